@@ -1,0 +1,2 @@
+//! **vigp**: structure-preserving learned dynamics.
+pub use vigp_runtime::*;

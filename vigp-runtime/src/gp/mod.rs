@@ -1,0 +1,1 @@
+//! Gaussian-process regression (exact ARD GP trained by marginal likelihood).
