@@ -1,2 +1,79 @@
 //! **vigp**: structure-preserving learned dynamics.
+//!
+//! Declare a planar mechanism once with [`mechanism!`]; it becomes a
+//! specialised variational integrator (Lagrangian, discrete Euler–Lagrange
+//! residual, exact Jacobians by dual numbers) that runs on the runtime in
+//! this crate.
+//!
+//! ```
+//! use vigp::prelude::*;
+//!
+//! vigp::mechanism! {
+//!     /// A double pendulum hanging from the origin.
+//!     pub DoublePendulum {
+//!         gravity: [0.0, -9.81],
+//!         links {
+//!             upper: { mass: 1.0, length: 1.0 },
+//!             lower: { mass: 1.0, length: 1.0, inertia: 0.0833 },
+//!         }
+//!         joints {
+//!             shoulder: revolute(world, upper.start) { damping: 0.0 },
+//!             elbow: revolute(upper.end, lower.start),
+//!         }
+//!     }
+//! }
+//!
+//! # fn main() -> Result<(), vigp::StepError> {
+//! let mut sys = DoublePendulum::default();
+//! sys.joints.elbow.damping = 0.3;
+//! let model = sys.minimal();
+//! let vi = Variational::new(model, 0.01);
+//! let z0 = model.state([std::f64::consts::FRAC_PI_2, 0.0], [0.0, 0.0]);
+//! let z1 = vi.step(&z0)?;
+//! let (e, g) = (model.energy(&z1), model.constraint_violation(&z1));
+//! assert!(e.is_finite() && g == 0.0);
+//! let traj = vi.rollout(&z0, 100)?;
+//! assert_eq!(traj.len(), 101);
+//! # Ok(())
+//! # }
+//! ```
+//!
+//! ## The DSL
+//!
+//! * `gravity: [gx, gy]` (optional, default `[0, -9.81]`; planar only).
+//! * `links { name: { mass, length, inertia?, com? }, … }`: a rigid link with
+//!   its local frame at `start` and local x-axis towards `end` = (length, 0).
+//!   `inertia` is about the centre of mass (default m·l²/12), `com` in local
+//!   coordinates (default (length/2, 0)).
+//! * `joints { name: revolute(parent, child) { damping? }, name:
+//!   prismatic(parent, child) { axis: [ax, ay], damping? }, … }` with points
+//!   `world`, `world @ [x, y]`, `link.start`, `link.end`, `link.center`,
+//!   `link @ [x, y]`. A joint whose child is already placed closes a loop and
+//!   becomes two constraint equations in minimal coordinates.
+//! * Angles: θ = 0 hangs straight down, counter-clockwise positive; a
+//!   revolute coordinate is the child's angle relative to its parent; a
+//!   prismatic coordinate is the slide distance along the unit axis.
+//! * Damping: when any joint declares `damping` (even `0.0`), every joint
+//!   gets a run-time damping parameter and the generated code contains the
+//!   Rayleigh dissipation function; when none does, no damping code exists.
+//!
+//! Generated items for `pub Name { … }`: `Name` (run-time parameters with the
+//! DSL's values as `Default`), `NameLinks`, `NameJoints` (if damped),
+//! `Name::link_poses` (forward kinematics), and `NameMinimal`, which
+//! implements [`Mechanism`]. To see or snapshot the generated source of your
+//! own mechanism, enable the `codegen` feature and call
+//! `vigp::codegen::expand_to_string`.
+
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub use vigp_macros::mechanism;
 pub use vigp_runtime::*;
+
+#[cfg(feature = "codegen")]
+pub use vigp_codegen as codegen;
+
+/// The names most programs need.
+pub mod prelude {
+    pub use vigp_runtime::{Integrator, Mechanism, NewtonOptions, State, StepError, Variational};
+}

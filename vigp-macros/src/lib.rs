@@ -1,1 +1,15 @@
-//! The `mechanism!` macro of vigp.
+//! The `mechanism!` macro of vigp. It only parses and emits (through
+//! `vigp-codegen`); all behaviour lives in `vigp-runtime`.
+
+#![forbid(unsafe_code)]
+
+use proc_macro::TokenStream;
+
+/// Declare a planar mechanism; see the `vigp` crate documentation for the
+/// DSL. Invalid descriptions become `compile_error!`s with spans.
+#[proc_macro]
+pub fn mechanism(input: TokenStream) -> TokenStream {
+    vigp_codegen::expand(input.into())
+        .unwrap_or_else(syn::Error::into_compile_error)
+        .into()
+}

@@ -10,3 +10,24 @@
 
 #[cfg(feature = "alloc")]
 pub mod gp;
+
+pub mod del;
+pub mod kinematics;
+pub mod linalg;
+pub mod mechanism;
+pub mod newton;
+pub mod params;
+pub mod variational;
+
+pub use kinematics::Pose2;
+pub use mechanism::{CoordinateKind, Mechanism, Scalar, State};
+pub use newton::{NewtonOptions, StepError, StepInfo};
+pub use params::{Joint, Link};
+pub use variational::{Integrator, Variational};
+
+/// Re-exports for generated code. Not part of the public API.
+#[doc(hidden)]
+pub mod __private {
+    pub use nalgebra;
+    pub use num_dual;
+}

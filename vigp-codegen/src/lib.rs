@@ -1,0 +1,44 @@
+//! Code generator behind vigp's `mechanism!` macro.
+//!
+//! `vigp-macros` is a thin shell around [`expand`]; this crate is a plain
+//! library so that users and tests can see exactly what a description
+//! expands to ([`expand_to_string`]) and snapshot it.
+//!
+//! Pipeline: tokens → [`parse`] (syntax with spans) → [`model`] (names
+//! resolved, numbers checked, joint graph split into a spanning tree and
+//! loop-closing joints) → [`emit`] (Rust generic over a num-dual scalar).
+
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod emit;
+pub mod model;
+pub mod parse;
+
+use proc_macro2::TokenStream;
+
+/// Expand a `mechanism!` body into Rust items, or a spanned error.
+pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
+    let parsed: parse::Input = syn::parse2(input)?;
+    let model = model::validate(parsed)?;
+    Ok(emit::emit(&model))
+}
+
+/// Expand a description given as source text and pretty-print the result,
+/// as reviewed in snapshots. Errors are returned as their messages.
+///
+/// ```
+/// let src = vigp_codegen::expand_to_string(
+///     "pub Pendulum { links { rod: { mass: 1.0, length: 1.0 } } joints { pivot: revolute(world, rod.start) } }",
+/// )
+/// .unwrap();
+/// assert!(src.contains("impl ::vigp::Mechanism<1, 0> for PendulumMinimal"));
+/// ```
+pub fn expand_to_string(src: &str) -> Result<String, String> {
+    let tokens: TokenStream = src.parse().map_err(|e| format!("{e}"))?;
+    let out = expand(tokens).map_err(|e| {
+        e.into_iter().map(|e| e.to_string()).collect::<Vec<_>>().join("\n")
+    })?;
+    let file: syn::File = syn::parse2(out).map_err(|e| format!("generated code does not parse: {e}"))?;
+    Ok(prettyplease::unparse(&file))
+}

@@ -1,0 +1,323 @@
+//! Syntax of the `mechanism!` DSL: tokens → an unvalidated description with
+//! spans. Nothing here judges meaning; `model` does.
+
+use proc_macro2::Span;
+use syn::parse::{Parse, ParseStream};
+use syn::{Attribute, Ident, Token, Visibility, braced, bracketed, parenthesized};
+
+/// A number literal (optionally negative) with its span.
+#[derive(Clone, Copy, Debug)]
+pub struct Number {
+    /// Value.
+    pub value: f64,
+    /// Where it was written.
+    pub span: Span,
+}
+
+impl Parse for Number {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        let neg = input.parse::<Option<Token![-]>>()?.is_some();
+        let lookahead = input.lookahead1();
+        let (value, span) = if lookahead.peek(syn::LitFloat) {
+            let lit: syn::LitFloat = input.parse()?;
+            (lit.base10_parse::<f64>()?, lit.span())
+        } else if lookahead.peek(syn::LitInt) {
+            let lit: syn::LitInt = input.parse()?;
+            (lit.base10_parse::<f64>()?, lit.span())
+        } else {
+            return Err(lookahead.error());
+        };
+        if !value.is_finite() {
+            return Err(syn::Error::new(span, "number is not finite"));
+        }
+        Ok(Number {
+            value: if neg { -value } else { value },
+            span,
+        })
+    }
+}
+
+/// A value: a number or a bracketed list of numbers.
+#[derive(Clone)]
+pub enum Value {
+    /// `1.5`
+    Number(Number),
+    /// `[1.0, 2.0]` with the span of the brackets.
+    Array(Span, Vec<Number>),
+}
+
+impl Value {
+    /// Span of the whole value.
+    pub fn span(&self) -> Span {
+        match self {
+            Value::Number(n) => n.span,
+            Value::Array(s, _) => *s,
+        }
+    }
+}
+
+impl Parse for Value {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        if input.peek(syn::token::Bracket) {
+            let content;
+            let b = bracketed!(content in input);
+            let items = content.parse_terminated(Number::parse, Token![,])?;
+            Ok(Value::Array(b.span.join(), items.into_iter().collect()))
+        } else {
+            Ok(Value::Number(input.parse()?))
+        }
+    }
+}
+
+/// `key: value`
+#[derive(Clone)]
+pub struct Field {
+    /// Key.
+    pub key: Ident,
+    /// Value.
+    pub value: Value,
+}
+
+impl Parse for Field {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        let key = input.parse()?;
+        input.parse::<Token![:]>()?;
+        let value = input.parse()?;
+        Ok(Field { key, value })
+    }
+}
+
+fn parse_fields(input: ParseStream) -> syn::Result<Vec<Field>> {
+    let content;
+    braced!(content in input);
+    Ok(content.parse_terminated(Field::parse, Token![,])?.into_iter().collect())
+}
+
+/// Where on a link a point sits.
+#[derive(Clone)]
+pub enum Anchor {
+    /// `link.start` (local origin).
+    Start,
+    /// `link.end` (local (length, 0)).
+    End,
+    /// `link.center` (local (length/2, 0)).
+    Center,
+    /// `link @ [x, y]` (local coordinates).
+    At([Number; 2]),
+}
+
+/// A point a joint attaches to.
+#[derive(Clone)]
+pub enum PointRef {
+    /// `world` or `world @ [x, y]`.
+    World {
+        /// The `world` keyword.
+        span: Span,
+        /// World coordinates (origin if absent).
+        at: Option<[Number; 2]>,
+    },
+    /// `link.start`, `link.end`, `link.center` or `link @ [x, y]`.
+    Link {
+        /// Link name.
+        link: Ident,
+        /// Anchor on the link.
+        anchor: Anchor,
+    },
+}
+
+fn parse_pair(input: ParseStream) -> syn::Result<[Number; 2]> {
+    let v: Value = input.parse()?;
+    match v {
+        Value::Array(_, ref items) if items.len() == 2 => Ok([items[0], items[1]]),
+        other => Err(syn::Error::new(other.span(), "expected a point `[x, y]` of two numbers")),
+    }
+}
+
+impl Parse for PointRef {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        let name: Ident = input.parse()?;
+        if name == "world" {
+            let at = if input.parse::<Option<Token![@]>>()?.is_some() {
+                Some(parse_pair(input)?)
+            } else {
+                None
+            };
+            return Ok(PointRef::World { span: name.span(), at });
+        }
+        if input.parse::<Option<Token![@]>>()?.is_some() {
+            return Ok(PointRef::Link {
+                link: name,
+                anchor: Anchor::At(parse_pair(input)?),
+            });
+        }
+        if input.parse::<Option<Token![.]>>()?.is_none() {
+            return Err(syn::Error::new(
+                name.span(),
+                format!("expected `{name}.start`, `{name}.end`, `{name}.center` or `{name} @ [x, y]`"),
+            ));
+        }
+        let which: Ident = input.parse()?;
+        let anchor = match which.to_string().as_str() {
+            "start" => Anchor::Start,
+            "end" => Anchor::End,
+            "center" => Anchor::Center,
+            _ => {
+                return Err(syn::Error::new(
+                    which.span(),
+                    format!("unknown attachment point `{which}`: expected `start`, `end`, `center` or `@ [x, y]`"),
+                ));
+            }
+        };
+        Ok(PointRef::Link { link: name, anchor })
+    }
+}
+
+/// `/// doc  name: { key: value, … }`
+#[derive(Clone)]
+pub struct LinkDecl {
+    /// Outer attributes (doc comments).
+    pub attrs: Vec<Attribute>,
+    /// Link name.
+    pub name: Ident,
+    /// Its fields.
+    pub fields: Vec<Field>,
+}
+
+impl Parse for LinkDecl {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        let attrs = input.call(Attribute::parse_outer)?;
+        let name = input.parse()?;
+        input.parse::<Token![:]>()?;
+        let fields = parse_fields(input)?;
+        Ok(LinkDecl { attrs, name, fields })
+    }
+}
+
+/// `/// doc  name: kind(parent, child) { key: value, … }`
+#[derive(Clone)]
+pub struct JointDecl {
+    /// Outer attributes (doc comments).
+    pub attrs: Vec<Attribute>,
+    /// Joint name.
+    pub name: Ident,
+    /// `revolute` or `prismatic`.
+    pub kind: Ident,
+    /// Parent point.
+    pub parent: PointRef,
+    /// Child point.
+    pub child: PointRef,
+    /// Optional fields.
+    pub fields: Vec<Field>,
+}
+
+impl Parse for JointDecl {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        let attrs = input.call(Attribute::parse_outer)?;
+        let name = input.parse()?;
+        input.parse::<Token![:]>()?;
+        let kind = input.parse()?;
+        let content;
+        parenthesized!(content in input);
+        let parent = content.parse()?;
+        content.parse::<Token![,]>()?;
+        let child = content.parse()?;
+        content.parse::<Option<Token![,]>>()?;
+        if !content.is_empty() {
+            return Err(content.error("expected `(parent_point, child_point)`"));
+        }
+        let fields = if input.peek(syn::token::Brace) {
+            parse_fields(input)?
+        } else {
+            Vec::new()
+        };
+        Ok(JointDecl {
+            attrs,
+            name,
+            kind,
+            parent,
+            child,
+            fields,
+        })
+    }
+}
+
+/// The whole description.
+#[derive(Clone)]
+pub struct Input {
+    /// Outer attributes of the mechanism (doc comments, derives are not allowed).
+    pub attrs: Vec<Attribute>,
+    /// Visibility of the generated types.
+    pub vis: Visibility,
+    /// Name of the generated parameter type.
+    pub name: Ident,
+    /// Span of the body braces (for "missing section" errors).
+    pub body_span: Span,
+    /// `gravity: [..]`, with the key's span.
+    pub gravity: Option<(Ident, Value)>,
+    /// `links { … }` with the keyword's span.
+    pub links: Option<(Ident, Vec<LinkDecl>)>,
+    /// `joints { … }` with the keyword's span.
+    pub joints: Option<(Ident, Vec<JointDecl>)>,
+}
+
+impl Parse for Input {
+    fn parse(input: ParseStream) -> syn::Result<Self> {
+        let attrs = input.call(Attribute::parse_outer)?;
+        let vis = input.parse()?;
+        let name = input.parse()?;
+        let content;
+        let brace = braced!(content in input);
+        if !input.is_empty() {
+            return Err(input.error("unexpected tokens after the mechanism body"));
+        }
+        let mut out = Input {
+            attrs,
+            vis,
+            name,
+            body_span: brace.span.join(),
+            gravity: None,
+            links: None,
+            joints: None,
+        };
+        while !content.is_empty() {
+            let key: Ident = content.parse()?;
+            let duplicate = || syn::Error::new(key.span(), format!("duplicate section `{key}`"));
+            match key.to_string().as_str() {
+                "gravity" => {
+                    content.parse::<Token![:]>()?;
+                    let v = content.parse()?;
+                    if out.gravity.is_some() {
+                        return Err(duplicate());
+                    }
+                    out.gravity = Some((key, v));
+                }
+                "links" => {
+                    let inner;
+                    braced!(inner in content);
+                    let links = inner.parse_terminated(LinkDecl::parse, Token![,])?;
+                    if out.links.is_some() {
+                        return Err(duplicate());
+                    }
+                    out.links = Some((key, links.into_iter().collect()));
+                }
+                "joints" => {
+                    let inner;
+                    braced!(inner in content);
+                    let joints = inner.parse_terminated(JointDecl::parse, Token![,])?;
+                    if out.joints.is_some() {
+                        return Err(duplicate());
+                    }
+                    out.joints = Some((key, joints.into_iter().collect()));
+                }
+                _ => {
+                    return Err(syn::Error::new(
+                        key.span(),
+                        format!("unknown section `{key}`: expected `gravity`, `links` or `joints`"),
+                    ));
+                }
+            }
+            content.parse::<Option<Token![,]>>()?;
+        }
+        Ok(out)
+    }
+}

@@ -1,0 +1,127 @@
+//! The [`Mechanism`] trait that `mechanism!`-generated code implements, the
+//! scalar bound it is generic over, and the discrete state.
+
+use nalgebra::SVector;
+use num_dual::DualNum;
+
+/// The scalar every generated function is generic over: `f64`, or any
+/// num-dual number over `f64` (dual, dual-vector, hyper-dual, nested).
+///
+/// One function body serves values and exact derivatives of any order.
+pub trait Scalar: DualNum<Primitive = f64> + Copy {}
+impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
+
+/// What a generalized coordinate measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CoordinateKind {
+    /// An angle in radians (revolute joint, or a link orientation).
+    Angle,
+    /// A length in metres (prismatic slide, or a position).
+    Length,
+}
+
+/// A discrete state z = (q, v) of an `N`-coordinate model.
+///
+/// `v` is the **discrete** velocity v_k = (q_{k+1} − q_k)/Δt of the
+/// variational integrators (DESIGN §3), not a continuous-time velocity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct State<const N: usize> {
+    /// Generalized positions q.
+    pub q: SVector<f64, N>,
+    /// (Discrete) generalized velocities v.
+    pub v: SVector<f64, N>,
+}
+
+impl<const N: usize> State<N> {
+    /// A state from position and velocity arrays.
+    pub fn new(q: [f64; N], v: [f64; N]) -> Self {
+        Self {
+            q: SVector::from(q),
+            v: SVector::from(v),
+        }
+    }
+
+    /// `true` when every entry is finite (no NaN, no ±∞).
+    pub fn is_finite(&self) -> bool {
+        self.q.iter().chain(self.v.iter()).all(|x| x.is_finite())
+    }
+}
+
+/// A planar mechanical model with `N` generalized coordinates and `C` scalar
+/// holonomic constraints g(q) = 0.
+///
+/// Implemented by the code that `mechanism!` generates, once per coordinate
+/// view (minimal, maximal). Every required function is generic over the
+/// [`Scalar`], so the integrators obtain exact first and second derivatives
+/// by evaluating the same body on dual numbers.
+pub trait Mechanism<const N: usize, const C: usize> {
+    /// Names of the generalized coordinates, in order.
+    const COORDINATES: [&'static str; N];
+    /// What each coordinate measures (angles get a sin/cos encoding in the
+    /// learned integrators).
+    const KINDS: [CoordinateKind; N];
+    /// `true` when [`Mechanism::dissipation`] is generated (some joint declares
+    /// `damping`); when `false` the integrators skip the force terms entirely.
+    const DISSIPATIVE: bool;
+
+    /// Kinetic energy T(q, v).
+    fn kinetic_energy<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> D;
+
+    /// Potential energy V(q) (gravity).
+    fn potential_energy<D: Scalar>(&self, q: &SVector<D, N>) -> D;
+
+    /// Lagrangian L(q, v) = T − V.
+    fn lagrangian<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> D {
+        self.kinetic_energy(q, v) - self.potential_energy(q)
+    }
+
+    /// Rayleigh dissipation function R(q, v) = ½ Σ c_j ṡ_j², with ṡ_j the rate
+    /// of joint j. The generalized non-conservative force is F = −∂R/∂v.
+    fn dissipation<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> D {
+        let _ = (q, v);
+        D::zero()
+    }
+
+    /// Holonomic constraints g(q) (empty for a tree in minimal coordinates).
+    fn constraints<D: Scalar>(&self, q: &SVector<D, N>) -> SVector<D, C> {
+        let _ = q;
+        SVector::from_element(D::zero())
+    }
+
+    /// Total energy T + V of a state, with its discrete velocity.
+    fn energy(&self, z: &State<N>) -> f64 {
+        self.kinetic_energy(&z.q, &z.v) + self.potential_energy(&z.q)
+    }
+
+    /// Euclidean norm |g(q)| of the constraint violation (0 for a tree).
+    fn constraint_violation(&self, z: &State<N>) -> f64 {
+        if C == 0 {
+            return 0.0;
+        }
+        self.constraints(&z.q).norm()
+    }
+
+    /// Generalized non-conservative forces F(q, v) = −∂R/∂v (exact, by
+    /// dual numbers).
+    fn generalized_forces<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> SVector<D, N> {
+        if !Self::DISSIPATIVE {
+            return SVector::from_element(D::zero());
+        }
+        let q = q.map(num_dual::DualVec::from_re);
+        let (_, grad) = num_dual::gradient(|v| self.dissipation(&q, &v), v);
+        -grad
+    }
+
+    /// Constraint Jacobian G(q) = ∂g/∂q (C × N), exact.
+    fn constraint_jacobian(&self, q: &SVector<f64, N>) -> nalgebra::SMatrix<f64, C, N> {
+        if C == 0 {
+            return nalgebra::SMatrix::zeros();
+        }
+        num_dual::jacobian(|q| self.constraints(&q), q).1
+    }
+
+    /// A state from position and velocity arrays (see [`State::new`]).
+    fn state(&self, q: [f64; N], v: [f64; N]) -> State<N> {
+        State::new(q, v)
+    }
+}
