@@ -1,0 +1,147 @@
+//! Training options and the training report.
+
+use serde::{Deserialize, Serialize};
+
+use super::error::GpError;
+use super::kernel::{Hyperparameters, check_positive};
+use super::mean::PriorMean;
+
+/// Box bounds on the hyperparameters, in *normalised* units (i.e. after
+/// input standardisation and output scaling, when those are on).
+///
+/// Keep them wide. In particular the noise lower bound must allow the tiny
+/// noise of near-deterministic data (DESIGN §3: σ = 1e-3 observation noise
+/// gives σ_n² ≈ 1e-7 after normalisation); ill-conditioning is handled by
+/// jitter, not by a noise floor.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Bounds {
+    /// (lower, upper) for every length scale ℓ_j.
+    pub length_scale: (f64, f64),
+    /// (lower, upper) for the signal variance σ_f².
+    pub signal_variance: (f64, f64),
+    /// (lower, upper) for the noise variance σ_n².
+    pub noise_variance: (f64, f64),
+}
+
+impl Default for Bounds {
+    /// ℓ ∈ [1e-3, 1e3], σ_f² ∈ [1e-4, 1e4], σ_n² ∈ [1e-10, 10].
+    fn default() -> Self {
+        Self {
+            length_scale: (1e-3, 1e3),
+            signal_variance: (1e-4, 1e4),
+            noise_variance: (1e-10, 1e1),
+        }
+    }
+}
+
+impl Bounds {
+    /// Same bounds for every hyperparameter (scikit-learn style, e.g. (1e-5, 1e5)).
+    pub fn uniform(lower: f64, upper: f64) -> Self {
+        Self {
+            length_scale: (lower, upper),
+            signal_variance: (lower, upper),
+            noise_variance: (lower, upper),
+        }
+    }
+
+    pub(crate) fn validate(&self) -> Result<(), GpError> {
+        for (what, (lo, hi)) in [
+            ("length scale bound", self.length_scale),
+            ("signal variance bound", self.signal_variance),
+            ("noise variance bound", self.noise_variance),
+        ] {
+            check_positive(what, lo)?;
+            check_positive(what, hi)?;
+            if lo > hi {
+                return Err(GpError::InvalidHyperparameter { what, value: lo });
+            }
+        }
+        Ok(())
+    }
+
+    /// Lower and upper bounds on θ = (ln ℓ, ln σ_f², ln σ_n²).
+    pub(crate) fn log_box(&self, d: usize) -> (Vec<f64>, Vec<f64>) {
+        let mut lo = vec![self.length_scale.0.ln(); d];
+        let mut hi = vec![self.length_scale.1.ln(); d];
+        lo.push(self.signal_variance.0.ln());
+        hi.push(self.signal_variance.1.ln());
+        lo.push(self.noise_variance.0.ln());
+        hi.push(self.noise_variance.1.ln());
+        (lo, hi)
+    }
+}
+
+/// How to train a [`Gp`](super::Gp).
+///
+/// Defaults: constant prior mean, inputs and outputs normalised, 5 random
+/// restarts besides the initial point, seed 0, [`Bounds::default`].
+#[derive(Clone, Debug)]
+pub struct TrainOptions {
+    /// Prior mean m(x); the GPs model y − m(x).
+    pub mean: PriorMean,
+    /// Standardise each input dimension (mean 0, standard deviation 1).
+    pub normalise_inputs: bool,
+    /// Divide each output's residual y − m(x) by its root mean square.
+    pub normalise_outputs: bool,
+    /// Starting hyperparameters (normalised units) of the first optimiser
+    /// run; `None` means ℓ = 1, σ_f² = 1, σ_n² = 0.01 (clamped into the bounds).
+    pub initial: Option<Hyperparameters>,
+    /// Number of extra starts drawn log-uniformly inside the bounds
+    /// (scikit-learn's `n_restarts_optimizer`): 1 + restarts runs per output.
+    pub restarts: usize,
+    /// Seed of the restart points. Same seed and data → bit-identical model,
+    /// whatever the thread count or scheduling.
+    pub seed: u64,
+    /// Hyperparameter bounds (normalised units).
+    pub bounds: Bounds,
+    /// Maximum L-BFGS iterations per start.
+    pub max_iters: usize,
+    /// Stop when the relative decrease of −LML in one iteration is below this.
+    pub ftol: f64,
+    /// Stop when the infinity norm of the projected gradient of −LML (w.r.t.
+    /// log hyperparameters) is below this.
+    pub pgtol: f64,
+}
+
+impl Default for TrainOptions {
+    fn default() -> Self {
+        Self {
+            mean: PriorMean::Constant,
+            normalise_inputs: true,
+            normalise_outputs: true,
+            initial: None,
+            restarts: 5,
+            seed: 0,
+            bounds: Bounds::default(),
+            max_iters: 500,
+            ftol: 1e-12,
+            pgtol: 1e-7,
+        }
+    }
+}
+
+/// What happened during training, per output.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TrainReport {
+    /// One entry per output.
+    pub outputs: Vec<OutputReport>,
+}
+
+/// Training details of one output's GP.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct OutputReport {
+    /// Best log marginal likelihood (normalised units), over all starts.
+    pub log_marginal_likelihood: f64,
+    /// Index of the winning start (0 = the initial point).
+    pub best_start: usize,
+    /// Final LML of every start (`NaN` for a start that failed).
+    pub start_lmls: Vec<f64>,
+    /// Total L-BFGS iterations over all starts.
+    pub iterations: usize,
+    /// Total likelihood evaluations over all starts.
+    pub evaluations: usize,
+    /// Whether the winning start met a convergence test (not the iteration cap).
+    pub converged: bool,
+    /// Absolute jitter (normalised units) on the diagonal of the final Gram matrix.
+    pub jitter: f64,
+}
