@@ -1,0 +1,83 @@
+//! `Gp::predict_into` and `Gp::predict_mean_into` do not allocate once the
+//! model and workspace exist. A counting global allocator in this test
+//! binary (its own process) observes every allocation; the test is the only
+//! one in the binary, so no other thread allocates meanwhile.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use vigp::gp::{Gp, PriorMean, TrainOptions};
+
+struct Counting;
+
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+// SAFETY: forwards to the system allocator, only counting calls.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn single_point_prediction_does_not_allocate() {
+    let n = 100;
+    let x: Vec<f64> = (0..n)
+        .flat_map(|i| [(i as f64 * 0.37).sin(), (i as f64 * 0.11).cos()])
+        .collect();
+    let y: Vec<f64> = x
+        .chunks(2)
+        .flat_map(|r| [r[0] * r[1], r[0] - r[1]])
+        .collect();
+    for mean in [
+        PriorMean::Constant,
+        PriorMean::Zero,
+        PriorMean::function(|x, m| {
+            m[0] = x[0];
+            m[1] = 0.0;
+        }),
+    ] {
+        let opts = TrainOptions {
+            mean,
+            restarts: 1,
+            ..Default::default()
+        };
+        let (gp, _) = Gp::train(&x, 2, &y, 2, &opts).unwrap();
+        let mut ws = gp.workspace();
+        let (mut m, mut v) = ([0.0; 2], [0.0; 2]);
+        let before = ALLOCS.load(Ordering::SeqCst);
+        let mut acc = 0.0;
+        for i in 0..1000 {
+            let q = [(i as f64 * 0.01).sin(), 0.5];
+            gp.predict_into(&q, &mut m, &mut v, &mut ws).unwrap();
+            acc += m[0] + v[1];
+            gp.predict_mean_into(&q, &mut m, &mut ws).unwrap();
+            acc += m[1];
+        }
+        let after = ALLOCS.load(Ordering::SeqCst);
+        assert!(acc.is_finite());
+        assert_eq!(
+            after - before,
+            0,
+            "predict_into allocated {} times",
+            after - before
+        );
+        // The counter works: a batch prediction does allocate.
+        let _ = gp.predict(&[0.1, 0.2]).unwrap();
+        assert!(ALLOCS.load(Ordering::SeqCst) > after);
+    }
+}
