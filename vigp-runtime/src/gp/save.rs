@@ -25,6 +25,10 @@ const MEAN_TOL: f64 = 1e-9;
 /// inputs are stored instead, and [`Gp::from_saved`] must be given the
 /// function again (it checks that it reproduces those values).
 ///
+/// For a bit-identical round trip through JSON, enable serde_json's
+/// `float_roundtrip` feature (its default parser may change the last bit of
+/// an f64, which moves predictions of a nearly noise-free model by more).
+///
 /// ```
 /// use vigp_runtime::gp::{Gp, PriorMean, SavedGp, TrainOptions};
 /// let x = [0.0, 0.5, 1.0, 1.5];
