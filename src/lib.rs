@@ -67,11 +67,16 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+// Lets generated code name `::vigp` inside this crate too (`systems`).
+extern crate self as vigp;
+
 pub use vigp_macros::mechanism;
 pub use vigp_runtime::*;
 
 #[cfg(feature = "codegen")]
 pub use vigp_codegen as codegen;
+
+pub mod systems;
 
 /// The names most programs need.
 pub mod prelude {

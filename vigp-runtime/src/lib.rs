@@ -17,6 +17,7 @@ pub mod linalg;
 pub mod mechanism;
 pub mod newton;
 pub mod params;
+pub mod projection;
 pub mod variational;
 
 pub use kinematics::Pose2;
