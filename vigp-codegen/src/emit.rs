@@ -140,7 +140,10 @@ fn loop_rate(m: &Model, params: &TokenStream, j: usize) -> TokenStream {
             quote!((#c - #p).eps)
         }
         JointKind::Prismatic { axis } => {
-            let (pp, cp) = (point_expr(m, params, joint.parent), point_expr(m, params, joint.child));
+            let (pp, cp) = (
+                point_expr(m, params, joint.parent),
+                point_expr(m, params, joint.child),
+            );
             let dir = axis_expr(m, joint.parent, axis);
             quote!({
                 let d = ::vigp::kinematics::sub(#cp, #pp);
@@ -166,7 +169,9 @@ fn used_by_loops(m: &Model) -> Vec<bool> {
 
 /// The whole expansion.
 pub fn emit(m: &Model) -> TokenStream {
-    let Model { attrs, vis, name, .. } = m;
+    let Model {
+        attrs, vis, name, ..
+    } = m;
     let n = Literal::usize_unsuffixed(m.dof());
     let c = Literal::usize_unsuffixed(m.loop_constraints());
     let nl = Literal::usize_unsuffixed(m.links.len());
@@ -180,7 +185,11 @@ pub fn emit(m: &Model) -> TokenStream {
     let link_fields = m.links.iter().map(|l| {
         let (ln, la) = (&l.name, &l.attrs);
         let doc = format!(" Link `{ln}`.");
-        let doc = if la.is_empty() { quote!(#[doc = #doc]) } else { quote!(#(#la)*) };
+        let doc = if la.is_empty() {
+            quote!(#[doc = #doc])
+        } else {
+            quote!(#(#la)*)
+        };
         quote!(#doc pub #ln: ::vigp::Link,)
     });
     let link_defaults = m.links.iter().map(|l| {
@@ -193,7 +202,11 @@ pub fn emit(m: &Model) -> TokenStream {
         let fields = m.joints.iter().map(|j| {
             let (jn, ja) = (&j.name, &j.attrs);
             let doc = format!(" Joint `{jn}`.");
-            let doc = if ja.is_empty() { quote!(#[doc = #doc]) } else { quote!(#(#ja)*) };
+            let doc = if ja.is_empty() {
+                quote!(#[doc = #doc])
+            } else {
+                quote!(#(#ja)*)
+            };
             quote!(#doc pub #jn: ::vigp::Joint,)
         });
         let doc = format!(" Joint parameters of [`{name}`].");
@@ -249,26 +262,24 @@ pub fn emit(m: &Model) -> TokenStream {
             let (jn, k) = (&m.joints[j].name, coordinate_index(k));
             quote!(v[#k] * v[#k] * joints.#jn.damping)
         });
-        let loop_terms: Vec<_> = m
-            .loops
-            .iter()
-            .map(|&j| {
-                let jn = &m.joints[j].name;
-                let rate = loop_rate(m, &sys, j);
-                quote!({ let rate = #rate; rate * rate * joints.#jn.damping })
-            })
-            .collect();
-        let tangent = if loop_terms.is_empty() {
-            quote!()
+        let loop_terms = m.loops.iter().map(|&j| {
+            let jn = &m.joints[j].name;
+            let rate = loop_rate(m, &sys, j);
+            quote!({ let rate = #rate; rate * rate * joints.#jn.damping })
+        });
+        let terms: Vec<_> = tree_terms.chain(loop_terms).collect();
+        // positions enter only through the kinematics of damped loop joints
+        let (q_arg, tangent) = if m.loops.is_empty() {
+            (quote!(_q), quote!())
         } else {
             let pattern = pose_pattern(m, &used_by_loops(m));
-            quote!(let #pattern = #sys.link_poses(&::vigp::kinematics::tangent(q, v));)
+            (quote!(q), quote!(let #pattern = #sys.link_poses(&::vigp::kinematics::tangent(q, v));))
         };
         quote! {
-            fn dissipation<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
+            fn dissipation<D: ::vigp::Scalar>(&self, #q_arg: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
                 let joints = &#sys.joints;
                 #tangent
-                (#(#tree_terms +)* #(#loop_terms +)* D::from(0.0)) * 0.5
+                (#(#terms)+*) * 0.5
             }
         }
     } else {
@@ -284,7 +295,10 @@ pub fn emit(m: &Model) -> TokenStream {
         for &j in &m.loops {
             let joint = &m.joints[j];
             let gap = format_ident!("{}_gap", joint.name);
-            let (pp, cp) = (point_expr(m, &sys, joint.parent), point_expr(m, &sys, joint.child));
+            let (pp, cp) = (
+                point_expr(m, &sys, joint.parent),
+                point_expr(m, &sys, joint.child),
+            );
             match joint.kind {
                 JointKind::Revolute => {
                     lets.push(quote!(let #gap = ::vigp::kinematics::sub(#pp, #cp);));
@@ -312,7 +326,11 @@ pub fn emit(m: &Model) -> TokenStream {
     let name_str = name.to_string();
     let minimal_doc = format!(
         " Minimal-coordinate view of [`{name_str}`]: one coordinate per tree joint ({}), {} loop-closure constraint equation(s).",
-        m.tree.iter().map(|&j| format!("`{}`", m.joints[j].name)).collect::<Vec<_>>().join(", "),
+        m.tree
+            .iter()
+            .map(|&j| format!("`{}`", m.joints[j].name))
+            .collect::<Vec<_>>()
+            .join(", "),
         m.loop_constraints()
     );
     let links_doc = format!(" Link parameters of [`{name_str}`].");

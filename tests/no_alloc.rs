@@ -1,0 +1,35 @@
+//! Steps of the nominal integrator and the projections run without heap
+//! allocation (fixed sizes only), as firmware-style callers need.
+
+use nalgebra::SVector;
+use vigp::prelude::*;
+use vigp::projection::{consistent_state, project_velocity};
+use vigp::systems::{DoublePendulum, Fourbar};
+
+#[test]
+fn variational_steps_do_not_allocate() {
+    let dp = Variational::new(DoublePendulum::default().minimal(), 0.01);
+    let mut z = State::new([1.0, 0.3], [0.0, 0.0]);
+    let info = allocation_counter::measure(|| {
+        for _ in 0..100 {
+            z = dp.step(&z).unwrap();
+        }
+    });
+    assert_eq!(info.count_total, 0, "double pendulum steps allocated");
+
+    let fb = Fourbar::default().minimal();
+    let z0 = consistent_state(&fb, &SVector::from([0.9, -1.3, -0.4, 1.3]), &SVector::zeros(), 0.01).unwrap();
+    let vi = Variational::new(fb, 0.01);
+    let mut out = [z0; 50];
+    let info = allocation_counter::measure(|| {
+        vi.rollout_into(&z0, &mut out).unwrap();
+        let _ = project_velocity(&fb, &out[49].q, &SVector::from([0.1, 0.2, 0.3, 0.4]), 0.01, &NewtonOptions::default()).unwrap();
+    });
+    assert_eq!(info.count_total, 0, "fourbar rollout_into / projection allocated");
+
+    // the counter does see allocations
+    let info = allocation_counter::measure(|| {
+        let _ = vi.rollout(&z0, 3).unwrap();
+    });
+    assert!(info.count_total > 0);
+}
