@@ -1,0 +1,111 @@
+//! GP engine benchmarks: likelihood + gradient, full training with restarts,
+//! single-point prediction. The data is the deterministic set that
+//! scripts/gp_sklearn_bench.py builds for the scikit-learn comparison
+//! (docs/gp.md).
+
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use vigp::gp::{Gp, Hyperparameters, TrainOptions, log_marginal_likelihood};
+
+/// Fractional parts of √p for the first primes: Weyl-sequence directions.
+const DIRS: [f64; 8] = [
+    0.414_213_562_373_095_1,
+    0.732_050_807_568_877_2,
+    0.236_067_977_499_789_7,
+    0.645_751_311_064_590_6,
+    0.316_624_790_355_399_85,
+    0.605_551_275_463_989_3,
+    0.123_105_625_617_660_55,
+    0.358_898_943_540_673_6,
+];
+
+/// x_ij = 4·frac((i+1)·dir_j) − 2; y = sin(3x₀) + cos(2x₁) + 0.5·x₂x₃ + small
+/// deterministic noise. Same formula as scripts/gp_sklearn_bench.py.
+pub fn bench_data(n: usize, d: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut x = vec![0.0; n * d];
+    let mut y = vec![0.0; n];
+    for i in 0..n {
+        let r = &mut x[i * d..(i + 1) * d];
+        for (j, v) in r.iter_mut().enumerate() {
+            *v = 4.0 * (((i + 1) as f64) * DIRS[j]).fract() - 2.0;
+        }
+        let mut t = (3.0 * r[0]).sin() + (2.0 * r[1]).cos();
+        if d >= 4 {
+            t += 0.5 * r[2] * r[3];
+        }
+        t += 0.01 * ((((i + 1) as f64) * 0.754_877_666_246_692_8).fract() - 0.5);
+        y[i] = t;
+    }
+    (x, y)
+}
+
+fn lml(c: &mut Criterion) {
+    let mut g = c.benchmark_group("lml_grad");
+    g.sample_size(10).measurement_time(Duration::from_secs(4));
+    for (n, d) in [(512, 4), (512, 8), (2048, 4), (2048, 8)] {
+        let (x, y) = bench_data(n, d);
+        let theta = Hyperparameters::isotropic(d, 1.0, 1.0, 1e-2).to_log();
+        for parallel in [false, true] {
+            let name = format!("N{n}_d{d}_{}", if parallel { "par" } else { "seq" });
+            g.bench_function(name, |b| {
+                b.iter(|| log_marginal_likelihood(black_box(&x), d, &y, &theta, parallel).unwrap())
+            });
+        }
+    }
+    g.finish();
+}
+
+/// The training options of the scikit-learn comparison: 10 restarts (11
+/// starts), the default bounds, ℓ = 1, σ_f² = 1, σ_n² = 0.01 initially.
+pub fn train_options() -> TrainOptions {
+    TrainOptions {
+        restarts: 10,
+        seed: 0,
+        ..Default::default()
+    }
+}
+
+fn train(c: &mut Criterion) {
+    let mut g = c.benchmark_group("train");
+    g.sample_size(10).measurement_time(Duration::from_secs(20));
+    let (x, y) = bench_data(512, 4);
+    let opts = train_options();
+    let (_, report) = Gp::train(&x, 4, &y, 1, &opts).unwrap();
+    let r = &report.outputs[0];
+    eprintln!(
+        "train N512_d4: best LML {:.6} (start {}), {} evaluations, {} iterations over 11 starts",
+        r.log_marginal_likelihood, r.best_start, r.evaluations, r.iterations
+    );
+    g.bench_function("N512_d4_10restarts", |b| {
+        b.iter(|| Gp::train(black_box(&x), 4, &y, 1, &opts).unwrap())
+    });
+    g.finish();
+}
+
+fn predict(c: &mut Criterion) {
+    let mut g = c.benchmark_group("predict");
+    let (x, y) = bench_data(512, 4);
+    let hp = Hyperparameters::isotropic(4, 0.8, 1.0, 1e-4);
+    let gp = Gp::fit(&x, 4, &y, 1, &[hp], &TrainOptions::default()).unwrap();
+    let mut ws = gp.workspace();
+    let (mut m, mut v) = ([0.0], [0.0]);
+    let q = [0.1, -0.3, 0.7, 1.2];
+    g.bench_function("N512_d4_mean_var", |b| {
+        b.iter(|| {
+            gp.predict_into(black_box(&q), &mut m, &mut v, &mut ws)
+                .unwrap()
+        })
+    });
+    g.bench_function("N512_d4_mean", |b| {
+        b.iter(|| {
+            gp.predict_mean_into(black_box(&q), &mut m, &mut ws)
+                .unwrap()
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, lml, train, predict);
+criterion_main!(benches);
