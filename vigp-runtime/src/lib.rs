@@ -18,12 +18,16 @@ pub mod mechanism;
 pub mod newton;
 pub mod params;
 pub mod projection;
+pub mod summary;
 pub mod variational;
 
 pub use kinematics::Pose2;
 pub use mechanism::{CoordinateKind, Mechanism, Scalar, State};
 pub use newton::{NewtonOptions, StepError, StepInfo};
 pub use params::{Joint, Link};
+pub use summary::RolloutSummary;
+#[cfg(feature = "std")]
+pub use summary::summarize;
 pub use variational::{Integrator, Variational};
 
 /// Re-exports for generated code. Not part of the public API.

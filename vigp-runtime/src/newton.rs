@@ -9,8 +9,15 @@ pub struct NewtonOptions {
     pub tolerance: f64,
     /// Iteration cap (default 25).
     pub max_iterations: usize,
-    /// Smallest line-search step before a step is taken anyway (default 1/256).
+    /// Smallest line-search step tried before Newton is declared stalled
+    /// (default 1/256).
     pub min_step: f64,
+    /// A stalled Newton iteration (no decrease possible along the Newton
+    /// direction, as at a configuration where a loop's constraint Jacobian
+    /// loses rank) is accepted when both scaled residuals are below this
+    /// (default 1e-10; reported as [`StepInfo::stalled`]). Set it equal to
+    /// `tolerance` to refuse stalled steps.
+    pub stall_tolerance: f64,
 }
 
 impl Default for NewtonOptions {
@@ -19,6 +26,7 @@ impl Default for NewtonOptions {
             tolerance: 1e-12,
             max_iterations: 25,
             min_step: 1.0 / 256.0,
+            stall_tolerance: 1e-10,
         }
     }
 }
@@ -29,6 +37,11 @@ impl NewtonOptions {
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
             return Err(StepError::InvalidOptions(
                 "tolerance must be finite and > 0",
+            ));
+        }
+        if !(self.stall_tolerance.is_finite() && self.stall_tolerance >= self.tolerance) {
+            return Err(StepError::InvalidOptions(
+                "stall_tolerance must be finite and >= tolerance",
             ));
         }
         if !(self.min_step > 0.0 && self.min_step <= 1.0) {
@@ -45,6 +58,9 @@ pub struct StepInfo {
     pub iterations: usize,
     /// Final scaled residual (max-norm).
     pub residual: f64,
+    /// `true` when the step was accepted as stalled (see
+    /// [`NewtonOptions::stall_tolerance`]) rather than converged.
+    pub stalled: bool,
 }
 
 /// Why a step failed. `step` is filled in by rollouts with the index of the

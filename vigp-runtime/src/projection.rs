@@ -36,6 +36,7 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
                 StepInfo {
                     iterations: iter,
                     residual: res,
+                    stalled: false,
                 },
             ));
         }
@@ -79,6 +80,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
             StepInfo {
                 iterations: 0,
                 residual: 0.0,
+                stalled: false,
             },
         ));
     }
@@ -111,6 +113,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
                 StepInfo {
                     iterations: iter,
                     residual: res_r.max(res_c),
+                    stalled: false,
                 },
             ));
         }

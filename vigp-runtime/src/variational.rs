@@ -133,6 +133,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
         };
         let (mut r, mut c, mut jac) = eval(&v, &lambda);
         let tol = self.options.tolerance;
+        let mut stalled = false;
         for iter in 0..=self.options.max_iterations {
             let res_r = r.amax() / p_scale;
             let res_c = c.amax() / g_scale;
@@ -142,7 +143,16 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
                     step: None,
                 });
             }
-            if res_r <= tol && res_c <= tol {
+            // Converged; or stalled at the attainable accuracy of a
+            // near-singular KKT system (e.g. a loop at a configuration where
+            // its constraint Jacobian loses rank, so that g is quadratic in
+            // the lost direction and no linear correction reduces it): Newton
+            // can no longer decrease the residual and both parts are within
+            // `stall_tolerance`.
+            let converged = res_r <= tol && res_c <= tol;
+            let stall_tol = self.options.stall_tolerance;
+            let accept_stall = stalled && res_c <= stall_tol && res_r <= stall_tol;
+            if converged || accept_stall {
                 let next = State { q: x1, v };
                 if !next.is_finite() {
                     return Err(StepError::NonFiniteState { step: None });
@@ -152,6 +162,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
                     StepInfo {
                         iterations: iter,
                         residual: res_r.max(res_c),
+                        stalled: !converged,
                     },
                 ));
             }
@@ -182,9 +193,14 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
                 let l_try = lambda - dl * alpha;
                 let (r_try, c_try, jac_try) = eval(&v_try, &l_try);
                 let phi = merit(&r_try, &c_try);
-                let accept = phi.is_finite() && phi <= (1.0 - 1e-4 * alpha) * phi0;
-                if accept || alpha <= self.options.min_step {
+                if phi.is_finite() && phi <= (1.0 - 1e-4 * alpha) * phi0 {
                     (v, lambda, r, c, jac) = (v_try, l_try, r_try, c_try, jac_try);
+                    break;
+                }
+                if alpha <= self.options.min_step {
+                    // no decrease along the Newton direction: keep the
+                    // current iterate and let the acceptance test decide
+                    stalled = true;
                     break;
                 }
                 alpha *= 0.5;
