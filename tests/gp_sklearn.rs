@@ -62,7 +62,11 @@ fn fixed_hyperparameters_match_sklearn() {
         // sklearn's LML is that of the (normalised) targets: ours too.
         let lml_ref = case["lml"].as_f64().unwrap();
         let e_lml = rel(out.log_marginal_likelihood(), lml_ref);
-        assert!(e_lml < FIXED_TOL, "{name}: lml {} vs {lml_ref}", out.log_marginal_likelihood());
+        assert!(
+            e_lml < FIXED_TOL,
+            "{name}: lml {} vs {lml_ref}",
+            out.log_marginal_likelihood()
+        );
         worst[0] = worst[0].max(e_lml);
 
         // Gradient (on raw targets only: with normalize_y sklearn's gradient is
@@ -88,7 +92,12 @@ fn fixed_hyperparameters_match_sklearn() {
         for i in 0..mean_ref.len() {
             // The mean is O(1) (targets have offset 3); relative to max(|m|, 1).
             let em = (pred.mean[i] - mean_ref[i]).abs() / mean_ref[i].abs().max(1.0);
-            assert!(em < FIXED_TOL, "{name}: mean {i}: {} vs {}", pred.mean[i], mean_ref[i]);
+            assert!(
+                em < FIXED_TOL,
+                "{name}: mean {i}: {} vs {}",
+                pred.mean[i],
+                mean_ref[i]
+            );
             // sklearn's variance includes the observation noise; ours is latent.
             // Both compute it as prior variance − vᵀv, a difference of O(σ_f²)
             // terms: round-off leaves an absolute error ≈ ε·cond(K)·σ_f²
@@ -98,7 +107,12 @@ fn fixed_hyperparameters_match_sklearn() {
             // max(var, prior variance of the latent function).
             let prior_var = out.kernel_max();
             let ev = (pred.variance[i] + noise - var_ref[i]).abs() / var_ref[i].max(prior_var);
-            assert!(ev < FIXED_TOL, "{name}: var {i}: {} vs {}", pred.variance[i] + noise, var_ref[i]);
+            assert!(
+                ev < FIXED_TOL,
+                "{name}: var {i}: {} vs {}",
+                pred.variance[i] + noise,
+                var_ref[i]
+            );
             worst[2] = worst[2].max(em);
             worst[3] = worst[3].max(ev);
         }
@@ -143,7 +157,10 @@ fn trained_optimum_at_least_sklearn() {
                 ours - sk,
                 report.outputs[0].start_lmls
             );
-            assert!(ours >= sk - 1e-6 * sk.abs(), "{name}: {ours} < sklearn {sk}");
+            assert!(
+                ours >= sk - 1e-6 * sk.abs(),
+                "{name}: {ours} < sklearn {sk}"
+            );
         }
     }
 }
