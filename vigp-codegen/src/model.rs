@@ -5,6 +5,7 @@
 use crate::parse::{self, Field, Input, Number, PointRef, Value};
 use proc_macro2::Span;
 use std::collections::HashMap;
+use syn::ext::IdentExt;
 use syn::{Attribute, Ident, Visibility};
 
 /// A validated link.
@@ -142,7 +143,9 @@ struct Errors(Option<syn::Error>);
 
 impl Errors {
     fn push(&mut self, span: Span, msg: impl std::fmt::Display) {
-        let e = syn::Error::new(span, msg);
+        self.add(syn::Error::new(span, msg));
+    }
+    fn add(&mut self, e: syn::Error) {
         match &mut self.0 {
             Some(all) => all.combine(e),
             None => self.0 = Some(e),
@@ -176,15 +179,32 @@ fn pair(errs: &mut Errors, f: &Field) -> Option<[f64; 2]> {
     }
 }
 
+/// "`a`" or "one of `a`, `b`".
+fn one_of(names: &[&str]) -> String {
+    let quoted: Vec<String> = names.iter().map(|n| format!("`{n}`")).collect();
+    match quoted.as_slice() {
+        [one] => one.clone(),
+        _ => format!("one of {}", quoted.join(", ")),
+    }
+}
+
 /// Collect fields into a map, reporting duplicates and unknown keys.
-fn fields<'a>(errs: &mut Errors, fields: &'a [Field], allowed: &[&str], what: &str) -> HashMap<String, &'a Field> {
+fn fields<'a>(
+    errs: &mut Errors,
+    fields: &'a [Field],
+    allowed: &[&str],
+    what: &str,
+) -> HashMap<String, &'a Field> {
     let mut map = HashMap::new();
     for f in fields {
         let key = f.key.to_string();
         if !allowed.contains(&key.as_str()) {
             errs.push(
                 f.key.span(),
-                format!("unknown key `{key}` for {what}: expected one of {}", allowed.join(", ")),
+                format!(
+                    "unknown key `{key}` for {what}: expected {}",
+                    one_of(allowed)
+                ),
             );
         } else if map.insert(key.clone(), f).is_some() {
             errs.push(f.key.span(), format!("duplicate key `{key}`"));
@@ -193,9 +213,41 @@ fn fields<'a>(errs: &mut Errors, fields: &'a [Field], allowed: &[&str], what: &s
     map
 }
 
+/// Links and joints become fields of generated structs (joints only when
+/// some joint is damped), so only doc comments carry over meaningfully; a
+/// `cfg` would leave the generated code inconsistent. On the mechanism, the
+/// derives are fixed and a `cfg` would not reach the generated impls.
+fn check_attrs(errs: &mut Errors, attrs: &[Attribute], on_mechanism: bool) {
+    for attr in attrs {
+        let path = attr.path();
+        let ok = if on_mechanism {
+            !["derive", "cfg", "cfg_attr"]
+                .iter()
+                .any(|name| path.is_ident(name))
+        } else {
+            path.is_ident("doc")
+        };
+        if !ok {
+            let msg = if on_mechanism {
+                "`derive`, `cfg` and `cfg_attr` are not supported on a mechanism: the generated types derive `Clone, Copy, Debug, PartialEq`"
+            } else {
+                "only doc comments are allowed on links and joints"
+            };
+            errs.push(path_span(path), msg);
+        }
+    }
+}
+
+fn path_span(path: &syn::Path) -> Span {
+    path.segments
+        .first()
+        .map_or_else(Span::call_site, |s| s.ident.span())
+}
+
 /// Validate a parsed description.
 pub fn validate(input: Input) -> syn::Result<Model> {
     let mut errs = Errors(None);
+    check_attrs(&mut errs, &input.attrs, true);
 
     // gravity
     let mut gravity = [0.0, -9.81];
@@ -215,7 +267,10 @@ pub fn validate(input: Input) -> syn::Result<Model> {
 
     // links
     let Some((links_kw, link_decls)) = &input.links else {
-        return Err(syn::Error::new(input.body_span, "missing `links { … }` section"));
+        return Err(syn::Error::new(
+            input.name.span(),
+            format!("mechanism `{}` has no `links {{ … }}` section", input.name),
+        ));
     };
     if link_decls.is_empty() {
         errs.push(links_kw.span(), "a mechanism needs at least one link");
@@ -223,15 +278,25 @@ pub fn validate(input: Input) -> syn::Result<Model> {
     let mut links = Vec::new();
     let mut index: HashMap<String, usize> = HashMap::new();
     for decl in link_decls {
-        let name = decl.name.to_string();
+        check_attrs(&mut errs, &decl.attrs, false);
+        // `r#type` and `type` name the same field.
+        let name = decl.name.unraw().to_string();
         if name == "world" {
-            errs.push(decl.name.span(), "`world` is reserved and cannot name a link");
+            errs.push(
+                decl.name.span(),
+                "`world` is reserved and cannot name a link",
+            );
         }
         if index.contains_key(&name) {
             errs.push(decl.name.span(), format!("duplicate link `{name}`"));
             continue;
         }
-        let f = fields(&mut errs, &decl.fields, &["mass", "length", "inertia", "com"], "a link");
+        let f = fields(
+            &mut errs,
+            &decl.fields,
+            &["mass", "length", "inertia", "com"],
+            "a link",
+        );
         let positive = |errs: &mut Errors, key: &str| -> f64 {
             match f.get(key) {
                 None => {
@@ -241,7 +306,7 @@ pub fn validate(input: Input) -> syn::Result<Model> {
                 Some(field) => match number(errs, field) {
                     Some(n) if n.value > 0.0 => n.value,
                     Some(n) => {
-                        errs.push(n.span, format!("`{key}` must be positive, got {}", n.value));
+                        errs.add(n.error(format!("`{key}` must be positive, got {}", n.value)));
                         1.0
                     }
                     None => 1.0,
@@ -251,11 +316,20 @@ pub fn validate(input: Input) -> syn::Result<Model> {
         let mass = positive(&mut errs, "mass");
         let length = positive(&mut errs, "length");
         let inertia = match f.get("inertia") {
-            None => mass * length * length / 12.0,
+            None if (mass * length * length).is_finite() => mass * length * length / 12.0,
+            None => {
+                errs.push(
+                    decl.name.span(),
+                    format!(
+                        "the default inertia m·l²/12 of link `{name}` overflows: give `inertia`"
+                    ),
+                );
+                0.0
+            }
             Some(field) => match number(&mut errs, field) {
                 Some(n) if n.value >= 0.0 => n.value,
                 Some(n) => {
-                    errs.push(n.span, format!("`inertia` must not be negative, got {}", n.value));
+                    errs.add(n.error(format!("`inertia` must not be negative, got {}", n.value)));
                     0.0
                 }
                 None => 0.0,
@@ -280,9 +354,11 @@ pub fn validate(input: Input) -> syn::Result<Model> {
     };
     let resolve = |errs: &mut Errors, p: &PointRef| -> Option<Point> {
         match p {
-            PointRef::World { at, .. } => Some(Point::World(at.map_or([0.0, 0.0], |a| [a[0].value, a[1].value]))),
+            PointRef::World { at, .. } => Some(Point::World(
+                at.map_or([0.0, 0.0], |a| [a[0].value, a[1].value]),
+            )),
             PointRef::Link { link, anchor } => {
-                let Some(&i) = index.get(&link.to_string()) else {
+                let Some(&i) = index.get(&link.unraw().to_string()) else {
                     errs.push(link.span(), format!("unknown link `{link}`"));
                     return None;
                 };
@@ -303,7 +379,8 @@ pub fn validate(input: Input) -> syn::Result<Model> {
     let mut joints = Vec::new();
     let mut joint_names: HashMap<String, ()> = HashMap::new();
     for decl in joint_decls {
-        let name = decl.name.to_string();
+        check_attrs(&mut errs, &decl.attrs, false);
+        let name = decl.name.unraw().to_string();
         if joint_names.insert(name.clone(), ()).is_some() {
             errs.push(decl.name.span(), format!("duplicate joint `{name}`"));
             continue;
@@ -320,45 +397,66 @@ pub fn validate(input: Input) -> syn::Result<Model> {
                 continue;
             }
         };
-        let f = fields(&mut errs, &decl.fields, allowed, &format!("a {kind_name} joint"));
+        let f = fields(
+            &mut errs,
+            &decl.fields,
+            allowed,
+            &format!("a {kind_name} joint"),
+        );
         let kind = if kind_name == "prismatic" {
             match f.get("axis") {
                 None => {
-                    errs.push(decl.kind.span(), format!("prismatic joint `{name}` needs `axis: [ax, ay]`"));
+                    errs.push(
+                        decl.kind.span(),
+                        format!("prismatic joint `{name}` needs `axis: [ax, ay]`"),
+                    );
                     JointKind::Prismatic { axis: [1.0, 0.0] }
                 }
                 Some(field) => {
-                    let axis = pair(&mut errs, field).unwrap_or([1.0, 0.0]);
-                    let n = axis[0].hypot(axis[1]);
-                    if !(n > 0.0) {
+                    let [ax, ay] = pair(&mut errs, field).unwrap_or([1.0, 0.0]);
+                    // Numbers are finite, so `s` is 0 exactly for a zero axis;
+                    // dividing by it first keeps the norm of a huge axis finite.
+                    let s = ax.abs().max(ay.abs());
+                    if s > 0.0 {
+                        let (ax, ay) = (ax / s, ay / s);
+                        let n = ax.hypot(ay);
+                        JointKind::Prismatic {
+                            axis: [ax / n, ay / n],
+                        }
+                    } else {
                         errs.push(field.value.span(), "`axis` must not be zero");
                         JointKind::Prismatic { axis: [1.0, 0.0] }
-                    } else {
-                        JointKind::Prismatic {
-                            axis: [axis[0] / n, axis[1] / n],
-                        }
                     }
                 }
             }
         } else {
             JointKind::Revolute
         };
-        let damping = f.get("damping").and_then(|field| match number(&mut errs, field) {
-            Some(n) if n.value >= 0.0 => Some(n.value),
-            Some(n) => {
-                errs.push(n.span, format!("`damping` must not be negative, got {}", n.value));
-                None
-            }
-            None => None,
-        });
+        let damping = f
+            .get("damping")
+            .and_then(|field| match number(&mut errs, field) {
+                Some(n) if n.value >= 0.0 => Some(n.value),
+                Some(n) => {
+                    errs.add(n.error(format!("`damping` must not be negative, got {}", n.value)));
+                    None
+                }
+                None => None,
+            });
         let parent = resolve(&mut errs, &decl.parent);
         let child = resolve(&mut errs, &decl.child);
         let (Some(parent), Some(child)) = (parent, child) else {
             continue;
         };
         if parent.link() == child.link() {
-            let what = if parent.link().is_none() { "the world to itself" } else { "a link to itself" };
-            errs.push(point_span(&decl.child), format!("joint `{name}` connects {what}"));
+            let what = if parent.link().is_none() {
+                "the world to itself"
+            } else {
+                "a link to itself"
+            };
+            errs.push(
+                point_span(&decl.child),
+                format!("joint `{name}` connects {what}"),
+            );
             continue;
         }
         joints.push(Joint {

@@ -1,7 +1,8 @@
 //! Syntax of the `mechanism!` DSL: tokens → an unvalidated description with
 //! spans. Nothing here judges meaning; `model` does.
 
-use proc_macro2::Span;
+use proc_macro2::{Punct, Spacing, Span};
+use quote::quote;
 use syn::parse::{Parse, ParseStream};
 use syn::{Attribute, Ident, Token, Visibility, braced, bracketed, parenthesized};
 
@@ -10,29 +11,51 @@ use syn::{Attribute, Ident, Token, Visibility, braced, bracketed, parenthesized}
 pub struct Number {
     /// Value.
     pub value: f64,
-    /// Where it was written.
+    /// Where the literal was written.
     pub span: Span,
+    /// Where its minus sign was written, if any.
+    pub minus: Option<Span>,
+}
+
+impl Number {
+    /// An error that points at the whole number, minus sign included.
+    pub fn error(&self, msg: impl std::fmt::Display) -> syn::Error {
+        let mut first = Punct::new('-', Spacing::Alone);
+        first.set_span(self.minus.unwrap_or(self.span));
+        let last = Ident::new("number", self.span);
+        syn::Error::new_spanned(quote!(#first #last), msg)
+    }
 }
 
 impl Parse for Number {
     fn parse(input: ParseStream) -> syn::Result<Self> {
-        let neg = input.parse::<Option<Token![-]>>()?.is_some();
-        let lookahead = input.lookahead1();
-        let (value, span) = if lookahead.peek(syn::LitFloat) {
+        let minus = input.parse::<Option<Token![-]>>()?.map(|m| m.span);
+        let (value, span, suffix) = if input.peek(syn::LitFloat) {
             let lit: syn::LitFloat = input.parse()?;
-            (lit.base10_parse::<f64>()?, lit.span())
-        } else if lookahead.peek(syn::LitInt) {
+            let value = lit.base10_parse::<f64>()?;
+            (value, lit.span(), lit.suffix().to_owned())
+        } else if input.peek(syn::LitInt) {
             let lit: syn::LitInt = input.parse()?;
-            (lit.base10_parse::<f64>()?, lit.span())
+            let value = lit.base10_parse::<f64>()?;
+            (value, lit.span(), lit.suffix().to_owned())
         } else {
-            return Err(lookahead.error());
+            return Err(input.error("expected a number"));
         };
+        // Every parameter is an f64; a suffix such as `1u8` or `1.5f32`
+        // would be silently ignored, so it is rejected.
+        if !suffix.is_empty() && suffix != "f64" {
+            return Err(syn::Error::new(
+                span,
+                format!("unexpected suffix `{suffix}`: parameters are plain numbers (f64)"),
+            ));
+        }
         if !value.is_finite() {
-            return Err(syn::Error::new(span, "number is not finite"));
+            return Err(syn::Error::new(span, "number is too large for an f64"));
         }
         Ok(Number {
-            value: if neg { -value } else { value },
+            value: if minus.is_some() { -value } else { value },
             span,
+            minus,
         })
     }
 }
@@ -90,7 +113,10 @@ impl Parse for Field {
 fn parse_fields(input: ParseStream) -> syn::Result<Vec<Field>> {
     let content;
     braced!(content in input);
-    Ok(content.parse_terminated(Field::parse, Token![,])?.into_iter().collect())
+    Ok(content
+        .parse_terminated(Field::parse, Token![,])?
+        .into_iter()
+        .collect())
 }
 
 /// Where on a link a point sits.
@@ -129,7 +155,10 @@ fn parse_pair(input: ParseStream) -> syn::Result<[Number; 2]> {
     let v: Value = input.parse()?;
     match v {
         Value::Array(_, ref items) if items.len() == 2 => Ok([items[0], items[1]]),
-        other => Err(syn::Error::new(other.span(), "expected a point `[x, y]` of two numbers")),
+        other => Err(syn::Error::new(
+            other.span(),
+            "expected a point `[x, y]` of two numbers",
+        )),
     }
 }
 
@@ -137,12 +166,21 @@ impl Parse for PointRef {
     fn parse(input: ParseStream) -> syn::Result<Self> {
         let name: Ident = input.parse()?;
         if name == "world" {
+            if input.peek(Token![.]) {
+                return Err(syn::Error::new(
+                    name.span(),
+                    "the world has no `start`, `end` or `center`: write `world` (the origin) or `world @ [x, y]`",
+                ));
+            }
             let at = if input.parse::<Option<Token![@]>>()?.is_some() {
                 Some(parse_pair(input)?)
             } else {
                 None
             };
-            return Ok(PointRef::World { span: name.span(), at });
+            return Ok(PointRef::World {
+                span: name.span(),
+                at,
+            });
         }
         if input.parse::<Option<Token![@]>>()?.is_some() {
             return Ok(PointRef::Link {
@@ -153,7 +191,9 @@ impl Parse for PointRef {
         if input.parse::<Option<Token![.]>>()?.is_none() {
             return Err(syn::Error::new(
                 name.span(),
-                format!("expected `{name}.start`, `{name}.end`, `{name}.center` or `{name} @ [x, y]`"),
+                format!(
+                    "expected `{name}.start`, `{name}.end`, `{name}.center` or `{name} @ [x, y]`"
+                ),
             ));
         }
         let which: Ident = input.parse()?;
@@ -164,7 +204,9 @@ impl Parse for PointRef {
             _ => {
                 return Err(syn::Error::new(
                     which.span(),
-                    format!("unknown attachment point `{which}`: expected `start`, `end`, `center` or `@ [x, y]`"),
+                    format!(
+                        "unknown attachment point `{which}`: expected `start`, `end`, `center` or `@ [x, y]`"
+                    ),
                 ));
             }
         };
@@ -189,7 +231,11 @@ impl Parse for LinkDecl {
         let name = input.parse()?;
         input.parse::<Token![:]>()?;
         let fields = parse_fields(input)?;
-        Ok(LinkDecl { attrs, name, fields })
+        Ok(LinkDecl {
+            attrs,
+            name,
+            fields,
+        })
     }
 }
 
@@ -250,8 +296,6 @@ pub struct Input {
     pub vis: Visibility,
     /// Name of the generated parameter type.
     pub name: Ident,
-    /// Span of the body braces (for "missing section" errors).
-    pub body_span: Span,
     /// `gravity: [..]`, with the key's span.
     pub gravity: Option<(Ident, Value)>,
     /// `links { … }` with the keyword's span.
@@ -266,7 +310,7 @@ impl Parse for Input {
         let vis = input.parse()?;
         let name = input.parse()?;
         let content;
-        let brace = braced!(content in input);
+        braced!(content in input);
         if !input.is_empty() {
             return Err(input.error("unexpected tokens after the mechanism body"));
         }
@@ -274,7 +318,6 @@ impl Parse for Input {
             attrs,
             vis,
             name,
-            body_span: brace.span.join(),
             gravity: None,
             links: None,
             joints: None,

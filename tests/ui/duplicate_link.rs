@@ -1,0 +1,13 @@
+vigp::mechanism! {
+    Pendulum {
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+            rod: { mass: 2.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start),
+        }
+    }
+}
+
+fn main() {}

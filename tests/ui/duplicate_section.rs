@@ -1,0 +1,14 @@
+vigp::mechanism! {
+    Pendulum {
+        gravity: [0.0, -9.81],
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start),
+        }
+        gravity: [0.0, -1.62],
+    }
+}
+
+fn main() {}

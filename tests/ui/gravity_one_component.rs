@@ -1,0 +1,13 @@
+vigp::mechanism! {
+    Pendulum {
+        gravity: [-9.81],
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start),
+        }
+    }
+}
+
+fn main() {}

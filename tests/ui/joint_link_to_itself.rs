@@ -1,0 +1,13 @@
+vigp::mechanism! {
+    Pendulum {
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start),
+            fold: revolute(rod.end, rod.start),
+        }
+    }
+}
+
+fn main() {}

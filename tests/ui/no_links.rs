@@ -1,0 +1,8 @@
+vigp::mechanism! {
+    Empty {
+        links {}
+        joints {}
+    }
+}
+
+fn main() {}

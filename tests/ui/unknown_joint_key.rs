@@ -1,0 +1,13 @@
+// `axis` belongs to prismatic joints only.
+vigp::mechanism! {
+    Pendulum {
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start) { axis: [1.0, 0.0] },
+        }
+    }
+}
+
+fn main() {}

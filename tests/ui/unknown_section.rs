@@ -1,0 +1,15 @@
+vigp::mechanism! {
+    Pendulum {
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start),
+        }
+        springs {
+            pivot: { stiffness: 1.0 },
+        }
+    }
+}
+
+fn main() {}
