@@ -80,5 +80,8 @@ pub mod systems;
 
 /// The names most programs need.
 pub mod prelude {
-    pub use vigp_runtime::{Integrator, Mechanism, NewtonOptions, State, StepError, Variational};
+    pub use vigp_runtime::{
+        Coordinates, ExplicitEuler, Integrator, Mechanism, NewtonOptions, Rk4, State, StepError,
+        SymplecticEuler, Variational,
+    };
 }

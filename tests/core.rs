@@ -65,8 +65,8 @@ fn check_del_jacobian<M: Mechanism<N, C>, const N: usize, const C: usize>(
     for _ in 0..20 {
         let x1 = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-2.0, 2.0));
         let v1 = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-3.0, 3.0));
-        let (terms, jac) = del::del_terms_jacobian::<M, N, C>(m, dt, &x1, &v1);
-        let direct = del::del_terms::<M, f64, N, C>(m, dt, &x1, &v1);
+        let (terms, jac) = del::del_terms_jacobian::<M, N, C>(m, dt, 0.0, &x1, &v1);
+        let direct = del::del_terms::<M, f64, N, C>(m, dt, 0.0, &x1, &v1);
         assert!((terms - direct).amax() <= 1e-13 * (1.0 + direct.amax()));
         let mut fd = SMatrix::<f64, N, N>::zeros();
         for j in 0..N {
@@ -74,8 +74,8 @@ fn check_del_jacobian<M: Mechanism<N, C>, const N: usize, const C: usize>(
             let (mut vp, mut vm) = (v1, v1);
             vp[j] += h;
             vm[j] -= h;
-            let d = (del::del_terms::<M, f64, N, C>(m, dt, &x1, &vp)
-                - del::del_terms::<M, f64, N, C>(m, dt, &x1, &vm))
+            let d = (del::del_terms::<M, f64, N, C>(m, dt, 0.0, &x1, &vp)
+                - del::del_terms::<M, f64, N, C>(m, dt, 0.0, &x1, &vm))
                 / (2.0 * h);
             fd.set_column(j, &d);
         }

@@ -328,8 +328,8 @@ fn error_bound_accessors_are_consistent() {
         for a in 0..n {
             let xa = &gp.inputs()[a * 3..a * 3 + 3];
             let mut s = (h.noise_variance + o.jitter() * o.output_scale().powi(2)) * alpha[a];
-            for b in 0..n {
-                s += h.kernel(xa, &gp.inputs()[b * 3..b * 3 + 3]) * alpha[b];
+            for (xb, ab) in gp.inputs().chunks(3).zip(&alpha) {
+                s += h.kernel(xa, xb) * ab;
             }
             let r = gp.targets()[a * 2 + j] - gp.prior_mean_at_inputs()[a * 2 + j];
             worst = worst.max((s - r).abs());

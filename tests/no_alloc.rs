@@ -18,14 +18,30 @@ fn variational_steps_do_not_allocate() {
     assert_eq!(info.count_total, 0, "double pendulum steps allocated");
 
     let fb = Fourbar::default().minimal();
-    let z0 = consistent_state(&fb, &SVector::from([0.9, -1.3, -0.4, 1.3]), &SVector::zeros(), 0.01).unwrap();
+    let z0 = consistent_state(
+        &fb,
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::zeros(),
+        0.01,
+    )
+    .unwrap();
     let vi = Variational::new(fb, 0.01);
     let mut out = [z0; 50];
     let info = allocation_counter::measure(|| {
         vi.rollout_into(&z0, &mut out).unwrap();
-        let _ = project_velocity(&fb, &out[49].q, &SVector::from([0.1, 0.2, 0.3, 0.4]), 0.01, &NewtonOptions::default()).unwrap();
+        let _ = project_velocity(
+            &fb,
+            &out[49].q,
+            &SVector::from([0.1, 0.2, 0.3, 0.4]),
+            0.01,
+            &NewtonOptions::default(),
+        )
+        .unwrap();
     });
-    assert_eq!(info.count_total, 0, "fourbar rollout_into / projection allocated");
+    assert_eq!(
+        info.count_total, 0,
+        "fourbar rollout_into / projection allocated"
+    );
 
     // the counter does see allocations
     let info = allocation_counter::measure(|| {

@@ -9,6 +9,7 @@ use crate::model::{Anchor, JointKind, Model, Point};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::Ident;
+use syn::ext::IdentExt;
 
 /// An f64 literal (a leading minus for negative values).
 pub fn lit(x: f64) -> TokenStream {
@@ -22,7 +23,7 @@ fn pair(p: [f64; 2]) -> TokenStream {
 }
 
 fn pose_ident(m: &Model, link: usize) -> Ident {
-    format_ident!("{}_pose", m.links[link].name)
+    format_ident!("pose_{}", m.links[link].name)
 }
 
 /// Local coordinates of an anchor, reading lengths from `params`.
@@ -31,7 +32,7 @@ fn anchor_local(m: &Model, params: &TokenStream, link: usize, anchor: Anchor) ->
     match anchor {
         Anchor::Start => quote!([0.0, 0.0]),
         Anchor::End => quote!([#params.links.#name.length, 0.0]),
-        Anchor::Center => quote!([#params.links.#name.length * 0.5, 0.0]),
+        Anchor::Center => quote!(::vigp::kinematics::center(#params.links.#name.length)),
         Anchor::At(p) => pair(p),
     }
 }
@@ -71,6 +72,30 @@ fn axis_expr(m: &Model, parent: Point, axis: [f64; 2]) -> TokenStream {
             let pose = pose_ident(m, l);
             quote!(#pose.direction(#a))
         }
+    }
+}
+
+/// θ_child − θ_parent of a joint (the world's θ is 0 and is left out).
+fn relative_theta(m: &Model, parent: Point, child: Point) -> TokenStream {
+    match (child.link(), parent.link()) {
+        (Some(_), None) => theta_expr(m, child),
+        (None, Some(_)) => {
+            let p = theta_expr(m, parent);
+            quote!(-#p)
+        }
+        _ => {
+            let (c, p) = (theta_expr(m, child), theta_expr(m, parent));
+            quote!(#c - #p)
+        }
+    }
+}
+
+/// A prismatic axis for a dot product with a scalar point: a plain `[f64; 2]`
+/// for a world parent, the rotated direction for a link parent.
+fn axis_for_dot(m: &Model, parent: Point, axis: [f64; 2]) -> TokenStream {
+    match parent.link() {
+        None => pair(axis),
+        Some(_) => axis_expr(m, parent, axis),
     }
 }
 
@@ -136,15 +161,15 @@ fn loop_rate(m: &Model, params: &TokenStream, j: usize) -> TokenStream {
     let joint = &m.joints[j];
     match joint.kind {
         JointKind::Revolute => {
-            let (c, p) = (theta_expr(m, joint.child), theta_expr(m, joint.parent));
-            quote!((#c - #p).eps)
+            let rel = relative_theta(m, joint.parent, joint.child);
+            quote!((#rel).eps)
         }
         JointKind::Prismatic { axis } => {
             let (pp, cp) = (
                 point_expr(m, params, joint.parent),
                 point_expr(m, params, joint.child),
             );
-            let dir = axis_expr(m, joint.parent, axis);
+            let dir = axis_for_dot(m, joint.parent, axis);
             quote!({
                 let d = ::vigp::kinematics::sub(#cp, #pp);
                 let a = #dir;
@@ -165,6 +190,217 @@ fn used_by_loops(m: &Model) -> Vec<bool> {
         }
     }
     used
+}
+
+/// Coordinate expression of a tree joint from link poses (f64 or generic).
+fn joint_coordinate(m: &Model, params: &TokenStream, j: usize) -> TokenStream {
+    let joint = &m.joints[j];
+    match joint.kind {
+        JointKind::Revolute => relative_theta(m, joint.parent, joint.child),
+        JointKind::Prismatic { axis } => {
+            let (pp, cp) = (
+                point_expr(m, params, joint.parent),
+                point_expr(m, params, joint.child),
+            );
+            let dir = axis_for_dot(m, joint.parent, axis);
+            quote!({
+                let d = ::vigp::kinematics::sub(#cp, #pp);
+                let a = #dir;
+                d[0] * a[0] + d[1] * a[1]
+            })
+        }
+    }
+}
+
+/// Constraint rows of a joint (2 equations) from link poses, pushing any
+/// `let` bindings they need.
+fn joint_constraint_rows(
+    m: &Model,
+    params: &TokenStream,
+    j: usize,
+    lets: &mut Vec<TokenStream>,
+    rows: &mut Vec<TokenStream>,
+) {
+    let joint = &m.joints[j];
+    let gap = format_ident!("gap_{}", joint.name);
+    let (pp, cp) = (
+        point_expr(m, params, joint.parent),
+        point_expr(m, params, joint.child),
+    );
+    match joint.kind {
+        JointKind::Revolute => {
+            lets.push(quote!(let #gap = ::vigp::kinematics::sub(#pp, #cp);));
+            rows.push(quote!(#gap[0]));
+            rows.push(quote!(#gap[1]));
+        }
+        JointKind::Prismatic { axis } => {
+            // off-axis offset, and relative orientation (bound to a name:
+            // binary operators inside array literals trip clippy's
+            // `possible_missing_comma` in macro output)
+            let dir = axis_expr(m, joint.parent, axis);
+            let turn = format_ident!("turn_{}", joint.name);
+            let rel = relative_theta(m, joint.parent, joint.child);
+            lets.push(quote!(let #gap = ::vigp::kinematics::sub(#cp, #pp);));
+            lets.push(quote!(let #turn = #rel;));
+            rows.push(quote!(::vigp::kinematics::cross(#gap, #dir)));
+            rows.push(quote!(#turn));
+        }
+    }
+}
+
+/// The maximal-coordinate view: each link's centre-of-mass pose (x, y, θ),
+/// every joint a constraint (2 equations), plus the coordinate maps.
+fn emit_maximal(m: &Model) -> TokenStream {
+    let name = &m.name;
+    let vis = &m.vis;
+    let maximal_ty = format_ident!("{}Maximal", name);
+    let minimal_ty = format_ident!("{}Minimal", name);
+    let nl = m.links.len();
+    let nm = Literal::usize_unsuffixed(3 * nl);
+    let n = Literal::usize_unsuffixed(m.dof());
+    let cm = Literal::usize_unsuffixed(2 * m.joints.len());
+    let nll = Literal::usize_unsuffixed(nl);
+    let svector = quote!(::vigp::__private::nalgebra::SVector);
+    let sys = quote!(self.sys);
+    let dissipative = m.dissipative();
+    let poses = all_poses(m);
+    let all_used = pose_pattern(m, &vec![true; nl]);
+
+    let attach = m.links.iter().enumerate().map(|(l, link)| {
+        let (ln, pose) = (&link.name, pose_ident(m, l));
+        let (ix, iy, it) = (
+            coordinate_index(3 * l),
+            coordinate_index(3 * l + 1),
+            coordinate_index(3 * l + 2),
+        );
+        quote!(let #pose = ::vigp::Pose2::attach(x[#it], [x[#ix], x[#iy]], self.sys.links.#ln.com);)
+    });
+    let coord_names = m
+        .links
+        .iter()
+        .flat_map(|l| ["x", "y", "theta"].map(|c| format!("{}.{c}", l.name.unraw())));
+    let kinds = m.links.iter().flat_map(|_| {
+        [
+            quote!(::vigp::CoordinateKind::Length),
+            quote!(::vigp::CoordinateKind::Length),
+            quote!(::vigp::CoordinateKind::Angle),
+        ]
+    });
+    let kinetic = m.links.iter().enumerate().map(|(l, link)| {
+        let ln = &link.name;
+        let (ix, iy, it) = (coordinate_index(3 * l), coordinate_index(3 * l + 1), coordinate_index(3 * l + 2));
+        quote!((v[#ix] * v[#ix] + v[#iy] * v[#iy]) * (0.5 * links.#ln.mass) + v[#it] * v[#it] * (0.5 * links.#ln.inertia))
+    });
+    let potential = m.links.iter().enumerate().map(|(l, link)| {
+        let ln = &link.name;
+        let (ix, iy) = (coordinate_index(3 * l), coordinate_index(3 * l + 1));
+        quote!(::vigp::kinematics::body_potential_energy(links.#ln.mass, gravity, [q[#ix], q[#iy]]))
+    });
+    let mut lets = Vec::new();
+    let mut rows = Vec::new();
+    for j in 0..m.joints.len() {
+        joint_constraint_rows(m, &sys, j, &mut lets, &mut rows);
+    }
+    let dissipation = if m.dissipative() {
+        let terms = (0..m.joints.len()).map(|j| {
+            let jn = &m.joints[j].name;
+            let rate = loop_rate(m, &sys, j);
+            quote!({ let rate = #rate; rate * rate * joints.#jn.damping })
+        });
+        quote! {
+            fn dissipation<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
+                let joints = &#sys.joints;
+                let #all_used = self.link_poses(&::vigp::kinematics::tangent(q, v));
+                (#(#terms)+*) * 0.5
+            }
+        }
+    } else {
+        quote!()
+    };
+    let maximal_entries = m.links.iter().enumerate().flat_map(|(l, link)| {
+        let (ln, pose) = (&link.name, pose_ident(m, l));
+        [
+            quote!(#pose.point(links.#ln.com)[0]),
+            quote!(#pose.point(links.#ln.com)[1]),
+            quote!(#pose.theta),
+        ]
+    });
+    let coord_idents: Vec<Ident> = m
+        .tree
+        .iter()
+        .map(|&j| format_ident!("coord_{}", m.joints[j].name))
+        .collect();
+    let coord_lets = m.tree.iter().zip(&coord_idents).map(|(&j, id)| {
+        let e = joint_coordinate(m, &quote!(self.sys), j);
+        quote!(let #id = #e;)
+    });
+    let doc = format!(
+        " Maximal-coordinate view of [`{name}`]: the pose (x, y, θ) of each link's centre of mass ({} coordinates), every joint a constraint ({} equations).",
+        3 * nl,
+        2 * m.joints.len()
+    );
+
+    quote! {
+        impl #name {
+            #[doc = " The maximal-coordinate model with these parameters."]
+            pub fn maximal(&self) -> #maximal_ty {
+                #maximal_ty { sys: *self }
+            }
+        }
+
+        #[doc = #doc]
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        #vis struct #maximal_ty {
+            #[doc = " The parameters."]
+            pub sys: #name,
+        }
+
+        impl #maximal_ty {
+            #[doc = " Link frame poses (origin at each link's `start`) from maximal coordinates, in link declaration order."]
+            pub fn link_poses<D: ::vigp::Scalar>(&self, x: &#svector<D, #nm>) -> [::vigp::Pose2<D>; #nll] {
+                #(#attach)*
+                [#(#poses),*]
+            }
+        }
+
+        impl ::vigp::Mechanism<#nm, #cm> for #maximal_ty {
+            const COORDINATES: [&'static str; #nm] = [#(#coord_names),*];
+            const KINDS: [::vigp::CoordinateKind; #nm] = [#(#kinds),*];
+            const DISSIPATIVE: bool = #dissipative;
+
+            fn kinetic_energy<D: ::vigp::Scalar>(&self, _q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
+                let links = &#sys.links;
+                #(#kinetic)+*
+            }
+
+            fn potential_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>) -> D {
+                let (links, gravity) = (&#sys.links, #sys.gravity);
+                #(#potential)+*
+            }
+
+            #dissipation
+
+            fn constraints<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>) -> #svector<D, #cm> {
+                let #all_used = self.link_poses(q);
+                #(#lets)*
+                #svector::from([#(#rows),*])
+            }
+        }
+
+        impl ::vigp::Coordinates<#n, #nm> for #minimal_ty {
+            fn maximal_positions<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>) -> #svector<D, #nm> {
+                let links = &#sys.links;
+                let #all_used = #sys.link_poses(q);
+                #svector::from([#(#maximal_entries),*])
+            }
+
+            fn minimal_positions(&self, x: &#svector<f64, #nm>) -> #svector<f64, #n> {
+                let #all_used = #sys.maximal().link_poses(x);
+                #(#coord_lets)*
+                #svector::from([#(#coord_idents),*])
+            }
+        }
+    }
 }
 
 /// The whole expansion.
@@ -233,8 +469,8 @@ pub fn emit(m: &Model) -> TokenStream {
         quote!()
     };
     let gravity = pair(m.gravity);
-    let link_names = m.links.iter().map(|l| l.name.to_string());
-    let coord_names = m.tree.iter().map(|&j| m.joints[j].name.to_string());
+    let link_names = m.links.iter().map(|l| l.name.unraw().to_string());
+    let coord_names = m.tree.iter().map(|&j| m.joints[j].name.unraw().to_string());
     let kinds = m.tree.iter().map(|&j| match m.joints[j].kind {
         JointKind::Revolute => quote!(::vigp::CoordinateKind::Angle),
         JointKind::Prismatic { .. } => quote!(::vigp::CoordinateKind::Length),
@@ -248,11 +484,11 @@ pub fn emit(m: &Model) -> TokenStream {
     // ---- Mechanism impl (minimal coordinates) ----
     let sys = quote!(self.sys);
     let kinetic_terms = m.links.iter().map(|l| {
-        let (ln, pose) = (&l.name, format_ident!("{}_pose", l.name));
+        let (ln, pose) = (&l.name, format_ident!("pose_{}", l.name));
         quote!(::vigp::kinematics::body_kinetic_energy(links.#ln.mass, links.#ln.inertia, #pose.point(links.#ln.com), #pose.theta))
     });
     let potential_terms = m.links.iter().map(|l| {
-        let (ln, pose) = (&l.name, format_ident!("{}_pose", l.name));
+        let (ln, pose) = (&l.name, format_ident!("pose_{}", l.name));
         quote!(::vigp::kinematics::body_potential_energy(links.#ln.mass, gravity, #pose.point(links.#ln.com)))
     });
     let all_used = pose_pattern(m, &vec![true; m.links.len()]);
@@ -273,7 +509,10 @@ pub fn emit(m: &Model) -> TokenStream {
             (quote!(_q), quote!())
         } else {
             let pattern = pose_pattern(m, &used_by_loops(m));
-            (quote!(q), quote!(let #pattern = #sys.link_poses(&::vigp::kinematics::tangent(q, v));))
+            (
+                quote!(q),
+                quote!(let #pattern = #sys.link_poses(&::vigp::kinematics::tangent(q, v));),
+            )
         };
         quote! {
             fn dissipation<D: ::vigp::Scalar>(&self, #q_arg: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
@@ -293,26 +532,7 @@ pub fn emit(m: &Model) -> TokenStream {
         let mut lets = Vec::new();
         let mut rows = Vec::new();
         for &j in &m.loops {
-            let joint = &m.joints[j];
-            let gap = format_ident!("{}_gap", joint.name);
-            let (pp, cp) = (
-                point_expr(m, &sys, joint.parent),
-                point_expr(m, &sys, joint.child),
-            );
-            match joint.kind {
-                JointKind::Revolute => {
-                    lets.push(quote!(let #gap = ::vigp::kinematics::sub(#pp, #cp);));
-                    rows.push(quote!(#gap[0]));
-                    rows.push(quote!(#gap[1]));
-                }
-                JointKind::Prismatic { axis } => {
-                    let dir = axis_expr(m, joint.parent, axis);
-                    let (tc, tp) = (theta_expr(m, joint.child), theta_expr(m, joint.parent));
-                    lets.push(quote!(let #gap = ::vigp::kinematics::sub(#cp, #pp);));
-                    rows.push(quote!(::vigp::kinematics::cross(#gap, #dir)));
-                    rows.push(quote!(#tc - #tp));
-                }
-            }
+            joint_constraint_rows(m, &sys, j, &mut lets, &mut rows);
         }
         quote! {
             fn constraints<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>) -> #svector<D, #c> {
@@ -334,6 +554,7 @@ pub fn emit(m: &Model) -> TokenStream {
         m.loop_constraints()
     );
     let links_doc = format!(" Link parameters of [`{name_str}`].");
+    let maximal = emit_maximal(m);
 
     quote! {
         #(#attrs)*
@@ -410,5 +631,7 @@ pub fn emit(m: &Model) -> TokenStream {
 
             #constraints
         }
+
+        #maximal
     }
 }

@@ -37,8 +37,12 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 pub fn expand_to_string(src: &str) -> Result<String, String> {
     let tokens: TokenStream = src.parse().map_err(|e| format!("{e}"))?;
     let out = expand(tokens).map_err(|e| {
-        e.into_iter().map(|e| e.to_string()).collect::<Vec<_>>().join("\n")
+        e.into_iter()
+            .map(|e| e.to_string())
+            .collect::<Vec<_>>()
+            .join("\n")
     })?;
-    let file: syn::File = syn::parse2(out).map_err(|e| format!("generated code does not parse: {e}"))?;
+    let file: syn::File =
+        syn::parse2(out).map_err(|e| format!("generated code does not parse: {e}"))?;
     Ok(prettyplease::unparse(&file))
 }

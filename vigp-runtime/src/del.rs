@@ -1,12 +1,19 @@
-//! The discrete Euler–Lagrange (DEL) residual of the first-order variational
-//! integrator (paper eq. 5–6, DESIGN §3) and its exact Jacobian.
+//! The discrete Euler–Lagrange (DEL) residual of the variational integrators
+//! (paper eq. 5–6, DESIGN §3) and its exact Jacobian.
 //!
-//! With x₁ = x₀ + Δt·v₀ fixed, the unknowns are v₁ and the multipliers λ:
+//! The discrete Lagrangian is L_d(x_k, x_{k+1}) = Δt·L(x_k + αΔt·v_k, v_k)
+//! with v_k = (x_{k+1} − x_k)/Δt: α = 0 is the paper's first-order
+//! (rectangle) rule, α = ½ the second-order midpoint rule. With
+//! x₁ = x₀ + Δt·v₀ fixed, the unknowns are v₁ and the multipliers λ:
 //!
 //! ```text
-//! d(v₁, λ) = p₀ − D_vL(x₁, v₁) + Δt·D_xL(x₁, v₁) + Δt·F(x₁, v₁) − G(x₁)ᵀλ = 0
-//! c(v₁)    = g(x₁ + Δt·v₁) = 0,            p₀ = D_vL(x₀, v₀)
+//! d(v₁, λ) = p₀ + (1−α)Δt·(D_xL + F)(m₁, v₁) − D_vL(m₁, v₁) − G(x₁)ᵀλ = 0
+//! c(v₁)    = g(x₁ + Δt·v₁) = 0
+//! p₀       = D_vL(m₀, v₀) + αΔt·(D_xL + F)(m₀, v₀),   m_k = x_k + αΔt·v_k
 //! ```
+//!
+//! For α = 0 this is exactly DESIGN §3:
+//! p₀ − D_vL(x₁, v₁) + Δt·D_xL(x₁, v₁) + Δt·F(x₁, v₁) − G(x₁)ᵀλ = 0.
 
 use crate::mechanism::{Mechanism, Scalar};
 use nalgebra::{SMatrix, SVector};
@@ -26,12 +33,50 @@ where
     gradient(|v| m.lagrangian(&x, &v), v).1
 }
 
+/// D_xL(x, v) + F(x, v): the generalized force side of the Euler–Lagrange
+/// equations, exact.
+pub fn force_terms<M, D, const N: usize, const C: usize>(
+    m: &M,
+    x: &SVector<D, N>,
+    v: &SVector<D, N>,
+) -> SVector<D, N>
+where
+    M: Mechanism<N, C>,
+    D: Scalar,
+{
+    let vv = v.map(DualVec::from_re);
+    let mut f = gradient(|x| m.lagrangian(&x, &vv), x).1;
+    if M::DISSIPATIVE {
+        f += m.generalized_forces(x, v);
+    }
+    f
+}
+
+/// The "previous step" momentum p₀ of the DEL residual (see module docs).
+pub fn previous_momentum<M, const N: usize, const C: usize>(
+    m: &M,
+    dt: f64,
+    alpha: f64,
+    x0: &SVector<f64, N>,
+    v0: &SVector<f64, N>,
+) -> SVector<f64, N>
+where
+    M: Mechanism<N, C>,
+{
+    if alpha == 0.0 {
+        return momentum::<M, f64, N, C>(m, x0, v0);
+    }
+    let m0 = x0 + v0 * (alpha * dt);
+    momentum::<M, f64, N, C>(m, &m0, v0) + force_terms::<M, f64, N, C>(m, &m0, v0) * (alpha * dt)
+}
+
 /// The v₁-dependent part of the DEL residual,
-/// −D_vL(x₁, v₁) + Δt·D_xL(x₁, v₁) + Δt·F(x₁, v₁), generic over the scalar
-/// so that its Jacobian comes from the same body.
+/// (1−α)Δt·(D_xL + F)(m₁, v₁) − D_vL(m₁, v₁) with m₁ = x₁ + αΔt·v₁, generic
+/// over the scalar so that its Jacobian comes from the same body.
 pub fn del_terms<M, D, const N: usize, const C: usize>(
     m: &M,
     dt: f64,
+    alpha: f64,
     x1: &SVector<D, N>,
     v1: &SVector<D, N>,
 ) -> SVector<D, N>
@@ -39,20 +84,20 @@ where
     M: Mechanism<N, C>,
     D: Scalar,
 {
-    let p1 = momentum::<M, D, N, C>(m, x1, v1);
-    let vv = v1.map(DualVec::from_re);
-    let dxl = gradient(|x| m.lagrangian(&x, &vv), x1).1;
-    let mut r = dxl * D::from(dt) - p1;
-    if M::DISSIPATIVE {
-        r += m.generalized_forces(x1, v1) * D::from(dt);
-    }
-    r
+    let m1 = if alpha == 0.0 {
+        *x1
+    } else {
+        x1 + v1 * D::from(alpha * dt)
+    };
+    force_terms::<M, D, N, C>(m, &m1, v1) * D::from((1.0 - alpha) * dt)
+        - momentum::<M, D, N, C>(m, &m1, v1)
 }
 
 /// Full DEL residual d(v₁, λ) for given p₀ and x₁.
 pub fn residual<M, const N: usize, const C: usize>(
     m: &M,
     dt: f64,
+    alpha: f64,
     p0: &SVector<f64, N>,
     x1: &SVector<f64, N>,
     v1: &SVector<f64, N>,
@@ -61,7 +106,7 @@ pub fn residual<M, const N: usize, const C: usize>(
 where
     M: Mechanism<N, C>,
 {
-    let mut r = p0 + del_terms::<M, f64, N, C>(m, dt, x1, v1);
+    let mut r = p0 + del_terms::<M, f64, N, C>(m, dt, alpha, x1, v1);
     if C > 0 {
         r -= m.constraint_jacobian(x1).transpose() * lambda;
     }
@@ -72,6 +117,7 @@ where
 pub fn del_terms_jacobian<M, const N: usize, const C: usize>(
     m: &M,
     dt: f64,
+    alpha: f64,
     x1: &SVector<f64, N>,
     v1: &SVector<f64, N>,
 ) -> (SVector<f64, N>, SMatrix<f64, N, N>)
@@ -82,7 +128,7 @@ where
     num_dual::jacobian(
         |v: SVector<DualVec<f64, nalgebra::Const<N>>, N>| {
             let x = x1.map(DualVec::from_re);
-            del_terms::<M, _, N, C>(m, dt, &x, &v)
+            del_terms::<M, _, N, C>(m, dt, alpha, &x, &v)
         },
         v1,
     )

@@ -100,3 +100,9 @@ pub fn body_potential_energy<D: Scalar>(mass: f64, gravity: [f64; 2], com: Point
 pub fn zero<D: Scalar>() -> D {
     D::from(0.0)
 }
+
+/// Local coordinates of the centre of a link of length `length`:
+/// `[length/2, 0]`.
+pub fn center(length: f64) -> [f64; 2] {
+    [length * 0.5, 0.0]
+}

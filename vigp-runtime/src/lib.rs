@@ -11,7 +11,9 @@
 #[cfg(feature = "alloc")]
 pub mod gp;
 
+pub mod classical;
 pub mod del;
+pub mod dynamics;
 pub mod kinematics;
 pub mod linalg;
 pub mod mechanism;
@@ -21,8 +23,9 @@ pub mod projection;
 pub mod summary;
 pub mod variational;
 
+pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
 pub use kinematics::Pose2;
-pub use mechanism::{CoordinateKind, Mechanism, Scalar, State};
+pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
 pub use newton::{NewtonOptions, StepError, StepInfo};
 pub use params::{Joint, Link};
 pub use summary::RolloutSummary;

@@ -43,7 +43,7 @@ impl<const M: usize> FullPivLu<M> {
                     }
                 }
             }
-            if !(best > rel_tol * scale) || best == 0.0 {
+            if best <= rel_tol * scale || best == 0.0 || best.is_nan() {
                 rank = k;
                 break;
             }

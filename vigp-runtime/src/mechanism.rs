@@ -125,3 +125,60 @@ pub trait Mechanism<const N: usize, const C: usize> {
         State::new(q, v)
     }
 }
+
+/// Scale for constraint residuals: 1 + the largest |coordinate| among the
+/// length coordinates (angles are left out: a link that has spun many turns
+/// must not loosen the tolerance on its joints).
+pub fn length_scale<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    q: &SVector<f64, N>,
+) -> f64 {
+    let mut s = 0.0f64;
+    for (x, kind) in q.iter().zip(M::KINDS.iter()) {
+        if *kind == CoordinateKind::Length {
+            s = s.max(x.abs());
+        }
+    }
+    1.0 + s
+}
+
+/// The map between a mechanism's minimal coordinates (`N`) and its maximal
+/// coordinates (`M` = 3 per link: x, y of the centre of mass and θ),
+/// implemented by the generated minimal view.
+pub trait Coordinates<const N: usize, const M: usize> {
+    /// Maximal positions X(q) (exact, generic so that derivatives follow).
+    fn maximal_positions<D: Scalar>(&self, q: &SVector<D, N>) -> SVector<D, M>;
+
+    /// Minimal positions q(X) of a maximal configuration (each tree joint's
+    /// relative angle or slide, read off the link poses). Exact inverse of
+    /// [`Coordinates::maximal_positions`] on consistent configurations.
+    fn minimal_positions(&self, x: &SVector<f64, M>) -> SVector<f64, N>;
+
+    /// Continuous maximal velocity Ẋ = (∂X/∂q)·q̇ (exact, by a dual number).
+    fn maximal_velocity(&self, q: &SVector<f64, N>, qdot: &SVector<f64, N>) -> SVector<f64, M> {
+        self.maximal_positions(&crate::kinematics::tangent(q, qdot))
+            .map(|x| x.eps)
+    }
+
+    /// A discrete minimal state as a discrete maximal state: X_k = X(q_k) and
+    /// V_k = (X(q_k + Δt·v_k) − X(q_k))/Δt, so that the maximal discrete
+    /// trajectory is exactly the image of the minimal one.
+    fn to_maximal(&self, z: &State<N>, dt: f64) -> State<M> {
+        let x0 = self.maximal_positions(&z.q);
+        let x1 = self.maximal_positions(&(z.q + z.v * dt));
+        State {
+            q: x0,
+            v: (x1 - x0) / dt,
+        }
+    }
+
+    /// A discrete maximal state as a discrete minimal state (the inverse of
+    /// [`Coordinates::to_maximal`] on consistent states).
+    fn to_minimal(&self, z: &State<M>, dt: f64) -> State<N> {
+        let q0 = self.minimal_positions(&z.q);
+        let q1 = self.minimal_positions(&(z.q + z.v * dt));
+        State {
+            q: q0,
+            v: (q1 - q0) / dt,
+        }
+    }
+}

@@ -5,7 +5,8 @@
 pub struct NewtonOptions {
     /// Convergence when the scaled residual max-norm falls below this
     /// (momentum residual relative to 1 + |p₀|, constraint residual relative
-    /// to 1 + |x|). Default 1e-12.
+    /// to 1 + the largest length coordinate, so effectively absolute in
+    /// metres for mechanisms near the origin). Default 1e-12.
     pub tolerance: f64,
     /// Iteration cap (default 25).
     pub max_iterations: usize,

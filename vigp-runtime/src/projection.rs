@@ -20,7 +20,7 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
         return Err(StepError::NonFiniteState { step: None });
     }
     let mut q = *q;
-    let scale = 1.0 + q.amax();
+    let scale = crate::mechanism::length_scale::<M, N, C>(&q);
     for iter in 0..=options.max_iterations {
         let g = m.constraints(&q);
         let res = g.amax() / scale;
@@ -85,7 +85,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
         ));
     }
     let v_scale = 1.0 + v_u.amax();
-    let g_scale = 1.0 + q1.amax();
+    let g_scale = crate::mechanism::length_scale::<M, N, C>(q1);
     let mut v = *v_u;
     let mut mu = SVector::<f64, C>::zeros();
     let eval = |v: &SVector<f64, N>, mu: &SVector<f64, C>| {

@@ -1,0 +1,121 @@
+//! Classical integrators on the continuous-time dynamics of
+//! [`crate::dynamics`]: explicit Euler, symplectic (semi-implicit) Euler and
+//! RK4. Their state is (q, q̇) with the **continuous** velocity q̇; constraints
+//! enter only at acceleration level, so positions drift off g(q) = 0 (the
+//! paper's Fig. 1b). They share the [`Integrator`] trait with the variational
+//! integrators, so swapping is one line.
+
+use crate::dynamics::acceleration;
+use crate::mechanism::{Mechanism, State};
+use crate::newton::StepError;
+use crate::variational::Integrator;
+
+macro_rules! classical {
+    ($(#[$doc:meta])* $name:ident) => {
+        $(#[$doc])*
+        #[derive(Clone, Copy, Debug)]
+        pub struct $name<M, const N: usize, const C: usize> {
+            model: M,
+            dt: f64,
+        }
+
+        impl<M: Mechanism<N, C>, const N: usize, const C: usize> $name<M, N, C> {
+            /// An integrator for `model` with time step `dt` (validated by `step`).
+            pub fn new(model: M, dt: f64) -> Self {
+                Self { model, dt }
+            }
+
+            /// The model.
+            pub fn model(&self) -> &M {
+                &self.model
+            }
+        }
+    };
+}
+
+classical! {
+    /// Explicit (forward) Euler: q⁺ = q + Δt q̇, q̇⁺ = q̇ + Δt q̈(q, q̇).
+    /// First order; energy grows on conservative systems.
+    ExplicitEuler
+}
+classical! {
+    /// Symplectic (semi-implicit) Euler: q̇⁺ = q̇ + Δt q̈(q, q̇), q⁺ = q + Δt q̇⁺.
+    /// First order.
+    SymplecticEuler
+}
+classical! {
+    /// Classical fourth-order Runge–Kutta on (q, q̇).
+    Rk4
+}
+
+fn check<const N: usize>(dt: f64, z: &State<N>) -> Result<(), StepError> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(StepError::InvalidTimeStep { dt });
+    }
+    if !z.is_finite() {
+        return Err(StepError::NonFiniteState { step: None });
+    }
+    Ok(())
+}
+
+fn finite<const N: usize>(z: State<N>) -> Result<State<N>, StepError> {
+    if z.is_finite() {
+        Ok(z)
+    } else {
+        Err(StepError::NonFiniteState { step: None })
+    }
+}
+
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for ExplicitEuler<M, N, C> {
+    fn dt(&self) -> f64 {
+        self.dt
+    }
+    fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+        check(self.dt, z)?;
+        let (a, _) = acceleration::<M, N, C>(&self.model, &z.q, &z.v)?;
+        finite(State {
+            q: z.q + z.v * self.dt,
+            v: z.v + a * self.dt,
+        })
+    }
+}
+
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N>
+    for SymplecticEuler<M, N, C>
+{
+    fn dt(&self) -> f64 {
+        self.dt
+    }
+    fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+        check(self.dt, z)?;
+        let (a, _) = acceleration::<M, N, C>(&self.model, &z.q, &z.v)?;
+        let v = z.v + a * self.dt;
+        finite(State {
+            q: z.q + v * self.dt,
+            v,
+        })
+    }
+}
+
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Rk4<M, N, C> {
+    fn dt(&self) -> f64 {
+        self.dt
+    }
+    fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+        check(self.dt, z)?;
+        let h = self.dt;
+        let f = |q, v| acceleration::<M, N, C>(&self.model, &q, &v).map(|(a, _)| a);
+        let (q, v) = (z.q, z.v);
+        let a1 = f(q, v)?;
+        let (q2, v2) = (q + v * (0.5 * h), v + a1 * (0.5 * h));
+        let a2 = f(q2, v2)?;
+        let (q3, v3) = (q + v2 * (0.5 * h), v + a2 * (0.5 * h));
+        let a3 = f(q3, v3)?;
+        let (q4, v4) = (q + v3 * h, v + a3 * h);
+        let a4 = f(q4, v4)?;
+        finite(State {
+            q: q + (v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0),
+            v: v + (a1 + a2 * 2.0 + a3 * 2.0 + a4) * (h / 6.0),
+        })
+    }
+}
