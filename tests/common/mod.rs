@@ -17,3 +17,30 @@ impl Rng {
         lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
     }
 }
+
+use nalgebra::SVector;
+use vigp::{Mechanism, Variational};
+
+/// Positions every `dt` for `samples` samples, integrated by the midpoint VI
+/// at `dt / substeps` from a state at rest at `q0` (projected first when the
+/// model has constraints).
+pub fn positions<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    m: M,
+    q0: SVector<f64, N>,
+    dt: f64,
+    substeps: usize,
+    samples: usize,
+) -> Vec<SVector<f64, N>> {
+    let h = dt / substeps as f64;
+    let z0 = vigp::projection::consistent_state(&m, &q0, &SVector::zeros(), h).unwrap();
+    let vi = Variational::midpoint(m, h);
+    let mut z = z0;
+    let mut out = vec![z.q];
+    for _ in 1..samples {
+        for _ in 0..substeps {
+            z = vi.step(&z).unwrap();
+        }
+        out.push(z.q);
+    }
+    out
+}

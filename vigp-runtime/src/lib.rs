@@ -11,10 +11,14 @@
 #[cfg(feature = "alloc")]
 pub mod gp;
 
+#[cfg(feature = "alloc")]
+pub mod bound;
 pub mod classical;
 pub mod del;
 pub mod dynamics;
 pub mod kinematics;
+#[cfg(feature = "alloc")]
+pub mod learned;
 pub mod linalg;
 pub mod mechanism;
 pub mod newton;

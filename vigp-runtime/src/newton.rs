@@ -99,6 +99,12 @@ pub enum StepError {
         /// Rollout step index, if in a rollout.
         step: Option<usize>,
     },
+    /// A learned model's prediction failed or was not finite.
+    #[error("learned prediction failed{}", at(step))]
+    Prediction {
+        /// Rollout step index, if in a rollout.
+        step: Option<usize>,
+    },
     /// The iteration cap was reached before the tolerance.
     #[error(
         "Newton did not converge: {iterations} iterations, residual {residual:.3e} > tolerance {tolerance:.1e}{}",
@@ -130,7 +136,8 @@ impl StepError {
             StepError::NonFiniteState { step }
             | StepError::NonFiniteResidual { step, .. }
             | StepError::SingularJacobian { step, .. }
-            | StepError::NotConverged { step, .. } => *step = Some(k),
+            | StepError::NotConverged { step, .. }
+            | StepError::Prediction { step } => *step = Some(k),
             StepError::InvalidTimeStep { .. } | StepError::InvalidOptions(_) => {}
         }
         self

@@ -1,0 +1,286 @@
+//! The learned integrators of paper §3: exact constraints after projection,
+//! consistency with the nominal model, bounded energy without a prior
+//! model (Fig. 1a), and empirical coverage of the error bound.
+
+mod common;
+
+use common::{Rng, positions};
+use nalgebra::SVector;
+use vigp::bound::BoundSettings;
+use vigp::gp::TrainOptions;
+use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
+use vigp::prelude::*;
+use vigp::systems::{DoublePendulum, Fourbar, Pendulum};
+
+fn quick_options() -> TrainOptions {
+    TrainOptions {
+        restarts: 2,
+        seed: 7,
+        ..TrainOptions::default()
+    }
+}
+
+/// Every `stride`-th transition, at most `n`.
+fn subsample<const N: usize>(all: &[Transition<N>], n: usize) -> Vec<Transition<N>> {
+    let stride = (all.len() / n).max(1);
+    all.iter().step_by(stride).take(n).copied().collect()
+}
+
+fn learned_rollout_violation<M: Mechanism<N, C> + Clone, const N: usize, const C: usize>(
+    l: &Learned<M, N, C>,
+    z0: &State<N>,
+    steps: usize,
+) -> (f64, f64) {
+    let mut ws = l.workspace();
+    let mut z = *z0;
+    let (mut worst, mut max_corr) = (0.0f64, 0.0f64);
+    for k in 0..steps {
+        let (next, info) = l
+            .step_with(&z, &mut ws)
+            .unwrap_or_else(|e| panic!("step {k}: {e}"));
+        worst = worst.max(l.model().constraint_violation(&next));
+        max_corr = max_corr.max(info.correction);
+        z = next;
+    }
+    (worst, max_corr)
+}
+
+/// After projection |g| ≤ 1e-10 at every step of 10^4-step learned rollouts
+/// of the fourbar (minimal coordinates, loop constraint) and the maximal
+/// double pendulum, with GPs trained on very few (5) and more (40) samples
+/// and no prior model.
+#[test]
+fn projection_keeps_constraints_exact_in_long_learned_rollouts() {
+    let dt = 0.01;
+    let fb = Fourbar::default().minimal();
+    let traj = positions(fb, SVector::from([0.9, -1.3, -0.4, 1.3]), dt, 10, 200);
+    let data = transitions(&traj, dt);
+    for n in [5, 40] {
+        let (l, _) = Learned::train(
+            fb,
+            dt,
+            &subsample(&data, n),
+            Encoding::Raw,
+            Prior::Constant,
+            &quick_options(),
+        )
+        .unwrap();
+        let (worst, corr) = learned_rollout_violation(&l, &data[0].z, 10_000);
+        eprintln!(
+            "fourbar, {n} samples: max |g| = {worst:.2e}, max projection correction = {corr:.2e}"
+        );
+        assert!(worst <= 1e-10, "fourbar {n}: {worst:e}");
+        assert!(corr > 0.0, "the projection should have had work to do");
+    }
+
+    let dp = DoublePendulum::default();
+    let (min, max) = (dp.minimal(), dp.maximal());
+    let traj = positions(
+        min,
+        SVector::from([std::f64::consts::FRAC_PI_2, 0.0]),
+        dt,
+        10,
+        200,
+    );
+    let traj: Vec<_> = traj.iter().map(|q| min.maximal_positions(q)).collect();
+    let data = transitions(&traj, dt);
+    for n in [5, 40] {
+        let (l, _) = Learned::train(
+            max,
+            dt,
+            &subsample(&data, n),
+            Encoding::Raw,
+            Prior::Constant,
+            &quick_options(),
+        )
+        .unwrap();
+        let (worst, corr) = learned_rollout_violation(&l, &data[0].z, 10_000);
+        eprintln!(
+            "double pendulum (maximal), {n} samples: max |g| = {worst:.2e}, max projection correction = {corr:.2e}"
+        );
+        assert!(worst <= 1e-10, "double pendulum {n}: {worst:e}");
+    }
+}
+
+/// A GP with the nominal prior, trained on noisy data from the nominal model
+/// itself, learns a residual at noise level: the learned step reproduces the
+/// nominal step to within the noise σ = 1e-3 on held-out states.
+#[test]
+fn trained_on_the_nominal_model_it_reproduces_the_nominal_step() {
+    let dt = 0.01;
+    let model = DoublePendulum::default().minimal();
+    let vi = Variational::new(model, dt);
+    let mut rng = Rng(11);
+    let gauss = |rng: &mut Rng| {
+        let (u1, u2) = (rng.uniform(1e-12, 1.0), rng.uniform(0.0, 1.0));
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    };
+    let mut data = Vec::new();
+    for _ in 0..120 {
+        let z = State::new(
+            [rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.5)],
+            [rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)],
+        );
+        let next = vi.step(&z).unwrap();
+        let noisy = next.v + SVector::from_fn(|_, _| 1e-3 * gauss(&mut rng));
+        data.push(Transition { z, v_next: noisy });
+    }
+    let (l, _) = Learned::train(
+        model,
+        dt,
+        &data,
+        Encoding::SinCos,
+        Prior::Nominal,
+        &quick_options(),
+    )
+    .unwrap();
+    let mut ws = l.workspace();
+    let (mut worst, mut sq, mut count) = (0.0f64, 0.0f64, 0usize);
+    for _ in 0..200 {
+        let z = State::new(
+            [rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.5)],
+            [rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)],
+        );
+        let (next, _) = l.step_with(&z, &mut ws).unwrap();
+        let d = next.v - vi.step(&z).unwrap().v;
+        worst = worst.max(d.amax());
+        sq += d.norm_squared();
+        count += 2;
+    }
+    let rms = (sq / count as f64).sqrt();
+    eprintln!(
+        "learned vs nominal step on held-out states: RMS |Δv| = {rms:.2e}, max {worst:.2e} (noise σ = 1e-3)"
+    );
+    // At noise level: the learned residual's RMS is below the noise σ (a GP
+    // that learned a spurious residual would sit well above it), and no
+    // component exceeds 3σ.
+    assert!(rms < 1e-3, "residual RMS above noise level: {rms:e}");
+    assert!(worst < 3e-3, "residual above 3σ: {worst:e}");
+}
+
+/// Paper Fig. 1a: a GP-only integrator (constant prior mean) trained on 10
+/// and on 20 samples of one pendulum trajectory from θ = π/2 in maximal
+/// coordinates, dt = 10 ms: its energy error stays bounded over 10^4 steps
+/// while explicit Euler's grows.
+#[test]
+fn learned_energy_stays_bounded_while_explicit_euler_grows() {
+    let dt = 0.01;
+    let p = Pendulum::default();
+    let (min, max) = (p.minimal(), p.maximal());
+    let traj = positions(
+        min,
+        SVector::from([std::f64::consts::FRAC_PI_2]),
+        dt,
+        100,
+        201,
+    );
+    let traj: Vec<_> = traj.iter().map(|q| min.maximal_positions(q)).collect();
+    let data = transitions(&traj, dt);
+    let z0 = data[0].z;
+    let e0 = max.energy(&z0);
+    let steps = 10_000;
+    let by_tenth = |traj: &[State<3>]| {
+        let mut t = [0.0f64; 10];
+        for (k, z) in traj[1..].iter().enumerate() {
+            t[k * 10 / steps] = t[k * 10 / steps].max((max.energy(z) - e0).abs());
+        }
+        t
+    };
+    let ee = by_tenth(
+        &ExplicitEuler::new(max, dt)
+            .rollout(
+                &State {
+                    q: z0.q,
+                    v: SVector::zeros(),
+                },
+                steps,
+            )
+            .unwrap(),
+    );
+    eprintln!("explicit Euler max |ΔE| per tenth: {ee:.3?}");
+    assert!(ee[9] > 10.0 * ee[0]);
+    for n in [10, 20] {
+        let (l, _) = Learned::train(
+            max,
+            dt,
+            &subsample(&data, n),
+            Encoding::Raw,
+            Prior::Constant,
+            &quick_options(),
+        )
+        .unwrap();
+        let t = by_tenth(&l.rollout(&z0, steps).unwrap());
+        eprintln!("learned ({n} samples) max |ΔE| per tenth: {t:.3?}");
+        // bounded: no growth from the second to the last tenth (after the
+        // initial transient the paper also observes), and far below Euler's
+        assert!(
+            t[9] <= 1.5 * t[1].max(1e-3),
+            "{n} samples: energy grows {t:?}"
+        );
+        assert!(t[9] < 0.1 * ee[9]);
+    }
+}
+
+/// Bound coverage on held-out data: the one-step error of the projected
+/// prediction exceeds the Theorem-1 bound in at most a δ fraction of cases.
+#[test]
+fn one_step_bound_covers_held_out_errors() {
+    let dt = 0.01;
+    let mut truth = Fourbar::default();
+    truth.links.link2.mass = 1.08;
+    truth.links.link3.inertia *= 0.93;
+    truth.joints.top1.damping = 0.8;
+    truth.joints.middle1.damping = 0.3;
+    truth.joints.middle2.damping = 0.3;
+    let nominal = Fourbar::default().minimal();
+    let mut rng = Rng(5);
+    let mut all = Vec::new();
+    for _ in 0..6 {
+        let q0 = SVector::from([
+            rng.uniform(-1.2, 1.2),
+            rng.uniform(-2.5, -0.5),
+            rng.uniform(-1.2, 1.2),
+            rng.uniform(0.5, 2.5),
+        ]);
+        let traj = positions(truth.minimal(), q0, dt, 10, 120);
+        all.extend(transitions(&traj, dt));
+    }
+    let train: Vec<_> = all.iter().step_by(5).copied().collect();
+    let held_out: Vec<_> = all.iter().skip(2).step_by(5).copied().collect();
+    let (l, _) = Learned::train(
+        nominal,
+        dt,
+        &train,
+        Encoding::SinCos,
+        Prior::Nominal,
+        &quick_options(),
+    )
+    .unwrap();
+    let settings = BoundSettings {
+        delta: 0.05,
+        ..BoundSettings::default()
+    };
+    let samples: Vec<_> = train.iter().map(|t| t.z).collect();
+    let bound = l.error_bound(&settings, &samples).unwrap();
+    let mut ws = l.workspace();
+    let (mut exceed, mut ratio_max) = (0usize, 0.0f64);
+    for t in &held_out {
+        let (next, info) = l.step_with(&t.z, &mut ws).unwrap();
+        let err = (next.v - t.v_next).norm();
+        let b = bound.one_step(info.std_dev.as_slice());
+        ratio_max = ratio_max.max(err / b);
+        if err > b {
+            exceed += 1;
+        }
+    }
+    let frac = exceed as f64 / held_out.len() as f64;
+    eprintln!(
+        "bound coverage: {} held-out transitions, δ = {}, exceeded in {exceed} ({frac:.3}); max error/bound = {ratio_max:.3}; β = {:.1}, L = {:.3}",
+        held_out.len(),
+        settings.delta,
+        bound.beta[0],
+        bound.projection_lipschitz
+    );
+    assert!(frac <= settings.delta, "bound exceeded in {frac} of cases");
+    assert!(bound.projection_lipschitz >= 1.0 - 1e-9);
+}

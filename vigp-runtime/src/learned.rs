@@ -1,0 +1,337 @@
+//! The paper's learned integrators (§3): a Gaussian process learns the
+//! velocity map z_k ↦ v_{k+1} on top of a prior (the nominal variational
+//! step, eq. 7, or a constant mean), and for constrained models the
+//! prediction is projected onto the constraint manifold (eq. 8).
+//!
+//! Positions are never learned: x_{k+1} = x_k + Δt·v_k is exact for discrete
+//! velocities, so training targets are v_{k+1} = (x_{k+2} − x_{k+1})/Δt from
+//! positions sampled at Δt ([`transitions`]).
+
+use crate::gp::{Gp, GpError, PriorMean, TrainOptions, TrainReport, Workspace};
+use crate::mechanism::{CoordinateKind, Mechanism, State};
+use crate::newton::{NewtonOptions, StepError};
+use crate::projection::project_velocity;
+use crate::variational::{Integrator, Variational};
+use nalgebra::SVector;
+
+/// How a state z = (q, v) is presented to the GP.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Encoding {
+    /// The model's own coordinates and velocities (minimal or maximal).
+    Raw,
+    /// Every angle coordinate θ replaced by (sin θ, cos θ); velocities as is.
+    SinCos,
+}
+
+impl Encoding {
+    /// Input dimension of the encoding for a model with coordinate `kinds`.
+    pub fn dim(self, kinds: &[CoordinateKind]) -> usize {
+        match self {
+            Encoding::Raw => 2 * kinds.len(),
+            Encoding::SinCos => {
+                2 * kinds.len()
+                    + kinds
+                        .iter()
+                        .filter(|k| **k == CoordinateKind::Angle)
+                        .count()
+            }
+        }
+    }
+
+    /// Write the encoding of `z` into `out` (length [`Encoding::dim`]).
+    pub fn encode<const N: usize>(
+        self,
+        kinds: &[CoordinateKind; N],
+        z: &State<N>,
+        out: &mut [f64],
+    ) {
+        let mut k = 0;
+        for (i, kind) in kinds.iter().enumerate() {
+            if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
+                let (s, c) = z.q[i].sin_cos();
+                out[k] = s;
+                out[k + 1] = c;
+                k += 2;
+            } else {
+                out[k] = z.q[i];
+                k += 1;
+            }
+        }
+        for i in 0..N {
+            out[k + i] = z.v[i];
+        }
+    }
+}
+
+/// The prior mean of the learned velocity map.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Prior {
+    /// The nominal variational step v̄(z) (paper eq. 7): the GP learns the
+    /// residual v_{k+1} − v̄(z_k).
+    Nominal,
+    /// No prior model: the constant mean of the training targets.
+    Constant,
+}
+
+/// One training pair: a discrete state and the next discrete velocity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transition<const N: usize> {
+    /// z_k = (x_k, v_k), v_k = (x_{k+1} − x_k)/Δt.
+    pub z: State<N>,
+    /// v_{k+1} = (x_{k+2} − x_{k+1})/Δt.
+    pub v_next: SVector<f64, N>,
+}
+
+/// Transitions of a trajectory of positions sampled every Δt (K positions
+/// give K − 2 transitions).
+pub fn transitions<const N: usize>(positions: &[SVector<f64, N>], dt: f64) -> Vec<Transition<N>> {
+    positions
+        .windows(3)
+        .map(|w| Transition {
+            z: State {
+                q: w[0],
+                v: (w[1] - w[0]) / dt,
+            },
+            v_next: (w[2] - w[1]) / dt,
+        })
+        .collect()
+}
+
+/// Why training or prediction of a learned integrator failed.
+#[derive(Debug, thiserror::Error)]
+pub enum LearnError {
+    /// The GP could not be trained or evaluated.
+    #[error(transparent)]
+    Gp(#[from] GpError),
+    /// A nominal step or a projection failed.
+    #[error(transparent)]
+    Step(#[from] StepError),
+    /// No training data.
+    #[error("no training transitions")]
+    Empty,
+    /// A setting is out of its domain.
+    #[error("invalid setting {what}: {value}")]
+    InvalidSetting {
+        /// Which setting.
+        what: &'static str,
+        /// The offending value.
+        value: f64,
+    },
+    /// A training transition contains NaN or ±∞.
+    #[error("training transition {0} is not finite")]
+    NonFinite(usize),
+}
+
+/// Diagnostics of one learned step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LearnedStepInfo<const N: usize> {
+    /// The unprojected prediction v_u (eq. 7).
+    pub unprojected: SVector<f64, N>,
+    /// Posterior standard deviation σ_i(z) of each velocity component.
+    pub std_dev: SVector<f64, N>,
+    /// Size ‖v − v_u‖ of the projection's correction (0 without constraints).
+    pub correction: f64,
+}
+
+/// A learned integrator: prior + GP velocity map (+ projection when the
+/// model has constraints and projection is on).
+///
+/// Complexity per step: one nominal VI step (with [`Prior::Nominal`]),
+/// O(N·(d + N)) per output for the GP mean and variance (N training
+/// samples, d input dimensions), and a Newton projection for constrained
+/// models.
+#[derive(Clone, Debug)]
+pub struct Learned<M, const N: usize, const C: usize> {
+    model: M,
+    dt: f64,
+    prior: Prior,
+    encoding: Encoding,
+    project: bool,
+    gp: Gp,
+    options: NewtonOptions,
+}
+
+impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
+    /// Train on transitions. `model` supplies the prior (for
+    /// [`Prior::Nominal`]), the angle kinds for [`Encoding::SinCos`], and the
+    /// constraints for the projection (on whenever C > 0). The GP options'
+    /// `mean` is overridden by `prior`.
+    pub fn train(
+        model: M,
+        dt: f64,
+        data: &[Transition<N>],
+        encoding: Encoding,
+        prior: Prior,
+        options: &TrainOptions,
+    ) -> Result<(Self, TrainReport), LearnError> {
+        if data.is_empty() {
+            return Err(LearnError::Empty);
+        }
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(StepError::InvalidTimeStep { dt }.into());
+        }
+        let d = encoding.dim(&M::KINDS);
+        let mut inputs = vec![0.0; data.len() * d];
+        let mut targets = Vec::with_capacity(data.len() * N);
+        let nominal = Variational::new(model.clone(), dt);
+        for (i, t) in data.iter().enumerate() {
+            if !(t.z.is_finite() && t.v_next.iter().all(|x| x.is_finite())) {
+                return Err(LearnError::NonFinite(i));
+            }
+            encoding.encode(&M::KINDS, &t.z, &mut inputs[i * d..(i + 1) * d]);
+            let base = match prior {
+                Prior::Nominal => nominal.step(&t.z)?.v,
+                Prior::Constant => SVector::zeros(),
+            };
+            targets.extend((t.v_next - base).iter());
+        }
+        let mut opts = options.clone();
+        opts.mean = match prior {
+            Prior::Nominal => PriorMean::Zero,
+            Prior::Constant => PriorMean::Constant,
+        };
+        let (gp, report) = Gp::train(&inputs, d, &targets, N, &opts)?;
+        Ok((
+            Self {
+                model,
+                dt,
+                prior,
+                encoding,
+                project: C > 0,
+                gp,
+                options: NewtonOptions::default(),
+            },
+            report,
+        ))
+    }
+
+    /// Switch the projection off (eq. 7 even for a constrained model), e.g.
+    /// to measure what the projection buys.
+    pub fn without_projection(mut self) -> Self {
+        self.project = false;
+        self
+    }
+
+    /// The trained GP.
+    pub fn gp(&self) -> &Gp {
+        &self.gp
+    }
+
+    /// The model (prior and constraints).
+    pub fn model(&self) -> &M {
+        &self.model
+    }
+
+    /// The encoding of GP inputs.
+    pub fn encoding(&self) -> Encoding {
+        self.encoding
+    }
+
+    /// The prior.
+    pub fn prior(&self) -> Prior {
+        self.prior
+    }
+
+    /// `true` when predictions are projected onto the constraints.
+    pub fn projects(&self) -> bool {
+        self.project
+    }
+
+    /// A GP workspace for [`Learned::step_with`].
+    pub fn workspace(&self) -> Workspace {
+        self.gp.workspace()
+    }
+
+    /// The unprojected prediction v_u = prior(z) + μ(z) (eq. 7) and the
+    /// posterior standard deviations.
+    pub fn predict_velocity(
+        &self,
+        z: &State<N>,
+        ws: &mut Workspace,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
+        let d = self.encoding.dim(&M::KINDS);
+        let mut x = [0.0f64; 64];
+        let mut heap;
+        let input: &mut [f64] = if d <= x.len() {
+            &mut x[..d]
+        } else {
+            heap = vec![0.0; d];
+            &mut heap
+        };
+        self.encoding.encode(&M::KINDS, z, input);
+        let mut mean = SVector::<f64, N>::zeros();
+        let mut var = SVector::<f64, N>::zeros();
+        self.gp
+            .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)
+            .map_err(|_| StepError::Prediction { step: None })?;
+        let base = match self.prior {
+            Prior::Nominal => {
+                Variational::new(self.model.clone(), self.dt)
+                    .with_options(self.options)
+                    .step(z)?
+                    .v
+            }
+            Prior::Constant => SVector::zeros(),
+        };
+        let v = base + mean;
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(StepError::Prediction { step: None });
+        }
+        Ok((v, var.map(|s| s.max(0.0).sqrt())))
+    }
+
+    /// One learned step with a caller-owned GP workspace (no allocation for
+    /// inputs of up to 64 dimensions).
+    pub fn step_with(
+        &self,
+        z: &State<N>,
+        ws: &mut Workspace,
+    ) -> Result<(State<N>, LearnedStepInfo<N>), StepError> {
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(StepError::InvalidTimeStep { dt: self.dt });
+        }
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState { step: None });
+        }
+        let x1 = z.q + z.v * self.dt;
+        let (vu, std_dev) = self.predict_velocity(z, ws)?;
+        let v = if self.project && C > 0 {
+            project_velocity(&self.model, &x1, &vu, self.dt, &self.options)?.0
+        } else {
+            vu
+        };
+        Ok((
+            State { q: x1, v },
+            LearnedStepInfo {
+                unprojected: vu,
+                std_dev,
+                correction: (v - vu).norm(),
+            },
+        ))
+    }
+}
+
+impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
+    for Learned<M, N, C>
+{
+    fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// One step; allocates a GP workspace per call (use
+    /// [`Learned::step_with`] in loops).
+    fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+        let mut ws = self.gp.workspace();
+        self.step_with(z, &mut ws).map(|(z, _)| z)
+    }
+
+    fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
+        let mut ws = self.gp.workspace();
+        let mut z = *z0;
+        for (k, slot) in out.iter_mut().enumerate() {
+            z = self.step_with(&z, &mut ws).map_err(|e| e.at_step(k))?.0;
+            *slot = z;
+        }
+        Ok(())
+    }
+}
