@@ -114,8 +114,8 @@ impl Default for TrainOptions {
             seed: 0,
             bounds: Bounds::default(),
             max_iters: 500,
-            ftol: 1e-12,
-            pgtol: 1e-7,
+            ftol: 2.220446049250313e-9,
+            pgtol: 1e-5,
         }
     }
 }
