@@ -307,9 +307,11 @@ impl Gp {
             .par_iter()
             .map(|(out, _, t0)| {
                 let y = &prep.residuals[*out].0;
+                // One workspace per (output, start) run: no N×N allocation per evaluation.
+                let mut ws = lml::LmlWorkspace::new(n);
                 lbfgs::minimise(
                     |t| {
-                        let e = lml::lml(&prep.xn, n, d, y, t, true, Par::Seq)?;
+                        let e = lml::lml_ws(&mut ws, &prep.xn, d, y, t, true, Par::Seq)?;
                         Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
                     },
                     t0,
@@ -427,7 +429,7 @@ impl Gp {
                 let (r, s) = &prep.residuals[o];
                 let xs = lml::scale_inputs(&prep.xn, d, &hp.length_scales);
                 let j0 = start_jitter.map_or(0.0, |j| j[o]);
-                let Factor { l, jitter, .. } = lml::factorise(&xs, n, d, &hp, j0, false, Par::Seq)?;
+                let Factor { l, jitter } = lml::factorise(&xs, n, d, &hp, j0, Par::Seq)?;
                 let alpha = lml::solve_alpha(&l, r);
                 let fit: f64 = r.iter().zip(&alpha).map(|(a, b)| a * b).sum();
                 let lml = -0.5 * fit
