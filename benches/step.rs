@@ -1,1 +1,76 @@
-fn main(){}
+//! Cost of one integrator step on the paper's systems, minimal and maximal
+//! coordinates, first-order and midpoint VI, and the classical integrators.
+//! Run: `cargo bench --bench step`. Speed against error is printed by
+//! `cargo run --release --example speed_vs_error`.
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use nalgebra::SVector;
+use std::hint::black_box;
+use vigp::prelude::*;
+use vigp::projection::consistent_state;
+use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
+
+fn bench_steps(c: &mut Criterion) {
+    let dt = 0.01;
+    let mut g = c.benchmark_group("step");
+
+    let p = Pendulum::default();
+    let z = State::new([1.0], [0.5]);
+    let vi = Variational::new(p.minimal(), dt);
+    g.bench_function("pendulum/minimal/vi", |b| {
+        b.iter(|| vi.step(black_box(&z)).unwrap())
+    });
+
+    let cp = Cartpole::default();
+    let z = State::new([0.2, 2.0], [0.3, 0.5]);
+    let vi = Variational::new(cp.minimal(), dt);
+    g.bench_function("cartpole/minimal/vi", |b| {
+        b.iter(|| vi.step(black_box(&z)).unwrap())
+    });
+
+    let dp = DoublePendulum::default();
+    let z = State::new([1.0, -0.5], [0.5, 1.0]);
+    let vi = Variational::new(dp.minimal(), dt);
+    g.bench_function("double_pendulum/minimal/vi", |b| {
+        b.iter(|| vi.step(black_box(&z)).unwrap())
+    });
+    let vi2 = Variational::midpoint(dp.minimal(), dt);
+    g.bench_function("double_pendulum/minimal/midpoint", |b| {
+        b.iter(|| vi2.step(black_box(&z)).unwrap())
+    });
+    let rk4 = Rk4::new(dp.minimal(), dt);
+    g.bench_function("double_pendulum/minimal/rk4", |b| {
+        b.iter(|| rk4.step(black_box(&z)).unwrap())
+    });
+    let zm = dp.minimal().to_maximal(&z, dt);
+    let vim = Variational::new(dp.maximal(), dt);
+    g.bench_function("double_pendulum/maximal/vi", |b| {
+        b.iter(|| vim.step(black_box(&zm)).unwrap())
+    });
+
+    let fb = Fourbar::default();
+    let z = consistent_state(
+        &fb.minimal(),
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::from([0.5, 0.0, 0.0, 0.0]),
+        dt,
+    )
+    .unwrap();
+    let vi = Variational::new(fb.minimal(), dt);
+    g.bench_function("fourbar/minimal/vi", |b| {
+        b.iter(|| vi.step(black_box(&z)).unwrap())
+    });
+    let zm = fb.minimal().to_maximal(&z, dt);
+    let vim = Variational::new(fb.maximal(), dt);
+    g.bench_function("fourbar/maximal/vi", |b| {
+        b.iter(|| vim.step(black_box(&zm)).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group! {
+    name = benches;
+    config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(2)).warm_up_time(std::time::Duration::from_millis(500));
+    targets = bench_steps
+}
+criterion_main!(benches);

@@ -78,6 +78,11 @@ pub use vigp_codegen as codegen;
 
 pub mod systems;
 
+/// The README's examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
+
 /// The names most programs need.
 pub mod prelude {
     pub use vigp_runtime::{

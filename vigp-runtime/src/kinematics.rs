@@ -12,7 +12,9 @@ use num_dual::Dual;
 /// A planar point in world coordinates (x right, y up).
 pub type Point2<D> = [D; 2];
 
-/// The pose of a link frame: origin (the link's `start`) and orientation.
+/// The pose of a link frame: origin (the link's `start`) and orientation,
+/// with sin θ and cos θ computed once (on nested dual numbers they are the
+/// most expensive part of the kinematics).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Pose2<D> {
     /// World x of the frame origin.
@@ -21,6 +23,10 @@ pub struct Pose2<D> {
     pub y: D,
     /// Orientation θ (0 = hanging down, counter-clockwise positive).
     pub theta: D,
+    /// sin θ.
+    pub sin: D,
+    /// cos θ.
+    pub cos: D,
 }
 
 impl<D: Scalar> Pose2<D> {
@@ -33,13 +39,15 @@ impl<D: Scalar> Pose2<D> {
             x: at[0] - (s * a + c * b),
             y: at[1] - (s * b - c * a),
             theta,
+            sin: s,
+            cos: c,
         }
     }
 
     /// World direction of a local direction (rotation only).
     pub fn direction(&self, local: [f64; 2]) -> Point2<D> {
         let [a, b] = local;
-        let (s, c) = self.theta.sin_cos();
+        let (s, c) = (self.sin, self.cos);
         [s * a + c * b, s * b - c * a]
     }
 

@@ -10,7 +10,7 @@
 use crate::gp::{Gp, GpError, PriorMean, TrainOptions, TrainReport, Workspace};
 use crate::mechanism::{CoordinateKind, Mechanism, State};
 use crate::newton::{NewtonOptions, StepError};
-use crate::projection::project_velocity;
+use crate::projection::{consistent_state, project_velocity};
 use crate::variational::{Integrator, Variational};
 use nalgebra::SVector;
 
@@ -180,6 +180,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             }
             encoding.encode(&M::KINDS, &t.z, &mut inputs[i * d..(i + 1) * d]);
             let base = match prior {
+                // With constraints, a noisy state is off the manifold and the
+                // nominal step would spend Δv ≈ |g|/Δt re-closing it: evaluate
+                // the prior at the nearest consistent state instead, as it is
+                // at prediction time (predictions are projected).
+                Prior::Nominal if C > 0 => {
+                    nominal
+                        .step(&consistent_state(&model, &t.z.q, &t.z.v, dt)?)?
+                        .v
+                }
                 Prior::Nominal => nominal.step(&t.z)?.v,
                 Prior::Constant => SVector::zeros(),
             };
@@ -199,7 +208,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 encoding,
                 project: C > 0,
                 gp,
-                options: NewtonOptions::default(),
+                // near a folded loop the projection converges linearly
+                options: NewtonOptions {
+                    max_iterations: 100,
+                    ..NewtonOptions::default()
+                },
             },
             report,
         ))

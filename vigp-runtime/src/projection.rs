@@ -6,6 +6,7 @@ use crate::linalg::{FullPivLu, solve_kkt};
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError, StepInfo};
 use nalgebra::{SMatrix, SVector};
+use num_dual::Dual2Vec;
 
 /// Project a configuration onto g(q) = 0 by Gauss–Newton minimum-norm
 /// corrections q ← q − Gᵀ(GGᵀ)⁻¹g (the nearest consistent configuration to
@@ -88,17 +89,37 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     let g_scale = crate::mechanism::length_scale::<M, N, C>(q1);
     let mut v = *v_u;
     let mut mu = SVector::<f64, C>::zeros();
+    // Exact Newton: ∂r/∂v = I + Δt²·Σ μ_i ∇²g_i(q₂) (a Gauss–Newton step
+    // without the curvature term stalls when the correction is large).
     let eval = |v: &SVector<f64, N>, mu: &SVector<f64, C>| {
         let q2 = q1 + v * dt;
+        let (_, grad, hess) = num_dual::hessian(
+            |w: SVector<Dual2Vec<f64, nalgebra::Const<N>>, N>| {
+                let q = w.map(|wi| wi * dt) + q1.map(Dual2Vec::from_re);
+                let g = m.constraints(&q);
+                let mut phi = Dual2Vec::from_re(0.0);
+                for i in 0..C {
+                    phi += g[i] * mu[i];
+                }
+                phi
+            },
+            v,
+        );
         let gj: SMatrix<f64, C, N> = m.constraint_jacobian(&q2);
-        let r = v - v_u + gj.transpose() * mu * dt;
-        (r, m.constraints(&q2), gj)
+        let r = v - v_u + grad;
+        (
+            r,
+            m.constraints(&q2),
+            gj,
+            SMatrix::<f64, N, N>::identity() + hess,
+        )
     };
     let merit = |r: &SVector<f64, N>, c: &SVector<f64, C>| {
         let (a, b) = (r.norm() / v_scale, c.norm() / g_scale);
         a * a + b * b
     };
-    let (mut r, mut c, mut gj) = eval(&v, &mu);
+    let (mut r, mut c, mut gj, mut jac) = eval(&v, &mu);
+    let mut stalled = false;
     for iter in 0..=options.max_iterations {
         let (res_r, res_c) = (r.amax() / v_scale, c.amax() / g_scale);
         if !(res_r.is_finite() && res_c.is_finite()) {
@@ -107,13 +128,15 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
                 step: None,
             });
         }
-        if res_r <= options.tolerance && res_c <= options.tolerance {
+        let converged = res_r <= options.tolerance && res_c <= options.tolerance;
+        let accept_stall = stalled && res_r.max(res_c) <= options.stall_tolerance;
+        if converged || accept_stall {
             return Ok((
                 v,
                 StepInfo {
                     iterations: iter,
                     residual: res_r.max(res_c),
-                    stalled: false,
+                    stalled: !converged,
                 },
             ));
         }
@@ -126,13 +149,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
             });
         }
         let a = gj * dt;
-        let Some((dv, dmu)) = solve_kkt(
-            &SMatrix::<f64, N, N>::identity(),
-            &a.transpose(),
-            &a,
-            &r,
-            &c,
-        ) else {
+        let Some((dv, dmu)) = solve_kkt(&jac, &a.transpose(), &a, &r, &c) else {
             return Err(StepError::SingularJacobian {
                 iteration: iter,
                 step: None,
@@ -142,11 +159,16 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
         let mut alpha = 1.0;
         loop {
             let (v_try, mu_try) = (v - dv * alpha, mu - dmu * alpha);
-            let (r_try, c_try, gj_try) = eval(&v_try, &mu_try);
+            let (r_try, c_try, gj_try, jac_try) = eval(&v_try, &mu_try);
             let phi = merit(&r_try, &c_try);
-            if (phi.is_finite() && phi <= (1.0 - 1e-4 * alpha) * phi0) || alpha <= options.min_step
-            {
-                (v, mu, r, c, gj) = (v_try, mu_try, r_try, c_try, gj_try);
+            if phi.is_finite() && phi <= (1.0 - 1e-4 * alpha) * phi0 {
+                (v, mu, r, c, gj, jac) = (v_try, mu_try, r_try, c_try, gj_try, jac_try);
+                break;
+            }
+            if alpha <= options.min_step {
+                // no decrease along the Newton direction (see
+                // `NewtonOptions::stall_tolerance`)
+                stalled = true;
                 break;
             }
             alpha *= 0.5;
