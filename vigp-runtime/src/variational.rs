@@ -135,22 +135,29 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
         let mut v = z.v;
         let mut lambda = SVector::<f64, C>::zeros();
 
+        // Residuals in plain f64; the Jacobian (N dual directions, nested
+        // duals inside) is refreshed only when contraction is slow: a
+        // chord/Newton hybrid that needs one Jacobian per step in the common
+        // case of a good initial guess.
         let eval = |v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
-            let (terms, jac) = del::del_terms_jacobian::<M, N, C>(m, dt, alpha, &x1, v);
-            let r = p0 + terms - g1t * lambda;
+            let r = p0 + del::del_terms::<M, f64, N, C>(m, dt, alpha, &x1, v) - g1t * lambda;
             let c = if C > 0 {
                 m.constraints(&(x1 + v * dt))
             } else {
                 SVector::zeros()
             };
-            (r, c, jac)
+            (r, c)
         };
+        let jacobian =
+            |v: &SVector<f64, N>| del::del_terms_jacobian::<M, N, C>(m, dt, alpha, &x1, v).1;
         let merit = |r: &SVector<f64, N>, c: &SVector<f64, C>| {
             let a = r.norm() / p_scale;
             let b = c.norm() / g_scale;
             a * a + b * b
         };
-        let (mut r, mut c, mut jac) = eval(&v, &lambda);
+        let (mut r, mut c) = eval(&v, &lambda);
+        let mut jac = jacobian(&v);
+        let mut fresh = true;
         let tol = self.options.tolerance;
         let mut stalled = false;
         for iter in 0..=self.options.max_iterations {
@@ -210,16 +217,28 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
             loop {
                 let v_try = v - dv * alpha;
                 let l_try = lambda - dl * alpha;
-                let (r_try, c_try, jac_try) = eval(&v_try, &l_try);
+                let (r_try, c_try) = eval(&v_try, &l_try);
                 let phi = merit(&r_try, &c_try);
                 if phi.is_finite() && phi <= (1.0 - 1e-4 * alpha) * phi0 {
-                    (v, lambda, r, c, jac) = (v_try, l_try, r_try, c_try, jac_try);
+                    (v, lambda, r, c) = (v_try, l_try, r_try, c_try);
+                    // slow contraction: the old Jacobian is stale
+                    if phi > 1e-2 * phi0 {
+                        jac = jacobian(&v);
+                        fresh = true;
+                    } else {
+                        fresh = false;
+                    }
                     break;
                 }
                 if alpha <= self.options.min_step {
-                    // no decrease along the Newton direction: keep the
-                    // current iterate and let the acceptance test decide
-                    stalled = true;
+                    if fresh {
+                        // no decrease along the exact Newton direction: keep
+                        // the iterate and let the acceptance test decide
+                        stalled = true;
+                    } else {
+                        jac = jacobian(&v);
+                        fresh = true;
+                    }
                     break;
                 }
                 alpha *= 0.5;
