@@ -596,7 +596,11 @@ impl Plot {
                 )))?;
             }
 
-            let style = line.colour.stroke_width(2);
+            // dense, jagged series (Fig. 1) at width 1: plotters joins thick
+            // segments with miters, which draw spikes far beyond the data at
+            // sharp turns on a log axis
+            let width = if line.points.len() > 200 { 1 } else { 2 };
+            let style = line.colour.stroke_width(width);
             let runs = finite_runs(&line.points, x_log, floor);
             // The first run carries the legend entry (an empty series if the line has no finite point).
             let first = runs.first().cloned().unwrap_or_default();
