@@ -61,7 +61,7 @@ fn main() -> Result<(), StepError> {
         let energy = |z: &State<2>| m.energy(z);
         let vi = Variational::new(m, dt);
         let mid = Variational::midpoint(m, dt);
-        let rows: [(&str, Result<(State<2>, f64, f64), StepError>); 5] = [
+        let rows: [(&str, Run); 5] = [
             (
                 "explicit Euler",
                 run(&ExplicitEuler::new(m, dt), &z0, energy),
