@@ -11,9 +11,10 @@
 //! * [`log_marginal_likelihood`]: the objective and its gradient on raw data.
 //!
 //! Complexity: one likelihood evaluation costs O(N²d + N³) time and O(N²)
-//! memory (N³/3 for the Cholesky, ≈2N³/3 for the inverse the gradient
-//! needs); a trained model predicts the mean in O(Nd) and the variance in
-//! O(N²) per output and point.
+//! memory (N³/3 for the Cholesky, 2N³/3 for the inverse the gradient
+//! needs; both blocked, zeroing entries far below rounding so that
+//! subnormals stay out of the level-3 updates); a trained model predicts
+//! the mean in O(Nd) and the variance in O(N²) per output and point.
 //!
 //! Numerical caveats: with tiny noise the Gram matrix is ill-conditioned
 //! (condition number up to σ_f²·N/σ_n²); the Cholesky then escalates a
