@@ -112,7 +112,11 @@ fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
 ) -> Result<Vec<SVector<f64, N>>, StepError> {
     let sub = (DT / gt_dt).round().max(1.0) as usize;
     let h = DT / sub as f64;
-    let mut z = consistent_state(&m, q0, &SVector::zeros(), h)?;
+    // at rest: the midpoint rule's discrete velocity belongs to t = h/2, so
+    // start from v₀ = ½h·q̈ (projected), not 0, which would cost an order
+    let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
+    let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h)?;
+    let mut z = State { q, v };
     let vi = Variational::midpoint(m, h);
     let mut out = Vec::with_capacity(TRAJ_SAMPLES);
     out.push(z.q);

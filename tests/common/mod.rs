@@ -32,7 +32,11 @@ pub fn positions<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     samples: usize,
 ) -> Vec<SVector<f64, N>> {
     let h = dt / substeps as f64;
-    let z0 = vigp::projection::consistent_state(&m, &q0, &SVector::zeros(), h).unwrap();
+    let q = vigp::projection::consistent_state(&m, &q0, &SVector::zeros(), h)
+        .unwrap()
+        .q;
+    let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h).unwrap();
+    let z0 = vigp::State { q, v };
     let vi = Variational::midpoint(m, h);
     let mut z = z0;
     let mut out = vec![z.q];
