@@ -284,3 +284,63 @@ fn one_step_bound_covers_held_out_errors() {
     assert!(frac <= settings.delta, "bound exceeded in {frac} of cases");
     assert!(bound.projection_lipschitz >= 1.0 - 1e-9);
 }
+
+/// The projection's Jacobian from the implicit function theorem (used for
+/// the bound's Lipschitz constant) matches central differences of the
+/// projection itself (relative 1e-6: the projection is solved to 1e-12 and
+/// differenced with h = 1e-5, so rounding contributes ~1e-7).
+#[test]
+fn projection_jacobian_matches_finite_differences() {
+    use vigp::bound::projection_jacobian;
+    use vigp::projection::{consistent_state, project_velocity};
+    let dt = 0.01;
+    let fb = Fourbar::default().minimal();
+    let dp = DoublePendulum::default().maximal();
+    let mut rng = Rng(3);
+    let z = consistent_state(
+        &fb,
+        &SVector::from([0.7, -1.1, -0.3, 1.1]),
+        &SVector::zeros(),
+        dt,
+    )
+    .unwrap();
+    let zm = DoublePendulum::default()
+        .minimal()
+        .to_maximal(&State::new([0.8, -0.4], [0.5, 1.0]), dt);
+    fn check<M: Mechanism<N, C>, const N: usize, const C: usize>(
+        m: &M,
+        q: &SVector<f64, N>,
+        vu: &SVector<f64, N>,
+        dt: f64,
+    ) {
+        let opts = NewtonOptions {
+            tolerance: 1e-14,
+            stall_tolerance: 1e-12,
+            max_iterations: 100,
+            ..NewtonOptions::default()
+        };
+        let x1 = q;
+        let jac = projection_jacobian(m, x1, vu, dt).unwrap();
+        let mut fd = nalgebra::SMatrix::<f64, N, N>::zeros();
+        let h = 1e-5;
+        for k in 0..N {
+            let (mut a, mut b) = (*vu, *vu);
+            a[k] += h;
+            b[k] -= h;
+            let pa = project_velocity(m, x1, &a, dt, &opts).unwrap().0;
+            let pb = project_velocity(m, x1, &b, dt, &opts).unwrap().0;
+            fd.set_column(k, &((pa - pb) / (2.0 * h)));
+        }
+        let err = (jac - fd).amax() / jac.amax();
+        assert!(
+            err < 1e-6,
+            "projection Jacobian vs central differences: {err:e}"
+        );
+    }
+    for _ in 0..5 {
+        let vu = z.v + SVector::from_fn(|_, _| rng.uniform(-0.5, 0.5));
+        check(&fb, &(z.q + z.v * dt), &vu, dt);
+        let vu = zm.v + SVector::from_fn(|_, _| rng.uniform(-0.5, 0.5));
+        check(&dp, &(zm.q + zm.v * dt), &vu, dt);
+    }
+}
