@@ -4,7 +4,7 @@
 
 mod common;
 
-use common::Rng;
+use common::{Rng, pendulum_reference};
 use nalgebra::{SMatrix, SVector};
 use vigp::del;
 use vigp::prelude::*;
@@ -341,24 +341,6 @@ fn other_loop_mechanisms_keep_their_constraints() {
         .map(|z| tel.constraint_violation(z))
         .fold(0.0, f64::max);
     assert!(worst <= 1e-10, "telescope |g| = {worst:e}");
-}
-
-/// RK4 on the damped pendulum ODE I θ̈ = −m g l_c sin θ − c θ̇ with a tiny
-/// step: an independent reference solution.
-fn pendulum_reference(theta0: f64, omega0: f64, t: f64, inertia: f64, mgl: f64, c: f64) -> f64 {
-    let f = |th: f64, om: f64| (om, (-mgl * th.sin() - c * om) / inertia);
-    let n = 200_000;
-    let h = t / n as f64;
-    let (mut th, mut om) = (theta0, omega0);
-    for _ in 0..n {
-        let k1 = f(th, om);
-        let k2 = f(th + 0.5 * h * k1.0, om + 0.5 * h * k1.1);
-        let k3 = f(th + 0.5 * h * k2.0, om + 0.5 * h * k2.1);
-        let k4 = f(th + h * k3.0, om + h * k3.1);
-        th += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-        om += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-    }
-    th
 }
 
 /// First-order convergence: the position error at t = 1 s halves when Δt

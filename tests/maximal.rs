@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::Rng;
+use common::{Rng, pendulum_reference};
 use nalgebra::SVector;
 use vigp::dynamics::{acceleration, discrete_velocity, mass_matrix};
 use vigp::prelude::*;
@@ -290,23 +290,6 @@ fn explicit_euler_energy_grows_while_the_vis_stay_bounded() {
     );
 }
 
-/// RK4 reference of the damped pendulum angle at t = 1 s.
-fn reference(theta0: f64, inertia: f64, mgl: f64, c: f64) -> f64 {
-    let f = |th: f64, om: f64| (om, (-mgl * th.sin() - c * om) / inertia);
-    let n = 100_000;
-    let h = 1.0 / n as f64;
-    let (mut th, mut om) = (theta0, 0.0);
-    for _ in 0..n {
-        let k1 = f(th, om);
-        let k2 = f(th + 0.5 * h * k1.0, om + 0.5 * h * k1.1);
-        let k3 = f(th + 0.5 * h * k2.0, om + 0.5 * h * k2.1);
-        let k4 = f(th + h * k3.0, om + h * k3.1);
-        th += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-        om += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-    }
-    th
-}
-
 /// Observed order from the errors at Δt = 1/40 and 1/160. Classical
 /// integrators start from the continuous state (1, 0); the VIs from the
 /// consistent discrete velocity `discrete_velocity` (q̇ + ½Δt·q̈).
@@ -341,7 +324,7 @@ fn measured_convergence_orders() {
     let mut sys = Pendulum::default();
     sys.joints.pivot.damping = 0.3;
     let m = sys.minimal();
-    let r = reference(1.0, sys.links.rod.inertia + 0.25, 9.81 * 0.5, 0.3);
+    let r = pendulum_reference(1.0, 0.0, 1.0, sys.links.rod.inertia + 0.25, 9.81 * 0.5, 0.3);
     let cases = [
         (
             "explicit Euler",

@@ -48,3 +48,21 @@ pub fn positions<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     }
     out
 }
+
+/// RK4 on the damped pendulum ODE I θ̈ = −m g l_c sin θ − c θ̇ with a tiny
+/// step: an independent reference solution.
+pub fn pendulum_reference(theta0: f64, omega0: f64, t: f64, inertia: f64, mgl: f64, c: f64) -> f64 {
+    let f = |th: f64, om: f64| (om, (-mgl * th.sin() - c * om) / inertia);
+    let n = 200_000;
+    let h = t / n as f64;
+    let (mut th, mut om) = (theta0, omega0);
+    for _ in 0..n {
+        let k1 = f(th, om);
+        let k2 = f(th + 0.5 * h * k1.0, om + 0.5 * h * k1.1);
+        let k3 = f(th + 0.5 * h * k2.0, om + 0.5 * h * k2.1);
+        let k4 = f(th + h * k3.0, om + h * k3.1);
+        th += h / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
+        om += h / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
+    }
+    th
+}
