@@ -491,6 +491,10 @@ pub fn emit(m: &Model) -> TokenStream {
         let (ln, pose) = (&l.name, format_ident!("pose_{}", l.name));
         quote!(::vigp::kinematics::body_potential_energy(links.#ln.mass, gravity, #pose.point(links.#ln.com)))
     });
+    let lagrangian_terms = m.links.iter().map(|l| {
+        let (ln, pose) = (&l.name, format_ident!("pose_{}", l.name));
+        quote!(::vigp::kinematics::body_lagrangian(links.#ln.mass, links.#ln.inertia, gravity, #pose.point(links.#ln.com), #pose.theta))
+    });
     let all_used = pose_pattern(m, &vec![true; m.links.len()]);
 
     let dissipation = if dissipative {
@@ -625,6 +629,12 @@ pub fn emit(m: &Model) -> TokenStream {
                 let (links, gravity) = (&#sys.links, #sys.gravity);
                 let #all_used = #sys.link_poses(q);
                 #(#potential_terms)+*
+            }
+
+            fn lagrangian<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
+                let (links, gravity) = (&#sys.links, #sys.gravity);
+                let #all_used = #sys.link_poses(&::vigp::kinematics::tangent(q, v));
+                #(#lagrangian_terms)+*
             }
 
             #dissipation

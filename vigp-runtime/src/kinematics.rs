@@ -114,3 +114,17 @@ pub fn zero<D: Scalar>() -> D {
 pub fn center(length: f64) -> [f64; 2] {
     [length * 0.5, 0.0]
 }
+
+/// Lagrangian T − V of one body from the tangent of its centre of mass and
+/// orientation: the positions are the real parts, so one tangent pass of the
+/// kinematics yields both energies.
+pub fn body_lagrangian<D: Scalar>(
+    mass: f64,
+    inertia: f64,
+    gravity: [f64; 2],
+    com: Point2<Dual<D>>,
+    theta: Dual<D>,
+) -> D {
+    body_kinetic_energy(mass, inertia, com, theta)
+        - body_potential_energy(mass, gravity, [com[0].re, com[1].re])
+}
