@@ -564,6 +564,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     {
         return Err("need at least one N, run and trajectory, and 0 < gt_dt <= 0.01".into());
     }
+    const SYSTEMS: [&str; 4] = ["pendulum", "cartpole", "double_pendulum", "fourbar"];
+    if let Some(bad) = cli.systems.iter().find(|s| !SYSTEMS.contains(&s.as_str())) {
+        return Err(format!(
+            "unknown system `{bad}` (expected one of {})",
+            SYSTEMS.join(", ")
+        )
+        .into());
+    }
     let t0 = Instant::now();
     println!(
         "vigp paper reproduction: systems {:?}, N {:?}, {} runs, {}+{} trajectories, {} restarts, gt dt {:e} s, seed {}",
