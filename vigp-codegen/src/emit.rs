@@ -156,29 +156,6 @@ fn pose_pattern(m: &Model, used: &[bool]) -> TokenStream {
     quote!([#(#names),*])
 }
 
-/// Rate of a loop joint's relative coordinate, from tangent poses.
-fn loop_rate(m: &Model, params: &TokenStream, j: usize) -> TokenStream {
-    let joint = &m.joints[j];
-    match joint.kind {
-        JointKind::Revolute => {
-            let rel = relative_theta(m, joint.parent, joint.child);
-            quote!((#rel).eps)
-        }
-        JointKind::Prismatic { axis } => {
-            let (pp, cp) = (
-                point_expr(m, params, joint.parent),
-                point_expr(m, params, joint.child),
-            );
-            let dir = axis_for_dot(m, joint.parent, axis);
-            quote!({
-                let d = ::vigp::kinematics::sub(#cp, #pp);
-                let a = #dir;
-                (d[0] * a[0] + d[1] * a[1]).eps
-            })
-        }
-    }
-}
-
 fn used_by_loops(m: &Model) -> Vec<bool> {
     let mut used = vec![false; m.links.len()];
     for &j in &m.loops {
@@ -192,7 +169,8 @@ fn used_by_loops(m: &Model) -> Vec<bool> {
     used
 }
 
-/// Coordinate expression of a tree joint from link poses (f64 or generic).
+/// Relative coordinate of a joint (angle or slide) from link poses, for any
+/// scalar; on tangent poses its `eps` part is the joint rate.
 fn joint_coordinate(m: &Model, params: &TokenStream, j: usize) -> TokenStream {
     let joint = &m.joints[j];
     match joint.kind {
@@ -304,8 +282,8 @@ fn emit_maximal(m: &Model) -> TokenStream {
     let dissipation = if m.dissipative() {
         let terms = (0..m.joints.len()).map(|j| {
             let jn = &m.joints[j].name;
-            let rate = loop_rate(m, &sys, j);
-            quote!({ let rate = #rate; rate * rate * joints.#jn.damping })
+            let coordinate = joint_coordinate(m, &sys, j);
+            quote!({ let coordinate = #coordinate; let rate = coordinate.eps; rate * rate * joints.#jn.damping })
         });
         quote! {
             fn dissipation<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
@@ -504,8 +482,8 @@ pub fn emit(m: &Model) -> TokenStream {
         });
         let loop_terms = m.loops.iter().map(|&j| {
             let jn = &m.joints[j].name;
-            let rate = loop_rate(m, &sys, j);
-            quote!({ let rate = #rate; rate * rate * joints.#jn.damping })
+            let coordinate = joint_coordinate(m, &sys, j);
+            quote!({ let coordinate = #coordinate; let rate = coordinate.eps; rate * rate * joints.#jn.damping })
         });
         let terms: Vec<_> = tree_terms.chain(loop_terms).collect();
         // positions enter only through the kinematics of damped loop joints
