@@ -1,5 +1,8 @@
 //! Cost of one integrator step on the paper's systems, minimal and maximal
-//! coordinates, first-order and midpoint VI, and the classical integrators.
+//! coordinates, first-order and midpoint VI, and the classical integrators
+//! (group `step`, the std dual-number runtime), and the fixed-size `no_std`
+//! first-order VI (group `embedded`: one step from a state, and one step
+//! inside a rollout, which carries the momentum).
 //! Run: `cargo bench --bench step`. Speed against error is printed by
 //! `cargo run --release --example speed_vs_error`.
 
@@ -7,6 +10,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::SVector;
 use std::hint::black_box;
 use vigp::prelude::*;
+use vigp::embedded::Stepper;
 use vigp::projection::consistent_state;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 
@@ -20,12 +24,22 @@ fn bench_steps(c: &mut Criterion) {
     g.bench_function("pendulum/minimal/vi", |b| {
         b.iter(|| vi.step(black_box(&z)).unwrap())
     });
+    let zm = p.minimal().to_maximal(&z, dt);
+    let vim = Variational::new(p.maximal(), dt);
+    g.bench_function("pendulum/maximal/vi", |b| {
+        b.iter(|| vim.step(black_box(&zm)).unwrap())
+    });
 
     let cp = Cartpole::default();
     let z = State::new([0.2, 2.0], [0.3, 0.5]);
     let vi = Variational::new(cp.minimal(), dt);
     g.bench_function("cartpole/minimal/vi", |b| {
         b.iter(|| vi.step(black_box(&z)).unwrap())
+    });
+    let zm = cp.minimal().to_maximal(&z, dt);
+    let vim = Variational::new(cp.maximal(), dt);
+    g.bench_function("cartpole/maximal/vi", |b| {
+        b.iter(|| vim.step(black_box(&zm)).unwrap())
     });
 
     let dp = DoublePendulum::default();
@@ -68,9 +82,57 @@ fn bench_steps(c: &mut Criterion) {
     g.finish();
 }
 
+/// The embedded stepper: `step` (computes p₀ = M(x₀)v₀, then solves) and
+/// the per-step cost of a 100-step `rollout_into` (momentum carried).
+fn bench_embedded<M, const N: usize, const C: usize>(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    name: &str,
+    sys: M,
+    z: State<N>,
+) where
+    M: vigp::embedded::Model<N, C> + Copy,
+{
+    let s = Stepper::new(sys, 0.01).unwrap();
+    g.bench_function(format!("{name}/step"), |b| {
+        b.iter(|| s.step(black_box(&z)).unwrap())
+    });
+    let mut out = [z; 101];
+    g.bench_function(format!("{name}/rollout_100"), |b| {
+        b.iter(|| s.rollout_into(black_box(&z), &mut out).unwrap())
+    });
+}
+
+fn bench_embedded_steps(c: &mut Criterion) {
+    let dt = 0.01;
+    let mut g = c.benchmark_group("embedded");
+    bench_embedded(&mut g, "pendulum", Pendulum::default(), State::new([1.0], [0.5]));
+    bench_embedded(
+        &mut g,
+        "cartpole",
+        Cartpole::default(),
+        State::new([0.2, 2.0], [0.3, 0.5]),
+    );
+    bench_embedded(
+        &mut g,
+        "double_pendulum",
+        DoublePendulum::default(),
+        State::new([1.0, -0.5], [0.5, 1.0]),
+    );
+    let fb = Fourbar::default();
+    let z = consistent_state(
+        &fb.minimal(),
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::from([0.5, 0.0, 0.0, 0.0]),
+        dt,
+    )
+    .unwrap();
+    bench_embedded(&mut g, "fourbar", fb, z);
+    g.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(2)).warm_up_time(std::time::Duration::from_millis(500));
-    targets = bench_steps
+    targets = bench_steps, bench_embedded_steps
 }
 criterion_main!(benches);

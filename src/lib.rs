@@ -64,6 +64,7 @@
 //! own mechanism, enable the `codegen` feature and call
 //! `vigp::codegen::expand_to_string`.
 
+#![cfg_attr(not(feature = "std"), no_std)]
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
@@ -71,7 +72,21 @@
 extern crate self as vigp;
 
 pub use vigp_macros::mechanism;
+#[cfg(feature = "std")]
 pub use vigp_runtime::*;
+
+#[cfg(not(feature = "std"))]
+pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics};
+/// The `no_std` core: fixed-size models and steps, exported-GP prediction.
+#[cfg(not(feature = "std"))]
+pub use vigp_core as embedded;
+
+/// Re-exports for generated code. Not part of the public API.
+#[cfg(not(feature = "std"))]
+#[doc(hidden)]
+pub mod __private {
+    pub use vigp_core::__private::nalgebra;
+}
 
 #[cfg(feature = "codegen")]
 pub use vigp_codegen as codegen;
@@ -84,6 +99,7 @@ pub mod systems;
 pub struct ReadmeDoctests;
 
 /// The names most programs need.
+#[cfg(feature = "std")]
 pub mod prelude {
     pub use vigp_runtime::{
         Coordinates, ExplicitEuler, Integrator, Mechanism, NewtonOptions, Rk4, State, StepError,

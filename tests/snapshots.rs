@@ -105,6 +105,29 @@ fn generated_code_contains_only_what_the_scene_needs() {
         vigp_codegen::expand_to_string(&mechanism_bodies(include_str!("../src/systems.rs"))[3].1)
             .unwrap();
     assert!(minimal_impl(&fourbar).contains("fn constraints"));
+    // the same for the no_std model: dampers and constraints only if needed
+    let embedded = |code: &str| {
+        let start = code.find("impl ::vigp::embedded::Model").expect("embedded impl");
+        code[start..start + code[start..].find("\n}\n").unwrap()].to_string()
+    };
+    assert!(!embedded(&bare).contains("fn for_each_damper"));
+    assert!(!embedded(&bare).contains("fn constraints"));
+    assert!(embedded(&dp).contains("fn for_each_damper"));
+    assert!(!embedded(&dp).contains("fn constraints"));
+    assert!(embedded(&fourbar).contains("fn constraints"));
     // the generated code is the code that compiles: `Bare` above is usable
     let _ = Bare::default().minimal();
+}
+
+/// The `no_std` expansion (what `vigp` without its `std` feature gets):
+/// parameters, kinematics and the fixed-size model, no dual-number views.
+#[test]
+fn no_std_expansion_has_only_the_fixed_size_items() {
+    let body = &mechanism_bodies(include_str!("../src/systems.rs"))[2].1;
+    let code = vigp_codegen::expand_to_string_for(body, vigp_codegen::Target::NoStd).unwrap();
+    assert!(code.contains("impl ::vigp::embedded::Model<2, 0> for DoublePendulum"));
+    assert!(!code.contains("::vigp::Mechanism"));
+    assert!(!code.contains("Maximal"));
+    assert!(!code.contains("num_dual"));
+    insta::assert_snapshot!("DoublePendulum_no_std", code);
 }

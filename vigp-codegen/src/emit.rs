@@ -382,7 +382,9 @@ fn emit_maximal(m: &Model) -> TokenStream {
 }
 
 /// The whole expansion.
-pub fn emit(m: &Model) -> TokenStream {
+/// The generated items for a validated model; `target` chooses whether the
+/// std runtime's items (dual-number views) are included.
+pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
     let Model {
         attrs, vis, name, ..
     } = m;
@@ -449,10 +451,14 @@ pub fn emit(m: &Model) -> TokenStream {
     let gravity = pair(m.gravity);
     let link_names = m.links.iter().map(|l| l.name.unraw().to_string());
     let coord_names = m.tree.iter().map(|&j| m.joints[j].name.unraw().to_string());
-    let kinds = m.tree.iter().map(|&j| match m.joints[j].kind {
-        JointKind::Revolute => quote!(::vigp::CoordinateKind::Angle),
-        JointKind::Prismatic { .. } => quote!(::vigp::CoordinateKind::Length),
-    });
+    let kinds: Vec<_> = m
+        .tree
+        .iter()
+        .map(|&j| match m.joints[j].kind {
+            JointKind::Revolute => quote!(::vigp::CoordinateKind::Angle),
+            JointKind::Prismatic { .. } => quote!(::vigp::CoordinateKind::Length),
+        })
+        .collect();
 
     // ---- forward kinematics ----
     let params = quote!(self);
@@ -510,19 +516,59 @@ pub fn emit(m: &Model) -> TokenStream {
     let constraints = if m.loops.is_empty() {
         quote!()
     } else {
+        quote! {
+            fn constraints<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>) -> #svector<D, #c> {
+                ::vigp::embedded::Model::constraints(&#sys, q)
+            }
+        }
+    };
+    let embedded_constraints = if m.loops.is_empty() {
+        quote!()
+    } else {
         let pattern = pose_pattern(m, &used_by_loops(m));
         let mut lets = Vec::new();
         let mut rows = Vec::new();
         for &j in &m.loops {
-            joint_constraint_rows(m, &sys, j, &mut lets, &mut rows);
+            joint_constraint_rows(m, &params, j, &mut lets, &mut rows);
         }
         quote! {
-            fn constraints<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>) -> #svector<D, #c> {
-                let #pattern = #sys.link_poses(q);
+            fn constraints<R: ::vigp::Real>(&self, q: &#svector<R, #n>) -> #svector<R, #c> {
+                let #pattern = self.link_poses(q);
                 #(#lets)*
                 #svector::from([#(#rows),*])
             }
         }
+    };
+    let body_visits = m.links.iter().map(|l| {
+        let (ln, pose) = (&l.name, format_ident!("pose_{}", l.name));
+        quote!(visit(::vigp::embedded::Body { mass: links.#ln.mass, inertia: links.#ln.inertia, com: #pose.point(links.#ln.com), theta: #pose.theta });)
+    });
+    let embedded_dampers = if dissipative {
+        let tree_visits = m.tree.iter().enumerate().map(|(k, &j)| {
+            let (jn, k) = (&m.joints[j].name, coordinate_index(k));
+            quote!(visit(joints.#jn.damping, q[#k]);)
+        });
+        let loop_visits: Vec<_> = m.loops.iter().map(|&j| {
+            let jn = &m.joints[j].name;
+            let coordinate = joint_coordinate(m, &params, j);
+            quote!(visit(joints.#jn.damping, #coordinate);)
+        }).collect();
+        let poses = if m.loops.is_empty() {
+            quote!()
+        } else {
+            let pattern = pose_pattern(m, &used_by_loops(m));
+            quote!(let #pattern = self.link_poses(q);)
+        };
+        quote! {
+            fn for_each_damper<R: ::vigp::Real>(&self, q: &#svector<R, #n>, visit: &mut impl FnMut(f64, R)) {
+                let joints = &self.joints;
+                #(#tree_visits)*
+                #poses
+                #(#loop_visits)*
+            }
+        }
+    } else {
+        quote!()
     };
 
     let name_str = name.to_string();
@@ -537,6 +583,42 @@ pub fn emit(m: &Model) -> TokenStream {
     );
     let links_doc = format!(" Link parameters of [`{name_str}`].");
     let maximal = emit_maximal(m);
+
+    let std_items = if target == crate::Target::Std {
+        quote! {
+            impl ::vigp::Mechanism<#n, #c> for #minimal_ty {
+            const COORDINATES: [&'static str; #n] = [#(#coord_names),*];
+            const KINDS: [::vigp::CoordinateKind; #n] = [#(#kinds),*];
+            const DISSIPATIVE: bool = #dissipative;
+
+            fn kinetic_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
+                let links = &#sys.links;
+                let #all_used = #sys.link_poses(&::vigp::kinematics::tangent(q, v));
+                #(#kinetic_terms)+*
+            }
+
+            fn potential_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>) -> D {
+                let (links, gravity) = (&#sys.links, #sys.gravity);
+                let #all_used = #sys.link_poses(q);
+                #(#potential_terms)+*
+            }
+
+            fn lagrangian<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
+                let (links, gravity) = (&#sys.links, #sys.gravity);
+                let #all_used = #sys.link_poses(&::vigp::kinematics::tangent(q, v));
+                #(#lagrangian_terms)+*
+            }
+
+            #dissipation
+
+            #constraints
+            }
+
+            #maximal
+        }
+    } else {
+        quote!()
+    };
 
     quote! {
         #(#attrs)*
@@ -579,10 +661,29 @@ pub fn emit(m: &Model) -> TokenStream {
             }
 
             #[doc = " Forward kinematics: the pose of every link frame (origin at the link's `start`) for minimal coordinates `q`, in [`Self::LINKS`] order. Any attachment point follows with [`::vigp::Pose2::point`]."]
-            pub fn link_poses<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>) -> [::vigp::Pose2<D>; #nl] {
+            pub fn link_poses<D: ::vigp::Real>(&self, q: &#svector<D, #n>) -> [::vigp::Pose2<D>; #nl] {
                 #fk
                 [#(#poses),*]
             }
+        }
+
+        impl ::vigp::embedded::Model<#n, #c> for #name {
+            const KINDS: [::vigp::CoordinateKind; #n] = [#(#kinds),*];
+            const DISSIPATIVE: bool = #dissipative;
+
+            fn gravity(&self) -> [f64; 2] {
+                self.gravity
+            }
+
+            fn for_each_body<R: ::vigp::Real>(&self, q: &#svector<R, #n>, visit: &mut impl FnMut(::vigp::embedded::Body<R>)) {
+                let links = &self.links;
+                let #all_used = self.link_poses(q);
+                #(#body_visits)*
+            }
+
+            #embedded_dampers
+
+            #embedded_constraints
         }
 
         #[doc = #minimal_doc]
@@ -592,34 +693,6 @@ pub fn emit(m: &Model) -> TokenStream {
             pub sys: #name,
         }
 
-        impl ::vigp::Mechanism<#n, #c> for #minimal_ty {
-            const COORDINATES: [&'static str; #n] = [#(#coord_names),*];
-            const KINDS: [::vigp::CoordinateKind; #n] = [#(#kinds),*];
-            const DISSIPATIVE: bool = #dissipative;
-
-            fn kinetic_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
-                let links = &#sys.links;
-                let #all_used = #sys.link_poses(&::vigp::kinematics::tangent(q, v));
-                #(#kinetic_terms)+*
-            }
-
-            fn potential_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>) -> D {
-                let (links, gravity) = (&#sys.links, #sys.gravity);
-                let #all_used = #sys.link_poses(q);
-                #(#potential_terms)+*
-            }
-
-            fn lagrangian<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
-                let (links, gravity) = (&#sys.links, #sys.gravity);
-                let #all_used = #sys.link_poses(&::vigp::kinematics::tangent(q, v));
-                #(#lagrangian_terms)+*
-            }
-
-            #dissipation
-
-            #constraints
-        }
-
-        #maximal
+        #std_items
     }
 }

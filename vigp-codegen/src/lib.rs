@@ -17,11 +17,30 @@ pub mod parse;
 
 use proc_macro2::TokenStream;
 
-/// Expand a `mechanism!` body into Rust items, or a spanned error.
+/// Which items a mechanism expands to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Target {
+    /// Everything: the `no_std` items plus the std runtime's dual-number
+    /// views (`Mechanism` impls, the maximal view, the coordinate maps).
+    /// What `vigp` with its default `std` feature gets.
+    Std,
+    /// Only the `no_std` items: parameters, forward kinematics and the
+    /// `vigp::embedded::Model` impl. What `vigp` without `std` gets.
+    NoStd,
+}
+
+/// Expand a `mechanism!` body into Rust items ([`Target::Std`]), or a
+/// spanned error.
 pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
+    expand_for(input, Target::Std)
+}
+
+/// Expand a `mechanism!` body into the items of `target`, or a spanned
+/// error.
+pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream> {
     let parsed: parse::Input = syn::parse2(input)?;
     let model = model::validate(parsed)?;
-    Ok(emit::emit(&model))
+    Ok(emit::emit(&model, target))
 }
 
 /// Expand a description given as source text and pretty-print the result,
@@ -35,8 +54,13 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 /// assert!(src.contains("impl ::vigp::Mechanism<1, 0> for PendulumMinimal"));
 /// ```
 pub fn expand_to_string(src: &str) -> Result<String, String> {
+    expand_to_string_for(src, Target::Std)
+}
+
+/// [`expand_to_string`] for a chosen [`Target`].
+pub fn expand_to_string_for(src: &str, target: Target) -> Result<String, String> {
     let tokens: TokenStream = src.parse().map_err(|e| format!("{e}"))?;
-    let out = expand(tokens).map_err(|e| {
+    let out = expand_for(tokens, target).map_err(|e| {
         e.into_iter()
             .map(|e| e.to_string())
             .collect::<Vec<_>>()

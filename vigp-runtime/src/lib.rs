@@ -27,6 +27,8 @@ pub mod projection;
 pub mod summary;
 pub mod variational;
 
+pub use vigp_core as embedded;
+pub use vigp_core::Real;
 pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
 pub use kinematics::Pose2;
 pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};

@@ -1,0 +1,55 @@
+//! A `#![no_std]` program on **vigp**, as firmware would use it: the
+//! mechanism is declared with `vigp::mechanism!` (no `std` feature, so only
+//! the fixed-size items are generated), stepped by
+//! [`vigp::embedded::Stepper`] on stack data, and nothing allocates.
+//!
+//! `cargo check -p vigp-embedded-demo` builds this crate with `vigp`'s
+//! default features off: `vigp`, `vigp-core`, `nalgebra` and `libm` all
+//! compile as `no_std`. `cargo run -p vigp-embedded-demo --example host`
+//! runs it on the host.
+
+#![no_std]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+use vigp::embedded::{RolloutError, State, StepError, Stepper};
+
+vigp::mechanism! {
+    /// The paper's double pendulum: two 1 m, 1 kg links hanging from the
+    /// origin, a damped elbow.
+    pub DoublePendulum {
+        gravity: [0.0, -9.81],
+        links {
+            upper: { mass: 1.0, length: 1.0 },
+            lower: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            shoulder: revolute(world, upper.start),
+            elbow: revolute(upper.end, lower.start) { damping: 0.05 },
+        }
+    }
+}
+
+/// Control period (s).
+pub const DT: f64 = 0.01;
+
+/// The controller's model: the generated mechanism behind the fixed-size
+/// first-order variational step.
+pub fn stepper() -> Result<Stepper<DoublePendulum, 2, 0>, StepError> {
+    Stepper::new(DoublePendulum::default(), DT)
+}
+
+/// An MPC-style prediction: `K` steps from `z0` into a caller-owned array
+/// (`out[0] = z0`). No allocation.
+pub fn predict<const K: usize>(
+    stepper: &Stepper<DoublePendulum, 2, 0>,
+    z0: &State<2>,
+    out: &mut [State<2>; K],
+) -> Result<(), RolloutError> {
+    stepper.rollout_into(z0, out)
+}
+
+/// Total energy of a state (J), for monitoring.
+pub fn energy(z: &State<2>) -> f64 {
+    vigp::embedded::model::energy(&DoublePendulum::default(), &z.q, &z.v)
+}

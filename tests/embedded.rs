@@ -1,0 +1,207 @@
+//! The `no_std` fixed-size step (`vigp::embedded::Stepper`) against the std
+//! dual-number integrator (`Variational::new`, the same first-order DEL
+//! equations solved by a different implementation: nested duals and a
+//! chord/Newton hybrid), and its mechanical terms against independent
+//! computations (the std runtime's dual-number mass matrix, central
+//! differences).
+
+mod common;
+
+use common::Rng;
+use nalgebra::SVector;
+use vigp::embedded::{Model, StepError, StepOptions, Stepper, model};
+use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
+use vigp::{Mechanism, State, Variational};
+
+vigp::mechanism! {
+    /// Slider-crank with offsets, a tilted rail and damping everywhere
+    /// (prismatic joint, loop, damped loop joint).
+    SliderCrank {
+        gravity: [0.0, -9.81],
+        links {
+            crank: { mass: 0.5, length: 0.4, com: [0.15, 0.02] },
+            rod: { mass: 0.8, length: 1.2, inertia: 0.11 },
+            block: { mass: 2.0, length: 0.3 },
+        }
+        joints {
+            pivot: revolute(world @ [0.1, 0.2], crank.start) { damping: 0.05 },
+            pin: revolute(crank @ [0.4, 0.01], rod.start) { damping: 0.02 },
+            rail: prismatic(world @ [1.0, 0.0], block.center) { axis: [1.0, 0.2], damping: 0.3 },
+            wrist: revolute(rod.end, block.center) { damping: 0.01 },
+        }
+    }
+}
+
+/// A random state; for loops, made consistent by the std projection.
+fn random_state<M, const N: usize, const C: usize>(m: &M, rng: &mut Rng, dt: f64) -> State<N>
+where
+    M: Mechanism<N, C>,
+{
+    let q = SVector::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+    let v = SVector::from_fn(|_, _| rng.uniform(-2.0, 2.0));
+    if C == 0 {
+        return State { q, v };
+    }
+    vigp::projection::consistent_state(m, &q, &v, dt).expect("projection")
+}
+
+/// One step from 20 random states by both implementations. Both solve the
+/// DEL equations to a scaled residual of 1e-12; the Newton matrix has a
+/// condition number of at most ~1e2 for these systems, so the two solutions
+/// must agree to 1e-10 (absolute, in rad/s or m/s).
+fn steps_agree<M, const N: usize, const C: usize>(sys: M, minimal: impl Mechanism<N, C> + Copy)
+where
+    M: Model<N, C> + Copy,
+{
+    let dt = 0.01;
+    let fast = Stepper::new(sys, dt).unwrap();
+    let vi = Variational::new(minimal, dt);
+    let mut rng = Rng(7);
+    let mut worst = 0.0f64;
+    for _ in 0..20 {
+        let z = random_state(&minimal, &mut rng, dt);
+        let a = fast.step(&z).unwrap();
+        let b = vi.step(&z).unwrap();
+        assert_eq!(a.q, b.q, "x₁ = x₀ + Δt·v₀ in both");
+        worst = worst.max((a.v - b.v).amax());
+        // energies of the same state by the two implementations: 1e-12
+        let (e1, e2) = (model::energy(&sys, &z.q, &z.v), minimal.energy(&z));
+        assert!((e1 - e2).abs() <= 1e-12 * (1.0 + e2.abs()), "{e1} vs {e2}");
+    }
+    println!("max |v_embedded − v_std| = {worst:.2e}");
+    assert!(worst < 1e-10, "{worst}");
+}
+
+#[test]
+fn one_step_matches_the_std_integrator_on_every_system() {
+    steps_agree(Pendulum::default(), Pendulum::default().minimal());
+    steps_agree(Cartpole::default(), Cartpole::default().minimal());
+    let mut dp = DoublePendulum::default();
+    steps_agree(dp, dp.minimal());
+    dp.joints.elbow.damping = 0.3;
+    steps_agree(dp, dp.minimal());
+    let mut fb = Fourbar::default();
+    steps_agree(fb, fb.minimal());
+    fb.joints.middle1.damping = 0.2;
+    steps_agree(fb, fb.minimal());
+    let sc = SliderCrank::default();
+    steps_agree(sc, sc.minimal());
+}
+
+/// M(q) from jets vs the std runtime's dual-number mass matrix, and ∂M/∂q vs
+/// central differences of M. Step 1e-6: truncation O(h²)·|M'''| ≈ 1e-12,
+/// rounding O(ε|M|/h) ≈ 1e-10, so 1e-8 cannot be failed by rounding.
+#[test]
+fn mass_matrix_and_its_derivatives_are_exact() {
+    fn check<M, const N: usize, const C: usize>(sys: M, minimal: impl Mechanism<N, C>)
+    where
+        M: Model<N, C>,
+    {
+        let mut rng = Rng(3);
+        for _ in 0..10 {
+            let q: SVector<f64, N> = SVector::from_fn(|_, _| rng.uniform(-1.5, 1.5));
+            let t = model::terms(&sys, &q);
+            let reference = vigp::dynamics::mass_matrix(&minimal, &q, &SVector::zeros());
+            assert!((t.mass - reference).amax() < 1e-12 * (1.0 + reference.amax()));
+            assert!((model::mass_matrix(&sys, &q) - reference).amax() < 1e-12 * (1.0 + reference.amax()));
+            let h = 1e-6;
+            for i in 0..N {
+                let mut e = SVector::<f64, N>::zeros();
+                e[i] = h;
+                let fd = (model::mass_matrix(&sys, &(q + e)) - model::mass_matrix(&sys, &(q - e)))
+                    / (2.0 * h);
+                assert!((t.dmass[i] - fd).amax() < 1e-8 * (1.0 + fd.amax()), "∂M/∂q{i}");
+            }
+            // ∇V against central differences of V = E(q, 0)
+            for i in 0..N {
+                let mut e = SVector::<f64, N>::zeros();
+                e[i] = h;
+                let z = SVector::zeros();
+                let fd = (model::energy(&sys, &(q + e), &z) - model::energy(&sys, &(q - e), &z))
+                    / (2.0 * h);
+                assert!((t.dpotential[i] - fd).abs() < 1e-7 * (1.0 + fd.abs()), "∇V{i}");
+            }
+        }
+    }
+    check(DoublePendulum::default(), DoublePendulum::default().minimal());
+    check(Cartpole::default(), Cartpole::default().minimal());
+    check(Fourbar::default(), Fourbar::default().minimal());
+    check(SliderCrank::default(), SliderCrank::default().minimal());
+}
+
+/// Rollouts: the carried momentum gives the same trajectory as stepping
+/// from each state; loops stay on the constraint manifold; the energy of a
+/// conservative double pendulum stays bounded (first-order VI: |ΔE| = O(Δt)).
+#[test]
+fn rollouts_carry_momentum_and_keep_structure() {
+    let dp = DoublePendulum::default();
+    let fast = Stepper::new(dp, 0.01).unwrap();
+    let z0 = State::new([1.2, -0.4], [0.0, 0.0]);
+    let mut traj = [z0; 2001];
+    fast.rollout_into(&z0, &mut traj).unwrap();
+    let mut z = z0;
+    for k in 0..50 {
+        z = fast.step(&z).unwrap();
+        assert!((z.v - traj[k + 1].v).amax() < 1e-11, "step {k}");
+    }
+    let e0 = model::energy(&dp, &z0.q, &z0.v);
+    let drift = traj
+        .iter()
+        .map(|z| (model::energy(&dp, &z.q, &z.v) - e0).abs())
+        .fold(0.0, f64::max);
+    println!("double pendulum, 2000 steps of 0.01 s: max |ΔE| = {drift:.3}");
+    // The std integrator's own bound for this state and dt (tests/core.rs
+    // measures ~2 J at higher energy); an unbounded drift would exceed it.
+    assert!(drift < 1.0, "{drift}");
+
+    let fb = Fourbar::default();
+    let m = fb.minimal();
+    let z0 = vigp::projection::consistent_state(
+        &m,
+        &SVector::from([0.5, -0.9, -0.4, 0.9]),
+        &SVector::zeros(),
+        0.01,
+    )
+    .unwrap();
+    let fast = Stepper::new(fb, 0.01).unwrap();
+    let mut traj = [z0; 1001];
+    fast.rollout_into(&z0, &mut traj).unwrap();
+    let g = traj.iter().map(|z| m.constraint_violation(z)).fold(0.0, f64::max);
+    println!("fourbar, 1000 steps: max |g| = {g:.2e}");
+    assert!(g < 1e-10, "{g}");
+}
+
+#[test]
+fn bad_input_is_a_typed_error() {
+    let dp = DoublePendulum::default();
+    assert_eq!(
+        Stepper::new(dp, 0.0).unwrap_err(),
+        StepError::InvalidTimeStep { dt: 0.0 }
+    );
+    assert!(matches!(
+        Stepper::new(dp, f64::NAN),
+        Err(StepError::InvalidTimeStep { .. })
+    ));
+    let opts = StepOptions {
+        tolerance: -1.0,
+        ..StepOptions::default()
+    };
+    assert!(matches!(
+        Stepper::with_options(dp, 0.01, opts),
+        Err(StepError::InvalidOptions(_))
+    ));
+    let fast = Stepper::new(dp, 0.01).unwrap();
+    let bad = State::new([f64::NAN, 0.0], [0.0, 0.0]);
+    assert_eq!(fast.step(&bad), Err(StepError::NonFiniteState));
+    let mut out = [bad; 3];
+    let err = fast.rollout_into(&bad, &mut out).unwrap_err();
+    assert_eq!(err.step, 0);
+    // one iteration cannot reach 1e-12 from a fast state with a big step
+    let opts = StepOptions {
+        max_iterations: 1,
+        ..StepOptions::default()
+    };
+    let fast = Stepper::with_options(dp, 0.2, opts).unwrap();
+    let z = State::new([2.0, 1.0], [5.0, -6.0]);
+    assert!(matches!(fast.step(&z), Err(StepError::NotConverged { iterations: 1, .. })));
+}

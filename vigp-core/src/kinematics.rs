@@ -1,0 +1,98 @@
+//! Planar kinematics helpers called by generated forward kinematics,
+//! generic over any [`Real`].
+//!
+//! Conventions (DESIGN §2): a link's local frame sits at its `start`, its
+//! local x-axis runs to its `end`; θ = 0 means the link hangs straight down
+//! (local x-axis along world −y); counter-clockwise is positive. A local
+//! point (a, b) maps to `origin + a·(sin θ, −cos θ) + b·(cos θ, sin θ)`.
+
+use crate::real::Real;
+
+/// A planar point in world coordinates (x right, y up).
+pub type Point2<D> = [D; 2];
+
+/// The pose of a link frame: origin (the link's `start`) and orientation,
+/// with sin θ and cos θ computed once (on nested dual numbers and jets they
+/// are the most expensive part of the kinematics).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pose2<D> {
+    /// World x of the frame origin.
+    pub x: D,
+    /// World y of the frame origin.
+    pub y: D,
+    /// Orientation θ (0 = hanging down, counter-clockwise positive).
+    pub theta: D,
+    /// sin θ.
+    pub sin: D,
+    /// cos θ.
+    pub cos: D,
+}
+
+impl<D: Real> Pose2<D> {
+    /// The pose with orientation `theta` that places the local point `local`
+    /// at the world point `at`.
+    #[inline]
+    pub fn attach(theta: D, at: Point2<D>, local: [f64; 2]) -> Self {
+        let [a, b] = local;
+        let (s, c) = theta.sincos();
+        Self {
+            x: at[0] - (s * a + c * b),
+            y: at[1] - (s * b - c * a),
+            theta,
+            sin: s,
+            cos: c,
+        }
+    }
+
+    /// World direction of a local direction (rotation only).
+    #[inline]
+    pub fn direction(&self, local: [f64; 2]) -> Point2<D> {
+        let [a, b] = local;
+        let (s, c) = (self.sin, self.cos);
+        [s * a + c * b, s * b - c * a]
+    }
+
+    /// World position of a local point.
+    #[inline]
+    pub fn point(&self, local: [f64; 2]) -> Point2<D> {
+        let [dx, dy] = self.direction(local);
+        [self.x + dx, self.y + dy]
+    }
+}
+
+/// A world-fixed point as a scalar point.
+#[inline]
+pub fn world<D: Real>(p: [f64; 2]) -> Point2<D> {
+    [D::from_f64(p[0]), D::from_f64(p[1])]
+}
+
+/// `p + s·dir`: a point slid by `s` along a direction.
+#[inline]
+pub fn slide<D: Real>(p: Point2<D>, dir: Point2<D>, s: D) -> Point2<D> {
+    [p[0] + dir[0] * s, p[1] + dir[1] * s]
+}
+
+/// `a − b` componentwise.
+#[inline]
+pub fn sub<D: Real>(a: Point2<D>, b: Point2<D>) -> Point2<D> {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+/// 2-D cross product a × b = a_x b_y − a_y b_x.
+#[inline]
+pub fn cross<D: Real>(a: Point2<D>, b: Point2<D>) -> D {
+    a[0] * b[1] - a[1] * b[0]
+}
+
+/// Zero of any scalar (the world's orientation).
+#[inline]
+pub fn zero<D: Real>() -> D {
+    D::from_f64(0.0)
+}
+
+/// Local coordinates of the centre of a link of length `length`:
+/// `[length/2, 0]`.
+#[inline]
+pub fn center(length: f64) -> [f64; 2] {
+    [length * 0.5, 0.0]
+}

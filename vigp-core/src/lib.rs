@@ -1,0 +1,38 @@
+//! `no_std` core of **vigp**: what generated code and firmware-style users
+//! need without allocation or the standard library.
+//!
+//! * [`Real`], [`Jet1`], [`Jet2`]: the scalar the generated kinematics is
+//!   generic over, and forward-mode jets for exact derivatives.
+//! * [`kinematics`]: planar poses ([`Pose2`]) and helpers.
+//! * [`Model`]: what `mechanism!` implements for every mechanism; [`model`]
+//!   computes M(q), ∂M/∂q, ∇V, D and the energy from it.
+//! * [`Stepper`]: the first-order variational step on fixed-size data.
+//!
+//! Everything here works on `nalgebra` static vectors and plain arrays, and
+//! never allocates. The std runtime (`vigp-runtime`) re-exports the shared
+//! pieces.
+
+#![no_std]
+#![forbid(unsafe_code)]
+#![warn(missing_docs)]
+
+pub mod kinematics;
+pub mod linalg;
+pub mod model;
+pub mod params;
+pub mod real;
+pub mod state;
+pub mod step;
+
+pub use kinematics::{Point2, Pose2};
+pub use model::{Body, Model, Terms};
+pub use params::{Joint, Link};
+pub use real::{Jet1, Jet2, Real};
+pub use state::{CoordinateKind, State};
+pub use step::{RolloutError, StepError, StepOptions, StepReport, Stepper};
+
+/// Re-exports for generated code. Not part of the public API.
+#[doc(hidden)]
+pub mod __private {
+    pub use nalgebra;
+}

@@ -1,0 +1,190 @@
+//! Small fixed-size dense solvers for the Newton steps.
+//!
+//! nalgebra's decompositions need `ToTypenum` bounds on const-generic sizes,
+//! which generic runtime code cannot state on stable Rust; these solvers work
+//! on `SMatrix<f64, M, M>` for any const `M`, without allocation.
+
+use nalgebra::{SMatrix, SVector};
+
+/// LU factorisation with complete (row and column) pivoting,
+/// P·A·Q = L·U, rank-revealing.
+///
+/// Complexity O(M³) to factor, O(M²) per solve. Pivots below
+/// `rel_tol · |largest entry|` are treated as zero: the numerical rank is
+/// reported and the solution sets the corresponding free unknowns to zero (a
+/// basic least-squares-compatible solution, exact when the system is
+/// consistent).
+#[derive(Clone, Copy, Debug)]
+pub struct FullPivLu<const M: usize> {
+    lu: SMatrix<f64, M, M>,
+    rows: [usize; M],
+    cols: [usize; M],
+    rank: usize,
+}
+
+impl<const M: usize> FullPivLu<M> {
+    /// Factor `a`; `rel_tol` is the relative pivot threshold (e.g. 1e-14).
+    pub fn new(mut a: SMatrix<f64, M, M>, rel_tol: f64) -> Self {
+        let mut rows = [0; M];
+        let mut cols = [0; M];
+        for i in 0..M {
+            rows[i] = i;
+            cols[i] = i;
+        }
+        let scale = a.amax();
+        let mut rank = M;
+        for k in 0..M {
+            let (mut pi, mut pj, mut best) = (k, k, -1.0);
+            for j in k..M {
+                for i in k..M {
+                    let v = a[(i, j)].abs();
+                    if v > best {
+                        (pi, pj, best) = (i, j, v);
+                    }
+                }
+            }
+            if best <= rel_tol * scale || best == 0.0 || best.is_nan() {
+                rank = k;
+                break;
+            }
+            a.swap_rows(k, pi);
+            a.swap_columns(k, pj);
+            rows.swap(k, pi);
+            cols.swap(k, pj);
+            let p = a[(k, k)];
+            for i in k + 1..M {
+                let f = a[(i, k)] / p;
+                a[(i, k)] = f;
+                for j in k + 1..M {
+                    a[(i, j)] -= f * a[(k, j)];
+                }
+            }
+        }
+        Self {
+            lu: a,
+            rows,
+            cols,
+            rank,
+        }
+    }
+
+    /// Numerical rank.
+    pub fn rank(&self) -> usize {
+        self.rank
+    }
+
+    /// Solve A x = b (free unknowns beyond the rank set to zero).
+    pub fn solve(&self, b: &SVector<f64, M>) -> SVector<f64, M> {
+        let mut y = SVector::<f64, M>::zeros();
+        for i in 0..M {
+            y[i] = b[self.rows[i]];
+        }
+        for i in 0..self.rank {
+            let mut s = y[i];
+            for j in 0..i {
+                s -= self.lu[(i, j)] * y[j];
+            }
+            y[i] = s;
+        }
+        let mut z = SVector::<f64, M>::zeros();
+        for i in (0..self.rank).rev() {
+            let mut s = y[i];
+            for j in i + 1..self.rank {
+                s -= self.lu[(i, j)] * z[j];
+            }
+            z[i] = s / self.lu[(i, i)];
+        }
+        let mut x = SVector::<f64, M>::zeros();
+        for i in 0..M {
+            x[self.cols[i]] = z[i];
+        }
+        x
+    }
+
+    /// Solve A X = B column by column.
+    pub fn solve_matrix<const K: usize>(&self, b: &SMatrix<f64, M, K>) -> SMatrix<f64, M, K> {
+        let mut x = SMatrix::<f64, M, K>::zeros();
+        for k in 0..K {
+            x.set_column(k, &self.solve(&b.column(k).into_owned()));
+        }
+        x
+    }
+}
+
+/// Solve the saddle-point (KKT) system
+///
+/// ```text
+/// [ J   B ] [x]   [r]
+/// [ A   0 ] [y] = [c]
+/// ```
+///
+/// with J (N×N) invertible, by the Schur complement S = A J⁻¹ B (C×C).
+/// A rank-deficient S (a constraint Jacobian losing rank, e.g. a folded
+/// four-bar) is handled by complete pivoting: the multiplier component in the
+/// deficient direction is set to zero. Returns `None` when J is singular.
+pub fn solve_kkt<const N: usize, const C: usize>(
+    j: &SMatrix<f64, N, N>,
+    b: &SMatrix<f64, N, C>,
+    a: &SMatrix<f64, C, N>,
+    r: &SVector<f64, N>,
+    c: &SVector<f64, C>,
+) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
+    let lu = FullPivLu::new(*j, 1e-14);
+    if lu.rank() < N {
+        return None;
+    }
+    let jr = lu.solve(r);
+    if C == 0 {
+        return Some((jr, SVector::zeros()));
+    }
+    let jb = lu.solve_matrix(b);
+    let s = a * jb;
+    let rhs = a * jr - c;
+    let y = FullPivLu::new(s, 1e-13).solve(&rhs);
+    let x = jr - jb * y;
+    Some((x, y))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Matrix3, Vector3};
+
+    #[test]
+    fn full_piv_lu_matches_nalgebra() {
+        let a = Matrix3::new(2.0, -1.0, 0.5, 1.0, 3.0, -2.0, 0.25, 4.0, 1.0);
+        let b = Vector3::new(1.0, -2.0, 0.5);
+        let x = FullPivLu::new(a, 1e-14).solve(&b);
+        let reference = a.lu().solve(&b).unwrap();
+        assert!((x - reference).amax() < 1e-14);
+    }
+
+    #[test]
+    fn rank_deficient_consistent_system_is_solved() {
+        // rows 1 and 2 are parallel; b in the range
+        let a = Matrix3::new(1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 1.0);
+        let b = Vector3::new(1.0, 2.0, 0.5);
+        let lu = FullPivLu::new(a, 1e-14);
+        assert_eq!(lu.rank(), 2);
+        let x = lu.solve(&b);
+        assert!((a * x - b).amax() < 1e-14);
+    }
+
+    #[test]
+    fn kkt_matches_dense_solve() {
+        let j = Matrix3::new(4.0, 1.0, 0.0, 1.0, 3.0, 0.5, 0.0, 0.5, 2.0);
+        let b = nalgebra::Matrix3x1::new(1.0, 0.0, -1.0);
+        let a = nalgebra::Matrix1x3::new(0.5, 1.0, 0.0);
+        let r = Vector3::new(1.0, 2.0, 3.0);
+        let c = nalgebra::Vector1::new(0.25);
+        let (x, y) = solve_kkt(&j, &b, &a, &r, &c).unwrap();
+        let mut k = nalgebra::Matrix4::zeros();
+        k.fixed_view_mut::<3, 3>(0, 0).copy_from(&j);
+        k.fixed_view_mut::<3, 1>(0, 3).copy_from(&b);
+        k.fixed_view_mut::<1, 3>(3, 0).copy_from(&a);
+        let rhs = nalgebra::Vector4::new(1.0, 2.0, 3.0, 0.25);
+        let full = k.lu().solve(&rhs).unwrap();
+        assert!((full.fixed_rows::<3>(0) - x).amax() < 1e-13);
+        assert!((full[3] - y[0]).abs() < 1e-13);
+    }
+}

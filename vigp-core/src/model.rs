@@ -1,0 +1,170 @@
+//! The fixed-size model interface that `mechanism!` implements for every
+//! mechanism (minimal coordinates), and the mechanical terms computed from
+//! it with jets: mass matrix M(q), its derivatives ∂M/∂q_i, the potential
+//! gradient ∇V(q), the damping matrix D(q) and the energy.
+//!
+//! Every planar mechanism of the DSL has L(q, v) = ½ vᵀM(q)v − V(q) and a
+//! Rayleigh function R = ½ vᵀD(q)v, so these terms determine the dynamics.
+//! One evaluation of the kinematics on [`Jet2`] gives all of them exactly
+//! (no finite differences, no nested duals).
+
+use crate::kinematics::Point2;
+use crate::real::{Jet1, Jet2, Real};
+use crate::state::CoordinateKind;
+use nalgebra::{SMatrix, SVector};
+
+/// One rigid body as the kinematics sees it at some q.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Body<R> {
+    /// Mass (kg).
+    pub mass: f64,
+    /// Rotational inertia about the centre of mass (kg·m²).
+    pub inertia: f64,
+    /// World position of the centre of mass.
+    pub com: Point2<R>,
+    /// Orientation.
+    pub theta: R,
+}
+
+/// A planar mechanism in `N` minimal coordinates with `C` loop constraints,
+/// described by its bodies, dampers and constraints as functions of q for
+/// any [`Real`]. Implemented by `mechanism!` for the parameter struct.
+pub trait Model<const N: usize, const C: usize> {
+    /// What each coordinate measures.
+    const KINDS: [CoordinateKind; N];
+    /// `true` when some joint declares damping.
+    const DISSIPATIVE: bool;
+
+    /// Gravitational acceleration (m/s²).
+    fn gravity(&self) -> [f64; 2];
+
+    /// Calls `visit` with every body at configuration `q`.
+    fn for_each_body<R: Real>(&self, q: &SVector<R, N>, visit: &mut impl FnMut(Body<R>));
+
+    /// Calls `visit(c, s)` for every joint with damping coefficient `c` and
+    /// joint coordinate `s(q)` (its rate is ∇s·v). Default: none.
+    fn for_each_damper<R: Real>(&self, q: &SVector<R, N>, visit: &mut impl FnMut(f64, R)) {
+        let _ = (q, visit);
+    }
+
+    /// Loop constraints g(q) (empty for a tree).
+    fn constraints<R: Real>(&self, q: &SVector<R, N>) -> SVector<R, C> {
+        let _ = q;
+        SVector::from_element(R::from_f64(0.0))
+    }
+}
+
+/// The mechanical terms at one configuration.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Terms<const N: usize> {
+    /// Mass matrix M(q).
+    pub mass: SMatrix<f64, N, N>,
+    /// ∂M/∂q_i for every i.
+    pub dmass: [SMatrix<f64, N, N>; N],
+    /// ∇V(q).
+    pub dpotential: SVector<f64, N>,
+    /// Damping matrix D(q) = Σ c_j ∇s_j ∇s_jᵀ (zero if not dissipative).
+    pub damping: SMatrix<f64, N, N>,
+}
+
+fn seed1<const N: usize>(q: &SVector<f64, N>) -> SVector<Jet1<N>, N> {
+    SVector::from_fn(|i, _| Jet1::variable(q[i], i))
+}
+
+fn seed2<const N: usize>(q: &SVector<f64, N>) -> SVector<Jet2<N>, N> {
+    SVector::from_fn(|i, _| Jet2::variable(q[i], i))
+}
+
+/// M(q), ∂M/∂q, ∇V(q) and D(q) in one [`Jet2`] pass of the kinematics
+/// (plus one [`Jet1`] pass of the damped joints if dissipative).
+///
+/// Cost: the kinematics on `N`-direction second-order jets, plus `O(N³)`
+/// per body for ∂M.
+pub fn terms<M: Model<N, C>, const N: usize, const C: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+) -> Terms<N> {
+    let g = model.gravity();
+    let mut t = Terms {
+        mass: SMatrix::zeros(),
+        dmass: [SMatrix::zeros(); N],
+        dpotential: SVector::zeros(),
+        damping: SMatrix::zeros(),
+    };
+    model.for_each_body(&seed2(q), &mut |b: Body<Jet2<N>>| {
+        let ([x, y], th, m, i) = (b.com, b.theta, b.mass, b.inertia);
+        for j in 0..N {
+            t.dpotential[j] -= m * (g[0] * x.g[j] + g[1] * y.g[j]);
+            for k in 0..N {
+                t.mass[(j, k)] +=
+                    m * (x.g[j] * x.g[k] + y.g[j] * y.g[k]) + i * th.g[j] * th.g[k];
+                for (l, dm) in t.dmass.iter_mut().enumerate() {
+                    dm[(j, k)] += m
+                        * (x.h[j][l] * x.g[k]
+                            + x.g[j] * x.h[k][l]
+                            + y.h[j][l] * y.g[k]
+                            + y.g[j] * y.h[k][l])
+                        + i * (th.h[j][l] * th.g[k] + th.g[j] * th.h[k][l]);
+                }
+            }
+        }
+    });
+    if M::DISSIPATIVE {
+        model.for_each_damper(&seed1(q), &mut |c: f64, s: Jet1<N>| {
+            for j in 0..N {
+                for k in 0..N {
+                    t.damping[(j, k)] += c * s.g[j] * s.g[k];
+                }
+            }
+        });
+    }
+    t
+}
+
+/// Mass matrix M(q) (one [`Jet1`] pass).
+pub fn mass_matrix<M: Model<N, C>, const N: usize, const C: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+) -> SMatrix<f64, N, N> {
+    let mut mass = SMatrix::zeros();
+    model.for_each_body(&seed1(q), &mut |b: Body<Jet1<N>>| {
+        let ([x, y], th) = (b.com, b.theta);
+        for j in 0..N {
+            for k in 0..N {
+                mass[(j, k)] += b.mass * (x.g[j] * x.g[k] + y.g[j] * y.g[k])
+                    + b.inertia * th.g[j] * th.g[k];
+            }
+        }
+    });
+    mass
+}
+
+/// Total energy ½ vᵀM(q)v + V(q), with V = −Σ m g·p_com.
+pub fn energy<M: Model<N, C>, const N: usize, const C: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+) -> f64 {
+    let g = model.gravity();
+    let mut e = 0.0;
+    model.for_each_body(&seed1(q), &mut |b: Body<Jet1<N>>| {
+        let ([x, y], th) = (b.com, b.theta);
+        let rate = |j: &Jet1<N>| j.g.iter().zip(v.iter()).map(|(a, b)| a * b).sum::<f64>();
+        let (vx, vy, w) = (rate(&x), rate(&y), rate(&th));
+        e += 0.5 * b.mass * (vx * vx + vy * vy) + 0.5 * b.inertia * w * w
+            - b.mass * (g[0] * x.v + g[1] * y.v);
+    });
+    e
+}
+
+/// Loop constraints g(q) and their Jacobian G(q) (one [`Jet1`] pass).
+pub fn constraints_and_jacobian<M: Model<N, C>, const N: usize, const C: usize>(
+    model: &M,
+    q: &SVector<f64, N>,
+) -> (SVector<f64, C>, SMatrix<f64, C, N>) {
+    let gj = model.constraints(&seed1(q));
+    (
+        SVector::from_fn(|r, _| gj[r].v),
+        SMatrix::from_fn(|r, k| gj[r].g[k]),
+    )
+}

@@ -1,0 +1,39 @@
+//! The discrete state of a model and what its coordinates measure.
+
+use nalgebra::SVector;
+
+/// What a generalized coordinate measures.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum CoordinateKind {
+    /// An angle in radians (revolute joint, or a link orientation).
+    Angle,
+    /// A length in metres (prismatic slide, or a position).
+    Length,
+}
+
+/// A discrete state z = (q, v) of an `N`-coordinate model.
+///
+/// `v` is the **discrete** velocity v_k = (q_{k+1} − q_k)/Δt of the
+/// variational integrators (DESIGN §3), not a continuous-time velocity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct State<const N: usize> {
+    /// Generalized positions q.
+    pub q: SVector<f64, N>,
+    /// (Discrete) generalized velocities v.
+    pub v: SVector<f64, N>,
+}
+
+impl<const N: usize> State<N> {
+    /// A state from position and velocity arrays.
+    pub fn new(q: [f64; N], v: [f64; N]) -> Self {
+        Self {
+            q: SVector::from(q),
+            v: SVector::from(v),
+        }
+    }
+
+    /// `true` when every entry is finite (no NaN, no ±∞).
+    pub fn is_finite(&self) -> bool {
+        self.q.iter().chain(self.v.iter()).all(|x| x.is_finite())
+    }
+}
