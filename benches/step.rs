@@ -9,8 +9,8 @@
 use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::SVector;
 use std::hint::black_box;
-use vigp::prelude::*;
 use vigp::embedded::Stepper;
+use vigp::prelude::*;
 use vigp::projection::consistent_state;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 
@@ -105,7 +105,12 @@ fn bench_embedded<M, const N: usize, const C: usize>(
 fn bench_embedded_steps(c: &mut Criterion) {
     let dt = 0.01;
     let mut g = c.benchmark_group("embedded");
-    bench_embedded(&mut g, "pendulum", Pendulum::default(), State::new([1.0], [0.5]));
+    bench_embedded(
+        &mut g,
+        "pendulum",
+        Pendulum::default(),
+        State::new([1.0], [0.5]),
+    );
     bench_embedded(
         &mut g,
         "cartpole",

@@ -75,11 +75,11 @@ pub use vigp_macros::mechanism;
 #[cfg(feature = "std")]
 pub use vigp_runtime::*;
 
-#[cfg(not(feature = "std"))]
-pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics};
 /// The `no_std` core: fixed-size models and steps, exported-GP prediction.
 #[cfg(not(feature = "std"))]
 pub use vigp_core as embedded;
+#[cfg(not(feature = "std"))]
+pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics};
 
 /// Re-exports for generated code. Not part of the public API.
 #[cfg(not(feature = "std"))]

@@ -103,14 +103,20 @@ fn mass_matrix_and_its_derivatives_are_exact() {
             let t = model::terms(&sys, &q);
             let reference = vigp::dynamics::mass_matrix(&minimal, &q, &SVector::zeros());
             assert!((t.mass - reference).amax() < 1e-12 * (1.0 + reference.amax()));
-            assert!((model::mass_matrix(&sys, &q) - reference).amax() < 1e-12 * (1.0 + reference.amax()));
+            assert!(
+                (model::mass_matrix(&sys, &q) - reference).amax()
+                    < 1e-12 * (1.0 + reference.amax())
+            );
             let h = 1e-6;
             for i in 0..N {
                 let mut e = SVector::<f64, N>::zeros();
                 e[i] = h;
                 let fd = (model::mass_matrix(&sys, &(q + e)) - model::mass_matrix(&sys, &(q - e)))
                     / (2.0 * h);
-                assert!((t.dmass[i] - fd).amax() < 1e-8 * (1.0 + fd.amax()), "∂M/∂q{i}");
+                assert!(
+                    (t.dmass[i] - fd).amax() < 1e-8 * (1.0 + fd.amax()),
+                    "∂M/∂q{i}"
+                );
             }
             // ∇V against central differences of V = E(q, 0)
             for i in 0..N {
@@ -119,11 +125,17 @@ fn mass_matrix_and_its_derivatives_are_exact() {
                 let z = SVector::zeros();
                 let fd = (model::energy(&sys, &(q + e), &z) - model::energy(&sys, &(q - e), &z))
                     / (2.0 * h);
-                assert!((t.dpotential[i] - fd).abs() < 1e-7 * (1.0 + fd.abs()), "∇V{i}");
+                assert!(
+                    (t.dpotential[i] - fd).abs() < 1e-7 * (1.0 + fd.abs()),
+                    "∇V{i}"
+                );
             }
         }
     }
-    check(DoublePendulum::default(), DoublePendulum::default().minimal());
+    check(
+        DoublePendulum::default(),
+        DoublePendulum::default().minimal(),
+    );
     check(Cartpole::default(), Cartpole::default().minimal());
     check(Fourbar::default(), Fourbar::default().minimal());
     check(SliderCrank::default(), SliderCrank::default().minimal());
@@ -166,7 +178,10 @@ fn rollouts_carry_momentum_and_keep_structure() {
     let fast = Stepper::new(fb, 0.01).unwrap();
     let mut traj = [z0; 1001];
     fast.rollout_into(&z0, &mut traj).unwrap();
-    let g = traj.iter().map(|z| m.constraint_violation(z)).fold(0.0, f64::max);
+    let g = traj
+        .iter()
+        .map(|z| m.constraint_violation(z))
+        .fold(0.0, f64::max);
     println!("fourbar, 1000 steps: max |g| = {g:.2e}");
     assert!(g < 1e-10, "{g}");
 }
@@ -203,5 +218,8 @@ fn bad_input_is_a_typed_error() {
     };
     let fast = Stepper::with_options(dp, 0.2, opts).unwrap();
     let z = State::new([2.0, 1.0], [5.0, -6.0]);
-    assert!(matches!(fast.step(&z), Err(StepError::NotConverged { iterations: 1, .. })));
+    assert!(matches!(
+        fast.step(&z),
+        Err(StepError::NotConverged { iterations: 1, .. })
+    ));
 }

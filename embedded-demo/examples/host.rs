@@ -21,6 +21,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             energy(z)
         );
     }
-    println!("{:.0} ns per step (one run, not a benchmark)", per_step * 1e9);
+    println!(
+        "{:.0} ns per step (one run, not a benchmark)",
+        per_step * 1e9
+    );
     Ok(())
 }

@@ -548,11 +548,15 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             let (jn, k) = (&m.joints[j].name, coordinate_index(k));
             quote!(visit(joints.#jn.damping, q[#k]);)
         });
-        let loop_visits: Vec<_> = m.loops.iter().map(|&j| {
-            let jn = &m.joints[j].name;
-            let coordinate = joint_coordinate(m, &params, j);
-            quote!(visit(joints.#jn.damping, #coordinate);)
-        }).collect();
+        let loop_visits: Vec<_> = m
+            .loops
+            .iter()
+            .map(|&j| {
+                let jn = &m.joints[j].name;
+                let coordinate = joint_coordinate(m, &params, j);
+                quote!(visit(joints.#jn.damping, #coordinate);)
+            })
+            .collect();
         let poses = if m.loops.is_empty() {
             quote!()
         } else {

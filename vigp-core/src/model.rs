@@ -96,8 +96,7 @@ pub fn terms<M: Model<N, C>, const N: usize, const C: usize>(
         for j in 0..N {
             t.dpotential[j] -= m * (g[0] * x.g[j] + g[1] * y.g[j]);
             for k in 0..N {
-                t.mass[(j, k)] +=
-                    m * (x.g[j] * x.g[k] + y.g[j] * y.g[k]) + i * th.g[j] * th.g[k];
+                t.mass[(j, k)] += m * (x.g[j] * x.g[k] + y.g[j] * y.g[k]) + i * th.g[j] * th.g[k];
                 for (l, dm) in t.dmass.iter_mut().enumerate() {
                     dm[(j, k)] += m
                         * (x.h[j][l] * x.g[k]
@@ -131,8 +130,8 @@ pub fn mass_matrix<M: Model<N, C>, const N: usize, const C: usize>(
         let ([x, y], th) = (b.com, b.theta);
         for j in 0..N {
             for k in 0..N {
-                mass[(j, k)] += b.mass * (x.g[j] * x.g[k] + y.g[j] * y.g[k])
-                    + b.inertia * th.g[j] * th.g[k];
+                mass[(j, k)] +=
+                    b.mass * (x.g[j] * x.g[k] + y.g[j] * y.g[k]) + b.inertia * th.g[j] * th.g[k];
             }
         }
     });

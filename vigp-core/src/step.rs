@@ -172,7 +172,9 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(StepError::InvalidTimeStep { dt });
         }
         if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
-            return Err(StepError::InvalidOptions("tolerance must be finite and > 0"));
+            return Err(StepError::InvalidOptions(
+                "tolerance must be finite and > 0",
+            ));
         }
         if !(options.min_step > 0.0 && options.min_step <= 1.0) {
             return Err(StepError::InvalidOptions("min_step must be in (0, 1]"));
