@@ -10,9 +10,8 @@
 //! G q̈ + Ġ q̇ = 0 with its velocity-product term.
 
 use crate::del;
-use crate::linalg::solve_kkt;
 use crate::mechanism::Mechanism;
-use crate::newton::StepError;
+use crate::newton::{StepError, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
 use num_dual::{Dual, DualVec};
 
@@ -59,11 +58,19 @@ pub fn constraint_curvature<M: Mechanism<N, C>, const N: usize, const C: usize>(
 
 /// Accelerations and multipliers from the index-1 KKT system (module docs).
 /// Cost: O((N+C)³) per call plus a few dual-number evaluations.
+///
+/// A mass matrix that is singular only in directions the constraints fix
+/// (a link without rotational inertia in maximal coordinates) is handled by
+/// the regularised KKT solve ([`solve_kkt_regularised`]); NaN or ±∞ in
+/// (q, q̇) is [`StepError::NonFiniteState`].
 pub fn acceleration<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     q: &SVector<f64, N>,
     qdot: &SVector<f64, N>,
 ) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
+    if !q.iter().chain(qdot.iter()).all(|x| x.is_finite()) {
+        return Err(StepError::NonFiniteState { step: None });
+    }
     let mass = mass_matrix::<M, N, C>(m, q, qdot);
     let rhs = -bias_forces::<M, N, C>(m, q, qdot);
     let (g, gamma) = if C > 0 {
@@ -74,12 +81,17 @@ pub fn acceleration<M: Mechanism<N, C>, const N: usize, const C: usize>(
     } else {
         (SMatrix::zeros(), SVector::zeros())
     };
-    let (a, lambda) = solve_kkt(&mass, &(-g.transpose()), &g, &rhs, &(-gamma)).ok_or(
-        StepError::SingularJacobian {
+    if !mass.iter().chain(rhs.iter()).all(|x| x.is_finite()) {
+        return Err(StepError::NonFiniteResidual {
             iteration: 0,
             step: None,
-        },
-    )?;
+        });
+    }
+    let ((a, lambda), _) = solve_kkt_regularised(&mass, &(-g.transpose()), &g, &rhs, &(-gamma))
+        .ok_or(StepError::SingularJacobian {
+            iteration: 0,
+            step: None,
+        })?;
     if a.iter().chain(lambda.iter()).any(|x| !x.is_finite()) {
         return Err(StepError::NonFiniteResidual {
             iteration: 0,

@@ -1,4 +1,8 @@
-//! Newton solver options, diagnostics and the step error type.
+//! Newton solver options, diagnostics, the step error type, and the
+//! regularised KKT solve of the Newton steps.
+
+use crate::linalg::solve_kkt;
+use nalgebra::{SMatrix, SVector};
 
 /// Options of the Newton solves inside implicit steps.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -62,6 +66,78 @@ pub struct StepInfo {
     /// `true` when the step was accepted as stalled (see
     /// [`NewtonOptions::stall_tolerance`]) rather than converged.
     pub stalled: bool,
+    /// `true` when some Newton matrix was singular and the equivalent
+    /// regularised KKT system was solved instead (see
+    /// [`solve_kkt_regularised`]).
+    pub regularised: bool,
+    /// `true` when the first Newton run failed and the solve was restarted
+    /// from a feasible point (the velocity projection from far off the
+    /// manifold, see [`crate::projection::project_velocity`]).
+    pub restarted: bool,
+}
+
+/// A KKT solution (x, y) of [`solve_kkt_regularised`].
+pub type KktSolution<const N: usize, const C: usize> = (SVector<f64, N>, SVector<f64, C>);
+
+/// Solve the KKT system of a Newton step,
+///
+/// ```text
+/// [ J   B ] [x]   [r]
+/// [ A   0 ] [y] = [c],
+/// ```
+///
+/// by [`solve_kkt`] (Schur complement, J invertible); when J is singular but
+/// the whole KKT matrix is not (a link without rotational inertia in
+/// maximal coordinates, whose orientation the constraints fix), solve the
+/// equivalent augmented system
+///
+/// ```text
+/// (J + ρ·B·A) x + B y = r + ρ·B·c,   A x = c
+/// ```
+///
+/// which has the same solution (add ρ·B times the second row to the first).
+/// ρ = ±‖J‖/‖B·A‖ (max-norms) with the sign of tr(J)·tr(B·A), so that
+/// ρ·B·A adds to J with J's own sign (J ≈ −M in the variational step,
+/// +M in the acceleration solve, I in the projection). The augmented
+/// solution is accepted only when it solves the original system to 1e-8
+/// relative to ‖J‖‖x‖ + ‖B‖‖y‖ + ‖r‖ (rows of J) and ‖A‖‖x‖ + ‖c‖ (rows
+/// of A): the augmentation multiplies the condition number by up to
+/// ρ‖B·A‖/‖J‖ = 1, so round-off stays near ε·cond; otherwise, or when J is
+/// singular and C = 0, `None`.
+///
+/// Returns the solution and whether the regularisation was needed.
+pub fn solve_kkt_regularised<const N: usize, const C: usize>(
+    j: &SMatrix<f64, N, N>,
+    b: &SMatrix<f64, N, C>,
+    a: &SMatrix<f64, C, N>,
+    r: &SVector<f64, N>,
+    c: &SVector<f64, C>,
+) -> Option<(KktSolution<N, C>, bool)> {
+    if let Some(sol) = solve_kkt(j, b, a, r, c) {
+        return Some((sol, false));
+    }
+    if C == 0 {
+        return None;
+    }
+    let k = b * a;
+    let (jn, kn) = (j.amax(), k.amax());
+    if !(kn > 0.0 && kn.is_finite() && jn.is_finite()) {
+        return None;
+    }
+    let sign = if j.trace() * k.trace() >= 0.0 {
+        1.0
+    } else {
+        -1.0
+    };
+    let rho = sign * if jn > 0.0 { jn / kn } else { 1.0 / kn };
+    let (x, y) = solve_kkt(&(j + k * rho), b, a, &(r + b * c * rho), c)?;
+    // the augmented system is equivalent in exact arithmetic; check it
+    let e1 = (j * x + b * y - r).amax();
+    let e2 = (a * x - c).amax();
+    let s1 = j.amax() * x.amax() + b.amax() * y.amax() + r.amax();
+    let s2 = a.amax() * x.amax() + c.amax();
+    let ok = e1 <= 1e-8 * s1.max(f64::MIN_POSITIVE) && e2 <= 1e-8 * s2.max(f64::MIN_POSITIVE);
+    (ok && x.iter().chain(y.iter()).all(|v| v.is_finite())).then_some(((x, y), true))
 }
 
 /// Why a step failed. `step` is filled in by rollouts with the index of the

@@ -2,9 +2,9 @@
 //! mechanisms with loops (DESIGN §2) and the velocity projection of the
 //! constrained learned integrator (paper eq. 8).
 
-use crate::linalg::{FullPivLu, solve_kkt};
+use crate::linalg::FullPivLu;
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{NewtonOptions, StepError, StepInfo};
+use crate::newton::{NewtonOptions, StepError, StepInfo, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
 use num_dual::Dual2Vec;
 
@@ -38,6 +38,8 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
                     iterations: iter,
                     residual: res,
                     stalled: false,
+                    regularised: false,
+                    restarted: false,
                 },
             ));
         }
@@ -61,6 +63,14 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
 /// system [I  Δt·Gᵀ; Δt·G  0] with a backtracking line search.
 /// Returns the projected velocity and diagnostics; `|v − v_u|` is the size of
 /// the correction.
+///
+/// **Far off the manifold** (a prediction that breaks the paper's Lipschitz
+/// assumption, |v_u − v| ≫ 1/Δt), Newton from v_u can stall in a local
+/// minimum of its merit function, since q₁ + Δt·v wraps around the loop's
+/// configuration space. The remedy used then: restart Newton from the
+/// feasible point v = (P(q₁ + Δt·v_u) − q₁)/Δt, with P the
+/// [`project_configuration`] map (reported as [`StepInfo::restarted`]). If
+/// that fails too, the first run's error is returned.
 pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     q1: &SVector<f64, N>,
@@ -82,12 +92,43 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
                 iterations: 0,
                 residual: 0.0,
                 stalled: false,
+                regularised: false,
+                restarted: false,
             },
         ));
     }
+    let first = match newton_projection(m, q1, v_u, v_u, dt, options) {
+        Err(e @ (StepError::NotConverged { .. } | StepError::SingularJacobian { .. })) => e,
+        done => return done,
+    };
+    let Ok((q2, _)) = project_configuration(m, &(q1 + v_u * dt), options) else {
+        return Err(first);
+    };
+    let start = (q2 - q1) / dt;
+    match newton_projection(m, q1, v_u, &start, dt, options) {
+        Ok((v, info)) => Ok((
+            v,
+            StepInfo {
+                restarted: true,
+                ..info
+            },
+        )),
+        Err(_) => Err(first),
+    }
+}
+
+/// Newton on the projection's KKT system from the initial guess `start`.
+fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    m: &M,
+    q1: &SVector<f64, N>,
+    v_u: &SVector<f64, N>,
+    start: &SVector<f64, N>,
+    dt: f64,
+    options: &NewtonOptions,
+) -> Result<(SVector<f64, N>, StepInfo), StepError> {
     let v_scale = 1.0 + v_u.amax();
     let g_scale = crate::mechanism::length_scale::<M, N, C>(q1);
-    let mut v = *v_u;
+    let mut v = *start;
     let mut mu = SVector::<f64, C>::zeros();
     // Exact Newton: ∂r/∂v = I + Δt²·Σ μ_i ∇²g_i(q₂) (a Gauss–Newton step
     // without the curvature term stalls when the correction is large).
@@ -120,6 +161,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     };
     let (mut r, mut c, mut gj, mut jac) = eval(&v, &mu);
     let mut stalled = false;
+    let mut regularised = false;
     for iter in 0..=options.max_iterations {
         let (res_r, res_c) = (r.amax() / v_scale, c.amax() / g_scale);
         if !(res_r.is_finite() && res_c.is_finite()) {
@@ -137,6 +179,8 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
                     iterations: iter,
                     residual: res_r.max(res_c),
                     stalled: !converged,
+                    regularised,
+                    restarted: false,
                 },
             ));
         }
@@ -149,12 +193,13 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
             });
         }
         let a = gj * dt;
-        let Some((dv, dmu)) = solve_kkt(&jac, &a.transpose(), &a, &r, &c) else {
+        let Some(((dv, dmu), reg)) = solve_kkt_regularised(&jac, &a.transpose(), &a, &r, &c) else {
             return Err(StepError::SingularJacobian {
                 iteration: iter,
                 step: None,
             });
         };
+        regularised |= reg;
         let phi0 = merit(&r, &c);
         let mut alpha = 1.0;
         loop {

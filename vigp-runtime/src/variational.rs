@@ -2,9 +2,8 @@
 //! [`Integrator`] trait shared by every integrator in vigp.
 
 use crate::del;
-use crate::linalg::solve_kkt;
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{NewtonOptions, StepError, StepInfo};
+use crate::newton::{NewtonOptions, StepError, StepInfo, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
 
 /// A one-step map z_k ↦ z_{k+1} with a fixed time step.
@@ -46,12 +45,19 @@ pub trait Integrator<const N: usize> {
 /// system with exact Jacobians (dual numbers) and a backtracking line search.
 /// Cost per Newton iteration: one dual-number evaluation of the residual and
 /// its N×N Jacobian, one O((N+C)³) pivoted solve; no allocation.
+///
+/// **Large steps.** The DEL equations are quadratic in v₁ (velocity terms of
+/// D_xL); when Δt·|v| is large against the configuration's curvature they
+/// can have no root near v₀, and the step fails with
+/// [`StepError::NotConverged`] (e.g. the double pendulum at Δt = 0.1 s and
+/// 3 rev/s). [`Variational::substeps`] is the opt-in remedy.
 #[derive(Clone, Copy, Debug)]
 pub struct Variational<M, const N: usize, const C: usize> {
     model: M,
     dt: f64,
     alpha: f64,
     options: NewtonOptions,
+    substeps: usize,
 }
 
 impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
@@ -63,6 +69,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
             dt,
             alpha: 0.0,
             options: NewtonOptions::default(),
+            substeps: 1,
         }
     }
 
@@ -98,6 +105,24 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
         self
     }
 
+    /// Opt-in sub-stepping: each step of Δt is `k` variational steps of
+    /// h = Δt/k (default 1). The integrator is then exactly the variational
+    /// integrator at h, sampled every Δt, and **the state's velocity is the
+    /// discrete velocity of the sub-step**, v = (q(t + h) − q(t))/h (start it
+    /// with h, e.g. [`crate::dynamics::discrete_velocity`]`(m, q, q̇, Δt/k)`).
+    /// Use it when Δt·|v| is too large for the DEL equations to have a root
+    /// (module docs); cost k steps. `k = 0` is reported by `step` as
+    /// [`StepError::InvalidOptions`].
+    pub fn substeps(mut self, k: usize) -> Self {
+        self.substeps = k;
+        self
+    }
+
+    /// The number of sub-steps per step (see [`Variational::substeps`]).
+    pub fn substep_count(&self) -> usize {
+        self.substeps
+    }
+
     /// The model.
     pub fn model(&self) -> &M {
         &self.model
@@ -108,7 +133,8 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
         &self.options
     }
 
-    /// One step with solver diagnostics.
+    /// One step with solver diagnostics (with sub-steps: iterations summed,
+    /// the largest residual, and any sub-step's flags).
     pub fn step_with_info(&self, z: &State<N>) -> Result<(State<N>, StepInfo), StepError> {
         let dt = self.dt;
         if !(dt.is_finite() && dt > 0.0) {
@@ -118,6 +144,34 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
             return Err(StepError::NonFiniteState { step: None });
         }
         self.options.validate()?;
+        if self.substeps == 0 {
+            return Err(StepError::InvalidOptions("substeps must be >= 1"));
+        }
+        if self.substeps == 1 {
+            return self.solve_step(z, dt);
+        }
+        let h = dt / self.substeps as f64;
+        let mut z = *z;
+        let mut info = StepInfo {
+            iterations: 0,
+            residual: 0.0,
+            stalled: false,
+            regularised: false,
+            restarted: false,
+        };
+        for _ in 0..self.substeps {
+            let (next, i) = self.solve_step(&z, h)?;
+            z = next;
+            info.iterations += i.iterations;
+            info.residual = info.residual.max(i.residual);
+            info.stalled |= i.stalled;
+            info.regularised |= i.regularised;
+        }
+        Ok((z, info))
+    }
+
+    /// One variational step of size `dt` from a validated state.
+    fn solve_step(&self, z: &State<N>, dt: f64) -> Result<(State<N>, StepInfo), StepError> {
         let m = &self.model;
         let x1 = z.q + z.v * dt;
         let alpha = self.alpha;
@@ -127,13 +181,6 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
         } else {
             SMatrix::zeros()
         };
-
-        // Residual scales: momentum units for d, the constraint tolerance is
-        // absolute (length units) scaled by the size of the configuration.
-        let p_scale = 1.0 + p0.amax();
-        let g_scale = crate::mechanism::length_scale::<M, N, C>(&x1);
-        let mut v = z.v;
-        let mut lambda = SVector::<f64, C>::zeros();
 
         // Residuals in plain f64; the Jacobian (N dual directions, nested
         // duals inside) is refreshed only when contraction is slow: a
@@ -150,14 +197,29 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
         };
         let jacobian =
             |v: &SVector<f64, N>| del::del_terms_jacobian::<M, N, C>(m, dt, alpha, &x1, v).1;
+        let mut v = z.v;
+        let mut lambda = SVector::<f64, C>::zeros();
+        let mut jac = jacobian(&v);
+        // Residual scales. Momentum: |p₀| + m̄·(1 unit of velocity), with m̄
+        // the largest diagonal entry of the Newton matrix (≈ the largest
+        // mass-matrix entry), so that the test does not depend on the mass
+        // unit (a 1e-9 kg or 1e9 kg double pendulum converges like a 1 kg
+        // one). Constraints: absolute (length units), scaled by the size of
+        // the configuration.
+        let m_bar = (0..N).map(|i| jac[(i, i)].abs()).fold(0.0, f64::max);
+        let p_scale = match p0.amax() + m_bar {
+            0.0 => 1.0,
+            s => s,
+        };
+        let g_scale = crate::mechanism::length_scale::<M, N, C>(&x1);
         let merit = |r: &SVector<f64, N>, c: &SVector<f64, C>| {
             let a = r.norm() / p_scale;
             let b = c.norm() / g_scale;
             a * a + b * b
         };
         let (mut r, mut c) = eval(&v, &lambda);
-        let mut jac = jacobian(&v);
         let mut fresh = true;
+        let mut regularised = false;
         let tol = self.options.tolerance;
         let mut stalled = false;
         for iter in 0..=self.options.max_iterations {
@@ -189,6 +251,8 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
                         iterations: iter,
                         residual: res_r.max(res_c),
                         stalled: !converged,
+                        regularised,
+                        restarted: false,
                     },
                 ));
             }
@@ -205,12 +269,19 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
             } else {
                 SMatrix::zeros()
             };
-            let Some((dv, dl)) = solve_kkt(&jac, &(-g1t), &a, &r, &c) else {
+            if !jac.iter().chain(a.iter()).all(|x| x.is_finite()) {
+                return Err(StepError::NonFiniteResidual {
+                    iteration: iter,
+                    step: None,
+                });
+            }
+            let Some(((dv, dl), reg)) = solve_kkt_regularised(&jac, &(-g1t), &a, &r, &c) else {
                 return Err(StepError::SingularJacobian {
                     iteration: iter,
                     step: None,
                 });
             };
+            regularised |= reg;
             // Newton direction is −(dv, dl); backtrack on the merit function.
             let phi0 = merit(&r, &c);
             let mut alpha = 1.0;
@@ -253,8 +324,9 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
     /// measured energy error second order. Equals `model.energy(z)` for the
     /// first-order rule.
     pub fn energy(&self, z: &State<N>) -> f64 {
+        let h = self.dt / self.substeps.max(1) as f64;
         let at = State {
-            q: z.q + z.v * (self.alpha * self.dt),
+            q: z.q + z.v * (self.alpha * h),
             v: z.v,
         };
         self.model.energy(&at)
