@@ -35,7 +35,7 @@ use super::kernel::Hyperparameters;
 /// Jitter ladder: first try relative jitter `JITTER_START` (times the
 /// diagonal σ_f² + σ_n²), multiply by 10 until `JITTER_MAX`.
 const JITTER_START: f64 = 1e-12;
-const JITTER_MAX: f64 = 1e-3;
+pub(crate) const JITTER_MAX: f64 = 1e-3;
 
 /// Block size of the blocked Cholesky and triangular inverse.
 const NB: usize = 64;

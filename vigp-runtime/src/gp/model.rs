@@ -153,10 +153,19 @@ pub(crate) fn check_dims(
         });
     }
     let n = inputs.len() / d;
-    if targets.len() != n * p {
+    // A corrupt model file can state any output dimension: N·p must not
+    // overflow (it cannot equal a real length then).
+    let Some(np) = n.checked_mul(p) else {
+        return Err(GpError::DimensionMismatch {
+            what: "targets (N × output dimension overflows usize)",
+            expected: usize::MAX,
+            got: targets.len(),
+        });
+    };
+    if targets.len() != np {
         return Err(GpError::DimensionMismatch {
             what: "targets (N × output dimension)",
-            expected: n * p,
+            expected: np,
             got: targets.len(),
         });
     }
@@ -592,7 +601,8 @@ impl Gp {
             mean[j] = ws.prior[j] + s * mn;
             var[j] = s * s * (o.hp.signal_variance - vv).max(0.0);
         }
-        check_finite("prediction (prior mean function output)", mean)
+        check_finite("prediction (prior mean function output)", mean)?;
+        check_finite("prediction variance", var)
     }
 
     /// Posterior mean only, at one point, without allocating: O(p·N·d).

@@ -40,13 +40,29 @@ impl InputNormaliser {
             }
         }
         shift.iter_mut().for_each(|s| *s /= n as f64);
+        if shift.iter().any(|s| !s.is_finite()) {
+            // the sum overflowed (inputs near f64::MAX): mean of x/N instead
+            shift.iter_mut().for_each(|s| *s = 0.0);
+            for row in x.chunks_exact(dim) {
+                for (s, v) in shift.iter_mut().zip(row) {
+                    *s += v / n as f64;
+                }
+            }
+        }
         for row in x.chunks_exact(dim) {
             for ((q, v), m) in scale.iter_mut().zip(row).zip(&shift) {
                 *q += (v - m) * (v - m);
             }
         }
-        for q in &mut scale {
+        for (j, q) in scale.iter_mut().enumerate() {
             *q = (*q / n as f64).sqrt();
+            if q.is_infinite() {
+                // the squares overflowed (inputs beyond ~1e154): the same
+                // deviation as m·√(mean ((x − μ)/m)²), m = max |x − μ|
+                let col = x.chunks_exact(dim).map(|row| row[j] - shift[j]);
+                let m = col.clone().fold(0.0f64, |m, u| m.max(u.abs()));
+                *q = m * (col.map(|u| (u / m) * (u / m)).sum::<f64>() / n as f64).sqrt();
+            }
             if !q.is_finite() || *q < ZERO_SCALE {
                 *q = 1.0;
             }
@@ -76,7 +92,13 @@ impl InputNormaliser {
 /// exactly scikit-learn's `normalize_y=True` convention.
 pub(crate) fn output_scale(residual: &[f64]) -> f64 {
     let n = residual.len() as f64;
-    let s = (residual.iter().map(|r| r * r).sum::<f64>() / n).sqrt();
+    let mut s = (residual.iter().map(|r| r * r).sum::<f64>() / n).sqrt();
+    if s.is_infinite() {
+        // the squares overflowed (residuals beyond ~1e154): the same RMS as
+        // m·√(mean (r/m)²), m = max |r|
+        let m = residual.iter().fold(0.0f64, |m, r| m.max(r.abs()));
+        s = m * (residual.iter().map(|r| (r / m) * (r / m)).sum::<f64>() / n).sqrt();
+    }
     if s.is_finite() && s >= ZERO_SCALE {
         s
     } else {

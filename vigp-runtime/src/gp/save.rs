@@ -146,6 +146,17 @@ impl Gp {
             if !(o.jitter.is_finite() && o.jitter >= 0.0) {
                 return Err(bad("jitter must be finite and non-negative"));
             }
+            let h = &o.hyperparameters;
+            let diag = h.signal_variance + h.noise_variance;
+            // Training never adds more than the jitter ladder's maximum; a
+            // larger value would silently turn the model into its prior.
+            if o.jitter > super::lml::JITTER_MAX * diag * (1.0 + 1e-9) {
+                return Err(bad(format!(
+                    "jitter {:e} exceeds the largest jitter training adds ({:e} of σ_f² + σ_n²)",
+                    o.jitter,
+                    super::lml::JITTER_MAX
+                )));
+            }
         }
         let resolved = match (&saved.mean, mean) {
             (SavedMean::Zero, None) => Resolved::Zero,
