@@ -59,8 +59,11 @@
 //!
 //! Generated items for `pub Name { … }`: `Name` (run-time parameters with the
 //! DSL's values as `Default`), `NameLinks`, `NameJoints` (if damped),
-//! `Name::link_poses` (forward kinematics), and `NameMinimal`, which
-//! implements [`Mechanism`]. To see or snapshot the generated source of your
+//! `Name::link_poses` (forward kinematics), an implementation of
+//! `vigp::embedded::Model` for `Name` (the `no_std`, fixed-size model behind
+//! `vigp::embedded::Stepper`), and, with the default `std` feature,
+//! `NameMinimal` implementing `Mechanism` and `NameMaximal` (maximal
+//! coordinates). To see or snapshot the generated source of your
 //! own mechanism, enable the `codegen` feature and call
 //! `vigp::codegen::expand_to_string`.
 

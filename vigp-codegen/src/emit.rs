@@ -46,8 +46,19 @@ fn point_expr(m: &Model, params: &TokenStream, p: Point) -> TokenStream {
         }
         Point::Link { link, anchor } => {
             let pose = pose_ident(m, link);
-            let local = anchor_local(m, params, link, anchor);
-            quote!(#pose.point(#local))
+            let name = &m.links[link].name;
+            // points on the link's axis skip the products by zero
+            match anchor {
+                Anchor::Start => quote!([#pose.x, #pose.y]),
+                Anchor::End => quote!(#pose.point_on_axis(#params.links.#name.length)),
+                Anchor::Center => {
+                    quote!(#pose.point_on_axis(#params.links.#name.length * 0.5))
+                }
+                Anchor::At(_) => {
+                    let local = anchor_local(m, params, link, anchor);
+                    quote!(#pose.point(#local))
+                }
+            }
         }
     }
 }
@@ -134,7 +145,11 @@ fn forward_kinematics(m: &Model, params: &TokenStream) -> TokenStream {
                 )
             }
         };
-        quote!(let #pose = ::vigp::Pose2::attach(#theta, #at, #local);)
+        if anchor == Anchor::Start {
+            quote!(let #pose = ::vigp::Pose2::attach_start(#theta, #at);)
+        } else {
+            quote!(let #pose = ::vigp::Pose2::attach(#theta, #at, #local);)
+        }
     });
     quote!(#(#lets)*)
 }

@@ -6,7 +6,9 @@
 //!
 //! Pipeline: tokens → [`parse`] (syntax with spans) → [`model`] (names
 //! resolved, numbers checked, joint graph split into a spanning tree and
-//! loop-closing joints) → [`emit`] (Rust generic over a num-dual scalar).
+//! loop-closing joints) → [`emit`] (Rust generic over a scalar: `vigp::Real`
+//! for the kinematics and the `no_std` model, num-dual numbers for the std
+//! runtime's views; [`Target`] selects which are emitted).
 
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]

@@ -44,6 +44,28 @@ impl<D: Real> Pose2<D> {
         }
     }
 
+    /// The pose with orientation `theta` whose origin (the link's `start`)
+    /// is at `at`: [`Pose2::attach`] with `local = [0, 0]`, without the
+    /// products by zero.
+    #[inline]
+    pub fn attach_start(theta: D, at: Point2<D>) -> Self {
+        let (s, c) = theta.sincos();
+        Self {
+            x: at[0],
+            y: at[1],
+            theta,
+            sin: s,
+            cos: c,
+        }
+    }
+
+    /// World position of the local point (a, 0) on the link's axis (its
+    /// `end` for a = length): [`Pose2::point`] without the products by zero.
+    #[inline]
+    pub fn point_on_axis(&self, a: f64) -> Point2<D> {
+        [self.x + self.sin * a, self.y - self.cos * a]
+    }
+
     /// World direction of a local direction (rotation only).
     #[inline]
     pub fn direction(&self, local: [f64; 2]) -> Point2<D> {
@@ -95,4 +117,29 @@ pub fn zero<D: Real>() -> D {
 #[inline]
 pub fn center(length: f64) -> [f64; 2] {
     [length * 0.5, 0.0]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The zero-skipping constructors equal the general ones exactly
+    /// (they drop only additions of ±0 and products by 0).
+    #[test]
+    fn shortcuts_equal_the_general_forms() {
+        for theta in [-2.5, -0.3, 0.0, 0.7, 3.0] {
+            let at = [0.4, -1.2];
+            let (a, b) = (
+                Pose2::attach_start(theta, at),
+                Pose2::attach(theta, at, [0.0, 0.0]),
+            );
+            assert_eq!((a.x, a.y, a.sin, a.cos), (b.x, b.y, b.sin, b.cos));
+            for len in [0.0, 0.5, 1.7] {
+                assert_eq!(a.point_on_axis(len), a.point([len, 0.0]));
+            }
+            // a local point is placed at `at`
+            let p = Pose2::attach(theta, at, [0.3, 0.1]).point([0.3, 0.1]);
+            assert!((p[0] - at[0]).abs() < 1e-15 && (p[1] - at[1]).abs() < 1e-15);
+        }
+    }
 }

@@ -111,6 +111,49 @@ impl<const M: usize> FullPivLu<M> {
     }
 }
 
+/// Solve A x = b by Gaussian elimination with partial (row) pivoting, for
+/// well-conditioned systems such as the Newton matrix of a tree step (a
+/// perturbation of −M). O(M³), no allocation. `None` when a pivot is
+/// below `1e-14 · |largest entry|` or not finite.
+pub fn solve_partial<const M: usize>(
+    a: &SMatrix<f64, M, M>,
+    b: &SVector<f64, M>,
+) -> Option<SVector<f64, M>> {
+    let (mut a, mut x) = (*a, *b);
+    let tiny = 1e-14 * a.amax();
+    for k in 0..M {
+        let mut p = k;
+        for i in k + 1..M {
+            if a[(i, k)].abs() > a[(p, k)].abs() {
+                p = i;
+            }
+        }
+        let pivot = a[(p, k)];
+        if !(pivot.abs() > tiny) || !pivot.is_finite() {
+            return None;
+        }
+        if p != k {
+            a.swap_rows(k, p);
+            x.swap_rows(k, p);
+        }
+        for i in k + 1..M {
+            let f = a[(i, k)] / pivot;
+            for j in k + 1..M {
+                a[(i, j)] -= f * a[(k, j)];
+            }
+            x[i] -= f * x[k];
+        }
+    }
+    for k in (0..M).rev() {
+        let mut s = x[k];
+        for j in k + 1..M {
+            s -= a[(k, j)] * x[j];
+        }
+        x[k] = s / a[(k, k)];
+    }
+    Some(x)
+}
+
 /// Solve the saddle-point (KKT) system
 ///
 /// ```text
@@ -157,6 +200,20 @@ mod tests {
         let x = FullPivLu::new(a, 1e-14).solve(&b);
         let reference = a.lu().solve(&b).unwrap();
         assert!((x - reference).amax() < 1e-14);
+    }
+
+    #[test]
+    fn partial_pivoting_matches_nalgebra_and_detects_singularity() {
+        // a zero leading entry forces a row swap
+        let a = Matrix3::new(0.0, -1.0, 0.5, 1.0, 3.0, -2.0, 0.25, 4.0, 1.0);
+        let b = Vector3::new(1.0, -2.0, 0.5);
+        let x = solve_partial(&a, &b).unwrap();
+        let reference = a.lu().solve(&b).unwrap();
+        assert!((x - reference).amax() < 1e-14);
+        let singular = Matrix3::new(1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 1.0);
+        assert!(solve_partial(&singular, &b).is_none());
+        let nan = Matrix3::new(f64::NAN, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        assert!(solve_partial(&nan, &b).is_none());
     }
 
     #[test]

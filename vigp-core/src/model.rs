@@ -95,7 +95,8 @@ pub fn terms<M: Model<N, C>, const N: usize, const C: usize>(
         let ([x, y], th, m, i) = (b.com, b.theta, b.mass, b.inertia);
         for j in 0..N {
             t.dpotential[j] -= m * (g[0] * x.g[j] + g[1] * y.g[j]);
-            for k in 0..N {
+            // M and every ∂M/∂q_l are symmetric: accumulate k ≥ j only.
+            for k in j..N {
                 t.mass[(j, k)] += m * (x.g[j] * x.g[k] + y.g[j] * y.g[k]) + i * th.g[j] * th.g[k];
                 for (l, dm) in t.dmass.iter_mut().enumerate() {
                     dm[(j, k)] += m
@@ -108,6 +109,14 @@ pub fn terms<M: Model<N, C>, const N: usize, const C: usize>(
             }
         }
     });
+    for j in 0..N {
+        for k in 0..j {
+            t.mass[(j, k)] = t.mass[(k, j)];
+            for dm in t.dmass.iter_mut() {
+                dm[(j, k)] = dm[(k, j)];
+            }
+        }
+    }
     if M::DISSIPATIVE {
         model.for_each_damper(&seed1(q), &mut |c: f64, s: Jet1<N>| {
             for j in 0..N {
