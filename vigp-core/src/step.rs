@@ -226,6 +226,17 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         if !z.is_finite() || !p0.iter().all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteState);
         }
+        self.solve_finite(z, p0, guess)
+    }
+
+    /// [`Self::solve`] for inputs known to be finite: a converged step's
+    /// outputs are (its residual is finite), so rollouts check only z₀.
+    fn solve_finite(
+        &self,
+        z: &State<N>,
+        p0: &SVector<f64, N>,
+        guess: &SVector<f64, N>,
+    ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         let h = self.dt;
         let x1 = z.q + z.v * h;
         let t = terms(&self.model, &x1);
@@ -338,10 +349,16 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         }
         *first = *z0;
         let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
+        if !p.iter().all(|x| x.is_finite()) {
+            return Err(RolloutError {
+                step: 0,
+                error: StepError::NonFiniteState,
+            });
+        }
         for (k, slot) in rest.iter_mut().enumerate() {
             let guess = z.v * 2.0 - v_prev;
             let (z1, p1, _) = self
-                .solve(&z, &p, &guess)
+                .solve_finite(&z, &p, &guess)
                 .map_err(|error| RolloutError { step: k, error })?;
             *slot = z1;
             v_prev = z.v;
