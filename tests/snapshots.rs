@@ -107,7 +107,9 @@ fn generated_code_contains_only_what_the_scene_needs() {
     assert!(minimal_impl(&fourbar).contains("fn constraints"));
     // the same for the no_std model: dampers and constraints only if needed
     let embedded = |code: &str| {
-        let start = code.find("impl ::vigp::embedded::Model").expect("embedded impl");
+        let start = code
+            .find("impl ::vigp::embedded::Model")
+            .expect("embedded impl");
         code[start..start + code[start..].find("\n}\n").unwrap()].to_string()
     };
     assert!(!embedded(&bare).contains("fn for_each_damper"));

@@ -27,8 +27,6 @@ pub mod projection;
 pub mod summary;
 pub mod variational;
 
-pub use vigp_core as embedded;
-pub use vigp_core::Real;
 pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
 pub use kinematics::Pose2;
 pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
@@ -38,6 +36,8 @@ pub use summary::RolloutSummary;
 #[cfg(feature = "std")]
 pub use summary::summarize;
 pub use variational::{Integrator, Variational};
+pub use vigp_core as embedded;
+pub use vigp_core::Real;
 
 /// Re-exports for generated code. Not part of the public API.
 #[doc(hidden)]
