@@ -30,9 +30,9 @@ use nalgebra::{SMatrix, SVector};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepOptions {
     /// Convergence when the scaled residual max-norm is below this
-    /// (momentum residual relative to 1 + |p₀|∞, constraint residual
-    /// relative to 1 + the largest length coordinate). Default 1e-12, as
-    /// the std runtime.
+    /// (momentum residual relative to |p₀|∞ + the largest diagonal entry of
+    /// M, constraint residual relative to 1 + the largest length
+    /// coordinate). Default 1e-12, as the std runtime.
     pub tolerance: f64,
     /// Iteration cap (default 25).
     pub max_iterations: usize,
@@ -240,7 +240,14 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let h = self.dt;
         let x1 = z.q + z.v * h;
         let t = terms(&self.model, &x1);
-        let p_scale = 1.0 + max_abs(p0);
+        // Momentum scale |p₀|∞ + m̄ (m̄ = largest diagonal entry of M, i.e.
+        // one unit of velocity's momentum) so that convergence does not
+        // depend on the mass unit; the std runtime scales the same way.
+        let m_bar = (0..N).map(|i| t.mass[(i, i)].abs()).fold(0.0, f64::max);
+        let p_scale = match max_abs(p0) + m_bar {
+            0.0 => 1.0,
+            s => s,
+        };
         let mut l_scale = 1.0f64;
         for (x, kind) in x1.iter().zip(M::KINDS.iter()) {
             if *kind == CoordinateKind::Length {
