@@ -7,6 +7,7 @@
 //! * [`Model`]: what `mechanism!` implements for every mechanism; [`model`]
 //!   computes M(q), ∂M/∂q, ∇V, D and the energy from it.
 //! * [`Stepper`]: the first-order variational step on fixed-size data.
+//! * [`gp`]: prediction with a Gaussian process exported as Rust source.
 //!
 //! Everything here works on `nalgebra` static vectors and plain arrays, and
 //! never allocates. The std runtime (`vigp-runtime`) re-exports the shared
@@ -16,6 +17,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod gp;
 pub mod kinematics;
 pub mod linalg;
 pub mod model;
