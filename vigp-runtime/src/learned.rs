@@ -137,9 +137,11 @@ pub struct LearnedStepInfo<const N: usize> {
 /// model has constraints and projection is on).
 ///
 /// Complexity per step: one nominal VI step (with [`Prior::Nominal`]),
-/// O(N·(d + N)) per output for the GP mean and variance (N training
-/// samples, d input dimensions), and a Newton projection for constrained
-/// models.
+/// O(N·d) per output for the GP mean (N training samples, d input
+/// dimensions: N·d subtract-multiply-adds and N exponentials), O(N²) more
+/// per output for the variance (only [`Learned::step_with`] and the error
+/// bound need it; [`Integrator::step`] and rollouts use the mean), and a
+/// Newton projection for constrained models.
 #[derive(Clone, Debug)]
 pub struct Learned<M, const N: usize, const C: usize> {
     model: M,
@@ -255,13 +257,27 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         self.gp.workspace()
     }
 
-    /// The unprojected prediction v_u = prior(z) + μ(z) (eq. 7) and the
-    /// posterior standard deviations.
-    pub fn predict_velocity(
+    /// The prior v̄(z): the nominal variational step, or 0 for a constant
+    /// prior (whose constant is part of the GP mean).
+    fn prior_velocity(&self, z: &State<N>) -> Result<SVector<f64, N>, StepError> {
+        Ok(match self.prior {
+            Prior::Nominal => {
+                Variational::new(self.model.clone(), self.dt)
+                    .with_options(self.options)
+                    .step(z)?
+                    .v
+            }
+            Prior::Constant => SVector::zeros(),
+        })
+    }
+
+    /// Encodes `z` into a stack buffer (heap only above 64 input
+    /// dimensions) and passes the GP input to `f`.
+    fn with_input<T>(
         &self,
         z: &State<N>,
-        ws: &mut Workspace,
-    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
+        f: impl FnOnce(&[f64]) -> Result<T, StepError>,
+    ) -> Result<T, StepError> {
         let d = self.encoding.dim(&M::KINDS);
         let mut x = [0.0f64; 64];
         let mut heap;
@@ -272,25 +288,77 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             &mut heap
         };
         self.encoding.encode(&M::KINDS, z, input);
+        f(input)
+    }
+
+    /// The unprojected prediction v_u = prior(z) + μ(z) (eq. 7) and the
+    /// posterior standard deviations. Cost O(p·N·(d + N)) for the GP (the
+    /// variance needs a triangular solve per output) plus the prior.
+    pub fn predict_velocity(
+        &self,
+        z: &State<N>,
+        ws: &mut Workspace,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
         let mut mean = SVector::<f64, N>::zeros();
         let mut var = SVector::<f64, N>::zeros();
-        self.gp
-            .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)
-            .map_err(|_| StepError::Prediction { step: None })?;
-        let base = match self.prior {
-            Prior::Nominal => {
-                Variational::new(self.model.clone(), self.dt)
-                    .with_options(self.options)
-                    .step(z)?
-                    .v
-            }
-            Prior::Constant => SVector::zeros(),
-        };
-        let v = base + mean;
+        self.with_input(z, |input| {
+            self.gp
+                .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)
+                .map_err(|_| StepError::Prediction { step: None })
+        })?;
+        let v = self.prior_velocity(z)? + mean;
         if !v.iter().all(|x| x.is_finite()) {
             return Err(StepError::Prediction { step: None });
         }
         Ok((v, var.map(|s| s.max(0.0).sqrt())))
+    }
+
+    /// The unprojected mean prediction v_u = prior(z) + μ(z) (eq. 7) without
+    /// the variance: O(p·N·d) for the GP plus the prior. Equal bit for bit
+    /// to the first component of [`predict_velocity`](Self::predict_velocity).
+    pub fn predict_mean_velocity(
+        &self,
+        z: &State<N>,
+        ws: &mut Workspace,
+    ) -> Result<SVector<f64, N>, StepError> {
+        let mut mean = SVector::<f64, N>::zeros();
+        self.with_input(z, |input| {
+            self.gp
+                .predict_mean_into(input, mean.as_mut_slice(), ws)
+                .map_err(|_| StepError::Prediction { step: None })
+        })?;
+        let v = self.prior_velocity(z)? + mean;
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(StepError::Prediction { step: None });
+        }
+        Ok(v)
+    }
+
+    /// One learned step using only the posterior mean (what a rollout
+    /// needs): like [`step_with`](Self::step_with) without the variances,
+    /// so O(p·N·d) instead of O(p·N·(d + N)) for the GP. Same next state as
+    /// `step_with`, bit for bit. No allocation for inputs of up to 64
+    /// dimensions.
+    pub fn step_mean_with(&self, z: &State<N>, ws: &mut Workspace) -> Result<State<N>, StepError> {
+        self.check_step(z)?;
+        let x1 = z.q + z.v * self.dt;
+        let vu = self.predict_mean_velocity(z, ws)?;
+        let v = if self.project && C > 0 {
+            project_velocity(&self.model, &x1, &vu, self.dt, &self.options)?.0
+        } else {
+            vu
+        };
+        Ok(State { q: x1, v })
+    }
+
+    fn check_step(&self, z: &State<N>) -> Result<(), StepError> {
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(StepError::InvalidTimeStep { dt: self.dt });
+        }
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState { step: None });
+        }
+        Ok(())
     }
 
     /// One learned step with a caller-owned GP workspace (no allocation for
@@ -300,12 +368,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         z: &State<N>,
         ws: &mut Workspace,
     ) -> Result<(State<N>, LearnedStepInfo<N>), StepError> {
-        if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(StepError::InvalidTimeStep { dt: self.dt });
-        }
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
+        self.check_step(z)?;
         let x1 = z.q + z.v * self.dt;
         let (vu, std_dev) = self.predict_velocity(z, ws)?;
         let v = if self.project && C > 0 {
@@ -331,18 +394,19 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         self.dt
     }
 
-    /// One step; allocates a GP workspace per call (use
-    /// [`Learned::step_with`] in loops).
+    /// One step (mean only, [`Learned::step_mean_with`]); allocates a GP
+    /// workspace per call (use `step_mean_with` in loops).
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         let mut ws = self.gp.workspace();
-        self.step_with(z, &mut ws).map(|(z, _)| z)
+        self.step_mean_with(z, &mut ws)
     }
 
+    /// Mean-only steps ([`Learned::step_mean_with`]) with one workspace.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
         let mut ws = self.gp.workspace();
         let mut z = *z0;
         for (k, slot) in out.iter_mut().enumerate() {
-            z = self.step_with(&z, &mut ws).map_err(|e| e.at_step(k))?.0;
+            z = self.step_mean_with(&z, &mut ws).map_err(|e| e.at_step(k))?;
             *slot = z;
         }
         Ok(())

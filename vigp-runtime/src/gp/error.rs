@@ -61,4 +61,8 @@ pub enum GpError {
     /// A saved model could not be parsed or is internally inconsistent.
     #[error("invalid saved model: {0}")]
     InvalidModel(String),
+    /// A model or export options that cannot be written as Rust source
+    /// (a function prior mean, an invalid item name or path).
+    #[error("cannot export: {0}")]
+    Export(String),
 }

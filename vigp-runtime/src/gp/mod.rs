@@ -8,6 +8,9 @@
 //!   [`Gp::predict`] for batches.
 //! * [`OutputGp`]: per-output accessors for the uniform error bound.
 //! * [`SavedGp`]: serde form of a trained model.
+//! * [`Gp::to_rust_source`]: the model as Rust source with `static` arrays
+//!   for `no_std` prediction with `vigp_core::gp::ExportedGp` (bit-identical
+//!   means: both use the kernels of `vigp_core::gp`).
 //! * [`log_marginal_likelihood`]: the objective and its gradient on raw data.
 //!
 //! Complexity: one likelihood evaluation costs O(N²d + N³) time and O(N²)
@@ -24,6 +27,7 @@
 //! ε·cond(K)·σ_f². See `docs/gp.md` for the method notes and benchmarks.
 
 mod error;
+mod export;
 mod kernel;
 mod lbfgs;
 mod lml;
@@ -35,6 +39,7 @@ mod rng;
 mod save;
 
 pub use error::GpError;
+pub use export::{ExportOptions, ExportedArrays};
 pub use kernel::Hyperparameters;
 pub use mean::{MeanFn, PriorMean};
 pub use model::{Gp, OutputGp, Prediction, Workspace};

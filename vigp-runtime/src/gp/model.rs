@@ -3,6 +3,7 @@
 
 use faer::{Mat, Par, Side};
 use rayon::prelude::*;
+use vigp_core::gp as core_gp;
 
 use super::error::GpError;
 use super::kernel::Hyperparameters;
@@ -80,7 +81,9 @@ pub struct OutputGp {
     pub(crate) hp: Hyperparameters,
     pub(crate) output_scale: f64,
     pub(crate) input_scale: Vec<f64>,
-    pub(crate) xs: Vec<f64>,
+    /// Scaled training inputs x_n/ℓ, **column-major** d × N (the layout of
+    /// the shared prediction kernels in `vigp_core::gp`).
+    pub(crate) xs_cols: Vec<f64>,
     pub(crate) chol: Mat<f64>,
     pub(crate) alpha: Vec<f64>,
     pub(crate) residual: Vec<f64>,
@@ -121,6 +124,12 @@ pub(crate) struct Prepared {
     pub prior: Vec<f64>,
     /// Per output: normalised residual and its scale.
     pub residuals: Vec<(Vec<f64>, f64)>,
+}
+
+/// The shared kernels only fail on inconsistent lengths, which the model's
+/// own invariants exclude; reported as an invalid model all the same.
+fn core_error(e: core_gp::GpError) -> GpError {
+    GpError::InvalidModel(e.to_string())
 }
 
 pub(crate) fn check_finite(what: &'static str, v: &[f64]) -> Result<(), GpError> {
@@ -447,11 +456,17 @@ impl Gp {
                 if !lml.is_finite() || alpha.iter().any(|a| !a.is_finite()) {
                     return Err(GpError::NotPositiveDefinite { jitter });
                 }
+                let mut xs_cols = vec![0.0; n * d];
+                for (i, row) in xs.chunks_exact(d).enumerate() {
+                    for (j, v) in row.iter().enumerate() {
+                        xs_cols[j * n + i] = *v;
+                    }
+                }
                 Ok(OutputGp {
                     hp,
                     output_scale: *s,
                     input_scale: prep.norm.scale.clone(),
-                    xs,
+                    xs_cols,
                     chol: l,
                     alpha,
                     residual: r.clone(),
@@ -560,16 +575,11 @@ impl Gp {
         Ok(())
     }
 
-    /// Fills ws.kstar with k(x, X) for output `o` (normalised kernel).
+    /// The scaled query x_n/ℓ of output `o` into ws.xs (ws.xn already set).
     #[inline]
-    fn kstar(&self, o: &OutputGp, ws: &mut Workspace) {
-        let d = self.d;
+    fn scale_query(o: &OutputGp, ws: &mut Workspace) {
         for ((s, v), l) in ws.xs.iter_mut().zip(&ws.xn).zip(&o.hp.length_scales) {
             *s = v / l;
-        }
-        let sf2 = o.hp.signal_variance;
-        for (k, row) in ws.kstar.iter_mut().zip(o.xs.chunks_exact(d)) {
-            *k = sf2 * (-0.5 * lml::sqdist(row, &ws.xs)).exp();
         }
     }
 
@@ -593,8 +603,16 @@ impl Gp {
         self.input_norm.apply(x, &mut ws.xn);
         self.mean.eval(x, &mut ws.prior);
         for (j, o) in self.outputs.iter().enumerate() {
-            self.kstar(o, ws);
-            let mn: f64 = ws.kstar.iter().zip(&o.alpha).map(|(a, b)| a * b).sum();
+            Self::scale_query(o, ws);
+            core_gp::kernel_row(
+                &o.xs_cols,
+                self.n,
+                &ws.xs,
+                o.hp.signal_variance,
+                &mut ws.kstar,
+            )
+            .map_err(core_error)?;
+            let mn = core_gp::dot(&ws.kstar, &o.alpha).map_err(core_error)?;
             lml::forward_solve(&o.chol, &mut ws.kstar);
             let vv: f64 = ws.kstar.iter().map(|v| v * v).sum();
             let s = o.output_scale;
@@ -617,8 +635,10 @@ impl Gp {
         self.input_norm.apply(x, &mut ws.xn);
         self.mean.eval(x, &mut ws.prior);
         for (j, o) in self.outputs.iter().enumerate() {
-            self.kstar(o, ws);
-            let mn: f64 = ws.kstar.iter().zip(&o.alpha).map(|(a, b)| a * b).sum();
+            Self::scale_query(o, ws);
+            let mn =
+                core_gp::kernel_dot(&o.xs_cols, self.n, &ws.xs, o.hp.signal_variance, &o.alpha)
+                    .map_err(core_error)?;
             mean[j] = ws.prior[j] + o.output_scale * mn;
         }
         check_finite("prediction (prior mean function output)", mean)
