@@ -14,6 +14,8 @@
 
 use vigp::embedded::{RolloutError, State, StepError, Stepper};
 
+pub mod learned;
+
 vigp::mechanism! {
     /// The paper's double pendulum: two 1 m, 1 kg links hanging from the
     /// origin, a damped elbow.

@@ -1,0 +1,512 @@
+//! A trained GP exported for `no_std` prediction (`Gp::export_output`,
+//! `Gp::to_rust_source`, `vigp::embedded::gp::ExportedGp`):
+//!
+//! * the exported model reproduces the std model's posterior mean bit for
+//!   bit and its variance to 1e-12 relative, on random points inside and
+//!   outside the data, for several model shapes (normalisation on/off,
+//!   zero/constant prior, d = 1…9, N not a multiple of the block size, a
+//!   nearly noise-free ill-conditioned fit);
+//! * both agree with an independent dense computation in original units
+//!   (nalgebra Cholesky, `f64::exp`) to rounding: mean within
+//!   1e-12·Σ|k_i·α_i|, variance within 1e-9·σ_f²s_y² (well-conditioned
+//!   models only);
+//! * the generated source round-trips every float exactly (parsed back,
+//!   compared by `to_bits`) and is deterministic (same model → same text;
+//!   retrained with the same seed → same text);
+//! * the committed `embedded-demo/src/gp_model.rs` compiles here too and
+//!   reproduces the check values it carries.
+
+mod common;
+
+use common::Rng;
+use nalgebra::{DMatrix, DVector};
+use vigp::gp::{ExportOptions, ExportedArrays, Gp, GpError, PriorMean, TrainOptions};
+
+#[allow(dead_code, clippy::all)]
+mod demo_model {
+    include!("../embedded-demo/src/gp_model.rs");
+}
+
+/// Smooth multi-output data on `d` inputs.
+fn data(n: usize, d: usize, p: usize, noise: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    let mut rng = Rng(seed);
+    let x: Vec<f64> = (0..n * d)
+        .map(|_| rng.uniform(-2.0, 2.0) * 1.5 + 0.3)
+        .collect();
+    let y: Vec<f64> = x
+        .chunks(d)
+        .flat_map(|r| {
+            let s: f64 = r
+                .iter()
+                .enumerate()
+                .map(|(j, v)| (j as f64 + 1.0) * v)
+                .sum();
+            let noise = noise * rng.uniform(-1.0, 1.0);
+            (0..p)
+                .map(|j| (s * 0.3 + j as f64).sin() * 2.0 + r[0] * j as f64 + noise + 5.0)
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    (x, y)
+}
+
+fn train(n: usize, d: usize, p: usize, noise: f64, opts: TrainOptions) -> Gp {
+    let (x, y) = data(n, d, p, noise, 11 + n as u64 + d as u64);
+    Gp::train(&x, d, &y, p, &opts).unwrap().0
+}
+
+/// Worst (mean ulps-or-exact, variance relative) differences between the
+/// std model and its exported outputs over `m` random points.
+fn compare<const D: usize>(gp: &Gp, m: usize, seed: u64) -> f64 {
+    assert_eq!(gp.input_dim(), D);
+    let p = gp.output_dim();
+    let exported: Vec<ExportedArrays> =
+        (0..p).map(|j| gp.export_output(j, true).unwrap()).collect();
+    let views: Vec<_> = exported
+        .iter()
+        .map(|a| a.as_exported::<D>().unwrap())
+        .collect();
+    let mut ws = gp.workspace();
+    let (mut mean, mut var, mut mean_only) = (vec![0.0; p], vec![0.0; p], vec![0.0; p]);
+    let mut scratch = vec![0.0; gp.n()];
+    let mut rng = Rng(seed);
+    let mut worst_var = 0.0f64;
+    for _ in 0..m {
+        // inside the data and far outside (down to the kernel cut-off)
+        let spread = if rng.uniform(0.0, 1.0) < 0.8 {
+            3.0
+        } else {
+            30.0
+        };
+        let x: [f64; D] = std::array::from_fn(|_| rng.uniform(-spread, spread));
+        gp.predict_into(&x, &mut mean, &mut var, &mut ws).unwrap();
+        gp.predict_mean_into(&x, &mut mean_only, &mut ws).unwrap();
+        for j in 0..p {
+            let m_exp = views[j].predict_mean(&x).unwrap();
+            assert_eq!(
+                m_exp.to_bits(),
+                mean_only[j].to_bits(),
+                "mean {m_exp} vs {}",
+                mean_only[j]
+            );
+            assert_eq!(
+                mean[j].to_bits(),
+                mean_only[j].to_bits(),
+                "std mean paths differ"
+            );
+            let (m2, v2) = views[j].predict(&x, &mut scratch).unwrap();
+            assert_eq!(m2.to_bits(), m_exp.to_bits());
+            let scale = gp.output(j).kernel_max();
+            worst_var = worst_var.max((v2 - var[j]).abs() / var[j].abs().max(1e-300 * scale));
+        }
+    }
+    assert!(
+        worst_var <= 1e-12,
+        "variance differs by {worst_var:e} relative"
+    );
+    worst_var
+}
+
+/// Independent dense reference in original units for a model with the
+/// constant prior: k from the original hyperparameters and `f64::exp`, α
+/// from `OutputGp::alpha()`, the variance from a fresh nalgebra Cholesky of
+/// K + (σ_n² + jitter)I.
+fn dense_reference(gp: &Gp, x: &[f64], j: usize) -> (f64, f64, f64) {
+    let o = gp.output(j);
+    let hp = o.hyperparameters_original();
+    let (n, d) = (gp.n(), gp.input_dim());
+    let xs = gp.inputs();
+    let k = |a: &[f64], b: &[f64]| -> f64 {
+        let r2: f64 = (0..d)
+            .map(|i| ((a[i] - b[i]) / hp.length_scales[i]).powi(2))
+            .sum();
+        if r2 > 690.0 {
+            0.0
+        } else {
+            hp.signal_variance * (-0.5 * r2).exp()
+        }
+    };
+    let kstar = DVector::from_fn(n, |i, _| k(&xs[i * d..(i + 1) * d], x));
+    let alpha = o.alpha();
+    // the constant prior mean: the mean of output j's training targets
+    let p = gp.output_dim();
+    let prior = gp.targets().iter().skip(j).step_by(p).sum::<f64>() / n as f64;
+    let terms: Vec<f64> = (0..n).map(|i| kstar[i] * alpha[i]).collect();
+    let mean = prior + terms.iter().sum::<f64>();
+    let magnitude = prior.abs() + terms.iter().map(|t| t.abs()).sum::<f64>();
+    let noise = (o.hyperparameters().noise_variance + o.jitter()) * o.output_scale().powi(2);
+    let a = DMatrix::from_fn(n, n, |r, c| {
+        k(&xs[r * d..(r + 1) * d], &xs[c * d..(c + 1) * d]) + if r == c { noise } else { 0.0 }
+    });
+    let chol = a.cholesky().expect("positive definite");
+    let sol = chol.solve(&kstar);
+    let var = (hp.signal_variance - kstar.dot(&sol)).max(0.0);
+    (mean, var, magnitude)
+}
+
+#[test]
+fn exported_predictions_equal_the_std_model() {
+    // (d = 2, p = 2), constant prior, both normalisations: the default
+    let gp = train(
+        77,
+        2,
+        2,
+        0.05,
+        TrainOptions {
+            restarts: 1,
+            ..Default::default()
+        },
+    );
+    let w2 = compare::<2>(&gp, 300, 1);
+    // d = 6 as the learned double pendulum (zero prior = nominal prior), N > 2 blocks
+    let gp6 = train(
+        150,
+        6,
+        2,
+        0.05,
+        TrainOptions {
+            mean: PriorMean::Zero,
+            restarts: 1,
+            ..Default::default()
+        },
+    );
+    let w6 = compare::<6>(&gp6, 200, 2);
+    // no normalisation, d = 1 and d = 9 (the generic kernel path)
+    let raw = TrainOptions {
+        normalise_inputs: false,
+        normalise_outputs: false,
+        restarts: 1,
+        ..Default::default()
+    };
+    let w1 = compare::<1>(&train(40, 1, 1, 0.01, raw.clone()), 200, 3);
+    let w9 = compare::<9>(&train(70, 9, 1, 0.05, raw), 200, 4);
+    // nearly noise-free: tiny noise variance, large weights (ill-conditioned)
+    let gpi = train(
+        60,
+        2,
+        1,
+        0.0,
+        TrainOptions {
+            restarts: 1,
+            ..Default::default()
+        },
+    );
+    let wi = compare::<2>(&gpi, 200, 5);
+    println!(
+        "max relative variance difference: {w2:e} (d=2) {w6:e} (d=6) {w1:e} (d=1) {w9:e} (d=9) {wi:e} (noise-free, σ_n² = {:e})",
+        gpi.output(0).hyperparameters().noise_variance
+    );
+}
+
+#[test]
+fn std_and_exported_agree_with_a_dense_reference() {
+    let gp = train(
+        60,
+        3,
+        2,
+        0.05,
+        TrainOptions {
+            restarts: 1,
+            ..Default::default()
+        },
+    );
+    let views: Vec<ExportedArrays> = (0..2).map(|j| gp.export_output(j, true).unwrap()).collect();
+    let mut rng = Rng(9);
+    let mut scratch = vec![0.0; gp.n()];
+    let (mut worst_mean, mut worst_var) = (0.0f64, 0.0f64);
+    for _ in 0..100 {
+        let x: [f64; 3] = std::array::from_fn(|_| rng.uniform(-3.0, 3.0));
+        for (j, a) in views.iter().enumerate() {
+            let e = a.as_exported::<3>().unwrap();
+            let (m, v) = e.predict(&x, &mut scratch).unwrap();
+            let (mr, vr, mag) = dense_reference(&gp, &x, j);
+            worst_mean = worst_mean.max((m - mr).abs() / mag);
+            worst_var = worst_var.max((v - vr).abs() / gp.output(j).kernel_max());
+        }
+    }
+    println!(
+        "vs dense reference: mean {worst_mean:e} of Σ|kα|, variance {worst_var:e} of σ_f²s_y²"
+    );
+    assert!(worst_mean <= 1e-12, "{worst_mean}");
+    assert!(worst_var <= 1e-9, "{worst_var}");
+}
+
+/// The numbers of `static <name>: [f64; K] = [ … ];` in the source.
+fn parse_array(src: &str, name: &str) -> Vec<f64> {
+    let head = format!("pub static {name}: [f64; ");
+    let start = src.find(&head).unwrap_or_else(|| panic!("{name} missing"));
+    let body = &src[start..];
+    let open = body.find("= [").unwrap() + 3;
+    let close = body.find("\n];").unwrap();
+    body[open..close]
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .flat_map(|l| l.split(','))
+        .map(str::trim)
+        .filter(|t| !t.is_empty())
+        .map(|t| t.parse::<f64>().unwrap_or_else(|e| panic!("{t}: {e}")))
+        .collect()
+}
+
+/// The numbers of `field: [a, b, …],` or `field: a,` for output `j`.
+fn parse_field(src: &str, j: usize, field: &str) -> Vec<f64> {
+    let block = src.split("ExportedGp {").nth(j + 1).unwrap();
+    let line = block
+        .lines()
+        .find(|l| l.trim_start().starts_with(&format!("{field}:")))
+        .unwrap();
+    let v = line.split_once(':').unwrap().1.trim().trim_end_matches(',');
+    v.trim_matches(|c| c == '[' || c == ']')
+        .split(',')
+        .map(|t| t.trim().parse::<f64>().unwrap())
+        .collect()
+}
+
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+#[test]
+fn rust_source_round_trips_every_float_and_is_deterministic() {
+    let opts = TrainOptions {
+        restarts: 1,
+        seed: 3,
+        ..Default::default()
+    };
+    let gp = train(50, 4, 2, 0.05, opts.clone());
+    let export = ExportOptions {
+        name: "MODEL".into(),
+        cholesky: true,
+        check_points: vec![vec![0.1, 0.2, 0.3, 0.4], vec![-1.0, 2.0, 0.0, 5.0]],
+        ..Default::default()
+    };
+    let src = gp.to_rust_source(&export).unwrap();
+    assert_eq!(
+        src,
+        gp.to_rust_source(&export).unwrap(),
+        "same model, same text"
+    );
+    let again = train(50, 4, 2, 0.05, opts);
+    assert_eq!(
+        src,
+        again.to_rust_source(&export).unwrap(),
+        "retrained with the same seed"
+    );
+    for j in 0..2 {
+        let a = gp.export_output(j, true).unwrap();
+        assert!(same_bits(
+            &parse_array(&src, &format!("MODEL_{j}_INPUTS")),
+            &a.inputs
+        ));
+        assert!(same_bits(
+            &parse_array(&src, &format!("MODEL_{j}_WEIGHTS")),
+            &a.weights
+        ));
+        assert!(same_bits(
+            &parse_array(&src, &format!("MODEL_{j}_CHOLESKY")),
+            a.cholesky.as_ref().unwrap()
+        ));
+        assert!(same_bits(
+            &parse_field(&src, j, "length_scales"),
+            &a.length_scales
+        ));
+        assert!(same_bits(
+            &parse_field(&src, j, "input_shift"),
+            &a.input_shift
+        ));
+        assert!(same_bits(
+            &parse_field(&src, j, "input_scale"),
+            &a.input_scale
+        ));
+        assert!(same_bits(
+            &parse_field(&src, j, "signal_variance"),
+            &[a.signal_variance]
+        ));
+        assert!(same_bits(
+            &parse_field(&src, j, "output_scale"),
+            &[a.output_scale]
+        ));
+        assert!(same_bits(
+            &parse_field(&src, j, "prior_mean"),
+            &[a.prior_mean]
+        ));
+    }
+    // without the factor: no CHOLESKY arrays, no variances
+    let lean = gp
+        .to_rust_source(&ExportOptions {
+            cholesky: false,
+            ..export
+        })
+        .unwrap();
+    assert!(!lean.contains("CHOLESKY") && lean.contains("cholesky: None"));
+}
+
+#[test]
+fn export_errors_are_typed() {
+    let (x, y) = data(20, 2, 1, 0.05, 1);
+    let opts = TrainOptions {
+        mean: PriorMean::function(|x, m| m[0] = x[0]),
+        restarts: 0,
+        ..Default::default()
+    };
+    let (gp, _) = Gp::train(&x, 2, &y, 1, &opts).unwrap();
+    assert!(matches!(
+        gp.export_output(0, false),
+        Err(GpError::Export(_))
+    ));
+    let gp = train(
+        20,
+        2,
+        1,
+        0.05,
+        TrainOptions {
+            restarts: 0,
+            ..Default::default()
+        },
+    );
+    assert!(matches!(
+        gp.export_output(1, false),
+        Err(GpError::DimensionMismatch { .. })
+    ));
+    for bad in [
+        ExportOptions {
+            name: "lower".into(),
+            ..Default::default()
+        },
+        ExportOptions {
+            core_path: "vigp::".into(),
+            ..Default::default()
+        },
+        ExportOptions {
+            header: vec!["a\nb".into()],
+            ..Default::default()
+        },
+    ] {
+        assert!(matches!(gp.to_rust_source(&bad), Err(GpError::Export(_))));
+    }
+    let wrong = ExportOptions {
+        check_points: vec![vec![0.0; 3]],
+        ..Default::default()
+    };
+    assert!(matches!(
+        gp.to_rust_source(&wrong),
+        Err(GpError::DimensionMismatch { .. })
+    ));
+    let a = gp.export_output(0, false).unwrap();
+    assert!(a.as_exported::<3>().is_err());
+    let e = a.as_exported::<2>().unwrap();
+    assert!(matches!(
+        e.predict(&[0.0, 0.0], &mut [0.0; 20]),
+        Err(vigp::embedded::gp::GpError::NoCholesky)
+    ));
+}
+
+/// The committed demo model, compiled into this (std) test: its GPs give
+/// the check values the exporting std model wrote, bit for bit.
+#[test]
+fn committed_demo_model_reproduces_its_check_values() {
+    use demo_model::*;
+    let mut scratch = [0.0; GP_N];
+    for ((x, means), vars) in GP_CHECK_POINTS
+        .iter()
+        .zip(&GP_CHECK_MEANS)
+        .zip(&GP_CHECK_VARIANCES)
+    {
+        for j in 0..GP_OUTPUT_DIM {
+            assert_eq!(GP[j].predict_mean(x).unwrap().to_bits(), means[j].to_bits());
+            let (_, v) = GP[j].predict(x, &mut scratch).unwrap();
+            assert!((v - vars[j]).abs() <= 1e-12 * vars[j], "{v} vs {}", vars[j]);
+        }
+    }
+    assert_eq!(
+        (GP_INPUT_DIM, GP_DT, GP_ENCODING, GP_PRIOR),
+        (6, 0.01, "sincos", "nominal")
+    );
+}
+
+#[allow(dead_code)]
+#[path = "../examples/export_gp.rs"]
+mod export_example;
+
+/// Regenerates the demo model with the example's recipe and compares the
+/// text with the committed file. Ignored by default: bit-identical
+/// retraining holds on the machine that wrote the file, but faer picks its
+/// SIMD kernels at run time, so another CPU may round the training
+/// differently. Run: `cargo test --release --test gp_export -- --ignored`.
+#[test]
+#[ignore = "machine-specific: retraining is bit-identical only on the CPU that generated the file"]
+fn committed_demo_model_is_what_the_example_generates() {
+    let e = export_example::generate(64).unwrap();
+    let committed = include_str!("../embedded-demo/src/gp_model.rs");
+    if e.source != committed {
+        std::fs::write(
+            std::env::temp_dir().join("gp_model_regenerated.rs"),
+            &e.source,
+        )
+        .unwrap();
+    }
+    assert!(
+        e.source == committed,
+        "regenerate with `cargo run --release --example export_gp`"
+    );
+}
+
+/// The mean-only learned step (`step_mean_with`, used by `Integrator::step`
+/// and rollouts) is the full step (`step_with`, which also computes the
+/// variances) without the variances: the same next state, bit for bit.
+#[test]
+fn mean_only_learned_step_equals_the_full_step() {
+    use vigp::learned::{Encoding, Learned, Prior, transitions};
+    use vigp::prelude::*;
+    use vigp::systems::{Fourbar, Pendulum};
+    let dt = 0.01;
+    let mut truth = Pendulum::default();
+    truth.joints.pivot.damping = 0.4;
+    let traj = Variational::new(truth.minimal(), dt)
+        .rollout(&State::new([1.0], [0.0]), 60)
+        .unwrap();
+    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
+    let data = transitions(&q, dt);
+    let opts = TrainOptions {
+        restarts: 1,
+        ..Default::default()
+    };
+    for prior in [Prior::Nominal, Prior::Constant] {
+        let (l, _) = Learned::train(
+            Pendulum::default().minimal(),
+            dt,
+            &data,
+            Encoding::SinCos,
+            prior,
+            &opts,
+        )
+        .unwrap();
+        let mut ws = l.workspace();
+        for t in &data {
+            let a = l.step_mean_with(&t.z, &mut ws).unwrap();
+            let (b, _) = l.step_with(&t.z, &mut ws).unwrap();
+            let c = l.step(&t.z).unwrap();
+            assert_eq!((a.q, a.v), (b.q, b.v));
+            assert_eq!((a.q, a.v), (c.q, c.v));
+        }
+    }
+    // a constrained model: the projection runs on the same unprojected mean
+    let fb = Fourbar::default().minimal();
+    let z0 = vigp::projection::consistent_state(
+        &fb,
+        &nalgebra::SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &nalgebra::SVector::zeros(),
+        dt,
+    )
+    .unwrap();
+    let traj = Variational::new(fb, dt).rollout(&z0, 40).unwrap();
+    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
+    let data = transitions(&q, dt);
+    let (l, _) = Learned::train(fb, dt, &data, Encoding::Raw, Prior::Constant, &opts).unwrap();
+    let mut ws = l.workspace();
+    for t in data.iter().step_by(5) {
+        let a = l.step_mean_with(&t.z, &mut ws).unwrap();
+        let (b, _) = l.step_with(&t.z, &mut ws).unwrap();
+        assert_eq!((a.q, a.v), (b.q, b.v));
+    }
+}
