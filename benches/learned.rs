@@ -1,0 +1,164 @@
+//! Cost of one learned step (paper eq. 7) on the double pendulum in minimal
+//! coordinates, at N = 64 and N = 512 training points: mean only, and with
+//! the posterior variance and the one-step error bound; the exported
+//! (`no_std`) GP's mean; and the parts of a step (GP mean, nominal step).
+//!
+//! Run: `cargo bench --bench learned`. Setup trains four GPs (a few seconds
+//! to a minute on 2 cores); the data is deterministic (seeded).
+//!
+//! Operation count of the GP mean per output: N·d subtract-multiply-adds
+//! (the squared distances), N exponentials, N multiply-adds (k·α). The
+//! paper's double-pendulum setting (constant prior, sin/cos encoding)
+//! has d = 6 and p = 2 outputs, so one step at N = 512 costs 2·512 = 1024
+//! exponentials and 2·512·6 = 6144 distance terms.
+
+use std::f64::consts::PI;
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use nalgebra::SVector;
+use vigp::bound::BoundSettings;
+use vigp::embedded::Stepper;
+use vigp::gp::TrainOptions;
+use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
+use vigp::prelude::*;
+use vigp::systems::{DoublePendulum, DoublePendulumMinimal};
+
+const DT: f64 = 0.01;
+
+/// SplitMix64 with a Box–Muller normal.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+    }
+    fn normal(&mut self) -> f64 {
+        let u = self.uniform(f64::MIN_POSITIVE, 1.0);
+        let v = self.uniform(0.0, 1.0);
+        (-2.0 * u.ln()).sqrt() * (2.0 * PI * v).cos()
+    }
+}
+
+/// The paper's double-pendulum data: a damped, mass-perturbed "truth",
+/// trajectories of 2 s from random configurations at rest, noise σ = 1e-3
+/// on q, v and the targets; `n` transitions drawn from the pool.
+fn data(n: usize, seed: u64) -> Vec<Transition<2>> {
+    let mut rng = Rng(seed);
+    let mut truth = DoublePendulum::default();
+    truth.links.upper.mass *= 1.05;
+    truth.links.lower.mass *= 0.95;
+    truth.joints.shoulder.damping = 0.8;
+    truth.joints.elbow.damping = 0.2;
+    let vi = Variational::new(truth.minimal(), DT);
+    let mut pool = Vec::new();
+    for _ in 0..20 {
+        let q0 = SVector::from([rng.uniform(-PI, PI), rng.uniform(-PI, PI)]);
+        let traj = vi
+            .rollout(
+                &State {
+                    q: q0,
+                    v: SVector::zeros(),
+                },
+                200,
+            )
+            .expect("ground truth");
+        let q: Vec<_> = traj.iter().map(|z| z.q).collect();
+        pool.extend(transitions(&q, DT));
+    }
+    (0..n)
+        .map(|_| {
+            let mut t = pool[(rng.next_u64() % pool.len() as u64) as usize];
+            for i in 0..2 {
+                t.z.q[i] += 1e-3 * rng.normal();
+                t.z.v[i] += 1e-3 * rng.normal();
+                t.v_next[i] += 1e-3 * rng.normal();
+            }
+            t
+        })
+        .collect()
+}
+
+fn train(n: usize, prior: Prior) -> (Learned<DoublePendulumMinimal, 2, 0>, Vec<Transition<2>>) {
+    let d = data(n, 7 + n as u64);
+    let opts = TrainOptions {
+        restarts: 2,
+        seed: 1,
+        ..TrainOptions::default()
+    };
+    let (l, _) = Learned::train(
+        DoublePendulum::default().minimal(),
+        DT,
+        &d,
+        Encoding::SinCos,
+        prior,
+        &opts,
+    )
+    .expect("training");
+    (l, d)
+}
+
+fn bench_learned(c: &mut Criterion) {
+    let z = State::new([1.0, -0.5], [0.5, 1.0]);
+    let mut g = c.benchmark_group("learned");
+    g.warm_up_time(Duration::from_secs(1));
+    g.measurement_time(Duration::from_secs(4));
+    for n in [64, 512] {
+        let (l, d) = train(n, Prior::Constant);
+        let samples: Vec<_> = d.iter().map(|t| t.z).collect();
+        let bound = l
+            .error_bound(&BoundSettings::default(), &samples)
+            .expect("bound");
+        let mut ws = l.workspace();
+        g.bench_function(format!("double_pendulum/N{n}/mean"), |b| {
+            b.iter(|| l.step_mean_with(black_box(&z), &mut ws).unwrap())
+        });
+        g.bench_function(format!("double_pendulum/N{n}/bound"), |b| {
+            b.iter(|| {
+                let (next, info) = l.step_with(black_box(&z), &mut ws).unwrap();
+                (next, bound.one_step(info.std_dev.as_slice()))
+            })
+        });
+        // the exported no_std GP (output 0 of 2)
+        let arrays = l.gp().export_output(0, false).expect("export");
+        let e = arrays.as_exported::<6>().expect("d = 6");
+        let mut x = [0.0; 6];
+        Encoding::SinCos.encode(&DoublePendulumMinimal::KINDS, &z, &mut x);
+        g.bench_function(format!("exported/N{n}/predict_mean_one_output"), |b| {
+            b.iter(|| e.predict_mean(black_box(&x)).unwrap())
+        });
+        // the GP part of a step: both outputs' means
+        let mut m = [0.0; 2];
+        let mut gws = l.gp().workspace();
+        g.bench_function(format!("gp/N{n}/predict_mean_into_two_outputs"), |b| {
+            b.iter(|| l.gp().predict_mean_into(black_box(&x), &mut m, &mut gws))
+        });
+    }
+    // with the nominal VI step as prior (paper eq. 7 for pendulum/cartpole)
+    let (l, _) = train(512, Prior::Nominal);
+    let mut ws = l.workspace();
+    g.bench_function("double_pendulum/N512/mean_nominal_prior", |b| {
+        b.iter(|| l.step_mean_with(black_box(&z), &mut ws).unwrap())
+    });
+    // the two nominal steps a prior could use
+    let vi = Variational::new(DoublePendulum::default().minimal(), DT);
+    g.bench_function("nominal/variational_std", |b| {
+        b.iter(|| vi.step(black_box(&z)).unwrap())
+    });
+    let fast = Stepper::new(DoublePendulum::default(), DT).expect("stepper");
+    g.bench_function("nominal/embedded_stepper", |b| {
+        b.iter(|| fast.step(black_box(&z)).unwrap())
+    });
+    g.finish();
+}
+
+criterion_group!(benches, bench_learned);
+criterion_main!(benches);
