@@ -72,8 +72,8 @@ fn learned_step_is_nominal_plus_correction_and_rejects_nan() {
     let learned = learned_step(&s, &z).unwrap();
     let c = correction(&z).unwrap();
     assert_eq!(learned.q, nominal.q);
-    for j in 0..2 {
-        assert_eq!(learned.v[j], nominal.v[j] + c[j]);
+    for (j, cj) in c.iter().enumerate() {
+        assert_eq!(learned.v[j], nominal.v[j] + cj);
     }
     // the correction is a real one: of the size the GP was trained on
     assert!(c.iter().any(|v| v.abs() > 1e-4), "{c:?}");

@@ -603,9 +603,10 @@ mod tests {
             two_sum(p, e)
         }
         // ln 2 = L1 + L2 + L3 with L1, L2 of 32 bits (exact products with |k| < 2^21).
-        const L1: f64 = 0.693_147_180_559_890_3;
-        let l1 = f64::from_bits(L1.to_bits() & 0xFFFF_FFFF_E000_0000);
-        let ln2: (f64, f64) = (0.693_147_180_559_945_3, 2.319_046_813_846_299_6e-17);
+        // ln 2 in double-double: LN_2 (the correctly rounded double) plus
+        // the next 53 bits
+        let ln2: (f64, f64) = (core::f64::consts::LN_2, 2.319_046_813_846_299_6e-17);
+        let l1 = f64::from_bits(ln2.0.to_bits() & 0xFFFF_FFFF_E000_0000);
         let l2full = add(ln2, (-l1, 0.0));
         let l2 = f64::from_bits(l2full.0.to_bits() & 0xFFFF_FFFF_E000_0000);
         let l3 = add(l2full, (-l2, 0.0));
