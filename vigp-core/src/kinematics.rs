@@ -127,8 +127,8 @@ mod tests {
     /// (they drop only additions of ±0 and products by 0).
     #[test]
     fn shortcuts_equal_the_general_forms() {
-        for theta in [-2.5, -0.3, 0.0, 0.7, 3.0] {
-            let at = [0.4, -1.2];
+        for theta in [-2.5f64, -0.3, 0.0, 0.7, 3.0] {
+            let at: [f64; 2] = [0.4, -1.2];
             let (a, b) = (
                 Pose2::attach_start(theta, at),
                 Pose2::attach(theta, at, [0.0, 0.0]),

@@ -129,7 +129,7 @@ pub fn solve_partial<const M: usize>(
             }
         }
         let pivot = a[(p, k)];
-        if !(pivot.abs() > tiny) || !pivot.is_finite() {
+        if pivot.abs() <= tiny || !pivot.is_finite() {
             return None;
         }
         if p != k {

@@ -132,8 +132,8 @@ impl<const N: usize> Mul for Jet1<N> {
     #[inline]
     fn mul(self, o: Self) -> Self {
         let mut g = [0.0; N];
-        for i in 0..N {
-            g[i] = self.g[i] * o.v + self.v * o.g[i];
+        for ((gi, a), b) in g.iter_mut().zip(self.g).zip(o.g) {
+            *gi = a * o.v + self.v * b;
         }
         Self { v: self.v * o.v, g }
     }
