@@ -267,3 +267,67 @@ fn bad_input_is_a_typed_error() {
         Err(StepError::NotConverged { iterations: 1, .. })
     ));
 }
+
+/// For trees the stepper may accept a full Newton step on the a-posteriori
+/// bound (Δt/2)κ|Δv|∞² of the (exactly quadratic) residual instead of
+/// evaluating the residual again. Every accepted step must still meet the
+/// tolerance: its DEL residual is evaluated here by the std runtime's
+/// dual-number implementation (`vigp::del::residual`, a second
+/// implementation) and scaled as the solver scales it (|p₀|∞ + m̄). The
+/// tolerance is 1e-12; evaluating the residual costs O(ε)·scale ≈ 1e-15 of
+/// rounding, which the solver's half-tolerance margin covers, so the
+/// comparison is against 1e-12 itself, and against the reported value
+/// (bound or evaluated residual) plus 1e-14.
+#[test]
+fn accepted_steps_meet_the_tolerance_by_an_independent_residual() {
+    fn check<M, const N: usize>(sys: M, minimal: impl Mechanism<N, 0> + Copy, name: &str)
+    where
+        M: Model<N, 0> + Copy,
+    {
+        let dt = 0.01;
+        let fast = Stepper::new(sys, dt).unwrap();
+        let mut rng = Rng(11);
+        let mut worst = 0.0f64;
+        let mut check_step = |z: &State<N>, p0: &SVector<f64, N>, z1: &State<N>, reported: f64| {
+            let d = vigp::del::residual(&minimal, dt, 0.0, p0, &z1.q, &z1.v, &SVector::zeros());
+            let m_bar = model::mass_matrix(&sys, &z1.q).diagonal().amax();
+            let scaled = d.amax() / (p0.amax() + m_bar);
+            assert!(scaled <= 1e-12, "{name}: residual {scaled:.3e} from {z:?}");
+            assert!(
+                scaled <= reported + 1e-14,
+                "{name}: {scaled:.3e} > reported {reported:.3e}"
+            );
+            worst = worst.max(scaled);
+        };
+        for _ in 0..200 {
+            let z = State {
+                q: SVector::from_fn(|_, _| rng.uniform(-3.0, 3.0)),
+                v: SVector::from_fn(|_, _| rng.uniform(-4.0, 4.0)),
+            };
+            let p0 = fast.momentum(&z);
+            let (z1, _, report) = fast.step_with_momentum(&z, &p0).unwrap();
+            check_step(&z, &p0, &z1, report.residual);
+        }
+        // rollouts start Newton from the extrapolation 2v_k − v_{k−1}
+        let z0 = State {
+            q: SVector::from_fn(|_, _| rng.uniform(-2.0, 2.0)),
+            v: SVector::from_fn(|_, _| rng.uniform(-2.0, 2.0)),
+        };
+        let mut traj = [z0; 501];
+        fast.rollout_into(&z0, &mut traj).unwrap();
+        for k in 0..500 {
+            let p0 = fast.momentum(&traj[k]);
+            check_step(&traj[k], &p0, &traj[k + 1], 1e-12);
+        }
+        println!("{name}: max scaled residual {worst:.2e}");
+    }
+    let p = Pendulum::default();
+    check(p, p.minimal(), "pendulum");
+    let cp = Cartpole::default();
+    check(cp, cp.minimal(), "cartpole");
+    let mut dp = DoublePendulum::default();
+    check(dp, dp.minimal(), "double pendulum");
+    dp.joints.elbow.damping = 0.3;
+    dp.joints.shoulder.damping = 0.1;
+    check(dp, dp.minimal(), "damped double pendulum");
+}

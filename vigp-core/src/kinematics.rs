@@ -74,9 +74,16 @@ impl<D: Real> Pose2<D> {
         [s * a + c * b, s * b - c * a]
     }
 
-    /// World position of a local point.
+    /// World position of a local point. A point on the link's axis
+    /// (`local[1] == 0`, e.g. every default centre of mass) takes the
+    /// [`Pose2::point_on_axis`] path, which skips the products by zero (on
+    /// jets and dual numbers these are whole-derivative operations); the
+    /// result is the same up to the sign of a zero.
     #[inline]
     pub fn point(&self, local: [f64; 2]) -> Point2<D> {
+        if local[1] == 0.0 {
+            return self.point_on_axis(local[0]);
+        }
         let [dx, dy] = self.direction(local);
         [self.x + dx, self.y + dy]
     }

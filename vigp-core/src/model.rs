@@ -91,30 +91,47 @@ pub fn terms<M: Model<N, C>, const N: usize, const C: usize>(
         dpotential: SVector::zeros(),
         damping: SMatrix::zeros(),
     };
+    // tt[j][l][k] = Σ_bodies m(∂²x/∂q_j∂q_l ∂x/∂q_k + same for y)
+    // + I ∂²θ/∂q_j∂q_l ∂θ/∂q_k, symmetric in (j, l): only j ≤ l is formed.
+    // Then ∂M_jk/∂q_l = tt[j][l][k] + tt[k][l][j]. Scaling the gradients by
+    // m and I once per body makes every entry three products.
+    let mut tt = [[[0.0f64; N]; N]; N];
     model.for_each_body(&seed2(q), &mut |b: Body<Jet2<N>>| {
         let ([x, y], th, m, i) = (b.com, b.theta, b.mass, b.inertia);
+        let (mut mx, mut my, mut it) = ([0.0f64; N], [0.0f64; N], [0.0f64; N]);
+        for k in 0..N {
+            (mx[k], my[k], it[k]) = (m * x.g[k], m * y.g[k], i * th.g[k]);
+        }
         for j in 0..N {
-            t.dpotential[j] -= m * (g[0] * x.g[j] + g[1] * y.g[j]);
-            // M and every ∂M/∂q_l are symmetric: accumulate k ≥ j only.
+            t.dpotential[j] -= g[0] * mx[j] + g[1] * my[j];
+            // M is symmetric: accumulate k ≥ j only.
             for k in j..N {
-                t.mass[(j, k)] += m * (x.g[j] * x.g[k] + y.g[j] * y.g[k]) + i * th.g[j] * th.g[k];
-                for (l, dm) in t.dmass.iter_mut().enumerate() {
-                    dm[(j, k)] += m
-                        * (x.h[j][l] * x.g[k]
-                            + x.g[j] * x.h[k][l]
-                            + y.h[j][l] * y.g[k]
-                            + y.g[j] * y.h[k][l])
-                        + i * (th.h[j][l] * th.g[k] + th.g[j] * th.h[k][l]);
+                t.mass[(j, k)] += x.g[j] * mx[k] + y.g[j] * my[k] + th.g[j] * it[k];
+            }
+            // Indexed on purpose: the iterator form (enumerate/skip over
+            // tt[j]) measured 9% more instructions per double-pendulum step.
+            #[allow(clippy::needless_range_loop)]
+            for l in j..N {
+                let (hx, hy, ht) = (x.h[j][l], y.h[j][l], th.h[j][l]);
+                for k in 0..N {
+                    tt[j][l][k] += hx * mx[k] + hy * my[k] + ht * it[k];
                 }
             }
         }
     });
+    let t_at = |j: usize, l: usize, k: usize| {
+        if j <= l { tt[j][l][k] } else { tt[l][j][k] }
+    };
     for j in 0..N {
+        for k in j..N {
+            for (l, dm) in t.dmass.iter_mut().enumerate() {
+                let v = t_at(j, l, k) + t_at(k, l, j);
+                dm[(j, k)] = v;
+                dm[(k, j)] = v;
+            }
+        }
         for k in 0..j {
             t.mass[(j, k)] = t.mass[(k, j)];
-            for dm in t.dmass.iter_mut() {
-                dm[(j, k)] = dm[(k, j)];
-            }
         }
     }
     if M::DISSIPATIVE {
@@ -138,12 +155,18 @@ pub fn mass_matrix<M: Model<N, C>, const N: usize, const C: usize>(
     model.for_each_body(&seed1(q), &mut |b: Body<Jet1<N>>| {
         let ([x, y], th) = (b.com, b.theta);
         for j in 0..N {
-            for k in 0..N {
-                mass[(j, k)] +=
-                    b.mass * (x.g[j] * x.g[k] + y.g[j] * y.g[k]) + b.inertia * th.g[j] * th.g[k];
+            let (mx, my, it) = (b.mass * x.g[j], b.mass * y.g[j], b.inertia * th.g[j]);
+            // symmetric: k ≥ j only
+            for k in j..N {
+                mass[(j, k)] += mx * x.g[k] + my * y.g[k] + it * th.g[k];
             }
         }
     });
+    for j in 0..N {
+        for k in 0..j {
+            mass[(j, k)] = mass[(k, j)];
+        }
+    }
     mass
 }
 

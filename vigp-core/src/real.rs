@@ -189,18 +189,23 @@ impl<const N: usize> Real for Jet1<N> {
     }
 }
 
-/// A second-order jet in `N` directions: value `v`, gradient `g` and
-/// Hessian `h` (full, symmetric).
+/// A second-order jet in `N` directions: value `v`, gradient `g` and the
+/// upper triangle of the Hessian `h`.
 ///
-/// Cost: a product is `O(N²)` (`3N² + 2N + 1` multiplications); sums and
-/// products with constants are `N² + N + 1` operations.
+/// The Hessian is symmetric, so only `h[i][j]` with `i ≤ j` is computed and
+/// stored; entries below the diagonal stay zero. Read it with
+/// [`Jet2::hessian`], which mirrors.
+///
+/// Cost: a product is `O(N²)` (`N(N+1)/2` Hessian entries of 4
+/// multiplications each, plus `2N + 1`); sums and products with constants are
+/// `N(N+1)/2 + N + 1` operations.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Jet2<const N: usize> {
     /// Value.
     pub v: f64,
     /// Gradient ∂/∂x_i.
     pub g: [f64; N],
-    /// Hessian ∂²/∂x_i∂x_j.
+    /// Hessian ∂²/∂x_i∂x_j for `i ≤ j` (upper triangle; the rest is zero).
     pub h: [[f64; N]; N],
 }
 
@@ -226,14 +231,24 @@ impl<const N: usize> Jet2<N> {
         x
     }
 
+    /// The Hessian entry ∂²/∂x_i∂x_j (either order).
+    ///
+    /// # Panics
+    /// If `i` or `j` is not below `N`.
+    #[inline]
+    pub fn hessian(&self, i: usize, j: usize) -> f64 {
+        if i <= j { self.h[i][j] } else { self.h[j][i] }
+    }
+
     /// f(self) from f, f′, f″ at the value.
     #[inline]
     fn chain(self, f: f64, df: f64, d2f: f64) -> Self {
         let mut out = Self::constant(f);
         for i in 0..N {
             out.g[i] = df * self.g[i];
-            for j in 0..N {
-                out.h[i][j] = df * self.h[i][j] + d2f * self.g[i] * self.g[j];
+            let d2fg = d2f * self.g[i];
+            for j in i..N {
+                out.h[i][j] = df * self.h[i][j] + d2fg * self.g[j];
             }
         }
         out
@@ -247,7 +262,7 @@ impl<const N: usize> Add for Jet2<N> {
         self.v += o.v;
         for i in 0..N {
             self.g[i] += o.g[i];
-            for j in 0..N {
+            for j in i..N {
                 self.h[i][j] += o.h[i][j];
             }
         }
@@ -262,7 +277,7 @@ impl<const N: usize> Sub for Jet2<N> {
         self.v -= o.v;
         for i in 0..N {
             self.g[i] -= o.g[i];
-            for j in 0..N {
+            for j in i..N {
                 self.h[i][j] -= o.h[i][j];
             }
         }
@@ -277,7 +292,7 @@ impl<const N: usize> Mul for Jet2<N> {
         let mut out = Self::constant(self.v * o.v);
         for i in 0..N {
             out.g[i] = self.g[i] * o.v + self.v * o.g[i];
-            for j in 0..N {
+            for j in i..N {
                 out.h[i][j] = self.h[i][j] * o.v
                     + self.v * o.h[i][j]
                     + self.g[i] * o.g[j]
@@ -321,7 +336,7 @@ impl<const N: usize> Mul<f64> for Jet2<N> {
         self.v *= o;
         for i in 0..N {
             self.g[i] *= o;
-            for j in 0..N {
+            for j in i..N {
                 self.h[i][j] *= o;
             }
         }
@@ -369,9 +384,11 @@ mod tests {
         assert!((j1.v - value).abs() < tol && (j2.v - value).abs() < tol);
         assert!((j1.g[0] - fx).abs() < tol && (j1.g[1] - fy).abs() < tol);
         assert!((j2.g[0] - fx).abs() < tol && (j2.g[1] - fy).abs() < tol);
-        assert!((j2.h[0][0] - fxx).abs() < tol);
-        assert!((j2.h[0][1] - fxy).abs() < tol && (j2.h[1][0] - fxy).abs() < tol);
-        assert!((j2.h[1][1] - fyy).abs() < tol);
+        assert!((j2.hessian(0, 0) - fxx).abs() < tol);
+        assert!((j2.hessian(0, 1) - fxy).abs() < tol && (j2.hessian(1, 0) - fxy).abs() < tol);
+        assert!((j2.hessian(1, 1) - fyy).abs() < tol);
+        // only the upper triangle is stored
+        assert_eq!(j2.h[1][0], 0.0);
     }
 
     #[test]
