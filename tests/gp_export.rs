@@ -428,26 +428,97 @@ fn committed_demo_model_reproduces_its_check_values() {
 #[path = "../examples/export_gp.rs"]
 mod export_example;
 
-/// Regenerates the demo model with the example's recipe and compares the
-/// text with the committed file. Ignored by default: bit-identical
-/// retraining holds on the machine that wrote the file, but faer picks its
-/// SIMD kernels at run time, so another CPU may round the training
-/// differently. Run: `cargo test --release --test gp_export -- --ignored`.
+/// The text of generated source with every floating-point literal (a
+/// number token containing `.`, `e` or `E`) replaced by `#`; integers (array
+/// sizes, N, d) stay.
+fn mask_floats(src: &str) -> String {
+    let chars: Vec<char> = src.chars().collect();
+    let mut out = String::with_capacity(src.len());
+    let mut i = 0;
+    while i < chars.len() {
+        let c = chars[i];
+        let prev_ident = i > 0 && (chars[i - 1].is_alphanumeric() || chars[i - 1] == '_');
+        let starts_number = c.is_ascii_digit()
+            || (c == '-' && chars.get(i + 1).is_some_and(|d| d.is_ascii_digit()));
+        if starts_number && !prev_ident {
+            let mut j = i + 1;
+            while j < chars.len() && (chars[j].is_ascii_digit() || ".eE+-".contains(chars[j])) {
+                j += 1;
+            }
+            let token: String = chars[i..j].iter().collect();
+            if token.contains(['.', 'e', 'E']) {
+                out.push('#');
+            } else {
+                out.push_str(&token);
+            }
+            i = j;
+        } else {
+            out.push(c);
+            i += 1;
+        }
+    }
+    out
+}
+
 #[test]
-#[ignore = "machine-specific: retraining is bit-identical only on the CPU that generated the file"]
+fn float_masking_keeps_integers_and_names() {
+    assert_eq!(
+        mask_floats("pub static GP_0_W: [f64; 64] = [1.5, -2e-3, 7.0E5, 12];"),
+        "pub static GP_0_W: [f64; 64] = [#, #, #, 12];"
+    );
+}
+
+/// Regenerates the demo model with the example's recipe (the same seeded
+/// data and training) and compares it with the committed file.
+///
+/// Not bit for bit: faer picks its SIMD kernels at run time, so another CPU
+/// rounds the training differently, and the likelihood is flat in some
+/// length scales. Measured on the generating machine, perturbing the
+/// training targets by a relative 1e-15 (rounding level) moved the
+/// hyperparameters by up to 3e-5 (relative) and the predicted means by up
+/// to 1.1e-4 of each output's scale. So the check is:
+/// - the text with every float literal masked is identical (names, layout,
+///   array sizes, N, d, options: the generator's format), exactly;
+/// - the regenerated GPs predict the committed check means
+///   (`GP_CHECK_MEANS`) to 2e-3 of each output's scale (≈20× the measured
+///   rounding sensitivity); a different recipe or a training bug moves them
+///   by far more (the correction itself is O(1) in these units).
+#[test]
 fn committed_demo_model_is_what_the_example_generates() {
     let e = export_example::generate(64).unwrap();
     let committed = include_str!("../embedded-demo/src/gp_model.rs");
     if e.source != committed {
-        std::fs::write(
-            std::env::temp_dir().join("gp_model_regenerated.rs"),
-            &e.source,
-        )
-        .unwrap();
+        let path = std::env::temp_dir().join("gp_model_regenerated.rs");
+        std::fs::write(&path, &e.source).unwrap();
+        println!(
+            "regenerated text differs in some digits: {}",
+            path.display()
+        );
     }
     assert!(
-        e.source == committed,
-        "regenerate with `cargo run --release --example export_gp`"
+        mask_floats(&e.source) == mask_floats(committed),
+        "the generator's output format changed: regenerate with \
+         `cargo run --release --example export_gp`"
+    );
+    let points: Vec<f64> = demo_model::GP_CHECK_POINTS
+        .iter()
+        .flatten()
+        .copied()
+        .collect();
+    let prediction = e.learned.gp().predict(&points).unwrap();
+    let outputs = e.learned.gp().outputs();
+    let mut worst = 0.0f64;
+    for (k, means) in demo_model::GP_CHECK_MEANS.iter().enumerate() {
+        for (j, committed_mean) in means.iter().enumerate() {
+            let got = prediction.mean[k * demo_model::GP_OUTPUT_DIM + j];
+            let rel = (got - committed_mean).abs() / outputs[j].output_scale();
+            worst = worst.max(rel);
+        }
+    }
+    println!("regenerated vs committed check means: max |Δ|/output scale = {worst:.2e}");
+    assert!(
+        worst <= 2e-3,
+        "{worst:.3e}: regenerate with `cargo run --release --example export_gp`"
     );
 }
 
