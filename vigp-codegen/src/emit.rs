@@ -631,6 +631,15 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             #dissipation
 
             #constraints
+
+            fn fixed_size_step(
+                &self,
+                z: &::vigp::State<#n>,
+                dt: f64,
+                options: &::vigp::NewtonOptions,
+            ) -> ::core::option::Option<::core::result::Result<::vigp::State<#n>, ::vigp::embedded::StepError>> {
+                ::core::option::Option::Some(::vigp::__private::fixed_size_step::<_, #n, #c>(&#sys, z, dt, options))
+            }
             }
 
             #maximal

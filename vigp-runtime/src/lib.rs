@@ -42,6 +42,7 @@ pub use vigp_core::Real;
 /// Re-exports for generated code. Not part of the public API.
 #[doc(hidden)]
 pub mod __private {
+    pub use crate::mechanism::fixed_size_step;
     pub use nalgebra;
     pub use num_dual;
 }

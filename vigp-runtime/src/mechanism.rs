@@ -13,6 +13,29 @@ impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
 
 pub use vigp_core::state::{CoordinateKind, State};
 
+use crate::newton::NewtonOptions;
+
+/// The body of [`Mechanism::fixed_size_step`] for a generated minimal view
+/// (called by generated code through `::vigp::__private`): the
+/// [`vigp_core::Stepper`] of `model` with the options that carry over.
+#[doc(hidden)]
+pub fn fixed_size_step<M, const N: usize, const C: usize>(
+    model: &M,
+    z: &State<N>,
+    dt: f64,
+    options: &NewtonOptions,
+) -> Result<State<N>, vigp_core::StepError>
+where
+    M: vigp_core::Model<N, C> + Copy,
+{
+    let options = vigp_core::StepOptions {
+        tolerance: options.tolerance,
+        max_iterations: options.max_iterations,
+        min_step: options.min_step,
+    };
+    vigp_core::Stepper::with_options(*model, dt, options)?.step(z)
+}
+
 /// A planar mechanical model with `N` generalized coordinates and `C` scalar
 /// holonomic constraints g(q) = 0.
 ///
@@ -52,6 +75,31 @@ pub trait Mechanism<const N: usize, const C: usize> {
     fn constraints<D: Scalar>(&self, q: &SVector<D, N>) -> SVector<D, C> {
         let _ = q;
         SVector::from_element(D::zero())
+    }
+
+    /// One step of the first-order variational integrator (the equations of
+    /// [`Variational::new`](crate::Variational::new)) by the fixed-size
+    /// `no_std` stepper [`vigp_core::Stepper`], when this view has an
+    /// embedded model. Every `mechanism!` minimal view has one and returns
+    /// `Some`; the default (hand-written mechanisms, maximal views) is
+    /// `None`.
+    ///
+    /// Both solvers meet the same scaled tolerance on the same equations
+    /// (tests/embedded.rs: ≤ 1e-10 apart) and the fixed-size one is about
+    /// ten times faster, so [`Learned`](crate::learned::Learned) uses it
+    /// for its nominal prior, falling back to [`Variational`](crate::Variational)
+    /// (which also accepts stalled steps and regularises rank-deficient
+    /// constraints) when it returns an error. `options.tolerance`,
+    /// `max_iterations` and `min_step` carry over; `stall_tolerance` has no
+    /// counterpart.
+    fn fixed_size_step(
+        &self,
+        z: &State<N>,
+        dt: f64,
+        options: &NewtonOptions,
+    ) -> Option<Result<State<N>, vigp_core::StepError>> {
+        let _ = (z, dt, options);
+        None
     }
 
     /// Total energy T + V of a state, with its discrete velocity.
