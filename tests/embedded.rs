@@ -268,16 +268,16 @@ fn bad_input_is_a_typed_error() {
     ));
 }
 
-/// For trees the stepper may accept a full Newton step on the a-posteriori
-/// bound (Δt/2)κ|Δv|∞² of the (exactly quadratic) residual instead of
-/// evaluating the residual again. Every accepted step must still meet the
+/// For trees the stepper may accept a full Newton step on the quadratic
+/// remainder (Δt/2)[Δvᵀ ∂M/∂q_i Δv]_i of the (exactly quadratic) residual
+/// instead of evaluating the residual again. Every accepted step must still meet the
 /// tolerance: its DEL residual is evaluated here by the std runtime's
 /// dual-number implementation (`vigp::del::residual`, a second
 /// implementation) and scaled as the solver scales it (|p₀|∞ + m̄). The
 /// tolerance is 1e-12; evaluating the residual costs O(ε)·scale ≈ 1e-15 of
 /// rounding, which the solver's half-tolerance margin covers, so the
 /// comparison is against 1e-12 itself, and against the reported value
-/// (bound or evaluated residual) plus 1e-14.
+/// (remainder or evaluated residual) plus 1e-14.
 #[test]
 fn accepted_steps_meet_the_tolerance_by_an_independent_residual() {
     fn check<M, const N: usize>(sys: M, minimal: impl Mechanism<N, 0> + Copy, name: &str)
