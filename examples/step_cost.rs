@@ -1,16 +1,24 @@
-//! Cost of the fixed-size (`vigp::embedded`) step for instruction counting.
+//! Cost of the fixed-size (`vigp::embedded`) step.
+//!
+//! **Wall-time table** (`cargo run --profile bench --example step_cost -- table`):
+//! for every system, 64 states spread over a long trajectory (so that the
+//! angle ranges `libm::sincos` reduces are all visited), the time of a step
+//! from a state and of a 100-step rollout per step. Each entry is the
+//! minimum over 15 repetitions of the mean over the 64 states: on a shared
+//! machine the minimum estimates the uninterrupted cost (criterion medians
+//! from `cargo bench --bench step` include interference).
+//!
+//! **Instruction counts** (load-independent):
 //!
 //! ```text
-//! cargo build --release --example step_cost
+//! cargo build --profile bench --example step_cost
 //! valgrind --tool=callgrind target/release/examples/step_cost double_pendulum 1000
 //! valgrind --tool=callgrind target/release/examples/step_cost double_pendulum 0
 //! ```
 //!
 //! The difference of the two totals divided by the step count is the
-//! instruction count of one rollout step (load-independent, unlike wall
-//! time); `callgrind_annotate` splits it by function. Without valgrind it
-//! prints wall time per step (one run: use `cargo bench --bench step` for
-//! medians).
+//! instruction count of one rollout step; `callgrind_annotate` splits it by
+//! function (build with `--release` instead to keep functions apart).
 
 use nalgebra::SVector;
 use vigp::embedded::{Model, State, Stepper};
@@ -37,8 +45,71 @@ fn run<M: Model<N, C> + Copy, const N: usize, const C: usize>(
     Ok(())
 }
 
+/// Mean time per step (ns) of `step` and of a 100-step rollout over 64
+/// states taken every 50 steps of a trajectory from `z0`; minimum over 15
+/// repetitions.
+fn table_row<M: Model<N, C> + Copy, const N: usize, const C: usize>(
+    name: &str,
+    sys: M,
+    z0: State<N>,
+) -> Result<(), Box<dyn std::error::Error>> {
+    use std::hint::black_box;
+    use std::time::Instant;
+    let s = Stepper::new(sys, 0.01)?;
+    let mut long = vec![z0; 64 * 50 + 1];
+    s.rollout_into(&z0, &mut long).map_err(|e| format!("{e}"))?;
+    let states: Vec<State<N>> = long.iter().step_by(50).take(64).copied().collect();
+    let mut out = [z0; 101];
+    let (mut best_step, mut best_roll) = (f64::INFINITY, f64::INFINITY);
+    for _ in 0..15 {
+        let t = Instant::now();
+        for _ in 0..20 {
+            for z in &states {
+                black_box(s.step(black_box(z)).map_err(|e| format!("{e}"))?);
+            }
+        }
+        best_step = best_step.min(t.elapsed().as_secs_f64() / (20.0 * 64.0));
+        let t = Instant::now();
+        for z in &states {
+            s.rollout_into(black_box(z), &mut out)
+                .map_err(|e| format!("{e}"))?;
+            black_box(&out);
+        }
+        best_roll = best_roll.min(t.elapsed().as_secs_f64() / (64.0 * 100.0));
+    }
+    println!(
+        "| {name} | {:.0} ns | {:.0} ns |",
+        best_step * 1e9,
+        best_roll * 1e9
+    );
+    Ok(())
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
+    if args.get(1).map(String::as_str) == Some("table") {
+        let fb = Fourbar::default();
+        let fb_z0 = consistent_state(
+            &fb.minimal(),
+            &SVector::from([0.9, -1.3, -0.4, 1.3]),
+            &SVector::from([0.5, 0.0, 0.0, 0.0]),
+            0.01,
+        )?;
+        println!("| system | step from a state | per step of a rollout |");
+        println!("|---|---|---|");
+        table_row("pendulum", Pendulum::default(), State::new([1.0], [0.5]))?;
+        table_row(
+            "cartpole",
+            Cartpole::default(),
+            State::new([0.2, 2.0], [0.3, 0.5]),
+        )?;
+        table_row(
+            "double pendulum",
+            DoublePendulum::default(),
+            State::new([1.0, -0.5], [0.5, 1.0]),
+        )?;
+        return table_row("fourbar", fb, fb_z0);
+    }
     let system = args.get(1).map_or("double_pendulum", String::as_str);
     let steps: usize = match args.get(2) {
         Some(s) => s.parse()?,
