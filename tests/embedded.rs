@@ -249,6 +249,26 @@ fn bad_input_is_a_typed_error() {
         Stepper::with_options(dp, 0.01, opts),
         Err(StepError::InvalidOptions(_))
     ));
+    // parameters that describe no mechanism are refused up front
+    let mut neg_mass = dp;
+    neg_mass.links.lower.mass = -1.0;
+    let mut nan_inertia = dp;
+    nan_inertia.links.upper.inertia = f64::NAN;
+    let mut neg_damping = dp;
+    neg_damping.joints.elbow.damping = -0.1;
+    let mut inf_gravity = dp;
+    inf_gravity.gravity[1] = f64::NEG_INFINITY;
+    for bad in [neg_mass, nan_inertia, neg_damping, inf_gravity] {
+        assert!(matches!(
+            Stepper::new(bad, 0.01),
+            Err(StepError::InvalidModel(_))
+        ));
+    }
+    // a massless link is valid (the other link carries the mass)
+    let mut massless = dp;
+    massless.links.lower.mass = 0.0;
+    massless.links.lower.inertia = 0.0;
+    assert!(Stepper::new(massless, 0.01).is_ok());
     let fast = Stepper::new(dp, 0.01).unwrap();
     let bad = State::new([f64::NAN, 0.0], [0.0, 0.0]);
     assert_eq!(fast.step(&bad), Err(StepError::NonFiniteState));

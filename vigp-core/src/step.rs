@@ -60,6 +60,10 @@ pub enum StepError {
     },
     /// Options that cannot work.
     InvalidOptions(&'static str),
+    /// Model parameters that cannot describe a mechanism: a negative or
+    /// non-finite mass, inertia or damping coefficient, or non-finite
+    /// gravity.
+    InvalidModel(&'static str),
     /// The state (or the momentum) holds NaN or ±∞.
     NonFiniteState,
     /// The residual became NaN or ±∞.
@@ -95,6 +99,7 @@ impl core::fmt::Display for StepError {
                 write!(f, "invalid time step dt = {dt} (must be finite and > 0)")
             }
             Self::InvalidOptions(why) => write!(f, "invalid step options: {why}"),
+            Self::InvalidModel(why) => write!(f, "invalid model parameters: {why}"),
             Self::NonFiniteState => write!(f, "non-finite state or momentum"),
             Self::NonFiniteResidual { iteration } => {
                 write!(f, "non-finite residual at Newton iteration {iteration}")
@@ -182,6 +187,7 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         if !(options.min_step > 0.0 && options.min_step <= 1.0) {
             return Err(StepError::InvalidOptions("min_step must be in (0, 1]"));
         }
+        validate(&model)?;
         Ok(Self { model, dt, options })
     }
 
@@ -418,6 +424,34 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         }
         Ok(())
     }
+}
+
+/// Checks the run-time parameters a [`Model`] exposes: gravity finite,
+/// every body's mass and inertia finite and ≥ 0 (zero is a massless link),
+/// every damping coefficient finite and ≥ 0 (a negative one would inject
+/// energy). Bodies and dampers are visited once at q = 0 (their parameters
+/// do not depend on q).
+fn validate<M: Model<N, C>, const N: usize, const C: usize>(model: &M) -> Result<(), StepError> {
+    let ok = |x: f64| x.is_finite() && x >= 0.0;
+    if !model.gravity().iter().all(|g| g.is_finite()) {
+        return Err(StepError::InvalidModel("gravity must be finite"));
+    }
+    let q = SVector::<f64, N>::zeros();
+    let mut err = None;
+    model.for_each_body(&q, &mut |b| {
+        if !ok(b.mass) {
+            err = err.or(Some("a link mass is negative or not finite"));
+        }
+        if !ok(b.inertia) {
+            err = err.or(Some("a link inertia is negative or not finite"));
+        }
+    });
+    model.for_each_damper(&q, &mut |c, _| {
+        if !ok(c) {
+            err = err.or(Some("a damping coefficient is negative or not finite"));
+        }
+    });
+    err.map_or(Ok(()), |why| Err(StepError::InvalidModel(why)))
 }
 
 /// d(v) without the multiplier term, b − M_h v + (Δt/2)[vᵀ∂M/∂q_i v]_i
