@@ -13,24 +13,9 @@ use vigp::embedded::{Model, StepError, StepOptions, Stepper, model};
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 use vigp::{Mechanism, State, Variational};
 
-vigp::mechanism! {
-    /// Slider-crank with offsets, a tilted rail and damping everywhere
-    /// (prismatic joint, loop, damped loop joint).
-    SliderCrank {
-        gravity: [0.0, -9.81],
-        links {
-            crank: { mass: 0.5, length: 0.4, com: [0.15, 0.02] },
-            rod: { mass: 0.8, length: 1.2, inertia: 0.11 },
-            block: { mass: 2.0, length: 0.3 },
-        }
-        joints {
-            pivot: revolute(world @ [0.1, 0.2], crank.start) { damping: 0.05 },
-            pin: revolute(crank @ [0.4, 0.01], rod.start) { damping: 0.02 },
-            rail: prismatic(world @ [1.0, 0.0], block.center) { axis: [1.0, 0.2], damping: 0.3 },
-            wrist: revolute(rod.end, block.center) { damping: 0.01 },
-        }
-    }
-}
+#[path = "common/slider_crank.rs"]
+mod slider_crank;
+use slider_crank::SliderCrank;
 
 /// A random state; for loops, made consistent by the std projection.
 fn random_state<M, const N: usize, const C: usize>(m: &M, rng: &mut Rng, dt: f64) -> State<N>
