@@ -82,8 +82,9 @@ fn bench_steps(c: &mut Criterion) {
     g.finish();
 }
 
-/// The embedded stepper: `step` (computes p₀ = M(x₀)v₀, then solves) and
-/// the per-step cost of a 100-step `rollout_into` (momentum carried).
+/// The embedded stepper: `step` (computes p₀ = M(x₀)v₀, then solves) from
+/// one state and from 64 states along a trajectory, and the per-step cost of
+/// a 100-step `rollout_into` (momentum carried).
 fn bench_embedded<M, const N: usize, const C: usize>(
     g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
     name: &str,
@@ -99,6 +100,21 @@ fn bench_embedded<M, const N: usize, const C: usize>(
     let mut out = [z; 101];
     g.bench_function(format!("{name}/rollout_100"), |b| {
         b.iter(|| s.rollout_into(black_box(&z), &mut out).unwrap())
+    });
+    // One step from each of 64 states spread along a trajectory (every 50th
+    // of 3 200 steps from z): the cost of a step from a state averaged over
+    // the configurations a motion visits (Newton iterations and sincos range
+    // reduction vary with the state; the single state above is one sample).
+    // Time per 64 steps.
+    let mut long = vec![z; 64 * 50 + 1];
+    s.rollout_into(&z, &mut long).unwrap();
+    let states: Vec<State<N>> = long.iter().step_by(50).take(64).copied().collect();
+    g.bench_function(format!("{name}/step_64_states"), |b| {
+        b.iter(|| {
+            for z in &states {
+                black_box(s.step(black_box(z)).unwrap());
+            }
+        })
     });
 }
 
