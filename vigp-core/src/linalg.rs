@@ -124,7 +124,8 @@ pub fn solve_partial<const M: usize>(
     a: &SMatrix<f64, M, M>,
     b: &SVector<f64, M>,
 ) -> Option<SVector<f64, M>> {
-    let tiny = 1e-14 * a.amax();
+    let amax = a.amax();
+    let tiny = 1e-14 * amax;
     if M == 1 {
         let d = a[(0, 0)];
         return (d.abs() > tiny && d.is_finite()).then(|| b / d);
@@ -132,7 +133,7 @@ pub fn solve_partial<const M: usize>(
     if M == 2 {
         let (a00, a01, a10, a11) = (a[(0, 0)], a[(0, 1)], a[(1, 0)], a[(1, 1)]);
         let det = a00 * a11 - a01 * a10;
-        if det.abs() > tiny * a.amax() && det.is_finite() {
+        if det.abs() > tiny * amax && det.is_finite() {
             let r = 1.0 / det;
             let mut x = *b;
             x[0] = (b[0] * a11 - a01 * b[1]) * r;

@@ -208,14 +208,9 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// One step from `z`.
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
-        }
+        // `solve` refuses a non-finite z or p₀ with `NonFiniteState`.
         let p0 = self.momentum(z);
-        if !p0.iter().all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteState);
-        }
-        self.solve_finite(z, &p0, &z.v).map(|(z1, _, _)| z1)
+        self.solve(z, &p0, &z.v).map(|(z1, _, _)| z1)
     }
 
     /// One step from `z` with its momentum `p0` known (from the previous
