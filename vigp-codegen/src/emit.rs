@@ -243,7 +243,9 @@ fn joint_constraint_rows(
 
 /// The maximal-coordinate view: each link's centre-of-mass pose (x, y, θ),
 /// every joint a constraint (2 equations), plus the coordinate maps.
-fn emit_maximal(m: &Model) -> TokenStream {
+/// Returns the items of every target and those of the std runtime
+/// (the dual-number `Mechanism` and `Coordinates` impls).
+fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
     let name = &m.name;
     let vis = &m.vis;
     let maximal_ty = format_ident!("{}Maximal", name);
@@ -333,7 +335,7 @@ fn emit_maximal(m: &Model) -> TokenStream {
         2 * m.joints.len()
     );
 
-    quote! {
+    let items = quote! {
         impl #name {
             #[doc = " The maximal-coordinate model with these parameters."]
             pub fn maximal(&self) -> #maximal_ty {
@@ -350,12 +352,13 @@ fn emit_maximal(m: &Model) -> TokenStream {
 
         impl #maximal_ty {
             #[doc = " Link frame poses (origin at each link's `start`) from maximal coordinates, in link declaration order."]
-            pub fn link_poses<D: ::vigp::Scalar>(&self, x: &#svector<D, #nm>) -> [::vigp::Pose2<D>; #nll] {
+            pub fn link_poses<D: ::vigp::Real>(&self, x: &#svector<D, #nm>) -> [::vigp::Pose2<D>; #nll] {
                 #(#attach)*
                 [#(#poses),*]
             }
         }
-
+    };
+    let std_items = quote! {
         impl ::vigp::Mechanism<#nm, #cm> for #maximal_ty {
             const COORDINATES: [&'static str; #nm] = [#(#coord_names),*];
             const KINDS: [::vigp::CoordinateKind; #nm] = [#(#kinds),*];
@@ -393,7 +396,8 @@ fn emit_maximal(m: &Model) -> TokenStream {
                 #svector::from([#(#coord_idents),*])
             }
         }
-    }
+    };
+    (items, std_items)
 }
 
 /// The whole expansion.
@@ -601,7 +605,30 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         m.loop_constraints()
     );
     let links_doc = format!(" Link parameters of [`{name_str}`].");
-    let maximal = emit_maximal(m);
+    let (maximal_items, maximal_std) = emit_maximal(m);
+    let maximal_kinds: Vec<TokenStream> = m
+        .links
+        .iter()
+        .flat_map(|_| {
+            [
+                quote!(::vigp::CoordinateKind::Length),
+                quote!(::vigp::CoordinateKind::Length),
+                quote!(::vigp::CoordinateKind::Angle),
+            ]
+        })
+        .collect();
+    let minimal_dynamics = crate::emit_terms::emit_dynamics(
+        m,
+        &crate::mechanics::Mechanics::new(m, crate::mechanics::View::Minimal),
+        &minimal_ty,
+        &kinds,
+    );
+    let maximal_dynamics = crate::emit_terms::emit_dynamics(
+        m,
+        &crate::mechanics::Mechanics::new(m, crate::mechanics::View::Maximal),
+        &format_ident!("{}Maximal", name),
+        &maximal_kinds,
+    );
 
     let std_items = if target == crate::Target::Std {
         quote! {
@@ -642,7 +669,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             }
             }
 
-            #maximal
+            #maximal_std
         }
     } else {
         quote!()
@@ -720,6 +747,12 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             #[doc = " The parameters."]
             pub sys: #name,
         }
+
+        #minimal_dynamics
+
+        #maximal_items
+
+        #maximal_dynamics
 
         #std_items
     }

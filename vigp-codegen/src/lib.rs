@@ -14,8 +14,11 @@
 #![warn(missing_docs)]
 
 pub mod emit;
+pub mod emit_terms;
+pub mod mechanics;
 pub mod model;
 pub mod parse;
+pub mod symbolic;
 
 use proc_macro2::TokenStream;
 

@@ -17,6 +17,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod dynamics;
 pub mod gp;
 pub mod kinematics;
 pub mod linalg;
@@ -26,8 +27,9 @@ pub mod real;
 pub mod state;
 pub mod step;
 
+pub use dynamics::{Dynamics, Terms};
 pub use kinematics::{Point2, Pose2};
-pub use model::{Body, Model, Terms};
+pub use model::{Body, Model};
 pub use params::{Joint, Link};
 pub use real::{Jet1, Jet2, Real};
 pub use state::{CoordinateKind, State};

@@ -8,6 +8,7 @@
 //! One evaluation of the kinematics on [`Jet2`] gives all of them exactly
 //! (no finite differences, no nested duals).
 
+use crate::dynamics::Terms;
 use crate::kinematics::Point2;
 use crate::real::{Jet1, Jet2, Real};
 use crate::state::CoordinateKind;
@@ -52,19 +53,6 @@ pub trait Model<const N: usize, const C: usize> {
         let _ = q;
         SVector::from_element(R::from_f64(0.0))
     }
-}
-
-/// The mechanical terms at one configuration.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Terms<const N: usize> {
-    /// Mass matrix M(q).
-    pub mass: SMatrix<f64, N, N>,
-    /// ∂M/∂q_i for every i.
-    pub dmass: [SMatrix<f64, N, N>; N],
-    /// ∇V(q).
-    pub dpotential: SVector<f64, N>,
-    /// Damping matrix D(q) = Σ c_j ∇s_j ∇s_jᵀ (zero if not dissipative).
-    pub damping: SMatrix<f64, N, N>,
 }
 
 fn seed1<const N: usize>(q: &SVector<f64, N>) -> SVector<Jet1<N>, N> {

@@ -1,0 +1,242 @@
+//! The generated closed-form terms (`vigp::embedded::Dynamics`, derived
+//! symbolically by the macro) against the independent dual-number
+//! reference: the same mechanism's Lagrangian, Rayleigh function and
+//! constraints evaluated on num-dual numbers (`vigp::Mechanism`), whose
+//! exact derivatives come from automatic differentiation, not from the
+//! symbolic derivation. Both views, every system, random states.
+//!
+//! Tolerance: both sides are exact up to rounding (a few hundred
+//! floating-point operations), so they must agree to 1e-12 relative to the
+//! size of the compared quantity.
+
+mod common;
+
+use common::Rng;
+use nalgebra::{SMatrix, SVector};
+use num_dual::{Dual2Vec, DualVec};
+use vigp::Mechanism;
+use vigp::embedded::{Dynamics, Terms};
+use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
+
+#[path = "common/slider_crank.rs"]
+mod slider_crank;
+use slider_crank::SliderCrank;
+
+vigp::mechanism! {
+    /// Every kind of kinematic element: a prismatic joint on a rotating
+    /// link (its axis turns with the arm), an off-axis anchor, a damped
+    /// prismatic loop joint on a tilted world rail, non-default centres of
+    /// mass.
+    pub Exotic {
+        gravity: [0.3, -9.81],
+        links {
+            arm: { mass: 1.3, length: 0.9, com: [0.4, 0.05] },
+            slider: { mass: 0.7, length: 0.5 },
+            tip: { mass: 0.4, length: 0.6, inertia: 0.02, com: [0.25, -0.03] },
+        }
+        joints {
+            shoulder: revolute(world @ [0.1, -0.2], arm.start) { damping: 0.1 },
+            slide: prismatic(arm.end, slider.start) { axis: [0.3, 1.0], damping: 0.2 },
+            wrist: revolute(slider @ [0.2, 0.1], tip.center) { damping: 0.05 },
+            guide: prismatic(world @ [0.5, -1.0], tip.end) { axis: [1.0, -0.4], damping: 0.3 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// Undamped, no loops: no damping or constraint code.
+    pub Plain {
+        links {
+            a: { mass: 2.0, length: 0.7 },
+            b: { mass: 0.5, length: 1.1, com: [0.3, 0.2] },
+            c: { mass: 1.5, length: 0.4 },
+        }
+        joints {
+            j1: revolute(world, a.start),
+            j2: prismatic(a.end, b.start) { axis: [1.0, 0.0] },
+            j3: revolute(b.end, c.start),
+        }
+    }
+}
+
+fn assert_close<const R: usize, const K: usize>(
+    what: &str,
+    a: &SMatrix<f64, R, K>,
+    b: &SMatrix<f64, R, K>,
+) -> f64 {
+    let scale = 1.0 + b.amax();
+    let err = (a - b).amax() / scale;
+    assert!(err <= 1e-12, "{what}: relative error {err:.2e}\n{a}\n{b}");
+    err
+}
+
+/// Every `Dynamics` function of `m` against the dual-number reference at
+/// 20 random states.
+fn check<M, const N: usize, const C: usize>(name: &str, m: M)
+where
+    M: Mechanism<N, C> + Dynamics<N, C>,
+{
+    let k = Dynamics::constants(&m).expect("default parameters are valid");
+    let mut rng = Rng(11);
+    let mut worst = 0.0f64;
+    for _ in 0..20 {
+        let q = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-2.0, 2.0));
+        let v = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-3.0, 3.0));
+        let mut t = Terms::zeros();
+        m.terms(&k, &q, &mut t);
+        // M(q)
+        let m_ref = vigp::dynamics::mass_matrix::<M, N, C>(&m, &q, &v);
+        worst = worst.max(assert_close("mass", &Dynamics::mass(&m, &k, &q), &m_ref));
+        worst = worst.max(assert_close("terms.mass", &t.mass, &m_ref));
+        // V(q) and ∇V(q)
+        let v_ref = m.potential_energy(&q);
+        let v_fast = Dynamics::potential(&m, &k, &q);
+        assert!(
+            (v_fast - v_ref).abs() <= 1e-12 * (1.0 + v_ref.abs()),
+            "{name} V"
+        );
+        let grad_ref = num_dual::gradient(|x| m.potential_energy(&x), &q).1;
+        worst = worst.max(assert_close("∇V", &t.dpotential, &grad_ref));
+        // D(q): F = −∂R/∂v = −D v for every v, so D = −∂F/∂v
+        if <M as Dynamics<N, C>>::DISSIPATIVE {
+            let d_ref = -num_dual::jacobian(
+                |vv: SVector<DualVec<f64, nalgebra::Const<N>>, N>| {
+                    m.generalized_forces(&q.map(DualVec::from_re), &vv)
+                },
+                &v,
+            )
+            .1;
+            worst = worst.max(assert_close("D", &t.damping, &d_ref));
+        }
+        // ∂M/∂q_l, column by column: ∂(M v)/∂q = Σ_l ∂M/∂q_l v e_lᵀ, by
+        // differentiating the reference momentum M(q)v in q
+        let dmv_ref = num_dual::jacobian(
+            |x: SVector<DualVec<f64, nalgebra::Const<N>>, N>| {
+                vigp::del::momentum::<M, _, N, C>(&m, &x, &v.map(DualVec::from_re))
+            },
+            &q,
+        )
+        .1;
+        let mut dmv = SMatrix::<f64, N, N>::zeros();
+        if !<M as Dynamics<N, C>>::CONSTANT_MASS {
+            for l in 0..N {
+                dmv.set_column(l, &(t.dmass[l] * v));
+            }
+        }
+        worst = worst.max(assert_close("∂M/∂q", &dmv, &dmv_ref));
+        // ∂/∂q [½ vᵀ∂M/∂q v − ∇V − D v] = ∂/∂q (D_xL + F) at fixed v
+        let fj_ref = num_dual::jacobian(
+            |x: SVector<DualVec<f64, nalgebra::Const<N>>, N>| {
+                vigp::del::force_terms::<M, _, N, C>(&m, &x, &v.map(DualVec::from_re))
+            },
+            &q,
+        )
+        .1;
+        worst = worst.max(assert_close(
+            "force_jacobian",
+            &m.force_jacobian(&k, &q, &v),
+            &fj_ref,
+        ));
+        // energy
+        let e_ref = m.kinetic_energy(&q, &v) + v_ref;
+        let e = Dynamics::energy(&m, &k, &q, &v);
+        assert!((e - e_ref).abs() <= 1e-12 * (1.0 + e_ref.abs()), "{name} E");
+        if C > 0 {
+            let g_ref = Mechanism::constraints(&m, &q);
+            worst = worst.max(assert_close(
+                "g",
+                &Dynamics::constraints(&m, &k, &q),
+                &g_ref,
+            ));
+            let (g, jac) = Dynamics::constraint_jacobian(&m, &k, &q);
+            worst = worst.max(assert_close("g (with G)", &g, &g_ref));
+            let jac_ref = Mechanism::constraint_jacobian(&m, &q);
+            worst = worst.max(assert_close("G", &jac, &jac_ref));
+            let mu = SVector::<f64, C>::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+            let h_ref = num_dual::hessian(
+                |x: SVector<Dual2Vec<f64, nalgebra::Const<N>>, N>| {
+                    let g = Mechanism::constraints(&m, &x);
+                    let mut s = Dual2Vec::from_re(0.0);
+                    for i in 0..C {
+                        s += g[i] * mu[i];
+                    }
+                    s
+                },
+                &q,
+            )
+            .2;
+            worst = worst.max(assert_close(
+                "Σμ∇²g",
+                &m.constraint_hessian(&k, &q, &mu),
+                &h_ref,
+            ));
+        }
+    }
+    println!("{name}: worst relative difference {worst:.1e}");
+}
+
+#[test]
+fn generated_terms_match_dual_numbers_in_both_views() {
+    check("pendulum minimal", Pendulum::default().minimal());
+    check("pendulum maximal", Pendulum::default().maximal());
+    check("cartpole minimal", Cartpole::default().minimal());
+    check("cartpole maximal", Cartpole::default().maximal());
+    check(
+        "double pendulum minimal",
+        DoublePendulum::default().minimal(),
+    );
+    check(
+        "double pendulum maximal",
+        DoublePendulum::default().maximal(),
+    );
+    check("fourbar minimal", Fourbar::default().minimal());
+    check("fourbar maximal", Fourbar::default().maximal());
+    check("slider-crank minimal", SliderCrank::default().minimal());
+    check("slider-crank maximal", SliderCrank::default().maximal());
+    check("exotic minimal", Exotic::default().minimal());
+    check("exotic maximal", Exotic::default().maximal());
+    check("plain minimal", Plain::default().minimal());
+    check("plain maximal", Plain::default().maximal());
+}
+
+/// Perturbed run-time parameters flow into the constants: the terms of a
+/// perturbed model still match its dual-number reference.
+#[test]
+fn perturbed_parameters_are_used() {
+    let mut sys = SliderCrank::default();
+    sys.links.rod.mass *= 1.7;
+    sys.links.crank.length = 0.55;
+    sys.links.block.com = [0.1, -0.05];
+    sys.joints.rail.damping = 0.9;
+    sys.gravity = [1.0, -3.0];
+    check("perturbed slider-crank minimal", sys.minimal());
+    check("perturbed slider-crank maximal", sys.maximal());
+}
+
+/// Invalid run-time parameters are typed errors naming the parameter.
+#[test]
+fn invalid_parameters_are_refused_by_name() {
+    use vigp::embedded::StepError;
+    let mut sys = DoublePendulum::default();
+    sys.links.lower.mass = -1.0;
+    let err = Dynamics::constants(&sys.minimal()).unwrap_err();
+    assert_eq!(
+        err,
+        StepError::InvalidModel("link `lower`: mass must be finite and >= 0")
+    );
+    assert!(Dynamics::constants(&sys.maximal()).is_err());
+    let mut sys = DoublePendulum::default();
+    sys.links.upper.length = f64::NAN;
+    assert!(Dynamics::constants(&sys.minimal()).is_err());
+    let mut sys = DoublePendulum::default();
+    sys.joints.elbow.damping = -0.1;
+    assert!(Dynamics::constants(&sys.minimal()).is_err());
+    let mut sys = DoublePendulum::default();
+    sys.gravity[1] = f64::INFINITY;
+    assert!(Dynamics::constants(&sys.minimal()).is_err());
+    // admissible parameters whose products overflow
+    let mut sys = DoublePendulum::default();
+    sys.links.upper.mass = 1e300;
+    sys.links.upper.length = 1e300;
+    assert!(Dynamics::constants(&sys.minimal()).is_err());
+}

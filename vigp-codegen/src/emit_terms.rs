@@ -1,0 +1,803 @@
+//! Straight-line Rust for the closed-form mechanics of one view
+//! ([`Mechanics`]): the `vigp::embedded::Dynamics` implementation every
+//! integrator runs on.
+//!
+//! Each function computes the sines and cosines it needs once (angle sums
+//! by the addition theorems from angles already at hand), multiplies them
+//! by parameter products precomputed in `constants` (indexed `k[i]`), and
+//! writes every entry of its result. Entries that are structurally zero
+//! are written as `0.0`; derivatives that vanish identically are not
+//! computed at all.
+
+use crate::mechanics::{Mechanics, Param};
+use crate::model::Model;
+use crate::symbolic::{Expr, Freq, Monomial, Poly, Sym};
+use proc_macro2::{Literal, TokenStream};
+use quote::{format_ident, quote};
+use std::cell::Cell;
+use std::collections::BTreeMap;
+use syn::Ident;
+
+/// An f64 literal (callers put the sign).
+fn lit(x: f64) -> TokenStream {
+    let l = Literal::f64_unsuffixed(x.abs());
+    if x < 0.0 { quote!(-#l) } else { quote!(#l) }
+}
+
+fn index(i: usize) -> Literal {
+    Literal::usize_unsuffixed(i)
+}
+
+/// Tokens reading a parameter from `sys` (the parameter struct).
+fn param_tokens(m: &Model, p: &Param) -> TokenStream {
+    match *p {
+        Param::Gravity(i) => {
+            let i = index(i);
+            quote!(sys.gravity[#i])
+        }
+        Param::Mass(l) => {
+            let n = &m.links[l].name;
+            quote!(sys.links.#n.mass)
+        }
+        Param::Length(l) => {
+            let n = &m.links[l].name;
+            quote!(sys.links.#n.length)
+        }
+        Param::Inertia(l) => {
+            let n = &m.links[l].name;
+            quote!(sys.links.#n.inertia)
+        }
+        Param::Com(l, i) => {
+            let (n, i) = (&m.links[l].name, index(i));
+            quote!(sys.links.#n.com[#i])
+        }
+        Param::Damping(j) => {
+            let n = &m.joints[j].name;
+            quote!(sys.joints.#n.damping)
+        }
+    }
+}
+
+type PolyKey = Vec<(Monomial, u64)>;
+
+fn key(p: &Poly) -> PolyKey {
+    p.terms
+        .iter()
+        .map(|(m, c)| (m.clone(), c.to_bits()))
+        .collect()
+}
+
+/// The table of parameter products `k[i]`.
+#[derive(Default)]
+struct Constants {
+    polys: Vec<Poly>,
+    index: BTreeMap<PolyKey, usize>,
+}
+
+impl Constants {
+    /// `(index, negated)` of a parameter polynomial (shared with its negation).
+    fn get(&mut self, p: &Poly) -> (usize, bool) {
+        if let Some(&i) = self.index.get(&key(p)) {
+            return (i, false);
+        }
+        if let Some(&i) = self.index.get(&key(&p.scale(-1.0))) {
+            return (i, true);
+        }
+        self.polys.push(p.clone());
+        self.index.insert(key(p), self.polys.len() - 1);
+        (self.polys.len() - 1, false)
+    }
+}
+
+/// What a function body read, so that unused arguments get a `_` name.
+#[derive(Default)]
+struct Uses {
+    q: Cell<bool>,
+    k: Cell<bool>,
+}
+
+/// Sines and cosines of the frequencies one function needs.
+struct Trig {
+    names: BTreeMap<Freq, (Ident, Ident)>,
+    lets: Vec<TokenStream>,
+}
+
+fn freq_name(phi: &Freq) -> String {
+    let parts: Vec<String> = phi
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| **w != 0)
+        .map(|(k, w)| match *w {
+            1 => format!("q{k}"),
+            -1 => format!("mq{k}"),
+            w if w > 0 => format!("{w}q{k}"),
+            w => format!("m{}q{k}", -w),
+        })
+        .collect();
+    parts.join("_")
+}
+
+/// φ·q as tokens.
+fn angle_tokens(phi: &Freq) -> TokenStream {
+    let mut out = TokenStream::new();
+    for (k, w) in phi.iter().enumerate() {
+        if *w == 0 {
+            continue;
+        }
+        let kk = index(k);
+        let term = match w.abs() {
+            1 => quote!(q[#kk]),
+            a => {
+                let a = lit(a as f64);
+                quote!(#a * q[#kk])
+            }
+        };
+        out = match (out.is_empty(), *w > 0) {
+            (true, true) => term,
+            (true, false) => quote!(-#term),
+            (false, true) => quote!(#out + #term),
+            (false, false) => quote!(#out - #term),
+        };
+    }
+    out
+}
+
+impl Trig {
+    /// Lets for every non-zero frequency in `freqs`: `sincos` of the angle,
+    /// or the addition theorem from two frequencies already computed.
+    fn new(freqs: impl IntoIterator<Item = Freq>) -> Self {
+        let mut list: Vec<Freq> = freqs
+            .into_iter()
+            .filter(|phi| phi.iter().any(|w| *w != 0))
+            .collect();
+        list.sort_by_key(|phi| (phi.iter().map(|w| w.abs()).sum::<i32>(), phi.clone()));
+        list.dedup();
+        let mut trig = Trig {
+            names: BTreeMap::new(),
+            lets: Vec::new(),
+        };
+        for phi in list {
+            let name = freq_name(&phi);
+            let (s, c) = (format_ident!("sin_{}", name), format_ident!("cos_{}", name));
+            let derived = trig.sum_of_known(&phi);
+            let value = match derived {
+                Some((a, sa, b, sb)) => {
+                    // sin(±α ± β), cos(±α ± β) from sin/cos of α and β
+                    let (sin_a, cos_a) = trig.names[&a].clone();
+                    let (sin_b, cos_b) = trig.names[&b].clone();
+                    let sa = if sa < 0.0 {
+                        quote!((-#sin_a))
+                    } else {
+                        quote!(#sin_a)
+                    };
+                    let sb = if sb < 0.0 {
+                        quote!((-#sin_b))
+                    } else {
+                        quote!(#sin_b)
+                    };
+                    quote!((#sa * #cos_b + #cos_a * #sb, #cos_a * #cos_b - #sa * #sb))
+                }
+                None => {
+                    let angle = angle_tokens(&phi);
+                    quote!(::vigp::embedded::dynamics::sincos(#angle))
+                }
+            };
+            trig.lets.push(quote!(let (#s, #c) = #value;));
+            trig.names.insert(phi, (s, c));
+        }
+        trig
+    }
+
+    /// φ = sa·α + sb·β for known canonical α, β and signs sa, sb = ±1.
+    fn sum_of_known(&self, phi: &Freq) -> Option<(Freq, f64, Freq, f64)> {
+        let known: Vec<&Freq> = self.names.keys().collect();
+        for a in &known {
+            for b in &known {
+                for (sa, sb) in [(1, 1), (1, -1), (-1, 1)] {
+                    let f: Freq = a
+                        .iter()
+                        .zip(b.iter())
+                        .map(|(x, y)| sa * x + sb * y)
+                        .collect();
+                    if &f == phi {
+                        return Some(((*a).clone(), sa as f64, (*b).clone(), sb as f64));
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    fn lets(&self) -> TokenStream {
+        let lets = &self.lets;
+        quote!(#(#lets)*)
+    }
+}
+
+/// Writes expressions as tokens over `q`, `k[i]` and the trig lets.
+struct Writer<'a> {
+    constants: &'a mut Constants,
+    uses: Uses,
+}
+
+impl Writer<'_> {
+    /// Tokens of one expression (`0.0` for zero).
+    fn expr(&mut self, e: &Expr, trig: &Trig) -> TokenStream {
+        // (negative?, term) in a stable order
+        let mut terms: Vec<(bool, TokenStream)> = Vec::new();
+        for (phi, (a, b)) in &e.terms {
+            let zero = phi.iter().all(|w| *w == 0);
+            for (poly, is_sin) in [(a, false), (b, true)] {
+                if poly.is_zero() {
+                    continue;
+                }
+                let factor = if zero {
+                    None
+                } else {
+                    let (s, c) = &trig.names[phi];
+                    Some(if is_sin { quote!(#s) } else { quote!(#c) })
+                };
+                for (coords, p) in poly.by_coordinates() {
+                    terms.push(self.term(&coords, &p, factor.clone()));
+                }
+            }
+        }
+        if terms.is_empty() {
+            return quote!(0.0);
+        }
+        let mut out = TokenStream::new();
+        for (i, (neg, t)) in terms.into_iter().enumerate() {
+            out = match (i == 0, neg) {
+                (true, false) => t,
+                (true, true) => quote!(-#t),
+                (false, false) => quote!(#out + #t),
+                (false, true) => quote!(#out - #t),
+            };
+        }
+        out
+    }
+
+    /// One product: coefficient × trig factor × coordinate monomial.
+    fn term(
+        &mut self,
+        coords: &Monomial,
+        p: &Poly,
+        factor: Option<TokenStream>,
+    ) -> (bool, TokenStream) {
+        let mut factors: Vec<TokenStream> = Vec::new();
+        let numeric = p.terms.len() == 1 && p.terms.keys().next().is_some_and(Vec::is_empty);
+        let neg = if numeric {
+            let c = *p.terms.values().next().expect("one term");
+            if c.abs() != 1.0 || (factor.is_none() && coords.is_empty()) {
+                factors.push(lit(c.abs()));
+            }
+            c < 0.0
+        } else {
+            let (i, neg) = self.constants.get(p);
+            let i = index(i);
+            self.uses.k.set(true);
+            factors.push(quote!(k[#i]));
+            neg
+        };
+        factors.extend(factor);
+        for s in coords {
+            let Sym::Coord(c) = s else {
+                unreachable!("coordinate part")
+            };
+            let c = index(*c);
+            self.uses.q.set(true);
+            factors.push(quote!(q[#c]));
+        }
+        let mut t = TokenStream::new();
+        for (i, f) in factors.iter().enumerate() {
+            t = if i == 0 { f.clone() } else { quote!(#t * #f) };
+        }
+        (neg, t)
+    }
+}
+
+/// Assignments `target = expr;` sharing one set of trig lets, then
+/// `extra`; returns the body and whether it read `q` and `k`.
+fn assign_body(
+    constants: &mut Constants,
+    outputs: &[(TokenStream, &Expr)],
+    extra: TokenStream,
+) -> (TokenStream, bool, bool) {
+    let trig = Trig::new(freqs(outputs.iter().map(|(_, e)| *e)));
+    let mut w = Writer {
+        constants,
+        uses: Uses::default(),
+    };
+    let assigns: Vec<TokenStream> = outputs
+        .iter()
+        .map(|(target, e)| {
+            let v = w.expr(e, &trig);
+            quote!(#target = #v;)
+        })
+        .collect();
+    let lets = trig.lets();
+    let uses_q = w.uses.q.get() || !trig.lets.is_empty();
+    let uses_k = w.uses.k.get();
+    (quote!(#lets #(#assigns)* #extra), uses_q, uses_k)
+}
+
+fn freqs<'a>(exprs: impl IntoIterator<Item = &'a Expr>) -> Vec<Freq> {
+    let mut out: Vec<Freq> = exprs
+        .into_iter()
+        .flat_map(|e| e.terms.keys().cloned())
+        .collect();
+    out.sort();
+    out.dedup();
+    out
+}
+
+/// The `Dynamics` implementation for `ty` (a view struct with field `sys`).
+pub fn emit_dynamics(
+    m: &Model,
+    mech: &Mechanics,
+    ty: &Ident,
+    kinds: &[TokenStream],
+) -> TokenStream {
+    let n = mech.n;
+    let c = mech.c();
+    let nn = index(n);
+    let cc = index(c);
+    let svector = quote!(::vigp::__private::nalgebra::SVector);
+    let smatrix = quote!(::vigp::__private::nalgebra::SMatrix);
+    let dissipative = !mech.dampers.is_empty();
+    let constant_mass = mech.constant_mass();
+    let mut constants = Constants::default();
+
+    let arg = |used: bool, name: &str| {
+        if used {
+            format_ident!("{}", name)
+        } else {
+            format_ident!("_{}", name)
+        }
+    };
+    let ij = |i: usize, j: usize| {
+        let (i, j) = (index(i), index(j));
+        quote!((#i, #j))
+    };
+
+    // mass(q)
+    let mut outs = Vec::new();
+    let mut mirror = Vec::new();
+    for j in 0..n {
+        for l in j..n {
+            let t = ij(j, l);
+            outs.push((quote!(m[#t]), &mech.mass[j][l]));
+            if l != j {
+                let tt = ij(l, j);
+                mirror.push(quote!(m[#tt] = m[#t];));
+            }
+        }
+    }
+    let (body, uq, uk) = assign_body(&mut constants, &outs, quote!(#(#mirror)*));
+    let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
+    let mass_fn = quote! {
+        fn mass(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> #smatrix<f64, #nn, #nn> {
+            let mut m = #smatrix::<f64, #nn, #nn>::zeros();
+            #body
+            m
+        }
+    };
+
+    // potential(q)
+    let (body, uq, uk) = assign_body(
+        &mut constants,
+        &[(quote!(let v), &mech.potential)],
+        quote!(),
+    );
+    let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
+    let potential_fn = quote! {
+        fn potential(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> f64 {
+            #body
+            v
+        }
+    };
+
+    // terms(q)
+    let grad_v = mech.potential_gradient();
+    let damping = mech.damping_matrix();
+    let dmass: Vec<Vec<Vec<Expr>>> = if constant_mass {
+        Vec::new()
+    } else {
+        (0..n)
+            .map(|l| {
+                (0..n)
+                    .map(|j| (0..n).map(|k| mech.mass[j][k].deriv(l)).collect())
+                    .collect()
+            })
+            .collect()
+    };
+    let mut outs = Vec::new();
+    let mut mirror = Vec::new();
+    for j in 0..n {
+        for l in j..n {
+            let t = ij(j, l);
+            outs.push((quote!(out.mass[#t]), &mech.mass[j][l]));
+            if l != j {
+                let tt = ij(l, j);
+                mirror.push(quote!(out.mass[#tt] = out.mass[#t];));
+            }
+        }
+    }
+    for (l, dm) in dmass.iter().enumerate() {
+        let li = index(l);
+        for j in 0..n {
+            for k in j..n {
+                let t = ij(j, k);
+                outs.push((quote!(out.dmass[#li][#t]), &dm[j][k]));
+                if k != j {
+                    let tt = ij(k, j);
+                    mirror.push(quote!(out.dmass[#li][#tt] = out.dmass[#li][#t];));
+                }
+            }
+        }
+    }
+    for (k, g) in grad_v.iter().enumerate() {
+        let kk = index(k);
+        outs.push((quote!(out.dpotential[#kk]), g));
+    }
+    if dissipative {
+        for j in 0..n {
+            for k in j..n {
+                let t = ij(j, k);
+                outs.push((quote!(out.damping[#t]), &damping[j][k]));
+                if k != j {
+                    let tt = ij(k, j);
+                    mirror.push(quote!(out.damping[#tt] = out.damping[#t];));
+                }
+            }
+        }
+    }
+    let (body, uq, uk) = assign_body(&mut constants, &outs, quote!(#(#mirror)*));
+    let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
+    let terms_fn = quote! {
+        fn terms(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>, out: &mut ::vigp::embedded::Terms<#nn>) {
+            #body
+        }
+    };
+
+    // force_jacobian(q, v) = ∂/∂q [½ vᵀ∂M/∂q v − ∇V − D(q) v]
+    let mut fj: Vec<Vec<Expr>> = vec![vec![Expr::zero(n); n]; n];
+    let mut v_terms: Vec<Vec<Vec<(usize, usize, Expr)>>> = vec![vec![Vec::new(); n]; n];
+    for i in 0..n {
+        for l in i..n {
+            fj[i][l] = grad_v[i].deriv(l).scale(-1.0);
+            if !constant_mass {
+                for j in 0..n {
+                    for k in j..n {
+                        let e = dmass[i][j][k].deriv(l);
+                        if !e.is_zero() {
+                            let w = if j == k { 0.5 } else { 1.0 };
+                            v_terms[i][l].push((j, k, e.scale(w)));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    // damping: −Σ_j ∂D_ij/∂q_l v_j (not symmetric in i, l)
+    let mut d_terms: Vec<Vec<Vec<(usize, Expr)>>> = vec![vec![Vec::new(); n]; n];
+    if dissipative {
+        for i in 0..n {
+            for l in 0..n {
+                for j in 0..n {
+                    let e = damping[i][j].deriv(l);
+                    if !e.is_zero() {
+                        d_terms[i][l].push((j, e.scale(-1.0)));
+                    }
+                }
+            }
+        }
+    }
+    let force_jacobian_fn = {
+        let mut all: Vec<&Expr> = Vec::new();
+        for i in 0..n {
+            for l in i..n {
+                all.push(&fj[i][l]);
+                all.extend(v_terms[i][l].iter().map(|(_, _, e)| e));
+            }
+        }
+        for row in &d_terms {
+            for cell in row {
+                all.extend(cell.iter().map(|(_, e)| e));
+            }
+        }
+        let trig = Trig::new(freqs(all.iter().copied()));
+        let mut w = Writer {
+            constants: &mut constants,
+            uses: Uses::default(),
+        };
+        let mut assigns = Vec::new();
+        let mut uses_v = false;
+        for i in 0..n {
+            for l in i..n {
+                let t = ij(i, l);
+                let mut value = w.expr(&fj[i][l], &trig);
+                let mut nonzero = !fj[i][l].is_zero();
+                for (j, k, e) in &v_terms[i][l] {
+                    let (jj, kk) = (index(*j), index(*k));
+                    let x = w.expr(e, &trig);
+                    value = if nonzero {
+                        quote!(#value + (#x) * (v[#jj] * v[#kk]))
+                    } else {
+                        quote!((#x) * (v[#jj] * v[#kk]))
+                    };
+                    nonzero = true;
+                    uses_v = true;
+                }
+                assigns.push(quote!(f[#t] = #value;));
+                if l != i {
+                    let tt = ij(l, i);
+                    assigns.push(quote!(f[#tt] = f[#t];));
+                }
+            }
+        }
+        for (i, row) in d_terms.iter().enumerate() {
+            for (l, cell) in row.iter().enumerate() {
+                if cell.is_empty() {
+                    continue;
+                }
+                let t = ij(i, l);
+                let mut sum = TokenStream::new();
+                for (j, e) in cell {
+                    let jj = index(*j);
+                    let x = w.expr(e, &trig);
+                    sum = if sum.is_empty() {
+                        quote!((#x) * v[#jj])
+                    } else {
+                        quote!(#sum + (#x) * v[#jj])
+                    };
+                }
+                uses_v = true;
+                assigns.push(quote!(f[#t] += #sum;));
+            }
+        }
+        let lets = trig.lets();
+        let q_arg = arg(w.uses.q.get() || !trig.lets.is_empty(), "q");
+        let k_arg = arg(w.uses.k.get(), "k");
+        let v_arg = arg(uses_v, "v");
+        quote! {
+            fn force_jacobian(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>, #v_arg: &#svector<f64, #nn>) -> #smatrix<f64, #nn, #nn> {
+                let mut f = #smatrix::<f64, #nn, #nn>::zeros();
+                #lets
+                #(#assigns)*
+                f
+            }
+        }
+    };
+
+    // constraints
+    let constraint_fns = if c == 0 {
+        quote!()
+    } else {
+        let rows = &mech.constraints;
+        let outs: Vec<(TokenStream, &Expr)> = rows
+            .iter()
+            .enumerate()
+            .map(|(r, e)| {
+                let r = index(r);
+                (quote!(g[#r]), e)
+            })
+            .collect();
+        let (body, uq, uk) = assign_body(&mut constants, &outs, quote!());
+        let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
+        let g_fn = quote! {
+            fn constraints(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> #svector<f64, #cc> {
+                let mut g = #svector::<f64, #cc>::zeros();
+                #body
+                g
+            }
+        };
+        let jac: Vec<Vec<Expr>> = rows
+            .iter()
+            .map(|e| (0..n).map(|k| e.deriv(k)).collect())
+            .collect();
+        let mut outs: Vec<(TokenStream, &Expr)> = Vec::new();
+        for (r, e) in rows.iter().enumerate() {
+            let ri = index(r);
+            outs.push((quote!(g[#ri]), e));
+            for k in 0..n {
+                let t = ij(r, k);
+                outs.push((quote!(jac[#t]), &jac[r][k]));
+            }
+        }
+        let (body, uq, uk) = assign_body(&mut constants, &outs, quote!());
+        let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
+        let jac_fn = quote! {
+            fn constraint_jacobian(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> (#svector<f64, #cc>, #smatrix<f64, #cc, #nn>) {
+                let mut g = #svector::<f64, #cc>::zeros();
+                let mut jac = #smatrix::<f64, #cc, #nn>::zeros();
+                #body
+                (g, jac)
+            }
+        };
+        // Σ μ_r ∇²g_r
+        let hess: Vec<Vec<Vec<Expr>>> = jac
+            .iter()
+            .map(|row| {
+                (0..n)
+                    .map(|a| (0..n).map(|b| row[a].deriv(b)).collect())
+                    .collect()
+            })
+            .collect();
+        let mut all: Vec<&Expr> = Vec::new();
+        for h in &hess {
+            for a in 0..n {
+                for b in a..n {
+                    all.push(&h[a][b]);
+                }
+            }
+        }
+        let trig = Trig::new(freqs(all.iter().copied()));
+        let mut w = Writer {
+            constants: &mut constants,
+            uses: Uses::default(),
+        };
+        let mut assigns = Vec::new();
+        for a in 0..n {
+            for b in a..n {
+                let mut sum = TokenStream::new();
+                for (r, h) in hess.iter().enumerate() {
+                    if h[a][b].is_zero() {
+                        continue;
+                    }
+                    let ri = index(r);
+                    let x = w.expr(&h[a][b], &trig);
+                    sum = if sum.is_empty() {
+                        quote!((#x) * mu[#ri])
+                    } else {
+                        quote!(#sum + (#x) * mu[#ri])
+                    };
+                }
+                if sum.is_empty() {
+                    continue;
+                }
+                let t = ij(a, b);
+                assigns.push(quote!(h[#t] = #sum;));
+                if a != b {
+                    let tt = ij(b, a);
+                    assigns.push(quote!(h[#tt] = h[#t];));
+                }
+            }
+        }
+        let lets = trig.lets();
+        let q_arg = arg(w.uses.q.get() || !trig.lets.is_empty(), "q");
+        let k_arg = arg(w.uses.k.get(), "k");
+        let mu_arg = arg(!assigns.is_empty(), "mu");
+        let hess_fn = quote! {
+            fn constraint_hessian(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>, #mu_arg: &#svector<f64, #cc>) -> #smatrix<f64, #nn, #nn> {
+                let mut h = #smatrix::<f64, #nn, #nn>::zeros();
+                #lets
+                #(#assigns)*
+                h
+            }
+        };
+        quote!(#g_fn #jac_fn #hess_fn)
+    };
+
+    // constants(): validation of every parameter, then the products
+    let nk = index(constants.polys.len());
+    let checks = validation(m);
+    let products: Vec<TokenStream> = constants
+        .polys
+        .iter()
+        .map(|p| poly_tokens(m, mech, p))
+        .collect();
+    let constants_fn = quote! {
+        fn constants(&self) -> ::core::result::Result<[f64; #nk], ::vigp::embedded::StepError> {
+            let sys = &self.sys;
+            #(#checks)*
+            ::vigp::embedded::dynamics::check_constants([#(#products),*])
+        }
+    };
+
+    quote! {
+        impl ::vigp::embedded::Dynamics<#nn, #cc> for #ty {
+            const KINDS: [::vigp::CoordinateKind; #nn] = [#(#kinds),*];
+            const DISSIPATIVE: bool = #dissipative;
+            const CONSTANT_MASS: bool = #constant_mass;
+            type Constants = [f64; #nk];
+
+            #constants_fn
+            #mass_fn
+            #potential_fn
+            #terms_fn
+            #force_jacobian_fn
+            #constraint_fns
+        }
+    }
+}
+
+/// A parameter polynomial as tokens over `sys`.
+fn poly_tokens(m: &Model, mech: &Mechanics, p: &Poly) -> TokenStream {
+    let mut out = TokenStream::new();
+    for (i, (mono, c)) in p.terms.iter().enumerate() {
+        let mut factors: Vec<TokenStream> = mono
+            .iter()
+            .map(|s| match s {
+                Sym::Param(j) => param_tokens(m, &mech.params[*j]),
+                Sym::Coord(_) => unreachable!("parameter polynomial"),
+            })
+            .collect();
+        if c.abs() != 1.0 || factors.is_empty() {
+            factors.push(lit(c.abs()));
+        }
+        let mut t = TokenStream::new();
+        for (j, f) in factors.iter().enumerate() {
+            t = if j == 0 { f.clone() } else { quote!(#t * #f) };
+        }
+        out = match (i == 0, *c < 0.0) {
+            (true, false) => t,
+            (true, true) => quote!(-#t),
+            (false, false) => quote!(#out + #t),
+            (false, true) => quote!(#out - #t),
+        };
+    }
+    out
+}
+
+/// Checks of every run-time parameter, naming it in the error.
+fn validation(m: &Model) -> Vec<TokenStream> {
+    let sign = |s: &str| {
+        let s = format_ident!("{}", s);
+        quote!(::vigp::embedded::dynamics::ParameterSign::#s)
+    };
+    let mut out = Vec::new();
+    let mut check = |value: TokenStream, s: &str, msg: String| {
+        let sg = sign(s);
+        out.push(quote!(::vigp::embedded::dynamics::check_parameter(#value, #sg, #msg)?;));
+    };
+    check(
+        quote!(sys.gravity[0]),
+        "Any",
+        "gravity[0] must be finite".into(),
+    );
+    check(
+        quote!(sys.gravity[1]),
+        "Any",
+        "gravity[1] must be finite".into(),
+    );
+    for l in &m.links {
+        let n = &l.name;
+        let name = syn::ext::IdentExt::unraw(n).to_string();
+        check(
+            quote!(sys.links.#n.mass),
+            "NonNegative",
+            format!("link `{name}`: mass must be finite and >= 0"),
+        );
+        check(
+            quote!(sys.links.#n.length),
+            "Positive",
+            format!("link `{name}`: length must be finite and > 0"),
+        );
+        check(
+            quote!(sys.links.#n.inertia),
+            "NonNegative",
+            format!("link `{name}`: inertia must be finite and >= 0"),
+        );
+        for i in 0..2 {
+            let ii = index(i);
+            check(
+                quote!(sys.links.#n.com[#ii]),
+                "Any",
+                format!("link `{name}`: com[{i}] must be finite"),
+            );
+        }
+    }
+    if m.dissipative() {
+        for j in &m.joints {
+            let n = &j.name;
+            let name = syn::ext::IdentExt::unraw(n).to_string();
+            check(
+                quote!(sys.joints.#n.damping),
+                "NonNegative",
+                format!("joint `{name}`: damping must be finite and >= 0"),
+            );
+        }
+    }
+    out
+}
