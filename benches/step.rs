@@ -91,7 +91,7 @@ fn bench_embedded<M, const N: usize, const C: usize>(
     sys: M,
     z: State<N>,
 ) where
-    M: vigp::embedded::Model<N, C> + Copy,
+    M: vigp::embedded::Dynamics<N, C> + Copy,
 {
     let s = Stepper::new(sys, 0.01).unwrap();
     g.bench_function(format!("{name}/step"), |b| {

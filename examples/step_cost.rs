@@ -21,11 +21,11 @@
 //! function (build with `--release` instead to keep functions apart).
 
 use nalgebra::SVector;
-use vigp::embedded::{Model, State, Stepper};
+use vigp::embedded::{Dynamics, State, Stepper};
 use vigp::projection::consistent_state;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 
-fn run<M: Model<N, C> + Copy, const N: usize, const C: usize>(
+fn run<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
     sys: M,
     z0: State<N>,
     steps: usize,
@@ -48,7 +48,7 @@ fn run<M: Model<N, C> + Copy, const N: usize, const C: usize>(
 /// Mean time per step (ns) of `step` and of a 100-step rollout over 64
 /// states taken every 50 steps of a trajectory from `z0`; minimum over 15
 /// repetitions.
-fn table_row<M: Model<N, C> + Copy, const N: usize, const C: usize>(
+fn table_row<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
     name: &str,
     sys: M,
     z0: State<N>,

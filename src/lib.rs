@@ -104,6 +104,7 @@ pub struct ReadmeDoctests;
 /// The names most programs need.
 #[cfg(feature = "std")]
 pub mod prelude {
+    pub use vigp_runtime::embedded::Dynamics;
     pub use vigp_runtime::{
         Coordinates, ExplicitEuler, Integrator, Mechanism, NewtonOptions, Rk4, State, StepError,
         SymplecticEuler, Variational,

@@ -417,7 +417,7 @@ fn generated_constants_and_kinematics() {
         ["top1", "middle1", "top2", "middle2"]
     );
     assert_eq!(
-        <vigp::systems::CartpoleMinimal as Mechanism<2, 0>>::KINDS,
+        <vigp::systems::CartpoleMinimal as vigp::embedded::Dynamics<2, 0>>::KINDS,
         [vigp::CoordinateKind::Length, vigp::CoordinateKind::Angle]
     );
     // θ = π/2 points the pendulum to the right: its end is at (1, 0).

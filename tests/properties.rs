@@ -46,7 +46,9 @@ fn angle() -> impl Strategy<Value = f64> {
 /// A failure must be a Newton failure with finite diagnostics.
 fn typed_failure(e: &StepError) -> bool {
     match e {
-        StepError::NotConverged { residual, .. } => residual.is_finite(),
+        StepError::NotConverged { residual, .. } | StepError::LineSearchFailed { residual, .. } => {
+            residual.is_finite()
+        }
         StepError::SingularJacobian { .. } | StepError::NonFiniteResidual { .. } => true,
         _ => false,
     }

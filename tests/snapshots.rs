@@ -117,19 +117,38 @@ fn generated_code_contains_only_what_the_scene_needs() {
     assert!(embedded(&dp).contains("fn for_each_damper"));
     assert!(!embedded(&dp).contains("fn constraints"));
     assert!(embedded(&fourbar).contains("fn constraints"));
+    // the closed-form terms likewise: no constraint functions for a tree,
+    // no damping matrix for an undamped scene
+    let dynamics = |code: &str, view: &str| {
+        let start = code
+            .find(&format!("for {view} {{\n    const KINDS"))
+            .expect("dynamics impl");
+        code[start..start + code[start..].find("\n}\n").unwrap()].to_string()
+    };
+    assert!(!dynamics(&bare, "BareMinimal").contains("fn constraint"));
+    assert!(!dynamics(&bare, "BareMinimal").contains("out.damping"));
+    assert!(dynamics(&bare, "BareMaximal").contains("fn constraint_jacobian"));
+    assert!(dynamics(&dp, "DpMinimal").contains("out.damping"));
+    assert!(!dynamics(&dp, "DpMinimal").contains("fn constraint"));
+    assert!(dynamics(&fourbar, "FourbarMinimal").contains("fn constraint_hessian"));
+    // maximal coordinates: constant mass, so no ∂M/∂q is computed
+    assert!(dynamics(&dp, "DpMaximal").contains("const CONSTANT_MASS: bool = true"));
+    assert!(!dynamics(&dp, "DpMaximal").contains("out.dmass"));
     // the generated code is the code that compiles: `Bare` above is usable
     let _ = Bare::default().minimal();
 }
 
 /// The `no_std` expansion (what `vigp` without its `std` feature gets):
-/// parameters, kinematics and the fixed-size model, no dual-number views.
+/// parameters, kinematics, the closed-form terms of both views, no
+/// dual-number views.
 #[test]
 fn no_std_expansion_has_only_the_fixed_size_items() {
     let body = &mechanism_bodies(include_str!("../src/systems.rs"))[2].1;
     let code = vigp_codegen::expand_to_string_for(body, vigp_codegen::Target::NoStd).unwrap();
     assert!(code.contains("impl ::vigp::embedded::Model<2, 0> for DoublePendulum"));
     assert!(!code.contains("::vigp::Mechanism"));
-    assert!(!code.contains("Maximal"));
+    assert!(code.contains("impl ::vigp::embedded::Dynamics<6, 4> for DoublePendulumMaximal"));
+    assert!(code.contains("impl ::vigp::embedded::Dynamics<2, 0> for DoublePendulumMinimal"));
     assert!(!code.contains("num_dual"));
     insta::assert_snapshot!("DoublePendulum_no_std", code);
 }

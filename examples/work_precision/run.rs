@@ -73,7 +73,7 @@ impl Method {
 }
 
 /// One of the five integrators, statically dispatched.
-pub enum AnyIntegrator<M, const N: usize, const C: usize> {
+pub enum AnyIntegrator<M: Mechanism<N, C>, const N: usize, const C: usize> {
     /// Explicit Euler.
     ExplicitEuler(ExplicitEuler<M, N, C>),
     /// Symplectic Euler.

@@ -257,7 +257,6 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
     let nll = Literal::usize_unsuffixed(nl);
     let svector = quote!(::vigp::__private::nalgebra::SVector);
     let sys = quote!(self.sys);
-    let dissipative = m.dissipative();
     let poses = all_poses(m);
     let all_used = pose_pattern(m, &vec![true; nl]);
 
@@ -274,13 +273,6 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
         .links
         .iter()
         .flat_map(|l| ["x", "y", "theta"].map(|c| format!("{}.{c}", l.name.unraw())));
-    let kinds = m.links.iter().flat_map(|_| {
-        [
-            quote!(::vigp::CoordinateKind::Length),
-            quote!(::vigp::CoordinateKind::Length),
-            quote!(::vigp::CoordinateKind::Angle),
-        ]
-    });
     let kinetic = m.links.iter().enumerate().map(|(l, link)| {
         let ln = &link.name;
         let (ix, iy, it) = (coordinate_index(3 * l), coordinate_index(3 * l + 1), coordinate_index(3 * l + 2));
@@ -361,8 +353,6 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
     let std_items = quote! {
         impl ::vigp::Mechanism<#nm, #cm> for #maximal_ty {
             const COORDINATES: [&'static str; #nm] = [#(#coord_names),*];
-            const KINDS: [::vigp::CoordinateKind; #nm] = [#(#kinds),*];
-            const DISSIPATIVE: bool = #dissipative;
 
             fn kinetic_energy<D: ::vigp::Scalar>(&self, _q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
                 let links = &#sys.links;
@@ -403,7 +393,7 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
 /// The whole expansion.
 /// The generated items for a validated model; `target` chooses whether the
 /// std runtime's items (dual-number views) are included.
-pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
+pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     let Model {
         attrs, vis, name, ..
     } = m;
@@ -617,15 +607,20 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             ]
         })
         .collect();
-    let minimal_dynamics = crate::emit_terms::emit_dynamics(
-        m,
-        &crate::mechanics::Mechanics::new(m, crate::mechanics::View::Minimal),
-        &minimal_ty,
-        &kinds,
-    );
+    let minimal_mech = crate::mechanics::Mechanics::new(m, crate::mechanics::View::Minimal);
+    let maximal_mech = crate::mechanics::Mechanics::new(m, crate::mechanics::View::Maximal);
+    if !(minimal_mech.coefficients_are_finite() && maximal_mech.coefficients_are_finite()) {
+        return Err(syn::Error::new(
+            name.span(),
+            format!(
+                "the numbers of `{name}` (anchors, world points, axes) are too large: products of them overflow f64 in its closed-form terms"
+            ),
+        ));
+    }
+    let minimal_dynamics = crate::emit_terms::emit_dynamics(m, &minimal_mech, &minimal_ty, &kinds);
     let maximal_dynamics = crate::emit_terms::emit_dynamics(
         m,
-        &crate::mechanics::Mechanics::new(m, crate::mechanics::View::Maximal),
+        &maximal_mech,
         &format_ident!("{}Maximal", name),
         &maximal_kinds,
     );
@@ -634,8 +629,6 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         quote! {
             impl ::vigp::Mechanism<#n, #c> for #minimal_ty {
             const COORDINATES: [&'static str; #n] = [#(#coord_names),*];
-            const KINDS: [::vigp::CoordinateKind; #n] = [#(#kinds),*];
-            const DISSIPATIVE: bool = #dissipative;
 
             fn kinetic_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
                 let links = &#sys.links;
@@ -659,14 +652,6 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
 
             #constraints
 
-            fn fixed_size_step(
-                &self,
-                z: &::vigp::State<#n>,
-                dt: f64,
-                options: &::vigp::NewtonOptions,
-            ) -> ::core::option::Option<::core::result::Result<::vigp::State<#n>, ::vigp::embedded::StepError>> {
-                ::core::option::Option::Some(::vigp::__private::fixed_size_step::<_, #n, #c>(&#sys, z, dt, options))
-            }
             }
 
             #maximal_std
@@ -675,7 +660,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         quote!()
     };
 
-    quote! {
+    Ok(quote! {
         #(#attrs)*
         #[derive(Clone, Copy, Debug, PartialEq)]
         #vis struct #name {
@@ -750,10 +735,42 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
 
         #minimal_dynamics
 
+        #[doc = " The parameter struct is its minimal-coordinate model: `Stepper::new(sys, dt)` steps `sys.minimal()`."]
+        impl ::vigp::embedded::Dynamics<#n, #c> for #name {
+            const KINDS: [::vigp::CoordinateKind; #n] = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::KINDS;
+            const DISSIPATIVE: bool = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::DISSIPATIVE;
+            const CONSTANT_MASS: bool = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::CONSTANT_MASS;
+            type Constants = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::Constants;
+            fn constants(&self) -> ::core::result::Result<Self::Constants, ::vigp::embedded::StepError> {
+                ::vigp::embedded::Dynamics::constants(&self.minimal())
+            }
+            fn mass(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, #n> {
+                ::vigp::embedded::Dynamics::mass(&self.minimal(), k, q)
+            }
+            fn potential(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> f64 {
+                ::vigp::embedded::Dynamics::potential(&self.minimal(), k, q)
+            }
+            fn terms(&self, k: &Self::Constants, q: &#svector<f64, #n>, out: &mut ::vigp::embedded::Terms<#n>) {
+                ::vigp::embedded::Dynamics::terms(&self.minimal(), k, q, out)
+            }
+            fn force_jacobian(&self, k: &Self::Constants, q: &#svector<f64, #n>, v: &#svector<f64, #n>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, #n> {
+                ::vigp::embedded::Dynamics::force_jacobian(&self.minimal(), k, q, v)
+            }
+            fn constraint_values(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> #svector<f64, #c> {
+                ::vigp::embedded::Dynamics::constraint_values(&self.minimal(), k, q)
+            }
+            fn constraints_and_jacobian(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> (#svector<f64, #c>, ::vigp::__private::nalgebra::SMatrix<f64, #c, #n>) {
+                ::vigp::embedded::Dynamics::constraints_and_jacobian(&self.minimal(), k, q)
+            }
+            fn constraint_hessian(&self, k: &Self::Constants, q: &#svector<f64, #n>, mu: &#svector<f64, #c>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, #n> {
+                ::vigp::embedded::Dynamics::constraint_hessian(&self.minimal(), k, q, mu)
+            }
+        }
+
         #maximal_items
 
         #maximal_dynamics
 
         #std_items
-    }
+    })
 }

@@ -586,7 +586,7 @@ pub fn emit_dynamics(
         let (body, uq, uk) = assign_body(&mut constants, &outs, quote!());
         let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
         let g_fn = quote! {
-            fn constraints(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> #svector<f64, #cc> {
+            fn constraint_values(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> #svector<f64, #cc> {
                 let mut g = #svector::<f64, #cc>::zeros();
                 #body
                 g
@@ -608,7 +608,7 @@ pub fn emit_dynamics(
         let (body, uq, uk) = assign_body(&mut constants, &outs, quote!());
         let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
         let jac_fn = quote! {
-            fn constraint_jacobian(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> (#svector<f64, #cc>, #smatrix<f64, #cc, #nn>) {
+            fn constraints_and_jacobian(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> (#svector<f64, #cc>, #smatrix<f64, #cc, #nn>) {
                 let mut g = #svector::<f64, #cc>::zeros();
                 let mut jac = #smatrix::<f64, #cc, #nn>::zeros();
                 #body

@@ -45,7 +45,7 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream> {
     let parsed: parse::Input = syn::parse2(input)?;
     let model = model::validate(parsed)?;
-    Ok(emit::emit(&model, target))
+    emit::emit(&model, target)
 }
 
 /// Expand a description given as source text and pretty-print the result,

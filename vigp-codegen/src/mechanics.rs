@@ -405,6 +405,17 @@ impl Mechanics {
         }
     }
 
+    /// `false` when a coefficient of the closed forms is not finite or so
+    /// large (> 1e300) that its derivatives could overflow: the
+    /// description's literal numbers (anchors, world points) are too large.
+    pub fn coefficients_are_finite(&self) -> bool {
+        let ok = |e: &Expr| e.max_abs_coefficient() <= 1e300;
+        self.mass.iter().flatten().all(ok)
+            && ok(&self.potential)
+            && self.constraints.iter().all(ok)
+            && self.dampers.iter().all(|(_, s)| ok(s))
+    }
+
     /// Number of constraint rows.
     pub fn c(&self) -> usize {
         self.constraints.len()

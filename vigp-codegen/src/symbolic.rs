@@ -344,6 +344,21 @@ impl Expr {
             .all(|(phi, (a, b))| phi.iter().all(|x| *x == 0) && !a.has_coords() && !b.has_coords())
     }
 
+    /// The largest |coefficient| (NaN if any is NaN): the description's
+    /// numbers must keep it finite with room for derivatives.
+    pub fn max_abs_coefficient(&self) -> f64 {
+        let mut m = 0.0f64;
+        for (a, b) in self.terms.values() {
+            for c in a.terms.values().chain(b.terms.values()) {
+                if c.is_nan() {
+                    return f64::NAN;
+                }
+                m = m.max(c.abs());
+            }
+        }
+        m
+    }
+
     /// Numerical value for parameters `p` and coordinates `q`.
     pub fn eval(&self, p: &[f64], q: &[f64]) -> f64 {
         self.terms
@@ -431,8 +446,8 @@ mod tests {
     #[test]
     fn algebra_matches_numbers() {
         let n = 3;
-        let p = [0.7, -1.3];
-        let q = [0.4, -1.1, 0.25];
+        let p = [0.7f64, -1.3];
+        let q = [0.4f64, -1.1, 0.25];
         // e1 = p0·cos(q0 + q1) + q2·sin(q1)
         let mut e1 = Expr::cos(vec![1, 1, 0]).mul(&Expr::param(n, 0));
         e1 = e1.add(&Expr::sin(vec![0, 1, 0]).mul(&Expr::coord(n, 2)));

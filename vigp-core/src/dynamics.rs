@@ -69,7 +69,7 @@ pub trait Dynamics<const N: usize, const C: usize> {
     const CONSTANT_MASS: bool;
 
     /// Parameter-dependent constants (products of masses, lengths, …).
-    type Constants: Copy + core::fmt::Debug;
+    type Constants: Copy + core::fmt::Debug + PartialEq + Send + Sync;
 
     /// Validates the run-time parameters (finite; masses, inertias and
     /// damping coefficients ≥ 0; lengths > 0) and precomputes the
@@ -99,13 +99,13 @@ pub trait Dynamics<const N: usize, const C: usize> {
     ) -> SMatrix<f64, N, N>;
 
     /// Constraints g(q) (empty when `C = 0`).
-    fn constraints(&self, k: &Self::Constants, q: &SVector<f64, N>) -> SVector<f64, C> {
+    fn constraint_values(&self, k: &Self::Constants, q: &SVector<f64, N>) -> SVector<f64, C> {
         let _ = (k, q);
         SVector::zeros()
     }
 
     /// Constraints g(q) and their Jacobian G(q) = ∂g/∂q.
-    fn constraint_jacobian(
+    fn constraints_and_jacobian(
         &self,
         k: &Self::Constants,
         q: &SVector<f64, N>,
@@ -126,7 +126,7 @@ pub trait Dynamics<const N: usize, const C: usize> {
     }
 
     /// Total energy ½ vᵀM(q)v + V(q).
-    fn energy(&self, k: &Self::Constants, q: &SVector<f64, N>, v: &SVector<f64, N>) -> f64 {
+    fn energy_at(&self, k: &Self::Constants, q: &SVector<f64, N>, v: &SVector<f64, N>) -> f64 {
         0.5 * v.dot(&(self.mass(k, q) * v)) + self.potential(k, q)
     }
 }

@@ -209,6 +209,89 @@ pub fn solve_kkt<const N: usize, const C: usize>(
     Some((x, y))
 }
 
+/// `Some(diag)` when `j` is diagonal (exact zeros off the diagonal) with
+/// no zero on it.
+fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<SVector<f64, N>> {
+    for c in 0..N {
+        for r in 0..N {
+            if r != c && j[(r, c)] != 0.0 {
+                return None;
+            }
+        }
+    }
+    let d = j.diagonal();
+    d.iter().all(|x| *x != 0.0 && x.is_finite()).then_some(d)
+}
+
+/// Solve the saddle-point (KKT) system of [`solve_kkt`]; when J is
+/// singular but the whole KKT matrix is not (a link without rotational
+/// inertia in maximal coordinates, whose orientation the constraints fix),
+/// solve the equivalent augmented system
+///
+/// ```text
+/// (J + ρ·B·A) x + B y = r + ρ·B·c,   A x = c
+/// ```
+///
+/// which has the same solution (ρ·B times the second row added to the
+/// first). ρ = ±‖J‖/‖B·A‖ (max-norms) with the sign of tr(J)·tr(B·A), so
+/// that ρ·B·A adds to J with J's own sign. The augmented solution is
+/// accepted only when it solves the original system to 1e-8 relative to
+/// ‖J‖‖x‖ + ‖B‖‖y‖ + ‖r‖ (rows of J) and ‖A‖‖x‖ + ‖c‖ (rows of A);
+/// otherwise, or when J is singular and C = 0, `None`.
+///
+/// A diagonal J (maximal coordinates without damping) is inverted
+/// directly: the Schur complement A J⁻¹ B costs O(C²N).
+///
+/// Returns the solution and whether the regularisation was needed.
+pub fn solve_kkt_regularised<const N: usize, const C: usize>(
+    j: &SMatrix<f64, N, N>,
+    b: &SMatrix<f64, N, C>,
+    a: &SMatrix<f64, C, N>,
+    r: &SVector<f64, N>,
+    c: &SVector<f64, C>,
+) -> Option<((SVector<f64, N>, SVector<f64, C>), bool)> {
+    if C > 0
+        && let Some(d) = invertible_diagonal(j)
+    {
+        let inv = d.map(|x| 1.0 / x);
+        let jr = r.component_mul(&inv);
+        let mut jb = *b;
+        for (i, mut row) in jb.row_iter_mut().enumerate() {
+            row *= inv[i];
+        }
+        let s = a * jb;
+        let y = FullPivLu::new(s, 1e-13).solve(&(a * jr - c));
+        let x = jr - jb * y;
+        if x.iter().chain(y.iter()).all(|v| v.is_finite()) {
+            return Some(((x, y), false));
+        }
+    }
+    if let Some(sol) = solve_kkt(j, b, a, r, c) {
+        return Some((sol, false));
+    }
+    if C == 0 {
+        return None;
+    }
+    let k = b * a;
+    let (jn, kn) = (j.amax(), k.amax());
+    if !(kn > 0.0 && kn.is_finite() && jn.is_finite()) {
+        return None;
+    }
+    let sign = if j.trace() * k.trace() >= 0.0 {
+        1.0
+    } else {
+        -1.0
+    };
+    let rho = sign * if jn > 0.0 { jn / kn } else { 1.0 / kn };
+    let (x, y) = solve_kkt(&(j + k * rho), b, a, &(r + b * c * rho), c)?;
+    let e1 = (j * x + b * y - r).amax();
+    let e2 = (a * x - c).amax();
+    let s1 = j.amax() * x.amax() + b.amax() * y.amax() + r.amax();
+    let s2 = a.amax() * x.amax() + c.amax();
+    let ok = e1 <= 1e-8 * s1.max(f64::MIN_POSITIVE) && e2 <= 1e-8 * s2.max(f64::MIN_POSITIVE);
+    (ok && x.iter().chain(y.iter()).all(|v| v.is_finite())).then_some(((x, y), true))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1,28 +1,49 @@
-//! The first-order variational step (paper eq. 5–6, α = 0 rule of the std
-//! runtime's `Variational::new`) on fixed-size data, without allocation.
+//! The variational step on fixed-size data, without allocation: the
+//! engine behind every variational integrator in vigp (the std
+//! `Variational` wraps it).
 //!
-//! With x₁ = x₀ + Δt·v₀ the unknowns are v₁ and the multipliers λ:
+//! The discrete Lagrangian is L_d(x_k, x_{k+1}) = Δt·L(x_k + αΔt·v_k, v_k)
+//! with v_k = (x_{k+1} − x_k)/Δt: α = 0 is the paper's first-order
+//! (rectangle) rule ([`Stepper::new`]), α = ½ the second-order midpoint
+//! rule ([`Stepper::midpoint`]). With L = ½ vᵀM(q)v − V(q), Rayleigh
+//! dissipation R = ½ vᵀD(q)v and
+//! f(q, v) = ½[vᵀ ∂M/∂q_i v]_i − ∇V(q) − D(q)v, one step from the
+//! position x₁ = x₀ + Δt·v₀ with momentum p₀ solves for v₁ and the
+//! multipliers λ:
 //!
 //! ```text
-//! d(v₁, λ) = p₀ + Δt·(½[v₁ᵀ ∂M/∂q_i v₁]_i − ∇V − D v₁) − M v₁ − G(x₁)ᵀλ = 0
-//! c(v₁)    = g(x₁ + Δt·v₁) = 0,                p₀ = M(x₀) v₀
+//! d(v₁, λ) = p₀ + (1−α)Δt·f(m₁, v₁) − M(m₁)v₁ − G(x₁)ᵀλ = 0,   m₁ = x₁ + αΔt·v₁
+//! c(v₁)    = g(x₁ + Δt·v₁) = 0
+//! p₀       = M(m₀)v₀ + αΔt·f(m₀, v₀),                           m₀ = x₀ + αΔt·v₀
 //! ```
 //!
-//! (all terms at x₁). Because x₁ is fixed, M, ∂M/∂q, ∇V and D are computed
-//! once per step by one [`Jet2`](crate::Jet2) pass of the kinematics
-//! ([`terms`]); each Newton iteration is then `O(N³)` arithmetic on small
-//! matrices (plus one [`Jet1`](crate::Jet1) pass of the loop constraints for
-//! closed chains). A rollout carries p₁ = M(x₁)v₁ to the next step, so it
-//! costs one kinematics pass per step.
+//! and the momentum carried to the next step is p₁ = M(m₁)v₁ + αΔt·f(m₁, v₁)
+//! (for α = 0: M(x₁)v₁). All terms come from the model's closed forms
+//! ([`Dynamics`]); for α = 0 they are evaluated once per step (x₁ is fixed),
+//! for α = ½ once per Newton iteration.
 //!
-//! Numerical caveats: the Newton matrix is Δt(Q − D) − M (Q_ij = (∂M/∂q_i v)_j),
-//! solved by LU with complete pivoting; for loops the KKT system is solved by
-//! its Schur complement G A⁻¹Gᵀ with complete pivoting, so where G loses
-//! rank only the deficient multiplier is dropped (convergence there may
-//! still fail: [`StepError::LineSearchFailed`]).
+//! Newton's method uses the exact Jacobian
+//!
+//! ```text
+//! ∂d/∂v₁ = (1−α)Δt(Q − D) − M − αΔt·Qᵀ + α(1−α)Δt²·F_q,   Q_ij = (∂M/∂q_i v)_j,
+//! ```
+//!
+//! F_q = ∂f/∂q ([`Dynamics::force_jacobian`]), with a backtracking line
+//! search on the scaled residual. Linear solves: closed forms for N ≤ 2,
+//! partial pivoting for trees (the Newton matrix is a perturbation of −M),
+//! and for constraints the Schur complement G A⁻¹Gᵀ with complete pivoting
+//! (a rank-deficient G, as at a four-bar's folded pose, loses only the
+//! deficient multiplier); a diagonal Newton matrix (maximal coordinates)
+//! is inverted directly; a singular one with non-singular KKT matrix (a
+//! link without rotational inertia in maximal coordinates) is solved by
+//! an equivalent regularised system ([`crate::linalg::solve_kkt_regularised`]).
+//!
+//! Convergence: the momentum residual is scaled by |p₀|∞ + m̄ (m̄ the
+//! largest diagonal entry of M: the motion does not depend on the mass
+//! unit), the constraint residual by 1 + the largest length coordinate.
 
-use crate::linalg::{solve_kkt, solve_partial};
-use crate::model::{Model, constraints_and_jacobian, mass_matrix, terms};
+use crate::dynamics::{Dynamics, Terms};
+use crate::linalg::{solve_kkt_regularised, solve_partial};
 use crate::state::{CoordinateKind, State};
 use nalgebra::{SMatrix, SVector};
 
@@ -30,14 +51,20 @@ use nalgebra::{SMatrix, SVector};
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StepOptions {
     /// Convergence when the scaled residual max-norm is below this
-    /// (momentum residual relative to |p₀|∞ + the largest diagonal entry of
-    /// M, constraint residual relative to 1 + the largest length
-    /// coordinate). Default 1e-12, as the std runtime.
+    /// (module docs). Default 1e-12.
     pub tolerance: f64,
     /// Iteration cap (default 25).
     pub max_iterations: usize,
-    /// Smallest line-search step before the step fails (default 1/256).
+    /// Smallest line-search step before Newton is declared stalled
+    /// (default 1/256).
     pub min_step: f64,
+    /// A stalled Newton iteration (no decrease possible along the exact
+    /// Newton direction, as where a loop's constraint Jacobian loses rank
+    /// and g is quadratic in the lost direction) is accepted when the
+    /// scaled residual is below this (default 1e-10; reported as
+    /// [`StepReport::stalled`]). Set it equal to `tolerance` to refuse
+    /// stalled steps.
+    pub stall_tolerance: f64,
 }
 
 impl Default for StepOptions {
@@ -46,23 +73,44 @@ impl Default for StepOptions {
             tolerance: 1e-12,
             max_iterations: 25,
             min_step: 1.0 / 256.0,
+            stall_tolerance: 1e-10,
         }
+    }
+}
+
+impl StepOptions {
+    /// Refuse options that cannot work.
+    pub fn validate(&self) -> Result<(), StepError> {
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
+            return Err(StepError::InvalidOptions(
+                "tolerance must be finite and > 0",
+            ));
+        }
+        if !(self.stall_tolerance.is_finite() && self.stall_tolerance >= self.tolerance) {
+            return Err(StepError::InvalidOptions(
+                "stall_tolerance must be finite and >= tolerance",
+            ));
+        }
+        if !(self.min_step > 0.0 && self.min_step <= 1.0) {
+            return Err(StepError::InvalidOptions("min_step must be in (0, 1]"));
+        }
+        Ok(())
     }
 }
 
 /// Why a step failed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum StepError {
-    /// Δt is not finite or not positive.
+    /// Δt is not finite, not positive, or so large or small that Δt² is
+    /// not a normal f64.
     InvalidTimeStep {
         /// The offending Δt.
         dt: f64,
     },
     /// Options that cannot work.
     InvalidOptions(&'static str),
-    /// Model parameters that cannot describe a mechanism: a negative or
-    /// non-finite mass, inertia or damping coefficient, or non-finite
-    /// gravity.
+    /// Model parameters that cannot describe a mechanism (the message names
+    /// the parameter).
     InvalidModel(&'static str),
     /// The state (or the momentum) holds NaN or ±∞.
     NonFiniteState,
@@ -71,12 +119,13 @@ pub enum StepError {
         /// Newton iteration.
         iteration: usize,
     },
-    /// The Newton (or Schur) matrix is singular.
+    /// The Newton (or KKT) matrix is singular.
     SingularJacobian {
         /// Newton iteration.
         iteration: usize,
     },
-    /// The line search found no decrease down to `min_step`.
+    /// The line search found no decrease down to `min_step`, above the
+    /// stall tolerance.
     LineSearchFailed {
         /// Newton iteration.
         iteration: usize,
@@ -95,9 +144,10 @@ pub enum StepError {
 impl core::fmt::Display for StepError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::InvalidTimeStep { dt } => {
-                write!(f, "invalid time step dt = {dt} (must be finite and > 0)")
-            }
+            Self::InvalidTimeStep { dt } => write!(
+                f,
+                "invalid time step dt = {dt} (must be finite and > 0, with dt² a normal number)"
+            ),
             Self::InvalidOptions(why) => write!(f, "invalid step options: {why}"),
             Self::InvalidModel(why) => write!(f, "invalid model parameters: {why}"),
             Self::NonFiniteState => write!(f, "non-finite state or momentum"),
@@ -144,51 +194,114 @@ impl core::fmt::Display for RolloutError {
 
 impl core::error::Error for RolloutError {}
 
-/// Diagnostics of a converged step.
-#[derive(Clone, Copy, Debug, PartialEq)]
+/// Diagnostics of a converged step (with sub-steps: iterations summed, the
+/// largest residual, any sub-step's flags).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct StepReport {
     /// Newton iterations used.
     pub iterations: usize,
-    /// Final scaled residual: evaluated, or, for a tree (`C = 0`) whose
-    /// last Newton step was a full one, its quadratic remainder
-    /// (Δt/2)[Δvᵀ ∂M/∂q_i Δv]_i (the residual is exactly quadratic in v, so
-    /// this is the residual left by that step, up to rounding).
+    /// Final scaled residual: evaluated, or, for a tree (`C = 0`) with the
+    /// first-order rule whose last Newton step was a full one, its
+    /// quadratic remainder (Δt/2)[Δvᵀ ∂M/∂q_i Δv]_i (the residual is then
+    /// exactly quadratic in v, so this is the residual left by that step,
+    /// up to rounding).
     pub residual: f64,
+    /// The step was accepted as stalled ([`StepOptions::stall_tolerance`]).
+    pub stalled: bool,
+    /// Some Newton matrix was singular and the equivalent regularised KKT
+    /// system was solved instead.
+    pub regularised: bool,
 }
 
-/// The first-order variational integrator of a [`Model`] with a fixed Δt.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Stepper<M, const N: usize, const C: usize> {
+impl StepReport {
+    fn merge(&mut self, other: &StepReport) {
+        self.iterations += other.iterations;
+        self.residual = self.residual.max(other.residual);
+        self.stalled |= other.stalled;
+        self.regularised |= other.regularised;
+    }
+}
+
+/// Checks a time step: finite, > 0, and Δt² a normal number (the Newton
+/// matrix mixes Δt and Δt² scales; Δt = 1e300 or 1e-300 cannot work).
+pub fn check_time_step(dt: f64) -> Result<(), StepError> {
+    if dt.is_finite() && dt > 0.0 && (dt * dt).is_normal() {
+        Ok(())
+    } else {
+        Err(StepError::InvalidTimeStep { dt })
+    }
+}
+
+/// A converged sub-step: v₁, the momentum p₁ and diagnostics.
+type Solved<const N: usize> = (SVector<f64, N>, SVector<f64, N>, StepReport);
+
+/// A variational integrator of a [`Dynamics`] model with a fixed Δt:
+/// first order ([`Stepper::new`], the paper's rule) or second order
+/// ([`Stepper::midpoint`]); optional sub-steps. Construction validates Δt,
+/// the options and the model's run-time parameters and precomputes the
+/// model's constants; steps allocate nothing.
+#[derive(Clone, Copy, Debug)]
+pub struct Stepper<M: Dynamics<N, C>, const N: usize, const C: usize> {
     model: M,
+    k: M::Constants,
     dt: f64,
+    alpha: f64,
     options: StepOptions,
+    substeps: usize,
 }
 
 fn max_abs<const K: usize>(x: &SVector<f64, K>) -> f64 {
     x.iter().fold(0.0f64, |m, v| m.max(v.abs()))
 }
 
-impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
-    /// A stepper with default options.
+impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
+    /// The paper's first-order variational integrator with default options.
     pub fn new(model: M, dt: f64) -> Result<Self, StepError> {
         Self::with_options(model, dt, StepOptions::default())
     }
 
-    /// A stepper with the given options.
+    /// The first-order integrator with the given options.
     pub fn with_options(model: M, dt: f64, options: StepOptions) -> Result<Self, StepError> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(StepError::InvalidTimeStep { dt });
+        check_time_step(dt)?;
+        options.validate()?;
+        let k = model.constants()?;
+        Ok(Self {
+            model,
+            k,
+            dt,
+            alpha: 0.0,
+            options,
+            substeps: 1,
+        })
+    }
+
+    /// The second-order variational integrator of the midpoint discrete
+    /// Lagrangian L_d = Δt·L((x_k + x_{k+1})/2, (x_{k+1} − x_k)/Δt).
+    pub fn midpoint(model: M, dt: f64) -> Result<Self, StepError> {
+        let mut s = Self::new(model, dt)?;
+        s.alpha = 0.5;
+        Ok(s)
+    }
+
+    /// The same integrator with other Newton options.
+    pub fn options(mut self, options: StepOptions) -> Result<Self, StepError> {
+        options.validate()?;
+        self.options = options;
+        Ok(self)
+    }
+
+    /// Each step of Δt becomes `k` variational steps of h = Δt/k: the
+    /// integrator is then exactly the variational integrator at h, sampled
+    /// every Δt, and **the state's velocity is the discrete velocity of the
+    /// sub-step**, v = (q(t + h) − q(t))/h. For motions too fast for the DEL
+    /// equations to have a root near v₀ at Δt. `k = 0` is refused.
+    pub fn substeps(mut self, k: usize) -> Result<Self, StepError> {
+        if k == 0 {
+            return Err(StepError::InvalidOptions("substeps must be >= 1"));
         }
-        if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
-            return Err(StepError::InvalidOptions(
-                "tolerance must be finite and > 0",
-            ));
-        }
-        if !(options.min_step > 0.0 && options.min_step <= 1.0) {
-            return Err(StepError::InvalidOptions("min_step must be in (0, 1]"));
-        }
-        validate(&model)?;
-        Ok(Self { model, dt, options })
+        check_time_step(self.dt / k as f64)?;
+        self.substeps = k;
+        Ok(self)
     }
 
     /// The model.
@@ -196,60 +309,198 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         &self.model
     }
 
+    /// The model's precomputed constants.
+    pub fn constants(&self) -> &M::Constants {
+        &self.k
+    }
+
     /// Δt.
     pub fn dt(&self) -> f64 {
         self.dt
     }
 
-    /// Discrete momentum p = M(q)v of a state (the p₀ of its step).
+    /// The time step of one sub-step, Δt / substeps.
+    pub fn substep_dt(&self) -> f64 {
+        self.dt / self.substeps as f64
+    }
+
+    /// Number of sub-steps per step.
+    pub fn substep_count(&self) -> usize {
+        self.substeps
+    }
+
+    /// Order of accuracy of the rule (1 or 2).
+    pub fn order(&self) -> usize {
+        if self.alpha == 0.0 { 1 } else { 2 }
+    }
+
+    /// The Newton options.
+    pub fn step_options(&self) -> &StepOptions {
+        &self.options
+    }
+
+    /// f(q, v) = ½[vᵀ ∂M/∂q_i v]_i − ∇V − D v from terms at q.
+    fn forces(t: &Terms<N>, v: &SVector<f64, N>) -> SVector<f64, N> {
+        let mut f = -t.dpotential;
+        if !M::CONSTANT_MASS {
+            for (i, dm) in t.dmass.iter().enumerate() {
+                f[i] += 0.5 * v.dot(&(dm * v));
+            }
+        }
+        if M::DISSIPATIVE {
+            f -= t.damping * v;
+        }
+        f
+    }
+
+    /// The discrete momentum p₀ of a step from `z` with sub-step size `h`
+    /// (module docs): M(x₀)v₀ for the first-order rule.
+    fn momentum_at(&self, z: &State<N>, h: f64) -> SVector<f64, N> {
+        if self.alpha == 0.0 {
+            return self.model.mass(&self.k, &z.q) * z.v;
+        }
+        let m0 = z.q + z.v * (self.alpha * h);
+        let mut t = Terms::zeros();
+        self.model.terms(&self.k, &m0, &mut t);
+        t.mass * z.v + Self::forces(&t, &z.v) * (self.alpha * h)
+    }
+
+    /// The discrete momentum p₀ of a step from `z` (the momentum a rollout
+    /// carries; module docs).
     pub fn momentum(&self, z: &State<N>) -> SVector<f64, N> {
-        mass_matrix(&self.model, &z.q) * z.v
+        self.momentum_at(z, self.substep_dt())
+    }
+
+    /// Energy of a discrete state at the rule's quadrature point,
+    /// E(x + αh·v, v): for the midpoint rule the discrete velocity belongs to
+    /// the interval's midpoint, which makes the measured energy error second
+    /// order. Equals the model's energy of `z` for the first-order rule.
+    pub fn energy(&self, z: &State<N>) -> f64 {
+        let h = self.substep_dt();
+        let q = z.q + z.v * (self.alpha * h);
+        self.model.energy_at(&self.k, &q, &z.v)
     }
 
     /// One step from `z`.
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
-        // `solve` refuses a non-finite z or p₀ with `NonFiniteState`.
+        self.step_with_report(z).map(|(z, _)| z)
+    }
+
+    /// One step from `z` with solver diagnostics.
+    pub fn step_with_report(&self, z: &State<N>) -> Result<(State<N>, StepReport), StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
         let p0 = self.momentum(z);
-        self.solve(z, &p0, &z.v).map(|(z1, _, _)| z1)
+        self.advance(z, &p0, &z.v).map(|(z1, _, r)| (z1, r))
     }
 
     /// One step from `z` with its momentum `p0` known (from the previous
-    /// step); returns the new state, its momentum and diagnostics.
+    /// step, see [`Stepper::momentum`]); returns the new state, its momentum
+    /// and diagnostics.
     pub fn step_with_momentum(
         &self,
         z: &State<N>,
         p0: &SVector<f64, N>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
-        self.solve(z, p0, &z.v)
-    }
-
-    /// The step from `z` with momentum `p0`, Newton started at `guess`.
-    fn solve(
-        &self,
-        z: &State<N>,
-        p0: &SVector<f64, N>,
-        guess: &SVector<f64, N>,
-    ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
-        if !z.is_finite() || !p0.iter().all(|x| x.is_finite()) {
+        if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
-        self.solve_finite(z, p0, guess)
+        self.advance(z, p0, &z.v)
     }
 
-    /// [`Self::solve`] for inputs known to be finite: a converged step's
-    /// outputs are (its residual is finite), so rollouts check only z₀.
-    fn solve_finite(
+    /// All sub-steps of one step from `z` with momentum `p0`, the first
+    /// Newton solve started at `guess`.
+    fn advance(
         &self,
         z: &State<N>,
         p0: &SVector<f64, N>,
         guess: &SVector<f64, N>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
-        let h = self.dt;
-        let x1 = z.q + z.v * h;
-        let t = terms(&self.model, &x1);
-        // Momentum scale |p₀|∞ + m̄ (m̄ = largest diagonal entry of M, i.e.
-        // one unit of velocity's momentum) so that convergence does not
-        // depend on the mass unit; the std runtime scales the same way.
+        if !p0.iter().all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteState);
+        }
+        let h = self.substep_dt();
+        let (mut z, mut p) = (*z, *p0);
+        let mut report = StepReport::default();
+        for i in 0..self.substeps {
+            let x1 = z.q + z.v * h;
+            let g = if i == 0 { *guess } else { z.v };
+            let (v1, p1, r) = self.solve(&x1, &p, h, &g)?;
+            report.merge(&r);
+            (z, p) = (State { q: x1, v: v1 }, p1);
+        }
+        Ok((z, p, report))
+    }
+
+    /// Fills `out` with the trajectory from `z0`: `out[0] = z0`, then one
+    /// step per entry (see [`Stepper::steps_into`]). No allocation.
+    pub fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), RolloutError> {
+        let Some((first, rest)) = out.split_first_mut() else {
+            return Ok(());
+        };
+        *first = *z0;
+        self.steps_into(z0, rest)
+    }
+
+    /// Fills `out` with the states after 1, 2, …, `out.len()` steps from
+    /// `z0`. The momentum is carried from step to step, and Newton starts
+    /// from the linear extrapolation 2v_k − v_{k−1} (the converged step is
+    /// the same to the solver tolerance). No allocation.
+    pub fn steps_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), RolloutError> {
+        let fail = |step, error| RolloutError { step, error };
+        if !z0.is_finite() {
+            return Err(fail(0, StepError::NonFiniteState));
+        }
+        if out.is_empty() {
+            return Ok(());
+        }
+        let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
+        for (k, slot) in out.iter_mut().enumerate() {
+            let guess = if self.substeps == 1 {
+                z.v * 2.0 - v_prev
+            } else {
+                z.v
+            };
+            let (z1, p1, _) = self.advance(&z, &p, &guess).map_err(|e| fail(k, e))?;
+            *slot = z1;
+            v_prev = z.v;
+            (z, p) = (z1, p1);
+        }
+        Ok(())
+    }
+
+    /// One variational step of size `h` from position `x1` with momentum
+    /// `p0` (module docs), Newton started at `guess`: returns v₁, the new
+    /// momentum p₁ and diagnostics. This is the position–momentum form of
+    /// the integrator, (x₁, p₀) ↦ (x₁ + h·v₁, p₁), which composition
+    /// methods chain with different `h`.
+    pub fn solve(
+        &self,
+        x1: &SVector<f64, N>,
+        p0: &SVector<f64, N>,
+        h: f64,
+        guess: &SVector<f64, N>,
+    ) -> Result<Solved<N>, StepError> {
+        let alpha = self.alpha;
+        let model = &self.model;
+        let k = &self.k;
+        let opts = &self.options;
+        let mut t = Terms::zeros();
+        let mut v = if guess.iter().all(|x| x.is_finite()) {
+            *guess
+        } else {
+            SVector::zeros()
+        };
+        // terms at x₁ (first order: once per step) or at m₁(v)
+        let at = |v: &SVector<f64, N>| {
+            if alpha == 0.0 {
+                *x1
+            } else {
+                x1 + v * (alpha * h)
+            }
+        };
+        model.terms(k, &at(&v), &mut t);
         let m_bar = (0..N).map(|i| t.mass[(i, i)].abs()).fold(0.0, f64::max);
         let p_scale = match max_abs(p0) + m_bar {
             0.0 => 1.0,
@@ -261,106 +512,144 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 l_scale = l_scale.max(1.0 + x.abs());
             }
         }
-        let g1 = if C > 0 {
-            constraints_and_jacobian(&self.model, &x1).1
+        let (inv_p, inv_l) = (1.0 / p_scale, 1.0 / l_scale);
+        let g1t: SMatrix<f64, N, C> = if C > 0 {
+            model.constraints_and_jacobian(k, x1).1.transpose()
         } else {
             SMatrix::zeros()
         };
-        // d(v) = b − M_h v + (Δt/2)[vᵀ ∂M/∂q_i v]_i with the v-independent
-        // parts formed once: b = p₀ − Δt∇V, M_h = M + Δt·D.
-        let b = p0 - t.dpotential * h;
-        let m_h = if M::DISSIPATIVE {
-            t.mass + t.damping * h
-        } else {
-            t.mass
+        let a1 = (1.0 - alpha) * h;
+        // residual d(v, λ), constraint c(v) and its Jacobian G(x₁ + h v)
+        let residual = |t: &Terms<N>, v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
+            let mut d = p0 + Self::forces(t, v) * a1 - t.mass * v;
+            if C > 0 {
+                d -= g1t * lambda;
+            }
+            d
         };
-        let inv_p_scale = 1.0 / p_scale;
-        let inv_l_scale = 1.0 / l_scale;
-        let eval = |v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
-            let (d, q) = residual(&t.dmass, &m_h, &b, h, v);
-            let d = d - g1.transpose() * lambda;
-            let (c, g2) = if C > 0 {
-                constraints_and_jacobian(&self.model, &(x1 + v * h))
+        let constraint = |v: &SVector<f64, N>| {
+            if C > 0 {
+                model.constraints_and_jacobian(k, &(x1 + v * h))
             } else {
                 (SVector::zeros(), SMatrix::zeros())
-            };
-            let err = (max_abs(&d) * inv_p_scale).max(max_abs(&c) * inv_l_scale);
-            (d, q, c, g2, err)
+            }
         };
-        let mut v = if guess.iter().all(|x| x.is_finite()) {
-            *guess
-        } else {
-            z.v
-        };
+        let error =
+            |d: &SVector<f64, N>, c: &SVector<f64, C>| (max_abs(d) * inv_p).max(max_abs(c) * inv_l);
         let mut lambda = SVector::<f64, C>::zeros();
-        let (mut d, mut q, mut c, mut g2, mut err) = eval(&v, &lambda);
-        for iteration in 0..self.options.max_iterations {
+        let mut d = residual(&t, &v, &lambda);
+        let (mut c, mut g2) = constraint(&v);
+        let mut err = error(&d, &c);
+        let mut regularised = false;
+        let momentum = |t: &Terms<N>, v: &SVector<f64, N>| {
+            if alpha == 0.0 {
+                t.mass * v
+            } else {
+                t.mass * v + Self::forces(t, v) * (alpha * h)
+            }
+        };
+        for iteration in 0..opts.max_iterations {
             if !err.is_finite() {
                 return Err(StepError::NonFiniteResidual { iteration });
             }
-            if err <= self.options.tolerance {
-                let z1 = State { q: x1, v };
-                return Ok((
-                    z1,
-                    t.mass * v,
-                    StepReport {
-                        iterations: iteration,
-                        residual: err,
-                    },
-                ));
+            if err <= opts.tolerance {
+                let report = StepReport {
+                    iterations: iteration,
+                    residual: err,
+                    stalled: false,
+                    regularised,
+                };
+                return Ok((v, momentum(&t, &v), report));
             }
-            // Newton matrix A = ∂d/∂v = ΔtQ − M_h, Q_ij = (∂M/∂q_i v)_j.
-            let a = q * h - m_h;
+            // Newton matrix ∂d/∂v (module docs)
+            let mut jac = -t.mass;
+            if !M::CONSTANT_MASS {
+                let mut q = SMatrix::<f64, N, N>::zeros();
+                for (i, dm) in t.dmass.iter().enumerate() {
+                    q.set_row(i, &(dm * v).transpose());
+                }
+                jac += q * a1;
+                if alpha != 0.0 {
+                    jac -= q.transpose() * (alpha * h);
+                }
+            }
+            if M::DISSIPATIVE {
+                jac -= t.damping * a1;
+            }
+            if alpha != 0.0 {
+                jac += model.force_jacobian(k, &at(&v), &v) * (alpha * a1 * h);
+            }
             let singular = StepError::SingularJacobian { iteration };
             let (dv, dl) = if C == 0 {
-                // A is a small perturbation of −M: partial pivoting suffices.
-                let dv = solve_partial(&a, &(-d)).ok_or(singular)?;
-                // With x₁ fixed, d is exactly quadratic in v, so after a full
-                // Newton step the residual is the quadratic remainder
-                // d(v + Δ) = (Δt/2)[Δᵀ ∂M/∂q_i Δ]_i, up to the O(ε·scale)
-                // rounding of d(v) and of the solve. That costs N³
-                // multiply-adds, less than evaluating d (which also forms Q
-                // and M_h v). When it is within half the tolerance (the other
-                // half covers the rounding, ~1e-16 relative) the step is
-                // accepted without evaluating d again.
-                let half_h = 0.5 * h;
-                let bound = t
-                    .dmass
-                    .iter()
-                    .map(|dm| (half_h * dv.dot(&(dm * dv))).abs())
-                    .fold(0.0, f64::max)
-                    * inv_p_scale;
-                if bound <= 0.5 * self.options.tolerance {
-                    let v1 = v + dv;
-                    if v1.iter().all(|x| x.is_finite()) {
-                        return Ok((
-                            State { q: x1, v: v1 },
-                            t.mass * v1,
-                            StepReport {
+                let dv = solve_partial(&jac, &(-d)).ok_or(singular)?;
+                // First-order rule, tree: with x₁ fixed d is exactly
+                // quadratic in v, so after a full Newton step the residual
+                // is the quadratic remainder (Δt/2)[Δvᵀ ∂M/∂q_i Δv]_i up to
+                // the O(ε·scale) rounding of d(v) and of the solve, cheaper
+                // than evaluating d again. Within half the tolerance (the
+                // other half covers the rounding) the step is accepted.
+                if alpha == 0.0 {
+                    let bound = if M::CONSTANT_MASS {
+                        0.0
+                    } else {
+                        t.dmass
+                            .iter()
+                            .map(|dm| (0.5 * h * dv.dot(&(dm * dv))).abs())
+                            .fold(0.0, f64::max)
+                            * inv_p
+                    };
+                    if bound <= 0.5 * opts.tolerance {
+                        let v1 = v + dv;
+                        if v1.iter().all(|x| x.is_finite()) {
+                            let report = StepReport {
                                 iterations: iteration + 1,
                                 residual: bound,
-                            },
-                        ));
+                                stalled: false,
+                                regularised,
+                            };
+                            return Ok((v1, t.mass * v1, report));
+                        }
                     }
                 }
                 (dv, SVector::zeros())
             } else {
-                // A Δv − G₁ᵀΔλ = −d,  G₂ Δv = −c/Δt (Schur complement, complete
-                // pivoting: a rank-deficient G loses only the deficient
-                // multiplier).
-                solve_kkt(&a, &(-g1.transpose()), &g2, &(-d), &(c / -h)).ok_or(singular)?
+                // J Δv − G₁ᵀΔλ = −d,  G₂ Δv = −c/h
+                let ((dv, dl), reg) =
+                    solve_kkt_regularised(&jac, &(-g1t), &g2, &(-d), &(c / -h)).ok_or(singular)?;
+                regularised |= reg;
+                (dv, dl)
             };
-            // Backtracking on the scaled residual.
-            let mut alpha = 1.0;
+            // backtracking on the scaled residual
+            let mut step = 1.0;
             loop {
-                let (vn, ln) = (v + dv * alpha, lambda + dl * alpha);
-                let (dn, qn, cn, g2n, errn) = eval(&vn, &ln);
-                if errn.is_finite() && (errn < err || errn <= self.options.tolerance) {
-                    (v, lambda, d, q, c, g2, err) = (vn, ln, dn, qn, cn, g2n, errn);
+                let (vn, ln) = (v + dv * step, lambda + dl * step);
+                if alpha != 0.0 {
+                    model.terms(k, &at(&vn), &mut t);
+                }
+                let dn = residual(&t, &vn, &ln);
+                let (cn, g2n) = constraint(&vn);
+                let errn = error(&dn, &cn);
+                if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
+                    (v, lambda, d, c, g2, err) = (vn, ln, dn, cn, g2n, errn);
                     break;
                 }
-                alpha *= 0.5;
-                if alpha < self.options.min_step {
+                step *= 0.5;
+                if step < opts.min_step {
+                    if alpha != 0.0 {
+                        // terms back at the current iterate
+                        model.terms(k, &at(&v), &mut t);
+                    }
+                    // no decrease along the exact Newton direction: accept
+                    // at the attainable accuracy, or fail
+                    if err <= opts.stall_tolerance {
+                        let report = StepReport {
+                            iterations: iteration + 1,
+                            residual: err,
+                            stalled: true,
+                            regularised,
+                        };
+                        return Ok((v, momentum(&t, &v), report));
+                    }
                     return Err(StepError::LineSearchFailed {
                         iteration,
                         residual: err,
@@ -368,104 +657,18 @@ impl<M: Model<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 }
             }
         }
-        if err <= self.options.tolerance {
-            return Ok((
-                State { q: x1, v },
-                t.mass * v,
-                StepReport {
-                    iterations: self.options.max_iterations,
-                    residual: err,
-                },
-            ));
+        if err <= opts.tolerance {
+            let report = StepReport {
+                iterations: opts.max_iterations,
+                residual: err,
+                stalled: false,
+                regularised,
+            };
+            return Ok((v, momentum(&t, &v), report));
         }
         Err(StepError::NotConverged {
-            iterations: self.options.max_iterations,
+            iterations: opts.max_iterations,
             residual: err,
         })
     }
-
-    /// Fills `out` with the trajectory from `z0`: `out[0] = z0`, then one
-    /// step per entry. The momentum is carried from step to step, so each
-    /// step costs one kinematics pass, and Newton starts from the linear
-    /// extrapolation 2v_k − v_{k−1} (one iteration fewer on smooth motion;
-    /// the converged step is the same to the solver tolerance). No
-    /// allocation.
-    pub fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), RolloutError> {
-        let Some((first, rest)) = out.split_first_mut() else {
-            return Ok(());
-        };
-        if !z0.is_finite() {
-            return Err(RolloutError {
-                step: 0,
-                error: StepError::NonFiniteState,
-            });
-        }
-        *first = *z0;
-        let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
-        if !p.iter().all(|x| x.is_finite()) {
-            return Err(RolloutError {
-                step: 0,
-                error: StepError::NonFiniteState,
-            });
-        }
-        for (k, slot) in rest.iter_mut().enumerate() {
-            let guess = z.v * 2.0 - v_prev;
-            let (z1, p1, _) = self
-                .solve_finite(&z, &p, &guess)
-                .map_err(|error| RolloutError { step: k, error })?;
-            *slot = z1;
-            v_prev = z.v;
-            (z, p) = (z1, p1);
-        }
-        Ok(())
-    }
-}
-
-/// Checks the run-time parameters a [`Model`] exposes: gravity finite,
-/// every body's mass and inertia finite and ≥ 0 (zero is a massless link),
-/// every damping coefficient finite and ≥ 0 (a negative one would inject
-/// energy). Bodies and dampers are visited once at q = 0 (their parameters
-/// do not depend on q).
-fn validate<M: Model<N, C>, const N: usize, const C: usize>(model: &M) -> Result<(), StepError> {
-    let ok = |x: f64| x.is_finite() && x >= 0.0;
-    if !model.gravity().iter().all(|g| g.is_finite()) {
-        return Err(StepError::InvalidModel("gravity must be finite"));
-    }
-    let q = SVector::<f64, N>::zeros();
-    let mut err = None;
-    model.for_each_body(&q, &mut |b| {
-        if !ok(b.mass) {
-            err = err.or(Some("a link mass is negative or not finite"));
-        }
-        if !ok(b.inertia) {
-            err = err.or(Some("a link inertia is negative or not finite"));
-        }
-    });
-    model.for_each_damper(&q, &mut |c, _| {
-        if !ok(c) {
-            err = err.or(Some("a damping coefficient is negative or not finite"));
-        }
-    });
-    err.map_or(Ok(()), |why| Err(StepError::InvalidModel(why)))
-}
-
-/// d(v) without the multiplier term, b − M_h v + (Δt/2)[vᵀ∂M/∂q_i v]_i
-/// (b = p₀ − Δt∇V, M_h = M + ΔtD), and Q (row i = (∂M/∂q_i v)ᵀ), which the
-/// Newton matrix reuses.
-fn residual<const N: usize>(
-    dmass: &[SMatrix<f64, N, N>; N],
-    m_h: &SMatrix<f64, N, N>,
-    b: &SVector<f64, N>,
-    h: f64,
-    v: &SVector<f64, N>,
-) -> (SVector<f64, N>, SMatrix<f64, N, N>) {
-    let mut d = b - m_h * v;
-    let mut q = SMatrix::<f64, N, N>::zeros();
-    let half_h = 0.5 * h;
-    for (i, dm) in dmass.iter().enumerate() {
-        let dmv = dm * v;
-        d[i] += half_h * v.dot(&dmv);
-        q.set_row(i, &dmv.transpose());
-    }
-    (d, q)
 }

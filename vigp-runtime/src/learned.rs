@@ -82,9 +82,8 @@ pub struct Transition<const N: usize> {
     pub v_next: SVector<f64, N>,
 }
 
-/// The nominal first-order VI step of the prior: the fixed-size stepper when
-/// the mechanism has one ([`Mechanism::fixed_size_step`], ~10× faster),
-/// else, or if it fails, the std [`Variational`] integrator with `options`.
+/// The nominal first-order VI step of the prior (the fixed-size engine
+/// on the model's closed-form terms, as [`Variational::new`] runs it).
 fn nominal_step<M, const N: usize, const C: usize>(
     model: &M,
     dt: f64,
@@ -94,9 +93,6 @@ fn nominal_step<M, const N: usize, const C: usize>(
 where
     M: Mechanism<N, C> + Clone,
 {
-    if let Some(Ok(next)) = model.fixed_size_step(z, dt, options) {
-        return Ok(next);
-    }
     Variational::new(model.clone(), dt)
         .with_options(*options)
         .step(z)

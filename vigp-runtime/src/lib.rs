@@ -24,6 +24,7 @@ pub mod mechanism;
 pub mod newton;
 pub mod params;
 pub mod projection;
+pub mod reference;
 pub mod summary;
 pub mod variational;
 
@@ -42,7 +43,6 @@ pub use vigp_core::Real;
 /// Re-exports for generated code. Not part of the public API.
 #[doc(hidden)]
 pub mod __private {
-    pub use crate::mechanism::fixed_size_step;
     pub use nalgebra;
     pub use num_dual;
 }

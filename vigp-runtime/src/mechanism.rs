@@ -13,45 +13,24 @@ impl<T: DualNum<Primitive = f64> + Copy> Scalar for T {}
 
 pub use vigp_core::state::{CoordinateKind, State};
 
-use crate::newton::NewtonOptions;
-
-/// The body of [`Mechanism::fixed_size_step`] for a generated minimal view
-/// (called by generated code through `::vigp::__private`): the
-/// [`vigp_core::Stepper`] of `model` with the options that carry over.
-#[doc(hidden)]
-pub fn fixed_size_step<M, const N: usize, const C: usize>(
-    model: &M,
-    z: &State<N>,
-    dt: f64,
-    options: &NewtonOptions,
-) -> Result<State<N>, vigp_core::StepError>
-where
-    M: vigp_core::Model<N, C> + Copy,
-{
-    let options = vigp_core::StepOptions {
-        tolerance: options.tolerance,
-        max_iterations: options.max_iterations,
-        min_step: options.min_step,
-    };
-    vigp_core::Stepper::with_options(*model, dt, options)?.step(z)
-}
-
 /// A planar mechanical model with `N` generalized coordinates and `C` scalar
 /// holonomic constraints g(q) = 0.
 ///
 /// Implemented by the code that `mechanism!` generates, once per coordinate
-/// view (minimal, maximal). Every required function is generic over the
-/// [`Scalar`], so the integrators obtain exact first and second derivatives
-/// by evaluating the same body on dual numbers.
-pub trait Mechanism<const N: usize, const C: usize> {
+/// view (minimal, maximal), on top of its closed-form terms
+/// ([`vigp_core::Dynamics`], which every integrator runs on; it also holds
+/// [`Dynamics::KINDS`](vigp_core::Dynamics::KINDS) and
+/// [`Dynamics::DISSIPATIVE`](vigp_core::Dynamics::DISSIPATIVE)).
+///
+/// The functions of this trait are the **reference path**: the Lagrangian,
+/// Rayleigh function and constraints generic over the [`Scalar`], so that
+/// exact first and second derivatives follow by evaluating the same body on
+/// dual numbers ([`crate::del`], [`crate::dynamics`]). They are independent of
+/// the symbolic derivation behind the closed forms, and the tests check one
+/// against the other.
+pub trait Mechanism<const N: usize, const C: usize>: vigp_core::Dynamics<N, C> {
     /// Names of the generalized coordinates, in order.
     const COORDINATES: [&'static str; N];
-    /// What each coordinate measures (angles get a sin/cos encoding in the
-    /// learned integrators).
-    const KINDS: [CoordinateKind; N];
-    /// `true` when [`Mechanism::dissipation`] is generated (some joint declares
-    /// `damping`); when `false` the integrators skip the force terms entirely.
-    const DISSIPATIVE: bool;
 
     /// Kinetic energy T(q, v).
     fn kinetic_energy<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> D;
@@ -77,31 +56,6 @@ pub trait Mechanism<const N: usize, const C: usize> {
         SVector::from_element(D::zero())
     }
 
-    /// One step of the first-order variational integrator (the equations of
-    /// [`Variational::new`](crate::Variational::new)) by the fixed-size
-    /// `no_std` stepper [`vigp_core::Stepper`], when this view has an
-    /// embedded model. Every `mechanism!` minimal view has one and returns
-    /// `Some`; the default (hand-written mechanisms, maximal views) is
-    /// `None`.
-    ///
-    /// Both solvers meet the same scaled tolerance on the same equations
-    /// (tests/embedded.rs: ≤ 1e-10 apart) and the fixed-size one is about
-    /// ten times faster, so [`Learned`](crate::learned::Learned) uses it
-    /// for its nominal prior, falling back to [`Variational`](crate::Variational)
-    /// (which also accepts stalled steps and regularises rank-deficient
-    /// constraints) when it returns an error. `options.tolerance`,
-    /// `max_iterations` and `min_step` carry over; `stall_tolerance` has no
-    /// counterpart.
-    fn fixed_size_step(
-        &self,
-        z: &State<N>,
-        dt: f64,
-        options: &NewtonOptions,
-    ) -> Option<Result<State<N>, vigp_core::StepError>> {
-        let _ = (z, dt, options);
-        None
-    }
-
     /// Total energy T + V of a state, with its discrete velocity.
     fn energy(&self, z: &State<N>) -> f64 {
         self.kinetic_energy(&z.q, &z.v) + self.potential_energy(&z.q)
@@ -118,7 +72,7 @@ pub trait Mechanism<const N: usize, const C: usize> {
     /// Generalized non-conservative forces F(q, v) = −∂R/∂v (exact, by
     /// dual numbers).
     fn generalized_forces<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> SVector<D, N> {
-        if !Self::DISSIPATIVE {
+        if !<Self as vigp_core::Dynamics<N, C>>::DISSIPATIVE {
             return SVector::from_element(D::zero());
         }
         let q = q.map(num_dual::DualVec::from_re);
@@ -134,6 +88,12 @@ pub trait Mechanism<const N: usize, const C: usize> {
         num_dual::jacobian(|q| self.constraints(&q), q).1
     }
 
+    /// The closed-form constants of this model's parameters
+    /// ([`vigp_core::Dynamics::constants`]) as a std error.
+    fn checked_constants(&self) -> Result<Self::Constants, crate::newton::StepError> {
+        vigp_core::Dynamics::constants(self).map_err(Into::into)
+    }
+
     /// A state from position and velocity arrays (see [`State::new`]).
     fn state(&self, q: [f64; N], v: [f64; N]) -> State<N> {
         State::new(q, v)
@@ -147,7 +107,7 @@ pub fn length_scale<M: Mechanism<N, C>, const N: usize, const C: usize>(
     q: &SVector<f64, N>,
 ) -> f64 {
     let mut s = 0.0f64;
-    for (x, kind) in q.iter().zip(M::KINDS.iter()) {
+    for (x, kind) in q.iter().zip(<M as vigp_core::Dynamics<N, C>>::KINDS.iter()) {
         if *kind == CoordinateKind::Length {
             s = s.max(x.abs());
         }

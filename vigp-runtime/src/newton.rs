@@ -1,60 +1,13 @@
 //! Newton solver options, diagnostics, the step error type, and the
 //! regularised KKT solve of the Newton steps.
 
-use crate::linalg::solve_kkt;
-use nalgebra::{SMatrix, SVector};
-
-/// Options of the Newton solves inside implicit steps.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct NewtonOptions {
-    /// Convergence when the scaled residual max-norm falls below this
-    /// (momentum residual relative to 1 + |p₀|, constraint residual relative
-    /// to 1 + the largest length coordinate, so effectively absolute in
-    /// metres for mechanisms near the origin). Default 1e-12.
-    pub tolerance: f64,
-    /// Iteration cap (default 25).
-    pub max_iterations: usize,
-    /// Smallest line-search step tried before Newton is declared stalled
-    /// (default 1/256).
-    pub min_step: f64,
-    /// A stalled Newton iteration (no decrease possible along the Newton
-    /// direction, as at a configuration where a loop's constraint Jacobian
-    /// loses rank) is accepted when both scaled residuals are below this
-    /// (default 1e-10; reported as [`StepInfo::stalled`]). Set it equal to
-    /// `tolerance` to refuse stalled steps.
-    pub stall_tolerance: f64,
-}
-
-impl Default for NewtonOptions {
-    fn default() -> Self {
-        Self {
-            tolerance: 1e-12,
-            max_iterations: 25,
-            min_step: 1.0 / 256.0,
-            stall_tolerance: 1e-10,
-        }
-    }
-}
-
-impl NewtonOptions {
-    /// Reject options that cannot work.
-    pub fn validate(&self) -> Result<(), StepError> {
-        if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return Err(StepError::InvalidOptions(
-                "tolerance must be finite and > 0",
-            ));
-        }
-        if !(self.stall_tolerance.is_finite() && self.stall_tolerance >= self.tolerance) {
-            return Err(StepError::InvalidOptions(
-                "stall_tolerance must be finite and >= tolerance",
-            ));
-        }
-        if !(self.min_step > 0.0 && self.min_step <= 1.0) {
-            return Err(StepError::InvalidOptions("min_step must be in (0, 1]"));
-        }
-        Ok(())
-    }
-}
+/// Options of the Newton solves inside implicit steps (the core
+/// [`vigp_core::StepOptions`]): tolerance on the scaled residual (default
+/// 1e-12), iteration cap (25), smallest line-search step (1/256), and the
+/// stall tolerance (1e-10) under which a step that cannot decrease its
+/// residual further (a loop at a configuration where its constraint
+/// Jacobian loses rank) is accepted.
+pub type NewtonOptions = vigp_core::StepOptions;
 
 /// Diagnostics of a converged step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -76,69 +29,7 @@ pub struct StepInfo {
     pub restarted: bool,
 }
 
-/// A KKT solution (x, y) of [`solve_kkt_regularised`].
-pub type KktSolution<const N: usize, const C: usize> = (SVector<f64, N>, SVector<f64, C>);
-
-/// Solve the KKT system of a Newton step,
-///
-/// ```text
-/// [ J   B ] [x]   [r]
-/// [ A   0 ] [y] = [c],
-/// ```
-///
-/// by [`solve_kkt`] (Schur complement, J invertible); when J is singular but
-/// the whole KKT matrix is not (a link without rotational inertia in
-/// maximal coordinates, whose orientation the constraints fix), solve the
-/// equivalent augmented system
-///
-/// ```text
-/// (J + ρ·B·A) x + B y = r + ρ·B·c,   A x = c
-/// ```
-///
-/// which has the same solution (add ρ·B times the second row to the first).
-/// ρ = ±‖J‖/‖B·A‖ (max-norms) with the sign of tr(J)·tr(B·A), so that
-/// ρ·B·A adds to J with J's own sign (J ≈ −M in the variational step,
-/// +M in the acceleration solve, I in the projection). The augmented
-/// solution is accepted only when it solves the original system to 1e-8
-/// relative to ‖J‖‖x‖ + ‖B‖‖y‖ + ‖r‖ (rows of J) and ‖A‖‖x‖ + ‖c‖ (rows
-/// of A): the augmentation multiplies the condition number by up to
-/// ρ‖B·A‖/‖J‖ = 1, so round-off stays near ε·cond; otherwise, or when J is
-/// singular and C = 0, `None`.
-///
-/// Returns the solution and whether the regularisation was needed.
-pub fn solve_kkt_regularised<const N: usize, const C: usize>(
-    j: &SMatrix<f64, N, N>,
-    b: &SMatrix<f64, N, C>,
-    a: &SMatrix<f64, C, N>,
-    r: &SVector<f64, N>,
-    c: &SVector<f64, C>,
-) -> Option<(KktSolution<N, C>, bool)> {
-    if let Some(sol) = solve_kkt(j, b, a, r, c) {
-        return Some((sol, false));
-    }
-    if C == 0 {
-        return None;
-    }
-    let k = b * a;
-    let (jn, kn) = (j.amax(), k.amax());
-    if !(kn > 0.0 && kn.is_finite() && jn.is_finite()) {
-        return None;
-    }
-    let sign = if j.trace() * k.trace() >= 0.0 {
-        1.0
-    } else {
-        -1.0
-    };
-    let rho = sign * if jn > 0.0 { jn / kn } else { 1.0 / kn };
-    let (x, y) = solve_kkt(&(j + k * rho), b, a, &(r + b * c * rho), c)?;
-    // the augmented system is equivalent in exact arithmetic; check it
-    let e1 = (j * x + b * y - r).amax();
-    let e2 = (a * x - c).amax();
-    let s1 = j.amax() * x.amax() + b.amax() * y.amax() + r.amax();
-    let s2 = a.amax() * x.amax() + c.amax();
-    let ok = e1 <= 1e-8 * s1.max(f64::MIN_POSITIVE) && e2 <= 1e-8 * s2.max(f64::MIN_POSITIVE);
-    (ok && x.iter().chain(y.iter()).all(|v| v.is_finite())).then_some(((x, y), true))
-}
+pub use vigp_core::linalg::solve_kkt_regularised;
 
 /// Why a step failed. `step` is filled in by rollouts with the index of the
 /// failing step.
@@ -153,6 +44,11 @@ pub enum StepError {
     /// Solver options that cannot work.
     #[error("invalid solver options: {0}")]
     InvalidOptions(&'static str),
+    /// Run-time parameters that cannot describe a mechanism (a negative or
+    /// non-finite mass, inertia or damping coefficient, a non-positive
+    /// length, non-finite gravity; the message names the parameter).
+    #[error("invalid model parameters: {0}")]
+    InvalidModel(&'static str),
     /// The input (or produced) state contains NaN or ±∞.
     #[error("non-finite state{}", at(step))]
     NonFiniteState {
@@ -178,6 +74,22 @@ pub enum StepError {
     /// A learned model's prediction failed or was not finite.
     #[error("learned prediction failed{}", at(step))]
     Prediction {
+        /// Rollout step index, if in a rollout.
+        step: Option<usize>,
+    },
+    /// No decrease of the residual along the exact Newton direction, above
+    /// the stall tolerance: the discrete equations have no root near the
+    /// start (often a step too large for the motion; see
+    /// `Variational::substeps`).
+    #[error(
+        "Newton stalled at iteration {iteration}: residual {residual:.3e} cannot be decreased along the Newton direction{}",
+        at(step)
+    )]
+    LineSearchFailed {
+        /// Newton iteration.
+        iteration: usize,
+        /// Scaled residual reached.
+        residual: f64,
         /// Rollout step index, if in a rollout.
         step: Option<usize>,
     },
@@ -213,9 +125,75 @@ impl StepError {
             | StepError::NonFiniteResidual { step, .. }
             | StepError::SingularJacobian { step, .. }
             | StepError::NotConverged { step, .. }
+            | StepError::LineSearchFailed { step, .. }
             | StepError::Prediction { step } => *step = Some(k),
-            StepError::InvalidTimeStep { .. } | StepError::InvalidOptions(_) => {}
+            StepError::InvalidTimeStep { .. }
+            | StepError::InvalidOptions(_)
+            | StepError::InvalidModel(_) => {}
         }
         self
+    }
+}
+
+impl From<vigp_core::StepError> for StepError {
+    /// The core's errors in the std runtime's form (no rollout step yet;
+    /// `NotConverged` carries no tolerance in the core and reports NaN
+    /// here: use [`StepError::with_tolerance`] where it is known).
+    fn from(e: vigp_core::StepError) -> Self {
+        use vigp_core::StepError as E;
+        match e {
+            E::InvalidTimeStep { dt } => StepError::InvalidTimeStep { dt },
+            E::InvalidOptions(why) => StepError::InvalidOptions(why),
+            E::InvalidModel(why) => StepError::InvalidModel(why),
+            E::NonFiniteState => StepError::NonFiniteState { step: None },
+            E::NonFiniteResidual { iteration } => StepError::NonFiniteResidual {
+                iteration,
+                step: None,
+            },
+            E::SingularJacobian { iteration } => StepError::SingularJacobian {
+                iteration,
+                step: None,
+            },
+            E::LineSearchFailed {
+                iteration,
+                residual,
+            } => StepError::LineSearchFailed {
+                iteration,
+                residual,
+                step: None,
+            },
+            E::NotConverged {
+                iterations,
+                residual,
+            } => StepError::NotConverged {
+                iterations,
+                residual,
+                tolerance: f64::NAN,
+                step: None,
+            },
+        }
+    }
+}
+
+impl StepError {
+    /// Fill in the tolerance of a [`StepError::NotConverged`].
+    pub fn with_tolerance(mut self, tol: f64) -> Self {
+        if let StepError::NotConverged { tolerance, .. } = &mut self {
+            *tolerance = tol;
+        }
+        self
+    }
+}
+
+impl StepInfo {
+    /// Diagnostics of a core step.
+    pub fn from_report(r: &vigp_core::StepReport) -> Self {
+        StepInfo {
+            iterations: r.iterations,
+            residual: r.residual,
+            stalled: r.stalled,
+            regularised: r.regularised,
+            restarted: false,
+        }
     }
 }
