@@ -137,6 +137,19 @@ where
             &m.force_jacobian(&k, &q, &v),
             &fj_ref,
         ));
+        // continuous accelerations (index-1 KKT system): the same linear
+        // system assembled from both sides, solved by the same solver, so
+        // they differ by rounding amplified by its condition number
+        // (≲ 1e3 at these random configurations): 1e-10 relative
+        let a = vigp::dynamics::acceleration::<M, N, C>(&m, &q, &v).unwrap();
+        let a_ref = vigp::dynamics::reference_acceleration::<M, N, C>(&m, &q, &v).unwrap();
+        let scale = 1.0 + a_ref.0.amax();
+        assert!(
+            (a.0 - a_ref.0).amax() <= 1e-10 * scale,
+            "{name} q̈: {} vs {}",
+            a.0,
+            a_ref.0
+        );
         // energy
         let e_ref = m.kinetic_energy(&q, &v) + v_ref;
         let e = Dynamics::energy_at(&m, &k, &q, &v);

@@ -177,3 +177,61 @@ pub fn check_constants<const K: usize>(k: [f64; K]) -> Result<[f64; K], StepErro
         ))
     }
 }
+
+/// Accelerations q̈ and constraint multipliers λ of the continuous-time
+/// equations of motion from the closed-form terms:
+///
+/// ```text
+/// [ M(q)  −Gᵀ ] [ q̈ ]   [ ½[q̇ᵀ ∂M/∂q_i q̇]_i − Σ_l (∂M/∂q_l q̇) q̇_l − ∇V − D q̇ ]
+/// [ G     0   ] [ λ  ] = [ −γ,  γ_i = q̇ᵀ ∇²g_i q̇                                ]
+/// ```
+///
+/// (the Euler–Lagrange equations with the acceleration-level constraint
+/// G q̈ + Ġ q̇ = 0). `t` is scratch for the terms. A mass matrix that is
+/// singular only in directions the constraints fix is handled by the
+/// regularised KKT solve. Returns `None` when the system is singular or
+/// the result is not finite. Cost: one terms evaluation, C constraint
+/// Hessians, one O((N+C)³) solve.
+pub fn acceleration<M: Dynamics<N, C>, const N: usize, const C: usize>(
+    model: &M,
+    k: &M::Constants,
+    q: &SVector<f64, N>,
+    qdot: &SVector<f64, N>,
+    t: &mut Terms<N>,
+) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
+    model.terms(k, q, t);
+    let mut rhs = -t.dpotential;
+    if !M::CONSTANT_MASS {
+        let mut mdot = SMatrix::<f64, N, N>::zeros();
+        for (l, dm) in t.dmass.iter().enumerate() {
+            rhs[l] += 0.5 * qdot.dot(&(dm * qdot));
+            mdot += dm * qdot[l];
+        }
+        rhs -= mdot * qdot;
+    }
+    if M::DISSIPATIVE {
+        rhs -= t.damping * qdot;
+    }
+    let (g, gamma) = if C > 0 {
+        let (_, g) = model.constraints_and_jacobian(k, q);
+        let mut gamma = SVector::<f64, C>::zeros();
+        for i in 0..C {
+            let mut e = SVector::<f64, C>::zeros();
+            e[i] = 1.0;
+            let h = model.constraint_hessian(k, q, &e);
+            gamma[i] = qdot.dot(&(h * qdot));
+        }
+        (g, gamma)
+    } else {
+        (SMatrix::zeros(), SVector::zeros())
+    };
+    if !t.mass.iter().chain(rhs.iter()).all(|x| x.is_finite()) {
+        return None;
+    }
+    let ((a, lambda), _) =
+        crate::linalg::solve_kkt_regularised(&t.mass, &(-g.transpose()), &g, &rhs, &(-gamma))?;
+    a.iter()
+        .chain(lambda.iter())
+        .all(|x| x.is_finite())
+        .then_some((a, lambda))
+}

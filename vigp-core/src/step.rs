@@ -250,8 +250,12 @@ pub struct Stepper<M: Dynamics<N, C>, const N: usize, const C: usize> {
     substeps: usize,
 }
 
+/// max |x_i|, NaN if any entry is NaN (`f64::max` would drop it).
 fn max_abs<const K: usize>(x: &SVector<f64, K>) -> f64 {
-    x.iter().fold(0.0f64, |m, v| m.max(v.abs()))
+    x.iter().fold(0.0f64, |m, v| {
+        let a = v.abs();
+        if a > m || a.is_nan() { a } else { m }
+    })
 }
 
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {

@@ -5,7 +5,7 @@
 //! paper's Fig. 1b). They share the [`Integrator`] trait with the variational
 //! integrators, so swapping is one line.
 
-use crate::dynamics::acceleration;
+use crate::dynamics::acceleration_with;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
 use crate::variational::Integrator;
@@ -14,15 +14,26 @@ macro_rules! classical {
     ($(#[$doc:meta])* $name:ident) => {
         $(#[$doc])*
         #[derive(Clone, Copy, Debug)]
-        pub struct $name<M, const N: usize, const C: usize> {
+        pub struct $name<M: Mechanism<N, C>, const N: usize, const C: usize> {
             model: M,
             dt: f64,
+            k: Result<M::Constants, StepError>,
         }
 
         impl<M: Mechanism<N, C>, const N: usize, const C: usize> $name<M, N, C> {
-            /// An integrator for `model` with time step `dt` (validated by `step`).
+            /// An integrator for `model` with time step `dt` (validated by
+            /// `step`, as are the model's run-time parameters).
             pub fn new(model: M, dt: f64) -> Self {
-                Self { model, dt }
+                let k = model.checked_constants();
+                Self { model, dt, k }
+            }
+
+            /// q̈ at (q, q̇) on the closed-form terms.
+            fn accel(&self, q: &nalgebra::SVector<f64, N>, v: &nalgebra::SVector<f64, N>)
+                -> Result<nalgebra::SVector<f64, N>, StepError>
+            {
+                let k = self.k.as_ref().map_err(|e| *e)?;
+                acceleration_with(&self.model, k, q, v).map(|(a, _)| a)
             }
 
             /// The model.
@@ -72,7 +83,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Expli
     }
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         check(self.dt, z)?;
-        let (a, _) = acceleration::<M, N, C>(&self.model, &z.q, &z.v)?;
+        let a = self.accel(&z.q, &z.v)?;
         finite(State {
             q: z.q + z.v * self.dt,
             v: z.v + a * self.dt,
@@ -88,7 +99,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N>
     }
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         check(self.dt, z)?;
-        let (a, _) = acceleration::<M, N, C>(&self.model, &z.q, &z.v)?;
+        let a = self.accel(&z.q, &z.v)?;
         let v = z.v + a * self.dt;
         finite(State {
             q: z.q + v * self.dt,
@@ -104,7 +115,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Rk4<M
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         check(self.dt, z)?;
         let h = self.dt;
-        let f = |q, v| acceleration::<M, N, C>(&self.model, &q, &v).map(|(a, _)| a);
+        let f = |q, v| self.accel(&q, &v);
         let (q, v) = (z.q, z.v);
         let a1 = f(q, v)?;
         let (q2, v2) = (q + v * (0.5 * h), v + a1 * (0.5 * h));

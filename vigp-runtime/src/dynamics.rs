@@ -1,5 +1,9 @@
 //! Continuous-time dynamics from the same Lagrangian, with exact
 //! derivatives: mass matrix, bias forces and the index-1 KKT system
+//! ([`acceleration`] runs on the model's closed-form terms,
+//! [`vigp_core::dynamics::acceleration`]; [`mass_matrix`], [`bias_forces`],
+//! [`constraint_curvature`] and [`reference_acceleration`] evaluate the
+//! Lagrangian on dual numbers, the independent reference the tests use)
 //!
 //! ```text
 //! [ M(q)  −Gᵀ ] [ q̈ ]   [ ∂L/∂q + F − (∂²L/∂v∂q)·q̇ ]
@@ -56,14 +60,44 @@ pub fn constraint_curvature<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m.constraints(&path).map(|g| g.eps.eps)
 }
 
-/// Accelerations and multipliers from the index-1 KKT system (module docs).
-/// Cost: O((N+C)³) per call plus a few dual-number evaluations.
+/// Accelerations and multipliers from the index-1 KKT system (module docs)
+/// on the model's closed-form terms. Cost: one terms evaluation and one
+/// O((N+C)³) solve.
 ///
 /// A mass matrix that is singular only in directions the constraints fix
 /// (a link without rotational inertia in maximal coordinates) is handled by
 /// the regularised KKT solve ([`solve_kkt_regularised`]); NaN or ±∞ in
-/// (q, q̇) is [`StepError::NonFiniteState`].
+/// (q, q̇) is [`StepError::NonFiniteState`], invalid run-time parameters
+/// [`StepError::InvalidModel`].
 pub fn acceleration<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    m: &M,
+    q: &SVector<f64, N>,
+    qdot: &SVector<f64, N>,
+) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
+    let k = m.checked_constants()?;
+    acceleration_with(m, &k, q, qdot)
+}
+
+/// [`acceleration`] with the model's constants computed once by the caller
+/// (the classical integrators hold them).
+pub fn acceleration_with<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    m: &M,
+    k: &M::Constants,
+    q: &SVector<f64, N>,
+    qdot: &SVector<f64, N>,
+) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
+    if !q.iter().chain(qdot.iter()).all(|x| x.is_finite()) {
+        return Err(StepError::NonFiniteState { step: None });
+    }
+    let mut t = vigp_core::Terms::zeros();
+    vigp_core::dynamics::acceleration(m, k, q, qdot, &mut t).ok_or(StepError::SingularJacobian {
+        iteration: 0,
+        step: None,
+    })
+}
+
+/// [`acceleration`] by dual numbers (the reference implementation).
+pub fn reference_acceleration<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     q: &SVector<f64, N>,
     qdot: &SVector<f64, N>,
