@@ -5,7 +5,7 @@ same double pendulum and fourbar as vigp (`systems::DoublePendulum`,
 the Euler (semi-implicit), implicitfast and RK4 integrators.
 
     pip install mujoco            # the wheel ships libmujoco and its headers
-    python3 scripts/mujoco_bench.py [--steps 10000] [--reps 21] [--no-c]
+    python3 scripts/mujoco_bench.py [--steps 10000] [--reps 21] [--no-c] [--callgrind]
 
 Time steps run in C, never in a Python loop:
 * `C loop`: scripts/mujoco_step.c, compiled here with `cc -O2` against the
@@ -14,6 +14,9 @@ Time steps run in C, never in a Python loop:
   which also copies the state out after every step.
 Each reports the median (and minimum) over --reps repetitions of the time
 per step. Record the load average printed in the header with the numbers.
+With --callgrind (needs valgrind) the C loop also runs under callgrind at
+1000 steps and at 0: the difference of the instruction totals / 1000 is the
+instruction count per mj_step, which does not depend on the machine's load.
 
 From the rollout's trajectory (states after each step; analysis in Python,
 not timed): the energy drift max_k |E_k - E_0| and the final E_N - E_0 (MuJoCo's
@@ -164,6 +167,22 @@ def time_c(exe, xml, q, qdot, nstep, reps):
     return float(fields["median_ns"]), float(fields["min_ns"]), qend, int(fields["warnings"])
 
 
+def callgrind_per_step(exe, xml, q, qdot, nstep=1000):
+    """Instructions per mj_step: callgrind totals at nstep and 0 steps."""
+    path = os.path.join(os.path.dirname(exe), "model.xml")
+    with open(path, "w") as fh:
+        fh.write(xml)
+    totals = []
+    for n in (nstep, 0):
+        out = os.path.join(os.path.dirname(exe), f"callgrind.{n}")
+        args = ["valgrind", "--tool=callgrind", f"--callgrind-out-file={out}", exe,
+                path, str(n), "1"] + [repr(float(x)) for x in (*q, *qdot)]
+        res = subprocess.run(args, capture_output=True, text=True, check=True)
+        line = [ln for ln in res.stderr.splitlines() if "Collected" in ln][0]
+        totals.append(int(line.split(":")[-1].strip().replace(",", "")))
+    return (totals[0] - totals[1]) / nstep
+
+
 def analyse(m, traj, q, qdot, fourbar):
     """Energy drift, and for the fourbar |g| and the branch, along traj."""
     m = mujoco.MjModel.from_xml_string(m)  # a copy with energy computed
@@ -205,6 +224,8 @@ def main():
     ap.add_argument("--steps", type=int, default=10_000, help="steps per run (default 10000)")
     ap.add_argument("--reps", type=int, default=21, help="timed repetitions (default 21)")
     ap.add_argument("--no-c", action="store_true", help="skip the C loop")
+    ap.add_argument("--callgrind", action="store_true",
+                    help="also count instructions per mj_step with valgrind")
     args = ap.parse_args()
 
     load = os.getloadavg()
@@ -218,6 +239,8 @@ def main():
         sys.exit("the MJCF models do not match the closed forms")
 
     exe = None if args.no_c else build_c()
+    if args.callgrind and (exe is None or shutil.which("valgrind") is None):
+        sys.exit("--callgrind needs the C loop and valgrind")
     fb_model = mujoco.MjModel.from_xml_string(mm.fourbar())
     fb_qdot = fourbar_velocity(fb_model, FB_Q, np.array([0.5, 0.0, 0.0, 0.0]))
     print(f"fourbar initial qdot = {np.array2string(fb_qdot, precision=6)}")
@@ -236,6 +259,8 @@ def main():
             if c is not None:
                 # the C loop and the rollout run the same steps
                 a["c_vs_rollout"] = np.abs(c[2] - traj[-1][1 : 1 + m.nq]).max()
+                if args.callgrind:
+                    a["instructions"] = callgrind_per_step(exe, xml, q, qdot)
             rows.append((name, integ, c, (r_med, r_min), a))
 
     t = args.steps * mm.DT
@@ -257,6 +282,9 @@ def main():
         if c is not None and (a["c_vs_rollout"] > 1e-9 or c[3]):
             print(f"note: {name}/{integ}: C loop and rollout end states differ by "
                   f"{a['c_vs_rollout']:.1e}, MuJoCo warnings in the C loop: {c[3]}")
+    if args.callgrind:
+        print("\ninstructions per mj_step (callgrind, C loop): " + ", ".join(
+            f"{name}/{integ} {a['instructions']:.0f}" for name, integ, _, _, a in rows))
     print(f"\nE0: double pendulum {rows[0][4]['e0']:.6f} J, fourbar {rows[3][4]['e0']:.6f} J "
           "(MuJoCo's potential zero: body origins at z = 0)")
 

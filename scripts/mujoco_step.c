@@ -11,7 +11,9 @@
  *   median_ns=<x> min_ns=<y> qpos_end=<q1,q2,...> warnings=<n>
  *
  * (the final qpos of the last repetition, to compare with the rollout's,
- * and the number of MuJoCo warnings raised).
+ * and the number of MuJoCo warnings raised). NSTEP = 0 runs no step: the
+ * difference of callgrind's instruction totals at NSTEP and at 0, divided
+ * by NSTEP, is the count per mj_step.
  */
 #include <mujoco/mujoco.h>
 #include <stdio.h>
@@ -42,8 +44,8 @@ int main(int argc, char **argv) {
   }
   long nstep = atol(argv[2]);
   int reps = atoi(argv[3]);
-  if (nstep <= 0 || reps <= 0 || argc != 4 + m->nq + m->nv) {
-    fprintf(stderr, "need NSTEP > 0, REPS > 0 and %d qpos + %d qvel values\n",
+  if (nstep < 0 || reps <= 0 || argc != 4 + m->nq + m->nv) {
+    fprintf(stderr, "need NSTEP >= 0, REPS > 0 and %d qpos + %d qvel values\n",
             (int)m->nq, (int)m->nv);
     return 2;
   }
@@ -56,7 +58,7 @@ int main(int argc, char **argv) {
     for (int i = 0; i < m->nv; i++) d->qvel[i] = atof(argv[4 + m->nq + i]);
     double t0 = now_ns();
     for (long k = 0; k < nstep; k++) mj_step(m, d);
-    t[r] = (now_ns() - t0) / (double)nstep;
+    t[r] = nstep ? (now_ns() - t0) / (double)nstep : 0.0;
     for (int w = 0; w < mjNWARNING; w++) warnings += d->warning[w].number;
   }
   double lo = t[0];

@@ -39,9 +39,11 @@
 //! re-evaluating d when its quadratic remainder (Δt/2)|Δvᵀ ∂M/∂q₂ Δv| is
 //! within tol/2 of that scale, otherwise backtrack (halving, down to 1/256)
 //! on the scaled residual. This is the iteration of `vigp-core`'s
-//! `Stepper` for a tree; the one difference is that a nearly singular
-//! Newton matrix (never the case here: A ≈ −M, M positive definite) is an
-//! error instead of a fallback to elimination.
+//! `Stepper` for a tree. Differences: a nearly singular Newton matrix
+//! (never the case here: A ≈ −M, M positive definite) is an error instead
+//! of a fallback to elimination, and a NaN component of the residual makes
+//! the residual norm NaN (an error) where a max-norm built from `f64::max`
+//! would skip it.
 //!
 //! The sine and cosine are the standard library's (`f64::sin_cos`).
 
@@ -134,7 +136,8 @@ impl ClosedForm {
     pub fn new(p: &Params, dt: f64) -> Result<Self, Error> {
         let ok = |x: f64| x.is_finite() && x >= 0.0;
         let params = [p.m1, p.m2, p.l1, p.c1, p.c2, p.j1, p.j2, p.d1, p.d2];
-        if !(dt.is_finite() && dt > 0.0) || !params.iter().all(|&x| ok(x)) || !p.g.is_finite() {
+        let valid = dt.is_finite() && dt > 0.0 && p.g.is_finite() && params.iter().all(|&x| ok(x));
+        if !valid {
             return Err(Error::Invalid);
         }
         let a = p.m1 * p.c1 * p.c1 + p.j1 + p.m2 * p.l1 * p.l1;
@@ -207,7 +210,7 @@ impl ClosedForm {
     /// The step from `z` with momentum `p0`, Newton started at `guess` (all
     /// finite); returns the new state, its momentum M(x₁)v₁ and the number
     /// of Newton iterations.
-    #[inline]
+    #[inline(always)]
     pub fn solve(
         &self,
         z: &State,
@@ -240,7 +243,13 @@ impl ClosedForm {
                 b[0] - (mh11 * v[0] + mh12 * v[1]),
                 b[1] - (mh12 * v[0] + mh22 * v[1]) + h * ks * v[0] * (v[0] + v[1]),
             ];
-            (d, d[0].abs().max(d[1].abs()) * inv_p_scale)
+            // `f64::max` drops a NaN operand; keep it, so that a NaN
+            // residual is an error and never an accepted step.
+            let err = match d[0].is_nan() || d[1].is_nan() {
+                true => f64::NAN,
+                false => d[0].abs().max(d[1].abs()) * inv_p_scale,
+            };
+            (d, err)
         };
         let mut v = *guess;
         let (mut d, mut err) = eval(&v);
