@@ -20,8 +20,8 @@
 //! **Instruction counts** (load-independent): with `VIGP_COUNT=<what>:<n>`
 //! the binary skips criterion and runs `n` steps of one kind, `what` one of
 //! `closed_form_rollout`, `stepper_rollout` (a rollout of `n` steps),
-//! `closed_form_step`, `stepper_step` (`n` steps from the 64 states in
-//! turn). The difference of callgrind's totals at `n` and at 0, divided by
+//! `closed_form_step`, `stepper_step`, `std_variational_step` (`n` steps
+//! from the 64 states in turn). The difference of callgrind's totals at `n` and at 0, divided by
 //! `n`, is the count per step:
 //!
 //! ```text
@@ -123,6 +123,13 @@ fn count(spec: &str) -> Result<(), String> {
         "stepper_step" => {
             for k in 0..n {
                 let z1 = stepper.step(black_box(&states[k % 64]));
+                acc += z1.map_err(|e| e.to_string())?.v[0];
+            }
+        }
+        "std_variational_step" => {
+            let vi = Variational::new(sys.minimal(), DT);
+            for k in 0..n {
+                let z1 = vi.step(black_box(&states[k % 64]));
                 acc += z1.map_err(|e| e.to_string())?.v[0];
             }
         }
