@@ -107,6 +107,6 @@ pub mod prelude {
     pub use vigp_runtime::embedded::Dynamics;
     pub use vigp_runtime::{
         Coordinates, ExplicitEuler, Integrator, Mechanism, NewtonOptions, Rk4, State, StepError,
-        SymplecticEuler, Variational,
+        SymplecticEuler, Variational, Variational4,
     };
 }

@@ -17,6 +17,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod compose;
 pub mod dynamics;
 pub mod gp;
 pub mod kinematics;
@@ -27,6 +28,7 @@ pub mod real;
 pub mod state;
 pub mod step;
 
+pub use compose::Composition;
 pub use dynamics::{Dynamics, Terms};
 pub use kinematics::{Point2, Pose2};
 pub use model::{Body, Model};

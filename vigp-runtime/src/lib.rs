@@ -14,6 +14,7 @@ pub mod gp;
 #[cfg(feature = "alloc")]
 pub mod bound;
 pub mod classical;
+pub mod composition;
 pub mod del;
 pub mod dynamics;
 pub mod kinematics;
@@ -29,6 +30,7 @@ pub mod summary;
 pub mod variational;
 
 pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
+pub use composition::Variational4;
 pub use kinematics::Pose2;
 pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
 pub use newton::{NewtonOptions, StepError, StepInfo};

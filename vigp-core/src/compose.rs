@@ -1,0 +1,198 @@
+//! A fourth-order variational integrator: a symmetric composition of the
+//! midpoint rule.
+//!
+//! The midpoint variational integrator is symmetric (its discrete
+//! Lagrangian satisfies L_d^{−h}(x₁, x₀) = −L_d^h(x₀, x₁)), so composing it
+//! with step sizes γ₁h, γ₂h, …, γ_sh whose coefficients satisfy
+//! Σγ_i = 1 and Σγ_i³ = 0 (symmetric) gives a fourth-order method that is
+//! still variational: symplectic, momentum-preserving, with bounded energy
+//! error, and — since every sub-step solves g(q) = 0 at position level —
+//! constraints held to solver tolerance (Yoshida 1990; Suzuki 1990;
+//! McLachlan 1995; for constrained systems Reich 1996, composing
+//! RATTLE-type steps).
+//!
+//! Sub-steps chain in position–momentum form (q, p) ↦ (q', p') with
+//! p = D₂L_d ([`Stepper::solve`]). **The state's velocity is the
+//! continuous q̇** (like RK4's), recovered as the tangent velocity with
+//! M(q)q̇ = p + G(q)ᵀμ, G(q)q̇ = 0, accurate to fourth order.
+//!
+//! Two coefficient sets: Yoshida's triple jump (3 sub-steps, one of them
+//! negative, γ₁ = 1/(2 − 2^{1/3}) ≈ 1.35) and Suzuki's five-stage fractal
+//! (5 sub-steps, γ₁ = γ₂ = γ₄ = γ₅ = 1/(4 − 4^{1/3}) ≈ 0.41): the latter
+//! costs 5/3 as much per step but its error constant is about 50 times
+//! smaller, which makes it the cheaper way to a given accuracy (the
+//! work-precision report measures both).
+
+use crate::dynamics::Dynamics;
+use crate::linalg::solve_kkt_regularised;
+use crate::state::State;
+use crate::step::{RolloutError, StepError, StepOptions, StepReport, Stepper};
+use nalgebra::SVector;
+
+/// Yoshida's triple jump: γ₁ = γ₃ = 1/(2 − 2^{1/3}), γ₂ = 1 − 2γ₁.
+pub const TRIPLE_JUMP: [f64; 3] = [
+    1.351_207_191_959_657_6,
+    -1.702_414_383_919_315_3,
+    1.351_207_191_959_657_6,
+];
+
+/// Suzuki's fractal: γ₁ = γ₂ = γ₄ = γ₅ = 1/(4 − 4^{1/3}), γ₃ = 1 − 4γ₁.
+pub const SUZUKI5: [f64; 5] = [
+    0.414_490_771_794_375_7,
+    0.414_490_771_794_375_7,
+    -0.657_963_087_177_502_9,
+    0.414_490_771_794_375_7,
+    0.414_490_771_794_375_7,
+];
+
+/// The fourth-order composition of the midpoint variational integrator of a
+/// [`Dynamics`] model (module docs). State: positions and **continuous**
+/// velocities. No allocation.
+#[derive(Clone, Copy, Debug)]
+pub struct Composition<M: Dynamics<N, C>, const N: usize, const C: usize> {
+    midpoint: Stepper<M, N, C>,
+    gammas: &'static [f64],
+}
+
+impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
+    /// Suzuki's five-stage composition (the default fourth-order VI).
+    pub fn new(model: M, dt: f64) -> Result<Self, StepError> {
+        Self::with_coefficients(model, dt, &SUZUKI5)
+    }
+
+    /// Yoshida's triple jump.
+    pub fn triple_jump(model: M, dt: f64) -> Result<Self, StepError> {
+        Self::with_coefficients(model, dt, &TRIPLE_JUMP)
+    }
+
+    /// A symmetric composition with the given sub-step coefficients (they
+    /// must sum to 1; symmetric sets with Σγ³ = 0 give fourth order).
+    pub fn with_coefficients(model: M, dt: f64, gammas: &'static [f64]) -> Result<Self, StepError> {
+        let sum: f64 = gammas.iter().sum();
+        if gammas.is_empty() || (sum - 1.0).abs() > 1e-12 {
+            return Err(StepError::InvalidOptions(
+                "composition coefficients must sum to 1",
+            ));
+        }
+        for g in gammas {
+            crate::step::check_time_step(g.abs() * dt)?;
+        }
+        Ok(Self {
+            midpoint: Stepper::midpoint(model, dt)?,
+            gammas,
+        })
+    }
+
+    /// The same integrator with other Newton options.
+    pub fn options(mut self, options: StepOptions) -> Result<Self, StepError> {
+        self.midpoint = self.midpoint.options(options)?;
+        Ok(self)
+    }
+
+    /// The model.
+    pub fn model(&self) -> &M {
+        self.midpoint.model()
+    }
+
+    /// Δt.
+    pub fn dt(&self) -> f64 {
+        self.midpoint.dt()
+    }
+
+    /// Number of midpoint sub-steps per step.
+    pub fn stages(&self) -> usize {
+        self.gammas.len()
+    }
+
+    /// The momentum p = M(q)q̇ of a continuous state.
+    pub fn momentum(&self, z: &State<N>) -> SVector<f64, N> {
+        let m = self.midpoint.model();
+        m.mass(self.midpoint.constants(), &z.q) * z.v
+    }
+
+    /// The tangent velocity q̇ of a momentum at q: M q̇ − Gᵀμ = p, G q̇ = 0
+    /// (q̇ = M⁻¹p without constraints).
+    pub fn velocity(
+        &self,
+        q: &SVector<f64, N>,
+        p: &SVector<f64, N>,
+    ) -> Result<SVector<f64, N>, StepError> {
+        let model = self.midpoint.model();
+        let k = self.midpoint.constants();
+        let mass = model.mass(k, q);
+        let g = if C > 0 {
+            model.constraints_and_jacobian(k, q).1
+        } else {
+            nalgebra::SMatrix::zeros()
+        };
+        let ((v, _), _) = solve_kkt_regularised(&mass, &(-g.transpose()), &g, p, &SVector::zeros())
+            .ok_or(StepError::SingularJacobian { iteration: 0 })?;
+        if v.iter().all(|x| x.is_finite()) {
+            Ok(v)
+        } else {
+            Err(StepError::NonFiniteState)
+        }
+    }
+
+    /// Energy ½ q̇ᵀM(q)q̇ + V(q) of a continuous state.
+    pub fn energy(&self, z: &State<N>) -> f64 {
+        self.midpoint
+            .model()
+            .energy_at(self.midpoint.constants(), &z.q, &z.v)
+    }
+
+    /// One step in position–momentum form: (q, p) ↦ (q', p').
+    pub fn step_momentum(
+        &self,
+        q: &SVector<f64, N>,
+        p: &SVector<f64, N>,
+        guess: &SVector<f64, N>,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
+        let dt = self.midpoint.dt();
+        let (mut q, mut p) = (*q, *p);
+        let mut report = StepReport::default();
+        let mut v = *guess;
+        for g in self.gammas {
+            let h = g * dt;
+            let (v1, p1, r) = self.midpoint.solve(&q, &p, h, &v)?;
+            report.iterations += r.iterations;
+            report.residual = report.residual.max(r.residual);
+            report.stalled |= r.stalled;
+            report.regularised |= r.regularised;
+            q += v1 * h;
+            (p, v) = (p1, v1);
+        }
+        Ok((q, p, report))
+    }
+
+    /// One step from a continuous state (q, q̇) (consistent for loops:
+    /// g(q) = 0, G(q)q̇ = 0).
+    pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        let p = self.momentum(z);
+        let (q, p, _) = self.step_momentum(&z.q, &p, &z.v)?;
+        Ok(State {
+            v: self.velocity(&q, &p)?,
+            q,
+        })
+    }
+
+    /// The states after 1, 2, …, `out.len()` steps from `z0`, carrying the
+    /// momentum between steps. No allocation.
+    pub fn steps_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), RolloutError> {
+        let fail = |step, error| RolloutError { step, error };
+        if !z0.is_finite() {
+            return Err(fail(0, StepError::NonFiniteState));
+        }
+        let (mut q, mut p, mut v) = (z0.q, self.momentum(z0), z0.v);
+        for (k, slot) in out.iter_mut().enumerate() {
+            let (q1, p1, _) = self.step_momentum(&q, &p, &v).map_err(|e| fail(k, e))?;
+            v = self.velocity(&q1, &p1).map_err(|e| fail(k, e))?;
+            (q, p) = (q1, p1);
+            *slot = State { q, v };
+        }
+        Ok(())
+    }
+}
