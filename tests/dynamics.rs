@@ -124,6 +124,18 @@ where
             }
         }
         worst = worst.max(assert_close("∂M/∂q", &dmv, &dmv_ref));
+        // the generated contractions (straight-line over the structural
+        // non-zeros): Q = [∂M/∂q_l v]_lᵀ, ½vᵀ∂M/∂q_l v, max_l |vᵀ∂M/∂q_l v|
+        let (qm, kin) = M::kinetic(&t, &v);
+        worst = worst.max(assert_close("Q", &qm, &dmv_ref.transpose()));
+        let kin_ref = (dmv_ref.transpose() * v) * 0.5;
+        worst = worst.max(assert_close("½vᵀ∂M v", &kin, &kin_ref));
+        let quad_ref = kin_ref.amax() * 2.0;
+        let quad = M::quadratic_max(&t, &v);
+        assert!(
+            (quad - quad_ref).abs() <= 1e-12 * (1.0 + quad_ref),
+            "{name}: {quad} vs {quad_ref}"
+        );
         // ∂/∂q [½ vᵀ∂M/∂q v − ∇V − D v] = ∂/∂q (D_xL + F) at fixed v
         let fj_ref = num_dual::jacobian(
             |x: SVector<DualVec<f64, nalgebra::Const<N>>, N>| {

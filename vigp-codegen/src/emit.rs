@@ -740,6 +740,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             const KINDS: [::vigp::CoordinateKind; #n] = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::KINDS;
             const DISSIPATIVE: bool = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::DISSIPATIVE;
             const CONSTANT_MASS: bool = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::CONSTANT_MASS;
+            const DMASS_PATTERN: [[[bool; #n]; #n]; #n] = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::DMASS_PATTERN;
             type Constants = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::Constants;
             fn constants(&self) -> ::core::result::Result<Self::Constants, ::vigp::embedded::StepError> {
                 ::vigp::embedded::Dynamics::constants(&self.minimal())
@@ -755,6 +756,14 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             }
             fn force_jacobian(&self, k: &Self::Constants, q: &#svector<f64, #n>, v: &#svector<f64, #n>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, #n> {
                 ::vigp::embedded::Dynamics::force_jacobian(&self.minimal(), k, q, v)
+            }
+            #[inline(always)]
+            fn kinetic(t: &::vigp::embedded::Terms<#n>, v: &#svector<f64, #n>) -> (::vigp::__private::nalgebra::SMatrix<f64, #n, #n>, #svector<f64, #n>) {
+                <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::kinetic(t, v)
+            }
+            #[inline(always)]
+            fn quadratic_max(t: &::vigp::embedded::Terms<#n>, dv: &#svector<f64, #n>) -> f64 {
+                <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::quadratic_max(t, dv)
             }
             fn constraint_values(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> #svector<f64, #c> {
                 ::vigp::embedded::Dynamics::constraint_values(&self.minimal(), k, q)

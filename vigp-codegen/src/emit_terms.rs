@@ -411,6 +411,89 @@ pub fn emit_dynamics(
             })
             .collect()
     };
+    let pattern: Vec<TokenStream> = (0..n)
+        .map(|l| {
+            let rows = (0..n).map(|j| {
+                let cells = (0..n).map(|k| !constant_mass && !dmass[l][j][k].is_zero());
+                quote!([#(#cells),*])
+            });
+            quote!([#(#rows),*])
+        })
+        .collect();
+    let pattern_const = if constant_mass {
+        quote!(const DMASS_PATTERN: [[[bool; #nn]; #nn]; #nn] = [[[false; #nn]; #nn]; #nn];)
+    } else {
+        quote!(const DMASS_PATTERN: [[[bool; #nn]; #nn]; #nn] = [#(#pattern),*];)
+    };
+    // kinetic(t, v) and quadratic_max(t, dv): the contractions of ∂M/∂q
+    // with the velocity, straight-line over its structural non-zeros
+    let contractions = if constant_mass {
+        quote!()
+    } else {
+        let nz = |l: usize, j: usize, k: usize| !dmass[l][j][k].is_zero();
+        let mut kin = Vec::new();
+        let mut quad = Vec::new();
+        let mut used_slices = Vec::new();
+        for l in 0..n {
+            if !(0..n).any(|j| (0..n).any(|k| nz(l, j, k))) {
+                continue;
+            }
+            let li = index(l);
+            let mut f_terms = Vec::new();
+            for j in 0..n {
+                let row: Vec<TokenStream> = (0..n)
+                    .filter(|&k| nz(l, j, k))
+                    .map(|k| {
+                        let (jj, kk) = (index(j), index(k));
+                        quote!(t.dmass[#li][(#jj, #kk)] * v[#kk])
+                    })
+                    .collect();
+                if row.is_empty() {
+                    continue;
+                }
+                let (jj, name) = (index(j), format_ident!("q_{}_{}", l, j));
+                kin.push(quote!(let #name = #(#row)+*; q[(#li, #jj)] = #name;));
+                f_terms.push(quote!(#name * v[#jj]));
+            }
+            kin.push(quote!(f[#li] = 0.5 * (#(#f_terms)+*);));
+            // dvᵀ A dv over the upper triangle (A symmetric)
+            let mut qt = Vec::new();
+            for j in 0..n {
+                for k in j..n {
+                    if !nz(l, j, k) {
+                        continue;
+                    }
+                    let (jj, kk) = (index(j), index(k));
+                    qt.push(if j == k {
+                        quote!(t.dmass[#li][(#jj, #jj)] * (dv[#jj] * dv[#jj]))
+                    } else {
+                        quote!(2.0 * t.dmass[#li][(#jj, #kk)] * (dv[#jj] * dv[#kk]))
+                    });
+                }
+            }
+            let name = format_ident!("s_{}", l);
+            quad.push(quote!(let #name = (#(#qt)+*).abs();));
+            used_slices.push(name);
+        }
+        let worst = used_slices.iter().skip(1).fold(
+            used_slices.first().map_or(quote!(0.0), |s| quote!(#s)),
+            |acc, s| quote!(#acc.max(#s)),
+        );
+        quote! {
+            #[inline(always)]
+            fn kinetic(t: &::vigp::embedded::Terms<#nn>, v: &#svector<f64, #nn>) -> (#smatrix<f64, #nn, #nn>, #svector<f64, #nn>) {
+                let mut q = #smatrix::<f64, #nn, #nn>::zeros();
+                let mut f = #svector::<f64, #nn>::zeros();
+                #(#kin)*
+                (q, f)
+            }
+            #[inline(always)]
+            fn quadratic_max(t: &::vigp::embedded::Terms<#nn>, dv: &#svector<f64, #nn>) -> f64 {
+                #(#quad)*
+                #worst
+            }
+        }
+    };
     let mut outs = Vec::new();
     let mut mirror = Vec::new();
     for j in 0..n {
@@ -700,12 +783,14 @@ pub fn emit_dynamics(
             const KINDS: [::vigp::CoordinateKind; #nn] = [#(#kinds),*];
             const DISSIPATIVE: bool = #dissipative;
             const CONSTANT_MASS: bool = #constant_mass;
+            #pattern_const
             type Constants = [f64; #nk];
 
             #constants_fn
             #mass_fn
             #potential_fn
             #terms_fn
+            #contractions
             #force_jacobian_fn
             #constraint_fns
         }

@@ -68,6 +68,11 @@ pub trait Dynamics<const N: usize, const C: usize> {
     /// prismatic joints): [`Terms::dmass`] is then never written.
     const CONSTANT_MASS: bool;
 
+    /// `DMASS_PATTERN[l][j][k]` is `false` where ∂M_jk/∂q_l vanishes
+    /// identically (structural zeros the engine skips; the double
+    /// pendulum's M depends on the elbow angle only). Default: all `true`.
+    const DMASS_PATTERN: [[[bool; N]; N]; N] = [[[true; N]; N]; N];
+
     /// Parameter-dependent constants (products of masses, lengths, …).
     type Constants: Copy + core::fmt::Debug + PartialEq + Send + Sync;
 
@@ -123,6 +128,56 @@ pub trait Dynamics<const N: usize, const C: usize> {
     ) -> SMatrix<f64, N, N> {
         let _ = (k, q, mu);
         SMatrix::zeros()
+    }
+
+    /// Q (row l = (∂M/∂q_l v)ᵀ) and ½[vᵀ ∂M/∂q_l v]_l from `t.dmass` (the
+    /// velocity terms of the residual and of the Newton matrix). Generated
+    /// code overrides this with the structural zeros removed.
+    #[inline(always)]
+    fn kinetic(t: &Terms<N>, v: &SVector<f64, N>) -> (SMatrix<f64, N, N>, SVector<f64, N>) {
+        let mut q = SMatrix::<f64, N, N>::zeros();
+        let mut f = SVector::<f64, N>::zeros();
+        if Self::CONSTANT_MASS {
+            return (q, f);
+        }
+        for l in 0..N {
+            let mut fl = 0.0;
+            for j in 0..N {
+                let mut s = 0.0;
+                for k in 0..N {
+                    if Self::DMASS_PATTERN[l][j][k] {
+                        s += t.dmass[l][(j, k)] * v[k];
+                    }
+                }
+                q[(l, j)] = s;
+                fl += s * v[j];
+            }
+            f[l] = 0.5 * fl;
+        }
+        (q, f)
+    }
+
+    /// max_l |dvᵀ ∂M/∂q_l dv| from `t.dmass` (the first-order step's
+    /// quadratic remainder). Generated code overrides this with the
+    /// structural zeros removed.
+    #[inline(always)]
+    fn quadratic_max(t: &Terms<N>, dv: &SVector<f64, N>) -> f64 {
+        if Self::CONSTANT_MASS {
+            return 0.0;
+        }
+        let mut worst = 0.0f64;
+        for l in 0..N {
+            let mut fl = 0.0;
+            for j in 0..N {
+                for k in 0..N {
+                    if Self::DMASS_PATTERN[l][j][k] {
+                        fl += dv[j] * t.dmass[l][(j, k)] * dv[k];
+                    }
+                }
+            }
+            worst = worst.max(fl.abs());
+        }
+        worst
     }
 
     /// Total energy ½ vᵀM(q)v + V(q).

@@ -124,7 +124,15 @@ pub fn solve_partial<const M: usize>(
     a: &SMatrix<f64, M, M>,
     b: &SVector<f64, M>,
 ) -> Option<SVector<f64, M>> {
-    let amax = a.amax();
+    // max |a_ij| (NaN-propagating; nalgebra's amax goes through generic
+    // SIMD comparisons that cost more than the 2×2 solve itself)
+    let mut amax = 0.0f64;
+    for x in a.iter() {
+        let v = x.abs();
+        if v > amax || v.is_nan() {
+            amax = v;
+        }
+    }
     let tiny = 1e-14 * amax;
     if M == 1 {
         let d = a[(0, 0)];

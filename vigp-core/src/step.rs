@@ -345,12 +345,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// f(q, v) = ½[vᵀ ∂M/∂q_i v]_i − ∇V − D v from terms at q.
     fn forces(t: &Terms<N>, v: &SVector<f64, N>) -> SVector<f64, N> {
-        let mut f = -t.dpotential;
-        if !M::CONSTANT_MASS {
-            for (i, dm) in t.dmass.iter().enumerate() {
-                f[i] += 0.5 * v.dot(&(dm * v));
-            }
-        }
+        let mut f = M::kinetic(t, v).1 - t.dpotential;
         if M::DISSIPATIVE {
             f -= t.damping * v;
         }
@@ -486,7 +481,24 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
     ) -> Result<Solved<N>, StepError> {
-        let alpha = self.alpha;
+        if self.alpha == 0.0 {
+            self.solve_rule::<false>(x1, p0, h, guess)
+        } else {
+            self.solve_rule::<true>(x1, p0, h, guess)
+        }
+    }
+
+    /// [`Stepper::solve`] for the first-order (`MID = false`) or the
+    /// midpoint rule, monomorphised so that each rule's loop carries only
+    /// its own terms.
+    fn solve_rule<const MID: bool>(
+        &self,
+        x1: &SVector<f64, N>,
+        p0: &SVector<f64, N>,
+        h: f64,
+        guess: &SVector<f64, N>,
+    ) -> Result<Solved<N>, StepError> {
+        let alpha = if MID { 0.5 } else { 0.0 };
         let model = &self.model;
         let k = &self.k;
         let opts = &self.options;
@@ -498,11 +510,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         };
         // terms at x₁ (first order: once per step) or at m₁(v)
         let at = |v: &SVector<f64, N>| {
-            if alpha == 0.0 {
-                *x1
-            } else {
-                x1 + v * (alpha * h)
-            }
+            if MID { x1 + v * (alpha * h) } else { *x1 }
         };
         model.terms(k, &at(&v), &mut t);
         let m_bar = (0..N).map(|i| t.mass[(i, i)].abs()).fold(0.0, f64::max);
@@ -523,13 +531,19 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             SMatrix::zeros()
         };
         let a1 = (1.0 - alpha) * h;
-        // residual d(v, λ), constraint c(v) and its Jacobian G(x₁ + h v)
+        // residual d(v, λ) and Q (row l = (∂M/∂q_l v)ᵀ, which the Newton
+        // matrix reuses); constraint c(v) and its Jacobian G(x₁ + h v)
         let residual = |t: &Terms<N>, v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
-            let mut d = p0 + Self::forces(t, v) * a1 - t.mass * v;
+            let (q, kin) = M::kinetic(t, v);
+            let mut f = kin - t.dpotential;
+            if M::DISSIPATIVE {
+                f -= t.damping * v;
+            }
+            let mut d = p0 + f * a1 - t.mass * v;
             if C > 0 {
                 d -= g1t * lambda;
             }
-            d
+            (d, q)
         };
         let constraint = |v: &SVector<f64, N>| {
             if C > 0 {
@@ -541,15 +555,15 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let error =
             |d: &SVector<f64, N>, c: &SVector<f64, C>| (max_abs(d) * inv_p).max(max_abs(c) * inv_l);
         let mut lambda = SVector::<f64, C>::zeros();
-        let mut d = residual(&t, &v, &lambda);
+        let (mut d, mut qm) = residual(&t, &v, &lambda);
         let (mut c, mut g2) = constraint(&v);
         let mut err = error(&d, &c);
         let mut regularised = false;
         let momentum = |t: &Terms<N>, v: &SVector<f64, N>| {
-            if alpha == 0.0 {
-                t.mass * v
-            } else {
+            if MID {
                 t.mass * v + Self::forces(t, v) * (alpha * h)
+            } else {
+                t.mass * v
             }
         };
         for iteration in 0..opts.max_iterations {
@@ -568,19 +582,15 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             // Newton matrix ∂d/∂v (module docs)
             let mut jac = -t.mass;
             if !M::CONSTANT_MASS {
-                let mut q = SMatrix::<f64, N, N>::zeros();
-                for (i, dm) in t.dmass.iter().enumerate() {
-                    q.set_row(i, &(dm * v).transpose());
-                }
-                jac += q * a1;
-                if alpha != 0.0 {
-                    jac -= q.transpose() * (alpha * h);
+                jac += qm * a1;
+                if MID {
+                    jac -= qm.transpose() * (alpha * h);
                 }
             }
             if M::DISSIPATIVE {
                 jac -= t.damping * a1;
             }
-            if alpha != 0.0 {
+            if MID {
                 jac += model.force_jacobian(k, &at(&v), &v) * (alpha * a1 * h);
             }
             let singular = StepError::SingularJacobian { iteration };
@@ -592,16 +602,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 // the O(ε·scale) rounding of d(v) and of the solve, cheaper
                 // than evaluating d again. Within half the tolerance (the
                 // other half covers the rounding) the step is accepted.
-                if alpha == 0.0 {
-                    let bound = if M::CONSTANT_MASS {
-                        0.0
-                    } else {
-                        t.dmass
-                            .iter()
-                            .map(|dm| (0.5 * h * dv.dot(&(dm * dv))).abs())
-                            .fold(0.0, f64::max)
-                            * inv_p
-                    };
+                if !MID {
+                    let bound = 0.5 * h.abs() * M::quadratic_max(&t, &dv) * inv_p;
                     if bound <= 0.5 * opts.tolerance {
                         let v1 = v + dv;
                         if v1.iter().all(|x| x.is_finite()) {
@@ -627,19 +629,19 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             let mut step = 1.0;
             loop {
                 let (vn, ln) = (v + dv * step, lambda + dl * step);
-                if alpha != 0.0 {
+                if MID {
                     model.terms(k, &at(&vn), &mut t);
                 }
-                let dn = residual(&t, &vn, &ln);
+                let (dn, qn) = residual(&t, &vn, &ln);
                 let (cn, g2n) = constraint(&vn);
                 let errn = error(&dn, &cn);
                 if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
-                    (v, lambda, d, c, g2, err) = (vn, ln, dn, cn, g2n, errn);
+                    (v, lambda, d, qm, c, g2, err) = (vn, ln, dn, qn, cn, g2n, errn);
                     break;
                 }
                 step *= 0.5;
                 if step < opts.min_step {
-                    if alpha != 0.0 {
+                    if MID {
                         // terms back at the current iterate
                         model.terms(k, &at(&v), &mut t);
                     }

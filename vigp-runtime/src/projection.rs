@@ -6,7 +6,6 @@ use crate::linalg::FullPivLu;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError, StepInfo, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
-use num_dual::Dual2Vec;
 
 /// Project a configuration onto g(q) = 0 by Gauss–Newton minimum-norm
 /// corrections q ← q − Gᵀ(GGᵀ)⁻¹g (the nearest consistent configuration to
@@ -20,10 +19,11 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
     if q.iter().any(|x| !x.is_finite()) {
         return Err(StepError::NonFiniteState { step: None });
     }
+    let k = m.checked_constants()?;
     let mut q = *q;
     let scale = crate::mechanism::length_scale::<M, N, C>(&q);
     for iter in 0..=options.max_iterations {
-        let g = m.constraints(&q);
+        let (g, gj) = m.constraints_and_jacobian(&k, &q);
         let res = g.amax() / scale;
         if !res.is_finite() {
             return Err(StepError::NonFiniteResidual {
@@ -51,7 +51,6 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
                 step: None,
             });
         }
-        let gj: SMatrix<f64, C, N> = m.constraint_jacobian(&q);
         let y = FullPivLu::new(gj * gj.transpose(), 1e-13).solve(&g);
         q -= gj.transpose() * y;
     }
@@ -126,34 +125,20 @@ fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
     dt: f64,
     options: &NewtonOptions,
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
+    let k = m.checked_constants()?;
     let v_scale = 1.0 + v_u.amax();
     let g_scale = crate::mechanism::length_scale::<M, N, C>(q1);
     let mut v = *start;
     let mut mu = SVector::<f64, C>::zeros();
     // Exact Newton: ∂r/∂v = I + Δt²·Σ μ_i ∇²g_i(q₂) (a Gauss–Newton step
-    // without the curvature term stalls when the correction is large).
+    // without the curvature term stalls when the correction is large); the
+    // closed-form terms give g, G and Σ μ_i ∇²g_i.
     let eval = |v: &SVector<f64, N>, mu: &SVector<f64, C>| {
         let q2 = q1 + v * dt;
-        let (_, grad, hess) = num_dual::hessian(
-            |w: SVector<Dual2Vec<f64, nalgebra::Const<N>>, N>| {
-                let q = w.map(|wi| wi * dt) + q1.map(Dual2Vec::from_re);
-                let g = m.constraints(&q);
-                let mut phi = Dual2Vec::from_re(0.0);
-                for i in 0..C {
-                    phi += g[i] * mu[i];
-                }
-                phi
-            },
-            v,
-        );
-        let gj: SMatrix<f64, C, N> = m.constraint_jacobian(&q2);
-        let r = v - v_u + grad;
-        (
-            r,
-            m.constraints(&q2),
-            gj,
-            SMatrix::<f64, N, N>::identity() + hess,
-        )
+        let (g, gj) = m.constraints_and_jacobian(&k, &q2);
+        let hess = m.constraint_hessian(&k, &q2, mu) * (dt * dt);
+        let r = v - v_u + gj.transpose() * mu * dt;
+        (r, g, gj, SMatrix::<f64, N, N>::identity() + hess)
     };
     let merit = |r: &SVector<f64, N>, c: &SVector<f64, C>| {
         let (a, b) = (r.norm() / v_scale, c.norm() / g_scale);
