@@ -37,14 +37,19 @@ mod normalise;
 mod options;
 mod rng;
 mod save;
+mod sparse;
+mod tri;
+mod update;
 
 pub use error::GpError;
 pub use export::{ExportOptions, ExportedArrays};
 pub use kernel::Hyperparameters;
 pub use mean::{MeanFn, PriorMean};
-pub use model::{Gp, OutputGp, Prediction, Workspace};
+pub use model::{Gp, OutputGp, Prediction, VarianceMode, Workspace};
 pub use normalise::InputNormaliser;
-pub use options::{Bounds, OutputReport, TrainOptions, TrainReport};
+pub use options::{
+    Bounds, InducingInit, Method, OutputReport, SparseOptions, TrainOptions, TrainReport,
+};
 pub use save::SavedGp;
 
 /// Log marginal likelihood and its gradient on data as given (no

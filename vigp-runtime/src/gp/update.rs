@@ -1,0 +1,189 @@
+//! Online updates: add samples to a trained model without re-optimising.
+//!
+//! The hyperparameters, the input standardisation, the output scales and
+//! the prior mean stay as they are (a constant prior mean keeps its value),
+//! so the result is the model [`Gp::from_saved`] builds from the enlarged
+//! data with the same hyperparameters and normalisation, up to rounding:
+//!
+//! * exact GP: the Cholesky factor gains one row per sample,
+//!   L' = [[L, 0], [cᵀ, δ]] with L·c = k and δ² = k(x, x) + σ_n² + jitter − ‖c‖²
+//!   (N²/2 multiply-adds), L⁻¹r gains one entry, L⁻¹ (when stored) one row
+//!   (N²/2), and α = L⁻ᵀ(L⁻¹r) is re-solved once per call (N²/2);
+//! * sparse GP: a = L_u⁻¹k_u/σ, B ← B + aaᵀ by a rank-one Cholesky update
+//!   of L_B, A·r ← A·r + a·r_new (O(M²) per sample), and the weights
+//!   u re-solved once per call (O(M²)).
+
+use super::error::GpError;
+use super::lml::sqdist;
+use super::model::{Gp, Posterior, check_finite};
+use super::{sparse, tri};
+
+impl Gp {
+    /// Adds samples (row-major `inputs`, k × d, and `targets`, k × p, in
+    /// original units) to the model at fixed hyperparameters, in
+    /// O(k·N²) for an exact GP and O(k·M²) for a sparse one (see the
+    /// module docs of `gp::update`). The report of the training run (LML)
+    /// is not updated; [`OutputGp::log_marginal_likelihood`](super::OutputGp::log_marginal_likelihood)
+    /// is (the exact LML, or the sparse bound, of the enlarged data).
+    ///
+    /// Errors (the model is unchanged then): dimension mismatches, NaN or ∞
+    /// in the samples or in the prior mean at them, or an exact model whose
+    /// extended Gram matrix is not numerically positive definite with the
+    /// model's jitter (e.g. a duplicate input with a tiny noise variance):
+    /// [`GpError::NotPositiveDefinite`]; refit with [`Gp::fit`] then.
+    pub fn add_samples(&mut self, inputs: &[f64], targets: &[f64]) -> Result<(), GpError> {
+        let (d, p) = (self.d, self.p);
+        let k = super::model::check_dims(inputs, d, targets, p)?;
+        let mut prior = vec![0.0; k * p];
+        for (o, x) in prior.chunks_exact_mut(p).zip(inputs.chunks_exact(d)) {
+            self.mean.eval(x, o);
+        }
+        check_finite("prior mean at the new inputs", &prior)?;
+        let mut xn = vec![0.0; k * d];
+        for (o, x) in xn.chunks_exact_mut(d).zip(inputs.chunks_exact(d)) {
+            self.input_norm.apply(x, o);
+        }
+        // Work on copies of the outputs, so that an error leaves `self` as it was.
+        let mut outputs = self.outputs.clone();
+        for (j, o) in outputs.iter_mut().enumerate() {
+            let s = o.output_scale;
+            let r_new: Vec<f64> = (0..k)
+                .map(|i| (targets[i * p + j] - prior[i * p + j]) / s)
+                .collect();
+            check_finite("residual y - m(x) of the new samples", &r_new)?;
+            let xs_new = super::lml::scale_inputs(&xn, d, &o.hp.length_scales);
+            let sf2 = o.hp.signal_variance;
+            let centres = o.alpha.len();
+            match &mut o.post {
+                Posterior::Exact { l, linv, fwd } => {
+                    let mut n = centres;
+                    // Row-major scaled training inputs, extended as we go.
+                    let mut xs = row_major(&o.xs_cols, d, n);
+                    let diag = sf2 + o.hp.noise_variance + o.jitter;
+                    for (i, xq) in xs_new.chunks_exact(d).enumerate() {
+                        let mut c: Vec<f64> = (0..n)
+                            .map(|a| {
+                                let r2 = sqdist(&xs[a * d..(a + 1) * d], xq);
+                                if r2 > vigp_core::gp::R2_CUTOFF {
+                                    0.0
+                                } else {
+                                    sf2 * (-0.5 * r2).exp()
+                                }
+                            })
+                            .collect();
+                        tri::forward_rows(l, &mut c);
+                        let delta2 = diag - tri::norm2(&c);
+                        if !(delta2 > 0.0 && delta2.is_finite()) {
+                            return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
+                        }
+                        let delta = delta2.sqrt();
+                        if let Some(li) = linv.as_mut() {
+                            tri::extend_inverse(li, n, &c, delta);
+                        }
+                        fwd.push((r_new[i] - tri::dot(&c, fwd)) / delta);
+                        l.extend_from_slice(&c);
+                        l.push(delta);
+                        xs.extend_from_slice(xq);
+                        n += 1;
+                    }
+                    let mut alpha = fwd.clone();
+                    tri::backward_rows(l, &mut alpha);
+                    let fit = tri::norm2(fwd);
+                    let ln2pi = (2.0 * core::f64::consts::PI).ln();
+                    let log_det: f64 =
+                        2.0 * (0..n).map(|i| l[tri::row_start(i) + i].ln()).sum::<f64>();
+                    o.lml = -0.5 * fit - 0.5 * log_det - 0.5 * n as f64 * ln2pi;
+                    if alpha.iter().any(|a| !a.is_finite()) || !o.lml.is_finite() {
+                        return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
+                    }
+                    o.alpha = alpha;
+                    o.xs_cols = col_major(&xs, d);
+                }
+                Posterior::Sparse { lu, lb, ay, .. } => {
+                    let m = centres;
+                    let sigma = o.hp.noise_variance.sqrt();
+                    let zs = row_major(&o.xs_cols, d, m);
+                    for (i, xq) in xs_new.chunks_exact(d).enumerate() {
+                        let mut a: Vec<f64> = (0..m)
+                            .map(|c| {
+                                let r2 = sqdist(&zs[c * d..(c + 1) * d], xq);
+                                if r2 > vigp_core::gp::R2_CUTOFF {
+                                    0.0
+                                } else {
+                                    sf2 * (-0.5 * r2).exp()
+                                }
+                            })
+                            .collect();
+                        tri::forward_rows(lu, &mut a);
+                        a.iter_mut().for_each(|v| *v /= sigma);
+                        for (y, v) in ay.iter_mut().zip(&a) {
+                            *y += v * r_new[i];
+                        }
+                        sparse::chol_update(lb, &mut a);
+                    }
+                    o.alpha = sparse::weights(lu, lb, ay, sigma);
+                    o.lml = sparse_bound(
+                        lb,
+                        ay,
+                        o.residual.iter().chain(&r_new),
+                        self.n + k,
+                        sf2,
+                        o.hp.noise_variance,
+                    );
+                }
+            }
+            o.residual.extend_from_slice(&r_new);
+        }
+        self.outputs = outputs;
+        self.inputs.extend_from_slice(inputs);
+        self.targets.extend_from_slice(targets);
+        self.prior_at_inputs.extend_from_slice(&prior);
+        self.n += k;
+        Ok(())
+    }
+}
+
+/// The SGPR bound from L_B, A·y and the targets (see `sparse`):
+/// tr(AAᵀ) = ‖L_B‖_F² − M.
+fn sparse_bound<'a>(
+    lb: &[f64],
+    ay: &[f64],
+    y: impl Iterator<Item = &'a f64>,
+    n: usize,
+    sf2: f64,
+    s2: f64,
+) -> f64 {
+    let m = ay.len();
+    let mut c = ay.to_vec();
+    tri::forward_rows(lb, &mut c);
+    let ctc = tri::norm2(&c) / s2;
+    let yty: f64 = y.map(|v| v * v).sum();
+    let tr_aat = tri::norm2(lb) - m as f64;
+    let logdet_b: f64 = (0..m).map(|i| lb[tri::row_start(i) + i].ln()).sum();
+    let nf = n as f64;
+    -0.5 * nf * (2.0 * core::f64::consts::PI).ln() - logdet_b - 0.5 * nf * s2.ln() - 0.5 * yty / s2
+        + 0.5 * ctc
+        - 0.5 * nf * sf2 / s2
+        + 0.5 * tr_aat
+}
+
+fn row_major(cols: &[f64], d: usize, n: usize) -> Vec<f64> {
+    let mut out = vec![0.0; n * d];
+    for j in 0..d {
+        for i in 0..n {
+            out[i * d + j] = cols[j * n + i];
+        }
+    }
+    out
+}
+
+fn col_major(rows: &[f64], d: usize) -> Vec<f64> {
+    let n = rows.len() / d;
+    let mut out = vec![0.0; n * d];
+    for i in 0..n {
+        for j in 0..d {
+            out[j * n + i] = rows[i * d + j];
+        }
+    }
+    out
+}
