@@ -487,7 +487,8 @@ impl Gp {
                         let mut ws = sparse::SparseWorkspace::new(z.len() / d, n);
                         lbfgs::minimise(
                             |t| {
-                                let e = sparse::elbo_ws(&mut ws, &prep.xn, z, d, y, t, true, inner)?;
+                                let e =
+                                    sparse::elbo_ws(&mut ws, &prep.xn, z, d, y, t, true, inner)?;
                                 Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
                             },
                             t0,

@@ -83,7 +83,10 @@ fn scaled(x: &[f64], d: usize, ls: &[f64]) -> Vec<f64> {
 /// K_uu (no jitter) from scaled inducing inputs.
 fn kuu(zs: &[f64], m: usize, d: usize, sf2: f64) -> Mat<f64> {
     Mat::from_fn(m, m, |i, j| {
-        kval(sf2, sqdist(&zs[i * d..(i + 1) * d], &zs[j * d..(j + 1) * d]))
+        kval(
+            sf2,
+            sqdist(&zs[i * d..(i + 1) * d], &zs[j * d..(j + 1) * d]),
+        )
     })
 }
 
@@ -215,12 +218,11 @@ fn core(
     solve_lower_triangular_in_place(lu.as_ref(), ws.a.as_mut(), par);
     let inv_sigma = 1.0 / sigma;
     for j in 0..n {
-        for v in ws
-            .a
-            .col_mut(j)
-            .try_as_col_major_mut()
-            .expect("contiguous")
-            .as_slice_mut()
+        for v in
+            ws.a.col_mut(j)
+                .try_as_col_major_mut()
+                .expect("contiguous")
+                .as_slice_mut()
         {
             *v *= inv_sigma;
         }
@@ -238,12 +240,11 @@ fn core(
     for j in 0..n {
         let yj = y[j];
         if yj != 0.0 {
-            let col = ws
-                .a
-                .col(j)
-                .try_as_col_major()
-                .expect("contiguous")
-                .as_slice();
+            let col =
+                ws.a.col(j)
+                    .try_as_col_major()
+                    .expect("contiguous")
+                    .as_slice();
             for (o, a) in ay.iter_mut().zip(col) {
                 *o += a * yj;
             }
@@ -269,7 +270,9 @@ fn core(
     let tr_aat: f64 = (0..m).map(|i| aat[(i, i)]).sum();
     let logdet_b: f64 = (0..m).map(|i| lb[(i, i)].ln()).sum();
     let nf = n as f64;
-    let elbo = -0.5 * nf * (2.0 * core::f64::consts::PI).ln() - logdet_b - 0.5 * nf * s2.ln()
+    let elbo = -0.5 * nf * (2.0 * core::f64::consts::PI).ln()
+        - logdet_b
+        - 0.5 * nf * s2.ln()
         - 0.5 * yty / s2
         + 0.5 * ctc
         - 0.5 * nf * sf2 / s2
@@ -333,18 +336,24 @@ pub(crate) fn elbo_ws(
     // α = σ⁻²(y − Aᵀ v1)
     let alpha: Vec<f64> = (0..n)
         .map(|j| {
-            let col = ws
-                .a
-                .col(j)
-                .try_as_col_major()
-                .expect("contiguous")
-                .as_slice();
+            let col =
+                ws.a.col(j)
+                    .try_as_col_major()
+                    .expect("contiguous")
+                    .as_slice();
             (y[j] - tri::dot(col, &c.v1)) / s2
         })
         .collect();
     // T = R·A (M × N), then G_uf = u αᵀ + T, contracted with K_uf ∘ D.
     let mut t = Mat::<f64>::zeros(m, n);
-    matmul(t.as_mut(), Accum::Replace, r.as_ref(), ws.a.as_ref(), 1.0, par);
+    matmul(
+        t.as_mut(),
+        Accum::Replace,
+        r.as_ref(),
+        ws.a.as_ref(),
+        1.0,
+        par,
+    );
     let contract = |j: usize, tcol: &[f64], gl: &mut [f64], gs: &mut f64| {
         let kcol = ws
             .kuf
@@ -378,7 +387,11 @@ pub(crate) fn elbo_ws(
             vec![{
                 let (mut g, mut s) = (vec![0.0; d], 0.0);
                 for j in 0..n {
-                    let tcol = tref.col(j).try_as_col_major().expect("contiguous").as_slice();
+                    let tcol = tref
+                        .col(j)
+                        .try_as_col_major()
+                        .expect("contiguous")
+                        .as_slice();
                     contract(j, tcol, &mut g, &mut s);
                 }
                 (g, s)
@@ -389,7 +402,11 @@ pub(crate) fn elbo_ws(
                 .map(|ci| {
                     let (mut g, mut s) = (vec![0.0; d], 0.0);
                     for j in ci * chunk..((ci + 1) * chunk).min(n) {
-                        let tcol = tref.col(j).try_as_col_major().expect("contiguous").as_slice();
+                        let tcol = tref
+                            .col(j)
+                            .try_as_col_major()
+                            .expect("contiguous")
+                            .as_slice();
                         contract(j, tcol, &mut g, &mut s);
                     }
                     (g, s)
@@ -411,7 +428,14 @@ pub(crate) fn elbo_ws(
     solve_upper_triangular_in_place(c.lu.as_ref().transpose(), w.as_mut(), Par::Seq);
     let w = w.transpose().to_owned(); // AAᵀ L_u⁻¹
     let mut guu = Mat::<f64>::zeros(m, m);
-    matmul(guu.as_mut(), Accum::Replace, r.as_ref(), w.as_ref(), -0.5 * sigma, Par::Seq);
+    matmul(
+        guu.as_mut(),
+        Accum::Replace,
+        r.as_ref(),
+        w.as_ref(),
+        -0.5 * sigma,
+        Par::Seq,
+    );
     let kuu0 = kuu(&zs, m, d, sf2);
     for i in 0..m {
         for j in 0..m {
@@ -434,12 +458,15 @@ pub(crate) fn elbo_ws(
     let ata: f64 = alpha.iter().map(|a| a * a).sum();
     let tr_binv: f64 = (0..m).map(|i| binv[(i, i)]).sum();
     let tr_aat: f64 = (0..m).map(|i| c.aat[(i, i)]).sum();
-    let ds2 = 0.5 * (ata - (nf - m as f64 + tr_binv) / s2) + (nf * sf2 - s2 * tr_aat) / (2.0 * s2 * s2);
+    let ds2 =
+        0.5 * (ata - (nf - m as f64 + tr_binv) / s2) + (nf * sf2 - s2 * tr_aat) / (2.0 * s2 * s2);
     let mut gradient = gl;
     gradient.push(gsf);
     gradient.push(s2 * ds2);
     if gradient.iter().any(|g| !g.is_finite()) {
-        return Err(GpError::NotPositiveDefinite { jitter: c.eps * sf2 });
+        return Err(GpError::NotPositiveDefinite {
+            jitter: c.eps * sf2,
+        });
     }
     Ok(LmlEval {
         value: c.elbo,
@@ -606,8 +633,12 @@ mod tests {
             tp[k] += h;
             let mut tm = theta.clone();
             tm[k] -= h;
-            let fp = elbo_ws(&mut ws, &x, &z, d, &y, &tp, false, Par::Seq).unwrap().value;
-            let fm = elbo_ws(&mut ws, &x, &z, d, &y, &tm, false, Par::Seq).unwrap().value;
+            let fp = elbo_ws(&mut ws, &x, &z, d, &y, &tp, false, Par::Seq)
+                .unwrap()
+                .value;
+            let fm = elbo_ws(&mut ws, &x, &z, d, &y, &tm, false, Par::Seq)
+                .unwrap()
+                .value;
             let fd = (fp - fm) / (2.0 * h);
             // central differences: O(h²) truncation ≈ 1e-10·|f'''|, rounding
             // ≈ ε·|F|/h ≈ 1e-9 here
@@ -626,7 +657,11 @@ mod tests {
     fn cholesky_update_matches_refactorisation() {
         let m = 7;
         let a = Mat::<f64>::from_fn(m, m, |i, j| {
-            if i == j { 3.0 + i as f64 } else { 0.2 * ((i + j) as f64).sin() }
+            if i == j {
+                3.0 + i as f64
+            } else {
+                0.2 * ((i + j) as f64).sin()
+            }
         });
         let l = a.llt(Side::Lower).unwrap().L().to_owned();
         let mut lp = tri::pack_rows(&l);

@@ -113,7 +113,13 @@ pub(crate) fn forward_rows(l: &[f64], v: &mut [f64]) {
     let n = v.len();
     let mut i = 0;
     while i + 4 <= n {
-        let s = dot4(row(l, i), row(l, i + 1), row(l, i + 2), row(l, i + 3), &v[..i]);
+        let s = dot4(
+            row(l, i),
+            row(l, i + 1),
+            row(l, i + 2),
+            row(l, i + 3),
+            &v[..i],
+        );
         for k in 0..4 {
             let r = row(l, i + k);
             let mut t = v[i + k] - s[k];
