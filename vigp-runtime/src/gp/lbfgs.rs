@@ -141,8 +141,10 @@ impl MoreThuente {
         if f <= ftest && g.abs() <= LS_GTOL * (-self.ginit) {
             return Search::Converged;
         }
-        if (self.brackt && (stp <= self.stmin || stp >= self.stmax))
-            || (self.brackt && self.stmax - self.stmin <= LS_XTOL * self.stmax)
+        if (self.brackt
+            && (stp <= self.stmin
+                || stp >= self.stmax
+                || self.stmax - self.stmin <= LS_XTOL * self.stmax))
             || (stp == self.stpmax && f <= ftest && g <= self.gtest)
             || (stp == self.stpmin && (f > ftest || g >= self.gtest))
         {
@@ -205,8 +207,10 @@ impl MoreThuente {
             self.stmax = stp + 4.0 * (stp - self.stx);
         }
         stp = stp.clamp(self.stpmin, self.stpmax);
-        if (self.brackt && (stp <= self.stmin || stp >= self.stmax))
-            || (self.brackt && self.stmax - self.stmin <= LS_XTOL * self.stmax)
+        if self.brackt
+            && (stp <= self.stmin
+                || stp >= self.stmax
+                || self.stmax - self.stmin <= LS_XTOL * self.stmax)
         {
             stp = self.stx;
         }
@@ -435,7 +439,7 @@ where
             let dnorm = dot(&d, &d).sqrt();
             let mut stp = if mem.is_empty() { 1.0 / dnorm } else { 1.0 };
             stp = stp.min(tmax);
-            if !(stp > 0.0) {
+            if stp.is_nan() || stp <= 0.0 {
                 continue;
             }
             let mut ls = MoreThuente::new(fx, slope, stp, 0.0, tmax);
@@ -455,7 +459,7 @@ where
                     .filter(|(v, gr)| v.is_finite() && gr.iter().all(|q| q.is_finite()));
                 let Some((ft, gt)) = r else {
                     stp = ls.failed(stp);
-                    if !(stp > 0.0) || stp <= 1e-20 * ls.stpmax.max(1e-300) {
+                    if stp.is_nan() || stp <= 1e-20 * ls.stpmax.max(1e-300) {
                         break;
                     }
                     continue;
@@ -491,6 +495,7 @@ where
             break;
         };
         let s: Vec<f64> = xn.iter().zip(&x).map(|(a, b)| a - b).collect();
+
         let y: Vec<f64> = gn.iter().zip(&g).map(|(a, b)| a - b).collect();
         let sy = dot(&s, &y);
         if sy > f64::EPSILON * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() && sy > 0.0 {

@@ -292,6 +292,9 @@ fn residuals_of(
         .collect()
 }
 
+/// (start LMLs, evaluations, first error, iterations, start evaluations).
+type StartTally = (Vec<f64>, usize, Option<GpError>, usize, Vec<usize>);
+
 /// Mixes the seed and output index into an independent SplitMix64 stream.
 fn stream_seed(seed: u64, output: usize) -> u64 {
     let mut r = SplitMix64::new(seed ^ (output as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
@@ -502,7 +505,9 @@ impl Gp {
             .collect();
         let starts = 1 + opts.restarts;
         let mut best: Vec<Option<(usize, Vec<f64>, bool)>> = vec![None; p];
-        let mut reports: Vec<(Vec<f64>, usize, Option<GpError>, usize, Vec<usize>)> =
+        // Per output: final LML and evaluations of every start, total
+        // evaluations and iterations, the first error.
+        let mut reports: Vec<StartTally> =
             vec![(vec![f64::NAN; starts], 0, None, 0, vec![0; starts]); p];
         for ((out, start, _), res) in jobs.iter().zip(results) {
             match res {

@@ -34,7 +34,7 @@
 //! **Cost** per evaluation: M·N kernel entries, the triangular solve
 //! L_u⁻¹K_uf (M²N), AAᵀ (M²N/… a full product here, M²N·2 flops), the
 //! product (I − B⁻¹)-term · A (2M²N) and O(M·N·d) for the contraction,
-//! all through faer's level-3 kernels; memory two M × N matrices.
+//! all through faer's level-3 kernels; memory three M × N matrices.
 //!
 //! **Prediction.** mean = k_uᵀu, latent variance
 //! σ_f² − ‖L_u⁻¹k_u‖² + ‖L_B⁻¹L_u⁻¹k_u‖². M = N with Z = X gives the exact
@@ -153,10 +153,12 @@ fn chol_kuu(k: &Mat<f64>, sf2: f64, start: f64) -> Result<(Mat<f64>, f64), GpErr
 }
 
 /// Everything an evaluation needs beyond the data, reused across
-/// evaluations of one optimiser run (two M × N buffers).
+/// evaluations of one optimiser run (three M × N buffers).
 pub(crate) struct SparseWorkspace {
     kuf: Mat<f64>,
     a: Mat<f64>,
+    /// R·A of the gradient (allocated on the first gradient evaluation).
+    t: Mat<f64>,
 }
 
 impl SparseWorkspace {
@@ -164,6 +166,7 @@ impl SparseWorkspace {
         Self {
             kuf: Mat::zeros(m, n),
             a: Mat::zeros(m, n),
+            t: Mat::new(),
         }
     }
 }
@@ -197,6 +200,7 @@ struct Core {
     sigma: f64,
 }
 
+#[allow(clippy::too_many_arguments)]
 fn core(
     ws: &mut SparseWorkspace,
     xs: &[f64],
@@ -237,8 +241,7 @@ fn core(
         par,
     );
     let mut ay = vec![0.0; m];
-    for j in 0..n {
-        let yj = y[j];
+    for (j, &yj) in y.iter().enumerate() {
         if yj != 0.0 {
             let col =
                 ws.a.col(j)
@@ -345,15 +348,18 @@ pub(crate) fn elbo_ws(
         })
         .collect();
     // T = R·A (M × N), then G_uf = u αᵀ + T, contracted with K_uf ∘ D.
-    let mut t = Mat::<f64>::zeros(m, n);
+    if ws.t.nrows() != m || ws.t.ncols() != n {
+        ws.t = Mat::zeros(m, n);
+    }
     matmul(
-        t.as_mut(),
+        ws.t.as_mut(),
         Accum::Replace,
         r.as_ref(),
         ws.a.as_ref(),
         1.0,
         par,
     );
+    let t = &ws.t;
     let contract = |j: usize, tcol: &[f64], gl: &mut [f64], gs: &mut f64| {
         let kcol = ws
             .kuf
@@ -380,7 +386,7 @@ pub(crate) fn elbo_ws(
     let mut gsf = 0.0;
     {
         use rayon::prelude::*;
-        let tref = &t;
+        let tref = t;
         let chunk = 2048usize;
         let nchunks = n.div_ceil(chunk);
         let parts: Vec<(Vec<f64>, f64)> = if matches!(par, Par::Seq) {
@@ -524,10 +530,10 @@ pub(crate) fn chol_update(l: &mut [f64], x: &mut [f64]) {
         let c = r / lkk;
         let s = x[k] / lkk;
         l[tri::row_start(k) + k] = r;
-        for i in k + 1..m {
+        for (i, xi) in x.iter_mut().enumerate().take(m).skip(k + 1) {
             let at = tri::row_start(i) + k;
-            let lik = (l[at] + s * x[i]) / c;
-            x[i] = c * x[i] - s * lik;
+            let lik = (l[at] + s * *xi) / c;
+            *xi = c * *xi - s * lik;
             l[at] = lik;
         }
     }

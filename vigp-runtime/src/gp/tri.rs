@@ -245,9 +245,9 @@ mod tests {
             }
             // Lᵀ x = c with c computed directly
             let mut c = vec![0.0; n];
-            for i in 0..n {
+            for (i, xi) in x.iter().enumerate() {
                 for (j, lij) in row(&l, i).iter().enumerate() {
-                    c[j] += lij * x[i];
+                    c[j] += lij * xi;
                 }
             }
             backward_rows(&l, &mut c);
