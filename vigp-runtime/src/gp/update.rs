@@ -15,7 +15,7 @@
 
 use super::error::GpError;
 use super::lml::sqdist;
-use super::model::{Gp, Posterior, check_finite};
+use super::model::{Gp, OutputGp, Posterior, check_finite};
 use super::{sparse, tri};
 
 impl Gp {
@@ -43,104 +43,197 @@ impl Gp {
         for (o, x) in xn.chunks_exact_mut(d).zip(inputs.chunks_exact(d)) {
             self.input_norm.apply(x, o);
         }
-        // Work on copies of the outputs, so that an error leaves `self` as it was.
-        let mut outputs = self.outputs.clone();
-        for (j, o) in outputs.iter_mut().enumerate() {
-            let s = o.output_scale;
-            let r_new: Vec<f64> = (0..k)
-                .map(|i| (targets[i * p + j] - prior[i * p + j]) / s)
-                .collect();
-            check_finite("residual y - m(x) of the new samples", &r_new)?;
-            let xs_new = super::lml::scale_inputs(&xn, d, &o.hp.length_scales);
-            let sf2 = o.hp.signal_variance;
-            let centres = o.alpha.len();
-            match &mut o.post {
-                Posterior::Exact { l, linv, fwd } => {
-                    let mut n = centres;
-                    // Row-major scaled training inputs, extended as we go.
-                    let mut xs = row_major(&o.xs_cols, d, n);
-                    let diag = sf2 + o.hp.noise_variance + o.jitter;
-                    for (i, xq) in xs_new.chunks_exact(d).enumerate() {
-                        let mut c: Vec<f64> = (0..n)
-                            .map(|a| {
-                                let r2 = sqdist(&xs[a * d..(a + 1) * d], xq);
-                                if r2 > vigp_core::gp::R2_CUTOFF {
-                                    0.0
-                                } else {
-                                    sf2 * (-0.5 * r2).exp()
-                                }
-                            })
-                            .collect();
-                        tri::forward_rows(l, &mut c);
-                        let delta2 = diag - tri::norm2(&c);
-                        if !(delta2 > 0.0 && delta2.is_finite()) {
-                            return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
-                        }
-                        let delta = delta2.sqrt();
-                        if let Some(li) = linv.as_mut() {
-                            tri::extend_inverse(li, n, &c, delta);
-                        }
-                        fwd.push((r_new[i] - tri::dot(&c, fwd)) / delta);
-                        l.extend_from_slice(&c);
-                        l.push(delta);
-                        xs.extend_from_slice(xq);
-                        n += 1;
-                    }
-                    let mut alpha = fwd.clone();
-                    tri::backward_rows(l, &mut alpha);
-                    let fit = tri::norm2(fwd);
-                    let ln2pi = (2.0 * core::f64::consts::PI).ln();
-                    let log_det: f64 =
-                        2.0 * (0..n).map(|i| l[tri::row_start(i) + i].ln()).sum::<f64>();
-                    o.lml = -0.5 * fit - 0.5 * log_det - 0.5 * n as f64 * ln2pi;
-                    if alpha.iter().any(|a| !a.is_finite()) || !o.lml.is_finite() {
-                        return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
-                    }
-                    o.alpha = alpha;
-                    o.xs_cols = col_major(&xs, d);
+        // Factors only grow by appended rows (exact) or are small (sparse):
+        // an error undoes the outputs updated so far instead of copying them.
+        let mut undo: Vec<Undo> = Vec::with_capacity(p);
+        for j in 0..p {
+            let o = &mut self.outputs[j];
+            undo.push(Undo::of(o));
+            if let Err(e) = update_output(o, j, k, d, p, targets, &prior, &xn, self.n) {
+                for (o, u) in self.outputs.iter_mut().zip(undo) {
+                    u.restore(o);
                 }
-                Posterior::Sparse { lu, lb, ay, .. } => {
-                    let m = centres;
-                    let sigma = o.hp.noise_variance.sqrt();
-                    let zs = row_major(&o.xs_cols, d, m);
-                    for (i, xq) in xs_new.chunks_exact(d).enumerate() {
-                        let mut a: Vec<f64> = (0..m)
-                            .map(|c| {
-                                let r2 = sqdist(&zs[c * d..(c + 1) * d], xq);
-                                if r2 > vigp_core::gp::R2_CUTOFF {
-                                    0.0
-                                } else {
-                                    sf2 * (-0.5 * r2).exp()
-                                }
-                            })
-                            .collect();
-                        tri::forward_rows(lu, &mut a);
-                        a.iter_mut().for_each(|v| *v /= sigma);
-                        for (y, v) in ay.iter_mut().zip(&a) {
-                            *y += v * r_new[i];
-                        }
-                        sparse::chol_update(lb, &mut a);
-                    }
-                    o.alpha = sparse::weights(lu, lb, ay, sigma);
-                    o.lml = sparse_bound(
-                        lb,
-                        ay,
-                        o.residual.iter().chain(&r_new),
-                        self.n + k,
-                        sf2,
-                        o.hp.noise_variance,
-                    );
-                }
+                return Err(e);
             }
-            o.residual.extend_from_slice(&r_new);
         }
-        self.outputs = outputs;
         self.inputs.extend_from_slice(inputs);
         self.targets.extend_from_slice(targets);
         self.prior_at_inputs.extend_from_slice(&prior);
         self.n += k;
         Ok(())
     }
+}
+
+/// What restores an output after a failed update.
+struct Undo {
+    alpha: Vec<f64>,
+    xs_cols: Vec<f64>,
+    lml: f64,
+    residual_len: usize,
+    post: UndoPost,
+}
+
+enum UndoPost {
+    /// Lengths of the appended-to vectors (L, L⁻¹, L⁻¹r).
+    Exact {
+        l: usize,
+        linv: Option<usize>,
+        fwd: usize,
+    },
+    /// Copies of the O(M²) state.
+    Sparse { lb: Vec<f64>, ay: Vec<f64> },
+}
+
+impl Undo {
+    fn of(o: &OutputGp) -> Self {
+        Self {
+            alpha: o.alpha.clone(),
+            xs_cols: o.xs_cols.clone(),
+            lml: o.lml,
+            residual_len: o.residual.len(),
+            post: match &o.post {
+                Posterior::Exact { l, linv, fwd } => UndoPost::Exact {
+                    l: l.len(),
+                    linv: linv.as_ref().map(Vec::len),
+                    fwd: fwd.len(),
+                },
+                Posterior::Sparse { lb, ay, .. } => UndoPost::Sparse {
+                    lb: lb.clone(),
+                    ay: ay.clone(),
+                },
+            },
+        }
+    }
+
+    fn restore(self, o: &mut OutputGp) {
+        o.alpha = self.alpha;
+        o.xs_cols = self.xs_cols;
+        o.lml = self.lml;
+        o.residual.truncate(self.residual_len);
+        match (&mut o.post, self.post) {
+            (
+                Posterior::Exact { l, linv, fwd },
+                UndoPost::Exact {
+                    l: nl,
+                    linv: ni,
+                    fwd: nf,
+                },
+            ) => {
+                l.truncate(nl);
+                fwd.truncate(nf);
+                if let (Some(li), Some(n)) = (linv.as_mut(), ni) {
+                    li.truncate(n);
+                }
+            }
+            (Posterior::Sparse { lb, ay, .. }, UndoPost::Sparse { lb: b, ay: a }) => {
+                *lb = b;
+                *ay = a;
+            }
+            _ => {}
+        }
+    }
+}
+
+/// Appends the k new samples to output `j` (see [`Gp::add_samples`]).
+#[allow(clippy::too_many_arguments)]
+fn update_output(
+    o: &mut OutputGp,
+    j: usize,
+    k: usize,
+    d: usize,
+    p: usize,
+    targets: &[f64],
+    prior: &[f64],
+    xn: &[f64],
+    n_old: usize,
+) -> Result<(), GpError> {
+    let s = o.output_scale;
+    let r_new: Vec<f64> = (0..k)
+        .map(|i| (targets[i * p + j] - prior[i * p + j]) / s)
+        .collect();
+    check_finite("residual y - m(x) of the new samples", &r_new)?;
+    let xs_new = super::lml::scale_inputs(xn, d, &o.hp.length_scales);
+    let sf2 = o.hp.signal_variance;
+    let centres = o.alpha.len();
+    match &mut o.post {
+        Posterior::Exact { l, linv, fwd } => {
+            let mut n = centres;
+            // Row-major scaled training inputs, extended as we go.
+            let mut xs = row_major(&o.xs_cols, d, n);
+            let diag = sf2 + o.hp.noise_variance + o.jitter;
+            for (i, xq) in xs_new.chunks_exact(d).enumerate() {
+                let mut c: Vec<f64> = (0..n)
+                    .map(|a| {
+                        let r2 = sqdist(&xs[a * d..(a + 1) * d], xq);
+                        if r2 > vigp_core::gp::R2_CUTOFF {
+                            0.0
+                        } else {
+                            sf2 * (-0.5 * r2).exp()
+                        }
+                    })
+                    .collect();
+                tri::forward_rows(l, &mut c);
+                let delta2 = diag - tri::norm2(&c);
+                if !(delta2 > 0.0 && delta2.is_finite()) {
+                    return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
+                }
+                let delta = delta2.sqrt();
+                if let Some(li) = linv.as_mut() {
+                    tri::extend_inverse(li, n, &c, delta);
+                }
+                fwd.push((r_new[i] - tri::dot(&c, fwd)) / delta);
+                l.extend_from_slice(&c);
+                l.push(delta);
+                xs.extend_from_slice(xq);
+                n += 1;
+            }
+            let mut alpha = fwd.clone();
+            tri::backward_rows(l, &mut alpha);
+            let fit = tri::norm2(fwd);
+            let ln2pi = (2.0 * core::f64::consts::PI).ln();
+            let log_det: f64 = 2.0 * (0..n).map(|i| l[tri::row_start(i) + i].ln()).sum::<f64>();
+            o.lml = -0.5 * fit - 0.5 * log_det - 0.5 * n as f64 * ln2pi;
+            if alpha.iter().any(|a| !a.is_finite()) || !o.lml.is_finite() {
+                return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
+            }
+            o.alpha = alpha;
+            o.xs_cols = col_major(&xs, d);
+        }
+        Posterior::Sparse { lu, lb, ay, .. } => {
+            let m = centres;
+            let sigma = o.hp.noise_variance.sqrt();
+            let zs = row_major(&o.xs_cols, d, m);
+            for (i, xq) in xs_new.chunks_exact(d).enumerate() {
+                let mut a: Vec<f64> = (0..m)
+                    .map(|c| {
+                        let r2 = sqdist(&zs[c * d..(c + 1) * d], xq);
+                        if r2 > vigp_core::gp::R2_CUTOFF {
+                            0.0
+                        } else {
+                            sf2 * (-0.5 * r2).exp()
+                        }
+                    })
+                    .collect();
+                tri::forward_rows(lu, &mut a);
+                a.iter_mut().for_each(|v| *v /= sigma);
+                for (y, v) in ay.iter_mut().zip(&a) {
+                    *y += v * r_new[i];
+                }
+                sparse::chol_update(lb, &mut a);
+            }
+            o.alpha = sparse::weights(lu, lb, ay, sigma);
+            o.lml = sparse_bound(
+                lb,
+                ay,
+                o.residual.iter().chain(&r_new),
+                n_old + k,
+                sf2,
+                o.hp.noise_variance,
+            );
+        }
+    }
+    o.residual.extend_from_slice(&r_new);
+    Ok(())
 }
 
 /// The SGPR bound from L_B, A·y and the targets (see `sparse`):
