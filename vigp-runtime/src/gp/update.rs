@@ -6,9 +6,12 @@
 //! data with the same hyperparameters and normalisation, up to rounding:
 //!
 //! * exact GP: the Cholesky factor gains one row per sample,
-//!   L' = [[L, 0], [cᵀ, δ]] with L·c = k and δ² = k(x, x) + σ_n² + jitter − ‖c‖²
-//!   (N²/2 multiply-adds), L⁻¹r gains one entry, L⁻¹ (when stored) one row
-//!   (N²/2), and α = L⁻ᵀ(L⁻¹r) is re-solved once per call (N²/2);
+//!   L' = [[L, 0], [cᵀ, δ]] with c = L⁻¹k and δ² = k(x, x) + σ_n² + jitter − ‖c‖²
+//!   (N²/2 multiply-adds, with the stored L⁻¹ or by forward substitution),
+//!   L⁻¹r gains one entry, the stored L⁻¹ one row −(L⁻ᵀc)ᵀ/δ (N²/2; without
+//!   it, L⁻ᵀc by backward substitution), and α by the block inverse,
+//!   α' = (α − L⁻ᵀc·β, β) with β = (r − kᵀα)/δ²: two passes over one
+//!   triangle per sample;
 //! * sparse GP: a = L_u⁻¹k_u/σ, B ← B + aaᵀ by a rank-one Cholesky update
 //!   of L_B, A·r ← A·r + a·r_new (O(M²) per sample), and the weights
 //!   u re-solved once per call (O(M²)).
@@ -161,8 +164,10 @@ fn update_output(
             // Row-major scaled training inputs, extended as we go.
             let mut xs = row_major(&o.xs_cols, d, n);
             let diag = sf2 + o.hp.noise_variance + o.jitter;
+            let mut alpha = o.alpha.clone();
+            let mut c = Vec::with_capacity(n + k);
             for (i, xq) in xs_new.chunks_exact(d).enumerate() {
-                let mut c: Vec<f64> = (0..n)
+                let b: Vec<f64> = (0..n)
                     .map(|a| {
                         let r2 = sqdist(&xs[a * d..(a + 1) * d], xq);
                         if r2 > vigp_core::gp::R2_CUTOFF {
@@ -172,23 +177,47 @@ fn update_output(
                         }
                     })
                     .collect();
-                tri::forward_rows(l, &mut c);
+                // c = L⁻¹b: one pass over L⁻¹ (or L)
+                c.clear();
+                c.resize(n, 0.0);
+                match linv.as_ref() {
+                    Some(li) => tri::lower_matvec(li, &b, &mut c),
+                    None => {
+                        c.copy_from_slice(&b);
+                        tri::forward_rows(l, &mut c);
+                    }
+                }
                 let delta2 = diag - tri::norm2(&c);
                 if !(delta2 > 0.0 && delta2.is_finite()) {
                     return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
                 }
                 let delta = delta2.sqrt();
-                if let Some(li) = linv.as_mut() {
-                    tri::extend_inverse(li, n, &c, delta);
+                // A⁻¹b = L⁻ᵀc: the new row of L⁻¹ is −(L⁻ᵀc)ᵀ/δ (one more
+                // pass), or a backward solve without a stored inverse.
+                let ainv_b: Vec<f64> = match linv.as_mut() {
+                    Some(li) => {
+                        tri::extend_inverse(li, n, &c, delta);
+                        let start = tri::row_start(n);
+                        li[start..start + n].iter().map(|v| -delta * v).collect()
+                    }
+                    None => {
+                        let mut t = c.clone();
+                        tri::backward_rows(l, &mut t);
+                        t
+                    }
+                };
+                // Block inverse: α' = (α − A⁻¹b·β, β), β = (r − bᵀα)/δ².
+                let beta = (r_new[i] - tri::dot(&b, &alpha)) / delta2;
+                for (a, q) in alpha.iter_mut().zip(&ainv_b) {
+                    *a -= q * beta;
                 }
+                alpha.push(beta);
                 fwd.push((r_new[i] - tri::dot(&c, fwd)) / delta);
                 l.extend_from_slice(&c);
                 l.push(delta);
                 xs.extend_from_slice(xq);
                 n += 1;
             }
-            let mut alpha = fwd.clone();
-            tri::backward_rows(l, &mut alpha);
             let fit = tri::norm2(fwd);
             let ln2pi = (2.0 * core::f64::consts::PI).ln();
             let log_det: f64 = 2.0 * (0..n).map(|i| l[tri::row_start(i) + i].ln()).sum::<f64>();
