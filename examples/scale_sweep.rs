@@ -19,8 +19,10 @@
 //! Prints a table (median window MSE of positions over the test windows,
 //! per system and N; the nominal model's error; training time and the
 //! fitted noise variance in original units) and writes it as CSV to
-//! `target/scale_sweep.csv`. `--noise 0` trains on noise-free data, which
-//! separates the observation-noise floor from the rest.
+//! `target/scale_sweep.csv` with a log–log figure `target/scale_sweep.svg`
+//! (`--plot some.csv` redraws the figure of a saved CSV as `some.svg`).
+//! `--noise 0` trains on noise-free data, which separates the
+//! observation-noise floor from the rest.
 
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -265,7 +267,43 @@ where
     Ok(())
 }
 
+/// Rows back from a CSV written by this example (for `--plot`).
+fn read_csv(path: &str) -> Result<Vec<Row>, Box<dyn std::error::Error>> {
+    let text = std::fs::read_to_string(path)?;
+    let mut rows = Vec::new();
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != 7 {
+            return Err(format!("bad CSV line: {line}").into());
+        }
+        rows.push(Row {
+            system: match f[0] {
+                "pendulum" => "pendulum",
+                "cartpole" => "cartpole",
+                other => return Err(format!("unknown system {other}").into()),
+            },
+            n: f[1].parse()?,
+            method: f[2].into(),
+            mse: f[3].parse()?,
+            nominal_mse: f[4].parse()?,
+            train_s: f[5].parse()?,
+            noise_var: f[6].parse()?,
+        });
+    }
+    Ok(rows)
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // `--plot CSV`: only redraw the figure of an earlier run.
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--plot") {
+        let csv = args.get(i + 1).ok_or("--plot needs a CSV path")?;
+        let rows = read_csv(csv)?;
+        let svg = csv.trim_end_matches(".csv").to_string() + ".svg";
+        figure(&rows, &svg)?;
+        println!("wrote {svg}");
+        return Ok(());
+    }
     let cli = parse()?;
     println!(
         "scale sweep: N {:?}, exact up to {}, sparse M = {}, noise σ = {:e}, ground truth dt {:e}, {} restarts, seed {}",
@@ -308,6 +346,89 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     std::fs::create_dir_all("target")?;
     std::fs::write("target/scale_sweep.csv", csv)?;
-    println!("wrote target/scale_sweep.csv");
+    figure(&rows, "target/scale_sweep.svg")?;
+    println!("wrote target/scale_sweep.csv and target/scale_sweep.svg");
+    Ok(())
+}
+
+/// Log–log figure: median 20-step MSE against N, one line per system, the
+/// nominal model's error dashed.
+fn figure(rows: &[Row], path: &str) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/assets/fonts/DejaVuSans.ttf"
+    ));
+    plotters::style::register_font("sans-serif", FontStyle::Normal, DEJAVU_SANS)
+        .map_err(|_| "embedded font")?;
+    let ok = |v: f64| v.is_finite() && v > 0.0;
+    let ys: Vec<f64> = rows
+        .iter()
+        .flat_map(|r| [r.mse, r.nominal_mse])
+        .filter(|v| ok(*v))
+        .collect();
+    let (ylo, yhi) = ys
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(*v), b.max(*v)));
+    let (xlo, xhi) = rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
+        (a.min(r.n as f64), b.max(r.n as f64))
+    });
+    if ys.is_empty() || !(xlo < xhi) {
+        return Ok(());
+    }
+    let root = SVGBackend::new(path, (800, 520)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "20-step position MSE vs training samples N",
+            ("sans-serif", 22),
+        )
+        .margin(16)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(
+            (xlo / 1.3..xhi * 1.3).log_scale(),
+            (ylo / 3.0..yhi * 3.0).log_scale(),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("N (exact up to --exact-max, sparse beyond)")
+        .y_desc("median window MSE [rad², m²]")
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .draw()?;
+    for (system, colour) in [("pendulum", BLUE), ("cartpole", RED)] {
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.system == system && ok(r.mse))
+            .map(|r| (r.n as f64, r.mse))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))?
+            .label(format!("{system}, learned (nominal VI prior)"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
+        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, colour.filled())))?;
+        if let Some(nom) = rows
+            .iter()
+            .find(|r| r.system == system)
+            .map(|r| r.nominal_mse)
+        {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    vec![(xlo, nom), (xhi, nom)],
+                    6,
+                    4,
+                    colour.mix(0.5).stroke_width(1),
+                ))?
+                .label(format!("{system}, nominal model"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.mix(0.5)));
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
     Ok(())
 }
