@@ -157,7 +157,7 @@ fn online_and_sparse(c: &mut Criterion) {
         4,
         &y[..2048],
         1,
-        &[hp.clone()],
+        std::slice::from_ref(&hp),
         &TrainOptions::default(),
     )
     .unwrap();

@@ -373,7 +373,7 @@ fn figure(rows: &[Row], path: &str) -> Result<(), Box<dyn std::error::Error>> {
     let (xlo, xhi) = rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
         (a.min(r.n as f64), b.max(r.n as f64))
     });
-    if ys.is_empty() || !(xlo < xhi) {
+    if ys.is_empty() || xlo >= xhi || xlo.is_nan() {
         return Ok(());
     }
     let root = SVGBackend::new(path, (800, 520)).into_drawing_area();
