@@ -6,8 +6,10 @@
 use std::hint::black_box;
 use std::time::Duration;
 
+use criterion::BatchSize;
 use criterion::{Criterion, criterion_group, criterion_main};
-use vigp::gp::{Gp, Hyperparameters, TrainOptions, log_marginal_likelihood};
+use faer::linalg::solvers::DenseSolveCore;
+use vigp::gp::{Gp, Hyperparameters, Method, SparseOptions, TrainOptions, log_marginal_likelihood};
 
 /// Fractional parts of √p for the first primes: Weyl-sequence directions.
 const DIRS: [f64; 8] = [
@@ -41,9 +43,42 @@ pub fn bench_data(n: usize, d: usize) -> (Vec<f64>, Vec<f64>) {
     (x, y)
 }
 
+/// The scaled kernel matrix of `bench_data` at ℓ = 1, σ_f² = 1, σ_n² = 0.01.
+fn kernel_matrix(x: &[f64], n: usize, d: usize) -> faer::Mat<f64> {
+    faer::Mat::from_fn(n, n, |i, j| {
+        let r2: f64 = (0..d).map(|k| (x[i * d + k] - x[j * d + k]).powi(2)).sum();
+        (-0.5 * r2).exp() + if i == j { 1e-2 } else { 0.0 }
+    })
+}
+
 fn lml(c: &mut Criterion) {
     let mut g = c.benchmark_group("lml_grad");
     g.sample_size(10).measurement_time(Duration::from_secs(4));
+    // The baseline of issue 17: one Cholesky plus one inverse of the same
+    // N × N matrix with faer's own routines (sequential and parallel).
+    for n in [512, 2048] {
+        let (x, _) = bench_data(n, 4);
+        let k = kernel_matrix(&x, n, 4);
+        for par in [faer::Par::Seq, faer::Par::rayon(0)] {
+            let name = format!(
+                "N{n}_cholesky_plus_inverse_{}",
+                if matches!(par, faer::Par::Seq) {
+                    "seq"
+                } else {
+                    "par"
+                }
+            );
+            g.bench_function(name, |b| {
+                b.iter(|| {
+                    faer::set_global_parallelism(par);
+                    let llt = black_box(&k).llt(faer::Side::Lower).unwrap();
+                    let inv = llt.inverse();
+                    faer::set_global_parallelism(faer::Par::rayon(0));
+                    inv
+                })
+            });
+        }
+    }
     for (n, d) in [(512, 4), (512, 8), (2048, 4), (2048, 8)] {
         let (x, y) = bench_data(n, d);
         let theta = Hyperparameters::isotropic(d, 1.0, 1.0, 1e-2).to_log();
@@ -107,5 +142,76 @@ fn predict(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, lml, train, predict);
+/// Online updates (`Gp::add_samples`): 16 samples added one call at a time
+/// to a model of N = 2048 (divide by 16 for the cost per sample; the
+/// factor's storage grows geometrically, so a reallocation is amortised as
+/// it is while a system runs), and the sparse GP's one-point prediction at
+/// M = 256.
+fn online_and_sparse(c: &mut Criterion) {
+    let mut g = c.benchmark_group("online");
+    g.sample_size(20).measurement_time(Duration::from_secs(6));
+    let (x, y) = bench_data(2048 + 16, 4);
+    let hp = Hyperparameters::isotropic(4, 0.8, 1.0, 1e-4);
+    let exact = Gp::fit(
+        &x[..2048 * 4],
+        4,
+        &y[..2048],
+        1,
+        std::slice::from_ref(&hp),
+        &TrainOptions::default(),
+    )
+    .unwrap();
+    let (xn, yn) = (&x[2048 * 4..], &y[2048..]);
+    g.bench_function("exact_N2048_add_16_one_at_a_time", |b| {
+        b.iter_batched(
+            || exact.clone(),
+            |mut gp| {
+                for (xi, yi) in xn.chunks(4).zip(yn.chunks(1)) {
+                    gp.add_samples(black_box(xi), yi).unwrap();
+                }
+                gp
+            },
+            BatchSize::LargeInput,
+        )
+    });
+    let sopts = TrainOptions {
+        method: Method::Sparse(SparseOptions::kmeans(256)),
+        ..Default::default()
+    };
+    let sparse = Gp::fit(&x[..2048 * 4], 4, &y[..2048], 1, &[hp], &sopts).unwrap();
+    g.bench_function("sparse_M256_add_16_one_at_a_time", |b| {
+        b.iter_batched(
+            || sparse.clone(),
+            |mut gp| {
+                for (xi, yi) in xn.chunks(4).zip(yn.chunks(1)) {
+                    gp.add_samples(black_box(xi), yi).unwrap();
+                }
+                gp
+            },
+            BatchSize::LargeInput,
+        )
+    });
+    g.finish();
+    let mut g = c.benchmark_group("predict");
+    let mut ws = sparse.workspace();
+    let (mut m, mut v) = ([0.0], [0.0]);
+    let q = [0.1, -0.3, 0.7, 1.2];
+    g.bench_function("sparse_M256_d4_mean", |b| {
+        b.iter(|| {
+            sparse
+                .predict_mean_into(black_box(&q), &mut m, &mut ws)
+                .unwrap()
+        })
+    });
+    g.bench_function("sparse_M256_d4_mean_var", |b| {
+        b.iter(|| {
+            sparse
+                .predict_into(black_box(&q), &mut m, &mut v, &mut ws)
+                .unwrap()
+        })
+    });
+    g.finish();
+}
+
+criterion_group!(benches, lml, train, predict, online_and_sparse);
 criterion_main!(benches);

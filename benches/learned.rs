@@ -20,7 +20,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 use nalgebra::SVector;
 use vigp::bound::BoundSettings;
 use vigp::embedded::Stepper;
-use vigp::gp::TrainOptions;
+use vigp::gp::{TrainOptions, VarianceMode};
 use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
 use vigp::prelude::*;
 use vigp::systems::{DoublePendulum, DoublePendulumMinimal};
@@ -127,6 +127,47 @@ fn bench_learned(c: &mut Criterion) {
                 (next, bound.one_step(info.std_dev.as_slice()))
             })
         });
+        // The variance paths (issue 18, item 4): the default stored L⁻¹
+        // (`VarianceMode::Inverse`, above) against the blocked forward
+        // substitution (`Solve`) and the column-oriented substitution of the
+        // previous code, which the exported GP still uses.
+        let x = {
+            let mut x = [0.0; 6];
+            Encoding::SinCos.encode(&DoublePendulumMinimal::KINDS, &z, &mut x);
+            x
+        };
+        let (mut mv, mut vv) = ([0.0; 2], [0.0; 2]);
+        let mut gws = l.gp().workspace();
+        g.bench_function(format!("gp/N{n}/mean_var_two_outputs/inverse"), |b| {
+            b.iter(|| {
+                l.gp()
+                    .predict_into(black_box(&x), &mut mv, &mut vv, &mut gws)
+            })
+        });
+        let mut solve_gp = l.gp().clone();
+        solve_gp.set_variance_mode(VarianceMode::Solve);
+        let mut sws = solve_gp.workspace();
+        g.bench_function(format!("gp/N{n}/mean_var_two_outputs/blocked_solve"), |b| {
+            b.iter(|| solve_gp.predict_into(black_box(&x), &mut mv, &mut vv, &mut sws))
+        });
+        let with_chol: Vec<_> = (0..2)
+            .map(|j| l.gp().export_output(j, true).expect("export"))
+            .collect();
+        let views: Vec<_> = with_chol
+            .iter()
+            .map(|a| a.as_exported::<6>().expect("d = 6"))
+            .collect();
+        let mut scratch = vec![0.0; n];
+        g.bench_function(
+            format!("gp/N{n}/mean_var_two_outputs/column_solve_previous"),
+            |b| {
+                b.iter(|| {
+                    let a = views[0].predict(black_box(&x), &mut scratch).unwrap();
+                    let c = views[1].predict(black_box(&x), &mut scratch).unwrap();
+                    (a, c)
+                })
+            },
+        );
         // the exported no_std GP (output 0 of 2)
         let arrays = l.gp().export_output(0, false).expect("export");
         let e = arrays.as_exported::<6>().expect("d = 6");

@@ -12,8 +12,16 @@ its defaults, ftol = 2.220446049250313e-09 (factr 1e7) and gtol (pgtol) 1e-5,
 maxcor 10; vigp's TrainOptions defaults are the same numbers. The optimizer
 below is that default made explicit, only to count function evaluations.
 
-Prints the median of --runs timings (time.perf_counter), the evaluations of
-the median run, and the BLAS in use.
+Prints, for each BLAS thread count in --threads (set with threadpoolctl,
+back to back in one process), each run's time (time.perf_counter), best LML,
+the L-BFGS-B evaluations of every start, and the median; then the BLAS in
+use and the load average before and after.
+
+One command per comparison (see docs/gp.md):
+    python scripts/gp_sklearn_bench.py --n 512 --restarts 10 --runs 3 --threads 1 2
+    python scripts/gp_sklearn_bench.py --n 2048 --restarts 10 --runs 1 --threads 1 2
+Unset OPENBLAS_CORETYPE and OPENBLAS_L2_SIZE for this command if the machine
+sets them (they slow a current numpy); the script prints the BLAS kernel.
 """
 import argparse
 import statistics
@@ -41,7 +49,7 @@ def bench_data(n, d):
     return X, y
 
 
-NFEV = [0]
+NFEV = []
 
 
 def lbfgsb(obj_func, initial_theta, bounds):
@@ -54,8 +62,15 @@ def lbfgsb(obj_func, initial_theta, bounds):
         bounds=bounds,
         options={"ftol": 2.220446049250313e-09, "gtol": 1e-5, "maxcor": 10},
     )
-    NFEV[0] += res.nfev
+    NFEV.append(int(res.nfev))
     return res.x, res.fun
+
+
+def load():
+    try:
+        return " ".join(open("/proc/loadavg").read().split()[:3])
+    except OSError:
+        return "?"
 
 
 def main():
@@ -64,39 +79,41 @@ def main():
     ap.add_argument("--n", type=int, default=512)
     ap.add_argument("--d", type=int, default=4)
     ap.add_argument("--restarts", type=int, default=10)
+    ap.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     a = ap.parse_args()
+    from threadpoolctl import threadpool_info, threadpool_limits
+
     X, y = bench_data(a.n, a.d)
     std = X.std(axis=0)
     Xn = (X - X.mean(axis=0)) / np.where(std < 10 * np.finfo(float).eps, 1.0, std)
-    times, lmls, nfevs = [], [], []
-    for r in range(a.runs):
-        k = ConstantKernel(1.0, (1e-4, 1e4)) * RBF([1.0] * a.d, (1e-3, 1e3)) + WhiteKernel(
-            1e-2, (1e-10, 1e1)
-        )
-        gp = GaussianProcessRegressor(
-            k, optimizer=lbfgsb, n_restarts_optimizer=a.restarts, normalize_y=True, random_state=r
-        )
-        NFEV[0] = 0
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            t0 = time.perf_counter()
-            gp.fit(Xn, y)
-            times.append(time.perf_counter() - t0)
-        lmls.append(gp.log_marginal_likelihood_value_)
-        nfevs.append(NFEV[0])
-        print(
-            f"run {r}: {times[-1]:.3f} s, best LML {lmls[-1]:.6f}, {NFEV[0]} evaluations "
-            f"({1e3 * times[-1] / NFEV[0]:.1f} ms each)",
-            flush=True,
-        )
-    try:
-        from threadpoolctl import threadpool_info
-
-        for p in threadpool_info():
-            print("blas:", p.get("internal_api"), p.get("version"), p.get("architecture"), "threads", p.get("num_threads"))
-    except ImportError:
-        pass
-    print(f"median {statistics.median(times):.3f} s over {a.runs} runs; best LML {max(lmls):.6f}")
+    print(f"scikit-learn GaussianProcessRegressor.fit: N = {a.n}, d = {a.d}, 1 + {a.restarts} starts")
+    print("load average before:", load(), flush=True)
+    for threads in a.threads:
+        times, lmls = [], []
+        with threadpool_limits(limits=threads, user_api="blas"):
+            for r in range(a.runs):
+                k = ConstantKernel(1.0, (1e-4, 1e4)) * RBF([1.0] * a.d, (1e-3, 1e3)) + WhiteKernel(
+                    1e-2, (1e-10, 1e1)
+                )
+                gp = GaussianProcessRegressor(
+                    k, optimizer=lbfgsb, n_restarts_optimizer=a.restarts, normalize_y=True, random_state=r
+                )
+                NFEV.clear()
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore")
+                    t0 = time.perf_counter()
+                    gp.fit(Xn, y)
+                    times.append(time.perf_counter() - t0)
+                lmls.append(gp.log_marginal_likelihood_value_)
+                print(
+                    f"{threads} BLAS thread(s), run {r}: {times[-1]:.3f} s, best LML {lmls[-1]:.6f}, "
+                    f"{sum(NFEV)} evaluations ({1e3 * times[-1] / sum(NFEV):.1f} ms each), per start {NFEV}",
+                    flush=True,
+                )
+            for p in threadpool_info():
+                print("  blas:", p.get("internal_api"), p.get("version"), p.get("architecture"), "threads", p.get("num_threads"))
+        print(f"{threads} BLAS thread(s): median {statistics.median(times):.3f} s over {a.runs} runs; best LML {max(lmls):.6f}")
+    print("load average after:", load())
 
 
 if __name__ == "__main__":

@@ -17,7 +17,8 @@ use vigp_core::gp::ExportedGp;
 
 use super::error::GpError;
 use super::mean::Resolved;
-use super::model::Gp;
+use super::model::{Gp, Posterior};
+use super::tri;
 use crate::learned::{Encoding, Learned, Prior};
 use crate::mechanism::{CoordinateKind, Mechanism};
 
@@ -184,7 +185,10 @@ const ITEM_ATTRS: &str =
 
 impl Gp {
     /// Output `j` in the exported layout; `cholesky` adds the packed
-    /// Cholesky factor (O(N²) numbers).
+    /// Cholesky factor (O(N²) numbers). A sparse GP exports its M inducing
+    /// points as the "training inputs" and its weights u as α, so the
+    /// exported mean is the sparse mean (O(M·d) per point); it has no
+    /// exported variance (`cholesky = true` is an [`GpError::Export`]).
     ///
     /// Errors: `j` out of range, or a model with a function prior mean
     /// (the exported predictor has only a constant mean: export the GP of
@@ -205,16 +209,17 @@ impl Gp {
                 ));
             }
         };
-        let n = self.n;
-        let cholesky = cholesky.then(|| {
-            let mut packed = Vec::with_capacity(n * (n + 1) / 2);
-            for c in 0..n {
-                for r in c..n {
-                    packed.push(o.chol[(r, c)]);
-                }
+        let n = o.alpha.len();
+        let cholesky = match (&o.post, cholesky) {
+            (_, false) => None,
+            (Posterior::Exact { l, .. }, true) => Some(tri::to_column_packed(l, n)),
+            (Posterior::Sparse { .. }, true) => {
+                return Err(export_error(
+                    "a sparse GP exports its mean only (its variance needs two M × M factors, \
+                     which ExportedGp does not hold): export with cholesky = false",
+                ));
             }
-            packed
-        });
+        };
         Ok(ExportedArrays {
             input_dim: self.d,
             inputs: o.xs_cols.clone(),
@@ -250,7 +255,11 @@ impl Gp {
     /// # Ok::<(), vigp_runtime::gp::GpError>(())
     /// ```
     pub fn to_rust_source(&self, opts: &ExportOptions) -> Result<String, GpError> {
-        let (n, d, p) = (self.n, self.d, self.p);
+        let (d, p) = (self.d, self.p);
+        let n = self
+            .outputs
+            .first()
+            .map_or(self.n, |o| o.alpha_normalised().len());
         opts.validate(d)?;
         let outputs = (0..p)
             .map(|j| self.export_output(j, opts.cholesky))
@@ -274,6 +283,14 @@ impl Gp {
              // Hyperparameters are in normalised units (see the ExportedGp docs).",
             opts.core_path
         );
+        if self.is_sparse() {
+            let _ = writeln!(
+                s,
+                "// Sparse GP (SGPR) trained on {} samples: the {n} \"training points\" below\n\
+                 // are its inducing points, the weights its predictive weights u.",
+                self.n
+            );
+        }
         for (j, o) in self.outputs.iter().enumerate() {
             let _ = writeln!(
                 s,

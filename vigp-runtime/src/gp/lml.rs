@@ -368,14 +368,6 @@ pub(crate) fn backward_solve(l: &Mat<f64>, v: &mut [f64]) {
     }
 }
 
-/// α = A⁻¹ y.
-pub(crate) fn solve_alpha(l: &Mat<f64>, y: &[f64]) -> Vec<f64> {
-    let mut a = y.to_vec();
-    forward_solve(l, &mut a);
-    backward_solve(l, &mut a);
-    a
-}
-
 /// ln det A = 2 Σ ln L_ii.
 pub(crate) fn log_det(l: &Mat<f64>) -> f64 {
     2.0 * (0..l.nrows()).map(|i| l[(i, i)].ln()).sum::<f64>()

@@ -11,7 +11,14 @@
 //! * [`Gp::to_rust_source`]: the model as Rust source with `static` arrays
 //!   for `no_std` prediction with `vigp_core::gp::ExportedGp` (bit-identical
 //!   means: both use the kernels of `vigp_core::gp`).
-//! * [`log_marginal_likelihood`]: the objective and its gradient on raw data.
+//! * [`log_marginal_likelihood`]: the objective and its gradient on raw data;
+//!   [`sparse_bound`] likewise for the sparse GP.
+//! * [`TrainOptions::method`]: the exact GP or Titsias' sparse variational
+//!   GP (SGPR) with M inducing points, behind the same [`Gp`] type (train,
+//!   predict, save/load, export of the mean, use in `Learned`).
+//! * [`Gp::add_samples`]: online updates at fixed hyperparameters
+//!   (exact: O(N²) per sample; sparse: O(M²)); [`Gp::warm_start`] and
+//!   [`TrainOptions::warm_start`] restart the optimiser from a previous model.
 //!
 //! Complexity: one likelihood evaluation costs O(N²d + N³) time and O(N²)
 //! memory (N³/3 for the Cholesky, 2N³/3 for the inverse the gradient
@@ -37,14 +44,19 @@ mod normalise;
 mod options;
 mod rng;
 mod save;
+mod sparse;
+mod tri;
+mod update;
 
 pub use error::GpError;
 pub use export::{ExportOptions, ExportedArrays};
 pub use kernel::Hyperparameters;
 pub use mean::{MeanFn, PriorMean};
-pub use model::{Gp, OutputGp, Prediction, Workspace};
+pub use model::{Gp, OutputGp, Prediction, VarianceMode, Workspace};
 pub use normalise::InputNormaliser;
-pub use options::{Bounds, OutputReport, TrainOptions, TrainReport};
+pub use options::{
+    Bounds, InducingInit, Method, OutputReport, SparseOptions, TrainOptions, TrainReport,
+};
 pub use save::SavedGp;
 
 /// Log marginal likelihood and its gradient on data as given (no
@@ -84,5 +96,59 @@ pub fn log_marginal_likelihood(
         faer::Par::Seq
     };
     let e = lml::lml(inputs, n, input_dim, targets, log_params, true, par)?;
+    Ok((e.value, e.gradient))
+}
+
+/// The sparse GP's evidence lower bound (Titsias 2009; see [`Method::Sparse`])
+/// and its gradient on data as given (no normalisation, zero prior mean),
+/// for inducing inputs `inducing` (row-major M × d, the units of `inputs`).
+///
+/// `log_params` is θ = (ln ℓ_1, …, ln ℓ_d, ln σ_f², ln σ_n²), as for
+/// [`log_marginal_likelihood`]; K_uu carries the relative jitter 1e-10·σ_f²
+/// (more if its Cholesky fails). With the inducing inputs equal to the
+/// training inputs the bound equals the exact log marginal likelihood up to
+/// that jitter. `parallel` lets faer and rayon use all threads.
+///
+/// ```
+/// use vigp_runtime::gp::sparse_bound;
+/// let x = [0.0, 0.5, 1.0, 1.5];
+/// let (v, g) = sparse_bound(&x, 1, &[0.0, 0.4, 0.8, 1.0], &[0.2, 1.2], &[0.0, 0.0, -2.0], false)?;
+/// assert!(v.is_finite() && g.len() == 3);
+/// # Ok::<(), vigp_runtime::gp::GpError>(())
+/// ```
+pub fn sparse_bound(
+    inputs: &[f64],
+    input_dim: usize,
+    targets: &[f64],
+    inducing: &[f64],
+    log_params: &[f64],
+    parallel: bool,
+) -> Result<(f64, Vec<f64>), GpError> {
+    let n = model::check_dims(inputs, input_dim, targets, 1)?;
+    if log_params.len() != input_dim + 2 {
+        return Err(GpError::DimensionMismatch {
+            what: "log_params (d + 2)",
+            expected: input_dim + 2,
+            got: log_params.len(),
+        });
+    }
+    model::check_finite("log_params", log_params)?;
+    model::check_finite("inducing points", inducing)?;
+    if inducing.is_empty() || inducing.len() % input_dim != 0 {
+        return Err(GpError::DimensionMismatch {
+            what: "inducing points (M × d, M ≥ 1)",
+            expected: input_dim,
+            got: inducing.len(),
+        });
+    }
+    let par = if parallel {
+        faer::Par::rayon(0)
+    } else {
+        faer::Par::Seq
+    };
+    let mut ws = sparse::SparseWorkspace::new(inducing.len() / input_dim, n);
+    let e = sparse::elbo_ws(
+        &mut ws, inputs, inducing, input_dim, targets, log_params, true, par,
+    )?;
     Ok((e.value, e.gradient))
 }

@@ -11,8 +11,41 @@ use super::lbfgs::{self, LbfgsOptions};
 use super::lml::{self, Factor};
 use super::mean::{PriorMean, Resolved};
 use super::normalise::{InputNormaliser, output_scale};
-use super::options::{OutputReport, TrainOptions, TrainReport};
+use super::options::{InducingInit, Method, OutputReport, TrainOptions, TrainReport};
 use super::rng::SplitMix64;
+use super::{sparse, tri};
+
+/// How [`Gp::predict_into`] computes the posterior variance of an exact GP
+/// (both give σ_f² − kᵀ(K + σ²I)⁻¹k; the mean is not affected).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum VarianceMode {
+    /// ‖L⁻¹k‖² with L⁻¹ computed once when the model is built (N³/6 flops
+    /// and N²/2 more numbers per output): a product of contiguous rows,
+    /// the faster path (see `docs/gp.md`, "The variance").
+    #[default]
+    Inverse,
+    /// ‖L⁻¹k‖² by forward substitution with the Cholesky factor L (blocked
+    /// by four rows): no extra memory.
+    Solve,
+}
+
+/// The factorised posterior of one output.
+#[derive(Clone)]
+pub(crate) enum Posterior {
+    /// Exact GP: L = chol(K + (σ_n² + jitter)·I) (packed rows), optionally
+    /// L⁻¹ (packed rows), and L⁻¹r (for appending samples).
+    Exact {
+        l: Vec<f64>,
+        linv: Option<Vec<f64>>,
+        fwd: Vec<f64>,
+    },
+    /// Sparse GP (see `sparse`): chol(K_uu + ε·σ_f²·I), chol(B), A·r.
+    Sparse {
+        lu: Vec<f64>,
+        lb: Vec<f64>,
+        ay: Vec<f64>,
+    },
+}
 
 /// A trained exact Gaussian process with p independent outputs on d inputs.
 ///
@@ -51,6 +84,9 @@ pub struct Gp {
     pub(crate) input_norm: InputNormaliser,
     pub(crate) mean: Resolved,
     pub(crate) outputs: Vec<OutputGp>,
+    /// Inducing inputs of a sparse GP (normalised units, row-major M × d).
+    pub(crate) inducing: Option<Vec<f64>>,
+    pub(crate) variance_mode: VarianceMode,
 }
 
 impl core::fmt::Debug for Gp {
@@ -81,10 +117,12 @@ pub struct OutputGp {
     pub(crate) hp: Hyperparameters,
     pub(crate) output_scale: f64,
     pub(crate) input_scale: Vec<f64>,
-    /// Scaled training inputs x_n/ℓ, **column-major** d × N (the layout of
-    /// the shared prediction kernels in `vigp_core::gp`).
+    /// Scaled training inputs x_n/ℓ (exact) or inducing inputs z/ℓ
+    /// (sparse), **column-major** d × N (or d × M): the layout of the shared
+    /// prediction kernels in `vigp_core::gp`.
     pub(crate) xs_cols: Vec<f64>,
-    pub(crate) chol: Mat<f64>,
+    pub(crate) post: Posterior,
+    /// Weights of the predictive mean: α (N, exact) or u (M, sparse).
     pub(crate) alpha: Vec<f64>,
     pub(crate) residual: Vec<f64>,
     pub(crate) jitter: f64,
@@ -97,6 +135,7 @@ pub struct Workspace {
     xn: Vec<f64>,
     xs: Vec<f64>,
     kstar: Vec<f64>,
+    tmp: Vec<f64>,
     prior: Vec<f64>,
     n: usize,
     d: usize,
@@ -253,24 +292,95 @@ fn residuals_of(
         .collect()
 }
 
+/// (start LMLs, evaluations, first error, iterations, start evaluations).
+type StartTally = (Vec<f64>, usize, Option<GpError>, usize, Vec<usize>);
+
 /// Mixes the seed and output index into an independent SplitMix64 stream.
 fn stream_seed(seed: u64, output: usize) -> u64 {
     let mut r = SplitMix64::new(seed ^ (output as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
     r.next_u64()
 }
 
+/// Row-major N × d → column-major d × N.
+fn column_major(x: &[f64], d: usize) -> Vec<f64> {
+    let n = x.len() / d;
+    let mut out = vec![0.0; n * d];
+    for (i, row) in x.chunks_exact(d).enumerate() {
+        for (j, v) in row.iter().enumerate() {
+            out[j * n + i] = *v;
+        }
+    }
+    out
+}
+
+/// L⁻¹ of a lower-triangular factor (the upper part of `l` is ignored),
+/// packed by rows.
+fn lower_inverse(l: &Mat<f64>) -> Vec<f64> {
+    let n = l.nrows();
+    let mut low = Mat::<f64>::zeros(n, n);
+    for j in 0..n {
+        for i in j..n {
+            low[(i, j)] = l[(i, j)];
+        }
+    }
+    let mut inv = Mat::<f64>::zeros(n, n);
+    faer::linalg::triangular_inverse::invert_lower_triangular(inv.as_mut(), low.as_ref(), Par::Seq);
+    tri::pack_rows(&inv)
+}
+
+/// The inducing inputs (normalised units, row-major M × d) of a sparse
+/// `opts.method`, or `None` for the exact GP.
+fn inducing_points(prep: &Prepared, opts: &TrainOptions) -> Result<Option<Vec<f64>>, GpError> {
+    let Method::Sparse(so) = &opts.method else {
+        return Ok(None);
+    };
+    let (n, d) = (prep.n, prep.d);
+    let m = so.inducing;
+    if m == 0 || m > n {
+        return Err(GpError::DimensionMismatch {
+            what: "inducing points (1..=N)",
+            expected: n,
+            got: m,
+        });
+    }
+    Ok(Some(match &so.init {
+        InducingInit::KMeansPlusPlus { lloyd_iters } => {
+            sparse::kmeans_pp(&prep.xn, d, m, *lloyd_iters, opts.seed)
+        }
+        InducingInit::First => prep.xn[..m * d].to_vec(),
+        InducingInit::Given(z) => {
+            if z.len() != m * d {
+                return Err(GpError::DimensionMismatch {
+                    what: "given inducing points (M × d)",
+                    expected: m * d,
+                    got: z.len(),
+                });
+            }
+            check_finite("inducing points", z)?;
+            let mut out = vec![0.0; m * d];
+            for (o, x) in out.chunks_exact_mut(d).zip(z.chunks_exact(d)) {
+                prep.norm.apply(x, o);
+            }
+            out
+        }
+    }))
+}
+
 impl Gp {
     /// Trains p independent GPs on row-major `inputs` (N × d) and `targets`
-    /// (N × p) by maximising each output's log marginal likelihood with a
-    /// bounded L-BFGS in log-hyperparameter space, from
-    /// `1 + opts.restarts` starts (the initial point, then log-uniform random
-    /// points in the bounds). All (output, start) runs go to rayon in
-    /// parallel; each run is sequential and seeded, so the result does not
-    /// depend on scheduling. The start with the highest likelihood wins
-    /// (ties: the lowest start index).
+    /// (N × p) by maximising each output's log marginal likelihood (or, for
+    /// [`Method::Sparse`], its variational lower bound) with a bounded
+    /// L-BFGS in log-hyperparameter space, from `1 + opts.restarts` starts
+    /// (the initial point or the warm start, then log-uniform random points
+    /// in the bounds). All (output, start) runs go to rayon in parallel;
+    /// each run is sequential and seeded, so the result does not depend on
+    /// scheduling. The start with the highest likelihood wins (ties: the
+    /// lowest start index). A single sparse run (one output, no restarts)
+    /// uses all threads inside its evaluations instead.
     ///
     /// Errors: empty data, mismatched lengths, non-finite values, invalid
-    /// bounds or initial hyperparameters, or every start failing.
+    /// bounds, initial or warm-start hyperparameters, an inducing-point count
+    /// outside 1..=N, or every start failing.
     pub fn train(
         inputs: &[f64],
         input_dim: usize,
@@ -289,6 +399,7 @@ impl Gp {
         )?;
         opts.bounds.validate()?;
         let (n, d, p) = (prep.n, prep.d, prep.p);
+        let inducing = inducing_points(&prep, opts)?;
         let (lo, hi) = opts.bounds.log_box(d);
         let init = match &opts.initial {
             Some(h) => {
@@ -297,10 +408,40 @@ impl Gp {
             }
             None => Hyperparameters::isotropic(d, 1.0, 1.0, 1e-2).to_log(),
         };
+        let warm: Option<Vec<Vec<f64>>> = match &opts.warm_start {
+            None => None,
+            Some(w) => {
+                if w.len() != p {
+                    return Err(GpError::DimensionMismatch {
+                        what: "warm_start (one per output)",
+                        expected: p,
+                        got: w.len(),
+                    });
+                }
+                let mut out = Vec::with_capacity(p);
+                for (h, (_, s)) in w.iter().zip(&prep.residuals) {
+                    h.validate(d)?;
+                    // original units → this model's normalised units
+                    let hn = Hyperparameters {
+                        length_scales: h
+                            .length_scales
+                            .iter()
+                            .zip(&prep.norm.scale)
+                            .map(|(l, sx)| l / sx)
+                            .collect(),
+                        signal_variance: h.signal_variance / (s * s),
+                        noise_variance: h.noise_variance / (s * s),
+                    };
+                    out.push(hn.to_log());
+                }
+                Some(out)
+            }
+        };
         let mut jobs = Vec::with_capacity(p * (1 + opts.restarts));
         for out in 0..p {
             let mut rng = SplitMix64::new(stream_seed(opts.seed, out));
-            let t0: Vec<f64> = init
+            let start = warm.as_ref().map_or(&init, |w| &w[out]);
+            let t0: Vec<f64> = start
                 .iter()
                 .zip(lo.iter().zip(&hi))
                 .map(|(t, (l, h))| t.clamp(*l, *h))
@@ -321,27 +462,53 @@ impl Gp {
             pgtol: opts.pgtol,
             ftol: opts.ftol,
         };
+        let inner = if jobs.len() == 1 && inducing.is_some() {
+            Par::rayon(0)
+        } else {
+            Par::Seq
+        };
         let results: Vec<_> = jobs
             .par_iter()
             .map(|(out, _, t0)| {
                 let y = &prep.residuals[*out].0;
-                // One workspace per (output, start) run: no N×N allocation per evaluation.
-                let mut ws = lml::LmlWorkspace::new(n);
-                lbfgs::minimise(
-                    |t| {
-                        let e = lml::lml_ws(&mut ws, &prep.xn, d, y, t, true, Par::Seq)?;
-                        Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
-                    },
-                    t0,
-                    &lo,
-                    &hi,
-                    lopt,
-                )
+                match &inducing {
+                    None => {
+                        // One workspace per (output, start) run: no N×N allocation per evaluation.
+                        let mut ws = lml::LmlWorkspace::new(n);
+                        lbfgs::minimise(
+                            |t| {
+                                let e = lml::lml_ws(&mut ws, &prep.xn, d, y, t, true, Par::Seq)?;
+                                Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
+                            },
+                            t0,
+                            &lo,
+                            &hi,
+                            lopt,
+                        )
+                    }
+                    Some(z) => {
+                        let mut ws = sparse::SparseWorkspace::new(z.len() / d, n);
+                        lbfgs::minimise(
+                            |t| {
+                                let e =
+                                    sparse::elbo_ws(&mut ws, &prep.xn, z, d, y, t, true, inner)?;
+                                Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
+                            },
+                            t0,
+                            &lo,
+                            &hi,
+                            lopt,
+                        )
+                    }
+                }
             })
             .collect();
+        let starts = 1 + opts.restarts;
         let mut best: Vec<Option<(usize, Vec<f64>, bool)>> = vec![None; p];
-        let mut reports: Vec<(Vec<f64>, usize, Option<GpError>, usize)> =
-            vec![(vec![f64::NAN; 1 + opts.restarts], 0, None, 0); p];
+        // Per output: final LML and evaluations of every start, total
+        // evaluations and iterations, the first error.
+        let mut reports: Vec<StartTally> =
+            vec![(vec![f64::NAN; starts], 0, None, 0, vec![0; starts]); p];
         for ((out, start, _), res) in jobs.iter().zip(results) {
             match res {
                 Ok(r) => {
@@ -349,6 +516,7 @@ impl Gp {
                     reports[*out].0[*start] = value;
                     reports[*out].1 += r.evaluations;
                     reports[*out].3 += r.iterations;
+                    reports[*out].4[*start] = r.evaluations;
                     let better = match &best[*out] {
                         None => true,
                         Some((b, _, _)) => value > reports[*out].0[*b],
@@ -377,7 +545,7 @@ impl Gp {
                 }
             }
         }
-        let gp = Self::from_prepared(inputs, targets, prep, &hps, None)?;
+        let gp = Self::from_prepared(inputs, targets, prep, &hps, None, inducing)?;
         let report = TrainReport {
             outputs: (0..p)
                 .map(|o| {
@@ -388,6 +556,7 @@ impl Gp {
                         start_lmls: reports[o].0.clone(),
                         iterations: reports[o].3,
                         evaluations: reports[o].1,
+                        start_evaluations: reports[o].4.clone(),
                         converged: *converged,
                         jitter: gp.outputs[o].jitter,
                     }
@@ -398,8 +567,9 @@ impl Gp {
     }
 
     /// Conditions p GPs on the data at given hyperparameters (one per output,
-    /// in normalised units), without optimisation. `opts.mean` and the
-    /// normalisation flags are used; the optimiser settings are ignored.
+    /// in normalised units), without optimisation. `opts.mean`, the
+    /// normalisation flags and `opts.method` (with the inducing points it
+    /// chooses) are used; the optimiser settings are ignored.
     pub fn fit(
         inputs: &[f64],
         input_dim: usize,
@@ -427,52 +597,94 @@ impl Gp {
         for h in hyperparameters {
             h.validate(input_dim)?;
         }
-        Self::from_prepared(inputs, targets, prep, hyperparameters, None)
+        let inducing = inducing_points(&prep, opts)?;
+        Self::from_prepared(inputs, targets, prep, hyperparameters, None, inducing)
     }
 
-    /// Builds the model: factorises each output's Gram matrix (in parallel over
-    /// outputs), starting the jitter ladder at `start_jitter[o]` if given.
+    /// Builds the model: factorises each output's Gram matrix (exact) or its
+    /// sparse posterior (when `inducing` is given), in parallel over outputs,
+    /// starting the jitter ladder at `start_jitter[o]` if given (absolute
+    /// for the exact GP, relative K_uu jitter ε for the sparse one).
     pub(crate) fn from_prepared(
         inputs: &[f64],
         targets: &[f64],
         prep: Prepared,
         hps: &[Hyperparameters],
         start_jitter: Option<&[f64]>,
+        inducing: Option<Vec<f64>>,
     ) -> Result<Self, GpError> {
         let (n, d, p) = (prep.n, prep.d, prep.p);
+        let mode = VarianceMode::default();
+        let par = if p == 1 { Par::rayon(0) } else { Par::Seq };
         let outputs = (0..p)
             .into_par_iter()
             .map(|o| {
                 let hp = hps[o].clone();
                 let (r, s) = &prep.residuals[o];
-                let xs = lml::scale_inputs(&prep.xn, d, &hp.length_scales);
                 let j0 = start_jitter.map_or(0.0, |j| j[o]);
-                let Factor { l, jitter } = lml::factorise(&xs, n, d, &hp, j0, Par::Seq)?;
-                let alpha = lml::solve_alpha(&l, r);
-                let fit: f64 = r.iter().zip(&alpha).map(|(a, b)| a * b).sum();
-                let lml = -0.5 * fit
-                    - 0.5 * lml::log_det(&l)
-                    - 0.5 * n as f64 * (2.0 * core::f64::consts::PI).ln();
-                if !lml.is_finite() || alpha.iter().any(|a| !a.is_finite()) {
-                    return Err(GpError::NotPositiveDefinite { jitter });
-                }
-                let mut xs_cols = vec![0.0; n * d];
-                for (i, row) in xs.chunks_exact(d).enumerate() {
-                    for (j, v) in row.iter().enumerate() {
-                        xs_cols[j * n + i] = *v;
+                let out = match &inducing {
+                    None => {
+                        let xs = lml::scale_inputs(&prep.xn, d, &hp.length_scales);
+                        let Factor { l, jitter } = lml::factorise(&xs, n, d, &hp, j0, Par::Seq)?;
+                        let linv = match mode {
+                            VarianceMode::Inverse => Some(lower_inverse(&l)),
+                            VarianceMode::Solve => None,
+                        };
+                        let l = tri::pack_rows(&l);
+                        let mut fwd = r.clone();
+                        tri::forward_rows(&l, &mut fwd);
+                        let mut alpha = fwd.clone();
+                        tri::backward_rows(&l, &mut alpha);
+                        let fit: f64 = fwd.iter().map(|a| a * a).sum();
+                        let log_det: f64 =
+                            2.0 * (0..n).map(|i| l[tri::row_start(i) + i].ln()).sum::<f64>();
+                        let lml = -0.5 * fit
+                            - 0.5 * log_det
+                            - 0.5 * n as f64 * (2.0 * core::f64::consts::PI).ln();
+                        if !lml.is_finite() || alpha.iter().any(|a| !a.is_finite()) {
+                            return Err(GpError::NotPositiveDefinite { jitter });
+                        }
+                        OutputGp {
+                            xs_cols: column_major(&xs, d),
+                            post: Posterior::Exact { l, linv, fwd },
+                            alpha,
+                            jitter,
+                            lml,
+                            hp,
+                            output_scale: *s,
+                            input_scale: prep.norm.scale.clone(),
+                            residual: r.clone(),
+                        }
                     }
-                }
-                Ok(OutputGp {
-                    hp,
-                    output_scale: *s,
-                    input_scale: prep.norm.scale.clone(),
-                    xs_cols,
-                    chol: l,
-                    alpha,
-                    residual: r.clone(),
-                    jitter,
-                    lml,
-                })
+                    Some(z) => {
+                        let f = sparse::factorise(
+                            &prep.xn,
+                            z,
+                            d,
+                            r,
+                            &hp,
+                            j0.max(sparse::KUU_JITTER),
+                            par,
+                        )?;
+                        let zs = lml::scale_inputs(z, d, &hp.length_scales);
+                        OutputGp {
+                            xs_cols: column_major(&zs, d),
+                            post: Posterior::Sparse {
+                                lu: f.lu,
+                                lb: f.lb,
+                                ay: f.ay,
+                            },
+                            alpha: f.u,
+                            jitter: f.eps * hp.signal_variance,
+                            lml: f.elbo,
+                            hp,
+                            output_scale: *s,
+                            input_scale: prep.norm.scale.clone(),
+                            residual: r.clone(),
+                        }
+                    }
+                };
+                Ok(out)
             })
             .collect::<Result<Vec<_>, GpError>>()?;
         Ok(Self {
@@ -485,6 +697,8 @@ impl Gp {
             input_norm: prep.norm,
             mean: prep.mean,
             outputs,
+            inducing,
+            variance_mode: mode,
         })
     }
 
@@ -535,18 +749,27 @@ impl Gp {
 
     /// Buffers for the allocation-free [`predict_into`](Self::predict_into).
     pub fn workspace(&self) -> Workspace {
+        let b = self.basis();
         Workspace {
             xn: vec![0.0; self.d],
             xs: vec![0.0; self.d],
-            kstar: vec![0.0; self.n],
+            kstar: vec![0.0; b],
+            tmp: vec![0.0; b],
             prior: vec![0.0; self.p],
-            n: self.n,
+            n: b,
             d: self.d,
             p: self.p,
         }
     }
 
-    fn check_point(&self, x: &[f64], ws: &Workspace) -> Result<(), GpError> {
+    /// Number of kernel centres per output: N (exact) or M (sparse).
+    fn basis(&self) -> usize {
+        self.outputs.first().map_or(self.n, |o| o.alpha.len())
+    }
+
+    /// Checks the query and the workspace; a workspace of this model from
+    /// before [`add_samples`](Self::add_samples) is resized (allocates once).
+    fn check_point(&self, x: &[f64], ws: &mut Workspace) -> Result<(), GpError> {
         if x.len() != self.d {
             return Err(GpError::DimensionMismatch {
                 what: "prediction input",
@@ -554,12 +777,18 @@ impl Gp {
                 got: x.len(),
             });
         }
-        if ws.n != self.n || ws.d != self.d || ws.p != self.p {
+        if ws.d != self.d || ws.p != self.p {
             return Err(GpError::DimensionMismatch {
                 what: "workspace (made by another model)",
-                expected: self.n,
-                got: ws.n,
+                expected: self.d,
+                got: ws.d,
             });
+        }
+        let b = self.basis();
+        if ws.n != b {
+            ws.kstar.resize(b, 0.0);
+            ws.tmp.resize(b, 0.0);
+            ws.n = b;
         }
         check_finite("prediction input", x)
     }
@@ -589,7 +818,8 @@ impl Gp {
     /// `x` has length d; `mean` and `var` length p. `var` is the variance of
     /// the latent function f(x), not of a new noisy observation: add
     /// [`OutputGp::hyperparameters_original`]`.noise_variance` for that.
-    /// Cost O(p·N·(d + N)).
+    /// Cost O(p·N·(d + N)) for the exact GP (see [`VarianceMode`]), O(p·M·(d + M))
+    /// for a sparse one.
     pub fn predict_into(
         &self,
         x: &[f64],
@@ -602,19 +832,30 @@ impl Gp {
         self.check_out("variance output", var)?;
         self.input_norm.apply(x, &mut ws.xn);
         self.mean.eval(x, &mut ws.prior);
+        let b = ws.n;
         for (j, o) in self.outputs.iter().enumerate() {
             Self::scale_query(o, ws);
-            core_gp::kernel_row(
-                &o.xs_cols,
-                self.n,
-                &ws.xs,
-                o.hp.signal_variance,
-                &mut ws.kstar,
-            )
-            .map_err(core_error)?;
+            core_gp::kernel_row(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
+                .map_err(core_error)?;
             let mn = core_gp::dot(&ws.kstar, &o.alpha).map_err(core_error)?;
-            lml::forward_solve(&o.chol, &mut ws.kstar);
-            let vv: f64 = ws.kstar.iter().map(|v| v * v).sum();
+            let vv = match &o.post {
+                Posterior::Exact {
+                    linv: Some(linv), ..
+                } if self.variance_mode == VarianceMode::Inverse => {
+                    tri::lower_matvec(linv, &ws.kstar, &mut ws.tmp);
+                    tri::norm2(&ws.tmp)
+                }
+                Posterior::Exact { l, .. } => {
+                    tri::forward_rows(l, &mut ws.kstar);
+                    tri::norm2(&ws.kstar)
+                }
+                Posterior::Sparse { lu, lb, .. } => {
+                    tri::forward_rows(lu, &mut ws.kstar);
+                    let a = tri::norm2(&ws.kstar);
+                    tri::forward_rows(lb, &mut ws.kstar);
+                    a - tri::norm2(&ws.kstar)
+                }
+            };
             let s = o.output_scale;
             mean[j] = ws.prior[j] + s * mn;
             var[j] = s * s * (o.hp.signal_variance - vv).max(0.0);
@@ -623,7 +864,8 @@ impl Gp {
         check_finite("prediction variance", var)
     }
 
-    /// Posterior mean only, at one point, without allocating: O(p·N·d).
+    /// Posterior mean only, at one point, without allocating: O(p·N·d)
+    /// (O(p·M·d) for a sparse GP).
     pub fn predict_mean_into(
         &self,
         x: &[f64],
@@ -634,14 +876,74 @@ impl Gp {
         self.check_out("mean output", mean)?;
         self.input_norm.apply(x, &mut ws.xn);
         self.mean.eval(x, &mut ws.prior);
+        let b = ws.n;
         for (j, o) in self.outputs.iter().enumerate() {
             Self::scale_query(o, ws);
-            let mn =
-                core_gp::kernel_dot(&o.xs_cols, self.n, &ws.xs, o.hp.signal_variance, &o.alpha)
-                    .map_err(core_error)?;
+            let mn = core_gp::kernel_dot(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &o.alpha)
+                .map_err(core_error)?;
             mean[j] = ws.prior[j] + o.output_scale * mn;
         }
         check_finite("prediction (prior mean function output)", mean)
+    }
+
+    /// How the variance of an exact GP is computed (default
+    /// [`VarianceMode::Inverse`]).
+    pub fn variance_mode(&self) -> VarianceMode {
+        self.variance_mode
+    }
+
+    /// Switches the variance path of an exact GP: `Inverse` computes L⁻¹
+    /// once (O(N³/6) per output, N²/2 numbers of memory), `Solve` drops it.
+    /// No effect on a sparse GP (whose variance always solves with its two
+    /// M × M factors). Means are unchanged bit for bit.
+    pub fn set_variance_mode(&mut self, mode: VarianceMode) {
+        self.variance_mode = mode;
+        for o in &mut self.outputs {
+            if let Posterior::Exact { l, linv, .. } = &mut o.post {
+                match mode {
+                    VarianceMode::Solve => *linv = None,
+                    VarianceMode::Inverse => {
+                        if linv.is_none() {
+                            let n = o.alpha.len();
+                            *linv = Some(lower_inverse(&tri::unpack(l, n)));
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// `true` for a sparse (SGPR) model.
+    pub fn is_sparse(&self) -> bool {
+        self.inducing.is_some()
+    }
+
+    /// Inducing inputs of a sparse GP in original units (row-major M × d),
+    /// `None` for an exact GP.
+    pub fn inducing_points(&self) -> Option<Vec<f64>> {
+        self.inducing.as_ref().map(|z| {
+            let mut out = z.clone();
+            for row in out.chunks_exact_mut(self.d) {
+                for ((v, m), s) in row
+                    .iter_mut()
+                    .zip(&self.input_norm.shift)
+                    .zip(&self.input_norm.scale)
+                {
+                    *v = *v * s + m;
+                }
+            }
+            out
+        })
+    }
+
+    /// Hyperparameters of every output in original units, for
+    /// [`TrainOptions::warm_start`] of the next training run (e.g. after
+    /// more samples arrived).
+    pub fn warm_start(&self) -> Vec<Hyperparameters> {
+        self.outputs
+            .iter()
+            .map(|o| o.hyperparameters_original())
+            .collect()
     }
 
     /// Posterior means and latent variances at m points (row-major m × d),
@@ -699,7 +1001,12 @@ impl OutputGp {
 
     /// Number of training samples N.
     pub fn n(&self) -> usize {
-        self.alpha.len()
+        self.residual.len()
+    }
+
+    /// `true` for an output of a sparse (SGPR) model.
+    pub fn is_sparse(&self) -> bool {
+        matches!(self.post, Posterior::Sparse { .. })
     }
 
     /// Log marginal likelihood of the normalised residuals at the fitted
@@ -714,13 +1021,16 @@ impl OutputGp {
         self.jitter
     }
 
-    /// α_n = (K_n + (σ_n² + jitter)·I)⁻¹ r_n in normalised units.
+    /// α_n = (K_n + (σ_n² + jitter)·I)⁻¹ r_n in normalised units (for a
+    /// sparse GP the M weights u of the inducing points instead:
+    /// mean = k(x, Z)·u).
     pub fn alpha_normalised(&self) -> &[f64] {
         &self.alpha
     }
 
     /// α = (K + σ²I)⁻¹ (y − m(X)) in original units (= α_n / s_y), where
-    /// K, σ² are in original units and the jitter counts as noise.
+    /// K, σ² are in original units and the jitter counts as noise (sparse:
+    /// the inducing-point weights u / s_y).
     pub fn alpha(&self) -> Vec<f64> {
         self.alpha.iter().map(|a| a / self.output_scale).collect()
     }
@@ -738,14 +1048,18 @@ impl OutputGp {
 
     /// ‖(K + σ²I)⁻¹‖₂ = 1/λ_min in original units, from the eigenvalues of
     /// L·Lᵀ: O(N³) time and O(N²) memory per call.
+    ///
+    /// Errors: [`GpError::InvalidModel`] for a sparse GP, whose posterior
+    /// has no N × N Gram matrix factor (the uniform error bound of
+    /// `vigp::bound` is stated for exact GPs).
     pub fn inv_gram_norm(&self) -> Result<f64, GpError> {
+        let Posterior::Exact { l, .. } = &self.post else {
+            return Err(GpError::InvalidModel(
+                "inv_gram_norm is defined for exact GPs only (this output is sparse)".into(),
+            ));
+        };
         let n = self.n();
-        let mut l = self.chol.clone();
-        for j in 0..n {
-            for i in 0..j {
-                l[(i, j)] = 0.0;
-            }
-        }
+        let l = tri::unpack(l, n);
         let a = &l * l.transpose();
         let ev = a
             .self_adjoint_eigenvalues(Side::Lower)

@@ -71,10 +71,63 @@ impl Bounds {
     }
 }
 
+/// Which GP a [`Gp`](super::Gp) is: the exact posterior, or the sparse
+/// variational approximation (SGPR).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub enum Method {
+    /// The exact GP: O(N³) per likelihood evaluation, O(N²) memory per output.
+    #[default]
+    Exact,
+    /// Titsias' (2009) variational sparse GP (SGPR, the collapsed "VFE"
+    /// bound) with M inducing points shared by all outputs: O(N·M²) per
+    /// evaluation, O(N·M) memory. Hyperparameters maximise the evidence
+    /// lower bound; the inducing points stay where [`SparseOptions`] puts
+    /// them (they are not optimised).
+    Sparse(SparseOptions),
+}
+
+/// Settings of the sparse GP ([`Method::Sparse`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SparseOptions {
+    /// Number M of inducing points (at most N; M = N gives the exact
+    /// posterior mean up to the jitter).
+    pub inducing: usize,
+    /// Where the inducing points come from.
+    pub init: InducingInit,
+}
+
+impl SparseOptions {
+    /// M inducing points chosen by k-means++ (seeded by `TrainOptions::seed`).
+    pub fn kmeans(inducing: usize) -> Self {
+        Self {
+            inducing,
+            init: InducingInit::KMeansPlusPlus { lloyd_iters: 0 },
+        }
+    }
+}
+
+/// How the inducing points of a sparse GP are chosen, in the units of the
+/// (standardised, when `normalise_inputs` is on) inputs.
+#[derive(Clone, Debug, PartialEq)]
+pub enum InducingInit {
+    /// k-means++ seeding (Arthur & Vassilvitskii 2007) on the training
+    /// inputs, then `lloyd_iters` Lloyd iterations (0: the seeds themselves,
+    /// which are training inputs).
+    KMeansPlusPlus {
+        /// Lloyd (k-means) iterations after the seeding.
+        lloyd_iters: usize,
+    },
+    /// The first M training inputs (e.g. data already in random order).
+    First,
+    /// Given points, row-major M × d, in original input units.
+    Given(Vec<f64>),
+}
+
 /// How to train a [`Gp`](super::Gp).
 ///
-/// Defaults: constant prior mean, inputs and outputs normalised, 5 random
-/// restarts besides the initial point, seed 0, [`Bounds::default`].
+/// Defaults: the exact GP, constant prior mean, inputs and outputs
+/// normalised, 5 random restarts besides the initial point, seed 0,
+/// [`Bounds::default`], no warm start.
 #[derive(Clone, Debug)]
 pub struct TrainOptions {
     /// Prior mean m(x); the GPs model y − m(x).
@@ -101,6 +154,15 @@ pub struct TrainOptions {
     /// Stop when the infinity norm of the projected gradient of −LML (w.r.t.
     /// log hyperparameters) is below this.
     pub pgtol: f64,
+    /// Exact or sparse GP.
+    pub method: Method,
+    /// Warm start: hyperparameters in **original** units, one per output
+    /// (e.g. [`Gp::warm_start`](super::Gp::warm_start) of a model trained on
+    /// fewer samples, or the previous run of a sweep). They replace
+    /// `initial` as start 0 of each output (converted to the new
+    /// normalisation and clamped into the bounds); the random restarts are
+    /// unchanged, so `restarts: 0` refines the previous optimum only.
+    pub warm_start: Option<Vec<Hyperparameters>>,
 }
 
 impl Default for TrainOptions {
@@ -116,6 +178,8 @@ impl Default for TrainOptions {
             max_iters: 500,
             ftol: 2.220446049250313e-9,
             pgtol: 1e-5,
+            method: Method::Exact,
+            warm_start: None,
         }
     }
 }
@@ -130,7 +194,8 @@ pub struct TrainReport {
 /// Training details of one output's GP.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OutputReport {
-    /// Best log marginal likelihood (normalised units), over all starts.
+    /// Best log marginal likelihood (normalised units), over all starts;
+    /// for a sparse GP the evidence lower bound at the winning start.
     pub log_marginal_likelihood: f64,
     /// Index of the winning start (0 = the initial point).
     pub best_start: usize,
@@ -140,6 +205,9 @@ pub struct OutputReport {
     pub iterations: usize,
     /// Total likelihood evaluations over all starts.
     pub evaluations: usize,
+    /// Likelihood evaluations of every start (0 for a start that failed).
+    #[serde(default)]
+    pub start_evaluations: Vec<usize>,
     /// Whether the winning start met a convergence test (not the iteration cap).
     pub converged: bool,
     /// Absolute jitter (normalised units) on the diagonal of the final Gram matrix.

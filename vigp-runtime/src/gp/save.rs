@@ -8,8 +8,9 @@ use super::mean::{MeanFn, Resolved};
 use super::model::{Gp, Prepared, check_dims, check_finite};
 use super::normalise::InputNormaliser;
 
-/// Format version written by [`Gp::to_saved`].
-const VERSION: u32 = 1;
+/// Format version written by [`Gp::to_saved`]: 2 added the inducing
+/// points of sparse GPs; version 1 files (exact GPs) still load.
+const VERSION: u32 = 2;
 
 /// Relative tolerance when checking that a re-attached mean function
 /// reproduces its saved values at the training inputs: the function is
@@ -17,9 +18,10 @@ const VERSION: u32 = 1;
 /// a different build's floating-point contraction can differ.
 const MEAN_TOL: f64 = 1e-9;
 
-/// The serde form of a trained [`Gp`]: data, normalisation, prior mean and
-/// hyperparameters. The Cholesky factor is not stored; loading recomputes it
-/// (O(N³)) with the saved jitter as the first rung of the ladder.
+/// The serde form of a trained [`Gp`]: data, normalisation, prior mean,
+/// hyperparameters and (sparse GPs) inducing points. The factors are not
+/// stored; loading recomputes them (O(N³), or O(N·M²) for a sparse GP) with
+/// the saved jitter as the first rung of the ladder.
 ///
 /// A function prior mean cannot be serialised: its values at the training
 /// inputs are stored instead, and [`Gp::from_saved`] must be given the
@@ -43,7 +45,7 @@ const MEAN_TOL: f64 = 1e-9;
 /// ```
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SavedGp {
-    /// Format version (currently 1).
+    /// Format version (currently 2; 1 is read too).
     pub version: u32,
     /// Input dimension d.
     pub input_dim: usize,
@@ -59,6 +61,10 @@ pub struct SavedGp {
     pub mean: SavedMean,
     /// Per output: hyperparameters (normalised), output scale s_y and jitter.
     pub outputs: Vec<SavedOutput>,
+    /// Inducing inputs of a sparse GP (normalised units, row-major M × d);
+    /// `None` for an exact GP (and in version 1 files).
+    #[serde(default)]
+    pub inducing_normalised: Option<Vec<f64>>,
 }
 
 /// The prior mean of a saved model.
@@ -112,6 +118,7 @@ impl Gp {
                     jitter: o.jitter,
                 })
                 .collect(),
+            inducing_normalised: self.inducing.clone(),
         }
     }
 
@@ -121,7 +128,7 @@ impl Gp {
     /// values at the training inputs are checked to 1e-9 relative); for zero
     /// and constant means pass `None`.
     pub fn from_saved(saved: &SavedGp, mean: Option<super::PriorMean>) -> Result<Self, GpError> {
-        if saved.version != VERSION {
+        if saved.version != VERSION && saved.version != 1 {
             return Err(bad(format!("unsupported version {}", saved.version)));
         }
         let (d, p) = (saved.input_dim, saved.output_dim);
@@ -138,6 +145,16 @@ impl Gp {
         if saved.outputs.len() != p {
             return Err(bad("number of saved outputs differs from output_dim"));
         }
+        if let Some(z) = &saved.inducing_normalised {
+            if saved.version < 2 {
+                return Err(bad("inducing points need format version 2"));
+            }
+            if z.is_empty() || z.len() % d != 0 || z.len() / d > n {
+                return Err(bad("inducing points: need 1..=N rows of d numbers"));
+            }
+            check_finite("inducing points", z)?;
+        }
+        let sparse = saved.inducing_normalised.is_some();
         for o in &saved.outputs {
             o.hyperparameters.validate(d)?;
             if !(o.output_scale.is_finite() && o.output_scale > 0.0) {
@@ -150,7 +167,12 @@ impl Gp {
             let diag = h.signal_variance + h.noise_variance;
             // Training never adds more than the jitter ladder's maximum; a
             // larger value would silently turn the model into its prior.
-            if o.jitter > super::lml::JITTER_MAX * diag * (1.0 + 1e-9) {
+            let max = if sparse {
+                super::sparse::KUU_JITTER_MAX * h.signal_variance
+            } else {
+                super::lml::JITTER_MAX * diag
+            };
+            if o.jitter > max * (1.0 + 1e-9) {
                 return Err(bad(format!(
                     "jitter {:e} exceeds the largest jitter training adds ({:e} of σ_f² + σ_n²)",
                     o.jitter,
@@ -227,7 +249,25 @@ impl Gp {
             .iter()
             .map(|o| o.hyperparameters.clone())
             .collect();
-        let jit: Vec<f64> = saved.outputs.iter().map(|o| o.jitter).collect();
-        Gp::from_prepared(&saved.inputs, &saved.targets, prep, &hps, Some(&jit))
+        // exact: absolute jitter; sparse: relative K_uu jitter ε = jitter/σ_f²
+        let jit: Vec<f64> = saved
+            .outputs
+            .iter()
+            .map(|o| {
+                if sparse {
+                    o.jitter / o.hyperparameters.signal_variance
+                } else {
+                    o.jitter
+                }
+            })
+            .collect();
+        Gp::from_prepared(
+            &saved.inputs,
+            &saved.targets,
+            prep,
+            &hps,
+            Some(&jit),
+            saved.inducing_normalised.clone(),
+        )
     }
 }

@@ -1,0 +1,434 @@
+//! The paper's question past N = 512: does the 20-step prediction error of
+//! the learned integrator keep falling with more data? (Brüdigam et al. stop
+//! at N = 512 because of training time.)
+//!
+//! Pendulum and cartpole with the nominal VI step as prior (paper eq. 7),
+//! minimal coordinates, sin/cos inputs, the data protocol of
+//! `examples/paper` (perturbed masses, inertias and damping; trajectories of
+//! 2 s from random configurations at rest; σ = 1e-3 noise on q, v and the
+//! targets; 20-step windows from held-out noise-free trajectories), exact
+//! GPs up to `--exact-max`, the sparse GP (k-means++ inducing points) for
+//! larger N. Training samples are drawn **without** replacement from the
+//! pool, so a larger N is more information, not repeats.
+//!
+//! ```text
+//! cargo run --release --example scale_sweep                       # defaults below
+//! cargo run --release --example scale_sweep -- --n 64,256,1024,4096,16384 --sparse-m 512 --noise 0
+//! ```
+//!
+//! Prints a table (median window MSE of positions over the test windows,
+//! per system and N; the nominal model's error; training time and the
+//! fitted noise variance in original units) and writes it as CSV to
+//! `target/scale_sweep.csv` with a log–log figure `target/scale_sweep.svg`
+//! (`--plot some.csv` redraws the figure of a saved CSV as `some.svg`).
+//! `--noise 0` trains on noise-free data, which separates the
+//! observation-noise floor from the rest.
+
+use std::f64::consts::PI;
+use std::time::Instant;
+
+use nalgebra::SVector;
+use rayon::prelude::*;
+use vigp::gp::{Method, SparseOptions, TrainOptions};
+use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
+use vigp::prelude::*;
+use vigp::projection::consistent_state;
+use vigp::systems::{Cartpole, Pendulum};
+
+const DT: f64 = 0.01;
+const HORIZON: usize = 20;
+const TRAJ_SAMPLES: usize = 201;
+
+struct Rng(u64);
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^ (z >> 31)
+    }
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
+    }
+    fn normal(&mut self) -> f64 {
+        let (u1, u2) = (self.uniform(f64::MIN_POSITIVE, 1.0), self.uniform(0.0, 1.0));
+        (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n as u64) as usize
+    }
+}
+
+struct Cli {
+    n: Vec<usize>,
+    exact_max: usize,
+    sparse_m: usize,
+    noise: f64,
+    gt_dt: f64,
+    restarts: usize,
+    test_trajectories: usize,
+    windows: usize,
+    seed: u64,
+}
+
+fn parse() -> Result<Cli, String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let get = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1).cloned())
+    };
+    let num = |name: &str, d: f64| -> Result<f64, String> {
+        get(name).map_or(Ok(d), |v| v.parse().map_err(|_| format!("bad {name}")))
+    };
+    let n = match get("--n") {
+        Some(v) => v
+            .split(',')
+            .map(|s| s.parse().map_err(|_| format!("bad --n entry {s}")))
+            .collect::<Result<Vec<usize>, _>>()?,
+        None => vec![64, 128, 256, 512, 1024, 2048, 4096, 8192, 16384],
+    };
+    Ok(Cli {
+        n,
+        exact_max: num("--exact-max", 4096.0)? as usize,
+        sparse_m: num("--sparse-m", 512.0)? as usize,
+        noise: num("--noise", 1e-3)?,
+        gt_dt: num("--gt-dt", 1e-3)?,
+        restarts: num("--restarts", 2.0)? as usize,
+        test_trajectories: num("--test-trajectories", 20.0)? as usize,
+        windows: num("--windows", 10.0)? as usize,
+        seed: num("--seed", 1.0)? as u64,
+    })
+}
+
+fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    m: M,
+    q0: &SVector<f64, N>,
+    gt_dt: f64,
+) -> Result<Vec<SVector<f64, N>>, StepError> {
+    let sub = (DT / gt_dt).round().max(1.0) as usize;
+    let h = DT / sub as f64;
+    let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
+    let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h)?;
+    let mut z = State { q, v };
+    let vi = Variational::midpoint(m, h);
+    let mut out = vec![z.q];
+    for _ in 1..TRAJ_SAMPLES {
+        for _ in 0..sub {
+            z = vi.step(&z)?;
+        }
+        out.push(z.q);
+    }
+    Ok(out)
+}
+
+struct Row {
+    system: &'static str,
+    n: usize,
+    method: String,
+    mse: f64,
+    nominal_mse: f64,
+    train_s: f64,
+    noise_var: f64,
+}
+
+#[allow(clippy::too_many_arguments)]
+fn sweep<S, Mn, const N: usize>(
+    name: &'static str,
+    cli: &Cli,
+    perturb: impl Fn(&mut S, &mut Rng),
+    minimal: impl Fn(&S) -> Mn,
+    sample_q0: impl Fn(&mut Rng) -> SVector<f64, N>,
+    rows: &mut Vec<Row>,
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    S: Default,
+    Mn: Mechanism<N, 0> + Copy + Send + Sync,
+{
+    let mut rng = Rng(cli.seed ^ name.len() as u64);
+    let mut truth = S::default();
+    perturb(&mut truth, &mut rng);
+    let (tmin, nmin) = (minimal(&truth), minimal(&S::default()));
+    let nmax = cli.n.iter().copied().max().unwrap_or(0);
+    // enough training trajectories for the largest N without repeats
+    let train_traj = nmax.div_ceil(TRAJ_SAMPLES - 2) + 1;
+    let starts: Vec<_> = (0..train_traj + cli.test_trajectories)
+        .map(|_| sample_q0(&mut rng))
+        .collect();
+    let t0 = Instant::now();
+    let trajs: Vec<Vec<SVector<f64, N>>> = starts
+        .par_iter()
+        .map(|q0| ground_truth(tmin, q0, cli.gt_dt))
+        .collect::<Result<_, _>>()?;
+    eprintln!(
+        "{name}: {} ground-truth trajectories in {:.1} s",
+        trajs.len(),
+        t0.elapsed().as_secs_f64()
+    );
+    let (train, test) = trajs.split_at(train_traj);
+    let mut pool: Vec<Transition<N>> = Vec::new();
+    for traj in train {
+        for t in transitions(traj, DT) {
+            let mut t = t;
+            t.z.q += SVector::from_fn(|_, _| cli.noise * rng.normal());
+            t.z.v += SVector::from_fn(|_, _| cli.noise * rng.normal());
+            t.v_next += SVector::from_fn(|_, _| cli.noise * rng.normal());
+            pool.push(t);
+        }
+    }
+    // a fixed random order: the first N of it are the N training samples
+    for i in (1..pool.len()).rev() {
+        pool.swap(i, rng.below(i + 1));
+    }
+    let mut windows = Vec::new();
+    for traj in test {
+        for _ in 0..cli.windows {
+            let k = rng.below(TRAJ_SAMPLES - HORIZON - 1);
+            windows.push((
+                State {
+                    q: traj[k],
+                    v: (traj[k + 1] - traj[k]) / DT,
+                },
+                traj[k..=k + HORIZON].to_vec(),
+            ));
+        }
+    }
+    let mse = |roll: &(dyn Fn(&State<N>) -> Result<Vec<State<N>>, StepError> + Sync)| -> f64 {
+        let v: Vec<f64> = windows
+            .par_iter()
+            .filter_map(|(z, truth)| {
+                let p = roll(z).ok()?;
+                let s: f64 = p
+                    .iter()
+                    .zip(truth)
+                    .skip(1)
+                    .map(|(a, b)| (a.q - b).norm_squared() / N as f64)
+                    .sum();
+                Some(s / HORIZON as f64)
+            })
+            .collect();
+        let mut v = v;
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v[v.len() / 2]
+        }
+    };
+    let nominal_vi = Variational::new(nmin, DT);
+    let nominal_mse = mse(&|z| nominal_vi.rollout(z, HORIZON));
+    let mut warm = None;
+    for &n in &cli.n {
+        let n = n.min(pool.len());
+        let sparse = n > cli.exact_max;
+        let opts = TrainOptions {
+            restarts: cli.restarts,
+            seed: cli.seed ^ n as u64,
+            method: if sparse {
+                Method::Sparse(SparseOptions::kmeans(cli.sparse_m.min(n)))
+            } else {
+                Method::Exact
+            },
+            warm_start: warm.clone(),
+            ..TrainOptions::default()
+        };
+        let t0 = Instant::now();
+        let (l, _) = Learned::train(
+            nmin,
+            DT,
+            &pool[..n],
+            Encoding::SinCos,
+            Prior::Nominal,
+            &opts,
+        )?;
+        let train_s = t0.elapsed().as_secs_f64();
+        warm = Some(l.gp().warm_start());
+        let m = mse(&|z| l.rollout(z, HORIZON));
+        let noise_var = l.gp().output(0).hyperparameters_original().noise_variance;
+        let method = if sparse {
+            format!("sparse M={}", cli.sparse_m.min(n))
+        } else {
+            "exact".into()
+        };
+        println!(
+            "{name:9} N {n:6} {method:13} 20-step MSE {m:.3e} (nominal {nominal_mse:.3e}), trained in {train_s:.1} s, σ_n² {noise_var:.2e}"
+        );
+        rows.push(Row {
+            system: name,
+            n,
+            method,
+            mse: m,
+            nominal_mse,
+            train_s,
+            noise_var,
+        });
+    }
+    Ok(())
+}
+
+/// Rows back from a CSV written by this example (for `--plot`).
+fn read_csv(path: &str) -> Result<Vec<Row>, Box<dyn std::error::Error>> {
+    let text = std::fs::read_to_string(path)?;
+    let mut rows = Vec::new();
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        if f.len() != 7 {
+            return Err(format!("bad CSV line: {line}").into());
+        }
+        rows.push(Row {
+            system: match f[0] {
+                "pendulum" => "pendulum",
+                "cartpole" => "cartpole",
+                other => return Err(format!("unknown system {other}").into()),
+            },
+            n: f[1].parse()?,
+            method: f[2].into(),
+            mse: f[3].parse()?,
+            nominal_mse: f[4].parse()?,
+            train_s: f[5].parse()?,
+            noise_var: f[6].parse()?,
+        });
+    }
+    Ok(rows)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    // `--plot CSV`: only redraw the figure of an earlier run.
+    let args: Vec<String> = std::env::args().collect();
+    if let Some(i) = args.iter().position(|a| a == "--plot") {
+        let csv = args.get(i + 1).ok_or("--plot needs a CSV path")?;
+        let rows = read_csv(csv)?;
+        let svg = csv.trim_end_matches(".csv").to_string() + ".svg";
+        figure(&rows, &svg)?;
+        println!("wrote {svg}");
+        return Ok(());
+    }
+    let cli = parse()?;
+    println!(
+        "scale sweep: N {:?}, exact up to {}, sparse M = {}, noise σ = {:e}, ground truth dt {:e}, {} restarts, seed {}",
+        cli.n, cli.exact_max, cli.sparse_m, cli.noise, cli.gt_dt, cli.restarts, cli.seed
+    );
+    let mut rows = Vec::new();
+    sweep(
+        "pendulum",
+        &cli,
+        |s: &mut Pendulum, r| {
+            s.links.rod.mass *= r.uniform(0.9, 1.1);
+            s.links.rod.inertia *= r.uniform(0.9, 1.1);
+            s.joints.pivot.damping = r.uniform(0.0, 1.0);
+        },
+        Pendulum::minimal,
+        |r| SVector::from([r.uniform(-PI, PI)]),
+        &mut rows,
+    )?;
+    sweep(
+        "cartpole",
+        &cli,
+        |s: &mut Cartpole, r| {
+            for l in [&mut s.links.cart, &mut s.links.pole] {
+                l.mass *= r.uniform(0.9, 1.1);
+                l.inertia *= r.uniform(0.9, 1.1);
+            }
+            s.joints.rail.damping = r.uniform(0.0, 0.5);
+            s.joints.hinge.damping = r.uniform(0.0, 1.0);
+        },
+        Cartpole::minimal,
+        |r| SVector::from([r.uniform(-1.0, 1.0), r.uniform(-PI, PI)]),
+        &mut rows,
+    )?;
+    let mut csv = String::from("system,n,method,mse,nominal_mse,train_s,noise_variance\n");
+    for r in &rows {
+        csv.push_str(&format!(
+            "{},{},{},{:e},{:e},{:.3},{:e}\n",
+            r.system, r.n, r.method, r.mse, r.nominal_mse, r.train_s, r.noise_var
+        ));
+    }
+    std::fs::create_dir_all("target")?;
+    std::fs::write("target/scale_sweep.csv", csv)?;
+    figure(&rows, "target/scale_sweep.svg")?;
+    println!("wrote target/scale_sweep.csv and target/scale_sweep.svg");
+    Ok(())
+}
+
+/// Log–log figure: median 20-step MSE against N, one line per system, the
+/// nominal model's error dashed.
+fn figure(rows: &[Row], path: &str) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/assets/fonts/DejaVuSans.ttf"
+    ));
+    plotters::style::register_font("sans-serif", FontStyle::Normal, DEJAVU_SANS)
+        .map_err(|_| "embedded font")?;
+    let ok = |v: f64| v.is_finite() && v > 0.0;
+    let ys: Vec<f64> = rows
+        .iter()
+        .flat_map(|r| [r.mse, r.nominal_mse])
+        .filter(|v| ok(*v))
+        .collect();
+    let (ylo, yhi) = ys
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(a, b), v| (a.min(*v), b.max(*v)));
+    let (xlo, xhi) = rows.iter().fold((f64::INFINITY, 0.0f64), |(a, b), r| {
+        (a.min(r.n as f64), b.max(r.n as f64))
+    });
+    if ys.is_empty() || xlo >= xhi || xlo.is_nan() {
+        return Ok(());
+    }
+    let root = SVGBackend::new(path, (800, 520)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "20-step position MSE vs training samples N",
+            ("sans-serif", 22),
+        )
+        .margin(16)
+        .x_label_area_size(50)
+        .y_label_area_size(80)
+        .build_cartesian_2d(
+            (xlo / 1.3..xhi * 1.3).log_scale(),
+            (ylo / 3.0..yhi * 3.0).log_scale(),
+        )?;
+    chart
+        .configure_mesh()
+        .x_desc("N (exact up to --exact-max, sparse beyond)")
+        .y_desc("median window MSE [rad², m²]")
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .draw()?;
+    for (system, colour) in [("pendulum", BLUE), ("cartpole", RED)] {
+        let pts: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.system == system && ok(r.mse))
+            .map(|r| (r.n as f64, r.mse))
+            .collect();
+        chart
+            .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))?
+            .label(format!("{system}, learned (nominal VI prior)"))
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour));
+        chart.draw_series(pts.iter().map(|p| Circle::new(*p, 4, colour.filled())))?;
+        if let Some(nom) = rows
+            .iter()
+            .find(|r| r.system == system)
+            .map(|r| r.nominal_mse)
+        {
+            chart
+                .draw_series(DashedLineSeries::new(
+                    vec![(xlo, nom), (xhi, nom)],
+                    6,
+                    4,
+                    colour.mix(0.5).stroke_width(1),
+                ))?
+                .label(format!("{system}, nominal model"))
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.mix(0.5)));
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
+    root.present()?;
+    Ok(())
+}

@@ -1,0 +1,390 @@
+//! The sparse GP (SGPR) and the online updates:
+//!
+//! * the bound, its gradient, the predictive mean and variance agree with an
+//!   independent dense numpy computation (`scripts/gp_sparse_fixtures.py`,
+//!   N × N matrices and `numpy.linalg.solve`, gradient by central
+//!   differences);
+//! * with the inducing inputs equal to the training inputs the bound is the
+//!   exact LML (up to the K_uu jitter), and training a sparse GP with more
+//!   inducing points approaches the exact GP's optimum;
+//! * `add_samples` equals rebuilding the model from the enlarged data at the
+//!   same hyperparameters and normalisation (`Gp::from_saved`) to 1e-9, for
+//!   exact and sparse models;
+//! * save/load (format 2, and format 1 files), export of the sparse mean,
+//!   warm starts.
+
+mod common;
+
+use common::Rng;
+use vigp::gp::{
+    ExportOptions, Gp, GpError, InducingInit, Method, SavedGp, SparseOptions, TrainOptions,
+    VarianceMode, log_marginal_likelihood, sparse_bound,
+};
+
+fn fixture() -> serde_json::Value {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/gp_sparse.json"
+    ))
+    .expect("fixture (scripts/gp_sparse_fixtures.py)");
+    serde_json::from_str(&text).unwrap()
+}
+
+fn vec_of(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .unwrap()
+        .iter()
+        .map(|x| x.as_f64().unwrap())
+        .collect()
+}
+
+fn raw_sparse(z: Vec<f64>) -> TrainOptions {
+    TrainOptions {
+        mean: vigp::gp::PriorMean::Zero,
+        normalise_inputs: false,
+        normalise_outputs: false,
+        method: Method::Sparse(SparseOptions {
+            inducing: 0, // set below
+            init: InducingInit::Given(z),
+        }),
+        ..Default::default()
+    }
+}
+
+#[test]
+fn bound_gradient_and_predictions_match_numpy() {
+    let fx = fixture();
+    for case in fx["cases"].as_array().unwrap() {
+        let name = case["name"].as_str().unwrap();
+        let d = case["d"].as_u64().unwrap() as usize;
+        let m = case["m"].as_u64().unwrap() as usize;
+        let (x, y, z) = (vec_of(&case["x"]), vec_of(&case["y"]), vec_of(&case["z"]));
+        let theta = vec_of(&case["log_params"]);
+        let (f, g) = sparse_bound(&x, d, &y, &z, &theta, false).unwrap();
+        let f_ref = case["bound"].as_f64().unwrap();
+        // numpy forms Q = K_fu K_uu⁻¹ K_uf and solves with the dense N × N
+        // matrix: both sides lose ≈ ε·cond digits (cond(K_uu + jitter) up to
+        // 1e10 here), so agreement is to ≈ 1e-9 relative, not 1e-15.
+        let rel = (f - f_ref).abs() / f_ref.abs();
+        println!("{name}: bound {f} vs numpy {f_ref} (rel {rel:.1e})");
+        assert!(rel < 1e-8, "{name}: bound {f} vs {f_ref}");
+        // numpy's gradient is a central difference with h = 1e-5: truncation
+        // O(h²·F''') plus rounding ε·|F|/h ≈ 1e-10·|F|.
+        let g_ref = vec_of(&case["bound_gradient_fd"]);
+        for (k, (a, b)) in g.iter().zip(&g_ref).enumerate() {
+            let tol = 1e-6 * (1.0 + b.abs()) + 1e-9 * f_ref.abs();
+            assert!((a - b).abs() < tol, "{name}: gradient {k}: {a} vs {b}");
+        }
+        // parallel evaluation: same value up to the summation order
+        let (fp, gp_) = sparse_bound(&x, d, &y, &z, &theta, true).unwrap();
+        assert!((fp - f).abs() <= 1e-10 * f.abs());
+        for (a, b) in gp_.iter().zip(&g) {
+            assert!((a - b).abs() <= 1e-9 * (1.0 + b.abs()));
+        }
+        // predictions of the fitted sparse model
+        let mut opts = raw_sparse(z.clone());
+        if let Method::Sparse(s) = &mut opts.method {
+            s.inducing = m;
+        }
+        let hp = vigp::gp::Hyperparameters::from_log(&theta).unwrap();
+        let model = Gp::fit(&x, d, &y, 1, &[hp], &opts).unwrap();
+        assert!(model.is_sparse());
+        let lml = model.output(0).log_marginal_likelihood();
+        assert!((lml - f).abs() <= 1e-12 * f.abs(), "{lml} vs {f}");
+        let xt = vec_of(&case["x_test"]);
+        let pred = model.predict(&xt).unwrap();
+        let (mref, vref) = (vec_of(&case["mean"]), vec_of(&case["variance"]));
+        let sf2 = theta[d].exp();
+        let full = m == case["n"].as_u64().unwrap() as usize;
+        // The variance σ_f² − kᵀK_uu⁻¹k + kᵀ(K_uu + K_ufK_fu/σ²)⁻¹k is a
+        // difference of terms of size σ_f², each computed to ≈ ε·cond(K_uu)·σ_f²
+        // on both sides: cond(K_uu) ≤ 1.4e4 for the first two cases (1e-8
+        // holds), 6e9 for Z = X (the jitter is its smallest eigenvalue), where
+        // numpy itself is only good to ≈ 1e-6·σ_f²; there the exact GP at the
+        // same hyperparameters (well conditioned by the noise) is checked too.
+        let vtol = if full { 2e-6 } else { 1e-8 } * sf2;
+        let exact = full.then(|| {
+            let o = TrainOptions {
+                method: Method::Exact,
+                ..opts.clone()
+            };
+            Gp::fit(
+                &x,
+                d,
+                &y,
+                1,
+                &[vigp::gp::Hyperparameters::from_log(&theta).unwrap()],
+                &o,
+            )
+            .unwrap()
+            .predict(&xt)
+            .unwrap()
+        });
+        let mut worst = (0.0f64, 0.0f64);
+        for i in 0..mref.len() {
+            let em = (pred.mean[i] - mref[i]).abs();
+            let ev = (pred.variance[i] - vref[i]).abs();
+            worst = (worst.0.max(em), worst.1.max(ev / sf2));
+            assert!(
+                em < 1e-8 * (1.0 + mref[i].abs()),
+                "{name}: mean {i}: {} vs {}",
+                pred.mean[i],
+                mref[i]
+            );
+            assert!(
+                ev < vtol,
+                "{name}: variance {i}: {} vs {}",
+                pred.variance[i],
+                vref[i]
+            );
+            if let Some(e) = &exact {
+                assert!((pred.mean[i] - e.mean[i]).abs() < 1e-7 * (1.0 + e.mean[i].abs()));
+                assert!((pred.variance[i] - e.variance[i]).abs() < 2e-6 * sf2);
+            }
+        }
+        println!(
+            "{name}: mean within {:.1e}, variance within {:.1e}·σ_f² of numpy",
+            worst.0, worst.1
+        );
+        // M = N, Z = X: the exact LML, up to the K_uu jitter (numpy: 7e-8 here)
+        if m == case["n"].as_u64().unwrap() as usize {
+            let (exact, _) = log_marginal_likelihood(&x, d, &y, &theta, false).unwrap();
+            let ex_ref = case["exact_lml"].as_f64().unwrap();
+            assert!((exact - ex_ref).abs() < 1e-9 * ex_ref.abs().max(1.0));
+            println!("{name}: M = N bound {f} vs exact LML {exact}");
+            assert!((f - exact).abs() < 1e-6 && f <= exact + 1e-9);
+        }
+    }
+}
+
+/// Smooth data, d inputs, p outputs.
+fn data(n: usize, d: usize, p: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    let mut rng = Rng(seed);
+    let x: Vec<f64> = (0..n * d).map(|_| rng.uniform(-2.0, 2.0)).collect();
+    let y = x
+        .chunks(d)
+        .flat_map(|r| {
+            let noise = 0.02 * rng.uniform(-1.0, 1.0);
+            (0..p)
+                .map(move |j| (1.5 * r[0] + j as f64).sin() + 0.3 * r[d - 1] * r[0] + noise + 2.0)
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    (x, y)
+}
+
+#[test]
+fn trained_sparse_bound_approaches_the_exact_optimum() {
+    let (n, d) = (300, 2);
+    let (x, y) = data(n, d, 1, 3);
+    let base = TrainOptions {
+        restarts: 2,
+        ..Default::default()
+    };
+    let (_, exact) = Gp::train(&x, d, &y, 1, &base).unwrap();
+    let exact = exact.outputs[0].log_marginal_likelihood;
+    let mut last = f64::NEG_INFINITY;
+    for m in [5, 20, 80] {
+        let opts = TrainOptions {
+            method: Method::Sparse(SparseOptions::kmeans(m)),
+            ..base.clone()
+        };
+        let (gp, rep) = Gp::train(&x, d, &y, 1, &opts).unwrap();
+        let b = rep.outputs[0].log_marginal_likelihood;
+        println!(
+            "M = {m}: trained bound {b:.6} (exact optimum {exact:.6}), {} evaluations",
+            rep.outputs[0].evaluations
+        );
+        // a lower bound of the exact LML at its own hyperparameters, hence
+        // below the exact optimum (up to the optimiser's tolerance)
+        assert!(b <= exact + 1e-6 * exact.abs(), "M = {m}: {b} > {exact}");
+        assert!(b > last - 1e-6 * b.abs(), "M = {m}: {b} < {last}");
+        assert_eq!(gp.inducing_points().unwrap().len(), m * d);
+        last = b;
+    }
+    // 80 k-means++ points on 300 smooth samples: within 1 % of the exact optimum
+    assert!(
+        (exact - last).abs() < 0.01 * exact.abs(),
+        "{last} vs {exact}"
+    );
+}
+
+/// `add_samples` against a model rebuilt from the enlarged data with the
+/// same hyperparameters and normalisation.
+fn check_update(gp0: &Gp, x_new: &[f64], y_new: &[f64], probes: &[f64]) -> f64 {
+    let mut gp = gp0.clone();
+    gp.add_samples(x_new, y_new).unwrap();
+    let mut saved = gp0.to_saved();
+    saved.inputs.extend_from_slice(x_new);
+    saved.targets.extend_from_slice(y_new);
+    let refit = Gp::from_saved(&saved, None).unwrap();
+    assert_eq!(gp.n(), refit.n());
+    let (a, b) = (gp.predict(probes).unwrap(), refit.predict(probes).unwrap());
+    let mut worst = 0.0f64;
+    for i in 0..a.mean.len() {
+        let s2 = gp.output(i % gp.output_dim()).kernel_max();
+        worst = worst.max((a.mean[i] - b.mean[i]).abs() / (1.0 + b.mean[i].abs()));
+        worst = worst.max((a.variance[i] - b.variance[i]).abs() / s2);
+    }
+    for j in 0..gp.output_dim() {
+        let (l1, l2) = (
+            gp.output(j).log_marginal_likelihood(),
+            refit.output(j).log_marginal_likelihood(),
+        );
+        worst = worst.max((l1 - l2).abs() / l2.abs().max(1.0));
+    }
+    worst
+}
+
+#[test]
+fn online_updates_equal_refitting() {
+    let (d, p) = (3, 2);
+    let (x, y) = data(260, d, p, 5);
+    let (x0, y0) = (&x[..200 * d], &y[..200 * p]);
+    let (x1, y1) = (&x[200 * d..], &y[200 * p..]);
+    let probes: Vec<f64> = data(40, d, 1, 77).0.iter().map(|v| v * 1.2).collect();
+    let opts = TrainOptions {
+        restarts: 1,
+        ..Default::default()
+    };
+    let (exact, _) = Gp::train(x0, d, y0, p, &opts).unwrap();
+    let mut solve = exact.clone();
+    solve.set_variance_mode(VarianceMode::Solve);
+    let sp = TrainOptions {
+        method: Method::Sparse(SparseOptions::kmeans(30)),
+        ..opts.clone()
+    };
+    let (sparse, _) = Gp::train(x0, d, y0, p, &sp).unwrap();
+    for (what, gp) in [
+        ("exact", &exact),
+        ("exact/solve", &solve),
+        ("sparse", &sparse),
+    ] {
+        // one sample, then the remaining 59 in one call
+        let w1 = check_update(gp, &x1[..d], &y1[..p], &probes);
+        let w60 = check_update(gp, x1, y1, &probes);
+        println!("{what}: add 1 → {w1:.1e}, add 60 → {w60:.1e} (relative to refit)");
+        // ill-conditioning bounds agreement at ε·cond(K) ≈ 1e-16·1e6 here
+        assert!(w1 < 1e-9 && w60 < 1e-9, "{what}: {w1} {w60}");
+    }
+    // a workspace made before the update keeps working (resized once)
+    let mut gp = exact.clone();
+    let mut ws = gp.workspace();
+    gp.add_samples(x1, y1).unwrap();
+    let (mut m, mut v) = ([0.0; 2], [0.0; 2]);
+    gp.predict_into(&probes[..d], &mut m, &mut v, &mut ws)
+        .unwrap();
+    // bad samples leave the model unchanged
+    let before = gp.predict(&probes).unwrap();
+    assert!(matches!(
+        gp.add_samples(&[f64::NAN, 0.0, 0.0], &[1.0, 1.0]),
+        Err(GpError::NonFinite { .. })
+    ));
+    assert!(matches!(
+        gp.add_samples(&[0.0, 0.0], &[1.0, 1.0]),
+        Err(GpError::DimensionMismatch { .. })
+    ));
+    assert_eq!(gp.predict(&probes).unwrap(), before);
+}
+
+#[test]
+fn sparse_save_load_export_and_old_files() {
+    let (d, p) = (2, 1);
+    let (x, y) = data(150, d, p, 9);
+    let opts = TrainOptions {
+        restarts: 1,
+        method: Method::Sparse(SparseOptions::kmeans(25)),
+        ..Default::default()
+    };
+    let (gp, _) = Gp::train(&x, d, &y, p, &opts).unwrap();
+    let saved = gp.to_saved();
+    assert_eq!(saved.version, 2);
+    let json = serde_json::to_string(&saved).unwrap();
+    let back = Gp::from_saved(&serde_json::from_str::<SavedGp>(&json).unwrap(), None).unwrap();
+    let q = [0.3, -0.7, 1.1, 0.2];
+    assert_eq!(back.predict(&q).unwrap(), gp.predict(&q).unwrap());
+    // export: the sparse mean, bit for bit; no variance export
+    let a = gp.export_output(0, false).unwrap();
+    assert_eq!(a.weights.len(), 25);
+    let e = a.as_exported::<2>().unwrap();
+    let mut ws = gp.workspace();
+    let mut m = [0.0];
+    for pt in q.chunks(2) {
+        gp.predict_mean_into(pt, &mut m, &mut ws).unwrap();
+        let pt: [f64; 2] = pt.try_into().unwrap();
+        assert_eq!(e.predict_mean(&pt).unwrap().to_bits(), m[0].to_bits());
+    }
+    assert!(matches!(gp.export_output(0, true), Err(GpError::Export(_))));
+    assert!(
+        gp.to_rust_source(&ExportOptions::default())
+            .unwrap()
+            .contains("Sparse GP")
+    );
+    // a sparse model has no exact Gram-matrix norm (the error bound needs an exact GP)
+    assert!(matches!(
+        gp.output(0).inv_gram_norm(),
+        Err(GpError::InvalidModel(_))
+    ));
+    // format 1 (exact GPs, before sparse models existed) still loads
+    let (exact, _) = Gp::train(
+        &x,
+        d,
+        &y,
+        p,
+        &TrainOptions {
+            restarts: 0,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let mut v1: serde_json::Value = serde_json::to_value(exact.to_saved()).unwrap();
+    v1["version"] = 1.into();
+    v1.as_object_mut().unwrap().remove("inducing_normalised");
+    let old: SavedGp = serde_json::from_value(v1).unwrap();
+    assert_eq!(
+        Gp::from_saved(&old, None).unwrap().predict(&q).unwrap(),
+        exact.predict(&q).unwrap()
+    );
+}
+
+#[test]
+fn warm_start_refines_a_previous_optimum_cheaply() {
+    let (d, p) = (2, 1);
+    let (x, y) = data(220, d, p, 21);
+    let opts = TrainOptions {
+        restarts: 3,
+        ..Default::default()
+    };
+    let (small, _) = Gp::train(&x[..180 * d], d, &y[..180 * p], p, &opts).unwrap();
+    let (full, cold) = Gp::train(&x, d, &y, p, &opts).unwrap();
+    let warm_opts = TrainOptions {
+        restarts: 0,
+        warm_start: Some(small.warm_start()),
+        ..opts.clone()
+    };
+    let (_, warm) = Gp::train(&x, d, &y, p, &warm_opts).unwrap();
+    let (lw, lc) = (
+        warm.outputs[0].log_marginal_likelihood,
+        cold.outputs[0].log_marginal_likelihood,
+    );
+    println!(
+        "warm start: LML {lw:.6} in {} evaluations; cold (1 + 3 starts): {lc:.6} in {} ({:?} per start)",
+        warm.outputs[0].evaluations, cold.outputs[0].evaluations, cold.outputs[0].start_evaluations
+    );
+    assert!(lw >= lc - 1e-6 * lc.abs(), "{lw} < {lc}");
+    assert!(warm.outputs[0].evaluations < cold.outputs[0].start_evaluations[0]);
+    assert_eq!(
+        cold.outputs[0].start_evaluations.iter().sum::<usize>(),
+        cold.outputs[0].evaluations
+    );
+    let _ = full;
+    // wrong number of warm-start hyperparameters
+    let bad = TrainOptions {
+        warm_start: Some(vec![]),
+        ..opts
+    };
+    assert!(matches!(
+        Gp::train(&x, d, &y, p, &bad),
+        Err(GpError::DimensionMismatch { .. })
+    ));
+}
