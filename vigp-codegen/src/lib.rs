@@ -13,6 +13,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod describe;
 pub mod emit;
 pub mod model;
 pub mod parse;
@@ -42,7 +43,9 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream> {
     let parsed: parse::Input = syn::parse2(input)?;
     let model = model::validate(parsed)?;
-    Ok(emit::emit(&model, target))
+    let mut out = emit::emit(&model, target);
+    out.extend(describe::emit(&model, target));
+    Ok(out)
 }
 
 /// Expand a description given as source text and pretty-print the result,

@@ -28,7 +28,7 @@ pub mod step;
 
 pub use kinematics::{Point2, Pose2};
 pub use model::{Body, Model, Terms};
-pub use params::{Joint, Link};
+pub use params::{Joint, Link, Parameters};
 pub use real::{Jet1, Jet2, Real};
 pub use state::{CoordinateKind, State};
 pub use step::{RolloutError, StepError, StepOptions, StepReport, Stepper};

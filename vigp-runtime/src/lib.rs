@@ -25,6 +25,7 @@ pub mod newton;
 pub mod params;
 pub mod projection;
 pub mod summary;
+pub mod system;
 pub mod variational;
 
 pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
@@ -35,6 +36,7 @@ pub use params::{Joint, Link};
 pub use summary::RolloutSummary;
 #[cfg(feature = "std")]
 pub use summary::summarize;
+pub use system::{Parameters, System, ViewVisitor};
 pub use variational::{Integrator, Variational};
 pub use vigp_core as embedded;
 pub use vigp_core::Real;
