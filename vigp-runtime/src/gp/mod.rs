@@ -45,7 +45,7 @@ pub use mean::{MeanFn, PriorMean};
 pub use model::{Gp, OutputGp, Prediction, Workspace};
 pub use normalise::InputNormaliser;
 pub use options::{Bounds, OutputReport, TrainOptions, TrainReport};
-pub use save::SavedGp;
+pub use save::{SavedGp, SavedMean, SavedOutput};
 
 /// Log marginal likelihood and its gradient on data as given (no
 /// normalisation, zero prior mean).
