@@ -14,6 +14,8 @@ pub mod gp;
 #[cfg(feature = "alloc")]
 pub mod bound;
 pub mod classical;
+#[cfg(feature = "alloc")]
+pub mod data;
 pub mod del;
 pub mod dynamics;
 pub mod kinematics;
@@ -31,6 +33,9 @@ pub mod variational;
 pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
 pub use kinematics::Pose2;
 pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
+/// The linear-algebra crate of vigp's public types (`SVector` in states and
+/// transitions), so that users need not guess a matching version.
+pub use nalgebra::{self, SMatrix, SVector};
 pub use newton::{NewtonOptions, StepError, StepInfo};
 pub use params::{Joint, Link};
 pub use summary::RolloutSummary;
