@@ -14,7 +14,9 @@ use crate::projection::{consistent_state, project_velocity};
 use crate::variational::{Integrator, Variational};
 use nalgebra::SVector;
 
+mod embedded;
 mod file;
+pub use embedded::{EmbeddedExport, ExportSize};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
 
 /// How a state z = (q, v) is presented to the GP (saved as `"raw"` or
