@@ -94,6 +94,9 @@ pub mod __private {
 #[cfg(feature = "codegen")]
 pub use vigp_codegen as codegen;
 
+#[cfg(feature = "cli")]
+pub mod cli;
+
 pub mod systems;
 
 /// The README's examples, compiled and run as doctests.
