@@ -1,5 +1,6 @@
 //! Projection onto the constraint manifold: consistent initial states for
-//! mechanisms with loops (DESIGN §2) and the velocity projection of the
+//! mechanisms with loops ([`consistent_state`], [`consistent_state_holding`])
+//! and the velocity projection of the
 //! constrained learned integrator (paper eq. 8).
 
 use crate::linalg::FullPivLu;
@@ -235,5 +236,95 @@ pub fn consistent_state<M: Mechanism<N, C>, const N: usize, const C: usize>(
     let options = NewtonOptions::default();
     let (q, _) = project_configuration(m, q, &options)?;
     let (v, _) = project_velocity(m, &q, v, dt, &options)?;
+    Ok(State { q, v })
+}
+
+/// [`consistent_state`] holding the coordinates listed in `hold` at their
+/// given values (positions and discrete velocities), e.g. a crank angle set
+/// by the user while the rest of a linkage is solved: the configuration is
+/// projected onto g(q) = 0 and the velocity onto g(q + Δt·v) = 0 by
+/// Gauss–Newton minimum-norm corrections of the free coordinates only.
+///
+/// Errors: an index in `hold` out of range ([`StepError::InvalidOptions`]);
+/// [`StepError::NotConverged`] when the loop cannot close with the held
+/// values (e.g. a crank angle the linkage cannot reach).
+///
+/// ```
+/// use vigp::prelude::*;
+/// use vigp::projection::consistent_state_holding;
+/// use vigp::systems::Fourbar;
+/// let m = Fourbar::default().minimal();
+/// let q = vigp::SVector::from([0.7, -1.0, -0.5, 1.0]);
+/// let z = consistent_state_holding(&m, &q, &vigp::SVector::zeros(), 0.01, &[0])?;
+/// assert_eq!(z.q[0], 0.7);
+/// assert!(m.constraint_violation(&z) < 1e-12);
+/// # Ok::<(), StepError>(())
+/// ```
+pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    m: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+    dt: f64,
+    hold: &[usize],
+) -> Result<State<N>, StepError> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(StepError::InvalidTimeStep { dt });
+    }
+    if hold.iter().any(|&i| i >= N) {
+        return Err(StepError::InvalidOptions(
+            "consistent_state_holding: a held coordinate index is out of range",
+        ));
+    }
+    if q.iter().chain(v.iter()).any(|x| !x.is_finite()) {
+        return Err(StepError::NonFiniteState { step: None });
+    }
+    let options = NewtonOptions::default();
+    let free = |mut j: SMatrix<f64, C, N>| {
+        for &i in hold {
+            j.set_column(i, &SVector::<f64, C>::zeros());
+        }
+        j
+    };
+    // Gauss–Newton on the free coordinates: x ← x − Jᵀ(JJᵀ)⁺ r with the held
+    // columns of J zeroed (complete pivoting drops rank-deficient rows).
+    let solve = |x0: &SVector<f64, N>,
+                 residual: &dyn Fn(&SVector<f64, N>) -> (SVector<f64, C>, SMatrix<f64, C, N>)|
+     -> Result<SVector<f64, N>, StepError> {
+        let mut x = *x0;
+        let scale = crate::mechanism::length_scale::<M, N, C>(q);
+        for iter in 0..=options.max_iterations {
+            let (r, j) = residual(&x);
+            let res = r.amax() / scale;
+            if !res.is_finite() {
+                return Err(StepError::NonFiniteResidual {
+                    iteration: iter,
+                    step: None,
+                });
+            }
+            if res <= options.tolerance {
+                return Ok(x);
+            }
+            if iter == options.max_iterations {
+                return Err(StepError::NotConverged {
+                    iterations: iter,
+                    residual: res,
+                    tolerance: options.tolerance,
+                    step: None,
+                });
+            }
+            let j = free(j);
+            let y = FullPivLu::new(j * j.transpose(), 1e-13).solve(&r);
+            x -= j.transpose() * y;
+        }
+        unreachable!("the loop returns on its last iteration")
+    };
+    if C == 0 {
+        return Ok(State { q: *q, v: *v });
+    }
+    let q = solve(q, &|x| (m.constraints(x), m.constraint_jacobian(x)))?;
+    let v = solve(v, &|w| {
+        let x2 = q + w * dt;
+        (m.constraints(&x2), m.constraint_jacobian(&x2) * dt)
+    })?;
     Ok(State { q, v })
 }

@@ -16,6 +16,16 @@ pub trait Integrator<const N: usize> {
     /// One step. Never returns a non-finite state.
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError>;
 
+    /// The energy of a state as this integrator defines it, when that is
+    /// not the model's `energy(z)`: the midpoint VI's discrete velocity
+    /// belongs to the interval's midpoint ([`Variational::energy`]).
+    /// `None` (the default) means the model's energy; [`crate::summarize`]
+    /// uses this.
+    fn state_energy(&self, z: &State<N>) -> Option<f64> {
+        let _ = z;
+        None
+    }
+
     /// Fill `out` with the states after 1, 2, …, `out.len()` steps from `z0`,
     /// without allocating. Stops at the first error (which names the step).
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
@@ -148,7 +158,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
             return Err(StepError::InvalidOptions("substeps must be >= 1"));
         }
         if self.substeps == 1 {
-            return self.solve_step(z, dt);
+            return self.solve_step(z, dt).map_err(|e| self.explain(e, z));
         }
         let h = dt / self.substeps as f64;
         let mut z = *z;
@@ -160,7 +170,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
             restarted: false,
         };
         for _ in 0..self.substeps {
-            let (next, i) = self.solve_step(&z, h)?;
+            let (next, i) = self.solve_step(&z, h).map_err(|e| self.explain(e, &z))?;
             z = next;
             info.iterations += i.iterations;
             info.residual = info.residual.max(i.residual);
@@ -168,6 +178,34 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
             info.regularised |= i.regularised;
         }
         Ok((z, info))
+    }
+
+    /// A `NotConverged` step from a configuration off the constraints
+    /// becomes [`StepError::OffConstraints`], which names the remedy.
+    fn explain(&self, e: StepError, z: &State<N>) -> StepError {
+        match e {
+            StepError::NotConverged {
+                iterations,
+                residual,
+                step,
+                ..
+            } if C > 0 => {
+                let scale = crate::mechanism::length_scale::<M, N, C>(&z.q);
+                let violation = self.model.constraints(&z.q).amax() / scale;
+                // consistent states have |g| at solver tolerance (1e-12)
+                if violation > 1e-8 {
+                    StepError::OffConstraints {
+                        violation,
+                        iterations,
+                        residual,
+                        step,
+                    }
+                } else {
+                    e
+                }
+            }
+            e => e,
+        }
     }
 
     /// One variational step of size `dt` from a validated state.
@@ -344,5 +382,8 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Varia
     }
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         Variational::step(self, z)
+    }
+    fn state_energy(&self, z: &State<N>) -> Option<f64> {
+        Some(Variational::energy(self, z))
     }
 }
