@@ -8,7 +8,8 @@
 //! resolved, numbers checked, joint graph split into a spanning tree and
 //! loop-closing joints) → [`emit`] (Rust generic over a scalar: `vigp::Real`
 //! for the kinematics and the `no_std` model, num-dual numbers for the std
-//! runtime's views; [`Target`] selects which are emitted).
+//! runtime's views; [`Target`] selects which are emitted), plus [`describe`]
+//! (the mechanism's name and named parameters, and the `vigp::System` impl).
 
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]

@@ -46,6 +46,16 @@ pub use variational::{Integrator, Variational};
 pub use vigp_core as embedded;
 pub use vigp_core::Real;
 
+/// Solver internals, grouped: the discrete Euler–Lagrange residual and its
+/// Jacobian ([`del`]), Newton options, diagnostics, the step error and the
+/// regularised KKT solve ([`newton`]), and small dense solvers with pivoting
+/// ([`linalg`]). Most programs need only [`NewtonOptions`], [`StepError`]
+/// and [`StepInfo`], re-exported at the top; the modules are public for
+/// tests, benchmarks and callers who build their own steps.
+pub mod solver {
+    pub use crate::{del, linalg, newton};
+}
+
 /// Re-exports for generated code. Not part of the public API.
 #[doc(hidden)]
 pub mod __private {
