@@ -278,53 +278,56 @@ pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usi
     if q.iter().chain(v.iter()).any(|x| !x.is_finite()) {
         return Err(StepError::NonFiniteState { step: None });
     }
-    let options = NewtonOptions::default();
-    let free = |mut j: SMatrix<f64, C, N>| {
-        for &i in hold {
-            j.set_column(i, &SVector::<f64, C>::zeros());
-        }
-        j
-    };
-    // Gauss–Newton on the free coordinates: x ← x − Jᵀ(JJᵀ)⁺ r with the held
-    // columns of J zeroed (complete pivoting drops rank-deficient rows).
-    let solve = |x0: &SVector<f64, N>,
-                 residual: &dyn Fn(&SVector<f64, N>) -> (SVector<f64, C>, SMatrix<f64, C, N>)|
-     -> Result<SVector<f64, N>, StepError> {
-        let mut x = *x0;
-        let scale = crate::mechanism::length_scale::<M, N, C>(q);
-        for iter in 0..=options.max_iterations {
-            let (r, j) = residual(&x);
-            let res = r.amax() / scale;
-            if !res.is_finite() {
-                return Err(StepError::NonFiniteResidual {
-                    iteration: iter,
-                    step: None,
-                });
-            }
-            if res <= options.tolerance {
-                return Ok(x);
-            }
-            if iter == options.max_iterations {
-                return Err(StepError::NotConverged {
-                    iterations: iter,
-                    residual: res,
-                    tolerance: options.tolerance,
-                    step: None,
-                });
-            }
-            let j = free(j);
-            let y = FullPivLu::new(j * j.transpose(), 1e-13).solve(&r);
-            x -= j.transpose() * y;
-        }
-        unreachable!("the loop returns on its last iteration")
-    };
     if C == 0 {
         return Ok(State { q: *q, v: *v });
     }
-    let q = solve(q, &|x| (m.constraints(x), m.constraint_jacobian(x)))?;
-    let v = solve(v, &|w| {
+    let scale = crate::mechanism::length_scale::<M, N, C>(q);
+    let q = solve_holding(q, scale, hold, |x| {
+        (m.constraints(x), m.constraint_jacobian(x))
+    })?;
+    let v = solve_holding(v, scale, hold, |w| {
         let x2 = q + w * dt;
         (m.constraints(&x2), m.constraint_jacobian(&x2) * dt)
     })?;
     Ok(State { q, v })
+}
+
+/// Gauss–Newton on the free coordinates of r(x) = 0: x ← x − Jᵀ(JJᵀ)⁺r with
+/// the held columns of J zeroed (complete pivoting drops rank-deficient
+/// directions). `residual` returns r(x) and J(x).
+fn solve_holding<const N: usize, const C: usize>(
+    x0: &SVector<f64, N>,
+    scale: f64,
+    hold: &[usize],
+    residual: impl Fn(&SVector<f64, N>) -> (SVector<f64, C>, SMatrix<f64, C, N>),
+) -> Result<SVector<f64, N>, StepError> {
+    let options = NewtonOptions::default();
+    let mut x = *x0;
+    for iter in 0..=options.max_iterations {
+        let (r, mut j) = residual(&x);
+        let res = r.amax() / scale;
+        if !res.is_finite() {
+            return Err(StepError::NonFiniteResidual {
+                iteration: iter,
+                step: None,
+            });
+        }
+        if res <= options.tolerance {
+            return Ok(x);
+        }
+        if iter == options.max_iterations {
+            return Err(StepError::NotConverged {
+                iterations: iter,
+                residual: res,
+                tolerance: options.tolerance,
+                step: None,
+            });
+        }
+        for &i in hold {
+            j.set_column(i, &SVector::<f64, C>::zeros());
+        }
+        let y = FullPivLu::new(j * j.transpose(), 1e-13).solve(&r);
+        x -= j.transpose() * y;
+    }
+    unreachable!("the loop returns on its last iteration")
 }
