@@ -249,17 +249,9 @@ pub fn consistent_state<M: Mechanism<N, C>, const N: usize, const C: usize>(
 /// [`StepError::NotConverged`] when the loop cannot close with the held
 /// values (e.g. a crank angle the linkage cannot reach).
 ///
-/// ```
-/// use vigp::prelude::*;
-/// use vigp::projection::consistent_state_holding;
-/// use vigp::systems::Fourbar;
-/// let m = Fourbar::default().minimal();
-/// let q = vigp::SVector::from([0.7, -1.0, -0.5, 1.0]);
-/// let z = consistent_state_holding(&m, &q, &vigp::SVector::zeros(), 0.01, &[0])?;
-/// assert_eq!(z.q[0], 0.7);
-/// assert!(m.constraint_violation(&z) < 1e-12);
-/// # Ok::<(), StepError>(())
-/// ```
+/// Example: a fourbar with its first top angle held at 0.7 rad while the
+/// other three are solved (`tests/workflow.rs`):
+/// `consistent_state_holding(&fourbar, &q_guess, &v_guess, dt, &[0])`.
 pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     q: &SVector<f64, N>,

@@ -34,7 +34,7 @@ pub const VERSION: u32 = 1;
 pub struct SavedLearned {
     /// Always `"vigp-learned"`.
     pub format: String,
-    /// File format version ([`VERSION`]).
+    /// File format version (1 for files written by this version of vigp).
     pub version: u32,
     /// The mechanism's name (`Parameters::NAME`, e.g. `"Cartpole"`).
     pub mechanism: String,
