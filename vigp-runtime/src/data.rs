@@ -352,6 +352,13 @@ fn wrap(d: f64) -> f64 {
     if w <= -PI { w + TAU } else { w }
 }
 
+/// The mean step rounded to 12 significant digits: timestamps are decimal
+/// text, so (t_last − t_first)/(rows − 1) carries binary rounding
+/// (0.009999999999999998 for t = 0.00 … 0.29) that no sampling clock has.
+fn tidy(dt: f64) -> f64 {
+    format!("{dt:.11e}").parse().unwrap_or(dt)
+}
+
 /// A run being read: times, positions and the line of each row.
 struct RawRun<const N: usize> {
     name: String,
@@ -423,7 +430,7 @@ impl<const N: usize> RawRun<N> {
                 line,
             });
         }
-        let dt = (times[n - 1] - t0) / (n - 1) as f64;
+        let dt = tidy((times[n - 1] - t0) / (n - 1) as f64);
         for k in 1..n {
             let step = times[k] - times[k - 1];
             if (step - dt).abs() > opts.time_tolerance * dt {
