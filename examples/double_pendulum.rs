@@ -1,4 +1,4 @@
-//! The double pendulum of DESIGN §2: a chaotic conservative rollout whose
+//! The double pendulum of the README's first example: a chaotic conservative rollout whose
 //! energy error stays bounded, and a damped one.
 //!
 //! Run: `cargo run --release --example double_pendulum`

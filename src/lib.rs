@@ -2,8 +2,27 @@
 //!
 //! Declare a planar mechanism once with [`mechanism!`]; it becomes a
 //! specialised variational integrator (Lagrangian, discrete Euler–Lagrange
-//! residual, exact Jacobians by dual numbers) that runs on the runtime in
-//! this crate.
+//! residual, exact Jacobians) that runs on the runtime in this crate; a
+//! Gaussian process learns what the nominal model misses; the learned model
+//! is saved, scored, and exported to `no_std` firmware.
+//!
+//! # The workflow, module by module
+//!
+//! | step | where |
+//! |---|---|
+//! | declare a mechanism | [`mechanism!`], [`Mechanism`], [`systems`] (the paper's four) |
+//! | simulate | [`Variational`] (paper eq. 5–6, midpoint), classical integrators, [`Integrator`], [`summarize`] |
+//! | consistent states for loops | [`projection`] (`consistent_state`, `consistent_state_holding`) |
+//! | load measured data | [`data`] (CSV: `run,t,<coordinates>`) |
+//! | learn | [`learned`] (`Learned`, save/load, export), [`gp`] |
+//! | bound the error | [`bound`] (paper Theorem 1) |
+//! | command line | `cli` (feature `cli`): `vigp fit / score / predict / export` |
+//! | embed | [`embedded`] (`no_std`: `Stepper`, `LearnedStepper`, exported GPs) |
+//!
+//! Solver internals (`del`, `newton`, `linalg`) are grouped under
+//! [`solver`]; the types most programs need from them ([`NewtonOptions`],
+//! [`StepError`]) are at the top. [`SVector`] and [`nalgebra`] are
+//! re-exported, so no separate `nalgebra` version is needed.
 //!
 //! ```
 //! use vigp::prelude::*;
@@ -63,7 +82,10 @@
 //! `vigp::embedded::Model` for `Name` (the `no_std`, fixed-size model behind
 //! `vigp::embedded::Stepper`), and, with the default `std` feature,
 //! `NameMinimal` implementing `Mechanism` and `NameMaximal` (maximal
-//! coordinates). To see or snapshot the generated source of your
+//! coordinates); `vigp::embedded::Parameters` (the mechanism's name and its
+//! parameters as named numbers, recorded in model files) for `Name` and both
+//! views, and [`System`] for `Name` (both views to generic tools such as
+//! `vigp::cli::main::<Name>()`). To see or snapshot the generated source of your
 //! own mechanism, enable the `codegen` feature and call
 //! `vigp::codegen::expand_to_string`.
 
@@ -94,6 +116,9 @@ pub mod __private {
 #[cfg(feature = "codegen")]
 pub use vigp_codegen as codegen;
 
+#[cfg(feature = "cli")]
+pub mod cli;
+
 pub mod systems;
 
 /// The README's examples, compiled and run as doctests.
@@ -104,9 +129,12 @@ pub struct ReadmeDoctests;
 /// The names most programs need.
 #[cfg(feature = "std")]
 pub mod prelude {
+    pub use vigp_runtime::data::{Dataset, ReadOptions};
     pub use vigp_runtime::embedded::Dynamics;
+    pub use vigp_runtime::gp::TrainOptions;
+    pub use vigp_runtime::learned::{Encoding, Learned, Prior};
     pub use vigp_runtime::{
-        Coordinates, ExplicitEuler, Integrator, Mechanism, NewtonOptions, Rk4, State, StepError,
-        SymplecticEuler, Variational, Variational4,
+        Coordinates, ExplicitEuler, Integrator, Mechanism, NewtonOptions, Rk4, SVector, State,
+        StepError, SymplecticEuler, Variational, Variational4,
     };
 }

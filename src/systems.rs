@@ -5,7 +5,7 @@
 //! These are ordinary `mechanism!` outputs; the snapshot tests review their
 //! generated code.
 //!
-//! [`mechanism!`]: crate::mechanism
+//! [`mechanism!`]: macro@crate::mechanism
 
 crate::mechanism! {
     /// A pendulum hanging from the origin (1 coordinate: `pivot`).

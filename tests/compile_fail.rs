@@ -1,5 +1,5 @@
 //! Invalid `mechanism!` descriptions are compile errors with spans that point
-//! at the offending token (DESIGN §2). One case per file in `tests/ui`; the
+//! at the offending token. One case per file in `tests/ui`; the
 //! expected compiler output sits next to it in `NAME.stderr`. Regenerate with
 //! `TRYBUILD=overwrite cargo test --test compile_fail` and review the diff.
 

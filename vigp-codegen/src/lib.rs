@@ -8,11 +8,13 @@
 //! resolved, numbers checked, joint graph split into a spanning tree and
 //! loop-closing joints) → [`emit`] (Rust generic over a scalar: `vigp::Real`
 //! for the kinematics and the `no_std` model, num-dual numbers for the std
-//! runtime's views; [`Target`] selects which are emitted).
+//! runtime's views; [`Target`] selects which are emitted), plus [`describe`]
+//! (the mechanism's name and named parameters, and the `vigp::System` impl).
 
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod describe;
 pub mod emit;
 pub mod emit_terms;
 pub mod mechanics;
@@ -45,7 +47,9 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream> {
     let parsed: parse::Input = syn::parse2(input)?;
     let model = model::validate(parsed)?;
-    emit::emit(&model, target)
+    let mut out = emit::emit(&model, target)?;
+    out.extend(describe::emit(&model, target));
+    Ok(out)
 }
 
 /// Expand a description given as source text and pretty-print the result,

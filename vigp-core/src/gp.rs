@@ -459,7 +459,7 @@ pub fn kernel_row(
     Ok(())
 }
 
-/// Σ_i a_i·b_i with [`LANES`] interleaved partial sums (element i goes to
+/// Σ_i a_i·b_i with `LANES` interleaved partial sums (element i goes to
 /// sum i mod 8), added pairwise at the end: a fixed order, so results are
 /// reproducible, and one that vectorises.
 ///

@@ -1,7 +1,7 @@
 //! Planar kinematics helpers called by generated forward kinematics,
 //! generic over any [`Real`].
 //!
-//! Conventions (DESIGN §2): a link's local frame sits at its `start`, its
+//! Conventions (the DSL's, see the `mechanism!` docs): a link's local frame sits at its `start`, its
 //! local x-axis runs to its `end`; θ = 0 means the link hangs straight down
 //! (local x-axis along world −y); counter-clockwise is positive. A local
 //! point (a, b) maps to `origin + a·(sin θ, −cos θ) + b·(cos θ, sin θ)`.

@@ -8,6 +8,8 @@
 //!   computes M(q), ∂M/∂q, ∇V, D and the energy from it.
 //! * [`Stepper`]: the first-order variational step on fixed-size data.
 //! * [`gp`]: prediction with a Gaussian process exported as Rust source.
+//! * [`LearnedStepper`]: the learned step (nominal prior + exported GP
+//!   means + projection for loops) of a model exported by the std runtime.
 //!
 //! Everything here works on `nalgebra` static vectors and plain arrays, and
 //! never allocates. The std runtime (`vigp-runtime`) re-exports the shared
@@ -21,6 +23,7 @@ pub mod compose;
 pub mod dynamics;
 pub mod gp;
 pub mod kinematics;
+pub mod learned;
 pub mod linalg;
 pub mod model;
 pub mod params;
@@ -31,8 +34,9 @@ pub mod step;
 pub use compose::Composition;
 pub use dynamics::{Dynamics, Terms};
 pub use kinematics::{Point2, Pose2};
+pub use learned::{LearnedError, LearnedModel, LearnedStepper};
 pub use model::{Body, Model};
-pub use params::{Joint, Link};
+pub use params::{Joint, Link, Parameters};
 pub use real::{Jet1, Jet2, Real};
 pub use state::{CoordinateKind, State};
 pub use step::{RolloutError, StepError, StepOptions, StepReport, Stepper};

@@ -111,6 +111,97 @@ impl<const M: usize> FullPivLu<M> {
     }
 }
 
+/// LU factorisation with partial (row) pivoting, P·A = L·U, for
+/// well-conditioned matrices such as Newton matrices that perturb −M
+/// (O(M³/3) to factor, O(M²) per solve; cheaper than [`FullPivLu`]'s
+/// complete pivoting, which searches the whole trailing block per column).
+#[derive(Clone, Copy, Debug)]
+pub struct PartialLu<const M: usize> {
+    // row-major: plain arrays let the compiler drop the bounds checks that
+    // nalgebra's (row, column) indexing keeps in these loops
+    lu: [[f64; M]; M],
+    perm: [usize; M],
+}
+
+impl<const M: usize> PartialLu<M> {
+    /// Factor `a`; `None` when a pivot is below `rel_tol · |largest entry|`
+    /// or not finite (singular or ill-conditioned for partial pivoting: use
+    /// [`FullPivLu`]).
+    pub fn new(a: SMatrix<f64, M, M>, rel_tol: f64) -> Option<Self> {
+        let mut lu = [[0.0f64; M]; M];
+        let mut amax = 0.0f64;
+        for (i, row) in lu.iter_mut().enumerate() {
+            for (j, x) in row.iter_mut().enumerate() {
+                *x = a[(i, j)];
+                amax = amax.max(x.abs());
+            }
+        }
+        let tiny = rel_tol * amax;
+        let mut perm = [0usize; M];
+        for (i, p) in perm.iter_mut().enumerate() {
+            *p = i;
+        }
+        for k in 0..M {
+            let mut p = k;
+            for i in k + 1..M {
+                if lu[i][k].abs() > lu[p][k].abs() {
+                    p = i;
+                }
+            }
+            let pivot = lu[p][k];
+            if pivot.abs() <= tiny || !pivot.is_finite() {
+                return None;
+            }
+            if p != k {
+                lu.swap(k, p);
+                perm.swap(k, p);
+            }
+            let inv = 1.0 / pivot;
+            let pivot_row = lu[k];
+            for row in lu.iter_mut().skip(k + 1) {
+                let f = row[k] * inv;
+                row[k] = f;
+                for j in k + 1..M {
+                    row[j] -= f * pivot_row[j];
+                }
+            }
+        }
+        Some(Self { lu, perm })
+    }
+
+    /// Solve A x = b.
+    pub fn solve(&self, b: &SVector<f64, M>) -> SVector<f64, M> {
+        let mut x = [0.0f64; M];
+        for i in 0..M {
+            x[i] = b[self.perm[i]];
+        }
+        for i in 0..M {
+            let mut s = x[i];
+            for j in 0..i {
+                s -= self.lu[i][j] * x[j];
+            }
+            x[i] = s;
+        }
+        for i in (0..M).rev() {
+            let mut s = x[i];
+            for j in i + 1..M {
+                s -= self.lu[i][j] * x[j];
+            }
+            x[i] = s / self.lu[i][i];
+        }
+        SVector::from(x)
+    }
+
+    /// Solve A X = B column by column.
+    pub fn solve_matrix<const K: usize>(&self, b: &SMatrix<f64, M, K>) -> SMatrix<f64, M, K> {
+        let mut x = SMatrix::<f64, M, K>::zeros();
+        for k in 0..K {
+            x.set_column(k, &self.solve(&b.column(k).into_owned()));
+        }
+        x
+    }
+}
+
 /// Solve A x = b by Gaussian elimination with partial (row) pivoting, for
 /// well-conditioned systems such as the Newton matrix of a tree step (a
 /// perturbation of −M). O(M³), no allocation. `None` when a pivot is
@@ -124,15 +215,15 @@ pub fn solve_partial<const M: usize>(
     a: &SMatrix<f64, M, M>,
     b: &SVector<f64, M>,
 ) -> Option<SVector<f64, M>> {
-    // max |a_ij| (NaN-propagating; nalgebra's amax goes through generic
-    // SIMD comparisons that cost more than the 2×2 solve itself)
+    // max |a_ij| (nalgebra's amax goes through generic SIMD comparisons
+    // that cost more than the 2×2 solve itself). `f64::max` drops NaN; a
+    // NaN or ∞ entry makes the determinant or a pivot non-finite, which the
+    // checks below refuse.
     let mut amax = 0.0f64;
     for x in a.iter() {
-        let v = x.abs();
-        if v > amax || v.is_nan() {
-            amax = v;
-        }
+        amax = amax.max(x.abs());
     }
+
     let tiny = 1e-14 * amax;
     if M == 1 {
         let d = a[(0, 0)];
@@ -148,6 +239,11 @@ pub fn solve_partial<const M: usize>(
             x[1] = (a00 * b[1] - a10 * b[0]) * r;
             return Some(x);
         }
+    }
+    // NaN or ±∞ somewhere (x·0 is NaN exactly then): the closed forms above
+    // caught it through the determinant
+    if a.iter().fold(0.0, |s, x| s + x * 0.0) != 0.0 {
+        return None;
     }
     let (mut a, mut x) = (*a, *b);
     for k in 0..M {
@@ -201,15 +297,22 @@ pub fn solve_kkt<const N: usize, const C: usize>(
     r: &SVector<f64, N>,
     c: &SVector<f64, C>,
 ) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
-    let lu = FullPivLu::new(*j, 1e-14);
-    if lu.rank() < N {
-        return None;
-    }
-    let jr = lu.solve(r);
+    // J: partial pivoting (Newton matrices perturb −M, or I), complete
+    // pivoting when that meets a tiny pivot (rank-revealing: a singular J
+    // is reported, and the caller may regularise)
+    let (jr, jb) = match PartialLu::new(*j, 1e-12) {
+        Some(lu) => (lu.solve(r), lu.solve_matrix(b)),
+        None => {
+            let lu = FullPivLu::new(*j, 1e-14);
+            if lu.rank() < N {
+                return None;
+            }
+            (lu.solve(r), lu.solve_matrix(b))
+        }
+    };
     if C == 0 {
         return Some((jr, SVector::zeros()));
     }
-    let jb = lu.solve_matrix(b);
     let s = a * jb;
     let rhs = a * jr - c;
     let y = FullPivLu::new(s, 1e-13).solve(&rhs);
@@ -220,11 +323,10 @@ pub fn solve_kkt<const N: usize, const C: usize>(
 /// `Some(diag)` when `j` is diagonal (exact zeros off the diagonal) with
 /// no zero on it.
 fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<SVector<f64, N>> {
-    for c in 0..N {
-        for r in 0..N {
-            if r != c && j[(r, c)] != 0.0 {
-                return None;
-            }
+    // column-major storage: entry k is (k mod N, k div N)
+    for (k, x) in j.as_slice().iter().enumerate() {
+        if *x != 0.0 && k % (N + 1) != 0 {
+            return None;
         }
     }
     let d = j.diagonal();
@@ -312,6 +414,25 @@ mod tests {
         let x = FullPivLu::new(a, 1e-14).solve(&b);
         let reference = a.lu().solve(&b).unwrap();
         assert!((x - reference).amax() < 1e-14);
+    }
+
+    /// The partial-pivoting factorisation against nalgebra's LU (a second
+    /// implementation), with a zero leading entry forcing a swap; singular
+    /// and non-finite matrices are refused.
+    #[test]
+    fn partial_lu_matches_nalgebra() {
+        let a = Matrix3::new(0.0, -1.0, 0.5, 1.0, 3.0, -2.0, 0.25, 4.0, 1.0);
+        let b = Vector3::new(1.0, -2.0, 0.5);
+        let lu = PartialLu::new(a, 1e-14).unwrap();
+        let reference = a.lu().solve(&b).unwrap();
+        assert!((lu.solve(&b) - reference).amax() < 1e-14);
+        let bm = nalgebra::Matrix3x2::new(1.0, 0.0, -2.0, 1.0, 0.5, 3.0);
+        let xm = lu.solve_matrix(&bm);
+        assert!((a * xm - bm).amax() < 1e-14);
+        let singular = Matrix3::new(1.0, 2.0, 3.0, 2.0, 4.0, 6.0, 0.0, 1.0, 1.0);
+        assert!(PartialLu::new(singular, 1e-14).is_none());
+        let nan = Matrix3::new(f64::NAN, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0);
+        assert!(PartialLu::new(nan, 1e-14).is_none());
     }
 
     #[test]

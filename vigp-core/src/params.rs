@@ -22,3 +22,51 @@ pub struct Joint {
     /// Viscous damping coefficient c ≥ 0 on the joint rate (N·m·s/rad or N·s/m).
     pub damping: f64,
 }
+
+/// A mechanism's name and its run-time parameters as a flat list of named
+/// numbers, implemented by `mechanism!` for the parameter struct (and, with
+/// the std runtime, for its coordinate views).
+///
+/// Tools use it to record which mechanism a saved or exported model belongs
+/// to and with which parameter values it was trained, and to restore those
+/// values. Names are dotted paths of the struct's fields: `gravity.x`,
+/// `gravity.y`, then per link `links.<link>.mass`, `.length`, `.inertia`,
+/// `.com.x`, `.com.y`, then (for a damped mechanism) per joint
+/// `joints.<joint>.damping`, in declaration order.
+///
+/// ```
+/// use vigp_core::{Link, Parameters};
+/// /// A hand-written parameter set (what `mechanism!` generates).
+/// struct Rod { link: Link }
+/// impl Parameters for Rod {
+///     const NAME: &'static str = "Rod";
+///     const PARAMETER_NAMES: &'static [&'static str] = &["links.rod.mass"];
+///     fn parameter(&self, index: usize) -> Option<f64> {
+///         (index == 0).then_some(self.link.mass)
+///     }
+///     fn parameter_mut(&mut self, index: usize) -> Option<&mut f64> {
+///         (index == 0).then_some(&mut self.link.mass)
+///     }
+/// }
+/// let mut rod = Rod { link: Link { mass: 1.0, length: 1.0, inertia: 0.1, com: [0.5, 0.0] } };
+/// *rod.parameter_mut(0).unwrap() = 2.0;
+/// assert_eq!(rod.parameter(0), Some(2.0));
+/// assert_eq!(rod.parameter(1), None);
+/// ```
+pub trait Parameters {
+    /// The mechanism's name as declared in `mechanism!` (e.g. `"Cartpole"`).
+    const NAME: &'static str;
+    /// The name of every parameter, in a fixed order (see the trait docs).
+    const PARAMETER_NAMES: &'static [&'static str];
+
+    /// The value of parameter `index` (`None` past the end).
+    fn parameter(&self, index: usize) -> Option<f64>;
+
+    /// Mutable access to parameter `index` (`None` past the end).
+    fn parameter_mut(&mut self, index: usize) -> Option<&mut f64>;
+
+    /// The index of the parameter called `name`.
+    fn parameter_index(name: &str) -> Option<usize> {
+        Self::PARAMETER_NAMES.iter().position(|n| *n == name)
+    }
+}

@@ -14,7 +14,7 @@ pub enum CoordinateKind {
 /// A discrete state z = (q, v) of an `N`-coordinate model.
 ///
 /// `v` is the **discrete** velocity v_k = (q_{k+1} − q_k)/Δt of the
-/// variational integrators (DESIGN §3), not a continuous-time velocity.
+/// variational integrators (paper eq. 5–6), not a continuous-time velocity.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct State<const N: usize> {
     /// Generalized positions q.

@@ -250,12 +250,18 @@ pub struct Stepper<M: Dynamics<N, C>, const N: usize, const C: usize> {
     substeps: usize,
 }
 
-/// max |x_i|, NaN if any entry is NaN (`f64::max` would drop it).
+/// max |x_i|, NaN if any entry is NaN or ±∞ (`f64::max` alone would drop
+/// a NaN): x·0 is 0 for finite x and NaN otherwise, so adding Σ x_i·0
+/// poisons the result without a branch per entry.
+#[inline(always)]
 fn max_abs<const K: usize>(x: &SVector<f64, K>) -> f64 {
-    x.iter().fold(0.0f64, |m, v| {
-        let a = v.abs();
-        if a > m || a.is_nan() { a } else { m }
-    })
+    let mut m = 0.0f64;
+    let mut poison = 0.0f64;
+    for v in x.iter() {
+        m = m.max(v.abs());
+        poison += v * 0.0;
+    }
+    m + poison
 }
 
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
@@ -410,14 +416,20 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// All sub-steps of one step from `z` with momentum `p0`, the first
     /// Newton solve started at `guess`.
+    #[inline(always)]
     fn advance(
         &self,
         z: &State<N>,
         p0: &SVector<f64, N>,
         guess: &SVector<f64, N>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
-        if !p0.iter().all(|x| x.is_finite()) {
+        if max_abs(p0).is_nan() {
             return Err(StepError::NonFiniteState);
+        }
+        if self.substeps == 1 {
+            let x1 = z.q + z.v * self.dt;
+            let (v1, p1, r) = self.solve(&x1, p0, self.dt, guess)?;
+            return Ok((State { q: x1, v: v1 }, p1, r));
         }
         let h = self.substep_dt();
         let (mut z, mut p) = (*z, *p0);
@@ -474,6 +486,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// momentum p₁ and diagnostics. This is the position–momentum form of
     /// the integrator, (x₁, p₀) ↦ (x₁ + h·v₁, p₁), which composition
     /// methods chain with different `h`.
+    #[inline(always)]
     pub fn solve(
         &self,
         x1: &SVector<f64, N>,
@@ -491,6 +504,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// [`Stepper::solve`] for the first-order (`MID = false`) or the
     /// midpoint rule, monomorphised so that each rule's loop carries only
     /// its own terms.
+    #[inline(always)]
     fn solve_rule<const MID: bool>(
         &self,
         x1: &SVector<f64, N>,
@@ -503,17 +517,20 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let k = &self.k;
         let opts = &self.options;
         let mut t = Terms::zeros();
-        let mut v = if guess.iter().all(|x| x.is_finite()) {
-            *guess
-        } else {
+        let mut v = if max_abs(guess).is_nan() {
             SVector::zeros()
+        } else {
+            *guess
         };
         // terms at x₁ (first order: once per step) or at m₁(v)
         let at = |v: &SVector<f64, N>| {
             if MID { x1 + v * (alpha * h) } else { *x1 }
         };
         model.terms(k, &at(&v), &mut t);
-        let m_bar = (0..N).map(|i| t.mass[(i, i)].abs()).fold(0.0, f64::max);
+        let mut m_bar = 0.0f64;
+        for i in 0..N {
+            m_bar = m_bar.max(t.mass[(i, i)].abs());
+        }
         let p_scale = match max_abs(p0) + m_bar {
             0.0 => 1.0,
             s => s,

@@ -1,6 +1,6 @@
-//! Probabilistic error bounds of the learned integrators (paper Theorem 1,
-//! DESIGN §3), built on the uniform GP error bound of Lederer, Umlauft &
-//! Hirche (NeurIPS 2019, Thm 3.1).
+//! Probabilistic error bounds of the learned integrators (paper Theorem 1),
+//! built on the uniform GP error bound of Lederer, Umlauft & Hirche
+//! (NeurIPS 2019, Thm 3.1).
 //!
 //! For each velocity component i (p = N outputs, union bound δ_i = δ/p),
 //! with probability ≥ 1 − δ for all z in the input box X:

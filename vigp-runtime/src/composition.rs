@@ -73,6 +73,10 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Varia
             .map_err(|e| StepError::from(e).with_tolerance(self.tolerance))
     }
 
+    fn state_energy(&self, z: &State<N>) -> Option<f64> {
+        Some(self.energy(z))
+    }
+
     /// Carries the momentum between steps. No allocation.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
         self.composition()?.steps_into(z0, out).map_err(|e| {

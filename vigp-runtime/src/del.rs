@@ -1,5 +1,5 @@
 //! The discrete Euler–Lagrange (DEL) residual of the variational integrators
-//! (paper eq. 5–6, DESIGN §3) and its exact Jacobian.
+//! (paper eq. 5–6) and its exact Jacobian.
 //!
 //! The discrete Lagrangian is L_d(x_k, x_{k+1}) = Δt·L(x_k + αΔt·v_k, v_k)
 //! with v_k = (x_{k+1} − x_k)/Δt: α = 0 is the paper's first-order
@@ -12,7 +12,7 @@
 //! p₀       = D_vL(m₀, v₀) + αΔt·(D_xL + F)(m₀, v₀),   m_k = x_k + αΔt·v_k
 //! ```
 //!
-//! For α = 0 this is exactly DESIGN §3:
+//! For α = 0 this is exactly the paper's first-order rule (eq. 5–6):
 //! p₀ − D_vL(x₁, v₁) + Δt·D_xL(x₁, v₁) + Δt·F(x₁, v₁) − G(x₁)ᵀλ = 0.
 
 use crate::mechanism::{Mechanism, Scalar};

@@ -14,8 +14,15 @@ use crate::projection::{consistent_state, project_velocity};
 use crate::variational::{Integrator, Variational};
 use nalgebra::SVector;
 
-/// How a state z = (q, v) is presented to the GP.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+mod embedded;
+mod file;
+pub use embedded::{EmbeddedExport, ExportSize};
+pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
+
+/// How a state z = (q, v) is presented to the GP (saved as `"raw"` or
+/// `"sincos"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Encoding {
     /// The model's own coordinates and velocities (minimal or maximal).
     Raw,
@@ -63,8 +70,10 @@ impl Encoding {
     }
 }
 
-/// The prior mean of the learned velocity map.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// The prior mean of the learned velocity map (saved as `"nominal"` or
+/// `"constant"`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Prior {
     /// The nominal variational step v̄(z) (paper eq. 7): the GP learns the
     /// residual v_{k+1} − v̄(z_k).

@@ -15,6 +15,8 @@ pub mod gp;
 pub mod bound;
 pub mod classical;
 pub mod composition;
+#[cfg(feature = "alloc")]
+pub mod data;
 pub mod del;
 pub mod dynamics;
 pub mod kinematics;
@@ -27,20 +29,35 @@ pub mod params;
 pub mod projection;
 pub mod reference;
 pub mod summary;
+pub mod system;
 pub mod variational;
 
 pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
 pub use composition::Variational4;
 pub use kinematics::Pose2;
 pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
+/// The linear-algebra crate of vigp's public types (`SVector` in states and
+/// transitions), so that users need not guess a matching version.
+pub use nalgebra::{self, SMatrix, SVector};
 pub use newton::{NewtonOptions, StepError, StepInfo};
 pub use params::{Joint, Link};
 pub use summary::RolloutSummary;
 #[cfg(feature = "std")]
 pub use summary::summarize;
+pub use system::{Parameters, System, ViewVisitor};
 pub use variational::{Integrator, Variational};
 pub use vigp_core as embedded;
 pub use vigp_core::Real;
+
+/// Solver internals, grouped: the discrete Euler–Lagrange residual and its
+/// Jacobian ([`del`]), Newton options, diagnostics, the step error and the
+/// regularised KKT solve ([`newton`]), and small dense solvers with pivoting
+/// ([`linalg`]). Most programs need only [`NewtonOptions`], [`StepError`]
+/// and [`StepInfo`], re-exported at the top; the modules are public for
+/// tests, benchmarks and callers who build their own steps.
+pub mod solver {
+    pub use crate::{del, linalg, newton};
+}
 
 /// Re-exports for generated code. Not part of the public API.
 #[doc(hidden)]

@@ -108,6 +108,27 @@ pub enum StepError {
         /// Rollout step index, if in a rollout.
         step: Option<usize>,
     },
+    /// Newton did not converge from a state whose configuration violates
+    /// the constraints: the step had to close the gap |g(q)| at once. The
+    /// remedy is a consistent initial state.
+    #[error(
+        "Newton did not converge from a state off the constraints (|g(q)| = {violation:.3e}, \
+         residual {residual:.3e} after {iterations} iterations){}: start from a consistent state, \
+         vigp::projection::consistent_state (or consistent_state_holding to keep chosen \
+         coordinates, e.g. a crank angle, fixed)",
+        at(step)
+    )]
+    OffConstraints {
+        /// |g(q)| of the state the step started from (scaled like the
+        /// constraint residual).
+        violation: f64,
+        /// Iterations used.
+        iterations: usize,
+        /// Scaled residual reached.
+        residual: f64,
+        /// Rollout step index, if in a rollout.
+        step: Option<usize>,
+    },
 }
 
 fn at(step: &Option<usize>) -> String {
@@ -126,6 +147,7 @@ impl StepError {
             | StepError::SingularJacobian { step, .. }
             | StepError::NotConverged { step, .. }
             | StepError::LineSearchFailed { step, .. }
+            | StepError::OffConstraints { step, .. }
             | StepError::Prediction { step } => *step = Some(k),
             StepError::InvalidTimeStep { .. }
             | StepError::InvalidOptions(_)

@@ -1,5 +1,6 @@
 //! Projection onto the constraint manifold: consistent initial states for
-//! mechanisms with loops (DESIGN §2) and the velocity projection of the
+//! mechanisms with loops ([`consistent_state`], [`consistent_state_holding`])
+//! and the velocity projection of the
 //! constrained learned integrator (paper eq. 8).
 
 use crate::linalg::FullPivLu;
@@ -221,4 +222,89 @@ pub fn consistent_state<M: Mechanism<N, C>, const N: usize, const C: usize>(
     let (q, _) = project_configuration(m, q, &options)?;
     let (v, _) = project_velocity(m, &q, v, dt, &options)?;
     Ok(State { q, v })
+}
+
+/// [`consistent_state`] holding the coordinates listed in `hold` at their
+/// given values (positions and discrete velocities), e.g. a crank angle set
+/// by the user while the rest of a linkage is solved: the configuration is
+/// projected onto g(q) = 0 and the velocity onto g(q + Δt·v) = 0 by
+/// Gauss–Newton minimum-norm corrections of the free coordinates only.
+///
+/// Errors: an index in `hold` out of range ([`StepError::InvalidOptions`]);
+/// [`StepError::NotConverged`] when the loop cannot close with the held
+/// values (e.g. a crank angle the linkage cannot reach).
+///
+/// Example: a fourbar with its first top angle held at 0.7 rad while the
+/// other three are solved (`tests/workflow.rs`):
+/// `consistent_state_holding(&fourbar, &q_guess, &v_guess, dt, &[0])`.
+pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    m: &M,
+    q: &SVector<f64, N>,
+    v: &SVector<f64, N>,
+    dt: f64,
+    hold: &[usize],
+) -> Result<State<N>, StepError> {
+    if !(dt.is_finite() && dt > 0.0) {
+        return Err(StepError::InvalidTimeStep { dt });
+    }
+    if hold.iter().any(|&i| i >= N) {
+        return Err(StepError::InvalidOptions(
+            "consistent_state_holding: a held coordinate index is out of range",
+        ));
+    }
+    if q.iter().chain(v.iter()).any(|x| !x.is_finite()) {
+        return Err(StepError::NonFiniteState { step: None });
+    }
+    if C == 0 {
+        return Ok(State { q: *q, v: *v });
+    }
+    let scale = crate::mechanism::length_scale::<M, N, C>(q);
+    let q = solve_holding(q, scale, hold, |x| {
+        (m.constraints(x), m.constraint_jacobian(x))
+    })?;
+    let v = solve_holding(v, scale, hold, |w| {
+        let x2 = q + w * dt;
+        (m.constraints(&x2), m.constraint_jacobian(&x2) * dt)
+    })?;
+    Ok(State { q, v })
+}
+
+/// Gauss–Newton on the free coordinates of r(x) = 0: x ← x − Jᵀ(JJᵀ)⁺r with
+/// the held columns of J zeroed (complete pivoting drops rank-deficient
+/// directions). `residual` returns r(x) and J(x).
+fn solve_holding<const N: usize, const C: usize>(
+    x0: &SVector<f64, N>,
+    scale: f64,
+    hold: &[usize],
+    residual: impl Fn(&SVector<f64, N>) -> (SVector<f64, C>, SMatrix<f64, C, N>),
+) -> Result<SVector<f64, N>, StepError> {
+    let options = NewtonOptions::default();
+    let mut x = *x0;
+    for iter in 0..=options.max_iterations {
+        let (r, mut j) = residual(&x);
+        let res = r.amax() / scale;
+        if !res.is_finite() {
+            return Err(StepError::NonFiniteResidual {
+                iteration: iter,
+                step: None,
+            });
+        }
+        if res <= options.tolerance {
+            return Ok(x);
+        }
+        if iter == options.max_iterations {
+            return Err(StepError::NotConverged {
+                iterations: iter,
+                residual: res,
+                tolerance: options.tolerance,
+                step: None,
+            });
+        }
+        for &i in hold {
+            j.set_column(i, &SVector::<f64, C>::zeros());
+        }
+        let y = FullPivLu::new(j * j.transpose(), 1e-13).solve(&r);
+        x -= j.transpose() * y;
+    }
+    unreachable!("the loop returns on its last iteration")
 }

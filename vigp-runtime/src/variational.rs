@@ -15,6 +15,16 @@ pub trait Integrator<const N: usize> {
     /// One step. Never returns a non-finite state.
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError>;
 
+    /// The energy of a state as this integrator defines it, when that is
+    /// not the model's `energy(z)`: the midpoint VI's discrete velocity
+    /// belongs to the interval's midpoint ([`Variational::energy`]).
+    /// `None` (the default) means the model's energy; [`crate::summarize`]
+    /// uses this.
+    fn state_energy(&self, z: &State<N>) -> Option<f64> {
+        let _ = z;
+        None
+    }
+
     /// Fill `out` with the states after 1, 2, …, `out.len()` steps from `z0`,
     /// without allocating. Stops at the first error (which names the step).
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
@@ -184,8 +194,45 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         }
         let (z1, report) = stepper
             .step_with_report(z)
-            .map_err(|e| StepError::from(e).with_tolerance(self.options.tolerance))?;
+            .map_err(|e| self.explain(StepError::from(e), z))?;
         Ok((z1, StepInfo::from_report(&report)))
+    }
+
+    /// The tolerance into a `NotConverged`; a Newton failure from a
+    /// configuration off the constraints becomes
+    /// [`StepError::OffConstraints`], which names the remedy.
+    fn explain(&self, e: StepError, z: &State<N>) -> StepError {
+        let e = e.with_tolerance(self.options.tolerance);
+        let (iterations, residual, step) = match e {
+            StepError::NotConverged {
+                iterations,
+                residual,
+                step,
+                ..
+            } => (iterations, residual, step),
+            StepError::LineSearchFailed {
+                iteration,
+                residual,
+                step,
+            } => (iteration, residual, step),
+            e => return e,
+        };
+        if C == 0 {
+            return e;
+        }
+        let scale = crate::mechanism::length_scale::<M, N, C>(&z.q);
+        let violation = self.model.constraints(&z.q).amax() / scale;
+        // consistent states have |g| at solver tolerance (1e-12)
+        if violation > 1e-8 {
+            StepError::OffConstraints {
+                violation,
+                iterations,
+                residual,
+                step,
+            }
+        } else {
+            e
+        }
     }
 
     /// Energy of a discrete state at this integrator's quadrature point,
@@ -218,15 +265,18 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         Variational::step(self, z)
     }
 
+    fn state_energy(&self, z: &State<N>) -> Option<f64> {
+        Some(Variational::energy(self, z))
+    }
+
     /// The fixed-size engine's rollout: the momentum is carried from step
     /// to step and Newton starts from the extrapolated velocity (the
     /// converged steps are those of repeated `step` calls to the solver
     /// tolerance). No allocation.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
         self.stepper()?.steps_into(z0, out).map_err(|e| {
-            StepError::from(e.error)
-                .with_tolerance(self.options.tolerance)
-                .at_step(e.step)
+            let from = if e.step == 0 { z0 } else { &out[e.step - 1] };
+            self.explain(StepError::from(e.error), from).at_step(e.step)
         })
     }
 }

@@ -57,7 +57,7 @@ pub use normalise::InputNormaliser;
 pub use options::{
     Bounds, InducingInit, Method, OutputReport, SparseOptions, TrainOptions, TrainReport,
 };
-pub use save::SavedGp;
+pub use save::{SavedGp, SavedMean, SavedOutput};
 
 /// Log marginal likelihood and its gradient on data as given (no
 /// normalisation, zero prior mean).

@@ -104,7 +104,7 @@ impl core::fmt::Debug for Gp {
 }
 
 /// One output's GP inside a [`Gp`]: hyperparameters, Cholesky factor and
-/// weights α, with the quantities the uniform error bound (DESIGN §3,
+/// weights α, with the quantities the uniform error bound ([`crate::bound`],
 /// Lederer et al. 2019) needs.
 ///
 /// Units: "normalised" means after input standardisation x_n = (x − μ)/s_x

@@ -10,7 +10,7 @@ use super::mean::PriorMean;
 /// input standardisation and output scaling, when those are on).
 ///
 /// Keep them wide. In particular the noise lower bound must allow the tiny
-/// noise of near-deterministic data (DESIGN §3: σ = 1e-3 observation noise
+/// noise of near-deterministic data (σ = 1e-3 observation noise
 /// gives σ_n² ≈ 1e-7 after normalisation); ill-conditioning is handled by
 /// jitter, not by a noise floor.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

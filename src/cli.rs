@@ -1,0 +1,1000 @@
+//! The `vigp` command-line tool, for the paper's systems and for your own
+//! mechanism (feature `cli`).
+//!
+//! ```text
+//! vigp fit     --system NAME --data train.csv --out model.json
+//!              [--encoding sincos|minimal|maximal] [--prior nominal|constant] [--restarts K]
+//! vigp score   --model model.json --data test.csv --steps 20
+//! vigp predict --model model.json --data starts.csv --steps K --out pred.csv
+//! vigp export  --model model.json --out model.rs [--variance]
+//! ```
+//!
+//! * `fit` reads measured positions ([`crate::data`] format), builds the
+//!   transitions, trains a [`Learned`] model on at most `--max-samples`
+//!   of them (evenly spaced; GP training is O(N³)) with the mechanism's
+//!   DSL parameters as nominal prior (change them with
+//!   `--set links.pole.mass=1.1`), and saves it as one JSON file.
+//!   `--encoding minimal` learns on the minimal coordinates as they are,
+//!   `sincos` replaces every angle by its sine and cosine, `maximal` learns
+//!   in maximal coordinates (each link's x, y, θ; projected onto the joint
+//!   constraints).
+//! * `score` is the paper's k-step prediction error: from every sample of
+//!   every run with k more samples after it, k steps of the learned model
+//!   and of the nominal variational integrator, position MSE in minimal
+//!   coordinates averaged over the steps and the windows. Its last line is
+//!   `nominal_mse=<x> learned_mse=<y>`.
+//! * `predict` rolls the learned model out from the first two rows of every
+//!   run (position and discrete velocity) and writes the trajectories with
+//!   each predicted velocity's one-step error bound (paper Theorem 1,
+//!   δ = `--delta`).
+//! * `export` writes the Rust source of a `no_std` learned model for
+//!   [`crate::embedded::LearnedStepper`] and states its size.
+//!
+//! Your own mechanism gets the same tool from one line:
+//!
+//! ```no_run
+//! vigp::mechanism! {
+//!     /// My robot.
+//!     pub Arm {
+//!         links { upper: { mass: 1.0, length: 0.5 } }
+//!         joints { shoulder: revolute(world, upper.start) { damping: 0.1 } }
+//!     }
+//! }
+//!
+//! fn main() -> std::process::ExitCode {
+//!     vigp::cli::main::<Arm>()
+//! }
+//! ```
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::{Duration, Instant};
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+
+use crate::bound::BoundSettings;
+use crate::data::{DataError, Dataset, ReadOptions};
+use crate::gp::{GpError, TrainOptions};
+use crate::learned::{
+    EmbeddedExport, Encoding, LearnError, Learned, LoadError, Prior, SavedLearned, Transition,
+    transitions,
+};
+use crate::{
+    Coordinates, Integrator, Mechanism, Parameters, SVector, State, StepError, System, Variational,
+    ViewVisitor,
+};
+
+/// Everything that can stop a command.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CliError {
+    /// Bad command-line arguments (clap's message, or help and version
+    /// output, which [`main_with`] prints and exits 0 on).
+    #[error("{0}")]
+    Args(#[from] clap::Error),
+    /// Arguments that parse but do not make sense.
+    #[error("{0}")]
+    Usage(String),
+    /// A data file could not be read.
+    #[error("{path}: {source}")]
+    Data {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: DataError,
+    },
+    /// A model file could not be loaded or saved.
+    #[error("{path}: {source}")]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: LoadError,
+    },
+    /// Training failed.
+    #[error("training failed: {0}")]
+    Learn(#[from] LearnError),
+    /// A prediction failed.
+    #[error("prediction failed: {0}")]
+    Step(#[from] StepError),
+    /// The GP could not be exported.
+    #[error("export failed: {0}")]
+    Export(#[from] GpError),
+    /// An output file could not be written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
+    move |source| CliError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "vigp",
+    version,
+    about = "Structure-preserving learned dynamics: fit a GP-augmented variational integrator to measured trajectories, score it, predict with bounds, export it for firmware."
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug, Clone)]
+enum Command {
+    /// Train a learned model on measured trajectories and save it.
+    Fit(FitArgs),
+    /// k-step position MSE of the learned and the nominal model on held-out runs.
+    Score(ScoreArgs),
+    /// Learned trajectories from the start of every run, with one-step bounds.
+    Predict(PredictArgs),
+    /// Rust source of the learned model for no_std firmware.
+    Export(ExportArgs),
+}
+
+/// How data files are read.
+#[derive(Args, Debug, Clone)]
+struct ReadArgs {
+    /// Resample uneven runs onto this time step (s) by linear interpolation.
+    #[arg(long, value_name = "DT")]
+    resample: Option<f64>,
+    /// Do not unwrap angle coordinates.
+    #[arg(long)]
+    no_unwrap: bool,
+    /// Accepted deviation of a time step from its run's mean step (relative).
+    #[arg(long, default_value_t = 1e-3)]
+    time_tolerance: f64,
+}
+
+impl ReadArgs {
+    fn options(&self) -> ReadOptions {
+        ReadOptions {
+            unwrap_angles: !self.no_unwrap,
+            time_tolerance: self.time_tolerance,
+            resample: self.resample,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum EncodingArg {
+    /// Angles as (sin, cos), minimal coordinates.
+    Sincos,
+    /// Minimal coordinates as they are.
+    Minimal,
+    /// Maximal coordinates (x, y, θ of every link), projected onto the joints.
+    Maximal,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum PriorArg {
+    /// The nominal variational step (the GP learns the residual).
+    Nominal,
+    /// No model: a constant mean.
+    Constant,
+}
+
+#[derive(Args, Debug, Clone)]
+struct FitArgs {
+    /// The mechanism (with several registered; case and `_` do not matter).
+    #[arg(long)]
+    system: Option<String>,
+    /// Training data (CSV: run,t,<coordinates>).
+    #[arg(long)]
+    data: PathBuf,
+    /// Where to save the model (JSON).
+    #[arg(long)]
+    out: PathBuf,
+    /// GP input coordinates.
+    #[arg(long, value_enum, default_value = "sincos")]
+    encoding: EncodingArg,
+    /// Prior of the velocity map.
+    #[arg(long, value_enum, default_value = "nominal")]
+    prior: PriorArg,
+    /// Random restarts of the hyperparameter optimisation (besides the first start).
+    #[arg(long, default_value_t = 5)]
+    restarts: usize,
+    /// Seed of the restarts.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Largest number of training transitions (evenly spaced over the data).
+    #[arg(long, default_value_t = 512)]
+    max_samples: usize,
+    /// Change a nominal parameter, e.g. `--set links.pole.mass=1.1` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    set: Vec<String>,
+    #[command(flatten)]
+    read: ReadArgs,
+}
+
+#[derive(Args, Debug, Clone)]
+struct ScoreArgs {
+    /// A model saved by `vigp fit`.
+    #[arg(long)]
+    model: PathBuf,
+    /// Held-out data (CSV: run,t,<coordinates>).
+    #[arg(long)]
+    data: PathBuf,
+    /// Prediction horizon k.
+    #[arg(long, default_value_t = 20)]
+    steps: usize,
+    #[command(flatten)]
+    read: ReadArgs,
+}
+
+#[derive(Args, Debug, Clone)]
+struct PredictArgs {
+    /// A model saved by `vigp fit`.
+    #[arg(long)]
+    model: PathBuf,
+    /// Start states: the first two rows of every run.
+    #[arg(long)]
+    data: PathBuf,
+    /// Steps to predict.
+    #[arg(long)]
+    steps: usize,
+    /// Output CSV: run,t,<coordinates>,v_<coordinate>…,bound.
+    #[arg(long)]
+    out: PathBuf,
+    /// Failure probability δ of the bounds.
+    #[arg(long, default_value_t = 0.01)]
+    delta: f64,
+    #[command(flatten)]
+    read: ReadArgs,
+}
+
+#[derive(Args, Debug, Clone)]
+struct ExportArgs {
+    /// A model saved by `vigp fit`.
+    #[arg(long)]
+    model: PathBuf,
+    /// The Rust file to write.
+    #[arg(long)]
+    out: PathBuf,
+    /// Also export the Cholesky factors (posterior variances; N(N+1)/2 numbers per output).
+    #[arg(long)]
+    variance: bool,
+    /// Name of the generated `LearnedModel` static.
+    #[arg(long, default_value = "LEARNED")]
+    name: String,
+    /// Path of vigp's no_std core in the generated code.
+    #[arg(long, default_value = "vigp::embedded")]
+    core_path: String,
+}
+
+/// One mechanism the tool knows (see [`system`]).
+#[derive(Clone, Copy)]
+pub struct SystemEntry {
+    name: &'static str,
+    run: fn(&Command, &mut dyn Write) -> Result<(), CliError>,
+}
+
+impl SystemEntry {
+    /// The mechanism's name.
+    pub fn name(&self) -> &'static str {
+        self.name
+    }
+}
+
+impl core::fmt::Debug for SystemEntry {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.debug_struct("SystemEntry")
+            .field("name", &self.name)
+            .finish()
+    }
+}
+
+/// The entry of mechanism `S` for [`main_with`] / [`run`].
+pub fn system<S: System>() -> SystemEntry {
+    SystemEntry {
+        name: S::NAME,
+        run: run_system::<S>,
+    }
+}
+
+/// The paper's four systems (`vigp::systems`), as the `vigp` binary has them.
+pub fn paper_systems() -> Vec<SystemEntry> {
+    use crate::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
+    vec![
+        system::<Pendulum>(),
+        system::<Cartpole>(),
+        system::<DoublePendulum>(),
+        system::<Fourbar>(),
+    ]
+}
+
+/// The whole tool for one mechanism: `fn main() -> ExitCode { vigp::cli::main::<MyMechanism>() }`.
+pub fn main<S: System>() -> ExitCode {
+    main_with(&[system::<S>()])
+}
+
+/// The tool for several mechanisms, with the process's arguments; prints
+/// errors to stderr and returns the exit code.
+pub fn main_with(systems: &[SystemEntry]) -> ExitCode {
+    let mut stdout = std::io::stdout().lock();
+    match run(systems, std::env::args_os(), &mut stdout) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(CliError::Args(e)) => {
+            let _ = e.print();
+            if e.use_stderr() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Runs one command line (`args` including the program name) for the given
+/// mechanisms, writing the report to `out`. Progress bars go to stderr
+/// (only on a terminal).
+pub fn run<I, T>(systems: &[SystemEntry], args: I, out: &mut dyn Write) -> Result<(), CliError>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = Cli::try_parse_from(args)?;
+    let entry = match &cli.command {
+        Command::Fit(a) => match &a.system {
+            Some(name) => find(systems, name)?,
+            None if systems.len() == 1 => systems[0],
+            None => {
+                return Err(CliError::Usage(format!(
+                    "--system is needed: one of {}",
+                    names(systems)
+                )));
+            }
+        },
+        Command::Score(ScoreArgs { model, .. })
+        | Command::Predict(PredictArgs { model, .. })
+        | Command::Export(ExportArgs { model, .. }) => {
+            let saved = read_saved(model)?;
+            find(systems, &saved.mechanism)?
+        }
+    };
+    (entry.run)(&cli.command, out)
+}
+
+fn names(systems: &[SystemEntry]) -> String {
+    systems
+        .iter()
+        .map(|s| s.name)
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// `DoublePendulum`, `double_pendulum`, `double-pendulum` all match.
+fn normalise(name: &str) -> String {
+    name.chars()
+        .filter(|c| *c != '_' && *c != '-')
+        .flat_map(char::to_lowercase)
+        .collect()
+}
+
+fn find(systems: &[SystemEntry], name: &str) -> Result<SystemEntry, CliError> {
+    systems
+        .iter()
+        .find(|s| normalise(s.name) == normalise(name))
+        .copied()
+        .ok_or_else(|| {
+            CliError::Usage(format!(
+                "unknown mechanism `{name}`: this tool knows {}",
+                names(systems)
+            ))
+        })
+}
+
+fn read_saved(path: &Path) -> Result<SavedLearned, CliError> {
+    SavedLearned::read(path).map_err(|source| CliError::Model {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn run_system<S: System>(cmd: &Command, out: &mut dyn Write) -> Result<(), CliError> {
+    let mut sys = S::default();
+    match cmd {
+        Command::Fit(a) => {
+            for s in &a.set {
+                set_parameter(&mut sys, s)?;
+            }
+            sys.visit(Visit { cmd, out })
+        }
+        _ => sys.visit(Visit { cmd, out }),
+    }
+}
+
+fn set_parameter<P: Parameters>(p: &mut P, assignment: &str) -> Result<(), CliError> {
+    let bad = |why: String| CliError::Usage(format!("--set {assignment}: {why}"));
+    let (name, value) = assignment
+        .split_once('=')
+        .ok_or_else(|| bad("expected NAME=VALUE".into()))?;
+    let value: f64 = value
+        .trim()
+        .parse()
+        .map_err(|_| bad(format!("{value:?} is not a number")))?;
+    if !value.is_finite() {
+        return Err(bad("the value must be finite".into()));
+    }
+    let i = P::parameter_index(name.trim()).ok_or_else(|| {
+        bad(format!(
+            "no parameter `{name}`; the parameters are {}",
+            P::PARAMETER_NAMES.join(", ")
+        ))
+    })?;
+    if let Some(slot) = p.parameter_mut(i) {
+        *slot = value;
+    }
+    Ok(())
+}
+
+/// Sets `p`'s parameters from a saved model's.
+fn restore_parameters<P: Parameters>(
+    p: &mut P,
+    saved: &SavedLearned,
+    path: &Path,
+) -> Result<(), CliError> {
+    for (i, name) in P::PARAMETER_NAMES.iter().enumerate() {
+        let value = saved
+            .parameters
+            .get(*name)
+            .copied()
+            .ok_or_else(|| CliError::Model {
+                path: path.to_path_buf(),
+                source: LoadError::MissingParameter(name.to_string()),
+            })?;
+        if let Some(slot) = p.parameter_mut(i) {
+            *slot = value;
+        }
+    }
+    Ok(())
+}
+
+struct Visit<'a> {
+    cmd: &'a Command,
+    out: &'a mut dyn Write,
+}
+
+fn spinner(message: String) -> ProgressBar {
+    let pb = ProgressBar::new_spinner();
+    pb.set_style(
+        ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    pb.set_message(message);
+    pb.enable_steady_tick(Duration::from_millis(120));
+    pb
+}
+
+fn bar(len: usize, message: &'static str) -> ProgressBar {
+    let pb = ProgressBar::new(len as u64);
+    pb.set_style(
+        ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} [{elapsed} < {eta}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    pb.set_message(message);
+    pb
+}
+
+fn w(out: &mut dyn Write, text: std::fmt::Arguments<'_>) -> Result<(), CliError> {
+    out.write_fmt(text)
+        .and_then(|_| out.write_all(b"\n"))
+        .map_err(io_error(Path::new("<stdout>")))
+}
+
+fn read_data<const N: usize>(
+    path: &Path,
+    names: &[&'static str; N],
+    kinds: &[crate::CoordinateKind; N],
+    read: &ReadArgs,
+) -> Result<Dataset<N>, CliError> {
+    Dataset::read_path(path, names, kinds, &read.options()).map_err(|source| CliError::Data {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Evenly spaced selection of at most `max` items.
+fn spread<T: Copy>(all: &[T], max: usize) -> Vec<T> {
+    if all.len() <= max {
+        return all.to_vec();
+    }
+    (0..max).map(|i| all[i * all.len() / max]).collect()
+}
+
+impl ViewVisitor for Visit<'_> {
+    type Output = Result<(), CliError>;
+
+    fn visit<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+        self,
+        minimal: Mn,
+        maximal: Mx,
+    ) -> Self::Output
+    where
+        Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
+        Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+    {
+        let Visit { cmd, out } = self;
+        match cmd {
+            Command::Fit(a) => fit(a, minimal, maximal, out),
+            Command::Score(a) => {
+                let saved = read_saved(&a.model)?;
+                let mut nominal = minimal;
+                restore_parameters(&mut nominal, &saved, &a.model)?;
+                let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
+                if saved.coordinates == Mn::COORDINATES {
+                    let l = load(&a.model, &saved, minimal)?;
+                    score(a, &l, nominal, &data, |z| *z, |q| *q, out)
+                } else {
+                    let l = load(&a.model, &saved, maximal)?;
+                    let dt = saved.dt;
+                    score(
+                        a,
+                        &l,
+                        nominal,
+                        &data,
+                        |z| nominal.to_maximal(z, dt),
+                        |x| nominal.minimal_positions(x),
+                        out,
+                    )
+                }
+            }
+            Command::Predict(a) => {
+                let saved = read_saved(&a.model)?;
+                let mut nominal = minimal;
+                restore_parameters(&mut nominal, &saved, &a.model)?;
+                let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
+                if saved.coordinates == Mn::COORDINATES {
+                    let l = load(&a.model, &saved, minimal)?;
+                    predict(a, &l, &data, |z| *z, |z| *z, out)
+                } else {
+                    let l = load(&a.model, &saved, maximal)?;
+                    let dt = saved.dt;
+                    predict(
+                        a,
+                        &l,
+                        &data,
+                        |z| nominal.to_maximal(z, dt),
+                        |z| nominal.to_minimal(z, dt),
+                        out,
+                    )
+                }
+            }
+            Command::Export(a) => {
+                let saved = read_saved(&a.model)?;
+                if saved.coordinates != Mn::COORDINATES {
+                    return Err(CliError::Usage(format!(
+                        "{}: only models in minimal coordinates ({}) can run on the embedded learned step; \
+                         this one is in {}",
+                        a.model.display(),
+                        Mn::COORDINATES.join(", "),
+                        saved.coordinates.join(", ")
+                    )));
+                }
+                let l = load(&a.model, &saved, minimal)?;
+                export(a, &l, out)
+            }
+        }
+    }
+}
+
+fn load<M: Mechanism<N, C> + Parameters + Clone, const N: usize, const C: usize>(
+    path: &Path,
+    saved: &SavedLearned,
+    model: M,
+) -> Result<Learned<M, N, C>, CliError> {
+    Learned::from_saved(model, saved).map_err(|source| CliError::Model {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+fn fit<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+    a: &FitArgs,
+    minimal: Mn,
+    maximal: Mx,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
+    Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+{
+    let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
+    let dt = data
+        .dt(a.read.time_tolerance)
+        .map_err(|source| CliError::Data {
+            path: a.data.clone(),
+            source,
+        })?;
+    let short: Vec<&str> = data.short_runs().map(|r| r.name.as_str()).collect();
+    w(
+        out,
+        format_args!(
+            "data: {}: {} runs, {} samples, dt = {dt} s",
+            a.data.display(),
+            data.runs.len(),
+            data.samples()
+        ),
+    )?;
+    if !short.is_empty() {
+        w(
+            out,
+            format_args!(
+                "note: {} run(s) with fewer than 3 samples give no transitions: {}",
+                short.len(),
+                short.join(", ")
+            ),
+        )?;
+    }
+    if a.max_samples == 0 {
+        return Err(CliError::Usage("--max-samples must be at least 1".into()));
+    }
+    let prior = match a.prior {
+        PriorArg::Nominal => Prior::Nominal,
+        PriorArg::Constant => Prior::Constant,
+    };
+    let opts = TrainOptions {
+        restarts: a.restarts,
+        seed: a.seed,
+        ..TrainOptions::default()
+    };
+    match a.encoding {
+        EncodingArg::Sincos | EncodingArg::Minimal => {
+            let enc = if a.encoding == EncodingArg::Sincos {
+                Encoding::SinCos
+            } else {
+                Encoding::Raw
+            };
+            let all = data.transitions();
+            fit_view(a, minimal, dt, &all, enc, prior, &opts, out)
+        }
+        EncodingArg::Maximal => {
+            let mut all: Vec<Transition<NM>> = Vec::new();
+            for run in &data.runs {
+                let Some(run_dt) = run.dt else { continue };
+                let xs: Vec<SVector<f64, NM>> = run
+                    .positions
+                    .iter()
+                    .map(|q| minimal.maximal_positions(q))
+                    .collect();
+                all.extend(transitions(&xs, run_dt));
+            }
+            fit_view(a, maximal, dt, &all, Encoding::Raw, prior, &opts, out)
+        }
+    }
+}
+
+#[allow(clippy::too_many_arguments)]
+fn fit_view<M, const N: usize, const C: usize>(
+    a: &FitArgs,
+    model: M,
+    dt: f64,
+    all: &[Transition<N>],
+    encoding: Encoding,
+    prior: Prior,
+    opts: &TrainOptions,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    M: Mechanism<N, C> + Parameters + Clone,
+{
+    let chosen = spread(all, a.max_samples);
+    let d = encoding.dim(&M::KINDS);
+    w(
+        out,
+        format_args!(
+            "fit: {} in coordinates [{}], {encoding:?} encoding ({d} inputs), {prior:?} prior: \
+             N = {} of {} transitions, {} restarts",
+            M::NAME,
+            M::COORDINATES.join(", "),
+            chosen.len(),
+            all.len(),
+            opts.restarts
+        ),
+    )?;
+    let pb = spinner(format!(
+        "training {N} GPs on N = {} ({} starts each)",
+        chosen.len(),
+        1 + opts.restarts
+    ));
+    let start = Instant::now();
+    let result = Learned::train(model, dt, &chosen, encoding, prior, opts);
+    pb.finish_and_clear();
+    let (learned, report) = result?;
+    w(
+        out,
+        format_args!("trained in {:.1} s", start.elapsed().as_secs_f64()),
+    )?;
+    for (j, o) in report.outputs.iter().enumerate() {
+        w(
+            out,
+            format_args!(
+                "  v_{}: log marginal likelihood {:.4e}, best start {}, jitter {:.1e}{}",
+                M::COORDINATES[j],
+                o.log_marginal_likelihood,
+                o.best_start,
+                o.jitter,
+                if o.converged { "" } else { " (iteration cap)" }
+            ),
+        )?;
+    }
+    learned.save(&a.out).map_err(|source| CliError::Model {
+        path: a.out.clone(),
+        source,
+    })?;
+    let bytes = std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0);
+    w(
+        out,
+        format_args!("wrote {} ({bytes} bytes)", a.out.display()),
+    )
+}
+
+/// Mean over steps 1..=k of |p − t|²/n.
+fn window_mse<const N: usize>(pred: &[SVector<f64, N>], truth: &[SVector<f64, N>]) -> f64 {
+    let s: f64 = pred
+        .iter()
+        .zip(truth)
+        .map(|(p, t)| (p - t).norm_squared() / N as f64)
+        .sum();
+    s / pred.len() as f64
+}
+
+fn score<L, Mn, const N: usize, const C: usize, const K: usize, const CK: usize>(
+    a: &ScoreArgs,
+    learned: &Learned<L, K, CK>,
+    nominal: Mn,
+    data: &Dataset<N>,
+    to_view: impl Fn(&State<N>) -> State<K> + Sync,
+    to_minimal: impl Fn(&SVector<f64, K>) -> SVector<f64, N> + Sync,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    L: Mechanism<K, CK> + Clone + Sync,
+    Mn: Mechanism<N, C> + Copy + Sync,
+{
+    let k = a.steps;
+    if k == 0 {
+        return Err(CliError::Usage("--steps must be at least 1".into()));
+    }
+    let dt = learned.dt();
+    data.check_dt(dt, a.read.time_tolerance)
+        .map_err(|source| CliError::Data {
+            path: a.data.clone(),
+            source,
+        })?;
+    // windows: every sample with k more after it (and one more for v₀)
+    let mut windows: Vec<(usize, usize)> = Vec::new();
+    for (r, run) in data.runs.iter().enumerate() {
+        let len = run.positions.len();
+        if len >= k + 2 {
+            windows.extend((0..len - k - 1).map(|s| (r, s)));
+        }
+    }
+    let too_short = data
+        .runs
+        .iter()
+        .filter(|r| r.positions.len() < k + 2)
+        .count();
+    w(
+        out,
+        format_args!(
+            "model: {} ({} coordinates, {:?} encoding, {:?} prior, N = {}, dt = {dt} s)",
+            a.model.display(),
+            K,
+            learned.encoding(),
+            learned.prior(),
+            learned.gp().n()
+        ),
+    )?;
+    w(
+        out,
+        format_args!(
+            "data: {}: {} runs ({too_short} shorter than {} samples), {} windows of {k} steps",
+            a.data.display(),
+            data.runs.len(),
+            k + 2,
+            windows.len()
+        ),
+    )?;
+    if windows.is_empty() {
+        return Err(CliError::Usage(format!(
+            "no run has {} samples: nothing to score with --steps {k}",
+            k + 2
+        )));
+    }
+    let vi = Variational::new(nominal, dt);
+    let pb = bar(windows.len(), "scoring");
+    let results: Vec<(Option<f64>, Option<f64>)> = windows
+        .par_iter()
+        .map(|&(r, s)| {
+            let run = &data.runs[r];
+            let truth = &run.positions[s + 1..=s + k];
+            let z0 = State {
+                q: run.positions[s],
+                v: (run.positions[s + 1] - run.positions[s]) / dt,
+            };
+            let nom = vi.rollout(&z0, k).ok().map(|traj| {
+                let p: Vec<_> = traj[1..].iter().map(|z| z.q).collect();
+                window_mse(&p, truth)
+            });
+            let lrn = learned.rollout(&to_view(&z0), k).ok().map(|traj| {
+                let p: Vec<_> = traj[1..].iter().map(|z| to_minimal(&z.q)).collect();
+                window_mse(&p, truth)
+            });
+            pb.inc(1);
+            (nom, lrn)
+        })
+        .collect();
+    pb.finish_and_clear();
+    let nominal_failed = results.iter().filter(|r| r.0.is_none()).count();
+    let learned_failed = results.iter().filter(|r| r.1.is_none()).count();
+    let both: Vec<(f64, f64)> = results
+        .iter()
+        .filter_map(|(a, b)| Some(((*a)?, (*b)?)))
+        .collect();
+    w(
+        out,
+        format_args!(
+            "failed windows: nominal {nominal_failed}, learned {learned_failed} (scored: {} windows where both succeed)",
+            both.len()
+        ),
+    )?;
+    if both.is_empty() {
+        return Err(CliError::Usage(
+            "every window failed for the nominal or the learned model".into(),
+        ));
+    }
+    let n = both.len() as f64;
+    let nominal_mse = both.iter().map(|p| p.0).sum::<f64>() / n;
+    let learned_mse = both.iter().map(|p| p.1).sum::<f64>() / n;
+    w(
+        out,
+        format_args!("nominal_mse={nominal_mse:e} learned_mse={learned_mse:e}"),
+    )
+}
+
+fn predict<L, const N: usize, const K: usize, const CK: usize>(
+    a: &PredictArgs,
+    learned: &Learned<L, K, CK>,
+    data: &Dataset<N>,
+    to_view: impl Fn(&State<N>) -> State<K>,
+    to_minimal: impl Fn(&State<K>) -> State<N>,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    L: Mechanism<K, CK> + Clone,
+{
+    let dt = learned.dt();
+    data.check_dt(dt, a.read.time_tolerance)
+        .map_err(|source| CliError::Data {
+            path: a.data.clone(),
+            source,
+        })?;
+    let mut starts = Vec::with_capacity(data.runs.len());
+    for run in &data.runs {
+        let Some(z) = run.state(0) else {
+            return Err(CliError::Usage(format!(
+                "{}: run `{}` has one row; a start state needs two (position and discrete velocity)",
+                a.data.display(),
+                run.name
+            )));
+        };
+        starts.push((run, z));
+    }
+    let view_starts: Vec<State<K>> = starts.iter().map(|(_, z)| to_view(z)).collect();
+    let bound = learned.error_bound(
+        &BoundSettings {
+            delta: a.delta,
+            ..BoundSettings::default()
+        },
+        &view_starts,
+    )?;
+    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
+    let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
+    let coords: Vec<String> = data.coordinates.clone();
+    let mut header = vec!["run".to_string(), "t".to_string()];
+    header.extend(coords.iter().cloned());
+    header.extend(coords.iter().map(|c| format!("v_{c}")));
+    header.push("bound".into());
+    let csv_err = |e: csv::Error| CliError::Io {
+        path: a.out.clone(),
+        source: std::io::Error::other(e),
+    };
+    wtr.write_record(&header).map_err(csv_err)?;
+    let pb = bar(starts.len(), "predicting");
+    let mut failed = 0usize;
+    for ((run, z0), zv) in starts.iter().zip(&view_starts) {
+        let pred = match learned.predict(zv, a.steps, &bound) {
+            Ok(p) => p,
+            Err(e) => {
+                failed += 1;
+                w(out, format_args!("run `{}`: {e}", run.name))?;
+                continue;
+            }
+        };
+        for (k, z) in pred.states.iter().enumerate() {
+            let zm = if k == 0 { *z0 } else { to_minimal(z) };
+            let mut row = vec![run.name.clone(), format!("{:?}", run.t0 + k as f64 * dt)];
+            row.extend(zm.q.iter().map(|x| format!("{x:?}")));
+            row.extend(zm.v.iter().map(|x| format!("{x:?}")));
+            row.push(if k == 0 {
+                String::new()
+            } else {
+                format!("{:?}", pred.one_step_bounds[k - 1])
+            });
+            wtr.write_record(&row).map_err(csv_err)?;
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    wtr.flush().map_err(io_error(&a.out))?;
+    w(
+        out,
+        format_args!(
+            "wrote {}: {} runs × {} steps ({failed} failed); `bound` bounds ‖v − v_true‖ of each \
+             predicted velocity with probability ≥ {} (one step from the predicted state)",
+            a.out.display(),
+            starts.len() - failed,
+            a.steps,
+            1.0 - a.delta
+        ),
+    )
+}
+
+fn export<M, const N: usize, const C: usize>(
+    a: &ExportArgs,
+    learned: &Learned<M, N, C>,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    M: Mechanism<N, C> + Parameters + Clone,
+{
+    let opts = EmbeddedExport {
+        name: a.name.clone(),
+        core_path: a.core_path.clone(),
+        variance: a.variance,
+        header: vec![format!(
+            "exported by `vigp export` from {}",
+            a.model.file_name().map_or_else(
+                || a.model.display().to_string(),
+                |f| f.to_string_lossy().into()
+            )
+        )],
+    };
+    let (src, size) = learned.to_embedded_source(&opts)?;
+    std::fs::write(&a.out, &src).map_err(io_error(&a.out))?;
+    w(
+        out,
+        format_args!(
+            "wrote {}: {} GPs on N = {} points, d = {} inputs: {} numbers = {} bytes of f64 data \
+             ({}), {} bytes of source",
+            a.out.display(),
+            size.outputs,
+            size.n,
+            size.input_dim,
+            size.numbers,
+            size.data_bytes,
+            if a.variance {
+                "mean and variance"
+            } else {
+                "mean only; --variance adds the Cholesky factors"
+            },
+            size.source_bytes
+        ),
+    )
+}

@@ -1,0 +1,280 @@
+//! `vigp::data`: every case of a measured-trajectory CSV file, each a clear
+//! error or handled as documented.
+
+use std::f64::consts::PI;
+use vigp::data::{DataError, Dataset, ReadOptions};
+use vigp::learned::transitions;
+use vigp::systems::{CartpoleMinimal, PendulumMinimal};
+use vigp::{CoordinateKind, SVector};
+
+fn read2(text: &str) -> Result<Dataset<2>, DataError> {
+    Dataset::read_for::<CartpoleMinimal, 0, _>(text.as_bytes(), &ReadOptions::default())
+}
+
+fn read1(text: &str, opts: &ReadOptions) -> Result<Dataset<1>, DataError> {
+    Dataset::read_for::<PendulumMinimal, 0, _>(text.as_bytes(), opts)
+}
+
+#[test]
+fn runs_split_columns_in_any_order_and_transitions_match() {
+    let text = "t,hinge,run,rail\n\
+                0.00,0.10,a,1.0\n0.01,0.11,a,1.1\n0.02,0.13,a,1.3\n0.03,0.16,a,1.6\n\
+                5.00,-0.2,b,0.0\n5.01,-0.2,b,0.5\n5.02,-0.1,b,0.75\n";
+    let d = read2(text).unwrap();
+    assert_eq!(d.runs.len(), 2);
+    assert_eq!(
+        (d.runs[0].name.as_str(), d.runs[1].name.as_str()),
+        ("a", "b")
+    );
+    assert_eq!(d.runs[1].t0, 5.0);
+    assert_eq!(d.runs[1].line, 6);
+    // columns are mapped by name: rail first, hinge second
+    assert_eq!(d.runs[0].positions[1], SVector::from([1.1, 0.11]));
+    let dt = d.dt(1e-9).unwrap();
+    // the mean step of decimal timestamps, without binary rounding noise
+    assert_eq!(dt, 0.01);
+    let tr = d.transitions();
+    // 4 rows give 2 transitions, 3 rows give 1
+    assert_eq!(tr.len(), 3);
+    let expect = transitions(&d.runs[0].positions, d.runs[0].dt.unwrap());
+    assert_eq!(&tr[..2], &expect[..]);
+    // v_k = (x_{k+1} − x_k)/Δt with the run's Δt: (1.3 − 1.1)/0.01 = 20
+    assert!((tr[1].z.v[0] - 20.0).abs() < 1e-9, "{:?}", tr[1]);
+    assert!((tr[1].v_next[0] - 30.0).abs() < 1e-9, "{:?}", tr[1]);
+    let z = d.runs[1].state(0).unwrap();
+    assert!((z.v[0] - 50.0).abs() < 1e-9);
+}
+
+/// A pendulum spinning at 5 rad/s logged by a sensor reporting (−π, π]:
+/// unwrapped back to the true angle (to rounding), so velocities stay
+/// 5 rad/s instead of jumping by 2π/Δt ≈ 628 rad/s.
+#[test]
+fn wrapped_angles_are_unwrapped() {
+    let mut text = String::from("run,t,pivot\n");
+    let truth: Vec<f64> = (0..300).map(|k| 2.0 + 5.0 * k as f64 * 0.01).collect();
+    for (k, th) in truth.iter().enumerate() {
+        let wrapped = (th + PI).rem_euclid(2.0 * PI) - PI;
+        text.push_str(&format!("spin,{},{wrapped}\n", k as f64 * 0.01));
+    }
+    let d = read1(&text, &ReadOptions::default()).unwrap();
+    for (p, t) in d.runs[0].positions.iter().zip(&truth) {
+        assert!((p[0] - t).abs() < 1e-12, "{} vs {t}", p[0]);
+    }
+    let vmax = d
+        .transitions()
+        .iter()
+        .map(|t| t.v_next[0].abs())
+        .fold(0.0, f64::max);
+    assert!((vmax - 5.0).abs() < 1e-9, "{vmax}");
+    // without unwrapping the wraps show up as ≈ 2π/Δt jumps
+    let raw = read1(
+        &text,
+        &ReadOptions {
+            unwrap_angles: false,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let vmax = raw
+        .transitions()
+        .iter()
+        .map(|t| t.v_next[0].abs())
+        .fold(0.0, f64::max);
+    assert!(vmax > 600.0, "{vmax}");
+    // lengths are never unwrapped: a cart jumping by 4 m stays a jump
+    let d = read2("run,t,rail,hinge\na,0,0,0\na,0.01,4,0\na,0.02,8,0\n").unwrap();
+    assert_eq!(d.runs[0].positions[2][0], 8.0);
+}
+
+#[test]
+fn uneven_time_is_an_error_naming_run_and_line_unless_resampling_is_asked() {
+    let text = "run,t,pivot\nr1,0,0\nr1,0.01,0.01\nr1,0.02,0.02\nr2,0,0\nr2,0.01,0.01\nr2,0.025,0.025\nr2,0.03,0.03\n";
+    let e = read1(text, &ReadOptions::default()).unwrap_err();
+    match &e {
+        DataError::NonUniformTime { run, line, .. } => {
+            assert_eq!((run.as_str(), *line), ("r2", 7));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(e.to_string().contains("run `r2`, line 7"), "{e}");
+    // resampling onto 0.01 s: linear motion is reproduced exactly
+    let opts = ReadOptions {
+        resample: Some(0.01),
+        ..Default::default()
+    };
+    let d = read1(text, &opts).unwrap();
+    assert_eq!(d.runs[1].positions.len(), 4);
+    for (k, p) in d.runs[1].positions.iter().enumerate() {
+        assert!((p[0] - 0.01 * k as f64).abs() < 1e-15, "{k}: {}", p[0]);
+    }
+    assert_eq!(d.runs[1].dt, Some(0.01));
+    // time going backwards is an error even when resampling
+    let e = read1("run,t,pivot\na,0,0\na,0.01,0\na,0.005,0\n", &opts).unwrap_err();
+    assert!(
+        matches!(e, DataError::TimeNotIncreasing { line: 4, .. }),
+        "{e}"
+    );
+    // a 300 Hz log with timestamps rounded to 6 decimals (steps off by up
+    // to 1e-6 s = 3e-4 of Δt) passes the default tolerance (1e-3 of Δt);
+    // rounded to 4 decimals (3e-2 of Δt) it does not
+    for (decimals, ok) in [(6, true), (4, false)] {
+        let mut text = String::from("run,t,pivot\n");
+        for k in 0..50 {
+            text.push_str(&format!("a,{:.*},0\n", decimals, k as f64 / 300.0));
+        }
+        assert_eq!(
+            read1(&text, &ReadOptions::default()).is_ok(),
+            ok,
+            "{decimals}"
+        );
+    }
+    // runs with different steps are caught when a common step is needed
+    let d = read1(
+        "run,t,pivot\na,0,0\na,0.01,0\nb,0,0\nb,0.02,0\n",
+        &ReadOptions::default(),
+    )
+    .unwrap();
+    assert!(matches!(
+        d.dt(1e-6),
+        Err(DataError::TimeStepMismatch { .. })
+    ));
+    assert!(
+        matches!(d.check_dt(0.01, 1e-6), Err(DataError::TimeStepMismatch { run, .. }) if run == "b")
+    );
+}
+
+#[test]
+fn missing_extra_and_duplicate_columns() {
+    let e = read2("run,t,rail\na,0,0\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::MissingColumn { name, .. } if name == "hinge"),
+        "{e}"
+    );
+    let e = read2("run,rail,hinge\na,0,0\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::MissingColumn { name, .. } if name == "t"),
+        "{e}"
+    );
+    let e = read2("run,t,rail,hinge,speed\na,0,0,0,1\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::UnknownColumn { name, column: 5, .. } if name == "speed"),
+        "{e}"
+    );
+    let e = read2("run,t,rail,hinge,u_rail\na,0,0,0,1\n").unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("control inputs are not supported yet"),
+        "{e}"
+    );
+    let e = read2("run,t,rail,hinge,\na,0,0,0,\n").unwrap_err();
+    assert!(e.to_string().contains("trailing comma"), "{e}");
+    let e = read2("run,t,rail,hinge,rail\na,0,0,0,0\n").unwrap_err();
+    assert!(
+        matches!(
+            e,
+            DataError::DuplicateColumn {
+                first: 3,
+                second: 5,
+                ..
+            }
+        ),
+        "{e}"
+    );
+    // a row with a value missing (fewer fields than the header)
+    let e = read2("run,t,rail,hinge\na,0,0,0\na,0.01,0\n").unwrap_err();
+    assert!(matches!(e, DataError::Csv { line: 3, .. }), "{e}");
+    // a row with an extra field
+    let e = read2("run,t,rail,hinge\na,0,0,0\na,0.01,0,0,7\n").unwrap_err();
+    assert!(matches!(e, DataError::Csv { line: 3, .. }), "{e}");
+    // an empty value
+    let e = read2("run,t,rail,hinge\na,0,0,0\na,0.01,,0\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::Parse { line: 3, column, .. } if column == "rail"),
+        "{e}"
+    );
+    let e = read2("run,t,rail,hinge\na,0,zero,0\n").unwrap_err();
+    assert!(e.to_string().contains("line 2, column `rail`"), "{e}");
+}
+
+#[test]
+fn nan_and_infinity_are_rejected_with_line_and_column() {
+    for (bad, col) in [("NaN", "hinge"), ("inf", "hinge"), ("-infinity", "hinge")] {
+        let text = format!("run,t,rail,hinge\na,0,0,0\na,0.01,0,{bad}\n");
+        let e = read2(&text).unwrap_err();
+        assert!(
+            matches!(&e, DataError::NonFinite { line: 3, column, .. } if column == col),
+            "{bad}: {e}"
+        );
+    }
+    let e = read2("run,t,rail,hinge\na,NaN,0,0\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::NonFinite { line: 2, column, .. } if column == "t"),
+        "{e}"
+    );
+}
+
+#[test]
+fn empty_runs_files_and_labels() {
+    let e = read2("").unwrap_err();
+    assert!(matches!(e, DataError::Empty(_)), "{e}");
+    let e = read2("run,t,rail,hinge\n").unwrap_err();
+    assert!(matches!(e, DataError::Empty(_)), "{e}");
+    // an empty run label
+    let e = read2("run,t,rail,hinge\n,0,0,0\n").unwrap_err();
+    assert!(matches!(e, DataError::EmptyRun { line: 2 }), "{e}");
+    // a run that reappears after another
+    let e = read2("run,t,rail,hinge\na,0,0,0\nb,0,0,0\na,0.01,0,0\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::RunNotContiguous { run, line: 4 } if run == "a"),
+        "{e}"
+    );
+}
+
+/// One-row and two-row runs are kept but give no transitions, as
+/// documented; a file of only one-row runs has no time step.
+#[test]
+fn one_row_runs_are_kept_without_transitions() {
+    let d =
+        read2("run,t,rail,hinge\na,0,0,0\nb,0,0,0\nb,0.01,0,0\nc,0,0,0\nc,0.01,1,0\nc,0.02,3,0\n")
+            .unwrap();
+    assert_eq!(d.runs.len(), 3);
+    assert_eq!(d.runs[0].dt, None);
+    assert!(d.runs[0].state(0).is_none());
+    assert_eq!(
+        d.short_runs().map(|r| r.name.as_str()).collect::<Vec<_>>(),
+        ["a", "b"]
+    );
+    assert_eq!(d.transitions().len(), 1);
+    assert_eq!(d.samples(), 6);
+    let d = read2("run,t,rail,hinge\na,0,0,0\nb,0,0,0\n").unwrap();
+    assert!(d.transitions().is_empty());
+    assert!(matches!(d.dt(1e-6), Err(DataError::NoTimeStep)));
+}
+
+#[test]
+fn reading_by_names_and_kinds_and_from_files() {
+    let names = ["x", "theta"];
+    let kinds = [CoordinateKind::Length, CoordinateKind::Angle];
+    let d = Dataset::read_csv(
+        "run,t,x,theta\n1,0,0,3.1\n1,0.1,0,-3.1\n".as_bytes(),
+        &names,
+        &kinds,
+        &ReadOptions::default(),
+    )
+    .unwrap();
+    assert!((d.runs[0].positions[1][1] - (2.0 * PI - 3.1)).abs() < 1e-12);
+    let e = Dataset::read_path("/nonexistent.csv", &names, &kinds, &ReadOptions::default())
+        .unwrap_err();
+    assert!(matches!(e, DataError::Io { .. }), "{e}");
+    let e = Dataset::read_csv(
+        "run,t,x,theta\n".as_bytes(),
+        &names,
+        &kinds,
+        &ReadOptions {
+            time_tolerance: f64::NAN,
+            ..Default::default()
+        },
+    )
+    .unwrap_err();
+    assert!(matches!(e, DataError::InvalidOption { .. }), "{e}");
+}

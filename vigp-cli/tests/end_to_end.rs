@@ -1,0 +1,324 @@
+//! End to end, as a user would: measured trajectories of a perturbed
+//! cart-pole (masses ×1.1, joint friction, position noise σ = 1e-4, encoder
+//! quantisation, angles wrapped into (−π, π] as an absolute encoder reports
+//! them) written as CSV; `vigp fit` on training runs, `vigp score` on
+//! held-out runs must print a learned MSE below the nominal one; `predict`
+//! writes bounded trajectories; `export` states its size. The same through
+//! the user-mechanism entry point (`vigp::cli::system::<M>()`, what
+//! `vigp::cli::main::<M>()` runs) on a mechanism declared here.
+
+use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use vigp::prelude::*;
+use vigp::systems::Cartpole;
+use vigp::{CoordinateKind, SVector};
+
+vigp::mechanism! {
+    /// A gantry crane: a trolley on a rail with a 0.6 m load pendulum
+    /// hanging from its end (declared only in this test).
+    pub Crane {
+        gravity: [0.0, -9.81],
+        links {
+            trolley: { mass: 2.0, length: 0.4 },
+            rope: { mass: 0.5, length: 0.6 },
+        }
+        joints {
+            rail: prismatic(world, trolley.start) { axis: [1.0, 0.0], damping: 0.0 },
+            hook: revolute(trolley.end, rope.start) { damping: 0.0 },
+        }
+    }
+}
+
+/// SplitMix64 with Box–Muller normals.
+struct Rng(u64);
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        lo + (hi - lo) * self.next()
+    }
+    fn normal(&mut self) -> f64 {
+        let (u1, u2) = (self.next().max(f64::MIN_POSITIVE), self.next());
+        (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
+    }
+}
+
+const DT: f64 = 0.01;
+
+/// Measured runs of `truth` (2 s each from random states at rest), as a
+/// sensor would log them: midpoint VI at DT/10 as ground truth, then
+/// Gaussian noise σ = 1e-4, then quantisation (2^16 counts per turn for
+/// angles, 10 µm for lengths), angles wrapped into (−π, π].
+fn measured_csv<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    truth: M,
+    runs: std::ops::Range<usize>,
+    seed: u64,
+) -> String {
+    let mut rng = Rng(seed);
+    let mut text = format!("run,t,{}\n", M::COORDINATES.join(","));
+    let h = DT / 10.0;
+    for run in runs {
+        let q0 = SVector::<f64, N>::from_fn(|i, _| match M::KINDS[i] {
+            CoordinateKind::Angle => rng.uniform(-2.5, 2.5),
+            CoordinateKind::Length => rng.uniform(-0.5, 0.5),
+        });
+        let vi = Variational::midpoint(truth, h);
+        let mut z = State {
+            q: q0,
+            v: SVector::zeros(),
+        };
+        for k in 0..200 {
+            let mut cells = vec![format!("r{run}"), format!("{:.6}", k as f64 * DT)];
+            for i in 0..N {
+                let noisy = z.q[i] + 1e-4 * rng.normal();
+                let value = match M::KINDS[i] {
+                    CoordinateKind::Angle => {
+                        let count = 2.0 * PI / 65536.0;
+                        let q = (noisy / count).round() * count;
+                        (q + PI).rem_euclid(2.0 * PI) - PI
+                    }
+                    CoordinateKind::Length => (noisy / 1e-5).round() * 1e-5,
+                };
+                cells.push(format!("{value:.9}"));
+            }
+            text.push_str(&cells.join(","));
+            text.push('\n');
+            for _ in 0..10 {
+                z = vi.step(&z).unwrap();
+            }
+        }
+    }
+    text
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vigp-e2e-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// The two numbers of `score`'s last line.
+fn mse_line(report: &str) -> (f64, f64) {
+    let last = report.lines().last().expect("a report");
+    let (n, l) = last
+        .strip_prefix("nominal_mse=")
+        .and_then(|r| r.split_once(" learned_mse="))
+        .unwrap_or_else(|| panic!("last line {last:?}"));
+    (n.parse().unwrap(), l.parse().unwrap())
+}
+
+fn vigp(args: &[&str]) -> String {
+    let out = Command::new(env!("CARGO_BIN_EXE_vigp"))
+        .args(args)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "vigp {args:?} failed:\n{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    eprintln!("$ vigp {}\n{stdout}", args.join(" "));
+    stdout
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+#[test]
+fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
+    let dir = temp_dir("cartpole");
+    let mut truth = Cartpole::default();
+    // masses ×1.1 (inertias about the centres of mass unchanged: scaling
+    // every mass and inertia alike would not change the motion)
+    truth.links.cart.mass *= 1.1;
+    truth.links.pole.mass *= 1.1;
+    truth.joints.rail.damping = 0.5;
+    truth.joints.hinge.damping = 0.1;
+    let (train, test) = (dir.join("train.csv"), dir.join("test.csv"));
+    std::fs::write(&train, measured_csv(truth.minimal(), 0..8, 1)).unwrap();
+    std::fs::write(&test, measured_csv(truth.minimal(), 100..104, 2)).unwrap();
+    let model = dir.join("model.json");
+    vigp(&[
+        "fit",
+        "--system",
+        "cartpole",
+        "--data",
+        s(&train),
+        "--out",
+        s(&model),
+        "--restarts",
+        "1",
+        "--max-samples",
+        "200",
+    ]);
+    let report = vigp(&[
+        "score",
+        "--model",
+        s(&model),
+        "--data",
+        s(&test),
+        "--steps",
+        "20",
+    ]);
+    let (nominal, learned) = mse_line(&report);
+    assert!(
+        learned < nominal,
+        "learned {learned:e} ≥ nominal {nominal:e}"
+    );
+
+    // predict: trajectories with one-step bounds
+    let pred = dir.join("pred.csv");
+    vigp(&[
+        "predict",
+        "--model",
+        s(&model),
+        "--data",
+        s(&test),
+        "--steps",
+        "5",
+        "--out",
+        s(&pred),
+    ]);
+    let text = std::fs::read_to_string(&pred).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(lines.next(), Some("run,t,rail,hinge,v_rail,v_hinge,bound"));
+    let rows: Vec<&str> = lines.collect();
+    assert_eq!(rows.len(), 4 * 6);
+    let b: f64 = rows[1].rsplit(',').next().unwrap().parse().unwrap();
+    assert!(b.is_finite() && b > 0.0, "{b}");
+
+    // export: the size is stated; mean only unless asked
+    let rs = dir.join("model.rs");
+    let out = vigp(&["export", "--model", s(&model), "--out", s(&rs)]);
+    assert!(
+        out.contains("N = 200") && out.contains("mean only"),
+        "{out}"
+    );
+    let src = std::fs::read_to_string(&rs).unwrap();
+    assert!(
+        src.contains("pub static LEARNED: vigp::embedded::learned::LearnedModel<'static, 2, 5>")
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn a_mechanism_declared_here_gets_the_same_tool() {
+    let dir = temp_dir("crane");
+    let mut truth = Crane::default();
+    truth.links.trolley.mass *= 1.1;
+    truth.links.rope.mass *= 1.1;
+    truth.joints.rail.damping = 0.5;
+    truth.joints.hook.damping = 0.02;
+    let (train, test) = (dir.join("train.csv"), dir.join("test.csv"));
+    std::fs::write(&train, measured_csv(truth.minimal(), 0..8, 3)).unwrap();
+    std::fs::write(&test, measured_csv(truth.minimal(), 50..53, 4)).unwrap();
+    let model = dir.join("crane.json");
+    let tool = [vigp::cli::system::<Crane>()];
+    let run = |args: &[&str]| {
+        let mut out = Vec::new();
+        let mut argv = vec!["crane-tool"];
+        argv.extend_from_slice(args);
+        vigp::cli::run(&tool, argv, &mut out).unwrap_or_else(|e| panic!("{args:?}: {e}"));
+        let text = String::from_utf8(out).unwrap();
+        eprintln!("$ crane-tool {}\n{text}", args.join(" "));
+        text
+    };
+    // no --system needed with one mechanism
+    run(&[
+        "fit",
+        "--data",
+        s(&train),
+        "--out",
+        s(&model),
+        "--restarts",
+        "1",
+        "--max-samples",
+        "200",
+    ]);
+    let (nominal, learned) = mse_line(&run(&[
+        "score",
+        "--model",
+        s(&model),
+        "--data",
+        s(&test),
+        "--steps",
+        "20",
+    ]));
+    assert!(
+        learned < nominal,
+        "learned {learned:e} ≥ nominal {nominal:e}"
+    );
+    // a model of another mechanism is refused with its name
+    let mut out = Vec::new();
+    let e = vigp::cli::run(
+        &[vigp::cli::system::<Cartpole>()],
+        ["x", "score", "--model", s(&model), "--data", s(&test)],
+        &mut out,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("Crane"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn usage_errors_are_reported_not_panicked() {
+    let tool = vigp::cli::paper_systems();
+    let mut out = Vec::new();
+    let e = vigp::cli::run(
+        &tool,
+        ["vigp", "fit", "--data", "x.csv", "--out", "m.json"],
+        &mut out,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("--system is needed"), "{e}");
+    let e = vigp::cli::run(
+        &tool,
+        [
+            "vigp", "fit", "--system", "robot", "--data", "x.csv", "--out", "m.json",
+        ],
+        &mut out,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("unknown mechanism `robot`"), "{e}");
+    let e = vigp::cli::run(
+        &tool,
+        [
+            "vigp",
+            "fit",
+            "--system",
+            "double_pendulum",
+            "--data",
+            "/nonexistent.csv",
+            "--out",
+            "m.json",
+        ],
+        &mut out,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("/nonexistent.csv"), "{e}");
+    let e = vigp::cli::run(
+        &tool,
+        [
+            "vigp",
+            "score",
+            "--model",
+            "/nonexistent.json",
+            "--data",
+            "x",
+        ],
+        &mut out,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("/nonexistent.json"), "{e}");
+    let e = vigp::cli::run(&tool, ["vigp", "frobnicate"], &mut out).unwrap_err();
+    assert!(matches!(e, vigp::cli::CliError::Args(_)), "{e}");
+}

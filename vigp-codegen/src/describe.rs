@@ -1,0 +1,105 @@
+//! The description items of a mechanism, emitted next to [`crate::emit`]:
+//! its name and named parameter list (`vigp::embedded::Parameters`, for the
+//! parameter struct and, with the std runtime, for both coordinate views),
+//! and with the std runtime the `vigp::System` impl that hands both views to
+//! generic tools (the command-line tool, saved models).
+//!
+//! Kept apart from `emit` so that the kinematics generator can change
+//! without touching what saved models record.
+
+use crate::Target;
+use crate::model::Model;
+use proc_macro2::{Literal, TokenStream};
+use quote::{format_ident, quote};
+use syn::ext::IdentExt;
+
+/// `(name, place)` of every parameter, in the order documented on
+/// `vigp_core::Parameters`: `place` is the field path below `self`.
+fn parameter_places(m: &Model) -> Vec<(String, TokenStream)> {
+    let mut out = vec![
+        ("gravity.x".to_string(), quote!(gravity[0])),
+        ("gravity.y".to_string(), quote!(gravity[1])),
+    ];
+    for l in &m.links {
+        let (ln, s) = (&l.name, l.name.unraw().to_string());
+        out.push((format!("links.{s}.mass"), quote!(links.#ln.mass)));
+        out.push((format!("links.{s}.length"), quote!(links.#ln.length)));
+        out.push((format!("links.{s}.inertia"), quote!(links.#ln.inertia)));
+        out.push((format!("links.{s}.com.x"), quote!(links.#ln.com[0])));
+        out.push((format!("links.{s}.com.y"), quote!(links.#ln.com[1])));
+    }
+    if m.dissipative() {
+        for j in &m.joints {
+            let (jn, s) = (&j.name, j.name.unraw().to_string());
+            out.push((format!("joints.{s}.damping"), quote!(joints.#jn.damping)));
+        }
+    }
+    out
+}
+
+/// `impl Parameters` for `ty`, whose parameter struct is reached as `base`
+/// (`self` or `self.sys`).
+fn parameters_impl(
+    m: &Model,
+    ty: &TokenStream,
+    base: &TokenStream,
+    places: &[(String, TokenStream)],
+) -> TokenStream {
+    let name = m.name.unraw().to_string();
+    let names = places.iter().map(|(n, _)| n);
+    let read = places.iter().enumerate().map(|(i, (_, p))| {
+        let i = Literal::usize_unsuffixed(i);
+        quote!(#i => ::core::option::Option::Some(#base.#p),)
+    });
+    let write = places.iter().enumerate().map(|(i, (_, p))| {
+        let i = Literal::usize_unsuffixed(i);
+        quote!(#i => ::core::option::Option::Some(&mut #base.#p),)
+    });
+    quote! {
+        impl ::vigp::embedded::Parameters for #ty {
+            const NAME: &'static str = #name;
+            const PARAMETER_NAMES: &'static [&'static str] = &[#(#names),*];
+            fn parameter(&self, index: usize) -> ::core::option::Option<f64> {
+                match index {
+                    #(#read)*
+                    _ => ::core::option::Option::None,
+                }
+            }
+            fn parameter_mut(&mut self, index: usize) -> ::core::option::Option<&mut f64> {
+                match index {
+                    #(#write)*
+                    _ => ::core::option::Option::None,
+                }
+            }
+        }
+    }
+}
+
+/// The description items of `m` for `target`.
+pub fn emit(m: &Model, target: Target) -> TokenStream {
+    let name = &m.name;
+    let places = parameter_places(m);
+    let own = parameters_impl(m, &quote!(#name), &quote!(self), &places);
+    if target != Target::Std {
+        return own;
+    }
+    let minimal_ty = format_ident!("{}Minimal", name);
+    let maximal_ty = format_ident!("{}Maximal", name);
+    let minimal = parameters_impl(m, &quote!(#minimal_ty), &quote!(self.sys), &places);
+    let maximal = parameters_impl(m, &quote!(#maximal_ty), &quote!(self.sys), &places);
+    let n = Literal::usize_unsuffixed(m.dof());
+    let c = Literal::usize_unsuffixed(m.loop_constraints());
+    let nm = Literal::usize_unsuffixed(3 * m.links.len());
+    // the maximal view: every joint is two constraint equations
+    let cm = Literal::usize_unsuffixed(2 * m.joints.len());
+    quote! {
+        #own
+        #minimal
+        #maximal
+        impl ::vigp::System for #name {
+            fn visit<V: ::vigp::ViewVisitor>(&self, visitor: V) -> V::Output {
+                visitor.visit::<#minimal_ty, #maximal_ty, #n, #c, #nm, #cm>(self.minimal(), self.maximal())
+            }
+        }
+    }
+}

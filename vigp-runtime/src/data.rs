@@ -1,0 +1,641 @@
+//! Measured trajectories in: CSV files of positions, split into runs,
+//! checked, and turned into training [`Transition`]s.
+//!
+//! # File format
+//!
+//! One header line, then one row per sample:
+//!
+//! ```text
+//! run,t,rail,hinge
+//! a,0.00,0.0,3.10
+//! a,0.01,0.001,3.13
+//! a,0.02,0.003,-3.12
+//! b,0.00,0.5,0.0
+//! ```
+//!
+//! * `run`: a label (any non-empty text); the rows of one run are
+//!   contiguous. `t`: time in seconds, strictly increasing within a run.
+//!   Then one column per coordinate of the mechanism, named as in
+//!   `Mechanism::COORDINATES` (joint names for the minimal view), holding
+//!   **positions** (rad or m), as the paper's data: velocities are formed as
+//!   discrete differences (x_{k+1} − x_k)/Δt, exactly what the learned
+//!   integrators need. Columns may come in any order.
+//! * A missing coordinate column, an unknown or duplicated column, an empty
+//!   run label, a run that reappears after another run, a value that does
+//!   not parse, NaN or ±∞: each is a [`DataError`] naming the line (the
+//!   file's line number, header = line 1) and the column.
+//! * **Uniform time.** Within a run every step t_{k+1} − t_k must equal the
+//!   run's mean step (t_last − t_first)/(rows − 1) to within
+//!   [`ReadOptions::time_tolerance`] (relative, default 1e-3); otherwise
+//!   [`DataError::NonUniformTime`] names the run and the line. Resampling
+//!   (linear interpolation onto a uniform grid) happens only if asked, with
+//!   [`ReadOptions::resample`].
+//! * **Angles** (coordinates of kind [`CoordinateKind::Angle`]) are
+//!   unwrapped within each run: a jump by more than π between samples is
+//!   taken as a wrap (±2π) of an angle sensor's range, so a pendulum logged
+//!   in (−π, π] turning past π does not become a 600 rad/s spike. This
+//!   assumes |θ̇|·Δt < π (at 100 Hz, below 314 rad/s); turn it off with
+//!   [`ReadOptions::unwrap_angles`].
+//! * **Short runs.** A run of one or two rows is kept (it is data) but gives
+//!   no transition (a transition needs three positions); a run of one row
+//!   has no time step. [`Dataset::transitions`] skips them and
+//!   [`Dataset::short_runs`] lists them.
+//!
+//! Control inputs (`u_<joint>` columns) are not read yet: such a column is
+//! reported as unknown. The reader maps each column to a role
+//! (run, time, coordinate) so that inputs are one more role.
+
+use std::collections::HashSet;
+use std::io;
+use std::path::{Path, PathBuf};
+
+use nalgebra::SVector;
+
+use crate::learned::Transition;
+use crate::mechanism::{CoordinateKind, Mechanism, State};
+
+/// How [`Dataset::read_csv`] reads a file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReadOptions {
+    /// Unwrap angle coordinates within each run (default `true`).
+    pub unwrap_angles: bool,
+    /// Largest accepted deviation of a time step from its run's mean step,
+    /// relative to that step (default 1e-3: timestamps printed with a few
+    /// decimals pass, a dropped or duplicated sample does not).
+    pub time_tolerance: f64,
+    /// `Some(dt)`: resample every run by linear interpolation onto
+    /// t_first + k·dt instead of requiring uniform time (t must still be
+    /// strictly increasing). Positions between samples are then
+    /// interpolated, which is only as good as the sampling is fine.
+    pub resample: Option<f64>,
+}
+
+impl Default for ReadOptions {
+    fn default() -> Self {
+        Self {
+            unwrap_angles: true,
+            time_tolerance: 1e-3,
+            resample: None,
+        }
+    }
+}
+
+/// Why a data file could not be read. Lines are the file's line numbers
+/// (the header is line 1).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum DataError {
+    /// The file could not be opened or read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The I/O error.
+        source: io::Error,
+    },
+    /// The CSV text itself is malformed (e.g. a row with another number of
+    /// fields than the header).
+    #[error("line {line}: {message}")]
+    Csv {
+        /// Line of the error.
+        line: u64,
+        /// The reader's message.
+        message: String,
+    },
+    /// No header, or a header but no data rows.
+    #[error("no data: {0}")]
+    Empty(&'static str),
+    /// A required column is not in the header.
+    #[error("missing column `{name}` (the header must hold run, t and {expected})")]
+    MissingColumn {
+        /// The missing column.
+        name: String,
+        /// All coordinate names expected.
+        expected: String,
+    },
+    /// A header column that is not run, t or a coordinate.
+    #[error("unknown column `{name}` (column {column}); expected run, t and {expected}{hint}")]
+    UnknownColumn {
+        /// The column's name.
+        name: String,
+        /// 1-based column index.
+        column: usize,
+        /// All coordinate names expected.
+        expected: String,
+        /// A hint for likely mistakes.
+        hint: &'static str,
+    },
+    /// A column name appears twice.
+    #[error("column `{name}` appears twice (columns {first} and {second})")]
+    DuplicateColumn {
+        /// The column's name.
+        name: String,
+        /// 1-based index of its first appearance.
+        first: usize,
+        /// 1-based index of its second appearance.
+        second: usize,
+    },
+    /// An empty run label.
+    #[error("line {line}: empty run label")]
+    EmptyRun {
+        /// Line of the row.
+        line: u64,
+    },
+    /// A run's rows are not contiguous.
+    #[error(
+        "line {line}: run `{run}` appears again after other runs (keep each run's rows together)"
+    )]
+    RunNotContiguous {
+        /// The run.
+        run: String,
+        /// Line where it reappears.
+        line: u64,
+    },
+    /// A value that is not a number.
+    #[error("line {line}, column `{column}`: cannot read {value:?} as a number")]
+    Parse {
+        /// Line of the row.
+        line: u64,
+        /// The column's name.
+        column: String,
+        /// The text found.
+        value: String,
+    },
+    /// NaN or ±∞ in the data.
+    #[error("line {line}, column `{column}`: {value} is not finite")]
+    NonFinite {
+        /// Line of the row.
+        line: u64,
+        /// The column's name.
+        column: String,
+        /// The value found.
+        value: f64,
+    },
+    /// Time does not increase within a run.
+    #[error("run `{run}`, line {line}: t = {t} does not increase (previous {previous})")]
+    TimeNotIncreasing {
+        /// The run.
+        run: String,
+        /// Line of the row.
+        line: u64,
+        /// Its t.
+        t: f64,
+        /// The previous row's t.
+        previous: f64,
+    },
+    /// A time step differs from the run's mean step.
+    #[error(
+        "run `{run}`, line {line}: time step {found} differs from the run's mean step {expected} \
+         by more than {tolerance} relative (missing or repeated samples?); \
+         resample if the sampling is truly uneven"
+    )]
+    NonUniformTime {
+        /// The run.
+        run: String,
+        /// Line of the row that ends the offending step.
+        line: u64,
+        /// The run's mean step.
+        expected: f64,
+        /// The step found.
+        found: f64,
+        /// The tolerance in force.
+        tolerance: f64,
+    },
+    /// Runs with different time steps, or a time step other than the
+    /// model's.
+    #[error("run `{run}`: time step {found} differs from {expected} ({what})")]
+    TimeStepMismatch {
+        /// The run.
+        run: String,
+        /// Its time step.
+        found: f64,
+        /// The time step expected.
+        expected: f64,
+        /// Whose time step is expected.
+        what: &'static str,
+    },
+    /// No run has two rows: there is no time step.
+    #[error("no run has two or more rows: the time step is unknown")]
+    NoTimeStep,
+    /// An option out of its domain.
+    #[error("invalid option {what}: {value}")]
+    InvalidOption {
+        /// Which option.
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
+}
+
+impl From<csv::Error> for DataError {
+    fn from(e: csv::Error) -> Self {
+        let line = e.position().map_or(0, |p| p.line());
+        DataError::Csv {
+            line,
+            message: e.to_string(),
+        }
+    }
+}
+
+/// One run: uniformly sampled positions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Run<const N: usize> {
+    /// The run's label.
+    pub name: String,
+    /// Time of the first sample (s).
+    pub t0: f64,
+    /// Time step (s); `None` for a run of one row.
+    pub dt: Option<f64>,
+    /// Positions, one per sample (angles unwrapped).
+    pub positions: Vec<SVector<f64, N>>,
+    /// File line of the run's first row.
+    pub line: u64,
+}
+
+impl<const N: usize> Run<N> {
+    /// The discrete state at sample `k`: (x_k, (x_{k+1} − x_k)/Δt), if the
+    /// run has a sample after `k`.
+    pub fn state(&self, k: usize) -> Option<State<N>> {
+        let dt = self.dt?;
+        let (a, b) = (self.positions.get(k)?, self.positions.get(k + 1)?);
+        Some(State {
+            q: *a,
+            v: (b - a) / dt,
+        })
+    }
+}
+
+/// Column roles of a header (a control input will be one more role).
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Role {
+    Run,
+    Time,
+    Coordinate(usize),
+}
+
+/// Trajectories of a mechanism with `N` coordinates, read from CSV.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dataset<const N: usize> {
+    /// Coordinate names, in the model's order.
+    pub coordinates: Vec<String>,
+    /// The runs, in file order.
+    pub runs: Vec<Run<N>>,
+}
+
+fn join_names(names: &[&str]) -> String {
+    names
+        .iter()
+        .map(|n| format!("`{n}`"))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+fn header_roles(header: &csv::StringRecord, names: &[&str]) -> Result<Vec<Role>, DataError> {
+    let expected = join_names(names);
+    let mut roles = Vec::with_capacity(header.len());
+    let mut seen: Vec<(&str, usize)> = Vec::new();
+    for (i, raw) in header.iter().enumerate() {
+        let name = raw.trim();
+        if let Some((_, first)) = seen.iter().find(|(n, _)| *n == name) {
+            return Err(DataError::DuplicateColumn {
+                name: name.into(),
+                first: first + 1,
+                second: i + 1,
+            });
+        }
+        seen.push((name, i));
+        let role = match name {
+            "run" => Role::Run,
+            "t" => Role::Time,
+            _ => match names.iter().position(|n| *n == name) {
+                Some(k) => Role::Coordinate(k),
+                None => {
+                    let hint = if name.starts_with("u_") {
+                        " (control inputs are not supported yet)"
+                    } else if name.is_empty() {
+                        " (an empty header field: a trailing comma?)"
+                    } else {
+                        ""
+                    };
+                    return Err(DataError::UnknownColumn {
+                        name: name.into(),
+                        column: i + 1,
+                        expected,
+                        hint,
+                    });
+                }
+            },
+        };
+        roles.push(role);
+    }
+    let has = |r: Role| roles.contains(&r);
+    for (name, role) in [("run", Role::Run), ("t", Role::Time)].into_iter().chain(
+        names
+            .iter()
+            .enumerate()
+            .map(|(k, n)| (*n, Role::Coordinate(k))),
+    ) {
+        if !has(role) {
+            return Err(DataError::MissingColumn {
+                name: name.into(),
+                expected,
+            });
+        }
+    }
+    Ok(roles)
+}
+
+/// Wraps an angle difference into (−π, π].
+fn wrap(d: f64) -> f64 {
+    use core::f64::consts::{PI, TAU};
+    let w = d - TAU * (d / TAU).round();
+    if w <= -PI { w + TAU } else { w }
+}
+
+/// The mean step rounded to 12 significant digits: timestamps are decimal
+/// text, so (t_last − t_first)/(rows − 1) carries binary rounding
+/// (0.009999999999999998 for t = 0.00 … 0.29) that no sampling clock has.
+fn tidy(dt: f64) -> f64 {
+    format!("{dt:.11e}").parse().unwrap_or(dt)
+}
+
+/// A run being read: times, positions and the line of each row.
+struct RawRun<const N: usize> {
+    name: String,
+    times: Vec<f64>,
+    positions: Vec<SVector<f64, N>>,
+    lines: Vec<u64>,
+}
+
+impl<const N: usize> RawRun<N> {
+    fn finish(self, kinds: &[CoordinateKind; N], opts: &ReadOptions) -> Result<Run<N>, DataError> {
+        let RawRun {
+            name,
+            times,
+            mut positions,
+            lines,
+        } = self;
+        for k in 1..times.len() {
+            if times[k] <= times[k - 1] {
+                return Err(DataError::TimeNotIncreasing {
+                    run: name,
+                    line: lines[k],
+                    t: times[k],
+                    previous: times[k - 1],
+                });
+            }
+        }
+        if opts.unwrap_angles {
+            for (i, kind) in kinds.iter().enumerate() {
+                if *kind != CoordinateKind::Angle {
+                    continue;
+                }
+                let mut prev_raw = positions[0][i];
+                for k in 1..positions.len() {
+                    let raw = positions[k][i];
+                    positions[k][i] = positions[k - 1][i] + wrap(raw - prev_raw);
+                    prev_raw = raw;
+                }
+            }
+        }
+        let (t0, line) = (times[0], lines[0]);
+        let n = times.len();
+        if n == 1 {
+            return Ok(Run {
+                name,
+                t0,
+                dt: None,
+                positions,
+                line,
+            });
+        }
+        if let Some(dt) = opts.resample {
+            let steps = ((times[n - 1] - t0) / dt * (1.0 + 1e-12)).floor() as usize;
+            let mut out = Vec::with_capacity(steps + 1);
+            let mut seg = 0;
+            for k in 0..=steps {
+                let t = t0 + k as f64 * dt;
+                while seg + 2 < n && times[seg + 1] < t {
+                    seg += 1;
+                }
+                let (ta, tb) = (times[seg], times[seg + 1]);
+                let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
+                out.push(positions[seg] * (1.0 - w) + positions[seg + 1] * w);
+            }
+            return Ok(Run {
+                name,
+                t0,
+                dt: Some(dt),
+                positions: out,
+                line,
+            });
+        }
+        let dt = tidy((times[n - 1] - t0) / (n - 1) as f64);
+        for k in 1..n {
+            let step = times[k] - times[k - 1];
+            if (step - dt).abs() > opts.time_tolerance * dt {
+                return Err(DataError::NonUniformTime {
+                    run: name,
+                    line: lines[k],
+                    expected: dt,
+                    found: step,
+                    tolerance: opts.time_tolerance,
+                });
+            }
+        }
+        Ok(Run {
+            name,
+            t0,
+            dt: Some(dt),
+            positions,
+            line,
+        })
+    }
+}
+
+impl<const N: usize> Dataset<N> {
+    /// Reads CSV text (see the module docs) for coordinates `names` of
+    /// kinds `kinds`.
+    pub fn read_csv<R: io::Read>(
+        reader: R,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        if !(opts.time_tolerance.is_finite() && opts.time_tolerance >= 0.0) {
+            return Err(DataError::InvalidOption {
+                what: "time_tolerance (finite, >= 0)",
+                value: opts.time_tolerance,
+            });
+        }
+        if let Some(dt) = opts.resample {
+            if !(dt.is_finite() && dt > 0.0) {
+                return Err(DataError::InvalidOption {
+                    what: "resample (a time step, finite and > 0)",
+                    value: dt,
+                });
+            }
+        }
+        let mut rdr = csv::ReaderBuilder::new()
+            .has_headers(true)
+            .trim(csv::Trim::All)
+            .from_reader(reader);
+        let header = rdr.headers()?.clone();
+        if header.is_empty() || header.iter().all(str::is_empty) {
+            return Err(DataError::Empty("no header line"));
+        }
+        let roles = header_roles(&header, names)?;
+        let mut runs: Vec<Run<N>> = Vec::new();
+        let mut finished: HashSet<String> = HashSet::new();
+        let mut current: Option<RawRun<N>> = None;
+        let mut record = csv::StringRecord::new();
+        while rdr.read_record(&mut record)? {
+            let line = record.position().map_or(0, |p| p.line());
+            let mut run = "";
+            let mut t = 0.0;
+            let mut q = SVector::<f64, N>::zeros();
+            for (field, (role, col)) in record.iter().zip(roles.iter().zip(header.iter())) {
+                let number = || -> Result<f64, DataError> {
+                    let v: f64 = field.parse().map_err(|_| DataError::Parse {
+                        line,
+                        column: col.trim().into(),
+                        value: field.into(),
+                    })?;
+                    if !v.is_finite() {
+                        return Err(DataError::NonFinite {
+                            line,
+                            column: col.trim().into(),
+                            value: v,
+                        });
+                    }
+                    Ok(v)
+                };
+                match role {
+                    Role::Run => run = field,
+                    Role::Time => t = number()?,
+                    Role::Coordinate(k) => q[*k] = number()?,
+                }
+            }
+            if run.is_empty() {
+                return Err(DataError::EmptyRun { line });
+            }
+            let same = current.as_ref().is_some_and(|c| c.name == run);
+            if !same {
+                if finished.contains(run) {
+                    return Err(DataError::RunNotContiguous {
+                        run: run.into(),
+                        line,
+                    });
+                }
+                if let Some(done) = current.take() {
+                    finished.insert(done.name.clone());
+                    runs.push(done.finish(kinds, opts)?);
+                }
+                current = Some(RawRun {
+                    name: run.into(),
+                    times: Vec::new(),
+                    positions: Vec::new(),
+                    lines: Vec::new(),
+                });
+            }
+            if let Some(c) = current.as_mut() {
+                c.times.push(t);
+                c.positions.push(q);
+                c.lines.push(line);
+            }
+        }
+        match current {
+            Some(done) => runs.push(done.finish(kinds, opts)?),
+            None => return Err(DataError::Empty("a header but no data rows")),
+        }
+        Ok(Self {
+            coordinates: names.iter().map(|s| s.to_string()).collect(),
+            runs,
+        })
+    }
+
+    /// Reads a CSV file ([`Dataset::read_csv`]).
+    pub fn read_path(
+        path: impl AsRef<Path>,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        let path = path.as_ref();
+        let file = std::fs::File::open(path).map_err(|source| DataError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Self::read_csv(io::BufReader::new(file), names, kinds, opts)
+    }
+
+    /// Reads CSV text with the coordinate names and kinds of mechanism `M`.
+    pub fn read_for<M: Mechanism<N, C>, const C: usize, R: io::Read>(
+        reader: R,
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        Self::read_csv(reader, &M::COORDINATES, &M::KINDS, opts)
+    }
+
+    /// The common time step of the runs: every run with two or more rows
+    /// must have the first such run's step to within `tolerance`
+    /// (relative).
+    pub fn dt(&self, tolerance: f64) -> Result<f64, DataError> {
+        let mut dt = None;
+        for r in &self.runs {
+            let Some(d) = r.dt else { continue };
+            match dt {
+                None => dt = Some(d),
+                Some(first) => {
+                    if (d - first).abs() > tolerance * first {
+                        return Err(DataError::TimeStepMismatch {
+                            run: r.name.clone(),
+                            found: d,
+                            expected: first,
+                            what: "the first run's",
+                        });
+                    }
+                }
+            }
+        }
+        dt.ok_or(DataError::NoTimeStep)
+    }
+
+    /// Checks that every run's time step is `dt` to within `tolerance`
+    /// (relative), e.g. the time step of a trained model.
+    pub fn check_dt(&self, dt: f64, tolerance: f64) -> Result<(), DataError> {
+        for r in &self.runs {
+            if let Some(d) = r.dt {
+                if (d - dt).abs() > tolerance * dt {
+                    return Err(DataError::TimeStepMismatch {
+                        run: r.name.clone(),
+                        found: d,
+                        expected: dt,
+                        what: "the model's",
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Training transitions of every run with three or more samples, each
+    /// with its run's time step (see [`crate::learned::transitions`]).
+    pub fn transitions(&self) -> Vec<Transition<N>> {
+        self.runs
+            .iter()
+            .filter_map(|r| Some(crate::learned::transitions(&r.positions, r.dt?)))
+            .flatten()
+            .collect()
+    }
+
+    /// The runs too short to give a transition (fewer than three samples).
+    pub fn short_runs(&self) -> impl Iterator<Item = &Run<N>> {
+        self.runs.iter().filter(|r| r.positions.len() < 3)
+    }
+
+    /// Number of samples over all runs.
+    pub fn samples(&self) -> usize {
+        self.runs.iter().map(|r| r.positions.len()).sum()
+    }
+}

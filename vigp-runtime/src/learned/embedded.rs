@@ -1,0 +1,146 @@
+//! A trained [`Learned`] as Rust source for the `no_std`
+//! [`vigp_core::LearnedStepper`]: the GP arrays and one `LearnedModel`
+//! static naming the mechanism, its parameters, Δt, encoding and prior.
+
+use core::fmt::Write;
+
+use super::{Encoding, Learned, Prior};
+use crate::gp::{ExportOptions, GpError};
+use crate::mechanism::Mechanism;
+use crate::system::Parameters;
+
+/// Options of [`Learned::to_embedded_source`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct EmbeddedExport {
+    /// Name of the generated `LearnedModel` static (an upper-case
+    /// identifier, default `"LEARNED"`); the GP items are prefixed
+    /// `<NAME>_GP`.
+    pub name: String,
+    /// Path of the `vigp_core` crate in the generated code (default
+    /// `"vigp::embedded"`).
+    pub core_path: String,
+    /// Also write the Cholesky factors (N(N+1)/2 numbers per velocity
+    /// component), needed only for posterior variances on the target.
+    pub variance: bool,
+    /// Comment lines for the file header.
+    pub header: Vec<String>,
+}
+
+impl Default for EmbeddedExport {
+    fn default() -> Self {
+        Self {
+            name: "LEARNED".into(),
+            core_path: "vigp::embedded".into(),
+            variance: false,
+            header: Vec::new(),
+        }
+    }
+}
+
+/// What an export holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ExportSize {
+    /// Training points N.
+    pub n: usize,
+    /// GP inputs d.
+    pub input_dim: usize,
+    /// Velocity components (one GP each).
+    pub outputs: usize,
+    /// f64 numbers in the exported arrays.
+    pub numbers: usize,
+    /// Bytes of those numbers in the target's memory (8 each).
+    pub data_bytes: usize,
+    /// Bytes of the generated source text.
+    pub source_bytes: usize,
+}
+
+impl<M, const N: usize, const C: usize> Learned<M, N, C>
+where
+    M: Mechanism<N, C> + Parameters + Clone,
+{
+    /// This model as Rust source for [`vigp_core::LearnedStepper`]: static
+    /// arrays of what the GP mean needs (scaled training inputs and weights
+    /// α: N·(d + 1) numbers per velocity component; with
+    /// [`EmbeddedExport::variance`] also the Cholesky factor) and a
+    /// `LearnedModel` static. The text compiles in a `#![no_std]` crate and
+    /// is deterministic; floats round-trip exactly.
+    ///
+    /// Models in either coordinate view export; `LearnedStepper::new` then
+    /// takes the same view (`sys.minimal()` or the parameter struct for a
+    /// minimal-coordinate model, `sys.maximal()` for a maximal one; the GP
+    /// input dimension it checks differs between the views).
+    pub fn to_embedded_source(
+        &self,
+        opts: &EmbeddedExport,
+    ) -> Result<(String, ExportSize), GpError> {
+        let gp_name = format!("{}_GP", opts.name);
+        let gp_opts = ExportOptions {
+            name: gp_name.clone(),
+            core_path: opts.core_path.clone(),
+            cholesky: opts.variance,
+            header: opts.header.clone(),
+            check_points: Vec::new(),
+        };
+        let mut s = self.gp.to_rust_source(&gp_opts)?;
+        let core = &opts.core_path;
+        let (n, d, p) = (self.gp.n(), self.gp.input_dim(), self.gp.output_dim());
+        let lit = |v: f64| format!("{v:?}");
+        let coords: Vec<String> = M::COORDINATES.iter().map(|c| format!("{c:?}")).collect();
+        let mut params = String::new();
+        for (i, name) in M::PARAMETER_NAMES.iter().enumerate() {
+            let value = self.model.parameter(i).unwrap_or(f64::NAN);
+            if !value.is_finite() {
+                return Err(GpError::Export(format!("parameter {name} is not finite")));
+            }
+            let _ = writeln!(params, "        ({name:?}, {}),", lit(value));
+        }
+        let encoding = match self.encoding {
+            Encoding::Raw => "Raw",
+            Encoding::SinCos => "SinCos",
+        };
+        let prior = match self.prior {
+            Prior::Nominal => "Nominal",
+            Prior::Constant => "Constant",
+        };
+        let name = &opts.name;
+        let _ = write!(
+            s,
+            "\n/// The learned model of `{mech}` (Δt = {dt} s, {encoding} encoding, {prior} prior):\n\
+             /// step it with `{core}::LearnedStepper::new({mech}::default(), &{name})`.\n\
+             #[rustfmt::skip]\n\
+             pub static {name}: {core}::learned::LearnedModel<'static, {N}, {d}> = {core}::learned::LearnedModel {{\n\
+             \x20   mechanism: {mech:?},\n\
+             \x20   coordinates: [{coords}],\n\
+             \x20   parameters: &[\n{params}    ],\n\
+             \x20   dt: {dtl},\n\
+             \x20   encoding: {core}::learned::Encoding::{encoding},\n\
+             \x20   prior: {core}::learned::Prior::{prior},\n\
+             \x20   project: {project},\n\
+             \x20   options: {core}::StepOptions {{ tolerance: {tol}, max_iterations: {iters}, min_step: {min_step}, stall_tolerance: {stall} }},\n\
+             \x20   gps: &{gp_name},\n\
+             }};\n",
+            mech = M::NAME,
+            dt = self.dt,
+            dtl = lit(self.dt),
+            coords = coords.join(", "),
+            project = self.project,
+            tol = lit(self.options.tolerance),
+            iters = self.options.max_iterations,
+            min_step = lit(self.options.min_step),
+            stall = lit(self.options.stall_tolerance),
+        );
+        let mut numbers = p * (n * (d + 1) + 3 * d + 3);
+        if opts.variance {
+            numbers += p * n * (n + 1) / 2;
+        }
+        let size = ExportSize {
+            n,
+            input_dim: d,
+            outputs: p,
+            numbers,
+            data_bytes: 8 * numbers,
+            source_bytes: s.len(),
+        };
+        Ok((s, size))
+    }
+}

@@ -1,0 +1,40 @@
+//! Mechanisms as values that generic tools can take apart: [`System`] is
+//! implemented by every `mechanism!` parameter struct and hands its two
+//! coordinate views, with their sizes, to a [`ViewVisitor`].
+//!
+//! The sizes N, C (minimal) and NM, CM (maximal) are const generics of the
+//! views, which a trait cannot name as associated constants on stable Rust;
+//! the visitor receives them as const parameters instead. This is how
+//! `vigp::cli::main::<MyMechanism>()` runs the whole command-line tool on a
+//! user's mechanism from one line.
+
+pub use vigp_core::Parameters;
+
+use crate::mechanism::{Coordinates, Mechanism};
+
+/// A mechanism declared with `mechanism!`: its run-time parameters
+/// ([`Parameters`], [`Default`] = the DSL's values) and both coordinate
+/// views.
+pub trait System: Parameters + Default + Copy + Send + Sync + 'static {
+    /// Calls `visitor` with the minimal and the maximal view of these
+    /// parameters.
+    fn visit<V: ViewVisitor>(&self, visitor: V) -> V::Output;
+}
+
+/// A computation generic over a mechanism's two coordinate views (see
+/// [`System::visit`]).
+pub trait ViewVisitor {
+    /// What the computation returns.
+    type Output;
+
+    /// Runs on the minimal view (`N` coordinates, `C` loop equations) and
+    /// the maximal view (`NM` = 3 per link, `CM` joint equations).
+    fn visit<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+        self,
+        minimal: Mn,
+        maximal: Mx,
+    ) -> Self::Output
+    where
+        Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
+        Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static;
+}
