@@ -11,8 +11,8 @@ use nalgebra::{DMatrix, DVector, SVector};
 use proptest::prelude::*;
 use std::sync::OnceLock;
 use vigp::bound::{
-    BoundError, BoundKind, BoundParts, Calibration, ConformalSettings, LipschitzF, NoiseBound,
-    NormBound, RkhsSettings, Score, SigmaModulus, Tau, Theorem1Settings, Tube, Window,
+    BoundError, BoundKind, BoundParts, Calibration, ConformalSettings, Fallback, LipschitzF,
+    NoiseBound, NormBound, RkhsSettings, Score, SigmaModulus, Tau, Theorem1Settings, Tube, Window,
 };
 use vigp::gp::TrainOptions;
 use vigp::learned::{Encoding, Learned, Prior, Transition};
@@ -280,7 +280,10 @@ fn rkhs_constants_match_a_second_implementation() {
             "N = {n}, λ = {lambda:.2e}: ln det {} vs {log_det} (tol {tol_det:.1e}); ‖μ‖ {} vs {mean_norm} (rel tol {tol_norm:.1e})",
             out.log_det, out.mean_norm
         );
-        assert!(tol_det < 1e-6 && tol_norm < 1e-6, "badly conditioned test model");
+        assert!(
+            tol_det < 1e-6 && tol_norm < 1e-6,
+            "badly conditioned test model"
+        );
         assert!((out.log_det - log_det).abs() <= tol_det);
         assert!((out.mean_norm - mean_norm).abs() <= tol_norm * mean_norm);
         // the formula, assembled from the reported parts
@@ -333,12 +336,21 @@ fn theorem1_constants_match_the_formulas() {
         for (i, o) in outputs.iter().enumerate() {
             let log_m: f64 = r
                 .iter()
-                .map(|rj| (rj * (d as f64).sqrt() / (2.0 * o.tau)).ceil().max(1.0).ln())
+                .map(|rj| {
+                    (rj * (d as f64).sqrt() / (2.0 * o.tau))
+                        .ceil()
+                        .max(1.0)
+                        .ln()
+                })
                 .sum();
             let beta = 2.0 * (log_m - (0.05f64 / p as f64).ln());
             assert!((o.beta - beta).abs() < 1e-9 * beta, "{} {beta}", o.beta);
             let hp = gp.output(i).hyperparameters();
-            let lmin = hp.length_scales.iter().copied().fold(f64::INFINITY, f64::min);
+            let lmin = hp
+                .length_scales
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min);
             let omega = match modulus {
                 SigmaModulus::FeatureSpace => hp.signal_variance.sqrt() * o.tau / lmin,
                 _ => o.omega_sigma,
@@ -411,6 +423,7 @@ fn predict_carries_a_bound_per_state() {
             delta: 0.05,
             score: Score::Absolute,
             tube: Tube::Simultaneous,
+            fallback: Fallback::None,
         }),
     ] {
         let b = l.error_bound(&kind, cal).unwrap();
@@ -523,7 +536,10 @@ fn any_kind() -> impl Strategy<Value = BoundKind> {
             }),
         (
             any_f64(),
-            prop_oneof![any_f64().prop_map(NormBound::MeanTimes), vecs.clone().prop_map(NormBound::Given)],
+            prop_oneof![
+                any_f64().prop_map(NormBound::MeanTimes),
+                vecs.clone().prop_map(NormBound::Given)
+            ],
             prop_oneof![Just(NoiseBound::Fitted), vecs.prop_map(NoiseBound::Given)]
         )
             .prop_map(|(delta, norm_bound, noise)| BoundKind::Rkhs(RkhsSettings {
@@ -535,7 +551,12 @@ fn any_kind() -> impl Strategy<Value = BoundKind> {
             BoundKind::Conformal(ConformalSettings {
                 delta,
                 score: if abs { Score::Absolute } else { Score::GpStd },
-                tube: if sim { Tube::Simultaneous } else { Tube::PerStep },
+                tube: if sim {
+                    Tube::Simultaneous
+                } else {
+                    Tube::PerStep
+                },
+                ..ConformalSettings::default()
             })
         }),
     ]

@@ -195,9 +195,14 @@ pub struct ConformalParts {
     /// q̂_k of the k-step position scores, k = 1…K (per step), or one value
     /// repeated K times (simultaneous).
     pub position_quantiles: Vec<f64>,
-    /// The largest predictive standard deviation ũ met during calibration
-    /// (a prediction beyond it extrapolates what was calibrated).
+    /// The largest predictive standard deviation ũ at a calibration start
+    /// (a start beyond it is unlike every calibration case).
     pub max_scale: f64,
+    /// Lower corner of the box of the calibration starts' GP inputs
+    /// (encoded, original units).
+    pub input_lower: Vec<f64>,
+    /// Upper corner of that box.
+    pub input_upper: Vec<f64>,
 }
 
 /// The index ⌈(n+1)(1−δ)⌉ (1-based) of the conformal quantile, or an error
@@ -271,6 +276,10 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
     let mut per_step = vec![Vec::with_capacity(n); k_max];
     let mut simultaneous = Vec::with_capacity(n);
     let (mut failed, mut max_scale) = (0usize, 0.0f64);
+    let d = learned.gp().input_dim();
+    let mut input = vec![0.0; d];
+    let mut lower = vec![f64::INFINITY; d];
+    let mut upper = vec![f64::NEG_INFINITY; d];
     for w in cal.windows() {
         let Ok(trace) = learned.trace(&w.start, k_max, &mut ws) else {
             failed += 1;
@@ -284,7 +293,12 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
             .iter()
             .map(|s| predictive_scale(s.as_slice(), noise))
             .collect();
-        max_scale = scales.iter().copied().fold(max_scale, f64::max);
+        max_scale = max_scale.max(scales[0]);
+        learned.encoding().encode(&M::KINDS, &w.start, &mut input);
+        for j in 0..d {
+            lower[j] = lower[j].min(input[j]);
+            upper[j] = upper[j].max(input[j]);
+        }
         let v1 = (w.positions[1] - w.positions[0]) / dt;
         let e1 = (trace.states[1].v - v1).norm();
         one.push(match settings.score {
@@ -320,6 +334,8 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
         one_step_quantile,
         position_quantiles,
         max_scale,
+        input_lower: lower,
+        input_upper: upper,
     })
 }
 

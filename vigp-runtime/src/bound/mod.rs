@@ -82,9 +82,7 @@ pub enum BoundError {
     Empty(&'static str),
     /// Too few calibration cases for δ: the conformal quantile would be
     /// infinite.
-    #[error(
-        "too few calibration windows for delta = {delta}: need at least {needed}, got {got}"
-    )]
+    #[error("too few calibration windows for delta = {delta}: need at least {needed}, got {got}")]
     TooFewCalibration {
         /// The δ asked for.
         delta: f64,
@@ -293,6 +291,28 @@ pub enum Tube {
     Simultaneous,
 }
 
+/// What the conformal bound does outside its calibrated region: for a
+/// state whose GP input lies outside the box of the calibration starts'
+/// inputs, or whose predictive standard deviation exceeds every
+/// calibration start's. Such a case is not exchangeable with the
+/// calibration cases and the conformal guarantee does not apply to it.
+///
+/// With a fallback, a flagged state's one-step bound is the larger of the
+/// conformal and the fallback bound, and when the *start* z₀ is flagged the
+/// position bounds of the whole prediction are too (the k-step calibration
+/// is about windows from the calibration starts' distribution).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Fallback {
+    /// Keep the conformal bound and only flag the states
+    /// ([`BoundedPrediction::outside`]).
+    None,
+    /// Flag, and fall back to the RKHS bound (default settings, same δ),
+    /// whose guarantee covers every input.
+    Rkhs,
+    /// Flag, and fall back to the Theorem-1 bound (default settings, same δ).
+    Theorem1,
+}
+
 /// Settings of the conformal bound.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ConformalSettings {
@@ -303,6 +323,8 @@ pub struct ConformalSettings {
     pub score: Score,
     /// Per-step or simultaneous tube. Default [`Tube::PerStep`].
     pub tube: Tube,
+    /// Outside the calibrated region. Default [`Fallback::Rkhs`].
+    pub fallback: Fallback,
 }
 
 impl Default for ConformalSettings {
@@ -311,6 +333,7 @@ impl Default for ConformalSettings {
             delta: 0.05,
             score: Score::GpStd,
             tube: Tube::PerStep,
+            fallback: Fallback::Rkhs,
         }
     }
 }
@@ -400,6 +423,9 @@ pub struct ErrorBound {
     pub parts: BoundParts,
     /// Sample states L and τ were estimated at.
     pub samples: usize,
+    /// The rigorous bound a conformal bound falls back to outside its
+    /// calibrated region ([`Fallback`]).
+    pub fallback: Option<Box<ErrorBound>>,
     outputs: usize,
     dt: f64,
     /// Per output √(σ_n² + jitter) in velocity units: the noise floor of the
@@ -507,7 +533,13 @@ impl ErrorBound {
                 .zip(domain_lower.iter().zip(domain_upper))
                 .any(|(x, (lo, hi))| x < lo || x > hi),
             BoundParts::Rkhs { .. } => false,
-            BoundParts::Conformal(c) => scale > c.max_scale,
+            BoundParts::Conformal(c) => {
+                scale > c.max_scale
+                    || input
+                        .iter()
+                        .zip(c.input_lower.iter().zip(&c.input_upper))
+                        .any(|(x, (lo, hi))| x < lo || x > hi)
+            }
         }
     }
 }
@@ -587,6 +619,13 @@ impl fmt::Display for ErrorBound {
                     c.position_quantiles.len(),
                     c.position_quantiles
                 )?;
+                match &self.fallback {
+                    Some(b) => write!(
+                        f,
+                        "  outside the calibrated region it falls back to the {b}"
+                    )?,
+                    None => writeln!(f, "  outside the calibrated region: flagged only")?,
+                }
             }
         }
         Ok(())
@@ -612,10 +651,14 @@ pub struct BoundedPrediction<const N: usize> {
     /// K values: the size of each projection correction.
     pub corrections: Vec<f64>,
     /// K values: `true` where z_k lies outside what the bound covers
-    /// (Theorem 1: its GP input is outside the box X; conformal: its
-    /// predictive standard deviation exceeds every calibration case's, so
-    /// the prediction extrapolates beyond the calibration data).
+    /// (Theorem 1: its GP input is outside the box X; conformal: its GP
+    /// input is outside the box of the calibration starts' inputs, or its
+    /// predictive standard deviation exceeds every calibration start's: the
+    /// case is unlike the calibration data).
     pub outside: Vec<bool>,
+    /// `true` when a conformal bound left its calibrated region and some
+    /// bounds are the larger of it and its [`Fallback`] (see there).
+    pub fell_back: bool,
 }
 
 /// States, standard deviations and corrections of a learned prediction.
@@ -715,6 +758,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             projection_lipschitz,
             parts,
             samples,
+            fallback: None,
             outputs: p,
             dt,
             noise_std: noise_std.clone(),
@@ -726,7 +770,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 ));
             }
             let parts = conformal::calibrate(self, s, calibration, &noise_std)?;
-            return Ok(bound(BoundParts::Conformal(parts), 1.0, 0));
+            let mut b = bound(BoundParts::Conformal(parts), 1.0, 0);
+            let fallback = match s.fallback {
+                Fallback::None => None,
+                Fallback::Rkhs => Some(BoundKind::rkhs(s.delta)),
+                Fallback::Theorem1 => Some(BoundKind::theorem1(s.delta)),
+            };
+            if let Some(kind) = fallback {
+                b.fallback = Some(Box::new(self.error_bound(&kind, calibration)?));
+            }
+            return Ok(b);
         }
         check_delta(kind.delta())?;
         let samples = self.sample_states(calibration);
@@ -771,8 +824,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// every state carries its bound: the one-step velocity bound of each
     /// step and the position bound of each state (see
     /// [`BoundedPrediction`]). Cost: `steps` learned steps with variances,
-    /// plus, for the rigorous kinds, 4N mean steps per step for the local
-    /// Jacobian that propagates the bound.
+    /// plus, for the rigorous kinds (and a conformal bound that falls
+    /// back), 2N + 1 mean steps per step for the local Jacobian that
+    /// propagates the bound.
     ///
     /// Errors: a bound made for another model, more steps than a conformal
     /// bound was calibrated for, a failed step, or a non-finite bound.
@@ -804,6 +858,50 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         }
         let mut ws = self.workspace();
         let trace = self.trace(z0, steps, &mut ws)?;
+        let (mut one_step, mut position, outside) = self.attach(bound, &trace, &mut ws, true)?;
+        let mut fell_back = false;
+        if let Some(fb) = &bound.fallback
+            && outside.iter().any(|o| *o)
+        {
+            // the fallback's position bounds (which cost a Jacobian per
+            // step) only when the start itself is outside
+            let start_outside = outside.first().copied().unwrap_or(false);
+            let (one, pos, _) = self.attach(fb, &trace, &mut ws, start_outside)?;
+            for ((a, b), o) in one_step.iter_mut().zip(one).zip(&outside) {
+                if *o {
+                    *a = a.max(b);
+                }
+            }
+            if start_outside {
+                for (a, b) in position.iter_mut().zip(pos) {
+                    *a = a.max(b);
+                }
+            }
+            fell_back = true;
+        }
+        Ok(BoundedPrediction {
+            states: trace.states,
+            one_step_bounds: one_step,
+            position_bounds: position,
+            std_devs: trace.std_devs,
+            corrections: trace.corrections,
+            outside,
+            fell_back,
+        })
+    }
+
+    /// One-step bounds, position bounds (only the initial 0 unless
+    /// `positions`) and outside flags of `bound` along a predicted trace.
+    #[allow(clippy::type_complexity)]
+    fn attach(
+        &self,
+        bound: &ErrorBound,
+        trace: &Trace<N>,
+        ws: &mut Workspace,
+        positions: bool,
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>), BoundError> {
+        let dt = Integrator::dt(self);
+        let steps = trace.std_devs.len();
         let mut input = vec![0.0; self.gp().input_dim()];
         let mut one_step = Vec::with_capacity(steps);
         let mut outside = Vec::with_capacity(steps);
@@ -818,6 +916,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let mut position = Vec::with_capacity(steps + 1);
         position.push(0.0);
         match &bound.parts {
+            _ if !positions => {}
             BoundParts::Conformal(c) => {
                 let u = position_scales(&scales, dt);
                 for (k, q) in c.position_quantiles.iter().take(steps).enumerate() {
@@ -831,7 +930,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 let (mut pk, mut vk) = (0.0f64, 0.0f64);
                 for k in 0..steps {
                     let (a, c) = if k > 0 && k + 1 < steps {
-                        self.step_jacobian_norms(&trace.states[k], &mut ws)?
+                        self.step_jacobian_norms(&trace.states[k], ws)?
                     } else {
                         (0.0, 0.0)
                     };
@@ -848,13 +947,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 value: *bad,
             });
         }
-        Ok(BoundedPrediction {
-            states: trace.states,
-            one_step_bounds: one_step,
-            position_bounds: position,
-            std_devs: trace.std_devs,
-            corrections: trace.corrections,
-            outside,
-        })
+        Ok((one_step, position, outside))
     }
 }

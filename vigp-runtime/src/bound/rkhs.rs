@@ -92,8 +92,8 @@ pub(super) fn compute(gp: &Gp, settings: &RkhsSettings) -> Result<Vec<RkhsOutput
         };
         let lbar = lambda.max(1.0);
         let log_det = n as f64 * (lbar / lambda).ln() + o.log_det_normalised();
-        let beta = norm_bound
-            + noise_bound / lambda.sqrt() * (log_det.max(0.0) - 2.0 * ln_delta_i).sqrt();
+        let beta =
+            norm_bound + noise_bound / lambda.sqrt() * (log_det.max(0.0) - 2.0 * ln_delta_i).sqrt();
         for (what, value) in [
             ("RKHS mean norm", mean_norm),
             ("RKHS log det", log_det),

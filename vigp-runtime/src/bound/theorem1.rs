@@ -156,9 +156,7 @@ pub(super) fn compute(
         let lederer_c = match settings.sigma_modulus {
             SigmaModulus::FeatureSpace => 0.0,
             // ‖(K + σ²I)⁻¹‖ in normalised units
-            SigmaModulus::Lederer2019 => {
-                1.0 + n as f64 * o.inv_gram_norm()? * s_y * s_y * sf2
-            }
+            SigmaModulus::Lederer2019 => 1.0 + n as f64 * o.inv_gram_norm()? * s_y * s_y * sf2,
         };
         let omega = |tau: f64| match settings.sigma_modulus {
             SigmaModulus::FeatureSpace => sf2.sqrt() * tau / lmin,
@@ -220,8 +218,12 @@ pub(super) fn compute(
         }
         outputs.push(out);
     }
-    let lower = (0..d).map(|j| norm.shift[j] + norm.scale[j] * lo[j]).collect();
-    let upper = (0..d).map(|j| norm.shift[j] + norm.scale[j] * hi[j]).collect();
+    let lower = (0..d)
+        .map(|j| norm.shift[j] + norm.scale[j] * lo[j])
+        .collect();
+    let upper = (0..d)
+        .map(|j| norm.shift[j] + norm.scale[j] * hi[j])
+        .collect();
     Ok(Theorem1Parts {
         outputs,
         lower,
