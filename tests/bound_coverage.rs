@@ -40,6 +40,9 @@ const TEST: usize = 1000;
 /// Jacobian per step).
 const SHIFTED: usize = 300;
 
+/// Draws a start (q, q̇).
+type Sampler<'a, const N: usize> = dyn Fn(&mut Rng) -> (SVector<f64, N>, SVector<f64, N>) + 'a;
+
 /// A window of K steps of `truth` from (q, q̇), simulated by the midpoint VI
 /// at Δt/SUB (None if the start cannot be made consistent or a step fails).
 fn window<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
@@ -70,7 +73,7 @@ fn windows<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     truth: M,
     seed: u64,
     count: usize,
-    sample: &dyn Fn(&mut Rng) -> (SVector<f64, N>, SVector<f64, N>),
+    sample: &Sampler<'_, N>,
 ) -> Vec<Window<N>> {
     let mut rng = Rng(seed);
     let mut out = Vec::with_capacity(count);
@@ -125,8 +128,8 @@ fn evaluate<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     nominal: M,
     encoding: Encoding,
     prior: Prior,
-    sample: &dyn Fn(&mut Rng) -> (SVector<f64, N>, SVector<f64, N>),
-    shifted: &dyn Fn(&mut Rng) -> (SVector<f64, N>, SVector<f64, N>),
+    sample: &Sampler<'_, N>,
+    shifted: &Sampler<'_, N>,
 ) -> Vec<Row> {
     let t0 = std::time::Instant::now();
     let mut rng = Rng(99);

@@ -214,11 +214,17 @@ fn windows_of<const P: usize>(
         .to_vec())
 }
 
+/// Draws a configuration at rest.
+pub type Start<'a, const N: usize> = dyn Fn(&mut Rng) -> SVector<f64, N> + Sync + 'a;
+/// Draws a configuration and a velocity.
+pub type MovingStart<'a, const N: usize> =
+    dyn Fn(&mut Rng) -> (SVector<f64, N>, SVector<f64, N>) + Sync + 'a;
+
 /// The bound evaluation of one system (all three coordinate choices).
 pub fn evaluate<S, Mn, Mx, const N: usize, const C: usize, const M: usize, const K: usize>(
     spec: &SystemSpec<S, Mn, Mx>,
-    sample_q0: &(dyn Fn(&mut Rng) -> SVector<f64, N> + Sync),
-    shifted_start: &(dyn Fn(&mut Rng) -> (SVector<f64, N>, SVector<f64, N>) + Sync),
+    sample_q0: &Start<'_, N>,
+    shifted_start: &MovingStart<'_, N>,
     cli: &Cli,
 ) -> Result<(Vec<BoundRow>, Vec<Tube>), Box<dyn Error>>
 where

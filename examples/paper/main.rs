@@ -331,11 +331,10 @@ where
 }
 
 /// Fig. 2 of one system, then (unless `--no-bounds`) its error bounds.
-#[allow(clippy::type_complexity)]
 fn run_system<S, Mn, Mx, const N: usize, const C: usize, const M: usize, const K: usize>(
     spec: &SystemSpec<S, Mn, Mx>,
-    sample: &(dyn Fn(&mut Rng) -> SVector<f64, N> + Sync),
-    shifted: &(dyn Fn(&mut Rng) -> (SVector<f64, N>, SVector<f64, N>) + Sync),
+    sample: &bounds::Start<'_, N>,
+    shifted: &bounds::MovingStart<'_, N>,
     cli: &Cli,
     progress: &ProgressBar,
     bound_out: &mut (Vec<bounds::BoundRow>, Vec<bounds::Tube>),

@@ -928,14 +928,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             }
             _ => {
                 let (mut pk, mut vk) = (0.0f64, 0.0f64);
-                for k in 0..steps {
+                for (k, b) in one_step.iter().enumerate() {
                     let (a, c) = if k > 0 && k + 1 < steps {
                         self.step_jacobian_norms(&trace.states[k], ws)?
                     } else {
                         (0.0, 0.0)
                     };
                     let p_next = pk + dt * vk;
-                    vk = a * pk + c * vk + one_step[k];
+                    vk = a * pk + c * vk + b;
                     pk = p_next;
                     position.push(pk);
                 }
