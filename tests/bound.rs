@@ -356,6 +356,7 @@ fn theorem1_constants_match_the_formulas() {
                 _ => o.omega_sigma,
             };
             assert!((o.omega_sigma - omega).abs() <= 1e-12 * omega);
+            assert!((o.lipschitz_sigma * o.tau - omega).abs() <= 1e-12 * omega);
             let gamma = ((o.lipschitz_mean + o.lipschitz_f) * o.tau + beta.sqrt() * omega)
                 * gp.output(i).output_scale();
             assert!((o.gamma - gamma).abs() <= 1e-9 * gamma);

@@ -563,22 +563,22 @@ impl fmt::Display for ErrorBound {
             } => {
                 writeln!(
                     f,
-                    "  |f_i - mu_i| <= sqrt(beta_i) sigma_i + gamma_i on X; omega_sigma: {sigma_modulus:?}; L_mu, L_f, tau, omega in normalised units"
+                    "  |f_i - mu_i| <= sqrt(beta_i) sigma_i + gamma_i on X; omega_sigma: {sigma_modulus:?}; L_mu, L_f, L_sigma, tau in normalised units"
                 )?;
                 writeln!(
                     f,
-                    "  output      beta    gamma        L_mu         L_f        tau    omega_sigma  sigma-multiplier L*sqrt(beta)"
+                    "  output      beta    gamma        L_mu         L_f     L_sigma        tau  sigma-multiplier L*sqrt(beta)"
                 )?;
                 for (i, o) in outputs.iter().enumerate() {
                     writeln!(
                         f,
-                        "  {i:>6} {:>9.2} {:>8.2e} {:>11.3e} {:>11.3e} {:>10.2e} {:>14.3e} {:>10.2}",
+                        "  {i:>6} {:>9.2} {:>8.2e} {:>11.3e} {:>11.3e} {:>11.3e} {:>10.2e} {:>10.2}",
                         o.beta,
                         o.gamma,
                         o.lipschitz_mean,
                         o.lipschitz_f,
+                        o.lipschitz_sigma,
                         o.tau,
-                        o.omega_sigma,
                         self.projection_lipschitz * o.beta.sqrt()
                     )?;
                 }

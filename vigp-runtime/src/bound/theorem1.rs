@@ -33,6 +33,10 @@ pub struct Theorem1Output {
     pub lipschitz_f: f64,
     /// ω_σ(τ): modulus of continuity of the posterior standard deviation at τ.
     pub omega_sigma: f64,
+    /// L_σ = ω_σ(τ)/τ: the Lipschitz constant of σ for the feature-space
+    /// modulus (σ_f/ℓ_min); for Lederer's, whose ω_σ grows like √τ, the
+    /// slope of the secant at τ.
+    pub lipschitz_sigma: f64,
     /// Median posterior standard deviation (normalised) at the sample
     /// states, the scale τ was chosen for.
     pub sigma_median: f64,
@@ -205,6 +209,7 @@ pub(super) fn compute(
             lipschitz_mean: l_mu,
             lipschitz_f: l_f,
             omega_sigma: omega(tau),
+            lipschitz_sigma: omega(tau) / tau,
             sigma_median,
         };
         for (what, value) in [
