@@ -203,6 +203,46 @@ pub struct ConformalParts {
     pub input_lower: Vec<f64>,
     /// Upper corner of that box.
     pub input_upper: Vec<f64>,
+    /// The calibration starts' GP inputs in the GP's normalised units
+    /// (row-major n × d), for the nearest-neighbour test.
+    pub starts_normalised: Vec<f64>,
+    /// A start farther than this (normalised units) from every calibration
+    /// start is outside: the 99 % conformal quantile of the calibration
+    /// starts' leave-one-out nearest-neighbour distances.
+    pub distance_threshold: f64,
+}
+
+/// Level of the nearest-neighbour distance threshold: about 1 % of cases
+/// drawn like the calibration starts are flagged.
+const DISTANCE_LEVEL: f64 = 0.01;
+
+impl ConformalParts {
+    /// Distance (normalised units) from `xn` to the nearest calibration
+    /// start, skipping index `skip`.
+    fn nearest(&self, xn: &[f64], skip: Option<usize>) -> f64 {
+        let d = xn.len();
+        let mut best = f64::INFINITY;
+        for (i, row) in self.starts_normalised.chunks_exact(d).enumerate() {
+            if Some(i) == skip {
+                continue;
+            }
+            let mut s = 0.0;
+            for (a, b) in row.iter().zip(xn) {
+                s += (a - b) * (a - b);
+                if s >= best {
+                    break;
+                }
+            }
+            best = best.min(s);
+        }
+        best.sqrt()
+    }
+
+    /// Whether the normalised GP input `xn` is farther from every
+    /// calibration start than [`ConformalParts::distance_threshold`].
+    pub(crate) fn far(&self, xn: &[f64]) -> bool {
+        !self.starts_normalised.is_empty() && self.nearest(xn, None) > self.distance_threshold
+    }
 }
 
 /// The index ⌈(n+1)(1−δ)⌉ (1-based) of the conformal quantile, or an error
@@ -280,7 +320,17 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
     let mut input = vec![0.0; d];
     let mut lower = vec![f64::INFINITY; d];
     let mut upper = vec![f64::NEG_INFINITY; d];
-    for w in cal.windows() {
+    let mut starts_normalised = vec![0.0; n * d];
+    for (index, w) in cal.windows().iter().enumerate() {
+        learned.encoding().encode(&M::KINDS, &w.start, &mut input);
+        learned
+            .gp()
+            .input_normaliser()
+            .apply(&input, &mut starts_normalised[index * d..(index + 1) * d]);
+        for j in 0..d {
+            lower[j] = lower[j].min(input[j]);
+            upper[j] = upper[j].max(input[j]);
+        }
         let Ok(trace) = learned.trace(&w.start, k_max, &mut ws) else {
             failed += 1;
             one.push(f64::INFINITY);
@@ -294,11 +344,6 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
             .map(|s| predictive_scale(s.as_slice(), noise))
             .collect();
         max_scale = max_scale.max(scales[0]);
-        learned.encoding().encode(&M::KINDS, &w.start, &mut input);
-        for j in 0..d {
-            lower[j] = lower[j].min(input[j]);
-            upper[j] = upper[j].max(input[j]);
-        }
         let v1 = (w.positions[1] - w.positions[0]) / dt;
         let e1 = (trace.states[1].v - v1).norm();
         one.push(match settings.score {
@@ -326,7 +371,7 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
             .collect::<Result<_, _>>()?,
         Tube::Simultaneous => vec![quantile(&mut simultaneous, settings.delta)?; k_max],
     };
-    Ok(ConformalParts {
+    let mut parts = ConformalParts {
         score: settings.score,
         tube: settings.tube,
         calibration_size: n,
@@ -336,7 +381,21 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
         max_scale,
         input_lower: lower,
         input_upper: upper,
-    })
+        starts_normalised,
+        distance_threshold: f64::INFINITY,
+    };
+    // leave-one-out nearest-neighbour distances of the calibration starts
+    // (O(n²·d)); with n ≥ 99 their 99 % quantile, else their maximum
+    let mut nn: Vec<f64> = (0..n)
+        .map(|i| parts.nearest(&parts.starts_normalised[i * d..(i + 1) * d], Some(i)))
+        .collect();
+    nn.sort_by(f64::total_cmp);
+    let level = quantile_index(n, DISTANCE_LEVEL).unwrap_or(n);
+    parts.distance_threshold = nn
+        .get(level.saturating_sub(1))
+        .copied()
+        .unwrap_or(f64::INFINITY);
+    Ok(parts)
 }
 
 #[cfg(test)]

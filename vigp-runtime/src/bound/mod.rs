@@ -293,9 +293,12 @@ pub enum Tube {
 
 /// What the conformal bound does outside its calibrated region: for a
 /// state whose GP input lies outside the box of the calibration starts'
-/// inputs, or whose predictive standard deviation exceeds every
-/// calibration start's. Such a case is not exchangeable with the
-/// calibration cases and the conformal guarantee does not apply to it.
+/// inputs, or farther (in the GP's normalised inputs) from every
+/// calibration start than 99 % of the calibration starts are from their
+/// nearest other one, or whose predictive standard deviation exceeds every
+/// calibration start's. Such a case is unlike the calibration cases, and
+/// the conformal guarantee does not apply to it. (A heuristic detector:
+/// about 1 % of cases drawn like the calibration starts are flagged.)
 ///
 /// With a fallback, a flagged state's one-step bound is the larger of the
 /// conformal and the fallback bound, and when the *start* z₀ is flagged the
@@ -518,11 +521,13 @@ impl ErrorBound {
         }
     }
 
-    /// Whether a state with GP input `input` and predictive scale `scale`
-    /// lies outside what the bound covers: outside the box X (Theorem 1), or
-    /// beyond the largest scale met in calibration (conformal: the case is
-    /// then unlike every calibration case). Never for the RKHS kind.
-    fn outside(&self, input: &[f64], scale: f64) -> bool {
+    /// Whether a state with GP input `input` (`input_n` normalised) and
+    /// predictive scale `scale` lies outside what the bound covers: outside
+    /// the box X (Theorem 1); for the conformal kind, outside the box of the
+    /// calibration starts, farther from every calibration start than their
+    /// nearest-neighbour threshold, or beyond their largest scale. Never for
+    /// the RKHS kind.
+    fn outside(&self, input: &[f64], input_n: &[f64], scale: f64) -> bool {
         match &self.parts {
             BoundParts::Theorem1 {
                 domain_lower,
@@ -539,6 +544,7 @@ impl ErrorBound {
                         .iter()
                         .zip(c.input_lower.iter().zip(&c.input_upper))
                         .any(|(x, (lo, hi))| x < lo || x > hi)
+                    || c.far(input_n)
             }
         }
     }
@@ -652,9 +658,8 @@ pub struct BoundedPrediction<const N: usize> {
     pub corrections: Vec<f64>,
     /// K values: `true` where z_k lies outside what the bound covers
     /// (Theorem 1: its GP input is outside the box X; conformal: its GP
-    /// input is outside the box of the calibration starts' inputs, or its
-    /// predictive standard deviation exceeds every calibration start's: the
-    /// case is unlike the calibration data).
+    /// input is outside the box of, or far from, the calibration starts, or
+    /// its predictive standard deviation exceeds theirs: see [`Fallback`]).
     pub outside: Vec<bool>,
     /// `true` when a conformal bound left its calibrated region and some
     /// bounds are the larger of it and its [`Fallback`] (see there).
@@ -903,6 +908,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let dt = Integrator::dt(self);
         let steps = trace.std_devs.len();
         let mut input = vec![0.0; self.gp().input_dim()];
+        let mut input_n = input.clone();
         let mut one_step = Vec::with_capacity(steps);
         let mut outside = Vec::with_capacity(steps);
         let mut scales = Vec::with_capacity(steps);
@@ -910,7 +916,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             one_step.push(bound.one_step(sd.as_slice())?);
             let s = predictive_scale(sd.as_slice(), &bound.noise_std);
             self.encoding().encode(&M::KINDS, z, &mut input);
-            outside.push(bound.outside(&input, s));
+            self.gp().input_normaliser().apply(&input, &mut input_n);
+            outside.push(bound.outside(&input, &input_n, s));
             scales.push(s);
         }
         let mut position = Vec::with_capacity(steps + 1);
