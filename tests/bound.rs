@@ -426,6 +426,12 @@ fn predict_carries_a_bound_per_state() {
             tube: Tube::Simultaneous,
             fallback: Fallback::None,
         }),
+        BoundKind::Conformal(ConformalSettings {
+            delta: 0.05,
+            score: Score::LatentStd,
+            fallback: Fallback::Theorem1,
+            ..ConformalSettings::default()
+        }),
     ] {
         let b = l.error_bound(&kind, cal).unwrap();
         let p = l.predict(&z0, 5, &b).unwrap();
@@ -548,18 +554,27 @@ fn any_kind() -> impl Strategy<Value = BoundKind> {
                 norm_bound,
                 noise
             })),
-        (any_f64(), any::<bool>(), any::<bool>()).prop_map(|(delta, abs, sim)| {
-            BoundKind::Conformal(ConformalSettings {
-                delta,
-                score: if abs { Score::Absolute } else { Score::GpStd },
-                tube: if sim {
-                    Tube::Simultaneous
-                } else {
-                    Tube::PerStep
-                },
-                ..ConformalSettings::default()
-            })
-        }),
+        (
+            any_f64(),
+            prop_oneof![
+                Just(Score::GpStd),
+                Just(Score::LatentStd),
+                Just(Score::Absolute)
+            ],
+            any::<bool>()
+        )
+            .prop_map(|(delta, score, sim)| {
+                BoundKind::Conformal(ConformalSettings {
+                    delta,
+                    score,
+                    tube: if sim {
+                        Tube::Simultaneous
+                    } else {
+                        Tube::PerStep
+                    },
+                    ..ConformalSettings::default()
+                })
+            }),
     ]
 }
 

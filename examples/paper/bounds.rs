@@ -20,7 +20,7 @@ use serde::Serialize;
 use std::error::Error;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use vigp::bound::{BoundKind, Calibration, Window};
+use vigp::bound::{BoundKind, Calibration, ConformalSettings, Score, Window};
 use vigp::gp::TrainOptions;
 use vigp::learned::{Encoding, Learned, Transition, transitions};
 use vigp::prelude::*;
@@ -38,7 +38,8 @@ pub struct BoundRow {
     pub system: String,
     /// `minimal`, `sincos` or `maximal`.
     pub coords: &'static str,
-    /// `conformal`, `theorem1` or `rkhs`.
+    /// `conformal`, `conformal-latent` (score normalised by the latent σ,
+    /// for noise-free targets such as these), `theorem1` or `rkhs`.
     pub kind: &'static str,
     /// `held-out` (starts like the training ones) or `shifted`.
     pub set: &'static str,
@@ -169,6 +170,13 @@ fn evaluate_model<Mo: Mechanism<P, Q> + Clone + Sync, const P: usize, const Q: u
     };
     for (name, kind) in [
         ("conformal", BoundKind::conformal(DELTA)),
+        (
+            "conformal-latent",
+            BoundKind::Conformal(ConformalSettings {
+                score: Score::LatentStd,
+                ..ConformalSettings::default()
+            }),
+        ),
         ("theorem1", BoundKind::theorem1(DELTA)),
         ("rkhs", BoundKind::rkhs(DELTA)),
     ] {
@@ -189,6 +197,9 @@ fn evaluate_model<Mo: Mechanism<P, Q> + Clone + Sync, const P: usize, const Q: u
                 })
                 .collect();
             rows.push(row(system, coords, name, set, &results));
+        }
+        if name == "conformal-latent" {
+            continue;
         }
         let p = learned.predict(&tube_window.start, HORIZON, &bound)?;
         if tube.deviation.is_empty() {
@@ -334,7 +345,7 @@ pub fn report(rows: &[BoundRow], cli: &Cli) -> String {
     // `write!` into a String cannot fail.
     let _ = writeln!(
         md,
-        "# Error bounds\n\nδ = {DELTA}; per system one perturbed truth, N = {} noisy training samples (σ = 1e-3), {} calibration and {} test trajectories (2 s, random configurations at rest, as the training ones, from two further seeds) cut into 20-step windows every {STRIDE} samples, and {} trajectories started with more energy than any training start (\"shifted\"). Coverage: fraction of cases whose error is within the bound; tightness: median bound ÷ median error. One step: the velocity error ‖v₁ − v₁,true‖; 20 steps: the position error ‖q₂₀ − q₂₀,true‖ in the model's coordinates. Flagged: starts the bound marks as outside its region (for the conformal bound, those get the RKHS fallback).\n",
+        "# Error bounds\n\nδ = {DELTA}; per system one perturbed truth, N = {} noisy training samples (σ = 1e-3), {} calibration and {} test trajectories (2 s, random configurations at rest, as the training ones, from two further seeds) cut into 20-step windows every {STRIDE} samples, and {} trajectories started with more energy than any training start (\"shifted\"). Coverage: fraction of cases whose error is within the bound; tightness: median bound ÷ median error. One step: the velocity error ‖v₁ − v₁,true‖; 20 steps: the position error ‖q₂₀ − q₂₀,true‖ in the model's coordinates. Flagged: starts the bound marks as outside its region (for the conformal bound, those get the RKHS fallback). `conformal` is the default (scores normalised by the GP's predictive σ, for noisy targets); `conformal-latent` normalises by the latent σ (`Score::LatentStd`), the choice for noise-free targets such as these.\n",
         cli.n.iter().copied().max().unwrap_or(0),
         cli.bound_trajectories,
         cli.bound_trajectories,

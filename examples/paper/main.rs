@@ -596,7 +596,7 @@ fn findings(points: &[Fig2Point], cli: &Cli) -> String {
 /// the systems and coordinate choices (details in `bounds.md`).
 fn bound_findings(rows: &[bounds::BoundRow]) -> String {
     let mut out = String::new();
-    for kind in ["conformal", "theorem1", "rkhs"] {
+    for kind in ["conformal", "conformal-latent", "theorem1", "rkhs"] {
         for set in ["held-out", "shifted"] {
             let r: Vec<&bounds::BoundRow> = rows
                 .iter()

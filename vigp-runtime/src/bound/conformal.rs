@@ -286,6 +286,20 @@ pub(crate) fn predictive_scale(std_dev: &[f64], noise: &[f64]) -> f64 {
         .sqrt()
 }
 
+/// The scale a one-step score is divided by: the predictive standard
+/// deviation ([`Score::GpStd`]), the latent one ([`Score::LatentStd`],
+/// floored at 1e-6 of the noise so that it stays positive) or 1.
+pub(crate) fn score_scale(score: Score, std_dev: &[f64], noise: &[f64]) -> f64 {
+    match score {
+        Score::GpStd => predictive_scale(std_dev, noise),
+        Score::LatentStd => {
+            let floor = (1e-6 * noise.iter().fold(0.0f64, |m, n| m.max(*n))).max(f64::MIN_POSITIVE);
+            std_dev.iter().map(|s| s * s).sum::<f64>().sqrt().max(floor)
+        }
+        Score::Absolute => 1.0,
+    }
+}
+
 /// u_k = Δt·Σ_{j<k} Σ_{i≤j} ũ_i for k = 1…K from the scales ũ_0…ũ_{K−1}.
 pub(crate) fn position_scales(scales: &[f64], dt: f64) -> Vec<f64> {
     let (mut inner, mut outer) = (0.0, 0.0);
@@ -338,26 +352,20 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
             simultaneous.push(f64::INFINITY);
             continue;
         };
+        max_scale = max_scale.max(predictive_scale(trace.std_devs[0].as_slice(), noise));
         let scales: Vec<f64> = trace
             .std_devs
             .iter()
-            .map(|s| predictive_scale(s.as_slice(), noise))
+            .map(|s| score_scale(settings.score, s.as_slice(), noise))
             .collect();
-        max_scale = max_scale.max(scales[0]);
         let v1 = (w.positions[1] - w.positions[0]) / dt;
         let e1 = (trace.states[1].v - v1).norm();
-        one.push(match settings.score {
-            Score::GpStd => e1 / scales[0],
-            Score::Absolute => e1,
-        });
+        one.push(e1 / scales[0]);
         let u = position_scales(&scales, dt);
         let mut worst = 0.0f64;
         for k in 1..=k_max {
             let e = (trace.states[k].q - w.positions[k - 1]).norm();
-            let s = match settings.score {
-                Score::GpStd => e / u[k - 1],
-                Score::Absolute => e,
-            };
+            let s = e / u[k - 1];
             per_step[k - 1].push(s);
             worst = worst.max(s);
         }

@@ -50,7 +50,7 @@ use crate::learned::{LearnError, Learned};
 use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
 use crate::variational::Integrator;
-use conformal::{position_scales, predictive_scale};
+use conformal::{position_scales, predictive_scale, score_scale};
 use core::fmt;
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
@@ -269,14 +269,20 @@ impl Default for RkhsSettings {
     }
 }
 
-/// The normalisation of conformal scores.
+/// The normalisation of conformal scores: the one-step error is divided by
+/// a scale ũ of the start, the k-step position error by
+/// u_k = Δt·Σ_{j<k} Σ_{i≤j} ũ_i along the prediction. Any choice keeps the
+/// coverage guarantee; it decides where the bound is wide.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Score {
-    /// Error divided by the GP's predictive standard deviation (one step),
-    /// or by its accumulation along the prediction (k steps): the bound
-    /// widens where the GP is unsure.
+    /// ũ = the GP's predictive standard deviation √(Σ σ_i² + σ_n,i²), for
+    /// a noisy observation: the bound widens where the GP is unsure.
     GpStd,
-    /// The error itself: one constant bound per horizon.
+    /// ũ = the latent standard deviation √(Σ σ_i²) (floored at 1e-6 of the
+    /// noise): for noise-free targets (simulated data), where the noise
+    /// floor of [`Score::GpStd`] blurs the normalisation.
+    LatentStd,
+    /// ũ = 1: one constant bound per horizon (u_k = Δt·k(k+1)/2).
     Absolute,
 }
 
@@ -506,10 +512,9 @@ impl ErrorBound {
                     0.0
                 }
             }
-            BoundParts::Conformal(c) => match c.score {
-                Score::GpStd => c.one_step_quantile * predictive_scale(std_dev, &self.noise_std),
-                Score::Absolute => c.one_step_quantile,
-            },
+            BoundParts::Conformal(c) => {
+                c.one_step_quantile * score_scale(c.score, std_dev, &self.noise_std)
+            }
         };
         if b.is_finite() && b >= 0.0 {
             Ok(b)
@@ -918,7 +923,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             self.encoding().encode(&M::KINDS, z, &mut input);
             self.gp().input_normaliser().apply(&input, &mut input_n);
             outside.push(bound.outside(&input, &input_n, s));
-            scales.push(s);
+            if let BoundParts::Conformal(c) = &bound.parts {
+                scales.push(score_scale(c.score, sd.as_slice(), &bound.noise_std));
+            }
         }
         let mut position = Vec::with_capacity(steps + 1);
         position.push(0.0);
@@ -926,11 +933,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             _ if !positions => {}
             BoundParts::Conformal(c) => {
                 let u = position_scales(&scales, dt);
-                for (k, q) in c.position_quantiles.iter().take(steps).enumerate() {
-                    position.push(match c.score {
-                        Score::GpStd => q * u[k],
-                        Score::Absolute => *q,
-                    });
+                for (q, u) in c.position_quantiles.iter().zip(u) {
+                    position.push(q * u);
                 }
             }
             _ => {
