@@ -559,7 +559,8 @@ fn any_kind() -> impl Strategy<Value = BoundKind> {
             prop_oneof![
                 Just(Score::GpStd),
                 Just(Score::LatentStd),
-                Just(Score::Absolute)
+                Just(Score::Absolute),
+                Just(Score::Auto)
             ],
             any::<bool>()
         )

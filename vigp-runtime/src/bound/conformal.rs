@@ -182,12 +182,15 @@ impl<const N: usize> Calibration<N> {
 /// The calibrated constants of a conformal bound.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ConformalParts {
-    /// The normalisation of the scores.
+    /// The normalisation of the scores (the one [`Score::Auto`] chose).
     pub score: Score,
     /// Per-step or simultaneous K-step quantiles.
     pub tube: Tube,
-    /// Number n of calibration windows.
+    /// Number of windows the quantiles were calibrated on.
     pub calibration_size: usize,
+    /// Number of windows [`Score::Auto`] chose the normalisation on (0 when
+    /// it did not choose); they are not among the calibrated ones.
+    pub selection_size: usize,
     /// Windows whose prediction failed (counted as misses: score +∞).
     pub failed: usize,
     /// q̂ of the one-step velocity scores.
@@ -291,11 +294,13 @@ pub(crate) fn predictive_scale(std_dev: &[f64], noise: &[f64]) -> f64 {
 /// floored at 1e-6 of the noise so that it stays positive) or 1.
 pub(crate) fn score_scale(score: Score, std_dev: &[f64], noise: &[f64]) -> f64 {
     match score {
-        Score::GpStd => predictive_scale(std_dev, noise),
         Score::LatentStd => {
             let floor = (1e-6 * noise.iter().fold(0.0f64, |m, n| m.max(*n))).max(f64::MIN_POSITIVE);
             std_dev.iter().map(|s| s * s).sum::<f64>().sqrt().max(floor)
         }
+        // Auto is resolved before any score is computed; as a scale it is
+        // the default normalisation
+        Score::GpStd | Score::Auto => predictive_scale(std_dev, noise),
         Score::Absolute => 1.0,
     }
 }
@@ -313,6 +318,107 @@ pub(crate) fn position_scales(scales: &[f64], dt: f64) -> Vec<f64> {
         .collect()
 }
 
+/// What calibration keeps of one window's prediction (None: it failed).
+struct Traced {
+    /// One-step velocity error ‖v̂₁ − v₁‖.
+    e1: f64,
+    /// Position errors ‖q̂_k − q_k‖, k = 1…K.
+    e: Vec<f64>,
+    /// Per output latent standard deviations along the prediction (K × p).
+    std_devs: Vec<Vec<f64>>,
+}
+
+/// The scores of `windows` with normalisation `score`: one-step, per
+/// horizon (K vectors), and the simultaneous max over horizons.
+#[allow(clippy::type_complexity)]
+fn scores(
+    windows: &[Option<Traced>],
+    score: Score,
+    noise: &[f64],
+    dt: f64,
+    k_max: usize,
+) -> (Vec<f64>, Vec<Vec<f64>>, Vec<f64>) {
+    let n = windows.len();
+    let mut one = Vec::with_capacity(n);
+    let mut per_step = vec![Vec::with_capacity(n); k_max];
+    let mut simultaneous = Vec::with_capacity(n);
+    for w in windows {
+        let Some(t) = w else {
+            one.push(f64::INFINITY);
+            per_step.iter_mut().for_each(|s| s.push(f64::INFINITY));
+            simultaneous.push(f64::INFINITY);
+            continue;
+        };
+        let scales: Vec<f64> = t
+            .std_devs
+            .iter()
+            .map(|s| score_scale(score, s, noise))
+            .collect();
+        one.push(t.e1 / scales[0]);
+        let u = position_scales(&scales, dt);
+        let mut worst = 0.0f64;
+        for (k, s) in per_step.iter_mut().enumerate() {
+            let v = t.e[k] / u[k];
+            s.push(v);
+            worst = worst.max(v);
+        }
+        simultaneous.push(worst);
+    }
+    (one, per_step, simultaneous)
+}
+
+/// Calibrated quantiles (one step, per horizon) of `windows` with `score`.
+fn quantiles(
+    windows: &[Option<Traced>],
+    score: Score,
+    settings: &ConformalSettings,
+    noise: &[f64],
+    dt: f64,
+    k_max: usize,
+) -> Result<(f64, Vec<f64>), BoundError> {
+    let (mut one, mut per_step, mut simultaneous) = scores(windows, score, noise, dt, k_max);
+    let q1 = quantile(&mut one, settings.delta)?;
+    let qk = match settings.tube {
+        Tube::PerStep => per_step
+            .iter_mut()
+            .map(|s| quantile(s, settings.delta))
+            .collect::<Result<_, _>>()?,
+        Tube::Simultaneous => vec![quantile(&mut simultaneous, settings.delta)?; k_max],
+    };
+    Ok((q1, qk))
+}
+
+/// [`Score::Auto`]: the candidate whose bounds, calibrated on `select`,
+/// have the smallest geometric-mean width (one step and K steps) on
+/// `select`; `None` if a candidate cannot be calibrated there.
+fn select_score(
+    select: &[Option<Traced>],
+    settings: &ConformalSettings,
+    noise: &[f64],
+    dt: f64,
+    k_max: usize,
+) -> Option<Score> {
+    let mut best: Option<(f64, Score)> = None;
+    for score in [Score::GpStd, Score::LatentStd, Score::Absolute] {
+        let (q1, qk) = quantiles(select, score, settings, noise, dt, k_max).ok()?;
+        let mut width = 0.0;
+        for t in select.iter().flatten() {
+            let scales: Vec<f64> = t
+                .std_devs
+                .iter()
+                .map(|s| score_scale(score, s, noise))
+                .collect();
+            let u = position_scales(&scales, dt);
+            width += (q1 * scales[0]).max(f64::MIN_POSITIVE).ln()
+                + (qk[k_max - 1] * u[k_max - 1]).max(f64::MIN_POSITIVE).ln();
+        }
+        if best.is_none_or(|(w, _)| width < w) {
+            best = Some((width, score));
+        }
+    }
+    best.map(|(_, s)| s)
+}
+
 pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usize>(
     learned: &Learned<M, N, C>,
     settings: &ConformalSettings,
@@ -326,15 +432,13 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
     let dt = Integrator::dt(learned);
     let k_max = cal.horizon();
     let mut ws = learned.workspace();
-    let mut one = Vec::with_capacity(n);
-    let mut per_step = vec![Vec::with_capacity(n); k_max];
-    let mut simultaneous = Vec::with_capacity(n);
-    let (mut failed, mut max_scale) = (0usize, 0.0f64);
+    let mut max_scale = 0.0f64;
     let d = learned.gp().input_dim();
     let mut input = vec![0.0; d];
     let mut lower = vec![f64::INFINITY; d];
     let mut upper = vec![f64::NEG_INFINITY; d];
     let mut starts_normalised = vec![0.0; n * d];
+    let mut traced = Vec::with_capacity(n);
     for (index, w) in cal.windows().iter().enumerate() {
         learned.encoding().encode(&M::KINDS, &w.start, &mut input);
         learned
@@ -346,43 +450,48 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
             upper[j] = upper[j].max(input[j]);
         }
         let Ok(trace) = learned.trace(&w.start, k_max, &mut ws) else {
-            failed += 1;
-            one.push(f64::INFINITY);
-            per_step.iter_mut().for_each(|s| s.push(f64::INFINITY));
-            simultaneous.push(f64::INFINITY);
+            traced.push(None);
             continue;
         };
         max_scale = max_scale.max(predictive_scale(trace.std_devs[0].as_slice(), noise));
-        let scales: Vec<f64> = trace
-            .std_devs
-            .iter()
-            .map(|s| score_scale(settings.score, s.as_slice(), noise))
-            .collect();
         let v1 = (w.positions[1] - w.positions[0]) / dt;
-        let e1 = (trace.states[1].v - v1).norm();
-        one.push(e1 / scales[0]);
-        let u = position_scales(&scales, dt);
-        let mut worst = 0.0f64;
-        for k in 1..=k_max {
-            let e = (trace.states[k].q - w.positions[k - 1]).norm();
-            let s = e / u[k - 1];
-            per_step[k - 1].push(s);
-            worst = worst.max(s);
-        }
-        simultaneous.push(worst);
+        traced.push(Some(Traced {
+            e1: (trace.states[1].v - v1).norm(),
+            e: (1..=k_max)
+                .map(|k| (trace.states[k].q - w.positions[k - 1]).norm())
+                .collect(),
+            std_devs: trace
+                .std_devs
+                .iter()
+                .map(|s| s.as_slice().to_vec())
+                .collect(),
+        }));
     }
-    let one_step_quantile = quantile(&mut one, settings.delta)?;
-    let position_quantiles = match settings.tube {
-        Tube::PerStep => per_step
-            .iter_mut()
-            .map(|s| quantile(s, settings.delta))
-            .collect::<Result<_, _>>()?,
-        Tube::Simultaneous => vec![quantile(&mut simultaneous, settings.delta)?; k_max],
+    let failed = traced.iter().filter(|t| t.is_none()).count();
+    // Score::Auto: choose the normalisation on the first fifth of the
+    // windows, calibrate it on the rest (independent of the choice), when
+    // both parts are large enough for δ; else the default normalisation
+    let (score, calibrate_on, selected_on) = match settings.score {
+        Score::Auto => {
+            let n_select = n / 5;
+            let enough = |m: usize| quantile_index(m, settings.delta).is_ok();
+            if enough(n_select) && enough(n - n_select) {
+                let choice = select_score(&traced[..n_select], settings, noise, dt, k_max)
+                    .unwrap_or(Score::GpStd);
+                (choice, &traced[n_select..], n_select)
+            } else {
+                (Score::GpStd, &traced[..], 0)
+            }
+        }
+        s => (s, &traced[..], 0),
     };
+    let (one_step_quantile, position_quantiles) =
+        quantiles(calibrate_on, score, settings, noise, dt, k_max)?;
     let mut parts = ConformalParts {
-        score: settings.score,
+        score,
         tube: settings.tube,
-        calibration_size: n,
+        calibration_size: calibrate_on.len(),
+        selection_size: selected_on,
         failed,
         one_step_quantile,
         position_quantiles,

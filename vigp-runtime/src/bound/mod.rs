@@ -284,6 +284,13 @@ pub enum Score {
     LatentStd,
     /// ũ = 1: one constant bound per horizon (u_k = Δt·k(k+1)/2).
     Absolute,
+    /// Choose among the three on the first fifth of the calibration windows
+    /// (the one whose bounds are narrowest there, geometric mean of the
+    /// one-step and K-step widths) and calibrate the choice on the other
+    /// four fifths: the choice does not see the windows that calibrate it,
+    /// so the guarantee holds. Falls back to [`Score::GpStd`] on all
+    /// windows when either part is too small for δ.
+    Auto,
 }
 
 /// How the k-step position quantiles are calibrated.
@@ -328,7 +335,7 @@ pub struct ConformalSettings {
     /// Miscoverage δ ∈ (0, 1). Needs at least ⌈1/δ − 1⌉ calibration
     /// windows. Default 0.05.
     pub delta: f64,
-    /// Score normalisation. Default [`Score::GpStd`].
+    /// Score normalisation. Default [`Score::Auto`].
     pub score: Score,
     /// Per-step or simultaneous tube. Default [`Tube::PerStep`].
     pub tube: Tube,
@@ -340,7 +347,7 @@ impl Default for ConformalSettings {
     fn default() -> Self {
         Self {
             delta: 0.05,
-            score: Score::GpStd,
+            score: Score::Auto,
             tube: Tube::PerStep,
             fallback: Fallback::Rkhs,
         }
@@ -620,8 +627,16 @@ impl fmt::Display for ErrorBound {
             BoundParts::Conformal(c) => {
                 writeln!(
                     f,
-                    "  {} calibration windows ({} failed), score {:?}, tube {:?}",
-                    c.calibration_size, c.failed, c.score, c.tube
+                    "  {} calibration windows ({} failed), score {:?}{}, tube {:?}",
+                    c.calibration_size,
+                    c.failed,
+                    c.score,
+                    if c.selection_size > 0 {
+                        format!(" (chosen on {} more windows)", c.selection_size)
+                    } else {
+                        String::new()
+                    },
+                    c.tube
                 )?;
                 writeln!(
                     f,
