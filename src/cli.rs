@@ -55,7 +55,7 @@ use clap::{Args, Parser, Subcommand, ValueEnum};
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 
-use crate::bound::BoundSettings;
+use crate::bound::{BoundError, BoundKind, Calibration};
 use crate::data::{DataError, Dataset, ReadOptions};
 use crate::gp::{GpError, TrainOptions};
 use crate::learned::{
@@ -100,6 +100,9 @@ pub enum CliError {
     /// A prediction failed.
     #[error("prediction failed: {0}")]
     Step(#[from] StepError),
+    /// The error bound could not be made or attached.
+    #[error("error bound: {0}")]
+    Bound(#[from] BoundError),
     /// The GP could not be exported.
     #[error("export failed: {0}")]
     Export(#[from] GpError),
@@ -178,6 +181,17 @@ enum EncodingArg {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+enum BoundArg {
+    /// Split conformal prediction on held-out runs (`--calibration`): coverage ≥ 1 − δ of a new
+    /// case exchangeable with them; falls back to the RKHS bound outside their region.
+    Conformal,
+    /// The paper's Theorem 1 (the true map is a sample of the fitted GP), uniform over a box.
+    Theorem1,
+    /// The RKHS-norm bound of Fiedler et al. (2021), uniform over all inputs.
+    Rkhs,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
 enum PriorArg {
     /// The nominal variational step (the GP learns the residual).
     Nominal,
@@ -244,12 +258,20 @@ struct PredictArgs {
     /// Steps to predict.
     #[arg(long)]
     steps: usize,
-    /// Output CSV: run,t,<coordinates>,v_<coordinate>…,bound.
+    /// Output CSV: run,t,<coordinates>,v_<coordinate>…,bound,position_bound.
     #[arg(long)]
     out: PathBuf,
     /// Failure probability δ of the bounds.
-    #[arg(long, default_value_t = 0.01)]
+    #[arg(long, default_value_t = 0.05)]
     delta: f64,
+    /// Kind of error bound [default: conformal with `--calibration`, rkhs without].
+    #[arg(long, value_enum)]
+    bound: Option<BoundArg>,
+    /// Held-out runs (same CSV format as `--data`, not used for training) that calibrate the
+    /// conformal bound over `--steps`-step windows; the rigorous kinds use their start states
+    /// to estimate Lipschitz constants.
+    #[arg(long)]
+    calibration: Option<PathBuf>,
     #[command(flatten)]
     read: ReadArgs,
 }
@@ -561,7 +583,8 @@ impl ViewVisitor for Visit<'_> {
                 let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
                 if saved.coordinates == Mn::COORDINATES {
                     let l = load(&a.model, &saved, minimal)?;
-                    predict(a, &l, &data, |z| *z, |z| *z, out)
+                    let coords = (&Mn::COORDINATES, &Mn::KINDS);
+                    predict(a, &l, &data, coords, |z| *z, |z| *z, out)
                 } else {
                     let l = load(&a.model, &saved, maximal)?;
                     let dt = saved.dt;
@@ -569,6 +592,7 @@ impl ViewVisitor for Visit<'_> {
                         a,
                         &l,
                         &data,
+                        (&Mn::COORDINATES, &Mn::KINDS),
                         |z| nominal.to_maximal(z, dt),
                         |z| nominal.to_minimal(z, dt),
                         out,
@@ -872,6 +896,7 @@ fn predict<L, const N: usize, const K: usize, const CK: usize>(
     a: &PredictArgs,
     learned: &Learned<L, K, CK>,
     data: &Dataset<N>,
+    (names, kinds): (&[&'static str; N], &[crate::CoordinateKind; N]),
     to_view: impl Fn(&State<N>) -> State<K>,
     to_minimal: impl Fn(&State<K>) -> State<N>,
     out: &mut dyn Write,
@@ -897,13 +922,52 @@ where
         starts.push((run, z));
     }
     let view_starts: Vec<State<K>> = starts.iter().map(|(_, z)| to_view(z)).collect();
-    let bound = learned.error_bound(
-        &BoundSettings {
-            delta: a.delta,
-            ..BoundSettings::default()
-        },
-        &view_starts,
-    )?;
+    let kind_arg = a.bound.unwrap_or(if a.calibration.is_some() {
+        BoundArg::Conformal
+    } else {
+        BoundArg::Rkhs
+    });
+    let calibration = match &a.calibration {
+        Some(path) => {
+            let held_out = read_data(path, names, kinds, &a.read)?;
+            held_out
+                .check_dt(dt, a.read.time_tolerance)
+                .map_err(|source| CliError::Data {
+                    path: path.clone(),
+                    source,
+                })?;
+            // windows in the model's coordinates: positions of the view
+            let trajectories: Vec<Vec<SVector<f64, K>>> = held_out
+                .runs
+                .iter()
+                .map(|run| {
+                    run.positions
+                        .iter()
+                        .map(|q| {
+                            to_view(&State {
+                                q: *q,
+                                v: SVector::zeros(),
+                            })
+                            .q
+                        })
+                        .collect()
+                })
+                .collect();
+            Calibration::from_trajectories(&trajectories, dt, a.steps.max(2), 1)?
+        }
+        None if kind_arg == BoundArg::Conformal => {
+            return Err(CliError::Usage(
+                "--bound conformal needs held-out runs: pass --calibration FILE".into(),
+            ));
+        }
+        None => Calibration::empty(dt),
+    };
+    let kind = match kind_arg {
+        BoundArg::Conformal => BoundKind::conformal(a.delta),
+        BoundArg::Theorem1 => BoundKind::theorem1(a.delta),
+        BoundArg::Rkhs => BoundKind::rkhs(a.delta),
+    };
+    let bound = learned.error_bound(&kind, &calibration)?;
     let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
     let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
     let coords: Vec<String> = data.coordinates.clone();
@@ -911,6 +975,7 @@ where
     header.extend(coords.iter().cloned());
     header.extend(coords.iter().map(|c| format!("v_{c}")));
     header.push("bound".into());
+    header.push("position_bound".into());
     let csv_err = |e: csv::Error| CliError::Io {
         path: a.out.clone(),
         source: std::io::Error::other(e),
@@ -937,6 +1002,7 @@ where
             } else {
                 format!("{:?}", pred.one_step_bounds[k - 1])
             });
+            row.push(format!("{:?}", pred.position_bounds[k]));
             wtr.write_record(&row).map_err(csv_err)?;
         }
         pb.inc(1);
@@ -946,11 +1012,13 @@ where
     w(
         out,
         format_args!(
-            "wrote {}: {} runs × {} steps ({failed} failed); `bound` bounds ‖v − v_true‖ of each \
-             predicted velocity with probability ≥ {} (one step from the predicted state)",
+            "wrote {}: {} runs × {} steps ({failed} failed); {} bound, probability ≥ {}: `bound` \
+             bounds ‖v − v_true‖ of each predicted velocity (one step from the predicted state), \
+             `position_bound` ‖q_k − q_true,k‖ along the prediction",
             a.out.display(),
             starts.len() - failed,
             a.steps,
+            bound.kind_name(),
             1.0 - a.delta
         ),
     )

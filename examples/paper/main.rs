@@ -16,7 +16,15 @@
 //! training states; 20-step predictions from held-out trajectories, position
 //! MSE in minimal coordinates. Output: plots (SVG, PNG), CSV and a Markdown
 //! report in one directory, named at the end.
+//!
+//! Error bounds ([`bounds`]): coverage and tightness of the conformal,
+//! Theorem-1 and RKHS bounds at δ = 0.05, one step and 20 steps, per system
+//! and coordinate choice, on held-out data from other seeds and on starts
+//! outside the training region (`bounds.md`, `bounds.csv`, and the figure
+//! `bounds_tube.svg` of a prediction with its bound tubes against the
+//! truth); `--no-bounds` skips them.
 
+mod bounds;
 mod output;
 
 use clap::Parser;
@@ -75,6 +83,13 @@ struct Cli {
     /// The paper's settings: 100 runs, 200/100 trajectories, N up to 512, 10 restarts.
     #[arg(long)]
     full: bool,
+    /// Skip the error-bound evaluation.
+    #[arg(long)]
+    no_bounds: bool,
+    /// Calibration trajectories, and as many test trajectories, per system
+    /// for the error bounds (each gives 19 windows of 20 steps).
+    #[arg(long, default_value_t = 60)]
+    bound_trajectories: usize,
 }
 
 const DT: f64 = 0.01;
@@ -315,6 +330,36 @@ where
     Ok((points, gt_err))
 }
 
+/// Fig. 2 of one system, then (unless `--no-bounds`) its error bounds.
+fn run_system<S, Mn, Mx, const N: usize, const C: usize, const M: usize, const K: usize>(
+    spec: &SystemSpec<S, Mn, Mx>,
+    sample: &bounds::Start<'_, N>,
+    shifted: &bounds::MovingStart<'_, N>,
+    cli: &Cli,
+    progress: &ProgressBar,
+    bound_out: &mut (Vec<bounds::BoundRow>, Vec<bounds::Tube>),
+) -> Result<(Vec<Fig2Point>, f64), Box<dyn std::error::Error>>
+where
+    S: Default + Copy + Send + Sync,
+    Mn: Mechanism<N, C> + Coordinates<N, M> + Copy + Send + Sync,
+    Mx: Mechanism<M, K> + Copy + Send + Sync,
+{
+    let out = evaluate_system(spec, sample, cli, progress)?;
+    if !cli.no_bounds {
+        progress.set_message(format!("{}: error bounds", spec.name));
+        let (rows, tubes) = bounds::evaluate(spec, sample, shifted, cli)?;
+        bound_out.0.extend(rows);
+        bound_out.1.extend(tubes);
+    }
+    Ok(out)
+}
+
+/// ± a uniform draw from [lo, hi] (a random sign).
+fn spin(r: &mut Rng, lo: f64, hi: f64) -> f64 {
+    let s = if r.uniform(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 };
+    s * r.uniform(lo, hi)
+}
+
 /// Mean window MSE over the windows whose prediction succeeded; failed
 /// windows (a step that did not converge or was not finite) are counted in
 /// `FAILED` and reported. A run whose windows all fail gives NaN.
@@ -547,6 +592,39 @@ fn findings(points: &[Fig2Point], cli: &Cli) -> String {
     out
 }
 
+/// One finding line per bound kind: its coverage and tightness ranges over
+/// the systems and coordinate choices (details in `bounds.md`).
+fn bound_findings(rows: &[bounds::BoundRow]) -> String {
+    let mut out = String::new();
+    for kind in ["conformal", "conformal-latent", "theorem1", "rkhs"] {
+        for set in ["held-out", "shifted"] {
+            let r: Vec<&bounds::BoundRow> = rows
+                .iter()
+                .filter(|r| r.kind == kind && r.set == set)
+                .collect();
+            if r.is_empty() {
+                continue;
+            }
+            let range = |f: &dyn Fn(&bounds::BoundRow) -> f64| {
+                let v = r.iter().map(|x| f(x));
+                (
+                    v.clone().fold(f64::INFINITY, f64::min),
+                    v.fold(f64::NEG_INFINITY, f64::max),
+                )
+            };
+            let (c1, c2) = range(&|x| x.one_step_coverage);
+            let (t1, t2) = range(&|x| x.one_step_tightness);
+            let (k1, k2) = range(&|x| x.k_step_coverage);
+            let (u1, u2) = range(&|x| x.k_step_tightness);
+            out += &format!(
+                "- Error bound {kind} (δ = {}), {set} starts: one-step coverage {c1:.3}–{c2:.3}, tightness {t1:.1}–{t2:.1}; 20-step coverage {k1:.3}–{k2:.3}, tightness {u1:.1}–{u2:.1} (bounds.md).\n",
+                bounds::DELTA
+            );
+        }
+    }
+    out
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cli = Cli::parse();
     if cli.full {
@@ -597,11 +675,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )?);
     let mut points = Vec::new();
     let mut gt_notes = String::new();
+    let mut bound_out = (Vec::new(), Vec::new());
     let angle = |rng: &mut Rng| rng.uniform(-PI, PI);
     for system in &cli.systems {
         bar.set_message(system.clone());
         let (p, err) = match system.as_str() {
-            "pendulum" => evaluate_system(
+            // shifted starts (error bounds): more energy than any training
+            // start, which is at rest
+            "pendulum" => run_system(
                 &SystemSpec {
                     name: "pendulum",
                     prior: Prior::Nominal,
@@ -612,11 +693,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     minimal: Pendulum::minimal,
                     maximal: Pendulum::maximal,
                 },
-                |r| SVector::from([angle(r)]),
+                &|r| SVector::from([angle(r)]),
+                &|r| {
+                    (
+                        SVector::from([angle(r)]),
+                        SVector::from([spin(r, 8.0, 10.0)]),
+                    )
+                },
                 &cli,
                 &bar,
+                &mut bound_out,
             )?,
-            "cartpole" => evaluate_system(
+            "cartpole" => run_system(
                 &SystemSpec {
                     name: "cartpole",
                     prior: Prior::Nominal,
@@ -628,11 +716,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     minimal: Cartpole::minimal,
                     maximal: Cartpole::maximal,
                 },
-                |r| SVector::from([r.uniform(-1.0, 1.0), angle(r)]),
+                &|r| SVector::from([r.uniform(-1.0, 1.0), angle(r)]),
+                &|r| {
+                    (
+                        SVector::from([r.uniform(-1.0, 1.0), angle(r)]),
+                        SVector::from([0.0, spin(r, 8.0, 10.0)]),
+                    )
+                },
                 &cli,
                 &bar,
+                &mut bound_out,
             )?,
-            "double_pendulum" => evaluate_system(
+            "double_pendulum" => run_system(
                 &SystemSpec {
                     name: "double_pendulum",
                     prior: Prior::Constant,
@@ -644,11 +739,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     minimal: DoublePendulum::minimal,
                     maximal: DoublePendulum::maximal,
                 },
-                |r| SVector::from([angle(r), angle(r)]),
+                &|r| SVector::from([angle(r), angle(r)]),
+                &|r| {
+                    (
+                        SVector::from([angle(r), angle(r)]),
+                        SVector::from([spin(r, 5.0, 7.0), spin(r, 5.0, 7.0)]),
+                    )
+                },
                 &cli,
                 &bar,
+                &mut bound_out,
             )?,
-            "fourbar" => evaluate_system(
+            "fourbar" => run_system(
                 &SystemSpec {
                     name: "fourbar",
                     prior: Prior::Constant,
@@ -666,15 +768,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     maximal: Fourbar::maximal,
                 },
                 // a random rhombus: arm angles θ1, θ3; the loop closes exactly
-                |r| {
+                &|r| {
                     let (t1, t3) = (
                         r.uniform(-FRAC_PI_2, FRAC_PI_2),
                         r.uniform(-FRAC_PI_2, FRAC_PI_2),
                     );
                     SVector::from([t1, t3 - t1, t3, t1 - t3])
                 },
+                &|r| {
+                    let (t1, t3) = (
+                        r.uniform(-FRAC_PI_2, FRAC_PI_2),
+                        r.uniform(-FRAC_PI_2, FRAC_PI_2),
+                    );
+                    let (w1, w3) = (spin(r, 3.0, 5.0), spin(r, 3.0, 5.0));
+                    (
+                        SVector::from([t1, t3 - t1, t3, t1 - t3]),
+                        SVector::from([w1, w3 - w1, w3, w1 - w3]),
+                    )
+                },
                 &cli,
                 &bar,
+                &mut bound_out,
             )?,
             other => {
                 return Err(format!(
@@ -707,7 +821,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         FAILED.load(Ordering::Relaxed),
         WINDOWS.load(Ordering::Relaxed)
     );
-    let files = output::write_all(&cli.out, &settings, &fig1, &points, &findings)?;
+    let mut findings = findings;
+    let mut files = Vec::new();
+    if !cli.no_bounds {
+        let (rows, tubes) = &bound_out;
+        let tube = tubes
+            .iter()
+            .find(|t| t.system == "double_pendulum" && t.coords == "minimal")
+            .or(tubes.first());
+        files.extend(bounds::write(&cli.out, rows, tube, &cli)?);
+        findings += &bound_findings(rows);
+    }
+    files.extend(output::write_all(
+        &cli.out, &settings, &fig1, &points, &findings,
+    )?);
     println!("\n{findings}");
     println!(
         "wrote {} files to {} in {:.0} s",

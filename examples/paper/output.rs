@@ -338,7 +338,7 @@ fn systems_with_files(summary: &[Fig2Summary]) -> Result<Vec<(String, String)>, 
 }
 
 /// Registers DejaVu Sans (embedded) as plotters' `"sans-serif"` font, once.
-fn register_embedded_font() -> Result<(), Box<dyn Error>> {
+pub fn register_embedded_font() -> Result<(), Box<dyn Error>> {
     static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
     static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
         env!("CARGO_MANIFEST_DIR"),

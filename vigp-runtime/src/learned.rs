@@ -68,6 +68,30 @@ impl Encoding {
             out[k + i] = z.v[i];
         }
     }
+
+    /// Inverse of [`Encoding::encode`]: the state whose encoding is `input`
+    /// (length [`Encoding::dim`]). With [`Encoding::SinCos`] an angle comes
+    /// back as atan2(sin, cos) ∈ (−π, π], i.e. modulo 2π.
+    pub fn decode<const N: usize>(self, kinds: &[CoordinateKind; N], input: &[f64]) -> State<N> {
+        let mut z = State {
+            q: SVector::zeros(),
+            v: SVector::zeros(),
+        };
+        let mut k = 0;
+        for (i, kind) in kinds.iter().enumerate() {
+            if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
+                z.q[i] = input[k].atan2(input[k + 1]);
+                k += 2;
+            } else {
+                z.q[i] = input[k];
+                k += 1;
+            }
+        }
+        for i in 0..N {
+            z.v[i] = input[k + i];
+        }
+        z
+    }
 }
 
 /// The prior mean of the learned velocity map (saved as `"nominal"` or

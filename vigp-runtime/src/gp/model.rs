@@ -1040,6 +1040,30 @@ impl OutputGp {
         &self.residual
     }
 
+    /// ln det(K_n + (σ_n² + jitter)·I) of the normalised Gram matrix, from
+    /// the stored Cholesky factor in O(N) (the RKHS error bound's
+    /// information-gain term needs it). In original units add 2N·ln s_y.
+    ///
+    /// Errors: [`GpError::InvalidModel`] for a sparse GP (no N × N factor).
+    pub fn log_det_normalised(&self) -> Result<f64, GpError> {
+        let Posterior::Exact { l, .. } = &self.post else {
+            return Err(GpError::InvalidModel(
+                "log_det_normalised is defined for exact GPs only (this output is sparse)".into(),
+            ));
+        };
+        // packed rows: row i starts at i(i+1)/2, its diagonal is entry i
+        Ok(2.0
+            * (0..self.n())
+                .map(|i| l[i * (i + 1) / 2 + i].ln())
+                .sum::<f64>())
+    }
+
+    /// The regularisation λ = σ_n² + jitter (normalised units) that the
+    /// posterior mean and variance were computed with.
+    pub fn regularisation_normalised(&self) -> f64 {
+        self.hp.noise_variance + self.jitter
+    }
+
     /// Cheap rigorous upper bound on ‖(K + σ²I)⁻¹‖₂ in original units:
     /// 1 / ((σ_n² + jitter)·s_y²), since K is positive semi-definite.
     pub fn inv_gram_norm_bound(&self) -> f64 {

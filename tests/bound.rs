@@ -1,0 +1,617 @@
+//! The error bounds (`vigp::bound`): settings validation, the constants
+//! against a second implementation, `predict`'s bookkeeping, and a
+//! property test that no setting yields a NaN, infinite or negative bound
+//! without a typed error. Coverage on the four systems is in
+//! `tests/bound_coverage.rs`.
+
+mod common;
+
+use common::Rng;
+use nalgebra::{DMatrix, DVector, SVector};
+use proptest::prelude::*;
+use std::sync::OnceLock;
+use vigp::bound::{
+    BoundError, BoundKind, BoundParts, Calibration, ConformalSettings, Fallback, LipschitzF,
+    NoiseBound, NormBound, RkhsSettings, Score, SigmaModulus, Tau, Theorem1Settings, Tube, Window,
+};
+use vigp::gp::TrainOptions;
+use vigp::learned::{Encoding, Learned, Prior, Transition};
+use vigp::prelude::*;
+use vigp::systems::{Pendulum, PendulumMinimal};
+
+const DT: f64 = 0.01;
+
+/// Windows of `k` steps of the damped pendulum (the truth) from random
+/// states, simulated at Δt/5 by the midpoint VI.
+fn pendulum_windows(seed: u64, count: usize, k: usize) -> Vec<Window<1>> {
+    let mut truth = Pendulum::default();
+    truth.joints.pivot.damping = 0.3;
+    truth.links.rod.mass = 1.05;
+    let m = truth.minimal();
+    let h = DT / 5.0;
+    let vi = Variational::midpoint(m, h);
+    let mut rng = Rng(seed);
+    (0..count)
+        .map(|_| {
+            let mut z = State::new([rng.uniform(-2.0, 2.0)], [rng.uniform(-2.5, 2.5)]);
+            let mut p = vec![z.q];
+            for _ in 0..k {
+                for _ in 0..5 {
+                    z = vi.step(&z).unwrap();
+                }
+                p.push(z.q);
+            }
+            Window {
+                start: State {
+                    q: p[0],
+                    v: (p[1] - p[0]) / DT,
+                },
+                positions: p[1..].to_vec(),
+            }
+        })
+        .collect()
+}
+
+/// A small learned pendulum (nominal prior, sin/cos inputs) trained once.
+fn model() -> &'static Learned<PendulumMinimal, 1, 0> {
+    static MODEL: OnceLock<Learned<PendulumMinimal, 1, 0>> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        let data: Vec<Transition<1>> = pendulum_windows(1, 40, 2)
+            .iter()
+            .map(|w| Transition {
+                z: w.start,
+                v_next: (w.positions[1] - w.positions[0]) / DT,
+            })
+            .collect();
+        let opts = TrainOptions {
+            restarts: 1,
+            seed: 3,
+            ..TrainOptions::default()
+        };
+        Learned::train(
+            Pendulum::default().minimal(),
+            DT,
+            &data,
+            Encoding::SinCos,
+            Prior::Nominal,
+            &opts,
+        )
+        .unwrap()
+        .0
+    })
+}
+
+/// The same with noisy targets (σ = 3e-3), so that the fitted noise is far
+/// above its floor and K + λI is well conditioned.
+fn noisy_model() -> &'static Learned<PendulumMinimal, 1, 0> {
+    static MODEL: OnceLock<Learned<PendulumMinimal, 1, 0>> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        let mut rng = Rng(17);
+        let data: Vec<Transition<1>> = pendulum_windows(1, 40, 2)
+            .iter()
+            .map(|w| {
+                let (u1, u2) = (rng.uniform(1e-300, 1.0), rng.uniform(0.0, 1.0));
+                let g = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
+                Transition {
+                    z: w.start,
+                    v_next: (w.positions[1] - w.positions[0]) / DT + SVector::from([3e-3 * g]),
+                }
+            })
+            .collect();
+        let opts = TrainOptions {
+            restarts: 1,
+            seed: 3,
+            ..TrainOptions::default()
+        };
+        Learned::train(
+            Pendulum::default().minimal(),
+            DT,
+            &data,
+            Encoding::SinCos,
+            Prior::Nominal,
+            &opts,
+        )
+        .unwrap()
+        .0
+    })
+}
+
+fn calibration() -> &'static Calibration<1> {
+    static CAL: OnceLock<Calibration<1>> = OnceLock::new();
+    CAL.get_or_init(|| Calibration::new(DT, pendulum_windows(2, 120, 5)).unwrap())
+}
+
+fn invalid(e: &BoundError) -> bool {
+    matches!(
+        e,
+        BoundError::InvalidSetting { .. }
+            | BoundError::WrongLength { .. }
+            | BoundError::TooFewCalibration { .. }
+    )
+}
+
+/// Each bad setting is its typed error, never a NaN or negative bound (the
+/// old API returned NaN bounds for `lipschitz_f: NaN` and negative ones for
+/// a negative value).
+#[test]
+fn bad_settings_are_typed_errors() {
+    let l = model();
+    let cal = calibration();
+    let t1 = |f: fn(&mut Theorem1Settings)| {
+        let mut s = Theorem1Settings::default();
+        f(&mut s);
+        BoundKind::Theorem1(s)
+    };
+    let rk = |f: fn(&mut RkhsSettings)| {
+        let mut s = RkhsSettings::default();
+        f(&mut s);
+        BoundKind::Rkhs(s)
+    };
+    let cases = [
+        t1(|s| s.delta = f64::NAN),
+        t1(|s| s.delta = 0.0),
+        t1(|s| s.delta = 1.0),
+        t1(|s| s.delta = -0.1),
+        t1(|s| s.lipschitz_f = LipschitzF::Given(vec![f64::NAN])),
+        t1(|s| s.lipschitz_f = LipschitzF::Given(vec![-1.0])),
+        t1(|s| s.lipschitz_f = LipschitzF::Given(vec![f64::INFINITY])),
+        t1(|s| s.lipschitz_f = LipschitzF::Given(vec![1.0, 2.0])),
+        t1(|s| s.tau = Tau::Relative(0.0)),
+        t1(|s| s.tau = Tau::Relative(f64::NAN)),
+        t1(|s| s.tau = Tau::Relative(-1e-3)),
+        t1(|s| s.domain_margin = -0.5),
+        t1(|s| s.domain_margin = f64::INFINITY),
+        rk(|s| s.delta = 2.0),
+        rk(|s| s.norm_bound = NormBound::MeanTimes(f64::NAN)),
+        rk(|s| s.norm_bound = NormBound::MeanTimes(0.0)),
+        rk(|s| s.norm_bound = NormBound::Given(vec![-1.0])),
+        rk(|s| s.norm_bound = NormBound::Given(vec![])),
+        rk(|s| s.noise = NoiseBound::Given(vec![f64::NEG_INFINITY])),
+        BoundKind::conformal(f64::NAN),
+        BoundKind::conformal(0.0),
+        // 120 windows cannot give δ = 0.005 (needs 199)
+        BoundKind::conformal(0.005),
+    ];
+    for kind in &cases {
+        match l.error_bound(kind, cal) {
+            Err(e) if invalid(&e) => {}
+            other => panic!("{kind:?}: expected a typed setting error, got {other:?}"),
+        }
+    }
+    // the conformal kind needs calibration data; the others do not
+    assert!(matches!(
+        l.error_bound(&BoundKind::conformal(0.05), &Calibration::empty(DT)),
+        Err(BoundError::Empty(_))
+    ));
+    assert!(
+        l.error_bound(&BoundKind::theorem1(0.05), &Calibration::empty(DT))
+            .is_ok()
+    );
+    // calibration data of another Δt
+    let other = Calibration::new(2.0 * DT, pendulum_windows(4, 30, 3)).unwrap();
+    assert!(matches!(
+        l.error_bound(&BoundKind::conformal(0.05), &other),
+        Err(BoundError::Mismatch(_))
+    ));
+}
+
+/// Malformed calibration windows are typed errors naming the window.
+#[test]
+fn bad_calibration_windows_are_typed_errors() {
+    let mut w = pendulum_windows(5, 4, 3);
+    assert!(Calibration::new(DT, w.clone()).is_ok());
+    w[2].positions[1][0] = f64::NAN;
+    assert!(matches!(
+        Calibration::new(DT, w.clone()),
+        Err(BoundError::Calibration { index: 2, .. })
+    ));
+    let mut w = pendulum_windows(5, 4, 3);
+    w[1].positions.pop();
+    assert!(matches!(
+        Calibration::new(DT, w),
+        Err(BoundError::Calibration { index: 1, .. })
+    ));
+    let mut w = pendulum_windows(5, 1, 3);
+    w[0].positions.truncate(1);
+    assert!(Calibration::new(DT, w).is_err());
+    assert!(Calibration::<1>::new(f64::NAN, vec![]).is_err());
+    let traj: Vec<SVector<f64, 1>> = (0..10).map(|i| SVector::from([i as f64])).collect();
+    assert!(matches!(
+        Calibration::from_trajectories(&[&traj[..3]], DT, 5, 1),
+        Err(BoundError::Empty(_))
+    ));
+    assert!(Calibration::from_trajectories(&[&traj], DT, 1, 1).is_err());
+    assert!(Calibration::from_trajectories(&[&traj], DT, 4, 0).is_err());
+    // 10 samples, horizon 4, stride 2: starts 0, 2, 4 (start + 4 < 10) → 3 windows
+    let c = Calibration::from_trajectories(&[&traj], DT, 4, 2).unwrap();
+    assert_eq!((c.len(), c.horizon()), (3, 4));
+    assert_eq!(c.windows()[1].start.q[0], 2.0);
+    assert_eq!(c.windows()[1].positions[3][0], 6.0);
+    assert!((c.windows()[1].start.v[0] - 1.0 / DT).abs() < 1e-9);
+}
+
+/// The RKHS constants against a second implementation with nalgebra: the
+/// Gram matrix rebuilt from the hyperparameters and the normalised inputs,
+/// its own Cholesky for ln det, its own solve for ‖μ‖_k = √(αᵀKα).
+///
+/// On the model with noisy targets (λ well above its floor). Tolerances
+/// from the conditioning: the two Gram matrices differ by rounding,
+/// ‖ΔK‖ ≤ 4N·ε·σ_f², which moves each of the N terms ln(e_i + λ) by at most
+/// ‖ΔK‖/λ: |Δ ln det| ≤ 4N²·ε·σ_f²/λ (absolute). The mean's norm carries
+/// the solve's relative error cond·ε ≤ 10·N·σ_f²/λ·ε. (With noise-free data
+/// λ sits at its floor, 1e-10, and these bounds say little: both
+/// implementations then agree to ~3e-5 only.)
+#[test]
+fn rkhs_constants_match_a_second_implementation() {
+    let l = noisy_model();
+    let b = l
+        .error_bound(&BoundKind::rkhs(0.05), &Calibration::empty(DT))
+        .unwrap();
+    let BoundParts::Rkhs { outputs } = &b.parts else {
+        panic!()
+    };
+    let gp = l.gp();
+    let (n, d) = (gp.n(), gp.input_dim());
+    let mut xn = vec![0.0; n * d];
+    for (o, x) in xn.chunks_exact_mut(d).zip(gp.inputs().chunks_exact(d)) {
+        gp.input_normaliser().apply(x, o);
+    }
+    for (i, out) in outputs.iter().enumerate() {
+        let o = gp.output(i);
+        let hp = o.hyperparameters();
+        let lambda = hp.noise_variance + o.jitter();
+        assert_eq!(out.regularisation, lambda);
+        let k = DMatrix::from_fn(n, n, |a, c| {
+            hp.kernel(&xn[a * d..(a + 1) * d], &xn[c * d..(c + 1) * d])
+        });
+        let chol = (k.clone() + DMatrix::identity(n, n) * lambda)
+            .cholesky()
+            .unwrap();
+        let log_det: f64 = 2.0 * chol.l().diagonal().iter().map(|x| x.ln()).sum::<f64>()
+            + n as f64 * (lambda.max(1.0) / lambda).ln();
+        let r = DVector::from_column_slice(o.residual_normalised());
+        let alpha = chol.solve(&r);
+        let mean_norm = (alpha.transpose() * &k * &alpha)[0].sqrt();
+        let eps = f64::EPSILON;
+        let sf2 = hp.signal_variance;
+        let tol_det = 4.0 * (n * n) as f64 * eps * sf2 / lambda;
+        let tol_norm = 10.0 * n as f64 * sf2 / lambda * eps;
+        eprintln!(
+            "N = {n}, λ = {lambda:.2e}: ln det {} vs {log_det} (tol {tol_det:.1e}); ‖μ‖ {} vs {mean_norm} (rel tol {tol_norm:.1e})",
+            out.log_det, out.mean_norm
+        );
+        assert!(
+            tol_det < 1e-6 && tol_norm < 1e-6,
+            "badly conditioned test model"
+        );
+        assert!((out.log_det - log_det).abs() <= tol_det);
+        assert!((out.mean_norm - mean_norm).abs() <= tol_norm * mean_norm);
+        // the formula, assembled from the reported parts
+        let beta = 2.0 * out.mean_norm
+            + hp.noise_variance.sqrt() / lambda.sqrt()
+                * (out.log_det - 2.0 * (0.05f64 / gp.output_dim() as f64).ln()).sqrt();
+        assert!((out.beta - beta).abs() <= 1e-12 * beta);
+    }
+}
+
+/// Theorem 1's β and γ against the formulas evaluated here from the
+/// reported τ and the box rebuilt from the training inputs, and the
+/// one-step bound against L·Σ(√β σ + γ).
+#[test]
+fn theorem1_constants_match_the_formulas() {
+    let l = model();
+    for modulus in [SigmaModulus::FeatureSpace, SigmaModulus::Lederer2019] {
+        let kind = BoundKind::Theorem1(Theorem1Settings {
+            sigma_modulus: modulus,
+            ..Theorem1Settings::default()
+        });
+        let b = l.error_bound(&kind, &Calibration::empty(DT)).unwrap();
+        let BoundParts::Theorem1 {
+            outputs,
+            domain_lower,
+            domain_upper,
+            ..
+        } = &b.parts
+        else {
+            panic!()
+        };
+        let gp = l.gp();
+        let (d, p) = (gp.input_dim(), gp.output_dim());
+        let norm = gp.input_normaliser();
+        // edges of X in normalised units: 2× the training box (margin 0.5)
+        let r: Vec<f64> = (0..d)
+            .map(|j| (domain_upper[j] - domain_lower[j]) / norm.scale[j])
+            .collect();
+        let mut xn = vec![0.0; d];
+        for j in 0..d {
+            let col = gp.inputs().chunks_exact(d).map(|x| {
+                norm.apply(x, &mut xn);
+                xn[j]
+            });
+            let (lo, hi) = col.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+                (a.min(v), b.max(v))
+            });
+            assert!((r[j] - 2.0 * (hi - lo)).abs() < 1e-9 * r[j].max(1.0));
+        }
+        for (i, o) in outputs.iter().enumerate() {
+            let log_m: f64 = r
+                .iter()
+                .map(|rj| {
+                    (rj * (d as f64).sqrt() / (2.0 * o.tau))
+                        .ceil()
+                        .max(1.0)
+                        .ln()
+                })
+                .sum();
+            let beta = 2.0 * (log_m - (0.05f64 / p as f64).ln());
+            assert!((o.beta - beta).abs() < 1e-9 * beta, "{} {beta}", o.beta);
+            let hp = gp.output(i).hyperparameters();
+            let lmin = hp
+                .length_scales
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min);
+            let omega = match modulus {
+                SigmaModulus::FeatureSpace => hp.signal_variance.sqrt() * o.tau / lmin,
+                _ => o.omega_sigma,
+            };
+            assert!((o.omega_sigma - omega).abs() <= 1e-12 * omega);
+            assert!((o.lipschitz_sigma * o.tau - omega).abs() <= 1e-12 * omega);
+            let gamma = ((o.lipschitz_mean + o.lipschitz_f) * o.tau + beta.sqrt() * omega)
+                * gp.output(i).output_scale();
+            assert!((o.gamma - gamma).abs() <= 1e-9 * gamma);
+            assert_eq!(o.lipschitz_f, o.lipschitz_mean);
+        }
+        let sd = [0.01];
+        let expect = b.projection_lipschitz * (outputs[0].beta.sqrt() * 0.01 + outputs[0].gamma);
+        assert!((b.one_step(&sd).unwrap() - expect).abs() < 1e-12 * expect);
+        eprintln!("{b}");
+    }
+}
+
+/// The noise lower bound no longer makes Theorem 1 vacuous: on noise-free
+/// data (fitted noise at its floor) the default bound's σ-multiplier stays
+/// below 30 and γ below the median σ, while the paper's modulus with a fixed
+/// τ = 1e-9·r (the old default) is orders of magnitude wider.
+#[test]
+fn theorem1_is_not_vacuous_at_the_noise_floor() {
+    let l = model();
+    let o = l.gp().output(0);
+    eprintln!(
+        "fitted noise variance (normalised) {:.2e}",
+        o.hyperparameters().noise_variance
+    );
+    let empty = Calibration::empty(DT);
+    let new = l.error_bound(&BoundKind::theorem1(0.05), &empty).unwrap();
+    let old = l
+        .error_bound(
+            &BoundKind::Theorem1(Theorem1Settings {
+                tau: Tau::Relative(1e-9),
+                sigma_modulus: SigmaModulus::Lederer2019,
+                ..Theorem1Settings::default()
+            }),
+            &empty,
+        )
+        .unwrap();
+    let (BoundParts::Theorem1 { outputs: a, .. }, BoundParts::Theorem1 { outputs: b, .. }) =
+        (&new.parts, &old.parts)
+    else {
+        panic!()
+    };
+    let sd = [a[0].sigma_median * o.output_scale()];
+    let (bn, bo) = (new.one_step(&sd).unwrap(), old.one_step(&sd).unwrap());
+    eprintln!(
+        "one-step bound at the median sample σ: default {bn:.3e}, old {bo:.3e}; γ {:.2e} vs {:.2e}",
+        a[0].gamma, b[0].gamma
+    );
+    assert!(new.sigma_multipliers()[0] < 30.0);
+    assert!(a[0].gamma < sd[0]);
+    assert!(bo > 10.0 * bn);
+}
+
+/// `predict` attaches a bound to every state; a conformal bound refuses to
+/// extrapolate its horizon; a bound of another model is refused.
+#[test]
+fn predict_carries_a_bound_per_state() {
+    let l = model();
+    let cal = calibration();
+    let z0 = cal.windows()[0].start;
+    for kind in [
+        BoundKind::theorem1(0.05),
+        BoundKind::rkhs(0.05),
+        BoundKind::conformal(0.05),
+        BoundKind::Conformal(ConformalSettings {
+            delta: 0.05,
+            score: Score::Absolute,
+            tube: Tube::Simultaneous,
+            fallback: Fallback::None,
+        }),
+        BoundKind::Conformal(ConformalSettings {
+            delta: 0.05,
+            score: Score::LatentStd,
+            fallback: Fallback::Theorem1,
+            ..ConformalSettings::default()
+        }),
+    ] {
+        let b = l.error_bound(&kind, cal).unwrap();
+        let p = l.predict(&z0, 5, &b).unwrap();
+        assert_eq!(p.states.len(), 6);
+        assert_eq!(p.one_step_bounds.len(), 5);
+        assert_eq!(p.position_bounds.len(), 6);
+        assert_eq!(p.outside.len(), 5);
+        assert_eq!(p.position_bounds[0], 0.0);
+        assert!(
+            p.one_step_bounds
+                .iter()
+                .chain(&p.position_bounds)
+                .all(|b| b.is_finite() && *b >= 0.0)
+        );
+        if b.kind_name() != "conformal" {
+            // propagated bounds never shrink along a prediction
+            assert!(p.position_bounds.windows(2).all(|w| w[1] >= w[0]));
+        }
+        // the mean trajectory is the rollout's
+        let roll = l.rollout(&z0, 5).unwrap();
+        assert_eq!(roll, p.states);
+        if b.kind_name() == "conformal" {
+            assert!(matches!(
+                l.predict(&z0, 6, &b),
+                Err(BoundError::HorizonTooLong {
+                    calibrated: 5,
+                    requested: 6
+                })
+            ));
+        }
+    }
+    let b = l.error_bound(&BoundKind::rkhs(0.05), cal).unwrap();
+    let (other, _) = Learned::train(
+        Pendulum::default().minimal(),
+        2.0 * DT,
+        &[Transition {
+            z: State::new([0.1], [0.0]),
+            v_next: SVector::from([0.1]),
+        }],
+        Encoding::Raw,
+        Prior::Nominal,
+        &TrainOptions::default(),
+    )
+    .unwrap();
+    assert!(matches!(
+        other.predict(&z0, 3, &b),
+        Err(BoundError::Mismatch(_))
+    ));
+    assert!(b.one_step(&[f64::NAN]).is_err());
+    assert!(b.one_step(&[-1.0]).is_err());
+    assert!(b.one_step(&[1.0, 1.0]).is_err());
+}
+
+/// Decoding inverts encoding (angles modulo 2π).
+#[test]
+fn encoding_round_trips() {
+    use vigp::CoordinateKind::{Angle, Length};
+    let kinds = [Length, Angle];
+    let z = State::new([0.3, 2.0 + std::f64::consts::TAU], [-1.0, 4.0]);
+    for enc in [Encoding::Raw, Encoding::SinCos] {
+        let mut x = vec![0.0; enc.dim(&kinds)];
+        enc.encode(&kinds, &z, &mut x);
+        let back = enc.decode(&kinds, &x);
+        assert_eq!(back.v, z.v);
+        assert_eq!(back.q[0], z.q[0]);
+        let dq = (back.q[1] - z.q[1]).rem_euclid(std::f64::consts::TAU);
+        assert!(dq.min(std::f64::consts::TAU - dq) < 1e-12);
+    }
+}
+
+/// Any f64 including NaN, ±∞, 0, negatives and huge values.
+fn any_f64() -> impl Strategy<Value = f64> + Clone {
+    prop_oneof![
+        Just(f64::NAN),
+        Just(f64::INFINITY),
+        Just(f64::NEG_INFINITY),
+        Just(0.0),
+        Just(-1.0),
+        Just(1e300),
+        Just(1e-300),
+        -10.0..10.0f64,
+        0.0..1.0f64,
+        proptest::num::f64::ANY,
+    ]
+}
+
+fn any_kind() -> impl Strategy<Value = BoundKind> {
+    let vecs = proptest::collection::vec(any_f64(), 0..3);
+    prop_oneof![
+        (
+            any_f64(),
+            prop_oneof![Just(None), any_f64().prop_map(Some)],
+            any::<bool>(),
+            prop_oneof![Just(None), vecs.clone().prop_map(Some)],
+            any_f64()
+        )
+            .prop_map(|(delta, tau, lederer, lf, margin)| {
+                BoundKind::Theorem1(Theorem1Settings {
+                    delta,
+                    tau: tau.map_or(Tau::Optimise, Tau::Relative),
+                    sigma_modulus: if lederer {
+                        SigmaModulus::Lederer2019
+                    } else {
+                        SigmaModulus::FeatureSpace
+                    },
+                    lipschitz_f: lf.map_or(LipschitzF::FromMean, LipschitzF::Given),
+                    domain_margin: margin,
+                })
+            }),
+        (
+            any_f64(),
+            prop_oneof![
+                any_f64().prop_map(NormBound::MeanTimes),
+                vecs.clone().prop_map(NormBound::Given)
+            ],
+            prop_oneof![Just(NoiseBound::Fitted), vecs.prop_map(NoiseBound::Given)]
+        )
+            .prop_map(|(delta, norm_bound, noise)| BoundKind::Rkhs(RkhsSettings {
+                delta,
+                norm_bound,
+                noise
+            })),
+        (
+            any_f64(),
+            prop_oneof![
+                Just(Score::GpStd),
+                Just(Score::LatentStd),
+                Just(Score::Absolute),
+                Just(Score::Auto)
+            ],
+            any::<bool>()
+        )
+            .prop_map(|(delta, score, sim)| {
+                BoundKind::Conformal(ConformalSettings {
+                    delta,
+                    score,
+                    tube: if sim {
+                        Tube::Simultaneous
+                    } else {
+                        Tube::PerStep
+                    },
+                    ..ConformalSettings::default()
+                })
+            }),
+    ]
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+    /// No setting yields a NaN, negative or infinite bound without a typed
+    /// error: either `error_bound` fails, or every constant, every one-step
+    /// bound (at any finite σ ≥ 0) and every position bound of a 5-step
+    /// prediction is finite and ≥ 0.
+    #[test]
+    fn no_setting_gives_a_bad_bound(kind in any_kind(), sd in 0.0..1e3f64, start in 0usize..120) {
+        let l = model();
+        let cal = calibration();
+        match l.error_bound(&kind, cal) {
+            Err(_) => {}
+            Ok(b) => {
+                prop_assert!(b.projection_lipschitz.is_finite() && b.projection_lipschitz >= 1.0);
+                for m in b.sigma_multipliers() {
+                    prop_assert!(m.is_finite() && m >= 0.0, "multiplier {}", m);
+                }
+                // a bound can still overflow at use (B = 1e300 times σ):
+                // then it is a typed error, never an ∞ or NaN value
+                match b.one_step(&[sd]) {
+                    Ok(one) => prop_assert!(one.is_finite() && one >= 0.0),
+                    Err(e) => prop_assert!(matches!(e, BoundError::NonFinite { .. }), "{e}"),
+                }
+                match l.predict(&cal.windows()[start].start, 5, &b) {
+                    Ok(p) => {
+                        for v in p.one_step_bounds.iter().chain(&p.position_bounds) {
+                            prop_assert!(v.is_finite() && *v >= 0.0, "bound {}", v);
+                        }
+                    }
+                    Err(e) => prop_assert!(matches!(e, BoundError::NonFinite { .. }), "{e}"),
+                }
+            }
+        }
+    }
+}

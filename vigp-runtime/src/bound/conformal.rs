@@ -1,0 +1,576 @@
+//! Split conformal prediction on held-out data (Vovk et al. 2005; Lei et
+//! al. 2018): a bound with a finite-sample guarantee that needs no model
+//! assumption, only exchangeability of the calibration and test cases.
+//!
+//! Scores on n held-out windows (start z₀ and the true positions after it):
+//! * one step: s = ‖v̂₁ − v₁‖ / u₀ with u₀ = √(Σ_i σ_i(z₀)² + σ_n,i²), the
+//!   GP's predictive standard deviation (its latent σ plus the fitted noise,
+//!   which keeps u > 0);
+//! * k steps: s_k = ‖q̂_k − q_k‖ / u_k with u_k = Δt·Σ_{j<k} Σ_{i≤j} ũ_i
+//!   along the predicted trajectory (a velocity error made at step i moves
+//!   every later position: the double sum is that accumulation).
+//!
+//! The bound is q̂·u at a new case, where q̂ is the ⌈(n+1)(1−δ)⌉-th smallest
+//! score. If the new case and the n calibration cases are exchangeable,
+//! P(error ≤ q̂·u) ≥ 1 − δ (marginally over both), and ≤ 1 − δ + 1/(n+1) when
+//! the scores have no ties.
+
+use super::{BoundError, ConformalSettings, Score, Tube, check_delta};
+use crate::learned::{Learned, Transition};
+use crate::mechanism::{Mechanism, State};
+use crate::variational::Integrator;
+use nalgebra::SVector;
+use serde::{Deserialize, Serialize};
+
+/// One held-out case: a start state and the true positions after it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Window<const N: usize> {
+    /// z₀ = (q₀, v₀) with the discrete velocity v₀ = (q₁ − q₀)/Δt.
+    pub start: State<N>,
+    /// The true positions q₁, …, q_K (K ≥ 2; q₁ = q₀ + Δt·v₀ for exact
+    /// data). The one-step velocity target is v₁ = (q₂ − q₁)/Δt.
+    pub positions: Vec<SVector<f64, N>>,
+}
+
+/// Held-out calibration data for the conformal bound: windows of equal
+/// length K, each a start state and the K true positions after it.
+///
+/// The guarantee needs the calibration windows and the windows you predict
+/// to be exchangeable (e.g. drawn independently from the same distribution
+/// of starts). Overlapping windows of one trajectory are dependent: the
+/// coverage then holds only approximately; prefer one window per
+/// trajectory, or a stride of at least the horizon.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Calibration<const N: usize> {
+    dt: f64,
+    windows: Vec<Window<N>>,
+}
+
+impl<const N: usize> Calibration<N> {
+    /// No calibration data (enough for the rigorous kinds, which take their
+    /// sample states from the training data).
+    pub fn empty(dt: f64) -> Self {
+        Self {
+            dt,
+            windows: Vec::new(),
+        }
+    }
+
+    /// Windows with time step `dt`. Errors: `dt` not finite and positive,
+    /// a window with fewer than 2 positions, windows of different lengths,
+    /// or a NaN/∞ anywhere.
+    pub fn new(dt: f64, windows: Vec<Window<N>>) -> Result<Self, BoundError> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(BoundError::InvalidSetting {
+                what: "calibration dt (must be finite and > 0)",
+                value: dt,
+            });
+        }
+        let k = windows.first().map_or(2, |w| w.positions.len());
+        for (index, w) in windows.iter().enumerate() {
+            if w.positions.len() < 2 {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "a window needs at least 2 positions after its start",
+                });
+            }
+            if w.positions.len() != k {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "windows of different lengths",
+                });
+            }
+            if !(w.start.is_finite() && w.positions.iter().flatten().all(|x| x.is_finite())) {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "NaN or infinity in the window",
+                });
+            }
+        }
+        Ok(Self { dt, windows })
+    }
+
+    /// One-step calibration cases from held-out transitions (K = 2:
+    /// q₁ = q₀ + Δt·v₀, q₂ = q₁ + Δt·v_next). Enough for one-step bounds
+    /// and for predictions of up to 2 steps.
+    pub fn from_transitions(data: &[Transition<N>], dt: f64) -> Result<Self, BoundError> {
+        let windows = data
+            .iter()
+            .map(|t| {
+                let q1 = t.z.q + t.z.v * dt;
+                Window {
+                    start: t.z,
+                    positions: vec![q1, q1 + t.v_next * dt],
+                }
+            })
+            .collect();
+        Self::new(dt, windows)
+    }
+
+    /// Windows of `horizon` steps from trajectories of positions sampled
+    /// every `dt` (the form training data has): a window starts at every
+    /// `stride`-th sample that leaves room for its horizon. Errors: `horizon`
+    /// < 2, `stride` = 0, no window at all, or what [`Calibration::new`]
+    /// rejects.
+    pub fn from_trajectories<T: AsRef<[SVector<f64, N>]>>(
+        trajectories: &[T],
+        dt: f64,
+        horizon: usize,
+        stride: usize,
+    ) -> Result<Self, BoundError> {
+        if horizon < 2 {
+            return Err(BoundError::InvalidSetting {
+                what: "calibration horizon (must be >= 2)",
+                value: horizon as f64,
+            });
+        }
+        if stride == 0 {
+            return Err(BoundError::InvalidSetting {
+                what: "calibration stride (must be >= 1)",
+                value: 0.0,
+            });
+        }
+        let mut windows = Vec::new();
+        for traj in trajectories {
+            let p = traj.as_ref();
+            let mut s = 0;
+            while s + horizon < p.len() {
+                windows.push(Window {
+                    start: State {
+                        q: p[s],
+                        v: (p[s + 1] - p[s]) / dt,
+                    },
+                    positions: p[s + 1..=s + horizon].to_vec(),
+                });
+                s += stride;
+            }
+        }
+        if windows.is_empty() {
+            return Err(BoundError::Empty(
+                "calibration trajectories (none is longer than the horizon)",
+            ));
+        }
+        Self::new(dt, windows)
+    }
+
+    /// The windows.
+    pub fn windows(&self) -> &[Window<N>] {
+        &self.windows
+    }
+
+    /// Number of windows n.
+    pub fn len(&self) -> usize {
+        self.windows.len()
+    }
+
+    /// `true` without windows.
+    pub fn is_empty(&self) -> bool {
+        self.windows.is_empty()
+    }
+
+    /// Window length K (0 when empty).
+    pub fn horizon(&self) -> usize {
+        self.windows.first().map_or(0, |w| w.positions.len())
+    }
+
+    /// The time step of the windows.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+}
+
+/// The calibrated constants of a conformal bound.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConformalParts {
+    /// The normalisation of the scores (the one [`Score::Auto`] chose).
+    pub score: Score,
+    /// Per-step or simultaneous K-step quantiles.
+    pub tube: Tube,
+    /// Number of windows the quantiles were calibrated on.
+    pub calibration_size: usize,
+    /// Number of windows [`Score::Auto`] chose the normalisation on (0 when
+    /// it did not choose); they are not among the calibrated ones.
+    pub selection_size: usize,
+    /// Windows whose prediction failed (counted as misses: score +∞).
+    pub failed: usize,
+    /// q̂ of the one-step velocity scores.
+    pub one_step_quantile: f64,
+    /// q̂_k of the k-step position scores, k = 1…K (per step), or one value
+    /// repeated K times (simultaneous).
+    pub position_quantiles: Vec<f64>,
+    /// The largest predictive standard deviation ũ at a calibration start
+    /// (a start beyond it is unlike every calibration case).
+    pub max_scale: f64,
+    /// Lower corner of the box of the calibration starts' GP inputs
+    /// (encoded, original units).
+    pub input_lower: Vec<f64>,
+    /// Upper corner of that box.
+    pub input_upper: Vec<f64>,
+    /// The calibration starts' GP inputs in the GP's normalised units
+    /// (row-major n × d), for the nearest-neighbour test.
+    pub starts_normalised: Vec<f64>,
+    /// A start farther than this (normalised units) from every calibration
+    /// start is outside: the 99 % conformal quantile of the calibration
+    /// starts' leave-one-out nearest-neighbour distances.
+    pub distance_threshold: f64,
+}
+
+/// Level of the nearest-neighbour distance threshold: about 1 % of cases
+/// drawn like the calibration starts are flagged.
+const DISTANCE_LEVEL: f64 = 0.01;
+
+impl ConformalParts {
+    /// Distance (normalised units) from `xn` to the nearest calibration
+    /// start, skipping index `skip`.
+    fn nearest(&self, xn: &[f64], skip: Option<usize>) -> f64 {
+        let d = xn.len();
+        let mut best = f64::INFINITY;
+        for (i, row) in self.starts_normalised.chunks_exact(d).enumerate() {
+            if Some(i) == skip {
+                continue;
+            }
+            let mut s = 0.0;
+            for (a, b) in row.iter().zip(xn) {
+                s += (a - b) * (a - b);
+                if s >= best {
+                    break;
+                }
+            }
+            best = best.min(s);
+        }
+        best.sqrt()
+    }
+
+    /// Whether the normalised GP input `xn` is farther from every
+    /// calibration start than [`ConformalParts::distance_threshold`].
+    pub(crate) fn far(&self, xn: &[f64]) -> bool {
+        !self.starts_normalised.is_empty() && self.nearest(xn, None) > self.distance_threshold
+    }
+}
+
+/// The index ⌈(n+1)(1−δ)⌉ (1-based) of the conformal quantile, or an error
+/// when n is too small for δ (n < 1/δ − 1 makes it n + 1).
+pub(crate) fn quantile_index(n: usize, delta: f64) -> Result<usize, BoundError> {
+    // a hair below (n+1)(1−δ) so that exact products (n = 19, δ = 0.05) are
+    // not pushed up by rounding
+    let k = ((n as f64 + 1.0) * (1.0 - delta) - 1e-9).ceil().max(1.0) as usize;
+    if k > n {
+        return Err(BoundError::TooFewCalibration {
+            delta,
+            needed: ((1.0 / delta) - 1.0 - 1e-9).ceil() as usize,
+            got: n,
+        });
+    }
+    Ok(k)
+}
+
+/// The conformal quantile of `scores` (consumed: sorted in place).
+pub(crate) fn quantile(scores: &mut [f64], delta: f64) -> Result<f64, BoundError> {
+    let k = quantile_index(scores.len(), delta)?;
+    scores.sort_by(f64::total_cmp);
+    let q = scores[k - 1];
+    if !q.is_finite() {
+        return Err(BoundError::NonFinite {
+            what: "conformal quantile (too many calibration predictions failed)",
+            value: q,
+        });
+    }
+    Ok(q)
+}
+
+/// The predictive scale ũ = √(Σ σ_i² + σ_n,i²) of a state with latent
+/// standard deviations `std_dev` and noise standard deviations `noise`.
+pub(crate) fn predictive_scale(std_dev: &[f64], noise: &[f64]) -> f64 {
+    std_dev
+        .iter()
+        .zip(noise)
+        .map(|(s, n)| s * s + n * n)
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// The scale a one-step score is divided by: the predictive standard
+/// deviation ([`Score::GpStd`]), the latent one ([`Score::LatentStd`],
+/// floored at 1e-6 of the noise so that it stays positive) or 1.
+pub(crate) fn score_scale(score: Score, std_dev: &[f64], noise: &[f64]) -> f64 {
+    match score {
+        Score::LatentStd => {
+            let floor = (1e-6 * noise.iter().fold(0.0f64, |m, n| m.max(*n))).max(f64::MIN_POSITIVE);
+            std_dev.iter().map(|s| s * s).sum::<f64>().sqrt().max(floor)
+        }
+        // Auto is resolved before any score is computed; as a scale it is
+        // the default normalisation
+        Score::GpStd | Score::Auto => predictive_scale(std_dev, noise),
+        Score::Absolute => 1.0,
+    }
+}
+
+/// u_k = Δt·Σ_{j<k} Σ_{i≤j} ũ_i for k = 1…K from the scales ũ_0…ũ_{K−1}.
+pub(crate) fn position_scales(scales: &[f64], dt: f64) -> Vec<f64> {
+    let (mut inner, mut outer) = (0.0, 0.0);
+    scales
+        .iter()
+        .map(|s| {
+            inner += s;
+            outer += dt * inner;
+            outer
+        })
+        .collect()
+}
+
+/// What calibration keeps of one window's prediction (None: it failed).
+struct Traced {
+    /// One-step velocity error ‖v̂₁ − v₁‖.
+    e1: f64,
+    /// Position errors ‖q̂_k − q_k‖, k = 1…K.
+    e: Vec<f64>,
+    /// Per output latent standard deviations along the prediction (K × p).
+    std_devs: Vec<Vec<f64>>,
+}
+
+/// The scores of `windows` with normalisation `score`: one-step, per
+/// horizon (K vectors), and the simultaneous max over horizons.
+#[allow(clippy::type_complexity)]
+fn scores(
+    windows: &[Option<Traced>],
+    score: Score,
+    noise: &[f64],
+    dt: f64,
+    k_max: usize,
+) -> (Vec<f64>, Vec<Vec<f64>>, Vec<f64>) {
+    let n = windows.len();
+    let mut one = Vec::with_capacity(n);
+    let mut per_step = vec![Vec::with_capacity(n); k_max];
+    let mut simultaneous = Vec::with_capacity(n);
+    for w in windows {
+        let Some(t) = w else {
+            one.push(f64::INFINITY);
+            per_step.iter_mut().for_each(|s| s.push(f64::INFINITY));
+            simultaneous.push(f64::INFINITY);
+            continue;
+        };
+        let scales: Vec<f64> = t
+            .std_devs
+            .iter()
+            .map(|s| score_scale(score, s, noise))
+            .collect();
+        one.push(t.e1 / scales[0]);
+        let u = position_scales(&scales, dt);
+        let mut worst = 0.0f64;
+        for (k, s) in per_step.iter_mut().enumerate() {
+            let v = t.e[k] / u[k];
+            s.push(v);
+            worst = worst.max(v);
+        }
+        simultaneous.push(worst);
+    }
+    (one, per_step, simultaneous)
+}
+
+/// Calibrated quantiles (one step, per horizon) of `windows` with `score`.
+fn quantiles(
+    windows: &[Option<Traced>],
+    score: Score,
+    settings: &ConformalSettings,
+    noise: &[f64],
+    dt: f64,
+    k_max: usize,
+) -> Result<(f64, Vec<f64>), BoundError> {
+    let (mut one, mut per_step, mut simultaneous) = scores(windows, score, noise, dt, k_max);
+    let q1 = quantile(&mut one, settings.delta)?;
+    let qk = match settings.tube {
+        Tube::PerStep => per_step
+            .iter_mut()
+            .map(|s| quantile(s, settings.delta))
+            .collect::<Result<_, _>>()?,
+        Tube::Simultaneous => vec![quantile(&mut simultaneous, settings.delta)?; k_max],
+    };
+    Ok((q1, qk))
+}
+
+/// [`Score::Auto`]: the candidate whose bounds, calibrated on `select`,
+/// have the smallest geometric-mean width (one step and K steps) on
+/// `select`; `None` if a candidate cannot be calibrated there.
+fn select_score(
+    select: &[Option<Traced>],
+    settings: &ConformalSettings,
+    noise: &[f64],
+    dt: f64,
+    k_max: usize,
+) -> Option<Score> {
+    let mut best: Option<(f64, Score)> = None;
+    for score in [Score::GpStd, Score::LatentStd, Score::Absolute] {
+        let (q1, qk) = quantiles(select, score, settings, noise, dt, k_max).ok()?;
+        let mut width = 0.0;
+        for t in select.iter().flatten() {
+            let scales: Vec<f64> = t
+                .std_devs
+                .iter()
+                .map(|s| score_scale(score, s, noise))
+                .collect();
+            let u = position_scales(&scales, dt);
+            width += (q1 * scales[0]).max(f64::MIN_POSITIVE).ln()
+                + (qk[k_max - 1] * u[k_max - 1]).max(f64::MIN_POSITIVE).ln();
+        }
+        if best.is_none_or(|(w, _)| width < w) {
+            best = Some((width, score));
+        }
+    }
+    best.map(|(_, s)| s)
+}
+
+pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usize>(
+    learned: &Learned<M, N, C>,
+    settings: &ConformalSettings,
+    cal: &Calibration<N>,
+    noise: &[f64],
+) -> Result<ConformalParts, BoundError> {
+    check_delta(settings.delta)?;
+    let n = cal.len();
+    // fail early, before the predictions
+    quantile_index(n, settings.delta)?;
+    let dt = Integrator::dt(learned);
+    let k_max = cal.horizon();
+    let mut ws = learned.workspace();
+    let mut max_scale = 0.0f64;
+    let d = learned.gp().input_dim();
+    let mut input = vec![0.0; d];
+    let mut lower = vec![f64::INFINITY; d];
+    let mut upper = vec![f64::NEG_INFINITY; d];
+    let mut starts_normalised = vec![0.0; n * d];
+    let mut traced = Vec::with_capacity(n);
+    for (index, w) in cal.windows().iter().enumerate() {
+        learned.encoding().encode(&M::KINDS, &w.start, &mut input);
+        learned
+            .gp()
+            .input_normaliser()
+            .apply(&input, &mut starts_normalised[index * d..(index + 1) * d]);
+        for j in 0..d {
+            lower[j] = lower[j].min(input[j]);
+            upper[j] = upper[j].max(input[j]);
+        }
+        let Ok(trace) = learned.trace(&w.start, k_max, &mut ws) else {
+            traced.push(None);
+            continue;
+        };
+        max_scale = max_scale.max(predictive_scale(trace.std_devs[0].as_slice(), noise));
+        let v1 = (w.positions[1] - w.positions[0]) / dt;
+        traced.push(Some(Traced {
+            e1: (trace.states[1].v - v1).norm(),
+            e: (1..=k_max)
+                .map(|k| (trace.states[k].q - w.positions[k - 1]).norm())
+                .collect(),
+            std_devs: trace
+                .std_devs
+                .iter()
+                .map(|s| s.as_slice().to_vec())
+                .collect(),
+        }));
+    }
+    let failed = traced.iter().filter(|t| t.is_none()).count();
+    // Score::Auto: choose the normalisation on the first fifth of the
+    // windows, calibrate it on the rest (independent of the choice), when
+    // both parts are large enough for δ; else the default normalisation
+    let (score, calibrate_on, selected_on) = match settings.score {
+        Score::Auto => {
+            let n_select = n / 5;
+            let enough = |m: usize| quantile_index(m, settings.delta).is_ok();
+            if enough(n_select) && enough(n - n_select) {
+                let choice = select_score(&traced[..n_select], settings, noise, dt, k_max)
+                    .unwrap_or(Score::GpStd);
+                (choice, &traced[n_select..], n_select)
+            } else {
+                (Score::GpStd, &traced[..], 0)
+            }
+        }
+        s => (s, &traced[..], 0),
+    };
+    let (one_step_quantile, position_quantiles) =
+        quantiles(calibrate_on, score, settings, noise, dt, k_max)?;
+    let mut parts = ConformalParts {
+        score,
+        tube: settings.tube,
+        calibration_size: calibrate_on.len(),
+        selection_size: selected_on,
+        failed,
+        one_step_quantile,
+        position_quantiles,
+        max_scale,
+        input_lower: lower,
+        input_upper: upper,
+        starts_normalised,
+        distance_threshold: f64::INFINITY,
+    };
+    // leave-one-out nearest-neighbour distances of the calibration starts
+    // (O(n²·d)); with n ≥ 99 their 99 % quantile, else their maximum
+    let mut nn: Vec<f64> = (0..n)
+        .map(|i| parts.nearest(&parts.starts_normalised[i * d..(i + 1) * d], Some(i)))
+        .collect();
+    nn.sort_by(f64::total_cmp);
+    let level = quantile_index(n, DISTANCE_LEVEL).unwrap_or(n);
+    parts.distance_threshold = nn
+        .get(level.saturating_sub(1))
+        .copied()
+        .unwrap_or(f64::INFINITY);
+    Ok(parts)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The quantile index against its definition, including the exact
+    /// products that rounding could push over n.
+    #[test]
+    fn quantile_index_is_the_ceiling() {
+        assert_eq!(quantile_index(19, 0.05).unwrap(), 19);
+        assert!(quantile_index(18, 0.05).is_err());
+        assert_eq!(quantile_index(99, 0.01).unwrap(), 99);
+        assert!(quantile_index(98, 0.01).is_err());
+        assert_eq!(quantile_index(1000, 0.05).unwrap(), 951);
+        match quantile_index(10, 0.05) {
+            Err(BoundError::TooFewCalibration { needed, got, .. }) => {
+                assert_eq!((needed, got), (19, 10));
+            }
+            other => panic!("{other:?}"),
+        }
+        let mut s: Vec<f64> = (1..=20).map(f64::from).rev().collect();
+        assert_eq!(quantile(&mut s, 0.1).unwrap(), 19.0);
+    }
+
+    /// Exchangeable scores: over independent calibration/test draws the
+    /// conformal quantile covers a new score with probability exactly
+    /// ⌈(n+1)(1−δ)⌉/(n+1) for continuous scores: 45/50 = 0.9 for δ = 0.1,
+    /// n = 49. 20 000 draws: standard error √(0.9·0.1/20000) ≈ 0.0021;
+    /// tolerance 0.0065 (3σ), so an index off by one (0.88 or 0.92) fails.
+    #[test]
+    fn coverage_of_exchangeable_scores() {
+        let mut state = 7u64;
+        let mut unif = || {
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let (delta, n, trials) = (0.1, 49, 20_000);
+        let mut covered = 0;
+        for _ in 0..trials {
+            // heavy-tailed scores: the guarantee needs no distribution
+            let mut s: Vec<f64> = (0..n).map(|_| 1.0 / (1.0 - unif())).collect();
+            let q = quantile(&mut s, delta).unwrap();
+            if 1.0 / (1.0 - unif()) <= q {
+                covered += 1;
+            }
+        }
+        let c = covered as f64 / trials as f64;
+        assert!((c - 0.9).abs() < 0.0065, "coverage {c}");
+    }
+
+    #[test]
+    fn position_scales_accumulate_twice() {
+        let u = position_scales(&[1.0, 2.0, 3.0], 0.5);
+        // k=1: 0.5·1; k=2: + 0.5·(1+2); k=3: + 0.5·(1+2+3)
+        assert_eq!(u, vec![0.5, 2.0, 5.0]);
+    }
+}

@@ -1,0 +1,978 @@
+//! Error bounds of the learned integrators: three kinds behind one entry
+//! point, [`Learned::error_bound`], whose result [`Learned::predict`] uses
+//! so that every predicted state carries its bound.
+//!
+//! | kind | guarantee | assumptions | needs |
+//! |---|---|---|---|
+//! | [`BoundKind::Theorem1`] | w.p. ≥ 1 − δ, for all states whose GP input lies in a box X | the true velocity map is a sample of the fitted GP prior; the projection is L-Lipschitz (L estimated) | the trained model |
+//! | [`BoundKind::Rkhs`] | w.p. ≥ 1 − δ, for all states | the true map lies in the fitted kernel's RKHS with norm ≤ B; sub-Gaussian noise | the trained model and a norm bound B |
+//! | [`BoundKind::Conformal`] | P(error ≤ bound) ≥ 1 − δ for a new case exchangeable with the calibration cases | exchangeability only | held-out windows ([`Calibration`]) |
+//!
+//! * **Theorem 1** is the paper's bound (Brüdigam et al. 2022), built on the
+//!   uniform error bound of Lederer, Umlauft & Hirche (NeurIPS 2019,
+//!   Thm 3.1): per velocity component i (union bound, δ_i = δ/p)
+//!   |f_i − μ_i| ≤ √β_i·σ_i + γ_i on X, and ‖v − v_true‖ ≤ L·Σ_i(√β_i σ_i + γ_i)
+//!   with L the projection's Lipschitz constant (1 without constraints).
+//!   τ is chosen to minimise the bound at the median σ of sample states
+//!   ([`Tau::Optimise`]); σ's modulus of continuity is the feature-space
+//!   one, σ_f·τ/ℓ_min, which does not depend on the noise
+//!   ([`SigmaModulus`]); see [`Theorem1Settings`].
+//! * **RKHS** (Fiedler, Scherer & Trimpe, AAAI 2021):
+//!   |f_i − μ_i| ≤ β_i·σ_i for all inputs, β_i = B_i + (R_i/√λ_i)·√(ln det(…) − 2 ln δ_i),
+//!   combined as ‖v − v_true‖ ≤ L·‖(β_i σ_i)_i‖₂; see [`RkhsSettings`].
+//! * **Conformal** (split conformal prediction): the one-step velocity error
+//!   normalised by the GP's predictive standard deviation, and the k-step
+//!   position error directly, on held-out windows; see
+//!   [`ConformalSettings`].
+//!
+//! Multi-step: the conformal kind calibrates the k-step position error
+//! itself. The rigorous kinds bound one step; over several steps
+//! [`Learned::predict`] propagates them with the learned step's local
+//! Jacobian norms at the predicted states (P_{k+1} = P_k + Δt·V_k,
+//! V_{k+1} = ‖∂v′/∂q‖·P_k + ‖∂v′/∂v‖·V_k + b_k): a first-order estimate, not
+//! part of the theorems.
+//!
+//! The derivations, the choice of τ, of the Lipschitz constants and of the
+//! norm bound, and measured coverage and tightness are in `docs/bounds.md`.
+
+mod conformal;
+mod jacobian;
+mod rkhs;
+mod theorem1;
+
+pub use conformal::{Calibration, ConformalParts, Window};
+pub use jacobian::projection_jacobian;
+pub use rkhs::RkhsOutput;
+pub use theorem1::Theorem1Output;
+
+use crate::gp::{GpError, Workspace};
+use crate::learned::{LearnError, Learned};
+use crate::mechanism::{Mechanism, State};
+use crate::newton::StepError;
+use crate::variational::Integrator;
+use conformal::{position_scales, predictive_scale, score_scale};
+use core::fmt;
+use nalgebra::SVector;
+use serde::{Deserialize, Serialize};
+
+/// Why a bound could not be computed or used.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum BoundError {
+    /// A setting is out of its domain (NaN, ∞, negative, δ ∉ (0, 1), …).
+    #[error("invalid bound setting {what}: {value}")]
+    InvalidSetting {
+        /// Which setting, with its domain.
+        what: &'static str,
+        /// The offending value.
+        value: f64,
+    },
+    /// A per-output setting has the wrong number of values.
+    #[error("{what}: expected {expected} values (one per GP output), got {got}")]
+    WrongLength {
+        /// Which setting.
+        what: &'static str,
+        /// The number of GP outputs.
+        expected: usize,
+        /// The number given.
+        got: usize,
+    },
+    /// Required data is missing.
+    #[error("empty {0}")]
+    Empty(&'static str),
+    /// Too few calibration cases for δ: the conformal quantile would be
+    /// infinite.
+    #[error("too few calibration windows for delta = {delta}: need at least {needed}, got {got}")]
+    TooFewCalibration {
+        /// The δ asked for.
+        delta: f64,
+        /// The least number of windows, ⌈1/δ − 1⌉.
+        needed: usize,
+        /// The number given.
+        got: usize,
+    },
+    /// A calibration window is unusable.
+    #[error("calibration window {index}: {reason}")]
+    Calibration {
+        /// Index of the window.
+        index: usize,
+        /// What is wrong with it.
+        reason: &'static str,
+    },
+    /// A constant of the bound came out NaN or infinite.
+    #[error("the bound's {what} is not finite ({value})")]
+    NonFinite {
+        /// Which constant.
+        what: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A conformal bound is asked for more steps than it was calibrated for.
+    #[error(
+        "prediction of {requested} steps, but the conformal bound was calibrated on windows of {calibrated}"
+    )]
+    HorizonTooLong {
+        /// The calibration horizon K.
+        calibrated: usize,
+        /// The steps asked for.
+        requested: usize,
+    },
+    /// The bound was computed for another model (output count or Δt).
+    #[error("bound and model do not match: {0}")]
+    Mismatch(&'static str),
+    /// A step, projection or nominal prior failed.
+    #[error(transparent)]
+    Step(#[from] StepError),
+    /// The GP failed.
+    #[error(transparent)]
+    Gp(#[from] GpError),
+}
+
+impl From<LearnError> for BoundError {
+    fn from(e: LearnError) -> Self {
+        match e {
+            LearnError::Gp(g) => BoundError::Gp(g),
+            LearnError::Step(s) => BoundError::Step(s),
+            LearnError::Empty => BoundError::Empty("training data"),
+            LearnError::InvalidSetting { what, value } => {
+                BoundError::InvalidSetting { what, value }
+            }
+            LearnError::NonFinite(_) => BoundError::NonFinite {
+                what: "training transition",
+                value: f64::NAN,
+            },
+        }
+    }
+}
+
+pub(crate) fn check_delta(delta: f64) -> Result<(), BoundError> {
+    if delta > 0.0 && delta < 1.0 {
+        Ok(())
+    } else {
+        Err(BoundError::InvalidSetting {
+            what: "delta (must be in (0, 1))",
+            value: delta,
+        })
+    }
+}
+
+/// How Theorem 1's grid constant τ is chosen.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum Tau {
+    /// Per output, the τ that minimises √β(τ)·σ̃ + γ(τ) at the median
+    /// posterior standard deviation σ̃ of the sample states (a grid of 0.01
+    /// decades from 1e-40). Any fixed τ > 0 gives a valid bound; this picks
+    /// one from the model and the sample states only, never from errors.
+    Optimise,
+    /// τ = this value times the largest edge of the box X (normalised
+    /// units); finite and > 0.
+    Relative(f64),
+}
+
+/// The modulus of continuity ω_σ of the posterior standard deviation in
+/// Theorem 1.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub enum SigmaModulus {
+    /// ω_σ(τ) = σ_f·τ/ℓ_min: σ(x) = ‖A^{1/2}φ(x)‖ with 0 ⪯ A ⪯ I in the
+    /// feature space, so |σ(x) − σ(x′)| ≤ ‖φ(x) − φ(x′)‖ =
+    /// √(2σ_f²(1 − e^{−r²/2})) ≤ σ_f·r. Independent of the noise, so the
+    /// bound stays finite when the fitted noise reaches its lower limit.
+    FeatureSpace,
+    /// Lederer et al. (2019): ω_σ(τ) = √(2τ·L_k·(1 + N·‖(K + σ_n²I)⁻¹‖·σ_f²)),
+    /// which grows like 1/σ_n: as in the paper, and much wider with tiny noise.
+    Lederer2019,
+}
+
+/// The Lipschitz constant L_f of the true velocity map in Theorem 1.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum LipschitzF {
+    /// L_f = L_μ, the posterior mean's bound (an estimate: the true map is
+    /// unknown). With the optimised τ the term (L_μ + L_f)·τ is small, so
+    /// the choice matters little; the report shows it.
+    FromMean,
+    /// One constant per GP output (velocity component), in velocity units
+    /// per unit of the GP's encoded input; finite and ≥ 0.
+    Given(Vec<f64>),
+}
+
+/// Settings of the paper's Theorem-1 bound.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Theorem1Settings {
+    /// Failure probability δ ∈ (0, 1) of the whole bound (union over
+    /// outputs). Default 0.05.
+    pub delta: f64,
+    /// Choice of τ. Default [`Tau::Optimise`].
+    pub tau: Tau,
+    /// Modulus of continuity of σ. Default [`SigmaModulus::FeatureSpace`].
+    pub sigma_modulus: SigmaModulus,
+    /// Lipschitz constant of the true map. Default [`LipschitzF::FromMean`].
+    pub lipschitz_f: LipschitzF,
+    /// The box X: the training inputs' box widened on each side by this
+    /// fraction of its edge (finite, ≥ 0). Default 0.5. β grows only with
+    /// the logarithm of X's size; states outside X are flagged in
+    /// [`BoundedPrediction::outside`].
+    pub domain_margin: f64,
+}
+
+impl Default for Theorem1Settings {
+    fn default() -> Self {
+        Self {
+            delta: 0.05,
+            tau: Tau::Optimise,
+            sigma_modulus: SigmaModulus::FeatureSpace,
+            lipschitz_f: LipschitzF::FromMean,
+            domain_margin: 0.5,
+        }
+    }
+}
+
+/// The RKHS-norm bound B of the RKHS kind.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum NormBound {
+    /// B_i = factor·‖μ_i‖_k (finite, > 0): a heuristic. The fitted mean's
+    /// norm is what the data show of f; for noise-free data it is a lower
+    /// bound on ‖f‖_k (the minimum-norm interpolant), so the factor must be
+    /// ≥ 1 and buys room for what the data do not show.
+    MeanTimes(f64),
+    /// One bound per GP output, finite and ≥ 0 (the RKHS norm is unit free).
+    Given(Vec<f64>),
+}
+
+/// The sub-Gaussian constant R of the noise in the RKHS kind.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum NoiseBound {
+    /// R_i = the fitted noise standard deviation σ_n,i (Gaussian noise of
+    /// standard deviation σ is σ-sub-Gaussian).
+    Fitted,
+    /// One R per GP output, in velocity units, finite and ≥ 0.
+    Given(Vec<f64>),
+}
+
+/// Settings of the RKHS bound.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RkhsSettings {
+    /// Failure probability δ ∈ (0, 1) (union over outputs). Default 0.05.
+    pub delta: f64,
+    /// Norm bound B. Default `MeanTimes(2.0)`.
+    pub norm_bound: NormBound,
+    /// Noise constant R. Default [`NoiseBound::Fitted`].
+    pub noise: NoiseBound,
+}
+
+impl Default for RkhsSettings {
+    fn default() -> Self {
+        Self {
+            delta: 0.05,
+            norm_bound: NormBound::MeanTimes(2.0),
+            noise: NoiseBound::Fitted,
+        }
+    }
+}
+
+/// The normalisation of conformal scores: the one-step error is divided by
+/// a scale ũ of the start, the k-step position error by
+/// u_k = Δt·Σ_{j<k} Σ_{i≤j} ũ_i along the prediction. Any choice keeps the
+/// coverage guarantee; it decides where the bound is wide.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Score {
+    /// ũ = the GP's predictive standard deviation √(Σ σ_i² + σ_n,i²), for
+    /// a noisy observation: the bound widens where the GP is unsure.
+    GpStd,
+    /// ũ = the latent standard deviation √(Σ σ_i²) (floored at 1e-6 of the
+    /// noise): for noise-free targets (simulated data), where the noise
+    /// floor of [`Score::GpStd`] blurs the normalisation.
+    LatentStd,
+    /// ũ = 1: one constant bound per horizon (u_k = Δt·k(k+1)/2).
+    Absolute,
+    /// Choose among the three on the first fifth of the calibration windows
+    /// (the one whose bounds are narrowest there, geometric mean of the
+    /// one-step and K-step widths) and calibrate the choice on the other
+    /// four fifths: the choice does not see the windows that calibrate it,
+    /// so the guarantee holds. Falls back to [`Score::GpStd`] on all
+    /// windows when either part is too small for δ.
+    Auto,
+}
+
+/// How the k-step position quantiles are calibrated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Tube {
+    /// One quantile per horizon k: each step's bound covers with
+    /// probability ≥ 1 − δ.
+    PerStep,
+    /// One quantile of max_k(score_k): the whole tube covers all K steps at
+    /// once with probability ≥ 1 − δ (wider).
+    Simultaneous,
+}
+
+/// What the conformal bound does outside its calibrated region: for a
+/// state whose GP input lies outside the box of the calibration starts'
+/// inputs, or farther (in the GP's normalised inputs) from every
+/// calibration start than 99 % of the calibration starts are from their
+/// nearest other one, or whose predictive standard deviation exceeds every
+/// calibration start's. Such a case is unlike the calibration cases, and
+/// the conformal guarantee does not apply to it. (A heuristic detector:
+/// about 1 % of cases drawn like the calibration starts are flagged.)
+///
+/// With a fallback, a flagged state's one-step bound is the larger of the
+/// conformal and the fallback bound, and when the *start* z₀ is flagged the
+/// position bounds of the whole prediction are too (the k-step calibration
+/// is about windows from the calibration starts' distribution).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Fallback {
+    /// Keep the conformal bound and only flag the states
+    /// ([`BoundedPrediction::outside`]).
+    None,
+    /// Flag, and fall back to the RKHS bound (default settings, same δ),
+    /// whose guarantee covers every input.
+    Rkhs,
+    /// Flag, and fall back to the Theorem-1 bound (default settings, same δ).
+    Theorem1,
+}
+
+/// Settings of the conformal bound.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ConformalSettings {
+    /// Miscoverage δ ∈ (0, 1). Needs at least ⌈1/δ − 1⌉ calibration
+    /// windows. Default 0.05.
+    pub delta: f64,
+    /// Score normalisation. Default [`Score::Auto`].
+    pub score: Score,
+    /// Per-step or simultaneous tube. Default [`Tube::PerStep`].
+    pub tube: Tube,
+    /// Outside the calibrated region. Default [`Fallback::Rkhs`].
+    pub fallback: Fallback,
+}
+
+impl Default for ConformalSettings {
+    fn default() -> Self {
+        Self {
+            delta: 0.05,
+            score: Score::Auto,
+            tube: Tube::PerStep,
+            fallback: Fallback::Rkhs,
+        }
+    }
+}
+
+/// Which bound to compute, with its settings.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum BoundKind {
+    /// The paper's Theorem 1 (Lederer et al. 2019 per output, union bound,
+    /// projection Lipschitz constant).
+    Theorem1(Theorem1Settings),
+    /// The RKHS-norm bound of Fiedler, Scherer & Trimpe (2021).
+    Rkhs(RkhsSettings),
+    /// Split conformal prediction on held-out windows.
+    Conformal(ConformalSettings),
+}
+
+impl BoundKind {
+    /// Theorem 1 with default settings and this δ.
+    pub fn theorem1(delta: f64) -> Self {
+        Self::Theorem1(Theorem1Settings {
+            delta,
+            ..Theorem1Settings::default()
+        })
+    }
+
+    /// The RKHS bound with default settings and this δ.
+    pub fn rkhs(delta: f64) -> Self {
+        Self::Rkhs(RkhsSettings {
+            delta,
+            ..RkhsSettings::default()
+        })
+    }
+
+    /// The conformal bound with default settings and this δ.
+    pub fn conformal(delta: f64) -> Self {
+        Self::Conformal(ConformalSettings {
+            delta,
+            ..ConformalSettings::default()
+        })
+    }
+
+    /// The δ of the settings.
+    pub fn delta(&self) -> f64 {
+        match self {
+            Self::Theorem1(s) => s.delta,
+            Self::Rkhs(s) => s.delta,
+            Self::Conformal(s) => s.delta,
+        }
+    }
+}
+
+/// The constants of each kind.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub enum BoundParts {
+    /// Theorem 1: per output, and the box X.
+    Theorem1 {
+        /// Per output.
+        outputs: Vec<Theorem1Output>,
+        /// Lower corner of X in the GP's encoded inputs (original units).
+        domain_lower: Vec<f64>,
+        /// Upper corner of X.
+        domain_upper: Vec<f64>,
+        /// The modulus of continuity used.
+        sigma_modulus: SigmaModulus,
+    },
+    /// RKHS: per output.
+    Rkhs {
+        /// Per output.
+        outputs: Vec<RkhsOutput>,
+    },
+    /// Conformal: the calibrated quantiles.
+    Conformal(ConformalParts),
+}
+
+/// A computed bound: its constants, and what [`Learned::predict`] needs to
+/// attach a bound to every predicted state. Made by
+/// [`Learned::error_bound`]; serialisable with the model.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ErrorBound {
+    /// δ.
+    pub delta: f64,
+    /// Lipschitz constant L of the projection (1 without constraints and for
+    /// the conformal kind, which needs none): the largest spectral norm of
+    /// its Jacobian at the sample states.
+    pub projection_lipschitz: f64,
+    /// The kind's constants.
+    pub parts: BoundParts,
+    /// Sample states L and τ were estimated at.
+    pub samples: usize,
+    /// The rigorous bound a conformal bound falls back to outside its
+    /// calibrated region ([`Fallback`]).
+    pub fallback: Option<Box<ErrorBound>>,
+    outputs: usize,
+    dt: f64,
+    /// Per output √(σ_n² + jitter) in velocity units: the noise floor of the
+    /// conformal score's scale.
+    noise_std: Vec<f64>,
+}
+
+impl ErrorBound {
+    /// `"theorem1"`, `"rkhs"` or `"conformal"`.
+    pub fn kind_name(&self) -> &'static str {
+        match self.parts {
+            BoundParts::Theorem1 { .. } => "theorem1",
+            BoundParts::Rkhs { .. } => "rkhs",
+            BoundParts::Conformal(_) => "conformal",
+        }
+    }
+
+    /// The most steps [`Learned::predict`] may take with this bound: the
+    /// calibration horizon for the conformal kind, `None` (no limit) for the
+    /// rigorous kinds.
+    pub fn horizon(&self) -> Option<usize> {
+        match &self.parts {
+            BoundParts::Conformal(c) => Some(c.position_quantiles.len()),
+            _ => None,
+        }
+    }
+
+    /// The σ-multiplier of each output: the factor of σ_i(z) in the bound
+    /// (L·√β_i for Theorem 1, L·β_i for RKHS, q̂ for conformal, which
+    /// multiplies the predictive standard deviation).
+    pub fn sigma_multipliers(&self) -> Vec<f64> {
+        let l = self.projection_lipschitz;
+        match &self.parts {
+            BoundParts::Theorem1 { outputs, .. } => {
+                outputs.iter().map(|o| l * o.beta.sqrt()).collect()
+            }
+            BoundParts::Rkhs { outputs } => outputs.iter().map(|o| l * o.beta).collect(),
+            BoundParts::Conformal(c) => vec![c.one_step_quantile; self.outputs],
+        }
+    }
+
+    /// The one-step bound on ‖v_{k+1} − v_true‖ at a state whose GP
+    /// posterior standard deviations (velocity units, one per output) are
+    /// `std_dev`. Errors: wrong length, or a NaN, ∞ or negative entry.
+    pub fn one_step(&self, std_dev: &[f64]) -> Result<f64, BoundError> {
+        if std_dev.len() != self.outputs {
+            return Err(BoundError::WrongLength {
+                what: "std_dev",
+                expected: self.outputs,
+                got: std_dev.len(),
+            });
+        }
+        if let Some(bad) = std_dev.iter().find(|s| !(s.is_finite() && **s >= 0.0)) {
+            return Err(BoundError::InvalidSetting {
+                what: "std_dev (must be finite and >= 0)",
+                value: *bad,
+            });
+        }
+        let l = self.projection_lipschitz;
+        let b = match &self.parts {
+            BoundParts::Theorem1 { outputs, .. } => {
+                l * std_dev
+                    .iter()
+                    .zip(outputs)
+                    .map(|(s, o)| o.beta.sqrt() * s + o.gamma)
+                    .sum::<f64>()
+            }
+            BoundParts::Rkhs { outputs } => {
+                // ‖(β_i σ_i)‖₂, scaled by the largest term against overflow
+                let terms = std_dev.iter().zip(outputs).map(|(s, o)| o.beta * s);
+                let m = terms.clone().fold(0.0f64, f64::max);
+                if m > 0.0 {
+                    l * m * terms.map(|t| (t / m) * (t / m)).sum::<f64>().sqrt()
+                } else {
+                    0.0
+                }
+            }
+            BoundParts::Conformal(c) => {
+                c.one_step_quantile * score_scale(c.score, std_dev, &self.noise_std)
+            }
+        };
+        if b.is_finite() && b >= 0.0 {
+            Ok(b)
+        } else {
+            Err(BoundError::NonFinite {
+                what: "one-step bound",
+                value: b,
+            })
+        }
+    }
+
+    /// Whether a state with GP input `input` (`input_n` normalised) and
+    /// predictive scale `scale` lies outside what the bound covers: outside
+    /// the box X (Theorem 1); for the conformal kind, outside the box of the
+    /// calibration starts, farther from every calibration start than their
+    /// nearest-neighbour threshold, or beyond their largest scale. Never for
+    /// the RKHS kind.
+    fn outside(&self, input: &[f64], input_n: &[f64], scale: f64) -> bool {
+        match &self.parts {
+            BoundParts::Theorem1 {
+                domain_lower,
+                domain_upper,
+                ..
+            } => input
+                .iter()
+                .zip(domain_lower.iter().zip(domain_upper))
+                .any(|(x, (lo, hi))| x < lo || x > hi),
+            BoundParts::Rkhs { .. } => false,
+            BoundParts::Conformal(c) => {
+                scale > c.max_scale
+                    || input
+                        .iter()
+                        .zip(c.input_lower.iter().zip(&c.input_upper))
+                        .any(|(x, (lo, hi))| x < lo || x > hi)
+                    || c.far(input_n)
+            }
+        }
+    }
+}
+
+impl fmt::Display for ErrorBound {
+    /// A human-readable report of the bound's parts.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        writeln!(
+            f,
+            "{} bound, delta = {}, projection Lipschitz L = {:.4} ({} sample states)",
+            self.kind_name(),
+            self.delta,
+            self.projection_lipschitz,
+            self.samples
+        )?;
+        match &self.parts {
+            BoundParts::Theorem1 {
+                outputs,
+                sigma_modulus,
+                ..
+            } => {
+                writeln!(
+                    f,
+                    "  |f_i - mu_i| <= sqrt(beta_i) sigma_i + gamma_i on X; omega_sigma: {sigma_modulus:?}; L_mu, L_f, L_sigma, tau in normalised units"
+                )?;
+                writeln!(
+                    f,
+                    "  output      beta    gamma        L_mu         L_f     L_sigma        tau  sigma-multiplier L*sqrt(beta)"
+                )?;
+                for (i, o) in outputs.iter().enumerate() {
+                    writeln!(
+                        f,
+                        "  {i:>6} {:>9.2} {:>8.2e} {:>11.3e} {:>11.3e} {:>11.3e} {:>10.2e} {:>10.2}",
+                        o.beta,
+                        o.gamma,
+                        o.lipschitz_mean,
+                        o.lipschitz_f,
+                        o.lipschitz_sigma,
+                        o.tau,
+                        self.projection_lipschitz * o.beta.sqrt()
+                    )?;
+                }
+            }
+            BoundParts::Rkhs { outputs } => {
+                writeln!(
+                    f,
+                    "  |f_i - mu_i| <= beta_i sigma_i for all inputs, beta_i = B_i + R_i/sqrt(lambda_i) sqrt(ln det - 2 ln(delta/p))"
+                )?;
+                writeln!(
+                    f,
+                    "  output   ||mu||_k        B          R     lambda     ln det     beta  sigma-multiplier L*beta"
+                )?;
+                for (i, o) in outputs.iter().enumerate() {
+                    writeln!(
+                        f,
+                        "  {i:>6} {:>10.3e} {:>8.3e} {:>10.3e} {:>10.3e} {:>10.2} {:>8.2} {:>10.2}",
+                        o.mean_norm,
+                        o.norm_bound,
+                        o.noise_bound,
+                        o.regularisation,
+                        o.log_det,
+                        o.beta,
+                        self.projection_lipschitz * o.beta
+                    )?;
+                }
+            }
+            BoundParts::Conformal(c) => {
+                writeln!(
+                    f,
+                    "  {} calibration windows ({} failed), score {:?}{}, tube {:?}",
+                    c.calibration_size,
+                    c.failed,
+                    c.score,
+                    if c.selection_size > 0 {
+                        format!(" (chosen on {} more windows)", c.selection_size)
+                    } else {
+                        String::new()
+                    },
+                    c.tube
+                )?;
+                writeln!(
+                    f,
+                    "  one-step quantile {:.4}; position quantiles k = 1..{}: {:.3?}",
+                    c.one_step_quantile,
+                    c.position_quantiles.len(),
+                    c.position_quantiles
+                )?;
+                match &self.fallback {
+                    Some(b) => write!(
+                        f,
+                        "  outside the calibrated region it falls back to the {b}"
+                    )?,
+                    None => writeln!(f, "  outside the calibrated region: flagged only")?,
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// A multi-step prediction in which every state carries its bound.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BoundedPrediction<const N: usize> {
+    /// z_0, z_1, …, z_K.
+    pub states: Vec<State<N>>,
+    /// K values: for each step k, the bound on ‖v_{k+1} − v_true(z_k)‖, the
+    /// error of the velocity predicted from z_k (holds with probability
+    /// ≥ 1 − δ; for conformal, marginally).
+    pub one_step_bounds: Vec<f64>,
+    /// K + 1 values: the bound on ‖q_k − q_true,k‖, the position error at
+    /// step k of the prediction against the true trajectory from z_0 (0 at
+    /// k = 0). Conformal: calibrated directly; rigorous kinds: propagated
+    /// (see the module docs).
+    pub position_bounds: Vec<f64>,
+    /// K values: the GP posterior standard deviations σ(z_k).
+    pub std_devs: Vec<SVector<f64, N>>,
+    /// K values: the size of each projection correction.
+    pub corrections: Vec<f64>,
+    /// K values: `true` where z_k lies outside what the bound covers
+    /// (Theorem 1: its GP input is outside the box X; conformal: its GP
+    /// input is outside the box of, or far from, the calibration starts, or
+    /// its predictive standard deviation exceeds theirs: see [`Fallback`]).
+    pub outside: Vec<bool>,
+    /// `true` when a conformal bound left its calibrated region and some
+    /// bounds are the larger of it and its [`Fallback`] (see there).
+    pub fell_back: bool,
+}
+
+/// States, standard deviations and corrections of a learned prediction.
+pub(crate) struct Trace<const N: usize> {
+    pub states: Vec<State<N>>,
+    pub std_devs: Vec<SVector<f64, N>>,
+    pub corrections: Vec<f64>,
+}
+
+/// At most this many training and this many calibration states are used to
+/// estimate L and pick τ (evenly strided).
+const MAX_SAMPLES: usize = 256;
+
+impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
+    /// `steps` learned steps with variances from `z0`.
+    pub(crate) fn trace(
+        &self,
+        z0: &State<N>,
+        steps: usize,
+        ws: &mut Workspace,
+    ) -> Result<Trace<N>, StepError> {
+        let mut t = Trace {
+            states: Vec::with_capacity(steps + 1),
+            std_devs: Vec::with_capacity(steps),
+            corrections: Vec::with_capacity(steps),
+        };
+        t.states.push(*z0);
+        let mut z = *z0;
+        for k in 0..steps {
+            let (next, info) = self.step_with(&z, ws).map_err(|e| e.at_step(k))?;
+            t.std_devs.push(info.std_dev);
+            t.corrections.push(info.correction);
+            t.states.push(next);
+            z = next;
+        }
+        Ok(t)
+    }
+
+    /// Per output √(σ_n² + jitter) in velocity units.
+    fn noise_std(&self) -> Vec<f64> {
+        self.gp()
+            .outputs()
+            .iter()
+            .map(|o| o.regularisation_normalised().sqrt() * o.output_scale())
+            .collect()
+    }
+
+    /// Training states (decoded from the GP inputs) and calibration starts,
+    /// each evenly strided to at most [`MAX_SAMPLES`].
+    fn sample_states(&self, calibration: &Calibration<N>) -> Vec<State<N>> {
+        let gp = self.gp();
+        let d = gp.input_dim();
+        let stride = gp.n().div_ceil(MAX_SAMPLES).max(1);
+        let mut out: Vec<State<N>> = gp
+            .inputs()
+            .chunks_exact(d)
+            .step_by(stride)
+            .map(|x| self.encoding().decode(&M::KINDS, x))
+            .collect();
+        let w = calibration.windows();
+        let stride = w.len().div_ceil(MAX_SAMPLES).max(1);
+        out.extend(w.iter().step_by(stride).map(|w| w.start));
+        out
+    }
+
+    /// The error bound of this trained model: one entry point for the three
+    /// kinds. `calibration` holds held-out windows: required by the
+    /// conformal kind; the rigorous kinds also estimate L and pick τ at its
+    /// start states (besides the training states) and accept
+    /// [`Calibration::empty`].
+    ///
+    /// Cost: the rigorous kinds predict σ and the projection's Jacobian at
+    /// up to 2·256 sample states (plus an O(N³) eigenvalue problem per
+    /// output for [`SigmaModulus::Lederer2019`]); the conformal kind predicts
+    /// every calibration window with variances (n·K learned steps).
+    ///
+    /// Errors: invalid settings (NaN, ∞, negative, δ ∉ (0, 1), wrong
+    /// lengths), too few or malformed calibration windows, calibration data
+    /// with another Δt, a failed projection or prior step at a sample state,
+    /// or a constant that comes out non-finite.
+    pub fn error_bound(
+        &self,
+        kind: &BoundKind,
+        calibration: &Calibration<N>,
+    ) -> Result<ErrorBound, BoundError> {
+        let dt = Integrator::dt(self);
+        if !calibration.is_empty() && (calibration.dt() - dt).abs() > 1e-12 * dt {
+            return Err(BoundError::Mismatch(
+                "the calibration windows have another dt than the model",
+            ));
+        }
+        let gp = self.gp();
+        let p = gp.output_dim();
+        let noise_std = self.noise_std();
+        let bound = |parts, projection_lipschitz, samples| ErrorBound {
+            delta: kind.delta(),
+            projection_lipschitz,
+            parts,
+            samples,
+            fallback: None,
+            outputs: p,
+            dt,
+            noise_std: noise_std.clone(),
+        };
+        if let BoundKind::Conformal(s) = kind {
+            if calibration.is_empty() {
+                return Err(BoundError::Empty(
+                    "calibration windows (the conformal bound needs held-out data)",
+                ));
+            }
+            let parts = conformal::calibrate(self, s, calibration, &noise_std)?;
+            let mut b = bound(BoundParts::Conformal(parts), 1.0, 0);
+            let fallback = match s.fallback {
+                Fallback::None => None,
+                Fallback::Rkhs => Some(BoundKind::rkhs(s.delta)),
+                Fallback::Theorem1 => Some(BoundKind::theorem1(s.delta)),
+            };
+            if let Some(kind) = fallback {
+                b.fallback = Some(Box::new(self.error_bound(&kind, calibration)?));
+            }
+            return Ok(b);
+        }
+        check_delta(kind.delta())?;
+        let samples = self.sample_states(calibration);
+        let mut ws = self.workspace();
+        let mut sigma = vec![Vec::with_capacity(samples.len()); p];
+        let mut lip = 1.0f64;
+        for z in &samples {
+            let (vu, sd) = self.predict_velocity(z, &mut ws)?;
+            for (i, o) in gp.outputs().iter().enumerate() {
+                sigma[i].push(sd[i] / o.output_scale());
+            }
+            if self.projects() && C > 0 {
+                let jac = projection_jacobian(self.model(), &(z.q + z.v * dt), &vu, dt)?;
+                lip = lip.max(jacobian::spectral_norm(&jac));
+            }
+        }
+        if !lip.is_finite() {
+            return Err(BoundError::NonFinite {
+                what: "projection Lipschitz constant",
+                value: lip,
+            });
+        }
+        let parts = match kind {
+            BoundKind::Theorem1(s) => {
+                let t = theorem1::compute(gp, s, &sigma)?;
+                BoundParts::Theorem1 {
+                    outputs: t.outputs,
+                    domain_lower: t.lower,
+                    domain_upper: t.upper,
+                    sigma_modulus: s.sigma_modulus,
+                }
+            }
+            BoundKind::Rkhs(s) => BoundParts::Rkhs {
+                outputs: rkhs::compute(gp, s)?,
+            },
+            BoundKind::Conformal(_) => unreachable!("handled above"),
+        };
+        Ok(bound(parts, lip, samples.len()))
+    }
+
+    /// A `steps`-step prediction from `z0` (e.g. 20 steps for MPC) in which
+    /// every state carries its bound: the one-step velocity bound of each
+    /// step and the position bound of each state (see
+    /// [`BoundedPrediction`]). Cost: `steps` learned steps with variances,
+    /// plus, for the rigorous kinds (and a conformal bound that falls
+    /// back), 2N + 1 mean steps per step for the local Jacobian that
+    /// propagates the bound.
+    ///
+    /// Errors: a bound made for another model, more steps than a conformal
+    /// bound was calibrated for, a failed step, or a non-finite bound.
+    pub fn predict(
+        &self,
+        z0: &State<N>,
+        steps: usize,
+        bound: &ErrorBound,
+    ) -> Result<BoundedPrediction<N>, BoundError> {
+        let dt = Integrator::dt(self);
+        if bound.outputs != self.gp().output_dim() {
+            return Err(BoundError::Mismatch("number of GP outputs"));
+        }
+        if (bound.dt - dt).abs() > 1e-12 * dt {
+            return Err(BoundError::Mismatch("time step dt"));
+        }
+        if let BoundParts::Theorem1 { domain_lower, .. } = &bound.parts
+            && domain_lower.len() != self.gp().input_dim()
+        {
+            return Err(BoundError::Mismatch("GP input dimension"));
+        }
+        if let Some(h) = bound.horizon()
+            && steps > h
+        {
+            return Err(BoundError::HorizonTooLong {
+                calibrated: h,
+                requested: steps,
+            });
+        }
+        let mut ws = self.workspace();
+        let trace = self.trace(z0, steps, &mut ws)?;
+        let (mut one_step, mut position, outside) = self.attach(bound, &trace, &mut ws, true)?;
+        let mut fell_back = false;
+        if let Some(fb) = &bound.fallback
+            && outside.iter().any(|o| *o)
+        {
+            // the fallback's position bounds (which cost a Jacobian per
+            // step) only when the start itself is outside
+            let start_outside = outside.first().copied().unwrap_or(false);
+            let (one, pos, _) = self.attach(fb, &trace, &mut ws, start_outside)?;
+            for ((a, b), o) in one_step.iter_mut().zip(one).zip(&outside) {
+                if *o {
+                    *a = a.max(b);
+                }
+            }
+            if start_outside {
+                for (a, b) in position.iter_mut().zip(pos) {
+                    *a = a.max(b);
+                }
+            }
+            fell_back = true;
+        }
+        Ok(BoundedPrediction {
+            states: trace.states,
+            one_step_bounds: one_step,
+            position_bounds: position,
+            std_devs: trace.std_devs,
+            corrections: trace.corrections,
+            outside,
+            fell_back,
+        })
+    }
+
+    /// One-step bounds, position bounds (only the initial 0 unless
+    /// `positions`) and outside flags of `bound` along a predicted trace.
+    #[allow(clippy::type_complexity)]
+    fn attach(
+        &self,
+        bound: &ErrorBound,
+        trace: &Trace<N>,
+        ws: &mut Workspace,
+        positions: bool,
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>), BoundError> {
+        let dt = Integrator::dt(self);
+        let steps = trace.std_devs.len();
+        let mut input = vec![0.0; self.gp().input_dim()];
+        let mut input_n = input.clone();
+        let mut one_step = Vec::with_capacity(steps);
+        let mut outside = Vec::with_capacity(steps);
+        let mut scales = Vec::with_capacity(steps);
+        for (z, sd) in trace.states.iter().zip(&trace.std_devs) {
+            one_step.push(bound.one_step(sd.as_slice())?);
+            let s = predictive_scale(sd.as_slice(), &bound.noise_std);
+            self.encoding().encode(&M::KINDS, z, &mut input);
+            self.gp().input_normaliser().apply(&input, &mut input_n);
+            outside.push(bound.outside(&input, &input_n, s));
+            if let BoundParts::Conformal(c) = &bound.parts {
+                scales.push(score_scale(c.score, sd.as_slice(), &bound.noise_std));
+            }
+        }
+        let mut position = Vec::with_capacity(steps + 1);
+        position.push(0.0);
+        match &bound.parts {
+            _ if !positions => {}
+            BoundParts::Conformal(c) => {
+                let u = position_scales(&scales, dt);
+                for (q, u) in c.position_quantiles.iter().zip(u) {
+                    position.push(q * u);
+                }
+            }
+            _ => {
+                let (mut pk, mut vk) = (0.0f64, 0.0f64);
+                for (k, b) in one_step.iter().enumerate() {
+                    let (a, c) = if k > 0 && k + 1 < steps {
+                        self.step_jacobian_norms(&trace.states[k], ws)?
+                    } else {
+                        (0.0, 0.0)
+                    };
+                    let p_next = pk + dt * vk;
+                    vk = a * pk + c * vk + b;
+                    pk = p_next;
+                    position.push(pk);
+                }
+            }
+        }
+        if let Some(bad) = position.iter().find(|b| !(b.is_finite() && **b >= 0.0)) {
+            return Err(BoundError::NonFinite {
+                what: "position bound",
+                value: *bad,
+            });
+        }
+        Ok((one_step, position, outside))
+    }
+}
