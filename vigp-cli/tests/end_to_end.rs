@@ -190,11 +190,49 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     ]);
     let text = std::fs::read_to_string(&pred).unwrap();
     let mut lines = text.lines();
-    assert_eq!(lines.next(), Some("run,t,rail,hinge,v_rail,v_hinge,bound"));
+    assert_eq!(
+        lines.next(),
+        Some("run,t,rail,hinge,v_rail,v_hinge,bound,position_bound")
+    );
     let rows: Vec<&str> = lines.collect();
     assert_eq!(rows.len(), 4 * 6);
-    let b: f64 = rows[1].rsplit(',').next().unwrap().parse().unwrap();
-    assert!(b.is_finite() && b > 0.0, "{b}");
+    let bounds = |row: &str| -> (f64, f64) {
+        let mut it = row.rsplit(',');
+        let q: f64 = it.next().unwrap().parse().unwrap();
+        let v: f64 = it.next().unwrap().parse().unwrap();
+        (v, q)
+    };
+    // q_1 = q_0 + Δt·v_0 is known exactly: its position bound is 0; from
+    // q_2 on the bound is positive and grows along the prediction
+    let (v1, q1) = bounds(rows[1]);
+    let (_, q2) = bounds(rows[2]);
+    assert!(v1.is_finite() && v1 > 0.0 && q1 == 0.0, "{v1} {q1}");
+    assert!(q2.is_finite() && q2 > 0.0 && bounds(rows[5]).1 >= q2, "{rows:?}");
+
+    // predict with a conformal bound calibrated on other held-out runs
+    let cal = dir.join("calibration.csv");
+    std::fs::write(&cal, measured_csv(truth.minimal(), 200..204, 3)).unwrap();
+    let pred_c = dir.join("pred_conformal.csv");
+    let out = vigp(&[
+        "predict",
+        "--model",
+        s(&model),
+        "--data",
+        s(&test),
+        "--steps",
+        "5",
+        "--out",
+        s(&pred_c),
+        "--calibration",
+        s(&cal),
+    ]);
+    assert!(out.contains("conformal"), "{out}");
+    let text = std::fs::read_to_string(&pred_c).unwrap();
+    let rows: Vec<&str> = text.lines().skip(1).collect();
+    assert_eq!(rows.len(), 4 * 6);
+    let (v1, _) = bounds(rows[1]);
+    let (_, q2) = bounds(rows[2]);
+    assert!(v1.is_finite() && v1 > 0.0 && q2.is_finite() && q2 > 0.0, "{v1} {q2}");
 
     // export: the size is stated; mean only unless asked
     let rs = dir.join("model.rs");
