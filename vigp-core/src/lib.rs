@@ -8,6 +8,8 @@
 //!   computes M(q), ∂M/∂q, ∇V, D and the energy from it.
 //! * [`Stepper`]: the first-order variational step on fixed-size data.
 //! * [`gp`]: prediction with a Gaussian process exported as Rust source.
+//! * [`spatial`]: 3-D mechanisms: minimal coordinates and the Lie-group
+//!   variational integrator in maximal coordinates (unit quaternions).
 //!
 //! Everything here works on `nalgebra` static vectors and plain arrays, and
 //! never allocates. The std runtime (`vigp-runtime`) re-exports the shared
@@ -23,6 +25,7 @@ pub mod linalg;
 pub mod model;
 pub mod params;
 pub mod real;
+pub mod spatial;
 pub mod state;
 pub mod step;
 
