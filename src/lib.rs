@@ -82,7 +82,7 @@ pub use vigp_runtime::*;
 #[cfg(not(feature = "std"))]
 pub use vigp_core as embedded;
 #[cfg(not(feature = "std"))]
-pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics};
+pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics, spatial};
 
 /// Re-exports for generated code. Not part of the public API.
 #[cfg(not(feature = "std"))]

@@ -8,7 +8,8 @@
 //! resolved, numbers checked, joint graph split into a spanning tree and
 //! loop-closing joints) → [`emit`] (Rust generic over a scalar: `vigp::Real`
 //! for the kinematics and the `no_std` model, num-dual numbers for the std
-//! runtime's views; [`Target`] selects which are emitted).
+//! runtime's views; [`Target`] selects which are emitted). A description
+//! with a 3-component gravity goes through [`spatial`] instead.
 
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -16,6 +17,7 @@
 pub mod emit;
 pub mod model;
 pub mod parse;
+pub mod spatial;
 
 use proc_macro2::TokenStream;
 
@@ -40,6 +42,11 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 /// Expand a `mechanism!` body into the items of `target`, or a spanned
 /// error.
 pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream> {
+    // `gravity: [gx, gy, gz]` selects the spatial path; everything else is
+    // planar (which reports any other shape of `gravity`).
+    if spatial::is_spatial(&input) {
+        return spatial::expand(input, target);
+    }
     let parsed: parse::Input = syn::parse2(input)?;
     let model = model::validate(parsed)?;
     Ok(emit::emit(&model, target))

@@ -24,6 +24,7 @@ pub mod mechanism;
 pub mod newton;
 pub mod params;
 pub mod projection;
+pub mod spatial;
 pub mod summary;
 pub mod variational;
 

@@ -41,7 +41,7 @@
 use super::geometry::{Motion3, Pose3, cross, mul_mv_f};
 use super::model::{Joint3, Link3, ModelError, Spatial, joint_rates, joint_residual, maximal_rows};
 use super::so3;
-use crate::linalg::solve_kkt;
+use crate::linalg::{FullPivLu, solve_kkt};
 use crate::real::Jet1;
 use crate::step::{RolloutError, StepError, StepOptions};
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
@@ -524,6 +524,138 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             z = z1;
         }
         Ok(())
+    }
+
+    /// Project a configuration onto g(x, q) = 0 by Gauss–Newton
+    /// minimum-norm corrections in (δx, η) (x_i += δx_i, q_i ← q_i ⊗
+    /// exp(η_i)): the nearest consistent configuration to first order.
+    /// Returns the iterations used.
+    pub fn project_configuration(
+        &self,
+        x: &mut [Vector3<f64>; B],
+        q: &mut [UnitQuaternion<f64>; B],
+    ) -> Result<usize, StepError> {
+        if C == 0 {
+            return Ok(0);
+        }
+        for iteration in 0..=self.options.max_iterations {
+            let (g, jac) = constraints_and_jacobian::<B, N, C>(&self.links, &self.joints, x, q);
+            let scale = 1.0 + x.iter().map(|x| x.amax()).fold(0.0, f64::max);
+            let err = g.amax() / scale;
+            if !err.is_finite() {
+                return Err(StepError::NonFiniteResidual { iteration });
+            }
+            if err <= self.options.tolerance {
+                return Ok(iteration);
+            }
+            if iteration == self.options.max_iterations {
+                return Err(StepError::NotConverged {
+                    iterations: iteration,
+                    residual: err,
+                });
+            }
+            let y = FullPivLu::new(jac * jac.transpose(), 1e-13).solve(&g);
+            let d = jac.transpose() * y;
+            for i in 0..B {
+                x[i] -= d.fixed_rows::<3>(6 * i);
+                q[i] = so3::advance(&q[i], &(-d.fixed_rows::<3>(6 * i + 3)), 1.0);
+            }
+        }
+        unreachable!("the loop returns on its last iteration")
+    }
+
+    /// The velocity projection (the spatial form of paper eq. 8): the
+    /// velocities ν = (v_i, ω_i) nearest to `nu` (Euclidean) such that the
+    /// configuration one step after (x1, q1) is consistent,
+    /// g(x1 + Δt·v, q1 ⊗ exp(Δt·ω)) = 0, by Newton on the KKT system
+    /// [I  Ĝᵀ; Ĝ  0] with a backtracking line search (Ĝ = ∂g/∂ν). The
+    /// unit norm of the quaternions holds by construction.
+    pub fn project_velocity(
+        &self,
+        x1: &[Vector3<f64>; B],
+        q1: &[UnitQuaternion<f64>; B],
+        nu: &SVector<f64, N>,
+    ) -> Result<SVector<f64, N>, StepError> {
+        if !nu.iter().all(|v| v.is_finite()) {
+            return Err(StepError::NonFiniteState);
+        }
+        if C == 0 {
+            return Ok(*nu);
+        }
+        let d = StepData::<B, N, C> {
+            x1: *x1,
+            q1: *q1,
+            b: SVector::zeros(),
+            g1t: SMatrix::zeros(),
+            damping: SMatrix::zeros(),
+            p_scale: 1.0,
+            l_scale: 1.0 + x1.iter().map(|x| x.amax()).fold(0.0, f64::max),
+        };
+        let v_scale = 1.0 + nu.amax();
+        let target = *nu;
+        let eval = |v: &SVector<f64, N>, l: &SVector<f64, C>, gh: &SMatrix<f64, C, N>| {
+            let (x2, q2) = self.config2(&d, v);
+            let c = constraints::<B, C>(&self.links, &self.joints, &x2, &q2);
+            let r = v - target + gh.transpose() * l;
+            let err = (r.amax() / v_scale).max(c.amax() / d.l_scale);
+            (r, c, err)
+        };
+        let mut v = *nu;
+        let mut lambda = SVector::<f64, C>::zeros();
+        let mut gh = self.jacobian(&d, &v).1;
+        let (mut r, mut c, mut err) = eval(&v, &lambda, &gh);
+        let eye = SMatrix::<f64, N, N>::identity();
+        for iteration in 0..=self.options.max_iterations {
+            if !err.is_finite() {
+                return Err(StepError::NonFiniteResidual { iteration });
+            }
+            if err <= self.options.tolerance {
+                return Ok(v);
+            }
+            if iteration == self.options.max_iterations {
+                break;
+            }
+            let Some((dv, dl)) = solve_kkt(&eye, &gh.transpose(), &gh, &(-r), &(-c)) else {
+                return Err(StepError::SingularJacobian { iteration });
+            };
+            let mut alpha = 1.0;
+            loop {
+                let (vn, ln) = (v + dv * alpha, lambda + dl * alpha);
+                let ghn = self.jacobian(&d, &vn).1;
+                let (rn, cn, errn) = eval(&vn, &ln, &ghn);
+                if errn.is_finite() && (errn < err || errn <= self.options.tolerance) {
+                    (v, lambda, gh, r, c, err) = (vn, ln, ghn, rn, cn, errn);
+                    break;
+                }
+                alpha *= 0.5;
+                if alpha < self.options.min_step {
+                    return Err(StepError::LineSearchFailed {
+                        iteration,
+                        residual: err,
+                    });
+                }
+            }
+        }
+        Err(StepError::NotConverged {
+            iterations: self.options.max_iterations,
+            residual: err,
+        })
+    }
+
+    /// A consistent initial state near `z`: its configuration projected
+    /// onto g = 0 ([`Self::project_configuration`]) and its velocities
+    /// projected so that the next configuration is consistent too
+    /// ([`Self::project_velocity`]). A state whose velocities only satisfy
+    /// Ġ = 0 would leave the first step off the manifold by O(Δt²).
+    pub fn consistent_state(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        let (mut x, mut q) = (z.x, z.q);
+        self.project_configuration(&mut x, &mut q)?;
+        let nu = self.project_velocity(&x, &q, &pack(&z.v, &z.w))?;
+        let (v, w) = unpack(&nu);
+        Ok(SpatialState { x, q, v, w })
     }
 
     /// The per-step data of the step from `z` (configuration k+1 and the

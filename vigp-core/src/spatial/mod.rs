@@ -9,6 +9,7 @@
 //! * [`maximal`]: maximal coordinates (centre of mass and unit quaternion
 //!   per link) and [`LieStepper`], the Lie-group variational integrator
 //!   with position-level joint constraints.
+//! * [`views`]: the map between minimal and maximal states.
 //! * [`so3`]: the exponential map, its Jacobian and the discrete angular
 //!   momenta.
 //! * [`geometry`]: vectors, rotations, poses and motions over any `Real`.
@@ -20,6 +21,7 @@ pub mod maximal;
 pub mod minimal;
 pub mod model;
 pub mod so3;
+pub mod views;
 
 pub use geometry::{Motion3, Pose3};
 pub use maximal::{LieStepReport, LieStepper, Maximal, SpatialState};
