@@ -341,6 +341,10 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         }
 
         impl #minimal_ty {
+            #[doc = " The coordinates of the reference configuration (angles and slides 0, quaternions (1, 0, 0, 0))."]
+            pub fn reference(&self) -> #svector<f64, #nm> {
+                #sp::views::reference::<#name, #b, #j, #nm>(&self.sys)
+            }
             #[doc = " The maximal-coordinate state of a discrete minimal state: X_k from q_k and X_{k+1} from q_k + Δt·v_k."]
             pub fn to_maximal(&self, z: &::vigp::State<#nm>, dt: f64) -> #sp::SpatialState<#b> {
                 #sp::views::to_maximal::<#name, #b, #j, #nm>(&self.sys, z, dt)

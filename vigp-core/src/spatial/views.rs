@@ -14,6 +14,26 @@ use super::model::{JointType, Layout, Spatial, rel_matrix};
 use crate::state::State;
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 
+/// The minimal coordinates of the reference configuration: every angle
+/// and slide zero, every quaternion (1, 0, 0, 0), every free joint's
+/// translation zero.
+pub fn reference<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize>(
+    sys: &S,
+) -> SVector<f64, N> {
+    let joints = sys.joints();
+    let layout = Layout::of::<S, B>(&joints);
+    let mut q = SVector::<f64, N>::zeros();
+    for (k, j) in joints.iter().enumerate() {
+        let o = layout.coordinate[k];
+        match j.kind {
+            JointType::Spherical if o != usize::MAX => q[o] = 1.0,
+            JointType::Free if o != usize::MAX => q[o + 3] = 1.0,
+            _ => {}
+        }
+    }
+    q
+}
+
 /// Centres of mass and orientations of every link for minimal coordinates
 /// `q` (quaternion coordinates are used as given: keep them unit).
 pub fn configuration<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize>(

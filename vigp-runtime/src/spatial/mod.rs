@@ -10,6 +10,9 @@
 //! integrator and the projections work on it unchanged) and
 //! `Name::maximal()` (a [`Maximal`] view for [`LieStepper`]).
 
+#[cfg(feature = "alloc")]
+pub mod learned;
+
 pub use vigp_core::spatial::*;
 pub use vigp_core::{RolloutError, StepOptions};
 
@@ -27,6 +30,20 @@ pub enum SpatialError {
     /// The description cannot be integrated.
     #[error(transparent)]
     Model(#[from] ModelError),
+    /// A learned integrator's GP failed.
+    #[cfg(feature = "alloc")]
+    #[error(transparent)]
+    Learn(Box<learned::LearnSpatialError>),
+}
+
+#[cfg(feature = "alloc")]
+impl From<learned::LearnSpatialError> for SpatialError {
+    fn from(e: learned::LearnSpatialError) -> Self {
+        match e {
+            learned::LearnSpatialError::Step(s) => SpatialError::Step(s),
+            other => SpatialError::Learn(Box::new(other)),
+        }
+    }
 }
 
 /// A one-step map of maximal spatial states with a fixed time step: the
