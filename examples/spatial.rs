@@ -5,17 +5,23 @@
 //! and in minimal coordinates (`Variational` on the generated
 //! `Mechanism`), and prints the energy error (maximum, first and last
 //! tenth), the largest constraint violation |g|, the largest quaternion
-//! norm error |‖q‖ − 1| and the cost per step.
+//! norm error |‖q‖ − 1|, the cost per step and (maximal view) the mean
+//! number of Newton iterations.
+//!
+//! The initial states are MuJoCo's (`tests/fixtures/spatial_mujoco.json`,
+//! written by `scripts/spatial_mujoco.py`), made consistent, so that
+//! `python3 scripts/spatial_mujoco.py bench` prints MuJoCo's energy error
+//! and cost from the same states.
 //!
 //! ```text
 //! cargo run --release --example spatial              # 10⁵ steps of 10 ms each
 //! cargo run --release --example spatial -- 20000     # fewer steps
 //! ```
 
-use nalgebra::{SVector, UnitQuaternion, Vector3};
+use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+use serde_json::Value;
 use std::time::Instant;
 use vigp::prelude::*;
-use vigp::projection::consistent_state;
 use vigp::spatial::{LieStepper, Maximal, Spatial, SpatialState, summarize};
 use vigp::systems::spatial::{
     DoublePendulum3d, Furuta, SpatialSliderCrank, SphericalPendulum, Tumbler,
@@ -36,7 +42,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .trim()
     );
     println!(
-        "{:<22} {:<8} {:>11} {:>11} {:>11} {:>9} {:>9} {:>11} {:>10}",
+        "{:<22} {:<8} {:>11} {:>11} {:>11} {:>9} {:>9} {:>11} {:>10} {:>7}",
         "system",
         "view",
         "max|ΔE| J",
@@ -45,17 +51,23 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "max|g|",
         "|‖q‖−1|",
         "E0 J",
-        "µs/step"
+        "µs/step",
+        "Newton"
     );
+    let fixture: Value = serde_json::from_str(&std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/spatial_mujoco.json"
+    ))?)?;
+    let models = &fixture["models"];
 
     let sys = SphericalPendulum::default();
+    let m = &models["spherical_pendulum"];
     run(
         "spherical pendulum",
         sys,
         sys.minimal(),
         sys.maximal(),
-        [0.8, 0.1, 0.55, 0.2],
-        [0.0, 0.5, 0.0, 1.5],
+        m,
         steps,
     )?;
     let sys = Furuta::default();
@@ -64,28 +76,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         sys,
         sys.minimal(),
         sys.maximal(),
-        [0.0, 2.5],
-        [3.0, 0.0],
+        &models["furuta"],
         steps,
     )?;
     let sys = DoublePendulum3d::default();
+    let m = &models["double_pendulum_3d"];
     run(
         "3-D double pendulum",
         sys,
         sys.minimal(),
         sys.maximal(),
-        [1.0, -0.8],
-        [0.0, 0.0],
+        m,
         steps,
     )?;
     let sys = SpatialSliderCrank::default();
+    let m = &models["spatial_slider_crank"];
     run(
         "spatial slider-crank",
         sys,
         sys.minimal(),
         sys.maximal(),
-        [0.0, 0.99, 0.0, 0.0, 0.12, 0.03],
-        [6.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        m,
         steps,
     )?;
 
@@ -102,7 +113,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let traj = vigp::spatial::SpatialIntegrator::rollout(&stepper, &z0, steps)?;
     let cost = t.elapsed().as_secs_f64() / steps as f64 * 1e6;
     let s = summarize(&stepper, &traj);
-    row("tumbler", "maximal", &s, stepper.energy(&z0), cost);
+    row(
+        "tumbler",
+        "maximal",
+        &s,
+        stepper.energy(&z0),
+        cost,
+        newton(&stepper, &z0),
+    );
     let l0 = stepper.momentum(&z0).1;
     let drift = traj
         .iter()
@@ -119,11 +137,39 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-fn row(name: &str, view: &str, s: &vigp::spatial::SpatialSummary, e0: f64, us: f64) {
+fn row(name: &str, view: &str, s: &vigp::spatial::SpatialSummary, e0: f64, us: f64, newton: f64) {
+    let newton = if newton.is_nan() {
+        String::new()
+    } else {
+        format!("{newton:.2}")
+    };
     println!(
-        "{name:<22} {view:<8} {:>11.3e} {:>11.3e} {:>11.3e} {:>9.1e} {:>9.1e} {:>11.4} {:>10.2}",
+        "{name:<22} {view:<8} {:>11.3e} {:>11.3e} {:>11.3e} {:>9.1e} {:>9.1e} {:>11.4} {:>10.2} {newton:>7}",
         s.max_energy_error, s.first_tenth, s.last_tenth, s.max_violation, s.max_norm_error, e0, us
     );
+}
+
+/// Mean Newton iterations per step over 1000 steps.
+fn newton<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>(
+    stepper: &LieStepper<S, B, J, N, C>,
+    z0: &SpatialState<B>,
+) -> f64 {
+    let mut z = *z0;
+    let mut total = 0;
+    for _ in 0..1000 {
+        let (next, report) = stepper.step_with_report(&z).expect("step");
+        total += report.iterations;
+        z = next;
+    }
+    total as f64 / 1000.0
+}
+
+fn vec3(v: &Value) -> Vector3<f64> {
+    Vector3::new(
+        v[0].as_f64().unwrap_or(f64::NAN),
+        v[1].as_f64().unwrap_or(f64::NAN),
+        v[2].as_f64().unwrap_or(f64::NAN),
+    )
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -141,29 +187,45 @@ fn run<
     sys: S,
     minimal: M,
     view: Maximal<S, B, J, N, C>,
-    q: [f64; NM],
-    v: [f64; NM],
+    fixture: &Value,
     steps: usize,
 ) -> Result<(), Box<dyn std::error::Error>>
 where
     S: Spatial<B, J> + Copy,
     M: Mechanism<NM, CM> + Copy,
 {
-    let zmin = consistent_state(&minimal, &SVector::from(q), &SVector::from(v), DT)?;
-    let z0 = vigp::spatial::views::to_maximal::<S, B, J, NM>(&sys, &zmin, DT);
+    // MuJoCo's initial state (centres of mass, orientations, continuous
+    // velocities), made consistent: the discrete velocities projected so
+    // that the first step ends on the joints
+    let init = fixture["initial"].as_array().ok_or("fixture: initial")?;
+    let q = |i: usize| {
+        let c = |k: usize| init[i]["quat"][k].as_f64().unwrap_or(f64::NAN);
+        UnitQuaternion::new_normalize(Quaternion::new(c(0), c(1), c(2), c(3)))
+    };
+    let guess = SpatialState::<B> {
+        x: std::array::from_fn(|i| vec3(&init[i]["com"])),
+        q: std::array::from_fn(q),
+        v: std::array::from_fn(|i| vec3(&init[i]["v_com"])),
+        w: std::array::from_fn(|i| vec3(&init[i]["w_body"])),
+    };
+    let stepper = LieStepper::new(view, DT)?;
+    let z0 = stepper.consistent_state(&guess)?;
+    let zmin = vigp::spatial::views::to_minimal::<S, B, J, NM>(&sys, &z0, DT);
 
     // maximal coordinates
-    let stepper = LieStepper::new(view, DT)?;
     let mut traj = vec![z0; steps + 1];
     let t = Instant::now();
     stepper.rollout_into(&z0, &mut traj)?;
     let cost = t.elapsed().as_secs_f64() / steps as f64 * 1e6;
+    let iterations = newton(&stepper, &z0);
+    let summary = summarize(&stepper, &traj);
     row(
         name,
         "maximal",
-        &summarize(&stepper, &traj),
+        &summary,
         stepper.energy(&z0),
         cost,
+        iterations,
     );
 
     // minimal coordinates
@@ -205,6 +267,6 @@ where
             }
         }
     }
-    row(name, "minimal", &s, e0, cost);
+    row(name, "minimal", &s, e0, cost, f64::NAN);
     Ok(())
 }

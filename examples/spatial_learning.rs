@@ -61,7 +61,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let n_step = LieStepper::new(nominal.maximal(), dt)?;
     let mut rng = Rng(5);
     let random_state = |rng: &mut Rng| -> Result<SpatialState<2>, Box<dyn std::error::Error>> {
-        let q = [rng.uniform(0.0, 6.283), rng.uniform(1.8, 4.4)];
+        let q = [
+            rng.uniform(0.0, std::f64::consts::TAU),
+            rng.uniform(1.8, 4.4),
+        ];
         let v = [rng.uniform(-4.0, 4.0), rng.uniform(-2.0, 2.0)];
         let z = consistent_state(&nominal.minimal(), &SVector::from(q), &SVector::from(v), dt)?;
         Ok(nominal.minimal().to_maximal(&z, dt))

@@ -95,8 +95,8 @@ fn planar_distance<const B: usize, const M: usize>(
     for (p, s) in planar.iter().zip(spatial) {
         for i in 0..B {
             let pose = planar_pose(&s.x[i], &s.q[i], p.q[3 * i + 2]);
-            for k in 0..3 {
-                d = d.max((pose[k] - p.q[3 * i + k]).abs());
+            for (k, x) in pose.iter().enumerate() {
+                d = d.max((x - p.q[3 * i + k]).abs());
             }
             let qq = s.q[i].quaternion();
             out = out.max(s.x[i].z.abs()).max(qq.i.abs()).max(qq.j.abs());

@@ -71,6 +71,10 @@ where
     let z0 = stepper.consistent_state(&z).unwrap();
     let samples = m["samples"].as_array().unwrap();
     let every = (0.05 / dt).round() as usize;
+    assert!(
+        (every as f64 * dt - 0.05).abs() < 1e-12,
+        "Δt must divide the 0.05 s sampling"
+    );
     let n = every * (samples.len() - 1);
     let mut traj = vec![z0; n + 1];
     stepper.rollout_into(&z0, &mut traj).unwrap();
@@ -87,14 +91,14 @@ where
 
 /// Every example converges to MuJoCo's RK4 trajectory: over 2 s the
 /// largest pose difference halves with Δt (observed order within
-/// [0.85, 1.2] from Δt = 0.8 ms to 0.2 ms) and is below 4e-3 (m or rad) at
-/// Δt = 0.2 ms (the fixture itself, RK4 at 0.1 ms, is accurate to ~1e-12). The reference poses agree to 1e-12.
+/// [0.85, 1.2] from Δt = 1 ms to 0.25 ms) and is below 4e-3 (m or rad) at
+/// Δt = 0.25 ms (the fixture itself, RK4 at 0.1 ms, is accurate to ~1e-12). The reference poses agree to 1e-12.
 #[test]
 fn examples_converge_to_mujoco() {
     fn check(name: &str, e: [f64; 3]) {
         let orders = [(e[0] / e[1]).log2(), (e[1] / e[2]).log2()];
         println!(
-            "{name}: max pose difference to MuJoCo over 2 s: {:.3e}, {:.3e}, {:.3e} at Δt = 0.8, 0.4, 0.2 ms; orders {:.3}, {:.3}",
+            "{name}: max pose difference to MuJoCo over 2 s: {:.3e}, {:.3e}, {:.3e} at Δt = 1, 0.5, 0.25 ms; orders {:.3}, {:.3}",
             e[0], e[1], e[2], orders[0], orders[1]
         );
         assert!(e[2] < 4e-3, "{name}: {e:?}");
@@ -102,7 +106,7 @@ fn examples_converge_to_mujoco() {
             assert!((0.85..=1.2).contains(&p), "{name}: order {p}");
         }
     }
-    let dts = [8e-4, 4e-4, 2e-4];
+    let dts = [1e-3, 5e-4, 2.5e-4];
     let sys = SphericalPendulum::default();
     check(
         "spherical pendulum",

@@ -34,6 +34,7 @@ fn usize_lit(n: usize) -> Literal {
 /// Link-frame (or world) coordinates of a point, with lengths and centres
 /// of mass read from the run-time parameters `links`.
 fn anchor_expr(m: &Model, p: Point) -> TokenStream {
+    let sp = quote!(::vigp::spatial);
     match p {
         Point::World(w) => triple(w),
         Point::Link { link, anchor } => {
@@ -41,7 +42,7 @@ fn anchor_expr(m: &Model, p: Point) -> TokenStream {
             match anchor {
                 Anchor::Start => quote!([0.0, 0.0, 0.0]),
                 Anchor::End => quote!([links.#name.length, 0.0, 0.0]),
-                Anchor::Center => quote!([links.#name.length * 0.5, 0.0, 0.0]),
+                Anchor::Center => quote!(#sp::model::center(links.#name.length)),
                 Anchor::Com => quote!(links.#name.com),
                 Anchor::At(p) => triple(p),
             }
@@ -280,6 +281,9 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
 
         #joints_items
 
+        // literals computed by the macro (reference rotations such as
+        // cos(π/4)) or copied from the description are exact values
+        #[allow(clippy::approx_constant)]
         impl ::core::default::Default for #name {
             fn default() -> Self {
                 Self {
@@ -316,6 +320,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             }
         }
 
+        #[allow(clippy::approx_constant)]
         impl #sp::Spatial<#b, #j> for #name {
             const LINKS: [&'static str; #b] = [#(#link_names),*];
             const JOINTS: [&'static str; #j] = [#(#joint_names),*];

@@ -827,6 +827,12 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         };
         let mut lambda = SVector::<f64, C>::zeros();
         let (mut r, mut c, mut err) = eval(&nu, &lambda);
+        // Chord/Newton hybrid: the factored KKT matrix is kept while Newton
+        // contracts fast (error down by 1e-2 or more per iteration) and
+        // refreshed at the current iterate otherwise, or when a line search
+        // had to backtrack. The converged step is the same (same residual,
+        // same tolerance); only the path to it changes.
+        let mut kkt: Option<Kkt<B, N, C>> = None;
         for iteration in 0..=self.options.max_iterations {
             if !err.is_finite() {
                 return Err(StepError::NonFiniteResidual { iteration });
@@ -849,20 +855,36 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             if iteration == self.options.max_iterations {
                 break;
             }
-            let (a, g2) = self.jacobian(&d, &nu);
-            let Some((dnu, dl)) = solve_kkt(&a, &(-d.g1t), &g2, &(-r), &(-c)) else {
-                return Err(StepError::SingularJacobian { iteration });
+            let fresh = kkt.is_none();
+            let factor = match kkt {
+                Some(f) => f,
+                None => {
+                    let f = self
+                        .factor(&d, &nu)
+                        .ok_or(StepError::SingularJacobian { iteration })?;
+                    kkt = Some(f);
+                    f
+                }
             };
+            let (dnu, dl) = factor.solve(&(-r), &(-c));
             let mut alpha = 1.0;
             loop {
                 let (nn, ln) = (nu + dnu * alpha, lambda + dl * alpha);
                 let (rn, cn, errn) = eval(&nn, &ln);
                 if errn.is_finite() && (errn < err || errn <= self.options.tolerance) {
+                    if alpha < 1.0 || errn > 1e-2 * err {
+                        kkt = None;
+                    }
                     (nu, lambda, r, c, err) = (nn, ln, rn, cn, errn);
                     break;
                 }
                 alpha *= 0.5;
                 if alpha < self.options.min_step {
+                    if !fresh {
+                        // no decrease along the stale direction: refresh
+                        kkt = None;
+                        break;
+                    }
                     return Err(StepError::LineSearchFailed {
                         iteration,
                         residual: err,
@@ -874,6 +896,102 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             iterations: self.options.max_iterations,
             residual: err,
         })
+    }
+
+    /// The KKT matrix [A  −G₁ᵀ; Ĝ₂  0] at ν, factored: A⁻¹ blockwise
+    /// (A = blockdiag(−m I, −∂μ⁺/∂ω) without damping) or by LU with
+    /// complete pivoting (with damping, which couples the links), and the
+    /// Schur complement S = Ĝ₂A⁻¹(−G₁ᵀ) by LU with complete pivoting (a
+    /// rank-deficient S drops only the deficient multiplier). `None` when
+    /// A is singular.
+    fn factor(&self, d: &StepData<B, N, C>, nu: &SVector<f64, N>) -> Option<Kkt<B, N, C>> {
+        let (a, g2) = self.jacobian(d, nu);
+        let inverse = if self.dissipative {
+            let lu = FullPivLu::new(a, 1e-14);
+            if lu.rank() < N {
+                return None;
+            }
+            AInverse::Dense(lu)
+        } else {
+            let mut blocks = [(0.0, Matrix3::zeros()); B];
+            for (i, blk) in blocks.iter_mut().enumerate() {
+                let m = a[(6 * i, 6 * i)];
+                let w = a.fixed_view::<3, 3>(6 * i + 3, 6 * i + 3).into_owned();
+                *blk = (1.0 / m, w.try_inverse()?);
+            }
+            AInverse::Blocks(blocks)
+        };
+        let ainv_b = inverse.apply_matrix(&(-d.g1t));
+        let s = g2 * ainv_b;
+        if !(ainv_b.iter().chain(s.iter()).all(|x| x.is_finite())) {
+            return None;
+        }
+        Some(Kkt {
+            inverse,
+            ainv_b,
+            g2,
+            schur: FullPivLu::new(s, 1e-13),
+        })
+    }
+}
+
+/// A⁻¹ of the Newton matrix's momentum block.
+#[derive(Clone, Copy, Debug)]
+enum AInverse<const B: usize, const N: usize> {
+    /// Per link: 1/(−m) for the translation and the inverse of −∂μ⁺/∂ω.
+    Blocks([(f64, Matrix3<f64>); B]),
+    /// LU with complete pivoting of the whole matrix (damped links couple).
+    Dense(FullPivLu<N>),
+}
+
+impl<const B: usize, const N: usize> AInverse<B, N> {
+    fn apply(&self, r: &SVector<f64, N>) -> SVector<f64, N> {
+        match self {
+            AInverse::Dense(lu) => lu.solve(r),
+            AInverse::Blocks(blocks) => {
+                let mut x = SVector::<f64, N>::zeros();
+                for (i, (inv_m, w)) in blocks.iter().enumerate() {
+                    let t = r.fixed_rows::<3>(6 * i) * *inv_m;
+                    x.fixed_rows_mut::<3>(6 * i).copy_from(&t);
+                    let o = w * r.fixed_rows::<3>(6 * i + 3);
+                    x.fixed_rows_mut::<3>(6 * i + 3).copy_from(&o);
+                }
+                x
+            }
+        }
+    }
+
+    fn apply_matrix<const K: usize>(&self, m: &SMatrix<f64, N, K>) -> SMatrix<f64, N, K> {
+        let mut out = SMatrix::<f64, N, K>::zeros();
+        for k in 0..K {
+            out.set_column(k, &self.apply(&m.column(k).into_owned()));
+        }
+        out
+    }
+}
+
+/// A factored KKT matrix of one Newton step (see `LieStepper::factor`).
+#[derive(Clone, Copy, Debug)]
+struct Kkt<const B: usize, const N: usize, const C: usize> {
+    inverse: AInverse<B, N>,
+    ainv_b: SMatrix<f64, N, C>,
+    g2: SMatrix<f64, C, N>,
+    schur: FullPivLu<C>,
+}
+
+impl<const B: usize, const N: usize, const C: usize> Kkt<B, N, C> {
+    /// Solve [A  B; Ĝ₂  0][x; y] = [r; c] (B = −G₁ᵀ).
+    fn solve(
+        &self,
+        r: &SVector<f64, N>,
+        c: &SVector<f64, C>,
+    ) -> (SVector<f64, N>, SVector<f64, C>) {
+        let ar = self.inverse.apply(r);
+        if C == 0 {
+            return (ar, SVector::zeros());
+        }
+        let y = self.schur.solve(&(self.g2 * ar - c));
+        (ar - self.ainv_b * y, y)
     }
 }
 

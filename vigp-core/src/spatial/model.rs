@@ -43,6 +43,12 @@ pub struct Link3 {
     pub length: f64,
 }
 
+/// The `center` anchor of a link of `length`: (length/2, 0, 0).
+#[inline]
+pub fn center(length: f64) -> [f64; 3] {
+    [0.5 * length, 0.0, 0.0]
+}
+
 /// What a joint allows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum JointType {

@@ -290,13 +290,18 @@ fn tumbling_body_conserves_momentum_and_flips_about_the_intermediate_axis() {
 }
 
 /// The spherical pendulum keeps its joint to solver tolerance, its
-/// quaternion unit to rounding, the vertical angular momentum exactly (no
-/// damping) and its energy bounded.
+/// quaternion unit to rounding, the vertical angular momentum to the
+/// solver tolerance (1e-14 here; no damping) and its energy bounded.
 #[test]
 fn spherical_pendulum_keeps_constraint_norm_and_vertical_momentum() {
     let dt = 0.01;
     let view = Maximal::<Spherical, 1, 1, 6, 3>::new(Spherical { damping: 0.0 });
-    let stepper = LieStepper::new(view, dt).unwrap();
+    let tol = 1e-14;
+    let options = crate::step::StepOptions {
+        tolerance: tol,
+        ..Default::default()
+    };
+    let stepper = LieStepper::with_options(view, dt, options).unwrap();
     // rod tilted 60° from the downward vertical, turning about the vertical
     // at 2 rad/s; v₀ chosen so that configuration 1 keeps the joint
     let q0 = UnitQuaternion::from_scaled_axis(Vector3::new(
@@ -325,6 +330,11 @@ fn spherical_pendulum_keeps_constraint_norm_and_vertical_momentum() {
         assert!(z.norm_error() < 1e-15);
     }
     assert!(max_g < 1e-10, "|g| = {max_g:e}");
-    assert!(max_dl < 1e-10, "L_z drift {max_dl:e}");
+    // each step changes L_z by at most its rotational Newton residual,
+    // √3·tol·p_scale (p_scale = |b|∞ + max(m, J_ii) < 4 here)
+    assert!(
+        max_dl < 5000.0 * 3f64.sqrt() * tol * 4.0,
+        "L_z drift {max_dl:e}"
+    );
     assert!(max_de < 0.2, "energy error {max_de}");
 }
