@@ -16,6 +16,7 @@
 //! ```text
 //! cargo run --release --example spatial              # 10⁵ steps of 10 ms each
 //! cargo run --release --example spatial -- 20000     # fewer steps
+//! cargo run --release --example spatial -- 20000 --maximal-only
 //! ```
 
 use nalgebra::{Quaternion, UnitQuaternion, Vector3};
@@ -229,6 +230,9 @@ where
     );
 
     // minimal coordinates
+    if std::env::args().any(|a| a == "--maximal-only") {
+        return Ok(());
+    }
     let vi = Variational::new(minimal, DT);
     let mut out = vec![zmin; steps];
     let t = Instant::now();

@@ -856,15 +856,14 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 break;
             }
             let fresh = kkt.is_none();
-            let factor = match kkt {
-                Some(f) => f,
-                None => {
-                    let f = self
-                        .factor(&d, &nu)
-                        .ok_or(StepError::SingularJacobian { iteration })?;
-                    kkt = Some(f);
-                    f
-                }
+            if fresh {
+                kkt = Some(
+                    self.factor(&d, &nu)
+                        .ok_or(StepError::SingularJacobian { iteration })?,
+                );
+            }
+            let Some(factor) = kkt.as_ref() else {
+                return Err(StepError::SingularJacobian { iteration });
             };
             let (dnu, dl) = factor.solve(&(-r), &(-c));
             let mut alpha = 1.0;
