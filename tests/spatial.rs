@@ -800,3 +800,85 @@ fn check_terms<S, M, const B: usize, const J: usize, const N: usize, const C: us
         }
     }
 }
+
+/// Bad input is a typed error, never a panic or a NaN: invalid Δt, NaN in
+/// the state, a negative or non-finite mass, an inertia made indefinite at
+/// run time, sizes that do not match the description, a state too fast
+/// for the step, empty training data.
+#[test]
+fn spatial_errors_are_typed() {
+    use vigp::embedded::StepError as E;
+    let sys = SphericalPendulum::default();
+    assert!(matches!(
+        LieStepper::new(sys.maximal(), 0.0),
+        Err(E::InvalidTimeStep { .. })
+    ));
+    assert!(matches!(
+        LieStepper::new(sys.maximal(), f64::NAN),
+        Err(E::InvalidTimeStep { .. })
+    ));
+    let mut bad = sys;
+    bad.links.rod.mass = -1.0;
+    assert!(matches!(
+        LieStepper::new(bad.maximal(), 0.01),
+        Err(E::InvalidModel(_))
+    ));
+    bad.links.rod.mass = f64::INFINITY;
+    assert!(matches!(
+        LieStepper::new(bad.maximal(), 0.01),
+        Err(E::InvalidModel(_))
+    ));
+    let mut bad = sys;
+    bad.links.rod.inertia[0][0] = -0.1;
+    assert!(matches!(
+        LieStepper::new(bad.maximal(), 0.01),
+        Err(E::InvalidModel(_))
+    ));
+    let mut bad = sys;
+    bad.joints.ball.damping = -1.0;
+    assert!(matches!(
+        LieStepper::new(bad.maximal(), 0.01),
+        Err(E::InvalidModel(_))
+    ));
+    let wrong = vigp::spatial::Maximal::<_, 1, 1, 6, 4>::new(sys);
+    assert!(matches!(
+        LieStepper::new(wrong, 0.01),
+        Err(E::InvalidModel(_))
+    ));
+
+    let stepper = LieStepper::new(sys.maximal(), 0.01).unwrap();
+    let (_, z0) = start(
+        &sys.minimal(),
+        &sys,
+        [0.8, 0.1, 0.55, 0.2],
+        [0.0, 0.5, 0.0, 1.5],
+        0.01,
+    );
+    let mut nan = z0;
+    nan.v[0].x = f64::NAN;
+    assert!(matches!(stepper.step(&nan), Err(E::NonFiniteState)));
+    assert!(matches!(
+        stepper.consistent_state(&nan),
+        Err(E::NonFiniteState)
+    ));
+    let mut out = [z0; 3];
+    assert!(stepper.rollout_into(&nan, &mut out).is_err());
+    // 1e6 rad/s against Δt = 10 ms: no root near the start; typed, finite
+    let mut fast = z0;
+    fast.w[0] = Vector3::new(1e6, -3e5, 2e5);
+    match stepper.step(&fast) {
+        Ok(z) => assert!(z.is_finite()),
+        Err(e) => assert!(!format!("{e}").is_empty()),
+    }
+    let empty: Vec<vigp::spatial::learned::SpatialTransition<1>> = Vec::new();
+    assert!(
+        vigp::spatial::learned::LearnedSpatial::train(
+            stepper,
+            &empty,
+            vigp::spatial::learned::Rotation::Matrix,
+            vigp::learned::Prior::Nominal,
+            &vigp::gp::TrainOptions::default(),
+        )
+        .is_err()
+    );
+}
