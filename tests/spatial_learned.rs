@@ -203,3 +203,41 @@ fn learned_minimal_view_projects_onto_the_unit_quaternion() {
     assert!(err(&learned_run) < err(&nominal_run) / 5.0);
     assert!(worst_norm <= 1e-10);
 }
+
+/// A learned spatial step with a caller-owned workspace allocates nothing
+/// (prior step, GP mean, projection).
+#[test]
+fn learned_spatial_step_does_not_allocate() {
+    let dt = 0.01;
+    let sys = Furuta::default();
+    let stepper = LieStepper::new(sys.maximal(), dt).unwrap();
+    let zmin = consistent_state(
+        &sys.minimal(),
+        &SVector::from([0.3, 2.5]),
+        &SVector::from([2.0, 0.5]),
+        dt,
+    )
+    .unwrap();
+    let z0 = sys.minimal().to_maximal(&zmin, dt);
+    let traj = stepper.rollout(&z0, 12).unwrap();
+    let configs: Vec<Configuration<2>> = traj.iter().map(|z| (z.x, z.q)).collect();
+    let (learned, _) = LearnedSpatial::train(
+        stepper,
+        &transitions(&configs, dt),
+        Rotation::Matrix,
+        Prior::Nominal,
+        &TrainOptions {
+            restarts: 0,
+            ..TrainOptions::default()
+        },
+    )
+    .unwrap();
+    let mut ws = learned.workspace();
+    let mut z = z0;
+    let info = allocation_counter::measure(|| {
+        for _ in 0..10 {
+            z = learned.step_with(&z, &mut ws).unwrap();
+        }
+    });
+    assert_eq!(info.count_total, 0, "learned spatial step allocated");
+}

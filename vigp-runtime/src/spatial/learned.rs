@@ -253,11 +253,20 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z: &SpatialState<B>,
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
+        // the GP input on the stack (heap only above 128 dimensions, i.e.
+        // more than 7 links with rotation matrices)
         let d = self.rotation.input_dim(B);
-        let mut input = vec![0.0; d];
-        self.rotation.encode(z, &mut input);
+        let mut stack = [0.0f64; 128];
+        let mut heap;
+        let input: &mut [f64] = if d <= stack.len() {
+            &mut stack[..d]
+        } else {
+            heap = vec![0.0; d];
+            &mut heap
+        };
+        self.rotation.encode(z, input);
         let mut mean = SVector::<f64, N>::zeros();
-        self.gp.predict_mean_into(&input, mean.as_mut_slice(), ws)?;
+        self.gp.predict_mean_into(input, mean.as_mut_slice(), ws)?;
         let prior: SVector<f64, N> = match self.prior {
             Prior::Nominal => {
                 let z1 = self.stepper.step(z)?;
@@ -275,7 +284,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// One learned step: configuration k+1 exactly, velocities predicted
-    /// and projected so that configuration k+2 is consistent.
+    /// and projected so that configuration k+2 is consistent. No
+    /// allocation (GP inputs of up to 128 dimensions).
     pub fn step_with(
         &self,
         z: &SpatialState<B>,
