@@ -348,7 +348,9 @@ where
 }
 
 /// The rate rows of every damped joint at q: each rate is b·v with b the
-/// returned row (as a jet in q when `R` is a jet), weighted by √c.
+/// returned row (as a jet in q when `R` is a jet); `visit(c, b)`.
+// `j` is the velocity direction: it fills the innermost index of `rows`.
+#[allow(clippy::needless_range_loop)]
 fn damping_rows<S, R, const B: usize, const J: usize, const N: usize>(
     sys: &S,
     q: &SVector<R, N>,
