@@ -86,35 +86,35 @@ def furuta(**kw):
     return mjcf(body, **kw)
 
 
-def double_pendulum_3d(**kw):
+def double_pendulum_3d(damping=(0.0, 0.0), **kw):
     # both frames hang down (x along -z); the shoulder axis (0, 1, 0) world is
     # (0, 1, 0) in the upper frame; the elbow axis (0, 0.6, 0.8) is given in
     # the upper frame and the lower frame equals it (relative rotation I)
     body = f"""
     <body name="upper" pos="0 0 0" quat="{DOWN}">
-      <joint name="shoulder" type="hinge" axis="0 1 0" pos="0 0 0" damping="0"/>
+      <joint name="shoulder" type="hinge" axis="0 1 0" pos="0 0 0" damping="{damping[0]}"/>
       {inertial(1.0, [0.0002, 0.0834333, 0.0834333], [0.5, 0, 0])}
       <body name="lower" pos="1 0 0">
-        <joint name="elbow" type="hinge" axis="0 0.6 0.8" pos="0 0 0" damping="0"/>
+        <joint name="elbow" type="hinge" axis="0 0.6 0.8" pos="0 0 0" damping="{damping[1]}"/>
         {inertial(1.0, [0.0002, 0.0834333, 0.0834333], [0.5, 0, 0])}
       </body>
     </body>"""
     return mjcf(body, **kw)
 
 
-def slider_crank(dt=1e-4, **kw):
+def slider_crank(dt=1e-4, damping=(0.0, 0.0, 0.0), **kw):
     body = f"""
     <body name="crank" pos="0 0 0">
-      <joint name="crankshaft" type="hinge" axis="0 1 0" pos="0 0 0" damping="0"/>
+      <joint name="crankshaft" type="hinge" axis="0 1 0" pos="0 0 0" damping="{damping[0]}"/>
       {inertial(0.5, [0.0001, 0.0017167, 0.0017167], [0.1, 0, 0])}
       <body name="rod" pos="0.2 0 0">
-        <joint name="crankpin" type="ball" pos="0 0 0" damping="0"/>
+        <joint name="crankpin" type="ball" pos="0 0 0" damping="{damping[1]}"/>
         {inertial(0.4, [0.00008, 0.012040, 0.012040], [0.3, 0, 0])}
         <site name="rod_end" pos="0.6 0 0"/>
       </body>
     </body>
     <body name="slider" pos="0.75 0.15 0">
-      <joint name="rail" type="slide" axis="1 0 0" pos="0 0 0" damping="0"/>
+      <joint name="rail" type="slide" axis="1 0 0" pos="0 0 0" damping="{damping[2]}"/>
       {inertial(0.6, [0.0005, 0.0008, 0.0008], [0, 0, 0])}
       <site name="slider_com" pos="0 0 0"/>
     </body>"""
@@ -189,6 +189,21 @@ MODELS = {
     "spatial_slider_crank": (slider_crank, None),
 }
 
+# Damped variants (fixtures only): joint damping on the tree joints, in
+# N·m·s/rad (hinge, ball: on each angular velocity component) and N·s/m
+# (slide). The slider-crank's loop joint is a MuJoCo equality, which has
+# no damping.
+DAMPED = {
+    "double_pendulum_3d_damped": (
+        lambda **kw: double_pendulum_3d(damping=(0.3, 0.15), **kw),
+        "double_pendulum_3d",
+    ),
+    "spatial_slider_crank_damped": (
+        lambda **kw: slider_crank(damping=(0.02, 0.01, 0.5), **kw),
+        "spatial_slider_crank",
+    ),
+}
+
 
 def initial_state(name, model):
     if name == "spherical_pendulum":
@@ -226,12 +241,14 @@ def link_state(model, data):
 def fixtures():
     dt, t_end, every = 1e-4, 2.0, 500
     result = {"mujoco": mujoco.__version__, "dt": dt, "integrator": "RK4", "models": {}}
-    for name, (build, _) in MODELS.items():
+    cases = [(n, b, n) for n, (b, _) in MODELS.items()]
+    cases += [(n, b, base) for n, (b, base) in DAMPED.items()]
+    for name, build, base in cases:
         model = mujoco.MjModel.from_xml_string(build(dt=dt))
         data = mujoco.MjData(model)
         mujoco.mj_forward(model, data)
         reference = [data.xipos[b].tolist() for b in range(1, model.nbody)]
-        qpos, qvel = initial_state(name, model)
+        qpos, qvel = initial_state(base, model)
         data.qpos[:] = qpos
         data.qvel[:] = qvel
         mujoco.mj_forward(model, data)
