@@ -53,7 +53,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "|‖q‖−1|",
         "E0 J",
         "µs/step",
-        "Newton"
+        "Newton/KKT"
     );
     let fixture: Value = serde_json::from_str(&std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -138,11 +138,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     Ok(())
 }
 
-fn row(name: &str, view: &str, s: &vigp::spatial::SpatialSummary, e0: f64, us: f64, newton: f64) {
-    let newton = if newton.is_nan() {
+fn row(
+    name: &str,
+    view: &str,
+    s: &vigp::spatial::SpatialSummary,
+    e0: f64,
+    us: f64,
+    newton: (f64, f64),
+) {
+    let newton = if newton.0.is_nan() {
         String::new()
     } else {
-        format!("{newton:.2}")
+        format!("{:.2}/{:.2}", newton.0, newton.1)
     };
     println!(
         "{name:<22} {view:<8} {:>11.3e} {:>11.3e} {:>11.3e} {:>9.1e} {:>9.1e} {:>11.4} {:>10.2} {newton:>7}",
@@ -150,19 +157,20 @@ fn row(name: &str, view: &str, s: &vigp::spatial::SpatialSummary, e0: f64, us: f
     );
 }
 
-/// Mean Newton iterations per step over 1000 steps.
+/// Mean Newton iterations and KKT factorizations per step over 1000 steps.
 fn newton<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>(
     stepper: &LieStepper<S, B, J, N, C>,
     z0: &SpatialState<B>,
-) -> f64 {
+) -> (f64, f64) {
     let mut z = *z0;
-    let mut total = 0;
+    let (mut total, mut factored) = (0, 0);
     for _ in 0..1000 {
         let (next, report) = stepper.step_with_report(&z).expect("step");
         total += report.iterations;
+        factored += report.factorizations;
         z = next;
     }
-    total as f64 / 1000.0
+    (total as f64 / 1000.0, factored as f64 / 1000.0)
 }
 
 fn vec3(v: &Value) -> Vector3<f64> {
@@ -271,6 +279,6 @@ where
             }
         }
     }
-    row(name, "minimal", &s, e0, cost, f64::NAN);
+    row(name, "minimal", &s, e0, cost, (f64::NAN, f64::NAN));
     Ok(())
 }

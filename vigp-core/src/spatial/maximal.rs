@@ -351,6 +351,9 @@ pub fn damping_matrix<const B: usize, const N: usize>(
 pub struct LieStepReport {
     /// Newton iterations used.
     pub iterations: usize,
+    /// KKT matrices evaluated and factored (at most `iterations`: the
+    /// chord/Newton hybrid reuses one while Newton contracts fast).
+    pub factorizations: usize,
     /// Final scaled residual (max-norm).
     pub residual: f64,
 }
@@ -752,8 +755,17 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         d: &StepData<B, N, C>,
         nu: &SVector<f64, N>,
     ) -> (SMatrix<f64, N, N>, SMatrix<f64, C, N>) {
+        let g2 = if C > 0 {
+            self.constraint_rate_jacobian(d, nu)
+        } else {
+            SMatrix::zeros()
+        };
+        (self.newton_matrix(d, nu), g2)
+    }
+
+    /// ∂r/∂ν = blockdiag(−m I, −∂μ⁺/∂ω) − Δt D.
+    fn newton_matrix(&self, d: &StepData<B, N, C>, nu: &SVector<f64, N>) -> SMatrix<f64, N, N> {
         let h = self.dt;
-        // ∂r/∂ν = blockdiag(−m I, −∂μ⁺/∂ω) − Δt D
         let mut a = -d.damping;
         for i in 0..B {
             let m = self.links[i].mass;
@@ -765,24 +777,28 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             let mut blk = a.fixed_view_mut::<3, 3>(6 * i + 3, 6 * i + 3);
             blk -= dm;
         }
-        // ∂c/∂ν: G(x₂, q₂) with Δt on the v columns and Δt·J_r(Δt ω) on the
-        // ω columns (q₂ = q₁ ⊗ exp(Δt ω))
-        let g2 = if C > 0 {
-            let (x2, q2) = self.config2(d, nu);
-            let mut g2 = constraints_and_jacobian::<B, N, C>(&self.links, &self.joints, &x2, &q2).1;
-            for i in 0..B {
-                let w = nu.fixed_rows::<3>(6 * i + 3).into_owned();
-                let jr = so3::right_jacobian(&(w * h)) * h;
-                let mut vcols = g2.fixed_view_mut::<C, 3>(0, 6 * i);
-                vcols *= h;
-                let wcols = g2.fixed_view::<C, 3>(0, 6 * i + 3) * jr;
-                g2.fixed_view_mut::<C, 3>(0, 6 * i + 3).copy_from(&wcols);
-            }
-            g2
-        } else {
-            SMatrix::zeros()
-        };
-        (a, g2)
+        a
+    }
+
+    /// ∂c/∂ν: G(x₂, q₂) with Δt on the v columns and Δt·J_r(Δt ω) on the
+    /// ω columns (q₂ = q₁ ⊗ exp(Δt ω)).
+    fn constraint_rate_jacobian(
+        &self,
+        d: &StepData<B, N, C>,
+        nu: &SVector<f64, N>,
+    ) -> SMatrix<f64, C, N> {
+        let h = self.dt;
+        let (x2, q2) = self.config2(d, nu);
+        let mut g2 = constraints_and_jacobian::<B, N, C>(&self.links, &self.joints, &x2, &q2).1;
+        for i in 0..B {
+            let w = nu.fixed_rows::<3>(6 * i + 3).into_owned();
+            let jr = so3::right_jacobian(&(w * h)) * h;
+            let mut vcols = g2.fixed_view_mut::<C, 3>(0, 6 * i);
+            vcols *= h;
+            let wcols = g2.fixed_view::<C, 3>(0, 6 * i + 3) * jr;
+            g2.fixed_view_mut::<C, 3>(0, 6 * i + 3).copy_from(&wcols);
+        }
+        g2
     }
 
     /// The residual of the step from `z` at unknowns ν = (v_i, ω_i)_{k+1}
@@ -833,6 +849,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         // had to backtrack. The converged step is the same (same residual,
         // same tolerance); only the path to it changes.
         let mut kkt: Option<Kkt<B, N, C>> = None;
+        let mut factorizations = 0;
         for iteration in 0..=self.options.max_iterations {
             if !err.is_finite() {
                 return Err(StepError::NonFiniteResidual { iteration });
@@ -848,6 +865,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     },
                     LieStepReport {
                         iterations: iteration,
+                        factorizations,
                         residual: err,
                     },
                 ));
@@ -857,6 +875,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             }
             let fresh = kkt.is_none();
             if fresh {
+                factorizations += 1;
                 kkt = Some(
                     self.factor(&d, &nu)
                         .ok_or(StepError::SingularJacobian { iteration })?,
@@ -904,23 +923,29 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// rank-deficient S drops only the deficient multiplier). `None` when
     /// A is singular.
     fn factor(&self, d: &StepData<B, N, C>, nu: &SVector<f64, N>) -> Option<Kkt<B, N, C>> {
-        let (a, g2) = self.jacobian(d, nu);
+        let h = self.dt;
         let inverse = if self.dissipative {
-            let lu = FullPivLu::new(a, 1e-14);
+            let lu = FullPivLu::new(self.newton_matrix(d, nu), 1e-14);
             if lu.rank() < N {
                 return None;
             }
             AInverse::Dense(lu)
         } else {
+            // A = blockdiag(−m I, −∂μ⁺/∂ω): invert per link without forming A
             let mut blocks = [(0.0, Matrix3::zeros()); B];
             for (i, blk) in blocks.iter_mut().enumerate() {
-                let m = a[(6 * i, 6 * i)];
-                let w = a.fixed_view::<3, 3>(6 * i + 3, 6 * i + 3).into_owned();
-                *blk = (1.0 / m, w.try_inverse()?);
+                let w = nu.fixed_rows::<3>(6 * i + 3).into_owned();
+                let dm = so3::momentum_jacobian(&self.inertia[i], &w, h, 1.0);
+                *blk = (-1.0 / self.links[i].mass, (-dm).try_inverse()?);
             }
             AInverse::Blocks(blocks)
         };
-        let ainv_b = inverse.apply_matrix(&(-d.g1t));
+        let g2 = if C > 0 {
+            self.constraint_rate_jacobian(d, nu)
+        } else {
+            SMatrix::zeros()
+        };
+        let ainv_b = inverse.apply_matrix(&d.g1t) * -1.0;
         let s = g2 * ainv_b;
         if !(ainv_b.iter().chain(s.iter()).all(|x| x.is_finite())) {
             return None;
@@ -961,11 +986,19 @@ impl<const B: usize, const N: usize> AInverse<B, N> {
     }
 
     fn apply_matrix<const K: usize>(&self, m: &SMatrix<f64, N, K>) -> SMatrix<f64, N, K> {
-        let mut out = SMatrix::<f64, N, K>::zeros();
-        for k in 0..K {
-            out.set_column(k, &self.apply(&m.column(k).into_owned()));
+        match self {
+            AInverse::Dense(lu) => lu.solve_matrix(m),
+            AInverse::Blocks(blocks) => {
+                let mut out = SMatrix::<f64, N, K>::zeros();
+                for (i, (inv_m, w)) in blocks.iter().enumerate() {
+                    let t = m.fixed_view::<3, K>(6 * i, 0) * *inv_m;
+                    out.fixed_view_mut::<3, K>(6 * i, 0).copy_from(&t);
+                    let o = w * m.fixed_view::<3, K>(6 * i + 3, 0);
+                    out.fixed_view_mut::<3, K>(6 * i + 3, 0).copy_from(&o);
+                }
+                out
+            }
         }
-        out
     }
 }
 
