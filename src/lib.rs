@@ -59,7 +59,10 @@
 //!
 //! ## The DSL
 //!
-//! * `gravity: [gx, gy]` (optional, default `[0, -9.81]`; planar only).
+//! * `gravity: [gx, gy]` (optional, default `[0, -9.81]`). Three components
+//!   `[gx, gy, gz]` declare a spatial mechanism: see `vigp::spatial` and
+//!   docs/spatial.md (links with inertia tensors and frames; revolute,
+//!   prismatic, spherical, fixed and free joints).
 //! * `links { name: { mass, length, inertia?, com? }, … }`: a rigid link with
 //!   its local frame at `start` and local x-axis towards `end` = (length, 0).
 //!   `inertia` is about the centre of mass (default m·l²/12), `com` in local
@@ -104,7 +107,7 @@ pub use vigp_runtime::*;
 #[cfg(not(feature = "std"))]
 pub use vigp_core as embedded;
 #[cfg(not(feature = "std"))]
-pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics};
+pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics, spatial};
 
 /// Re-exports for generated code. Not part of the public API.
 #[cfg(not(feature = "std"))]
@@ -125,6 +128,11 @@ pub mod systems;
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 pub struct ReadmeDoctests;
+
+/// The examples of docs/spatial.md, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/spatial.md")]
+pub struct SpatialDoctests;
 
 /// The names most programs need.
 #[cfg(feature = "std")]

@@ -77,3 +77,5 @@ crate::mechanism! {
         }
     }
 }
+
+pub mod spatial;

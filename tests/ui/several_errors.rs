@@ -2,7 +2,7 @@
 // the first one.
 vigp::mechanism! {
     DoublePendulum {
-        gravity: [0.0, 0.0, -9.81],
+        gravity: [0.0, 0.0, -9.81, 0.0],
         links {
             upper: { mass: 0.0, length: 1.0, inertia: -1.0 },
             lower: { mas: 1.0, length: 1.0 },

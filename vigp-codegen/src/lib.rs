@@ -10,6 +10,7 @@
 //! for the kinematics and the `no_std` model, num-dual numbers for the std
 //! runtime's views; [`Target`] selects which are emitted), plus [`describe`]
 //! (the mechanism's name and named parameters, and the `vigp::System` impl).
+//! A description with a 3-component gravity goes through [`spatial`] instead.
 
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
@@ -20,6 +21,7 @@ pub mod emit_terms;
 pub mod mechanics;
 pub mod model;
 pub mod parse;
+pub mod spatial;
 pub mod symbolic;
 
 use proc_macro2::TokenStream;
@@ -45,6 +47,11 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 /// Expand a `mechanism!` body into the items of `target`, or a spanned
 /// error.
 pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream> {
+    // `gravity: [gx, gy, gz]` selects the spatial path; everything else is
+    // planar (which reports any other shape of `gravity`).
+    if spatial::is_spatial(&input) {
+        return spatial::expand(input, target);
+    }
     let parsed: parse::Input = syn::parse2(input)?;
     let model = model::validate(parsed)?;
     let mut out = emit::emit(&model, target)?;

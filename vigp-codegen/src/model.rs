@@ -254,13 +254,12 @@ pub fn validate(input: Input) -> syn::Result<Model> {
     if let Some((key, v)) = &input.gravity {
         match v {
             Value::Array(_, g) if g.len() == 2 => gravity = [g[0].value, g[1].value],
-            Value::Array(s, g) if g.len() == 3 => errs.push(
-                *s,
-                "spatial (3-D) mechanisms are not supported yet: give planar gravity `[gx, gy]`",
-            ),
+            // three numbers select the spatial path before this point
             other => errs.push(
                 other.span(),
-                format!("`{key}` must have 2 components `[gx, gy]` for a planar mechanism"),
+                format!(
+                    "`{key}` must have 2 components `[gx, gy]` (planar) or 3 `[gx, gy, gz]` (spatial)"
+                ),
             ),
         }
     }

@@ -10,6 +10,8 @@
 //! * [`gp`]: prediction with a Gaussian process exported as Rust source.
 //! * [`LearnedStepper`]: the learned step (nominal prior + exported GP
 //!   means + projection for loops) of a model exported by the std runtime.
+//! * [`spatial`]: 3-D mechanisms: minimal coordinates and the Lie-group
+//!   variational integrator in maximal coordinates (unit quaternions).
 //!
 //! Everything here works on `nalgebra` static vectors and plain arrays, and
 //! never allocates. The std runtime (`vigp-runtime`) re-exports the shared
@@ -28,6 +30,7 @@ pub mod linalg;
 pub mod model;
 pub mod params;
 pub mod real;
+pub mod spatial;
 pub mod state;
 pub mod step;
 

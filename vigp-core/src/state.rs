@@ -9,6 +9,10 @@ pub enum CoordinateKind {
     Angle,
     /// A length in metres (prismatic slide, or a position).
     Length,
+    /// A component of a unit quaternion (dimensionless, in [−1, 1]): the
+    /// four coordinates of a spatial mechanism's spherical or free joint in
+    /// minimal coordinates, held on the unit sphere by a constraint.
+    Quaternion,
 }
 
 /// A discrete state z = (q, v) of an `N`-coordinate model.

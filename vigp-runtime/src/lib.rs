@@ -28,6 +28,7 @@ pub mod newton;
 pub mod params;
 pub mod projection;
 pub mod reference;
+pub mod spatial;
 pub mod summary;
 pub mod system;
 pub mod variational;

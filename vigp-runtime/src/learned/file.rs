@@ -69,6 +69,8 @@ pub enum SavedKind {
     Angle,
     /// A length (m).
     Length,
+    /// A unit-quaternion component (spatial minimal coordinates).
+    Quaternion,
 }
 
 impl From<CoordinateKind> for SavedKind {
@@ -76,6 +78,7 @@ impl From<CoordinateKind> for SavedKind {
         match k {
             CoordinateKind::Angle => SavedKind::Angle,
             CoordinateKind::Length => SavedKind::Length,
+            CoordinateKind::Quaternion => SavedKind::Quaternion,
         }
     }
 }

@@ -1,0 +1,99 @@
+//! Snapshots of the generated code of the spatial examples (reviewed as
+//! diffs; accept intended changes with
+//! `INSTA_UPDATE=always cargo test --test spatial_snapshot`), and what a
+//! spatial scene does not need is not emitted.
+
+/// The bodies of every `crate::mechanism! { … }` in `src`, with names.
+fn mechanism_bodies(src: &str) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mut rest = src;
+    while let Some(i) = rest.find("mechanism! {") {
+        let open = i + "mechanism! ".len();
+        let mut depth = 0usize;
+        let mut end = open;
+        for (k, ch) in rest[open..].char_indices() {
+            match ch {
+                '{' => depth += 1,
+                '}' => {
+                    depth -= 1;
+                    if depth == 0 {
+                        end = open + k;
+                        break;
+                    }
+                }
+                _ => {}
+            }
+        }
+        let body = &rest[open + 1..end];
+        let name = body
+            .lines()
+            .map(str::trim)
+            .find(|l| l.starts_with("pub "))
+            .and_then(|l| l.split_whitespace().nth(1))
+            .expect("a `pub Name {` line")
+            .to_string();
+        out.push((name, body.to_string()));
+        rest = &rest[end..];
+    }
+    out
+}
+
+#[test]
+fn generated_code_of_the_spatial_examples() {
+    let bodies = mechanism_bodies(include_str!("../src/systems/spatial.rs"));
+    let names: Vec<_> = bodies.iter().map(|(n, _)| n.as_str()).collect();
+    assert_eq!(
+        names,
+        [
+            "SphericalPendulum",
+            "Furuta",
+            "DoublePendulum3d",
+            "SpatialSliderCrank",
+            "Tumbler"
+        ]
+    );
+    for (name, body) in bodies {
+        let code = vigp_codegen::expand_to_string(&body).unwrap_or_else(|e| panic!("{name}: {e}"));
+        if name == "Furuta" || name == "SpatialSliderCrank" {
+            insta::assert_snapshot!(name, code);
+        }
+    }
+}
+
+/// An undamped revolute tree has no joint parameters, no dissipation and
+/// no constraint code in its minimal view; a ball joint brings its
+/// unit-norm constraint; the `no_std` expansion has no `Mechanism` impl.
+#[test]
+fn spatial_code_contains_only_what_the_scene_needs() {
+    let tree = vigp_codegen::expand_to_string(
+        "pub Arm { gravity: [0.0, 0.0, -9.81], links { a: { mass: 1.0, length: 1.0, inertia: [0.1, 1.0, 1.0] } } \
+         joints { j: revolute(world, a.start) { axis: [0.0, 1.0, 0.0] } } }",
+    )
+    .unwrap();
+    assert!(tree.contains("impl ::vigp::Mechanism<1, 0> for ArmMinimal"));
+    assert!(!tree.contains("fn constraints"));
+    assert!(!tree.contains("fn dissipation"));
+    assert!(!tree.contains("ArmJoints"));
+    let ball = vigp_codegen::expand_to_string(
+        "pub Ball { gravity: [0.0, 0.0, -9.81], links { a: { mass: 1.0, length: 1.0, inertia: [0.1, 1.0, 1.0] } } \
+         joints { j: spherical(world, a.start) { damping: 0.1 } } }",
+    )
+    .unwrap();
+    assert!(ball.contains("impl ::vigp::Mechanism<4, 1> for BallMinimal"));
+    assert!(ball.contains("fn constraints"));
+    assert!(ball.contains("fn dissipation"));
+    assert!(ball.contains("Maximal<Self, 1, 1, 6, 3>"));
+    let no_std = vigp_codegen::expand_to_string_for(
+        &mechanism_bodies(include_str!("../src/systems/spatial.rs"))[1].1,
+        vigp_codegen::Target::NoStd,
+    )
+    .unwrap();
+    assert!(no_std.contains("impl ::vigp::spatial::Spatial<2, 2> for Furuta"));
+    assert!(!no_std.contains("::vigp::Mechanism"));
+    // a planar description still gets planar code
+    let planar = vigp_codegen::expand_to_string(
+        "pub P { links { a: { mass: 1.0, length: 1.0 } } joints { j: revolute(world, a.start) } }",
+    )
+    .unwrap();
+    assert!(planar.contains("::vigp::Pose2") && !planar.contains("::vigp::spatial"));
+}

@@ -1,0 +1,13 @@
+vigp::mechanism! {
+    Pendulum {
+        gravity: [0.0, 0.0, -9.81, 0.0],
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start),
+        }
+    }
+}
+
+fn main() {}

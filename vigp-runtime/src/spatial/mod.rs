@@ -1,0 +1,154 @@
+//! Spatial (3-D) mechanisms: the `no_std` core (`vigp_core::spatial`:
+//! description, minimal coordinates, the Lie-group variational integrator
+//! in maximal coordinates) re-exported, plus the std conveniences: a
+//! typed error, rollouts into a `Vec`, run summaries and the learned
+//! integrator in space ([`learned`]).
+//!
+//! A `mechanism!` with `gravity: [gx, gy, gz]` generates a parameter type
+//! `Name` implementing [`Spatial`], with `Name::minimal()` (a
+//! [`Mechanism`](crate::Mechanism): every planar integrator, the learned
+//! integrator and the projections work on it unchanged) and
+//! `Name::maximal()` (a [`Maximal`] view for [`LieStepper`]).
+
+#[cfg(feature = "alloc")]
+pub mod learned;
+
+pub use vigp_core::spatial::*;
+pub use vigp_core::{RolloutError, StepOptions};
+
+use vigp_core::StepError as CoreStepError;
+
+/// Why a spatial computation failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SpatialError {
+    /// A step failed.
+    #[error(transparent)]
+    Step(#[from] CoreStepError),
+    /// A step inside a rollout failed (the index names it).
+    #[error(transparent)]
+    Rollout(#[from] RolloutError),
+    /// The description cannot be integrated.
+    #[error(transparent)]
+    Model(#[from] ModelError),
+    /// A learned integrator's GP failed.
+    #[cfg(feature = "alloc")]
+    #[error(transparent)]
+    Learn(Box<learned::LearnSpatialError>),
+}
+
+#[cfg(feature = "alloc")]
+impl From<learned::LearnSpatialError> for SpatialError {
+    fn from(e: learned::LearnSpatialError) -> Self {
+        match e {
+            learned::LearnSpatialError::Step(s) => SpatialError::Step(s),
+            other => SpatialError::Learn(Box::new(other)),
+        }
+    }
+}
+
+/// A one-step map of maximal spatial states with a fixed time step: the
+/// Lie-group variational integrator ([`LieStepper`]) or a learned one.
+pub trait SpatialIntegrator<const B: usize> {
+    /// Δt (s).
+    fn dt(&self) -> f64;
+
+    /// One step.
+    fn step(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, SpatialError>;
+
+    /// The trajectory z₀, z₁, …, z_steps (`steps + 1` states); a failing
+    /// step is reported with its index.
+    fn rollout(
+        &self,
+        z0: &SpatialState<B>,
+        steps: usize,
+    ) -> Result<Vec<SpatialState<B>>, SpatialError> {
+        let mut out = Vec::with_capacity(steps + 1);
+        out.push(*z0);
+        let mut z = *z0;
+        for k in 0..steps {
+            z = self.step(&z).map_err(|e| match e {
+                SpatialError::Step(error) => SpatialError::Rollout(RolloutError { step: k, error }),
+                other => other,
+            })?;
+            out.push(z);
+        }
+        Ok(out)
+    }
+}
+
+impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
+    SpatialIntegrator<B> for LieStepper<S, B, J, N, C>
+{
+    fn dt(&self) -> f64 {
+        LieStepper::dt(self)
+    }
+
+    fn step(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, SpatialError> {
+        Ok(LieStepper::step(self, z)?)
+    }
+
+    /// Through [`LieStepper::rollout_into`] (extrapolated Newton starts).
+    fn rollout(
+        &self,
+        z0: &SpatialState<B>,
+        steps: usize,
+    ) -> Result<Vec<SpatialState<B>>, SpatialError> {
+        let mut out = vec![*z0; steps + 1];
+        self.rollout_into(z0, &mut out)?;
+        Ok(out)
+    }
+}
+
+/// What a run did to the invariants: energy error, constraint violation
+/// and quaternion norms.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpatialSummary {
+    /// max_k |E_k − E_0|.
+    pub max_energy_error: f64,
+    /// max |E_k − E_0| over the first tenth of the run.
+    pub first_tenth: f64,
+    /// max |E_k − E_0| over the last tenth of the run.
+    pub last_tenth: f64,
+    /// max_k |g(x_k, q_k)|, from step 1 on (z₀ may be inconsistent).
+    pub max_violation: f64,
+    /// max_k max_i |‖q_i‖ − 1|.
+    pub max_norm_error: f64,
+}
+
+/// Summarise a trajectory of `stepper`.
+pub fn summarize<
+    S: Spatial<B, J>,
+    const B: usize,
+    const J: usize,
+    const N: usize,
+    const C: usize,
+>(
+    stepper: &LieStepper<S, B, J, N, C>,
+    traj: &[SpatialState<B>],
+) -> SpatialSummary {
+    let e0 = traj.first().map_or(0.0, |z| stepper.energy(z));
+    let n = traj.len();
+    let tenth = (n / 10).max(1);
+    let mut s = SpatialSummary {
+        max_energy_error: 0.0,
+        first_tenth: 0.0,
+        last_tenth: 0.0,
+        max_violation: 0.0,
+        max_norm_error: 0.0,
+    };
+    for (k, z) in traj.iter().enumerate() {
+        let de = (stepper.energy(z) - e0).abs();
+        s.max_energy_error = s.max_energy_error.max(de);
+        if k < tenth {
+            s.first_tenth = s.first_tenth.max(de);
+        }
+        if k + tenth >= n {
+            s.last_tenth = s.last_tenth.max(de);
+        }
+        if k > 0 {
+            s.max_violation = s.max_violation.max(stepper.constraint_violation(z));
+        }
+        s.max_norm_error = s.max_norm_error.max(z.norm_error());
+    }
+    s
+}
