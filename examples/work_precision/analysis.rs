@@ -1,6 +1,6 @@
 //! Reading the curves: fitted orders and the cost to reach an error.
 
-use crate::run::{Method, SweepPoint};
+use crate::run::{Measured, Method, SweepPoint};
 
 /// A least-squares fit log₁₀(error) = p·log₁₀(dt) + c.
 #[derive(Clone, Debug, PartialEq)]
@@ -21,9 +21,12 @@ pub struct Fit {
 }
 
 /// Which points enter the order fit: the `max_points` smallest time steps
-/// among those with a finite error in `[lo, hi]`, where `lo` keeps clear of
-/// the reference's own error and round-off, `hi` leaves out unstable large
-/// steps, and taking the smallest steps stays in the asymptotic regime.
+/// among those with a finite error in `[lo, hi]`, at least 10× the
+/// run's own solver error (if it has a Newton iteration) and at least 10×
+/// its accumulated round-off `steps · roundoff`, where `lo` keeps
+/// clear of the reference's own error, the solver error of the
+/// accumulated Newton tolerance, `hi` leaves out unstable large steps, and
+/// taking the smallest steps stays in the asymptotic regime.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FitWindow {
     /// Lower error limit.
@@ -32,6 +35,28 @@ pub struct FitWindow {
     pub hi: f64,
     /// At most this many points (the smallest dt).
     pub max_points: usize,
+    /// Round-off per step, ε·max(1, ‖q_ref‖∞): a run of n steps has an
+    /// error floor of about n times this (linear accumulation, the
+    /// worst case).
+    pub roundoff: f64,
+}
+
+impl FitWindow {
+    /// `true` if the measured error of a run of `steps` steps is clear
+    /// (by 10×) of the reference's error, the run's solver error and its
+    /// accumulated round-off, and below `hi`.
+    pub fn admits(&self, m: &Measured, steps: usize) -> bool {
+        m.error.is_finite() && m.error <= self.hi && self.above_floor(m, steps)
+    }
+
+    /// `true` if a measured error is clear of the reference's error, the
+    /// solver's error and round-off (large errors included): a filled
+    /// marker in the plots.
+    pub fn above_floor(&self, m: &Measured, steps: usize) -> bool {
+        m.error >= self.lo
+            && m.error >= 10.0 * steps as f64 * self.roundoff
+            && m.solver_error.is_none_or(|s| m.error >= 10.0 * s)
+    }
 }
 
 /// Fits the observed order over the points of one curve selected by
@@ -42,8 +67,7 @@ pub fn fit_order(points: &[SweepPoint], window: FitWindow) -> Option<Fit> {
         .iter()
         .filter_map(|p| {
             let m = p.outcome.as_ref().ok()?;
-            (m.error.is_finite() && m.error >= window.lo && m.error <= window.hi && p.dt > 0.0)
-                .then(|| (p.dt, p.dt.log10(), m.error.log10()))
+            (window.admits(m, p.steps) && p.dt > 0.0).then(|| (p.dt, p.dt.log10(), m.error.log10()))
         })
         .collect();
     used.sort_by(|a, b| a.0.total_cmp(&b.0));
@@ -201,7 +225,7 @@ pub fn reach_cell(r: &Reach) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::run::{Failure, Measured};
+    use crate::run::Failure;
 
     fn point(dt: f64, error: Option<f64>, cost: f64) -> SweepPoint {
         SweepPoint {
@@ -212,6 +236,7 @@ mod tests {
                 Some(error) => Ok(Measured {
                     error,
                     constraint_violation: 0.0,
+                    solver_error: None,
                     cost,
                     cost_min: cost,
                     cost_max: cost,
@@ -235,6 +260,7 @@ mod tests {
             lo: 0.0,
             hi: 1.0,
             max_points: 10,
+            roundoff: 0.0,
         };
         let f = fit_order(&pts, all).unwrap();
         assert!((f.slope - 2.0).abs() < 1e-12);
@@ -250,6 +276,49 @@ mod tests {
         )
         .unwrap();
         assert_eq!((three.points, three.dt_max), (3, 0.05));
+    }
+
+    #[test]
+    fn fit_leaves_out_solver_and_roundoff_floors() {
+        // a fourth-order curve whose two smallest steps sit on a solver
+        // floor (error ≈ solver error) and a round-off floor
+        let mut pts: Vec<_> = [0.04, 0.02, 0.01, 0.005, 0.0025, 0.00125]
+            .iter()
+            .map(|&dt: &f64| point(dt, Some(10.0 * dt.powi(4)), 1.0 / dt))
+            .collect();
+        if let Ok(m) = &mut pts[4].outcome {
+            m.error = 3e-9;
+            m.solver_error = Some(2.9e-9);
+        }
+        pts[5].steps = 1_000_000;
+        if let Ok(m) = &mut pts[5].outcome {
+            m.error = 1e-10; // < 10 · 10⁶ · 2.2e-16
+        }
+        let window = FitWindow {
+            lo: 1e-13,
+            hi: 1.0,
+            max_points: 10,
+            roundoff: f64::EPSILON,
+        };
+        let f = fit_order(&pts, window).unwrap();
+        assert_eq!((f.points, f.dt_min), (4, 0.005));
+        assert!((f.slope - 4.0).abs() < 1e-9, "{}", f.slope);
+        // without the floors the two points spoil the fit
+        let mut bare = pts.clone();
+        for p in &mut bare {
+            if let Ok(m) = &mut p.outcome {
+                m.solver_error = None;
+            }
+        }
+        let spoiled = fit_order(
+            &bare,
+            FitWindow {
+                roundoff: 0.0,
+                ..window
+            },
+        )
+        .unwrap();
+        assert!((spoiled.slope - 4.0).abs() > 0.3, "{}", spoiled.slope);
     }
 
     #[test]

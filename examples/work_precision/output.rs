@@ -150,6 +150,9 @@ fn write_error_csv(dir: &Path, systems: &[SystemResult]) -> Result<PathBuf, Box<
         "status",
         "error_inf",
         "above_reference_floor",
+        "solver_error",
+        "above_solver_floor",
+        "above_roundoff_floor",
         "constraint_violation_end",
         "cost_s_per_sim_s",
         "cost_min",
@@ -172,6 +175,11 @@ fn write_error_csv(dir: &Path, systems: &[SystemResult]) -> Result<PathBuf, Box<
                     "ok".to_string(),
                     m.error.to_string(),
                     (m.error >= s.fit_window.lo).to_string(),
+                    opt(m.solver_error),
+                    m.solver_error
+                        .is_none_or(|e| m.error >= 10.0 * e)
+                        .to_string(),
+                    (m.error >= 10.0 * p.steps as f64 * s.fit_window.roundoff).to_string(),
                     m.constraint_violation.to_string(),
                     m.cost.to_string(),
                     m.cost_min.to_string(),
@@ -182,7 +190,7 @@ fn write_error_csv(dir: &Path, systems: &[SystemResult]) -> Result<PathBuf, Box<
                 ],
                 Err(f) => {
                     let mut r = vec![f.status().to_string()];
-                    r.extend(std::iter::repeat_n(String::new(), 8));
+                    r.extend(std::iter::repeat_n(String::new(), 11));
                     r.push(f.message.clone());
                     r
                 }
@@ -380,6 +388,7 @@ fn colour(m: Method) -> RGBColor {
         Method::Rk4 => RGBColor(31, 119, 180),
         Method::Vi1 => RGBColor(44, 160, 44),
         Method::Vi2 => RGBColor(148, 103, 189),
+        Method::Vi4 => RGBColor(140, 86, 75),
     }
 }
 
@@ -578,7 +587,7 @@ fn sweep_line(s: &SystemResult, m: Method, x: impl Fn(&SweepPoint) -> f64) -> Li
                 (px.is_finite() && px > 0.0 && py.is_finite() && py > 0.0).then_some((
                     px,
                     py,
-                    py >= s.fit_window.lo,
+                    s.fit_window.above_floor(e, p.steps),
                 ))
             })
             .collect(),
@@ -588,7 +597,7 @@ fn sweep_line(s: &SystemResult, m: Method, x: impl Fn(&SweepPoint) -> f64) -> Li
 fn work_precision_figure(systems: &[SystemResult]) -> Figure {
     Figure {
         title: "Work-precision: position error at t = T against compute time".into(),
-        subtitle: "error = max_i |q_i(T) − q_ref,i(T)| in minimal coordinates; cost = median wall time of the steps per simulated second; hollow: below 10× the reference's error estimate".into(),
+        subtitle: "error = max_i |q_i(T) − q_ref,i(T)| in minimal coordinates; cost = median wall time of the steps per simulated second; hollow: below 10× the reference's error estimate, the run's solver error or its round-off".into(),
         panels: systems
             .iter()
             .map(|s| Panel {
@@ -611,7 +620,7 @@ fn work_precision_figure(systems: &[SystemResult]) -> Figure {
 fn convergence_figure(systems: &[SystemResult]) -> Figure {
     Figure {
         title: "Convergence: position error at t = T against the time step".into(),
-        subtitle: "slopes are the observed orders (summary.csv); hollow: below 10× the reference's error estimate (not fitted)".into(),
+        subtitle: "slopes are the observed orders (summary.csv); hollow: below 10× the reference's error estimate, the run's solver error or its round-off (not fitted)".into(),
         panels: systems
             .iter()
             .map(|s| Panel {
@@ -750,9 +759,9 @@ fn report_md(systems: &[SystemResult], info: &RunInfo) -> String {
     );
     let _ = writeln!(
         r,
-        "**Error**: max_i |q_i(T) − q_ref,i(T)| over the minimal coordinates (rad for joint angles, m for the cart's slide) at T = {} s. Positions only: the variational integrators carry a discrete velocity (q_(k+1) − q_k)/Δt, the classical ones q̇. \
+        "**Error**: max_i |q_i(T) − q_ref,i(T)| over the minimal coordinates (rad for joint angles, m for the cart's slide) at T = {} s. Positions only: the first-order and midpoint VIs carry a discrete velocity (q_(k+1) − q_k)/Δt, the classical integrators and the fourth-order VI q̇. \
 **Cost**: median wall time of the stepping loop per simulated second over ≥ {} repetitions and ≥ {} s per point (initial discrete velocity not included), release build, one thread. \
-**Fourbar**: all integrators in the same minimal coordinates (4 joint angles, 2 loop equations). The variational integrators solve the constraint g(q_(k+1)) = 0 at position level every step; the classical ones integrate the index-1 DAE (acceleration-level constraint G q̈ + Ġ q̇ = 0 in a KKT solve, `vigp::dynamics::acceleration`) with no projection, so their positions drift off g = 0 (the `constraint_violation_end` column). \
+**Fourbar**: all integrators in the same minimal coordinates (4 joint angles, 2 loop equations). The variational integrators solve the constraint g(q_(k+1)) = 0 at position level every step (the fourth-order VI at each of its five midpoint sub-steps); the classical ones integrate the index-1 DAE (acceleration-level constraint G q̈ + Ġ q̇ = 0 in a KKT solve, `vigp::dynamics::acceleration`) with no projection, so their positions drift off g = 0 (the `constraint_violation_end` column). \
 **Reference**: midpoint VI at h/2 and h/4, Richardson-extrapolated (the midpoint rule is symmetric, its error expands in h²); its error is estimated by the difference to the extrapolation from h and h/2.\n",
         info.t_end, info.min_reps, info.min_total
     );
@@ -788,7 +797,8 @@ fn report_md(systems: &[SystemResult], info: &RunInfo) -> String {
     let _ = writeln!(r, "\n## Summary\n");
     let _ = writeln!(
         r,
-        "Costs in ms of compute per simulated second, log-log interpolated between the two measured points around the crossing; \"≤\": already reached at the largest dt measured; \"—\": not reached (best error and its cost instead). A target counts as reached only if every smaller dt also stays below it. Orders: least-squares slope of log error against log dt over the smallest time steps whose errors lie inside the fit window (at most half of the time steps, at least 3).\n"
+        "Costs in ms of compute per simulated second, log-log interpolated between the two measured points around the crossing; \"≤\": already reached at the largest dt measured; \"—\": not reached (best error and its cost instead). A target counts as reached only if every smaller dt also stays below it. Orders: least-squares slope of log error against log dt over the smallest time steps whose errors lie inside the fit window (the smallest max(4, a quarter of the time steps) of them; no fit with fewer than 3) and, for the variational integrators, at least 10× the run's solver error (the difference to the same run solved to a relative Newton residual of {:e} instead of the default 1e-12: it accumulates over the steps and does not shrink with dt, `solver_error` in `error.csv`), and at least 10× the accumulated round-off n·ε·max(1, ‖q_ref‖∞) of a run of n steps.\n",
+        crate::run::REFERENCE_TOLERANCE
     );
     r += &summary_table(systems, info);
     let _ = writeln!(r, "\n![work-precision](work_precision.png)\n");
@@ -879,7 +889,7 @@ fn report_md(systems: &[SystemResult], info: &RunInfo) -> String {
     let _ = writeln!(r, "\n## Long-horizon energy\n");
     let _ = writeln!(
         r,
-        "max_k |E_k − E(q₀, q̇₀)| over {} s; E_k is E(q, q̇) for the classical integrators and E(q + αΔt·v, v) (`Variational::energy`) for the VIs. First/last tenth: the same maximum over the first and last tenth of the steps (growth shows as last ≫ first). Cost from the one long run.\n",
+        "max_k |E_k − E(q₀, q̇₀)| over {} s; E_k is E(q, q̇) for the classical integrators and the fourth-order VI (whose state is continuous), and E(q + αΔt·v, v) (`Variational::energy`) for the first-order and midpoint VIs. First/last tenth: the same maximum over the first and last tenth of the steps (growth shows as last ≫ first). Cost from the one long run.\n",
         info.energy_horizon
     );
     let _ = writeln!(

@@ -1,4 +1,4 @@
-//! Running the integrators: one enum over the five integrators, the timed
+//! Running the integrators: one enum over the six integrators, the timed
 //! runs to t = T, the reference solution and the long energy runs.
 //!
 //! Everything here is generic over the mechanism; the results it returns are
@@ -10,7 +10,7 @@ use std::time::Instant;
 use nalgebra::SVector;
 use vigp::prelude::*;
 
-/// The five integrators compared.
+/// The six integrators compared.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Method {
     /// `ExplicitEuler` on (q, q̇).
@@ -23,16 +23,20 @@ pub enum Method {
     Vi1,
     /// `Variational::midpoint`: the second-order VI.
     Vi2,
+    /// `Variational4::new`: the fourth-order VI (Suzuki's five-stage
+    /// composition of the midpoint VI); its state carries the continuous q̇.
+    Vi4,
 }
 
 impl Method {
     /// All methods, in table order.
-    pub const ALL: [Method; 5] = [
+    pub const ALL: [Method; 6] = [
         Method::ExplicitEuler,
         Method::SymplecticEuler,
         Method::Rk4,
         Method::Vi1,
         Method::Vi2,
+        Method::Vi4,
     ];
 
     /// Identifier used in the CSV files.
@@ -43,6 +47,7 @@ impl Method {
             Method::Rk4 => "rk4",
             Method::Vi1 => "vi_paper",
             Method::Vi2 => "vi_midpoint",
+            Method::Vi4 => "vi_4th_order",
         }
     }
 
@@ -54,6 +59,7 @@ impl Method {
             Method::Rk4 => "RK4",
             Method::Vi1 => "VI (paper, 1st order)",
             Method::Vi2 => "VI (midpoint, 2nd order)",
+            Method::Vi4 => "VI (4th order, Suzuki)",
         }
     }
 
@@ -62,17 +68,25 @@ impl Method {
         match self {
             Method::ExplicitEuler | Method::SymplecticEuler | Method::Vi1 => 1.0,
             Method::Vi2 => 2.0,
-            Method::Rk4 => 4.0,
+            Method::Rk4 | Method::Vi4 => 4.0,
         }
     }
 
-    /// `true` for the variational integrators (discrete velocity in the state).
-    pub fn is_variational(self) -> bool {
+    /// `true` for the integrators that solve a Newton iteration every step
+    /// (the variational ones), whose error has a solver part.
+    pub fn has_solver(self) -> bool {
+        matches!(self, Method::Vi1 | Method::Vi2 | Method::Vi4)
+    }
+
+    /// `true` for the integrators whose state carries a discrete velocity
+    /// (the first-order and midpoint VIs). The fourth-order VI carries the
+    /// continuous q̇, like the classical integrators.
+    pub fn discrete_velocity(self) -> bool {
         matches!(self, Method::Vi1 | Method::Vi2)
     }
 }
 
-/// One of the five integrators, statically dispatched.
+/// One of the six integrators, statically dispatched.
 pub enum AnyIntegrator<M: Mechanism<N, C>, const N: usize, const C: usize> {
     /// Explicit Euler.
     ExplicitEuler(ExplicitEuler<M, N, C>),
@@ -80,29 +94,51 @@ pub enum AnyIntegrator<M: Mechanism<N, C>, const N: usize, const C: usize> {
     SymplecticEuler(SymplecticEuler<M, N, C>),
     /// RK4.
     Rk4(Rk4<M, N, C>),
-    /// Either variational integrator.
+    /// The first-order or the midpoint variational integrator.
     Variational(Variational<M, N, C>),
+    /// The fourth-order variational integrator.
+    Variational4(Variational4<M, N, C>),
 }
 
 impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> AnyIntegrator<M, N, C> {
     /// The integrator `method` for `model` at time step `dt`.
     pub fn new(method: Method, model: M, dt: f64) -> Self {
+        Self::with_tolerance(method, model, dt, None)
+    }
+
+    /// The integrator `method` with the Newton tolerance `tolerance`
+    /// (relative residual; `None`: the default 1e-12). The classical
+    /// integrators have no Newton iteration and ignore it.
+    pub fn with_tolerance(method: Method, model: M, dt: f64, tolerance: Option<f64>) -> Self {
+        let vi =
+            |v: Variational<M, N, C>| Self::Variational(tolerance.map_or(v, |t| v.tolerance(t)));
         match method {
             Method::ExplicitEuler => Self::ExplicitEuler(ExplicitEuler::new(model, dt)),
             Method::SymplecticEuler => Self::SymplecticEuler(SymplecticEuler::new(model, dt)),
             Method::Rk4 => Self::Rk4(Rk4::new(model, dt)),
-            Method::Vi1 => Self::Variational(Variational::new(model, dt)),
-            Method::Vi2 => Self::Variational(Variational::midpoint(model, dt)),
+            Method::Vi1 => vi(Variational::new(model, dt)),
+            Method::Vi2 => vi(Variational::midpoint(model, dt)),
+            Method::Vi4 => {
+                let v = Variational4::new(model, dt);
+                Self::Variational4(tolerance.map_or(v, |tolerance| {
+                    v.with_options(NewtonOptions {
+                        tolerance,
+                        ..NewtonOptions::default()
+                    })
+                }))
+            }
         }
     }
 
     /// Energy of a state of this integrator: E(q, q̇) for the classical
     /// integrators, E(q + αΔt·v, v) at the rule's quadrature point for the
     /// variational ones (`Variational::energy`; α = 0 for the paper's VI,
-    /// ½ for the midpoint VI).
+    /// ½ for the midpoint VI). The fourth-order VI's state is continuous:
+    /// E(q, q̇) as for the classical integrators.
     pub fn energy(&self, model: &M, z: &State<N>) -> f64 {
         match self {
             Self::Variational(vi) => vi.energy(z),
+            Self::Variational4(vi) => vi.energy(z),
             _ => model.energy(z),
         }
     }
@@ -117,6 +153,7 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Integrator<N>
             Self::SymplecticEuler(i) => i.dt(),
             Self::Rk4(i) => i.dt(),
             Self::Variational(i) => Integrator::dt(i),
+            Self::Variational4(i) => i.dt(),
         }
     }
 
@@ -126,6 +163,7 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Integrator<N>
             Self::SymplecticEuler(i) => i.step(z),
             Self::Rk4(i) => i.step(z),
             Self::Variational(i) => Integrator::step(i, z),
+            Self::Variational4(i) => i.step(z),
         }
     }
 }
@@ -174,12 +212,13 @@ pub struct Problem<M, const N: usize, const C: usize> {
 
 impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Problem<M, N, C> {
     /// The initial state of `method` at step `dt`: (q₀, q̇₀) for the classical
-    /// integrators; (q₀, v₀) with the discrete velocity
+    /// integrators and the fourth-order VI (q̇₀ must satisfy G(q₀)q̇₀ = 0 for
+    /// loops; the problems here start at rest); (q₀, v₀) with the discrete velocity
     /// v₀ = q̇₀ + ½Δt·q̈₀, projected onto g(q₀ + Δt·v₀) = 0, for the
     /// variational ones (`vigp::dynamics::discrete_velocity`; starting the
     /// midpoint rule from v₀ = q̇₀ would cost it an order).
     pub fn start(&self, method: Method, dt: f64) -> Result<State<N>, StepError> {
-        let v = if method.is_variational() {
+        let v = if method.discrete_velocity() {
             vigp::dynamics::discrete_velocity(&self.model, &self.q0, &self.qdot0, dt)?
         } else {
             self.qdot0
@@ -233,6 +272,11 @@ pub struct Measured {
     pub error: f64,
     /// |g(q(T))|, the constraint violation at the end (0 without constraints).
     pub constraint_violation: f64,
+    /// For the integrators with a Newton iteration: max_i |q_i(T) − q̃_i(T)|
+    /// against the same run solved to [`REFERENCE_TOLERANCE`], the part of
+    /// the error due to the default solver tolerance (`None`: no solver, or
+    /// the tight run failed).
+    pub solver_error: Option<f64>,
     /// Median wall time per simulated second (s/s) over the repetitions.
     pub cost: f64,
     /// Fastest repetition (s/s).
@@ -303,6 +347,23 @@ pub fn sweep_point<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
             }
             times.push(t);
         }
+        // the solver's share of the error: the same run at a tight
+        // tolerance (untimed)
+        let solver_error = method
+            .has_solver()
+            .then(|| {
+                let tight = AnyIntegrator::with_tolerance(
+                    method,
+                    problem.model,
+                    dt,
+                    Some(REFERENCE_TOLERANCE),
+                );
+                timed_run(&tight, &z0, steps)
+                    .0
+                    .ok()
+                    .map(|z| (end.q - z.q).amax())
+            })
+            .flatten();
         let per_sim_s = |t: f64| t / t_end;
         let cost_min = times.iter().copied().fold(f64::INFINITY, f64::min);
         let cost_max = times.iter().copied().fold(0.0, f64::max);
@@ -310,6 +371,7 @@ pub fn sweep_point<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
         Ok(Measured {
             error: (end.q - q_ref).amax(),
             constraint_violation: problem.model.constraint_violation(&end),
+            solver_error,
             cost: per_sim_s(median(&mut times)),
             cost_min: per_sim_s(cost_min),
             cost_max: per_sim_s(cost_max),
