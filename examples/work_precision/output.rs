@@ -597,7 +597,7 @@ fn sweep_line(s: &SystemResult, m: Method, x: impl Fn(&SweepPoint) -> f64) -> Li
 fn work_precision_figure(systems: &[SystemResult]) -> Figure {
     Figure {
         title: "Work-precision: position error at t = T against compute time".into(),
-        subtitle: "error = max_i |q_i(T) − q_ref,i(T)| in minimal coordinates; cost = median wall time of the steps per simulated second; hollow: below 10× the reference's error estimate, the run's solver error or its round-off".into(),
+        subtitle: "error = max_i |q_i(T) − q_ref,i(T)| in minimal coordinates; cost = median wall time of the steps per simulated second; hollow: under 10× the reference, solver or round-off floor".into(),
         panels: systems
             .iter()
             .map(|s| Panel {
@@ -620,7 +620,7 @@ fn work_precision_figure(systems: &[SystemResult]) -> Figure {
 fn convergence_figure(systems: &[SystemResult]) -> Figure {
     Figure {
         title: "Convergence: position error at t = T against the time step".into(),
-        subtitle: "slopes are the observed orders (summary.csv); hollow: below 10× the reference's error estimate, the run's solver error or its round-off (not fitted)".into(),
+        subtitle: "slopes are the observed orders (summary.csv); hollow: under 10× the reference, solver or round-off floor (not fitted)".into(),
         panels: systems
             .iter()
             .map(|s| Panel {
