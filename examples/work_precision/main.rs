@@ -5,7 +5,7 @@
 //! the long-horizon energy error against the same cost.
 //!
 //! ```text
-//! cargo run --release --example work_precision               # default, ~1 min on 2 cores
+//! cargo run --release --example work_precision               # default, ~20 s on 2 cores
 //! cargo run --release --example work_precision -- --full     # 32 time steps, more repetitions, 1000 s energy runs
 //! cargo run --release --example work_precision -- --help     # systems, dt range, reference, output directory
 //! ```
