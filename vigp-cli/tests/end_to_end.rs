@@ -207,7 +207,10 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     let (v1, q1) = bounds(rows[1]);
     let (_, q2) = bounds(rows[2]);
     assert!(v1.is_finite() && v1 > 0.0 && q1 == 0.0, "{v1} {q1}");
-    assert!(q2.is_finite() && q2 > 0.0 && bounds(rows[5]).1 >= q2, "{rows:?}");
+    assert!(
+        q2.is_finite() && q2 > 0.0 && bounds(rows[5]).1 >= q2,
+        "{rows:?}"
+    );
 
     // predict with a conformal bound calibrated on other held-out runs
     let cal = dir.join("calibration.csv");
@@ -232,7 +235,10 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     assert_eq!(rows.len(), 4 * 6);
     let (v1, _) = bounds(rows[1]);
     let (_, q2) = bounds(rows[2]);
-    assert!(v1.is_finite() && v1 > 0.0 && q2.is_finite() && q2 > 0.0, "{v1} {q2}");
+    assert!(
+        v1.is_finite() && v1 > 0.0 && q2.is_finite() && q2 > 0.0,
+        "{v1} {q2}"
+    );
 
     // export: the size is stated; mean only unless asked
     let rs = dir.join("model.rs");
