@@ -68,6 +68,7 @@ fn measured_csv<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
         let q0 = SVector::<f64, N>::from_fn(|i, _| match M::KINDS[i] {
             CoordinateKind::Angle => rng.uniform(-2.5, 2.5),
             CoordinateKind::Length => rng.uniform(-0.5, 0.5),
+            CoordinateKind::Quaternion => panic!("the tool's systems here are planar"),
         });
         let vi = Variational::midpoint(truth, h);
         let mut z = State {
@@ -85,6 +86,7 @@ fn measured_csv<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
                         (q + PI).rem_euclid(2.0 * PI) - PI
                     }
                     CoordinateKind::Length => (noisy / 1e-5).round() * 1e-5,
+                    CoordinateKind::Quaternion => panic!("the tool's systems here are planar"),
                 };
                 cells.push(format!("{value:.9}"));
             }
