@@ -324,7 +324,7 @@ where
     worst
 }
 
-fn both_views<S, Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+fn both_views<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
     name: &str,
     minimal: Mn,
     maximal: Mx,
@@ -345,17 +345,17 @@ fn both_views<S, Mn, Mx, const N: usize, const C: usize, const NM: usize, const 
 #[test]
 fn engine_steps_match_the_dual_number_reference() {
     let p = Pendulum::default();
-    both_views::<(), _, _, 1, 0, 3, 2>("pendulum", p.minimal(), p.maximal());
+    both_views::<_, _, 1, 0, 3, 2>("pendulum", p.minimal(), p.maximal());
     let cp = Cartpole::default();
-    both_views::<(), _, _, 2, 0, 6, 4>("cartpole", cp.minimal(), cp.maximal());
+    both_views::<_, _, 2, 0, 6, 4>("cartpole", cp.minimal(), cp.maximal());
     let mut dp = DoublePendulum::default();
     dp.joints.elbow.damping = 0.3;
-    both_views::<(), _, _, 2, 0, 6, 4>("double pendulum", dp.minimal(), dp.maximal());
+    both_views::<_, _, 2, 0, 6, 4>("double pendulum", dp.minimal(), dp.maximal());
     let mut fb = Fourbar::default();
     fb.joints.bottom.damping = 0.2;
-    both_views::<(), _, _, 4, 2, 12, 10>("fourbar", fb.minimal(), fb.maximal());
+    both_views::<_, _, 4, 2, 12, 10>("fourbar", fb.minimal(), fb.maximal());
     let sc = SliderCrank::default();
-    both_views::<(), _, _, 3, 2, 9, 8>("slider-crank", sc.minimal(), sc.maximal());
+    both_views::<_, _, 3, 2, 9, 8>("slider-crank", sc.minimal(), sc.maximal());
     let ex = Exotic::default();
-    both_views::<(), _, _, 3, 2, 9, 8>("exotic", ex.minimal(), ex.maximal());
+    both_views::<_, _, 3, 2, 9, 8>("exotic", ex.minimal(), ex.maximal());
 }

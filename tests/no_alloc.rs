@@ -43,6 +43,33 @@ fn variational_steps_do_not_allocate() {
         "fourbar rollout_into / projection allocated"
     );
 
+    // the fixed-size core engine: the midpoint rule with sub-steps in
+    // minimal coordinates, both rules in maximal coordinates (4 joint
+    // constraints), and the fourth-order composition
+    use vigp::embedded::{Composition, Stepper};
+    let sys = DoublePendulum::default();
+    let zm = State::new([1.0, 0.3], [0.0, 0.0]);
+    let zx = sys.minimal().to_maximal(&zm, 0.01);
+    let mid = Stepper::midpoint(sys.minimal(), 0.01)
+        .and_then(|s| s.substeps(2))
+        .unwrap();
+    let max1 = Stepper::new(sys.maximal(), 0.01).unwrap();
+    let max2 = Stepper::midpoint(sys.maximal(), 0.01).unwrap();
+    let c4 = Composition::new(sys.minimal(), 0.01).unwrap();
+    let mut outm = [zm; 20];
+    let mut outx = [zx; 20];
+    let info = allocation_counter::measure(|| {
+        mid.rollout_into(&zm, &mut outm).unwrap();
+        max1.rollout_into(&zx, &mut outx).unwrap();
+        max2.rollout_into(&zx, &mut outx).unwrap();
+        c4.steps_into(&zm, &mut outm).unwrap();
+    });
+    assert_eq!(
+        info.count_total, 0,
+        "midpoint / maximal / fourth-order fixed-size steps allocated"
+    );
+    assert!(outx[19].q.iter().all(|x| x.is_finite()));
+
     // the counter does see allocations
     let info = allocation_counter::measure(|| {
         let _ = vi.rollout(&z0, 3).unwrap();

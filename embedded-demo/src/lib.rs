@@ -12,7 +12,7 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
-use vigp::embedded::{RolloutError, State, StepError, Stepper};
+use vigp::embedded::{Composition, RolloutError, State, StepError, Stepper};
 
 pub mod learned;
 
@@ -49,6 +49,20 @@ pub fn predict<const K: usize>(
     out: &mut [State<2>; K],
 ) -> Result<(), RolloutError> {
     stepper.rollout_into(z0, out)
+}
+
+/// The second-order (midpoint) variational step in **maximal coordinates**
+/// (x, y, θ of each link; the joints are 4 constraints held at position
+/// level every step), two sub-steps per control period: the fixed-size path
+/// runs every rule and view without allocation.
+pub fn maximal_midpoint_stepper() -> Result<Stepper<DoublePendulumMaximal, 6, 4>, StepError> {
+    Stepper::midpoint(DoublePendulum::default().maximal(), DT)?.substeps(2)
+}
+
+/// The fourth-order variational integrator (Suzuki's composition of the
+/// midpoint step); its state velocity is the continuous q̇.
+pub fn fourth_order() -> Result<Composition<DoublePendulum, 2, 0>, StepError> {
+    Composition::new(DoublePendulum::default(), DT)
 }
 
 /// Total energy of a state (J), for monitoring.

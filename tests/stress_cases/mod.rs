@@ -1276,8 +1276,21 @@ pub fn bad_input(size: Size) -> Vec<Row> {
         },
     )
     .unwrap();
-    let (other, _) = Gp::train(&x[..10], 1, &y[..10], 1, &TrainOptions::default()).unwrap();
     let mut row = Row::new("GP: wrong dimensions, NaN inputs, workspace of another model");
+    // a workspace of a model with another output count is refused; one of
+    // a model of the same shape but another N is resized and reused (the
+    // workspace is scratch, and online updates change N)
+    let y2: Vec<f64> = y[..10].iter().flat_map(|v| [*v, -*v]).collect();
+    let (other, _) = Gp::train(&x[..10], 1, &y2, 2, &TrainOptions::default()).unwrap();
+    let (small, _) = Gp::train(&x[..10], 1, &y[..10], 1, &TrainOptions::default()).unwrap();
+    let (mut m_fresh, mut v_fresh, mut m_reused, mut v_reused) = ([0.0], [0.0], [0.0], [0.0]);
+    gp.predict_into(&[0.3], &mut m_fresh, &mut v_fresh, &mut gp.workspace())
+        .unwrap();
+    gp.predict_into(&[0.3], &mut m_reused, &mut v_reused, &mut small.workspace())
+        .unwrap();
+    if (m_fresh, v_fresh) != (m_reused, v_reused) {
+        row.fail("a reused workspace of another N changed the prediction");
+    }
     let mut ws = gp.workspace();
     let mut ws_other = other.workspace();
     let (mut m, mut v) = ([0.0], [0.0]);

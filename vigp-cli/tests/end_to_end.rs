@@ -68,6 +68,7 @@ fn measured_csv<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
         let q0 = SVector::<f64, N>::from_fn(|i, _| match M::KINDS[i] {
             CoordinateKind::Angle => rng.uniform(-2.5, 2.5),
             CoordinateKind::Length => rng.uniform(-0.5, 0.5),
+            CoordinateKind::Quaternion => panic!("the tool's systems here are planar"),
         });
         let vi = Variational::midpoint(truth, h);
         let mut z = State {
@@ -85,6 +86,7 @@ fn measured_csv<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
                         (q + PI).rem_euclid(2.0 * PI) - PI
                     }
                     CoordinateKind::Length => (noisy / 1e-5).round() * 1e-5,
+                    CoordinateKind::Quaternion => panic!("the tool's systems here are planar"),
                 };
                 cells.push(format!("{value:.9}"));
             }
@@ -207,7 +209,10 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     let (v1, q1) = bounds(rows[1]);
     let (_, q2) = bounds(rows[2]);
     assert!(v1.is_finite() && v1 > 0.0 && q1 == 0.0, "{v1} {q1}");
-    assert!(q2.is_finite() && q2 > 0.0 && bounds(rows[5]).1 >= q2, "{rows:?}");
+    assert!(
+        q2.is_finite() && q2 > 0.0 && bounds(rows[5]).1 >= q2,
+        "{rows:?}"
+    );
 
     // predict with a conformal bound calibrated on other held-out runs
     let cal = dir.join("calibration.csv");
@@ -232,7 +237,10 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     assert_eq!(rows.len(), 4 * 6);
     let (v1, _) = bounds(rows[1]);
     let (_, q2) = bounds(rows[2]);
-    assert!(v1.is_finite() && v1 > 0.0 && q2.is_finite() && q2 > 0.0, "{v1} {q2}");
+    assert!(
+        v1.is_finite() && v1 > 0.0 && q2.is_finite() && q2 > 0.0,
+        "{v1} {q2}"
+    );
 
     // export: the size is stated; mean only unless asked
     let rs = dir.join("model.rs");

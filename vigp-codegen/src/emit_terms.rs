@@ -9,6 +9,10 @@
 //! are written as `0.0`; derivatives that vanish identically are not
 //! computed at all.
 
+// Index loops over (symmetric) matrices of expressions read as the
+// formulas they implement; iterator chains would hide the indices.
+#![allow(clippy::needless_range_loop)]
+
 use crate::mechanics::{Mechanics, Param};
 use crate::model::Model;
 use crate::symbolic::{Expr, Freq, Monomial, Poly, Sym};
@@ -770,7 +774,11 @@ pub fn emit_dynamics(
         .iter()
         .map(|p| poly_tokens(m, mech, p))
         .collect();
+    // parameter products mix spans from the description (field names) with
+    // the macro's own (operators): clippy would read a line break inside
+    // each product and suspect a missing comma in the array
     let constants_fn = quote! {
+        #[allow(clippy::possible_missing_comma)]
         fn constants(&self) -> ::core::result::Result<[f64; #nk], ::vigp::embedded::StepError> {
             let sys = &self.sys;
             #(#checks)*

@@ -8,6 +8,10 @@
 //! link's frame sits at its `start`, θ = 0 hangs straight down, a local
 //! point (a, b) maps to `origin + a·(sin θ, −cos θ) + b·(cos θ, sin θ)`.
 
+// Index loops over (symmetric) matrices of expressions read as the
+// formulas they implement; iterator chains would hide the indices.
+#![allow(clippy::needless_range_loop)]
+
 use crate::model::{Anchor, JointKind, Model, Point};
 use crate::symbolic::{Expr, Freq, Poly, Sym, Vec2};
 use syn::ext::IdentExt;

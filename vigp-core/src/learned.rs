@@ -23,9 +23,9 @@
 //! Newton iterations on the (N+C)-dimensional KKT system of the projection.
 //! Stack only.
 
+use crate::dynamics::Dynamics;
 use crate::gp::{ExportedGp, GpError};
 use crate::linalg::solve_kkt;
-use crate::dynamics::Dynamics;
 use crate::params::Parameters;
 use crate::real::Real;
 use crate::state::{CoordinateKind, State};
@@ -324,7 +324,8 @@ pub fn project_velocity<M: Dynamics<N, C>, const N: usize, const C: usize>(
     let eval = |v: &SVector<f64, N>, mu: &SVector<f64, C>| {
         let x2 = x1 + v * dt;
         let (c, gj) = model.constraints_and_jacobian(k, &x2);
-        let jac = SMatrix::<f64, N, N>::identity() + model.constraint_hessian(k, &x2, mu) * (dt * dt);
+        let jac =
+            SMatrix::<f64, N, N>::identity() + model.constraint_hessian(k, &x2, mu) * (dt * dt);
         let r = v - v_u + gj.transpose() * mu * dt;
         (r, c, gj, jac)
     };

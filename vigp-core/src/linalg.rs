@@ -170,6 +170,8 @@ impl<const M: usize> PartialLu<M> {
     }
 
     /// Solve A x = b.
+    // forward and back substitution read as the textbook formulas
+    #[allow(clippy::needless_range_loop)]
     pub fn solve(&self, b: &SVector<f64, M>) -> SVector<f64, M> {
         let mut x = [0.0f64; M];
         for i in 0..M {
@@ -279,6 +281,9 @@ pub fn solve_partial<const M: usize>(
     Some(x)
 }
 
+/// The solution (x, y) of a KKT system.
+pub type KktSolution<const N: usize, const C: usize> = (SVector<f64, N>, SVector<f64, C>);
+
 /// Solve the saddle-point (KKT) system
 ///
 /// ```text
@@ -359,7 +364,7 @@ pub fn solve_kkt_regularised<const N: usize, const C: usize>(
     a: &SMatrix<f64, C, N>,
     r: &SVector<f64, N>,
     c: &SVector<f64, C>,
-) -> Option<((SVector<f64, N>, SVector<f64, C>), bool)> {
+) -> Option<(KktSolution<N, C>, bool)> {
     if C > 0
         && let Some(d) = invertible_diagonal(j)
     {

@@ -569,8 +569,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 (SVector::zeros(), SMatrix::zeros())
             }
         };
-        let error =
-            |d: &SVector<f64, N>, c: &SVector<f64, C>| (max_abs(d) * inv_p).max(max_abs(c) * inv_l);
+        // NaN-propagating: f64::max would drop a NaN residual part (an
+        // overflowed kinetic term) and report the other one
+        let error = |d: &SVector<f64, N>, c: &SVector<f64, C>| {
+            let (a, b) = (max_abs(d) * inv_p, max_abs(c) * inv_l);
+            a.max(b) + (a + b) * 0.0
+        };
         let mut lambda = SVector::<f64, C>::zeros();
         let (mut d, mut qm) = residual(&t, &v, &lambda);
         let (mut c, mut g2) = constraint(&v);
