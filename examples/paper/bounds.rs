@@ -78,23 +78,43 @@ pub struct Tube {
     pub bounds: Vec<(&'static str, Vec<f64>)>,
 }
 
-/// Positions every DT for 2 s from (q0, q̇0), by the midpoint VI at `gt_dt`.
+/// Positions every DT for 2 s from (q0, q̇0), by the ground truth's
+/// integrator at its step.
 fn ground_truth_moving<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     m: M,
     q0: &SVector<f64, N>,
     qd0: &SVector<f64, N>,
-    gt_dt: f64,
-) -> Result<Vec<SVector<f64, N>>, StepError> {
-    let sub = (DT / gt_dt).round().max(1.0) as usize;
+    gt: super::Gt,
+) -> Result<Vec<SVector<f64, N>>, String> {
+    let sub = (DT / gt.dt).round().max(1.0) as usize;
     let h = DT / sub as f64;
-    let mut z = consistent_state(&m, q0, qd0, h)?;
-    let vi = Variational::midpoint(m, h);
+    let mut z = consistent_state(&m, q0, qd0, h).map_err(|e| e.to_string())?;
+    let vi: Box<dyn Integrator<N>> = match gt.method {
+        super::GtMethod::Midpoint => Box::new(Variational::midpoint(m, h)),
+        super::GtMethod::Vi4 => {
+            // continuous velocity: q̇0 projected onto the tangent space
+            // G(q)·q̇ = 0, v = q̇0 − Gᵀ(GGᵀ)⁻¹G q̇0
+            if C > 0 {
+                let g = m.constraint_jacobian(&z.q);
+                let g = nalgebra::DMatrix::from_column_slice(C, N, g.as_slice());
+                let lam = (&g * g.transpose())
+                    .lu()
+                    .solve(&(&g * nalgebra::DVector::from_column_slice(qd0.as_slice())))
+                    .ok_or("singular constraint Jacobian at a start")?;
+                let correction = g.transpose() * lam;
+                z.v = qd0 - SVector::<f64, N>::from_column_slice(correction.as_slice());
+            } else {
+                z.v = *qd0;
+            }
+            Box::new(Variational4::new(m, h).with_options(super::GT_SOLVER))
+        }
+    };
     let samples = super::TRAJ_SAMPLES;
     let mut out = Vec::with_capacity(samples);
     out.push(z.q);
     for _ in 1..samples {
         for _ in 0..sub {
-            z = vi.step(&z)?;
+            z = vi.step(&z).map_err(|e| e.to_string())?;
         }
         out.push(z.q);
     }
@@ -258,7 +278,7 @@ where
         let starts: Vec<SVector<f64, N>> = (0..count).map(|_| sample_q0(&mut r)).collect();
         starts
             .par_iter()
-            .map(|q0| ground_truth(tmin, q0, cli.gt_dt))
+            .map(|q0| ground_truth(tmin, q0, cli.gt()))
             .collect()
     };
     let train = at_rest(seed ^ 1, cli.train_trajectories)?;
@@ -271,7 +291,7 @@ where
             .collect();
         starts
             .par_iter()
-            .map(|(q0, qd0)| ground_truth_moving(tmin, q0, qd0, cli.gt_dt))
+            .map(|(q0, qd0)| ground_truth_moving(tmin, q0, qd0, cli.gt()))
             .collect::<Result<_, _>>()?
     };
     let to_max = |trajs: &[Vec<SVector<f64, N>>]| -> Vec<Vec<SVector<f64, M>>> {
