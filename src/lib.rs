@@ -104,7 +104,9 @@ pub use vigp_runtime::*;
 #[cfg(not(feature = "std"))]
 pub use vigp_core as embedded;
 #[cfg(not(feature = "std"))]
-pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics};
+pub use vigp_core::{
+    CoordinateKind, ElasticJoint, Joint, Link, Pose2, Real, Spring, State, kinematics,
+};
 
 /// Re-exports for generated code. Not part of the public API.
 #[cfg(not(feature = "std"))]
