@@ -291,8 +291,25 @@ pub fn acceleration<M: Dynamics<N, C>, const N: usize, const C: usize>(
     qdot: &SVector<f64, N>,
     t: &mut Terms<N>,
 ) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
+    acceleration_forced(model, k, q, qdot, None, t)
+}
+
+/// [`acceleration`] with an extra generalized force on the right-hand side
+/// (the inputs' B(q)u, [`Dynamics::input_matrix`]); `None` is
+/// [`acceleration`] exactly.
+pub fn acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize>(
+    model: &M,
+    k: &M::Constants,
+    q: &SVector<f64, N>,
+    qdot: &SVector<f64, N>,
+    force: Option<&SVector<f64, N>>,
+    t: &mut Terms<N>,
+) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
     model.terms(k, q, t);
     let mut rhs = -t.dpotential;
+    if let Some(f) = force {
+        rhs += f;
+    }
     if !M::CONSTANT_MASS {
         let mut mdot = SMatrix::<f64, N, N>::zeros();
         for (l, dm) in t.dmass.iter().enumerate() {

@@ -62,6 +62,10 @@ pub enum StepError {
         /// Rollout step index, if in a rollout.
         step: Option<usize>,
     },
+    /// Non-zero inputs given to an integrator that cannot take them (the
+    /// default of [`crate::Integrator::step_forced`]).
+    #[error("this integrator does not take inputs")]
+    InputsNotSupported,
     /// The residual became NaN or ±∞ during Newton iterations.
     #[error("non-finite residual at Newton iteration {iteration}{}", at(step))]
     NonFiniteResidual {
@@ -158,6 +162,7 @@ impl StepError {
             | StepError::OffConstraints { step, .. }
             | StepError::Prediction { step } => *step = Some(k),
             StepError::InvalidTimeStep { .. }
+            | StepError::InputsNotSupported
             | StepError::InvalidOptions(_)
             | StepError::InvalidModel(_) => {}
         }

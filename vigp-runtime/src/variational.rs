@@ -15,6 +15,45 @@ pub trait Integrator<const N: usize> {
     /// One step. Never returns a non-finite state.
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError>;
 
+    /// One step under inputs `u` (one per actuated joint, in declaration
+    /// order; `U` must equal the mechanism's `Dynamics::INPUTS`). Every
+    /// integrator of vigp implements it; the default, for integrators that
+    /// cannot take inputs, takes u = 0 as [`Integrator::step`] and refuses
+    /// anything else with [`StepError::InputsNotSupported`].
+    fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<State<N>, StepError> {
+        if u.iter().all(|x| *x == 0.0) {
+            self.step(z)
+        } else {
+            Err(StepError::InputsNotSupported)
+        }
+    }
+
+    /// The states after 1, …, `out.len()` steps from `z0`, step k under
+    /// `inputs[k]` (which must be at least as long as `out`). Stops at the
+    /// first error (which names the step).
+    fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[nalgebra::SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), StepError> {
+        if inputs.len() < out.len() {
+            return Err(StepError::NonFiniteInput {
+                step: Some(inputs.len()),
+            });
+        }
+        let mut z = *z0;
+        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
+            z = self.step_forced(&z, u).map_err(|e| e.at_step(k))?;
+            *slot = z;
+        }
+        Ok(())
+    }
+
     /// The energy of a state as this integrator defines it, when that is
     /// not the model's `energy(z)`: the midpoint VI's discrete velocity
     /// belongs to the interval's midpoint ([`Variational::energy`]).
@@ -410,6 +449,25 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
 
     fn state_energy(&self, z: &State<N>) -> Option<f64> {
         Some(Variational::energy(self, z))
+    }
+
+    fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<State<N>, StepError> {
+        Variational::step_forced(self, z, u)
+    }
+
+    /// The fixed-size engine's forced rollout, carrying the momentum
+    /// ([`Variational::rollout_forced_into`]).
+    fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[nalgebra::SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), StepError> {
+        Variational::rollout_forced_into(self, z0, inputs, out)
     }
 
     /// The fixed-size engine's rollout: the momentum is carried from step
