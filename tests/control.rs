@@ -950,3 +950,29 @@ fn every_integrator_takes_inputs() {
     );
     assert!(e1 / e2 >= 12.0, "ratio {}", e1 / e2);
 }
+
+/// Forced steps, forced rollouts and the step derivatives run without heap
+/// allocation (the embedded engine underneath `Variational`), loops
+/// included.
+#[test]
+fn forced_steps_and_derivatives_do_not_allocate() {
+    let dt = 0.01;
+    let fb = DriveFourbar::default().minimal();
+    let (s, _) = minimal_and_maximal_states::<_, 4, 2, 12>(&fb, 7, 1, dt);
+    let u = SVector::<f64, 2>::new(0.4, -0.2);
+    let inputs = [u; 30];
+    let mut out = [s[0]; 30];
+    for vi in [Variational::new(fb, dt), Variational::midpoint(fb, dt)] {
+        let stepper = *vi.stepper().unwrap();
+        let p0 = stepper.momentum(&s[0]);
+        let info = allocation_counter::measure(|| {
+            let z1 = vi.step_forced(&s[0], &u).unwrap();
+            let _ = vi.step_derivatives(&z1, &u).unwrap();
+            vi.rollout_forced_into(&s[0], &inputs, &mut out).unwrap();
+            let _ = stepper
+                .step_with_momentum_derivatives(&s[0], &p0, &u)
+                .unwrap();
+        });
+        assert_eq!(info.count_total, 0, "forced steps / derivatives allocated");
+    }
+}
