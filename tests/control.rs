@@ -578,7 +578,7 @@ fn fd_eps() -> f64 {
 /// [8(f(ε) − f(−ε)) − (f(2ε) − f(−2ε))]/(12ε): truncation O(ε⁴).
 fn stencil<const N: usize>(
     eps: f64,
-    f: impl Fn(f64) -> State<N>,
+    mut f: impl FnMut(f64) -> State<N>,
 ) -> (SVector<f64, N>, SVector<f64, N>) {
     let (p1, m1, p2, m2) = (f(eps), f(-eps), f(2.0 * eps), f(-2.0 * eps));
     let d = |a: SVector<f64, N>, b: SVector<f64, N>, c: SVector<f64, N>, e: SVector<f64, N>| {
@@ -983,7 +983,8 @@ fn forced_steps_and_derivatives_do_not_allocate() {
 /// residual of the nominal forced step (GP input = encoded state + u). On
 /// held-out states and inputs its one-step velocity error against the true
 /// system must be well below the nominal model's (≤ 1/5 of it: the
-/// residual is smooth and well sampled), the learned step under u = 0
+/// residual is smooth and well sampled), its exact derivatives must match
+/// five-point differences (ε = 1e-3: relative 1e-6), the learned step under u = 0
 /// must not equal the one under u (the input is used), and the model file
 /// round-trips with its inputs.
 #[test]
@@ -1022,7 +1023,22 @@ fn learned_integrator_takes_inputs() {
     let t0: ForcedTransition<2, 1> = data[0];
     let again = true_vi.step_forced(&t0.z, &t0.u).unwrap();
     assert!((again.v - t0.v_next).amax() < 1e-9);
-    let data: Vec<_> = data.iter().step_by(2).copied().collect();
+    // measurement noise on the velocities (σ = 1e-4, uniform): it keeps
+    // the GP's noise variance, and with it the weights α, moderate, so
+    // that the learned step can be checked against finite differences
+    // (noise-free data drives σ_n² → 0 and α up, and the mean's rounding
+    // through Σ α_i k_i then limits differences to ~1e-5)
+    let data: Vec<_> = data
+        .iter()
+        .step_by(2)
+        .map(|t| {
+            let mut t = *t;
+            for x in t.v_next.iter_mut() {
+                *x += rng.uniform(-1.7e-4, 1.7e-4);
+            }
+            t
+        })
+        .collect();
     let options = TrainOptions {
         restarts: 2,
         seed: 3,
@@ -1060,6 +1076,59 @@ fn learned_integrator_takes_inputs() {
         e_learned < 0.2 * e_nominal,
         "{e_learned:e} vs {e_nominal:e}"
     );
+    // exact derivatives of the learned step (nominal forced step's + GP
+    // mean gradient through the encoding) against five-point differences
+    let mut worst = 0.0f64;
+    for _ in 0..5 {
+        let z = State::new(
+            [rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0)],
+            [rng.uniform(-0.5, 0.5), rng.uniform(-1.5, 1.5)],
+        );
+        let u = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
+        let (z1, d) = l.step_derivatives_forced(&z, &u, &mut ws).unwrap();
+        assert_eq!(z1, l.step_mean_forced_with(&z, &u, &mut ws).unwrap());
+        let mut ws2 = l.workspace();
+        let mut err = 0.0f64;
+        let mut scale = 0.0f64;
+        for j in 0..2 {
+            for pos in [true, false] {
+                let (dq, dv) = stencil(1e-3, |e| {
+                    let mut zp = z;
+                    if pos {
+                        zp.q[j] += e;
+                    } else {
+                        zp.v[j] += e;
+                    }
+                    l.step_mean_forced_with(&zp, &u, &mut ws2).unwrap()
+                });
+                let (aq, av) = if pos {
+                    (
+                        d.a.q_q.column(j).into_owned(),
+                        d.a.v_q.column(j).into_owned(),
+                    )
+                } else {
+                    (
+                        d.a.q_v.column(j).into_owned(),
+                        d.a.v_v.column(j).into_owned(),
+                    )
+                };
+                err = err.max((aq - dq).amax()).max((av - dv).amax());
+                scale = scale.max(dq.amax()).max(dv.amax());
+            }
+        }
+        let (dq, dv) = stencil(1e-3, |e| {
+            l.step_mean_forced_with(&z, &(u + SVector::<f64, 1>::new(e)), &mut ws2)
+                .unwrap()
+        });
+        let eb = (d.b.q_u.column(0) - dq)
+            .amax()
+            .max((d.b.v_u.column(0) - dv).amax());
+        let bscale = dv.amax();
+        println!("A err {:.2e}, B err {:.2e}", err / scale, eb / bscale);
+        worst = worst.max(err / scale).max(eb / bscale);
+    }
+    println!("learned step derivatives: worst relative error {worst:.1e}");
+    assert!(worst <= 1e-6, "{worst:e}");
     // the input matters, and the Integrator trait reaches it
     let z = State::new([0.0, 0.3], [0.0, 0.0]);
     let a = vigp::Integrator::step_forced(&l, &z, &SVector::<f64, 1>::new(3.0)).unwrap();

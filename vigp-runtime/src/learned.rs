@@ -391,6 +391,106 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Ok(v)
     }
 
+    /// One learned mean step under inputs `u` (as
+    /// [`Learned::step_mean_forced_with`]; `U = 0` for a model trained
+    /// without inputs) with its exact derivatives A = ∂z₁/∂z₀ and
+    /// B = ∂z₁/∂u: q₁ = q₀ + Δt·v₀, and v₁ = prior(z₀, u) + μ(enc(z₀), u)
+    /// differentiates into the nominal forced step's derivatives
+    /// (`Variational::step_derivatives`) plus the GP mean's gradient
+    /// (`Gp::predict_mean_gradient_into`) through the encoding. The
+    /// projection's implicit derivative (constrained models) is not
+    /// implemented: such a model returns [`StepError::InvalidOptions`].
+    pub fn step_derivatives_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
+        use nalgebra::SMatrix;
+        self.check_step(z)?;
+        if U != self.inputs {
+            return Err(StepError::InputsNotSupported);
+        }
+        if !u.iter().all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput { step: None });
+        }
+        if self.project && C > 0 {
+            return Err(StepError::InvalidOptions(
+                "derivatives of the projected learned step are not implemented",
+            ));
+        }
+        let h = self.dt;
+        // prior
+        let (mut v, mut v_q, mut v_v, mut v_u) = match self.prior {
+            Prior::Nominal => {
+                let (z1, d) = Variational::new(self.model.clone(), h)
+                    .with_options(self.options)
+                    .step_derivatives(z, u)?;
+                (z1.v, d.a.v_q, d.a.v_v, d.b.v_u)
+            }
+            Prior::Constant => (
+                SVector::zeros(),
+                SMatrix::zeros(),
+                SMatrix::zeros(),
+                SMatrix::zeros(),
+            ),
+        };
+        // GP mean and its gradient in the GP input
+        let e = self.encoding.dim(&M::KINDS);
+        let d = e + U;
+        let mut mean = SVector::<f64, N>::zeros();
+        let mut grad = vec![0.0; N * d];
+        self.with_input_u(z, u.as_slice(), |input| {
+            self.gp
+                .predict_mean_gradient_into(input, mean.as_mut_slice(), &mut grad, ws)
+                .map_err(|_| StepError::Prediction { step: None })
+        })?;
+        v += mean;
+        // chain rule through the encoding
+        for j in 0..N {
+            let g = &grad[j * d..(j + 1) * d];
+            let mut k = 0;
+            for (i, kind) in M::KINDS.iter().enumerate() {
+                if self.encoding == Encoding::SinCos && *kind == CoordinateKind::Angle {
+                    let (sn, cs) = z.q[i].sin_cos();
+                    v_q[(j, i)] += g[k] * cs - g[k + 1] * sn;
+                    k += 2;
+                } else {
+                    v_q[(j, i)] += g[k];
+                    k += 1;
+                }
+            }
+            for i in 0..N {
+                v_v[(j, i)] += g[k + i];
+            }
+            for i in 0..U {
+                v_u[(j, i)] += g[e + i];
+            }
+        }
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(StepError::Prediction { step: None });
+        }
+        let eye = SMatrix::<f64, N, N>::identity();
+        Ok((
+            State {
+                q: z.q + z.v * h,
+                v,
+            },
+            vigp_core::StepDerivatives {
+                a: vigp_core::StateJacobian {
+                    q_q: eye,
+                    q_v: eye * h,
+                    v_q,
+                    v_v,
+                },
+                b: vigp_core::InputJacobian {
+                    q_u: SMatrix::zeros(),
+                    v_u,
+                },
+            },
+        ))
+    }
+
     /// One learned step under inputs `u` using the posterior mean (and the
     /// projection for constrained models), as
     /// [`Learned::step_mean_with`]. `U` must be the number of inputs the
