@@ -151,9 +151,51 @@ fn bench_embedded_steps(c: &mut Criterion) {
     g.finish();
 }
 
+vigp::mechanism! {
+    /// The paper's double pendulum with a motor on each joint (as
+    /// scripts/mujoco_models.py's actuated double pendulum).
+    pub DrivenDoublePendulum {
+        gravity: [0.0, -9.81],
+        links {
+            upper: { mass: 1.0, length: 1.0 },
+            lower: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            shoulder: revolute(world, upper.start) { actuated },
+            elbow: revolute(upper.end, lower.start) { actuated },
+        }
+    }
+}
+
+/// The embedded double-pendulum step against the same step with its exact
+/// derivatives A = ∂z₁/∂z₀ and B = ∂z₁/∂u (implicit function theorem), both
+/// rules; the ratio is what the control docs quote (docs/control.md).
+fn bench_derivatives(c: &mut Criterion) {
+    let dt = 0.01;
+    let mut g = c.benchmark_group("derivatives");
+    let m = DrivenDoublePendulum::default();
+    let z = State::new([1.0, -0.5], [0.5, 1.0]);
+    let u = SVector::<f64, 2>::new(0.3, -0.2);
+    for (rule, s) in [
+        ("first_order", Stepper::new(m, dt).unwrap()),
+        ("midpoint", Stepper::midpoint(m, dt).unwrap()),
+    ] {
+        g.bench_function(format!("double_pendulum/{rule}/step"), |b| {
+            b.iter(|| s.step_forced(black_box(&z), black_box(&u)).unwrap())
+        });
+        g.bench_function(format!("double_pendulum/{rule}/step_with_a_b"), |b| {
+            b.iter(|| {
+                s.step_with_derivatives(black_box(&z), black_box(&u))
+                    .unwrap()
+            })
+        });
+    }
+    g.finish();
+}
+
 criterion_group! {
     name = benches;
     config = Criterion::default().sample_size(30).measurement_time(std::time::Duration::from_secs(2)).warm_up_time(std::time::Duration::from_millis(500));
-    targets = bench_steps, bench_embedded_steps
+    targets = bench_steps, bench_embedded_steps, bench_derivatives
 }
 criterion_main!(benches);

@@ -79,8 +79,26 @@
 //!   gets a run-time damping parameter and the generated code contains the
 //!   Rayleigh dissipation function; when none does, no damping code exists.
 //!
+//! * Inputs: a joint declaring `actuated` (`{ actuated, damping: 0.1 }`) is
+//!   an input — a torque on a revolute joint, a force along a prismatic
+//!   axis — applying the generalized force u_i ∇s_i(q) (s_i the joint
+//!   coordinate). Inputs are numbered in joint declaration order
+//!   (`Name::INPUT_NAMES`); their count is `Dynamics::INPUTS`, and input
+//!   vectors are `SVector<f64, U>` with `U` checked against it at compile
+//!   time. Steps: `Variational::step_forced`, `rollout_forced`, every
+//!   [`Integrator`]'s `step_forced`, the embedded `Stepper::step_forced`;
+//!   exact derivatives A = ∂z₁/∂z₀, B = ∂z₁/∂u: `Variational::step_derivatives`,
+//!   `rollout_derivatives`, `Stepper::step_with_derivatives` (docs/control.md).
+//!   With u = 0 an actuated mechanism steps bit for bit as without
+//!   `actuated`; no input code exists for an unactuated mechanism.
+//! * Springs: `stiffness: k` with optional `rest: s0` adds ½k(s − s0)² on the
+//!   joint coordinate to V; when any joint declares `stiffness`, every joint
+//!   gets run-time `stiffness` and `rest` parameters (`vigp::Spring`, or
+//!   `vigp::ElasticJoint` with damping); otherwise no spring code exists.
+//!
 //! Generated items for `pub Name { … }`: `Name` (run-time parameters with the
-//! DSL's values as `Default`), `NameLinks`, `NameJoints` (if damped),
+//! DSL's values as `Default`), `NameLinks`, `NameJoints` (if damped or
+//! elastic),
 //! `Name::link_poses` (forward kinematics), an implementation of
 //! `vigp::embedded::Model` for `Name` (the `no_std`, fixed-size model behind
 //! `vigp::embedded::Stepper`), and, with the default `std` feature,
@@ -107,7 +125,9 @@ pub use vigp_runtime::*;
 #[cfg(not(feature = "std"))]
 pub use vigp_core as embedded;
 #[cfg(not(feature = "std"))]
-pub use vigp_core::{CoordinateKind, Joint, Link, Pose2, Real, State, kinematics, spatial};
+pub use vigp_core::{
+    CoordinateKind, ElasticJoint, Joint, Link, Pose2, Real, Spring, State, kinematics, spatial,
+};
 
 /// Re-exports for generated code. Not part of the public API.
 #[cfg(not(feature = "std"))]

@@ -163,7 +163,7 @@ fn missing_extra_and_duplicate_columns() {
     let e = read2("run,t,rail,hinge,u_rail\na,0,0,0,1\n").unwrap_err();
     assert!(
         e.to_string()
-            .contains("control inputs are not supported yet"),
+            .contains("the mechanism has no `actuated` joint"),
         "{e}"
     );
     let e = read2("run,t,rail,hinge,\na,0,0,0,\n").unwrap_err();
@@ -277,4 +277,80 @@ fn reading_by_names_and_kinds_and_from_files() {
     )
     .unwrap_err();
     assert!(matches!(e, DataError::InvalidOption { .. }), "{e}");
+}
+
+vigp::mechanism! {
+    /// A cartpole pushed along its rail and driven at the hinge.
+    pub DrivenCartpole {
+        links {
+            cart: { mass: 1.0, length: 1.0 },
+            pole: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            rail: prismatic(world, cart.center) { axis: [1.0, 0.0], actuated },
+            hinge: revolute(cart.center, pole.start) { actuated },
+        }
+    }
+}
+
+/// `u_<joint>` columns of an actuated mechanism: required, in any order,
+/// checked like coordinates, zero-order held when resampling; the step
+/// from state k is driven by row k+1's input.
+#[test]
+fn input_columns_are_read() {
+    let read = |text: &str, opts: &ReadOptions| {
+        Dataset::<2>::read_for::<DrivenCartpoleMinimal, 0, _>(text.as_bytes(), opts)
+    };
+    let text = "run,t,u_hinge,rail,hinge,u_rail\n\
+                a,0.0,0.5,0.0,0.1,1.0\n\
+                a,0.1,0.6,0.1,0.2,2.0\n\
+                a,0.2,0.7,0.3,0.3,3.0\n";
+    let d = read(text, &ReadOptions::default()).unwrap();
+    assert_eq!(d.inputs, vec!["rail", "hinge"]);
+    let r = &d.runs[0];
+    assert_eq!(
+        r.inputs,
+        vec![vec![1.0, 0.5], vec![2.0, 0.6], vec![3.0, 0.7]]
+    );
+    assert_eq!(r.step_input(0), Some(&[2.0, 0.6][..]));
+    assert_eq!(r.step_input(2), None);
+    // a missing input column, a bad value
+    let e = read(
+        "run,t,rail,hinge,u_rail\na,0,0,0,1\n",
+        &ReadOptions::default(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&e, DataError::MissingColumn { name, .. } if name == "u_hinge"),
+        "{e}"
+    );
+    let e = read(
+        "run,t,rail,hinge,u_rail,u_hinge\na,0,0,0,1,nan\n",
+        &ReadOptions::default(),
+    )
+    .unwrap_err();
+    assert!(
+        matches!(&e, DataError::NonFinite { column, .. } if column == "u_hinge"),
+        "{e}"
+    );
+    let e = read(
+        "run,t,rail,hinge,u_rail,u_hinge,u_elbow\na,0,0,0,1,1,1\n",
+        &ReadOptions::default(),
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("u_<actuated joint>"), "{e}");
+    // resampling holds the input (zero-order hold), positions interpolate
+    let opts = ReadOptions {
+        resample: Some(0.05),
+        ..ReadOptions::default()
+    };
+    let d = read(text, &opts).unwrap();
+    let r = &d.runs[0];
+    assert_eq!(r.positions.len(), 5);
+    assert_eq!(r.inputs.len(), 5);
+    assert_eq!(r.inputs[1], vec![1.0, 0.5]);
+    assert_eq!(r.inputs[2], vec![2.0, 0.6]);
+    assert_eq!(r.inputs[3], vec![2.0, 0.6]);
+    assert_eq!(r.inputs[4], vec![3.0, 0.7]);
+    assert!((r.positions[1][0] - 0.05).abs() < 1e-12);
 }

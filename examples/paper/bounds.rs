@@ -89,8 +89,24 @@ fn ground_truth_moving<M: Mechanism<N, C> + Copy, const N: usize, const C: usize
     let sub = (DT / gt.dt).round().max(1.0) as usize;
     let h = DT / sub as f64;
     let mut z = consistent_state(&m, q0, qd0, h).map_err(|e| e.to_string())?;
-    let vi: Box<dyn Integrator<N>> = match gt.method {
-        super::GtMethod::Midpoint => Box::new(Variational::midpoint(m, h)),
+    // samples every DT from z by `sub` steps of `vi` each
+    let run = |vi: &dyn Fn(&State<N>) -> Result<State<N>, StepError>, mut z: State<N>| {
+        let samples = super::TRAJ_SAMPLES;
+        let mut out = Vec::with_capacity(samples);
+        out.push(z.q);
+        for _ in 1..samples {
+            for _ in 0..sub {
+                z = vi(&z).map_err(|e| e.to_string())?;
+            }
+            out.push(z.q);
+        }
+        Ok::<_, String>(out)
+    };
+    match gt.method {
+        super::GtMethod::Midpoint => {
+            let vi = Variational::midpoint(m, h);
+            run(&|z| vi.step(z), z)
+        }
         super::GtMethod::Vi4 => {
             // continuous velocity: q̇0 projected onto the tangent space
             // G(q)·q̇ = 0, v = q̇0 − Gᵀ(GGᵀ)⁻¹G q̇0
@@ -106,19 +122,10 @@ fn ground_truth_moving<M: Mechanism<N, C> + Copy, const N: usize, const C: usize
             } else {
                 z.v = *qd0;
             }
-            Box::new(Variational4::new(m, h).with_options(super::GT_SOLVER))
+            let vi = Variational4::new(m, h).with_options(super::GT_SOLVER);
+            run(&|z| vi.step(z), z)
         }
-    };
-    let samples = super::TRAJ_SAMPLES;
-    let mut out = Vec::with_capacity(samples);
-    out.push(z.q);
-    for _ in 1..samples {
-        for _ in 0..sub {
-            z = vi.step(&z).map_err(|e| e.to_string())?;
-        }
-        out.push(z.q);
     }
-    Ok(out)
 }
 
 fn median(v: &[f64]) -> f64 {

@@ -241,6 +241,111 @@ fn joint_constraint_rows(
     }
 }
 
+/// Links whose poses the coordinates of `joints` read.
+fn used_by_joints(m: &Model, joints: &[usize]) -> Vec<bool> {
+    let mut used = vec![false; m.links.len()];
+    for &j in joints {
+        let joint = &m.joints[j];
+        for p in [joint.parent, joint.child] {
+            if let Some(l) = p.link() {
+                used[l] = true;
+            }
+        }
+    }
+    used
+}
+
+/// A joint's coordinate s_j(q) for the reference path: `q[k]` for a tree
+/// joint in minimal coordinates, else from the link poses in scope.
+fn coordinate_tokens(m: &Model, params: &TokenStream, j: usize, minimal: bool) -> TokenStream {
+    match (minimal, m.coordinate_of(j)) {
+        (true, Some(k)) => {
+            let k = coordinate_index(k);
+            quote!(q[#k])
+        }
+        _ => joint_coordinate(m, params, j),
+    }
+}
+
+/// `let` of the link poses the coordinates of `joints` need (none when
+/// every one is a minimal tree coordinate). `poses` computes all poses
+/// from `q`.
+fn poses_for(m: &Model, joints: &[usize], minimal: bool, poses: &TokenStream) -> TokenStream {
+    let need: Vec<usize> = joints
+        .iter()
+        .copied()
+        .filter(|&j| !(minimal && m.coordinate_of(j).is_some()))
+        .collect();
+    if need.is_empty() {
+        return quote!();
+    }
+    let pattern = pose_pattern(m, &used_by_joints(m, &need));
+    quote!(let #pattern = #poses;)
+}
+
+/// The reference path's spring energy Σ ½k_j (s_j − r_j)² over every
+/// joint (a `D` expression over `q`), or `None` without springs.
+fn spring_energy(
+    m: &Model,
+    params: &TokenStream,
+    minimal: bool,
+    poses: &TokenStream,
+) -> Option<TokenStream> {
+    if !m.elastic() {
+        return None;
+    }
+    let all: Vec<usize> = (0..m.joints.len()).collect();
+    let lets = poses_for(m, &all, minimal, poses);
+    let terms = all.iter().map(|&j| {
+        let jn = &m.joints[j].name;
+        let s = coordinate_tokens(m, params, j, minimal);
+        quote!(({ let stretch = #s - joints.#jn.rest; stretch * stretch * (0.5 * joints.#jn.stiffness) }))
+    });
+    Some(quote!(({
+        let joints = &#params.joints;
+        #lets
+        #(#terms)+*
+    })))
+}
+
+/// The reference path's `input_work` Σ_i u_i s_i(q) over the actuated
+/// joints, or nothing for an unactuated mechanism.
+fn input_work(
+    m: &Model,
+    params: &TokenStream,
+    minimal: bool,
+    poses: &TokenStream,
+    n: &Literal,
+) -> TokenStream {
+    let inputs = m.inputs();
+    if inputs.is_empty() {
+        return quote!();
+    }
+    let svector = quote!(::vigp::__private::nalgebra::SVector);
+    let lets = poses_for(m, &inputs, minimal, poses);
+    let terms = inputs.iter().enumerate().map(|(i, &j)| {
+        let s = coordinate_tokens(m, params, j, minimal);
+        let i = coordinate_index(i);
+        quote!((#s) * u.get(#i).copied().unwrap_or(0.0))
+    });
+    quote! {
+        fn input_work<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, u: &[f64]) -> D {
+            #lets
+            #(#terms)+*
+        }
+    }
+}
+
+/// `const INPUT_NAMES` of a `Mechanism` impl (nothing when unactuated).
+fn mechanism_input_names(m: &Model) -> TokenStream {
+    let inputs = m.inputs();
+    if inputs.is_empty() {
+        return quote!();
+    }
+    let names = inputs.iter().map(|&j| m.joints[j].name.unraw().to_string());
+    quote!(const INPUT_NAMES: &'static [&'static str] = &[#(#names),*];)
+}
+
 /// The maximal-coordinate view: each link's centre-of-mass pose (x, y, θ),
 /// every joint a constraint (2 equations), plus the coordinate maps.
 /// Returns the items of every target and those of the std runtime
@@ -304,6 +409,13 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
     } else {
         quote!()
     };
+    let max_poses = quote!(self.link_poses(q));
+    let springs = match spring_energy(m, &sys, false, &max_poses) {
+        Some(e) => quote!(+ #e),
+        None => quote!(),
+    };
+    let inputs = input_work(m, &sys, false, &max_poses, &nm);
+    let mechanism_inputs = mechanism_input_names(m);
     let maximal_entries = m.links.iter().enumerate().flat_map(|(l, link)| {
         let (ln, pose) = (&link.name, pose_ident(m, l));
         [
@@ -353,6 +465,7 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
     let std_items = quote! {
         impl ::vigp::Mechanism<#nm, #cm> for #maximal_ty {
             const COORDINATES: [&'static str; #nm] = [#(#coord_names),*];
+            #mechanism_inputs
 
             fn kinetic_energy<D: ::vigp::Scalar>(&self, _q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
                 let links = &#sys.links;
@@ -361,10 +474,12 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
 
             fn potential_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>) -> D {
                 let (links, gravity) = (&#sys.links, #sys.gravity);
-                #(#potential)+*
+                #(#potential)+* #springs
             }
 
             #dissipation
+
+            #inputs
 
             fn constraints<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>) -> #svector<D, #cm> {
                 let #all_used = self.link_poses(q);
@@ -404,6 +519,13 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     let joints_ty = format_ident!("{}Joints", name);
     let minimal_ty = format_ident!("{}Minimal", name);
     let dissipative = m.dissipative();
+    let elastic = m.elastic();
+    let has_joints = dissipative || elastic;
+    let joint_ty = match (dissipative, elastic) {
+        (true, true) => quote!(::vigp::ElasticJoint),
+        (false, true) => quote!(::vigp::Spring),
+        _ => quote!(::vigp::Joint),
+    };
     let svector = quote!(::vigp::__private::nalgebra::SVector);
 
     // ---- parameter types ----
@@ -423,7 +545,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
         let com = pair(l.com.unwrap_or([l.length * 0.5, 0.0]));
         quote!(#ln: ::vigp::Link { mass: #mass, length: #length, inertia: #inertia, com: #com },)
     });
-    let joints_items = if dissipative {
+    let joints_items = if has_joints {
         let fields = m.joints.iter().map(|j| {
             let (jn, ja) = (&j.name, &j.attrs);
             let doc = format!(" Joint `{jn}`.");
@@ -432,7 +554,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             } else {
                 quote!(#(#ja)*)
             };
-            quote!(#doc pub #jn: ::vigp::Joint,)
+            quote!(#doc pub #jn: #joint_ty,)
         });
         let doc = format!(" Joint parameters of [`{name}`].");
         quote! {
@@ -443,15 +565,29 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     } else {
         quote!()
     };
-    let joints_field = if dissipative {
-        quote!(#[doc = " Joint parameters (damping)."] pub joints: #joints_ty,)
-    } else {
-        quote!()
+    let joints_field = match (dissipative, elastic) {
+        (true, false) => {
+            quote!(#[doc = " Joint parameters (damping)."] pub joints: #joints_ty,)
+        }
+        (false, true) => {
+            quote!(#[doc = " Joint parameters (springs)."] pub joints: #joints_ty,)
+        }
+        (true, true) => {
+            quote!(#[doc = " Joint parameters (damping and springs)."] pub joints: #joints_ty,)
+        }
+        (false, false) => quote!(),
     };
-    let joints_default = if dissipative {
+    let joints_default = if has_joints {
         let defaults = m.joints.iter().map(|j| {
             let (jn, d) = (&j.name, lit(j.damping.unwrap_or(0.0)));
-            quote!(#jn: ::vigp::Joint { damping: #d },)
+            let (k, r) = (lit(j.stiffness.unwrap_or(0.0)), lit(j.rest.unwrap_or(0.0)));
+            match (dissipative, elastic) {
+                (true, true) => {
+                    quote!(#jn: ::vigp::ElasticJoint { damping: #d, stiffness: #k, rest: #r },)
+                }
+                (false, true) => quote!(#jn: ::vigp::Spring { stiffness: #k, rest: #r },),
+                _ => quote!(#jn: ::vigp::Joint { damping: #d },),
+            }
         });
         quote!(joints: #joints_ty { #(#defaults)* },)
     } else {
@@ -584,6 +720,30 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
         quote!()
     };
 
+    let input_joints = m.inputs();
+    let (inputs_delegate_const, inputs_delegate_fns, input_names) = if input_joints.is_empty() {
+        (quote!(), quote!(), quote!())
+    } else {
+        let u = Literal::usize_unsuffixed(input_joints.len());
+        let names = input_joints
+            .iter()
+            .map(|&j| m.joints[j].name.unraw().to_string());
+        (
+            quote!(const INPUTS: usize = #u;),
+            quote! {
+                fn input_matrix<const U: usize>(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, U> {
+                    ::vigp::embedded::Dynamics::input_matrix::<U>(&self.minimal(), k, q)
+                }
+                fn input_force_jacobian<const U: usize>(&self, k: &Self::Constants, q: &#svector<f64, #n>, u: &#svector<f64, U>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, #n> {
+                    ::vigp::embedded::Dynamics::input_force_jacobian::<U>(&self.minimal(), k, q, u)
+                }
+            },
+            quote! {
+                #[doc = " Names of the inputs (the actuated joints, in declaration order): input i is a torque on a revolute joint or a force along a prismatic axis."]
+                pub const INPUT_NAMES: [&'static str; #u] = [#(#names),*];
+            },
+        )
+    };
     let name_str = name.to_string();
     let minimal_doc = format!(
         " Minimal-coordinate view of [`{name_str}`]: one coordinate per tree joint ({}), {} loop-closure constraint equation(s).",
@@ -625,10 +785,23 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
         &maximal_kinds,
     );
 
+    let min_poses = quote!(#sys.link_poses(q));
+    let (min_springs, min_springs_neg) = match spring_energy(m, &sys, true, &min_poses) {
+        Some(e) => (quote!(+ #e), quote!(- #e)),
+        None => (quote!(), quote!()),
+    };
+    let min_inputs = input_work(m, &sys, true, &min_poses, &n);
+    let mechanism_inputs = mechanism_input_names(m);
+    let lagrangian_body = if m.elastic() {
+        quote!((#(#lagrangian_terms)+*) #min_springs_neg)
+    } else {
+        quote!(#(#lagrangian_terms)+*)
+    };
     let std_items = if target == crate::Target::Std {
         quote! {
             impl ::vigp::Mechanism<#n, #c> for #minimal_ty {
             const COORDINATES: [&'static str; #n] = [#(#coord_names),*];
+            #mechanism_inputs
 
             fn kinetic_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
                 let links = &#sys.links;
@@ -639,16 +812,18 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             fn potential_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>) -> D {
                 let (links, gravity) = (&#sys.links, #sys.gravity);
                 let #all_used = #sys.link_poses(q);
-                #(#potential_terms)+*
+                #(#potential_terms)+* #min_springs
             }
 
             fn lagrangian<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
                 let (links, gravity) = (&#sys.links, #sys.gravity);
                 let #all_used = #sys.link_poses(&::vigp::kinematics::tangent(q, v));
-                #(#lagrangian_terms)+*
+                #lagrangian_body
             }
 
             #dissipation
+
+            #min_inputs
 
             #constraints
 
@@ -694,6 +869,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             pub const LOOP_CONSTRAINTS: usize = #c;
             #[doc = " Link names, in declaration order (the order of [`Self::link_poses`])."]
             pub const LINKS: [&'static str; #nl] = [#(#link_names),*];
+            #input_names
 
             #[doc = " The minimal-coordinate model with these parameters."]
             pub fn minimal(&self) -> #minimal_ty {
@@ -741,6 +917,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             const DISSIPATIVE: bool = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::DISSIPATIVE;
             const CONSTANT_MASS: bool = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::CONSTANT_MASS;
             const DMASS_PATTERN: [[[bool; #n]; #n]; #n] = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::DMASS_PATTERN;
+            #inputs_delegate_const
             type Constants = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::Constants;
             fn constants(&self) -> ::core::result::Result<Self::Constants, ::vigp::embedded::StepError> {
                 ::vigp::embedded::Dynamics::constants(&self.minimal())
@@ -774,6 +951,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             fn constraint_hessian(&self, k: &Self::Constants, q: &#svector<f64, #n>, mu: &#svector<f64, #c>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, #n> {
                 ::vigp::embedded::Dynamics::constraint_hessian(&self.minimal(), k, q, mu)
             }
+            #inputs_delegate_fns
         }
 
         #maximal_items

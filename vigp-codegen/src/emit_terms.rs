@@ -59,6 +59,14 @@ fn param_tokens(m: &Model, p: &Param) -> TokenStream {
             let n = &m.joints[j].name;
             quote!(sys.joints.#n.damping)
         }
+        Param::Stiffness(j) => {
+            let n = &m.joints[j].name;
+            quote!(sys.joints.#n.stiffness)
+        }
+        Param::Rest(j) => {
+            let n = &m.joints[j].name;
+            quote!(sys.joints.#n.rest)
+        }
     }
 }
 
@@ -766,6 +774,100 @@ pub fn emit_dynamics(
         quote!(#g_fn #jac_fn #hess_fn)
     };
 
+    // inputs (emitted last: the constants of the other functions keep
+    // their indices, so an actuated mechanism's terms are those of the
+    // same mechanism without `actuated`)
+    let (inputs_const, input_fns) = if mech.inputs.is_empty() {
+        (quote!(), quote!())
+    } else {
+        let u = mech.inputs.len();
+        let uu = index(u);
+        let bm = mech.input_matrix();
+        let mut outs: Vec<(TokenStream, &Expr)> = Vec::new();
+        for (k, row) in bm.iter().enumerate() {
+            for (i, e) in row.iter().enumerate() {
+                let t = ij(k, i);
+                outs.push((quote!(b[#t]), e));
+            }
+        }
+        let (body, uq, uk) = assign_body(&mut constants, &outs, quote!());
+        let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
+        let assert_u = quote! {
+            const { ::core::assert!(U == #uu, "the input vector's length U must equal Dynamics::INPUTS") };
+        };
+        let b_fn = quote! {
+            fn input_matrix<const U: usize>(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> #smatrix<f64, #nn, U> {
+                #assert_u
+                let mut b = #smatrix::<f64, #nn, U>::zeros();
+                #body
+                b
+            }
+        };
+        // Σ_i u_i ∇²s_i (symmetric)
+        let hess: Vec<Vec<Vec<Expr>>> = (0..u)
+            .map(|i| {
+                (0..n)
+                    .map(|a| (0..n).map(|c| bm[a][i].deriv(c)).collect())
+                    .collect()
+            })
+            .collect();
+        let mut all: Vec<&Expr> = Vec::new();
+        for h in &hess {
+            for a in 0..n {
+                for c in a..n {
+                    all.push(&h[a][c]);
+                }
+            }
+        }
+        let trig = Trig::new(freqs(all.iter().copied()));
+        let mut w = Writer {
+            constants: &mut constants,
+            uses: Uses::default(),
+        };
+        let mut assigns = Vec::new();
+        for a in 0..n {
+            for c in a..n {
+                let mut sum = TokenStream::new();
+                for (i, h) in hess.iter().enumerate() {
+                    if h[a][c].is_zero() {
+                        continue;
+                    }
+                    let ii = index(i);
+                    let x = w.expr(&h[a][c], &trig);
+                    sum = if sum.is_empty() {
+                        quote!((#x) * u[#ii])
+                    } else {
+                        quote!(#sum + (#x) * u[#ii])
+                    };
+                }
+                if sum.is_empty() {
+                    continue;
+                }
+                let t = ij(a, c);
+                assigns.push(quote!(h[#t] = #sum;));
+                if a != c {
+                    let tt = ij(c, a);
+                    assigns.push(quote!(h[#tt] = h[#t];));
+                }
+            }
+        }
+        let lets = trig.lets();
+        let q_arg = arg(w.uses.q.get() || !trig.lets.is_empty(), "q");
+        let k_arg = arg(w.uses.k.get(), "k");
+        let u_arg = arg(!assigns.is_empty(), "u");
+        let h_fn = quote! {
+            fn input_force_jacobian<const U: usize>(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>, #u_arg: &#svector<f64, U>) -> #smatrix<f64, #nn, #nn> {
+                #assert_u
+                #[allow(unused_mut)]
+                let mut h = #smatrix::<f64, #nn, #nn>::zeros();
+                #lets
+                #(#assigns)*
+                h
+            }
+        };
+        (quote!(const INPUTS: usize = #uu;), quote!(#b_fn #h_fn))
+    };
+
     // constants(): validation of every parameter, then the products
     let nk = index(constants.polys.len());
     let checks = validation(m);
@@ -792,6 +894,7 @@ pub fn emit_dynamics(
             const DISSIPATIVE: bool = #dissipative;
             const CONSTANT_MASS: bool = #constant_mass;
             #pattern_const
+            #inputs_const
             type Constants = [f64; #nk];
 
             #constants_fn
@@ -801,6 +904,7 @@ pub fn emit_dynamics(
             #contractions
             #force_jacobian_fn
             #constraint_fns
+            #input_fns
         }
     }
 }
@@ -889,6 +993,22 @@ fn validation(m: &Model) -> Vec<TokenStream> {
                 quote!(sys.joints.#n.damping),
                 "NonNegative",
                 format!("joint `{name}`: damping must be finite and >= 0"),
+            );
+        }
+    }
+    if m.elastic() {
+        for j in &m.joints {
+            let n = &j.name;
+            let name = syn::ext::IdentExt::unraw(n).to_string();
+            check(
+                quote!(sys.joints.#n.stiffness),
+                "NonNegative",
+                format!("joint `{name}`: stiffness must be finite and >= 0"),
+            );
+            check(
+                quote!(sys.joints.#n.rest),
+                "Any",
+                format!("joint `{name}`: rest must be finite"),
             );
         }
     }

@@ -41,6 +41,10 @@ pub enum Param {
     Com(usize, usize),
     /// `joints.<joint>.damping`.
     Damping(usize),
+    /// `joints.<joint>.stiffness`.
+    Stiffness(usize),
+    /// `joints.<joint>.rest`.
+    Rest(usize),
 }
 
 /// One rigid body.
@@ -125,6 +129,9 @@ pub struct Mechanics {
     /// Constraint rows g(q) (loop joints in minimal coordinates, every
     /// joint in maximal coordinates).
     pub constraints: Vec<Expr>,
+    /// Coordinates s(q) of the actuated joints, in declaration order: input
+    /// i applies the generalized force u_i ∇s_i(q).
+    pub inputs: Vec<Expr>,
 }
 
 struct Builder<'m> {
@@ -374,17 +381,42 @@ impl Mechanics {
             }
         }
 
+        // joint coordinates s_j(q), for dampers, springs and inputs
+        let mut coordinates: Vec<Option<Expr>> = vec![None; m.joints.len()];
+        let mut joint_coordinate = |b: &mut Builder, j: usize| {
+            coordinates[j]
+                .get_or_insert_with(|| match (view, m.coordinate_of(j)) {
+                    (View::Minimal, Some(k)) => Expr::coord(n, k),
+                    _ => b.joint_coordinate(&frames, j),
+                })
+                .clone()
+        };
+
         // dampers
         let mut dampers = Vec::new();
         if m.dissipative() {
             for j in 0..m.joints.len() {
-                let s = match (view, m.coordinate_of(j)) {
-                    (View::Minimal, Some(k)) => Expr::coord(n, k),
-                    _ => b.joint_coordinate(&frames, j),
-                };
+                let s = joint_coordinate(&mut b, j);
                 dampers.push((b.param_index(Param::Damping(j)), s));
             }
         }
+
+        // springs: V += ½ k_j (s_j − r_j)² for every joint (run-time k, r)
+        if m.elastic() {
+            for j in 0..m.joints.len() {
+                let s = joint_coordinate(&mut b, j);
+                let (k, r) = (b.param(Param::Stiffness(j)), b.param(Param::Rest(j)));
+                let stretch = s.sub(&r);
+                potential = potential.add(&stretch.mul(&stretch).mul(&k).scale(0.5));
+            }
+        }
+
+        // inputs
+        let inputs: Vec<Expr> = m
+            .inputs()
+            .into_iter()
+            .map(|j| joint_coordinate(&mut b, j))
+            .collect();
 
         // constraints
         let joints: Vec<usize> = match view {
@@ -406,6 +438,7 @@ impl Mechanics {
             mass,
             dampers,
             constraints,
+            inputs,
         }
     }
 
@@ -418,6 +451,14 @@ impl Mechanics {
             && ok(&self.potential)
             && self.constraints.iter().all(ok)
             && self.dampers.iter().all(|(_, s)| ok(s))
+            && self.inputs.iter().all(ok)
+    }
+
+    /// The input matrix B(q) (N × U): column i is ∇s_i of actuated joint i.
+    pub fn input_matrix(&self) -> Vec<Vec<Expr>> {
+        (0..self.n)
+            .map(|k| self.inputs.iter().map(|s| s.deriv(k)).collect())
+            .collect()
     }
 
     /// Number of constraint rows.
@@ -467,6 +508,8 @@ impl Mechanics {
             Param::Inertia(l) => format!("links.{}.inertia", link(l)),
             Param::Com(l, k) => format!("links.{}.com[{k}]", link(l)),
             Param::Damping(j) => format!("joints.{}.damping", m.joints[j].name.unraw()),
+            Param::Stiffness(j) => format!("joints.{}.stiffness", m.joints[j].name.unraw()),
+            Param::Rest(j) => format!("joints.{}.rest", m.joints[j].name.unraw()),
         }
     }
 }

@@ -90,6 +90,14 @@ pub struct Joint {
     pub child: Point,
     /// Declared damping (`None` when the joint does not mention it).
     pub damping: Option<f64>,
+    /// `true` when the joint declares `actuated` (an input: a torque on a
+    /// revolute joint, a force along a prismatic axis).
+    pub actuated: bool,
+    /// Declared spring stiffness k ≥ 0 (`None` when not mentioned).
+    pub stiffness: Option<f64>,
+    /// Declared spring rest coordinate s₀ (`None` when not mentioned; only
+    /// allowed with `stiffness`).
+    pub rest: Option<f64>,
 }
 
 /// A validated mechanism.
@@ -133,6 +141,20 @@ impl Model {
         self.joints.iter().any(|j| j.damping.is_some())
     }
 
+    /// `true` when any joint declares `stiffness` (then every joint gets a
+    /// run-time spring: stiffness and rest coordinate).
+    pub fn elastic(&self) -> bool {
+        self.joints.iter().any(|j| j.stiffness.is_some())
+    }
+
+    /// The actuated joints in declaration order: input i drives joint
+    /// `inputs()[i]`.
+    pub fn inputs(&self) -> Vec<usize> {
+        (0..self.joints.len())
+            .filter(|&j| self.joints[j].actuated)
+            .collect()
+    }
+
     /// Coordinate index of a tree joint.
     pub fn coordinate_of(&self, joint: usize) -> Option<usize> {
         self.tree.iter().position(|&j| j == joint)
@@ -162,7 +184,7 @@ impl Errors {
 fn number(errs: &mut Errors, f: &Field) -> Option<Number> {
     match &f.value {
         Value::Number(n) => Some(*n),
-        Value::Array(s, _) => {
+        Value::Array(s, _) | Value::Flag(s) => {
             errs.push(*s, format!("`{}` takes a single number", f.key));
             None
         }
@@ -386,8 +408,8 @@ pub fn validate(input: Input) -> syn::Result<Model> {
         }
         let kind_name = decl.kind.to_string();
         let allowed: &[&str] = match kind_name.as_str() {
-            "revolute" => &["damping"],
-            "prismatic" => &["damping", "axis"],
+            "revolute" => &["damping", "actuated", "stiffness", "rest"],
+            "prismatic" => &["damping", "axis", "actuated", "stiffness", "rest"],
             _ => {
                 errs.push(
                     decl.kind.span(),
@@ -441,6 +463,39 @@ pub fn validate(input: Input) -> syn::Result<Model> {
                 }
                 None => None,
             });
+        let actuated = match f.get("actuated") {
+            None => false,
+            Some(field) => match &field.value {
+                Value::Flag(_) => true,
+                other => {
+                    errs.push(
+                        other.span(),
+                        "`actuated` takes no value: write `actuated` to make the joint an input",
+                    );
+                    false
+                }
+            },
+        };
+        let stiffness = f
+            .get("stiffness")
+            .and_then(|field| match number(&mut errs, field) {
+                Some(n) if n.value >= 0.0 => Some(n.value),
+                Some(n) => {
+                    errs.add(n.error(format!("`stiffness` must not be negative, got {}", n.value)));
+                    None
+                }
+                None => None,
+            });
+        let rest = f.get("rest").and_then(|field| {
+            let n = number(&mut errs, field)?;
+            if !f.contains_key("stiffness") {
+                errs.push(
+                    field.key.span(),
+                    format!("`rest` of joint `{name}` needs `stiffness` (a spring ½k(s − rest)²)"),
+                );
+            }
+            Some(n.value)
+        });
         let parent = resolve(&mut errs, &decl.parent);
         let child = resolve(&mut errs, &decl.child);
         let (Some(parent), Some(child)) = (parent, child) else {
@@ -465,6 +520,9 @@ pub fn validate(input: Input) -> syn::Result<Model> {
             parent,
             child,
             damping,
+            actuated,
+            stiffness,
+            rest,
         });
     }
     if let Some(e) = errs.0.take() {

@@ -60,13 +60,16 @@ impl Parse for Number {
     }
 }
 
-/// A value: a number or a bracketed list of numbers.
+/// A value: a number or a bracketed list of numbers, or nothing (a bare
+/// flag such as `actuated`).
 #[derive(Clone)]
 pub enum Value {
     /// `1.5`
     Number(Number),
     /// `[1.0, 2.0]` with the span of the brackets.
     Array(Span, Vec<Number>),
+    /// A key written without `: value` (the key's span).
+    Flag(Span),
 }
 
 impl Value {
@@ -74,7 +77,7 @@ impl Value {
     pub fn span(&self) -> Span {
         match self {
             Value::Number(n) => n.span,
-            Value::Array(s, _) => *s,
+            Value::Array(s, _) | Value::Flag(s) => *s,
         }
     }
 }
@@ -92,7 +95,7 @@ impl Parse for Value {
     }
 }
 
-/// `key: value`
+/// `key: value`, or a bare `key` (a flag, [`Value::Flag`]).
 #[derive(Clone)]
 pub struct Field {
     /// Key.
@@ -103,7 +106,14 @@ pub struct Field {
 
 impl Parse for Field {
     fn parse(input: ParseStream) -> syn::Result<Self> {
-        let key = input.parse()?;
+        let key: Ident = input.parse()?;
+        if input.is_empty() || input.peek(Token![,]) {
+            let span = key.span();
+            return Ok(Field {
+                key,
+                value: Value::Flag(span),
+            });
+        }
         input.parse::<Token![:]>()?;
         let value = input.parse()?;
         Ok(Field { key, value })

@@ -165,6 +165,52 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         Ok((q, p, report))
     }
 
+    /// [`Composition::step_momentum`] under inputs `u` held over the step
+    /// (each midpoint stage forced as in [`crate::forced`]; for constant u
+    /// this is the composition of the midpoint rule of L + uᵀs(q), so it
+    /// keeps the fourth order).
+    pub fn step_momentum_forced<const U: usize>(
+        &self,
+        q: &SVector<f64, N>,
+        p: &SVector<f64, N>,
+        guess: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
+        let dt = self.midpoint.dt();
+        let (mut q, mut p) = (*q, *p);
+        let mut report = StepReport::default();
+        let mut v = *guess;
+        for g in self.gammas {
+            let h = g * dt;
+            let (v1, p1, r) = self.midpoint.solve_forced(&q, &p, h, &v, u)?;
+            report.iterations += r.iterations;
+            report.residual = report.residual.max(r.residual);
+            report.stalled |= r.stalled;
+            report.regularised |= r.regularised;
+            q += v1 * h;
+            (p, v) = (p1, v1);
+        }
+        Ok((q, p, report))
+    }
+
+    /// One step from a continuous state under inputs `u` (`U` must equal
+    /// [`Dynamics::INPUTS`]); u = 0 is [`Composition::step`] bit for bit.
+    pub fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+    ) -> Result<State<N>, StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        let p = self.momentum(z);
+        let (q, p, _) = self.step_momentum_forced(&z.q, &p, &z.v, u)?;
+        Ok(State {
+            v: self.velocity(&q, &p)?,
+            q,
+        })
+    }
+
     /// One step from a continuous state (q, q̇) (consistent for loops:
     /// g(q) = 0, G(q)q̇ = 0).
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {

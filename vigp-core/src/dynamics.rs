@@ -73,6 +73,15 @@ pub trait Dynamics<const N: usize, const C: usize> {
     /// pendulum's M depends on the elbow angle only). Default: all `true`.
     const DMASS_PATTERN: [[[bool; N]; N]; N] = [[[true; N]; N]; N];
 
+    /// Number of inputs: the joints declared `actuated`, in declaration
+    /// order (0 for an unactuated mechanism, which has no input code).
+    /// Input i is a torque on a revolute joint or a force along a prismatic
+    /// axis; it applies the generalized force u_i ∇s_i(q), s_i the joint's
+    /// coordinate, so that the forced equations of motion read
+    /// M q̈ + … = f(q, q̇) + B(q) u with B = [∇s_1 … ∇s_U]
+    /// ([`Dynamics::input_matrix`]).
+    const INPUTS: usize = 0;
+
     /// Parameter-dependent constants (products of masses, lengths, …).
     type Constants: Copy + core::fmt::Debug + PartialEq + Send + Sync;
 
@@ -180,6 +189,34 @@ pub trait Dynamics<const N: usize, const C: usize> {
         worst
     }
 
+    /// The input matrix B(q) (N × U, column i = ∇s_i(q) of actuated joint
+    /// i): the generalized force of inputs u is B(q)u. `U` must equal
+    /// [`Dynamics::INPUTS`] (checked at compile time). Default (no inputs):
+    /// empty.
+    fn input_matrix<const U: usize>(
+        &self,
+        k: &Self::Constants,
+        q: &SVector<f64, N>,
+    ) -> SMatrix<f64, N, U> {
+        const { assert!(U == Self::INPUTS, "U must equal Dynamics::INPUTS") };
+        let _ = (k, q);
+        SMatrix::zeros()
+    }
+
+    /// ∂/∂q [B(q)u] = Σ_i u_i ∇²s_i(q) (N × N, symmetric; zero when every
+    /// actuated joint's coordinate is linear in q, as for minimal
+    /// coordinates of a tree). `U` must equal [`Dynamics::INPUTS`].
+    fn input_force_jacobian<const U: usize>(
+        &self,
+        k: &Self::Constants,
+        q: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+    ) -> SMatrix<f64, N, N> {
+        const { assert!(U == Self::INPUTS, "U must equal Dynamics::INPUTS") };
+        let _ = (k, q, u);
+        SMatrix::zeros()
+    }
+
     /// Total energy ½ vᵀM(q)v + V(q).
     fn energy_at(&self, k: &Self::Constants, q: &SVector<f64, N>, v: &SVector<f64, N>) -> f64 {
         0.5 * v.dot(&(self.mass(k, q) * v)) + self.potential(k, q)
@@ -254,8 +291,25 @@ pub fn acceleration<M: Dynamics<N, C>, const N: usize, const C: usize>(
     qdot: &SVector<f64, N>,
     t: &mut Terms<N>,
 ) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
+    acceleration_forced(model, k, q, qdot, None, t)
+}
+
+/// [`acceleration`] with an extra generalized force on the right-hand side
+/// (the inputs' B(q)u, [`Dynamics::input_matrix`]); `None` is
+/// [`acceleration`] exactly.
+pub fn acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize>(
+    model: &M,
+    k: &M::Constants,
+    q: &SVector<f64, N>,
+    qdot: &SVector<f64, N>,
+    force: Option<&SVector<f64, N>>,
+    t: &mut Terms<N>,
+) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
     model.terms(k, q, t);
     let mut rhs = -t.dpotential;
+    if let Some(f) = force {
+        rhs += f;
+    }
     if !M::CONSTANT_MASS {
         let mut mdot = SMatrix::<f64, N, N>::zeros();
         for (l, dm) in t.dmass.iter().enumerate() {

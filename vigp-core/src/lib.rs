@@ -23,6 +23,7 @@
 
 pub mod compose;
 pub mod dynamics;
+pub mod forced;
 pub mod gp;
 pub mod kinematics;
 pub mod learned;
@@ -36,10 +37,11 @@ pub mod step;
 
 pub use compose::Composition;
 pub use dynamics::{Dynamics, Terms};
+pub use forced::{InputJacobian, MomentumDerivatives, StateJacobian, StepDerivatives};
 pub use kinematics::{Point2, Pose2};
 pub use learned::{LearnedError, LearnedModel, LearnedStepper};
 pub use model::{Body, Model};
-pub use params::{Joint, Link, Parameters};
+pub use params::{ElasticJoint, Joint, Link, Parameters, Spring};
 pub use real::{Jet1, Jet2, Real};
 pub use state::{CoordinateKind, State};
 pub use step::{RolloutError, StepError, StepOptions, StepReport, Stepper};

@@ -23,6 +23,29 @@ pub struct Joint {
     pub damping: f64,
 }
 
+/// Run-time parameters of one joint of a mechanism with springs but no
+/// damping (some joint declares `stiffness`, none `damping`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spring {
+    /// Spring stiffness k ≥ 0 (N·m/rad or N/m): potential ½k(s − rest)² on
+    /// the joint coordinate s.
+    pub stiffness: f64,
+    /// Rest coordinate of the spring (rad or m).
+    pub rest: f64,
+}
+
+/// Run-time parameters of one joint of a mechanism with damping and springs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ElasticJoint {
+    /// Viscous damping coefficient c ≥ 0 on the joint rate (N·m·s/rad or N·s/m).
+    pub damping: f64,
+    /// Spring stiffness k ≥ 0 (N·m/rad or N/m): potential ½k(s − rest)² on
+    /// the joint coordinate s.
+    pub stiffness: f64,
+    /// Rest coordinate of the spring (rad or m).
+    pub rest: f64,
+}
+
 /// A mechanism's name and its run-time parameters as a flat list of named
 /// numbers, implemented by `mechanism!` for the parameter struct (and, with
 /// the std runtime, for its coordinate views).
@@ -32,7 +55,9 @@ pub struct Joint {
 /// values. Names are dotted paths of the struct's fields: `gravity.x`,
 /// `gravity.y`, then per link `links.<link>.mass`, `.length`, `.inertia`,
 /// `.com.x`, `.com.y`, then (for a damped mechanism) per joint
-/// `joints.<joint>.damping`, in declaration order.
+/// `joints.<joint>.damping`, then (for a mechanism with springs) per joint
+/// `joints.<joint>.stiffness` and `joints.<joint>.rest`, in declaration
+/// order.
 ///
 /// ```
 /// use vigp_core::{Link, Parameters};

@@ -114,6 +114,9 @@ pub enum StepError {
     InvalidModel(&'static str),
     /// The state (or the momentum) holds NaN or ±∞.
     NonFiniteState,
+    /// An input (actuator torque or force) holds NaN or ±∞, or a forced
+    /// rollout has fewer inputs than steps.
+    NonFiniteInput,
     /// The residual became NaN or ±∞.
     NonFiniteResidual {
         /// Newton iteration.
@@ -151,6 +154,7 @@ impl core::fmt::Display for StepError {
             Self::InvalidOptions(why) => write!(f, "invalid step options: {why}"),
             Self::InvalidModel(why) => write!(f, "invalid model parameters: {why}"),
             Self::NonFiniteState => write!(f, "non-finite state or momentum"),
+            Self::NonFiniteInput => write!(f, "non-finite or missing input"),
             Self::NonFiniteResidual { iteration } => {
                 write!(f, "non-finite residual at Newton iteration {iteration}")
             }
@@ -235,6 +239,14 @@ pub fn check_time_step(dt: f64) -> Result<(), StepError> {
 /// A converged sub-step: v₁, the momentum p₁ and diagnostics.
 type Solved<const N: usize> = (SVector<f64, N>, SVector<f64, N>, StepReport);
 
+/// A converged forced sub-step: v₁, p₁, diagnostics and the multipliers λ.
+pub(crate) type Forced<const N: usize, const C: usize> = (
+    SVector<f64, N>,
+    SVector<f64, N>,
+    StepReport,
+    SVector<f64, C>,
+);
+
 /// A variational integrator of a [`Dynamics`] model with a fixed Δt:
 /// first order ([`Stepper::new`], the paper's rule) or second order
 /// ([`Stepper::midpoint`]); optional sub-steps. Construction validates Δt,
@@ -242,19 +254,19 @@ type Solved<const N: usize> = (SVector<f64, N>, SVector<f64, N>, StepReport);
 /// model's constants; steps allocate nothing.
 #[derive(Clone, Copy, Debug)]
 pub struct Stepper<M: Dynamics<N, C>, const N: usize, const C: usize> {
-    model: M,
-    k: M::Constants,
-    dt: f64,
-    alpha: f64,
-    options: StepOptions,
-    substeps: usize,
+    pub(crate) model: M,
+    pub(crate) k: M::Constants,
+    pub(crate) dt: f64,
+    pub(crate) alpha: f64,
+    pub(crate) options: StepOptions,
+    pub(crate) substeps: usize,
 }
 
 /// max |x_i|, NaN if any entry is NaN or ±∞ (`f64::max` alone would drop
 /// a NaN): x·0 is 0 for finite x and NaN otherwise, so adding Σ x_i·0
 /// poisons the result without a branch per entry.
 #[inline(always)]
-fn max_abs<const K: usize>(x: &SVector<f64, K>) -> f64 {
+pub(crate) fn max_abs<const K: usize>(x: &SVector<f64, K>) -> f64 {
     let mut m = 0.0f64;
     let mut poison = 0.0f64;
     for v in x.iter() {
@@ -350,7 +362,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     }
 
     /// f(q, v) = ½[vᵀ ∂M/∂q_i v]_i − ∇V − D v from terms at q.
-    fn forces(t: &Terms<N>, v: &SVector<f64, N>) -> SVector<f64, N> {
+    pub(crate) fn forces(t: &Terms<N>, v: &SVector<f64, N>) -> SVector<f64, N> {
         let mut f = M::kinetic(t, v).1 - t.dpotential;
         if M::DISSIPATIVE {
             f -= t.damping * v;
@@ -512,6 +524,33 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
     ) -> Result<Solved<N>, StepError> {
+        self.solve_forced_rule::<MID, false>(
+            x1,
+            p0,
+            h,
+            guess,
+            |_| SVector::zeros(),
+            |_| SMatrix::zeros(),
+        )
+        .map(|(v, p, r, _)| (v, p, r))
+    }
+
+    /// [`Stepper::solve_rule`] with the generalized input force
+    /// `input(q)` = B(q)u and its configuration derivative `input_jac(q)`
+    /// when `FORCED` (`crate::forced`: B(m₁)u joins the forces f(m₁, v₁)
+    /// in the residual and in the momentum carried on); also returns the
+    /// multipliers λ. With `FORCED = false` neither is called and the code
+    /// is that of the unforced step.
+    #[inline(always)]
+    pub(crate) fn solve_forced_rule<const MID: bool, const FORCED: bool>(
+        &self,
+        x1: &SVector<f64, N>,
+        p0: &SVector<f64, N>,
+        h: f64,
+        guess: &SVector<f64, N>,
+        input_force: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+        input_jac: impl Fn(&SVector<f64, N>) -> SMatrix<f64, N, N>,
+    ) -> Result<Forced<N, C>, StepError> {
         let alpha = if MID { 0.5 } else { 0.0 };
         let model = &self.model;
         let k = &self.k;
@@ -527,6 +566,15 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             if MID { x1 + v * (alpha * h) } else { *x1 }
         };
         model.terms(k, &at(&v), &mut t);
+        // generalized input force B(m₁)u (first order: once per step)
+        let input = |q: &SVector<f64, N>| {
+            if FORCED {
+                input_force(q)
+            } else {
+                SVector::<f64, N>::zeros()
+            }
+        };
+        let mut bu = input(&at(&v));
         let mut m_bar = 0.0f64;
         for i in 0..N {
             m_bar = m_bar.max(t.mass[(i, i)].abs());
@@ -550,18 +598,22 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let a1 = (1.0 - alpha) * h;
         // residual d(v, λ) and Q (row l = (∂M/∂q_l v)ᵀ, which the Newton
         // matrix reuses); constraint c(v) and its Jacobian G(x₁ + h v)
-        let residual = |t: &Terms<N>, v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
-            let (q, kin) = M::kinetic(t, v);
-            let mut f = kin - t.dpotential;
-            if M::DISSIPATIVE {
-                f -= t.damping * v;
-            }
-            let mut d = p0 + f * a1 - t.mass * v;
-            if C > 0 {
-                d -= g1t * lambda;
-            }
-            (d, q)
-        };
+        let residual =
+            |t: &Terms<N>, bu: &SVector<f64, N>, v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
+                let (q, kin) = M::kinetic(t, v);
+                let mut f = kin - t.dpotential;
+                if M::DISSIPATIVE {
+                    f -= t.damping * v;
+                }
+                if FORCED {
+                    f += bu;
+                }
+                let mut d = p0 + f * a1 - t.mass * v;
+                if C > 0 {
+                    d -= g1t * lambda;
+                }
+                (d, q)
+            };
         let constraint = |v: &SVector<f64, N>| {
             if C > 0 {
                 model.constraints_and_jacobian(k, &(x1 + v * h))
@@ -576,13 +628,17 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             a.max(b) + (a + b) * 0.0
         };
         let mut lambda = SVector::<f64, C>::zeros();
-        let (mut d, mut qm) = residual(&t, &v, &lambda);
+        let (mut d, mut qm) = residual(&t, &bu, &v, &lambda);
         let (mut c, mut g2) = constraint(&v);
         let mut err = error(&d, &c);
         let mut regularised = false;
-        let momentum = |t: &Terms<N>, v: &SVector<f64, N>| {
+        let momentum = |t: &Terms<N>, bu: &SVector<f64, N>, v: &SVector<f64, N>| {
             if MID {
-                t.mass * v + Self::forces(t, v) * (alpha * h)
+                let mut f = Self::forces(t, v);
+                if FORCED {
+                    f += bu;
+                }
+                t.mass * v + f * (alpha * h)
             } else {
                 t.mass * v
             }
@@ -598,7 +654,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     stalled: false,
                     regularised,
                 };
-                return Ok((v, momentum(&t, &v), report));
+                return Ok((v, momentum(&t, &bu, &v), report, lambda));
             }
             // Newton matrix ∂d/∂v (module docs)
             let mut jac = -t.mass;
@@ -612,7 +668,11 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 jac -= t.damping * a1;
             }
             if MID {
-                jac += model.force_jacobian(k, &at(&v), &v) * (alpha * a1 * h);
+                let mut fq = model.force_jacobian(k, &at(&v), &v);
+                if FORCED {
+                    fq += input_jac(&at(&v));
+                }
+                jac += fq * (alpha * a1 * h);
             }
             let singular = StepError::SingularJacobian { iteration };
             let (dv, dl) = if C == 0 {
@@ -634,7 +694,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                                 stalled: false,
                                 regularised,
                             };
-                            return Ok((v1, t.mass * v1, report));
+                            return Ok((v1, t.mass * v1, report, lambda));
                         }
                     }
                 }
@@ -652,8 +712,11 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 let (vn, ln) = (v + dv * step, lambda + dl * step);
                 if MID {
                     model.terms(k, &at(&vn), &mut t);
+                    if FORCED {
+                        bu = input(&at(&vn));
+                    }
                 }
-                let (dn, qn) = residual(&t, &vn, &ln);
+                let (dn, qn) = residual(&t, &bu, &vn, &ln);
                 let (cn, g2n) = constraint(&vn);
                 let errn = error(&dn, &cn);
                 if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
@@ -665,6 +728,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     if MID {
                         // terms back at the current iterate
                         model.terms(k, &at(&v), &mut t);
+                        if FORCED {
+                            bu = input(&at(&v));
+                        }
                     }
                     // no decrease along the exact Newton direction: accept
                     // at the attainable accuracy, or fail
@@ -675,7 +741,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                             stalled: true,
                             regularised,
                         };
-                        return Ok((v, momentum(&t, &v), report));
+                        return Ok((v, momentum(&t, &bu, &v), report, lambda));
                     }
                     return Err(StepError::LineSearchFailed {
                         iteration,
@@ -691,7 +757,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 stalled: false,
                 regularised,
             };
-            return Ok((v, momentum(&t, &v), report));
+            return Ok((v, momentum(&t, &bu, &v), report, lambda));
         }
         Err(StepError::NotConverged {
             iterations: opts.max_iterations,

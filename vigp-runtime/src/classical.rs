@@ -5,10 +5,11 @@
 //! paper's Fig. 1b). They share the [`Integrator`] trait with the variational
 //! integrators, so swapping is one line.
 
-use crate::dynamics::acceleration_with;
+use crate::dynamics::{acceleration_forced_with, acceleration_with};
 use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
 use crate::variational::Integrator;
+use nalgebra::SVector;
 
 macro_rules! classical {
     ($(#[$doc:meta])* $name:ident) => {
@@ -77,13 +78,24 @@ fn finite<const N: usize>(z: State<N>) -> Result<State<N>, StepError> {
     }
 }
 
-impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for ExplicitEuler<M, N, C> {
-    fn dt(&self) -> f64 {
-        self.dt
-    }
-    fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+/// The integrators' updates with the acceleration as a parameter (with or
+/// without inputs).
+trait Update<const N: usize> {
+    fn update(
+        &self,
+        z: &State<N>,
+        accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>) -> Result<SVector<f64, N>, StepError>,
+    ) -> Result<State<N>, StepError>;
+}
+
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Update<N> for ExplicitEuler<M, N, C> {
+    fn update(
+        &self,
+        z: &State<N>,
+        accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>) -> Result<SVector<f64, N>, StepError>,
+    ) -> Result<State<N>, StepError> {
         check(self.dt, z)?;
-        let a = self.accel(&z.q, &z.v)?;
+        let a = accel(&z.q, &z.v)?;
         finite(State {
             q: z.q + z.v * self.dt,
             v: z.v + a * self.dt,
@@ -91,15 +103,14 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Expli
     }
 }
 
-impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N>
-    for SymplecticEuler<M, N, C>
-{
-    fn dt(&self) -> f64 {
-        self.dt
-    }
-    fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Update<N> for SymplecticEuler<M, N, C> {
+    fn update(
+        &self,
+        z: &State<N>,
+        accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>) -> Result<SVector<f64, N>, StepError>,
+    ) -> Result<State<N>, StepError> {
         check(self.dt, z)?;
-        let a = self.accel(&z.q, &z.v)?;
+        let a = accel(&z.q, &z.v)?;
         let v = z.v + a * self.dt;
         finite(State {
             q: z.q + v * self.dt,
@@ -108,14 +119,15 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N>
     }
 }
 
-impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Rk4<M, N, C> {
-    fn dt(&self) -> f64 {
-        self.dt
-    }
-    fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Update<N> for Rk4<M, N, C> {
+    fn update(
+        &self,
+        z: &State<N>,
+        accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>) -> Result<SVector<f64, N>, StepError>,
+    ) -> Result<State<N>, StepError> {
         check(self.dt, z)?;
         let h = self.dt;
-        let f = |q, v| self.accel(&q, &v);
+        let f = |q, v| accel(&q, &v);
         let (q, v) = (z.q, z.v);
         let a1 = f(q, v)?;
         let (q2, v2) = (q + v * (0.5 * h), v + a1 * (0.5 * h));
@@ -130,3 +142,31 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Rk4<M
         })
     }
 }
+
+macro_rules! integrator {
+    ($name:ident) => {
+        impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for $name<M, N, C> {
+            fn dt(&self) -> f64 {
+                self.dt
+            }
+            fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
+                self.update(z, |q, v| self.accel(q, v))
+            }
+            /// Inputs enter the continuous equations of motion as the
+            /// generalized force B(q)u, held over the step.
+            fn step_forced<const U: usize>(
+                &self,
+                z: &State<N>,
+                u: &SVector<f64, U>,
+            ) -> Result<State<N>, StepError> {
+                let k = self.k.as_ref().map_err(|e| *e)?;
+                self.update(z, |q, v| {
+                    acceleration_forced_with(&self.model, k, q, v, u).map(|(a, _)| a)
+                })
+            }
+        }
+    };
+}
+integrator!(ExplicitEuler);
+integrator!(SymplecticEuler);
+integrator!(Rk4);

@@ -77,6 +77,17 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Varia
         Some(self.energy(z))
     }
 
+    /// Every midpoint stage forced by u (`vigp_core::Composition::step_forced`).
+    fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<State<N>, StepError> {
+        self.composition()?
+            .step_forced(z, u)
+            .map_err(|e| StepError::from(e).with_tolerance(self.tolerance))
+    }
+
     /// Carries the momentum between steps. No allocation.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
         self.composition()?.steps_into(z0, out).map_err(|e| {

@@ -41,9 +41,15 @@
 //!   has no time step. [`Dataset::transitions`] skips them and
 //!   [`Dataset::short_runs`] lists them.
 //!
-//! Control inputs (`u_<joint>` columns) are not read yet: such a column is
-//! reported as unknown. The reader maps each column to a role
-//! (run, time, coordinate) so that inputs are one more role.
+//! * **Inputs.** For an actuated mechanism (joints declared `actuated`)
+//!   every input has a column `u_<joint>` (torque or force), required when
+//!   the mechanism has inputs and refused when it has none. The value on
+//!   row k is the input held from t_k to t_{k+1} (zero-order hold; with
+//!   [`ReadOptions::resample`] the held value is sampled, not
+//!   interpolated). In the variational step from state k to state k+1
+//!   the input acts over the interval of the new discrete velocity
+//!   v_{k+1} = (x_{k+2} − x_{k+1})/Δt (`vigp_core::forced`), so that step is
+//!   driven by row k+1's input: [`Run::step_input`].
 
 use std::collections::HashSet;
 use std::io;
@@ -248,11 +254,22 @@ pub struct Run<const N: usize> {
     pub dt: Option<f64>,
     /// Positions, one per sample (angles unwrapped).
     pub positions: Vec<SVector<f64, N>>,
+    /// Inputs, one vector (of the dataset's input count) per sample; empty
+    /// when the mechanism has no inputs.
+    pub inputs: Vec<Vec<f64>>,
     /// File line of the run's first row.
     pub line: u64,
 }
 
 impl<const N: usize> Run<N> {
+    /// The input that drives the variational step from state `k` (see
+    /// [`Run::state`]) to state k+1: the one held over the interval of the
+    /// new discrete velocity, i.e. row k+1's (module docs). `None` past the
+    /// end or without inputs.
+    pub fn step_input(&self, k: usize) -> Option<&[f64]> {
+        self.inputs.get(k + 1).map(Vec::as_slice)
+    }
+
     /// The discrete state at sample `k`: (x_k, (x_{k+1} − x_k)/Δt), if the
     /// run has a sample after `k`.
     pub fn state(&self, k: usize) -> Option<State<N>> {
@@ -265,12 +282,13 @@ impl<const N: usize> Run<N> {
     }
 }
 
-/// Column roles of a header (a control input will be one more role).
+/// Column roles of a header.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Role {
     Run,
     Time,
     Coordinate(usize),
+    Input(usize),
 }
 
 /// Trajectories of a mechanism with `N` coordinates, read from CSV.
@@ -278,6 +296,9 @@ enum Role {
 pub struct Dataset<const N: usize> {
     /// Coordinate names, in the model's order.
     pub coordinates: Vec<String>,
+    /// Input names (the actuated joints; columns `u_<name>`), in the
+    /// model's order; empty for an unactuated mechanism.
+    pub inputs: Vec<String>,
     /// The runs, in file order.
     pub runs: Vec<Run<N>>,
 }
@@ -290,8 +311,18 @@ fn join_names(names: &[&str]) -> String {
         .join(", ")
 }
 
-fn header_roles(header: &csv::StringRecord, names: &[&str]) -> Result<Vec<Role>, DataError> {
-    let expected = join_names(names);
+fn header_roles(
+    header: &csv::StringRecord,
+    names: &[&str],
+    inputs: &[&str],
+) -> Result<Vec<Role>, DataError> {
+    let input_columns: Vec<String> = inputs.iter().map(|n| format!("u_{n}")).collect();
+    let all: Vec<&str> = names
+        .iter()
+        .copied()
+        .chain(input_columns.iter().map(String::as_str))
+        .collect();
+    let expected = join_names(&all);
     let mut roles = Vec::with_capacity(header.len());
     let mut seen: Vec<(&str, usize)> = Vec::new();
     for (i, raw) in header.iter().enumerate() {
@@ -309,9 +340,17 @@ fn header_roles(header: &csv::StringRecord, names: &[&str]) -> Result<Vec<Role>,
             "t" => Role::Time,
             _ => match names.iter().position(|n| *n == name) {
                 Some(k) => Role::Coordinate(k),
+                None if input_columns.iter().any(|c| c == name) => Role::Input(
+                    input_columns
+                        .iter()
+                        .position(|c| c == name)
+                        .unwrap_or_default(),
+                ),
                 None => {
-                    let hint = if name.starts_with("u_") {
-                        " (control inputs are not supported yet)"
+                    let hint = if name.starts_with("u_") && inputs.is_empty() {
+                        " (an input column, but the mechanism has no `actuated` joint)"
+                    } else if name.starts_with("u_") {
+                        " (input columns are `u_<actuated joint>`)"
                     } else if name.is_empty() {
                         " (an empty header field: a trailing comma?)"
                     } else {
@@ -342,6 +381,14 @@ fn header_roles(header: &csv::StringRecord, names: &[&str]) -> Result<Vec<Role>,
             });
         }
     }
+    for (k, name) in input_columns.iter().enumerate() {
+        if !has(Role::Input(k)) {
+            return Err(DataError::MissingColumn {
+                name: name.clone(),
+                expected,
+            });
+        }
+    }
     Ok(roles)
 }
 
@@ -364,6 +411,7 @@ struct RawRun<const N: usize> {
     name: String,
     times: Vec<f64>,
     positions: Vec<SVector<f64, N>>,
+    inputs: Vec<Vec<f64>>,
     lines: Vec<u64>,
 }
 
@@ -373,6 +421,7 @@ impl<const N: usize> RawRun<N> {
             name,
             times,
             mut positions,
+            inputs,
             lines,
         } = self;
         for k in 1..times.len() {
@@ -406,12 +455,14 @@ impl<const N: usize> RawRun<N> {
                 t0,
                 dt: None,
                 positions,
+                inputs,
                 line,
             });
         }
         if let Some(dt) = opts.resample {
             let steps = ((times[n - 1] - t0) / dt * (1.0 + 1e-12)).floor() as usize;
             let mut out = Vec::with_capacity(steps + 1);
+            let mut held = Vec::with_capacity(if inputs.is_empty() { 0 } else { steps + 1 });
             let mut seg = 0;
             for k in 0..=steps {
                 let t = t0 + k as f64 * dt;
@@ -421,12 +472,18 @@ impl<const N: usize> RawRun<N> {
                 let (ta, tb) = (times[seg], times[seg + 1]);
                 let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
                 out.push(positions[seg] * (1.0 - w) + positions[seg + 1] * w);
+                if !inputs.is_empty() {
+                    // zero-order hold: the last sample at or before t
+                    let at = if w >= 1.0 { seg + 1 } else { seg };
+                    held.push(inputs[at].clone());
+                }
             }
             return Ok(Run {
                 name,
                 t0,
                 dt: Some(dt),
                 positions: out,
+                inputs: held,
                 line,
             });
         }
@@ -448,6 +505,7 @@ impl<const N: usize> RawRun<N> {
             t0,
             dt: Some(dt),
             positions,
+            inputs,
             line,
         })
     }
@@ -460,6 +518,18 @@ impl<const N: usize> Dataset<N> {
         reader: R,
         names: &[&str; N],
         kinds: &[CoordinateKind; N],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        Self::read_csv_with_inputs(reader, names, kinds, &[], opts)
+    }
+
+    /// [`Dataset::read_csv`] for a mechanism with inputs `inputs` (the
+    /// actuated joints' names; columns `u_<name>`, module docs).
+    pub fn read_csv_with_inputs<R: io::Read>(
+        reader: R,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        inputs: &[&str],
         opts: &ReadOptions,
     ) -> Result<Self, DataError> {
         if !(opts.time_tolerance.is_finite() && opts.time_tolerance >= 0.0) {
@@ -484,7 +554,7 @@ impl<const N: usize> Dataset<N> {
         if header.is_empty() || header.iter().all(str::is_empty) {
             return Err(DataError::Empty("no header line"));
         }
-        let roles = header_roles(&header, names)?;
+        let roles = header_roles(&header, names, inputs)?;
         let mut runs: Vec<Run<N>> = Vec::new();
         let mut finished: HashSet<String> = HashSet::new();
         let mut current: Option<RawRun<N>> = None;
@@ -494,6 +564,7 @@ impl<const N: usize> Dataset<N> {
             let mut run = "";
             let mut t = 0.0;
             let mut q = SVector::<f64, N>::zeros();
+            let mut u = vec![0.0; inputs.len()];
             for (field, (role, col)) in record.iter().zip(roles.iter().zip(header.iter())) {
                 let number = || -> Result<f64, DataError> {
                     let v: f64 = field.parse().map_err(|_| DataError::Parse {
@@ -514,6 +585,7 @@ impl<const N: usize> Dataset<N> {
                     Role::Run => run = field,
                     Role::Time => t = number()?,
                     Role::Coordinate(k) => q[*k] = number()?,
+                    Role::Input(k) => u[*k] = number()?,
                 }
             }
             if run.is_empty() {
@@ -535,12 +607,16 @@ impl<const N: usize> Dataset<N> {
                     name: run.into(),
                     times: Vec::new(),
                     positions: Vec::new(),
+                    inputs: Vec::new(),
                     lines: Vec::new(),
                 });
             }
             if let Some(c) = current.as_mut() {
                 c.times.push(t);
                 c.positions.push(q);
+                if !inputs.is_empty() {
+                    c.inputs.push(u);
+                }
                 c.lines.push(line);
             }
         }
@@ -550,6 +626,7 @@ impl<const N: usize> Dataset<N> {
         }
         Ok(Self {
             coordinates: names.iter().map(|s| s.to_string()).collect(),
+            inputs: inputs.iter().map(|s| s.to_string()).collect(),
             runs,
         })
     }
@@ -570,11 +647,13 @@ impl<const N: usize> Dataset<N> {
     }
 
     /// Reads CSV text with the coordinate names and kinds of mechanism `M`.
+    /// Inputs: the `u_<joint>` columns of its actuated joints
+    /// (`Mechanism::INPUT_NAMES`).
     pub fn read_for<M: Mechanism<N, C>, const C: usize, R: io::Read>(
         reader: R,
         opts: &ReadOptions,
     ) -> Result<Self, DataError> {
-        Self::read_csv(reader, &M::COORDINATES, &M::KINDS, opts)
+        Self::read_csv_with_inputs(reader, &M::COORDINATES, &M::KINDS, M::INPUT_NAMES, opts)
     }
 
     /// The common time step of the runs: every run with two or more rows

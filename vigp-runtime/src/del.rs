@@ -84,13 +84,34 @@ where
     M: Mechanism<N, C>,
     D: Scalar,
 {
+    del_terms_forced::<M, D, N, C>(m, dt, alpha, x1, v1, &[])
+}
+
+/// [`del_terms`] under inputs `u`: the generalized input force
+/// ∇_q W(m₁; u) ([`Mechanism::input_force`]) joins the forces,
+/// (1−α)Δt·(D_xL + F + ∇W)(m₁, v₁) − D_vL(m₁, v₁).
+pub fn del_terms_forced<M, D, const N: usize, const C: usize>(
+    m: &M,
+    dt: f64,
+    alpha: f64,
+    x1: &SVector<D, N>,
+    v1: &SVector<D, N>,
+    u: &[f64],
+) -> SVector<D, N>
+where
+    M: Mechanism<N, C>,
+    D: Scalar,
+{
     let m1 = if alpha == 0.0 {
         *x1
     } else {
         x1 + v1 * D::from(alpha * dt)
     };
-    force_terms::<M, D, N, C>(m, &m1, v1) * D::from((1.0 - alpha) * dt)
-        - momentum::<M, D, N, C>(m, &m1, v1)
+    let mut f = force_terms::<M, D, N, C>(m, &m1, v1);
+    if u.iter().any(|x| *x != 0.0) {
+        f += m.input_force(&m1, u);
+    }
+    f * D::from((1.0 - alpha) * dt) - momentum::<M, D, N, C>(m, &m1, v1)
 }
 
 /// Full DEL residual d(v₁, λ) for given p₀ and x₁.
@@ -124,11 +145,26 @@ pub fn del_terms_jacobian<M, const N: usize, const C: usize>(
 where
     M: Mechanism<N, C>,
 {
+    del_terms_forced_jacobian::<M, N, C>(m, dt, alpha, x1, v1, &[])
+}
+
+/// [`del_terms_forced`] and its exact Jacobian ∂d/∂v₁ in one dual pass.
+pub fn del_terms_forced_jacobian<M, const N: usize, const C: usize>(
+    m: &M,
+    dt: f64,
+    alpha: f64,
+    x1: &SVector<f64, N>,
+    v1: &SVector<f64, N>,
+    u: &[f64],
+) -> (SVector<f64, N>, SMatrix<f64, N, N>)
+where
+    M: Mechanism<N, C>,
+{
     let x1 = *x1;
     num_dual::jacobian(
         |v: SVector<DualVec<f64, nalgebra::Const<N>>, N>| {
             let x = x1.map(DualVec::from_re);
-            del_terms::<M, _, N, C>(m, dt, alpha, &x, &v)
+            del_terms_forced::<M, _, N, C>(m, dt, alpha, &x, &v, u)
         },
         v1,
     )

@@ -96,6 +96,46 @@ pub fn acceleration_with<M: Mechanism<N, C>, const N: usize, const C: usize>(
     })
 }
 
+/// [`acceleration_with`] under inputs `u` (one per actuated joint; `U`
+/// must equal the mechanism's `Dynamics::INPUTS`): the generalized force
+/// B(q)u joins the right-hand side. u = 0 is [`acceleration_with`].
+pub fn acceleration_forced_with<
+    M: Mechanism<N, C>,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
+    m: &M,
+    k: &M::Constants,
+    q: &SVector<f64, N>,
+    qdot: &SVector<f64, N>,
+    u: &SVector<f64, U>,
+) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
+    const {
+        assert!(
+            U == <M as vigp_core::Dynamics<N, C>>::INPUTS,
+            "U must equal Dynamics::INPUTS"
+        )
+    };
+    if !u.iter().all(|x| x.is_finite()) {
+        return Err(StepError::NonFiniteInput { step: None });
+    }
+    if u.iter().all(|x| *x == 0.0) {
+        return acceleration_with(m, k, q, qdot);
+    }
+    if !q.iter().chain(qdot.iter()).all(|x| x.is_finite()) {
+        return Err(StepError::NonFiniteState { step: None });
+    }
+    let force = m.input_matrix::<U>(k, q) * u;
+    let mut t = vigp_core::Terms::zeros();
+    vigp_core::dynamics::acceleration_forced(m, k, q, qdot, Some(&force), &mut t).ok_or(
+        StepError::SingularJacobian {
+            iteration: 0,
+            step: None,
+        },
+    )
+}
+
 /// [`acceleration`] by dual numbers (the reference implementation).
 pub fn reference_acceleration<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,

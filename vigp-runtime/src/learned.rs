@@ -115,6 +115,43 @@ pub struct Transition<const N: usize> {
     pub v_next: SVector<f64, N>,
 }
 
+/// One training pair of an actuated mechanism: a discrete state, the
+/// input that drove the step from it (held over the interval of the new
+/// discrete velocity, `vigp_core::forced`) and the next discrete velocity.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ForcedTransition<const N: usize, const U: usize> {
+    /// z_k = (x_k, v_k), v_k = (x_{k+1} − x_k)/Δt.
+    pub z: State<N>,
+    /// The input over [t_{k+1}, t_{k+2}] (one per actuated joint).
+    pub u: SVector<f64, U>,
+    /// v_{k+1} = (x_{k+2} − x_{k+1})/Δt.
+    pub v_next: SVector<f64, N>,
+}
+
+/// Transitions of a trajectory of positions sampled every Δt with the
+/// input logged at each sample (held until the next): transition k is
+/// driven by `inputs[k + 1]` (see `vigp::data::Run::step_input`). K
+/// positions give K − 2 transitions; `inputs` must be as long as
+/// `positions` (shorter: fewer transitions).
+pub fn forced_transitions<const N: usize, const U: usize>(
+    positions: &[SVector<f64, N>],
+    inputs: &[SVector<f64, U>],
+    dt: f64,
+) -> Vec<ForcedTransition<N, U>> {
+    positions
+        .windows(3)
+        .zip(inputs.iter().skip(1))
+        .map(|(w, u)| ForcedTransition {
+            z: State {
+                q: w[0],
+                v: (w[1] - w[0]) / dt,
+            },
+            u: *u,
+            v_next: (w[2] - w[1]) / dt,
+        })
+        .collect()
+}
+
 /// The nominal first-order VI step of the prior (the fixed-size engine
 /// on the model's closed-form terms, as [`Variational::new`] runs it).
 fn nominal_step<M, const N: usize, const C: usize>(
@@ -129,6 +166,24 @@ where
     Variational::new(model.clone(), dt)
         .with_options(*options)
         .step(z)
+}
+
+/// The prior's next velocity under inputs: the nominal first-order VI
+/// step forced by `u` (`U` = the mechanism's `Dynamics::INPUTS`).
+fn nominal_forced<M, const N: usize, const C: usize, const U: usize>(
+    model: &M,
+    dt: f64,
+    options: &NewtonOptions,
+    z: &State<N>,
+    u: &SVector<f64, U>,
+) -> Result<SVector<f64, N>, StepError>
+where
+    M: Mechanism<N, C> + Clone,
+{
+    Ok(Variational::new(model.clone(), dt)
+        .with_options(*options)
+        .step_forced(z, u)?
+        .v)
 }
 
 /// Transitions of a trajectory of positions sampled every Δt (K positions
@@ -200,6 +255,9 @@ pub struct Learned<M, const N: usize, const C: usize> {
     project: bool,
     gp: Gp,
     options: NewtonOptions,
+    /// Number of inputs appended to the GP input (0: trained without
+    /// inputs, [`Learned::train`]; else [`Learned::train_forced`]).
+    pub(crate) inputs: usize,
 }
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
@@ -215,21 +273,73 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         prior: Prior,
         options: &TrainOptions,
     ) -> Result<(Self, TrainReport), LearnError> {
+        let forced: Vec<ForcedTransition<N, 0>> = data
+            .iter()
+            .map(|t| ForcedTransition {
+                z: t.z,
+                u: SVector::zeros(),
+                v_next: t.v_next,
+            })
+            .collect();
+        let nominal = |m: &M, z: &State<N>, _: &SVector<f64, 0>| {
+            Ok(nominal_step(m, dt, &NewtonOptions::default(), z)?.v)
+        };
+        Self::train_inputs(model, dt, &forced, encoding, prior, options, false, nominal)
+    }
+
+    /// [`Learned::train`] for an actuated mechanism on transitions with
+    /// their inputs: the GP input is the encoded state followed by u, and
+    /// the nominal prior is the forced step under u. `U` must equal the
+    /// mechanism's `Dynamics::INPUTS`.
+    pub fn train_forced<const U: usize>(
+        model: M,
+        dt: f64,
+        data: &[ForcedTransition<N, U>],
+        encoding: Encoding,
+        prior: Prior,
+        options: &TrainOptions,
+    ) -> Result<(Self, TrainReport), LearnError> {
+        let nominal = |m: &M, z: &State<N>, u: &SVector<f64, U>| {
+            nominal_forced(m, dt, &NewtonOptions::default(), z, u)
+        };
+        Self::train_inputs(model, dt, data, encoding, prior, options, true, nominal)
+    }
+
+    /// Training with the GP input = encoded state (+ u when `forced`) and
+    /// the prior's next velocity `nominal(model, z, u)`.
+    #[allow(clippy::too_many_arguments)]
+    fn train_inputs<const U: usize>(
+        model: M,
+        dt: f64,
+        data: &[ForcedTransition<N, U>],
+        encoding: Encoding,
+        prior: Prior,
+        options: &TrainOptions,
+        forced: bool,
+        nominal_velocity: impl Fn(&M, &State<N>, &SVector<f64, U>) -> Result<SVector<f64, N>, StepError>,
+    ) -> Result<(Self, TrainReport), LearnError> {
         if data.is_empty() {
             return Err(LearnError::Empty);
         }
         if !(dt.is_finite() && dt > 0.0) {
             return Err(StepError::InvalidTimeStep { dt }.into());
         }
-        let d = encoding.dim(&M::KINDS);
+        let u_dim = if forced { U } else { 0 };
+        let e = encoding.dim(&M::KINDS);
+        let d = e + u_dim;
         let mut inputs = vec![0.0; data.len() * d];
         let mut targets = Vec::with_capacity(data.len() * N);
-        let nominal = NewtonOptions::default();
         for (i, t) in data.iter().enumerate() {
-            if !(t.z.is_finite() && t.v_next.iter().all(|x| x.is_finite())) {
+            if !(t.z.is_finite()
+                && t.v_next.iter().all(|x| x.is_finite())
+                && t.u.iter().all(|x| x.is_finite()))
+            {
                 return Err(LearnError::NonFinite(i));
             }
-            encoding.encode(&M::KINDS, &t.z, &mut inputs[i * d..(i + 1) * d]);
+            encoding.encode(&M::KINDS, &t.z, &mut inputs[i * d..i * d + e]);
+            if forced {
+                inputs[i * d + e..(i + 1) * d].copy_from_slice(t.u.as_slice());
+            }
             let base = match prior {
                 // With constraints, a noisy state is off the manifold and the
                 // nominal step would spend Δv ≈ |g|/Δt re-closing it: evaluate
@@ -237,9 +347,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 // at prediction time (predictions are projected).
                 Prior::Nominal if C > 0 => {
                     let z = consistent_state(&model, &t.z.q, &t.z.v, dt)?;
-                    nominal_step(&model, dt, &nominal, &z)?.v
+                    nominal_velocity(&model, &z, &t.u)?
                 }
-                Prior::Nominal => nominal_step(&model, dt, &nominal, &t.z)?.v,
+                Prior::Nominal => nominal_velocity(&model, &t.z, &t.u)?,
                 Prior::Constant => SVector::zeros(),
             };
             targets.extend((t.v_next - base).iter());
@@ -263,9 +373,167 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                     max_iterations: 100,
                     ..NewtonOptions::default()
                 },
+                inputs: u_dim,
             },
             report,
         ))
+    }
+
+    /// Number of inputs the model was trained with (0: without inputs).
+    pub fn inputs(&self) -> usize {
+        self.inputs
+    }
+
+    /// The unprojected mean prediction under inputs `u` (a model from
+    /// [`Learned::train_forced`]): v_u = forced prior(z, u) + μ(z, u).
+    pub fn predict_mean_velocity_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<SVector<f64, N>, StepError> {
+        if U != self.inputs {
+            return Err(StepError::InputsNotSupported);
+        }
+        if !u.iter().all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput { step: None });
+        }
+        let mut mean = SVector::<f64, N>::zeros();
+        self.with_input_u(z, u.as_slice(), |input| {
+            self.gp
+                .predict_mean_into(input, mean.as_mut_slice(), ws)
+                .map_err(|_| StepError::Prediction { step: None })
+        })?;
+        let prior = match self.prior {
+            Prior::Nominal => nominal_forced(&self.model, self.dt, &self.options, z, u)?,
+            Prior::Constant => SVector::zeros(),
+        };
+        let v = prior + mean;
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(StepError::Prediction { step: None });
+        }
+        Ok(v)
+    }
+
+    /// One learned mean step under inputs `u` (as
+    /// [`Learned::step_mean_forced_with`]; `U = 0` for a model trained
+    /// without inputs) with its exact derivatives A = ∂z₁/∂z₀ and
+    /// B = ∂z₁/∂u: q₁ = q₀ + Δt·v₀, and v₁ = prior(z₀, u) + μ(enc(z₀), u)
+    /// differentiates into the nominal forced step's derivatives
+    /// (`Variational::step_derivatives`) plus the GP mean's gradient
+    /// (`Gp::predict_mean_gradient_into`) through the encoding. The
+    /// projection's implicit derivative (constrained models) is not
+    /// implemented: such a model returns [`StepError::InvalidOptions`].
+    pub fn step_derivatives_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
+        use nalgebra::SMatrix;
+        self.check_step(z)?;
+        if U != self.inputs {
+            return Err(StepError::InputsNotSupported);
+        }
+        if !u.iter().all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput { step: None });
+        }
+        if self.project && C > 0 {
+            return Err(StepError::InvalidOptions(
+                "derivatives of the projected learned step are not implemented",
+            ));
+        }
+        let h = self.dt;
+        // prior
+        let (mut v, mut v_q, mut v_v, mut v_u) = match self.prior {
+            Prior::Nominal => {
+                let (z1, d) = Variational::new(self.model.clone(), h)
+                    .with_options(self.options)
+                    .step_derivatives(z, u)?;
+                (z1.v, d.a.v_q, d.a.v_v, d.b.v_u)
+            }
+            Prior::Constant => (
+                SVector::zeros(),
+                SMatrix::zeros(),
+                SMatrix::zeros(),
+                SMatrix::zeros(),
+            ),
+        };
+        // GP mean and its gradient in the GP input
+        let e = self.encoding.dim(&M::KINDS);
+        let d = e + U;
+        let mut mean = SVector::<f64, N>::zeros();
+        let mut grad = vec![0.0; N * d];
+        self.with_input_u(z, u.as_slice(), |input| {
+            self.gp
+                .predict_mean_gradient_into(input, mean.as_mut_slice(), &mut grad, ws)
+                .map_err(|_| StepError::Prediction { step: None })
+        })?;
+        v += mean;
+        // chain rule through the encoding
+        for j in 0..N {
+            let g = &grad[j * d..(j + 1) * d];
+            let mut k = 0;
+            for (i, kind) in M::KINDS.iter().enumerate() {
+                if self.encoding == Encoding::SinCos && *kind == CoordinateKind::Angle {
+                    let (sn, cs) = z.q[i].sin_cos();
+                    v_q[(j, i)] += g[k] * cs - g[k + 1] * sn;
+                    k += 2;
+                } else {
+                    v_q[(j, i)] += g[k];
+                    k += 1;
+                }
+            }
+            for i in 0..N {
+                v_v[(j, i)] += g[k + i];
+            }
+            for i in 0..U {
+                v_u[(j, i)] += g[e + i];
+            }
+        }
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(StepError::Prediction { step: None });
+        }
+        let eye = SMatrix::<f64, N, N>::identity();
+        Ok((
+            State {
+                q: z.q + z.v * h,
+                v,
+            },
+            vigp_core::StepDerivatives {
+                a: vigp_core::StateJacobian {
+                    q_q: eye,
+                    q_v: eye * h,
+                    v_q,
+                    v_v,
+                },
+                b: vigp_core::InputJacobian {
+                    q_u: SMatrix::zeros(),
+                    v_u,
+                },
+            },
+        ))
+    }
+
+    /// One learned step under inputs `u` using the posterior mean (and the
+    /// projection for constrained models), as
+    /// [`Learned::step_mean_with`]. `U` must be the number of inputs the
+    /// model was trained with.
+    pub fn step_mean_forced_with<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<State<N>, StepError> {
+        self.check_step(z)?;
+        let x1 = z.q + z.v * self.dt;
+        let vu = self.predict_mean_velocity_forced(z, u, ws)?;
+        let v = if self.project && C > 0 {
+            project_velocity(&self.model, &x1, &vu, self.dt, &self.options)?.0
+        } else {
+            vu
+        };
+        Ok(State { q: x1, v })
     }
 
     /// Switch the projection off (eq. 7 even for a constrained model), e.g.
@@ -312,6 +580,29 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             Prior::Nominal => nominal_step(&self.model, self.dt, &self.options, z)?.v,
             Prior::Constant => SVector::zeros(),
         })
+    }
+
+    /// Encodes `z` followed by the inputs `u` into a stack buffer (heap
+    /// only above 64 input dimensions) and passes the GP input to `f`.
+    fn with_input_u<T>(
+        &self,
+        z: &State<N>,
+        u: &[f64],
+        f: impl FnOnce(&[f64]) -> Result<T, StepError>,
+    ) -> Result<T, StepError> {
+        let e = self.encoding.dim(&M::KINDS);
+        let d = e + u.len();
+        let mut x = [0.0f64; 64];
+        let mut heap;
+        let input: &mut [f64] = if d <= x.len() {
+            &mut x[..d]
+        } else {
+            heap = vec![0.0; d];
+            &mut heap
+        };
+        self.encoding.encode(&M::KINDS, z, &mut input[..e]);
+        input[e..].copy_from_slice(u);
+        f(input)
     }
 
     /// Encodes `z` into a stack buffer (heap only above 64 input
@@ -442,6 +733,25 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         let mut ws = self.gp.workspace();
         self.step_mean_with(z, &mut ws)
+    }
+
+    /// A model trained with inputs ([`Learned::train_forced`]) steps under
+    /// them ([`Learned::step_mean_forced_with`]); one trained without
+    /// inputs takes only u = 0.
+    fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+    ) -> Result<State<N>, StepError> {
+        if self.inputs == 0 {
+            return if u.iter().all(|x| *x == 0.0) {
+                self.step(z)
+            } else {
+                Err(StepError::InputsNotSupported)
+            };
+        }
+        let mut ws = self.gp.workspace();
+        self.step_mean_forced_with(z, u, &mut ws)
     }
 
     /// Mean-only steps ([`Learned::step_mean_with`]) with one workspace.

@@ -41,11 +41,13 @@ pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
 /// transitions), so that users need not guess a matching version.
 pub use nalgebra::{self, SMatrix, SVector};
 pub use newton::{NewtonOptions, StepError, StepInfo};
-pub use params::{Joint, Link};
+pub use params::{ElasticJoint, Joint, Link, Spring};
 pub use summary::RolloutSummary;
 #[cfg(feature = "std")]
 pub use summary::summarize;
 pub use system::{Parameters, System, ViewVisitor};
+#[cfg(feature = "alloc")]
+pub use variational::RolloutDerivatives;
 pub use variational::{Integrator, Variational};
 pub use vigp_core as embedded;
 pub use vigp_core::Real;

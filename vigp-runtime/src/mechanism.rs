@@ -32,6 +32,11 @@ pub trait Mechanism<const N: usize, const C: usize>: vigp_core::Dynamics<N, C> {
     /// Names of the generalized coordinates, in order.
     const COORDINATES: [&'static str; N];
 
+    /// Names of the inputs (the actuated joints, in declaration order;
+    /// [`vigp_core::Dynamics::INPUTS`] of them): empty for an unactuated
+    /// mechanism.
+    const INPUT_NAMES: &'static [&'static str] = &[];
+
     /// Kinetic energy T(q, v).
     fn kinetic_energy<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> D;
 
@@ -48,6 +53,25 @@ pub trait Mechanism<const N: usize, const C: usize>: vigp_core::Dynamics<N, C> {
     fn dissipation<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> D {
         let _ = (q, v);
         D::zero()
+    }
+
+    /// Virtual work of the inputs W(q; u) = Σ_i u_i s_i(q), s_i the
+    /// coordinate of actuated joint i (in declaration order; missing
+    /// entries of `u` count as 0): the generalized input force is ∇_q W
+    /// ([`Mechanism::input_force`]). Zero for an unactuated mechanism.
+    fn input_work<D: Scalar>(&self, q: &SVector<D, N>, u: &[f64]) -> D {
+        let _ = (q, u);
+        D::zero()
+    }
+
+    /// Generalized input force B(q)u = ∇_q W(q; u) (exact, by dual
+    /// numbers): the reference of the generated
+    /// [`input_matrix`](vigp_core::Dynamics::input_matrix).
+    fn input_force<D: Scalar>(&self, q: &SVector<D, N>, u: &[f64]) -> SVector<D, N> {
+        if <Self as vigp_core::Dynamics<N, C>>::INPUTS == 0 {
+            return SVector::from_element(D::zero());
+        }
+        num_dual::gradient(|x| self.input_work(&x, u), q).1
     }
 
     /// Holonomic constraints g(q) (empty for a tree in minimal coordinates).

@@ -55,6 +55,17 @@ pub enum StepError {
         /// Rollout step index, if in a rollout.
         step: Option<usize>,
     },
+    /// An input (actuator torque or force) is NaN or ±∞, or the input
+    /// sequence is shorter than the rollout.
+    #[error("non-finite or missing input{}", at(step))]
+    NonFiniteInput {
+        /// Rollout step index, if in a rollout.
+        step: Option<usize>,
+    },
+    /// Non-zero inputs given to an integrator that cannot take them (the
+    /// default of [`crate::Integrator::step_forced`]).
+    #[error("this integrator does not take inputs")]
+    InputsNotSupported,
     /// The residual became NaN or ±∞ during Newton iterations.
     #[error("non-finite residual at Newton iteration {iteration}{}", at(step))]
     NonFiniteResidual {
@@ -143,6 +154,7 @@ impl StepError {
     pub fn at_step(mut self, k: usize) -> Self {
         match &mut self {
             StepError::NonFiniteState { step }
+            | StepError::NonFiniteInput { step }
             | StepError::NonFiniteResidual { step, .. }
             | StepError::SingularJacobian { step, .. }
             | StepError::NotConverged { step, .. }
@@ -150,6 +162,7 @@ impl StepError {
             | StepError::OffConstraints { step, .. }
             | StepError::Prediction { step } => *step = Some(k),
             StepError::InvalidTimeStep { .. }
+            | StepError::InputsNotSupported
             | StepError::InvalidOptions(_)
             | StepError::InvalidModel(_) => {}
         }
@@ -168,6 +181,7 @@ impl From<vigp_core::StepError> for StepError {
             E::InvalidOptions(why) => StepError::InvalidOptions(why),
             E::InvalidModel(why) => StepError::InvalidModel(why),
             E::NonFiniteState => StepError::NonFiniteState { step: None },
+            E::NonFiniteInput => StepError::NonFiniteInput { step: None },
             E::NonFiniteResidual { iteration } => StepError::NonFiniteResidual {
                 iteration,
                 step: None,

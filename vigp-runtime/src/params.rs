@@ -1,4 +1,4 @@
 //! Run-time parameters of generated mechanisms (perturb them without
 //! recompiling): re-exported from the `no_std` core.
 
-pub use vigp_core::params::{Joint, Link};
+pub use vigp_core::params::{ElasticJoint, Joint, Link, Spring};

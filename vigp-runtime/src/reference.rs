@@ -23,6 +23,21 @@ pub fn step<M: Mechanism<N, C>, const N: usize, const C: usize>(
     options: &NewtonOptions,
     z: &State<N>,
 ) -> Result<(State<N>, StepInfo), StepError> {
+    step_forced(m, dt, alpha, options, z, &[])
+}
+
+/// [`step`] under inputs `u` (one per actuated joint): the generalized
+/// input force ∇_q W(m₁; u) joins the forces of the residual
+/// ([`del::del_terms_forced`]); the momentum p₀ is the input-free one of
+/// `z`, as in `vigp_core::Stepper::step_forced`.
+pub fn step_forced<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    m: &M,
+    dt: f64,
+    alpha: f64,
+    options: &NewtonOptions,
+    z: &State<N>,
+    u: &[f64],
+) -> Result<(State<N>, StepInfo), StepError> {
     if !(dt.is_finite() && dt > 0.0) {
         return Err(StepError::InvalidTimeStep { dt });
     }
@@ -43,7 +58,7 @@ pub fn step<M: Mechanism<N, C>, const N: usize, const C: usize>(
     // chord/Newton hybrid that needs one Jacobian per step in the common
     // case of a good initial guess.
     let eval = |v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
-        let r = p0 + del::del_terms::<M, f64, N, C>(m, dt, alpha, &x1, v) - g1t * lambda;
+        let r = p0 + del::del_terms_forced::<M, f64, N, C>(m, dt, alpha, &x1, v, u) - g1t * lambda;
         let c = if C > 0 {
             Mechanism::constraints(m, &(x1 + v * dt))
         } else {
@@ -51,7 +66,8 @@ pub fn step<M: Mechanism<N, C>, const N: usize, const C: usize>(
         };
         (r, c)
     };
-    let jacobian = |v: &SVector<f64, N>| del::del_terms_jacobian::<M, N, C>(m, dt, alpha, &x1, v).1;
+    let jacobian =
+        |v: &SVector<f64, N>| del::del_terms_forced_jacobian::<M, N, C>(m, dt, alpha, &x1, v, u).1;
     let mut v = z.v;
     let mut lambda = SVector::<f64, C>::zeros();
     let mut jac = jacobian(&v);

@@ -15,6 +15,51 @@ pub trait Integrator<const N: usize> {
     /// One step. Never returns a non-finite state.
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError>;
 
+    /// One step under inputs `u` (one per actuated joint, in declaration
+    /// order; `U` must equal the mechanism's `Dynamics::INPUTS`). Every
+    /// integrator of vigp implements it; the default, for integrators that
+    /// cannot take inputs, takes u = 0 as [`Integrator::step`] and refuses
+    /// anything else with [`StepError::InputsNotSupported`].
+    fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<State<N>, StepError>
+    where
+        Self: Sized,
+    {
+        if u.iter().all(|x| *x == 0.0) {
+            self.step(z)
+        } else {
+            Err(StepError::InputsNotSupported)
+        }
+    }
+
+    /// The states after 1, …, `out.len()` steps from `z0`, step k under
+    /// `inputs[k]` (which must be at least as long as `out`). Stops at the
+    /// first error (which names the step).
+    fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[nalgebra::SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), StepError>
+    where
+        Self: Sized,
+    {
+        if inputs.len() < out.len() {
+            return Err(StepError::NonFiniteInput {
+                step: Some(inputs.len()),
+            });
+        }
+        let mut z = *z0;
+        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
+            z = self.step_forced(&z, u).map_err(|e| e.at_step(k))?;
+            *slot = z;
+        }
+        Ok(())
+    }
+
     /// The energy of a state as this integrator defines it, when that is
     /// not the model's `energy(z)`: the midpoint VI's discrete velocity
     /// belongs to the interval's midpoint ([`Variational::energy`]).
@@ -255,6 +300,149 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 }
 
+/// A forced rollout with the exact derivatives of every state with respect
+/// to the initial state and to every input ([`Variational::rollout_derivatives`]),
+/// for shooting methods.
+#[cfg(feature = "alloc")]
+#[derive(Clone, Debug, PartialEq)]
+pub struct RolloutDerivatives<const N: usize, const U: usize> {
+    /// z_0, z_1, …, z_K.
+    pub states: Vec<State<N>>,
+    /// ∂z_k/∂z_0 for k = 0, …, K (the identity first).
+    pub initial: Vec<vigp_core::StateJacobian<N>>,
+    /// `inputs[k][j]` = ∂z_k/∂u_j for k = 0, …, K and j = 0, …, K−1 (zero
+    /// for j ≥ k: an input acts on later states only).
+    pub inputs: Vec<Vec<vigp_core::InputJacobian<N, U>>>,
+}
+
+impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, N, C> {
+    /// One step under inputs `u` (one per actuated joint, in declaration
+    /// order; `U` must equal the mechanism's `Dynamics::INPUTS`, checked at
+    /// compile time), from the input-free momentum of `z` (the forced
+    /// equations: `vigp_core::forced`). With u = 0 this is
+    /// [`Variational::step`], bit for bit.
+    pub fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<State<N>, StepError> {
+        let stepper = self.stepper()?;
+        stepper
+            .step_forced(z, u)
+            .map_err(|e| self.explain(StepError::from(e), z))
+    }
+
+    /// Fill `out` with the states after 1, …, `out.len()` forced steps from
+    /// `z0`, step k under `inputs[k]`, carrying the momentum (for the
+    /// midpoint rule it holds the previous input's share). No allocation.
+    pub fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[nalgebra::SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), StepError> {
+        self.stepper()?
+            .steps_forced_into(z0, inputs, out)
+            .map_err(|e| {
+                let from = if e.step == 0 || e.step > out.len() {
+                    z0
+                } else {
+                    &out[e.step - 1]
+                };
+                self.explain(StepError::from(e.error), from).at_step(e.step)
+            })
+    }
+
+    /// The forced trajectory z_0, …, z_K under `inputs` (K = `inputs.len()`).
+    #[cfg(feature = "alloc")]
+    pub fn rollout_forced<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[nalgebra::SVector<f64, U>],
+    ) -> Result<Vec<State<N>>, StepError> {
+        let mut traj = vec![*z0; inputs.len() + 1];
+        self.rollout_forced_into(z0, inputs, &mut traj[1..])?;
+        Ok(traj)
+    }
+
+    /// One forced step with its exact derivatives A = ∂z₁/∂z₀ and
+    /// B = ∂z₁/∂u by the implicit function theorem on the converged
+    /// DEL/KKT system (`vigp_core::forced`). `A = d.a.matrix::<{2N}>()`.
+    pub fn step_derivatives<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
+        let stepper = self.stepper()?;
+        stepper
+            .step_with_derivatives(z, u)
+            .map_err(|e| self.explain(StepError::from(e), z))
+    }
+
+    /// A forced rollout (as [`Variational::rollout_forced`]) with the exact
+    /// derivatives of every state with respect to z_0 and to every input,
+    /// chained through the carried momentum (exact for both rules). Cost:
+    /// K steps with derivatives plus O(K²) small matrix products.
+    #[cfg(feature = "alloc")]
+    pub fn rollout_derivatives<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[nalgebra::SVector<f64, U>],
+    ) -> Result<RolloutDerivatives<N, U>, StepError> {
+        use nalgebra::SMatrix;
+        use vigp_core::{InputJacobian, StateJacobian};
+        let stepper = self.stepper()?;
+        if !z0.is_finite() {
+            return Err(StepError::NonFiniteState { step: None });
+        }
+        let k_steps = inputs.len();
+        let mut states = vec![*z0];
+        let mut initial = vec![StateJacobian::identity()];
+        let mut wrt_u = vec![vec![InputJacobian::<N, U>::zeros(); k_steps]; k_steps + 1];
+        // momentum sensitivities: to q₀, v₀ and to every input
+        let (mut p_q, mut p_v) = stepper.momentum_derivatives(z0);
+        let mut p_u = vec![SMatrix::<f64, N, U>::zeros(); k_steps];
+        let (mut z, mut p) = (*z0, stepper.momentum(z0));
+        for (k, u) in inputs.iter().enumerate() {
+            let (z1, p1, d) = stepper
+                .step_with_momentum_derivatives(&z, &p, u)
+                .map_err(|e| self.explain(StepError::from(e), &z).at_step(k))?;
+            let prev = initial[k];
+            let next = StateJacobian {
+                q_q: d.z_z.q_q * prev.q_q + d.z_z.q_v * prev.v_q + d.q_p * p_q,
+                q_v: d.z_z.q_q * prev.q_v + d.z_z.q_v * prev.v_v + d.q_p * p_v,
+                v_q: d.z_z.v_q * prev.q_q + d.z_z.v_v * prev.v_q + d.v_p * p_q,
+                v_v: d.z_z.v_q * prev.q_v + d.z_z.v_v * prev.v_v + d.v_p * p_v,
+            };
+            let np_q = d.p_q * prev.q_q + d.p_v * prev.v_q + d.p_p * p_q;
+            let np_v = d.p_q * prev.q_v + d.p_v * prev.v_v + d.p_p * p_v;
+            (p_q, p_v) = (np_q, np_v);
+            initial.push(next);
+            for j in 0..=k {
+                let b = wrt_u[k][j];
+                let (q_u, v_u, pu) = if j == k {
+                    (d.z_u.q_u, d.z_u.v_u, d.p_u)
+                } else {
+                    (
+                        d.z_z.q_q * b.q_u + d.z_z.q_v * b.v_u + d.q_p * p_u[j],
+                        d.z_z.v_q * b.q_u + d.z_z.v_v * b.v_u + d.v_p * p_u[j],
+                        d.p_q * b.q_u + d.p_v * b.v_u + d.p_p * p_u[j],
+                    )
+                };
+                wrt_u[k + 1][j] = InputJacobian { q_u, v_u };
+                p_u[j] = pu;
+            }
+            states.push(z1);
+            (z, p) = (z1, p1);
+        }
+        Ok(RolloutDerivatives {
+            states,
+            initial,
+            inputs: wrt_u,
+        })
+    }
+}
+
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     for Variational<M, N, C>
 {
@@ -267,6 +455,25 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
 
     fn state_energy(&self, z: &State<N>) -> Option<f64> {
         Some(Variational::energy(self, z))
+    }
+
+    fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<State<N>, StepError> {
+        Variational::step_forced(self, z, u)
+    }
+
+    /// The fixed-size engine's forced rollout, carrying the momentum
+    /// ([`Variational::rollout_forced_into`]).
+    fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[nalgebra::SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), StepError> {
+        Variational::rollout_forced_into(self, z0, inputs, out)
     }
 
     /// The fixed-size engine's rollout: the momentum is carried from step

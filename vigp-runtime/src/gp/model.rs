@@ -886,6 +886,60 @@ impl Gp {
         check_finite("prediction (prior mean function output)", mean)
     }
 
+    /// Posterior mean and its gradient with respect to the input at one
+    /// point, without allocating: `mean` has length p, `grad` is row-major
+    /// p × d (∂mean_j/∂x_m at `grad[j * d + m]`). For the squared-exponential
+    /// kernel on normalised inputs x̃ = (x − shift)/scale,
+    /// ∂m_j/∂x_m = s_j Σ_i α_i k(x̃, x̃_i) (x̃_i,m − x̃_m)/ℓ_m² / scale_m (ℓ
+    /// in normalised units). A user function prior mean has no known
+    /// gradient: [`GpError::InvalidModel`]. O(p·N·d).
+    pub fn predict_mean_gradient_into(
+        &self,
+        x: &[f64],
+        mean: &mut [f64],
+        grad: &mut [f64],
+        ws: &mut Workspace,
+    ) -> Result<(), GpError> {
+        self.check_point(x, ws)?;
+        self.check_out("mean output", mean)?;
+        let d = ws.d;
+        if grad.len() != self.p * d {
+            return Err(GpError::DimensionMismatch {
+                what: "gradient output (p × d)",
+                expected: self.p * d,
+                got: grad.len(),
+            });
+        }
+        if matches!(self.mean, Resolved::Function(_)) {
+            return Err(GpError::InvalidModel(
+                "the gradient of a function prior mean is unknown".into(),
+            ));
+        }
+        self.input_norm.apply(x, &mut ws.xn);
+        self.mean.eval(x, &mut ws.prior);
+        let b = ws.n;
+        for (j, o) in self.outputs.iter().enumerate() {
+            Self::scale_query(o, ws);
+            core_gp::kernel_row(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
+                .map_err(core_error)?;
+            // as predict_mean_into (kernel_dot = kernel_row + dot), bit for bit
+            let mn = core_gp::dot(&ws.kstar, &o.alpha).map_err(core_error)?;
+            mean[j] = ws.prior[j] + o.output_scale * mn;
+            for m in 0..d {
+                // Σ_i α_i k_i (x̃s_i,m − x̃s_m), x̃s = x̃/ℓ (scaled inputs)
+                let col = &o.xs_cols[m * b..(m + 1) * b];
+                let mut g = 0.0;
+                for ((k, a), xi) in ws.kstar.iter().zip(&o.alpha).zip(col) {
+                    g += k * a * (xi - ws.xs[m]);
+                }
+                let dxs_dx = 1.0 / (o.hp.length_scales[m] * self.input_norm.scale[m]);
+                grad[j * d + m] = o.output_scale * g * dxs_dx;
+            }
+        }
+        check_finite("prediction (prior mean function output)", mean)?;
+        check_finite("prediction gradient", grad)
+    }
+
     /// How the variance of an exact GP is computed (default
     /// [`VarianceMode::Inverse`]).
     pub fn variance_mode(&self) -> VarianceMode {

@@ -25,7 +25,7 @@ pub const VERSION: u32 = 1;
 /// Loading into a model checks, each with an error that names the field:
 /// the `format` tag and `version`, the mechanism's `mechanism` name, its
 /// `coordinates` (their names and so the view: minimal or maximal), their
-/// `kinds`, the `inputs` (none until control inputs exist), every parameter
+/// `kinds`, the `inputs` (the actuated joints the GP takes), every parameter
 /// name (values are restored from the file: the prior is the model the GP
 /// was trained on), `dt`, the solver options, and the GP's dimensions
 /// against the encoding and the number of coordinates.
@@ -43,7 +43,8 @@ pub struct SavedLearned {
     pub coordinates: Vec<String>,
     /// What each coordinate measures.
     pub kinds: Vec<SavedKind>,
-    /// Names of the control inputs (empty: mechanisms have no inputs yet).
+    /// Names of the control inputs the GP takes after the encoded state
+    /// (the actuated joints; empty for a model trained without inputs).
     pub inputs: Vec<String>,
     /// Every run-time parameter of the nominal model, by name.
     pub parameters: BTreeMap<String, f64>,
@@ -315,7 +316,10 @@ where
             mechanism: M::NAME.into(),
             coordinates: M::COORDINATES.iter().map(|s| s.to_string()).collect(),
             kinds: M::KINDS.iter().map(|k| SavedKind::from(*k)).collect(),
-            inputs: Vec::new(),
+            inputs: M::INPUT_NAMES[..self.inputs.min(M::INPUT_NAMES.len())]
+                .iter()
+                .map(|s| s.to_string())
+                .collect(),
             parameters,
             dt: self.dt,
             encoding: self.encoding,
@@ -378,9 +382,13 @@ where
                 format!("the file has {:?}, the model {kinds:?}", saved.kinds),
             ));
         }
-        if !saved.inputs.is_empty() {
+        // no inputs (a model trained without them), or exactly the model's
+        if !saved.inputs.is_empty()
+            && (saved.inputs.len() != M::INPUT_NAMES.len()
+                || saved.inputs.iter().zip(M::INPUT_NAMES).any(|(a, b)| a != b))
+        {
             return Err(LoadError::Inputs {
-                expected: Vec::new(),
+                expected: M::INPUT_NAMES.iter().map(|s| s.to_string()).collect(),
                 found: saved.inputs.clone(),
             });
         }
@@ -417,7 +425,7 @@ where
         if saved.project && C == 0 {
             return Err(field("project", "true, but the model has no constraints"));
         }
-        let d = saved.encoding.dim(&M::KINDS);
+        let d = saved.encoding.dim(&M::KINDS) + saved.inputs.len();
         check_gp(&saved.gp, d, N, saved.prior)?;
         let gp = Gp::from_saved(&saved.gp, None)?;
         Ok(Self {
@@ -428,6 +436,7 @@ where
             project: saved.project,
             gp,
             options,
+            inputs: saved.inputs.len(),
         })
     }
 

@@ -1,0 +1,1144 @@
+//! Actuated mechanisms and springs (`actuated`, `stiffness`, `rest` in
+//! `mechanism!`), the forced variational step and its exact derivatives.
+//!
+//! Every new generated term is checked against the dual-number reference
+//! (`vigp::Mechanism`: spring energy in V, the input's virtual work
+//! W(q; u) = Σ u_i s_i(q) differentiated by num-dual); every forced step
+//! against the reference step of the same equations; A = ∂z₁/∂z₀ and
+//! B = ∂z₁/∂u against central finite differences; and the physics against
+//! closed forms (a constant torque's equilibrium, a spring's period).
+
+mod common;
+
+#[path = "common/slider_crank.rs"]
+mod slider_crank;
+
+use common::Rng;
+use nalgebra::{SMatrix, SVector};
+use num_dual::DualVec;
+use slider_crank::SliderCrank;
+use vigp::embedded::{Dynamics, Stepper, Terms};
+use vigp::{Coordinates, Mechanism, State, Variational};
+
+vigp::mechanism! {
+    /// A damped pendulum driven by a torque at its pivot.
+    pub TorquePendulum {
+        gravity: [0.0, -9.81],
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start) { damping: 2.0, actuated },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// `TorquePendulum` without the actuator.
+    pub PlainPendulum {
+        gravity: [0.0, -9.81],
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start) { damping: 2.0 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// A rod on a torsion spring with a rest angle, no gravity.
+    pub SpringRod {
+        gravity: [0.0, 0.0],
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start) { stiffness: 4.0, rest: 0.5 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// A cartpole pushed along its rail, with a spring on the hinge.
+    pub DriveCartpole {
+        links {
+            cart: { mass: 1.0, length: 0.5 },
+            pole: { mass: 0.3, length: 0.8 },
+        }
+        joints {
+            rail: prismatic(world, cart.center) { axis: [1.0, 0.0], damping: 0.1, actuated },
+            hinge: revolute(cart.center, pole.start) { damping: 0.05, stiffness: 0.7, rest: 0.2 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// An acrobot (double pendulum driven at the elbow) with a shoulder
+    /// spring; undamped springs only (no `damping` anywhere).
+    pub Acrobot {
+        links {
+            upper: { mass: 1.0, length: 1.0 },
+            lower: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            shoulder: revolute(world, upper.start) { stiffness: 1.5, rest: -0.3 },
+            elbow: revolute(upper.end, lower.start) { actuated },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// The paper's four-bar rhombus, driven at the top pivot and at the
+    /// loop-closing joint (an actuated loop joint), with a spring on it.
+    pub DriveFourbar {
+        links {
+            link1: { mass: 1.0, length: 1.0 },
+            link2: { mass: 1.0, length: 1.0 },
+            link3: { mass: 1.0, length: 1.0 },
+            link4: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            top1: revolute(world, link1.start) { damping: 0.1, actuated },
+            middle1: revolute(link1.end, link2.start) { damping: 0.0 },
+            top2: revolute(world, link3.start) { damping: 0.0 },
+            middle2: revolute(link3.end, link4.start) { damping: 0.0 },
+            bottom: revolute(link2.end, link4.end) { damping: 0.05, stiffness: 2.0, rest: 0.4, actuated },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// `DriveFourbar` without actuators.
+    pub TwinFourbar {
+        links {
+            link1: { mass: 1.0, length: 1.0 },
+            link2: { mass: 1.0, length: 1.0 },
+            link3: { mass: 1.0, length: 1.0 },
+            link4: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            top1: revolute(world, link1.start) { damping: 0.1 },
+            middle1: revolute(link1.end, link2.start) { damping: 0.0 },
+            top2: revolute(world, link3.start) { damping: 0.0 },
+            middle2: revolute(link3.end, link4.start) { damping: 0.0 },
+            bottom: revolute(link2.end, link4.end) { damping: 0.05, stiffness: 2.0, rest: 0.4 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// tests/common/slider_crank.rs driven at the crank pivot and along the
+    /// tilted rail (a prismatic input: its direction turns with nothing in
+    /// minimal coordinates, with the rail's frame in maximal ones).
+    pub DriveSliderCrank {
+        gravity: [0.0, -9.81],
+        links {
+            crank: { mass: 0.5, length: 0.4, com: [0.15, 0.02] },
+            rod: { mass: 0.8, length: 1.2, inertia: 0.11 },
+            block: { mass: 2.0, length: 0.3 },
+        }
+        joints {
+            pivot: revolute(world @ [0.1, 0.2], crank.start) { damping: 0.05, actuated },
+            pin: revolute(crank @ [0.4, 0.01], rod.start) { damping: 0.02 },
+            rail: prismatic(world @ [1.0, 0.0], block.center) { axis: [1.0, 0.2], damping: 0.3, actuated },
+            wrist: revolute(rod.end, block.center) { damping: 0.01 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// A prismatic spring on a rotating arm (its axis turns), driven along
+    /// the slide: nonlinear joint coordinates in both views.
+    pub SlideArm {
+        links {
+            arm: { mass: 1.3, length: 0.9, com: [0.4, 0.05] },
+            slider: { mass: 0.7, length: 0.5 },
+        }
+        joints {
+            shoulder: revolute(world @ [0.1, -0.2], arm.start) { damping: 0.1, actuated },
+            slide: prismatic(arm.end, slider.start) { axis: [0.3, 1.0], stiffness: 3.0, rest: 0.1, actuated },
+        }
+    }
+}
+
+fn rel(a: f64, scale: f64) -> f64 {
+    a / (1.0 + scale)
+}
+
+/// The new generated terms against the dual-number reference at random
+/// configurations: V and ∇V (springs included), the force Jacobian, the
+/// input matrix B(q) (against ∇_q W(q; e_i)) and Σ u_i ∇²s_i (against the
+/// Jacobian of ∇_q W). Exact on both sides up to rounding: 1e-12 relative.
+fn check_terms<M, const N: usize, const C: usize, const U: usize>(name: &str, m: M)
+where
+    M: Mechanism<N, C>,
+{
+    let k = Dynamics::constants(&m).expect("valid parameters");
+    let mut rng = Rng(3);
+    let mut worst = 0.0f64;
+    for _ in 0..10 {
+        let q = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-2.0, 2.0));
+        let v = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-2.0, 2.0));
+        let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-3.0, 3.0));
+        let us: Vec<f64> = u.iter().copied().collect();
+        let mut t = Terms::zeros();
+        m.terms(&k, &q, &mut t);
+        let v_ref = m.potential_energy(&q);
+        let e = rel((Dynamics::potential(&m, &k, &q) - v_ref).abs(), v_ref.abs());
+        let grad_ref = num_dual::gradient(|x| m.potential_energy(&x), &q).1;
+        let e2 = rel((t.dpotential - grad_ref).amax(), grad_ref.amax());
+        let fj_ref = num_dual::jacobian(
+            |x: SVector<DualVec<f64, nalgebra::Const<N>>, N>| {
+                vigp::del::force_terms::<M, _, N, C>(&m, &x, &v.map(DualVec::from_re))
+            },
+            &q,
+        )
+        .1;
+        let fj = m.force_jacobian(&k, &q, &v);
+        let e3 = rel((fj - fj_ref).amax(), fj_ref.amax());
+        let b = m.input_matrix::<U>(&k, &q);
+        let bu_ref = m.input_force(&q, &us);
+        let e4 = rel((b * u - bu_ref).amax(), bu_ref.amax());
+        let mut b_ref = SMatrix::<f64, N, U>::zeros();
+        for i in 0..U {
+            let mut ei = vec![0.0; U];
+            ei[i] = 1.0;
+            b_ref.set_column(i, &m.input_force(&q, &ei));
+        }
+        let e5 = rel((b - b_ref).amax(), b_ref.amax());
+        let h_ref = num_dual::jacobian(
+            |x: SVector<DualVec<f64, nalgebra::Const<N>>, N>| m.input_force(&x, &us),
+            &q,
+        )
+        .1;
+        let h = m.input_force_jacobian::<U>(&k, &q, &u);
+        let e6 = rel((h - h_ref).amax(), h_ref.amax());
+        for (what, e) in [
+            ("V", e),
+            ("∇V", e2),
+            ("force_jacobian", e3),
+            ("B u", e4),
+            ("B", e5),
+            ("Σu∇²s", e6),
+        ] {
+            assert!(e <= 1e-12, "{name} {what}: {e:.2e}");
+            worst = worst.max(e);
+        }
+    }
+    println!("{name}: worst relative difference {worst:.1e}");
+}
+
+#[test]
+fn generated_input_and_spring_terms_match_dual_numbers() {
+    check_terms::<_, 1, 0, 1>(
+        "torque pendulum minimal",
+        TorquePendulum::default().minimal(),
+    );
+    check_terms::<_, 3, 2, 1>(
+        "torque pendulum maximal",
+        TorquePendulum::default().maximal(),
+    );
+    check_terms::<_, 1, 0, 0>("spring rod minimal", SpringRod::default().minimal());
+    check_terms::<_, 3, 2, 0>("spring rod maximal", SpringRod::default().maximal());
+    check_terms::<_, 2, 0, 1>("cartpole minimal", DriveCartpole::default().minimal());
+    check_terms::<_, 6, 4, 1>("cartpole maximal", DriveCartpole::default().maximal());
+    check_terms::<_, 2, 0, 1>("acrobot minimal", Acrobot::default().minimal());
+    check_terms::<_, 6, 4, 1>("acrobot maximal", Acrobot::default().maximal());
+    check_terms::<_, 4, 2, 2>("fourbar minimal", DriveFourbar::default().minimal());
+    check_terms::<_, 12, 10, 2>("fourbar maximal", DriveFourbar::default().maximal());
+    check_terms::<_, 3, 2, 2>(
+        "slider-crank minimal",
+        DriveSliderCrank::default().minimal(),
+    );
+    check_terms::<_, 9, 8, 2>(
+        "slider-crank maximal",
+        DriveSliderCrank::default().maximal(),
+    );
+    check_terms::<_, 2, 0, 2>("slide arm minimal", SlideArm::default().minimal());
+    check_terms::<_, 6, 4, 2>("slide arm maximal", SlideArm::default().maximal());
+}
+
+/// A random consistent state (loops: projected by the std runtime).
+fn random_state<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    m: &M,
+    rng: &mut Rng,
+    dt: f64,
+) -> State<N> {
+    let q = SVector::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+    let v = SVector::from_fn(|_, _| rng.uniform(-1.5, 1.5));
+    if C == 0 {
+        return State { q, v };
+    }
+    vigp::projection::consistent_state(m, &q, &v, dt).expect("projection")
+}
+
+fn minimal_and_maximal_states<Mn, const N: usize, const C: usize, const NM: usize>(
+    m: &Mn,
+    seed: u64,
+    count: usize,
+    dt: f64,
+) -> (Vec<State<N>>, Vec<State<NM>>)
+where
+    Mn: Mechanism<N, C> + Coordinates<N, NM> + Copy,
+{
+    let mut rng = Rng(seed);
+    let states: Vec<State<N>> = (0..count).map(|_| random_state(m, &mut rng, dt)).collect();
+    let max = states.iter().map(|z| m.to_maximal(z, dt)).collect();
+    (states, max)
+}
+
+/// The engine's forced step against the dual-number reference step
+/// (`vigp::reference::step_forced`: the input force by differentiating the
+/// virtual work on dual numbers), both rules, both solved to 1e-14: the
+/// velocities agree to 1e-11 (as for the unforced step, tests/dynamics.rs).
+fn forced_matches_reference<M, const N: usize, const C: usize, const U: usize>(
+    name: &str,
+    m: M,
+    states: &[State<N>],
+) where
+    M: Mechanism<N, C> + Copy,
+{
+    let dt = 0.01;
+    let opts = vigp::NewtonOptions {
+        tolerance: 1e-14,
+        ..vigp::NewtonOptions::default()
+    };
+    let mut rng = Rng(17);
+    let mut worst = 0.0f64;
+    for (alpha, vi) in [
+        (0.0, Variational::new(m, dt)),
+        (0.5, Variational::midpoint(m, dt)),
+    ] {
+        let vi = vi.with_options(opts);
+        for z in states {
+            let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-5.0, 5.0));
+            let us: Vec<f64> = u.iter().copied().collect();
+            let a = vi
+                .step_forced(z, &u)
+                .unwrap_or_else(|e| panic!("{name} α={alpha}: {e}"));
+            let (b, _) = vigp::reference::step_forced(&m, dt, alpha, &opts, z, &us)
+                .unwrap_or_else(|e| panic!("{name} α={alpha} reference: {e}"));
+            assert_eq!(a.q, b.q);
+            let d = (a.v - b.v).amax();
+            assert!(d <= 1e-11, "{name} α={alpha}: |Δv| = {d:.2e}");
+            worst = worst.max(d);
+        }
+    }
+    println!("{name}: max |v_engine − v_reference| = {worst:.1e}");
+}
+
+#[test]
+fn forced_steps_match_the_dual_number_reference() {
+    let dt = 0.01;
+    macro_rules! both {
+        ($name:expr, $sys:expr, $n:literal, $c:literal, $nm:literal, $cm:literal, $u:literal) => {{
+            let sys = $sys;
+            let (s, x) = minimal_and_maximal_states::<_, $n, $c, $nm>(&sys.minimal(), 5, 8, dt);
+            forced_matches_reference::<_, $n, $c, $u>(
+                &format!("{} minimal", $name),
+                sys.minimal(),
+                &s,
+            );
+            forced_matches_reference::<_, $nm, $cm, $u>(
+                &format!("{} maximal", $name),
+                sys.maximal(),
+                &x,
+            );
+        }};
+    }
+    both!("torque pendulum", TorquePendulum::default(), 1, 0, 3, 2, 1);
+    both!("cartpole", DriveCartpole::default(), 2, 0, 6, 4, 1);
+    both!("acrobot", Acrobot::default(), 2, 0, 6, 4, 1);
+    both!("fourbar", DriveFourbar::default(), 4, 2, 12, 10, 2);
+    both!("slider-crank", DriveSliderCrank::default(), 3, 2, 9, 8, 2);
+    both!("slide arm", SlideArm::default(), 2, 0, 6, 4, 2);
+}
+
+/// u = 0 reproduces the same mechanism without `actuated` bit for bit:
+/// single steps and rollouts, both rules, both views, loops included.
+fn bitwise<A, B, const N: usize, const C: usize, const U: usize>(
+    name: &str,
+    actuated: A,
+    plain: B,
+    states: &[State<N>],
+) where
+    A: Dynamics<N, C> + Copy,
+    B: Dynamics<N, C> + Copy,
+{
+    let dt = 0.01;
+    let zero = SVector::<f64, U>::zeros();
+    for mid in [false, true] {
+        let (sa, sb) = if mid {
+            (
+                Stepper::midpoint(actuated, dt).unwrap(),
+                Stepper::midpoint(plain, dt).unwrap(),
+            )
+        } else {
+            (
+                Stepper::new(actuated, dt).unwrap(),
+                Stepper::new(plain, dt).unwrap(),
+            )
+        };
+        for z in states {
+            let a = sa.step_forced(z, &zero).unwrap();
+            let b = sb.step(z).unwrap();
+            let c = sa.step(z).unwrap();
+            for (x, y) in
+                a.q.iter()
+                    .chain(a.v.iter())
+                    .zip(b.q.iter().chain(b.v.iter()))
+            {
+                assert_eq!(x.to_bits(), y.to_bits(), "{name} mid={mid}");
+            }
+            for (x, y) in
+                c.q.iter()
+                    .chain(c.v.iter())
+                    .zip(b.q.iter().chain(b.v.iter()))
+            {
+                assert_eq!(x.to_bits(), y.to_bits(), "{name} mid={mid} (step)");
+            }
+        }
+        let mut ra = [states[0]; 20];
+        let mut rb = ra;
+        sa.steps_forced_into(&states[0], &[zero; 20], &mut ra)
+            .unwrap();
+        sb.steps_into(&states[0], &mut rb).unwrap();
+        for (a, b) in ra.iter().zip(&rb) {
+            for (x, y) in
+                a.q.iter()
+                    .chain(a.v.iter())
+                    .zip(b.q.iter().chain(b.v.iter()))
+            {
+                assert_eq!(x.to_bits(), y.to_bits(), "{name} mid={mid} rollout");
+            }
+        }
+    }
+}
+
+#[test]
+fn zero_input_is_the_unactuated_mechanism_bit_for_bit() {
+    let dt = 0.01;
+    let (s, x) =
+        minimal_and_maximal_states::<_, 1, 0, 3>(&PlainPendulum::default().minimal(), 9, 5, dt);
+    bitwise::<_, _, 1, 0, 1>(
+        "pendulum minimal",
+        TorquePendulum::default().minimal(),
+        PlainPendulum::default().minimal(),
+        &s,
+    );
+    bitwise::<_, _, 3, 2, 1>(
+        "pendulum maximal",
+        TorquePendulum::default().maximal(),
+        PlainPendulum::default().maximal(),
+        &x,
+    );
+    let (s, x) =
+        minimal_and_maximal_states::<_, 4, 2, 12>(&TwinFourbar::default().minimal(), 9, 5, dt);
+    bitwise::<_, _, 4, 2, 2>(
+        "fourbar minimal",
+        DriveFourbar::default().minimal(),
+        TwinFourbar::default().minimal(),
+        &s,
+    );
+    bitwise::<_, _, 12, 10, 2>(
+        "fourbar maximal",
+        DriveFourbar::default().maximal(),
+        TwinFourbar::default().maximal(),
+        &x,
+    );
+    let (s, x) =
+        minimal_and_maximal_states::<_, 3, 2, 9>(&SliderCrank::default().minimal(), 9, 5, dt);
+    bitwise::<_, _, 3, 2, 2>(
+        "slider-crank minimal",
+        DriveSliderCrank::default().minimal(),
+        SliderCrank::default().minimal(),
+        &s,
+    );
+    bitwise::<_, _, 9, 8, 2>(
+        "slider-crank maximal",
+        DriveSliderCrank::default().maximal(),
+        SliderCrank::default().maximal(),
+        &x,
+    );
+}
+
+/// A damped pendulum under a constant torque u settles where gravity's
+/// torque balances it, m g l_c sin θ = u. The discrete equilibrium of the
+/// forced DEL equations (v = 0) is exactly the continuous one, so after
+/// the transient has decayed (rate c/(2 I_pivot) = 3/s; 20 s) the angle
+/// matches to 1e-8 (both rules, both views).
+#[test]
+fn constant_torque_settles_at_the_static_equilibrium() {
+    let sys = TorquePendulum::default();
+    let (m, g, lc) = (1.0, 9.81, 0.5);
+    let dt = 0.01;
+    for u0 in [2.0, -3.5] {
+        let u = SVector::<f64, 1>::new(u0);
+        let target = u0 / (m * g * lc);
+        let inputs = vec![u; 2000];
+        for mid in [false, true] {
+            let z0 = State::new([0.0], [0.0]);
+            let min = if mid {
+                Variational::midpoint(sys.minimal(), dt)
+            } else {
+                Variational::new(sys.minimal(), dt)
+            };
+            let traj = min.rollout_forced(&z0, &inputs).unwrap();
+            let theta = traj.last().unwrap().q[0];
+            let err = (theta.sin() - target).abs();
+            println!("u = {u0}, mid = {mid}: minimal |sin θ − u/(m g l_c)| = {err:.1e}");
+            assert!(err <= 1e-8, "minimal mid={mid}: {err:.2e}");
+            let max = if mid {
+                Variational::midpoint(sys.maximal(), dt)
+            } else {
+                Variational::new(sys.maximal(), dt)
+            };
+            let traj = max
+                .rollout_forced(&sys.minimal().to_maximal(&z0, dt), &inputs)
+                .unwrap();
+            let theta = traj.last().unwrap().q[2];
+            let err = (theta.sin() - target).abs();
+            println!("u = {u0}, mid = {mid}: maximal |sin θ − u/(m g l_c)| = {err:.1e}");
+            assert!(err <= 1e-8, "maximal mid={mid}: {err:.2e}");
+        }
+    }
+}
+
+/// Times of the upward crossings of `level` by the samples (linear
+/// interpolation between samples).
+fn crossings(xs: &[f64], dt: f64, level: f64) -> Vec<f64> {
+    let mut out = Vec::new();
+    for (k, w) in xs.windows(2).enumerate() {
+        let (a, b) = (w[0] - level, w[1] - level);
+        if a < 0.0 && b >= 0.0 {
+            out.push((k as f64 + a / (a - b)) * dt);
+        }
+    }
+    out
+}
+
+/// A torsion spring with rest angle s0 and no gravity: θ oscillates about
+/// s0 with period T = 2π √(I_pivot / k). The midpoint VI is the implicit
+/// midpoint rule on this linear oscillator, whose discrete period is
+/// 2πh / arccos((1 − ω²h²/4)/(1 + ω²h²/4)) = T(1 + ω²h²/12 + O(h⁴)): the
+/// measured period must show that O(Δt²) error (ratio 4 when Δt halves)
+/// and match the discrete closed form to 1e-6 s (linear interpolation of
+/// the crossings, error O(Δt³) at a zero of the second derivative).
+#[test]
+fn spring_oscillates_about_its_rest_angle_with_the_closed_form_period() {
+    let sys = SpringRod::default();
+    let (k, s0): (f64, f64) = (4.0, 0.5);
+    let inertia: f64 = 1.0 / 12.0 + 0.25;
+    let omega = (k / inertia).sqrt();
+    let period = 2.0 * std::f64::consts::PI / omega;
+    let mut errors = Vec::new();
+    for dt in [0.01, 0.005] {
+        let vi = Variational::midpoint(sys.minimal(), dt);
+        let z0 = State::new([s0 + 0.3], [0.0]);
+        let steps = (10.0 * period / dt) as usize;
+        let traj = vigp::Integrator::rollout(&vi, &z0, steps).unwrap();
+        let theta: Vec<f64> = traj.iter().map(|z| z.q[0]).collect();
+        // oscillation about s0: symmetric extremes
+        let (lo, hi) = theta
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(a, b), &x| (a.min(x), b.max(x)));
+        assert!(
+            ((lo + hi) / 2.0 - s0).abs() < 1e-3,
+            "centre {}",
+            (lo + hi) / 2.0
+        );
+        let c = crossings(&theta, dt, s0);
+        let measured = (c[c.len() - 1] - c[0]) / (c.len() - 1) as f64;
+        let wh: f64 = omega * dt;
+        let discrete = 2.0 * std::f64::consts::PI * dt
+            / ((1.0 - wh * wh / 4.0) / (1.0 + wh * wh / 4.0)).acos();
+        println!(
+            "dt = {dt}: period {measured:.9} s, discrete closed form {discrete:.9}, continuous {period:.9}"
+        );
+        assert!(
+            (measured - discrete).abs() < 1e-6,
+            "{measured} vs {discrete}"
+        );
+        errors.push((measured - period).abs());
+    }
+    let ratio = errors[0] / errors[1];
+    println!("period error ratio (Δt halved): {ratio:.3}");
+    assert!((3.8..4.2).contains(&ratio), "ratio {ratio}");
+}
+
+fn fd_eps() -> f64 {
+    std::env::var("FD_EPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1e-4)
+}
+
+/// The five-point central difference of a step's result in one direction,
+/// [8(f(ε) − f(−ε)) − (f(2ε) − f(−2ε))]/(12ε): truncation O(ε⁴).
+fn stencil<const N: usize>(
+    eps: f64,
+    mut f: impl FnMut(f64) -> State<N>,
+) -> (SVector<f64, N>, SVector<f64, N>) {
+    let (p1, m1, p2, m2) = (f(eps), f(-eps), f(2.0 * eps), f(-2.0 * eps));
+    let d = |a: SVector<f64, N>, b: SVector<f64, N>, c: SVector<f64, N>, e: SVector<f64, N>| {
+        ((a - b) * 8.0 - (c - e)) / (12.0 * eps)
+    };
+    (d(p1.q, m1.q, p2.q, m2.q), d(p1.v, m1.v, p2.v, m2.v))
+}
+
+/// A and B of a forced step (`Variational::step_derivatives`, the core
+/// `Stepper` underneath) against five-point central differences of the
+/// step, for random states and inputs. The steps are solved to 1e-14 and
+/// the difference step is 1e-4 (relative to each entry's scale, at least
+/// 1): the truncation error O(ε⁴) and the solver noise (~1e-13/1e-4 for
+/// the constrained systems, whose converged velocities carry the
+/// constraint residual divided by Δt) are well below the 1e-6 relative
+/// acceptance bound. (Plain central differences at ε = 1e-5 reach only
+/// ~2e-6 on the four-bar with sub-steps: truncation and noise both near
+/// 1e-6 there.)
+fn check_derivatives<M, const N: usize, const C: usize, const U: usize>(
+    name: &str,
+    m: M,
+    states: &[State<N>],
+    substeps: usize,
+) -> f64
+where
+    M: Mechanism<N, C> + Copy,
+{
+    let dt = 0.01;
+    let mut rng = Rng(23);
+    let mut worst = 0.0f64;
+    for mid in [false, true] {
+        let vi = if mid {
+            Variational::midpoint(m, dt)
+        } else {
+            Variational::new(m, dt)
+        }
+        .tolerance(1e-14)
+        .substeps(substeps);
+        for z in states {
+            let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-3.0, 3.0));
+            let (z1, d) = vi.step_derivatives(z, &u).unwrap();
+            assert_eq!(z1, vi.step_forced(z, &u).unwrap());
+            let mut a_fd = [SMatrix::<f64, N, N>::zeros(); 4];
+            for j in 0..N {
+                for (which, base) in [(0usize, true), (1, false)] {
+                    let x = if base { z.q[j] } else { z.v[j] };
+                    let eps = fd_eps() * x.abs().max(1.0);
+                    let (dq, dv) = stencil(eps, |e| {
+                        let mut zp = *z;
+                        if base {
+                            zp.q[j] += e;
+                        } else {
+                            zp.v[j] += e;
+                        }
+                        vi.step_forced(&zp, &u).unwrap()
+                    });
+                    a_fd[which].set_column(j, &dq);
+                    a_fd[2 + which].set_column(j, &dv);
+                }
+            }
+            let mut b_fd = [SMatrix::<f64, N, U>::zeros(); 2];
+            for i in 0..U {
+                let eps = fd_eps() * u[i].abs().max(1.0);
+                let (dq, dv) = stencil(eps, |e| {
+                    let mut up = u;
+                    up[i] += e;
+                    vi.step_forced(z, &up).unwrap()
+                });
+                b_fd[0].set_column(i, &dq);
+                b_fd[1].set_column(i, &dv);
+            }
+            // relative to the whole of A (blocks such as ∂q₁/∂q₀ = I are
+            // exact; others can be near zero)
+            let a_scale = a_fd.iter().map(|b| b.amax()).fold(0.0, f64::max);
+            let e = [
+                (d.a.q_q - a_fd[0]).amax(),
+                (d.a.q_v - a_fd[1]).amax(),
+                (d.a.v_q - a_fd[2]).amax(),
+                (d.a.v_v - a_fd[3]).amax(),
+            ]
+            .iter()
+            .fold(0.0f64, |a, b| a.max(*b))
+                / a_scale;
+            let b_scale = b_fd[0].amax().max(b_fd[1].amax()).max(1e-300);
+            let e_b = (d.b.q_u - b_fd[0]).amax().max((d.b.v_u - b_fd[1]).amax()) / b_scale;
+            assert!(e <= 1e-6, "{name} mid={mid}: A relative error {e:.2e}");
+            if U > 0 {
+                assert!(e_b <= 1e-6, "{name} mid={mid}: B relative error {e_b:.2e}");
+            }
+            worst = worst.max(e).max(if U > 0 { e_b } else { 0.0 });
+        }
+    }
+    println!("{name} (substeps {substeps}): worst relative |A − A_fd|, |B − B_fd| = {worst:.1e}");
+    worst
+}
+
+#[test]
+fn step_derivatives_match_central_differences() {
+    let dt = 0.01;
+    macro_rules! both {
+        ($name:expr, $sys:expr, $n:literal, $c:literal, $nm:literal, $cm:literal, $u:literal) => {{
+            let sys = $sys;
+            let (s, x) = minimal_and_maximal_states::<_, $n, $c, $nm>(&sys.minimal(), 31, 3, dt);
+            check_derivatives::<_, $n, $c, $u>(&format!("{} minimal", $name), sys.minimal(), &s, 1);
+            check_derivatives::<_, $nm, $cm, $u>(
+                &format!("{} maximal", $name),
+                sys.maximal(),
+                &x,
+                1,
+            );
+        }};
+    }
+    both!("torque pendulum", TorquePendulum::default(), 1, 0, 3, 2, 1);
+    both!("cartpole", DriveCartpole::default(), 2, 0, 6, 4, 1);
+    both!("acrobot", Acrobot::default(), 2, 0, 6, 4, 1);
+    both!("fourbar", DriveFourbar::default(), 4, 2, 12, 10, 2);
+    both!("slider-crank", DriveSliderCrank::default(), 3, 2, 9, 8, 2);
+    both!("slide arm", SlideArm::default(), 2, 0, 6, 4, 2);
+    // unactuated (U = 0: A alone), and sub-steps
+    let (s, _) =
+        minimal_and_maximal_states::<_, 1, 0, 3>(&SpringRod::default().minimal(), 31, 3, dt);
+    check_derivatives::<_, 1, 0, 0>("spring rod minimal", SpringRod::default().minimal(), &s, 1);
+    let (s, _) =
+        minimal_and_maximal_states::<_, 2, 0, 6>(&DriveCartpole::default().minimal(), 31, 3, dt);
+    check_derivatives::<_, 2, 0, 1>(
+        "cartpole minimal",
+        DriveCartpole::default().minimal(),
+        &s,
+        3,
+    );
+    let (s, _) =
+        minimal_and_maximal_states::<_, 4, 2, 12>(&DriveFourbar::default().minimal(), 31, 3, dt);
+    check_derivatives::<_, 4, 2, 2>("fourbar minimal", DriveFourbar::default().minimal(), &s, 2);
+}
+
+/// The K-step rollout derivatives (∂z_K/∂z_0 and ∂z_K/∂u_j, chained through
+/// the carried momentum) against central differences of the whole forced
+/// rollout, both rules, a tree and a loop.
+fn check_rollout<M, const N: usize, const C: usize, const U: usize>(name: &str, m: M, z0: &State<N>)
+where
+    M: Mechanism<N, C> + Copy,
+{
+    let dt = 0.01;
+    let k_steps = 6;
+    let mut rng = Rng(41);
+    let inputs: Vec<SVector<f64, U>> = (0..k_steps)
+        .map(|_| SVector::from_fn(|_, _| rng.uniform(-3.0, 3.0)))
+        .collect();
+    for mid in [false, true] {
+        let vi = if mid {
+            Variational::midpoint(m, dt)
+        } else {
+            Variational::new(m, dt)
+        }
+        .tolerance(1e-14);
+        let d = vi.rollout_derivatives(z0, &inputs).unwrap();
+        let traj = vi.rollout_forced(z0, &inputs).unwrap();
+        // the same steps, Newton started differently: equal to the solver
+        // tolerance
+        for (a, b) in d.states.iter().zip(&traj) {
+            assert!((a.q - b.q).amax() <= 1e-12 && (a.v - b.v).amax() <= 1e-10);
+        }
+        let last = |z: &State<N>, us: &[SVector<f64, U>]| {
+            *vi.rollout_forced(z, us).unwrap().last().unwrap()
+        };
+        let eps = 1e-5;
+        let mut worst = 0.0f64;
+        // ∂z_K/∂v_0 column j and ∂z_K/∂q_0 column j
+        let jk = &d.initial[k_steps];
+        let scale = jk
+            .q_q
+            .amax()
+            .max(jk.q_v.amax())
+            .max(jk.v_q.amax())
+            .max(jk.v_v.amax());
+        for j in 0..N {
+            for pos in [true, false] {
+                let (mut zp, mut zm) = (*z0, *z0);
+                if pos {
+                    zp.q[j] += eps;
+                    zm.q[j] -= eps;
+                } else {
+                    zp.v[j] += eps;
+                    zm.v[j] -= eps;
+                }
+                let (p, q) = (last(&zp, &inputs), last(&zm, &inputs));
+                let dq = (p.q - q.q) / (2.0 * eps);
+                let dv = (p.v - q.v) / (2.0 * eps);
+                let (eq, ev) = if pos {
+                    (jk.q_q.column(j) - dq, jk.v_q.column(j) - dv)
+                } else {
+                    (jk.q_v.column(j) - dq, jk.v_v.column(j) - dv)
+                };
+                worst = worst.max(eq.amax().max(ev.amax()) / scale);
+            }
+        }
+        for (j, bj) in d.inputs[k_steps].iter().enumerate() {
+            let bscale = bj.q_u.amax().max(bj.v_u.amax());
+            for i in 0..U {
+                let (mut up, mut um) = (inputs.clone(), inputs.clone());
+                up[j][i] += eps;
+                um[j][i] -= eps;
+                let (p, q) = (last(z0, &up), last(z0, &um));
+                let eq = bj.q_u.column(i) - (p.q - q.q) / (2.0 * eps);
+                let ev = bj.v_u.column(i) - (p.v - q.v) / (2.0 * eps);
+                worst = worst.max(eq.amax().max(ev.amax()) / bscale);
+            }
+        }
+        println!(
+            "{name} mid={mid}: {k_steps}-step rollout derivatives, worst relative error {worst:.1e}"
+        );
+        assert!(worst <= 1e-6, "{name} mid={mid}: {worst:.2e}");
+    }
+}
+
+#[test]
+fn rollout_derivatives_match_central_differences() {
+    let dt = 0.01;
+    let cp = DriveCartpole::default().minimal();
+    check_rollout::<_, 2, 0, 1>("cartpole minimal", cp, &State::new([0.1, 2.5], [0.3, -0.4]));
+    let fb = DriveFourbar::default().minimal();
+    let (s, _) = minimal_and_maximal_states::<_, 4, 2, 12>(&fb, 43, 1, dt);
+    check_rollout::<_, 4, 2, 2>("fourbar minimal", fb, &s[0]);
+}
+
+/// Non-finite inputs are typed errors, not NaN states.
+#[test]
+fn non_finite_inputs_are_refused() {
+    let vi = Variational::new(TorquePendulum::default().minimal(), 0.01);
+    let z = State::new([0.1], [0.0]);
+    for bad in [f64::NAN, f64::INFINITY] {
+        let e = vi
+            .step_forced(&z, &SVector::<f64, 1>::new(bad))
+            .unwrap_err();
+        assert!(matches!(e, vigp::StepError::NonFiniteInput { .. }), "{e}");
+        assert!(
+            vi.step_derivatives(&z, &SVector::<f64, 1>::new(bad))
+                .is_err()
+        );
+    }
+    let e = vi
+        .rollout_forced(
+            &z,
+            &[
+                SVector::<f64, 1>::new(1.0),
+                SVector::<f64, 1>::new(f64::NAN),
+            ],
+        )
+        .unwrap_err();
+    assert!(
+        matches!(e, vigp::StepError::NonFiniteInput { step: Some(1) }),
+        "{e}"
+    );
+}
+
+/// For the first-order rule a step with k sub-steps is k steps of Δt/k
+/// (the momentum M(x)v carried between sub-steps is that of the state),
+/// so its derivatives are the product of the sub-steps' derivatives: an
+/// exact algebraic check of the sub-step chain (rounding only: 1e-10).
+#[test]
+fn substep_derivatives_are_the_chain_of_smaller_steps() {
+    let dt = 0.01;
+    let fb = DriveFourbar::default().minimal();
+    let (s, _) = minimal_and_maximal_states::<_, 4, 2, 12>(&fb, 31, 3, dt);
+    let u = SVector::<f64, 2>::new(1.5, -0.7);
+    let two = Variational::new(fb, dt).tolerance(1e-14).substeps(2);
+    let half = Variational::new(fb, dt / 2.0).tolerance(1e-14);
+    for z in &s {
+        let (z2, d2) = two.step_derivatives(z, &u).unwrap();
+        let (za, da) = half.step_derivatives(z, &u).unwrap();
+        let (zb, db) = half.step_derivatives(&za, &u).unwrap();
+        assert!((z2.v - zb.v).amax() < 1e-11);
+        let a = db.a.after(&da.a);
+        let b = db.a.times_input(&da.b);
+        let b_qu = b.q_u + db.b.q_u;
+        let b_vu = b.v_u + db.b.v_u;
+        let scale = a.v_q.amax().max(a.v_v.amax());
+        let e = [
+            (a.q_q - d2.a.q_q).amax(),
+            (a.q_v - d2.a.q_v).amax(),
+            (a.v_q - d2.a.v_q).amax(),
+            (a.v_v - d2.a.v_v).amax(),
+            (b_qu - d2.b.q_u).amax(),
+            (b_vu - d2.b.v_u).amax(),
+        ];
+        println!("chain vs sub-steps: {e:?} (scale {scale:.2e})");
+        for x in e {
+            assert!(x <= 1e-10 * scale, "{e:?}");
+        }
+    }
+}
+
+/// Every integrator takes inputs. The classical ones integrate
+/// M q̈ = f + B(q)u: a damped pendulum under a constant torque settles at
+/// the same equilibrium sin θ = u/(m g l_c) (their fixed point is exact
+/// too), and the fourth-order composition's forced step with constant u
+/// converges at fourth order to a fine reference (error ratio ≥ 12 when Δt
+/// halves, 16 asymptotically). u = 0 is each integrator's plain step.
+#[test]
+fn every_integrator_takes_inputs() {
+    use vigp::{ExplicitEuler, Integrator, Rk4, SymplecticEuler, Variational4};
+    let sys = TorquePendulum::default();
+    let m = sys.minimal();
+    let u = SVector::<f64, 1>::new(2.0);
+    let target = 2.0 / (9.81 * 0.5);
+    let z0 = State::new([0.0], [0.0]);
+    fn settle<I: Integrator<1>>(
+        name: &str,
+        i: &I,
+        z0: &State<1>,
+        u: &SVector<f64, 1>,
+        target: f64,
+    ) {
+        let mut out = vec![*z0; 3000];
+        i.rollout_forced_into(z0, &vec![*u; 3000], &mut out)
+            .unwrap();
+        let err = (out.last().unwrap().q[0].sin() - target).abs();
+        println!("{name}: |sin θ − u/(m g l_c)| = {err:.1e}");
+        assert!(err <= 1e-8, "{name}: {err:.2e}");
+        let zero = SVector::<f64, 1>::zeros();
+        assert_eq!(
+            i.step_forced(&out[10], &zero).unwrap(),
+            i.step(&out[10]).unwrap()
+        );
+    }
+    settle(
+        "explicit Euler",
+        &ExplicitEuler::new(m, 0.005),
+        &z0,
+        &u,
+        target,
+    );
+    settle(
+        "symplectic Euler",
+        &SymplecticEuler::new(m, 0.005),
+        &z0,
+        &u,
+        target,
+    );
+    settle("RK4", &Rk4::new(m, 0.01), &z0, &u, target);
+    settle("Variational4", &Variational4::new(m, 0.01), &z0, &u, target);
+    settle(
+        "Variational",
+        &Variational::midpoint(m, 0.01),
+        &z0,
+        &u,
+        target,
+    );
+    // fourth order under a constant input (undamped spring-free acrobot)
+    let a = Acrobot::default().minimal();
+    let z = State::new([0.4, -0.3], [0.0, 0.0]);
+    let ua = SVector::<f64, 1>::new(1.3);
+    let t_end = 0.5;
+    let run = |dt: f64| {
+        let vi = Variational4::new(a, dt);
+        let n = (t_end / dt).round() as usize;
+        let mut out = vec![z; n];
+        vi.rollout_forced_into(&z, &vec![ua; n], &mut out).unwrap();
+        out[n - 1].q
+    };
+    let reference = run(0.0005);
+    let (e1, e2) = (
+        (run(0.02) - reference).amax(),
+        (run(0.01) - reference).amax(),
+    );
+    println!(
+        "Variational4 forced: errors {e1:.2e}, {e2:.2e}, ratio {:.1}",
+        e1 / e2
+    );
+    assert!(e1 / e2 >= 12.0, "ratio {}", e1 / e2);
+}
+
+/// Forced steps, forced rollouts and the step derivatives run without heap
+/// allocation (the embedded engine underneath `Variational`), loops
+/// included.
+#[test]
+fn forced_steps_and_derivatives_do_not_allocate() {
+    let dt = 0.01;
+    let fb = DriveFourbar::default().minimal();
+    let (s, _) = minimal_and_maximal_states::<_, 4, 2, 12>(&fb, 7, 1, dt);
+    let u = SVector::<f64, 2>::new(0.4, -0.2);
+    let inputs = [u; 30];
+    let mut out = [s[0]; 30];
+    for vi in [Variational::new(fb, dt), Variational::midpoint(fb, dt)] {
+        let stepper = *vi.stepper().unwrap();
+        let p0 = stepper.momentum(&s[0]);
+        let info = allocation_counter::measure(|| {
+            let z1 = vi.step_forced(&s[0], &u).unwrap();
+            let _ = vi.step_derivatives(&z1, &u).unwrap();
+            vi.rollout_forced_into(&s[0], &inputs, &mut out).unwrap();
+            let _ = stepper
+                .step_with_momentum_derivatives(&s[0], &p0, &u)
+                .unwrap();
+        });
+        assert_eq!(info.count_total, 0, "forced steps / derivatives allocated");
+    }
+}
+
+/// The learned integrator with inputs: a "true" cartpole (masses ×1.1,
+/// pole inertia ×0.9, more rail friction) driven by random piecewise
+/// constant forces gives transitions with their inputs; the GP learns the
+/// residual of the nominal forced step (GP input = encoded state + u). On
+/// held-out states and inputs its one-step velocity error against the true
+/// system must be well below the nominal model's (≤ 1/5 of it: the
+/// residual is smooth and well sampled), its exact derivatives must match
+/// five-point differences (ε = 1e-3: relative 1e-6), the learned step under u = 0
+/// must not equal the one under u (the input is used), and the model file
+/// round-trips with its inputs.
+#[test]
+fn learned_integrator_takes_inputs() {
+    use vigp::gp::TrainOptions;
+    use vigp::learned::{Encoding, ForcedTransition, Learned, Prior, forced_transitions};
+    let dt = 0.01;
+    let nominal = DriveCartpole::default();
+    let mut truth = nominal;
+    truth.links.cart.mass *= 1.1;
+    truth.links.pole.mass *= 1.1;
+    truth.links.pole.inertia *= 0.9;
+    truth.joints.rail.damping = 0.4;
+    let true_vi = Variational::new(truth.minimal(), dt);
+    let nominal_vi = Variational::new(nominal.minimal(), dt);
+    let mut rng = Rng(77);
+    let mut data = Vec::new();
+    for _ in 0..4 {
+        let mut z = State::new([rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0)], [0.0, 0.0]);
+        let mut positions = vec![z.q];
+        let mut logged = vec![SVector::<f64, 1>::zeros()];
+        let mut u = SVector::<f64, 1>::zeros();
+        for k in 0..120 {
+            if k % 10 == 0 {
+                u = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
+            }
+            z = true_vi.step_forced(&z, &u).unwrap();
+            positions.push(z.q);
+            // the input logged at the sample where the step's new
+            // velocity interval starts (data docs: Run::step_input)
+            logged.push(u);
+        }
+        data.extend(forced_transitions(&positions, &logged, dt));
+    }
+    // the indexing of forced_transitions matches the simulation
+    let t0: ForcedTransition<2, 1> = data[0];
+    let again = true_vi.step_forced(&t0.z, &t0.u).unwrap();
+    assert!((again.v - t0.v_next).amax() < 1e-9);
+    // measurement noise on the velocities (σ = 1e-4, uniform): it keeps
+    // the GP's noise variance, and with it the weights α, moderate, so
+    // that the learned step can be checked against finite differences
+    // (noise-free data drives σ_n² → 0 and α up, and the mean's rounding
+    // through Σ α_i k_i then limits differences to ~1e-5)
+    let data: Vec<_> = data
+        .iter()
+        .step_by(2)
+        .map(|t| {
+            let mut t = *t;
+            for x in t.v_next.iter_mut() {
+                *x += rng.uniform(-1.7e-4, 1.7e-4);
+            }
+            t
+        })
+        .collect();
+    let options = TrainOptions {
+        restarts: 2,
+        seed: 3,
+        ..TrainOptions::default()
+    };
+    let (l, _) = Learned::train_forced(
+        nominal.minimal(),
+        dt,
+        &data,
+        Encoding::SinCos,
+        Prior::Nominal,
+        &options,
+    )
+    .unwrap();
+    assert_eq!(l.inputs(), 1);
+    let mut ws = l.workspace();
+    let (mut e_learned, mut e_nominal) = (0.0f64, 0.0f64);
+    for _ in 0..100 {
+        let z = State::new(
+            [rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0)],
+            [rng.uniform(-0.5, 0.5), rng.uniform(-1.5, 1.5)],
+        );
+        let u = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
+        let target = true_vi.step_forced(&z, &u).unwrap().v;
+        let learned = l.step_mean_forced_with(&z, &u, &mut ws).unwrap().v;
+        let nominal_next = nominal_vi.step_forced(&z, &u).unwrap().v;
+        e_learned += (learned - target).norm_squared();
+        e_nominal += (nominal_next - target).norm_squared();
+    }
+    let (e_learned, e_nominal) = ((e_learned / 100.0).sqrt(), (e_nominal / 100.0).sqrt());
+    println!(
+        "one-step RMS |Δv| against the true system: learned {e_learned:.2e}, nominal {e_nominal:.2e}"
+    );
+    assert!(
+        e_learned < 0.2 * e_nominal,
+        "{e_learned:e} vs {e_nominal:e}"
+    );
+    // exact derivatives of the learned step (nominal forced step's + GP
+    // mean gradient through the encoding) against five-point differences
+    let mut worst = 0.0f64;
+    for _ in 0..5 {
+        let z = State::new(
+            [rng.uniform(-0.5, 0.5), rng.uniform(-1.0, 1.0)],
+            [rng.uniform(-0.5, 0.5), rng.uniform(-1.5, 1.5)],
+        );
+        let u = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
+        let (z1, d) = l.step_derivatives_forced(&z, &u, &mut ws).unwrap();
+        assert_eq!(z1, l.step_mean_forced_with(&z, &u, &mut ws).unwrap());
+        let mut ws2 = l.workspace();
+        let mut err = 0.0f64;
+        let mut scale = 0.0f64;
+        for j in 0..2 {
+            for pos in [true, false] {
+                let (dq, dv) = stencil(1e-3, |e| {
+                    let mut zp = z;
+                    if pos {
+                        zp.q[j] += e;
+                    } else {
+                        zp.v[j] += e;
+                    }
+                    l.step_mean_forced_with(&zp, &u, &mut ws2).unwrap()
+                });
+                let (aq, av) = if pos {
+                    (
+                        d.a.q_q.column(j).into_owned(),
+                        d.a.v_q.column(j).into_owned(),
+                    )
+                } else {
+                    (
+                        d.a.q_v.column(j).into_owned(),
+                        d.a.v_v.column(j).into_owned(),
+                    )
+                };
+                err = err.max((aq - dq).amax()).max((av - dv).amax());
+                scale = scale.max(dq.amax()).max(dv.amax());
+            }
+        }
+        let (dq, dv) = stencil(1e-3, |e| {
+            l.step_mean_forced_with(&z, &(u + SVector::<f64, 1>::new(e)), &mut ws2)
+                .unwrap()
+        });
+        let eb = (d.b.q_u.column(0) - dq)
+            .amax()
+            .max((d.b.v_u.column(0) - dv).amax());
+        let bscale = dv.amax();
+        println!("A err {:.2e}, B err {:.2e}", err / scale, eb / bscale);
+        worst = worst.max(err / scale).max(eb / bscale);
+    }
+    println!("learned step derivatives: worst relative error {worst:.1e}");
+    assert!(worst <= 1e-6, "{worst:e}");
+    // the input matters, and the Integrator trait reaches it
+    let z = State::new([0.0, 0.3], [0.0, 0.0]);
+    let a = vigp::Integrator::step_forced(&l, &z, &SVector::<f64, 1>::new(3.0)).unwrap();
+    let b = vigp::Integrator::step_forced(&l, &z, &SVector::<f64, 1>::zeros()).unwrap();
+    assert!((a.v - b.v).amax() > 1e-3);
+    // the model file keeps the inputs
+    let json = l.to_json();
+    assert!(json.contains("\"rail\""));
+    let back = Learned::<_, 2, 0>::from_json(nominal.minimal(), &json).unwrap();
+    assert_eq!(back.inputs(), 1);
+    let c = vigp::Integrator::step_forced(&back, &z, &SVector::<f64, 1>::new(3.0)).unwrap();
+    assert_eq!(a, c);
+}

@@ -1,0 +1,704 @@
+//! Inputs and exact step derivatives on the [`Stepper`].
+//!
+//! # Forced steps
+//!
+//! An actuated joint i (declared `actuated` in `mechanism!`) applies the
+//! generalized force u_i ∇s_i(q), s_i the joint's coordinate: a torque on a
+//! revolute joint, a force along a prismatic axis. With the input matrix
+//! B(q) = [∇s_1 … ∇s_U] ([`Dynamics::input_matrix`]) the input enters the
+//! discrete Euler–Lagrange equations exactly where the damping force −D v
+//! enters (the step module's docs), as part of the force
+//! F(q, v, u) = f(q, v) + B(q)u:
+//!
+//! ```text
+//! d(v₁, λ) = p₀ + (1−α)Δt·F(m₁, v₁, u) − M(m₁)v₁ − G(x₁)ᵀλ = 0,   m₁ = x₁ + αΔt·v₁
+//! p₁       = M(m₁)v₁ + αΔt·F(m₁, v₁, u)
+//! ```
+//!
+//! u is held constant over the interval of the new discrete velocity v₁
+//! (from x₁ to x₁ + Δt·v₁). For the first-order rule (α = 0) the whole
+//! impulse Δt·B(x₁)u enters the residual and the step is a map
+//! z₁ = Φ(z₀, u₀) of the state alone. For the midpoint rule the impulse is
+//! split as the damping force's is: (1−α)Δt in this step's residual and αΔt
+//! in the momentum p₁ carried to the next step, which is what makes the
+//! rule second order for piecewise-constant inputs. A step from a state
+//! alone ([`Stepper::step_forced`]) starts from the input-free momentum
+//! p₀ = M(m₀)v₀ + αΔt·f(m₀, v₀) ([`Stepper::momentum`]), as if no input
+//! acted before; a forced rollout ([`Stepper::steps_forced_into`]) carries
+//! p₁, including the previous input's share.
+//!
+//! With u = 0 a forced step takes the unforced code path: an actuated
+//! mechanism steps bit for bit as the same mechanism without `actuated`.
+//!
+//! # Exact derivatives
+//!
+//! At the converged solution the residual (d, c) = 0 defines (v₁, λ) as a
+//! function of (x₁, p₀, u); the implicit function theorem gives
+//!
+//! ```text
+//! [ J      −G(x₁)ᵀ ] [ ∂v₁ ]     [ ∂d/∂θ ]
+//! [ Δt·G₂   0      ] [ ∂λ  ] = − [ ∂c/∂θ ],   θ ∈ {x₁, p₀, u}
+//!
+//! ∂d/∂x₁ = (1−α)Δt·(F_q + H_u) − Qᵀ − Σ λ_i ∇²g_i(x₁),   ∂d/∂p₀ = I,   ∂d/∂u = (1−α)Δt·B(m₁)
+//! ∂c/∂x₁ = G₂ = G(x₁ + Δt·v₁)
+//! ```
+//!
+//! with J the exact Newton matrix ∂d/∂v₁, F_q = [`Dynamics::force_jacobian`],
+//! H_u = Σ u_i ∇²s_i ([`Dynamics::input_force_jacobian`]) and Q as in the
+//! step module's docs. The derivatives of p₁ follow by the chain rule, and
+//! those of p₀ = M(m₀)v₀ + αΔt·f(m₀, v₀) with respect to z₀ likewise. One
+//! factorisation of J (and of the Schur complement for constraints) serves
+//! every direction. Nothing here allocates.
+
+use crate::dynamics::{Dynamics, Terms};
+use crate::linalg::{FullPivLu, PartialLu, solve_kkt_regularised};
+use crate::state::State;
+use crate::step::{RolloutError, StepError, StepReport, Stepper, max_abs};
+use nalgebra::{SMatrix, SVector};
+
+/// ∂z₁/∂z₀ of a step, z = (q, v), by N × N blocks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StateJacobian<const N: usize> {
+    /// ∂q₁/∂q₀.
+    pub q_q: SMatrix<f64, N, N>,
+    /// ∂q₁/∂v₀.
+    pub q_v: SMatrix<f64, N, N>,
+    /// ∂v₁/∂q₀.
+    pub v_q: SMatrix<f64, N, N>,
+    /// ∂v₁/∂v₀.
+    pub v_v: SMatrix<f64, N, N>,
+}
+
+/// ∂z₁/∂u of a step, z = (q, v), by N × U blocks.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct InputJacobian<const N: usize, const U: usize> {
+    /// ∂q₁/∂u.
+    pub q_u: SMatrix<f64, N, U>,
+    /// ∂v₁/∂u.
+    pub v_u: SMatrix<f64, N, U>,
+}
+
+impl<const N: usize> StateJacobian<N> {
+    /// The identity map.
+    pub fn identity() -> Self {
+        Self {
+            q_q: SMatrix::identity(),
+            q_v: SMatrix::zeros(),
+            v_q: SMatrix::zeros(),
+            v_v: SMatrix::identity(),
+        }
+    }
+
+    /// All blocks zero.
+    pub fn zeros() -> Self {
+        Self {
+            q_q: SMatrix::zeros(),
+            q_v: SMatrix::zeros(),
+            v_q: SMatrix::zeros(),
+            v_v: SMatrix::zeros(),
+        }
+    }
+
+    /// The 2N × 2N matrix A = [[q_q, q_v], [v_q, v_v]]; `Z` must be 2N
+    /// (checked at compile time).
+    pub fn matrix<const Z: usize>(&self) -> SMatrix<f64, Z, Z> {
+        const { assert!(Z == 2 * N, "Z must equal 2N") };
+        let mut a = SMatrix::<f64, Z, Z>::zeros();
+        for i in 0..N {
+            for j in 0..N {
+                a[(i, j)] = self.q_q[(i, j)];
+                a[(i, N + j)] = self.q_v[(i, j)];
+                a[(N + i, j)] = self.v_q[(i, j)];
+                a[(N + i, N + j)] = self.v_v[(i, j)];
+            }
+        }
+        a
+    }
+
+    /// The composition `self ∘ first` (the Jacobian of applying the map of
+    /// `first`, then that of `self`).
+    pub fn after(&self, first: &Self) -> Self {
+        Self {
+            q_q: self.q_q * first.q_q + self.q_v * first.v_q,
+            q_v: self.q_q * first.q_v + self.q_v * first.v_v,
+            v_q: self.v_q * first.q_q + self.v_v * first.v_q,
+            v_v: self.v_q * first.q_v + self.v_v * first.v_v,
+        }
+    }
+
+    /// This Jacobian applied to the input Jacobian of an earlier step.
+    pub fn times_input<const U: usize>(&self, b: &InputJacobian<N, U>) -> InputJacobian<N, U> {
+        InputJacobian {
+            q_u: self.q_q * b.q_u + self.q_v * b.v_u,
+            v_u: self.v_q * b.q_u + self.v_v * b.v_u,
+        }
+    }
+}
+
+impl<const N: usize, const U: usize> InputJacobian<N, U> {
+    /// All blocks zero.
+    pub fn zeros() -> Self {
+        Self {
+            q_u: SMatrix::zeros(),
+            v_u: SMatrix::zeros(),
+        }
+    }
+
+    /// The 2N × U matrix B = [q_u; v_u]; `Z` must be 2N (checked at
+    /// compile time).
+    pub fn matrix<const Z: usize>(&self) -> SMatrix<f64, Z, U> {
+        const { assert!(Z == 2 * N, "Z must equal 2N") };
+        let mut b = SMatrix::<f64, Z, U>::zeros();
+        for i in 0..N {
+            for j in 0..U {
+                b[(i, j)] = self.q_u[(i, j)];
+                b[(N + i, j)] = self.v_u[(i, j)];
+            }
+        }
+        b
+    }
+}
+
+/// The exact derivatives of one step z₁ = Φ(z₀, u) (module docs):
+/// A = ∂z₁/∂z₀ and B = ∂z₁/∂u.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StepDerivatives<const N: usize, const U: usize> {
+    /// A = ∂z₁/∂z₀.
+    pub a: StateJacobian<N>,
+    /// B = ∂z₁/∂u.
+    pub b: InputJacobian<N, U>,
+}
+
+/// The exact derivatives of one step in momentum form,
+/// (z₀, p₀, u) ↦ (z₁, p₁) with the momentum p₀ given (carried from the
+/// previous step, [`Stepper::step_forced_with_momentum`]): what a rollout's
+/// derivatives chain.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MomentumDerivatives<const N: usize, const U: usize> {
+    /// ∂z₁/∂z₀ at fixed p₀ (z₀ enters through x₁ = q₀ + Δt·v₀).
+    pub z_z: StateJacobian<N>,
+    /// ∂q₁/∂p₀.
+    pub q_p: SMatrix<f64, N, N>,
+    /// ∂v₁/∂p₀.
+    pub v_p: SMatrix<f64, N, N>,
+    /// ∂z₁/∂u.
+    pub z_u: InputJacobian<N, U>,
+    /// ∂p₁/∂q₀.
+    pub p_q: SMatrix<f64, N, N>,
+    /// ∂p₁/∂v₀.
+    pub p_v: SMatrix<f64, N, N>,
+    /// ∂p₁/∂p₀.
+    pub p_p: SMatrix<f64, N, N>,
+    /// ∂p₁/∂u.
+    pub p_u: SMatrix<f64, N, U>,
+}
+
+/// Derivatives of one converged sub-step (x₁, p₀, u) ↦ (v₁, p₁).
+struct Local<const N: usize, const U: usize> {
+    /// ∂v₁/∂x₁, ∂v₁/∂p₀, ∂v₁/∂u.
+    sx: SMatrix<f64, N, N>,
+    sp: SMatrix<f64, N, N>,
+    su: SMatrix<f64, N, U>,
+    /// ∂p₁/∂x₁ at fixed v₁, ∂p₁/∂v₁ (total), ∂p₁/∂u at fixed v₁.
+    px: SMatrix<f64, N, N>,
+    pv: SMatrix<f64, N, N>,
+    pu: SMatrix<f64, N, U>,
+}
+
+/// Sensitivities of (x, p) and of the last v along W seed directions.
+#[derive(Clone, Copy)]
+struct Seeds<const N: usize, const W: usize> {
+    x: SMatrix<f64, N, W>,
+    p: SMatrix<f64, N, W>,
+    v: SMatrix<f64, N, W>,
+}
+
+impl<const N: usize, const W: usize> Seeds<N, W> {
+    fn new(x: SMatrix<f64, N, W>, p: SMatrix<f64, N, W>) -> Self {
+        Self {
+            x,
+            p,
+            v: SMatrix::zeros(),
+        }
+    }
+}
+
+/// The seed groups of [`Stepper::propagate`]: directions of q₀, v₀, p₀
+/// and u.
+#[derive(Clone, Copy)]
+struct Groups<const N: usize, const U: usize> {
+    q: Seeds<N, N>,
+    v: Seeds<N, N>,
+    p: Seeds<N, N>,
+    u: Seeds<N, U>,
+}
+
+impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
+    /// Refuses an input vector with NaN or ±∞; `U` must equal
+    /// [`Dynamics::INPUTS`] (a compile-time check).
+    fn check_input<const U: usize>(u: &SVector<f64, U>) -> Result<(), StepError> {
+        const { assert!(U == M::INPUTS, "U must equal Dynamics::INPUTS") };
+        if max_abs(u).is_nan() {
+            Err(StepError::NonFiniteInput)
+        } else {
+            Ok(())
+        }
+    }
+
+    /// One forced sub-step (module docs), u = 0 on the unforced path.
+    #[inline(always)]
+    fn solve_forced_any<const U: usize>(
+        &self,
+        x1: &SVector<f64, N>,
+        p0: &SVector<f64, N>,
+        h: f64,
+        guess: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+    ) -> Result<crate::step::Forced<N, C>, StepError> {
+        let zero = u.iter().all(|x| *x == 0.0);
+        let (model, k) = (&self.model, &self.k);
+        let force = |q: &SVector<f64, N>| model.input_matrix::<U>(k, q) * u;
+        let jac = |q: &SVector<f64, N>| model.input_force_jacobian::<U>(k, q, u);
+        match (self.alpha == 0.0, zero) {
+            (true, true) => self.solve_forced_rule::<false, false>(x1, p0, h, guess, force, jac),
+            (true, false) => self.solve_forced_rule::<false, true>(x1, p0, h, guess, force, jac),
+            (false, true) => self.solve_forced_rule::<true, false>(x1, p0, h, guess, force, jac),
+            (false, false) => self.solve_forced_rule::<true, true>(x1, p0, h, guess, force, jac),
+        }
+    }
+
+    /// The position–momentum form with inputs: one sub-step of size `h`
+    /// from position `x1` with momentum `p0` under inputs `u` (module
+    /// docs); returns v₁, the momentum p₁ (including αh·B(m₁)u) and
+    /// diagnostics. `U` must equal [`Dynamics::INPUTS`].
+    pub fn solve_forced<const U: usize>(
+        &self,
+        x1: &SVector<f64, N>,
+        p0: &SVector<f64, N>,
+        h: f64,
+        guess: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
+        Self::check_input(u)?;
+        self.solve_forced_any(x1, p0, h, guess, u)
+            .map(|(v, p, r, _)| (v, p, r))
+    }
+
+    /// All sub-steps of one forced step from `z` with momentum `p0`.
+    fn advance_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        p0: &SVector<f64, N>,
+        guess: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+    ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
+        if max_abs(p0).is_nan() {
+            return Err(StepError::NonFiniteState);
+        }
+        let h = self.substep_dt();
+        let (mut z, mut p) = (*z, *p0);
+        let mut report = StepReport::default();
+        for i in 0..self.substeps {
+            let x1 = z.q + z.v * h;
+            let g = if i == 0 { *guess } else { z.v };
+            let (v1, p1, r, _) = self.solve_forced_any(&x1, &p, h, &g, u)?;
+            if i == 0 {
+                report = r;
+            } else {
+                report.iterations += r.iterations;
+                report.residual = report.residual.max(r.residual);
+                report.stalled |= r.stalled;
+                report.regularised |= r.regularised;
+            }
+            (z, p) = (State { q: x1, v: v1 }, p1);
+        }
+        Ok((z, p, report))
+    }
+
+    /// One step from `z` under inputs `u` (one per actuated joint, in
+    /// declaration order; `U` must equal [`Dynamics::INPUTS`]), starting
+    /// from the input-free momentum of `z` (module docs). With u = 0 this
+    /// is [`Stepper::step`], bit for bit.
+    pub fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+    ) -> Result<State<N>, StepError> {
+        self.step_forced_with_report(z, u).map(|(z, _)| z)
+    }
+
+    /// [`Stepper::step_forced`] with solver diagnostics.
+    pub fn step_forced_with_report<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+    ) -> Result<(State<N>, StepReport), StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        Self::check_input(u)?;
+        let p0 = self.momentum(z);
+        self.advance_forced(z, &p0, &z.v, u)
+            .map(|(z1, _, r)| (z1, r))
+    }
+
+    /// One forced step from `z` with its momentum `p0` known (carried from
+    /// the previous step); returns the new state, its momentum (with the
+    /// input's αΔt share for the midpoint rule) and diagnostics.
+    pub fn step_forced_with_momentum<const U: usize>(
+        &self,
+        z: &State<N>,
+        p0: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+    ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        Self::check_input(u)?;
+        self.advance_forced(z, p0, &z.v, u)
+    }
+
+    /// Fills `out` with the states after 1, 2, …, `out.len()` forced steps
+    /// from `z0`, step k under `inputs[k]` (`inputs` must be at least as
+    /// long as `out`), carrying the momentum between steps (module docs).
+    /// No allocation.
+    pub fn steps_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), RolloutError> {
+        let fail = |step, error| RolloutError { step, error };
+        if !z0.is_finite() {
+            return Err(fail(0, StepError::NonFiniteState));
+        }
+        if inputs.len() < out.len() {
+            return Err(fail(inputs.len(), StepError::NonFiniteInput));
+        }
+        let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
+        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
+            Self::check_input(u).map_err(|e| fail(k, e))?;
+            let guess = if self.substeps == 1 {
+                z.v * 2.0 - v_prev
+            } else {
+                z.v
+            };
+            let (z1, p1, _) = self
+                .advance_forced(&z, &p, &guess, u)
+                .map_err(|e| fail(k, e))?;
+            *slot = z1;
+            v_prev = z.v;
+            (z, p) = (z1, p1);
+        }
+        Ok(())
+    }
+
+    /// Π(m, v) = M(m)v + αh·(f(m, v) + B(m)u) and its derivatives
+    /// ∂Π/∂m (with the input's), ∂Π/∂v (at fixed m), from terms at m.
+    fn momentum_parts<const U: usize>(
+        &self,
+        t: &Terms<N>,
+        m: &SVector<f64, N>,
+        v: &SVector<f64, N>,
+        h: f64,
+        hu: &SMatrix<f64, N, N>,
+    ) -> (SMatrix<f64, N, N>, SMatrix<f64, N, N>) {
+        let (qm, _) = M::kinetic(t, v);
+        let ah = self.alpha * h;
+        if self.alpha == 0.0 {
+            return (qm.transpose(), t.mass);
+        }
+        let fq = self.model.force_jacobian(&self.k, m, v) + hu;
+        let mut fv = qm;
+        if M::DISSIPATIVE {
+            fv -= t.damping;
+        }
+        (qm.transpose() + fq * ah, t.mass + fv * ah)
+    }
+
+    /// The derivatives of a converged sub-step at (x₁, v₁, λ) under `u`
+    /// (module docs).
+    fn local<const U: usize>(
+        &self,
+        x1: &SVector<f64, N>,
+        v1: &SVector<f64, N>,
+        lambda: &SVector<f64, C>,
+        h: f64,
+        u: &SVector<f64, U>,
+    ) -> Result<Local<N, U>, StepError> {
+        let (model, k) = (&self.model, &self.k);
+        let alpha = self.alpha;
+        let (ah, a1) = (alpha * h, (1.0 - alpha) * h);
+        let m1 = x1 + v1 * ah;
+        let mut t = Terms::zeros();
+        model.terms(k, &m1, &mut t);
+        let forced = U > 0 && u.iter().any(|x| *x != 0.0);
+        let (b, hu) = if U > 0 {
+            let b = model.input_matrix::<U>(k, &m1);
+            let hu = if forced {
+                model.input_force_jacobian::<U>(k, &m1, u)
+            } else {
+                SMatrix::zeros()
+            };
+            (b, hu)
+        } else {
+            (SMatrix::zeros(), SMatrix::zeros())
+        };
+        let (qm, _) = M::kinetic(&t, v1);
+        let fq = model.force_jacobian(k, &m1, v1) + hu;
+        // Newton matrix J = ∂d/∂v₁
+        let mut jac = -t.mass;
+        if !M::CONSTANT_MASS {
+            jac += qm * a1;
+            jac -= qm.transpose() * ah;
+        }
+        if M::DISSIPATIVE {
+            jac -= t.damping * a1;
+        }
+        jac += fq * (ah * a1);
+        // ∂d/∂x₁
+        let mut dx = fq * a1 - qm.transpose();
+        let (g1t, g2) = if C > 0 {
+            dx -= model.constraint_hessian(k, x1, lambda);
+            (
+                model.constraints_and_jacobian(k, x1).1.transpose(),
+                model.constraints_and_jacobian(k, &(x1 + v1 * h)).1,
+            )
+        } else {
+            (SMatrix::zeros(), SMatrix::zeros())
+        };
+        let singular = StepError::SingularJacobian { iteration: 0 };
+        let neg_i = -SMatrix::<f64, N, N>::identity();
+        let (sx, sp, su) = kkt_solve3(&jac, &g1t, &(g2 * h), &(-dx), &(-g2), &neg_i, &(b * -a1))
+            .ok_or(singular)?;
+        // p₁ = Π(m₁, v₁) + αh·B(m₁)u
+        let (pm, pv) = self.momentum_parts::<U>(&t, &m1, v1, h, &hu);
+        let pv_total = pm * ah + pv;
+        Ok(Local {
+            sx,
+            sp,
+            su,
+            px: pm,
+            pv: pv_total,
+            pu: b * ah,
+        })
+    }
+
+    /// ∂p₀/∂q₀ and ∂p₀/∂v₀ of the input-free momentum p₀ of `z` with
+    /// sub-step `h` ([`Stepper::momentum`]).
+    fn momentum_derivatives_at(
+        &self,
+        z: &State<N>,
+        h: f64,
+    ) -> (SMatrix<f64, N, N>, SMatrix<f64, N, N>) {
+        let ah = self.alpha * h;
+        let m0 = z.q + z.v * ah;
+        let mut t = Terms::zeros();
+        self.model.terms(&self.k, &m0, &mut t);
+        let (pm, pv) = self.momentum_parts::<0>(&t, &m0, &z.v, h, &SMatrix::zeros());
+        (pm, pm * ah + pv)
+    }
+
+    /// ∂p/∂q and ∂p/∂v of the momentum of `z` ([`Stepper::momentum`]),
+    /// exact: the first link of a rollout's derivative chain.
+    pub fn momentum_derivatives(&self, z: &State<N>) -> (SMatrix<f64, N, N>, SMatrix<f64, N, N>) {
+        self.momentum_derivatives_at(z, self.substep_dt())
+    }
+
+    /// Propagates seeds through all sub-steps of a step from `z` with
+    /// momentum `p0` under `u`, solving each sub-step once: the seeds of
+    /// (x₁, p₀) in the directions of q₀, v₀ and p₀ (N each) and of u
+    /// (U, with the input's own direct effect). Returns the new state and
+    /// momentum, the diagnostics and the seeds of (q₁, v₁, p₁) per group.
+    fn propagate<const U: usize>(
+        &self,
+        z: &State<N>,
+        p0: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+        mut seeds: Groups<N, U>,
+    ) -> Result<(State<N>, SVector<f64, N>, StepReport, Groups<N, U>), StepError> {
+        let h = self.substep_dt();
+        let (mut zc, mut pc) = (*z, *p0);
+        let mut report = StepReport::default();
+        let eye_u = SMatrix::<f64, U, U>::identity();
+        for i in 0..self.substeps {
+            if i > 0 {
+                seeds.q.x += seeds.q.v * h;
+                seeds.v.x += seeds.v.v * h;
+                seeds.p.x += seeds.p.v * h;
+                seeds.u.x += seeds.u.v * h;
+            }
+            let x1 = zc.q + zc.v * h;
+            let (v1, p1, r, lambda) = self.solve_forced_any(&x1, &pc, h, &zc.v, u)?;
+            report.iterations += r.iterations;
+            report.residual = report.residual.max(r.residual);
+            report.stalled |= r.stalled;
+            report.regularised |= r.regularised;
+            let l = self.local(&x1, &v1, &lambda, h, u)?;
+            for g in [&mut seeds.q, &mut seeds.v, &mut seeds.p] {
+                g.v = l.sx * g.x + l.sp * g.p;
+                g.p = l.px * g.x + l.pv * g.v;
+            }
+            let g = &mut seeds.u;
+            g.v = l.sx * g.x + l.sp * g.p + l.su * eye_u;
+            g.p = l.px * g.x + l.pv * g.v + l.pu;
+            (zc, pc) = (State { q: x1, v: v1 }, p1);
+        }
+        Ok((zc, pc, report, seeds))
+    }
+
+    /// One forced step from `z` (as [`Stepper::step_forced`]) with its exact
+    /// derivatives A = ∂z₁/∂z₀ and B = ∂z₁/∂u (module docs). `U` must
+    /// equal [`Dynamics::INPUTS`] (`U = 0` for an unactuated mechanism: A
+    /// alone). No allocation.
+    pub fn step_with_derivatives<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+    ) -> Result<(State<N>, StepDerivatives<N, U>), StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        Self::check_input(u)?;
+        let h = self.substep_dt();
+        let p0 = self.momentum(z);
+        let (pq, pv) = self.momentum_derivatives_at(z, h);
+        let eye = SMatrix::<f64, N, N>::identity();
+        let seeds = Groups {
+            q: Seeds::new(eye, pq),
+            v: Seeds::new(eye * h, pv),
+            p: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
+            u: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
+        };
+        let (z1, _, _, s) = self.propagate(z, &p0, u, seeds)?;
+        Ok((
+            z1,
+            StepDerivatives {
+                a: StateJacobian {
+                    q_q: s.q.x,
+                    q_v: s.v.x,
+                    v_q: s.q.v,
+                    v_v: s.v.v,
+                },
+                b: InputJacobian {
+                    q_u: s.u.x,
+                    v_u: s.u.v,
+                },
+            },
+        ))
+    }
+
+    /// One forced step in momentum form (as
+    /// [`Stepper::step_forced_with_momentum`]) with the exact derivatives of
+    /// (z₁, p₁) with respect to (z₀, p₀, u): the link a rollout's
+    /// derivatives chain (the Markov state of a forced midpoint rollout is
+    /// (z, p)).
+    pub fn step_with_momentum_derivatives<const U: usize>(
+        &self,
+        z: &State<N>,
+        p0: &SVector<f64, N>,
+        u: &SVector<f64, U>,
+    ) -> Result<(State<N>, SVector<f64, N>, MomentumDerivatives<N, U>), StepError> {
+        if !z.is_finite() || max_abs(p0).is_nan() {
+            return Err(StepError::NonFiniteState);
+        }
+        Self::check_input(u)?;
+        let h = self.substep_dt();
+        let (eye, zero) = (
+            SMatrix::<f64, N, N>::identity(),
+            SMatrix::<f64, N, N>::zeros(),
+        );
+        let seeds = Groups {
+            q: Seeds::new(eye, zero),
+            v: Seeds::new(eye * h, zero),
+            p: Seeds::new(zero, eye),
+            u: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
+        };
+        let (z1, p1, _, s) = self.propagate(z, p0, u, seeds)?;
+        Ok((
+            z1,
+            p1,
+            MomentumDerivatives {
+                z_z: StateJacobian {
+                    q_q: s.q.x,
+                    q_v: s.v.x,
+                    v_q: s.q.v,
+                    v_v: s.v.v,
+                },
+                q_p: s.p.x,
+                v_p: s.p.v,
+                z_u: InputJacobian {
+                    q_u: s.u.x,
+                    v_u: s.u.v,
+                },
+                p_q: s.q.p,
+                p_v: s.v.p,
+                p_p: s.p.p,
+                p_u: s.u.p,
+            },
+        ))
+    }
+}
+
+/// Solves the KKT system [J, −G₁ᵀ; A, 0][X; Λ] = [R; S] for three
+/// right-hand sides (R₁ with S₁; R₂, R₃ with S = 0), returning the X
+/// parts. One factorisation of J and of the Schur complement A J⁻¹ G₁ᵀ;
+/// a singular J falls back to the regularised solve column by column.
+#[allow(clippy::too_many_arguments)]
+fn kkt_solve3<const N: usize, const C: usize, const U: usize>(
+    j: &SMatrix<f64, N, N>,
+    g1t: &SMatrix<f64, N, C>,
+    a: &SMatrix<f64, C, N>,
+    r1: &SMatrix<f64, N, N>,
+    s1: &SMatrix<f64, C, N>,
+    r2: &SMatrix<f64, N, N>,
+    r3: &SMatrix<f64, N, U>,
+) -> Option<(SMatrix<f64, N, N>, SMatrix<f64, N, N>, SMatrix<f64, N, U>)> {
+    if let Some(lu) = PartialLu::new(*j, 1e-12) {
+        // J x − G₁ᵀ y = r, A x = s:  x = J⁻¹(r + G₁ᵀ y),  (A J⁻¹ G₁ᵀ) y = s − A J⁻¹ r
+        let (x1, x2, x3) = (
+            lu.solve_matrix(r1),
+            lu.solve_matrix(r2),
+            lu.solve_matrix(r3),
+        );
+        if C == 0 {
+            return Some((x1, x2, x3));
+        }
+        let jg = lu.solve_matrix(g1t);
+        let schur = FullPivLu::new(a * jg, 1e-13);
+        let y1 = schur.solve_matrix(&(s1 - a * x1));
+        let y2 = schur.solve_matrix(&(-(a * x2)));
+        let y3 = schur.solve_matrix(&(-(a * x3)));
+        let out = (x1 + jg * y1, x2 + jg * y2, x3 + jg * y3);
+        let finite = out
+            .0
+            .iter()
+            .chain(out.1.iter())
+            .chain(out.2.iter())
+            .all(|x| x.is_finite());
+        return finite.then_some(out);
+    }
+    let b = -g1t;
+    let mut x1 = SMatrix::<f64, N, N>::zeros();
+    let mut x2 = SMatrix::<f64, N, N>::zeros();
+    let mut x3 = SMatrix::<f64, N, U>::zeros();
+    for col in 0..N {
+        let ((x, _), _) = solve_kkt_regularised(
+            j,
+            &b,
+            a,
+            &r1.column(col).into_owned(),
+            &s1.column(col).into_owned(),
+        )?;
+        x1.set_column(col, &x);
+        let ((x, _), _) =
+            solve_kkt_regularised(j, &b, a, &r2.column(col).into_owned(), &SVector::zeros())?;
+        x2.set_column(col, &x);
+    }
+    for col in 0..U {
+        let ((x, _), _) =
+            solve_kkt_regularised(j, &b, a, &r3.column(col).into_owned(), &SVector::zeros())?;
+        x3.set_column(col, &x);
+    }
+    Some((x1, x2, x3))
+}
