@@ -422,8 +422,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// differentiates into the nominal forced step's derivatives
     /// (`Variational::step_derivatives`) plus the GP mean's gradient
     /// (`Gp::predict_mean_gradient_into`) through the encoding. The
-    /// projection's implicit derivative (constrained models) is not
-    /// implemented: such a model returns [`StepError::InvalidOptions`].
+    /// projection (constrained models: loops, maximal coordinates)
+    /// differentiates implicitly through its KKT conditions at the
+    /// projected velocity (multipliers and the constraints' second
+    /// derivatives included).
     pub fn step_derivatives_forced<const U: usize>(
         &self,
         z: &State<N>,
@@ -437,11 +439,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         }
         if !u.iter().all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
-        }
-        if self.project && C > 0 {
-            return Err(StepError::InvalidOptions(
-                "derivatives of the projected learned step are not implemented",
-            ));
         }
         let h = self.dt;
         // prior
@@ -495,11 +492,50 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             return Err(StepError::Prediction { step: None });
         }
         let eye = SMatrix::<f64, N, N>::identity();
+        let x1 = z.q + z.v * h;
+        if self.project && C > 0 {
+            // v* = argmin ½‖v − v_u‖² subject to g(x₁ + h·v) = 0; its KKT
+            // conditions F = [v − v_u + h·G(y)ᵀλ; g(y)] = 0, y = x₁ + h·v,
+            // differentiate (implicit function theorem) into
+            // [I + h²H, h·Gᵀ; h·G, 0] [dv; dλ] = [dv_u − h·H·dx₁; −G·dx₁]
+            // with H = Σλ_i∇²g_i(y), for every direction of (q₀, v₀, u)
+            let singular = StepError::SingularJacobian {
+                iteration: 0,
+                step: None,
+            };
+            let vu = v;
+            let (vp, _) = project_velocity(&self.model, &x1, &vu, h, &self.options)?;
+            let y = x1 + vp * h;
+            let k = self.model.constants()?;
+            let (_, g) = self.model.constraints_and_jacobian(&k, &y);
+            // λ from the first KKT row, h·Gᵀλ = v_u − v* (least squares)
+            let gg = g * g.transpose();
+            let lambda =
+                vigp_core::linalg::solve_partial(&gg, &(g * (vu - vp) / h)).ok_or(singular)?;
+            let hess = self.model.constraint_hessian(&k, &y, &lambda);
+            let jm = eye + hess * (h * h);
+            let bm = g.transpose() * h;
+            let am = g * h;
+            let solve = |dvu: SVector<f64, N>, dx1: SVector<f64, N>| {
+                let r = dvu - hess * dx1 * h;
+                let c = -(g * dx1);
+                vigp_core::linalg::solve_kkt(&jm, &bm, &am, &r, &c)
+                    .map(|(dv, _)| dv)
+                    .ok_or(singular)
+            };
+            let (mut pq, mut pv, mut pu) = (v_q, v_v, v_u);
+            for i in 0..N {
+                let e = eye.column(i).into_owned();
+                pq.set_column(i, &solve(v_q.column(i).into_owned(), e)?);
+                pv.set_column(i, &solve(v_v.column(i).into_owned(), e * h)?);
+            }
+            for i in 0..U {
+                pu.set_column(i, &solve(v_u.column(i).into_owned(), SVector::zeros())?);
+            }
+            (v, v_q, v_v, v_u) = (vp, pq, pv, pu);
+        }
         Ok((
-            State {
-                q: z.q + z.v * h,
-                v,
-            },
+            State { q: x1, v },
             vigp_core::StepDerivatives {
                 a: vigp_core::StateJacobian {
                     q_q: eye,
