@@ -333,6 +333,62 @@ fn assign_body(
     (quote!(#lets #(#assigns)* #extra), uses_q, uses_k)
 }
 
+/// The statements `h[(a, b)] = Σ_r (hess_r)_ab · w[r]` (upper triangle,
+/// mirrored) of a weighted sum of symmetric n × n Hessians with weights
+/// named `weight` (Σ μ_r ∇²g_r, Σ u_i ∇²s_i), skipping structural zeros;
+/// with the trig lets they need and whether they read q and k.
+fn weighted_hessian(
+    constants: &mut Constants,
+    hess: &[Vec<Vec<Expr>>],
+    n: usize,
+    weight: &str,
+) -> (TokenStream, Vec<TokenStream>, bool, bool) {
+    let weight = format_ident!("{}", weight);
+    let all = hess
+        .iter()
+        .flat_map(|h| (0..n).flat_map(move |a| (a..n).map(move |b| &h[a][b])));
+    let trig = Trig::new(freqs(all));
+    let mut w = Writer {
+        constants,
+        uses: Uses::default(),
+    };
+    let mut assigns = Vec::new();
+    for a in 0..n {
+        for b in a..n {
+            let mut sum = TokenStream::new();
+            for (r, h) in hess.iter().enumerate() {
+                if h[a][b].is_zero() {
+                    continue;
+                }
+                let ri = index(r);
+                let x = w.expr(&h[a][b], &trig);
+                sum = if sum.is_empty() {
+                    quote!((#x) * #weight[#ri])
+                } else {
+                    quote!(#sum + (#x) * #weight[#ri])
+                };
+            }
+            if sum.is_empty() {
+                continue;
+            }
+            let t = ij(a, b);
+            assigns.push(quote!(h[#t] = #sum;));
+            if a != b {
+                let tt = ij(b, a);
+                assigns.push(quote!(h[#tt] = h[#t];));
+            }
+        }
+    }
+    let uses_q = w.uses.q.get() || !trig.lets.is_empty();
+    (trig.lets(), assigns, uses_q, w.uses.k.get())
+}
+
+/// The tokens `(i, j)` of a matrix index.
+fn ij(i: usize, j: usize) -> TokenStream {
+    let (i, j) = (index(i), index(j));
+    quote!((#i, #j))
+}
+
 fn freqs<'a>(exprs: impl IntoIterator<Item = &'a Expr>) -> Vec<Freq> {
     let mut out: Vec<Freq> = exprs
         .into_iter()
@@ -366,10 +422,6 @@ pub fn emit_dynamics(
         } else {
             format_ident!("_{}", name)
         }
-    };
-    let ij = |i: usize, j: usize| {
-        let (i, j) = (index(i), index(j));
-        quote!((#i, #j))
     };
 
     // mass(q)
@@ -719,49 +771,8 @@ pub fn emit_dynamics(
                     .collect()
             })
             .collect();
-        let mut all: Vec<&Expr> = Vec::new();
-        for h in &hess {
-            for a in 0..n {
-                for b in a..n {
-                    all.push(&h[a][b]);
-                }
-            }
-        }
-        let trig = Trig::new(freqs(all.iter().copied()));
-        let mut w = Writer {
-            constants: &mut constants,
-            uses: Uses::default(),
-        };
-        let mut assigns = Vec::new();
-        for a in 0..n {
-            for b in a..n {
-                let mut sum = TokenStream::new();
-                for (r, h) in hess.iter().enumerate() {
-                    if h[a][b].is_zero() {
-                        continue;
-                    }
-                    let ri = index(r);
-                    let x = w.expr(&h[a][b], &trig);
-                    sum = if sum.is_empty() {
-                        quote!((#x) * mu[#ri])
-                    } else {
-                        quote!(#sum + (#x) * mu[#ri])
-                    };
-                }
-                if sum.is_empty() {
-                    continue;
-                }
-                let t = ij(a, b);
-                assigns.push(quote!(h[#t] = #sum;));
-                if a != b {
-                    let tt = ij(b, a);
-                    assigns.push(quote!(h[#tt] = h[#t];));
-                }
-            }
-        }
-        let lets = trig.lets();
-        let q_arg = arg(w.uses.q.get() || !trig.lets.is_empty(), "q");
-        let k_arg = arg(w.uses.k.get(), "k");
+        let (lets, assigns, uq, uk) = weighted_hessian(&mut constants, &hess, n, "mu");
+        let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
         let mu_arg = arg(!assigns.is_empty(), "mu");
         let hess_fn = quote! {
             fn constraint_hessian(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>, #mu_arg: &#svector<f64, #cc>) -> #smatrix<f64, #nn, #nn> {
@@ -811,49 +822,8 @@ pub fn emit_dynamics(
                     .collect()
             })
             .collect();
-        let mut all: Vec<&Expr> = Vec::new();
-        for h in &hess {
-            for a in 0..n {
-                for c in a..n {
-                    all.push(&h[a][c]);
-                }
-            }
-        }
-        let trig = Trig::new(freqs(all.iter().copied()));
-        let mut w = Writer {
-            constants: &mut constants,
-            uses: Uses::default(),
-        };
-        let mut assigns = Vec::new();
-        for a in 0..n {
-            for c in a..n {
-                let mut sum = TokenStream::new();
-                for (i, h) in hess.iter().enumerate() {
-                    if h[a][c].is_zero() {
-                        continue;
-                    }
-                    let ii = index(i);
-                    let x = w.expr(&h[a][c], &trig);
-                    sum = if sum.is_empty() {
-                        quote!((#x) * u[#ii])
-                    } else {
-                        quote!(#sum + (#x) * u[#ii])
-                    };
-                }
-                if sum.is_empty() {
-                    continue;
-                }
-                let t = ij(a, c);
-                assigns.push(quote!(h[#t] = #sum;));
-                if a != c {
-                    let tt = ij(c, a);
-                    assigns.push(quote!(h[#tt] = h[#t];));
-                }
-            }
-        }
-        let lets = trig.lets();
-        let q_arg = arg(w.uses.q.get() || !trig.lets.is_empty(), "q");
-        let k_arg = arg(w.uses.k.get(), "k");
+        let (lets, assigns, uq, uk) = weighted_hessian(&mut constants, &hess, n, "u");
+        let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
         let u_arg = arg(!assigns.is_empty(), "u");
         let h_fn = quote! {
             fn input_force_jacobian<const U: usize>(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>, #u_arg: &#svector<f64, U>) -> #smatrix<f64, #nn, #nn> {
