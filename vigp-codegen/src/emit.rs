@@ -5,7 +5,7 @@
 //!
 //! [`Mechanism`]: https://docs.rs/vigp-runtime
 
-use crate::model::{Anchor, JointKind, Model, Point};
+use crate::model::{Anchor, DefaultValue, JointKind, Model, Point};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::Ident;
@@ -529,9 +529,33 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     });
     let link_defaults = m.links.iter().map(|l| {
         let ln = &l.name;
-        let (mass, length, inertia) = (lit(l.mass), lit(l.length), lit(l.inertia));
-        let com = pair(l.com.unwrap_or([l.length * 0.5, 0.0]));
-        quote!(#ln: ::vigp::Link { mass: #mass, length: #length, inertia: #inertia, com: #com },)
+        let (mass, length) = (l.mass.tokens(), l.length.tokens());
+        let given_com = l.com.as_ref().map(|[x, y]| {
+            let (x, y) = (x.tokens(), y.tokens());
+            quote!([#x, #y])
+        });
+        match (&l.inertia, given_com, l.length.known()) {
+            // every value is written once: no defaults to derive
+            (Some(inertia), Some(com), _) => {
+                let inertia = inertia.tokens();
+                quote!(#ln: ::vigp::Link { mass: #mass, length: #length, inertia: #inertia, com: #com },)
+            }
+            (Some(inertia), None, Some(len)) => {
+                let (inertia, com) = (inertia.tokens(), pair([len * 0.5, 0.0]));
+                quote!(#ln: ::vigp::Link { mass: #mass, length: #length, inertia: #inertia, com: #com },)
+            }
+            // a default (m·l²/12, [l/2, 0]) of a value only the compiler
+            // knows: derived at run time, each expression written once
+            (inertia, com, _) => {
+                let some = |t: TokenStream| quote!(::core::option::Option::Some(#t));
+                let none = quote!(::core::option::Option::None);
+                let inertia = inertia
+                    .as_ref()
+                    .map_or_else(|| none.clone(), |p| some(p.tokens()));
+                let com = com.map_or(none, some);
+                quote!(#ln: ::vigp::Link::with_defaults(#mass, #length, #inertia, #com),)
+            }
+        }
     });
     let joints_items = if has_joints {
         let fields = m.joints.iter().map(|j| {
@@ -567,8 +591,11 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     };
     let joints_default = if has_joints {
         let defaults = m.joints.iter().map(|j| {
-            let (jn, d) = (&j.name, lit(j.damping.unwrap_or(0.0)));
-            let (k, r) = (lit(j.stiffness.unwrap_or(0.0)), lit(j.rest.unwrap_or(0.0)));
+            let value = |p: &Option<DefaultValue>| {
+                p.as_ref().map_or_else(|| lit(0.0), DefaultValue::tokens)
+            };
+            let (jn, d) = (&j.name, value(&j.damping));
+            let (k, r) = (value(&j.stiffness), value(&j.rest));
             match (dissipative, elastic) {
                 (true, true) => {
                     quote!(#jn: ::vigp::ElasticJoint { damping: #d, stiffness: #k, rest: #r },)
@@ -581,7 +608,10 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     } else {
         quote!()
     };
-    let gravity = pair(m.gravity);
+    let gravity = {
+        let [gx, gy] = [m.gravity[0].tokens(), m.gravity[1].tokens()];
+        quote!([#gx, #gy])
+    };
     let link_names = m.links.iter().map(|l| l.name.unraw().to_string());
     let coord_names = m.tree.iter().map(|&j| m.joints[j].name.unraw().to_string());
     let kinds: Vec<_> = m

@@ -8,6 +8,7 @@
 
 use super::model::{Anchor, JointKind, Model, Point};
 use crate::emit::lit;
+use crate::model::DefaultValue;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::ext::IdentExt;
@@ -20,11 +21,6 @@ fn triple(p: [f64; 3]) -> TokenStream {
 fn quad(p: [f64; 4]) -> TokenStream {
     let items = p.map(lit);
     quote!([#(#items),*])
-}
-
-fn matrix(m: &[[f64; 3]; 3]) -> TokenStream {
-    let rows = m.map(triple);
-    quote!([#(#rows),*])
 }
 
 fn usize_lit(n: usize) -> Literal {
@@ -86,10 +82,31 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
     });
     let link_defaults = m.links.iter().map(|l| {
         let ln = &l.name;
-        let mass = lit(l.mass);
-        let inertia = matrix(&l.inertia);
-        let com = triple(l.default_com());
-        let length = lit(l.length.unwrap_or(0.0));
+        let mass = l.mass.tokens();
+        let inertia = {
+            let rows = l.inertia.iter().map(|r| {
+                let r = r.iter().map(DefaultValue::tokens);
+                quote!([#(#r),*])
+            });
+            quote!([#(#rows),*])
+        };
+        let length = l
+            .length
+            .as_ref()
+            .map_or_else(|| lit(0.0), DefaultValue::tokens);
+        let com = match (&l.com, &l.length) {
+            (Some(c), _) => {
+                let c = c.iter().map(DefaultValue::tokens);
+                quote!([#(#c),*])
+            }
+            (None, None) => triple([0.0; 3]),
+            (None, Some(DefaultValue::Known(len))) => triple([0.5 * len, 0.0, 0.0]),
+            // a default (length/2, 0, 0) of a length only the compiler
+            // knows: derived at run time, the length written once
+            (None, Some(DefaultValue::Expr(_))) => {
+                return quote!(#ln: #sp::Link3::with_default_com(#mass, #inertia, #length),);
+            }
+        };
         quote!(#ln: #sp::Link3 { mass: #mass, inertia: #inertia, com: #com, length: #length },)
     });
     let (joints_items, joints_field, joints_default) = if dissipative {
@@ -99,7 +116,11 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             quote!(#doc pub #jn: ::vigp::Joint,)
         });
         let defaults = m.joints.iter().map(|jt| {
-            let (jn, d) = (&jt.name, lit(jt.damping.unwrap_or(0.0)));
+            let d = jt
+                .damping
+                .as_ref()
+                .map_or_else(|| lit(0.0), DefaultValue::tokens);
+            let jn = &jt.name;
             quote!(#jn: ::vigp::Joint { damping: #d },)
         });
         let doc = format!(" Joint parameters of [`{name_str}`].");
@@ -115,7 +136,10 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
     } else {
         (quote!(), quote!(), quote!())
     };
-    let gravity = triple(m.gravity);
+    let gravity = {
+        let g = m.gravity.iter().map(DefaultValue::tokens);
+        quote!([#(#g),*])
+    };
     let link_names: Vec<String> = m.links.iter().map(|l| l.name.unraw().to_string()).collect();
     let joint_names: Vec<String> = m
         .joints
