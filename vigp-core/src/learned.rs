@@ -30,8 +30,9 @@
 //! ```
 //!
 //! The input count is a type-level fact: `U` must equal
-//! [`Dynamics::INPUTS`] (a compile-time check), so a wrong-length input
-//! does not compile; NaN or ±∞ in u is [`StepError::NonFiniteInput`].
+//! [`Dynamics::INPUTS`] (a `const` assertion, evaluated when the code is
+//! generated: `cargo build` reports a wrong `U`, `cargo check` does not),
+//! so a wrong-length input does not build; NaN or ±∞ in u is [`StepError::NonFiniteInput`].
 //! [`LearnedStepper::step`] (no input) of a model with inputs is the forced
 //! step under u = 0, as the std runtime's unforced step of such a model. A
 //! model trained without inputs takes only u = 0 in `step_forced` (which is
@@ -318,7 +319,8 @@ where
 
     /// The unprojected prediction v_u = v̄(z, u) + μ(enc(z), u) of the next
     /// velocity under inputs `u` (module docs, "Inputs"). `U` must equal
-    /// [`Dynamics::INPUTS`] (checked at compile time).
+    /// [`Dynamics::INPUTS`] (a `const` assertion: `cargo build` reports a
+    /// wrong `U`).
     pub fn predict_velocity_forced<const U: usize>(
         &self,
         z: &State<N>,
@@ -397,7 +399,7 @@ where
 
     /// One learned step from `z` under inputs `u` (one per actuated joint,
     /// in declaration order; `U` must equal [`Dynamics::INPUTS`], checked
-    /// at compile time): GP input (enc(z), u), nominal prior the forced
+    /// when the code is built): GP input (enc(z), u), nominal prior the forced
     /// step [`Stepper::step_forced`], projection for loops. Equal to the
     /// std runtime's learned forced mean step to solver tolerance. NaN or
     /// ±∞ in `u` is [`StepError::NonFiniteInput`]; a model trained without
