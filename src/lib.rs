@@ -168,6 +168,11 @@ pub struct ReadmeDoctests;
 #[doc = include_str!("../docs/spatial.md")]
 pub struct SpatialDoctests;
 
+/// The examples of docs/control.md, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/control.md")]
+pub struct ControlDoctests;
+
 /// The names most programs need.
 #[cfg(feature = "std")]
 pub mod prelude {

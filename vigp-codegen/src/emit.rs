@@ -336,16 +336,6 @@ fn input_work(
     }
 }
 
-/// `const INPUT_NAMES` of a `Mechanism` impl (nothing when unactuated).
-fn mechanism_input_names(m: &Model) -> TokenStream {
-    let inputs = m.inputs();
-    if inputs.is_empty() {
-        return quote!();
-    }
-    let names = inputs.iter().map(|&j| m.joints[j].name.unraw().to_string());
-    quote!(const INPUT_NAMES: &'static [&'static str] = &[#(#names),*];)
-}
-
 /// The maximal-coordinate view: each link's centre-of-mass pose (x, y, θ),
 /// every joint a constraint (2 equations), plus the coordinate maps.
 /// Returns the items of every target and those of the std runtime
@@ -415,7 +405,6 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
         None => quote!(),
     };
     let inputs = input_work(m, &sys, false, &max_poses, &nm);
-    let mechanism_inputs = mechanism_input_names(m);
     let maximal_entries = m.links.iter().enumerate().flat_map(|(l, link)| {
         let (ln, pose) = (&link.name, pose_ident(m, l));
         [
@@ -465,7 +454,6 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
     let std_items = quote! {
         impl ::vigp::Mechanism<#nm, #cm> for #maximal_ty {
             const COORDINATES: [&'static str; #nm] = [#(#coord_names),*];
-            #mechanism_inputs
 
             fn kinetic_energy<D: ::vigp::Scalar>(&self, _q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
                 let links = &#sys.links;
@@ -759,7 +747,10 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             .iter()
             .map(|&j| m.joints[j].name.unraw().to_string());
         (
-            quote!(const INPUTS: usize = #u;),
+            quote! {
+                const INPUTS: usize = #u;
+                const INPUT_NAMES: &'static [&'static str] = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::INPUT_NAMES;
+            },
             quote! {
                 fn input_matrix<const U: usize>(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, U> {
                     ::vigp::embedded::Dynamics::input_matrix::<U>(&self.minimal(), k, q)
@@ -821,7 +812,6 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
         None => (quote!(), quote!()),
     };
     let min_inputs = input_work(m, &sys, true, &min_poses, &n);
-    let mechanism_inputs = mechanism_input_names(m);
     let lagrangian_body = if m.elastic() {
         quote!((#(#lagrangian_terms)+*) #min_springs_neg)
     } else {
@@ -831,7 +821,6 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
         quote! {
             impl ::vigp::Mechanism<#n, #c> for #minimal_ty {
             const COORDINATES: [&'static str; #n] = [#(#coord_names),*];
-            #mechanism_inputs
 
             fn kinetic_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
                 let links = &#sys.links;
