@@ -213,6 +213,7 @@ impl<const M: usize> PartialLu<M> {
 /// is forward stable for 2×2 systems, Higham, *Accuracy and Stability of
 /// Numerical Algorithms*, 2nd ed., §1.10.1) unless the determinant is below
 /// `1e-14 · |largest entry|²`, where elimination decides as for larger `M`.
+#[inline(always)]
 pub fn solve_partial<const M: usize>(
     a: &SMatrix<f64, M, M>,
     b: &SVector<f64, M>,

@@ -296,7 +296,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
 
     /// Multipliers are not part of the state; this returns only the state.
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
-        self.step_with_info(z).map(|(z, _)| z)
+        // the fixed-size step directly (no diagnostics to carry back): the
+        // same solve as `step_with_info`, with the same errors
+        let stepper = self.stepper()?;
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState { step: None });
+        }
+        stepper
+            .step(z)
+            .map_err(|e| self.explain(StepError::from(e), z))
     }
 }
 
