@@ -141,18 +141,14 @@ where
 /// The coordinate s_j(q) of joint `k` (revolute or prismatic): the minimal
 /// coordinate itself for a tree joint, [`joint_coordinate`] of the link
 /// poses (on the branch within π of `near`) for a loop joint.
-fn coordinate_of<S, R, const B: usize, const J: usize, const N: usize>(
+fn coordinate_of<R: Real, const B: usize, const J: usize, const N: usize>(
     joints: &[Joint3; J],
     layout: &Layout<J>,
     k: usize,
     q: &SVector<R, N>,
     poses: &[Pose3<R>; B],
     near: f64,
-) -> R
-where
-    S: Spatial<B, J>,
-    R: Real,
-{
+) -> R {
     let j = &joints[k];
     let o = layout.coordinate[k];
     if o != usize::MAX {
@@ -182,7 +178,7 @@ where
         if sp.stiffness == 0.0 {
             continue;
         }
-        let s = coordinate_of::<S, R, B, J, N>(&joints, &layout, k, q, poses, sp.rest);
+        let s = coordinate_of::<R, B, J, N>(&joints, &layout, k, q, poses, sp.rest);
         let stretch = s - sp.rest;
         v = v + stretch * stretch * (0.5 * sp.stiffness);
     }
@@ -215,7 +211,7 @@ where
     for (i, &k) in S::INPUT_JOINTS.iter().enumerate() {
         let ui = u.get(i).copied().unwrap_or(0.0);
         if ui != 0.0 {
-            w = w + coordinate_of::<S, R, B, J, N>(&joints, &layout, k, q, &poses, 0.0) * ui;
+            w = w + coordinate_of::<R, B, J, N>(&joints, &layout, k, q, &poses, 0.0) * ui;
         }
     }
     w
@@ -244,7 +240,7 @@ where
             continue;
         }
         let p = *cached.get_or_insert_with(|| poses::<S, Jet1<N>, B, J, N>(sys, &qj));
-        let s = coordinate_of::<S, Jet1<N>, B, J, N>(&joints, &layout, k, &qj, &p, 0.0);
+        let s = coordinate_of::<Jet1<N>, B, J, N>(&joints, &layout, k, &qj, &p, 0.0);
         for l in 0..N {
             out[(l, i)] = s.g[l];
         }
