@@ -493,6 +493,11 @@ fn constant_torque_settles_at_the_static_equilibrium_in_space() {
         let x0 = sys.minimal().to_maximal(&z0, dt);
         let mut out = vec![x0; inputs.len() + 1];
         stepper.rollout_forced_into(&x0, &inputs, &mut out).unwrap();
+        // the std trait's rollout is the same trajectory
+        assert_eq!(
+            SpatialIntegrator::rollout_forced(&stepper, &x0, &inputs).unwrap(),
+            out
+        );
         let theta = stepper.joint_coordinates(out.last().unwrap())[0];
         let err = (theta.sin() - target).abs();
         println!("u = {u0}, maximal: |sin θ − u/(m g l_c)| = {err:.1e}");
