@@ -26,8 +26,13 @@
 //! ```
 //!
 //! with μ∓(ω) = J_r(Δt·ω)^{−ᵀ, −1}·Jω ([`so3::momentum`]), F the damping
-//! forces −D(k+1)·(v, ω)_{k+1}, and G the constraint Jacobian with respect
-//! to (x, η). These are solved by Newton's method on the KKT system with
+//! forces −D(k+1)·(v, ω)_{k+1} plus, for a forced step
+//! ([`LieStepper::step_forced`]), the inputs' Σ u_i·∂ṡ_i/∂ν at k+1 (ṡ_i
+//! the rate of actuated joint i, [`joint_rates`]), and G the constraint
+//! Jacobian with respect to (x, η). Joint springs ½k(s − rest)² enter as
+//! potential forces −Δt·k(s − rest)·∂s/∂(x, η) at k+1, where gravity's
+//! Δt·m·g does (s by [`joint_coordinate`]); inputs and springs are fixed
+//! within the step, so the Newton matrix does not change. These are solved by Newton's method on the KKT system with
 //! exact Jacobians and a backtracking line search.
 //!
 //! Consequences: the discrete momentum map Σ x_{k+1} × m·v_k +
