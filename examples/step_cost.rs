@@ -17,7 +17,10 @@
 //! ```
 //!
 //! The difference of the two totals divided by the step count is the
-//! instruction count of one rollout step; `callgrind_annotate` splits it by
+//! instruction count of one rollout step (`driven_step` and `driven_step_ab`
+//! instead of a system name: a forced step of the actuated double pendulum
+//! without and with its exact A and B; `driven_midpoint_step[_ab]` for the
+//! midpoint rule); `callgrind_annotate` splits it by
 //! function (build with `--release` instead to keep functions apart).
 
 use nalgebra::SVector;
@@ -85,6 +88,55 @@ fn table_row<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
     Ok(())
 }
 
+vigp::mechanism! {
+    /// The paper's double pendulum with a motor on each joint (as in
+    /// `benches/step.rs`).
+    pub DrivenDoublePendulum {
+        gravity: [0.0, -9.81],
+        links {
+            upper: { mass: 1.0, length: 1.0 },
+            lower: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            shoulder: revolute(world, upper.start) { actuated },
+            elbow: revolute(upper.end, lower.start) { actuated },
+        }
+    }
+}
+
+/// `steps` forced steps of the driven double pendulum from the states of
+/// a trajectory, with (`ab`) or without their exact A and B: the
+/// instruction counts of the two runs give the cost of the derivatives.
+fn derivatives(
+    midpoint: bool,
+    with_ab: bool,
+    steps: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let sys = DrivenDoublePendulum::default();
+    let s = if midpoint {
+        Stepper::midpoint(sys, 0.01)?
+    } else {
+        Stepper::new(sys, 0.01)?
+    };
+    let u = SVector::<f64, 2>::new(0.3, -0.2);
+    let mut z = State::new([1.0, -0.5], [0.5, 1.0]);
+    let mut trace = 0.0;
+    for _ in 0..steps {
+        z = if with_ab {
+            let (z1, d) = s.step_with_derivatives(&z, &u)?;
+            trace += d.a.v_v.trace() + d.b.v_u[(0, 0)];
+            z1
+        } else {
+            s.step_forced(&z, &u)?
+        };
+    }
+    println!(
+        "{steps} steps (A and B: {with_ab}), final q = {:?}, {trace:.3}",
+        z.q
+    );
+    Ok(())
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.get(1).map(String::as_str) == Some("table") {
@@ -116,6 +168,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         None => 1000,
     };
     match system {
+        "driven_step" => derivatives(false, false, steps),
+        "driven_step_ab" => derivatives(false, true, steps),
+        "driven_midpoint_step" => derivatives(true, false, steps),
+        "driven_midpoint_step_ab" => derivatives(true, true, steps),
         "pendulum" => run(Pendulum::default(), State::new([1.0], [0.5]), steps),
         "cartpole" => run(
             Cartpole::default(),

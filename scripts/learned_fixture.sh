@@ -3,7 +3,8 @@
 # a small cart-pole model fitted by `vigp fit` on smooth synthetic
 # trajectories (written here by Python's standard library), saved as JSON and
 # exported by `vigp export` as Rust source. The test includes the source and
-# checks it against the JSON loaded by the std runtime.
+# checks it against the JSON loaded by the std runtime. The same for a model
+# with inputs (learned_drive_cartpole.*, examples/learned_forced_fixture.rs).
 #   bash scripts/learned_fixture.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -23,3 +24,6 @@ cargo run --release --bin vigp -- fit --system cartpole --data "$dir/learned_car
     --out "$dir/learned_cartpole.json" --max-samples 24 --restarts 0
 cargo run --release --bin vigp -- export --model "$dir/learned_cartpole.json" \
     --out "$dir/learned_cartpole.rs"
+# The forced model (an actuated cart-pole trained with inputs): trained in
+# Rust (`vigp fit` reads no inputs), exported through `vigp export`.
+cargo run --release --features cli --example learned_forced_fixture -- "$dir"

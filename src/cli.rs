@@ -1049,12 +1049,20 @@ where
     w(
         out,
         format_args!(
-            "wrote {}: {} GPs on N = {} points, d = {} inputs: {} numbers = {} bytes of f64 data \
+            "wrote {}: {} GPs on N = {} points, d = {} inputs{}: {} numbers = {} bytes of f64 data \
              ({}), {} bytes of source",
             a.out.display(),
             size.outputs,
             size.n,
             size.input_dim,
+            if learned.inputs() > 0 {
+                format!(
+                    " (state, then control inputs {})",
+                    M::INPUT_NAMES[..learned.inputs().min(M::INPUT_NAMES.len())].join(", ")
+                )
+            } else {
+                String::new()
+            },
             size.numbers,
             size.data_bytes,
             if a.variance {

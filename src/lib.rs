@@ -85,7 +85,8 @@
 //!   coordinate). Inputs are numbered in joint declaration order
 //!   (`Name::INPUT_NAMES`); their count is `Dynamics::INPUTS`, and input
 //!   vectors are `SVector<f64, U>` with `U` checked against it at compile
-//!   time. Steps: `Variational::step_forced`, `rollout_forced`, every
+//!   time (a `const` assertion, evaluated when the code is generated:
+//!   `cargo build` reports a wrong `U`, `cargo check` does not). Steps: `Variational::step_forced`, `rollout_forced`, every
 //!   [`Integrator`]'s `step_forced`, the embedded `Stepper::step_forced`;
 //!   exact derivatives A = ∂z₁/∂z₀, B = ∂z₁/∂u: `Variational::step_derivatives`,
 //!   `rollout_derivatives`, `Stepper::step_with_derivatives` (docs/control.md).
@@ -95,6 +96,19 @@
 //!   joint coordinate to V; when any joint declares `stiffness`, every joint
 //!   gets run-time `stiffness` and `rest` parameters (`vigp::Spring`, or
 //!   `vigp::ElasticJoint` with damping); otherwise no spring code exists.
+//! * Numbers: every value is an f64. A run-time parameter (`mass`, `length`,
+//!   `inertia`, `com`, `damping`, `stiffness`, `rest`, `gravity`) may be a
+//!   Rust expression such as `mass: 2.0 * M` or `rest: FRAC_PI_4`. Literals
+//!   and `+ - * /` of literals are evaluated by the macro (integer literals
+//!   count as f64) and checked when it runs: a mass of `-2.0 * 0.5` is a
+//!   compile error. An expression that names a constant or calls a function
+//!   becomes the default value as written, so the compiler checks its type
+//!   (write `2.0 * M`, not `2 * M`, for an `f64` constant). Its value is
+//!   checked at run time like any parameter set by hand: `Stepper::new`
+//!   returns the typed `InvalidModel` error, and `Variational::check` and
+//!   every step report it. Geometry shapes the generated code, so it must be
+//!   known when the macro runs: prismatic `axis`, the points `world @ [x, y]`
+//!   and `link @ [x, y]`, and for spatial links `frame` and joint axes.
 //!
 //! Generated items for `pub Name { … }`: `Name` (run-time parameters with the
 //! DSL's values as `Default`), `NameLinks`, `NameJoints` (if damped or
@@ -153,6 +167,11 @@ pub struct ReadmeDoctests;
 #[cfg(doctest)]
 #[doc = include_str!("../docs/spatial.md")]
 pub struct SpatialDoctests;
+
+/// The examples of docs/control.md, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/control.md")]
+pub struct ControlDoctests;
 
 /// The names most programs need.
 #[cfg(feature = "std")]

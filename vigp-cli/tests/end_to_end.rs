@@ -5,7 +5,8 @@
 //! held-out runs must print a learned MSE below the nominal one; `predict`
 //! writes bounded trajectories; `export` states its size. The same through
 //! the user-mechanism entry point (`vigp::cli::system::<M>()`, what
-//! `vigp::cli::main::<M>()` runs) on a mechanism declared here.
+//! `vigp::cli::main::<M>()` runs) on a mechanism declared here, and
+//! `export` of an actuated mechanism's model trained with inputs.
 
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -13,6 +14,10 @@ use std::process::Command;
 
 use vigp::prelude::*;
 use vigp::systems::Cartpole;
+
+#[path = "../../tests/common/drive_cartpole.rs"]
+mod drive_cartpole;
+use drive_cartpole::DriveCartpole;
 use vigp::{CoordinateKind, SVector};
 
 vigp::mechanism! {
@@ -312,6 +317,33 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("Crane"), "{e}");
+
+    // an actuated mechanism's model trained with inputs exports with them:
+    // the source is exactly the fixture that tests/embedded_learned.rs
+    // compiles and steps under inputs (against the std model, 1e-12)
+    let forced = dir.join("learned_drive_cartpole.json");
+    std::fs::write(
+        &forced,
+        include_str!("../../tests/fixtures/learned_drive_cartpole.json"),
+    )
+    .unwrap();
+    let rs = dir.join("forced.rs");
+    let mut out = Vec::new();
+    vigp::cli::run(
+        &[vigp::cli::system::<DriveCartpole>()],
+        ["x", "export", "--model", s(&forced), "--out", s(&rs)],
+        &mut out,
+    )
+    .unwrap();
+    let out = String::from_utf8(out).unwrap();
+    assert!(
+        out.contains("d = 6 inputs (state, then control inputs rail)"),
+        "{out}"
+    );
+    assert_eq!(
+        std::fs::read_to_string(&rs).unwrap(),
+        include_str!("../../tests/fixtures/learned_drive_cartpole.rs")
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -5,7 +5,7 @@
 //!
 //! [`Mechanism`]: https://docs.rs/vigp-runtime
 
-use crate::model::{Anchor, JointKind, Model, Point};
+use crate::model::{Anchor, DefaultValue, JointKind, Model, Point};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::Ident;
@@ -336,16 +336,6 @@ fn input_work(
     }
 }
 
-/// `const INPUT_NAMES` of a `Mechanism` impl (nothing when unactuated).
-fn mechanism_input_names(m: &Model) -> TokenStream {
-    let inputs = m.inputs();
-    if inputs.is_empty() {
-        return quote!();
-    }
-    let names = inputs.iter().map(|&j| m.joints[j].name.unraw().to_string());
-    quote!(const INPUT_NAMES: &'static [&'static str] = &[#(#names),*];)
-}
-
 /// The maximal-coordinate view: each link's centre-of-mass pose (x, y, θ),
 /// every joint a constraint (2 equations), plus the coordinate maps.
 /// Returns the items of every target and those of the std runtime
@@ -415,7 +405,6 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
         None => quote!(),
     };
     let inputs = input_work(m, &sys, false, &max_poses, &nm);
-    let mechanism_inputs = mechanism_input_names(m);
     let maximal_entries = m.links.iter().enumerate().flat_map(|(l, link)| {
         let (ln, pose) = (&link.name, pose_ident(m, l));
         [
@@ -465,7 +454,6 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
     let std_items = quote! {
         impl ::vigp::Mechanism<#nm, #cm> for #maximal_ty {
             const COORDINATES: [&'static str; #nm] = [#(#coord_names),*];
-            #mechanism_inputs
 
             fn kinetic_energy<D: ::vigp::Scalar>(&self, _q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
                 let links = &#sys.links;
@@ -541,9 +529,33 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     });
     let link_defaults = m.links.iter().map(|l| {
         let ln = &l.name;
-        let (mass, length, inertia) = (lit(l.mass), lit(l.length), lit(l.inertia));
-        let com = pair(l.com.unwrap_or([l.length * 0.5, 0.0]));
-        quote!(#ln: ::vigp::Link { mass: #mass, length: #length, inertia: #inertia, com: #com },)
+        let (mass, length) = (l.mass.tokens(), l.length.tokens());
+        let given_com = l.com.as_ref().map(|[x, y]| {
+            let (x, y) = (x.tokens(), y.tokens());
+            quote!([#x, #y])
+        });
+        match (&l.inertia, given_com, l.length.known()) {
+            // every value is written once: no defaults to derive
+            (Some(inertia), Some(com), _) => {
+                let inertia = inertia.tokens();
+                quote!(#ln: ::vigp::Link { mass: #mass, length: #length, inertia: #inertia, com: #com },)
+            }
+            (Some(inertia), None, Some(len)) => {
+                let (inertia, com) = (inertia.tokens(), pair([len * 0.5, 0.0]));
+                quote!(#ln: ::vigp::Link { mass: #mass, length: #length, inertia: #inertia, com: #com },)
+            }
+            // a default (m·l²/12, [l/2, 0]) of a value only the compiler
+            // knows: derived at run time, each expression written once
+            (inertia, com, _) => {
+                let some = |t: TokenStream| quote!(::core::option::Option::Some(#t));
+                let none = quote!(::core::option::Option::None);
+                let inertia = inertia
+                    .as_ref()
+                    .map_or_else(|| none.clone(), |p| some(p.tokens()));
+                let com = com.map_or(none, some);
+                quote!(#ln: ::vigp::Link::with_defaults(#mass, #length, #inertia, #com),)
+            }
+        }
     });
     let joints_items = if has_joints {
         let fields = m.joints.iter().map(|j| {
@@ -579,8 +591,11 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     };
     let joints_default = if has_joints {
         let defaults = m.joints.iter().map(|j| {
-            let (jn, d) = (&j.name, lit(j.damping.unwrap_or(0.0)));
-            let (k, r) = (lit(j.stiffness.unwrap_or(0.0)), lit(j.rest.unwrap_or(0.0)));
+            let value = |p: &Option<DefaultValue>| {
+                p.as_ref().map_or_else(|| lit(0.0), DefaultValue::tokens)
+            };
+            let (jn, d) = (&j.name, value(&j.damping));
+            let (k, r) = (value(&j.stiffness), value(&j.rest));
             match (dissipative, elastic) {
                 (true, true) => {
                     quote!(#jn: ::vigp::ElasticJoint { damping: #d, stiffness: #k, rest: #r },)
@@ -593,7 +608,10 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     } else {
         quote!()
     };
-    let gravity = pair(m.gravity);
+    let gravity = {
+        let [gx, gy] = [m.gravity[0].tokens(), m.gravity[1].tokens()];
+        quote!([#gx, #gy])
+    };
     let link_names = m.links.iter().map(|l| l.name.unraw().to_string());
     let coord_names = m.tree.iter().map(|&j| m.joints[j].name.unraw().to_string());
     let kinds: Vec<_> = m
@@ -729,7 +747,10 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             .iter()
             .map(|&j| m.joints[j].name.unraw().to_string());
         (
-            quote!(const INPUTS: usize = #u;),
+            quote! {
+                const INPUTS: usize = #u;
+                const INPUT_NAMES: &'static [&'static str] = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::INPUT_NAMES;
+            },
             quote! {
                 fn input_matrix<const U: usize>(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> ::vigp::__private::nalgebra::SMatrix<f64, #n, U> {
                     ::vigp::embedded::Dynamics::input_matrix::<U>(&self.minimal(), k, q)
@@ -791,7 +812,6 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
         None => (quote!(), quote!()),
     };
     let min_inputs = input_work(m, &sys, true, &min_poses, &n);
-    let mechanism_inputs = mechanism_input_names(m);
     let lagrangian_body = if m.elastic() {
         quote!((#(#lagrangian_terms)+*) #min_springs_neg)
     } else {
@@ -801,7 +821,6 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
         quote! {
             impl ::vigp::Mechanism<#n, #c> for #minimal_ty {
             const COORDINATES: [&'static str; #n] = [#(#coord_names),*];
-            #mechanism_inputs
 
             fn kinetic_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #n>, v: &#svector<D, #n>) -> D {
                 let links = &#sys.links;

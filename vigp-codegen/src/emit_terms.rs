@@ -835,7 +835,17 @@ pub fn emit_dynamics(
                 h
             }
         };
-        (quote!(const INPUTS: usize = #uu;), quote!(#b_fn #h_fn))
+        let names = m
+            .inputs()
+            .into_iter()
+            .map(|j| syn::ext::IdentExt::unraw(&m.joints[j].name).to_string());
+        (
+            quote! {
+                const INPUTS: usize = #uu;
+                const INPUT_NAMES: &'static [&'static str] = &[#(#names),*];
+            },
+            quote!(#b_fn #h_fn),
+        )
     };
 
     // constants(): validation of every parameter, then the products

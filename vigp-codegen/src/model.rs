@@ -3,10 +3,51 @@
 //! joints (constraints). Every problem becomes a spanned `syn::Error`.
 
 use crate::parse::{self, Field, Input, Number, PointRef, Value};
-use proc_macro2::Span;
+use proc_macro2::{Span, TokenStream};
+use quote::ToTokens;
 use std::collections::HashMap;
 use syn::ext::IdentExt;
 use syn::{Attribute, Ident, Visibility};
+
+/// The default value of a run-time parameter (a field of the generated
+/// parameter struct): a number the macro knows and has checked, or a Rust
+/// expression only the compiler evaluates (`2.0 * M`), which the generated
+/// `constants` check when the program runs (a typed `InvalidModel`).
+#[derive(Clone)]
+pub enum DefaultValue {
+    /// Known when the macro runs.
+    Known(f64),
+    /// Evaluated by the compiled program.
+    Expr(syn::Expr),
+}
+
+impl DefaultValue {
+    /// The value, when the macro knows it.
+    pub fn known(&self) -> Option<f64> {
+        match self {
+            DefaultValue::Known(x) => Some(*x),
+            DefaultValue::Expr(_) => None,
+        }
+    }
+
+    /// The value as Rust: a literal, or the expression as written (its
+    /// spans kept, so a type error points at the user's code).
+    pub fn tokens(&self) -> TokenStream {
+        match self {
+            DefaultValue::Known(x) => crate::emit::lit(*x),
+            DefaultValue::Expr(e) => e.to_token_stream(),
+        }
+    }
+}
+
+impl From<&Number> for DefaultValue {
+    fn from(n: &Number) -> Self {
+        match n.value {
+            Some(x) => DefaultValue::Known(x),
+            None => DefaultValue::Expr((*n.expr).clone()),
+        }
+    }
+}
 
 /// A validated link.
 #[derive(Clone)]
@@ -15,14 +56,15 @@ pub struct Link {
     pub attrs: Vec<Attribute>,
     /// Name.
     pub name: Ident,
-    /// Mass (kg, > 0).
-    pub mass: f64,
-    /// Length (m, > 0).
-    pub length: f64,
-    /// Inertia about the centre of mass (kg·m², ≥ 0).
-    pub inertia: f64,
+    /// Mass (kg, > 0 when known).
+    pub mass: DefaultValue,
+    /// Length (m, > 0 when known).
+    pub length: DefaultValue,
+    /// Inertia about the centre of mass (kg·m², ≥ 0 when known); `None`
+    /// means a uniform rod's m·l²/12.
+    pub inertia: Option<DefaultValue>,
     /// Centre of mass in local coordinates; `None` means `[length/2, 0]`.
-    pub com: Option<[f64; 2]>,
+    pub com: Option<[DefaultValue; 2]>,
 }
 
 /// Where a point sits on a link.
@@ -89,15 +131,15 @@ pub struct Joint {
     /// Child point.
     pub child: Point,
     /// Declared damping (`None` when the joint does not mention it).
-    pub damping: Option<f64>,
+    pub damping: Option<DefaultValue>,
     /// `true` when the joint declares `actuated` (an input: a torque on a
     /// revolute joint, a force along a prismatic axis).
     pub actuated: bool,
     /// Declared spring stiffness k ≥ 0 (`None` when not mentioned).
-    pub stiffness: Option<f64>,
+    pub stiffness: Option<DefaultValue>,
     /// Declared spring rest coordinate s₀ (`None` when not mentioned; only
     /// allowed with `stiffness`).
-    pub rest: Option<f64>,
+    pub rest: Option<DefaultValue>,
 }
 
 /// A validated mechanism.
@@ -110,7 +152,7 @@ pub struct Model {
     /// Name.
     pub name: Ident,
     /// Gravity (m/s²).
-    pub gravity: [f64; 2],
+    pub gravity: [DefaultValue; 2],
     /// Links in declaration order.
     pub links: Vec<Link>,
     /// Joints in declaration order.
@@ -183,7 +225,7 @@ impl Errors {
 
 fn number(errs: &mut Errors, f: &Field) -> Option<Number> {
     match &f.value {
-        Value::Number(n) => Some(*n),
+        Value::Number(n) => Some(n.clone()),
         Value::Array(s, _) | Value::Flag(s) => {
             errs.push(*s, format!("`{}` takes a single number", f.key));
             None
@@ -191,14 +233,47 @@ fn number(errs: &mut Errors, f: &Field) -> Option<Number> {
     }
 }
 
-fn pair(errs: &mut Errors, f: &Field) -> Option<[f64; 2]> {
+/// A run-time parameter that must not be negative (when known).
+fn non_negative(errs: &mut Errors, f: &Field) -> Option<DefaultValue> {
+    let n = number(errs, f)?;
+    match n.value {
+        Some(x) if x < 0.0 => {
+            errs.add(n.error(format!("`{}` must not be negative, got {x}", f.key)));
+            None
+        }
+        _ => Some(DefaultValue::from(&n)),
+    }
+}
+
+/// The two numbers of a pair `[x, y]`.
+fn pair_numbers<'a>(errs: &mut Errors, f: &'a Field) -> Option<&'a [Number]> {
     match &f.value {
-        Value::Array(_, items) if items.len() == 2 => Some([items[0].value, items[1].value]),
+        Value::Array(_, items) if items.len() == 2 => Some(items),
         other => {
             errs.push(other.span(), format!("`{}` takes a pair `[x, y]`", f.key));
             None
         }
     }
+}
+
+/// A pair of run-time parameters.
+fn param_pair(errs: &mut Errors, f: &Field) -> Option<[DefaultValue; 2]> {
+    pair_numbers(errs, f).map(|p| [DefaultValue::from(&p[0]), DefaultValue::from(&p[1])])
+}
+
+/// A pair the macro must know (geometry that shapes the generated code).
+fn known_pair(errs: &mut Errors, p: &[Number], what: &str) -> Option<[f64; 2]> {
+    let mut out = [0.0; 2];
+    for (o, n) in out.iter_mut().zip(p) {
+        match n.known(what) {
+            Ok(x) => *o = x,
+            Err(e) => {
+                errs.add(e);
+                return None;
+            }
+        }
+    }
+    Some(out)
 }
 
 /// "`a`" or "one of `a`, `b`".
@@ -272,10 +347,10 @@ pub fn validate(input: Input) -> syn::Result<Model> {
     check_attrs(&mut errs, &input.attrs, true);
 
     // gravity
-    let mut gravity = [0.0, -9.81];
+    let mut gravity = [DefaultValue::Known(0.0), DefaultValue::Known(-9.81)];
     if let Some((key, v)) = &input.gravity {
         match v {
-            Value::Array(_, g) if g.len() == 2 => gravity = [g[0].value, g[1].value],
+            Value::Array(_, g) if g.len() == 2 => gravity = [(&g[0]).into(), (&g[1]).into()],
             // three numbers select the spatial path before this point
             other => errs.push(
                 other.span(),
@@ -318,45 +393,44 @@ pub fn validate(input: Input) -> syn::Result<Model> {
             &["mass", "length", "inertia", "com"],
             "a link",
         );
-        let positive = |errs: &mut Errors, key: &str| -> f64 {
+        let positive = |errs: &mut Errors, key: &str| -> DefaultValue {
             match f.get(key) {
                 None => {
                     errs.push(decl.name.span(), format!("link `{name}` needs `{key}`"));
-                    1.0
+                    DefaultValue::Known(1.0)
                 }
                 Some(field) => match number(errs, field) {
-                    Some(n) if n.value > 0.0 => n.value,
-                    Some(n) => {
-                        errs.add(n.error(format!("`{key}` must be positive, got {}", n.value)));
-                        1.0
-                    }
-                    None => 1.0,
+                    Some(n) => match n.value {
+                        Some(x) if x <= 0.0 => {
+                            errs.add(n.error(format!("`{key}` must be positive, got {x}")));
+                            DefaultValue::Known(1.0)
+                        }
+                        _ => DefaultValue::from(&n),
+                    },
+                    None => DefaultValue::Known(1.0),
                 },
             }
         };
         let mass = positive(&mut errs, "mass");
         let length = positive(&mut errs, "length");
         let inertia = match f.get("inertia") {
-            None if (mass * length * length).is_finite() => mass * length * length / 12.0,
-            None => {
-                errs.push(
-                    decl.name.span(),
-                    format!(
-                        "the default inertia m·l²/12 of link `{name}` overflows: give `inertia`"
-                    ),
-                );
-                0.0
-            }
-            Some(field) => match number(&mut errs, field) {
-                Some(n) if n.value >= 0.0 => n.value,
-                Some(n) => {
-                    errs.add(n.error(format!("`inertia` must not be negative, got {}", n.value)));
-                    0.0
+            None => match (mass.known(), length.known()) {
+                (Some(m), Some(l)) if !(m * l * l).is_finite() => {
+                    errs.push(
+                        decl.name.span(),
+                        format!(
+                            "the default inertia m·l²/12 of link `{name}` overflows: give `inertia`"
+                        ),
+                    );
+                    None
                 }
-                None => 0.0,
+                (Some(m), Some(l)) => Some(DefaultValue::Known(m * l * l / 12.0)),
+                // computed by the compiled program (and checked at run time)
+                _ => None,
             },
+            Some(field) => non_negative(&mut errs, field),
         };
-        let com = f.get("com").and_then(|field| pair(&mut errs, field));
+        let com = f.get("com").and_then(|field| param_pair(&mut errs, field));
         index.insert(name, links.len());
         links.push(Link {
             attrs: decl.attrs.clone(),
@@ -375,9 +449,10 @@ pub fn validate(input: Input) -> syn::Result<Model> {
     };
     let resolve = |errs: &mut Errors, p: &PointRef| -> Option<Point> {
         match p {
-            PointRef::World { at, .. } => Some(Point::World(
-                at.map_or([0.0, 0.0], |a| [a[0].value, a[1].value]),
-            )),
+            PointRef::World { at, .. } => match at {
+                None => Some(Point::World([0.0, 0.0])),
+                Some(a) => known_pair(errs, a, "a world point").map(Point::World),
+            },
             PointRef::Link { link, anchor } => {
                 let Some(&i) = index.get(&link.unraw().to_string()) else {
                     errs.push(link.span(), format!("unknown link `{link}`"));
@@ -387,7 +462,7 @@ pub fn validate(input: Input) -> syn::Result<Model> {
                     parse::Anchor::Start => Anchor::Start,
                     parse::Anchor::End => Anchor::End,
                     parse::Anchor::Center => Anchor::Center,
-                    parse::Anchor::At(a) => Anchor::At([a[0].value, a[1].value]),
+                    parse::Anchor::At(a) => Anchor::At(known_pair(errs, a, "an attachment point")?),
                 };
                 Some(Point::Link { link: i, anchor })
             }
@@ -434,7 +509,9 @@ pub fn validate(input: Input) -> syn::Result<Model> {
                     JointKind::Prismatic { axis: [1.0, 0.0] }
                 }
                 Some(field) => {
-                    let [ax, ay] = pair(&mut errs, field).unwrap_or([1.0, 0.0]);
+                    let [ax, ay] = pair_numbers(&mut errs, field)
+                        .and_then(|p| known_pair(&mut errs, p, "`axis`"))
+                        .unwrap_or([1.0, 0.0]);
                     // Numbers are finite, so `s` is 0 exactly for a zero axis;
                     // dividing by it first keeps the norm of a huge axis finite.
                     let s = ax.abs().max(ay.abs());
@@ -455,14 +532,7 @@ pub fn validate(input: Input) -> syn::Result<Model> {
         };
         let damping = f
             .get("damping")
-            .and_then(|field| match number(&mut errs, field) {
-                Some(n) if n.value >= 0.0 => Some(n.value),
-                Some(n) => {
-                    errs.add(n.error(format!("`damping` must not be negative, got {}", n.value)));
-                    None
-                }
-                None => None,
-            });
+            .and_then(|field| non_negative(&mut errs, field));
         let actuated = match f.get("actuated") {
             None => false,
             Some(field) => match &field.value {
@@ -478,14 +548,7 @@ pub fn validate(input: Input) -> syn::Result<Model> {
         };
         let stiffness = f
             .get("stiffness")
-            .and_then(|field| match number(&mut errs, field) {
-                Some(n) if n.value >= 0.0 => Some(n.value),
-                Some(n) => {
-                    errs.add(n.error(format!("`stiffness` must not be negative, got {}", n.value)));
-                    None
-                }
-                None => None,
-            });
+            .and_then(|field| non_negative(&mut errs, field));
         let rest = f.get("rest").and_then(|field| {
             let n = number(&mut errs, field)?;
             if !f.contains_key("stiffness") {
@@ -494,7 +557,7 @@ pub fn validate(input: Input) -> syn::Result<Model> {
                     format!("`rest` of joint `{name}` needs `stiffness` (a spring ½k(s − rest)²)"),
                 );
             }
-            Some(n.value)
+            Some(DefaultValue::from(&n))
         });
         let parent = resolve(&mut errs, &decl.parent);
         let child = resolve(&mut errs, &decl.child);

@@ -82,6 +82,14 @@ pub trait Dynamics<const N: usize, const C: usize> {
     /// ([`Dynamics::input_matrix`]).
     const INPUTS: usize = 0;
 
+    /// Names of the inputs (the actuated joints, in declaration order;
+    /// [`Dynamics::INPUTS`] of them, empty for an unactuated mechanism).
+    /// Exported learned models record them, and
+    /// [`LearnedStepper::new`](crate::LearnedStepper::new) checks a model's
+    /// inputs against them. A hand-written implementation that leaves them
+    /// empty gets only the count checked.
+    const INPUT_NAMES: &'static [&'static str] = &[];
+
     /// Parameter-dependent constants (products of masses, lengths, …).
     type Constants: Copy + core::fmt::Debug + PartialEq + Send + Sync;
 

@@ -254,16 +254,17 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
         u: &SVector<f64, U>,
+        t: &mut Terms<N>,
     ) -> Result<crate::step::Forced<N, C>, StepError> {
         let zero = u.iter().all(|x| *x == 0.0);
         let (model, k) = (&self.model, &self.k);
         let force = |q: &SVector<f64, N>| model.input_matrix::<U>(k, q) * u;
         let jac = |q: &SVector<f64, N>| model.input_force_jacobian::<U>(k, q, u);
         match (self.alpha == 0.0, zero) {
-            (true, true) => self.solve_forced_rule::<false, false>(x1, p0, h, guess, force, jac),
-            (true, false) => self.solve_forced_rule::<false, true>(x1, p0, h, guess, force, jac),
-            (false, true) => self.solve_forced_rule::<true, false>(x1, p0, h, guess, force, jac),
-            (false, false) => self.solve_forced_rule::<true, true>(x1, p0, h, guess, force, jac),
+            (true, true) => self.solve_forced_rule::<false, false>(x1, p0, h, guess, force, jac, t),
+            (true, false) => self.solve_forced_rule::<false, true>(x1, p0, h, guess, force, jac, t),
+            (false, true) => self.solve_forced_rule::<true, false>(x1, p0, h, guess, force, jac, t),
+            (false, false) => self.solve_forced_rule::<true, true>(x1, p0, h, guess, force, jac, t),
         }
     }
 
@@ -280,7 +281,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         u: &SVector<f64, U>,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
         Self::check_input(u)?;
-        self.solve_forced_any(x1, p0, h, guess, u)
+        self.solve_forced_any(x1, p0, h, guess, u, &mut Terms::zeros())
             .map(|(v, p, r, _)| (v, p, r))
     }
 
@@ -301,7 +302,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         for i in 0..self.substeps {
             let x1 = z.q + z.v * h;
             let g = if i == 0 { *guess } else { z.v };
-            let (v1, p1, r, _) = self.solve_forced_any(&x1, &p, h, &g, u)?;
+            let (v1, p1, r, _) = self.solve_forced_any(&x1, &p, h, &g, u, &mut Terms::zeros())?;
             if i == 0 {
                 report = r;
             } else {
@@ -417,7 +418,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     }
 
     /// The derivatives of a converged sub-step at (x₁, v₁, λ) under `u`
-    /// (module docs).
+    /// (module docs), with `t` the terms at m₁ = x₁ + αh·v₁ (as the solver
+    /// leaves them).
     fn local<const U: usize>(
         &self,
         x1: &SVector<f64, N>,
@@ -425,13 +427,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         lambda: &SVector<f64, C>,
         h: f64,
         u: &SVector<f64, U>,
+        t: &Terms<N>,
     ) -> Result<Local<N, U>, StepError> {
         let (model, k) = (&self.model, &self.k);
         let alpha = self.alpha;
         let (ah, a1) = (alpha * h, (1.0 - alpha) * h);
         let m1 = x1 + v1 * ah;
-        let mut t = Terms::zeros();
-        model.terms(k, &m1, &mut t);
         let forced = U > 0 && u.iter().any(|x| *x != 0.0);
         let (b, hu) = if U > 0 {
             let b = model.input_matrix::<U>(k, &m1);
@@ -444,7 +445,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         } else {
             (SMatrix::zeros(), SMatrix::zeros())
         };
-        let (qm, _) = M::kinetic(&t, v1);
+        let (qm, _) = M::kinetic(t, v1);
         let fq = model.force_jacobian(k, &m1, v1) + hu;
         // Newton matrix J = ∂d/∂v₁
         let mut jac = -t.mass;
@@ -472,7 +473,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let (sx, sp, su) = kkt_solve3(&jac, &g1t, &(g2 * h), &(-dx), &(-g2), &neg_i, &(b * -a1))
             .ok_or(singular)?;
         // p₁ = Π(m₁, v₁) + αh·B(m₁)u
-        let (pm, pv) = self.momentum_parts::<U>(&t, &m1, v1, h, &hu);
+        let (pm, pv) = self.momentum_parts::<U>(t, &m1, v1, h, &hu);
         let pv_total = pm * ah + pv;
         Ok(Local {
             sx,
@@ -510,12 +511,14 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// (x₁, p₀) in the directions of q₀, v₀ and p₀ (N each) and of u
     /// (U, with the input's own direct effect). Returns the new state and
     /// momentum, the diagnostics and the seeds of (q₁, v₁, p₁) per group.
+    /// Without `track_p` the p₀ group, zero on entry, is left at zero.
     fn propagate<const U: usize>(
         &self,
         z: &State<N>,
         p0: &SVector<f64, N>,
         u: &SVector<f64, U>,
         mut seeds: Groups<N, U>,
+        track_p: bool,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport, Groups<N, U>), StepError> {
         let h = self.substep_dt();
         let (mut zc, mut pc) = (*z, *p0);
@@ -525,17 +528,28 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             if i > 0 {
                 seeds.q.x += seeds.q.v * h;
                 seeds.v.x += seeds.v.v * h;
-                seeds.p.x += seeds.p.v * h;
+                if track_p {
+                    seeds.p.x += seeds.p.v * h;
+                }
                 seeds.u.x += seeds.u.v * h;
             }
             let x1 = zc.q + zc.v * h;
-            let (v1, p1, r, lambda) = self.solve_forced_any(&x1, &pc, h, &zc.v, u)?;
+            // the solver leaves the terms at m₁(v₁) in `t`: the
+            // derivatives reuse them
+            let mut t = Terms::zeros();
+            let (v1, p1, r, lambda) = self.solve_forced_any(&x1, &pc, h, &zc.v, u, &mut t)?;
             report.iterations += r.iterations;
             report.residual = report.residual.max(r.residual);
             report.stalled |= r.stalled;
             report.regularised |= r.regularised;
-            let l = self.local(&x1, &v1, &lambda, h, u)?;
-            for g in [&mut seeds.q, &mut seeds.v, &mut seeds.p] {
+            let l = self.local(&x1, &v1, &lambda, h, u, &t)?;
+            for g in [&mut seeds.q, &mut seeds.v] {
+                g.v = l.sx * g.x + l.sp * g.p;
+                g.p = l.px * g.x + l.pv * g.v;
+            }
+            // seeds that start at zero stay zero (A and B alone)
+            if track_p {
+                let g = &mut seeds.p;
                 g.v = l.sx * g.x + l.sp * g.p;
                 g.p = l.px * g.x + l.pv * g.v;
             }
@@ -570,7 +584,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             p: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
             u: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
         };
-        let (z1, _, _, s) = self.propagate(z, &p0, u, seeds)?;
+        let (z1, _, _, s) = self.propagate(z, &p0, u, seeds, false)?;
         Ok((
             z1,
             StepDerivatives {
@@ -614,7 +628,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             p: Seeds::new(zero, eye),
             u: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
         };
-        let (z1, p1, _, s) = self.propagate(z, p0, u, seeds)?;
+        let (z1, p1, _, s) = self.propagate(z, p0, u, seeds, true)?;
         Ok((
             z1,
             p1,

@@ -7,15 +7,36 @@
 //! The std runtime writes a trained `Learned` model as Rust source
 //! (`Learned::to_embedded_source`, or `vigp export` on the command line):
 //! static arrays for the GPs and one [`LearnedModel`] that names the
-//! mechanism, its parameter values, Δt, the encoding and the prior.
-//! [`LearnedStepper::new`] checks that model against the mechanism type
-//! and sets the parameters; [`LearnedStepper::step`] is then
+//! mechanism, its parameter values, Δt, the encoding, the prior and the
+//! inputs. [`LearnedStepper::new`] checks that model against the mechanism
+//! type and sets the parameters; [`LearnedStepper::step`] is then
 //!
 //! ```text
 //! x₁ = x₀ + Δt·v₀
 //! v_u = v̄(z₀) + μ(enc(z₀))      (v̄: nominal VI step, or 0 for a constant prior)
 //! v₁  = argmin ‖v − v_u‖²  s.t. g(x₁ + Δt·v) = 0      (loops only)
 //! ```
+//!
+//! # Inputs
+//!
+//! A model trained with inputs on an actuated mechanism (the std runtime's
+//! `Learned::train_forced`) takes them in [`LearnedStepper::step_forced`]
+//! and [`LearnedStepper::rollout_forced_into`]: the GP input is the encoded
+//! state followed by u, (enc(z₀), u), and the nominal prior is the nominal
+//! forced step [`Stepper::step_forced`] under u, as in the std runtime:
+//!
+//! ```text
+//! v_u = v̄(z₀, u) + μ(enc(z₀), u)
+//! ```
+//!
+//! The input count is a type-level fact: `U` must equal
+//! [`Dynamics::INPUTS`] (a `const` assertion, evaluated when the code is
+//! generated: `cargo build` reports a wrong `U`, `cargo check` does not),
+//! so a wrong-length input does not build; NaN or ±∞ in u is [`StepError::NonFiniteInput`].
+//! [`LearnedStepper::step`] (no input) of a model with inputs is the forced
+//! step under u = 0, as the std runtime's unforced step of such a model. A
+//! model trained without inputs takes only u = 0 in `step_forced` (which is
+//! then `step`); any other input is [`LearnedError::NoInputs`].
 //!
 //! Cost per step: one nominal [`Stepper`] step (with a nominal prior), N·D
 //! subtract-multiply-adds and N exponentials per velocity component for the
@@ -88,13 +109,19 @@ pub enum Prior {
 }
 
 /// A learned model as exported data (normally a `static` in a generated
-/// file). `N` coordinates, `D` GP inputs.
+/// file). `N` coordinates, `D` GP inputs: the encoding's dimension plus
+/// the number of control inputs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LearnedModel<'a, const N: usize, const D: usize> {
     /// The mechanism's name (`Parameters::NAME`).
     pub mechanism: &'a str,
     /// The coordinate names the model was trained on (minimal view).
     pub coordinates: [&'a str; N],
+    /// Names of the control inputs the GPs take after the encoded state
+    /// (the actuated joints, in declaration order, as
+    /// [`Dynamics::INPUT_NAMES`]); empty for a model trained without
+    /// inputs.
+    pub inputs: &'a [&'a str],
     /// Every parameter of the nominal model, by name.
     pub parameters: &'a [(&'a str, f64)],
     /// Time step Δt (s).
@@ -129,6 +156,21 @@ pub enum LearnedError {
         /// `D`.
         got: usize,
     },
+    /// The model takes a number of inputs other than the mechanism's
+    /// [`Dynamics::INPUTS`] (a model trained with inputs must take all of
+    /// them).
+    InputCount {
+        /// The mechanism's number of inputs.
+        expected: usize,
+        /// The model's ([`LearnedModel::inputs`]).
+        got: usize,
+    },
+    /// Input `i` of the model ([`LearnedModel::inputs`]) is not the
+    /// mechanism's input `i` ([`Dynamics::INPUT_NAMES`]).
+    UnknownInput(usize),
+    /// A nonzero input given to a model trained without inputs (it knows
+    /// only u = 0).
+    NoInputs,
     /// Projection asked for a mechanism without loops.
     NothingToProject,
     /// The nominal step or the projection failed.
@@ -164,8 +206,19 @@ impl core::fmt::Display for LearnedError {
             }
             Self::InputDimension { expected, got } => write!(
                 f,
-                "the GPs take {got} inputs, the encoding of this mechanism's state has {expected}"
+                "the GPs take {got} inputs, the encoded state and the model's control inputs have {expected}"
             ),
+            Self::InputCount { expected, got } => write!(
+                f,
+                "the learned model takes {got} control inputs, the mechanism has {expected}"
+            ),
+            Self::UnknownInput(i) => write!(
+                f,
+                "control input {i} of the learned model is not this mechanism's input {i}"
+            ),
+            Self::NoInputs => {
+                f.write_str("the learned model was trained without inputs: it takes only u = 0")
+            }
             Self::NothingToProject => f.write_str("projection asked for a mechanism without loops"),
             Self::Step(e) => write!(f, "step failed: {e}"),
             Self::Gp(e) => write!(f, "GP prediction failed: {e}"),
@@ -191,7 +244,9 @@ where
 {
     /// A stepper for `model` (its parameters are set to the learned model's:
     /// they are the prior the GPs were trained on). Checks the mechanism's
-    /// name, every parameter name, the GP input dimension and the options.
+    /// name, every parameter name, the control inputs (none, or exactly the
+    /// mechanism's, by name and order), the GP input dimension (encoding
+    /// plus inputs) and the options.
     pub fn new(mut model: M, learned: &'a LearnedModel<'a, N, D>) -> Result<Self, LearnedError> {
         if learned.mechanism != M::NAME {
             return Err(LearnedError::WrongMechanism);
@@ -212,7 +267,23 @@ where
         {
             return Err(LearnedError::UnknownParameter(i));
         }
-        let expected = learned.encoding.dim(&M::KINDS);
+        if !learned.inputs.is_empty() {
+            if learned.inputs.len() != M::INPUTS {
+                return Err(LearnedError::InputCount {
+                    expected: M::INPUTS,
+                    got: learned.inputs.len(),
+                });
+            }
+            if let Some(i) = learned
+                .inputs
+                .iter()
+                .zip(M::INPUT_NAMES)
+                .position(|(a, b)| a != b)
+            {
+                return Err(LearnedError::UnknownInput(i));
+            }
+        }
+        let expected = learned.encoding.dim(&M::KINDS) + learned.inputs.len();
         if expected != D {
             return Err(LearnedError::InputDimension { expected, got: D });
         }
@@ -233,17 +304,65 @@ where
         self.learned
     }
 
-    /// The unprojected prediction v_u = v̄(z) + μ(z) of the next velocity.
+    /// The unprojected prediction v_u = v̄(z) + μ(enc(z)) of the next
+    /// velocity (for a model with inputs: under u = 0).
     pub fn predict_velocity(&self, z: &State<N>) -> Result<SVector<f64, N>, LearnedError> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState.into());
         }
-        let mut x = [0.0f64; D];
-        self.learned.encoding.encode(&M::KINDS, z, &mut x);
-        let mut v = match self.learned.prior {
+        let prior = match self.learned.prior {
             Prior::Nominal => self.stepper.step(z)?.v,
             Prior::Constant => SVector::zeros(),
         };
+        self.add_gp_mean(z, &[], prior)
+    }
+
+    /// The unprojected prediction v_u = v̄(z, u) + μ(enc(z), u) of the next
+    /// velocity under inputs `u` (module docs, "Inputs"). `U` must equal
+    /// [`Dynamics::INPUTS`] (a `const` assertion: `cargo build` reports a
+    /// wrong `U`).
+    pub fn predict_velocity_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+    ) -> Result<SVector<f64, N>, LearnedError> {
+        const { assert!(U == M::INPUTS, "U must equal Dynamics::INPUTS") };
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState.into());
+        }
+        if !u.iter().all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput.into());
+        }
+        if self.learned.inputs.is_empty() {
+            return if u.iter().all(|x| *x == 0.0) {
+                self.predict_velocity(z)
+            } else {
+                Err(LearnedError::NoInputs)
+            };
+        }
+        let prior = match self.learned.prior {
+            Prior::Nominal => self.stepper.step_forced(z, u)?.v,
+            Prior::Constant => SVector::zeros(),
+        };
+        self.add_gp_mean(z, u.as_slice(), prior)
+    }
+
+    /// v + μ(enc(z), u): the GP input is the encoded state followed by `u`
+    /// (zeros where `u` is shorter than the model's inputs).
+    fn add_gp_mean(
+        &self,
+        z: &State<N>,
+        u: &[f64],
+        mut v: SVector<f64, N>,
+    ) -> Result<SVector<f64, N>, LearnedError> {
+        let mut x = [0.0f64; D];
+        // `new` checked D = encoding dimension + inputs
+        let e = D.saturating_sub(self.learned.inputs.len());
+        let (state, inputs) = x.split_at_mut(e);
+        self.learned.encoding.encode(&M::KINDS, z, state);
+        for (xi, ui) in inputs.iter_mut().zip(u) {
+            *xi = *ui;
+        }
         for (vi, gp) in v.iter_mut().zip(self.learned.gps.iter()) {
             *vi += gp.predict_mean(&x)?;
         }
@@ -253,9 +372,8 @@ where
         Ok(v)
     }
 
-    /// One learned step from `z`.
-    pub fn step(&self, z: &State<N>) -> Result<State<N>, LearnedError> {
-        let vu = self.predict_velocity(z)?;
+    /// x₁ = x₀ + Δt·v₀ and the velocity `vu`, projected for loops.
+    fn finish(&self, z: &State<N>, vu: SVector<f64, N>) -> Result<State<N>, LearnedError> {
         let x1 = z.q + z.v * self.learned.dt;
         let v = if self.learned.project && C > 0 {
             project_velocity(
@@ -272,6 +390,29 @@ where
         Ok(State { q: x1, v })
     }
 
+    /// One learned step from `z` (for a model with inputs: under u = 0,
+    /// [`step_forced`](Self::step_forced) with zeros).
+    pub fn step(&self, z: &State<N>) -> Result<State<N>, LearnedError> {
+        let vu = self.predict_velocity(z)?;
+        self.finish(z, vu)
+    }
+
+    /// One learned step from `z` under inputs `u` (one per actuated joint,
+    /// in declaration order; `U` must equal [`Dynamics::INPUTS`], checked
+    /// when the code is built): GP input (enc(z), u), nominal prior the forced
+    /// step [`Stepper::step_forced`], projection for loops. Equal to the
+    /// std runtime's learned forced mean step to solver tolerance. NaN or
+    /// ±∞ in `u` is [`StepError::NonFiniteInput`]; a model trained without
+    /// inputs takes only u = 0 ([`LearnedError::NoInputs`]).
+    pub fn step_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+    ) -> Result<State<N>, LearnedError> {
+        let vu = self.predict_velocity_forced(z, u)?;
+        self.finish(z, vu)
+    }
+
     /// The states after 1, 2, …, `out.len()` steps from `z0` (an MPC
     /// prediction), into a caller-owned slice. On failure returns the index
     /// of the failing step with the error.
@@ -283,6 +424,31 @@ where
         let mut z = *z0;
         for (k, slot) in out.iter_mut().enumerate() {
             z = self.step(&z).map_err(|e| (k, e))?;
+            *slot = z;
+        }
+        Ok(())
+    }
+
+    /// The states after 1, 2, …, `out.len()` forced steps from `z0`, step k
+    /// under `inputs[k]` (an MPC prediction along an input sequence), into
+    /// a caller-owned slice; each step is [`step_forced`](Self::step_forced)
+    /// (the learned step is a map of the state: no momentum is carried).
+    /// `inputs` must be at least as long as `out`: a shorter one fails at
+    /// step `inputs.len()` with [`StepError::NonFiniteInput`], before any
+    /// step. On failure returns the index of the failing step with the
+    /// error. No allocation.
+    pub fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), (usize, LearnedError)> {
+        if inputs.len() < out.len() {
+            return Err((inputs.len(), StepError::NonFiniteInput.into()));
+        }
+        let mut z = *z0;
+        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
+            z = self.step_forced(&z, u).map_err(|e| (k, e))?;
             *slot = z;
         }
         Ok(())

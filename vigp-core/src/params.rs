@@ -16,6 +16,33 @@ pub struct Link {
     pub com: [f64; 2],
 }
 
+impl Link {
+    /// A link with the DSL's defaults for what is not given: the inertia
+    /// m·l²/12 of a uniform rod about its centre, and the centre of mass
+    /// `[length/2, 0]`. `mechanism!` emits this when a default derives from
+    /// a value written as an expression (`mass: 2.0 * M`); the values are
+    /// checked where every parameter is, when a model is built.
+    ///
+    /// ```
+    /// use vigp_core::Link;
+    /// let l = Link::with_defaults(3.0, 2.0, None, None);
+    /// assert_eq!((l.inertia, l.com), (1.0, [1.0, 0.0]));
+    /// ```
+    pub fn with_defaults(
+        mass: f64,
+        length: f64,
+        inertia: Option<f64>,
+        com: Option<[f64; 2]>,
+    ) -> Self {
+        Link {
+            mass,
+            length,
+            inertia: inertia.unwrap_or(mass * length * length / 12.0),
+            com: com.unwrap_or_else(|| crate::kinematics::center(length)),
+        }
+    }
+}
+
 /// Run-time parameters of one joint.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Joint {

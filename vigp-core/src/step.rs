@@ -524,6 +524,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
     ) -> Result<Solved<N>, StepError> {
+        let mut t = Terms::zeros();
         self.solve_forced_rule::<MID, false>(
             x1,
             p0,
@@ -531,6 +532,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             guess,
             |_| SVector::zeros(),
             |_| SMatrix::zeros(),
+            &mut t,
         )
         .map(|(v, p, r, _)| (v, p, r))
     }
@@ -540,8 +542,14 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// when `FORCED` (`crate::forced`: B(m₁)u joins the forces f(m₁, v₁)
     /// in the residual and in the momentum carried on); also returns the
     /// multipliers λ. With `FORCED = false` neither is called and the code
-    /// is that of the unforced step.
+    /// is that of the unforced step. `t` is the solver's workspace; after a
+    /// converged solve it holds the terms at the solution's quadrature
+    /// point m₁(v₁) = x₁ + αh·v₁ (the derivatives reuse them).
     #[inline(always)]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "internal: the sub-step's data, the two input closures and the terms workspace"
+    )]
     pub(crate) fn solve_forced_rule<const MID: bool, const FORCED: bool>(
         &self,
         x1: &SVector<f64, N>,
@@ -550,12 +558,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         guess: &SVector<f64, N>,
         input_force: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
         input_jac: impl Fn(&SVector<f64, N>) -> SMatrix<f64, N, N>,
+        t: &mut Terms<N>,
     ) -> Result<Forced<N, C>, StepError> {
         let alpha = if MID { 0.5 } else { 0.0 };
         let model = &self.model;
         let k = &self.k;
         let opts = &self.options;
-        let mut t = Terms::zeros();
         let mut v = if max_abs(guess).is_nan() {
             SVector::zeros()
         } else {
@@ -565,7 +573,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let at = |v: &SVector<f64, N>| {
             if MID { x1 + v * (alpha * h) } else { *x1 }
         };
-        model.terms(k, &at(&v), &mut t);
+        model.terms(k, &at(&v), t);
         // generalized input force B(m₁)u (first order: once per step)
         let input = |q: &SVector<f64, N>| {
             if FORCED {
@@ -628,7 +636,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             a.max(b) + (a + b) * 0.0
         };
         let mut lambda = SVector::<f64, C>::zeros();
-        let (mut d, mut qm) = residual(&t, &bu, &v, &lambda);
+        let (mut d, mut qm) = residual(t, &bu, &v, &lambda);
         let (mut c, mut g2) = constraint(&v);
         let mut err = error(&d, &c);
         let mut regularised = false;
@@ -654,7 +662,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     stalled: false,
                     regularised,
                 };
-                return Ok((v, momentum(&t, &bu, &v), report, lambda));
+                return Ok((v, momentum(t, &bu, &v), report, lambda));
             }
             // Newton matrix ∂d/∂v (module docs)
             let mut jac = -t.mass;
@@ -684,7 +692,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 // than evaluating d again. Within half the tolerance (the
                 // other half covers the rounding) the step is accepted.
                 if !MID {
-                    let bound = 0.5 * h.abs() * M::quadratic_max(&t, &dv) * inv_p;
+                    let bound = 0.5 * h.abs() * M::quadratic_max(t, &dv) * inv_p;
                     if bound <= 0.5 * opts.tolerance {
                         let v1 = v + dv;
                         if v1.iter().all(|x| x.is_finite()) {
@@ -711,12 +719,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             loop {
                 let (vn, ln) = (v + dv * step, lambda + dl * step);
                 if MID {
-                    model.terms(k, &at(&vn), &mut t);
+                    model.terms(k, &at(&vn), t);
                     if FORCED {
                         bu = input(&at(&vn));
                     }
                 }
-                let (dn, qn) = residual(&t, &bu, &vn, &ln);
+                let (dn, qn) = residual(t, &bu, &vn, &ln);
                 let (cn, g2n) = constraint(&vn);
                 let errn = error(&dn, &cn);
                 if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
@@ -727,7 +735,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 if step < opts.min_step {
                     if MID {
                         // terms back at the current iterate
-                        model.terms(k, &at(&v), &mut t);
+                        model.terms(k, &at(&v), t);
                         if FORCED {
                             bu = input(&at(&v));
                         }
@@ -741,7 +749,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                             stalled: true,
                             regularised,
                         };
-                        return Ok((v, momentum(&t, &bu, &v), report, lambda));
+                        return Ok((v, momentum(t, &bu, &v), report, lambda));
                     }
                     return Err(StepError::LineSearchFailed {
                         iteration,
@@ -757,7 +765,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 stalled: false,
                 regularised,
             };
-            return Ok((v, momentum(&t, &bu, &v), report, lambda));
+            return Ok((v, momentum(t, &bu, &v), report, lambda));
         }
         Err(StepError::NotConverged {
             iterations: opts.max_iterations,

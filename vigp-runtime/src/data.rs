@@ -648,7 +648,7 @@ impl<const N: usize> Dataset<N> {
 
     /// Reads CSV text with the coordinate names and kinds of mechanism `M`.
     /// Inputs: the `u_<joint>` columns of its actuated joints
-    /// (`Mechanism::INPUT_NAMES`).
+    /// (`Dynamics::INPUT_NAMES`).
     pub fn read_for<M: Mechanism<N, C>, const C: usize, R: io::Read>(
         reader: R,
         opts: &ReadOptions,

@@ -642,13 +642,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// Encodes `z` into a stack buffer (heap only above 64 input
-    /// dimensions) and passes the GP input to `f`.
+    /// dimensions), followed by u = 0 for a model trained with inputs, and
+    /// passes the GP input to `f`.
     fn with_input<T>(
         &self,
         z: &State<N>,
         f: impl FnOnce(&[f64]) -> Result<T, StepError>,
     ) -> Result<T, StepError> {
-        let d = self.encoding.dim(&M::KINDS);
+        let e = self.encoding.dim(&M::KINDS);
+        let d = e + self.inputs;
         let mut x = [0.0f64; 64];
         let mut heap;
         let input: &mut [f64] = if d <= x.len() {
@@ -657,12 +659,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             heap = vec![0.0; d];
             &mut heap
         };
-        self.encoding.encode(&M::KINDS, z, input);
+        self.encoding.encode(&M::KINDS, z, &mut input[..e]);
         f(input)
     }
 
     /// The unprojected prediction v_u = prior(z) + μ(z) (eq. 7) and the
-    /// posterior standard deviations. Cost O(p·N·(d + N)) for the GP (the
+    /// posterior standard deviations (a model trained with inputs,
+    /// [`Learned::train_forced`], predicts under u = 0). Cost O(p·N·(d + N)) for the GP (the
     /// variance needs a triangular solve per output) plus the prior.
     pub fn predict_velocity(
         &self,
@@ -708,7 +711,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// needs): like [`step_with`](Self::step_with) without the variances,
     /// so O(p·N·d) instead of O(p·N·(d + N)) for the GP. Same next state as
     /// `step_with`, bit for bit. No allocation for inputs of up to 64
-    /// dimensions.
+    /// dimensions. A model trained with inputs steps under u = 0 (equal to
+    /// [`Learned::step_mean_forced_with`] with zeros).
     pub fn step_mean_with(&self, z: &State<N>, ws: &mut Workspace) -> Result<State<N>, StepError> {
         self.check_step(z)?;
         let x1 = z.q + z.v * self.dt;
@@ -764,8 +768,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         self.dt
     }
 
-    /// One step (mean only, [`Learned::step_mean_with`]); allocates a GP
-    /// workspace per call (use `step_mean_with` in loops).
+    /// One step (mean only, [`Learned::step_mean_with`]; under u = 0 for
+    /// a model trained with inputs); allocates a GP workspace per call (use
+    /// `step_mean_with` in loops).
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         let mut ws = self.gp.workspace();
         self.step_mean_with(z, &mut ws)

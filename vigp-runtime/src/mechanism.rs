@@ -32,11 +32,6 @@ pub trait Mechanism<const N: usize, const C: usize>: vigp_core::Dynamics<N, C> {
     /// Names of the generalized coordinates, in order.
     const COORDINATES: [&'static str; N];
 
-    /// Names of the inputs (the actuated joints, in declaration order;
-    /// [`vigp_core::Dynamics::INPUTS`] of them): empty for an unactuated
-    /// mechanism.
-    const INPUT_NAMES: &'static [&'static str] = &[];
-
     /// Kinetic energy T(q, v).
     fn kinetic_energy<D: Scalar>(&self, q: &SVector<D, N>, v: &SVector<D, N>) -> D;
 

@@ -9,6 +9,7 @@
 
 use super::model::{Anchor, JointKind, Model, Point};
 use crate::emit::lit;
+use crate::model::DefaultValue;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::ext::IdentExt;
@@ -21,11 +22,6 @@ fn triple(p: [f64; 3]) -> TokenStream {
 fn quad(p: [f64; 4]) -> TokenStream {
     let items = p.map(lit);
     quote!([#(#items),*])
-}
-
-fn matrix(m: &[[f64; 3]; 3]) -> TokenStream {
-    let rows = m.map(triple);
-    quote!([#(#rows),*])
 }
 
 fn usize_lit(n: usize) -> Literal {
@@ -87,10 +83,31 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
     });
     let link_defaults = m.links.iter().map(|l| {
         let ln = &l.name;
-        let mass = lit(l.mass);
-        let inertia = matrix(&l.inertia);
-        let com = triple(l.default_com());
-        let length = lit(l.length.unwrap_or(0.0));
+        let mass = l.mass.tokens();
+        let inertia = {
+            let rows = l.inertia.iter().map(|r| {
+                let r = r.iter().map(DefaultValue::tokens);
+                quote!([#(#r),*])
+            });
+            quote!([#(#rows),*])
+        };
+        let length = l
+            .length
+            .as_ref()
+            .map_or_else(|| lit(0.0), DefaultValue::tokens);
+        let com = match (&l.com, &l.length) {
+            (Some(c), _) => {
+                let c = c.iter().map(DefaultValue::tokens);
+                quote!([#(#c),*])
+            }
+            (None, None) => triple([0.0; 3]),
+            (None, Some(DefaultValue::Known(len))) => triple([0.5 * len, 0.0, 0.0]),
+            // a default (length/2, 0, 0) of a length only the compiler
+            // knows: derived at run time, the length written once
+            (None, Some(DefaultValue::Expr(_))) => {
+                return quote!(#ln: #sp::Link3::with_default_com(#mass, #inertia, #length),);
+            }
+        };
         quote!(#ln: #sp::Link3 { mass: #mass, inertia: #inertia, com: #com, length: #length },)
     });
     let elastic = m.elastic();
@@ -107,11 +124,11 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             quote!(#doc pub #jn: #joint_ty,)
         });
         let defaults = m.joints.iter().map(|jt| {
-            let (jn, d) = (&jt.name, lit(jt.damping.unwrap_or(0.0)));
-            let (k, r) = (
-                lit(jt.stiffness.unwrap_or(0.0)),
-                lit(jt.rest.unwrap_or(0.0)),
-            );
+            let value = |x: &Option<DefaultValue>| {
+                x.as_ref().map_or_else(|| lit(0.0), DefaultValue::tokens)
+            };
+            let jn = &jt.name;
+            let (d, k, r) = (value(&jt.damping), value(&jt.stiffness), value(&jt.rest));
             match (dissipative, elastic) {
                 (true, true) => {
                     quote!(#jn: ::vigp::ElasticJoint { damping: #d, stiffness: #k, rest: #r },)
@@ -170,7 +187,10 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
                 #[doc = " Names of the inputs (the actuated joints, in declaration order): input i is a torque about a revolute axis or a force along a prismatic axis."]
                 pub const INPUT_NAMES: [&'static str; #u] = [#(#names),*];
             },
-            quote!(const INPUTS: usize = #u;),
+            quote! {
+                const INPUTS: usize = #u;
+                const INPUT_NAMES: &'static [&'static str] = &[#(#names),*];
+            },
             quote! {
                 fn input_matrix<const U: usize>(&self, _k: &(), q: &#svector<f64, #nm>) -> #smatrix<f64, #nm, U> {
                     const { assert!(U == #u, "U must equal Dynamics::INPUTS") };
@@ -187,14 +207,16 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
                 }
             },
             quote! {
-                const INPUT_NAMES: &'static [&'static str] = &[#(#names),*];
                 fn input_work<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>, u: &[f64]) -> D {
                     #sp::minimal::input_work::<#name, D, #b, #j, #nm>(&self.sys, q, u)
                 }
             },
         )
     };
-    let gravity = triple(m.gravity);
+    let gravity = {
+        let g = m.gravity.iter().map(DefaultValue::tokens);
+        quote!([#(#g),*])
+    };
     let link_names: Vec<String> = m.links.iter().map(|l| l.name.unraw().to_string()).collect();
     let joint_names: Vec<String> = m
         .joints

@@ -4,6 +4,8 @@
 //! loop-closing joints. Every problem becomes a spanned `syn::Error`.
 
 use super::parse::{self, Field, Input, PointRef, Value};
+use crate::model::DefaultValue;
+use crate::parse::Number;
 use proc_macro2::Span;
 use std::collections::HashMap;
 use syn::ext::IdentExt;
@@ -16,26 +18,19 @@ pub struct Link {
     pub attrs: Vec<Attribute>,
     /// Name.
     pub name: Ident,
-    /// Mass (kg, > 0).
-    pub mass: f64,
+    /// Mass (kg, > 0 when known).
+    pub mass: DefaultValue,
     /// Inertia tensor about the centre of mass in the link frame
-    /// (symmetric, positive definite, triangle inequality).
-    pub inertia: [[f64; 3]; 3],
+    /// (symmetric, positive definite, triangle inequality: checked here
+    /// when every entry is known, by the run-time validation otherwise).
+    pub inertia: [[DefaultValue; 3]; 3],
     /// Length, if declared.
-    pub length: Option<f64>,
+    pub length: Option<DefaultValue>,
     /// Centre of mass in the link frame; `None`: (length/2, 0, 0), or the
     /// origin without a length.
-    pub com: Option<[f64; 3]>,
+    pub com: Option<[DefaultValue; 3]>,
     /// Reference orientation R⁰ (link frame → world), orthonormal.
     pub frame: [[f64; 3]; 3],
-}
-
-impl Link {
-    /// The default centre of mass.
-    pub fn default_com(&self) -> [f64; 3] {
-        self.com
-            .unwrap_or([self.length.map_or(0.0, |l| 0.5 * l), 0.0, 0.0])
-    }
 }
 
 /// Where a point sits on a link.
@@ -153,15 +148,15 @@ pub struct Joint {
     /// Child point.
     pub child: Point,
     /// Declared damping.
-    pub damping: Option<f64>,
+    pub damping: Option<DefaultValue>,
     /// `true` when the joint declares `actuated` (an input: a torque about a
     /// revolute axis, a force along a prismatic axis).
     pub actuated: bool,
     /// Declared spring stiffness k ≥ 0 (`None` when not mentioned).
-    pub stiffness: Option<f64>,
+    pub stiffness: Option<DefaultValue>,
     /// Declared spring rest coordinate (`None` when not mentioned; only
     /// allowed with `stiffness`).
-    pub rest: Option<f64>,
+    pub rest: Option<DefaultValue>,
     /// Reference relative rotation R_p⁰ᵀR_c⁰ as a unit quaternion (w, x, y, z).
     pub rel: [f64; 4],
 }
@@ -176,7 +171,7 @@ pub struct Model {
     /// Name.
     pub name: Ident,
     /// Gravity (m/s²).
-    pub gravity: [f64; 3],
+    pub gravity: [DefaultValue; 3],
     /// Links in declaration order.
     pub links: Vec<Link>,
     /// Joints in declaration order.
@@ -256,31 +251,22 @@ fn actuated(errs: &mut Errors, f: &HashMap<String, &Field>) -> bool {
     }
 }
 
-/// `stiffness: k` (k ≥ 0), as in the planar DSL.
-fn stiffness(errs: &mut Errors, f: &HashMap<String, &Field>) -> Option<f64> {
-    let field = f.get("stiffness")?;
-    let v = number(errs, field)?;
-    let n = as_number(&v)?;
-    if n.value >= 0.0 {
-        Some(n.value)
-    } else {
-        errs.add(n.error(format!("`stiffness` must not be negative, got {}", n.value)));
-        None
-    }
+/// `stiffness: k` (k ≥ 0 when known), as in the planar DSL.
+fn stiffness(errs: &mut Errors, f: &HashMap<String, &Field>) -> Option<DefaultValue> {
+    non_negative(errs, f.get("stiffness")?)
 }
 
 /// `rest: s0`, only with `stiffness`, as in the planar DSL.
-fn rest(errs: &mut Errors, f: &HashMap<String, &Field>, joint: &str) -> Option<f64> {
+fn rest(errs: &mut Errors, f: &HashMap<String, &Field>, joint: &str) -> Option<DefaultValue> {
     let field = f.get("rest")?;
-    let v = number(errs, field)?;
-    let n = as_number(&v)?;
+    let n = number(errs, field)?;
     if !f.contains_key("stiffness") {
         errs.push(
             field.key.span(),
             format!("`rest` of joint `{joint}` needs `stiffness` (a spring ½k(s − rest)²)"),
         );
     }
-    Some(n.value)
+    Some(DefaultValue::from(n))
 }
 
 struct Errors(Option<syn::Error>);
@@ -357,9 +343,9 @@ fn check_attrs(errs: &mut Errors, attrs: &[Attribute], on_mechanism: bool) {
     }
 }
 
-fn number(errs: &mut Errors, f: &Field) -> Option<parse::Value> {
+fn number<'a>(errs: &mut Errors, f: &'a Field) -> Option<&'a Number> {
     match &f.value {
-        v @ Value::Number(_) => Some(v.clone()),
+        Value::Number(n) => Some(n),
         Value::Array(s, _) | Value::Flag(s) => {
             errs.push(*s, format!("`{}` takes a single number", f.key));
             None
@@ -367,21 +353,63 @@ fn number(errs: &mut Errors, f: &Field) -> Option<parse::Value> {
     }
 }
 
-fn as_number(v: &Value) -> Option<&crate::parse::Number> {
-    match v {
-        Value::Number(n) => Some(n),
-        Value::Array(..) | Value::Flag(_) => None,
+/// A run-time parameter that must be positive (when known).
+fn positive(errs: &mut Errors, f: &Field) -> Option<DefaultValue> {
+    let n = number(errs, f)?;
+    match n.value {
+        Some(x) if x <= 0.0 => {
+            errs.add(n.error(format!("`{}` must be positive, got {x}", f.key)));
+            None
+        }
+        _ => Some(DefaultValue::from(n)),
     }
 }
 
-fn triple(errs: &mut Errors, v: &Value, what: &str) -> Option<[f64; 3]> {
-    match v.numbers(3) {
+/// A run-time parameter that must not be negative (when known).
+fn non_negative(errs: &mut Errors, f: &Field) -> Option<DefaultValue> {
+    let n = number(errs, f)?;
+    match n.value {
+        Some(x) if x < 0.0 => {
+            errs.add(n.error(format!("`{}` must not be negative, got {x}", f.key)));
+            None
+        }
+        _ => Some(DefaultValue::from(n)),
+    }
+}
+
+fn items3<'a>(errs: &mut Errors, v: &'a Value, what: &str) -> Option<[&'a Number; 3]> {
+    match v.items(3) {
         Some(x) => Some([x[0], x[1], x[2]]),
         None => {
             errs.push(v.span(), format!("{what} takes three numbers `[x, y, z]`"));
             None
         }
     }
+}
+
+/// Three numbers the macro must know (geometry that shapes the code).
+fn triple(errs: &mut Errors, v: &Value, what: &str) -> Option<[f64; 3]> {
+    let x = items3(errs, v, what)?;
+    known3(errs, x, what)
+}
+
+fn known3(errs: &mut Errors, x: [&Number; 3], what: &str) -> Option<[f64; 3]> {
+    let mut out = [0.0; 3];
+    for (o, n) in out.iter_mut().zip(x) {
+        match n.known(what) {
+            Ok(v) => *o = v,
+            Err(e) => {
+                errs.add(e);
+                return None;
+            }
+        }
+    }
+    Some(out)
+}
+
+/// Three run-time parameters.
+fn param3(errs: &mut Errors, v: &Value, what: &str) -> Option<[DefaultValue; 3]> {
+    items3(errs, v, what).map(|x| x.map(DefaultValue::from))
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -493,21 +521,18 @@ const FRAME_TOL: f64 = 1e-6;
 /// The inertia: three principal moments (link frame axes) or a symmetric
 /// 3×3 matrix; positive definite and physically realisable (each principal
 /// moment at most the sum of the other two).
-fn inertia(errs: &mut Errors, f: &Field) -> Option<[[f64; 3]; 3]> {
+fn inertia(errs: &mut Errors, f: &Field) -> Option<[[DefaultValue; 3]; 3]> {
     let v = &f.value;
-    let m = if let Some(d) = v.numbers(3) {
-        [[d[0], 0.0, 0.0], [0.0, d[1], 0.0], [0.0, 0.0, d[2]]]
+    let zero = || DefaultValue::Known(0.0);
+    let params = if let Some(d) = v.items(3) {
+        let d: Vec<DefaultValue> = d.into_iter().map(DefaultValue::from).collect();
+        [
+            [d[0].clone(), zero(), zero()],
+            [zero(), d[1].clone(), zero()],
+            [zero(), zero(), d[2].clone()],
+        ]
     } else if let Some(m) = v.matrix3() {
-        let big = m.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
-        let asym = (m[0][1] - m[1][0])
-            .abs()
-            .max((m[0][2] - m[2][0]).abs())
-            .max((m[1][2] - m[2][1]).abs());
-        if asym > 1e-12 * big {
-            errs.push(v.span(), "`inertia` must be symmetric");
-            return None;
-        }
-        m
+        m.map(|r| r.map(DefaultValue::from))
     } else {
         errs.push(
             v.span(),
@@ -515,7 +540,38 @@ fn inertia(errs: &mut Errors, f: &Field) -> Option<[[f64; 3]; 3]> {
         );
         return None;
     };
-    let e = eigenvalues(&m);
+    // Checked here when the macro knows every entry; otherwise the
+    // generated model's run-time validation checks symmetry and
+    // definiteness (a typed error).
+    let mut m = [[0.0; 3]; 3];
+    for (row, prow) in m.iter_mut().zip(&params) {
+        for (x, p) in row.iter_mut().zip(prow) {
+            match p.known() {
+                Some(k) => *x = k,
+                None => return Some(params),
+            }
+        }
+    }
+    if check_inertia(errs, v, &m) {
+        Some(params)
+    } else {
+        None
+    }
+}
+
+/// The compile-time checks of a known inertia tensor; `false` after
+/// reporting a problem.
+fn check_inertia(errs: &mut Errors, v: &Value, m: &[[f64; 3]; 3]) -> bool {
+    let big = m.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
+    let asym = (m[0][1] - m[1][0])
+        .abs()
+        .max((m[0][2] - m[2][0]).abs())
+        .max((m[1][2] - m[2][1]).abs());
+    if asym > 1e-12 * big {
+        errs.push(v.span(), "`inertia` must be symmetric");
+        return false;
+    }
+    let e = eigenvalues(m);
     let big = e.iter().fold(0.0f64, |a, x| a.max(x.abs()));
     if !e.iter().all(|x| x.is_finite()) || e.iter().any(|&x| x <= 1e-12 * big) || big == 0.0 {
         errs.push(
@@ -525,7 +581,7 @@ fn inertia(errs: &mut Errors, f: &Field) -> Option<[[f64; 3]; 3]> {
                 e[0], e[1], e[2]
             ),
         );
-        return None;
+        return false;
     }
     for i in 0..3 {
         let others = e[(i + 1) % 3] + e[(i + 2) % 3];
@@ -537,10 +593,10 @@ fn inertia(errs: &mut Errors, f: &Field) -> Option<[[f64; 3]; 3]> {
                     e[i], others
                 ),
             );
-            return None;
+            return false;
         }
     }
-    Some(m)
+    true
 }
 
 /// `frame: [[x axis], [y axis], [z axis]]`: the link's axes in world
@@ -549,13 +605,17 @@ fn inertia(errs: &mut Errors, f: &Field) -> Option<[[f64; 3]; 3]> {
 /// re-orthonormalised exactly.
 fn frame(errs: &mut Errors, f: &Field) -> Option<[[f64; 3]; 3]> {
     let v = &f.value;
-    let Some(rows) = v.matrix3() else {
+    let Some(items) = v.matrix3() else {
         errs.push(
             v.span(),
             "`frame` takes the link's axes in world coordinates `[[x axis], [y axis], [z axis]]`",
         );
         return None;
     };
+    let mut rows = [[0.0; 3]; 3];
+    for (row, r) in rows.iter_mut().zip(items) {
+        *row = known3(errs, r, "`frame`")?;
+    }
     let mut axes = [[0.0; 3]; 3];
     for (i, r) in rows.iter().enumerate() {
         match unit(*r) {
@@ -606,9 +666,9 @@ pub fn validate(input: Input) -> syn::Result<Model> {
     let mut errs = Errors(None);
     check_attrs(&mut errs, &input.attrs, true);
 
-    let mut gravity = [0.0, 0.0, -9.81];
+    let mut gravity = [0.0, 0.0, -9.81].map(DefaultValue::Known);
     if let Some((_, v)) = &input.gravity {
-        if let Some(g) = triple(&mut errs, v, "a spatial `gravity`") {
+        if let Some(g) = param3(&mut errs, v, "a spatial `gravity`") {
             gravity = g;
         }
     }
@@ -643,22 +703,12 @@ pub fn validate(input: Input) -> syn::Result<Model> {
             &["mass", "inertia", "length", "com", "frame"],
             "a spatial link",
         );
-        let positive = |errs: &mut Errors, field: &Field| -> Option<f64> {
-            let v = number(errs, field)?;
-            let n = as_number(&v)?;
-            if n.value > 0.0 {
-                Some(n.value)
-            } else {
-                errs.add(n.error(format!("`{}` must be positive, got {}", field.key, n.value)));
-                None
-            }
-        };
         let mass = match f.get("mass") {
             None => {
                 errs.push(decl.name.span(), format!("link `{name}` needs `mass`"));
-                1.0
+                DefaultValue::Known(1.0)
             }
-            Some(field) => positive(&mut errs, field).unwrap_or(1.0),
+            Some(field) => positive(&mut errs, field).unwrap_or(DefaultValue::Known(1.0)),
         };
         let length = f.get("length").and_then(|field| positive(&mut errs, field));
         let inertia = match f.get("inertia") {
@@ -669,13 +719,14 @@ pub fn validate(input: Input) -> syn::Result<Model> {
                         "link `{name}` needs `inertia` (principal moments `[i1, i2, i3]` or a symmetric 3×3 matrix about the centre of mass, in the link frame): a spatial link's inertia is not implied by its length"
                     ),
                 );
-                IDENTITY
+                IDENTITY.map(|r| r.map(DefaultValue::Known))
             }
-            Some(field) => inertia(&mut errs, field).unwrap_or(IDENTITY),
+            Some(field) => inertia(&mut errs, field)
+                .unwrap_or_else(|| IDENTITY.map(|r| r.map(DefaultValue::Known))),
         };
         let com = f
             .get("com")
-            .and_then(|field| triple(&mut errs, &field.value, "`com`"));
+            .and_then(|field| param3(&mut errs, &field.value, "`com`"));
         let frame = f
             .get("frame")
             .and_then(|field| frame(&mut errs, field))
@@ -811,16 +862,9 @@ pub fn validate(input: Input) -> syn::Result<Model> {
             "fixed" => JointKind::Fixed,
             _ => JointKind::Free,
         };
-        let damping = f.get("damping").and_then(|field| {
-            let v = number(&mut errs, field)?;
-            let n = as_number(&v)?;
-            if n.value >= 0.0 {
-                Some(n.value)
-            } else {
-                errs.add(n.error(format!("`damping` must not be negative, got {}", n.value)));
-                None
-            }
-        });
+        let damping = f
+            .get("damping")
+            .and_then(|field| non_negative(&mut errs, field));
         let actuated = actuated(&mut errs, &f);
         let stiffness = stiffness(&mut errs, &f);
         let rest = rest(&mut errs, &f, &name);

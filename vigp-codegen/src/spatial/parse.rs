@@ -23,18 +23,18 @@ impl Value {
     /// Span of the whole value.
     pub fn span(&self) -> Span {
         match self {
-            Value::Number(n) => n.span,
+            Value::Number(n) => n.span(),
             Value::Array(s, _) | Value::Flag(s) => *s,
         }
     }
 
     /// The numbers of a flat list of exactly `n` numbers.
-    pub fn numbers(&self, n: usize) -> Option<Vec<f64>> {
+    pub fn items(&self, n: usize) -> Option<Vec<&Number>> {
         match self {
             Value::Array(_, items) if items.len() == n => items
                 .iter()
                 .map(|v| match v {
-                    Value::Number(x) => Some(x.value),
+                    Value::Number(x) => Some(x),
                     Value::Array(..) | Value::Flag(_) => None,
                 })
                 .collect(),
@@ -42,16 +42,15 @@ impl Value {
         }
     }
 
-    /// A 3×3 nested list, row by row.
-    pub fn matrix3(&self) -> Option<[[f64; 3]; 3]> {
+    /// The numbers of a 3×3 nested list, row by row.
+    pub fn matrix3(&self) -> Option<[[&Number; 3]; 3]> {
         match self {
             Value::Array(_, rows) if rows.len() == 3 => {
-                let mut m = [[0.0; 3]; 3];
-                for (i, r) in rows.iter().enumerate() {
-                    let r = r.numbers(3)?;
-                    m[i] = [r[0], r[1], r[2]];
-                }
-                Some(m)
+                let row = |i: usize| -> Option<[&Number; 3]> {
+                    let r = rows[i].items(3)?;
+                    Some([r[0], r[1], r[2]])
+                };
+                Some([row(0)?, row(1)?, row(2)?])
             }
             _ => None,
         }

@@ -44,6 +44,20 @@ pub struct Link3 {
     pub length: f64,
 }
 
+impl Link3 {
+    /// A link whose centre of mass is the DSL's default (length/2, 0, 0).
+    /// `mechanism!` emits this when the length is written as an expression
+    /// (`length: 2.0 * L`) and `com` is not given.
+    pub fn with_default_com(mass: f64, inertia: [[f64; 3]; 3], length: f64) -> Self {
+        Link3 {
+            mass,
+            inertia,
+            com: center(length),
+            length,
+        }
+    }
+}
+
 /// The `center` anchor of a link of `length`: (length/2, 0, 0).
 #[inline]
 pub fn center(length: f64) -> [f64; 3] {

@@ -1,6 +1,7 @@
 //! A trained [`Learned`] as Rust source for the `no_std`
 //! [`vigp_core::LearnedStepper`]: the GP arrays and one `LearnedModel`
-//! static naming the mechanism, its parameters, Δt, encoding and prior.
+//! static naming the mechanism, its parameters, Δt, encoding, prior and
+//! control inputs.
 
 use core::fmt::Write;
 
@@ -65,6 +66,12 @@ where
     /// `LearnedModel` static. The text compiles in a `#![no_std]` crate and
     /// is deterministic; floats round-trip exactly.
     ///
+    /// A model trained with inputs ([`Learned::train_forced`]) records
+    /// their names (`inputs: &["rail"]`, the mechanism's
+    /// `Dynamics::INPUT_NAMES`); its GPs take the encoded state followed by
+    /// u, and on the target it steps with `LearnedStepper::step_forced`.
+    /// A model trained without inputs writes `inputs: &[]`.
+    ///
     /// Models in either coordinate view export; `LearnedStepper::new` then
     /// takes the same view (`sys.minimal()` or the parameter struct for a
     /// minimal-coordinate model, `sys.maximal()` for a maximal one; the GP
@@ -86,6 +93,17 @@ where
         let (n, d, p) = (self.gp.n(), self.gp.input_dim(), self.gp.output_dim());
         let lit = |v: f64| format!("{v:?}");
         let coords: Vec<String> = M::COORDINATES.iter().map(|c| format!("{c:?}")).collect();
+        if self.inputs > M::INPUT_NAMES.len() {
+            return Err(GpError::Export(format!(
+                "the model takes {} inputs, the mechanism names {}",
+                self.inputs,
+                M::INPUT_NAMES.len()
+            )));
+        }
+        let inputs: Vec<String> = M::INPUT_NAMES[..self.inputs]
+            .iter()
+            .map(|c| format!("{c:?}"))
+            .collect();
         let mut params = String::new();
         for (i, name) in M::PARAMETER_NAMES.iter().enumerate() {
             let value = self.model.parameter(i).unwrap_or(f64::NAN);
@@ -105,12 +123,13 @@ where
         let name = &opts.name;
         let _ = write!(
             s,
-            "\n/// The learned model of `{mech}` (Δt = {dt} s, {encoding} encoding, {prior} prior):\n\
+            "\n/// The learned model of `{mech}` (Δt = {dt} s, {encoding} encoding, {prior} prior{with_inputs}):\n\
              /// step it with `{core}::LearnedStepper::new({mech}::default(), &{name})`.\n\
              #[rustfmt::skip]\n\
              pub static {name}: {core}::learned::LearnedModel<'static, {N}, {d}> = {core}::learned::LearnedModel {{\n\
              \x20   mechanism: {mech:?},\n\
              \x20   coordinates: [{coords}],\n\
+             \x20   inputs: &[{inputs}],\n\
              \x20   parameters: &[\n{params}    ],\n\
              \x20   dt: {dtl},\n\
              \x20   encoding: {core}::learned::Encoding::{encoding},\n\
@@ -123,6 +142,12 @@ where
             dt = self.dt,
             dtl = lit(self.dt),
             coords = coords.join(", "),
+            inputs = inputs.join(", "),
+            with_inputs = if inputs.is_empty() {
+                String::new()
+            } else {
+                format!(", inputs {}", inputs.join(", "))
+            },
             project = self.project,
             tol = lit(self.options.tolerance),
             iters = self.options.max_iterations,
