@@ -685,6 +685,26 @@ fn constant_inputs_accelerate_a_free_rotor_and_slider_exactly() {
     assert_eq!(Motors::INPUT_NAMES, ["spin", "slide"]);
 }
 
+/// Run-time spring parameters are validated when a stepper is built: a
+/// negative or non-finite stiffness, or a non-finite rest, is a typed
+/// error in both views.
+#[test]
+fn invalid_run_time_springs_are_typed_errors() {
+    for (k, r) in [(-1.0, 0.0), (f64::NAN, 0.0), (1.0, f64::INFINITY)] {
+        let mut sys = Arm3::default();
+        sys.joints.elbow.stiffness = k;
+        sys.joints.elbow.rest = r;
+        assert!(matches!(
+            LieStepper::new(sys.maximal(), 0.01).unwrap_err(),
+            vigp::embedded::StepError::InvalidModel(_)
+        ));
+        assert!(matches!(
+            vigp::embedded::Stepper::new(sys.minimal(), 0.01).unwrap_err(),
+            vigp::embedded::StepError::InvalidModel(_)
+        ));
+    }
+}
+
 /// A non-finite input is an error, not a NaN state.
 #[test]
 fn non_finite_spatial_inputs_are_refused() {
