@@ -108,7 +108,7 @@ vigp::mechanism! {
         }
         joints {
             yaw: revolute(world, arm.start) { axis: [0.0, 0.0, 1.0], damping: C },
-            pitch: revolute(arm.end, bob.start) { axis: [0.0, 1.0, 0.0] },
+            pitch: revolute(arm.end, bob.start) { axis: [0.0, 1.0, 0.0], stiffness: K, rest: physical::REST, actuated },
         }
     }
 }
@@ -128,7 +128,7 @@ vigp::mechanism! {
         }
         joints {
             yaw: revolute(world, arm.start) { axis: [0.0, 0.0, 1.0], damping: 0.1 },
-            pitch: revolute(arm.end, bob.start) { axis: [0.0, 1.0, 0.0] },
+            pitch: revolute(arm.end, bob.start) { axis: [0.0, 1.0, 0.0], stiffness: 3.0, rest: 0.6, actuated },
         }
     }
 }
@@ -155,6 +155,16 @@ fn spatial_expressions_give_the_literal_description() {
     );
     let z = named.minimal().state([0.2, 0.4], [1.0, 0.0]);
     assert_eq!(a.rollout(&z, 50).unwrap(), b.rollout(&z, 50).unwrap());
+    // the spring and the input (on `pitch`) likewise
+    assert_eq!(
+        format!("{:?}", Spatial::springs(&named)),
+        format!("{:?}", Spatial::springs(&literal))
+    );
+    let u = [SVector::<f64, 1>::new(0.3); 20];
+    assert_eq!(
+        a.rollout_forced(&z, &u).unwrap(),
+        b.rollout_forced(&z, &u).unwrap()
+    );
 }
 
 // ---- values the macro cannot know are checked when the program runs ----

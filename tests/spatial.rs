@@ -76,6 +76,115 @@ vigp::mechanism! {
     }
 }
 
+// ---- the same with inputs and springs (`actuated`, `stiffness`, `rest`),
+// ---- planar and lifted: every joint driven, springs with rest angles,
+// ---- the fourbar's input and spring on its loop-closing joint. (No
+// ---- spring on the cartpole's hinge: the pole is driven round several
+// ---- turns, and the maximal view reads a revolute angle only within π
+// ---- of its rest angle, while the planar maximal view counts turns.)
+
+vigp::mechanism! {
+    DrivenDoublePendulum {
+        gravity: [0.0, -9.81],
+        links {
+            upper: { mass: 1.0, length: 1.0 },
+            lower: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            shoulder: revolute(world, upper.start) { actuated, stiffness: 3.0, rest: 0.4 },
+            elbow: revolute(upper.end, lower.start) { damping: 0.2, actuated, stiffness: 2.0, rest: -0.3 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    LiftedDrivenDoublePendulum {
+        gravity: [0.0, -9.81, 0.0],
+        links {
+            upper: { mass: 1.0, length: 1.0, inertia: [0.001, 0.08333333333333333, 0.08333333333333333],
+                     frame: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] },
+            lower: { mass: 1.0, length: 1.0, inertia: [0.001, 0.08333333333333333, 0.08333333333333333],
+                     frame: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] },
+        }
+        joints {
+            shoulder: revolute(world, upper.start) { axis: [0.0, 0.0, 1.0], actuated, stiffness: 3.0, rest: 0.4 },
+            elbow: revolute(upper.end, lower.start) { axis: [0.0, 0.0, 1.0], damping: 0.2, actuated, stiffness: 2.0, rest: -0.3 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    DrivenCartpole {
+        gravity: [0.0, -9.81],
+        links {
+            cart: { mass: 1.0, length: 1.0 },
+            pole: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            rail: prismatic(world, cart.center) { axis: [1.0, 0.0], actuated, stiffness: 5.0, rest: 0.2 },
+            hinge: revolute(cart.center, pole.start) { actuated },
+        }
+    }
+}
+
+vigp::mechanism! {
+    LiftedDrivenCartpole {
+        gravity: [0.0, -9.81, 0.0],
+        links {
+            cart: { mass: 1.0, length: 1.0, inertia: [0.001, 0.08333333333333333, 0.08333333333333333],
+                    frame: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] },
+            pole: { mass: 1.0, length: 1.0, inertia: [0.001, 0.08333333333333333, 0.08333333333333333],
+                    frame: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] },
+        }
+        joints {
+            rail: prismatic(world, cart.center) { axis: [1.0, 0.0, 0.0], actuated, stiffness: 5.0, rest: 0.2 },
+            hinge: revolute(cart.center, pole.start) { axis: [0.0, 0.0, 1.0], actuated },
+        }
+    }
+}
+
+vigp::mechanism! {
+    DrivenFourbar {
+        gravity: [0.0, -9.81],
+        links {
+            link1: { mass: 1.0, length: 1.0 },
+            link2: { mass: 1.0, length: 1.0 },
+            link3: { mass: 1.0, length: 1.0 },
+            link4: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            top1: revolute(world, link1.start) { actuated, stiffness: 1.0, rest: 0.5 },
+            middle1: revolute(link1.end, link2.start),
+            top2: revolute(world, link3.start),
+            middle2: revolute(link3.end, link4.start),
+            bottom: revolute(link2.end, link4.end) { actuated, stiffness: 2.0, rest: 0.5 },
+        }
+    }
+}
+
+vigp::mechanism! {
+    LiftedDrivenFourbar {
+        gravity: [0.0, -9.81, 0.0],
+        links {
+            link1: { mass: 1.0, length: 1.0, inertia: [0.001, 0.08333333333333333, 0.08333333333333333],
+                     frame: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] },
+            link2: { mass: 1.0, length: 1.0, inertia: [0.001, 0.08333333333333333, 0.08333333333333333],
+                     frame: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] },
+            link3: { mass: 1.0, length: 1.0, inertia: [0.001, 0.08333333333333333, 0.08333333333333333],
+                     frame: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] },
+            link4: { mass: 1.0, length: 1.0, inertia: [0.001, 0.08333333333333333, 0.08333333333333333],
+                     frame: [[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]] },
+        }
+        joints {
+            top1: revolute(world, link1.start) { axis: [0.0, 0.0, 1.0], actuated, stiffness: 1.0, rest: 0.5 },
+            middle1: revolute(link1.end, link2.start) { axis: [0.0, 0.0, 1.0] },
+            top2: revolute(world, link3.start) { axis: [0.0, 0.0, 1.0] },
+            middle2: revolute(link3.end, link4.start) { axis: [0.0, 0.0, 1.0] },
+            bottom: revolute(link2.end, link4.end) { axis: [0.0, 0.0, 1.0], actuated, stiffness: 2.0, rest: 0.5 },
+        }
+    }
+}
+
 /// Planar pose (x, y, θ) of a spatial link state in the x-y plane:
 /// q = rot_z(θ − π/2) for a link frame hanging along −y at θ = 0.
 fn planar_pose(x: &Vector3<f64>, q: &UnitQuaternion<f64>, near: f64) -> [f64; 3] {
@@ -186,6 +295,143 @@ fn parallel_axes_reproduce_the_planar_implementation() {
         dt,
         steps,
     );
+
+    // the same with inputs and springs: every joint driven by a torque or
+    // force varying over the run, springs with rest coordinates (the
+    // fourbar's on its loop-closing joint, whose angle both views read
+    // from the link poses)
+    let inputs = |k: usize| {
+        let t = k as f64 * dt;
+        SVector::<f64, 2>::new(2.0 * (3.0 * t).sin(), -1.5 + (2.0 * t).cos())
+    };
+    let inputs: Vec<SVector<f64, 2>> = (0..steps).map(inputs).collect();
+    let planar = DrivenDoublePendulum::default();
+    let lifted = LiftedDrivenDoublePendulum::default();
+    compare_forced(
+        "driven double pendulum",
+        planar.minimal(),
+        planar.maximal(),
+        planar.minimal(),
+        lifted.minimal(),
+        lifted,
+        &State::new([1.2, -0.7], [0.5, 1.5]),
+        dt,
+        &inputs,
+    );
+    let planar = DrivenCartpole::default();
+    let lifted = LiftedDrivenCartpole::default();
+    compare_forced(
+        "driven cartpole",
+        planar.minimal(),
+        planar.maximal(),
+        planar.minimal(),
+        lifted.minimal(),
+        lifted,
+        &State::new([0.1, 2.0], [0.3, -1.0]),
+        dt,
+        &inputs,
+    );
+    let planar = DrivenFourbar::default();
+    let lifted = LiftedDrivenFourbar::default();
+    let z0 = consistent_state(
+        &planar.minimal(),
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::from([1.0, -0.5, 0.8, 0.2]),
+        dt,
+    )
+    .unwrap();
+    compare_forced(
+        "driven fourbar",
+        planar.minimal(),
+        planar.maximal(),
+        planar.minimal(),
+        lifted.minimal(),
+        lifted,
+        &z0,
+        dt,
+        &inputs,
+    );
+}
+
+/// [`compare`] under inputs: every trajectory through its forced rollout
+/// (`Variational::rollout_forced`, `LieStepper::rollout_forced_into`),
+/// the same input sequence for all four; the same tolerances.
+#[allow(clippy::too_many_arguments)]
+fn compare_forced<
+    P,
+    PM,
+    LM,
+    L,
+    const N: usize,
+    const C: usize,
+    const M: usize,
+    const CM: usize,
+    const CL: usize,
+    const B: usize,
+    const J: usize,
+    const NB: usize,
+    const CB: usize,
+    const U: usize,
+>(
+    name: &str,
+    planar_min: P,
+    planar_max: PM,
+    coords: P,
+    lifted_min: LM,
+    lifted: L,
+    z0: &State<N>,
+    dt: f64,
+    inputs: &[SVector<f64, U>],
+) where
+    P: Mechanism<N, C> + vigp::Coordinates<N, M> + Copy,
+    PM: Mechanism<M, CM> + Copy,
+    LM: Mechanism<N, CL> + Copy,
+    L: vigp::spatial::Spatial<B, J> + Copy + MaximalOf<B, J, NB, CB>,
+{
+    let steps = inputs.len();
+    let min = |m: P, z: &State<N>| {
+        Variational::new(m, dt)
+            .tolerance(1e-14)
+            .rollout_forced(z, inputs)
+            .unwrap()
+    };
+    let a = min(planar_min, z0);
+    let b = Variational::new(lifted_min, dt)
+        .tolerance(1e-14)
+        .rollout_forced(z0, inputs)
+        .unwrap();
+    let dmin = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x.q - y.q).amax().max((x.v - y.v).amax()))
+        .fold(0.0, f64::max);
+    let zp = coords.to_maximal(z0, dt);
+    let pm = Variational::new(planar_max, dt)
+        .tolerance(1e-14)
+        .rollout_forced(&zp, inputs)
+        .unwrap();
+    let stepper = LieStepper::with_options(lifted.maximal_view(), dt, tight()).unwrap();
+    let zs = vigp::spatial::views::to_maximal::<L, B, J, N>(&lifted, z0, dt);
+    let mut sm = vec![zs; steps + 1];
+    stepper.rollout_forced_into(&zs, inputs, &mut sm).unwrap();
+    let (dmax, out) = planar_distance(&pm, &sm);
+    // the planar minimal trajectory's own sensitivity (see `compare`)
+    let mut z1 = *z0;
+    z1.q[0] = f64::from_bits(z1.q[0].to_bits() + 1);
+    let dself = a
+        .iter()
+        .zip(&min(planar_min, &z1))
+        .map(|(x, y)| (x.q - y.q).amax().max((x.v - y.v).amax()))
+        .fold(0.0, f64::max);
+    println!(
+        "{name}: minimal views differ by {dmin:.2e} (planar vs itself from z₀ + 1 ulp: {dself:.2e}), maximal views by {dmax:.2e} (out of plane {out:.1e}) over {steps} steps"
+    );
+    assert!(
+        dmin <= 1e-10f64.max(10.0 * dself),
+        "{name} minimal: {dmin:e}"
+    );
+    assert!(dmax <= 1e-10, "{name} maximal: {dmax:e}");
+    assert!(out <= 1e-12, "{name}: left the plane by {out:e}");
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -288,6 +534,9 @@ macro_rules! maximal_of {
 }
 
 maximal_of! {
+    LiftedDrivenDoublePendulum: 2, 2, 12, 10;
+    LiftedDrivenCartpole: 2, 2, 12, 10;
+    LiftedDrivenFourbar: 4, 5, 24, 25;
     LiftedDoublePendulum: 2, 2, 12, 10;
     LiftedCartpole: 2, 2, 12, 10;
     LiftedFourbar: 4, 5, 24, 25;

@@ -60,8 +60,9 @@ fn generated_code_of_the_spatial_examples() {
     }
 }
 
-/// An undamped revolute tree has no joint parameters, no dissipation and
-/// no constraint code in its minimal view; a ball joint brings its
+/// An undamped revolute tree has no joint parameters, no dissipation, no
+/// input or spring code and no constraint code in its minimal view (an
+/// actuated one gets input code only, a sprung one spring code only); a ball joint brings its
 /// unit-norm constraint; the `no_std` expansion has no `Mechanism` impl.
 #[test]
 fn spatial_code_contains_only_what_the_scene_needs() {
@@ -74,6 +75,25 @@ fn spatial_code_contains_only_what_the_scene_needs() {
     assert!(!tree.contains("fn constraints"));
     assert!(!tree.contains("fn dissipation"));
     assert!(!tree.contains("ArmJoints"));
+    // no input or spring code unless declared; with them, exactly theirs
+    for absent in ["INPUT", "input_", "springs", "ELASTIC", "Spring"] {
+        assert!(!tree.contains(absent), "{absent}");
+    }
+    let driven = vigp_codegen::expand_to_string(
+        "pub Arm { gravity: [0.0, 0.0, -9.81], links { a: { mass: 1.0, length: 1.0, inertia: [0.1, 1.0, 1.0] } } \
+         joints { j: revolute(world, a.start) { axis: [0.0, 1.0, 0.0], actuated } } }",
+    )
+    .unwrap();
+    assert!(driven.contains("const INPUTS: usize = 1"));
+    assert!(driven.contains("fn input_work") && driven.contains("INPUT_JOINTS"));
+    assert!(!driven.contains("springs") && !driven.contains("ArmJoints"));
+    let sprung = vigp_codegen::expand_to_string(
+        "pub Arm { gravity: [0.0, 0.0, -9.81], links { a: { mass: 1.0, length: 1.0, inertia: [0.1, 1.0, 1.0] } } \
+         joints { j: revolute(world, a.start) { axis: [0.0, 1.0, 0.0], stiffness: 2.0, rest: 0.1 } } }",
+    )
+    .unwrap();
+    assert!(sprung.contains("fn springs") && sprung.contains("::vigp::Spring"));
+    assert!(!sprung.contains("INPUT") && !sprung.contains("input_"));
     let ball = vigp_codegen::expand_to_string(
         "pub Ball { gravity: [0.0, 0.0, -9.81], links { a: { mass: 1.0, length: 1.0, inertia: [0.1, 1.0, 1.0] } } \
          joints { j: spherical(world, a.start) { damping: 0.1 } } }",

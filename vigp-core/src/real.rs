@@ -2,7 +2,8 @@
 //! jets that carry exact first (and second) derivatives through it.
 //!
 //! [`Real`] is deliberately small: the ring operations, products and sums
-//! with `f64` constants, and `sincos`. Planar kinematics needs nothing else.
+//! with `f64` constants, `sincos`, and `atan2` (the angle of a spatial
+//! revolute joint read back from two link orientations).
 //! It is implemented for `f64` (via `libm`, so it works in `no_std`), for
 //! [`Jet1`] and [`Jet2`] here, and, with the `dual` feature, for every
 //! num-dual number, so the std runtime and this crate run the same
@@ -30,6 +31,9 @@ pub trait Real:
     fn from_f64(x: f64) -> Self;
     /// `(sin x, cos x)` with their derivatives.
     fn sincos(self) -> (Self, Self);
+    /// The angle atan2(self, x) ∈ (−π, π] of the point (x, self), with its
+    /// derivatives (finite wherever x² + self² > 0).
+    fn atan2(self, x: Self) -> Self;
 }
 
 #[cfg(not(feature = "dual"))]
@@ -41,6 +45,10 @@ impl Real for f64 {
     #[inline]
     fn sincos(self) -> (Self, Self) {
         libm::sincos(self)
+    }
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        libm::atan2(self, x)
     }
 }
 
@@ -56,6 +64,17 @@ where
     #[inline]
     fn sincos(self) -> (Self, Self) {
         self.sin_cos()
+    }
+    /// θ₀ + atan(n/d) with θ₀ = atan2 of the values and (n, d) the point
+    /// rotated by −θ₀: n = 0 and d = r > 0 at the value, so the derivatives
+    /// stay finite where num-dual's atan2 (through y/x) divides by x = 0.
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        let t0 = self.re().atan2(x.re());
+        let (s0, c0) = t0.sin_cos();
+        let n = self * T::from(c0) - x * T::from(s0);
+        let d = x * T::from(c0) + self * T::from(s0);
+        (n / d).atan() + T::from(t0)
     }
 }
 
@@ -186,6 +205,17 @@ impl<const N: usize> Real for Jet1<N> {
     fn sincos(self) -> (Self, Self) {
         let (s, c) = sincos_f64(self.v);
         (self.chain(s, c), self.chain(c, -s))
+    }
+    /// θ = atan2(y, x): ∂θ/∂y = x/r², ∂θ/∂x = −y/r².
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        let r2 = x.v * x.v + self.v * self.v;
+        let (ty, tx) = (x.v / r2, -self.v / r2);
+        let mut out = Self::constant(libm::atan2(self.v, x.v));
+        for i in 0..N {
+            out.g[i] = ty * self.g[i] + tx * x.g[i];
+        }
+        out
     }
 }
 
@@ -354,6 +384,28 @@ impl<const N: usize> Real for Jet2<N> {
         let (s, c) = sincos_f64(self.v);
         (self.chain(s, c, -s), self.chain(c, -s, -c))
     }
+    /// θ = atan2(y, x): θ_y = x/r², θ_x = −y/r², θ_yy = −2xy/r⁴ = −θ_xx,
+    /// θ_xy = (y² − x²)/r⁴.
+    #[inline]
+    fn atan2(self, x: Self) -> Self {
+        let (yv, xv) = (self.v, x.v);
+        let r2 = xv * xv + yv * yv;
+        let r4 = r2 * r2;
+        let (ty, tx) = (xv / r2, -yv / r2);
+        let tyy = -2.0 * xv * yv / r4;
+        let txy = (yv * yv - xv * xv) / r4;
+        let mut out = Self::constant(libm::atan2(yv, xv));
+        for i in 0..N {
+            out.g[i] = ty * self.g[i] + tx * x.g[i];
+            for j in i..N {
+                out.h[i][j] = ty * self.h[i][j]
+                    + tx * x.h[i][j]
+                    + tyy * (self.g[i] * self.g[j] - x.g[i] * x.g[j])
+                    + txy * (self.g[i] * x.g[j] + x.g[i] * self.g[j]);
+            }
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -389,6 +441,32 @@ mod tests {
         assert!((j2.hessian(1, 1) - fyy).abs() < tol);
         // only the upper triangle is stored
         assert_eq!(j2.h[1][0], 0.0);
+    }
+
+    /// θ(x, y) = atan2(y, x) composed with (x, y) = (r cos φ, r sin φ) is φ
+    /// wherever φ ∈ (−π, π): gradient (0, 1) in (r, φ), Hessian zero; and
+    /// in Cartesian form ∂θ/∂y = x/r², ∂²θ/∂x∂y = (y² − x²)/r⁴.
+    #[test]
+    fn atan2_jets_match_closed_forms() {
+        for phi in [0.3, core::f64::consts::FRAC_PI_2, 2.9, -2.9, -1.2] {
+            let r = 1.7;
+            let (rj, pj) = (Jet2::<2>::variable(r, 0), Jet2::<2>::variable(phi, 1));
+            let (s, c) = pj.sincos();
+            let t = (rj * s).atan2(rj * c);
+            assert!((t.v - phi).abs() < 1e-15, "{phi}");
+            assert!(t.g[0].abs() < 1e-15 && (t.g[1] - 1.0).abs() < 1e-15);
+            for (i, j) in [(0, 0), (0, 1), (1, 1)] {
+                assert!(t.hessian(i, j).abs() < 1e-15, "{phi} {i}{j}");
+            }
+            let (x, y) = (r * phi.cos(), r * phi.sin());
+            let r2 = x * x + y * y;
+            let j = Jet2::<2>::variable(y, 1).atan2(Jet2::variable(x, 0));
+            let j1 = Jet1::<2>::variable(y, 1).atan2(Jet1::variable(x, 0));
+            assert!((j.g[1] - x / r2).abs() < 1e-15 && (j.g[0] + y / r2).abs() < 1e-15);
+            assert_eq!(j.g, j1.g);
+            assert!((j.hessian(0, 1) - (y * y - x * x) / (r2 * r2)).abs() < 1e-15);
+            assert!((j.hessian(0, 0) - 2.0 * x * y / (r2 * r2)).abs() < 1e-15);
+        }
     }
 
     #[test]

@@ -3,8 +3,9 @@
 //! and reference rotations, the spanning tree), the maximal view, and the
 //! minimal view with its `Mechanism` implementation. Behaviour lives in the
 //! runtime (`vigp::spatial`): the impls here only pass the description on.
-//! No damping code when no joint declares `damping`, no constraint code
-//! when the minimal view has no constraint.
+//! No damping code when no joint declares `damping`, no spring code without
+//! `stiffness`, no input code without `actuated`, no constraint code when
+//! the minimal view has no constraint.
 
 use super::model::{Anchor, JointKind, Model, Point};
 use crate::emit::lit;
@@ -109,32 +110,108 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         };
         quote!(#ln: #sp::Link3 { mass: #mass, inertia: #inertia, com: #com, length: #length },)
     });
-    let (joints_items, joints_field, joints_default) = if dissipative {
+    let elastic = m.elastic();
+    let input_joints = m.inputs();
+    let (joints_items, joints_field, joints_default) = if dissipative || elastic {
+        let joint_ty = match (dissipative, elastic) {
+            (true, true) => quote!(::vigp::ElasticJoint),
+            (false, true) => quote!(::vigp::Spring),
+            _ => quote!(::vigp::Joint),
+        };
         let fields = m.joints.iter().map(|jt| {
             let jn = &jt.name;
             let doc = doc_or(&jt.attrs, format!(" Joint `{}`.", jn.unraw()));
-            quote!(#doc pub #jn: ::vigp::Joint,)
+            quote!(#doc pub #jn: #joint_ty,)
         });
         let defaults = m.joints.iter().map(|jt| {
-            let d = jt
-                .damping
-                .as_ref()
-                .map_or_else(|| lit(0.0), DefaultValue::tokens);
+            let value = |x: &Option<DefaultValue>| {
+                x.as_ref().map_or_else(|| lit(0.0), DefaultValue::tokens)
+            };
             let jn = &jt.name;
-            quote!(#jn: ::vigp::Joint { damping: #d },)
+            let (d, k, r) = (value(&jt.damping), value(&jt.stiffness), value(&jt.rest));
+            match (dissipative, elastic) {
+                (true, true) => {
+                    quote!(#jn: ::vigp::ElasticJoint { damping: #d, stiffness: #k, rest: #r },)
+                }
+                (false, true) => quote!(#jn: ::vigp::Spring { stiffness: #k, rest: #r },),
+                _ => quote!(#jn: ::vigp::Joint { damping: #d },),
+            }
         });
         let doc = format!(" Joint parameters of [`{name_str}`].");
+        let field_doc = match (dissipative, elastic) {
+            (true, true) => " Joint parameters (damping and springs).",
+            (false, true) => " Joint parameters (springs).",
+            _ => " Joint parameters (damping).",
+        };
         (
             quote! {
                 #[doc = #doc]
                 #[derive(Clone, Copy, Debug, PartialEq)]
                 #vis struct #joints_ty { #(#fields)* }
             },
-            quote!(#[doc = " Joint parameters (damping)."] pub joints: #joints_ty,),
+            quote!(#[doc = #field_doc] pub joints: #joints_ty,),
             quote!(joints: #joints_ty { #(#defaults)* },),
         )
     } else {
         (quote!(), quote!(), quote!())
+    };
+    // springs and inputs: only what is declared is generated
+    let spatial_springs = if elastic {
+        let springs = m.joints.iter().map(|jt| {
+            let jn = &jt.name;
+            quote!(::vigp::Spring { stiffness: self.joints.#jn.stiffness, rest: self.joints.#jn.rest })
+        });
+        quote! {
+            const ELASTIC: bool = true;
+            fn springs(&self) -> [::vigp::Spring; #j] {
+                [#(#springs),*]
+            }
+        }
+    } else {
+        quote!()
+    };
+    let (spatial_inputs, input_names, inputs_const, inputs_fns, mechanism_inputs) = if input_joints
+        .is_empty()
+    {
+        (quote!(), quote!(), quote!(), quote!(), quote!())
+    } else {
+        let u = usize_lit(input_joints.len());
+        let indices = input_joints.iter().map(|&k| usize_lit(k));
+        let names: Vec<String> = input_joints
+            .iter()
+            .map(|&k| m.joints[k].name.unraw().to_string())
+            .collect();
+        (
+            quote!(const INPUT_JOINTS: &'static [usize] = &[#(#indices),*];),
+            quote! {
+                #[doc = " Names of the inputs (the actuated joints, in declaration order): input i is a torque about a revolute axis or a force along a prismatic axis."]
+                pub const INPUT_NAMES: [&'static str; #u] = [#(#names),*];
+            },
+            quote! {
+                const INPUTS: usize = #u;
+                const INPUT_NAMES: &'static [&'static str] = &[#(#names),*];
+            },
+            quote! {
+                fn input_matrix<const U: usize>(&self, _k: &(), q: &#svector<f64, #nm>) -> #smatrix<f64, #nm, U> {
+                    const { assert!(U == #u, "U must equal Dynamics::INPUTS") };
+                    #sp::minimal::input_matrix::<#name, #b, #j, #nm, U>(&self.sys, q)
+                }
+                fn input_force_jacobian<const U: usize>(
+                    &self,
+                    _k: &(),
+                    q: &#svector<f64, #nm>,
+                    u: &#svector<f64, U>,
+                ) -> #smatrix<f64, #nm, #nm> {
+                    const { assert!(U == #u, "U must equal Dynamics::INPUTS") };
+                    #sp::minimal::input_force_jacobian::<#name, #b, #j, #nm, U>(&self.sys, q, u)
+                }
+            },
+            quote! {
+                fn input_work<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>, u: &[f64]) -> D {
+                    #sp::minimal::input_work::<#name, D, #b, #j, #nm>(&self.sys, q, u)
+                }
+            },
+        )
     };
     let gravity = {
         let g = m.gravity.iter().map(DefaultValue::tokens);
@@ -298,6 +375,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
                 const KINDS: [::vigp::CoordinateKind; #nm] = [#(#kinds),*];
                 const DISSIPATIVE: bool = #dissipative;
                 const CONSTANT_MASS: bool = false;
+                #inputs_const
                 type Constants = ();
                 fn constants(&self) -> ::core::result::Result<(), ::vigp::embedded::StepError> {
                     #sp::model::validate::<#name, #b, #j>(&self.sys)
@@ -330,10 +408,12 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
                     #sp::minimal::force_jacobian::<#name, #b, #j, #nm>(&self.sys, q, v)
                 }
                 #constraint_terms
+                #inputs_fns
             }
 
             impl ::vigp::Mechanism<#nm, #cm> for #minimal_ty {
                 const COORDINATES: [&'static str; #nm] = [#(#coord_names),*];
+                #mechanism_inputs
                 fn kinetic_energy<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
                     #sp::minimal::kinetic_energy::<#name, D, #b, #j, #nm>(&self.sys, q, v)
                 }
@@ -391,6 +471,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             pub const MAXIMAL_CONSTRAINTS: usize = #c_max;
             #[doc = " Link names, in declaration order."]
             pub const LINKS: [&'static str; #b] = [#(#link_names),*];
+            #input_names
 
             #[doc = " The minimal-coordinate model with these parameters."]
             pub fn minimal(&self) -> #minimal_ty {
@@ -414,6 +495,8 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             const JOINTS: [&'static str; #j] = [#(#joint_names),*];
             const TREE: [usize; #b] = [#(#placement),*];
             const DISSIPATIVE: bool = #dissipative;
+            #spatial_springs
+            #spatial_inputs
             fn gravity(&self) -> [f64; 3] {
                 self.gravity
             }

@@ -11,14 +11,23 @@
 //!                 length?: l, com?: [x, y, z], frame?: [[x axis], [y axis], [z axis]] },
 //!     }
 //!     joints {
-//!         name: revolute(parent, child) { axis: [ax, ay, az], damping? },
-//!         name: prismatic(parent, child) { axis: [ax, ay, az], damping? },
+//!         name: revolute(parent, child) { axis: [ax, ay, az], damping?, actuated?, stiffness?, rest? },
+//!         name: prismatic(parent, child) { axis: [ax, ay, az], damping?, actuated?, stiffness?, rest? },
 //!         name: spherical(parent, child) { damping? },
 //!         name: fixed(parent, child),
 //!         name: free(parent, child),
 //!     }
 //! }
 //! ```
+//!
+//! `actuated` (a bare flag) makes a revolute or prismatic joint an input: a
+//! torque about the axis, a force along it; inputs are numbered in joint
+//! declaration order and named by their joints. `stiffness: k` (≥ 0) and
+//! `rest: s0` (default 0, only with `stiffness`) add the spring
+//! ½k(s − s0)² on the joint coordinate s (zero in the reference
+//! configuration). Spherical, fixed and free joints have no single
+//! coordinate and reject all three. As in the planar DSL, only what is
+//! declared is generated.
 //!
 //! Points: `world`, `world @ [x, y, z]`, `link.start`, `link.end`,
 //! `link.center`, `link.com`, `link @ [x, y, z]`.

@@ -149,6 +149,14 @@ pub struct Joint {
     pub child: Point,
     /// Declared damping.
     pub damping: Option<DefaultValue>,
+    /// `true` when the joint declares `actuated` (an input: a torque about a
+    /// revolute axis, a force along a prismatic axis).
+    pub actuated: bool,
+    /// Declared spring stiffness k ≥ 0 (`None` when not mentioned).
+    pub stiffness: Option<DefaultValue>,
+    /// Declared spring rest coordinate (`None` when not mentioned; only
+    /// allowed with `stiffness`).
+    pub rest: Option<DefaultValue>,
     /// Reference relative rotation R_p⁰ᵀR_c⁰ as a unit quaternion (w, x, y, z).
     pub rel: [f64; 4],
 }
@@ -206,6 +214,59 @@ impl Model {
     pub fn dissipative(&self) -> bool {
         self.joints.iter().any(|j| j.damping.is_some())
     }
+
+    /// `true` when any joint declares `stiffness` (then every joint gets a
+    /// run-time spring: stiffness and rest coordinate).
+    pub fn elastic(&self) -> bool {
+        self.joints.iter().any(|j| j.stiffness.is_some())
+    }
+
+    /// The actuated joints in declaration order: input i drives joint
+    /// `inputs()[i]`.
+    pub fn inputs(&self) -> Vec<usize> {
+        (0..self.joints.len())
+            .filter(|&j| self.joints[j].actuated)
+            .collect()
+    }
+}
+
+/// The keys of inputs and springs, which only revolute and prismatic
+/// joints take.
+const ACTUATION_KEYS: [&str; 3] = ["actuated", "stiffness", "rest"];
+
+/// `actuated` (a flag), as in the planar DSL.
+fn actuated(errs: &mut Errors, f: &HashMap<String, &Field>) -> bool {
+    match f.get("actuated") {
+        None => false,
+        Some(field) => match &field.value {
+            Value::Flag(_) => true,
+            other => {
+                errs.push(
+                    other.span(),
+                    "`actuated` takes no value: write `actuated` to make the joint an input",
+                );
+                false
+            }
+        },
+    }
+}
+
+/// `stiffness: k` (k ≥ 0 when known), as in the planar DSL.
+fn stiffness(errs: &mut Errors, f: &HashMap<String, &Field>) -> Option<DefaultValue> {
+    non_negative(errs, f.get("stiffness")?)
+}
+
+/// `rest: s0`, only with `stiffness`, as in the planar DSL.
+fn rest(errs: &mut Errors, f: &HashMap<String, &Field>, joint: &str) -> Option<DefaultValue> {
+    let field = f.get("rest")?;
+    let n = number(errs, field)?;
+    if !f.contains_key("stiffness") {
+        errs.push(
+            field.key.span(),
+            format!("`rest` of joint `{joint}` needs `stiffness` (a spring ½k(s − rest)²)"),
+        );
+    }
+    Some(DefaultValue::from(n))
 }
 
 struct Errors(Option<syn::Error>);
@@ -285,7 +346,7 @@ fn check_attrs(errs: &mut Errors, attrs: &[Attribute], on_mechanism: bool) {
 fn number<'a>(errs: &mut Errors, f: &'a Field) -> Option<&'a Number> {
     match &f.value {
         Value::Number(n) => Some(n),
-        Value::Array(s, _) => {
+        Value::Array(s, _) | Value::Flag(s) => {
             errs.push(*s, format!("`{}` takes a single number", f.key));
             None
         }
@@ -743,7 +804,7 @@ pub fn validate(input: Input) -> syn::Result<Model> {
         }
         let kind_name = decl.kind.to_string();
         let allowed: &[&str] = match kind_name.as_str() {
-            "revolute" | "prismatic" => &["axis", "damping"],
+            "revolute" | "prismatic" => &["axis", "damping", "actuated", "stiffness", "rest"],
             "spherical" => &["damping"],
             "fixed" | "free" => &[],
             _ => {
@@ -756,12 +817,24 @@ pub fn validate(input: Input) -> syn::Result<Model> {
                 continue;
             }
         };
-        let f = fields(
-            &mut errs,
-            &decl.fields,
-            allowed,
-            &format!("a {kind_name} joint"),
-        );
+        // inputs and springs act on a single joint coordinate: on any other
+        // joint they get their own message
+        let one_coordinate = matches!(kind_name.as_str(), "revolute" | "prismatic");
+        let mut own = Vec::new();
+        for field in &decl.fields {
+            let key = field.key.to_string();
+            if !one_coordinate && ACTUATION_KEYS.contains(&key.as_str()) {
+                errs.push(
+                    field.key.span(),
+                    format!(
+                        "`{key}` is not supported on a {kind_name} joint: only revolute and prismatic joints take `actuated`, `stiffness` and `rest` (they act on the joint's single coordinate)"
+                    ),
+                );
+            } else {
+                own.push(field.clone());
+            }
+        }
+        let f = fields(&mut errs, &own, allowed, &format!("a {kind_name} joint"));
         let mut axis = || -> [f64; 3] {
             match f.get("axis") {
                 None => {
@@ -792,6 +865,9 @@ pub fn validate(input: Input) -> syn::Result<Model> {
         let damping = f
             .get("damping")
             .and_then(|field| non_negative(&mut errs, field));
+        let actuated = actuated(&mut errs, &f);
+        let stiffness = stiffness(&mut errs, &f);
+        let rest = rest(&mut errs, &f, &name);
         let parent = resolve(&mut errs, &decl.parent);
         let child = resolve(&mut errs, &decl.child);
         let (Some(parent), Some(child)) = (parent, child) else {
@@ -830,6 +906,9 @@ pub fn validate(input: Input) -> syn::Result<Model> {
             parent,
             child,
             damping,
+            actuated,
+            stiffness,
+            rest,
             rel,
         });
     }

@@ -15,6 +15,8 @@ pub enum Value {
     Number(Number),
     /// `[a, b, …]` with the span of the brackets.
     Array(Span, Vec<Value>),
+    /// A key written without `: value` (`actuated`), with the key's span.
+    Flag(Span),
 }
 
 impl Value {
@@ -22,7 +24,7 @@ impl Value {
     pub fn span(&self) -> Span {
         match self {
             Value::Number(n) => n.span(),
-            Value::Array(s, _) => *s,
+            Value::Array(s, _) | Value::Flag(s) => *s,
         }
     }
 
@@ -33,7 +35,7 @@ impl Value {
                 .iter()
                 .map(|v| match v {
                     Value::Number(x) => Some(x),
-                    Value::Array(..) => None,
+                    Value::Array(..) | Value::Flag(_) => None,
                 })
                 .collect(),
             _ => None,
@@ -68,7 +70,7 @@ impl Parse for Value {
     }
 }
 
-/// `key: value`
+/// `key: value`, or a bare `key` (a flag, [`Value::Flag`]).
 #[derive(Clone)]
 pub struct Field {
     /// Key.
@@ -79,7 +81,14 @@ pub struct Field {
 
 impl Parse for Field {
     fn parse(input: ParseStream) -> syn::Result<Self> {
-        let key = input.parse()?;
+        let key: Ident = input.parse()?;
+        if input.is_empty() || input.peek(Token![,]) {
+            let span = key.span();
+            return Ok(Field {
+                key,
+                value: Value::Flag(span),
+            });
+        }
         input.parse::<Token![:]>()?;
         let value = input.parse()?;
         Ok(Field { key, value })

@@ -26,8 +26,13 @@
 //! ```
 //!
 //! with μ∓(ω) = J_r(Δt·ω)^{−ᵀ, −1}·Jω ([`so3::momentum`]), F the damping
-//! forces −D(k+1)·(v, ω)_{k+1}, and G the constraint Jacobian with respect
-//! to (x, η). These are solved by Newton's method on the KKT system with
+//! forces −D(k+1)·(v, ω)_{k+1} plus, for a forced step
+//! ([`LieStepper::step_forced`]), the inputs' Σ u_i·∂ṡ_i/∂ν at k+1 (ṡ_i
+//! the rate of actuated joint i, [`joint_rates`]), and G the constraint
+//! Jacobian with respect to (x, η). Joint springs ½k(s − rest)² enter as
+//! potential forces −Δt·k(s − rest)·∂s/∂(x, η) at k+1, where gravity's
+//! Δt·m·g does (s by [`joint_coordinate`]); inputs and springs are fixed
+//! within the step, so the Newton matrix does not change. These are solved by Newton's method on the KKT system with
 //! exact Jacobians and a backtracking line search.
 //!
 //! Consequences: the discrete momentum map Σ x_{k+1} × m·v_k +
@@ -39,9 +44,12 @@
 //! |‖q‖ − 1| stays at the rounding level.
 
 use super::geometry::{Motion3, Pose3, cross, mul_mv_f};
-use super::model::{Joint3, Link3, ModelError, Spatial, joint_rates, joint_residual, maximal_rows};
+use super::model::{
+    Joint3, Link3, ModelError, Spatial, joint_coordinate, joint_rates, joint_residual, maximal_rows,
+};
 use super::so3;
 use crate::linalg::{FullPivLu, solve_kkt};
+use crate::params::Spring;
 use crate::real::Jet1;
 use crate::step::{RolloutError, StepError, StepOptions};
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
@@ -291,36 +299,12 @@ pub fn damping_matrix<const B: usize, const N: usize>(
 ) -> SMatrix<f64, N, N> {
     let poses: [Pose3<f64>; B] = core::array::from_fn(|i| link_pose(&links[i], &x[i], &q[i]));
     let mut d = SMatrix::<f64, N, N>::zeros();
-    // motion of link i with velocity jets at `base`
-    let motion = |i: usize, base: usize| {
-        let p = &poses[i];
-        let wb = [
-            Jet1::<12>::variable(0.0, base + 3),
-            Jet1::variable(0.0, base + 4),
-            Jet1::variable(0.0, base + 5),
-        ];
-        let rot = p.rot.map(|r| r.map(Jet1::constant));
-        let omega = super::geometry::mul_mv(&rot, wb);
-        let vcom = [
-            Jet1::variable(0.0, base),
-            Jet1::variable(0.0, base + 1),
-            Jet1::variable(0.0, base + 2),
-        ];
-        let arm = mul_mv_f(&rot, links[i].com);
-        let velocity = super::geometry::sub(vcom, cross(omega, arm));
-        (constant_pose(p), Motion3 { velocity, omega })
-    };
     for j in joints {
         if j.damping == 0.0 {
             continue;
         }
-        let (cp, cm) = motion(j.child, 6);
-        let (pp, pm) = match j.parent {
-            Some(p) => motion(p, 0),
-            None => (constant_pose(&Pose3::identity()), Motion3::zero()),
-        };
         let mut rates = [Jet1::constant(0.0); 3];
-        let n = joint_rates(j, (&pp, &pm), (&cp, &cm), &mut rates);
+        let n = rate_jets(links, &poses, j, &mut rates);
         // columns of the two links in the global ordering
         let col = |k: usize| -> Option<usize> {
             if k < 6 {
@@ -344,6 +328,96 @@ pub fn damping_matrix<const B: usize, const N: usize>(
         }
     }
     d
+}
+
+/// The motion of link `i` at pose `poses[i]` with its velocities
+/// (v_com, ω_body) as jets in directions `base..base + 6`.
+fn jet_motion<const B: usize>(
+    links: &[Link3; B],
+    poses: &[Pose3<f64>; B],
+    i: usize,
+    base: usize,
+) -> (Pose3<Jet1<12>>, Motion3<Jet1<12>>) {
+    let p = &poses[i];
+    let wb = [
+        Jet1::<12>::variable(0.0, base + 3),
+        Jet1::variable(0.0, base + 4),
+        Jet1::variable(0.0, base + 5),
+    ];
+    let rot = p.rot.map(|r| r.map(Jet1::constant));
+    let omega = super::geometry::mul_mv(&rot, wb);
+    let vcom = [
+        Jet1::variable(0.0, base),
+        Jet1::variable(0.0, base + 1),
+        Jet1::variable(0.0, base + 2),
+    ];
+    let arm = mul_mv_f(&rot, links[i].com);
+    let velocity = super::geometry::sub(vcom, cross(omega, arm));
+    (constant_pose(p), Motion3 { velocity, omega })
+}
+
+/// The rates of joint `j` ([`joint_rates`]) as linear forms in the
+/// velocities of its parent (directions 0..6) and child (6..12).
+fn rate_jets<const B: usize>(
+    links: &[Link3; B],
+    poses: &[Pose3<f64>; B],
+    j: &Joint3,
+    out: &mut [Jet1<12>; 3],
+) -> usize {
+    let (cp, cm) = jet_motion(links, poses, j.child, 6);
+    let (pp, pm) = match j.parent {
+        Some(p) => jet_motion(links, poses, p, 0),
+        None => (constant_pose(&Pose3::identity()), Motion3::zero()),
+    };
+    joint_rates(j, (&pp, &pm), (&cp, &cm), out)
+}
+
+/// Adds `w`·(a 12-entry row over the parent's and child's (δx, η) or
+/// (v, ω) columns) into `out`.
+fn scatter<const N: usize>(out: &mut SVector<f64, N>, j: &Joint3, row: &[f64; 12], w: f64) {
+    for k in 0..6 {
+        out[6 * j.child + k] += w * row[6 + k];
+        if let Some(p) = j.parent {
+            out[6 * p + k] += w * row[k];
+        }
+    }
+}
+
+/// The coordinate s of joint `j` ([`joint_coordinate`], branch within π of
+/// `near`) at the configuration (x, q) with its gradient with respect to
+/// the parent's (δx, η) (entries 0..6) and the child's (6..12).
+fn coordinate_jet<const B: usize>(
+    links: &[Link3; B],
+    poses: &[Pose3<f64>; B],
+    x: &[Vector3<f64>; B],
+    j: &Joint3,
+    near: f64,
+) -> Jet1<12> {
+    let c = j.child;
+    let child = jet_pose(&links[c], &poses[c], &x[c], 6);
+    let parent = match j.parent {
+        Some(p) => jet_pose(&links[p], &poses[p], &x[p], 0),
+        None => constant_pose(&Pose3::identity()),
+    };
+    joint_coordinate(j, &parent, &child, near)
+}
+
+/// The joint coordinates s_j of every joint at the configuration (x, q)
+/// (0 for spherical, fixed and free joints), revolute angles on the branch
+/// (near_j − π, near_j + π] ([`joint_coordinate`]).
+pub fn joint_coordinates<const B: usize, const J: usize>(
+    links: &[Link3; B],
+    joints: &[Joint3; J],
+    x: &[Vector3<f64>; B],
+    q: &[UnitQuaternion<f64>; B],
+    near: &[f64; J],
+) -> [f64; J] {
+    let poses: [Pose3<f64>; B] = core::array::from_fn(|i| link_pose(&links[i], &x[i], &q[i]));
+    core::array::from_fn(|k| {
+        let j = &joints[k];
+        let parent = j.parent.map_or_else(Pose3::identity, |p| poses[p]);
+        joint_coordinate(j, &parent, &poses[j.child], near[k])
+    })
 }
 
 /// Diagnostics of a converged step.
@@ -371,6 +445,8 @@ pub struct LieStepper<S, const B: usize, const J: usize, const N: usize, const C
     inertia: [Matrix3<f64>; B],
     gravity: Vector3<f64>,
     dissipative: bool,
+    springs: [Spring; J],
+    elastic: bool,
     dt: f64,
     options: StepOptions,
 }
@@ -407,6 +483,14 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         })?;
         let inertia = links.map(|l| Matrix3::from_fn(|i, j| l.inertia[i][j]));
         let g = view.sys.gravity();
+        let springs = if S::ELASTIC {
+            view.sys.springs()
+        } else {
+            [Spring {
+                stiffness: 0.0,
+                rest: 0.0,
+            }; J]
+        };
         Ok(Self {
             view,
             links,
@@ -414,6 +498,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             inertia,
             gravity: Vector3::new(g[0], g[1], g[2]),
             dissipative: S::DISSIPATIVE && joints.iter().any(|j| j.damping > 0.0),
+            springs,
+            elastic: springs.iter().any(|s| s.stiffness != 0.0),
             dt,
             options,
         })
@@ -440,15 +526,36 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// Total energy of a state with its discrete velocities:
-    /// Σ ½m|v|² + ½ωᵀJω − m·g·x.
+    /// Σ ½m|v|² + ½ωᵀJω − m·g·x, plus the springs' Σ ½k(s − rest)².
     pub fn energy(&self, z: &SpatialState<B>) -> f64 {
-        (0..B)
+        let e: f64 = (0..B)
             .map(|i| {
                 let m = self.links[i].mass;
                 0.5 * m * z.v[i].norm_squared() + 0.5 * z.w[i].dot(&(self.inertia[i] * z.w[i]))
                     - m * self.gravity.dot(&z.x[i])
             })
-            .sum()
+            .sum();
+        if !self.elastic {
+            return e;
+        }
+        let rest = self.springs.map(|s| s.rest);
+        let s = joint_coordinates(&self.links, &self.joints, &z.x, &z.q, &rest);
+        e + self
+            .springs
+            .iter()
+            .zip(s)
+            .map(|(sp, s)| 0.5 * sp.stiffness * (s - sp.rest) * (s - sp.rest))
+            .sum::<f64>()
+    }
+
+    /// The joint coordinates at the state's configuration, in joint
+    /// declaration order (0 for spherical, fixed and free joints): the same
+    /// zero as the minimal coordinates; a revolute angle on the branch
+    /// within π of its spring's rest angle (0 without a spring), since
+    /// orientations carry no winding count.
+    pub fn joint_coordinates(&self, z: &SpatialState<B>) -> [f64; J] {
+        let rest = self.springs.map(|s| s.rest);
+        joint_coordinates(&self.links, &self.joints, &z.x, &z.q, &rest)
     }
 
     /// Constraint residual g at the state's configuration.
@@ -493,7 +600,90 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             return Err(StepError::NonFiniteState);
         }
         let guess = pack(&z.v, &z.w);
-        self.solve(z, &guess)
+        self.solve(z, &guess, &[])
+    }
+
+    /// One step under inputs `u` (one per actuated joint in declaration
+    /// order, [`Spatial::INPUT_JOINTS`]; `U` must equal their number,
+    /// checked at compile time), held over the step: input i adds the
+    /// generalized force u_i·∂ṡ_i/∂ν at configuration k+1 to the DEL,
+    /// where the damping force −D·ν enters (a torque about a revolute
+    /// axis on the child and its reaction on the parent, a force along a
+    /// prismatic axis). With u = 0 this is [`Self::step`], bit for bit.
+    pub fn step_forced<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &SVector<f64, U>,
+    ) -> Result<SpatialState<B>, StepError> {
+        self.step_forced_with_report(z, u).map(|(z, _)| z)
+    }
+
+    /// [`Self::step_forced`] with solver diagnostics.
+    pub fn step_forced_with_report<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &SVector<f64, U>,
+    ) -> Result<(SpatialState<B>, LieStepReport), StepError> {
+        const {
+            assert!(
+                U == S::INPUT_JOINTS.len(),
+                "U must equal the number of inputs"
+            )
+        };
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        if !u.iter().all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput);
+        }
+        let guess = pack(&z.v, &z.w);
+        self.solve(z, &guess, u.as_slice())
+    }
+
+    /// Fills `out` with the forced trajectory from `z0`: `out[0] = z0`,
+    /// then `out[k + 1]` after the step under `inputs[k]` (`inputs` needs
+    /// at least `out.len() − 1` entries); Newton starts from the
+    /// extrapolation 2ν_k − ν_{k−1}, as [`Self::rollout_into`]. No
+    /// allocation.
+    pub fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &SpatialState<B>,
+        inputs: &[SVector<f64, U>],
+        out: &mut [SpatialState<B>],
+    ) -> Result<(), RolloutError> {
+        const {
+            assert!(
+                U == S::INPUT_JOINTS.len(),
+                "U must equal the number of inputs"
+            )
+        };
+        let Some((first, rest)) = out.split_first_mut() else {
+            return Ok(());
+        };
+        let fail = |step, error| RolloutError { step, error };
+        if !z0.is_finite() {
+            return Err(fail(0, StepError::NonFiniteState));
+        }
+        if inputs.len() < rest.len() {
+            return Err(fail(inputs.len(), StepError::NonFiniteInput));
+        }
+        *first = *z0;
+        let mut z = *z0;
+        let mut prev = pack(&z0.v, &z0.w);
+        for (k, (slot, u)) in rest.iter_mut().zip(inputs).enumerate() {
+            if !u.iter().all(|x| x.is_finite()) {
+                return Err(fail(k, StepError::NonFiniteInput));
+            }
+            let now = pack(&z.v, &z.w);
+            let guess = now * 2.0 - prev;
+            let (z1, _) = self
+                .solve(&z, &guess, u.as_slice())
+                .map_err(|error| fail(k, error))?;
+            *slot = z1;
+            prev = now;
+            z = z1;
+        }
+        Ok(())
     }
 
     /// Fills `out` with the trajectory from `z0`: `out[0] = z0`, then one
@@ -520,7 +710,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             let now = pack(&z.v, &z.w);
             let guess = now * 2.0 - prev;
             let (z1, _) = self
-                .solve(&z, &guess)
+                .solve(&z, &guess, &[])
                 .map_err(|error| RolloutError { step: k, error })?;
             *slot = z1;
             prev = now;
@@ -661,9 +851,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         Ok(SpatialState { x, q, v, w })
     }
 
-    /// The per-step data of the step from `z` (configuration k+1 and the
-    /// terms fixed within the step).
-    fn prepare(&self, z: &SpatialState<B>) -> StepData<B, N, C> {
+    /// The per-step data of the step from `z` under inputs `u` (empty or
+    /// zero: none): configuration k+1 and the terms fixed within the step.
+    fn prepare(&self, z: &SpatialState<B>, u: &[f64]) -> StepData<B, N, C> {
         let h = self.dt;
         let (x1, q1) = z.advanced(h);
         // b = (m v_k + Δt m g, μ⁻(ω_k)) per link: the ν-independent terms
@@ -677,6 +867,35 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             b.fixed_rows_mut::<3>(6 * i + 3).copy_from(&r);
             let jmax = (0..3).map(|k| self.inertia[i][(k, k)]).fold(0.0, f64::max);
             m_bar = m_bar.max(m).max(jmax);
+        }
+        let forced = u.iter().any(|x| *x != 0.0);
+        if self.elastic || forced {
+            let poses: [Pose3<f64>; B] =
+                core::array::from_fn(|i| link_pose(&self.links[i], &x1[i], &q1[i]));
+            // springs: Δt·(−k(s − rest)∇s) at configuration k+1, the
+            // potential's place in the DEL (as gravity's Δt·m·g)
+            if self.elastic {
+                for (j, sp) in self.joints.iter().zip(&self.springs) {
+                    if sp.stiffness == 0.0 {
+                        continue;
+                    }
+                    let s = coordinate_jet(&self.links, &poses, &x1, j, sp.rest);
+                    scatter(&mut b, j, &s.g, -h * sp.stiffness * (s.v - sp.rest));
+                }
+            }
+            // inputs: Δt·u_i·∂ṡ_i/∂ν at configuration k+1, the damping
+            // force's place
+            if forced {
+                for (&k, &ui) in S::INPUT_JOINTS.iter().zip(u) {
+                    if ui == 0.0 {
+                        continue;
+                    }
+                    let j = &self.joints[k];
+                    let mut rates = [Jet1::constant(0.0); 3];
+                    rate_jets(&self.links, &poses, j, &mut rates);
+                    scatter(&mut b, j, &rates[0].g, h * ui);
+                }
+            }
         }
         let g1t: SMatrix<f64, N, C> = if C > 0 {
             constraints_and_jacobian::<B, N, C>(&self.links, &self.joints, &x1, &q1)
@@ -810,7 +1029,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         nu: &SVector<f64, N>,
         lambda: &SVector<f64, C>,
     ) -> (SVector<f64, N>, SVector<f64, C>) {
-        self.residual(&self.prepare(z), nu, lambda)
+        self.residual(&self.prepare(z, &[]), nu, lambda)
     }
 
     /// The exact Jacobian of [`Self::del_residual`] used by Newton:
@@ -820,7 +1039,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z: &SpatialState<B>,
         nu: &SVector<f64, N>,
     ) -> (SMatrix<f64, N, N>, SMatrix<f64, N, C>, SMatrix<f64, C, N>) {
-        let d = self.prepare(z);
+        let d = self.prepare(z, &[]);
         let (a, g2) = self.jacobian(&d, nu);
         (a, -d.g1t, g2)
     }
@@ -829,8 +1048,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z: &SpatialState<B>,
         guess: &SVector<f64, N>,
+        u: &[f64],
     ) -> Result<(SpatialState<B>, LieStepReport), StepError> {
-        let d = self.prepare(z);
+        let d = self.prepare(z, u);
         let eval = |nu: &SVector<f64, N>, lambda: &SVector<f64, C>| {
             let (r, c) = self.residual(&d, nu, lambda);
             let err = (r.amax() / d.p_scale).max(c.amax() / d.l_scale);

@@ -12,7 +12,8 @@
 
 use super::geometry::{Motion3, Pose3, dot, dot_f, mul_mtv, mul_mv_f};
 use super::model::{
-    Joint3, JointType, Layout, Link3, Spatial, joint_rates, joint_residual, place_child,
+    Joint3, JointType, Layout, Link3, Spatial, joint_coordinate, joint_rates, joint_residual,
+    place_child,
 };
 use crate::real::Real;
 use nalgebra::SVector;
@@ -115,7 +116,8 @@ where
     t
 }
 
-/// Potential energy V(q) (gravity).
+/// Potential energy V(q): gravity, plus the joint springs
+/// ([`spring_energy`]) when [`Spatial::ELASTIC`].
 pub fn potential_energy<S, R, const B: usize, const J: usize, const N: usize>(
     sys: &S,
     q: &SVector<R, N>,
@@ -130,10 +132,147 @@ where
     for i in 0..B {
         v = v + link_potential_energy(&links[i], g, &poses[i]);
     }
+    if S::ELASTIC {
+        v = v + spring_energy::<S, R, B, J, N>(sys, q, &poses);
+    }
     v
 }
 
-/// Lagrangian T − V in one pass of the kinematics.
+/// The coordinate s_j(q) of joint `k` (revolute or prismatic): the minimal
+/// coordinate itself for a tree joint, [`joint_coordinate`] of the link
+/// poses (on the branch within π of `near`) for a loop joint.
+fn coordinate_of<R: Real, const B: usize, const J: usize, const N: usize>(
+    joints: &[Joint3; J],
+    layout: &Layout<J>,
+    k: usize,
+    q: &SVector<R, N>,
+    poses: &[Pose3<R>; B],
+    near: f64,
+) -> R {
+    let j = &joints[k];
+    let o = layout.coordinate[k];
+    if o != usize::MAX {
+        return match j.kind {
+            JointType::Revolute | JointType::Prismatic => q[o],
+            _ => R::from_f64(0.0),
+        };
+    }
+    joint_coordinate(j, &parent_of(j, poses), &poses[j.child], near)
+}
+
+/// Spring energy Σ_j ½k_j(s_j − rest_j)² over the joints with springs
+/// ([`Spatial::springs`]) at the link `poses` of `q`.
+pub fn spring_energy<S, R, const B: usize, const J: usize, const N: usize>(
+    sys: &S,
+    q: &SVector<R, N>,
+    poses: &[Pose3<R>; B],
+) -> R
+where
+    S: Spatial<B, J>,
+    R: Real,
+{
+    let joints = sys.joints();
+    let layout = Layout::of::<S, B>(&joints);
+    let mut v = R::from_f64(0.0);
+    for (k, sp) in sys.springs().iter().enumerate() {
+        if sp.stiffness == 0.0 {
+            continue;
+        }
+        let s = coordinate_of::<R, B, J, N>(&joints, &layout, k, q, poses, sp.rest);
+        let stretch = s - sp.rest;
+        v = v + stretch * stretch * (0.5 * sp.stiffness);
+    }
+    v
+}
+
+/// Virtual work of the inputs W(q; u) = Σ_i u_i s_i(q) over the actuated
+/// joints ([`Spatial::INPUT_JOINTS`]; missing entries of `u` count as 0):
+/// the generalized input force is ∇W = B(q)u.
+pub fn input_work<S, R, const B: usize, const J: usize, const N: usize>(
+    sys: &S,
+    q: &SVector<R, N>,
+    u: &[f64],
+) -> R
+where
+    S: Spatial<B, J>,
+    R: Real,
+{
+    let joints = sys.joints();
+    let layout = Layout::of::<S, B>(&joints);
+    let loops = S::INPUT_JOINTS
+        .iter()
+        .any(|&k| layout.coordinate[k] == usize::MAX);
+    let poses = if loops {
+        poses::<S, R, B, J, N>(sys, q)
+    } else {
+        [Pose3::identity(); B]
+    };
+    let mut w = R::from_f64(0.0);
+    for (i, &k) in S::INPUT_JOINTS.iter().enumerate() {
+        let ui = u.get(i).copied().unwrap_or(0.0);
+        if ui != 0.0 {
+            w = w + coordinate_of::<R, B, J, N>(&joints, &layout, k, q, &poses, 0.0) * ui;
+        }
+    }
+    w
+}
+
+/// The input matrix B(q) (N × U): column i is ∇s_i(q) of actuated joint
+/// i (a unit vector for a tree joint; one first-order jet pass when an
+/// input drives a loop joint).
+pub fn input_matrix<S, const B: usize, const J: usize, const N: usize, const U: usize>(
+    sys: &S,
+    q: &SVector<f64, N>,
+) -> nalgebra::SMatrix<f64, N, U>
+where
+    S: Spatial<B, J>,
+{
+    use crate::real::Jet1;
+    let joints = sys.joints();
+    let layout = Layout::of::<S, B>(&joints);
+    let mut out = nalgebra::SMatrix::<f64, N, U>::zeros();
+    let qj = seed1(q);
+    let mut cached = None;
+    for (i, &k) in S::INPUT_JOINTS.iter().enumerate().take(U) {
+        let o = layout.coordinate[k];
+        if o != usize::MAX {
+            out[(o, i)] = 1.0;
+            continue;
+        }
+        let p = *cached.get_or_insert_with(|| poses::<S, Jet1<N>, B, J, N>(sys, &qj));
+        let s = coordinate_of::<Jet1<N>, B, J, N>(&joints, &layout, k, &qj, &p, 0.0);
+        for l in 0..N {
+            out[(l, i)] = s.g[l];
+        }
+    }
+    out
+}
+
+/// ∂/∂q [B(q)u] = Σ_i u_i ∇²s_i(q): zero unless an input drives a loop
+/// joint (one second-order jet pass then).
+pub fn input_force_jacobian<S, const B: usize, const J: usize, const N: usize, const U: usize>(
+    sys: &S,
+    q: &SVector<f64, N>,
+    u: &SVector<f64, U>,
+) -> nalgebra::SMatrix<f64, N, N>
+where
+    S: Spatial<B, J>,
+{
+    use crate::real::Jet2;
+    let joints = sys.joints();
+    let layout = Layout::of::<S, B>(&joints);
+    let loops = S::INPUT_JOINTS
+        .iter()
+        .any(|&k| layout.coordinate[k] == usize::MAX);
+    if !loops {
+        return nalgebra::SMatrix::zeros();
+    }
+    let qj = SVector::<Jet2<N>, N>::from_fn(|i, _| Jet2::variable(q[i], i));
+    let w = input_work::<S, Jet2<N>, B, J, N>(sys, &qj, u.as_slice());
+    nalgebra::SMatrix::from_fn(|i, k| w.hessian(i, k))
+}
+
+/// Lagrangian T − V (springs included) in one pass of the kinematics.
 pub fn lagrangian<S, R, const B: usize, const J: usize, const N: usize>(
     sys: &S,
     q: &SVector<R, N>,
@@ -149,6 +288,9 @@ where
     for i in 0..B {
         l = l + link_kinetic_energy(&links[i], &poses[i], &motions[i])
             - link_potential_energy(&links[i], g, &poses[i]);
+    }
+    if S::ELASTIC {
+        l = l - spring_energy::<S, R, B, J, N>(sys, q, &poses);
     }
     l
 }

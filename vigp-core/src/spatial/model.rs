@@ -26,6 +26,7 @@ use super::geometry::{
     Mat3, Motion3, Pose3, Vec3, add, complement, cross, dot, dot_f, mul_mm, mul_mm_f, mul_mtm,
     mul_mtv, mul_mv_f, sub, vee_skew,
 };
+use crate::params::Spring;
 use crate::real::Real;
 
 /// One rigid link: mass properties in its own frame.
@@ -152,6 +153,15 @@ pub trait Spatial<const B: usize, const J: usize> {
     /// `true` when some joint declares damping (otherwise the integrators
     /// skip the dissipation terms).
     const DISSIPATIVE: bool;
+    /// `true` when some joint has a spring ([`Spatial::springs`]);
+    /// otherwise the integrators skip the spring terms. Default: none.
+    const ELASTIC: bool = false;
+    /// The actuated joints in declaration order: input i drives joint
+    /// `INPUT_JOINTS[i]` (a revolute or prismatic joint) with the
+    /// generalized force u_i·∇s_i, s_i its coordinate ([`joint_coordinate`]):
+    /// a torque about a revolute axis (on the child, and its reaction on
+    /// the parent), a force along a prismatic axis. Default: none.
+    const INPUT_JOINTS: &'static [usize] = &[];
 
     /// Gravitational acceleration in world coordinates (m/s²).
     fn gravity(&self) -> [f64; 3];
@@ -159,6 +169,16 @@ pub trait Spatial<const B: usize, const J: usize> {
     fn links(&self) -> [Link3; B];
     /// The joints, in declaration order.
     fn joints(&self) -> [Joint3; J];
+    /// The spring of every joint, in declaration order: potential
+    /// ½k(s − rest)² on the joint coordinate s ([`joint_coordinate`]; only
+    /// revolute and prismatic joints may have k ≠ 0). Read only when
+    /// [`Spatial::ELASTIC`]. Default: none.
+    fn springs(&self) -> [Spring; J] {
+        [Spring {
+            stiffness: 0.0,
+            rest: 0.0,
+        }; J]
+    }
 }
 
 /// Why a description cannot be integrated.
@@ -207,7 +227,9 @@ pub fn positive_definite(m: &[[f64; 3]; 3]) -> bool {
 /// Checks a description: gravity finite; masses finite and > 0; inertias
 /// finite, symmetric and positive definite; centres of mass and anchors
 /// finite; indices in range; axes and `rel` unit (to 1e-9); damping finite
-/// and ≥ 0; [`Spatial::TREE`] a valid placement order (each link placed
+/// and ≥ 0; spring stiffnesses finite and ≥ 0 with finite rests, on
+/// revolute and prismatic joints only; inputs on distinct revolute or
+/// prismatic joints; [`Spatial::TREE`] a valid placement order (each link placed
 /// once, by a joint whose child it is, parents first).
 pub fn validate<S: Spatial<B, J>, const B: usize, const J: usize>(
     sys: &S,
@@ -266,6 +288,33 @@ pub fn validate<S: Spatial<B, J>, const B: usize, const J: usize>(
             return Err(ModelError::Invalid(
                 "a damping coefficient is negative or not finite",
             ));
+        }
+    }
+    if S::ELASTIC {
+        for (s, j) in sys.springs().iter().zip(&joints) {
+            if !(s.stiffness.is_finite() && s.stiffness >= 0.0 && s.rest.is_finite()) {
+                return Err(ModelError::Invalid(
+                    "a spring stiffness is negative or not finite, or its rest is not finite",
+                ));
+            }
+            if s.stiffness != 0.0 && !matches!(j.kind, JointType::Revolute | JointType::Prismatic) {
+                return Err(ModelError::Invalid(
+                    "a spring on a joint that is not revolute or prismatic",
+                ));
+            }
+        }
+    }
+    for (i, &k) in S::INPUT_JOINTS.iter().enumerate() {
+        let Some(j) = joints.get(k) else {
+            return Err(ModelError::Invalid("an input joint index is out of range"));
+        };
+        if !matches!(j.kind, JointType::Revolute | JointType::Prismatic) {
+            return Err(ModelError::Invalid(
+                "an input drives a joint that is not revolute or prismatic",
+            ));
+        }
+        if S::INPUT_JOINTS[..i].contains(&k) {
+            return Err(ModelError::Invalid("a joint is actuated twice"));
         }
     }
     let mut placed = [false; B];
@@ -411,6 +460,41 @@ pub fn joint_residual<R: Real>(
             6
         }
         JointType::Free => 0,
+    }
+}
+
+/// The coordinate s of a revolute or prismatic joint `j` read from its
+/// parent and child poses, zero in the reference configuration (the
+/// convention of the minimal coordinates, [`place_child`]):
+///
+/// * revolute: the angle θ of E = R_pᵀ·R_c·Qᵀ about the axis a, measured
+///   as atan2(b₂·E b₁, b₁·E b₁) ((b₁, b₂) the axis' [`complement`]) on the
+///   branch (near − π, near + π]: orientations carry no winding count;
+/// * prismatic: the slide (R_p a)·(C − P) (parent point P, child point C);
+/// * other joints: 0.
+///
+/// On consistent poses its rate is [`joint_rates`]' row; generic over
+/// [`Real`], so jets and dual numbers differentiate it (spring forces,
+/// inputs on loop joints, the maximal view).
+pub fn joint_coordinate<R: Real>(j: &Joint3, parent: &Pose3<R>, child: &Pose3<R>, near: f64) -> R {
+    match j.kind {
+        JointType::Revolute => {
+            let q = rel_matrix(j.rel);
+            let (b1, b2) = complement(j.axis);
+            let e = relative(parent, child, &q);
+            let eb1 = [dot_f(e[0], b1), dot_f(e[1], b1), dot_f(e[2], b1)];
+            let (c, s) = (dot_f(eb1, b1), dot_f(eb1, b2));
+            // rotate (c, s) by −near so that atan2's cut sits opposite `near`
+            let (sn, cn) = libm::sincos(near);
+            let (y, x) = (s * cn - c * sn, c * cn + s * sn);
+            y.atan2(x) + near
+        }
+        JointType::Prismatic => {
+            let a = parent.direction(j.axis);
+            let d = sub(child.point(j.child_anchor), parent.point(j.parent_anchor));
+            dot(a, d)
+        }
+        _ => R::from_f64(0.0),
     }
 }
 

@@ -30,6 +30,10 @@ pub enum SpatialError {
     /// The description cannot be integrated.
     #[error(transparent)]
     Model(#[from] ModelError),
+    /// Non-zero inputs given to an integrator that takes none (a learned
+    /// spatial integrator).
+    #[error("this spatial integrator takes no inputs")]
+    InputsNotSupported,
     /// A learned integrator's GP failed.
     #[cfg(feature = "alloc")]
     #[error(transparent)]
@@ -54,6 +58,50 @@ pub trait SpatialIntegrator<const B: usize> {
 
     /// One step.
     fn step(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, SpatialError>;
+
+    /// One step under inputs `u` (one per actuated joint in declaration
+    /// order, `Name::INPUT_NAMES`; `U` must equal their number). The
+    /// default, for integrators without inputs, takes u = 0 as
+    /// [`SpatialIntegrator::step`] and refuses anything else with
+    /// [`SpatialError::InputsNotSupported`]; [`LieStepper`] implements it
+    /// ([`LieStepper::step_forced`]).
+    fn step_forced<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<SpatialState<B>, SpatialError>
+    where
+        Self: Sized,
+    {
+        if u.iter().all(|x| *x == 0.0) {
+            self.step(z)
+        } else {
+            Err(SpatialError::InputsNotSupported)
+        }
+    }
+
+    /// The forced trajectory z₀, z₁, …, z_K (K = `inputs.len()`), step k
+    /// under `inputs[k]`; a failing step is reported with its index.
+    fn rollout_forced<const U: usize>(
+        &self,
+        z0: &SpatialState<B>,
+        inputs: &[nalgebra::SVector<f64, U>],
+    ) -> Result<Vec<SpatialState<B>>, SpatialError>
+    where
+        Self: Sized,
+    {
+        let mut out = Vec::with_capacity(inputs.len() + 1);
+        out.push(*z0);
+        let mut z = *z0;
+        for (k, u) in inputs.iter().enumerate() {
+            z = self.step_forced(&z, u).map_err(|e| match e {
+                SpatialError::Step(error) => SpatialError::Rollout(RolloutError { step: k, error }),
+                other => other,
+            })?;
+            out.push(z);
+        }
+        Ok(out)
+    }
 
     /// The trajectory z₀, z₁, …, z_steps (`steps + 1` states); a failing
     /// step is reported with its index.
@@ -95,6 +143,25 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<Vec<SpatialState<B>>, SpatialError> {
         let mut out = vec![*z0; steps + 1];
         self.rollout_into(z0, &mut out)?;
+        Ok(out)
+    }
+
+    fn step_forced<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &nalgebra::SVector<f64, U>,
+    ) -> Result<SpatialState<B>, SpatialError> {
+        Ok(LieStepper::step_forced(self, z, u)?)
+    }
+
+    /// Through [`LieStepper::rollout_forced_into`].
+    fn rollout_forced<const U: usize>(
+        &self,
+        z0: &SpatialState<B>,
+        inputs: &[nalgebra::SVector<f64, U>],
+    ) -> Result<Vec<SpatialState<B>>, SpatialError> {
+        let mut out = vec![*z0; inputs.len() + 1];
+        self.rollout_forced_into(z0, inputs, &mut out)?;
         Ok(out)
     }
 }
