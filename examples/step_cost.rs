@@ -183,6 +183,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             State::new([1.0, -0.5], [0.5, 1.0]),
             steps,
         ),
+        "fourbar_maximal" => {
+            let fb = Fourbar::default();
+            let z0 = consistent_state(
+                &fb.minimal(),
+                &SVector::from([0.9, -1.3, -0.4, 1.3]),
+                &SVector::from([0.5, 0.0, 0.0, 0.0]),
+                0.01,
+            )?;
+            use vigp::Coordinates;
+            run(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
+        }
         "fourbar" => {
             let fb = Fourbar::default();
             let z0 = consistent_state(

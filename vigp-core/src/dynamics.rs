@@ -37,7 +37,9 @@ impl<const N: usize> Terms<N> {
     pub fn zeros() -> Self {
         Self {
             mass: SMatrix::zeros(),
-            dmass: [SMatrix::zeros(); N],
+            // written in place (an array repeat expression copies one zero
+            // matrix N times: N³ numbers through memcpy)
+            dmass: core::array::from_fn(|_| SMatrix::zeros()),
             dpotential: SVector::zeros(),
             damping: SMatrix::zeros(),
         }

@@ -356,7 +356,9 @@ fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<SVector
 /// otherwise, or when J is singular and C = 0, `None`.
 ///
 /// A diagonal J (maximal coordinates without damping) is inverted
-/// directly: the Schur complement A J⁻¹ B costs O(C²N).
+/// directly: the Schur complement S = A J⁻¹ B costs O(C²N), and S is
+/// solved by partial pivoting, or by full pivoting when a pivot is tiny
+/// (a singular S: redundant constraints).
 ///
 /// Returns the solution and whether the regularisation was needed.
 pub fn solve_kkt_regularised<const N: usize, const C: usize>(
@@ -376,7 +378,11 @@ pub fn solve_kkt_regularised<const N: usize, const C: usize>(
             row *= inv[i];
         }
         let s = a * jb;
-        let y = FullPivLu::new(s, 1e-13).solve(&(a * jr - c));
+        let rhs = a * jr - c;
+        // partial pivoting first (a fraction of full pivoting's cost); a
+        // pivot below 1e-14 of the largest entry — redundant constraints
+        // make S singular — goes to full pivoting's rank-revealing solve
+        let y = solve_partial(&s, &rhs).unwrap_or_else(|| FullPivLu::new(s, 1e-13).solve(&rhs));
         let x = jr - jb * y;
         if x.iter().chain(y.iter()).all(|v| v.is_finite()) {
             return Some(((x, y), false));

@@ -409,7 +409,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(StepError::NonFiniteState);
         }
         let p0 = self.momentum(z);
-        self.advance(z, &p0, &z.v).map(|(z1, _, r)| (z1, r))
+        self.advance(z, &p0, &z.v, &mut Terms::zeros())
+            .map(|(z1, _, r)| (z1, r))
     }
 
     /// One step from `z` with its momentum `p0` known (from the previous
@@ -423,24 +424,27 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
-        self.advance(z, p0, &z.v)
+        self.advance(z, p0, &z.v, &mut Terms::zeros())
     }
 
     /// All sub-steps of one step from `z` with momentum `p0`, the first
-    /// Newton solve started at `guess`.
+    /// Newton solve started at `guess`; `t` is the terms workspace (a
+    /// rollout reuses one: every call of [`Dynamics::terms`] rewrites the
+    /// same entries, the others stay zero).
     #[inline(always)]
     fn advance(
         &self,
         z: &State<N>,
         p0: &SVector<f64, N>,
         guess: &SVector<f64, N>,
+        t: &mut Terms<N>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         if max_abs(p0).is_nan() {
             return Err(StepError::NonFiniteState);
         }
         if self.substeps == 1 {
             let x1 = z.q + z.v * self.dt;
-            let (v1, p1, r) = self.solve(&x1, p0, self.dt, guess)?;
+            let (v1, p1, r) = self.solve_in(&x1, p0, self.dt, guess, t)?;
             return Ok((State { q: x1, v: v1 }, p1, r));
         }
         let h = self.substep_dt();
@@ -449,7 +453,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         for i in 0..self.substeps {
             let x1 = z.q + z.v * h;
             let g = if i == 0 { *guess } else { z.v };
-            let (v1, p1, r) = self.solve(&x1, &p, h, &g)?;
+            let (v1, p1, r) = self.solve_in(&x1, &p, h, &g, t)?;
             report.merge(&r);
             (z, p) = (State { q: x1, v: v1 }, p1);
         }
@@ -479,13 +483,18 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Ok(());
         }
         let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
+        // one terms workspace for the whole rollout (zeroing it is not free:
+        // ∂M/∂q alone is N³ numbers)
+        let mut t = Terms::zeros();
         for (k, slot) in out.iter_mut().enumerate() {
             let guess = if self.substeps == 1 {
                 z.v * 2.0 - v_prev
             } else {
                 z.v
             };
-            let (z1, p1, _) = self.advance(&z, &p, &guess).map_err(|e| fail(k, e))?;
+            let (z1, p1, _) = self
+                .advance(&z, &p, &guess, &mut t)
+                .map_err(|e| fail(k, e))?;
             *slot = z1;
             v_prev = z.v;
             (z, p) = (z1, p1);
@@ -506,10 +515,23 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
     ) -> Result<Solved<N>, StepError> {
+        self.solve_in(x1, p0, h, guess, &mut Terms::zeros())
+    }
+
+    /// [`Stepper::solve`] with the caller's terms workspace `t`.
+    #[inline(always)]
+    fn solve_in(
+        &self,
+        x1: &SVector<f64, N>,
+        p0: &SVector<f64, N>,
+        h: f64,
+        guess: &SVector<f64, N>,
+        t: &mut Terms<N>,
+    ) -> Result<Solved<N>, StepError> {
         if self.alpha == 0.0 {
-            self.solve_rule::<false>(x1, p0, h, guess)
+            self.solve_rule::<false>(x1, p0, h, guess, t)
         } else {
-            self.solve_rule::<true>(x1, p0, h, guess)
+            self.solve_rule::<true>(x1, p0, h, guess, t)
         }
     }
 
@@ -523,8 +545,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         p0: &SVector<f64, N>,
         h: f64,
         guess: &SVector<f64, N>,
+        t: &mut Terms<N>,
     ) -> Result<Solved<N>, StepError> {
-        let mut t = Terms::zeros();
         self.solve_forced_rule::<MID, false>(
             x1,
             p0,
@@ -532,7 +554,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             guess,
             |_| SVector::zeros(),
             |_| SMatrix::zeros(),
-            &mut t,
+            t,
         )
         .map(|(v, p, r, _)| (v, p, r))
     }
