@@ -13,7 +13,7 @@ mod common;
 #[path = "common/slider_crank.rs"]
 mod slider_crank;
 
-use common::Rng;
+use common::{Rng, ab_errors, stencil};
 use nalgebra::{SMatrix, SVector};
 use num_dual::DualVec;
 use slider_crank::SliderCrank;
@@ -574,19 +574,6 @@ fn fd_eps() -> f64 {
         .unwrap_or(1e-4)
 }
 
-/// The five-point central difference of a step's result in one direction,
-/// [8(f(ε) − f(−ε)) − (f(2ε) − f(−2ε))]/(12ε): truncation O(ε⁴).
-fn stencil<const N: usize>(
-    eps: f64,
-    mut f: impl FnMut(f64) -> State<N>,
-) -> (SVector<f64, N>, SVector<f64, N>) {
-    let (p1, m1, p2, m2) = (f(eps), f(-eps), f(2.0 * eps), f(-2.0 * eps));
-    let d = |a: SVector<f64, N>, b: SVector<f64, N>, c: SVector<f64, N>, e: SVector<f64, N>| {
-        ((a - b) * 8.0 - (c - e)) / (12.0 * eps)
-    };
-    (d(p1.q, m1.q, p2.q, m2.q), d(p1.v, m1.v, p2.v, m2.v))
-}
-
 /// A and B of a forced step (`Variational::step_derivatives`, the core
 /// `Stepper` underneath) against five-point central differences of the
 /// step, for random states and inputs. The steps are solved to 1e-14 and
@@ -621,49 +608,7 @@ where
             let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-3.0, 3.0));
             let (z1, d) = vi.step_derivatives(z, &u).unwrap();
             assert_eq!(z1, vi.step_forced(z, &u).unwrap());
-            let mut a_fd = [SMatrix::<f64, N, N>::zeros(); 4];
-            for j in 0..N {
-                for (which, base) in [(0usize, true), (1, false)] {
-                    let x = if base { z.q[j] } else { z.v[j] };
-                    let eps = fd_eps() * x.abs().max(1.0);
-                    let (dq, dv) = stencil(eps, |e| {
-                        let mut zp = *z;
-                        if base {
-                            zp.q[j] += e;
-                        } else {
-                            zp.v[j] += e;
-                        }
-                        vi.step_forced(&zp, &u).unwrap()
-                    });
-                    a_fd[which].set_column(j, &dq);
-                    a_fd[2 + which].set_column(j, &dv);
-                }
-            }
-            let mut b_fd = [SMatrix::<f64, N, U>::zeros(); 2];
-            for i in 0..U {
-                let eps = fd_eps() * u[i].abs().max(1.0);
-                let (dq, dv) = stencil(eps, |e| {
-                    let mut up = u;
-                    up[i] += e;
-                    vi.step_forced(z, &up).unwrap()
-                });
-                b_fd[0].set_column(i, &dq);
-                b_fd[1].set_column(i, &dv);
-            }
-            // relative to the whole of A (blocks such as ∂q₁/∂q₀ = I are
-            // exact; others can be near zero)
-            let a_scale = a_fd.iter().map(|b| b.amax()).fold(0.0, f64::max);
-            let e = [
-                (d.a.q_q - a_fd[0]).amax(),
-                (d.a.q_v - a_fd[1]).amax(),
-                (d.a.v_q - a_fd[2]).amax(),
-                (d.a.v_v - a_fd[3]).amax(),
-            ]
-            .iter()
-            .fold(0.0f64, |a, b| a.max(*b))
-                / a_scale;
-            let b_scale = b_fd[0].amax().max(b_fd[1].amax()).max(1e-300);
-            let e_b = (d.b.q_u - b_fd[0]).amax().max((d.b.v_u - b_fd[1]).amax()) / b_scale;
+            let (e, e_b) = ab_errors(z, &u, &d, fd_eps(), |z, u| vi.step_forced(z, u).unwrap());
             assert!(e <= 1e-6, "{name} mid={mid}: A relative error {e:.2e}");
             if U > 0 {
                 assert!(e_b <= 1e-6, "{name} mid={mid}: B relative error {e_b:.2e}");

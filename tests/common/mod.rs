@@ -66,3 +66,79 @@ pub fn pendulum_reference(theta0: f64, omega0: f64, t: f64, inertia: f64, mgl: f
     }
     th
 }
+
+/// The five-point central difference of a step's result in one direction,
+/// [8(f(ε) − f(−ε)) − (f(2ε) − f(−2ε))]/(12ε): truncation O(ε⁴).
+pub fn stencil<const N: usize>(
+    eps: f64,
+    mut f: impl FnMut(f64) -> vigp::State<N>,
+) -> (nalgebra::SVector<f64, N>, nalgebra::SVector<f64, N>) {
+    let (p1, m1, p2, m2) = (f(eps), f(-eps), f(2.0 * eps), f(-2.0 * eps));
+    let d = |a: nalgebra::SVector<f64, N>,
+             b: nalgebra::SVector<f64, N>,
+             c: nalgebra::SVector<f64, N>,
+             e: nalgebra::SVector<f64, N>| ((a - b) * 8.0 - (c - e)) / (12.0 * eps);
+    (d(p1.q, m1.q, p2.q, m2.q), d(p1.v, m1.v, p2.v, m2.v))
+}
+
+/// The relative errors (max |A − A_fd| / max |A_fd|, the same for B) of the
+/// exact one-step derivatives `d` of the forced step `step` at (`z`, `u`)
+/// against five-point central differences ([`stencil`]) with steps `fd`
+/// relative to each entry (at least 1). Relative to the whole of A (B):
+/// blocks such as ∂q₁/∂q₀ = I are exact, others can be near zero. With
+/// U = 0 the B error is 0.
+pub fn ab_errors<const N: usize, const U: usize>(
+    z: &vigp::State<N>,
+    u: &nalgebra::SVector<f64, U>,
+    d: &vigp::embedded::StepDerivatives<N, U>,
+    fd: f64,
+    step: impl Fn(&vigp::State<N>, &nalgebra::SVector<f64, U>) -> vigp::State<N>,
+) -> (f64, f64) {
+    use nalgebra::SMatrix;
+    let mut a_fd = [SMatrix::<f64, N, N>::zeros(); 4];
+    for j in 0..N {
+        for (which, base) in [(0usize, true), (1, false)] {
+            let x = if base { z.q[j] } else { z.v[j] };
+            let eps = fd * x.abs().max(1.0);
+            let (dq, dv) = stencil(eps, |e| {
+                let mut zp = *z;
+                if base {
+                    zp.q[j] += e;
+                } else {
+                    zp.v[j] += e;
+                }
+                step(&zp, u)
+            });
+            a_fd[which].set_column(j, &dq);
+            a_fd[2 + which].set_column(j, &dv);
+        }
+    }
+    let mut b_fd = [SMatrix::<f64, N, U>::zeros(); 2];
+    for i in 0..U {
+        let eps = fd * u[i].abs().max(1.0);
+        let (dq, dv) = stencil(eps, |e| {
+            let mut up = *u;
+            up[i] += e;
+            step(z, &up)
+        });
+        b_fd[0].set_column(i, &dq);
+        b_fd[1].set_column(i, &dv);
+    }
+    let a_scale = a_fd.iter().map(|b| b.amax()).fold(0.0, f64::max);
+    let e_a = [
+        (d.a.q_q - a_fd[0]).amax(),
+        (d.a.q_v - a_fd[1]).amax(),
+        (d.a.v_q - a_fd[2]).amax(),
+        (d.a.v_v - a_fd[3]).amax(),
+    ]
+    .iter()
+    .fold(0.0f64, |a, b| a.max(*b))
+        / a_scale;
+    let e_b = if U > 0 {
+        let b_scale = b_fd[0].amax().max(b_fd[1].amax());
+        (d.b.q_u - b_fd[0]).amax().max((d.b.v_u - b_fd[1]).amax()) / b_scale
+    } else {
+        0.0
+    };
+    (e_a, e_b)
+}

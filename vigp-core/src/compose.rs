@@ -155,10 +155,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         for g in self.gammas {
             let h = g * dt;
             let (v1, p1, r) = self.midpoint.solve(&q, &p, h, &v)?;
-            report.iterations += r.iterations;
-            report.residual = report.residual.max(r.residual);
-            report.stalled |= r.stalled;
-            report.regularised |= r.regularised;
+            report.merge(&r);
             q += v1 * h;
             (p, v) = (p1, v1);
         }
@@ -183,10 +180,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         for g in self.gammas {
             let h = g * dt;
             let (v1, p1, r) = self.midpoint.solve_forced(&q, &p, h, &v, u)?;
-            report.iterations += r.iterations;
-            report.residual = report.residual.max(r.residual);
-            report.stalled |= r.stalled;
-            report.regularised |= r.regularised;
+            report.merge(&r);
             q += v1 * h;
             (p, v) = (p1, v1);
         }

@@ -285,13 +285,16 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             .map(|(v, p, r, _)| (v, p, r))
     }
 
-    /// All sub-steps of one forced step from `z` with momentum `p0`.
+    /// All sub-steps of one forced step from `z` with momentum `p0`; `t` is
+    /// the terms workspace (as for [`Stepper`]'s unforced steps, a rollout
+    /// reuses one).
     fn advance_forced<const U: usize>(
         &self,
         z: &State<N>,
         p0: &SVector<f64, N>,
         guess: &SVector<f64, N>,
         u: &SVector<f64, U>,
+        t: &mut Terms<N>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         if max_abs(p0).is_nan() {
             return Err(StepError::NonFiniteState);
@@ -302,15 +305,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         for i in 0..self.substeps {
             let x1 = z.q + z.v * h;
             let g = if i == 0 { *guess } else { z.v };
-            let (v1, p1, r, _) = self.solve_forced_any(&x1, &p, h, &g, u, &mut Terms::zeros())?;
-            if i == 0 {
-                report = r;
-            } else {
-                report.iterations += r.iterations;
-                report.residual = report.residual.max(r.residual);
-                report.stalled |= r.stalled;
-                report.regularised |= r.regularised;
-            }
+            let (v1, p1, r, _) = self.solve_forced_any(&x1, &p, h, &g, u, t)?;
+            report.merge(&r);
             (z, p) = (State { q: x1, v: v1 }, p1);
         }
         Ok((z, p, report))
@@ -339,7 +335,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         }
         Self::check_input(u)?;
         let p0 = self.momentum(z);
-        self.advance_forced(z, &p0, &z.v, u)
+        self.advance_forced(z, &p0, &z.v, u, &mut Terms::zeros())
             .map(|(z1, _, r)| (z1, r))
     }
 
@@ -356,7 +352,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(StepError::NonFiniteState);
         }
         Self::check_input(u)?;
-        self.advance_forced(z, p0, &z.v, u)
+        self.advance_forced(z, p0, &z.v, u, &mut Terms::zeros())
     }
 
     /// Fills `out` with the states after 1, 2, …, `out.len()` forced steps
@@ -377,6 +373,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(fail(inputs.len(), StepError::NonFiniteInput));
         }
         let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
+        let mut t = Terms::zeros();
         for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
             Self::check_input(u).map_err(|e| fail(k, e))?;
             let guess = if self.substeps == 1 {
@@ -385,7 +382,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 z.v
             };
             let (z1, p1, _) = self
-                .advance_forced(&z, &p, &guess, u)
+                .advance_forced(&z, &p, &guess, u, &mut t)
                 .map_err(|e| fail(k, e))?;
             *slot = z1;
             v_prev = z.v;
@@ -524,6 +521,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let (mut zc, mut pc) = (*z, *p0);
         let mut report = StepReport::default();
         let eye_u = SMatrix::<f64, U, U>::identity();
+        let mut t = Terms::zeros();
         for i in 0..self.substeps {
             if i > 0 {
                 seeds.q.x += seeds.q.v * h;
@@ -536,12 +534,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             let x1 = zc.q + zc.v * h;
             // the solver leaves the terms at m₁(v₁) in `t`: the
             // derivatives reuse them
-            let mut t = Terms::zeros();
             let (v1, p1, r, lambda) = self.solve_forced_any(&x1, &pc, h, &zc.v, u, &mut t)?;
-            report.iterations += r.iterations;
-            report.residual = report.residual.max(r.residual);
-            report.stalled |= r.stalled;
-            report.regularised |= r.regularised;
+            report.merge(&r);
             let l = self.local(&x1, &v1, &lambda, h, u, &t)?;
             for g in [&mut seeds.q, &mut seeds.v] {
                 g.v = l.sx * g.x + l.sp * g.p;

@@ -218,7 +218,7 @@ pub struct StepReport {
 }
 
 impl StepReport {
-    fn merge(&mut self, other: &StepReport) {
+    pub(crate) fn merge(&mut self, other: &StepReport) {
         self.iterations += other.iterations;
         self.residual = self.residual.max(other.residual);
         self.stalled |= other.stalled;

@@ -233,11 +233,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// One step with solver diagnostics (with sub-steps: iterations summed,
     /// the largest residual, and any sub-step's flags).
     pub fn step_with_info(&self, z: &State<N>) -> Result<(State<N>, StepInfo), StepError> {
-        let stepper = self.stepper()?;
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        let (z1, report) = stepper
+        let (z1, report) = self
+            .stepper()?
             .step_with_report(z)
             .map_err(|e| self.explain(StepError::from(e), z))?;
         Ok((z1, StepInfo::from_report(&report)))
@@ -296,13 +293,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
 
     /// Multipliers are not part of the state; this returns only the state.
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
-        // the fixed-size step directly (no diagnostics to carry back): the
-        // same solve as `step_with_info`, with the same errors
-        let stepper = self.stepper()?;
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        stepper
+        // the fixed-size step directly (no diagnostics to carry back); it
+        // refuses a non-finite state itself
+        self.stepper()?
             .step(z)
             .map_err(|e| self.explain(StepError::from(e), z))
     }
