@@ -20,7 +20,9 @@
 //! instruction count of one rollout step (`driven_step` and `driven_step_ab`
 //! instead of a system name: a forced step of the actuated double pendulum
 //! without and with its exact A and B; `driven_midpoint_step[_ab]` for the
-//! midpoint rule); `callgrind_annotate` splits it by
+//! midpoint rule; `fourbar_maximal_single`: single steps from the states of
+//! a rollout, whose instruction count minus that of `fourbar_maximal` with
+//! the same count is the cost of the steps from a state); `callgrind_annotate` splits it by
 //! function (build with `--release` instead to keep functions apart).
 
 use nalgebra::SVector;
@@ -45,6 +47,29 @@ fn run<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
             out[steps].q.as_slice()
         );
     }
+    Ok(())
+}
+
+/// `steps` single steps from the states of a `steps`-step rollout (the
+/// cost of a step from a state, which computes the momentum and starts
+/// Newton without a previous velocity); the rollout's own cost is that of
+/// [`run`] with the same count.
+fn run_single<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
+    sys: M,
+    z0: State<N>,
+    steps: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let s = Stepper::new(sys, 0.01)?;
+    let mut out = vec![z0; steps + 1];
+    s.rollout_into(&z0, &mut out).map_err(|e| format!("{e}"))?;
+    let mut sum = 0.0;
+    for z in &out[..steps] {
+        sum += s
+            .step(std::hint::black_box(z))
+            .map_err(|e| format!("{e}"))?
+            .q[0];
+    }
+    println!("{steps} single steps, sum of q[0] = {sum}");
     Ok(())
 }
 
@@ -160,7 +185,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             DoublePendulum::default(),
             State::new([1.0, -0.5], [0.5, 1.0]),
         )?;
-        return table_row("fourbar", fb, fb_z0);
+        table_row("fourbar", fb, fb_z0)?;
+        use vigp::Coordinates;
+        return table_row(
+            "fourbar (maximal)",
+            fb.maximal(),
+            fb.minimal().to_maximal(&fb_z0, 0.01),
+        );
     }
     let system = args.get(1).map_or("double_pendulum", String::as_str);
     let steps: usize = match args.get(2) {
@@ -183,6 +214,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             State::new([1.0, -0.5], [0.5, 1.0]),
             steps,
         ),
+        "fourbar_maximal_single" => {
+            let fb = Fourbar::default();
+            let z0 = consistent_state(
+                &fb.minimal(),
+                &SVector::from([0.9, -1.3, -0.4, 1.3]),
+                &SVector::from([0.5, 0.0, 0.0, 0.0]),
+                0.01,
+            )?;
+            use vigp::Coordinates;
+            run_single(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
+        }
         "fourbar_maximal" => {
             let fb = Fourbar::default();
             let z0 = consistent_state(

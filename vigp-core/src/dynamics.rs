@@ -34,6 +34,10 @@ pub struct Terms<const N: usize> {
 
 impl<const N: usize> Terms<N> {
     /// All terms zero.
+    // inlined, so that the zeros are written into the caller's workspace
+    // (a returned value of N³ numbers is otherwise built on the stack and
+    // copied: ~14 KB for N = 12)
+    #[inline(always)]
     pub fn zeros() -> Self {
         Self {
             mass: SMatrix::zeros(),

@@ -129,11 +129,27 @@ impl<const M: usize> PartialLu<M> {
     /// [`FullPivLu`]).
     pub fn new(a: SMatrix<f64, M, M>, rel_tol: f64) -> Option<Self> {
         let mut lu = [[0.0f64; M]; M];
-        let mut amax = 0.0f64;
         for (i, row) in lu.iter_mut().enumerate() {
             for (j, x) in row.iter_mut().enumerate() {
                 *x = a[(i, j)];
-                amax = amax.max(x.abs());
+            }
+        }
+        Self::from_rows(lu, rel_tol)
+    }
+
+    /// [`PartialLu::new`] from the rows of A (`rows[i][j]` = A_ij).
+    pub fn from_rows(rows: [[f64; M]; M], rel_tol: f64) -> Option<Self> {
+        let mut lu = rows;
+        // max |a_ij| by plain comparisons (which ignore NaN as `f64::max`
+        // does, without its NaN bookkeeping); a NaN that reaches a pivot is
+        // refused below
+        let mut amax = 0.0f64;
+        for row in &lu {
+            for x in row {
+                let a = x.abs();
+                if a > amax {
+                    amax = a;
+                }
             }
         }
         let tiny = rel_tol * amax;
@@ -173,6 +189,13 @@ impl<const M: usize> PartialLu<M> {
     // forward and back substitution read as the textbook formulas
     #[allow(clippy::needless_range_loop)]
     pub fn solve(&self, b: &SVector<f64, M>) -> SVector<f64, M> {
+        SVector::from(self.solve_array(b.as_slice()))
+    }
+
+    /// [`PartialLu::solve`] on plain arrays (`b` has length M).
+    // forward and back substitution read as the textbook formulas
+    #[allow(clippy::needless_range_loop)]
+    pub fn solve_array(&self, b: &[f64]) -> [f64; M] {
         let mut x = [0.0f64; M];
         for i in 0..M {
             x[i] = b[self.perm[i]];
@@ -191,7 +214,7 @@ impl<const M: usize> PartialLu<M> {
             }
             x[i] = s / self.lu[i][i];
         }
-        SVector::from(x)
+        x
     }
 
     /// Solve A X = B column by column.
@@ -326,17 +349,100 @@ pub fn solve_kkt<const N: usize, const C: usize>(
     Some((x, y))
 }
 
-/// `Some(diag)` when `j` is diagonal (exact zeros off the diagonal) with
-/// no zero on it.
-fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<SVector<f64, N>> {
-    // column-major storage: entry k is (k mod N, k div N)
-    for (k, x) in j.as_slice().iter().enumerate() {
-        if *x != 0.0 && k % (N + 1) != 0 {
+/// `Some(1/diag)` when `j` is diagonal (exact zeros off the diagonal) with
+/// a finite, nonzero diagonal whose reciprocals are finite.
+fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<[f64; N]> {
+    // column-major storage: column k holds the diagonal entry at row k.
+    // Branch-free test for a nonzero off the diagonal: OR the bits of every
+    // off-diagonal entry without its sign (±0 give 0; NaN counts as nonzero)
+    let mut off = 0u64;
+    for (k, col) in j.as_slice().chunks_exact(N).enumerate() {
+        for (i, x) in col.iter().enumerate() {
+            off |= (x.to_bits() << 1) & if i == k { 0 } else { u64::MAX };
+        }
+    }
+    if off != 0 {
+        return None;
+    }
+    let mut inv = [0.0; N];
+    for (k, (col, d)) in j.as_slice().chunks_exact(N).zip(inv.iter_mut()).enumerate() {
+        *d = 1.0 / col[k];
+        if col[k] == 0.0 || !d.is_finite() || !col[k].is_finite() {
             return None;
         }
     }
-    let d = j.diagonal();
-    d.iter().all(|x| *x != 0.0 && x.is_finite()).then_some(d)
+    Some(inv)
+}
+
+/// The KKT system of [`solve_kkt`] for a diagonal J = diag(1/inv) (maximal
+/// coordinates: a constant diagonal mass matrix): the Schur complement
+/// S = A J⁻¹ B (C×C) is assembled from the nonzero entries of A only (a
+/// joint's constraint rows touch the coordinates of two bodies, so most of
+/// A is zero: O(nnz(A)·C) instead of O(C²N)) and solved by partial
+/// pivoting, or by full pivoting when a pivot is below 1e-14 of the largest
+/// entry (redundant constraints make S singular); then
+/// x = J⁻¹(r − B y). `None` when the solution is not finite.
+#[inline]
+fn solve_kkt_diagonal<const N: usize, const C: usize>(
+    inv: &[f64; N],
+    b: &SMatrix<f64, N, C>,
+    a: &SMatrix<f64, C, N>,
+    r: &SVector<f64, N>,
+    c: &SVector<f64, C>,
+) -> Option<KktSolution<N, C>> {
+    // B by rows (row k of B is contiguous here; B is stored by columns)
+    let mut brow = [[0.0f64; C]; N];
+    for (jcol, col) in b.as_slice().chunks_exact(N).enumerate() {
+        for (k, x) in col.iter().enumerate() {
+            brow[k][jcol] = *x;
+        }
+    }
+    let mut jr = [0.0f64; N];
+    for k in 0..N {
+        jr[k] = r[k] * inv[k];
+    }
+    // S = A J⁻¹ B and the right-hand side A J⁻¹ r − c, row by row; A is
+    // stored by columns: A_ik = a[k·C + i]
+    let a_s = a.as_slice();
+    let mut s = [[0.0f64; C]; C];
+    let mut rhs = [0.0f64; C];
+    for (i, (srow, rh)) in s.iter_mut().zip(rhs.iter_mut()).enumerate() {
+        let mut acc = -c[i];
+        for k in 0..N {
+            let aik = a_s[k * C + i];
+            if aik != 0.0 {
+                acc += aik * jr[k];
+                let w = aik * inv[k];
+                for (sij, bkj) in srow.iter_mut().zip(brow[k].iter()) {
+                    *sij += w * bkj;
+                }
+            }
+        }
+        *rh = acc;
+    }
+    let y: [f64; C] = match PartialLu::from_rows(s, 1e-14) {
+        Some(lu) => lu.solve_array(&rhs),
+        None => {
+            let sm = SMatrix::<f64, C, C>::from_fn(|i, j| s[i][j]);
+            let y = FullPivLu::new(sm, 1e-13).solve(&SVector::from(rhs));
+            let mut out = [0.0; C];
+            out.copy_from_slice(y.as_slice());
+            out
+        }
+    };
+    let mut x = SVector::<f64, N>::zeros();
+    for k in 0..N {
+        let mut bk = 0.0;
+        for (bkj, yj) in brow[k].iter().zip(y.iter()) {
+            bk += bkj * yj;
+        }
+        x[k] = (r[k] - bk) * inv[k];
+    }
+    let y = SVector::from(y);
+    x.iter()
+        .chain(y.iter())
+        .all(|v| v.is_finite())
+        .then_some((x, y))
 }
 
 /// Solve the saddle-point (KKT) system of [`solve_kkt`]; when J is
@@ -356,9 +462,10 @@ fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<SVector
 /// otherwise, or when J is singular and C = 0, `None`.
 ///
 /// A diagonal J (maximal coordinates without damping) is inverted
-/// directly: the Schur complement S = A J⁻¹ B costs O(C²N), and S is
-/// solved by partial pivoting, or by full pivoting when a pivot is tiny
-/// (a singular S: redundant constraints).
+/// directly: the Schur complement S = A J⁻¹ B costs O(nnz(A)·C) (only the
+/// nonzero entries of A are visited), and S is solved by partial pivoting,
+/// or by full pivoting when a pivot is tiny (a singular S: redundant
+/// constraints).
 ///
 /// Returns the solution and whether the regularisation was needed.
 pub fn solve_kkt_regularised<const N: usize, const C: usize>(
@@ -369,24 +476,10 @@ pub fn solve_kkt_regularised<const N: usize, const C: usize>(
     c: &SVector<f64, C>,
 ) -> Option<(KktSolution<N, C>, bool)> {
     if C > 0
-        && let Some(d) = invertible_diagonal(j)
+        && let Some(inv) = invertible_diagonal(j)
+        && let Some(sol) = solve_kkt_diagonal(&inv, b, a, r, c)
     {
-        let inv = d.map(|x| 1.0 / x);
-        let jr = r.component_mul(&inv);
-        let mut jb = *b;
-        for (i, mut row) in jb.row_iter_mut().enumerate() {
-            row *= inv[i];
-        }
-        let s = a * jb;
-        let rhs = a * jr - c;
-        // partial pivoting first (a fraction of full pivoting's cost); a
-        // pivot below 1e-14 of the largest entry — redundant constraints
-        // make S singular — goes to full pivoting's rank-revealing solve
-        let y = solve_partial(&s, &rhs).unwrap_or_else(|| FullPivLu::new(s, 1e-13).solve(&rhs));
-        let x = jr - jb * y;
-        if x.iter().chain(y.iter()).all(|v| v.is_finite()) {
-            return Some(((x, y), false));
-        }
+        return Some((sol, false));
     }
     if let Some(sol) = solve_kkt(j, b, a, r, c) {
         return Some((sol, false));
@@ -525,5 +618,62 @@ mod tests {
         let full = k.lu().solve(&rhs).unwrap();
         assert!((full.fixed_rows::<3>(0) - x).amax() < 1e-13);
         assert!((full[3] - y[0]).abs() < 1e-13);
+    }
+
+    /// The diagonal-J Schur path against nalgebra's LU of the whole KKT
+    /// matrix (a second implementation): sparse A (two-body rows, as a
+    /// joint's constraint rows), B ≠ Aᵀ, and a redundant constraint (a row
+    /// repeated, consistent right-hand side) that sends S to full pivoting.
+    #[test]
+    fn diagonal_kkt_matches_dense_solve() {
+        use nalgebra::{SMatrix, SVector};
+        const N: usize = 6;
+        const C: usize = 4;
+        let j = SMatrix::<f64, N, N>::from_diagonal(&SVector::from([
+            -1.0, -1.0, -0.08, -2.0, -2.0, -0.3,
+        ]));
+        let mut a = SMatrix::<f64, C, N>::zeros();
+        for (i, row) in [
+            [1.0, 0.0, 0.4, 0.0, 0.0, 0.0],
+            [0.0, 1.0, -0.7, 0.0, 0.0, 0.0],
+            [1.0, 0.0, -0.3, -1.0, 0.0, 0.25],
+            [0.0, 1.0, 0.6, 0.0, -1.0, -0.9],
+        ]
+        .iter()
+        .enumerate()
+        {
+            for (k, x) in row.iter().enumerate() {
+                a[(i, k)] = *x;
+            }
+        }
+        let b =
+            -(a + SMatrix::<f64, C, N>::from_fn(|i, k| 0.01 * (i as f64 - k as f64))).transpose();
+        let r = SVector::<f64, N>::from_fn(|i, _| (i as f64 * 0.7).sin());
+        let c = SVector::<f64, C>::from_fn(|i, _| 0.1 * i as f64 - 0.2);
+        let ((x, y), reg) = solve_kkt_regularised(&j, &b, &a, &r, &c).unwrap();
+        assert!(!reg);
+        let mut k = SMatrix::<f64, 10, 10>::zeros();
+        k.fixed_view_mut::<N, N>(0, 0).copy_from(&j);
+        k.fixed_view_mut::<N, C>(0, N).copy_from(&b);
+        k.fixed_view_mut::<C, N>(N, 0).copy_from(&a);
+        let mut rhs = SVector::<f64, 10>::zeros();
+        rhs.fixed_rows_mut::<N>(0).copy_from(&r);
+        rhs.fixed_rows_mut::<C>(N).copy_from(&c);
+        let full = k.lu().solve(&rhs).unwrap();
+        // both backward stable on a matrix with condition ≈ 1e2
+        assert!((full.fixed_rows::<N>(0) - x).amax() < 1e-13, "{x} {full}");
+        assert!((full.fixed_rows::<C>(N) - y).amax() < 1e-13, "{y} {full}");
+
+        // redundant: constraint row 3 repeated in place of row 2, with a
+        // consistent right-hand side (the Schur complement is singular)
+        let mut a2 = a;
+        let row3 = a.row(3).into_owned();
+        a2.set_row(2, &row3);
+        let b2 = -a2.transpose();
+        let mut c2 = c;
+        c2[2] = c2[3];
+        let ((x2, y2), _) = solve_kkt_regularised(&j, &b2, &a2, &r, &c2).unwrap();
+        assert!((j * x2 + b2 * y2 - r).amax() < 1e-13);
+        assert!((a2 * x2 - c2).amax() < 1e-13);
     }
 }

@@ -269,7 +269,9 @@ pub struct Stepper<M: Dynamics<N, C>, const N: usize, const C: usize> {
 pub(crate) fn max_abs<const K: usize>(x: &SVector<f64, K>) -> f64 {
     let mut m = 0.0f64;
     let mut poison = 0.0f64;
-    for v in x.iter() {
+    // the slice, not nalgebra's element iterator (whose per-element
+    // bookkeeping costs more than the arithmetic here)
+    for v in x.as_slice() {
         m = m.max(v.abs());
         poison += v * 0.0;
     }
@@ -625,6 +627,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         } else {
             SMatrix::zeros()
         };
+        let neg_g1t = -g1t;
         let a1 = (1.0 - alpha) * h;
         // residual d(v, λ) and Q (row l = (∂M/∂q_l v)ᵀ, which the Newton
         // matrix reuses); constraint c(v) and its Jacobian G(x₁ + h v)
@@ -686,16 +689,24 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 };
                 return Ok((v, momentum(t, &bu, &v), report, lambda));
             }
-            // Newton matrix ∂d/∂v (module docs)
-            let mut jac = -t.mass;
+            // Newton matrix ∂d/∂v (module docs); −M − a₁·D in one pass over
+            // the storage (nalgebra's element-wise operators iterate with
+            // per-element bookkeeping that costs more than the arithmetic)
+            let mut jac = t.mass;
+            if M::DISSIPATIVE {
+                for (j, dmp) in jac.as_mut_slice().iter_mut().zip(t.damping.as_slice()) {
+                    *j = -*j - a1 * dmp;
+                }
+            } else {
+                for j in jac.as_mut_slice() {
+                    *j = -*j;
+                }
+            }
             if !M::CONSTANT_MASS {
                 jac += qm * a1;
                 if MID {
                     jac -= qm.transpose() * (alpha * h);
                 }
-            }
-            if M::DISSIPATIVE {
-                jac -= t.damping * a1;
             }
             if MID {
                 let mut fq = model.force_jacobian(k, &at(&v), &v);
@@ -732,7 +743,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             } else {
                 // J Δv − G₁ᵀΔλ = −d,  G₂ Δv = −c/h
                 let ((dv, dl), reg) =
-                    solve_kkt_regularised(&jac, &(-g1t), &g2, &(-d), &(c / -h)).ok_or(singular)?;
+                    solve_kkt_regularised(&jac, &neg_g1t, &g2, &(-d), &(c / -h)).ok_or(singular)?;
                 regularised |= reg;
                 (dv, dl)
             };
