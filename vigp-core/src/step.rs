@@ -31,7 +31,7 @@
 //! F_q = ∂f/∂q ([`Dynamics::force_jacobian`]), with a backtracking line
 //! search on the scaled residual. For the midpoint rule the matrix of an
 //! iteration that contracted the residual at least 100-fold at a full step
-//! is reused once more (a chord step, which saves one force Jacobian per
+//! is kept for the next iteration (a chord step, which saves a force Jacobian per
 //! step; a chord direction that does not descend is replaced by the exact
 //! one). The convergence test is the same either way. Linear solves: closed forms for N ≤ 2,
 //! partial pivoting for trees (the Newton matrix is a perturbation of −M),
