@@ -31,10 +31,11 @@
 //! F_q = ∂f/∂q ([`Dynamics::force_jacobian`]), with a backtracking line
 //! search on the scaled residual. For the midpoint rule the matrix of an
 //! iteration that contracted the residual at least 100-fold at a full step
-//! is kept for the next iteration (a chord step, which saves a force Jacobian per
-//! step; a chord direction that does not descend is replaced by the exact
-//! one). The convergence test is the same either way. Linear solves: closed forms for N ≤ 2,
-//! partial pivoting for trees (the Newton matrix is a perturbation of −M),
+//! is kept for the next iteration (a chord step, which saves a force
+//! Jacobian per step; a chord direction that does not descend is replaced
+//! by the exact one). The convergence test is the same either way.
+//!
+//! Linear solves: closed forms for N ≤ 2, partial pivoting for trees (the Newton matrix is a perturbation of −M),
 //! and for constraints the Schur complement G A⁻¹Gᵀ with complete pivoting
 //! (a rank-deficient G, as at a four-bar's folded pose, loses only the
 //! deficient multiplier); a diagonal Newton matrix (maximal coordinates)
