@@ -16,6 +16,19 @@
 //! continuous q̇** (like RK4's), recovered as the tangent velocity with
 //! M(q)q̇ = p + G(q)ᵀμ, G(q)q̇ = 0, accurate to fourth order.
 //!
+//! **Explicit sub-steps when the model allows them.** For a model with a
+//! constant mass matrix, no constraints and no damping (a pendulum on a
+//! fixed pivot, prismatic chains, springs between them) the base method is
+//! Störmer–Verlet instead, the variational integrator of the trapezoidal
+//! discrete Lagrangian L_d = h·[½vᵀMv − ½(V(x₀) + V(x₁))], v = (x₁ − x₀)/h,
+//! which is symmetric and second order as the midpoint rule is, and
+//! explicit: p½ = p + (h/2)F(q), q' = q + h·M⁻¹p½, p' = p½ + (h/2)F(q') with
+//! F = −∇V + B(q)u (the forced discrete Lagrange–d'Alembert principle with
+//! the trapezoidal rule). One force evaluation per sub-step, no Newton
+//! solve ([`Composition::is_explicit`] says which path a model takes; the
+//! decision is made once, when the integrator is built, from the model's
+//! terms at q = 0).
+//!
 //! Two coefficient sets: Yoshida's triple jump (3 sub-steps, one of them
 //! negative, γ₁ = 1/(2 − 2^{1/3}) ≈ 1.35) and Suzuki's five-stage fractal
 //! (5 sub-steps, γ₁ = γ₂ = γ₄ = γ₅ = 1/(4 − 4^{1/3}) ≈ 0.41): the latter
@@ -23,11 +36,11 @@
 //! smaller, which makes it the cheaper way to a given accuracy (the
 //! work-precision report measures both).
 
-use crate::dynamics::Dynamics;
-use crate::linalg::solve_kkt_regularised;
+use crate::dynamics::{Dynamics, Terms};
+use crate::linalg::{PartialLu, solve_kkt_regularised};
 use crate::state::State;
 use crate::step::{RolloutError, StepError, StepOptions, StepReport, Stepper};
-use nalgebra::SVector;
+use nalgebra::{SMatrix, SVector};
 
 /// Yoshida's triple jump: γ₁ = γ₃ = 1/(2 − 2^{1/3}), γ₂ = 1 − 2γ₁.
 pub const TRIPLE_JUMP: [f64; 3] = [
@@ -114,6 +127,9 @@ impl<const N: usize> Predictor<N> {
 pub struct Composition<M: Dynamics<N, C>, const N: usize, const C: usize> {
     midpoint: Stepper<M, N, C>,
     gammas: &'static [f64],
+    /// M⁻¹ when the sub-steps are explicit Störmer–Verlet steps (module
+    /// docs): constant mass, no constraints, no damping.
+    explicit: Option<SMatrix<f64, N, N>>,
 }
 
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
@@ -139,10 +155,69 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         for g in gammas {
             crate::step::check_time_step(g.abs() * dt)?;
         }
+        let midpoint = Stepper::midpoint(model, dt)?;
         Ok(Self {
-            midpoint: Stepper::midpoint(model, dt)?,
+            explicit: Self::explicit_inverse(&midpoint),
+            midpoint,
             gammas,
         })
+    }
+
+    /// M⁻¹ if the model has a constant mass matrix, no constraints and no
+    /// damping (its damping matrix is then constant: the joint coordinates
+    /// are the generalized coordinates; it is checked at q = 0), else
+    /// `None`.
+    fn explicit_inverse(s: &Stepper<M, N, C>) -> Option<SMatrix<f64, N, N>> {
+        if !(M::CONSTANT_MASS && C == 0) {
+            return None;
+        }
+        let mut t = Terms::zeros();
+        s.model().terms(s.constants(), &SVector::zeros(), &mut t);
+        if t.damping.as_slice().iter().any(|x| *x != 0.0) {
+            return None;
+        }
+        let inv = PartialLu::new(t.mass, 1e-14)?.solve_matrix(&SMatrix::identity());
+        inv.as_slice().iter().all(|x| x.is_finite()).then_some(inv)
+    }
+
+    /// Whether the sub-steps are explicit Störmer–Verlet steps (module
+    /// docs) rather than midpoint-rule Newton solves.
+    pub fn is_explicit(&self) -> bool {
+        self.explicit.is_some()
+    }
+
+    /// The Störmer–Verlet sub-steps of one step (module docs), with the
+    /// generalized input force `input(q)` = B(q)u.
+    fn verlet(
+        &self,
+        minv: &SMatrix<f64, N, N>,
+        q: &SVector<f64, N>,
+        p: &SVector<f64, N>,
+        input: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
+        let model = self.midpoint.model();
+        let k = self.midpoint.constants();
+        let mut t = Terms::zeros();
+        // the force −∇V(q) + B(q)u
+        let mut force = |q: &SVector<f64, N>| {
+            model.terms(k, q, &mut t);
+            input(q) - t.dpotential
+        };
+        let dt = self.midpoint.dt();
+        let (mut q, mut p) = (*q, *p);
+        let mut f = force(&q);
+        for g in self.gammas {
+            let h = g * dt;
+            let half = p + f * (0.5 * h);
+            q += minv * half * h;
+            f = force(&q);
+            p = half + f * (0.5 * h);
+        }
+        if q.iter().chain(p.iter()).all(|x| x.is_finite()) {
+            Ok((q, p))
+        } else {
+            Err(StepError::NonFiniteResidual { iteration: 0 })
+        }
     }
 
     /// The same integrator with other Newton options.
@@ -223,6 +298,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         p: &SVector<f64, N>,
         mut predictor: Predictor<N>,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport, Predictor<N>), StepError> {
+        if let Some(minv) = &self.explicit {
+            let (q, p) = self.verlet(minv, q, p, |_| SVector::zeros())?;
+            return Ok((q, p, StepReport::default(), predictor));
+        }
         let dt = self.midpoint.dt();
         let (mut q, mut p) = (*q, *p);
         let mut report = StepReport::default();
@@ -248,6 +327,15 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         guess: &SVector<f64, N>,
         u: &SVector<f64, U>,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
+        if let Some(minv) = &self.explicit {
+            if u.iter().any(|x| !x.is_finite()) {
+                return Err(StepError::NonFiniteInput);
+            }
+            let model = self.midpoint.model();
+            let k = self.midpoint.constants();
+            let (q, p) = self.verlet(minv, q, p, |q| model.input_matrix(k, q) * u)?;
+            return Ok((q, p, StepReport::default()));
+        }
         let dt = self.midpoint.dt();
         let (mut q, mut p) = (*q, *p);
         let mut report = StepReport::default();

@@ -11,7 +11,10 @@ use vigp_core::Composition;
 /// triple jump ([`Variational4::triple_jump`]). Symplectic, with bounded
 /// energy error and constraints held at position level every sub-step,
 /// like the other variational integrators; fourth order like
-/// [`crate::Rk4`].
+/// [`crate::Rk4`]. For a model with a constant mass matrix, no constraints
+/// and no damping the composed method is explicit Störmer–Verlet instead
+/// of the midpoint rule (one force evaluation per stage, no Newton solve;
+/// see [`vigp_core::compose`] and `Composition::is_explicit`).
 ///
 /// **The state's velocity is the continuous q̇** (as for the classical
 /// integrators), not a discrete one: start it from (q, q̇) with G(q)q̇ = 0
