@@ -1,5 +1,5 @@
 //! The learned step on fixed-size data (paper eq. 7–8), `no_std` and
-//! without allocation: the nominal variational step of a [`Model`] as
+//! without allocation: the nominal variational step of a [`Dynamics`](crate::Dynamics) model as
 //! prior, a GP mean exported from the std runtime as correction, and for
 //! mechanisms with loops the projection of the velocity onto the
 //! constraints.
