@@ -1,6 +1,6 @@
 //! The learned step on fixed-size data (paper eq. 7–8), `no_std` and
-//! without allocation: the nominal variational step of a [`Dynamics`](crate::Dynamics) model as
-//! prior, a GP mean exported from the std runtime as correction, and for
+//! without allocation: the nominal variational step of a [`Dynamics`]
+//! model as prior, a GP mean exported from the std runtime as correction, and for
 //! mechanisms with loops the projection of the velocity onto the
 //! constraints.
 //!
