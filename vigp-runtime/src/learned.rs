@@ -247,8 +247,11 @@ pub struct LearnedStepInfo<const N: usize> {
 /// bound need it; [`Integrator::step`] and rollouts use the mean), and a
 /// Newton projection for constrained models.
 #[derive(Clone, Debug)]
-pub struct Learned<M, const N: usize, const C: usize> {
+pub struct Learned<M: Mechanism<N, C>, const N: usize, const C: usize> {
     model: M,
+    /// The nominal prior's integrator, built once (its run-time parameters
+    /// are validated here, not at every step).
+    nominal: Variational<M, N, C>,
     dt: f64,
     prior: Prior,
     encoding: Encoding,
@@ -360,19 +363,21 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             Prior::Constant => PriorMean::Constant,
         };
         let (gp, report) = Gp::train(&inputs, d, &targets, N, &opts)?;
+        // near a folded loop the projection converges linearly
+        let options = NewtonOptions {
+            max_iterations: 100,
+            ..NewtonOptions::default()
+        };
         Ok((
             Self {
+                nominal: Variational::new(model.clone(), dt).with_options(options),
                 model,
                 dt,
                 prior,
                 encoding,
                 project: C > 0,
                 gp,
-                // near a folded loop the projection converges linearly
-                options: NewtonOptions {
-                    max_iterations: 100,
-                    ..NewtonOptions::default()
-                },
+                options,
                 inputs: u_dim,
             },
             report,
@@ -405,7 +410,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 .map_err(|_| StepError::Prediction { step: None })
         })?;
         let prior = match self.prior {
-            Prior::Nominal => nominal_forced(&self.model, self.dt, &self.options, z, u)?,
+            Prior::Nominal => self.nominal.step_forced(z, u)?.v,
             Prior::Constant => SVector::zeros(),
         };
         let v = prior + mean;
@@ -444,9 +449,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         // prior
         let (mut v, mut v_q, mut v_v, mut v_u) = match self.prior {
             Prior::Nominal => {
-                let (z1, d) = Variational::new(self.model.clone(), h)
-                    .with_options(self.options)
-                    .step_derivatives(z, u)?;
+                let (z1, d) = self.nominal.step_derivatives(z, u)?;
                 (z1.v, d.a.v_q, d.a.v_v, d.b.v_u)
             }
             Prior::Constant => (
@@ -613,7 +616,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// prior (whose constant is part of the GP mean).
     fn prior_velocity(&self, z: &State<N>) -> Result<SVector<f64, N>, StepError> {
         Ok(match self.prior {
-            Prior::Nominal => nominal_step(&self.model, self.dt, &self.options, z)?.v,
+            Prior::Nominal => self.nominal.step(z)?.v,
             Prior::Constant => SVector::zeros(),
         })
     }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{Encoding, Learned, Prior};
+use crate::Variational;
 use crate::gp::{Gp, GpError, SavedGp};
 use crate::mechanism::{CoordinateKind, Mechanism};
 use crate::newton::NewtonOptions;
@@ -429,6 +430,7 @@ where
         check_gp(&saved.gp, d, N, saved.prior)?;
         let gp = Gp::from_saved(&saved.gp, None)?;
         Ok(Self {
+            nominal: Variational::new(model.clone(), saved.dt).with_options(options),
             model,
             dt: saved.dt,
             prior: saved.prior,
