@@ -304,39 +304,47 @@ fn core(
     let lur = lu.as_ref();
     let parts = run_tasks(tasks, par, |(s, mut kb, mut ab)| {
         let w = kb.ncols();
-        for j in 0..w {
-            let kc = col_mut(kb.rb_mut(), j);
-            let xq = &xs[(s + j) * d..(s + j + 1) * d];
-            core_gp::kernel_row(zc, m, xq, sf2, kc).expect("shapes checked by construction");
-            let ac = col_mut(ab.rb_mut(), j);
-            for (a, k) in ac.iter_mut().zip(col(kb.rb(), j)) {
-                *a = k * inv_sigma;
-            }
-        }
-        solve_lower_triangular_in_place(lur, ab.rb_mut(), Par::Seq);
         let mut aat = Mat::<f64>::zeros(m, m);
-        trimul::matmul(
-            aat.as_mut(),
-            BlockStructure::TriangularLower,
-            Accum::Replace,
-            ab.rb(),
-            BlockStructure::Rectangular,
-            ab.rb().transpose(),
-            BlockStructure::Rectangular,
-            1.0,
-            Par::Seq,
-        );
         let mut ay = vec![0.0; m];
-        // tr(K_ff − Q) point by point: σ_f² − σ²‖a_j‖² (the Nyström
-        // residual of one point, small where the inducing points cover).
         let mut trace = 0.0;
-        for j in 0..w {
-            let yj = y[s + j];
-            let ac = col(ab.rb(), j);
-            for (o, a) in ay.iter_mut().zip(ac) {
-                *o += a * yj;
+        // Panels of `blocks.sub` columns: kernel values, solve and product
+        // of one panel while it is in cache.
+        let mut p0 = 0;
+        while p0 < w {
+            let pw = blocks.sub.min(w - p0);
+            for j in p0..p0 + pw {
+                let kc = col_mut(kb.rb_mut(), j);
+                let xq = &xs[(s + j) * d..(s + j + 1) * d];
+                core_gp::kernel_row(zc, m, xq, sf2, kc).expect("shapes checked by construction");
+                let ac = col_mut(ab.rb_mut(), j);
+                for (a, k) in ac.iter_mut().zip(col(kb.rb(), j)) {
+                    *a = k * inv_sigma;
+                }
             }
-            trace += sf2 - s2 * tri::norm2(ac);
+            let mut panel = ab.rb_mut().subcols_mut(p0, pw);
+            solve_lower_triangular_in_place(lur, panel.rb_mut(), Par::Seq);
+            trimul::matmul(
+                aat.as_mut(),
+                BlockStructure::TriangularLower,
+                if p0 == 0 { Accum::Replace } else { Accum::Add },
+                panel.rb(),
+                BlockStructure::Rectangular,
+                panel.rb().transpose(),
+                BlockStructure::Rectangular,
+                1.0,
+                Par::Seq,
+            );
+            // tr(K_ff − Q) point by point: σ_f² − σ²‖a_j‖² (the Nyström
+            // residual of one point, small where the inducing points cover).
+            for j in 0..pw {
+                let yj = y[s + p0 + j];
+                let ac = col(panel.rb(), j);
+                for (o, a) in ay.iter_mut().zip(ac) {
+                    *o += a * yj;
+                }
+                trace += sf2 - s2 * tri::norm2(ac);
+            }
+            p0 += pw;
         }
         (aat, ay, trace)
     });
