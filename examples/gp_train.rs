@@ -11,7 +11,9 @@
 //! ```
 //!
 //! Prints the machine load (`/proc/loadavg`) before and after, each run's
-//! wall time, best LML (normalised units, as scikit-learn reports it with
+//! wall time and the process's CPU time over it (on a loaded machine the
+//! CPU time divided by the thread count estimates the idle-machine wall
+//! time), best LML (normalised units, as scikit-learn reports it with
 //! `normalize_y=True`) and the LML + gradient evaluations of every start.
 
 use std::time::Instant;
@@ -53,6 +55,23 @@ fn load() -> String {
     std::fs::read_to_string("/proc/loadavg")
         .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
         .unwrap_or_else(|_| "?".into())
+}
+
+/// CPU time (user + system) of this process so far, in seconds, from
+/// `/proc/self/stat` (Linux; clock ticks of 1/100 s, the kernel's USER_HZ on
+/// every mainstream architecture). On a loaded machine the wall time
+/// includes the time other processes held the cores; the CPU time does not,
+/// so CPU time / threads estimates the wall time on an idle machine (for a
+/// run that keeps all its threads busy).
+fn cpu_seconds() -> Option<f64> {
+    let s = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses).
+    let rest = &s[s.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    // utime and stime are fields 14 and 15 of the whole line (1-based),
+    // i.e. 11 and 12 after the name (0-based).
+    let (u, st): (f64, f64) = (f.get(11)?.parse().ok()?, f.get(12)?.parse().ok()?);
+    Some((u + st) / 100.0)
 }
 
 fn arg(name: &str, default: usize) -> usize {
@@ -97,13 +116,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("load average before: {}", load());
     let mut times = Vec::new();
     for r in 0..runs {
-        let t0 = Instant::now();
+        let (t0, c0) = (Instant::now(), cpu_seconds());
         let (_, rep) = pool.install(|| Gp::train(&x, d, &y, 1, &opts))?;
         let t = t0.elapsed().as_secs_f64();
+        let cpu = match (c0, cpu_seconds()) {
+            (Some(a), Some(b)) => format!(
+                "CPU {:.1} s = {:.2} of {} thread(s)",
+                b - a,
+                (b - a) / t,
+                pool.current_num_threads()
+            ),
+            _ => "CPU time unavailable".into(),
+        };
         times.push(t);
         let o = &rep.outputs[0];
         println!(
-            "run {r}: {t:.3} s, best LML {:.6} (start {}), {} evaluations in {} iterations ({:.2} ms each), per start {:?}",
+            "run {r}: {t:.3} s ({cpu}), best LML {:.6} (start {}), {} evaluations in {} iterations ({:.2} ms each), per start {:?}",
             o.log_marginal_likelihood,
             o.best_start,
             o.evaluations,

@@ -1,12 +1,12 @@
 //! `Gp::predict_into` and `Gp::predict_mean_into` do not allocate once the
-//! model and workspace exist. A counting global allocator in this test
+//! model and workspace exist, for exact and sparse (SGPR) models. A counting global allocator in this test
 //! binary (its own process) observes every allocation; the test is the only
 //! one in the binary, so no other thread allocates meanwhile.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use vigp::gp::{Gp, PriorMean, TrainOptions};
+use vigp::gp::{Gp, Method, PriorMean, SparseOptions, TrainOptions};
 
 struct Counting;
 
@@ -43,16 +43,21 @@ fn single_point_prediction_does_not_allocate() {
         .chunks(2)
         .flat_map(|r| [r[0] * r[1], r[0] - r[1]])
         .collect();
-    for mean in [
+    let methods = [Method::Exact, Method::Sparse(SparseOptions::kmeans(20))];
+    for (mean, method) in [
         PriorMean::Constant,
         PriorMean::Zero,
         PriorMean::function(|x, m| {
             m[0] = x[0];
             m[1] = 0.0;
         }),
-    ] {
+    ]
+    .into_iter()
+    .flat_map(|m| methods.clone().map(|method| (m.clone(), method)))
+    {
         let opts = TrainOptions {
             mean,
+            method,
             restarts: 1,
             ..Default::default()
         };

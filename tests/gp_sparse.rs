@@ -11,7 +11,8 @@
 //!   same hyperparameters and normalisation (`Gp::from_saved`) to 1e-9, for
 //!   exact and sparse models;
 //! * save/load (format 2, and format 1 files), export of the sparse mean,
-//!   warm starts.
+//!   warm starts;
+//! * a sparse run gives the same bits on one and on two threads.
 
 mod common;
 
@@ -387,4 +388,31 @@ fn warm_start_refines_a_previous_optimum_cheaply() {
         Gp::train(&x, d, &y, p, &bad),
         Err(GpError::DimensionMismatch { .. })
     ));
+}
+
+#[test]
+fn sparse_training_is_bit_reproducible_across_thread_counts() {
+    // A single sparse run uses all threads inside each bound evaluation;
+    // its column blocks (4096 wide: three here, the last partial) are a
+    // fixed partition whose partial sums are added in block order, so one
+    // and two threads give the same bits.
+    let (n, d) = (9000, 2);
+    let (x, y) = data(n, d, 1, 11);
+    let opts = TrainOptions {
+        restarts: 0,
+        method: Method::Sparse(SparseOptions::kmeans(24)),
+        ..Default::default()
+    };
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| Gp::train(&x, d, &y, 1, &opts).unwrap())
+    };
+    let (a, ra) = run(1);
+    let (b, rb) = run(2);
+    assert_eq!(a.to_saved(), b.to_saved());
+    assert_eq!(ra, rb);
+    assert!(ra.outputs[0].evaluations > 1);
 }

@@ -56,6 +56,8 @@ const LS_FTOL: f64 = 1e-3;
 const LS_GTOL: f64 = 0.9;
 const LS_XTOL: f64 = 0.1;
 const LS_MAX_EVALS: usize = 20;
+/// Evaluations remembered for repeated trial points.
+const RECENT: usize = 16;
 
 fn project(x: &mut [f64], lo: &[f64], hi: &[f64]) {
     for ((v, l), h) in x.iter_mut().zip(lo).zip(hi) {
@@ -390,6 +392,9 @@ where
         });
     }
     let mut evaluations = 1;
+    // The last evaluated points with their values and gradients.
+    let mut recent: VecDeque<(Vec<f64>, f64, Vec<f64>)> = VecDeque::with_capacity(RECENT);
+    recent.push_back((x.clone(), fx, g.clone()));
     let mut mem: VecDeque<(Vec<f64>, Vec<f64>, f64)> = VecDeque::new();
     let mut converged = false;
     let mut iterations = 0;
@@ -453,10 +458,26 @@ where
                 }
                 // Land exactly on the bound at t_max (rounding can overshoot).
                 project(&mut trial, lo, hi);
-                evaluations += 1;
-                let r = f(&trial)
-                    .ok()
-                    .filter(|(v, gr)| v.is_finite() && gr.iter().all(|q| q.is_finite()));
+                // A trial that repeats a recent point (a search that falls
+                // back to its start or its best step, with steps below the
+                // resolution of x, as rounding noise in f causes) reuses
+                // that evaluation: the same path, without paying twice.
+                let r = match recent.iter().find(|(p, _, _)| *p == trial) {
+                    Some((_, v, gr)) => Some((*v, gr.clone())),
+                    None => {
+                        evaluations += 1;
+                        let r = f(&trial)
+                            .ok()
+                            .filter(|(v, gr)| v.is_finite() && gr.iter().all(|q| q.is_finite()));
+                        if let Some((v, gr)) = &r {
+                            if recent.len() == RECENT {
+                                recent.pop_front();
+                            }
+                            recent.push_back((trial.clone(), *v, gr.clone()));
+                        }
+                        r
+                    }
+                };
                 let Some((ft, gt)) = r else {
                     stp = ls.failed(stp);
                     if stp.is_nan() || stp <= 1e-20 * ls.stpmax.max(1e-300) {
@@ -632,6 +653,35 @@ mod tests {
             }
         }
         panic!("no convergence in {LS_MAX_EVALS} evaluations");
+    }
+
+    #[test]
+    fn rounding_noise_does_not_cost_evaluations_at_the_same_point() {
+        // A quadratic whose value carries deterministic noise of 1e-7 (a hash
+        // of x's bits), as a sum of huge cancelling terms does: near the
+        // minimiser the line searches cannot decrease f and shrink their
+        // step to nothing. No point may be evaluated twice (a search that
+        // falls back to its start has nothing new to evaluate).
+        let seen = std::cell::RefCell::new(Vec::<Vec<f64>>::new());
+        let f = |x: &[f64]| {
+            seen.borrow_mut().push(x.to_vec());
+            let h = x.iter().fold(0x9E37_79B9_7F4A_7C15u64, |h, v| {
+                (h ^ v.to_bits()).wrapping_mul(0xBF58_476D_1CE4_E5B9)
+            });
+            let noise = 1e-7 * ((h >> 11) as f64 / (1u64 << 53) as f64 - 0.5);
+            let v = (x[0] - 1.0).powi(2) + 10.0 * (x[1] + 0.5).powi(2) + noise;
+            Ok((v, vec![2.0 * (x[0] - 1.0), 20.0 * (x[1] + 0.5)]))
+        };
+        let r = minimise(f, &[3.0, 2.0], &[-5.0, -5.0], &[5.0, 5.0], opts()).unwrap();
+        assert!((r.x[0] - 1.0).abs() < 1e-3 && (r.x[1] + 0.5).abs() < 1e-3);
+        let pts = seen.borrow();
+        for (i, p) in pts.iter().enumerate() {
+            assert!(
+                pts[..i].iter().all(|q| q != p),
+                "evaluation {i} repeats an earlier point {p:?} ({} evaluations)",
+                pts.len()
+            );
+        }
     }
 
     #[test]

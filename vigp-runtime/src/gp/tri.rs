@@ -189,7 +189,9 @@ pub(crate) fn norm2(v: &[f64]) -> f64 {
 }
 
 /// Appends to the packed L⁻¹ (size n) the row of the extended inverse when
-/// L gains the row (cᵀ, δ): the new row is (−cᵀL⁻¹/δ, 1/δ). O(n²/2).
+/// L gains the row (cᵀ, δ): the new row is (−cᵀL⁻¹/δ, 1/δ). O(n²/2). The
+/// reference for [`matvec_and_inverse_row`], which the online update uses.
+#[cfg(test)]
 pub(crate) fn extend_inverse(linv: &mut Vec<f64>, n: usize, c: &[f64], delta: f64) {
     let start = linv.len();
     linv.resize(start + n + 1, 0.0);
@@ -202,6 +204,63 @@ pub(crate) fn extend_inverse(linv: &mut Vec<f64>, n: usize, c: &[f64], delta: f6
             }
         }
     }
+    for v in new[..n].iter_mut() {
+        *v /= delta;
+    }
+    new[n] = 1.0 / delta;
+}
+
+/// One pass over the packed L⁻¹ (size n) for appending a sample: returns
+/// c = L⁻¹·b in `c` and appends to `linv` the row w = −cᵀL⁻¹ (the new row
+/// of the extended inverse before its scaling by 1/δ, which
+/// [`finish_inverse_row`] applies once δ is known). Each row of L⁻¹ is read
+/// from memory once, for its dot product with b and, while in cache, for
+/// its share of w: half the memory traffic of [`lower_matvec`] followed by
+/// [`extend_inverse`]. Four rows at a time.
+pub(crate) fn matvec_and_inverse_row(linv: &mut Vec<f64>, b: &[f64], c: &mut [f64]) {
+    let n = b.len();
+    let start = linv.len();
+    debug_assert_eq!(start, row_start(n));
+    linv.resize(start + n + 1, 0.0);
+    let (old, new) = linv.split_at_mut(start);
+    let mut i = 0;
+    while i + 4 <= n {
+        let (r0, r1, r2, r3) = (
+            row(old, i),
+            row(old, i + 1),
+            row(old, i + 2),
+            row(old, i + 3),
+        );
+        let s = dot4(r0, r1, r2, r3, &b[..=i]);
+        let c0 = s[0];
+        let c1 = s[1] + r1[i + 1] * b[i + 1];
+        let c2 = s[2] + r2[i + 1] * b[i + 1] + r2[i + 2] * b[i + 2];
+        let c3 = s[3] + r3[i + 1] * b[i + 1] + r3[i + 2] * b[i + 2] + r3[i + 3] * b[i + 3];
+        c[i..i + 4].copy_from_slice(&[c0, c1, c2, c3]);
+        // w_j −= Σ_k c_k (L⁻¹)_kj over the four rows (all have column ≤ i).
+        for (j, w) in new[..=i].iter_mut().enumerate() {
+            *w -= (c0 * r0[j] + c1 * r1[j]) + (c2 * r2[j] + c3 * r3[j]);
+        }
+        new[i + 1] -= c1 * r1[i + 1] + c2 * r2[i + 1] + c3 * r3[i + 1];
+        new[i + 2] -= c2 * r2[i + 2] + c3 * r3[i + 2];
+        new[i + 3] -= c3 * r3[i + 3];
+        i += 4;
+    }
+    while i < n {
+        let r = row(old, i);
+        let ci = dot(r, &b[..=i]);
+        c[i] = ci;
+        for (w, l) in new[..=i].iter_mut().zip(r) {
+            *w -= ci * l;
+        }
+        i += 1;
+    }
+}
+
+/// Scales the row appended by [`matvec_and_inverse_row`] by 1/δ and sets
+/// its diagonal entry 1/δ: (−cᵀL⁻¹/δ, 1/δ).
+pub(crate) fn finish_inverse_row(linv: &mut [f64], n: usize, delta: f64) {
+    let new = &mut linv[row_start(n)..row_start(n + 1)];
     for v in new[..n].iter_mut() {
         *v /= delta;
     }
@@ -265,6 +324,23 @@ mod tests {
             lower_matvec(&linv, &b, &mut out);
             for (a, e) in out.iter().zip(&x) {
                 assert!((a - e).abs() < 1e-13, "n = {n}: {a} vs {e}");
+            }
+            // the fused pass: the same c and the same appended row as
+            // lower_matvec + extend_inverse, up to the order of the sums
+            let v: Vec<f64> = (0..n).map(|i| (i as f64 * 0.9).sin()).collect();
+            let delta = 1.7;
+            let (mut c1, mut c2) = (vec![0.0; n], vec![0.0; n]);
+            lower_matvec(&linv, &v, &mut c1);
+            let mut a = linv.clone();
+            extend_inverse(&mut a, n, &c1, delta);
+            let mut f = linv.clone();
+            matvec_and_inverse_row(&mut f, &v, &mut c2);
+            finish_inverse_row(&mut f, n, delta);
+            for (p, q) in c1.iter().zip(&c2).chain(a.iter().zip(&f)) {
+                assert!(
+                    (p - q).abs() < 1e-13 * (1.0 + q.abs()),
+                    "n = {n}: {p} vs {q}"
+                );
             }
         }
     }

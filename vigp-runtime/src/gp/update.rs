@@ -177,28 +177,30 @@ fn update_output(
                         }
                     })
                     .collect();
-                // c = L⁻¹b: one pass over L⁻¹ (or L)
+                // c = L⁻¹b and, with a stored L⁻¹, its new row −cᵀL⁻¹/δ
+                // (= −(A⁻¹b)ᵀ/δ) in the same pass over L⁻¹; without it, a
+                // forward and a backward solve with L.
                 c.clear();
                 c.resize(n, 0.0);
-                match linv.as_ref() {
-                    Some(li) => tri::lower_matvec(li, &b, &mut c),
-                    None => {
-                        c.copy_from_slice(&b);
-                        tri::forward_rows(l, &mut c);
-                    }
+                if let Some(li) = linv.as_mut() {
+                    tri::matvec_and_inverse_row(li, &b, &mut c);
+                } else {
+                    c.copy_from_slice(&b);
+                    tri::forward_rows(l, &mut c);
                 }
                 let delta2 = diag - tri::norm2(&c);
                 if !(delta2 > 0.0 && delta2.is_finite()) {
+                    // the undo record truncates the appended row of L⁻¹
                     return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
                 }
                 let delta = delta2.sqrt();
-                // A⁻¹b = L⁻ᵀc: the new row of L⁻¹ is −(L⁻ᵀc)ᵀ/δ (one more
-                // pass), or a backward solve without a stored inverse.
+                // A⁻¹b = L⁻ᵀc: the unscaled new row of L⁻¹, negated.
                 let ainv_b: Vec<f64> = match linv.as_mut() {
                     Some(li) => {
-                        tri::extend_inverse(li, n, &c, delta);
                         let start = tri::row_start(n);
-                        li[start..start + n].iter().map(|v| -delta * v).collect()
+                        let w: Vec<f64> = li[start..start + n].iter().map(|v| -v).collect();
+                        tri::finish_inverse_row(li, n, delta);
+                        w
                     }
                     None => {
                         let mut t = c.clone();
