@@ -162,16 +162,22 @@ fn derivatives(
     Ok(())
 }
 
+/// The fourbar and the consistent start state every fourbar mode uses.
+fn fourbar_start() -> Result<(Fourbar, State<4>), Box<dyn std::error::Error>> {
+    let fb = Fourbar::default();
+    let z0 = consistent_state(
+        &fb.minimal(),
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::from([0.5, 0.0, 0.0, 0.0]),
+        0.01,
+    )?;
+    Ok((fb, z0))
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.get(1).map(String::as_str) == Some("table") {
-        let fb = Fourbar::default();
-        let fb_z0 = consistent_state(
-            &fb.minimal(),
-            &SVector::from([0.9, -1.3, -0.4, 1.3]),
-            &SVector::from([0.5, 0.0, 0.0, 0.0]),
-            0.01,
-        )?;
+        let (fb, fb_z0) = fourbar_start()?;
         println!("| system | step from a state | per step of a rollout |");
         println!("|---|---|---|");
         table_row("pendulum", Pendulum::default(), State::new([1.0], [0.5]))?;
@@ -215,35 +221,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             steps,
         ),
         "fourbar_maximal_single" => {
-            let fb = Fourbar::default();
-            let z0 = consistent_state(
-                &fb.minimal(),
-                &SVector::from([0.9, -1.3, -0.4, 1.3]),
-                &SVector::from([0.5, 0.0, 0.0, 0.0]),
-                0.01,
-            )?;
+            let (fb, z0) = fourbar_start()?;
             use vigp::Coordinates;
             run_single(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
         }
         "fourbar_maximal" => {
-            let fb = Fourbar::default();
-            let z0 = consistent_state(
-                &fb.minimal(),
-                &SVector::from([0.9, -1.3, -0.4, 1.3]),
-                &SVector::from([0.5, 0.0, 0.0, 0.0]),
-                0.01,
-            )?;
+            let (fb, z0) = fourbar_start()?;
             use vigp::Coordinates;
             run(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
         }
         "fourbar" => {
-            let fb = Fourbar::default();
-            let z0 = consistent_state(
-                &fb.minimal(),
-                &SVector::from([0.9, -1.3, -0.4, 1.3]),
-                &SVector::from([0.5, 0.0, 0.0, 0.0]),
-                0.01,
-            )?;
+            let (fb, z0) = fourbar_start()?;
             run(fb, z0, steps)
         }
         other => Err(format!(
