@@ -126,6 +126,20 @@ fn bench_learned(c: &mut Criterion) {
                 (next, bound.one_step(info.std_dev.as_slice()))
             })
         });
+        // The same step with the two outputs' variances on two threads
+        // (opt-in `set_parallel_variance`).
+        let mut seq = l.clone();
+        seq.set_parallel_variance(true);
+        let mut seq_ws = seq.workspace();
+        g.bench_function(
+            format!("double_pendulum/N{n}/bound_parallel_variance"),
+            |b| {
+                b.iter(|| {
+                    let (next, info) = seq.step_with(black_box(&z), &mut seq_ws).unwrap();
+                    (next, bound.one_step(info.std_dev.as_slice()))
+                })
+            },
+        );
         // The variance paths (issue 18, item 4): the default stored L⁻¹
         // (`VarianceMode::Inverse`, above) against the blocked forward
         // substitution (`Solve`) and the column-oriented substitution of the

@@ -610,3 +610,67 @@ fn mean_only_learned_step_equals_the_full_step() {
         assert_eq!((a.q, a.v), (b.q, b.v));
     }
 }
+
+/// The opt-in parallel variance path (one output per rayon task, taken for
+/// an exact GP with p ≥ 2, N ≥ `PARALLEL_VARIANCE_MIN_N` and the stored
+/// inverse) gives the sequential path's means and variances bit for bit,
+/// and both agree with the dense reference (N = 300, p = 3, d = 3).
+#[test]
+fn parallel_variance_equals_the_sequential_path() {
+    let n = vigp::gp::PARALLEL_VARIANCE_MIN_N + 44;
+    let mut gp = train(
+        n,
+        3,
+        3,
+        0.05,
+        TrainOptions {
+            restarts: 0,
+            ..Default::default()
+        },
+    );
+    assert!(!gp.parallel_variance(), "off by default");
+    gp.set_parallel_variance(true);
+    let mut ws = gp.workspace();
+    let mut rng = Rng(21);
+    let points: Vec<[f64; 3]> = (0..40)
+        .map(|_| std::array::from_fn(|_| rng.uniform(-3.0, 3.0)))
+        .collect();
+    let mut par = Vec::new();
+    for x in &points {
+        let (mut m, mut v) = ([0.0; 3], [0.0; 3]);
+        gp.predict_into(x, &mut m, &mut v, &mut ws).unwrap();
+        par.push((m, v));
+    }
+    gp.set_parallel_variance(false);
+    // a workspace made with the parallel buffers serves the sequential path
+    for (x, (pm, pv)) in points.iter().zip(&par) {
+        let (mut m, mut v) = ([0.0; 3], [0.0; 3]);
+        gp.predict_into(x, &mut m, &mut v, &mut ws).unwrap();
+        assert_eq!(
+            m.map(f64::to_bits),
+            pm.map(f64::to_bits),
+            "means differ at {x:?}"
+        );
+        assert_eq!(
+            v.map(f64::to_bits),
+            pv.map(f64::to_bits),
+            "variances differ at {x:?}"
+        );
+        for j in 0..3 {
+            let (mr, vr, mag) = dense_reference(&gp, x, j);
+            assert!((pm[j] - mr).abs() <= 1e-12 * mag, "mean {j} at {x:?}");
+            assert!(
+                (pv[j] - vr).abs() <= 1e-9 * gp.output(j).kernel_max(),
+                "variance {j} at {x:?}: {} vs {vr}",
+                pv[j]
+            );
+        }
+    }
+    // and a workspace made while it was off serves the parallel path
+    let mut ws_seq = gp.workspace();
+    gp.set_parallel_variance(true);
+    let (mut m, mut v) = ([0.0; 3], [0.0; 3]);
+    gp.predict_into(&points[0], &mut m, &mut v, &mut ws_seq)
+        .unwrap();
+    assert_eq!(v.map(f64::to_bits), par[0].1.map(f64::to_bits));
+}

@@ -44,6 +44,21 @@ fn single_point_prediction_does_not_allocate() {
         .flat_map(|r| [r[0] * r[1], r[0] - r[1]])
         .collect();
     let methods = [Method::Exact, Method::Sparse(SparseOptions::kmeans(20))];
+    check(&x, &y, methods, 1);
+    // N ≥ PARALLEL_VARIANCE_MIN_N with the default sequential variance
+    // (the opt-in parallel one hands tasks to rayon, whose queue allocates)
+    let n = vigp::gp::PARALLEL_VARIANCE_MIN_N + 4;
+    let x: Vec<f64> = (0..n)
+        .flat_map(|i| [(i as f64 * 0.37).sin(), (i as f64 * 0.11).cos()])
+        .collect();
+    let y: Vec<f64> = x
+        .chunks(2)
+        .flat_map(|r| [r[0] * r[1], r[0] - r[1]])
+        .collect();
+    check(&x, &y, [Method::Exact], 0);
+}
+
+fn check<const K: usize>(x: &[f64], y: &[f64], methods: [Method; K], restarts: usize) {
     for (mean, method) in [
         PriorMean::Constant,
         PriorMean::Zero,
@@ -58,10 +73,10 @@ fn single_point_prediction_does_not_allocate() {
         let opts = TrainOptions {
             mean,
             method,
-            restarts: 1,
+            restarts,
             ..Default::default()
         };
-        let (gp, _) = Gp::train(&x, 2, &y, 2, &opts).unwrap();
+        let (gp, _) = Gp::train(x, 2, y, 2, &opts).unwrap();
         let mut ws = gp.workspace();
         let (mut m, mut v) = ([0.0; 2], [0.0; 2]);
         let before = ALLOCS.load(Ordering::SeqCst);

@@ -587,6 +587,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         &self.gp
     }
 
+    /// Whether the step with its bound ([`step_with`](Self::step_with)) may
+    /// compute the velocity outputs' variances on rayon's thread pool (see
+    /// [`Gp::set_parallel_variance`]; default `false`, results bit-identical
+    /// either way; not allocation-free when on).
+    pub fn set_parallel_variance(&mut self, on: bool) {
+        self.gp.set_parallel_variance(on);
+    }
+
     /// The model (prior and constraints).
     pub fn model(&self) -> &M {
         &self.model

@@ -52,7 +52,7 @@ pub use error::GpError;
 pub use export::{ExportOptions, ExportedArrays};
 pub use kernel::Hyperparameters;
 pub use mean::{MeanFn, PriorMean};
-pub use model::{Gp, OutputGp, Prediction, VarianceMode, Workspace};
+pub use model::{Gp, OutputGp, PARALLEL_VARIANCE_MIN_N, Prediction, VarianceMode, Workspace};
 pub use normalise::InputNormaliser;
 pub use options::{
     Bounds, InducingInit, Method, OutputReport, SparseOptions, TrainOptions, TrainReport,
