@@ -35,19 +35,17 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn single_point_prediction_does_not_allocate() {
-    let n = 100;
-    let x: Vec<f64> = (0..n)
-        .flat_map(|i| [(i as f64 * 0.37).sin(), (i as f64 * 0.11).cos()])
-        .collect();
-    let y: Vec<f64> = x
-        .chunks(2)
-        .flat_map(|r| [r[0] * r[1], r[0] - r[1]])
-        .collect();
+    let (x, y) = data(100);
     let methods = [Method::Exact, Method::Sparse(SparseOptions::kmeans(20))];
     check(&x, &y, methods, 1);
     // N ≥ PARALLEL_VARIANCE_MIN_N with the default sequential variance
     // (the opt-in parallel one hands tasks to rayon, whose queue allocates)
-    let n = vigp::gp::PARALLEL_VARIANCE_MIN_N + 4;
+    let (x, y) = data(vigp::gp::PARALLEL_VARIANCE_MIN_N + 4);
+    check(&x, &y, [Method::Exact], 0);
+}
+
+/// n points on [−1, 1]² (d = 2) and two smooth targets (p = 2).
+fn data(n: usize) -> (Vec<f64>, Vec<f64>) {
     let x: Vec<f64> = (0..n)
         .flat_map(|i| [(i as f64 * 0.37).sin(), (i as f64 * 0.11).cos()])
         .collect();
@@ -55,7 +53,7 @@ fn single_point_prediction_does_not_allocate() {
         .chunks(2)
         .flat_map(|r| [r[0] * r[1], r[0] - r[1]])
         .collect();
-    check(&x, &y, [Method::Exact], 0);
+    (x, y)
 }
 
 fn check<const K: usize>(x: &[f64], y: &[f64], methods: [Method; K], restarts: usize) {
