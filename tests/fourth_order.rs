@@ -110,6 +110,14 @@ vigp::mechanism! {
     }
 }
 
+/// Whether the fourth-order VI of `model` at Δt = 0.01 takes the explicit path.
+fn explicit<M: Mechanism<N, C>, const N: usize, const C: usize>(model: M) -> bool {
+    Variational4::new(model, 0.01)
+        .composition()
+        .unwrap()
+        .is_explicit()
+}
+
 /// The explicit path (Störmer–Verlet sub-steps, taken for constant mass,
 /// no constraints, no damping): which models take it, its order against
 /// RK4 at Δt = 1e-4 (as above), its energy over 10⁴ steps, and a constant
@@ -119,50 +127,20 @@ vigp::mechanism! {
 fn explicit_composition_for_constant_mass() {
     use vigp::systems::{Cartpole, Pendulum};
     let pendulum = Pendulum::default().minimal();
-    assert!(
-        Variational4::new(pendulum, 0.01)
-            .composition()
-            .unwrap()
-            .is_explicit()
-    );
+    assert!(explicit(pendulum));
     let mut damped = Pendulum::default();
     damped.joints.pivot.damping = 0.1;
-    assert!(
-        !Variational4::new(damped.minimal(), 0.01)
-            .composition()
-            .unwrap()
-            .is_explicit()
-    );
+    assert!(!explicit(damped.minimal()));
     let cartpole = Cartpole::default().minimal();
-    assert!(
-        !Variational4::new(cartpole, 0.01)
-            .composition()
-            .unwrap()
-            .is_explicit()
-    );
+    assert!(!explicit(cartpole));
     let dp = DoublePendulum::default();
-    assert!(
-        !Variational4::new(dp.minimal(), 0.01)
-            .composition()
-            .unwrap()
-            .is_explicit()
-    );
+    assert!(!explicit(dp.minimal()));
     // maximal coordinates have a constant mass but constraints
-    assert!(
-        !Variational4::new(Pendulum::default().maximal(), 0.01)
-            .composition()
-            .unwrap()
-            .is_explicit()
-    );
+    assert!(!explicit(Pendulum::default().maximal()));
 
     // order, unforced and under a constant torque
     let driven = DrivenPendulum::default().minimal();
-    assert!(
-        Variational4::new(driven, 0.01)
-            .composition()
-            .unwrap()
-            .is_explicit()
-    );
+    assert!(explicit(driven));
     let z0 = State::new([2.5], [0.3]);
     let t_end = 1.0;
     for u in [0.0, 1.7] {

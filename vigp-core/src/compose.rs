@@ -39,7 +39,7 @@
 use crate::dynamics::{Dynamics, Terms};
 use crate::linalg::{PartialLu, solve_kkt_regularised};
 use crate::state::State;
-use crate::step::{RolloutError, StepError, StepOptions, StepReport, Stepper};
+use crate::step::{RolloutError, Solved, StepError, StepOptions, StepReport, Stepper};
 use nalgebra::{SMatrix, SVector};
 
 /// Yoshida's triple jump: γ₁ = γ₃ = 1/(2 − 2^{1/3}), γ₂ = 1 − 2γ₁.
@@ -296,10 +296,37 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         &self,
         q: &SVector<f64, N>,
         p: &SVector<f64, N>,
+        predictor: Predictor<N>,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport, Predictor<N>), StepError> {
+        self.run_stages(
+            q,
+            p,
+            predictor,
+            |_| SVector::zeros(),
+            |q, p, h, guess| self.midpoint.solve(q, p, h, guess),
+        )
+    }
+
+    /// The sub-steps of one step: explicit Störmer–Verlet steps with the
+    /// generalized input force `input(q)` when the model allows them (module
+    /// docs), else midpoint-rule stages solved by `solve(q, p, h, guess)`
+    /// from the predictor's guesses. Returns the predictor advanced past
+    /// the step.
+    fn run_stages(
+        &self,
+        q: &SVector<f64, N>,
+        p: &SVector<f64, N>,
         mut predictor: Predictor<N>,
+        input: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+        solve: impl Fn(
+            &SVector<f64, N>,
+            &SVector<f64, N>,
+            f64,
+            &SVector<f64, N>,
+        ) -> Result<Solved<N>, StepError>,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport, Predictor<N>), StepError> {
         if let Some(minv) = &self.explicit {
-            let (q, p) = self.verlet(minv, q, p, |_| SVector::zeros())?;
+            let (q, p) = self.verlet(minv, q, p, input)?;
             return Ok((q, p, StepReport::default(), predictor));
         }
         let dt = self.midpoint.dt();
@@ -307,7 +334,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         let mut report = StepReport::default();
         for g in self.gammas {
             let h = g * dt;
-            let (v1, p1, r) = self.midpoint.solve(&q, &p, h, &predictor.guess(h))?;
+            let (v1, p1, r) = solve(&q, &p, h, &predictor.guess(h))?;
             report.merge(&r);
             q += v1 * h;
             p = p1;
@@ -327,30 +354,20 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         guess: &SVector<f64, N>,
         u: &SVector<f64, U>,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
-        if let Some(minv) = &self.explicit {
-            if u.iter().any(|x| !x.is_finite()) {
-                return Err(StepError::NonFiniteInput);
-            }
-            let model = self.midpoint.model();
-            let k = self.midpoint.constants();
-            let (q, p) = self.verlet(minv, q, p, |q| model.input_matrix(k, q) * u)?;
-            return Ok((q, p, StepReport::default()));
+        // the midpoint stages check u themselves; the explicit ones here
+        if self.explicit.is_some() && u.iter().any(|x| !x.is_finite()) {
+            return Err(StepError::NonFiniteInput);
         }
-        let dt = self.midpoint.dt();
-        let (mut q, mut p) = (*q, *p);
-        let mut report = StepReport::default();
-        let mut predictor = Predictor::new(guess);
-        for g in self.gammas {
-            let h = g * dt;
-            let (v1, p1, r) = self
-                .midpoint
-                .solve_forced(&q, &p, h, &predictor.guess(h), u)?;
-            report.merge(&r);
-            q += v1 * h;
-            p = p1;
-            predictor.push(h, v1);
-        }
-        Ok((q, p, report))
+        let model = self.midpoint.model();
+        let k = self.midpoint.constants();
+        self.run_stages(
+            q,
+            p,
+            Predictor::new(guess),
+            |q| model.input_matrix(k, q) * u,
+            |q, p, h, guess| self.midpoint.solve_forced(q, p, h, guess, u),
+        )
+        .map(|(q, p, r, _)| (q, p, r))
     }
 
     /// One step from a continuous state under inputs `u` (`U` must equal

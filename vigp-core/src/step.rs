@@ -242,7 +242,7 @@ pub fn check_time_step(dt: f64) -> Result<(), StepError> {
 }
 
 /// A converged sub-step: v₁, the momentum p₁ and diagnostics.
-type Solved<const N: usize> = (SVector<f64, N>, SVector<f64, N>, StepReport);
+pub(crate) type Solved<const N: usize> = (SVector<f64, N>, SVector<f64, N>, StepReport);
 
 /// A converged forced sub-step: v₁, p₁, diagnostics and the multipliers λ.
 pub(crate) type Forced<const N: usize, const C: usize> = (

@@ -152,40 +152,6 @@ pub fn forced_transitions<const N: usize, const U: usize>(
         .collect()
 }
 
-/// The nominal first-order VI step of the prior (the fixed-size engine
-/// on the model's closed-form terms, as [`Variational::new`] runs it).
-fn nominal_step<M, const N: usize, const C: usize>(
-    model: &M,
-    dt: f64,
-    options: &NewtonOptions,
-    z: &State<N>,
-) -> Result<State<N>, StepError>
-where
-    M: Mechanism<N, C> + Clone,
-{
-    Variational::new(model.clone(), dt)
-        .with_options(*options)
-        .step(z)
-}
-
-/// The prior's next velocity under inputs: the nominal first-order VI
-/// step forced by `u` (`U` = the mechanism's `Dynamics::INPUTS`).
-fn nominal_forced<M, const N: usize, const C: usize, const U: usize>(
-    model: &M,
-    dt: f64,
-    options: &NewtonOptions,
-    z: &State<N>,
-    u: &SVector<f64, U>,
-) -> Result<SVector<f64, N>, StepError>
-where
-    M: Mechanism<N, C> + Clone,
-{
-    Ok(Variational::new(model.clone(), dt)
-        .with_options(*options)
-        .step_forced(z, u)?
-        .v)
-}
-
 /// Transitions of a trajectory of positions sampled every Δt (K positions
 /// give K − 2 transitions).
 pub fn transitions<const N: usize>(positions: &[SVector<f64, N>], dt: f64) -> Vec<Transition<N>> {
@@ -284,9 +250,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 v_next: t.v_next,
             })
             .collect();
-        let nominal = |m: &M, z: &State<N>, _: &SVector<f64, 0>| {
-            Ok(nominal_step(m, dt, &NewtonOptions::default(), z)?.v)
-        };
+        let nominal =
+            |vi: &Variational<M, N, C>, z: &State<N>, _: &SVector<f64, 0>| Ok(vi.step(z)?.v);
         Self::train_inputs(model, dt, &forced, encoding, prior, options, false, nominal)
     }
 
@@ -302,14 +267,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         prior: Prior,
         options: &TrainOptions,
     ) -> Result<(Self, TrainReport), LearnError> {
-        let nominal = |m: &M, z: &State<N>, u: &SVector<f64, U>| {
-            nominal_forced(m, dt, &NewtonOptions::default(), z, u)
+        let nominal = |vi: &Variational<M, N, C>, z: &State<N>, u: &SVector<f64, U>| {
+            Ok(vi.step_forced(z, u)?.v)
         };
         Self::train_inputs(model, dt, data, encoding, prior, options, true, nominal)
     }
 
     /// Training with the GP input = encoded state (+ u when `forced`) and
-    /// the prior's next velocity `nominal(model, z, u)`.
+    /// the prior's next velocity `nominal(vi, z, u)` of the nominal
+    /// first-order VI `vi` (default Newton options, built once here).
     #[allow(clippy::too_many_arguments)]
     fn train_inputs<const U: usize>(
         model: M,
@@ -319,7 +285,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         prior: Prior,
         options: &TrainOptions,
         forced: bool,
-        nominal_velocity: impl Fn(&M, &State<N>, &SVector<f64, U>) -> Result<SVector<f64, N>, StepError>,
+        nominal_velocity: impl Fn(
+            &Variational<M, N, C>,
+            &State<N>,
+            &SVector<f64, U>,
+        ) -> Result<SVector<f64, N>, StepError>,
     ) -> Result<(Self, TrainReport), LearnError> {
         if data.is_empty() {
             return Err(LearnError::Empty);
@@ -332,6 +302,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let d = e + u_dim;
         let mut inputs = vec![0.0; data.len() * d];
         let mut targets = Vec::with_capacity(data.len() * N);
+        let prior_vi = Variational::new(model.clone(), dt);
         for (i, t) in data.iter().enumerate() {
             if !(t.z.is_finite()
                 && t.v_next.iter().all(|x| x.is_finite())
@@ -350,9 +321,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 // at prediction time (predictions are projected).
                 Prior::Nominal if C > 0 => {
                     let z = consistent_state(&model, &t.z.q, &t.z.v, dt)?;
-                    nominal_velocity(&model, &z, &t.u)?
+                    nominal_velocity(&prior_vi, &z, &t.u)?
                 }
-                Prior::Nominal => nominal_velocity(&model, &t.z, &t.u)?,
+                Prior::Nominal => nominal_velocity(&prior_vi, &t.z, &t.u)?,
                 Prior::Constant => SVector::zeros(),
             };
             targets.extend((t.v_next - base).iter());

@@ -849,10 +849,10 @@ impl Gp {
         Ok(())
     }
 
-    /// The scaled query x_n/ℓ of output `o` into ws.xs (ws.xn already set).
+    /// The scaled query x_n/ℓ of output `o` into `xs`.
     #[inline]
-    fn scale_query(o: &OutputGp, ws: &mut Workspace) {
-        for ((s, v), l) in ws.xs.iter_mut().zip(&ws.xn).zip(&o.hp.length_scales) {
+    fn scale_query(o: &OutputGp, xn: &[f64], xs: &mut [f64]) {
+        for ((s, v), l) in xs.iter_mut().zip(xn).zip(&o.hp.length_scales) {
             *s = v / l;
         }
     }
@@ -883,7 +883,7 @@ impl Gp {
             return self.predict_parallel(mean, var, ws);
         }
         for (j, o) in self.outputs.iter().enumerate() {
-            Self::scale_query(o, ws);
+            Self::scale_query(o, &ws.xn, &mut ws.xs);
             core_gp::kernel_row(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
                 .map_err(core_error)?;
             let mn = core_gp::dot(&ws.kstar, &o.alpha).map_err(core_error)?;
@@ -929,9 +929,7 @@ impl Gp {
             .par_iter_mut()
             .zip(self.outputs.par_iter())
             .try_for_each(|(lane, o)| -> Result<(), GpError> {
-                for ((s, v), l) in lane.xs.iter_mut().zip(xn).zip(&o.hp.length_scales) {
-                    *s = v / l;
-                }
+                Self::scale_query(o, xn, &mut lane.xs);
                 core_gp::kernel_row(
                     &o.xs_cols,
                     b,
@@ -990,7 +988,7 @@ impl Gp {
         self.mean.eval(x, &mut ws.prior);
         let b = ws.n;
         for (j, o) in self.outputs.iter().enumerate() {
-            Self::scale_query(o, ws);
+            Self::scale_query(o, &ws.xn, &mut ws.xs);
             let mn = core_gp::kernel_dot(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &o.alpha)
                 .map_err(core_error)?;
             mean[j] = ws.prior[j] + o.output_scale * mn;
@@ -1031,7 +1029,7 @@ impl Gp {
         self.mean.eval(x, &mut ws.prior);
         let b = ws.n;
         for (j, o) in self.outputs.iter().enumerate() {
-            Self::scale_query(o, ws);
+            Self::scale_query(o, &ws.xn, &mut ws.xs);
             core_gp::kernel_row(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
                 .map_err(core_error)?;
             // as predict_mean_into (kernel_dot = kernel_row + dot), bit for bit
