@@ -15,10 +15,27 @@
 //! CPU time divided by the thread count estimates the idle-machine wall
 //! time), best LML (normalised units, as scikit-learn reports it with
 //! `normalize_y=True`) and the LML + gradient evaluations of every start.
+//!
+//! `--dump-inducing PATH` (sparse only) writes, after the last run, what a
+//! peer SGPR needs to optimise the same problem as JSON: the inducing
+//! points in original and in normalised (standardised) units (row-major
+//! M × d, from `Gp::inducing_points`, mapped with the model's
+//! `InputNormaliser`), that normaliser's shift and scale, the constant prior
+//! mean and output scale s_y of the targets, the trained hyperparameters
+//! (normalised units), the K_uu jitter (absolute, normalised units) and the
+//! final bound (normalised units; in original units it is this − N·ln s_y),
+//! and the bound at the first start ℓ = 1, σ_f² = 1, σ² = 0.01 (from
+//! `vigp::gp::sparse_bound` on the normalised data; a well-conditioned
+//! point for checking a peer's bound to rounding).
+//! `scripts/sgpr_peer.py` reads it.
+//!
+//! ```text
+//! cargo run --release --example gp_train -- --n 100000 --sparse 256 --restarts 0 --runs 1 --dump-inducing /tmp/z.json
+//! ```
 
 use std::time::Instant;
 
-use vigp::gp::{Gp, Method, SparseOptions, TrainOptions};
+use vigp::gp::{Gp, Method, SparseOptions, TrainOptions, sparse_bound};
 
 /// Fractional parts of √p for the first primes: Weyl-sequence directions
 /// (the same as `benches/gp.rs` and `scripts/gp_sklearn_bench.py`).
@@ -83,10 +100,74 @@ fn arg(name: &str, default: usize) -> usize {
         .unwrap_or(default)
 }
 
+fn str_arg(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .cloned()
+}
+
+/// The `--dump-inducing` JSON of a trained sparse model (see the module docs).
+fn dump_inducing(
+    path: &str,
+    gp: &Gp,
+    y: &[f64],
+    lml: f64,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let z = gp
+        .inducing_points()
+        .ok_or("--dump-inducing needs a sparse model (--sparse M)")?;
+    let norm = gp.input_normaliser();
+    let d = gp.input_dim();
+    let mut zn = vec![0.0; z.len()];
+    for (o, r) in zn.chunks_exact_mut(d).zip(z.chunks_exact(d)) {
+        norm.apply(r, o);
+    }
+    let o = gp.output(0);
+    let hp = o.hyperparameters();
+    // The constant prior mean: the mean of the targets (PriorMean::Constant).
+    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    let rows = |v: &[f64]| v.chunks_exact(d).map(|r| r.to_vec()).collect::<Vec<_>>();
+    // The bound at the first start (TrainOptions::initial = None), on the
+    // model's normalised inputs and residuals.
+    let mut xn = vec![0.0; gp.inputs().len()];
+    for (o, r) in xn.chunks_exact_mut(d).zip(gp.inputs().chunks_exact(d)) {
+        norm.apply(r, o);
+    }
+    let mut theta = vec![0.0; d + 2];
+    theta[d + 1] = 1e-2f64.ln();
+    let (start, _) = sparse_bound(&xn, d, o.residual_normalised(), &zn, &theta, true)?;
+    let json = serde_json::json!({
+        "n": gp.n(),
+        "d": d,
+        "m": z.len() / d,
+        "inducing_original": rows(&z),
+        "inducing_normalised": rows(&zn),
+        "input_shift": norm.shift,
+        "input_scale": norm.scale,
+        "target_mean": mean,
+        "output_scale": o.output_scale(),
+        "length_scales": hp.length_scales,
+        "signal_variance": hp.signal_variance,
+        "noise_variance": hp.noise_variance,
+        "kuu_jitter": o.jitter(),
+        "bound_normalised": lml,
+        "bound_at_start_normalised": start,
+    });
+    std::fs::write(path, serde_json::to_string_pretty(&json)?)?;
+    println!("wrote inducing points and normalisation to {path}");
+    Ok(())
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (n, d) = (arg("--n", 512), arg("--d", 4));
     let (restarts, runs, threads) = (arg("--restarts", 10), arg("--runs", 3), arg("--threads", 0));
     let sparse = arg("--sparse", 0);
+    let dump = str_arg("--dump-inducing");
+    if dump.is_some() && sparse == 0 {
+        return Err("--dump-inducing needs --sparse M".into());
+    }
     if !(1..=8).contains(&d) {
         return Err("--d must be in 1..=8".into());
     }
@@ -115,9 +196,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("load average before: {}", load());
     let mut times = Vec::new();
+    let mut last = None;
     for r in 0..runs {
         let (t0, c0) = (Instant::now(), cpu_seconds());
-        let (_, rep) = pool.install(|| Gp::train(&x, d, &y, 1, &opts))?;
+        let (gp, rep) = pool.install(|| Gp::train(&x, d, &y, 1, &opts))?;
         let t = t0.elapsed().as_secs_f64();
         let cpu = match (c0, cpu_seconds()) {
             (Some(a), Some(b)) => format!(
@@ -141,9 +223,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         let lmls: Vec<String> = o.start_lmls.iter().map(|v| format!("{v:.3}")).collect();
         println!("  final LML per start: [{}]", lmls.join(", "));
+        last = Some((gp, o.log_marginal_likelihood));
     }
     times.sort_by(f64::total_cmp);
     println!("median {:.3} s over {runs} run(s)", times[runs / 2]);
     println!("load average after: {}", load());
+    if let (Some(path), Some((gp, lml))) = (dump, last) {
+        dump_inducing(&path, &gp, &y, lml)?;
+    }
     Ok(())
 }
