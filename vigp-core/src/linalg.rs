@@ -175,6 +175,15 @@ impl<const M: usize> PartialLu<M> {
             let inv = 1.0 / pivot;
             let pivot_row = lu[k];
             for row in lu.iter_mut().skip(k + 1) {
+                // a zero below the pivot (Schur complements of mechanisms
+                // are block-banded: constraints on different bodies do not
+                // couple) needs no elimination: the row is unchanged, as
+                // subtracting 0·pivot_row would leave it (up to the sign of
+                // a zero; a NaN in the pivot row still reaches the solution
+                // through back substitution, where callers test finiteness)
+                if row[k] == 0.0 {
+                    continue;
+                }
                 let f = row[k] * inv;
                 row[k] = f;
                 for j in k + 1..M {
