@@ -33,20 +33,8 @@ import scipy.optimize
 from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
 
-DIRS = [
-    0.4142135623730951, 0.7320508075688772, 0.2360679774997897, 0.6457513110645906,
-    0.31662479035539985, 0.6055512754639893, 0.12310562561766055, 0.3588989435406736,
-]
-
-
-def bench_data(n, d):
-    i = np.arange(1, n + 1, dtype=float)
-    X = np.stack([4.0 * ((i * DIRS[j]) % 1.0) - 2.0 for j in range(d)], axis=1)
-    y = np.sin(3.0 * X[:, 0]) + np.cos(2.0 * X[:, 1])
-    if d >= 4:
-        y = y + 0.5 * X[:, 2] * X[:, 3]
-    y = y + 0.01 * (((i * 0.7548776662466928) % 1.0) - 0.5)
-    return X, y
+# run as `python scripts/...`: scripts/ is on the import path
+from bench_data import bench_data, load
 
 
 NFEV = []
@@ -64,13 +52,6 @@ def lbfgsb(obj_func, initial_theta, bounds):
     )
     NFEV.append(int(res.nfev))
     return res.x, res.fun
-
-
-def load():
-    try:
-        return " ".join(open("/proc/loadavg").read().split()[:3])
-    except OSError:
-        return "?"
 
 
 def main():
