@@ -92,14 +92,12 @@ fn cpu_seconds() -> Option<f64> {
 }
 
 fn arg(name: &str, default: usize) -> usize {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
+    str_arg(name)
         .and_then(|v| v.parse().ok())
         .unwrap_or(default)
 }
 
+/// The command-line word after `name`, if any.
 fn str_arg(name: &str) -> Option<String> {
     let args: Vec<String> = std::env::args().collect();
     args.iter()
@@ -108,33 +106,32 @@ fn str_arg(name: &str) -> Option<String> {
         .cloned()
 }
 
+/// Rows (row-major, `d` wide) through the model's input standardisation.
+fn normalised(gp: &Gp, rows: &[f64]) -> Vec<f64> {
+    let (norm, d) = (gp.input_normaliser(), gp.input_dim());
+    let mut out = vec![0.0; rows.len()];
+    for (o, r) in out.chunks_exact_mut(d).zip(rows.chunks_exact(d)) {
+        norm.apply(r, o);
+    }
+    out
+}
+
 /// The `--dump-inducing` JSON of a trained sparse model (see the module docs).
-fn dump_inducing(
-    path: &str,
-    gp: &Gp,
-    y: &[f64],
-    lml: f64,
-) -> Result<(), Box<dyn std::error::Error>> {
+fn dump_inducing(path: &str, gp: &Gp, lml: f64) -> Result<(), Box<dyn std::error::Error>> {
     let z = gp
         .inducing_points()
         .ok_or("--dump-inducing needs a sparse model (--sparse M)")?;
     let norm = gp.input_normaliser();
     let d = gp.input_dim();
-    let mut zn = vec![0.0; z.len()];
-    for (o, r) in zn.chunks_exact_mut(d).zip(z.chunks_exact(d)) {
-        norm.apply(r, o);
-    }
+    let zn = normalised(gp, &z);
     let o = gp.output(0);
     let hp = o.hyperparameters();
-    // The constant prior mean: the mean of the targets (PriorMean::Constant).
-    let mean = y.iter().sum::<f64>() / y.len() as f64;
+    // The constant prior mean (PriorMean::Constant: the same at every input).
+    let mean = gp.prior_mean_at_inputs()[0];
     let rows = |v: &[f64]| v.chunks_exact(d).map(|r| r.to_vec()).collect::<Vec<_>>();
     // The bound at the first start (TrainOptions::initial = None), on the
     // model's normalised inputs and residuals.
-    let mut xn = vec![0.0; gp.inputs().len()];
-    for (o, r) in xn.chunks_exact_mut(d).zip(gp.inputs().chunks_exact(d)) {
-        norm.apply(r, o);
-    }
+    let xn = normalised(gp, gp.inputs());
     let mut theta = vec![0.0; d + 2];
     theta[d + 1] = 1e-2f64.ln();
     let (start, _) = sparse_bound(&xn, d, o.residual_normalised(), &zn, &theta, true)?;
@@ -229,7 +226,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("median {:.3} s over {runs} run(s)", times[runs / 2]);
     println!("load average after: {}", load());
     if let (Some(path), Some((gp, lml))) = (dump, last) {
-        dump_inducing(&path, &gp, &y, lml)?;
+        dump_inducing(&path, &gp, lml)?;
     }
     Ok(())
 }
