@@ -234,8 +234,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let (fb, z0) = fourbar_start()?;
             run(fb, z0, steps)
         }
+        // joint damping makes the maximal Newton matrix −M − a·D
+        // non-diagonal: the general (LU + sparse Schur) KKT path
+        "fourbar_maximal_damped" => {
+            let (mut fb, z0) = fourbar_start()?;
+            for j in [
+                &mut fb.joints.top1,
+                &mut fb.joints.middle1,
+                &mut fb.joints.top2,
+                &mut fb.joints.middle2,
+                &mut fb.joints.bottom,
+            ] {
+                j.damping = 0.1;
+            }
+            use vigp::Coordinates;
+            run(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
+        }
         other => Err(format!(
-            "unknown system {other:?}: pendulum, cartpole, double_pendulum or fourbar"
+            "unknown system {other:?}: pendulum, cartpole, double_pendulum, fourbar, fourbar_maximal or fourbar_maximal_damped"
         )
         .into()),
     }

@@ -138,6 +138,9 @@ impl<const M: usize> PartialLu<M> {
     }
 
     /// [`PartialLu::new`] from the rows of A (`rows[i][j]` = A_ij).
+    // inlined: out of line, the rows and the factors are copied in and out
+    // (memcpy) at every call, which costs a tenth of a 10×10 factorisation
+    #[inline(always)]
     pub fn from_rows(rows: [[f64; M]; M], rel_tol: f64) -> Option<Self> {
         let mut lu = rows;
         // max |a_ij| by plain comparisons (which ignore NaN as `f64::max`
@@ -204,6 +207,7 @@ impl<const M: usize> PartialLu<M> {
     /// [`PartialLu::solve`] on plain arrays (`b` has length M).
     // forward and back substitution read as the textbook formulas
     #[allow(clippy::needless_range_loop)]
+    #[inline(always)]
     pub fn solve_array(&self, b: &[f64]) -> [f64; M] {
         let mut x = [0.0f64; M];
         for i in 0..M {
@@ -325,9 +329,11 @@ pub type KktSolution<const N: usize, const C: usize> = (SVector<f64, N>, SVector
 /// ```
 ///
 /// with J (N×N) invertible, by the Schur complement S = A J⁻¹ B (C×C).
-/// A rank-deficient S (a constraint Jacobian losing rank, e.g. a folded
-/// four-bar) is handled by complete pivoting: the multiplier component in the
-/// deficient direction is set to zero. Returns `None` when J is singular.
+/// S is assembled from the nonzero entries of A only and factored by
+/// partial pivoting; a rank-deficient S (a constraint Jacobian losing rank,
+/// e.g. a folded four-bar) meets a tiny pivot there and is handled by
+/// complete pivoting: the multiplier component in the deficient direction is
+/// set to zero. Returns `None` when J is singular.
 pub fn solve_kkt<const N: usize, const C: usize>(
     j: &SMatrix<f64, N, N>,
     b: &SMatrix<f64, N, C>,
@@ -351,11 +357,88 @@ pub fn solve_kkt<const N: usize, const C: usize>(
     if C == 0 {
         return Some((jr, SVector::zeros()));
     }
-    let s = a * jb;
-    let rhs = a * jr - c;
-    let y = FullPivLu::new(s, 1e-13).solve(&rhs);
-    let x = jr - jb * y;
-    Some((x, y))
+    // rows of J⁻¹B (J⁻¹B is stored by columns)
+    let mut jb_rows = [[0.0f64; C]; N];
+    for (col, xs) in jb.as_slice().chunks_exact(N).enumerate() {
+        for (k, x) in xs.iter().enumerate() {
+            jb_rows[k][col] = *x;
+        }
+    }
+    let (s, rhs) = schur_sparse(a, &jb_rows, &[1.0; N], jr.as_slice(), c);
+    let y = solve_schur(s, &rhs);
+    let mut x = jr;
+    for (k, xk) in x.iter_mut().enumerate() {
+        *xk -= dot(&jb_rows[k], &y);
+    }
+    Some((x, SVector::from(y)))
+}
+
+/// Σ_j a_j b_j.
+#[inline(always)]
+fn dot<const C: usize>(a: &[f64; C], b: &[f64; C]) -> f64 {
+    let mut s = 0.0;
+    for (x, y) in a.iter().zip(b.iter()) {
+        s += x * y;
+    }
+    s
+}
+
+/// The Schur complement S = A·W·R (C×C) and the right-hand side
+/// A·(J⁻¹r) − c, for W = diag(`w`) and R given by its rows (R = J⁻¹B with
+/// W = I; R = B with W = J⁻¹ for a diagonal J), visiting only the nonzero
+/// entries of A: a joint's constraint rows touch the coordinates of two
+/// bodies, so most of A is zero in maximal coordinates (O(nnz(A)·C) instead
+/// of O(C²N)). Skipping a zero a_ik leaves the sums exactly as adding 0·x
+/// would (up to the sign of a zero).
+#[inline(always)]
+fn schur_sparse<const N: usize, const C: usize>(
+    a: &SMatrix<f64, C, N>,
+    rows: &[[f64; C]; N],
+    w: &[f64; N],
+    jr: &[f64],
+    c: &SVector<f64, C>,
+) -> ([[f64; C]; C], [f64; C]) {
+    // A is stored by columns: A_ik = a[k·C + i]
+    let a_s = a.as_slice();
+    let mut s = [[0.0f64; C]; C];
+    let mut rhs = [0.0f64; C];
+    for (i, (srow, rh)) in s.iter_mut().zip(rhs.iter_mut()).enumerate() {
+        let mut acc = -c[i];
+        for k in 0..N {
+            let aik = a_s[k * C + i];
+            if aik != 0.0 {
+                acc += aik * jr[k];
+                let f = aik * w[k];
+                for (sij, x) in srow.iter_mut().zip(rows[k].iter()) {
+                    *sij += f * x;
+                }
+            }
+        }
+        *rh = acc;
+    }
+    (s, rhs)
+}
+
+/// Solve S y = rhs for the Schur complement of a KKT system: partial
+/// pivoting (O(C³/3), no search of the trailing block) when every pivot is
+/// at least 1e-8 of the largest entry (S well conditioned), otherwise
+/// complete pivoting with the rank threshold 1e-13. A singular or nearly
+/// singular S (redundant constraints: a spatial slider-crank's loop has
+/// pivots ≈ 1e-10 relative; a folded four-bar) thus takes the rank-revealing
+/// path, where the multiplier component in the deficient direction is set
+/// to zero, as before this fast path existed.
+#[inline(always)]
+fn solve_schur<const C: usize>(s: [[f64; C]; C], rhs: &[f64; C]) -> [f64; C] {
+    match PartialLu::from_rows(s, 1e-8) {
+        Some(lu) => lu.solve_array(rhs),
+        None => {
+            let sm = SMatrix::<f64, C, C>::from_fn(|i, j| s[i][j]);
+            let y = FullPivLu::new(sm, 1e-13).solve(&SVector::from(*rhs));
+            let mut out = [0.0; C];
+            out.copy_from_slice(y.as_slice());
+            out
+        }
+    }
 }
 
 /// `Some(1/diag)` when `j` is diagonal (exact zeros off the diagonal) with
@@ -387,9 +470,9 @@ fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<[f64; N
 /// coordinates: a constant diagonal mass matrix): the Schur complement
 /// S = A J⁻¹ B (C×C) is assembled from the nonzero entries of A only (a
 /// joint's constraint rows touch the coordinates of two bodies, so most of
-/// A is zero: O(nnz(A)·C) instead of O(C²N)) and solved by partial
-/// pivoting, or by full pivoting when a pivot is below 1e-14 of the largest
-/// entry (redundant constraints make S singular); then
+/// A is zero: O(nnz(A)·C) instead of O(C²N)) and solved as in
+/// `solve_schur` (partial pivoting when well conditioned, complete pivoting
+/// otherwise: redundant constraints make S singular); then
 /// x = J⁻¹(r − B y). `None` when the solution is not finite.
 #[inline]
 fn solve_kkt_diagonal<const N: usize, const C: usize>(
@@ -410,42 +493,11 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
     for k in 0..N {
         jr[k] = r[k] * inv[k];
     }
-    // S = A J⁻¹ B and the right-hand side A J⁻¹ r − c, row by row; A is
-    // stored by columns: A_ik = a[k·C + i]
-    let a_s = a.as_slice();
-    let mut s = [[0.0f64; C]; C];
-    let mut rhs = [0.0f64; C];
-    for (i, (srow, rh)) in s.iter_mut().zip(rhs.iter_mut()).enumerate() {
-        let mut acc = -c[i];
-        for k in 0..N {
-            let aik = a_s[k * C + i];
-            if aik != 0.0 {
-                acc += aik * jr[k];
-                let w = aik * inv[k];
-                for (sij, bkj) in srow.iter_mut().zip(brow[k].iter()) {
-                    *sij += w * bkj;
-                }
-            }
-        }
-        *rh = acc;
-    }
-    let y: [f64; C] = match PartialLu::from_rows(s, 1e-14) {
-        Some(lu) => lu.solve_array(&rhs),
-        None => {
-            let sm = SMatrix::<f64, C, C>::from_fn(|i, j| s[i][j]);
-            let y = FullPivLu::new(sm, 1e-13).solve(&SVector::from(rhs));
-            let mut out = [0.0; C];
-            out.copy_from_slice(y.as_slice());
-            out
-        }
-    };
+    let (s, rhs) = schur_sparse(a, &brow, inv, &jr, c);
+    let y = solve_schur(s, &rhs);
     let mut x = SVector::<f64, N>::zeros();
     for k in 0..N {
-        let mut bk = 0.0;
-        for (bkj, yj) in brow[k].iter().zip(y.iter()) {
-            bk += bkj * yj;
-        }
-        x[k] = (r[k] - bk) * inv[k];
+        x[k] = (r[k] - dot(&brow[k], &y)) * inv[k];
     }
     let y = SVector::from(y);
     x.iter()
