@@ -107,7 +107,11 @@ where
             )
             .1;
             worst = worst.max(assert_close("D", &t.damping, &d_ref));
+            // the generated D·v (straight-line over D's structural non-zeros)
+            worst = worst.max(assert_close("D v", &M::damping_times(&t, &v), &(d_ref * v)));
         }
+        // the generated M·v (straight-line over M's structural non-zeros)
+        worst = worst.max(assert_close("M v", &M::mass_times(&t, &v), &(m_ref * v)));
         // ∂M/∂q_l, column by column: ∂(M v)/∂q = Σ_l ∂M/∂q_l v e_lᵀ, by
         // differentiating the reference momentum M(q)v in q
         let dmv_ref = num_dual::jacobian(

@@ -558,6 +558,36 @@ pub fn emit_dynamics(
             }
         }
     };
+    // mass_times(t, v) and damping_times(t, v): M·v and D·v straight-line
+    // over the structural non-zeros (M is diagonal in maximal coordinates)
+    let sparse_times = |name: &str, field: TokenStream, a: &[Vec<Expr>]| {
+        let rows = (0..n).filter_map(|j| {
+            let terms: Vec<TokenStream> = (0..n)
+                .filter(|&k| !a[j.min(k)][j.max(k)].is_zero())
+                .map(|k| {
+                    let (jj, kk) = (index(j), index(k));
+                    quote!(t.#field[(#jj, #kk)] * v[#kk])
+                })
+                .collect();
+            let jj = index(j);
+            (!terms.is_empty()).then(|| quote!(r[#jj] = #(#terms)+*;))
+        });
+        let name = format_ident!("{}", name);
+        quote! {
+            #[inline(always)]
+            fn #name(t: &::vigp::embedded::Terms<#nn>, v: &#svector<f64, #nn>) -> #svector<f64, #nn> {
+                let mut r = #svector::<f64, #nn>::zeros();
+                #(#rows)*
+                r
+            }
+        }
+    };
+    let mass_times = sparse_times("mass_times", quote!(mass), &mech.mass);
+    let damping_times = if dissipative {
+        sparse_times("damping_times", quote!(damping), &damping)
+    } else {
+        quote!()
+    };
     let mut outs = Vec::new();
     let mut mirror = Vec::new();
     for j in 0..n {
@@ -882,6 +912,8 @@ pub fn emit_dynamics(
             #potential_fn
             #terms_fn
             #contractions
+            #mass_times
+            #damping_times
             #force_jacobian_fn
             #constraint_fns
             #input_fns

@@ -203,6 +203,28 @@ pub trait Dynamics<const N: usize, const C: usize> {
         worst
     }
 
+    /// M(q)·v from `t.mass` (the momentum and the residual). Generated code
+    /// overrides this with M's structural zeros removed: in maximal
+    /// coordinates M is diagonal, and the dense product would spend N² of
+    /// its N multiplications on zeros.
+    #[inline(always)]
+    fn mass_times(t: &Terms<N>, v: &SVector<f64, N>) -> SVector<f64, N> {
+        t.mass * v
+    }
+
+    /// D(q)·v from `t.damping` (the dissipative force; zero unless
+    /// [`Dynamics::DISSIPATIVE`]). Generated code overrides this with D's
+    /// structural zeros removed: a joint's damping couples only the
+    /// coordinates its relative angle or offset depends on.
+    #[inline(always)]
+    fn damping_times(t: &Terms<N>, v: &SVector<f64, N>) -> SVector<f64, N> {
+        if Self::DISSIPATIVE {
+            t.damping * v
+        } else {
+            SVector::zeros()
+        }
+    }
+
     /// The input matrix B(q) (N × U, column i = ∇s_i(q) of actuated joint
     /// i): the generalized force of inputs u is B(q)u. `U` must equal
     /// [`Dynamics::INPUTS`] (checked at compile time). Default (no inputs):

@@ -372,7 +372,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     pub(crate) fn forces(t: &Terms<N>, v: &SVector<f64, N>) -> SVector<f64, N> {
         let mut f = M::kinetic(t, v).1 - t.dpotential;
         if M::DISSIPATIVE {
-            f -= t.damping * v;
+            f -= M::damping_times(t, v);
         }
         f
     }
@@ -386,7 +386,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let m0 = z.q + z.v * (self.alpha * h);
         let mut t = Terms::zeros();
         self.model.terms(&self.k, &m0, &mut t);
-        t.mass * z.v + Self::forces(&t, &z.v) * (self.alpha * h)
+        M::mass_times(&t, &z.v) + Self::forces(&t, &z.v) * (self.alpha * h)
     }
 
     /// The discrete momentum p₀ of a step from `z` (the momentum a rollout
@@ -641,12 +641,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 let (q, kin) = M::kinetic(t, v);
                 let mut f = kin - t.dpotential;
                 if M::DISSIPATIVE {
-                    f -= t.damping * v;
+                    f -= M::damping_times(t, v);
                 }
                 if FORCED {
                     f += bu;
                 }
-                let mut d = p0 + f * a1 - t.mass * v;
+                let mut d = p0 + f * a1 - M::mass_times(t, v);
                 if C > 0 {
                     d -= g1t * lambda;
                 }
@@ -676,9 +676,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 if FORCED {
                     f += bu;
                 }
-                t.mass * v + f * (alpha * h)
+                M::mass_times(t, v) + f * (alpha * h)
             } else {
-                t.mass * v
+                M::mass_times(t, v)
             }
         };
         let mut jac = SMatrix::<f64, N, N>::zeros();
@@ -752,7 +752,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                                 stalled: false,
                                 regularised,
                             };
-                            return Ok((v1, t.mass * v1, report, lambda));
+                            return Ok((v1, M::mass_times(t, &v1), report, lambda));
                         }
                     }
                 }
