@@ -506,6 +506,95 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
         .then_some((x, y))
 }
 
+/// How [`KktFactors`] applies J⁻¹: a diagonal J by its reciprocals, any
+/// other by partial-pivoting LU.
+#[derive(Clone, Copy, Debug)]
+enum JInverse<const N: usize> {
+    Diagonal([f64; N]),
+    Lu(PartialLu<N>),
+}
+
+/// The parts of the KKT system of [`solve_kkt`] that depend on J and B
+/// only — J's factorisation and the rows of J⁻¹B — kept across Newton
+/// iterations whose Newton matrix J and constraint-force matrix B do not
+/// change (the first-order step with a constant mass matrix, whose J is
+/// −M − a·D at the fixed start configuration; a chord iteration of the
+/// midpoint step). Each [`KktFactors::solve`] then costs O(N²) for J⁻¹r,
+/// O(nnz(A)·C) for the Schur complement and O(C³/3) for its solve, instead
+/// of re-factoring J (O(N³/3)) and solving for C right-hand sides (O(N²C)).
+#[derive(Clone, Copy, Debug)]
+pub struct KktFactors<const N: usize, const C: usize> {
+    j: JInverse<N>,
+    jb_rows: [[f64; C]; N],
+}
+
+impl<const N: usize, const C: usize> KktFactors<N, C> {
+    /// Factor J (diagonal, or partial pivoting with the relative pivot
+    /// threshold 1e-12 of [`solve_kkt`]) and form J⁻¹B. `None` when J is
+    /// not diagonal and partial pivoting meets a tiny pivot, or when J⁻¹B
+    /// is not finite: use [`solve_kkt_regularised`], which also handles a
+    /// singular J.
+    pub fn new(j: &SMatrix<f64, N, N>, b: &SMatrix<f64, N, C>) -> Option<Self> {
+        let mut jb_rows = [[0.0f64; C]; N];
+        let j = if let Some(inv) = invertible_diagonal(j) {
+            // B is stored by columns
+            for (col, xs) in b.as_slice().chunks_exact(N).enumerate() {
+                for (k, x) in xs.iter().enumerate() {
+                    jb_rows[k][col] = x * inv[k];
+                }
+            }
+            JInverse::Diagonal(inv)
+        } else {
+            let lu = PartialLu::new(*j, 1e-12)?;
+            let jb = lu.solve_matrix(b);
+            for (col, xs) in jb.as_slice().chunks_exact(N).enumerate() {
+                for (k, x) in xs.iter().enumerate() {
+                    jb_rows[k][col] = *x;
+                }
+            }
+            JInverse::Lu(lu)
+        };
+        jb_rows
+            .iter()
+            .flatten()
+            .all(|x| x.is_finite())
+            .then_some(Self { j, jb_rows })
+    }
+
+    /// Solve the KKT system with this J and B and the given A, r and c (a
+    /// singular Schur complement as in [`solve_kkt`]). `None` when the
+    /// solution is not finite.
+    #[inline]
+    pub fn solve(
+        &self,
+        a: &SMatrix<f64, C, N>,
+        r: &SVector<f64, N>,
+        c: &SVector<f64, C>,
+    ) -> Option<KktSolution<N, C>> {
+        let jr: [f64; N] = match &self.j {
+            JInverse::Diagonal(inv) => {
+                let mut jr = [0.0f64; N];
+                for ((x, rk), ik) in jr.iter_mut().zip(r.iter()).zip(inv.iter()) {
+                    *x = rk * ik;
+                }
+                jr
+            }
+            JInverse::Lu(lu) => lu.solve_array(r.as_slice()),
+        };
+        let (s, rhs) = schur_sparse(a, &self.jb_rows, &[1.0; N], &jr, c);
+        let y = solve_schur(s, &rhs);
+        let mut x = SVector::<f64, N>::from(jr);
+        for (xk, row) in x.iter_mut().zip(self.jb_rows.iter()) {
+            *xk -= dot(row, &y);
+        }
+        let y = SVector::from(y);
+        x.iter()
+            .chain(y.iter())
+            .all(|v| v.is_finite())
+            .then_some((x, y))
+    }
+}
+
 /// Solve the saddle-point (KKT) system of [`solve_kkt`]; when J is
 /// singular but the whole KKT matrix is not (a link without rotational
 /// inertia in maximal coordinates, whose orientation the constraints fix),

@@ -48,7 +48,7 @@
 //! unit), the constraint residual by 1 + the largest length coordinate.
 
 use crate::dynamics::{Dynamics, Terms};
-use crate::linalg::{solve_kkt_regularised, solve_partial};
+use crate::linalg::{KktFactors, solve_kkt_regularised, solve_partial};
 use crate::state::{CoordinateKind, State};
 use nalgebra::{SMatrix, SVector};
 
@@ -683,6 +683,13 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         };
         let mut jac = SMatrix::<f64, N, N>::zeros();
         let mut reuse_jac = false;
+        // first-order rule with a constant mass matrix: the terms stay at
+        // x₁, so J = −M − a₁·D(x₁) is the same in every iteration
+        let jac_constant = !MID && M::CONSTANT_MASS;
+        // J's factorisation and J⁻¹B (B = −G₁ᵀ is fixed for the step),
+        // formed at the first KKT solve when `jac_constant`: `None` = to be
+        // formed, `Some(None)` = J needs the robust solve
+        let mut factors: Option<Option<KktFactors<N, C>>> = None;
         'newton: for iteration in 0..opts.max_iterations {
             if !err.is_finite() {
                 return Err(StepError::NonFiniteResidual { iteration });
@@ -704,7 +711,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             // an iteration that contracts less recomputes it). This skips
             // one force Jacobian — the model's trigonometry again — per
             // sub-step of the fourth-order composition.
-            if !(MID && reuse_jac) {
+            if !((MID && reuse_jac) || (jac_constant && iteration > 0)) {
                 // −M − a₁·D in one pass over the storage (nalgebra's
                 // element-wise operators iterate with per-element
                 // bookkeeping that costs more than the arithmetic)
@@ -759,10 +766,26 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 (dv, SVector::zeros())
             } else {
                 // J Δv − G₁ᵀΔλ = −d,  G₂ Δv = −c/h
-                let ((dv, dl), reg) =
-                    solve_kkt_regularised(&jac, &neg_g1t, &g2, &(-d), &(c / -h)).ok_or(singular)?;
-                regularised |= reg;
-                (dv, dl)
+                let (r, cc) = (-d, c / -h);
+                // only where J is kept across iterations: elsewhere the
+                // factors would serve one solve and cost their copies
+                let fast = if jac_constant {
+                    factors
+                        .get_or_insert_with(|| KktFactors::new(&jac, &neg_g1t))
+                        .as_ref()
+                        .and_then(|f| f.solve(&g2, &r, &cc))
+                } else {
+                    None
+                };
+                match fast {
+                    Some(sol) => sol,
+                    None => {
+                        let (sol, reg) =
+                            solve_kkt_regularised(&jac, &neg_g1t, &g2, &r, &cc).ok_or(singular)?;
+                        regularised |= reg;
+                        sol
+                    }
+                }
             };
             // backtracking on the scaled residual
             let mut step = 1.0;
