@@ -246,6 +246,8 @@ pub(crate) struct SparseFactor {
 
 /// Intermediate results of one bound evaluation.
 struct Core {
+    /// K_uu without jitter (the gradient's K_uu term reuses it).
+    kuu: Mat<f64>,
     lu: Mat<f64>,
     lb: Mat<f64>,
     eps: f64,
@@ -256,17 +258,62 @@ struct Core {
     aat: Mat<f64>,
     /// tr(K_ff − Q), summed point by point.
     trace: f64,
-    /// ‖y − Aᵀv1‖² = σ⁴‖α‖².
+    /// ‖y − Aᵀv1‖² = σ⁴‖α‖² (NaN until [`Core::finish`]).
     rr: f64,
+    /// The bound F (NaN until [`Core::finish`]).
     elbo: f64,
     sigma: f64,
+    /// N.
+    n: usize,
+    /// σ².
+    s2: f64,
+    /// σ_f².
+    sf2: f64,
+}
+
+impl Core {
+    /// Completes the bound from the residual sum ‖y − Aᵀv1‖² (computed by
+    /// the residual pass of [`core`] or, with the gradient, by the
+    /// gradient pass, which forms the same residuals anyway).
+    fn finish(&mut self, rr: f64) -> Result<(), GpError> {
+        let (n, m, s2) = (self.n, self.lb.nrows(), self.s2);
+        // yᵀ(Q + σ²I)⁻¹y = (‖r‖² + ‖v1‖²)/σ², a sum of positive terms
+        // (from AAᵀ = B − I), where yᵀy/σ² − ‖L_B⁻¹Ay‖²/σ² would cancel
+        // terms of size N/σ².
+        let fit = (rr + tri::norm2(&self.v1)) / s2;
+        let logdet_b: f64 = (0..m).map(|i| self.lb[(i, i)].ln()).sum();
+        let nf = n as f64;
+        let elbo = -0.5 * nf * (2.0 * core::f64::consts::PI).ln()
+            - logdet_b
+            - 0.5 * nf * s2.ln()
+            - 0.5 * fit
+            - 0.5 * self.trace / s2;
+        if !elbo.is_finite() {
+            return Err(GpError::NotPositiveDefinite {
+                jitter: self.eps * self.sf2,
+            });
+        }
+        self.rr = rr;
+        self.elbo = elbo;
+        Ok(())
+    }
+}
+
+/// ‖y_j − a_jᵀv1‖² summed over the columns of one task, in column order
+/// (the residual pass and the gradient pass add the same terms in the
+/// same order, so either gives the same bits).
+#[inline]
+fn residual(y: f64, a: &[f64], v1: &[f64]) -> f64 {
+    y - tri::dot(a, v1)
 }
 
 /// The bound's first pass: K_uf, A = L_u⁻¹K_uf/σ, AAᵀ and Ay, column
 /// block by column block (each block's kernel values, triangular solve
 /// and product stay in cache), then the M × M algebra.
 /// `xs` are the scaled inputs (row-major N × d), `zs` the scaled inducing
-/// inputs row-major, `zc` the same column-major.
+/// inputs row-major, `zc` the same column-major. With `residual_pass`
+/// a last pass over A sums ‖y − Aᵀv1‖² and completes the bound; without
+/// it the caller does (see [`Core::finish`]).
 #[allow(clippy::too_many_arguments)]
 fn core(
     ws: &mut SparseWorkspace,
@@ -279,13 +326,15 @@ fn core(
     eps_start: f64,
     par: Par,
     blocks: Blocks,
+    residual_pass: bool,
 ) -> Result<Core, GpError> {
     let n = y.len();
     let m = zs.len() / d;
     let sf2 = hp.signal_variance;
     let s2 = hp.noise_variance;
     let sigma = s2.sqrt();
-    let (lu, eps) = chol_kuu(&kuu(zs, m, d, sf2), sf2, eps_start)?;
+    let kuu0 = kuu(zs, m, d, sf2);
+    let (lu, eps) = chol_kuu(&kuu0, sf2, eps_start)?;
     let inv_sigma = 1.0 / sigma;
     // Fixed column blocks of K_uf and A.
     let mut tasks = Vec::with_capacity(n.div_ceil(blocks.task));
@@ -381,34 +430,8 @@ fn core(
     solve_lower_triangular_in_place(lb.as_ref(), c.as_mut(), Par::Seq);
     solve_upper_triangular_in_place(lb.as_ref().transpose(), c.as_mut(), Par::Seq);
     let v1: Vec<f64> = (0..m).map(|i| c[(i, 0)]).collect();
-    // The residual r = y − Aᵀv1 = σ²α, point by point (a second pass over
-    // A); yᵀ(Q + σ²I)⁻¹y = (‖r‖² + ‖v1‖²)/σ², a sum of positive terms
-    // (from AAᵀ = B − I), where yᵀy/σ² − ‖L_B⁻¹Ay‖²/σ² would cancel
-    // terms of size N/σ².
-    let ar = ws.a.as_ref();
-    let starts: Vec<usize> = (0..n).step_by(blocks.task).collect();
-    let rr: f64 = run_tasks(starts, par, |s| {
-        (s..(s + blocks.task).min(n))
-            .map(|j| {
-                let r = y[j] - tri::dot(col(ar, j), &v1);
-                r * r
-            })
-            .sum::<f64>()
-    })
-    .iter()
-    .sum();
-    let fit = (rr + tri::norm2(&v1)) / s2;
-    let logdet_b: f64 = (0..m).map(|i| lb[(i, i)].ln()).sum();
-    let nf = n as f64;
-    let elbo = -0.5 * nf * (2.0 * core::f64::consts::PI).ln()
-        - logdet_b
-        - 0.5 * nf * s2.ln()
-        - 0.5 * fit
-        - 0.5 * trace / s2;
-    if !elbo.is_finite() {
-        return Err(GpError::NotPositiveDefinite { jitter: eps * sf2 });
-    }
-    Ok(Core {
+    let mut out = Core {
+        kuu: kuu0,
         lu,
         lb,
         eps,
@@ -416,10 +439,32 @@ fn core(
         v1,
         aat,
         trace,
-        rr,
-        elbo,
+        rr: f64::NAN,
+        elbo: f64::NAN,
         sigma,
-    })
+        n,
+        s2,
+        sf2,
+    };
+    if residual_pass {
+        // The residual r = y − Aᵀv1 = σ²α, point by point (a second pass
+        // over A).
+        let ar = ws.a.as_ref();
+        let v1 = &out.v1;
+        let starts: Vec<usize> = (0..n).step_by(blocks.task).collect();
+        let rr: f64 = run_tasks(starts, par, |s| {
+            (s..(s + blocks.task).min(n))
+                .map(|j| {
+                    let r = residual(y[j], col(ar, j), v1);
+                    r * r
+                })
+                .sum::<f64>()
+        })
+        .iter()
+        .sum();
+        out.finish(rr)?;
+    }
+    Ok(out)
 }
 
 /// The bound F and (if `grad`) ∂F/∂θ for θ = (ln ℓ, ln σ_f², ln σ_n²), on
@@ -456,7 +501,7 @@ fn elbo_blocks(
     let xs = scaled(x, d, &hp.length_scales);
     let zs = scaled(z, d, &hp.length_scales);
     let zc = scaled_cols(z, d, &hp.length_scales);
-    let c = core(ws, &xs, &zs, &zc, d, y, &hp, KUU_JITTER, par, blocks)?;
+    let mut c = core(ws, &xs, &zs, &zc, d, y, &hp, KUU_JITTER, par, blocks, !grad)?;
     if !grad {
         return Ok(LmlEval {
             value: c.elbo,
@@ -480,9 +525,10 @@ fn elbo_blocks(
     let mut um = Mat::<f64>::from_fn(m, 1, |i, _| c.v1[i] / sigma);
     solve_upper_triangular_in_place(c.lu.as_ref().transpose(), um.as_mut(), Par::Seq);
     let u: Vec<f64> = (0..m).map(|i| um[(i, 0)]).collect();
-    // Second pass, block by block: α = σ⁻²(y − Aᵀv1), T = R·A (an
-    // M × 512 panel at a time), H = (uαᵀ + T) ∘ K_uf, and its contraction
-    // with ∂k/∂ln ℓ_k = k·(x_k − z_k)².
+    // Second pass, block by block: α = σ⁻²(y − Aᵀv1) (and ‖y − Aᵀv1‖²
+    // for the bound, in the residual pass's order), T = R·A (an M × 512
+    // panel at a time), H = (uαᵀ + T) ∘ K_uf, and its contraction with
+    // ∂k/∂ln ℓ_k = k·(x_k − z_k)².
     let (kuf, a) = (ws.kuf.as_ref(), ws.a.as_ref());
     let starts: Vec<usize> = (0..n).step_by(blocks.task).collect();
     let (rr, v1) = (r.as_ref(), &c.v1);
@@ -490,6 +536,7 @@ fn elbo_blocks(
         let w = blocks.task.min(n - s);
         let mut t = Mat::<f64>::zeros(m, blocks.sub.min(w));
         let mut gl = vec![0.0; d];
+        let mut rr_task = 0.0;
         let mut sub = 0;
         while sub < w {
             let ws_ = blocks.sub.min(w - sub);
@@ -498,7 +545,9 @@ fn elbo_blocks(
             matmul(tb.rb_mut(), Accum::Replace, rr, ab, 1.0, Par::Seq);
             for jj in 0..ws_ {
                 let j = s + sub + jj;
-                let aj = (y[j] - tri::dot(col(ab, jj), v1)) / s2;
+                let r = residual(y[j], col(ab, jj), v1);
+                rr_task += r * r;
+                let aj = r / s2;
                 let h = col_mut(tb.rb_mut(), jj);
                 for ((hi, ui), ki) in h.iter_mut().zip(&u).zip(col(kuf, j)) {
                     *hi = (ui * aj + *hi) * ki;
@@ -510,15 +559,18 @@ fn elbo_blocks(
             }
             sub += ws_;
         }
-        gl
+        (gl, rr_task)
     });
     let mut gl = vec![0.0; d];
+    let mut rr_parts = Vec::with_capacity(parts.len());
     // Fixed order of the partial sums: the result does not depend on scheduling.
-    for g in parts {
+    for (g, rt) in parts {
         for (a, b) in gl.iter_mut().zip(&g) {
             *a += b;
         }
+        rr_parts.push(rt);
     }
+    c.finish(rr_parts.iter().sum())?;
     // G_uu = −½ u uᵀ − ½ L_u⁻ᵀ (I − B⁻¹) AAᵀ L_u⁻¹
     //      = −½ u uᵀ − ½ σ · R · AAᵀ L_u⁻¹.
     let mut w = c.aat.transpose().to_owned(); // (AAᵀ)ᵀ = AAᵀ
@@ -534,7 +586,7 @@ fn elbo_blocks(
         -0.5 * sigma,
         Par::Seq,
     );
-    let kuu0 = kuu(&zs, m, d, sf2);
+    let kuu0 = &c.kuu;
     for i in 0..m {
         for j in 0..m {
             let g = guu[(i, j)] - 0.5 * u[i] * u[j];
@@ -555,7 +607,7 @@ fn elbo_blocks(
     // terms of size N·σ_f²/σ²).
     let nf = n as f64;
     let tr_binv: f64 = (0..m).map(|i| binv[(i, i)]).sum();
-    let gsf = 0.5 * (tri::norm2(v1) / s2 - m as f64 + tr_binv) - 0.5 * c.trace / s2;
+    let gsf = 0.5 * (tri::norm2(&c.v1) / s2 - m as f64 + tr_binv) - 0.5 * c.trace / s2;
     // ∂F/∂σ² with σ²‖α‖² = ‖r‖²/σ² and N σ_f² − σ² tr AAᵀ = tr(K_ff − Q).
     let ds2 = 0.5 * (c.rr / s2 - (nf - m as f64 + tr_binv)) / s2 + c.trace / (2.0 * s2 * s2);
     let mut gradient = gl;
@@ -589,7 +641,9 @@ pub(crate) fn factorise(
     let zs = scaled(z, d, &hp.length_scales);
     let zc = scaled_cols(z, d, &hp.length_scales);
     let mut ws = SparseWorkspace::new(m, n);
-    let c = core(&mut ws, &xs, &zs, &zc, d, y, hp, eps_start, par, BLOCKS)?;
+    let c = core(
+        &mut ws, &xs, &zs, &zc, d, y, hp, eps_start, par, BLOCKS, true,
+    )?;
     let lu = tri::pack_rows(&c.lu);
     let lb = tri::pack_rows(&c.lb);
     let u = weights(&lu, &lb, &c.ay, c.sigma);
