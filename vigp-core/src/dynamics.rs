@@ -212,17 +212,14 @@ pub trait Dynamics<const N: usize, const C: usize> {
         t.mass * v
     }
 
-    /// D(q)·v from `t.damping` (the dissipative force; zero unless
-    /// [`Dynamics::DISSIPATIVE`]). Generated code overrides this with D's
-    /// structural zeros removed: a joint's damping couples only the
-    /// coordinates its relative angle or offset depends on.
+    /// D(q)·v from `t.damping` (the dissipative force; callers skip it
+    /// unless [`Dynamics::DISSIPATIVE`], where `t.damping` stays zero).
+    /// Generated code overrides this with D's structural zeros removed: a
+    /// joint's damping couples only the coordinates its relative angle or
+    /// offset depends on.
     #[inline(always)]
     fn damping_times(t: &Terms<N>, v: &SVector<f64, N>) -> SVector<f64, N> {
-        if Self::DISSIPATIVE {
-            t.damping * v
-        } else {
-            SVector::zeros()
-        }
+        t.damping * v
     }
 
     /// The input matrix B(q) (N × U, column i = ∇s_i(q) of actuated joint

@@ -357,20 +357,52 @@ pub fn solve_kkt<const N: usize, const C: usize>(
     if C == 0 {
         return Some((jr, SVector::zeros()));
     }
-    // rows of J⁻¹B (J⁻¹B is stored by columns)
-    let mut jb_rows = [[0.0f64; C]; N];
-    for (col, xs) in jb.as_slice().chunks_exact(N).enumerate() {
+    let (x, y) = solve_with_rows(a, &rows_of(&jb), jr.into(), c);
+    Some((x, SVector::from(y)))
+}
+
+/// The rows of an N × C matrix (nalgebra stores it by columns), for the
+/// row-wise loops of the Schur complement.
+#[inline(always)]
+fn rows_of<const N: usize, const C: usize>(m: &SMatrix<f64, N, C>) -> [[f64; C]; N] {
+    let mut rows = [[0.0f64; C]; N];
+    for (col, xs) in m.as_slice().chunks_exact(N).enumerate() {
         for (k, x) in xs.iter().enumerate() {
-            jb_rows[k][col] = *x;
+            rows[k][col] = *x;
         }
     }
-    let (s, rhs) = schur_sparse(a, &jb_rows, &[1.0; N], jr.as_slice(), c);
+    rows
+}
+
+/// The KKT solution from the rows of J⁻¹B and J⁻¹r: y from the Schur
+/// complement ([`schur_sparse`], [`solve_schur`]), x = J⁻¹r − (J⁻¹B)·y.
+#[inline(always)]
+fn solve_with_rows<const N: usize, const C: usize>(
+    a: &SMatrix<f64, C, N>,
+    jb_rows: &[[f64; C]; N],
+    jr: [f64; N],
+    c: &SVector<f64, C>,
+) -> (SVector<f64, N>, [f64; C]) {
+    let (s, rhs) = schur_sparse(a, jb_rows, &[1.0; N], &jr, c);
     let y = solve_schur(s, &rhs);
-    let mut x = jr;
-    for (k, xk) in x.iter_mut().enumerate() {
-        *xk -= dot(&jb_rows[k], &y);
+    let mut x = SVector::<f64, N>::from(jr);
+    for (xk, row) in x.iter_mut().zip(jb_rows.iter()) {
+        *xk -= dot(row, &y);
     }
-    Some((x, SVector::from(y)))
+    (x, y)
+}
+
+/// `Some((x, y))` when every entry is finite.
+#[inline(always)]
+fn finite_solution<const N: usize, const C: usize>(
+    x: SVector<f64, N>,
+    y: [f64; C],
+) -> Option<KktSolution<N, C>> {
+    let y = SVector::from(y);
+    x.iter()
+        .chain(y.iter())
+        .all(|v| v.is_finite())
+        .then_some((x, y))
 }
 
 /// Σ_j a_j b_j.
@@ -482,13 +514,7 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
     r: &SVector<f64, N>,
     c: &SVector<f64, C>,
 ) -> Option<KktSolution<N, C>> {
-    // B by rows (row k of B is contiguous here; B is stored by columns)
-    let mut brow = [[0.0f64; C]; N];
-    for (jcol, col) in b.as_slice().chunks_exact(N).enumerate() {
-        for (k, x) in col.iter().enumerate() {
-            brow[k][jcol] = *x;
-        }
-    }
+    let brow = rows_of(b);
     let mut jr = [0.0f64; N];
     for k in 0..N {
         jr[k] = r[k] * inv[k];
@@ -499,11 +525,7 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
     for k in 0..N {
         x[k] = (r[k] - dot(&brow[k], &y)) * inv[k];
     }
-    let y = SVector::from(y);
-    x.iter()
-        .chain(y.iter())
-        .all(|v| v.is_finite())
-        .then_some((x, y))
+    finite_solution(x, y)
 }
 
 /// How [`KktFactors`] applies J⁻¹: a diagonal J by its reciprocals, any
@@ -517,9 +539,10 @@ enum JInverse<const N: usize> {
 /// The parts of the KKT system of [`solve_kkt`] that depend on J and B
 /// only — J's factorisation and the rows of J⁻¹B — kept across Newton
 /// iterations whose Newton matrix J and constraint-force matrix B do not
-/// change (the first-order step with a constant mass matrix, whose J is
-/// −M − a·D at the fixed start configuration; a chord iteration of the
-/// midpoint step). Each [`KktFactors::solve`] then costs O(N²) for J⁻¹r,
+/// change. The step uses it for the first-order rule with a constant mass
+/// matrix, whose J is −M − a·D at the fixed start configuration (a chord
+/// iteration of the midpoint rule would qualify too; it does not use it).
+/// Each [`KktFactors::solve`] then costs O(N²) for J⁻¹r,
 /// O(nnz(A)·C) for the Schur complement and O(C³/3) for its solve, instead
 /// of re-factoring J (O(N³/3)) and solving for C right-hand sides (O(N²C)).
 #[derive(Clone, Copy, Debug)]
@@ -535,24 +558,18 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
     /// is not finite: use [`solve_kkt_regularised`], which also handles a
     /// singular J.
     pub fn new(j: &SMatrix<f64, N, N>, b: &SMatrix<f64, N, C>) -> Option<Self> {
-        let mut jb_rows = [[0.0f64; C]; N];
-        let j = if let Some(inv) = invertible_diagonal(j) {
-            // B is stored by columns
+        let (j, jb_rows) = if let Some(inv) = invertible_diagonal(j) {
+            // rows of J⁻¹B in one pass over B (stored by columns)
+            let mut jb_rows = [[0.0f64; C]; N];
             for (col, xs) in b.as_slice().chunks_exact(N).enumerate() {
                 for (k, x) in xs.iter().enumerate() {
                     jb_rows[k][col] = x * inv[k];
                 }
             }
-            JInverse::Diagonal(inv)
+            (JInverse::Diagonal(inv), jb_rows)
         } else {
             let lu = PartialLu::new(*j, 1e-12)?;
-            let jb = lu.solve_matrix(b);
-            for (col, xs) in jb.as_slice().chunks_exact(N).enumerate() {
-                for (k, x) in xs.iter().enumerate() {
-                    jb_rows[k][col] = *x;
-                }
-            }
-            JInverse::Lu(lu)
+            (JInverse::Lu(lu), rows_of(&lu.solve_matrix(b)))
         };
         jb_rows
             .iter()
@@ -581,17 +598,8 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
             }
             JInverse::Lu(lu) => lu.solve_array(r.as_slice()),
         };
-        let (s, rhs) = schur_sparse(a, &self.jb_rows, &[1.0; N], &jr, c);
-        let y = solve_schur(s, &rhs);
-        let mut x = SVector::<f64, N>::from(jr);
-        for (xk, row) in x.iter_mut().zip(self.jb_rows.iter()) {
-            *xk -= dot(row, &y);
-        }
-        let y = SVector::from(y);
-        x.iter()
-            .chain(y.iter())
-            .all(|v| v.is_finite())
-            .then_some((x, y))
+        let (x, y) = solve_with_rows(a, &self.jb_rows, jr, c);
+        finite_solution(x, y)
     }
 }
 

@@ -562,15 +562,15 @@ fn elbo_blocks(
         (gl, rr_task)
     });
     let mut gl = vec![0.0; d];
-    let mut rr_parts = Vec::with_capacity(parts.len());
+    let mut rr_sum = 0.0;
     // Fixed order of the partial sums: the result does not depend on scheduling.
     for (g, rt) in parts {
         for (a, b) in gl.iter_mut().zip(&g) {
             *a += b;
         }
-        rr_parts.push(rt);
+        rr_sum += rt;
     }
-    c.finish(rr_parts.iter().sum())?;
+    c.finish(rr_sum)?;
     // G_uu = −½ u uᵀ − ½ L_u⁻ᵀ (I − B⁻¹) AAᵀ L_u⁻¹
     //      = −½ u uᵀ − ½ σ · R · AAᵀ L_u⁻¹.
     let mut w = c.aat.transpose().to_owned(); // (AAᵀ)ᵀ = AAᵀ
