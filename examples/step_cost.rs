@@ -8,6 +8,10 @@
 //! machine the minimum estimates the uninterrupted cost (criterion medians
 //! from `cargo bench --bench step` include interference).
 //!
+//! **Newton iterations** (`… --example step_cost -- iterations [steps]`): the
+//! mean and largest iteration count per step of a rollout of the double
+//! pendulum and the fourbar's modes.
+//!
 //! **Instruction counts** (load-independent):
 //!
 //! ```text
@@ -70,6 +74,34 @@ fn run_single<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
             .q[0];
     }
     println!("{steps} single steps, sum of q[0] = {sum}");
+    Ok(())
+}
+
+/// Mean Newton iterations per step ([`vigp::embedded::StepReport`]) of a
+/// `steps`-step rollout from `z0`, replaying [`Stepper::steps_into`]
+/// (carried momentum, Newton started at 2v_k − v_{k−1}) through the public
+/// [`Stepper::solve`], which returns each step's report.
+fn iterations<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
+    name: &str,
+    sys: M,
+    z0: State<N>,
+    steps: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let s = Stepper::new(sys, 0.01)?;
+    let (mut z, mut p, mut v_prev) = (z0, s.momentum(&z0), z0.v);
+    let (mut total, mut most) = (0usize, 0usize);
+    for _ in 0..steps {
+        let x1 = z.q + z.v * s.dt();
+        let guess = z.v * 2.0 - v_prev;
+        let (v1, p1, r) = s.solve(&x1, &p, s.dt(), &guess)?;
+        (total, most) = (total + r.iterations, most.max(r.iterations));
+        v_prev = z.v;
+        (z, p) = (State { q: x1, v: v1 }, p1);
+    }
+    println!(
+        "| {name} | {:.3} | {most} |",
+        total as f64 / steps.max(1) as f64
+    );
     Ok(())
 }
 
@@ -204,6 +236,41 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some(s) => s.parse()?,
         None => 1000,
     };
+    if system == "iterations" {
+        use vigp::Coordinates;
+        let (fb, fb_z0) = fourbar_start()?;
+        let mut damped = fb;
+        for j in [
+            &mut damped.joints.top1,
+            &mut damped.joints.middle1,
+            &mut damped.joints.top2,
+            &mut damped.joints.middle2,
+            &mut damped.joints.bottom,
+        ] {
+            j.damping = 0.1;
+        }
+        println!("| system ({steps}-step rollout) | Newton iterations per step | most |");
+        println!("|---|---|---|");
+        iterations(
+            "double pendulum",
+            DoublePendulum::default(),
+            State::new([1.0, -0.5], [0.5, 1.0]),
+            steps,
+        )?;
+        iterations("fourbar", fb, fb_z0, steps)?;
+        iterations(
+            "fourbar (maximal)",
+            fb.maximal(),
+            fb.minimal().to_maximal(&fb_z0, 0.01),
+            steps,
+        )?;
+        return iterations(
+            "fourbar (maximal, damped)",
+            damped.maximal(),
+            damped.minimal().to_maximal(&fb_z0, 0.01),
+            steps,
+        );
+    }
     match system {
         "driven_step" => derivatives(false, false, steps),
         "driven_step_ab" => derivatives(false, true, steps),
