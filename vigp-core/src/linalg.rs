@@ -142,12 +142,26 @@ impl<const M: usize> PartialLu<M> {
     // (memcpy) at every call, which costs a tenth of a 10×10 factorisation
     #[inline(always)]
     pub fn from_rows(rows: [[f64; M]; M], rel_tol: f64) -> Option<Self> {
-        let mut lu = rows;
+        let mut lu = Self {
+            lu: rows,
+            perm: [0; M],
+        };
+        lu.factor(rel_tol).then_some(lu)
+    }
+
+    /// Factor in place: `self.lu` holds the rows of A on entry, its factors
+    /// on return; `false` where [`PartialLu::from_rows`] gives `None` (the
+    /// factors are then partial). In place, a caller that keeps the factors
+    /// (`SchurFactor`) forms A where they will stay instead of copying it
+    /// there and the factors back.
+    #[inline(always)]
+    fn factor(&mut self, rel_tol: f64) -> bool {
+        let Self { lu, perm } = self;
         // max |a_ij| by plain comparisons (which ignore NaN as `f64::max`
         // does, without its NaN bookkeeping); a NaN that reaches a pivot is
         // refused below
         let mut amax = 0.0f64;
-        for row in &lu {
+        for row in lu.iter() {
             for x in row {
                 let a = x.abs();
                 if a > amax {
@@ -156,7 +170,6 @@ impl<const M: usize> PartialLu<M> {
             }
         }
         let tiny = rel_tol * amax;
-        let mut perm = [0usize; M];
         for (i, p) in perm.iter_mut().enumerate() {
             *p = i;
         }
@@ -169,7 +182,7 @@ impl<const M: usize> PartialLu<M> {
             }
             let pivot = lu[p][k];
             if pivot.abs() <= tiny || !pivot.is_finite() {
-                return None;
+                return false;
             }
             if p != k {
                 lu.swap(k, p);
@@ -194,7 +207,7 @@ impl<const M: usize> PartialLu<M> {
                 }
             }
         }
-        Some(Self { lu, perm })
+        true
     }
 
     /// Solve A x = b.
@@ -383,13 +396,24 @@ fn solve_with_rows<const N: usize, const C: usize>(
     jr: [f64; N],
     c: &SVector<f64, C>,
 ) -> (SVector<f64, N>, [f64; C]) {
-    let (s, rhs) = schur_sparse(a, jb_rows, &[1.0; N], &jr, c);
+    let mut s = [[0.0f64; C]; C];
+    let rhs = schur_sparse(a, jb_rows, &[1.0; N], &jr, c, &mut s);
     let y = solve_schur(s, &rhs);
+    (minus_rows_times(jr, jb_rows, &y), y)
+}
+
+/// x = J⁻¹r − (J⁻¹B)·y from J⁻¹r and the rows of J⁻¹B.
+#[inline(always)]
+fn minus_rows_times<const N: usize, const C: usize>(
+    jr: [f64; N],
+    jb_rows: &[[f64; C]; N],
+    y: &[f64; C],
+) -> SVector<f64, N> {
     let mut x = SVector::<f64, N>::from(jr);
     for (xk, row) in x.iter_mut().zip(jb_rows.iter()) {
-        *xk -= dot(row, &y);
+        *xk -= dot(row, y);
     }
-    (x, y)
+    x
 }
 
 /// `Some((x, y))` when every entry is finite.
@@ -415,13 +439,13 @@ fn dot<const C: usize>(a: &[f64; C], b: &[f64; C]) -> f64 {
     s
 }
 
-/// The Schur complement S = A·W·R (C×C) and the right-hand side
-/// A·(J⁻¹r) − c, for W = diag(`w`) and R given by its rows (R = J⁻¹B with
-/// W = I; R = B with W = J⁻¹ for a diagonal J), visiting only the nonzero
-/// entries of A: a joint's constraint rows touch the coordinates of two
-/// bodies, so most of A is zero in maximal coordinates (O(nnz(A)·C) instead
-/// of O(C²N)). Skipping a zero a_ik leaves the sums exactly as adding 0·x
-/// would (up to the sign of a zero).
+/// The Schur complement S = A·W·R (C×C, into `s`) and the right-hand side
+/// A·(J⁻¹r) − c (returned), for W = diag(`w`) and R given by its rows
+/// (R = J⁻¹B with W = I; R = B with W = J⁻¹ for a diagonal J), visiting
+/// only the nonzero entries of A: a joint's constraint rows touch the
+/// coordinates of two bodies, so most of A is zero in maximal coordinates
+/// (O(nnz(A)·C) instead of O(C²N)). Skipping a zero a_ik leaves the sums
+/// exactly as adding 0·x would (up to the sign of a zero).
 #[inline(always)]
 fn schur_sparse<const N: usize, const C: usize>(
     a: &SMatrix<f64, C, N>,
@@ -429,26 +453,30 @@ fn schur_sparse<const N: usize, const C: usize>(
     w: &[f64; N],
     jr: &[f64],
     c: &SVector<f64, C>,
-) -> ([[f64; C]; C], [f64; C]) {
+    s: &mut [[f64; C]; C],
+) -> [f64; C] {
     // A is stored by columns: A_ik = a[k·C + i]
     let a_s = a.as_slice();
-    let mut s = [[0.0f64; C]; C];
     let mut rhs = [0.0f64; C];
     for (i, (srow, rh)) in s.iter_mut().zip(rhs.iter_mut()).enumerate() {
+        // the row accumulates in a local (registers), stored once: through
+        // `s` every update would be stored
+        let mut row = [0.0f64; C];
         let mut acc = -c[i];
         for k in 0..N {
             let aik = a_s[k * C + i];
             if aik != 0.0 {
                 acc += aik * jr[k];
                 let f = aik * w[k];
-                for (sij, x) in srow.iter_mut().zip(rows[k].iter()) {
+                for (sij, x) in row.iter_mut().zip(rows[k].iter()) {
                     *sij += f * x;
                 }
             }
         }
+        *srow = row;
         *rh = acc;
     }
-    (s, rhs)
+    rhs
 }
 
 /// Solve S y = rhs for the Schur complement of a KKT system: partial
@@ -461,15 +489,28 @@ fn schur_sparse<const N: usize, const C: usize>(
 /// to zero, as before this fast path existed.
 #[inline(always)]
 fn solve_schur<const C: usize>(s: [[f64; C]; C], rhs: &[f64; C]) -> [f64; C] {
-    match PartialLu::from_rows(s, 1e-8) {
+    match PartialLu::from_rows(s, SCHUR_PIVOT_TOL) {
         Some(lu) => lu.solve_array(rhs),
-        None => {
-            let sm = SMatrix::<f64, C, C>::from_fn(|i, j| s[i][j]);
-            let y = FullPivLu::new(sm, 1e-13).solve(&SVector::from(*rhs));
-            let mut out = [0.0; C];
-            out.copy_from_slice(y.as_slice());
-            out
-        }
+        None => full_piv_schur(&s).solve_array(rhs),
+    }
+}
+
+/// Relative pivot threshold of the partial-pivoting Schur solve.
+const SCHUR_PIVOT_TOL: f64 = 1e-8;
+
+/// S's complete-pivoting factorisation (rank threshold 1e-13), where
+/// partial pivoting met a pivot below [`SCHUR_PIVOT_TOL`].
+fn full_piv_schur<const C: usize>(s: &[[f64; C]; C]) -> FullPivLu<C> {
+    FullPivLu::new(SMatrix::<f64, C, C>::from_fn(|i, j| s[i][j]), 1e-13)
+}
+
+impl<const C: usize> FullPivLu<C> {
+    /// [`FullPivLu::solve`] on plain arrays.
+    fn solve_array(&self, rhs: &[f64; C]) -> [f64; C] {
+        let y = self.solve(&SVector::from(*rhs));
+        let mut out = [0.0; C];
+        out.copy_from_slice(y.as_slice());
+        out
     }
 }
 
@@ -519,7 +560,8 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
     for k in 0..N {
         jr[k] = r[k] * inv[k];
     }
-    let (s, rhs) = schur_sparse(a, &brow, inv, &jr, c);
+    let mut s = [[0.0f64; C]; C];
+    let rhs = schur_sparse(a, &brow, inv, &jr, c, &mut s);
     let y = solve_schur(s, &rhs);
     let mut x = SVector::<f64, N>::zeros();
     for k in 0..N {
@@ -578,6 +620,21 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
             .then_some(Self { j, jb_rows })
     }
 
+    /// J⁻¹r.
+    #[inline(always)]
+    fn j_solve(&self, r: &SVector<f64, N>) -> [f64; N] {
+        match &self.j {
+            JInverse::Diagonal(inv) => {
+                let mut jr = [0.0f64; N];
+                for ((x, rk), ik) in jr.iter_mut().zip(r.iter()).zip(inv.iter()) {
+                    *x = rk * ik;
+                }
+                jr
+            }
+            JInverse::Lu(lu) => lu.solve_array(r.as_slice()),
+        }
+    }
+
     /// Solve the KKT system with this J and B and the given A, r and c (a
     /// singular Schur complement as in [`solve_kkt`]). `None` when the
     /// solution is not finite.
@@ -588,18 +645,113 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         r: &SVector<f64, N>,
         c: &SVector<f64, C>,
     ) -> Option<KktSolution<N, C>> {
-        let jr: [f64; N] = match &self.j {
-            JInverse::Diagonal(inv) => {
-                let mut jr = [0.0f64; N];
-                for ((x, rk), ik) in jr.iter_mut().zip(r.iter()).zip(inv.iter()) {
-                    *x = rk * ik;
-                }
-                jr
-            }
-            JInverse::Lu(lu) => lu.solve_array(r.as_slice()),
-        };
-        let (x, y) = solve_with_rows(a, &self.jb_rows, jr, c);
+        let (x, y) = solve_with_rows(a, &self.jb_rows, self.j_solve(r), c);
         finite_solution(x, y)
+    }
+
+    /// [`KktFactors::solve`], leaving the factored Schur complement
+    /// S = A J⁻¹B and A in `schur` for [`KktFactors::solve_chord`] (not
+    /// [`SchurFactor::is_formed`] when the solution is not finite).
+    #[inline(always)]
+    pub fn solve_keeping(
+        &self,
+        a: &SMatrix<f64, C, N>,
+        r: &SVector<f64, N>,
+        c: &SVector<f64, C>,
+        schur: &mut SchurFactor<N, C>,
+    ) -> Option<KktSolution<N, C>> {
+        let jr = self.j_solve(r);
+        // S formed and factored where it stays: formed elsewhere and moved
+        // there, S and its factors would be copied (memcpy) on the way
+        schur.a = *a;
+        let rhs = schur_sparse(a, &self.jb_rows, &[1.0; N], &jr, c, &mut schur.lu.lu);
+        schur.full = if schur.lu.factor(SCHUR_PIVOT_TOL) {
+            None
+        } else {
+            // as `solve_schur`: S again (the attempt overwrote it)
+            let mut s = [[0.0f64; C]; C];
+            schur_sparse(a, &self.jb_rows, &[1.0; N], &jr, c, &mut s);
+            Some(full_piv_schur(&s))
+        };
+        let y = schur.solve(&rhs);
+        let sol = finite_solution(minus_rows_times(jr, &self.jb_rows, &y), y);
+        schur.formed = sol.is_some();
+        sol
+    }
+
+    /// Solve the KKT system with this J and B, the A and S of `schur` (left
+    /// by [`KktFactors::solve_keeping`] of these factors) and the given r
+    /// and c, without forming S: a chord step when A has moved since (the
+    /// caller evaluates the residuals exactly and keeps S only while the
+    /// iteration contracts). O(N) (diagonal J) or O(N²) for J⁻¹r,
+    /// O(NC) for A·J⁻¹r and for x, O(C²) for the solve with S.
+    /// `None` when the solution is not finite.
+    #[inline(always)]
+    pub fn solve_chord(
+        &self,
+        schur: &SchurFactor<N, C>,
+        r: &SVector<f64, N>,
+        c: &SVector<f64, C>,
+    ) -> Option<KktSolution<N, C>> {
+        let jr = self.j_solve(r);
+        // A·(J⁻¹r) − c, column by column (A is stored by columns): with no
+        // S to form, testing A's zeros costs more than multiplying them
+        let mut rhs = [0.0f64; C];
+        for (rh, ci) in rhs.iter_mut().zip(c.iter()) {
+            *rh = -ci;
+        }
+        for (col, x) in schur.a.as_slice().chunks_exact(C).zip(jr.iter()) {
+            for (rh, aik) in rhs.iter_mut().zip(col.iter()) {
+                *rh += aik * x;
+            }
+        }
+        let y = schur.solve(&rhs);
+        finite_solution(minus_rows_times(jr, &self.jb_rows, &y), y)
+    }
+}
+
+/// The factored Schur complement S = A J⁻¹B of a [`KktFactors`] system
+/// and the constraint matrix A it was formed from
+/// ([`KktFactors::solve_keeping`]), for chord steps
+/// ([`KktFactors::solve_chord`]) with the same J and B.
+/// [`SchurFactor::default`] holds none (not [`SchurFactor::is_formed`]).
+#[derive(Clone, Copy, Debug)]
+pub struct SchurFactor<const N: usize, const C: usize> {
+    a: SMatrix<f64, C, N>,
+    // S by partial pivoting (as `solve_schur`), unless `full` holds its
+    // complete-pivoting factors
+    lu: PartialLu<C>,
+    full: Option<FullPivLu<C>>,
+    formed: bool,
+}
+
+impl<const N: usize, const C: usize> Default for SchurFactor<N, C> {
+    fn default() -> Self {
+        Self {
+            a: SMatrix::zeros(),
+            lu: PartialLu {
+                lu: [[0.0; C]; C],
+                perm: [0; C],
+            },
+            full: None,
+            formed: false,
+        }
+    }
+}
+
+impl<const N: usize, const C: usize> SchurFactor<N, C> {
+    /// Whether it holds the S of a solve with a finite solution.
+    pub fn is_formed(&self) -> bool {
+        self.formed
+    }
+
+    /// S⁻¹·rhs.
+    #[inline(always)]
+    fn solve(&self, rhs: &[f64; C]) -> [f64; C] {
+        match &self.full {
+            None => self.lu.solve_array(rhs),
+            Some(full) => full.solve_array(rhs),
+        }
     }
 }
 
@@ -841,6 +993,9 @@ mod tests {
     /// coupled one (joint damping in maximal coordinates), two different
     /// sparse A with the same factors, and a redundant constraint (singular
     /// Schur complement: complete pivoting, checked through the residuals).
+    /// A Schur complement kept by `solve_keeping` (which solves as `solve`)
+    /// serves `solve_chord`: the KKT system with the kept A in the
+    /// constraint row (a chord step's), for new right-hand sides.
     #[test]
     fn kkt_factors_match_dense_solve() {
         use nalgebra::{SMatrix, SVector};
@@ -874,20 +1029,23 @@ mod tests {
         coupled[(5, 5)] -= 0.05;
         coupled[(2, 5)] += 0.05;
         coupled[(5, 2)] += 0.05;
-        let dense = |j: &SMatrix<f64, N, N>, a: &SMatrix<f64, C, N>| {
+        let dense = |j: &SMatrix<f64, N, N>,
+                     a: &SMatrix<f64, C, N>,
+                     r: &SVector<f64, N>,
+                     c: &SVector<f64, C>| {
             let mut k = SMatrix::<f64, 10, 10>::zeros();
             k.fixed_view_mut::<N, N>(0, 0).copy_from(j);
             k.fixed_view_mut::<N, C>(0, N).copy_from(&b);
             k.fixed_view_mut::<C, N>(N, 0).copy_from(a);
             let mut rhs = SVector::<f64, 10>::zeros();
-            rhs.fixed_rows_mut::<N>(0).copy_from(&r);
-            rhs.fixed_rows_mut::<C>(N).copy_from(&c);
+            rhs.fixed_rows_mut::<N>(0).copy_from(r);
+            rhs.fixed_rows_mut::<C>(N).copy_from(c);
             k.lu().solve(&rhs).unwrap()
         };
         for j in [diag, coupled] {
             let f = KktFactors::new(&j, &b).unwrap();
             for a in [a, a_next] {
-                let full = dense(&j, &a);
+                let full = dense(&j, &a, &r, &c);
                 // both backward stable on matrices with condition ≈ 1e2
                 let (x, y) = f.solve(&a, &r, &c).unwrap();
                 assert!((full.fixed_rows::<N>(0) - x).amax() < 1e-13, "{x} {full}");
@@ -896,18 +1054,39 @@ mod tests {
                 assert!((full.fixed_rows::<N>(0) - x).amax() < 1e-13, "{x} {full}");
                 assert!((full.fixed_rows::<C>(N) - y).amax() < 1e-13, "{y} {full}");
             }
+            // chord: S kept from A, then new right-hand sides (the
+            // constraint row stays A, whatever the current Jacobian)
+            let mut schur = SchurFactor::default();
+            assert!(!schur.is_formed());
+            assert_eq!(f.solve_keeping(&a, &r, &c, &mut schur), f.solve(&a, &r, &c));
+            assert!(schur.is_formed());
+            let (r2, c2) = (r.map(|x| 0.01 * x - 0.003), c.map(|x| 1e-3 * x + 2e-4));
+            let full = dense(&j, &a, &r2, &c2);
+            let (x, y) = f.solve_chord(&schur, &r2, &c2).unwrap();
+            assert!((full.fixed_rows::<N>(0) - x).amax() < 1e-15, "{x} {full}");
+            assert!((full.fixed_rows::<C>(N) - y).amax() < 1e-15, "{y} {full}");
+            // a non-finite solution keeps no S
+            let nan = r.map(|_| f64::NAN);
+            assert!(f.solve_keeping(&a_next, &nan, &c, &mut schur).is_none());
+            assert!(!schur.is_formed());
             // redundant: row 3 repeated in place of row 2, consistent c
             let mut a2 = a;
             a2.set_row(2, &a.row(3).into_owned());
             let b2 = -a2.transpose();
             let mut c2 = c;
             c2[2] = c2[3];
-            let (x2, y2) = KktFactors::new(&j, &b2)
-                .unwrap()
-                .solve(&a2, &r, &c2)
-                .unwrap();
+            let f2 = KktFactors::new(&j, &b2).unwrap();
+            let (x2, y2) = f2.solve(&a2, &r, &c2).unwrap();
             assert!((j * x2 + b2 * y2 - r).amax() < 1e-13);
             assert!((a2 * x2 - c2).amax() < 1e-13);
+            // the kept S is singular (complete pivoting), consistent c
+            let mut schur = SchurFactor::default();
+            f2.solve_keeping(&a2, &r, &c2, &mut schur).unwrap();
+            let (r3, mut c3) = (r * 0.5, c * 0.25);
+            c3[2] = c3[3];
+            let (x3, y3) = f2.solve_chord(&schur, &r3, &c3).unwrap();
+            assert!((j * x3 + b2 * y3 - r3).amax() < 1e-13);
+            assert!((a2 * x3 - c3).amax() < 1e-13);
         }
         // a singular J is left to the regularised solve
         let mut singular = diag;

@@ -33,7 +33,14 @@
 //! iteration that contracted the residual at least 100-fold at a full step
 //! is kept for the next iteration (a chord step, which saves a force
 //! Jacobian per step; a chord direction that does not descend is replaced
-//! by the exact one). The convergence test is the same either way.
+//! by the exact one). For the first-order rule with a constant mass matrix
+//! and constraints, J = −M − Δt·D and G(x₁)ᵀ are fixed for the step and
+//! only G₂ = G(x₁ + Δt·v) moves: the factored Schur complement
+//! G₂J⁻¹G(x₁)ᵀ of an iteration, with its G₂, is kept for the next one (a
+//! chord step in the constraint row) when that step is predicted to
+//! converge (its contraction is about the relative move Δt‖Δv‖ of G₂'s
+//! configuration); a chord direction that does not descend is replaced by
+//! a fresh one. The convergence test is the same either way.
 //!
 //! Linear solves: closed forms for N ≤ 2, partial pivoting for trees (the Newton matrix is a perturbation of −M),
 //! and for constraints the Schur complement G A⁻¹Gᵀ with complete pivoting
@@ -48,7 +55,7 @@
 //! unit), the constraint residual by 1 + the largest length coordinate.
 
 use crate::dynamics::{Dynamics, Terms};
-use crate::linalg::{KktFactors, solve_kkt_regularised, solve_partial};
+use crate::linalg::{KktFactors, SchurFactor, solve_kkt_regularised, solve_partial};
 use crate::state::{CoordinateKind, State};
 use nalgebra::{SMatrix, SVector};
 
@@ -690,6 +697,11 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         // formed at the first KKT solve when `jac_constant`: `None` = to be
         // formed, `Some(None)` = J needs the robust solve
         let mut factors: Option<Option<KktFactors<N, C>>> = None;
+        // with them: the factored Schur complement S = G₂J⁻¹B of the last
+        // fresh KKT solve and the G₂ it was formed from, and whether the
+        // next iteration is a chord step with them (`keep_schur`, below)
+        let mut schur = SchurFactor::<N, C>::default();
+        let mut keep_schur = false;
         'newton: for iteration in 0..opts.max_iterations {
             if !err.is_finite() {
                 return Err(StepError::NonFiniteResidual { iteration });
@@ -740,6 +752,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 }
             }
             let singular = StepError::SingularJacobian { iteration };
+            // this iteration's direction comes from a kept S (first-order
+            // rule with constraints and a constant J)
+            let mut chord = false;
             let (dv, dl) = if C == 0 {
                 let dv = solve_partial(&jac, &(-d)).ok_or(singular)?;
                 // First-order rule, tree: with x₁ fixed d is exactly
@@ -773,7 +788,19 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     factors
                         .get_or_insert_with(|| KktFactors::new(&jac, &neg_g1t))
                         .as_ref()
-                        .and_then(|f| f.solve(&g2, &r, &cc))
+                        .and_then(|f| {
+                            // a chord step: S and G₂ (in the constraint
+                            // row) of an earlier iterate, see `keep_schur`;
+                            // d and c are evaluated exactly, so the
+                            // tolerance means the same. Skips forming S
+                            // (O(nnz(G₂)·C)) and its O(C³/3) factorisation.
+                            chord = keep_schur && schur.is_formed();
+                            if chord && let Some(sol) = f.solve_chord(&schur, &r, &cc) {
+                                return Some(sol);
+                            }
+                            chord = false;
+                            f.solve_keeping(&g2, &r, &cc, &mut schur)
+                        })
                 } else {
                     None
                 };
@@ -802,6 +829,19 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 let errn = error(&dn, &cn);
                 if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
                     reuse_jac = step == 1.0 && errn <= 0.01 * err;
+                    if jac_constant && C > 0 {
+                        // S moves with v only through G₂ = G(x₁ + h·v), so
+                        // a chord step after this one contracts the
+                        // residual by about the relative move h‖Δv‖ of G₂'s
+                        // configuration (G's entries are sines and cosines
+                        // of angles times lengths). S is kept when that
+                        // step is predicted to converge: a chord iteration
+                        // that contracts less than Newton's would add
+                        // iterations (steps from a state, whose first
+                        // Newton step moves v by O(Δt·v̇), rather than from
+                        // a rollout's extrapolated guess).
+                        keep_schur = step == 1.0 && h.abs() * max_abs(&dv) * errn <= opts.tolerance;
+                    }
                     (v, lambda, d, qm, c, g2, err) = (vn, ln, dn, qn, cn, g2n, errn);
                     break;
                 }
@@ -813,12 +853,13 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         if FORCED {
                             bu = input(&at(&v));
                         }
-                        if reuse_jac {
-                            // a chord direction that does not descend:
-                            // retry with the exact Newton matrix
-                            reuse_jac = false;
-                            continue 'newton;
-                        }
+                    }
+                    if (MID && reuse_jac) || chord {
+                        // a chord direction that does not descend: retry
+                        // with the exact Newton matrix (or a fresh S)
+                        reuse_jac = false;
+                        keep_schur = false;
+                        continue 'newton;
                     }
                     // no decrease along the exact Newton direction: accept
                     // at the attainable accuracy, or fail
@@ -851,5 +892,103 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             iterations: opts.max_iterations,
             residual: err,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two coordinates with unit masses (M = I), no forces, one constraint
+    /// ψ(q₀) = B·ψ₀(q₀/L) = 0 whose slope changes sign at a kink:
+    /// ψ₀(z) = 1 − z left of 0.99, K(z − m)² − e right of it (continuous
+    /// there, root m + √(e/K)). Newton from z = 0 lands at z = 1, the
+    /// residual cut 200-fold to 5e-10 after a move of 1e-5 (the chord step
+    /// is predicted to converge), where the slope is
+    /// +8.5 instead of −1: that chord step on S raises |ψ| at every step
+    /// length.
+    #[derive(Clone, Copy, Debug)]
+    struct Kinked;
+
+    const B: f64 = 1e-7;
+    const L: f64 = 1e-5;
+    const K: f64 = 1000.0;
+    const M: f64 = 0.99575;
+    const E: f64 = 0.0230625;
+
+    /// ψ and ψ'.
+    fn psi(q: f64) -> (f64, f64) {
+        let z = q / L;
+        let (p, slope) = if z < 0.99 {
+            (1.0 - z, -1.0)
+        } else {
+            (K * (z - M) * (z - M) - E, 2.0 * K * (z - M))
+        };
+        (B * p, B / L * slope)
+    }
+
+    impl Dynamics<2, 1> for Kinked {
+        const KINDS: [CoordinateKind; 2] = [CoordinateKind::Angle; 2];
+        const DISSIPATIVE: bool = false;
+        const CONSTANT_MASS: bool = true;
+        type Constants = ();
+
+        fn constants(&self) -> Result<(), StepError> {
+            Ok(())
+        }
+
+        fn mass(&self, _: &(), _: &SVector<f64, 2>) -> SMatrix<f64, 2, 2> {
+            SMatrix::identity()
+        }
+
+        fn potential(&self, _: &(), _: &SVector<f64, 2>) -> f64 {
+            0.0
+        }
+
+        fn terms(&self, _: &(), _: &SVector<f64, 2>, out: &mut Terms<2>) {
+            out.mass = SMatrix::identity();
+        }
+
+        fn force_jacobian(
+            &self,
+            _: &(),
+            _: &SVector<f64, 2>,
+            _: &SVector<f64, 2>,
+        ) -> SMatrix<f64, 2, 2> {
+            SMatrix::zeros()
+        }
+
+        fn constraint_values(&self, _: &(), q: &SVector<f64, 2>) -> SVector<f64, 1> {
+            SVector::from([psi(q[0]).0])
+        }
+
+        fn constraints_and_jacobian(
+            &self,
+            _: &(),
+            q: &SVector<f64, 2>,
+        ) -> (SVector<f64, 1>, SMatrix<f64, 1, 2>) {
+            let (g, slope) = psi(q[0]);
+            (SVector::from([g]), SMatrix::from([[slope], [0.0]]))
+        }
+    }
+
+    /// A chord step on the Schur complement that does not descend is
+    /// retried with a fresh one, and the step converges to the root
+    /// (without the retry it fails: `LineSearchFailed` at iteration 1 with
+    /// the residual 5e-10, above the stall tolerance).
+    #[test]
+    fn failed_chord_step_is_retried_with_a_fresh_schur_complement() {
+        let s = Stepper::new(Kinked, 1.0).unwrap();
+        let zero = SVector::<f64, 2>::zeros();
+        // x₁ = 0, h = 1: the constraint is ψ(v₀)
+        let (v, _, report) = s.solve(&zero, &zero, 1.0, &zero).unwrap();
+        let tol = s.step_options().tolerance;
+        assert!(!report.stalled && !report.regularised, "{report:?}");
+        assert!(report.residual <= tol, "{report:?}");
+        // |ψ| ≤ tol within tol/ψ' of the root
+        let root = L * (M + (E / K).sqrt());
+        let slope = psi(root).1;
+        assert!((v[0] - root).abs() <= 2.0 * tol / slope, "{v} {root}");
+        assert_eq!(v[1], 0.0);
     }
 }
