@@ -529,14 +529,16 @@ fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<[f64; N
     if off != 0 {
         return None;
     }
+    // x = 0 gives 1/x = ∞, x = ±∞ gives 0 (x NaN: NaN): x and 1/x both
+    // finite is the test, AND-ed without a branch per entry
+    // (the diagonal: every (N+1)-th entry of the storage)
     let mut inv = [0.0; N];
-    for (k, (col, d)) in j.as_slice().chunks_exact(N).zip(inv.iter_mut()).enumerate() {
-        *d = 1.0 / col[k];
-        if col[k] == 0.0 || !d.is_finite() || !col[k].is_finite() {
-            return None;
-        }
+    let mut finite = true;
+    for (d, x) in inv.iter_mut().zip(j.as_slice().iter().step_by(N + 1)) {
+        *d = 1.0 / x;
+        finite &= d.is_finite() & x.is_finite();
     }
-    Some(inv)
+    finite.then_some(inv)
 }
 
 /// The KKT system of [`solve_kkt`] for a diagonal J = diag(1/inv) (maximal
@@ -613,10 +615,12 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
             let lu = PartialLu::new(*j, 1e-12)?;
             (JInverse::Lu(lu), rows_of(&lu.solve_matrix(b)))
         };
+        // AND-ed without a branch per entry (`all` stops at the first
+        // non-finite one, a test and a branch each)
         jb_rows
             .iter()
             .flatten()
-            .all(|x| x.is_finite())
+            .fold(true, |ok, x| ok & x.is_finite())
             .then_some(Self { j, jb_rows })
     }
 
@@ -985,6 +989,35 @@ mod tests {
         let ((x2, y2), _) = solve_kkt_regularised(&j, &b2, &a2, &r, &c2).unwrap();
         assert!((j * x2 + b2 * y2 - r).amax() < 1e-13);
         assert!((a2 * x2 - c2).amax() < 1e-13);
+    }
+
+    /// `invertible_diagonal` accepts a diagonal matrix (−0 off the diagonal
+    /// included) and refuses a nonzero or NaN entry off the diagonal and a
+    /// diagonal entry that is 0, ±∞, NaN or whose reciprocal overflows;
+    /// `KktFactors::new` refuses a non-finite J⁻¹B.
+    #[test]
+    fn invertible_diagonal_refuses_what_it_cannot_invert() {
+        let d = Matrix3::from_diagonal(&Vector3::new(-2.0, 0.5, -4.0));
+        assert_eq!(invertible_diagonal(&d), Some([-0.5, 2.0, -0.25]));
+        let mut neg_zero = d;
+        neg_zero[(0, 2)] = -0.0;
+        assert_eq!(invertible_diagonal(&neg_zero), Some([-0.5, 2.0, -0.25]));
+        for (i, j, x) in [
+            (0, 1, 1e-300),
+            (2, 0, f64::NAN),
+            (1, 1, 0.0),
+            (1, 1, -0.0),
+            (2, 2, f64::INFINITY),
+            (0, 0, f64::NAN),
+            (0, 0, 1e-310),
+        ] {
+            let mut m = d;
+            m[(i, j)] = x;
+            assert_eq!(invertible_diagonal(&m), None, "{m}");
+        }
+        let b = nalgebra::Matrix3x2::new(1.0, 0.0, f64::INFINITY, 1.0, 0.5, 3.0);
+        assert!(KktFactors::new(&d, &b).is_none());
+        assert!(KktFactors::new(&(d + Matrix3::repeat(0.1)), &b).is_none());
     }
 
     /// `KktFactors` (J factored once, reused for several A) and the general
