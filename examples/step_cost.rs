@@ -195,6 +195,21 @@ fn derivatives(
 }
 
 /// The fourbar and the consistent start state every fourbar mode uses.
+/// The fourbar with damping 0.1 on every joint (the maximal Newton matrix
+/// −M − a·D is then non-diagonal).
+fn with_joint_damping(mut fb: Fourbar) -> Fourbar {
+    for j in [
+        &mut fb.joints.top1,
+        &mut fb.joints.middle1,
+        &mut fb.joints.top2,
+        &mut fb.joints.middle2,
+        &mut fb.joints.bottom,
+    ] {
+        j.damping = 0.1;
+    }
+    fb
+}
+
 fn fourbar_start() -> Result<(Fourbar, State<4>), Box<dyn std::error::Error>> {
     let fb = Fourbar::default();
     let z0 = consistent_state(
@@ -239,16 +254,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if system == "iterations" {
         use vigp::Coordinates;
         let (fb, fb_z0) = fourbar_start()?;
-        let mut damped = fb;
-        for j in [
-            &mut damped.joints.top1,
-            &mut damped.joints.middle1,
-            &mut damped.joints.top2,
-            &mut damped.joints.middle2,
-            &mut damped.joints.bottom,
-        ] {
-            j.damping = 0.1;
-        }
+        let damped = with_joint_damping(fb);
         println!("| system ({steps}-step rollout) | Newton iterations per step | most |");
         println!("|---|---|---|");
         iterations(
@@ -304,16 +310,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         // joint damping makes the maximal Newton matrix −M − a·D
         // non-diagonal: the general (LU + sparse Schur) KKT path
         "fourbar_maximal_damped" => {
-            let (mut fb, z0) = fourbar_start()?;
-            for j in [
-                &mut fb.joints.top1,
-                &mut fb.joints.middle1,
-                &mut fb.joints.top2,
-                &mut fb.joints.middle2,
-                &mut fb.joints.bottom,
-            ] {
-                j.damping = 0.1;
-            }
+            let (fb, z0) = fourbar_start()?;
+            let fb = with_joint_damping(fb);
             use vigp::Coordinates;
             run(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
         }
