@@ -35,7 +35,20 @@
 //!   decrease (f_k − f_{k+1})/max(|f_k|, |f_{k+1}|, 1) ≤ `ftol`, or after
 //!   `max_iters` iterations.
 //!
-//! Departures from scipy, each saving evaluations:
+//! Departures from scipy:
+//!
+//! * **the first step of a run in a box is bounded**: scipy's first trial
+//!   is x̄ = P(x − g) itself, however large g is. In log-hyperparameter
+//!   space the LML's gradient grows with N, so that trial lands in a corner
+//!   of the box, and a corner with the length scales at their lower bound
+//!   is a plateau (the GP sees white noise; its gradient vanishes) where
+//!   the run then stops. vigp's first trial moves no variable by more
+//!   than 1 (a factor e in a hyperparameter); afterwards the model sets
+//!   the scale. On the N = 512 problems of `examples/gp_train` this costs
+//!   evaluations but lets 2–3 times as many random starts reach the best
+//!   LML (`docs/gp.md`);
+//!
+//! and, each saving evaluations:
 //!
 //! * a trial that repeats one of the last 16 evaluated points reuses it;
 //! * a search that stops without meeting the Wolfe conditions returns its
@@ -98,6 +111,9 @@ const LS_MAX_EVALS: usize = 20;
 /// Relative error within which the model must have predicted the last
 /// step's decrease for its prediction to end a run (see the module docs).
 const MODEL_TOL: f64 = 0.25;
+/// Largest change of any variable at the first trial step of a bounded
+/// run (a factor e in a hyperparameter, in log space).
+const FIRST_REACH: f64 = 1.0;
 /// Evaluations remembered for repeated trial points.
 const RECENT: usize = 16;
 
@@ -796,6 +812,13 @@ where
     }
     let mut stp = if first && !set.boxed {
         (1.0 / dot(&d, &d).sqrt()).min(tmax)
+    } else if first {
+        // scipy tries x̄ = P(x − g) itself, however large g is; that can
+        // jump to a corner of the box where the gradient vanishes (a GP
+        // whose length scales sit at the lower bound sees white noise, a
+        // plateau). The first trial moves no variable by more than 1.
+        let reach = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        (FIRST_REACH / reach).min(tmax)
     } else {
         tmax.min(1.0)
     };
@@ -1158,15 +1181,43 @@ mod tests {
             ftol,
             ..opts()
         };
-        let r = minimise(f, &[-2.0, 1.0, 0.0], &[-5.0; 3], &[5.0; 3], o).unwrap();
+        let r = minimise(f, &[0.8, -1.05, 2.005], &[-5.0; 3], &[5.0; 3], o).unwrap();
         assert!(r.converged);
         // Stopped no further from the minimum than the ftol test allows.
         let fmin: f64 = w.iter().sum();
         assert!(r.f - fmin <= ftol * fmin, "f − f* = {}", r.f - fmin);
-        // scipy 1.17.1's L-BFGS-B (same options): 17 evaluations in 13
-        // iterations, the last of which decreases f by less than ftol.
+        // scipy 1.17.1's L-BFGS-B (same options): 11 evaluations in 9
+        // iterations, the last of which decreases f by less than ftol
+        // (vigp without the rule: the same 11). The start is close enough
+        // that the first trial is scipy's (no variable moves by more than
+        // FIRST_REACH).
         println!("{} evaluations, {} iterations", r.evaluations, r.iterations);
-        assert!(r.evaluations < 17, "{} evaluations", r.evaluations);
+        assert!(r.evaluations < 11, "{} evaluations", r.evaluations);
+    }
+
+    #[test]
+    fn the_first_trial_of_a_boxed_run_moves_no_variable_by_more_than_one() {
+        // A steep start: P(x − g) is the corner (−10, 10, −10) of the box,
+        // 10 away in every variable; scipy evaluates that corner first.
+        let mut points: Vec<Vec<f64>> = Vec::new();
+        let f = |x: &[f64]| {
+            points.push(x.to_vec());
+            let c = [3.0, -2.0, 1.0];
+            let v = (0..3).map(|i| 50.0 * (x[i] - c[i]).powi(2)).sum();
+            let g = (0..3).map(|i| 100.0 * (x[i] - c[i])).collect();
+            Ok((v, g))
+        };
+        let x0 = [0.5, 0.5, 0.5];
+        let r = minimise(f, &x0, &[-10.0; 3], &[10.0; 3], opts()).unwrap();
+        assert!(r.converged);
+        for (v, c) in r.x.iter().zip([3.0, -2.0, 1.0]) {
+            assert!((v - c).abs() < 1e-8, "{:?}", r.x);
+        }
+        let reach = points[1]
+            .iter()
+            .zip(&x0)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!((reach - 1.0).abs() < 1e-12, "first trial {:?}", points[1]);
     }
 
     #[test]
