@@ -37,16 +37,18 @@
 //!
 //! Departures from scipy:
 //!
-//! * **the first step of a run in a box is bounded**: scipy's first trial
-//!   is x̄ = P(x − g) itself, however large g is. In log-hyperparameter
-//!   space the LML's gradient grows with N, so that trial lands in a corner
-//!   of the box, and a corner with the length scales at their lower bound
-//!   is a plateau (the GP sees white noise; its gradient vanishes) where
-//!   the run then stops. vigp's first trial moves no variable by more
-//!   than 1 (a factor e in a hyperparameter); afterwards the model sets
-//!   the scale. On the N = 512 problems of `examples/gp_train` this costs
-//!   evaluations but lets 2–3 times as many random starts reach the best
-//!   LML (`docs/gp.md`);
+//! * **`unit_start`** (set by GP training): with an empty memory scipy
+//!   models f by B = I, so its first trial is x̄ = P(x − g) however large g
+//!   is. In log-hyperparameter space the LML's gradient grows with N, and
+//!   for a badly scaled start that trial is a corner of the box; the
+//!   projection has then thrown away the gradient's proportions, and a
+//!   corner with the length scales at their lower bound is a plateau (the
+//!   GP sees white noise; the gradient vanishes) where the run stops. With
+//!   `unit_start` the empty-memory model is B = max(1, ‖g‖₂)·I, so the
+//!   Cauchy point is at most a unit steepest-descent step away, and the
+//!   line search of that iteration may extend the step to the edge of the
+//!   box. For ‖g‖₂ ≤ 1, and on problems without bounds, it is scipy's
+//!   iteration;
 //!
 //! and, each saving evaluations:
 //!
@@ -85,6 +87,12 @@ pub(crate) struct LbfgsOptions {
     pub pgtol: f64,
     /// Stop when the relative decrease of an iteration is at most this.
     pub ftol: f64,
+    /// With an empty memory, model the objective by B = max(1, ‖g‖₂)·I
+    /// instead of scipy's B = I, so the steepest-descent step to the
+    /// Cauchy point is at most 1 long, and let that iteration's line
+    /// search run to the edge of the box (scipy: up to x̄). See the module
+    /// docs for why GP training sets it.
+    pub unit_start: bool,
 }
 
 /// Outcome of [`minimise`].
@@ -111,9 +119,6 @@ const LS_MAX_EVALS: usize = 20;
 /// Relative error within which the model must have predicted the last
 /// step's decrease for its prediction to end a run (see the module docs).
 const MODEL_TOL: f64 = 0.25;
-/// Largest change of any variable at the first trial step of a bounded
-/// run (a factor e in a hyperparameter, in log space).
-const FIRST_REACH: f64 = 1.0;
 /// Evaluations remembered for repeated trial points.
 const RECENT: usize = 16;
 
@@ -729,6 +734,8 @@ struct Setting<'a> {
     boxed: bool,
     /// `ftol` of [`LbfgsOptions`].
     ftol: f64,
+    /// `unit_start` of [`LbfgsOptions`].
+    unit_start: bool,
 }
 
 /// How one iteration's search ended.
@@ -763,9 +770,15 @@ where
 {
     let (x, fx, g, lo, hi) = (&at.x, at.f, &at.g, set.lo, set.hi);
     let n = x.len();
-    let Some(b) = mem.dense(n) else {
+    let Some(mut b) = mem.dense(n) else {
         return Attempt::Failed;
     };
+    if mem.is_empty() && set.unit_start {
+        let scale = dot(g, g).sqrt().max(1.0);
+        for i in 0..n {
+            b[i * n + i] = scale;
+        }
+    }
     let (xcp, free) = if set.constrained || mem.is_empty() {
         cauchy(x, g, lo, hi, &b)
     } else {
@@ -799,7 +812,7 @@ where
     // Largest step in the box; 1 on the first iteration of a bounded
     // problem (scipy's `lnsrlb`, where d = P(x − g) − x then).
     let mut tmax: f64 = 1e10;
-    if first && set.constrained {
+    if first && set.constrained && !set.unit_start {
         tmax = 1.0;
     } else {
         for i in 0..n {
@@ -812,13 +825,6 @@ where
     }
     let mut stp = if first && !set.boxed {
         (1.0 / dot(&d, &d).sqrt()).min(tmax)
-    } else if first {
-        // scipy tries x̄ = P(x − g) itself, however large g is; that can
-        // jump to a corner of the box where the gradient vanishes (a GP
-        // whose length scales sit at the lower bound sees white noise, a
-        // plateau). The first trial moves no variable by more than 1.
-        let reach = d.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        (FIRST_REACH / reach).min(tmax)
     } else {
         tmax.min(1.0)
     };
@@ -916,6 +922,7 @@ where
         constrained: lo.iter().chain(hi).any(|v| v.is_finite()),
         boxed: lo.iter().chain(hi).all(|v| v.is_finite()),
         ftol: opt.ftol,
+        unit_start: opt.unit_start,
     };
     let mut at = Point { x, f: fx, g };
     let mut mem = Memory::new(opt.memory);
@@ -980,6 +987,7 @@ mod tests {
             max_iters: 500,
             pgtol: 1e-9,
             ftol: 0.0,
+            unit_start: false,
         }
     }
 
@@ -1196,28 +1204,40 @@ mod tests {
     }
 
     #[test]
-    fn the_first_trial_of_a_boxed_run_moves_no_variable_by_more_than_one() {
-        // A steep start: P(x − g) is the corner (−10, 10, −10) of the box,
-        // 10 away in every variable; scipy evaluates that corner first.
-        let mut points: Vec<Vec<f64>> = Vec::new();
-        let f = |x: &[f64]| {
-            points.push(x.to_vec());
-            let c = [3.0, -2.0, 1.0];
-            let v = (0..3).map(|i| 50.0 * (x[i] - c[i]).powi(2)).sum();
-            let g = (0..3).map(|i| 100.0 * (x[i] - c[i])).collect();
-            Ok((v, g))
-        };
+    fn unit_start_first_trial_is_a_unit_steepest_descent_step() {
+        // A steep start, g = 100·(x − c): scipy's first trial is P(x − g),
+        // the corner (10, −10, 10) of the box, 9.5 or more away in every variable;
+        // with `unit_start` it is x − g/‖g‖₂, and both runs converge.
+        let c = [3.0, -2.0, 1.0];
         let x0 = [0.5, 0.5, 0.5];
-        let r = minimise(f, &x0, &[-10.0; 3], &[10.0; 3], opts()).unwrap();
-        assert!(r.converged);
-        for (v, c) in r.x.iter().zip([3.0, -2.0, 1.0]) {
-            assert!((v - c).abs() < 1e-8, "{:?}", r.x);
+        for unit_start in [false, true] {
+            let mut points: Vec<Vec<f64>> = Vec::new();
+            let f = |x: &[f64]| {
+                points.push(x.to_vec());
+                let v = (0..3).map(|i| 50.0 * (x[i] - c[i]).powi(2)).sum();
+                let g = (0..3).map(|i| 100.0 * (x[i] - c[i])).collect();
+                Ok((v, g))
+            };
+            let o = LbfgsOptions {
+                unit_start,
+                ..opts()
+            };
+            let r = minimise(f, &x0, &[-10.0; 3], &[10.0; 3], o).unwrap();
+            assert!(r.converged);
+            for (v, c) in r.x.iter().zip(c) {
+                assert!((v - c).abs() < 1e-8, "{:?}", r.x);
+            }
+            let g0: Vec<f64> = (0..3).map(|i| 100.0 * (x0[i] - c[i])).collect();
+            let gn = dot(&g0, &g0).sqrt();
+            let expected: Vec<f64> = if unit_start {
+                (0..3).map(|i| x0[i] - g0[i] / gn).collect()
+            } else {
+                vec![10.0, -10.0, 10.0]
+            };
+            for (p, e) in points[1].iter().zip(&expected) {
+                assert!((p - e).abs() < 1e-12, "first trial {:?}", points[1]);
+            }
         }
-        let reach = points[1]
-            .iter()
-            .zip(&x0)
-            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
-        assert!((reach - 1.0).abs() < 1e-12, "first trial {:?}", points[1]);
     }
 
     #[test]
