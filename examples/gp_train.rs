@@ -10,6 +10,9 @@
 //! cargo run --release --example gp_train -- --n 100000 --sparse 256 --restarts 0 --runs 1
 //! ```
 //!
+//! `--seed S` (default 0) seeds the restarts' start points
+//! (`TrainOptions::seed`), as `scripts/gp_scipy_evals.py --seed S` does.
+//!
 //! Prints the machine load (`/proc/loadavg`) before and after, each run's
 //! wall time and the process's CPU time over it (on a loaded machine the
 //! CPU time divided by the thread count estimates the idle-machine wall
@@ -161,6 +164,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (n, d) = (arg("--n", 512), arg("--d", 4));
     let (restarts, runs, threads) = (arg("--restarts", 10), arg("--runs", 3), arg("--threads", 0));
     let sparse = arg("--sparse", 0);
+    let seed = arg("--seed", 0) as u64;
     let dump = str_arg("--dump-inducing");
     if dump.is_some() && sparse == 0 {
         return Err("--dump-inducing needs --sparse M".into());
@@ -171,7 +175,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (x, y) = bench_data(n, d);
     let opts = TrainOptions {
         restarts,
-        seed: 0,
+        seed,
         method: if sparse > 0 {
             Method::Sparse(SparseOptions::kmeans(sparse))
         } else {
@@ -183,7 +187,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .num_threads(threads)
         .build()?;
     println!(
-        "vigp Gp::train: N = {n}, d = {d}, 1 + {restarts} starts, {} thread(s), {}",
+        "vigp Gp::train: N = {n}, d = {d}, 1 + {restarts} starts (seed {seed}), {} thread(s), {}",
         pool.current_num_threads(),
         if sparse > 0 {
             format!("sparse M = {sparse} (k-means++)")

@@ -6,9 +6,11 @@ below), on the data of benches/gp.rs, with the same bounds and stopping
 rules (ftol 2.220446049250313e-9, pgtol 1e-5, memory 10).
 
 Compare with `cargo run --release --example gp_train -- --n N --restarts R
---runs 1`, which prints vigp's evaluations per start and final LMLs.
+--runs 1`, which prints vigp's evaluations per start and final LMLs
+(`--d` and `--seed` likewise match gp_train's flags).
 
     python scripts/gp_scipy_evals.py --n 512 --restarts 10
+    python scripts/gp_scipy_evals.py --n 512 --d 6 --seed 1 --restarts 10
 """
 import argparse
 import math
@@ -57,6 +59,7 @@ def main():
     ap.add_argument("--n", type=int, default=512)
     ap.add_argument("--d", type=int, default=4)
     ap.add_argument("--restarts", type=int, default=10)
+    ap.add_argument("--seed", type=int, default=0, help="TrainOptions::seed (gp_train --seed)")
     a = ap.parse_args()
     X, y = bench_data(a.n, a.d)
     std = X.std(axis=0)
@@ -72,7 +75,7 @@ def main():
         v, g = gp.log_marginal_likelihood(ts, eval_gradient=True, clone_kernel=False)
         return -v, -g
 
-    starts, bounds = vigp_starts(0, 0, d, a.restarts)
+    starts, bounds = vigp_starts(a.seed, 0, d, a.restarts)
     sk_bounds = [bounds[d]] + bounds[:d] + [bounds[d + 1]]
     nfevs, lmls = [], []
     for t0 in starts:

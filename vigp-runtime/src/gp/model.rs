@@ -493,6 +493,7 @@ impl Gp {
             max_iters: opts.max_iters,
             pgtol: opts.pgtol,
             ftol: opts.ftol,
+            unit_start: true,
         };
         let inner = if jobs.len() == 1 && inducing.is_some() {
             Par::rayon(0)
