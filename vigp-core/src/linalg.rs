@@ -516,6 +516,9 @@ impl<const C: usize> FullPivLu<C> {
 
 /// `Some(1/diag)` when `j` is diagonal (exact zeros off the diagonal) with
 /// a finite, nonzero diagonal whose reciprocals are finite.
+// inlined into its three callers (one per KKT entry point): out of line,
+// the call costs more than the test for the small N of a tree
+#[inline(always)]
 fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<[f64; N]> {
     // column-major storage: column k holds the diagonal entry at row k.
     // Branch-free test for a nonzero off the diagonal: OR the bits of every
@@ -612,16 +615,59 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
             }
             (JInverse::Diagonal(inv), jb_rows)
         } else {
-            let lu = PartialLu::new(*j, 1e-12)?;
-            (JInverse::Lu(lu), rows_of(&lu.solve_matrix(b)))
+            return Self::from_lu(j, b);
         };
-        // AND-ed without a branch per entry (`all` stops at the first
-        // non-finite one, a test and a branch each)
-        jb_rows
+        Self::if_finite(j, jb_rows)
+    }
+
+    /// [`KktFactors::new`] with B = −Gᵀ (the constraint forces of a step,
+    /// G the constraint Jacobian at the step's start), read from G's
+    /// storage: G is stored by columns, so column k of G is row k of B up
+    /// to the sign and, for a diagonal J, row k of J⁻¹B is −(1/J_kk) times
+    /// it — no transposed or negated copy of G is formed. The factors are
+    /// those of `new(j, &-g.transpose())`, bit for bit.
+    #[inline(always)]
+    pub fn with_constraint_jacobian(
+        j: &SMatrix<f64, N, N>,
+        g: &SMatrix<f64, C, N>,
+    ) -> Option<Self> {
+        let Some(inv) = invertible_diagonal(j) else {
+            return Self::from_lu(j, &-g.transpose());
+        };
+        let mut jb_rows = [[0.0f64; C]; N];
+        for ((row, col), ik) in jb_rows
+            .iter_mut()
+            .zip(g.as_slice().chunks_exact(C))
+            .zip(inv.iter())
+        {
+            for (x, gik) in row.iter_mut().zip(col.iter()) {
+                *x = -gik * ik;
+            }
+        }
+        Self::if_finite(JInverse::Diagonal(inv), jb_rows)
+    }
+
+    /// The factors of a J that is not diagonal: partial pivoting with the
+    /// relative pivot threshold 1e-12 of [`solve_kkt`].
+    fn from_lu(j: &SMatrix<f64, N, N>, b: &SMatrix<f64, N, C>) -> Option<Self> {
+        let lu = PartialLu::new(*j, 1e-12)?;
+        Self::if_finite(JInverse::Lu(lu), rows_of(&lu.solve_matrix(b)))
+    }
+
+    /// `Some` when every entry of J⁻¹B is finite (AND-ed without a branch
+    /// per entry: `all` stops at the first non-finite one, a test and a
+    /// branch each).
+    #[inline(always)]
+    fn if_finite(j: JInverse<N>, jb_rows: [[f64; C]; N]) -> Option<Self> {
+        let finite = jb_rows
             .iter()
             .flatten()
-            .fold(true, |ok, x| ok & x.is_finite())
-            .then_some(Self { j, jb_rows })
+            .fold(true, |ok, x| ok & x.is_finite());
+        if finite {
+            Some(Self { j, jb_rows })
+        } else {
+            None
+        }
     }
 
     /// J⁻¹r.
@@ -1125,5 +1171,18 @@ mod tests {
         let mut singular = diag;
         singular[(2, 2)] = 0.0;
         assert!(KktFactors::new(&singular, &b).is_none());
+        // the factors from G (B = −Gᵀ, read from G's columns) are those of
+        // `new` with the formed B, bit for bit, diagonal J or not
+        let g = a + SMatrix::<f64, C, N>::from_fn(|i, k| 0.01 * (i as f64 - k as f64));
+        for j in [diag, coupled] {
+            let from_g = KktFactors::with_constraint_jacobian(&j, &g).unwrap();
+            let from_b = KktFactors::new(&j, &-g.transpose()).unwrap();
+            assert_eq!(from_g.jb_rows, from_b.jb_rows);
+            assert_eq!(from_g.solve(&a, &r, &c), from_b.solve(&a, &r, &c));
+        }
+        assert!(KktFactors::with_constraint_jacobian(&singular, &g).is_none());
+        let mut inf = g;
+        inf[(1, 3)] = f64::INFINITY;
+        assert!(KktFactors::with_constraint_jacobian(&diag, &inf).is_none());
     }
 }

@@ -634,12 +634,14 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             }
         }
         let (inv_p, inv_l) = (1.0 / p_scale, 1.0 / l_scale);
-        let g1t: SMatrix<f64, N, C> = if C > 0 {
-            model.constraints_and_jacobian(k, x1).1.transpose()
+        // G₁ = G(x₁), fixed for the step, and G₁ᵀ for the constraint
+        // forces −G₁ᵀλ (J⁻¹B, B = −G₁ᵀ, is read from G₁'s columns)
+        let g1: SMatrix<f64, C, N> = if C > 0 {
+            model.constraints_and_jacobian(k, x1).1
         } else {
             SMatrix::zeros()
         };
-        let neg_g1t = -g1t;
+        let g1t = g1.transpose();
         let a1 = (1.0 - alpha) * h;
         // residual d(v, λ) and Q (row l = (∂M/∂q_l v)ᵀ, which the Newton
         // matrix reuses); constraint c(v) and its Jacobian G(x₁ + h v)
@@ -655,6 +657,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 }
                 let mut d = p0 + f * a1 - M::mass_times(t, v);
                 if C > 0 {
+                    // G₁ᵀ stored: its columns are contiguous, so the
+                    // product vectorises (G₁ᵀλ from G₁'s columns would be
+                    // a dot product per row, serial in rounding order)
                     d -= g1t * lambda;
                 }
                 (d, q)
@@ -694,9 +699,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         // x₁, so J = −M − a₁·D(x₁) is the same in every iteration
         let jac_constant = !MID && M::CONSTANT_MASS;
         // J's factorisation and J⁻¹B (B = −G₁ᵀ is fixed for the step),
-        // formed at the first KKT solve when `jac_constant`: `None` = to be
-        // formed, `Some(None)` = J needs the robust solve
-        let mut factors: Option<Option<KktFactors<N, C>>> = None;
+        // formed at the first KKT solve when `jac_constant` (`factored`):
+        // `None` after that = J needs the robust solve
+        let mut factors: Option<KktFactors<N, C>> = None;
+        let mut factored = false;
+        // B = −G₁ᵀ for the general KKT solve, formed at its first use
+        let mut neg_g1t: Option<SMatrix<f64, N, C>> = None;
         // with them: the factored Schur complement S = G₂J⁻¹B of the last
         // fresh KKT solve and the G₂ it was formed from, and whether the
         // next iteration is a chord step with them (`keep_schur`, below)
@@ -784,31 +792,37 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 let (r, cc) = (-d, c / -h);
                 // only where J is kept across iterations: elsewhere the
                 // factors would serve one solve and cost their copies
+                if jac_constant && !factored {
+                    // assigned, not inserted through a closure: the
+                    // factors (kilobytes) are then formed in place
+                    factors = KktFactors::with_constraint_jacobian(&jac, &g1);
+                    factored = true;
+                }
                 let fast = if jac_constant {
-                    factors
-                        .get_or_insert_with(|| KktFactors::new(&jac, &neg_g1t))
-                        .as_ref()
-                        .and_then(|f| {
-                            // a chord step: S and G₂ (in the constraint
-                            // row) of an earlier iterate, see `keep_schur`;
-                            // d and c are evaluated exactly, so the
-                            // tolerance means the same. Skips forming S
-                            // (O(nnz(G₂)·C)) and its O(C³/3) factorisation.
-                            chord = keep_schur && schur.is_formed();
-                            if chord && let Some(sol) = f.solve_chord(&schur, &r, &cc) {
-                                return Some(sol);
-                            }
-                            chord = false;
-                            f.solve_keeping(&g2, &r, &cc, &mut schur)
-                        })
+                    factors.as_ref().and_then(|f| {
+                        // a chord step: S and G₂ (in the constraint
+                        // row) of an earlier iterate, see `keep_schur`;
+                        // d and c are evaluated exactly, so the
+                        // tolerance means the same. Skips forming S
+                        // (O(nnz(G₂)·C)) and its O(C³/3) factorisation.
+                        chord = keep_schur && schur.is_formed();
+                        if chord && let Some(sol) = f.solve_chord(&schur, &r, &cc) {
+                            return Some(sol);
+                        }
+                        chord = false;
+                        f.solve_keeping(&g2, &r, &cc, &mut schur)
+                    })
                 } else {
                     None
                 };
                 match fast {
                     Some(sol) => sol,
                     None => {
+                        // B = −G₁ᵀ, formed at the step's first general
+                        // KKT solve (J moves with v, or J's factors failed)
+                        let b = neg_g1t.get_or_insert_with(|| -g1t);
                         let (sol, reg) =
-                            solve_kkt_regularised(&jac, &neg_g1t, &g2, &r, &cc).ok_or(singular)?;
+                            solve_kkt_regularised(&jac, b, &g2, &r, &cc).ok_or(singular)?;
                         regularised |= reg;
                         sol
                     }
