@@ -734,15 +734,18 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             if !((MID && reuse_jac) || (jac_constant && iteration > 0)) {
                 // −M − a₁·D in one pass over the storage (nalgebra's
                 // element-wise operators iterate with per-element
-                // bookkeeping that costs more than the arithmetic)
-                jac = t.mass;
+                // bookkeeping that costs more than the arithmetic), read
+                // from M and D where they are (copying M into J first costs
+                // a memcpy of N² numbers)
+                let mass = t.mass.as_slice().iter();
                 if M::DISSIPATIVE {
-                    for (j, dmp) in jac.as_mut_slice().iter_mut().zip(t.damping.as_slice()) {
-                        *j = -*j - a1 * dmp;
+                    let md = mass.zip(t.damping.as_slice());
+                    for (j, (m, dmp)) in jac.as_mut_slice().iter_mut().zip(md) {
+                        *j = -*m - a1 * dmp;
                     }
                 } else {
-                    for j in jac.as_mut_slice() {
-                        *j = -*j;
+                    for (j, m) in jac.as_mut_slice().iter_mut().zip(mass) {
+                        *j = -*m;
                     }
                 }
                 if !M::CONSTANT_MASS {
