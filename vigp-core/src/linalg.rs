@@ -409,11 +409,11 @@ fn minus_rows_times<const N: usize, const C: usize>(
     jb_rows: &[[f64; C]; N],
     y: &[f64; C],
 ) -> SVector<f64, N> {
-    let mut x = SVector::<f64, N>::from(jr);
+    let mut x = jr;
     for (xk, row) in x.iter_mut().zip(jb_rows.iter()) {
         *xk -= dot(row, y);
     }
-    x
+    SVector::from(x)
 }
 
 /// `Some((x, y))` when every entry is finite.
@@ -422,11 +422,14 @@ fn finite_solution<const N: usize, const C: usize>(
     x: SVector<f64, N>,
     y: [f64; C],
 ) -> Option<KktSolution<N, C>> {
-    let y = SVector::from(y);
-    x.iter()
+    // on the slices, AND-ed without a branch per entry (nalgebra's element
+    // iterator and `all`'s early exit each cost more than the test)
+    let finite = x
+        .as_slice()
+        .iter()
         .chain(y.iter())
-        .all(|v| v.is_finite())
-        .then_some((x, y))
+        .fold(true, |ok, v| ok & v.is_finite());
+    finite.then(|| (x, SVector::from(y)))
 }
 
 /// Σ_j a_j b_j.
@@ -676,7 +679,7 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         match &self.j {
             JInverse::Diagonal(inv) => {
                 let mut jr = [0.0f64; N];
-                for ((x, rk), ik) in jr.iter_mut().zip(r.iter()).zip(inv.iter()) {
+                for ((x, rk), ik) in jr.iter_mut().zip(r.as_slice()).zip(inv.iter()) {
                     *x = rk * ik;
                 }
                 jr
@@ -747,7 +750,7 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         // A·(J⁻¹r) − c, column by column (A is stored by columns): with no
         // S to form, testing A's zeros costs more than multiplying them
         let mut rhs = [0.0f64; C];
-        for (rh, ci) in rhs.iter_mut().zip(c.iter()) {
+        for (rh, ci) in rhs.iter_mut().zip(c.as_slice()) {
             *rh = -ci;
         }
         for (col, x) in schur.a.as_slice().chunks_exact(C).zip(jr.iter()) {

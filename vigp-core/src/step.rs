@@ -628,7 +628,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             s => s,
         };
         let mut l_scale = 1.0f64;
-        for (x, kind) in x1.iter().zip(M::KINDS.iter()) {
+        for (x, kind) in x1.as_slice().iter().zip(M::KINDS.iter()) {
             if *kind == CoordinateKind::Length {
                 l_scale = l_scale.max(1.0 + x.abs());
             }
@@ -679,8 +679,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         };
         let mut lambda = SVector::<f64, C>::zeros();
         let (mut d, mut qm) = residual(t, &bu, &v, &lambda);
-        let (mut c, mut g2) = constraint(&v);
-        let mut err = error(&d, &c);
+        // c and G₂ at the iterate (`cg[cur]`) and at the line search's
+        // trial point (`cg[1 - cur]`): a trial point is accepted by
+        // switching `cur`, without copying G₂ (C × N numbers)
+        let mut cg = [constraint(&v), (SVector::zeros(), SMatrix::zeros())];
+        let mut cur = 0;
+        let mut err = error(&d, &cg[cur].0);
         let mut regularised = false;
         let momentum = |t: &Terms<N>, bu: &SVector<f64, N>, v: &SVector<f64, N>| {
             if MID {
@@ -792,7 +796,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 (dv, SVector::zeros())
             } else {
                 // J Δv − G₁ᵀΔλ = −d,  G₂ Δv = −c/h
-                let (r, cc) = (-d, c / -h);
+                let (r, cc) = (-d, cg[cur].0 / -h);
                 // only where J is kept across iterations: elsewhere the
                 // factors would serve one solve and cost their copies
                 if jac_constant && !factored {
@@ -813,7 +817,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                             return Some(sol);
                         }
                         chord = false;
-                        f.solve_keeping(&g2, &r, &cc, &mut schur)
+                        f.solve_keeping(&cg[cur].1, &r, &cc, &mut schur)
                     })
                 } else {
                     None
@@ -825,7 +829,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         // KKT solve (J moves with v, or J's factors failed)
                         let b = neg_g1t.get_or_insert_with(|| -g1t);
                         let (sol, reg) =
-                            solve_kkt_regularised(&jac, b, &g2, &r, &cc).ok_or(singular)?;
+                            solve_kkt_regularised(&jac, b, &cg[cur].1, &r, &cc).ok_or(singular)?;
                         regularised |= reg;
                         sol
                     }
@@ -842,8 +846,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     }
                 }
                 let (dn, qn) = residual(t, &bu, &vn, &ln);
-                let (cn, g2n) = constraint(&vn);
-                let errn = error(&dn, &cn);
+                cg[1 - cur] = constraint(&vn);
+                let errn = error(&dn, &cg[1 - cur].0);
                 if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
                     reuse_jac = step == 1.0 && errn <= 0.01 * err;
                     if jac_constant && C > 0 {
@@ -859,7 +863,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         // a rollout's extrapolated guess).
                         keep_schur = step == 1.0 && h.abs() * max_abs(&dv) * errn <= opts.tolerance;
                     }
-                    (v, lambda, d, qm, c, g2, err) = (vn, ln, dn, qn, cn, g2n, errn);
+                    (v, lambda, d, qm, err) = (vn, ln, dn, qn, errn);
+                    cur = 1 - cur;
                     break;
                 }
                 step *= 0.5;
