@@ -578,6 +578,20 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
     finite_solution(x, y)
 }
 
+/// Whether every entry is finite, AND-ed without a branch per entry
+/// (`all` stops at the first non-finite one, a test and a branch each; a
+/// flattening iterator is not always inlined).
+#[inline(always)]
+fn all_finite<const N: usize, const C: usize>(rows: &[[f64; C]; N]) -> bool {
+    let mut ok = true;
+    for row in rows {
+        for x in row {
+            ok &= x.is_finite();
+        }
+    }
+    ok
+}
+
 /// How [`KktFactors`] applies J⁻¹: a diagonal J by its reciprocals, any
 /// other by partial-pivoting LU.
 #[derive(Clone, Copy, Debug)]
@@ -599,6 +613,17 @@ enum JInverse<const N: usize> {
 pub struct KktFactors<const N: usize, const C: usize> {
     j: JInverse<N>,
     jb_rows: [[f64; C]; N],
+}
+
+impl<const N: usize, const C: usize> Default for KktFactors<N, C> {
+    /// The factors of J = I and B = 0 (a holder for
+    /// [`KktFactors::factor_constraint_jacobian`]).
+    fn default() -> Self {
+        Self {
+            j: JInverse::Diagonal([1.0; N]),
+            jb_rows: [[0.0; C]; N],
+        }
+    }
 }
 
 impl<const N: usize, const C: usize> KktFactors<N, C> {
@@ -650,6 +675,40 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         Self::if_finite(JInverse::Diagonal(inv), jb_rows)
     }
 
+    /// [`KktFactors::with_constraint_jacobian`] in place: `self` becomes
+    /// those factors, formed where they stay (returned in an `Option`, the
+    /// factors — kilobytes — are copied on the way), and `true` is
+    /// returned; `false` where `with_constraint_jacobian` gives `None`
+    /// (`self` then holds unspecified factors).
+    #[inline(always)]
+    pub fn factor_constraint_jacobian(
+        &mut self,
+        j: &SMatrix<f64, N, N>,
+        g: &SMatrix<f64, C, N>,
+    ) -> bool {
+        let Some(inv) = invertible_diagonal(j) else {
+            return match Self::from_lu(j, &-g.transpose()) {
+                Some(f) => {
+                    *self = f;
+                    true
+                }
+                None => false,
+            };
+        };
+        for ((row, col), ik) in self
+            .jb_rows
+            .iter_mut()
+            .zip(g.as_slice().chunks_exact(C))
+            .zip(inv.iter())
+        {
+            for (x, gik) in row.iter_mut().zip(col.iter()) {
+                *x = -gik * ik;
+            }
+        }
+        self.j = JInverse::Diagonal(inv);
+        all_finite(&self.jb_rows)
+    }
+
     /// The factors of a J that is not diagonal: partial pivoting with the
     /// relative pivot threshold 1e-12 of [`solve_kkt`].
     fn from_lu(j: &SMatrix<f64, N, N>, b: &SMatrix<f64, N, C>) -> Option<Self> {
@@ -657,16 +716,10 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         Self::if_finite(JInverse::Lu(lu), rows_of(&lu.solve_matrix(b)))
     }
 
-    /// `Some` when every entry of J⁻¹B is finite (AND-ed without a branch
-    /// per entry: `all` stops at the first non-finite one, a test and a
-    /// branch each).
+    /// `Some` when every entry of J⁻¹B is finite.
     #[inline(always)]
     fn if_finite(j: JInverse<N>, jb_rows: [[f64; C]; N]) -> Option<Self> {
-        let finite = jb_rows
-            .iter()
-            .flatten()
-            .fold(true, |ok, x| ok & x.is_finite());
-        if finite {
+        if all_finite(&jb_rows) {
             Some(Self { j, jb_rows })
         } else {
             None
@@ -1182,10 +1235,22 @@ mod tests {
             let from_b = KktFactors::new(&j, &-g.transpose()).unwrap();
             assert_eq!(from_g.jb_rows, from_b.jb_rows);
             assert_eq!(from_g.solve(&a, &r, &c), from_b.solve(&a, &r, &c));
+            // in place, over factors of another J (diagonal or not)
+            for mut held in [
+                KktFactors::default(),
+                from_b,
+                KktFactors::new(&coupled, &b).unwrap(),
+            ] {
+                assert!(held.factor_constraint_jacobian(&j, &g));
+                assert_eq!(held.jb_rows, from_b.jb_rows);
+                assert_eq!(held.solve(&a, &r, &c), from_b.solve(&a, &r, &c));
+            }
         }
-        assert!(KktFactors::with_constraint_jacobian(&singular, &g).is_none());
         let mut inf = g;
         inf[(1, 3)] = f64::INFINITY;
-        assert!(KktFactors::with_constraint_jacobian(&diag, &inf).is_none());
+        for (j, g) in [(singular, g), (diag, inf)] {
+            assert!(KktFactors::with_constraint_jacobian(&j, &g).is_none());
+            assert!(!KktFactors::default().factor_constraint_jacobian(&j, &g));
+        }
     }
 }

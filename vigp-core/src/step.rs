@@ -703,10 +703,11 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         // x₁, so J = −M − a₁·D(x₁) is the same in every iteration
         let jac_constant = !MID && M::CONSTANT_MASS;
         // J's factorisation and J⁻¹B (B = −G₁ᵀ is fixed for the step),
-        // formed at the first KKT solve when `jac_constant` (`factored`):
-        // `None` after that = J needs the robust solve
-        let mut factors: Option<KktFactors<N, C>> = None;
-        let mut factored = false;
+        // formed in place at the first KKT solve when `jac_constant`
+        // (`factored`); `factors_ok` false after that = J needs the robust
+        // solve
+        let mut factors = KktFactors::<N, C>::default();
+        let (mut factored, mut factors_ok) = (false, false);
         // B = −G₁ᵀ for the general KKT solve, formed at its first use
         let mut neg_g1t: Option<SMatrix<f64, N, C>> = None;
         // with them: the factored Schur complement S = G₂J⁻¹B of the last
@@ -800,25 +801,29 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 // only where J is kept across iterations: elsewhere the
                 // factors would serve one solve and cost their copies
                 if jac_constant && !factored {
-                    // assigned, not inserted through a closure: the
-                    // factors (kilobytes) are then formed in place
-                    factors = KktFactors::with_constraint_jacobian(&jac, &g1);
+                    // in place: returned in an Option, the factors
+                    // (kilobytes) would be copied on the way
+                    factors_ok = factors.factor_constraint_jacobian(&jac, &g1);
                     factored = true;
                 }
-                let fast = if jac_constant {
-                    factors.as_ref().and_then(|f| {
-                        // a chord step: S and G₂ (in the constraint
-                        // row) of an earlier iterate, see `keep_schur`;
-                        // d and c are evaluated exactly, so the
-                        // tolerance means the same. Skips forming S
-                        // (O(nnz(G₂)·C)) and its O(C³/3) factorisation.
-                        chord = keep_schur && schur.is_formed();
-                        if chord && let Some(sol) = f.solve_chord(&schur, &r, &cc) {
-                            return Some(sol);
-                        }
+                let fast = if jac_constant && factors_ok {
+                    // a chord step: S and G₂ (in the constraint row) of
+                    // an earlier iterate, see `keep_schur`; d and c are
+                    // evaluated exactly, so the tolerance means the same.
+                    // Skips forming S (O(nnz(G₂)·C)) and its O(C³/3)
+                    // factorisation.
+                    chord = keep_schur && schur.is_formed();
+                    let sol = if chord {
+                        factors.solve_chord(&schur, &r, &cc)
+                    } else {
+                        None
+                    };
+                    if sol.is_some() {
+                        sol
+                    } else {
                         chord = false;
-                        f.solve_keeping(&cg[cur].1, &r, &cc, &mut schur)
-                    })
+                        factors.solve_keeping(&cg[cur].1, &r, &cc, &mut schur)
+                    }
                 } else {
                     None
                 };
