@@ -409,11 +409,11 @@ fn minus_rows_times<const N: usize, const C: usize>(
     jb_rows: &[[f64; C]; N],
     y: &[f64; C],
 ) -> SVector<f64, N> {
-    let mut x = SVector::<f64, N>::from(jr);
+    let mut x = jr;
     for (xk, row) in x.iter_mut().zip(jb_rows.iter()) {
         *xk -= dot(row, y);
     }
-    x
+    SVector::from(x)
 }
 
 /// `Some((x, y))` when every entry is finite.
@@ -422,11 +422,14 @@ fn finite_solution<const N: usize, const C: usize>(
     x: SVector<f64, N>,
     y: [f64; C],
 ) -> Option<KktSolution<N, C>> {
-    let y = SVector::from(y);
-    x.iter()
+    // on the slices, AND-ed without a branch per entry (nalgebra's element
+    // iterator and `all`'s early exit each cost more than the test)
+    let finite = x
+        .as_slice()
+        .iter()
         .chain(y.iter())
-        .all(|v| v.is_finite())
-        .then_some((x, y))
+        .fold(true, |ok, v| ok & v.is_finite());
+    finite.then(|| (x, SVector::from(y)))
 }
 
 /// Σ_j a_j b_j.
@@ -516,6 +519,9 @@ impl<const C: usize> FullPivLu<C> {
 
 /// `Some(1/diag)` when `j` is diagonal (exact zeros off the diagonal) with
 /// a finite, nonzero diagonal whose reciprocals are finite.
+// inlined into its three callers (one per KKT entry point): out of line,
+// the call costs more than the test for the small N of a tree
+#[inline(always)]
 fn invertible_diagonal<const N: usize>(j: &SMatrix<f64, N, N>) -> Option<[f64; N]> {
     // column-major storage: column k holds the diagonal entry at row k.
     // Branch-free test for a nonzero off the diagonal: OR the bits of every
@@ -572,6 +578,20 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
     finite_solution(x, y)
 }
 
+/// Whether every entry is finite, AND-ed without a branch per entry
+/// (`all` stops at the first non-finite one, a test and a branch each; a
+/// flattening iterator is not always inlined).
+#[inline(always)]
+fn all_finite<const N: usize, const C: usize>(rows: &[[f64; C]; N]) -> bool {
+    let mut ok = true;
+    for row in rows {
+        for x in row {
+            ok &= x.is_finite();
+        }
+    }
+    ok
+}
+
 /// How [`KktFactors`] applies J⁻¹: a diagonal J by its reciprocals, any
 /// other by partial-pivoting LU.
 #[derive(Clone, Copy, Debug)]
@@ -595,6 +615,17 @@ pub struct KktFactors<const N: usize, const C: usize> {
     jb_rows: [[f64; C]; N],
 }
 
+impl<const N: usize, const C: usize> Default for KktFactors<N, C> {
+    /// The factors of J = I and B = 0 (a holder for
+    /// [`KktFactors::factor_constraint_jacobian`]).
+    fn default() -> Self {
+        Self {
+            j: JInverse::Diagonal([1.0; N]),
+            jb_rows: [[0.0; C]; N],
+        }
+    }
+}
+
 impl<const N: usize, const C: usize> KktFactors<N, C> {
     /// Factor J (diagonal, or partial pivoting with the relative pivot
     /// threshold 1e-12 of [`solve_kkt`]) and form J⁻¹B. `None` when J is
@@ -612,16 +643,87 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
             }
             (JInverse::Diagonal(inv), jb_rows)
         } else {
-            let lu = PartialLu::new(*j, 1e-12)?;
-            (JInverse::Lu(lu), rows_of(&lu.solve_matrix(b)))
+            return Self::from_lu(j, b);
         };
-        // AND-ed without a branch per entry (`all` stops at the first
-        // non-finite one, a test and a branch each)
-        jb_rows
-            .iter()
-            .flatten()
-            .fold(true, |ok, x| ok & x.is_finite())
-            .then_some(Self { j, jb_rows })
+        Self::if_finite(j, jb_rows)
+    }
+
+    /// [`KktFactors::new`] with B = −Gᵀ (the constraint forces of a step,
+    /// G the constraint Jacobian at the step's start), read from G's
+    /// storage: G is stored by columns, so column k of G is row k of B up
+    /// to the sign and, for a diagonal J, row k of J⁻¹B is −(1/J_kk) times
+    /// it — no transposed or negated copy of G is formed. The factors are
+    /// those of `new(j, &-g.transpose())`, bit for bit.
+    #[inline(always)]
+    pub fn with_constraint_jacobian(
+        j: &SMatrix<f64, N, N>,
+        g: &SMatrix<f64, C, N>,
+    ) -> Option<Self> {
+        let Some(inv) = invertible_diagonal(j) else {
+            return Self::from_lu(j, &-g.transpose());
+        };
+        let mut jb_rows = [[0.0f64; C]; N];
+        for ((row, col), ik) in jb_rows
+            .iter_mut()
+            .zip(g.as_slice().chunks_exact(C))
+            .zip(inv.iter())
+        {
+            for (x, gik) in row.iter_mut().zip(col.iter()) {
+                *x = -gik * ik;
+            }
+        }
+        Self::if_finite(JInverse::Diagonal(inv), jb_rows)
+    }
+
+    /// [`KktFactors::with_constraint_jacobian`] in place: `self` becomes
+    /// those factors, formed where they stay (returned in an `Option`, the
+    /// factors — kilobytes — are copied on the way), and `true` is
+    /// returned; `false` where `with_constraint_jacobian` gives `None`
+    /// (`self` then holds unspecified factors).
+    #[inline(always)]
+    pub fn factor_constraint_jacobian(
+        &mut self,
+        j: &SMatrix<f64, N, N>,
+        g: &SMatrix<f64, C, N>,
+    ) -> bool {
+        let Some(inv) = invertible_diagonal(j) else {
+            return match Self::from_lu(j, &-g.transpose()) {
+                Some(f) => {
+                    *self = f;
+                    true
+                }
+                None => false,
+            };
+        };
+        for ((row, col), ik) in self
+            .jb_rows
+            .iter_mut()
+            .zip(g.as_slice().chunks_exact(C))
+            .zip(inv.iter())
+        {
+            for (x, gik) in row.iter_mut().zip(col.iter()) {
+                *x = -gik * ik;
+            }
+        }
+        self.j = JInverse::Diagonal(inv);
+        all_finite(&self.jb_rows)
+    }
+
+    /// The factors of a J that is not diagonal: partial pivoting with the
+    /// relative pivot threshold 1e-12 of [`solve_kkt`].
+    fn from_lu(j: &SMatrix<f64, N, N>, b: &SMatrix<f64, N, C>) -> Option<Self> {
+        let lu = PartialLu::new(*j, 1e-12)?;
+        Self::if_finite(JInverse::Lu(lu), rows_of(&lu.solve_matrix(b)))
+    }
+
+    /// `Some` when every entry of J⁻¹B is finite.
+    #[inline(always)]
+    fn if_finite(j: JInverse<N>, jb_rows: [[f64; C]; N]) -> Option<Self> {
+        if all_finite(&jb_rows) {
+            Some(Self { j, jb_rows })
+        } else {
+            None
+        }
     }
 
     /// J⁻¹r.
@@ -630,7 +732,7 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         match &self.j {
             JInverse::Diagonal(inv) => {
                 let mut jr = [0.0f64; N];
-                for ((x, rk), ik) in jr.iter_mut().zip(r.iter()).zip(inv.iter()) {
+                for ((x, rk), ik) in jr.iter_mut().zip(r.as_slice()).zip(inv.iter()) {
                     *x = rk * ik;
                 }
                 jr
@@ -701,7 +803,7 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         // A·(J⁻¹r) − c, column by column (A is stored by columns): with no
         // S to form, testing A's zeros costs more than multiplying them
         let mut rhs = [0.0f64; C];
-        for (rh, ci) in rhs.iter_mut().zip(c.iter()) {
+        for (rh, ci) in rhs.iter_mut().zip(c.as_slice()) {
             *rh = -ci;
         }
         for (col, x) in schur.a.as_slice().chunks_exact(C).zip(jr.iter()) {
@@ -1125,5 +1227,30 @@ mod tests {
         let mut singular = diag;
         singular[(2, 2)] = 0.0;
         assert!(KktFactors::new(&singular, &b).is_none());
+        // the factors from G (B = −Gᵀ, read from G's columns) are those of
+        // `new` with the formed B, bit for bit, diagonal J or not
+        let g = a + SMatrix::<f64, C, N>::from_fn(|i, k| 0.01 * (i as f64 - k as f64));
+        for j in [diag, coupled] {
+            let from_g = KktFactors::with_constraint_jacobian(&j, &g).unwrap();
+            let from_b = KktFactors::new(&j, &-g.transpose()).unwrap();
+            assert_eq!(from_g.jb_rows, from_b.jb_rows);
+            assert_eq!(from_g.solve(&a, &r, &c), from_b.solve(&a, &r, &c));
+            // in place, over factors of another J (diagonal or not)
+            for mut held in [
+                KktFactors::default(),
+                from_b,
+                KktFactors::new(&coupled, &b).unwrap(),
+            ] {
+                assert!(held.factor_constraint_jacobian(&j, &g));
+                assert_eq!(held.jb_rows, from_b.jb_rows);
+                assert_eq!(held.solve(&a, &r, &c), from_b.solve(&a, &r, &c));
+            }
+        }
+        let mut inf = g;
+        inf[(1, 3)] = f64::INFINITY;
+        for (j, g) in [(singular, g), (diag, inf)] {
+            assert!(KktFactors::with_constraint_jacobian(&j, &g).is_none());
+            assert!(!KktFactors::default().factor_constraint_jacobian(&j, &g));
+        }
     }
 }

@@ -628,18 +628,20 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             s => s,
         };
         let mut l_scale = 1.0f64;
-        for (x, kind) in x1.iter().zip(M::KINDS.iter()) {
+        for (x, kind) in x1.as_slice().iter().zip(M::KINDS.iter()) {
             if *kind == CoordinateKind::Length {
                 l_scale = l_scale.max(1.0 + x.abs());
             }
         }
         let (inv_p, inv_l) = (1.0 / p_scale, 1.0 / l_scale);
-        let g1t: SMatrix<f64, N, C> = if C > 0 {
-            model.constraints_and_jacobian(k, x1).1.transpose()
+        // G₁ = G(x₁), fixed for the step, and G₁ᵀ for the constraint
+        // forces −G₁ᵀλ (J⁻¹B, B = −G₁ᵀ, is read from G₁'s columns)
+        let g1: SMatrix<f64, C, N> = if C > 0 {
+            model.constraints_and_jacobian(k, x1).1
         } else {
             SMatrix::zeros()
         };
-        let neg_g1t = -g1t;
+        let g1t = g1.transpose();
         let a1 = (1.0 - alpha) * h;
         // residual d(v, λ) and Q (row l = (∂M/∂q_l v)ᵀ, which the Newton
         // matrix reuses); constraint c(v) and its Jacobian G(x₁ + h v)
@@ -655,6 +657,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 }
                 let mut d = p0 + f * a1 - M::mass_times(t, v);
                 if C > 0 {
+                    // G₁ᵀ stored: its columns are contiguous, so the
+                    // product vectorises (G₁ᵀλ from G₁'s columns would be
+                    // a dot product per row, serial in rounding order)
                     d -= g1t * lambda;
                 }
                 (d, q)
@@ -674,8 +679,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         };
         let mut lambda = SVector::<f64, C>::zeros();
         let (mut d, mut qm) = residual(t, &bu, &v, &lambda);
-        let (mut c, mut g2) = constraint(&v);
-        let mut err = error(&d, &c);
+        // c and G₂ at the iterate (`cg[cur]`) and at the line search's
+        // trial point (`cg[1 - cur]`): a trial point is accepted by
+        // switching `cur`, without copying G₂ (C × N numbers)
+        let mut cg = [constraint(&v), (SVector::zeros(), SMatrix::zeros())];
+        let mut cur = 0;
+        let mut err = error(&d, &cg[cur].0);
         let mut regularised = false;
         let momentum = |t: &Terms<N>, bu: &SVector<f64, N>, v: &SVector<f64, N>| {
             if MID {
@@ -694,9 +703,13 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         // x₁, so J = −M − a₁·D(x₁) is the same in every iteration
         let jac_constant = !MID && M::CONSTANT_MASS;
         // J's factorisation and J⁻¹B (B = −G₁ᵀ is fixed for the step),
-        // formed at the first KKT solve when `jac_constant`: `None` = to be
-        // formed, `Some(None)` = J needs the robust solve
-        let mut factors: Option<Option<KktFactors<N, C>>> = None;
+        // formed in place at the first KKT solve when `jac_constant`
+        // (`factored`); `factors_ok` false after that = J needs the robust
+        // solve
+        let mut factors = KktFactors::<N, C>::default();
+        let (mut factored, mut factors_ok) = (false, false);
+        // B = −G₁ᵀ for the general KKT solve, formed at its first use
+        let mut neg_g1t: Option<SMatrix<f64, N, C>> = None;
         // with them: the factored Schur complement S = G₂J⁻¹B of the last
         // fresh KKT solve and the G₂ it was formed from, and whether the
         // next iteration is a chord step with them (`keep_schur`, below)
@@ -726,15 +739,18 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             if !((MID && reuse_jac) || (jac_constant && iteration > 0)) {
                 // −M − a₁·D in one pass over the storage (nalgebra's
                 // element-wise operators iterate with per-element
-                // bookkeeping that costs more than the arithmetic)
-                jac = t.mass;
+                // bookkeeping that costs more than the arithmetic), read
+                // from M and D where they are (copying M into J first costs
+                // a memcpy of N² numbers)
+                let mass = t.mass.as_slice().iter();
                 if M::DISSIPATIVE {
-                    for (j, dmp) in jac.as_mut_slice().iter_mut().zip(t.damping.as_slice()) {
-                        *j = -*j - a1 * dmp;
+                    let md = mass.zip(t.damping.as_slice());
+                    for (j, (m, dmp)) in jac.as_mut_slice().iter_mut().zip(md) {
+                        *j = -*m - a1 * dmp;
                     }
                 } else {
-                    for j in jac.as_mut_slice() {
-                        *j = -*j;
+                    for (j, m) in jac.as_mut_slice().iter_mut().zip(mass) {
+                        *j = -*m;
                     }
                 }
                 if !M::CONSTANT_MASS {
@@ -781,34 +797,44 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 (dv, SVector::zeros())
             } else {
                 // J Δv − G₁ᵀΔλ = −d,  G₂ Δv = −c/h
-                let (r, cc) = (-d, c / -h);
+                let (r, cc) = (-d, cg[cur].0 / -h);
                 // only where J is kept across iterations: elsewhere the
                 // factors would serve one solve and cost their copies
-                let fast = if jac_constant {
-                    factors
-                        .get_or_insert_with(|| KktFactors::new(&jac, &neg_g1t))
-                        .as_ref()
-                        .and_then(|f| {
-                            // a chord step: S and G₂ (in the constraint
-                            // row) of an earlier iterate, see `keep_schur`;
-                            // d and c are evaluated exactly, so the
-                            // tolerance means the same. Skips forming S
-                            // (O(nnz(G₂)·C)) and its O(C³/3) factorisation.
-                            chord = keep_schur && schur.is_formed();
-                            if chord && let Some(sol) = f.solve_chord(&schur, &r, &cc) {
-                                return Some(sol);
-                            }
-                            chord = false;
-                            f.solve_keeping(&g2, &r, &cc, &mut schur)
-                        })
+                if jac_constant && !factored {
+                    // in place: returned in an Option, the factors
+                    // (kilobytes) would be copied on the way
+                    factors_ok = factors.factor_constraint_jacobian(&jac, &g1);
+                    factored = true;
+                }
+                let fast = if jac_constant && factors_ok {
+                    // a chord step: S and G₂ (in the constraint row) of
+                    // an earlier iterate, see `keep_schur`; d and c are
+                    // evaluated exactly, so the tolerance means the same.
+                    // Skips forming S (O(nnz(G₂)·C)) and its O(C³/3)
+                    // factorisation.
+                    chord = keep_schur && schur.is_formed();
+                    let sol = if chord {
+                        factors.solve_chord(&schur, &r, &cc)
+                    } else {
+                        None
+                    };
+                    if sol.is_some() {
+                        sol
+                    } else {
+                        chord = false;
+                        factors.solve_keeping(&cg[cur].1, &r, &cc, &mut schur)
+                    }
                 } else {
                     None
                 };
                 match fast {
                     Some(sol) => sol,
                     None => {
+                        // B = −G₁ᵀ, formed at the step's first general
+                        // KKT solve (J moves with v, or J's factors failed)
+                        let b = neg_g1t.get_or_insert_with(|| -g1t);
                         let (sol, reg) =
-                            solve_kkt_regularised(&jac, &neg_g1t, &g2, &r, &cc).ok_or(singular)?;
+                            solve_kkt_regularised(&jac, b, &cg[cur].1, &r, &cc).ok_or(singular)?;
                         regularised |= reg;
                         sol
                     }
@@ -825,8 +851,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     }
                 }
                 let (dn, qn) = residual(t, &bu, &vn, &ln);
-                let (cn, g2n) = constraint(&vn);
-                let errn = error(&dn, &cn);
+                cg[1 - cur] = constraint(&vn);
+                let errn = error(&dn, &cg[1 - cur].0);
                 if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
                     reuse_jac = step == 1.0 && errn <= 0.01 * err;
                     if jac_constant && C > 0 {
@@ -842,7 +868,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         // a rollout's extrapolated guess).
                         keep_schur = step == 1.0 && h.abs() * max_abs(&dv) * errn <= opts.tolerance;
                     }
-                    (v, lambda, d, qm, c, g2, err) = (vn, ln, dn, qn, cn, g2n, errn);
+                    (v, lambda, d, qm, err) = (vn, ln, dn, qn, errn);
+                    cur = 1 - cur;
                     break;
                 }
                 step *= 0.5;
