@@ -654,25 +654,12 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
     /// to the sign and, for a diagonal J, row k of J⁻¹B is −(1/J_kk) times
     /// it — no transposed or negated copy of G is formed. The factors are
     /// those of `new(j, &-g.transpose())`, bit for bit.
-    #[inline(always)]
     pub fn with_constraint_jacobian(
         j: &SMatrix<f64, N, N>,
         g: &SMatrix<f64, C, N>,
     ) -> Option<Self> {
-        let Some(inv) = invertible_diagonal(j) else {
-            return Self::from_lu(j, &-g.transpose());
-        };
-        let mut jb_rows = [[0.0f64; C]; N];
-        for ((row, col), ik) in jb_rows
-            .iter_mut()
-            .zip(g.as_slice().chunks_exact(C))
-            .zip(inv.iter())
-        {
-            for (x, gik) in row.iter_mut().zip(col.iter()) {
-                *x = -gik * ik;
-            }
-        }
-        Self::if_finite(JInverse::Diagonal(inv), jb_rows)
+        let mut f = Self::default();
+        f.factor_constraint_jacobian(j, g).then_some(f)
     }
 
     /// [`KktFactors::with_constraint_jacobian`] in place: `self` becomes
