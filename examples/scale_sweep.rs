@@ -22,7 +22,13 @@
 //! `target/scale_sweep.csv` with a log–log figure `target/scale_sweep.svg`
 //! (`--plot some.csv` redraws the figure of a saved CSV as `some.svg`).
 //! `--noise 0` trains on noise-free data, which separates the
-//! observation-noise floor from the rest.
+//! observation-noise floor from the rest. `--sparse-also` trains the sparse
+//! GP as well at every N where the exact one runs (N > M), on the same
+//! samples, and prints the ratio of their errors:
+//!
+//! ```text
+//! cargo run --release --example scale_sweep -- --n 1024,2048,4096 --exact-max 4096 --sparse-m 256 --sparse-also --restarts 1
+//! ```
 
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -70,6 +76,8 @@ struct Cli {
     test_trajectories: usize,
     windows: usize,
     seed: u64,
+    /// Also train the sparse GP where the exact one runs (N > M).
+    sparse_also: bool,
 }
 
 fn parse() -> Result<Cli, String> {
@@ -99,6 +107,7 @@ fn parse() -> Result<Cli, String> {
         test_trajectories: num("--test-trajectories", 20.0)? as usize,
         windows: num("--windows", 10.0)? as usize,
         seed: num("--seed", 1.0)? as u64,
+        sparse_also: args.iter().any(|a| a == "--sparse-also"),
     })
 }
 
@@ -218,51 +227,71 @@ where
     };
     let nominal_vi = Variational::new(nmin, DT);
     let nominal_mse = mse(&|z| nominal_vi.rollout(z, HORIZON));
-    let mut warm = None;
+    // Warm starts: one chain for the main method at each N, one for the
+    // sparse GP trained beside the exact one (`--sparse-also`).
+    let (mut warm, mut warm_also) = (None, None);
     for &n in &cli.n {
         let n = n.min(pool.len());
         let sparse = n > cli.exact_max;
-        let opts = TrainOptions {
-            restarts: cli.restarts,
-            seed: cli.seed ^ n as u64,
-            method: if sparse {
-                Method::Sparse(SparseOptions::kmeans(cli.sparse_m.min(n)))
+        let also = cli.sparse_also && !sparse && n > cli.sparse_m;
+        let mut exact_mse = None;
+        for sparse in std::iter::once(sparse).chain(also.then_some(true)) {
+            let warm = if sparse && also {
+                &mut warm_also
             } else {
-                Method::Exact
-            },
-            warm_start: warm.clone(),
-            ..TrainOptions::default()
-        };
-        let t0 = Instant::now();
-        let (l, _) = Learned::train(
-            nmin,
-            DT,
-            &pool[..n],
-            Encoding::SinCos,
-            Prior::Nominal,
-            &opts,
-        )?;
-        let train_s = t0.elapsed().as_secs_f64();
-        warm = Some(l.gp().warm_start());
-        let m = mse(&|z| l.rollout(z, HORIZON));
-        let noise_var = l.gp().output(0).hyperparameters_original().noise_variance;
-        let method = if sparse {
-            format!("sparse M={}", cli.sparse_m.min(n))
-        } else {
-            "exact".into()
-        };
-        println!(
-            "{name:9} N {n:6} {method:13} 20-step MSE {m:.3e} (nominal {nominal_mse:.3e}), trained in {train_s:.1} s, σ_n² {noise_var:.2e}"
-        );
-        rows.push(Row {
-            system: name,
-            n,
-            method,
-            mse: m,
-            nominal_mse,
-            train_s,
-            noise_var,
-        });
+                &mut warm
+            };
+            let opts = TrainOptions {
+                restarts: cli.restarts,
+                seed: cli.seed ^ n as u64,
+                method: if sparse {
+                    Method::Sparse(SparseOptions::kmeans(cli.sparse_m.min(n)))
+                } else {
+                    Method::Exact
+                },
+                warm_start: warm.clone(),
+                ..TrainOptions::default()
+            };
+            let t0 = Instant::now();
+            let (l, _) = Learned::train(
+                nmin,
+                DT,
+                &pool[..n],
+                Encoding::SinCos,
+                Prior::Nominal,
+                &opts,
+            )?;
+            let train_s = t0.elapsed().as_secs_f64();
+            *warm = Some(l.gp().warm_start());
+            let m = mse(&|z| l.rollout(z, HORIZON));
+            let noise_var = l.gp().output(0).hyperparameters_original().noise_variance;
+            let method = if sparse {
+                format!("sparse M={}", cli.sparse_m.min(n))
+            } else {
+                "exact".into()
+            };
+            println!(
+                "{name:9} N {n:6} {method:13} 20-step MSE {m:.4e} (nominal {nominal_mse:.3e}), trained in {train_s:.1} s, σ_n² {noise_var:.3e}{}",
+                if l.gp().is_sparse() {
+                    " (sparse model)"
+                } else {
+                    ""
+                }
+            );
+            match exact_mse {
+                None => exact_mse = Some(m),
+                Some(e) => println!("{name:9} N {n:6} sparse / exact 20-step MSE: {:.3}", m / e),
+            }
+            rows.push(Row {
+                system: name,
+                n,
+                method,
+                mse: m,
+                nominal_mse,
+                train_s,
+                noise_var,
+            });
+        }
     }
     Ok(())
 }
@@ -397,12 +426,34 @@ fn figure(rows: &[Row], path: &str) -> Result<(), Box<dyn std::error::Error>> {
         .y_label_formatter(&|v| format!("{v:.0e}"))
         .x_label_formatter(&|v| format!("{v:.0}"))
         .draw()?;
+    // A sparse row at an N where the exact GP also ran (`--sparse-also`)
+    // is drawn apart, as hollow markers.
+    let beside_exact = |r: &Row| {
+        r.method != "exact"
+            && rows
+                .iter()
+                .any(|e| e.system == r.system && e.n == r.n && e.method == "exact")
+    };
     for (system, colour) in [("pendulum", BLUE), ("cartpole", RED)] {
         let pts: Vec<(f64, f64)> = rows
             .iter()
-            .filter(|r| r.system == system && ok(r.mse))
+            .filter(|r| r.system == system && ok(r.mse) && !beside_exact(r))
             .map(|r| (r.n as f64, r.mse))
             .collect();
+        let also: Vec<(f64, f64)> = rows
+            .iter()
+            .filter(|r| r.system == system && ok(r.mse) && beside_exact(r))
+            .map(|r| (r.n as f64, r.mse))
+            .collect();
+        if !also.is_empty() {
+            chart
+                .draw_series(
+                    also.iter()
+                        .map(|p| Circle::new(*p, 6, colour.stroke_width(2))),
+                )?
+                .label(format!("{system}, sparse GP at the same N"))
+                .legend(move |(x, y)| Circle::new((x + 10, y), 5, colour.stroke_width(2)));
+        }
         chart
             .draw_series(LineSeries::new(pts.clone(), colour.stroke_width(2)))?
             .label(format!("{system}, learned (nominal VI prior)"))
