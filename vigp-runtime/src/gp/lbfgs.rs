@@ -44,11 +44,12 @@
 //!   projection has then thrown away the gradient's proportions, and a
 //!   corner with the length scales at their lower bound is a plateau (the
 //!   GP sees white noise; the gradient vanishes) where the run stops. With
-//!   `unit_start` the empty-memory model is B = max(1, ‖g‖₂)·I, so the
-//!   Cauchy point is at most a unit steepest-descent step away, and the
-//!   line search of that iteration may extend the step to the edge of the
-//!   box. For ‖g‖₂ ≤ 1, and on problems without bounds, it is scipy's
-//!   iteration;
+//!   `unit_start`, when scipy's trial P(x − g) would clip *every*
+//!   variable to a bound, the empty-memory model is B = max(1, ‖g‖₂)·I
+//!   instead, so the Cauchy point is at most a unit steepest-descent step
+//!   away, and the line search of that iteration may extend the step to
+//!   the edge of the box. Otherwise (some variable stays inside the box,
+//!   ‖g‖₂ ≤ 1, or no bounds) it is scipy's iteration;
 //!
 //! and, each saving evaluations:
 //!
@@ -87,11 +88,12 @@ pub(crate) struct LbfgsOptions {
     pub pgtol: f64,
     /// Stop when the relative decrease of an iteration is at most this.
     pub ftol: f64,
-    /// With an empty memory, model the objective by B = max(1, ‖g‖₂)·I
-    /// instead of scipy's B = I, so the steepest-descent step to the
-    /// Cauchy point is at most 1 long, and let that iteration's line
-    /// search run to the edge of the box (scipy: up to x̄). See the module
-    /// docs for why GP training sets it.
+    /// With an empty memory, when scipy's first trial P(x − g) would put
+    /// every variable on a bound (a corner of the box), model the
+    /// objective by B = max(1, ‖g‖₂)·I instead of scipy's B = I, so the
+    /// steepest-descent step to the Cauchy point is at most 1 long, and
+    /// let that iteration's line search run to the edge of the box
+    /// (scipy: up to x̄). See the module docs for why GP training sets it.
     pub unit_start: bool,
 }
 
@@ -773,7 +775,15 @@ where
     let Some(mut b) = mem.dense(n) else {
         return Attempt::Failed;
     };
-    if mem.is_empty() && set.unit_start {
+    // `unit_start`: scipy's first trial P(x − g) would be a corner of the
+    // box (every variable clipped), which keeps none of g's proportions.
+    let scaled = mem.is_empty()
+        && set.unit_start
+        && (0..n).all(|i| {
+            let t = x[i] - g[i];
+            t < lo[i] || t > hi[i]
+        });
+    if scaled {
         let scale = dot(g, g).sqrt().max(1.0);
         for i in 0..n {
             b[i * n + i] = scale;
@@ -812,7 +822,7 @@ where
     // Largest step in the box; 1 on the first iteration of a bounded
     // problem (scipy's `lnsrlb`, where d = P(x − g) − x then).
     let mut tmax: f64 = 1e10;
-    if first && set.constrained && !set.unit_start {
+    if first && set.constrained && !scaled {
         tmax = 1.0;
     } else {
         for i in 0..n {
@@ -1235,6 +1245,36 @@ mod tests {
                 vec![10.0, -10.0, 10.0]
             };
             for (p, e) in points[1].iter().zip(&expected) {
+                assert!((p - e).abs() < 1e-12, "first trial {:?}", points[1]);
+            }
+        }
+    }
+
+    #[test]
+    fn unit_start_keeps_scipys_first_trial_unless_it_is_a_corner() {
+        // g = 100·(x − c) with c₃ = x₃ + 0.001: x − g clips the first two
+        // variables but not the third, so with or without `unit_start` the
+        // first trial is scipy's P(x − g) = (10, −10, 0.6).
+        let c = [3.0, -2.0, 0.501];
+        let x0 = [0.5, 0.5, 0.5];
+        for unit_start in [false, true] {
+            let mut points: Vec<Vec<f64>> = Vec::new();
+            let f = |x: &[f64]| {
+                points.push(x.to_vec());
+                let v = (0..3).map(|i| 50.0 * (x[i] - c[i]).powi(2)).sum();
+                let g = (0..3).map(|i| 100.0 * (x[i] - c[i])).collect();
+                Ok((v, g))
+            };
+            let o = LbfgsOptions {
+                unit_start,
+                ..opts()
+            };
+            let r = minimise(f, &x0, &[-10.0; 3], &[10.0; 3], o).unwrap();
+            assert!(r.converged);
+            for (v, c) in r.x.iter().zip(c) {
+                assert!((v - c).abs() < 1e-8, "{:?}", r.x);
+            }
+            for (p, e) in points[1].iter().zip([10.0, -10.0, 0.6]) {
                 assert!((p - e).abs() < 1e-12, "first trial {:?}", points[1]);
             }
         }
