@@ -386,6 +386,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// The discrete momentum p₀ of a step from `z` with sub-step size `h`
     /// (module docs): M(x₀)v₀ for the first-order rule.
+    // inlined: a step from a state starts with it, and out of line its
+    // M(x₀) and p₀ make a round trip through memory
+    #[inline(always)]
     fn momentum_at(&self, z: &State<N>, h: f64) -> SVector<f64, N> {
         if self.alpha == 0.0 {
             return self.model.mass(&self.k, &z.q) * z.v;
@@ -422,7 +425,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
-        let p0 = self.momentum(z);
+        let p0 = self.momentum_at(z, self.substep_dt());
         self.advance(z, &p0, &z.v, &mut Terms::zeros())
             .map(|(z1, _, r)| (z1, r))
     }
