@@ -677,7 +677,15 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         // NaN-propagating: f64::max would drop a NaN residual part (an
         // overflowed kinetic term) and report the other one
         let error = |d: &SVector<f64, N>, c: &SVector<f64, C>| {
-            let (a, b) = (max_abs(d) * inv_p, max_abs(c) * inv_l);
+            let a = max_abs(d) * inv_p;
+            if C == 0 {
+                // a is ≥ 0, +∞ or NaN (max_abs poisons): the combination
+                // below would only turn +∞ into NaN, and every use of the
+                // error treats both alike (non-finite). Four dependent
+                // operations fewer per residual of a tree.
+                return a;
+            }
+            let b = max_abs(c) * inv_l;
             a.max(b) + (a + b) * 0.0
         };
         let mut lambda = SVector::<f64, C>::zeros();
