@@ -290,6 +290,13 @@ pub(crate) fn max_abs<const K: usize>(x: &SVector<f64, K>) -> f64 {
     m + poison
 }
 
+/// `Err(e)`, out of line (see [`Stepper::step`]).
+#[cold]
+#[inline(never)]
+fn failed<T>(e: StepError) -> Result<T, StepError> {
+    Err(e)
+}
+
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// The paper's first-order variational integrator with default options.
     pub fn new(model: M, dt: f64) -> Result<Self, StepError> {
@@ -417,7 +424,13 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// One step from `z`.
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
-        self.step_with_report(z).map(|(z, _)| z)
+        match self.step_with_report(z) {
+            Ok((z1, _)) => Ok(z1),
+            // out of line: merged with the error paths' stores, the state
+            // was written one number at a time (at offsets chosen by the
+            // variant), and the caller's load of v stalled on them
+            Err(e) => failed(e),
+        }
     }
 
     /// One step from `z` with solver diagnostics.
