@@ -961,6 +961,17 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             fn quadratic_max(t: &::vigp::embedded::Terms<#n>, dv: &#svector<f64, #n>) -> f64 {
                 <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::quadratic_max(t, dv)
             }
+            // the minimal model's sparse products, not the trait's dense
+            // defaults: `Stepper::new(sys, dt)` must step exactly as
+            // `Stepper::new(sys.minimal(), dt)`
+            #[inline(always)]
+            fn mass_times(t: &::vigp::embedded::Terms<#n>, v: &#svector<f64, #n>) -> #svector<f64, #n> {
+                <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::mass_times(t, v)
+            }
+            #[inline(always)]
+            fn damping_times(t: &::vigp::embedded::Terms<#n>, v: &#svector<f64, #n>) -> #svector<f64, #n> {
+                <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::damping_times(t, v)
+            }
             fn constraint_values(&self, k: &Self::Constants, q: &#svector<f64, #n>) -> #svector<f64, #c> {
                 ::vigp::embedded::Dynamics::constraint_values(&self.minimal(), k, q)
             }

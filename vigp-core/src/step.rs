@@ -290,6 +290,13 @@ pub(crate) fn max_abs<const K: usize>(x: &SVector<f64, K>) -> f64 {
     m + poison
 }
 
+/// `Err(e)`, out of line (see [`Stepper::step`]).
+#[cold]
+#[inline(never)]
+fn failed<T>(e: StepError) -> Result<T, StepError> {
+    Err(e)
+}
+
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// The paper's first-order variational integrator with default options.
     pub fn new(model: M, dt: f64) -> Result<Self, StepError> {
@@ -386,6 +393,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// The discrete momentum p₀ of a step from `z` with sub-step size `h`
     /// (module docs): M(x₀)v₀ for the first-order rule.
+    // inlined: a step from a state starts with it, and out of line its
+    // M(x₀) and p₀ make a round trip through memory
+    #[inline(always)]
     fn momentum_at(&self, z: &State<N>, h: f64) -> SVector<f64, N> {
         if self.alpha == 0.0 {
             return self.model.mass(&self.k, &z.q) * z.v;
@@ -414,7 +424,13 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// One step from `z`.
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
-        self.step_with_report(z).map(|(z, _)| z)
+        match self.step_with_report(z) {
+            Ok((z1, _)) => Ok(z1),
+            // out of line: merged with the error paths' stores, the state
+            // was written one number at a time (at offsets chosen by the
+            // variant), and the caller's load of v stalled on them
+            Err(e) => failed(e),
+        }
     }
 
     /// One step from `z` with solver diagnostics.
@@ -422,7 +438,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
-        let p0 = self.momentum(z);
+        let p0 = self.momentum_at(z, self.substep_dt());
         self.advance(z, &p0, &z.v, &mut Terms::zeros())
             .map(|(z1, _, r)| (z1, r))
     }
@@ -674,7 +690,15 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         // NaN-propagating: f64::max would drop a NaN residual part (an
         // overflowed kinetic term) and report the other one
         let error = |d: &SVector<f64, N>, c: &SVector<f64, C>| {
-            let (a, b) = (max_abs(d) * inv_p, max_abs(c) * inv_l);
+            let a = max_abs(d) * inv_p;
+            if C == 0 {
+                // a is ≥ 0, +∞ or NaN (max_abs poisons): the combination
+                // below would only turn +∞ into NaN, and every use of the
+                // error treats both alike (non-finite). Four dependent
+                // operations fewer per residual of a tree.
+                return a;
+            }
+            let b = max_abs(c) * inv_l;
             a.max(b) + (a + b) * 0.0
         };
         let mut lambda = SVector::<f64, C>::zeros();
