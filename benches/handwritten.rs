@@ -4,13 +4,14 @@
 //! * `closed_form`: the hand-written step (closed-form M(q), ∂M/∂q₂, ∇V,
 //!   Cramer's rule; the same Newton iteration, tolerance and scaling);
 //! * `stepper`: the generated fixed-size step, `vigp::embedded::Stepper`;
-//! * `std_variational`: the std runtime's `Variational::new` (one step).
+//! * `std_variational`: the std runtime's `Variational::new`.
 //!
-//! For each: a step from the state (1.0, −0.5; 0.5, 1.0) (`step`), a
+//! A step from the state (1.0, −0.5; 0.5, 1.0) (`step`, all three), a
 //! 100-step rollout that carries the momentum and starts Newton from
-//! 2v_k − v_{k−1} (`rollout_100`, time per 100 steps), and one step from
-//! each of 64 states every 50 steps along a trajectory (`step_64_states`,
-//! time per 64 steps). Δt = 0.01 s.
+//! 2v_k − v_{k−1} (`rollout_100`, time per 100 steps; all three, the std
+//! one through `Integrator::rollout_into`), and one step from each of 64
+//! states every 50 steps along a trajectory (`step_64_states`, time per 64
+//! steps; closed form and `Stepper`). Δt = 0.01 s.
 //!
 //! Run: `cargo bench --bench handwritten`. After criterion's output it
 //! prints a table per step: criterion's median and the fastest of its 30
@@ -35,7 +36,7 @@ use criterion::{BenchmarkGroup, Criterion, measurement::WallTime};
 use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::{Duration, SystemTime};
-use vigp::Variational;
+use vigp::{Integrator, Variational};
 use vigp::embedded::{State, Stepper};
 use vigp::systems::DoublePendulum;
 
@@ -48,7 +49,7 @@ const GROUP: &str = "handwritten";
 const DT: f64 = 0.01;
 
 /// (benchmark id, steps per iteration, label in the table)
-const ROWS: [(&str, f64, &str); 7] = [
+const ROWS: [(&str, f64, &str); 8] = [
     ("dp_closed_form_step", 1.0, "closed form, step from a state"),
     (
         "dp_stepper_step",
@@ -65,6 +66,11 @@ const ROWS: [(&str, f64, &str); 7] = [
         "dp_stepper_rollout_100",
         100.0,
         "embedded Stepper, rollout step",
+    ),
+    (
+        "dp_std_variational_rollout_100",
+        100.0,
+        "std Variational::new, rollout step",
     ),
     (
         "dp_closed_form_step_64_states",
@@ -162,6 +168,10 @@ fn bench(g: &mut BenchmarkGroup<'_, WallTime>) {
     g.bench_function(ROWS[4].0, |b| {
         b.iter(|| stepper.rollout_into(black_box(&z), &mut out).unwrap())
     });
+    let mut out_std = [z; 100];
+    g.bench_function(ROWS[5].0, |b| {
+        b.iter(|| vi.rollout_into(black_box(&z), &mut out_std).unwrap())
+    });
     // The same rollout by both: a check that they stay together (they
     // solve the same equations by the same iteration; tests/handwritten.rs).
     let gap = out_h
@@ -173,14 +183,14 @@ fn bench(g: &mut BenchmarkGroup<'_, WallTime>) {
 
     let states = states_along(&stepper, &z);
     let states_h: Vec<dp::State> = states.iter().map(to_hand).collect();
-    g.bench_function(ROWS[5].0, |b| {
+    g.bench_function(ROWS[6].0, |b| {
         b.iter(|| {
             for z in &states_h {
                 black_box(cf.step(black_box(z)).unwrap());
             }
         })
     });
-    g.bench_function(ROWS[6].0, |b| {
+    g.bench_function(ROWS[7].0, |b| {
         b.iter(|| {
             for z in &states {
                 black_box(stepper.step(black_box(z)).unwrap());
@@ -256,7 +266,7 @@ fn main() {
         println!("(no results of this run found under {:?})", criterion_dir());
         return;
     }
-    let base = [0, 0, 0, 3, 3, 5, 5];
+    let base = [0, 0, 0, 3, 3, 3, 6, 6];
     println!("\ndouble pendulum, dt = {DT}: criterion, ns per step (this run)");
     println!(
         "{:<36} {:>9} {:>8} {:>9} {:>8}",
