@@ -36,9 +36,9 @@ use criterion::{BenchmarkGroup, Criterion, measurement::WallTime};
 use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::{Duration, SystemTime};
-use vigp::{Integrator, Variational};
 use vigp::embedded::{State, Stepper};
 use vigp::systems::DoublePendulum;
+use vigp::{Integrator, Variational};
 
 mod handwritten {
     pub mod dp;
