@@ -1213,30 +1213,37 @@ mod tests {
         assert!(r.evaluations < 11, "{} evaluations", r.evaluations);
     }
 
+    /// Minimises 50·‖x − c‖² in the box [−10, 10]³ from (0.5, 0.5, 0.5);
+    /// checks that the run converges to c and returns the first trial point.
+    fn steep_quadratic_first_trial(c: [f64; 3], unit_start: bool) -> Vec<f64> {
+        let mut points: Vec<Vec<f64>> = Vec::new();
+        let f = |x: &[f64]| {
+            points.push(x.to_vec());
+            let v = (0..3).map(|i| 50.0 * (x[i] - c[i]).powi(2)).sum();
+            let g = (0..3).map(|i| 100.0 * (x[i] - c[i])).collect();
+            Ok((v, g))
+        };
+        let o = LbfgsOptions {
+            unit_start,
+            ..opts()
+        };
+        let r = minimise(f, &[0.5; 3], &[-10.0; 3], &[10.0; 3], o).unwrap();
+        assert!(r.converged);
+        for (v, c) in r.x.iter().zip(c) {
+            assert!((v - c).abs() < 1e-8, "{:?}", r.x);
+        }
+        points.swap_remove(1)
+    }
+
     #[test]
     fn unit_start_first_trial_is_a_unit_steepest_descent_step() {
         // A steep start, g = 100·(x − c): scipy's first trial is P(x − g),
         // the corner (10, −10, 10) of the box, 9.5 or more away in every variable;
         // with `unit_start` it is x − g/‖g‖₂, and both runs converge.
         let c = [3.0, -2.0, 1.0];
-        let x0 = [0.5, 0.5, 0.5];
+        let x0 = [0.5; 3];
         for unit_start in [false, true] {
-            let mut points: Vec<Vec<f64>> = Vec::new();
-            let f = |x: &[f64]| {
-                points.push(x.to_vec());
-                let v = (0..3).map(|i| 50.0 * (x[i] - c[i]).powi(2)).sum();
-                let g = (0..3).map(|i| 100.0 * (x[i] - c[i])).collect();
-                Ok((v, g))
-            };
-            let o = LbfgsOptions {
-                unit_start,
-                ..opts()
-            };
-            let r = minimise(f, &x0, &[-10.0; 3], &[10.0; 3], o).unwrap();
-            assert!(r.converged);
-            for (v, c) in r.x.iter().zip(c) {
-                assert!((v - c).abs() < 1e-8, "{:?}", r.x);
-            }
+            let first = steep_quadratic_first_trial(c, unit_start);
             let g0: Vec<f64> = (0..3).map(|i| 100.0 * (x0[i] - c[i])).collect();
             let gn = dot(&g0, &g0).sqrt();
             let expected: Vec<f64> = if unit_start {
@@ -1244,8 +1251,8 @@ mod tests {
             } else {
                 vec![10.0, -10.0, 10.0]
             };
-            for (p, e) in points[1].iter().zip(&expected) {
-                assert!((p - e).abs() < 1e-12, "first trial {:?}", points[1]);
+            for (p, e) in first.iter().zip(&expected) {
+                assert!((p - e).abs() < 1e-12, "first trial {first:?}");
             }
         }
     }
@@ -1255,27 +1262,10 @@ mod tests {
         // g = 100·(x − c) with c₃ = x₃ + 0.001: x − g clips the first two
         // variables but not the third, so with or without `unit_start` the
         // first trial is scipy's P(x − g) = (10, −10, 0.6).
-        let c = [3.0, -2.0, 0.501];
-        let x0 = [0.5, 0.5, 0.5];
         for unit_start in [false, true] {
-            let mut points: Vec<Vec<f64>> = Vec::new();
-            let f = |x: &[f64]| {
-                points.push(x.to_vec());
-                let v = (0..3).map(|i| 50.0 * (x[i] - c[i]).powi(2)).sum();
-                let g = (0..3).map(|i| 100.0 * (x[i] - c[i])).collect();
-                Ok((v, g))
-            };
-            let o = LbfgsOptions {
-                unit_start,
-                ..opts()
-            };
-            let r = minimise(f, &x0, &[-10.0; 3], &[10.0; 3], o).unwrap();
-            assert!(r.converged);
-            for (v, c) in r.x.iter().zip(c) {
-                assert!((v - c).abs() < 1e-8, "{:?}", r.x);
-            }
-            for (p, e) in points[1].iter().zip([10.0, -10.0, 0.6]) {
-                assert!((p - e).abs() < 1e-12, "first trial {:?}", points[1]);
+            let first = steep_quadratic_first_trial([3.0, -2.0, 0.501], unit_start);
+            for (p, e) in first.iter().zip([10.0, -10.0, 0.6]) {
+                assert!((p - e).abs() < 1e-12, "first trial {first:?}");
             }
         }
     }
