@@ -27,7 +27,7 @@
 //! samples, and prints the ratio of their errors:
 //!
 //! ```text
-//! cargo run --release --example scale_sweep -- --n 1024,2048,4096 --exact-max 4096 --sparse-m 256 --sparse-also --restarts 1
+//! cargo run --release --example scale_sweep -- --n 1024,2048,4096 --exact-max 4096 --sparse-m 256 --sparse-also --restarts 0
 //! ```
 
 use std::f64::consts::PI;
