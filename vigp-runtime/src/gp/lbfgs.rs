@@ -111,6 +111,10 @@ pub(crate) struct LbfgsResult {
     pub evaluations: usize,
     /// A stopping test was met (not `max_iters`).
     pub converged: bool,
+    /// scipy's first trial from the start, P(x₀ − g₀), clips every
+    /// variable to a bound (a corner of the box): the case `unit_start`
+    /// changes.
+    pub corner_start: bool,
 }
 
 /// Line-search constants of scipy's L-BFGS-B (`lnsrlb`).
@@ -724,6 +728,15 @@ fn subspace(
     Some(z)
 }
 
+/// scipy's trial from an empty memory, P(x − g), clips every variable to a
+/// bound (a corner of the box).
+fn corner_trial(x: &[f64], g: &[f64], lo: &[f64], hi: &[f64]) -> bool {
+    (0..x.len()).all(|i| {
+        let t = x[i] - g[i];
+        t < lo[i] || t > hi[i]
+    })
+}
+
 /// What stays fixed over a run: the box and the decrease too small to
 /// matter.
 struct Setting<'a> {
@@ -777,12 +790,7 @@ where
     };
     // `unit_start`: scipy's first trial P(x − g) would be a corner of the
     // box (every variable clipped), which keeps none of g's proportions.
-    let scaled = mem.is_empty()
-        && set.unit_start
-        && (0..n).all(|i| {
-            let t = x[i] - g[i];
-            t < lo[i] || t > hi[i]
-        });
+    let scaled = mem.is_empty() && set.unit_start && corner_trial(x, g, lo, hi);
     if scaled {
         let scale = dot(g, g).sqrt().max(1.0);
         for i in 0..n {
@@ -926,6 +934,7 @@ where
         });
     }
     obj.remember(&x, fx, &g);
+    let corner_start = corner_trial(&x, &g, lo, hi);
     let set = Setting {
         lo,
         hi,
@@ -984,6 +993,7 @@ where
         iterations,
         evaluations: obj.evaluations,
         converged,
+        corner_start,
     })
 }
 
@@ -1255,6 +1265,59 @@ mod tests {
                 assert!((p - e).abs() < 1e-12, "first trial {first:?}");
             }
         }
+    }
+
+    /// Σᵢ −½·tanh(3xᵢ) − 2·exp(−8(xᵢ − ½)²) in the box [−1, 2]²: a deep
+    /// minimum near xᵢ = 0.5 and, towards the corner (2, 2), a plateau
+    /// (gradient ≈ −2e-5 per variable, pushing out of the box) lower than
+    /// the start 0.
+    fn plateau(x: &[f64]) -> Result<(f64, Vec<f64>), GpError> {
+        let mut v = 0.0;
+        let mut g = Vec::with_capacity(x.len());
+        for &t in x {
+            let (th, e) = ((3.0 * t).tanh(), (-8.0 * (t - 0.5) * (t - 0.5)).exp());
+            v += -0.5 * th - 2.0 * e;
+            g.push(-1.5 * (1.0 - th * th) + 32.0 * (t - 0.5) * e);
+        }
+        Ok((v, g))
+    }
+
+    #[test]
+    fn unit_start_leaves_a_corner_plateau_to_the_minimum() {
+        // From 0, g ≈ −3.66 per variable: scipy's first trial is the
+        // corner (2, 2); it meets the strong Wolfe conditions and the
+        // projected gradient vanishes there, so scipy's iteration stops on
+        // the plateau (f ≈ −1) instead of the minimum (f ≈ −4.9). With
+        // `unit_start` the first trial is a unit steepest-descent step.
+        let run = |unit_start| {
+            let mut points: Vec<Vec<f64>> = Vec::new();
+            let f = |x: &[f64]| {
+                points.push(x.to_vec());
+                plateau(x)
+            };
+            let o = LbfgsOptions {
+                unit_start,
+                ..opts()
+            };
+            let r = minimise(f, &[0.0; 2], &[-1.0; 2], &[2.0; 2], o).unwrap();
+            (r, points)
+        };
+        let (scipy, sp) = run(false);
+        assert!(scipy.corner_start);
+        assert_eq!(sp[1], vec![2.0, 2.0]);
+        assert_eq!(scipy.x, vec![2.0, 2.0]);
+        assert!((scipy.f + 1.0).abs() < 1e-4, "{}", scipy.f);
+        let (guarded, gp) = run(true);
+        let g0 = plateau(&[0.0; 2]).unwrap().1;
+        let gn = dot(&g0, &g0).sqrt();
+        for (p, g) in gp[1].iter().zip(&g0) {
+            assert!((p + g / gn).abs() < 1e-12, "first trial {:?}", gp[1]);
+        }
+        assert!(guarded.converged);
+        // minimum: 3(1 − tanh²(3x))/2 = 32(x − ½)e^{−8(x−½)²}, x ≈ 0.5
+        let best = plateau(&guarded.x).unwrap();
+        assert!(best.0 < -4.8, "{:?} at {:?}", best.0, guarded.x);
+        assert!(best.1.iter().all(|g| g.abs() < 1e-5), "{:?}", best.1);
     }
 
     #[test]
