@@ -16,7 +16,10 @@
 //!   [1e-5, 1e5] on every hyperparameter and start 0 at ℓ = σ_f² = σ_n² = 1,
 //!   i.e. scikit-learn's `ConstantKernel(1) * RBF([1] * d) + WhiteKernel(1)`
 //!   with bounds (1e-5, 1e5) and `normalize_y=True`;
-//! * `--bounds LO HI`: other uniform bounds (normalised units).
+//! * `--bounds LO HI`: other uniform bounds (normalised units);
+//! * `--start t1,…,t(d+2)`: start 0 at this θ (normalised units, vigp's
+//!   order, clamped into the bounds) instead; with `--restarts 0` this runs
+//!   the optimiser from one given point (e.g. one of scikit-learn's starts).
 //!
 //! Without `--theta` it trains with 1 + `restarts` starts and prints one
 //! JSON line: the best LML in normalised units (scikit-learn's
@@ -73,6 +76,11 @@ fn read_csv(path: &str) -> Result<Vec<Vec<f64>>, Box<dyn std::error::Error>> {
     Ok(rows)
 }
 
+/// Comma-separated numbers.
+fn parse_list(s: &str) -> Result<Vec<f64>, std::num::ParseFloatError> {
+    s.split(',').map(|v| v.trim().parse::<f64>()).collect()
+}
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let path = str_arg("--csv").ok_or("--csv PATH is required")?;
     let rows = read_csv(&path)?;
@@ -100,11 +108,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if let Some((lo, hi)) = pair_arg("--bounds") {
         opts.bounds = Bounds::uniform(lo.parse()?, hi.parse()?);
     }
+    if let Some(start) = str_arg("--start") {
+        opts.initial = Some(Hyperparameters::from_log(&parse_list(&start)?)?);
+    }
     if let Some(theta) = str_arg("--theta") {
-        let t: Vec<f64> = theta
-            .split(',')
-            .map(|v| v.trim().parse::<f64>())
-            .collect::<Result<_, _>>()?;
+        let t = parse_list(&theta)?;
         let hp = Hyperparameters::from_log(&t)?;
         let gp = Gp::fit(&x, d, &y, 1, std::slice::from_ref(&hp), &opts)?;
         let out = gp.output(0);
