@@ -510,6 +510,7 @@ impl Gp {
         };
         let run = |jobs: &[(usize, usize, Vec<f64>)], lopt: LbfgsOptions| -> Vec<_> {
             jobs.par_iter()
+                .with_max_len(1)
                 .map(|(out, _, t0)| {
                     let y = &prep.residuals[*out].0;
                     match &inducing {
