@@ -661,25 +661,48 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let a1 = (1.0 - alpha) * h;
         // residual d(v, λ) and Q (row l = (∂M/∂q_l v)ᵀ, which the Newton
         // matrix reuses); constraint c(v) and its Jacobian G(x₁ + h v)
-        let residual =
-            |t: &Terms<N>, bu: &SVector<f64, N>, v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
-                let (q, kin) = M::kinetic(t, v);
-                let mut f = kin - t.dpotential;
-                if M::DISSIPATIVE {
-                    f -= M::damping_times(t, v);
+        // (Q is written to `q_out` only where the mass matrix moves: with
+        // a constant one it is zero and unused, and carrying it would cost
+        // a zeroed and a copied N × N matrix per residual)
+        let residual = |t: &Terms<N>,
+                        bu: &SVector<f64, N>,
+                        v: &SVector<f64, N>,
+                        lambda: &SVector<f64, C>,
+                        q_out: &mut SMatrix<f64, N, N>| {
+            let (q, kin) = M::kinetic(t, v);
+            if !M::CONSTANT_MASS {
+                *q_out = q;
+            }
+            let mut f = kin - t.dpotential;
+            if M::DISSIPATIVE {
+                f -= M::damping_times(t, v);
+            }
+            if FORCED {
+                f += bu;
+            }
+            let mut d = p0 + f * a1 - M::mass_times(t, v);
+            if C > 0 {
+                // G₁ᵀλ as nalgebra's `g1t * lambda` forms it (gemv: the
+                // product with λ₀ stored, then λ_j times column j added
+                // for j = 1, 2, … — the same roundings), inline: out of
+                // line the product and its result make a round trip
+                // through memory. G₁ᵀ stored: its columns are contiguous,
+                // so the loop vectorises across rows.
+                let mut gl = [0.0f64; N];
+                for (j, (col, lj)) in g1t
+                    .as_slice()
+                    .chunks_exact(N)
+                    .zip(lambda.as_slice())
+                    .enumerate()
+                {
+                    for (y, g) in gl.iter_mut().zip(col) {
+                        *y = if j == 0 { g * lj } else { *y + g * lj };
+                    }
                 }
-                if FORCED {
-                    f += bu;
-                }
-                let mut d = p0 + f * a1 - M::mass_times(t, v);
-                if C > 0 {
-                    // G₁ᵀ stored: its columns are contiguous, so the
-                    // product vectorises (G₁ᵀλ from G₁'s columns would be
-                    // a dot product per row, serial in rounding order)
-                    d -= g1t * lambda;
-                }
-                (d, q)
-            };
+                d -= SVector::from(gl);
+            }
+            d
+        };
         let constraint = |v: &SVector<f64, N>| {
             if C > 0 {
                 model.constraints_and_jacobian(k, &(x1 + v * h))
@@ -702,7 +725,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             a.max(b) + (a + b) * 0.0
         };
         let mut lambda = SVector::<f64, C>::zeros();
-        let (mut d, mut qm) = residual(t, &bu, &v, &lambda);
+        // Q at the iterate and at the trial point (unused with a constant
+        // mass matrix)
+        let (mut qm, mut qn) = (SMatrix::<f64, N, N>::zeros(), SMatrix::<f64, N, N>::zeros());
+        let mut d = residual(t, &bu, &v, &lambda, &mut qm);
         // c and G₂ at the iterate (`cg[cur]`) and at the line search's
         // trial point (`cg[1 - cur]`): a trial point is accepted by
         // switching `cur`, without copying G₂ (C × N numbers)
@@ -874,7 +900,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         bu = input(&at(&vn));
                     }
                 }
-                let (dn, qn) = residual(t, &bu, &vn, &ln);
+                let dn = residual(t, &bu, &vn, &ln, &mut qn);
                 cg[1 - cur] = constraint(&vn);
                 let errn = error(&dn, &cg[1 - cur].0);
                 if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
@@ -892,7 +918,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         // a rollout's extrapolated guess).
                         keep_schur = step == 1.0 && h.abs() * max_abs(&dv) * errn <= opts.tolerance;
                     }
-                    (v, lambda, d, qm, err) = (vn, ln, dn, qn, errn);
+                    (v, lambda, d, err) = (vn, ln, dn, errn);
+                    if !M::CONSTANT_MASS {
+                        qm = qn;
+                    }
                     cur = 1 - cur;
                     break;
                 }
