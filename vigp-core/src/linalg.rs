@@ -836,6 +836,12 @@ impl<const N: usize, const C: usize> Default for SchurFactor<N, C> {
 }
 
 impl<const N: usize, const C: usize> SchurFactor<N, C> {
+    /// Forget the S held (not [`SchurFactor::is_formed`] until the next
+    /// [`KktFactors::solve_keeping`]).
+    pub fn clear(&mut self) {
+        self.formed = false;
+    }
+
     /// Whether it holds the S of a solve with a finite solution.
     pub fn is_formed(&self) -> bool {
         self.formed
