@@ -746,8 +746,10 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
     }
 
     /// [`KktFactors::solve`], leaving the factored Schur complement
-    /// S = A J⁻¹B and A in `schur` for [`KktFactors::solve_chord`] (not
-    /// [`SchurFactor::is_formed`] when the solution is not finite).
+    /// S = A J⁻¹B in `schur` for [`KktFactors::solve_chord`] (not
+    /// [`SchurFactor::is_formed`] when the solution is not finite). The
+    /// caller keeps A for the chord steps (not copied here: the step keeps
+    /// it where it was evaluated).
     #[inline(always)]
     pub fn solve_keeping(
         &self,
@@ -759,7 +761,6 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         let jr = self.j_solve(r);
         // S formed and factored where it stays: formed elsewhere and moved
         // there, S and its factors would be copied (memcpy) on the way
-        schur.a = *a;
         let rhs = schur_sparse(a, &self.jb_rows, &[1.0; N], &jr, c, &mut schur.lu.lu);
         schur.full = if schur.lu.factor(SCHUR_PIVOT_TOL) {
             None
@@ -775,9 +776,10 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         sol
     }
 
-    /// Solve the KKT system with this J and B, the A and S of `schur` (left
-    /// by [`KktFactors::solve_keeping`] of these factors) and the given r
-    /// and c, without forming S: a chord step when A has moved since (the
+    /// Solve the KKT system with this J and B, the S of `schur` and the A
+    /// it was formed from (left by [`KktFactors::solve_keeping`] of these
+    /// factors with this `a`) and the given r and c, without forming S: a
+    /// chord step when the constraint rows have moved since (the
     /// caller evaluates the residuals exactly and keeps S only while the
     /// iteration contracts). O(N) (diagonal J) or O(N²) for J⁻¹r,
     /// O(NC) for A·J⁻¹r and for x, O(C²) for the solve with S.
@@ -786,6 +788,7 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
     pub fn solve_chord(
         &self,
         schur: &SchurFactor<N, C>,
+        a: &SMatrix<f64, C, N>,
         r: &SVector<f64, N>,
         c: &SVector<f64, C>,
     ) -> Option<KktSolution<N, C>> {
@@ -796,7 +799,7 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         for (rh, ci) in rhs.iter_mut().zip(c.as_slice()) {
             *rh = -ci;
         }
-        for (col, x) in schur.a.as_slice().chunks_exact(C).zip(jr.iter()) {
+        for (col, x) in a.as_slice().chunks_exact(C).zip(jr.iter()) {
             for (rh, aik) in rhs.iter_mut().zip(col.iter()) {
                 *rh += aik * x;
             }
@@ -807,13 +810,13 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
 }
 
 /// The factored Schur complement S = A J⁻¹B of a [`KktFactors`] system
-/// and the constraint matrix A it was formed from
 /// ([`KktFactors::solve_keeping`]), for chord steps
-/// ([`KktFactors::solve_chord`]) with the same J and B.
+/// ([`KktFactors::solve_chord`], given the same A) with the same J and B.
 /// [`SchurFactor::default`] holds none (not [`SchurFactor::is_formed`]).
 #[derive(Clone, Copy, Debug)]
 pub struct SchurFactor<const N: usize, const C: usize> {
-    a: SMatrix<f64, C, N>,
+    // (N: the KKT system's size, for the solves' signatures)
+    _n: core::marker::PhantomData<[f64; N]>,
     // S by partial pivoting (as `solve_schur`), unless `full` holds its
     // complete-pivoting factors
     lu: PartialLu<C>,
@@ -824,7 +827,7 @@ pub struct SchurFactor<const N: usize, const C: usize> {
 impl<const N: usize, const C: usize> Default for SchurFactor<N, C> {
     fn default() -> Self {
         Self {
-            a: SMatrix::zeros(),
+            _n: core::marker::PhantomData,
             lu: PartialLu {
                 lu: [[0.0; C]; C],
                 perm: [0; C],

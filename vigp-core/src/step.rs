@@ -309,10 +309,11 @@ pub(crate) struct Workspace<const N: usize, const C: usize> {
     /// The terms: after a converged solve, at the solution's quadrature
     /// point m₁(v₁) (the derivatives reuse them).
     pub(crate) t: Terms<N>,
-    // c and G at three configurations: G₁'s (`g_slot`), the iterate's and
-    // the line search's trial point; an accepted trial point or a
-    // converged step changes roles by index, without copying G
-    cg: [(SVector<f64, C>, SMatrix<f64, C, N>); 3],
+    // c and G at four configurations: G₁'s (`g_slot`), the iterate's, the
+    // line search's trial point and the one the kept Schur complement was
+    // formed at (for chord steps); an accepted trial point or a converged
+    // step changes roles by index, without copying G
+    cg: [(SVector<f64, C>, SMatrix<f64, C, N>); 4],
     // cg[g_slot] holds c and G at `g_at` (NaN: at no point yet)
     g_slot: usize,
     g_at: SVector<f64, N>,
@@ -328,7 +329,7 @@ impl<const N: usize, const C: usize> Workspace<N, C> {
     pub(crate) fn new() -> Self {
         Self {
             t: Terms::zeros(),
-            cg: [(SVector::zeros(), SMatrix::zeros()); 3],
+            cg: [(SVector::zeros(), SMatrix::zeros()); 4],
             g_slot: 0,
             g_at: SVector::repeat(f64::NAN),
             factors: KktFactors::default(),
@@ -793,10 +794,13 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         // c and G₂ at the iterate (`cg[cur]`) and at the line search's
         // trial point (`cg[trial]`): a trial point is accepted by
         // switching the two, without copying G₂ (C × N numbers)
-        let (mut cur, mut trial) = match i1 {
-            0 => (1, 2),
-            1 => (2, 0),
-            _ => (0, 1),
+        // `spare`: where the kept S was formed after a fresh KKT solve
+        // (the chord steps' A), or free
+        let (mut cur, mut trial, mut spare) = match i1 {
+            0 => (1, 2, 3),
+            1 => (2, 3, 0),
+            2 => (3, 0, 1),
+            _ => (0, 1, 2),
         };
         cg[cur] = constraint(&v);
         let mut err = error(&d, &cg[cur].0);
@@ -890,6 +894,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             // this iteration's direction comes from a kept S (first-order
             // rule with constraints and a constant J)
             let mut chord = false;
+            // this iteration's direction formed a kept S at `cur`
+            let mut fresh = false;
             let (dv, dl) = if C == 0 {
                 let dv = solve_partial(&jac, &(-d)).ok_or(singular)?;
                 // First-order rule, tree: with x₁ fixed d is exactly
@@ -933,7 +939,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     // factorisation.
                     chord = keep_schur && schur.is_formed();
                     let sol = if chord {
-                        factors.solve_chord(schur, &r, &cc)
+                        factors.solve_chord(schur, &cg[spare].1, &r, &cc)
                     } else {
                         None
                     };
@@ -941,6 +947,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         sol
                     } else {
                         chord = false;
+                        fresh = true;
                         factors.solve_keeping(&cg[cur].1, &r, &cc, schur)
                     }
                 } else {
@@ -991,7 +998,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     if !M::CONSTANT_MASS {
                         qm = qn;
                     }
-                    (cur, trial) = (trial, cur);
+                    if fresh {
+                        // the iterate's G goes with S
+                        (cur, trial, spare) = (trial, spare, cur);
+                    } else {
+                        (cur, trial) = (trial, cur);
+                    }
                     break;
                 }
                 step *= 0.5;
