@@ -1196,7 +1196,7 @@ mod tests {
             assert!(schur.is_formed());
             let (r2, c2) = (r.map(|x| 0.01 * x - 0.003), c.map(|x| 1e-3 * x + 2e-4));
             let full = dense(&j, &a, &r2, &c2);
-            let (x, y) = f.solve_chord(&schur, &r2, &c2).unwrap();
+            let (x, y) = f.solve_chord(&schur, &a, &r2, &c2).unwrap();
             assert!((full.fixed_rows::<N>(0) - x).amax() < 1e-15, "{x} {full}");
             assert!((full.fixed_rows::<C>(N) - y).amax() < 1e-15, "{y} {full}");
             // a non-finite solution keeps no S
@@ -1218,7 +1218,7 @@ mod tests {
             f2.solve_keeping(&a2, &r, &c2, &mut schur).unwrap();
             let (r3, mut c3) = (r * 0.5, c * 0.25);
             c3[2] = c3[3];
-            let (x3, y3) = f2.solve_chord(&schur, &r3, &c3).unwrap();
+            let (x3, y3) = f2.solve_chord(&schur, &a2, &r3, &c3).unwrap();
             assert!((j * x3 + b2 * y3 - r3).amax() < 1e-13);
             assert!((a2 * x3 - c3).amax() < 1e-13);
         }
