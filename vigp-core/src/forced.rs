@@ -53,7 +53,7 @@
 use crate::dynamics::{Dynamics, Terms};
 use crate::linalg::{FullPivLu, PartialLu, solve_kkt_regularised};
 use crate::state::State;
-use crate::step::{RolloutError, StepError, StepReport, Stepper, max_abs};
+use crate::step::{RolloutError, StepError, StepReport, Stepper, Workspace, max_abs};
 use nalgebra::{SMatrix, SVector};
 
 /// ∂z₁/∂z₀ of a step, z = (q, v), by N × N blocks.
@@ -254,7 +254,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
         u: &SVector<f64, U>,
-        t: &mut Terms<N>,
+        t: &mut Workspace<N, C>,
     ) -> Result<crate::step::Forced<N, C>, StepError> {
         let zero = u.iter().all(|x| *x == 0.0);
         let (model, k) = (&self.model, &self.k);
@@ -281,7 +281,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         u: &SVector<f64, U>,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
         Self::check_input(u)?;
-        self.solve_forced_any(x1, p0, h, guess, u, &mut Terms::zeros())
+        self.solve_forced_any(x1, p0, h, guess, u, &mut Workspace::new())
             .map(|(v, p, r, _)| (v, p, r))
     }
 
@@ -294,7 +294,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         p0: &SVector<f64, N>,
         guess: &SVector<f64, N>,
         u: &SVector<f64, U>,
-        t: &mut Terms<N>,
+        t: &mut Workspace<N, C>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         if max_abs(p0).is_nan() {
             return Err(StepError::NonFiniteState);
@@ -335,7 +335,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         }
         Self::check_input(u)?;
         let p0 = self.momentum(z);
-        self.advance_forced(z, &p0, &z.v, u, &mut Terms::zeros())
+        self.advance_forced(z, &p0, &z.v, u, &mut Workspace::new())
             .map(|(z1, _, r)| (z1, r))
     }
 
@@ -352,7 +352,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(StepError::NonFiniteState);
         }
         Self::check_input(u)?;
-        self.advance_forced(z, p0, &z.v, u, &mut Terms::zeros())
+        self.advance_forced(z, p0, &z.v, u, &mut Workspace::new())
     }
 
     /// Fills `out` with the states after 1, 2, …, `out.len()` forced steps
@@ -373,7 +373,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(fail(inputs.len(), StepError::NonFiniteInput));
         }
         let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
-        let mut t = Terms::zeros();
+        let mut t = Workspace::new();
         for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
             Self::check_input(u).map_err(|e| fail(k, e))?;
             let guess = if self.substeps == 1 {
@@ -521,7 +521,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let (mut zc, mut pc) = (*z, *p0);
         let mut report = StepReport::default();
         let eye_u = SMatrix::<f64, U, U>::identity();
-        let mut t = Terms::zeros();
+        let mut t = Workspace::new();
         for i in 0..self.substeps {
             if i > 0 {
                 seeds.q.x += seeds.q.v * h;
@@ -536,7 +536,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             // derivatives reuse them
             let (v1, p1, r, lambda) = self.solve_forced_any(&x1, &pc, h, &zc.v, u, &mut t)?;
             report.merge(&r);
-            let l = self.local(&x1, &v1, &lambda, h, u, &t)?;
+            let l = self.local(&x1, &v1, &lambda, h, u, &t.t)?;
             for g in [&mut seeds.q, &mut seeds.v] {
                 g.v = l.sx * g.x + l.sp * g.p;
                 g.p = l.px * g.x + l.pv * g.v;

@@ -578,18 +578,21 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
     finite_solution(x, y)
 }
 
-/// Whether every entry is finite, AND-ed without a branch per entry
-/// (`all` stops at the first non-finite one, a test and a branch each; a
-/// flattening iterator is not always inlined).
+/// Whether every entry is finite, without a branch per entry (`all` stops
+/// at the first non-finite one, a test and a branch each; a flattening
+/// iterator is not always inlined): x·0 is ±0 for finite x and NaN
+/// otherwise, summed per column (independent chains that vectorise; one
+/// multiply and one add per entry, where `is_finite` costs an absolute
+/// value, a compare and an AND).
 #[inline(always)]
 fn all_finite<const N: usize, const C: usize>(rows: &[[f64; C]; N]) -> bool {
-    let mut ok = true;
+    let mut poison = [0.0f64; C];
     for row in rows {
-        for x in row {
-            ok &= x.is_finite();
+        for (p, x) in poison.iter_mut().zip(row.iter()) {
+            *p += x * 0.0;
         }
     }
-    ok
+    poison.iter().fold(0.0, |s, p| s + p) == 0.0
 }
 
 /// How [`KktFactors`] applies J⁻¹: a diagonal J by its reciprocals, any
@@ -743,8 +746,10 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
     }
 
     /// [`KktFactors::solve`], leaving the factored Schur complement
-    /// S = A J⁻¹B and A in `schur` for [`KktFactors::solve_chord`] (not
-    /// [`SchurFactor::is_formed`] when the solution is not finite).
+    /// S = A J⁻¹B in `schur` for [`KktFactors::solve_chord`] (not
+    /// [`SchurFactor::is_formed`] when the solution is not finite). The
+    /// caller keeps A for the chord steps (not copied here: the step keeps
+    /// it where it was evaluated).
     #[inline(always)]
     pub fn solve_keeping(
         &self,
@@ -756,7 +761,6 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         let jr = self.j_solve(r);
         // S formed and factored where it stays: formed elsewhere and moved
         // there, S and its factors would be copied (memcpy) on the way
-        schur.a = *a;
         let rhs = schur_sparse(a, &self.jb_rows, &[1.0; N], &jr, c, &mut schur.lu.lu);
         schur.full = if schur.lu.factor(SCHUR_PIVOT_TOL) {
             None
@@ -772,9 +776,10 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         sol
     }
 
-    /// Solve the KKT system with this J and B, the A and S of `schur` (left
-    /// by [`KktFactors::solve_keeping`] of these factors) and the given r
-    /// and c, without forming S: a chord step when A has moved since (the
+    /// Solve the KKT system with this J and B, the S of `schur` and the A
+    /// it was formed from (left by [`KktFactors::solve_keeping`] of these
+    /// factors with this `a`) and the given r and c, without forming S: a
+    /// chord step when the constraint rows have moved since (the
     /// caller evaluates the residuals exactly and keeps S only while the
     /// iteration contracts). O(N) (diagonal J) or O(N²) for J⁻¹r,
     /// O(NC) for A·J⁻¹r and for x, O(C²) for the solve with S.
@@ -783,6 +788,7 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
     pub fn solve_chord(
         &self,
         schur: &SchurFactor<N, C>,
+        a: &SMatrix<f64, C, N>,
         r: &SVector<f64, N>,
         c: &SVector<f64, C>,
     ) -> Option<KktSolution<N, C>> {
@@ -793,7 +799,7 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         for (rh, ci) in rhs.iter_mut().zip(c.as_slice()) {
             *rh = -ci;
         }
-        for (col, x) in schur.a.as_slice().chunks_exact(C).zip(jr.iter()) {
+        for (col, x) in a.as_slice().chunks_exact(C).zip(jr.iter()) {
             for (rh, aik) in rhs.iter_mut().zip(col.iter()) {
                 *rh += aik * x;
             }
@@ -804,13 +810,13 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
 }
 
 /// The factored Schur complement S = A J⁻¹B of a [`KktFactors`] system
-/// and the constraint matrix A it was formed from
 /// ([`KktFactors::solve_keeping`]), for chord steps
-/// ([`KktFactors::solve_chord`]) with the same J and B.
+/// ([`KktFactors::solve_chord`], given the same A) with the same J and B.
 /// [`SchurFactor::default`] holds none (not [`SchurFactor::is_formed`]).
 #[derive(Clone, Copy, Debug)]
 pub struct SchurFactor<const N: usize, const C: usize> {
-    a: SMatrix<f64, C, N>,
+    // (N: the KKT system's size, for the solves' signatures)
+    _n: core::marker::PhantomData<[f64; N]>,
     // S by partial pivoting (as `solve_schur`), unless `full` holds its
     // complete-pivoting factors
     lu: PartialLu<C>,
@@ -821,7 +827,7 @@ pub struct SchurFactor<const N: usize, const C: usize> {
 impl<const N: usize, const C: usize> Default for SchurFactor<N, C> {
     fn default() -> Self {
         Self {
-            a: SMatrix::zeros(),
+            _n: core::marker::PhantomData,
             lu: PartialLu {
                 lu: [[0.0; C]; C],
                 perm: [0; C],
@@ -833,6 +839,12 @@ impl<const N: usize, const C: usize> Default for SchurFactor<N, C> {
 }
 
 impl<const N: usize, const C: usize> SchurFactor<N, C> {
+    /// Forget the S held (not [`SchurFactor::is_formed`] until the next
+    /// [`KktFactors::solve_keeping`]).
+    pub fn clear(&mut self) {
+        self.formed = false;
+    }
+
     /// Whether it holds the S of a solve with a finite solution.
     pub fn is_formed(&self) -> bool {
         self.formed
@@ -1184,7 +1196,7 @@ mod tests {
             assert!(schur.is_formed());
             let (r2, c2) = (r.map(|x| 0.01 * x - 0.003), c.map(|x| 1e-3 * x + 2e-4));
             let full = dense(&j, &a, &r2, &c2);
-            let (x, y) = f.solve_chord(&schur, &r2, &c2).unwrap();
+            let (x, y) = f.solve_chord(&schur, &a, &r2, &c2).unwrap();
             assert!((full.fixed_rows::<N>(0) - x).amax() < 1e-15, "{x} {full}");
             assert!((full.fixed_rows::<C>(N) - y).amax() < 1e-15, "{y} {full}");
             // a non-finite solution keeps no S
@@ -1206,7 +1218,7 @@ mod tests {
             f2.solve_keeping(&a2, &r, &c2, &mut schur).unwrap();
             let (r3, mut c3) = (r * 0.5, c * 0.25);
             c3[2] = c3[3];
-            let (x3, y3) = f2.solve_chord(&schur, &r3, &c3).unwrap();
+            let (x3, y3) = f2.solve_chord(&schur, &a2, &r3, &c3).unwrap();
             assert!((j * x3 + b2 * y3 - r3).amax() < 1e-13);
             assert!((a2 * x3 - c3).amax() < 1e-13);
         }

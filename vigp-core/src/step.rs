@@ -297,6 +297,58 @@ fn failed<T>(e: StepError) -> Result<T, StepError> {
     Err(e)
 }
 
+/// The solver's workspace, reused by the steps of a rollout: the terms,
+/// the constraint values and Jacobians of the Newton iterations, and the
+/// KKT factors. Held across steps, nothing in it is zeroed per step (its
+/// kilobytes of factors would cost a memset each), and the G(x₁ + h·v₁) of
+/// a converged step, where the next step's G₁ = G(x₁') is evaluated (x₁' =
+/// x₁ + h·v₁, the same floating-point operations), is reused for that G₁:
+/// a constraint Jacobian (the model's trigonometry) fewer per step.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Workspace<const N: usize, const C: usize> {
+    /// The terms: after a converged solve, at the solution's quadrature
+    /// point m₁(v₁) (the derivatives reuse them).
+    pub(crate) t: Terms<N>,
+    // c and G at four configurations: G₁'s (`g_slot`), the iterate's, the
+    // line search's trial point and the one the kept Schur complement was
+    // formed at (for chord steps); an accepted trial point or a converged
+    // step changes roles by index, without copying G
+    cg: [(SVector<f64, C>, SMatrix<f64, C, N>); 4],
+    // cg[g_slot] holds c and G at `g_at` (NaN: at no point yet)
+    g_slot: usize,
+    g_at: SVector<f64, N>,
+    factors: KktFactors<N, C>,
+    schur: SchurFactor<N, C>,
+}
+
+impl<const N: usize, const C: usize> Workspace<N, C> {
+    /// A fresh workspace (no G cached).
+    // inlined, so that it is formed in the caller's frame (see
+    // `Terms::zeros`)
+    #[inline(always)]
+    pub(crate) fn new() -> Self {
+        Self {
+            t: Terms::zeros(),
+            cg: [(SVector::zeros(), SMatrix::zeros()); 4],
+            g_slot: 0,
+            g_at: SVector::repeat(f64::NAN),
+            factors: KktFactors::default(),
+            schur: SchurFactor::default(),
+        }
+    }
+}
+
+/// Whether `a` and `b` hold the same bits (a point where G was evaluated:
+/// −0 and +0 may give G's zeros different signs, NaN never matches).
+#[inline(always)]
+fn same_bits<const N: usize>(a: &SVector<f64, N>, b: &SVector<f64, N>) -> bool {
+    let mut diff = 0u64;
+    for (x, y) in a.as_slice().iter().zip(b.as_slice()) {
+        diff |= x.to_bits() ^ y.to_bits();
+    }
+    diff == 0 && !a[0].is_nan()
+}
+
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// The paper's first-order variational integrator with default options.
     pub fn new(model: M, dt: f64) -> Result<Self, StepError> {
@@ -439,7 +491,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(StepError::NonFiniteState);
         }
         let p0 = self.momentum_at(z, self.substep_dt());
-        self.advance(z, &p0, &z.v, &mut Terms::zeros())
+        self.advance(z, &p0, &z.v, &mut Workspace::new())
             .map(|(z1, _, r)| (z1, r))
     }
 
@@ -454,7 +506,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
-        self.advance(z, p0, &z.v, &mut Terms::zeros())
+        self.advance(z, p0, &z.v, &mut Workspace::new())
     }
 
     /// All sub-steps of one step from `z` with momentum `p0`, the first
@@ -467,7 +519,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         z: &State<N>,
         p0: &SVector<f64, N>,
         guess: &SVector<f64, N>,
-        t: &mut Terms<N>,
+        t: &mut Workspace<N, C>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         if max_abs(p0).is_nan() {
             return Err(StepError::NonFiniteState);
@@ -515,7 +567,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
         // one terms workspace for the whole rollout (zeroing it is not free:
         // ∂M/∂q alone is N³ numbers)
-        let mut t = Terms::zeros();
+        let mut t = Workspace::new();
         for (k, slot) in out.iter_mut().enumerate() {
             let guess = if self.substeps == 1 {
                 z.v * 2.0 - v_prev
@@ -545,7 +597,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
     ) -> Result<Solved<N>, StepError> {
-        self.solve_in(x1, p0, h, guess, &mut Terms::zeros())
+        self.solve_in(x1, p0, h, guess, &mut Workspace::new())
     }
 
     /// [`Stepper::solve`] with the caller's terms workspace `t`.
@@ -556,7 +608,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         p0: &SVector<f64, N>,
         h: f64,
         guess: &SVector<f64, N>,
-        t: &mut Terms<N>,
+        t: &mut Workspace<N, C>,
     ) -> Result<Solved<N>, StepError> {
         if self.alpha == 0.0 {
             self.solve_rule::<false>(x1, p0, h, guess, t)
@@ -575,7 +627,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         p0: &SVector<f64, N>,
         h: f64,
         guess: &SVector<f64, N>,
-        t: &mut Terms<N>,
+        t: &mut Workspace<N, C>,
     ) -> Result<Solved<N>, StepError> {
         self.solve_forced_rule::<MID, false>(
             x1,
@@ -610,9 +662,17 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         guess: &SVector<f64, N>,
         input_force: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
         input_jac: impl Fn(&SVector<f64, N>) -> SMatrix<f64, N, N>,
-        t: &mut Terms<N>,
+        ws: &mut Workspace<N, C>,
     ) -> Result<Forced<N, C>, StepError> {
         let alpha = if MID { 0.5 } else { 0.0 };
+        let Workspace {
+            t,
+            cg,
+            g_slot,
+            g_at,
+            factors,
+            schur,
+        } = ws;
         let model = &self.model;
         let k = &self.k;
         let opts = &self.options;
@@ -652,34 +712,59 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let (inv_p, inv_l) = (1.0 / p_scale, 1.0 / l_scale);
         // G₁ = G(x₁), fixed for the step, and G₁ᵀ for the constraint
         // forces −G₁ᵀλ (J⁻¹B, B = −G₁ᵀ, is read from G₁'s columns)
-        let g1: SMatrix<f64, C, N> = if C > 0 {
-            model.constraints_and_jacobian(k, x1).1
-        } else {
-            SMatrix::zeros()
-        };
-        let g1t = g1.transpose();
+        // (`cg[i1]`: the previous step's G at its solution when that was
+        // at x₁, see `Workspace`)
+        let i1 = *g_slot;
+        if C > 0 && !same_bits(g_at, x1) {
+            cg[i1] = model.constraints_and_jacobian(k, x1);
+            *g_at = *x1;
+        }
+        let g1t = cg[i1].1.transpose();
         let a1 = (1.0 - alpha) * h;
         // residual d(v, λ) and Q (row l = (∂M/∂q_l v)ᵀ, which the Newton
         // matrix reuses); constraint c(v) and its Jacobian G(x₁ + h v)
-        let residual =
-            |t: &Terms<N>, bu: &SVector<f64, N>, v: &SVector<f64, N>, lambda: &SVector<f64, C>| {
-                let (q, kin) = M::kinetic(t, v);
-                let mut f = kin - t.dpotential;
-                if M::DISSIPATIVE {
-                    f -= M::damping_times(t, v);
+        // (Q is written to `q_out` only where the mass matrix moves: with
+        // a constant one it is zero and unused, and carrying it would cost
+        // a zeroed and a copied N × N matrix per residual)
+        let residual = |t: &Terms<N>,
+                        bu: &SVector<f64, N>,
+                        v: &SVector<f64, N>,
+                        lambda: &SVector<f64, C>,
+                        q_out: &mut SMatrix<f64, N, N>| {
+            let (q, kin) = M::kinetic(t, v);
+            if !M::CONSTANT_MASS {
+                *q_out = q;
+            }
+            let mut f = kin - t.dpotential;
+            if M::DISSIPATIVE {
+                f -= M::damping_times(t, v);
+            }
+            if FORCED {
+                f += bu;
+            }
+            let mut d = p0 + f * a1 - M::mass_times(t, v);
+            if C > 0 {
+                // G₁ᵀλ as nalgebra's `g1t * lambda` forms it (gemv: the
+                // product with λ₀ stored, then λ_j times column j added
+                // for j = 1, 2, … — the same roundings), inline: out of
+                // line the product and its result make a round trip
+                // through memory. G₁ᵀ stored: its columns are contiguous,
+                // so the loop vectorises across rows.
+                let mut gl = [0.0f64; N];
+                for (j, (col, lj)) in g1t
+                    .as_slice()
+                    .chunks_exact(N)
+                    .zip(lambda.as_slice())
+                    .enumerate()
+                {
+                    for (y, g) in gl.iter_mut().zip(col) {
+                        *y = if j == 0 { g * lj } else { *y + g * lj };
+                    }
                 }
-                if FORCED {
-                    f += bu;
-                }
-                let mut d = p0 + f * a1 - M::mass_times(t, v);
-                if C > 0 {
-                    // G₁ᵀ stored: its columns are contiguous, so the
-                    // product vectorises (G₁ᵀλ from G₁'s columns would be
-                    // a dot product per row, serial in rounding order)
-                    d -= g1t * lambda;
-                }
-                (d, q)
-            };
+                d -= SVector::from(gl);
+            }
+            d
+        };
         let constraint = |v: &SVector<f64, N>| {
             if C > 0 {
                 model.constraints_and_jacobian(k, &(x1 + v * h))
@@ -702,12 +787,22 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             a.max(b) + (a + b) * 0.0
         };
         let mut lambda = SVector::<f64, C>::zeros();
-        let (mut d, mut qm) = residual(t, &bu, &v, &lambda);
+        // Q at the iterate and at the trial point (unused with a constant
+        // mass matrix)
+        let (mut qm, mut qn) = (SMatrix::<f64, N, N>::zeros(), SMatrix::<f64, N, N>::zeros());
+        let mut d = residual(t, &bu, &v, &lambda, &mut qm);
         // c and G₂ at the iterate (`cg[cur]`) and at the line search's
-        // trial point (`cg[1 - cur]`): a trial point is accepted by
-        // switching `cur`, without copying G₂ (C × N numbers)
-        let mut cg = [constraint(&v), (SVector::zeros(), SMatrix::zeros())];
-        let mut cur = 0;
+        // trial point (`cg[trial]`): a trial point is accepted by
+        // switching the two, without copying G₂ (C × N numbers)
+        // `spare`: where the kept S was formed after a fresh KKT solve
+        // (the chord steps' A), or free
+        let (mut cur, mut trial, mut spare) = match i1 {
+            0 => (1, 2, 3),
+            1 => (2, 3, 0),
+            2 => (3, 0, 1),
+            _ => (0, 1, 2),
+        };
+        cg[cur] = constraint(&v);
         let mut err = error(&d, &cg[cur].0);
         let mut regularised = false;
         let momentum = |t: &Terms<N>, bu: &SVector<f64, N>, v: &SVector<f64, N>| {
@@ -730,14 +825,14 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         // formed in place at the first KKT solve when `jac_constant`
         // (`factored`); `factors_ok` false after that = J needs the robust
         // solve
-        let mut factors = KktFactors::<N, C>::default();
+
         let (mut factored, mut factors_ok) = (false, false);
         // B = −G₁ᵀ for the general KKT solve, formed at its first use
         let mut neg_g1t: Option<SMatrix<f64, N, C>> = None;
         // with them: the factored Schur complement S = G₂J⁻¹B of the last
         // fresh KKT solve and the G₂ it was formed from, and whether the
         // next iteration is a chord step with them (`keep_schur`, below)
-        let mut schur = SchurFactor::<N, C>::default();
+        schur.clear();
         let mut keep_schur = false;
         'newton: for iteration in 0..opts.max_iterations {
             if !err.is_finite() {
@@ -750,6 +845,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     stalled: false,
                     regularised,
                 };
+                if C > 0 {
+                    // c and G at x₁ + h·v, the next step's x₁
+                    (*g_slot, *g_at) = (cur, x1 + v * h);
+                }
                 return Ok((v, momentum(t, &bu, &v), report, lambda));
             }
             // Newton matrix ∂d/∂v (module docs). Midpoint rule: after an
@@ -795,6 +894,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             // this iteration's direction comes from a kept S (first-order
             // rule with constraints and a constant J)
             let mut chord = false;
+            // this iteration's direction formed a kept S at `cur`
+            let mut fresh = false;
             let (dv, dl) = if C == 0 {
                 let dv = solve_partial(&jac, &(-d)).ok_or(singular)?;
                 // First-order rule, tree: with x₁ fixed d is exactly
@@ -827,7 +928,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 if jac_constant && !factored {
                     // in place: returned in an Option, the factors
                     // (kilobytes) would be copied on the way
-                    factors_ok = factors.factor_constraint_jacobian(&jac, &g1);
+                    factors_ok = factors.factor_constraint_jacobian(&jac, &cg[i1].1);
                     factored = true;
                 }
                 let fast = if jac_constant && factors_ok {
@@ -838,7 +939,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     // factorisation.
                     chord = keep_schur && schur.is_formed();
                     let sol = if chord {
-                        factors.solve_chord(&schur, &r, &cc)
+                        factors.solve_chord(schur, &cg[spare].1, &r, &cc)
                     } else {
                         None
                     };
@@ -846,7 +947,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         sol
                     } else {
                         chord = false;
-                        factors.solve_keeping(&cg[cur].1, &r, &cc, &mut schur)
+                        fresh = true;
+                        factors.solve_keeping(&cg[cur].1, &r, &cc, schur)
                     }
                 } else {
                     None
@@ -874,9 +976,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         bu = input(&at(&vn));
                     }
                 }
-                let (dn, qn) = residual(t, &bu, &vn, &ln);
-                cg[1 - cur] = constraint(&vn);
-                let errn = error(&dn, &cg[1 - cur].0);
+                let dn = residual(t, &bu, &vn, &ln, &mut qn);
+                cg[trial] = constraint(&vn);
+                let errn = error(&dn, &cg[trial].0);
                 if errn.is_finite() && (errn < err || errn <= opts.tolerance) {
                     reuse_jac = step == 1.0 && errn <= 0.01 * err;
                     if jac_constant && C > 0 {
@@ -892,8 +994,16 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                         // a rollout's extrapolated guess).
                         keep_schur = step == 1.0 && h.abs() * max_abs(&dv) * errn <= opts.tolerance;
                     }
-                    (v, lambda, d, qm, err) = (vn, ln, dn, qn, errn);
-                    cur = 1 - cur;
+                    (v, lambda, d, err) = (vn, ln, dn, errn);
+                    if !M::CONSTANT_MASS {
+                        qm = qn;
+                    }
+                    if fresh {
+                        // the iterate's G goes with S
+                        (cur, trial, spare) = (trial, spare, cur);
+                    } else {
+                        (cur, trial) = (trial, cur);
+                    }
                     break;
                 }
                 step *= 0.5;
@@ -921,6 +1031,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                             stalled: true,
                             regularised,
                         };
+                        if C > 0 {
+                            // c and G at x₁ + h·v, the next step's x₁
+                            (*g_slot, *g_at) = (cur, x1 + v * h);
+                        }
                         return Ok((v, momentum(t, &bu, &v), report, lambda));
                     }
                     return Err(StepError::LineSearchFailed {
@@ -937,6 +1051,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 stalled: false,
                 regularised,
             };
+            if C > 0 {
+                // c and G at x₁ + h·v, the next step's x₁
+                (*g_slot, *g_at) = (cur, x1 + v * h);
+            }
             return Ok((v, momentum(t, &bu, &v), report, lambda));
         }
         Err(StepError::NotConverged {
