@@ -410,13 +410,15 @@ impl Gp {
     /// lowest start index). A single sparse run (one output, no restarts)
     /// uses all threads inside its evaluations instead.
     ///
-    /// Each start follows scipy's L-BFGS-B iteration. If no start of an
-    /// output does better than white noise (its best LML within 1e-6
-    /// relative of −(N/2)(1 + ln(2π·yᵀy/N)), the plateau where the length
-    /// scales are too short for any two inputs to correlate), the starts
-    /// whose first trial was a corner of the box are run again with a
-    /// first step of unit length (see the `lbfgs` module), and the better
-    /// end of each counts; the report's evaluations include both runs.
+    /// Each start follows scipy's L-BFGS-B iteration. If an output's best
+    /// fit is not preferred over white noise by Akaike's criterion (its
+    /// best LML exceeds −(N/2)(1 + ln(2π·yᵀy/N)), white noise at its best
+    /// variance, by at most d), the starts whose first trial was a corner
+    /// of the box (the way onto the white-noise plateau, where the length
+    /// scales are too short for any two inputs to correlate) are run again
+    /// with a first step of unit length (see the `lbfgs` module), and the
+    /// better end of each counts; the report's evaluations include both
+    /// runs.
     ///
     /// Errors: empty data, mismatched lengths, non-finite values, invalid
     /// bounds, initial or warm-start hyperparameters, an inducing-point count
