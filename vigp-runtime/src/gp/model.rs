@@ -588,16 +588,16 @@ impl Gp {
                 ..lopt
             };
             for (j, res) in again.into_iter().zip(run(&retry, guarded)) {
-                if let (Ok(first), Ok(mut second)) = (&results[j], res) {
-                    second.evaluations += first.evaluations;
-                    second.iterations += first.iterations;
-                    if second.f < first.f {
-                        results[j] = Ok(second);
-                    } else if let Ok(first) = &mut results[j] {
-                        first.evaluations = second.evaluations;
-                        first.iterations = second.iterations;
-                    }
+                let (Ok(first), Ok(second)) = (&mut results[j], res) else {
+                    continue;
+                };
+                let evaluations = first.evaluations + second.evaluations;
+                let iterations = first.iterations + second.iterations;
+                if second.f < first.f {
+                    *first = second;
                 }
+                first.evaluations = evaluations;
+                first.iterations = iterations;
             }
         }
         let starts = 1 + opts.restarts;
