@@ -181,6 +181,15 @@ where
             worst = worst.max(assert_close("g (with G)", &g, &g_ref));
             let jac_ref = Mechanism::constraint_jacobian(&m, &q);
             worst = worst.max(assert_close("G", &jac, &jac_ref));
+            // the declared structural zeros of G are zeros of the reference
+            // Jacobian (exactly: a structural zero is no derivative at all)
+            for i in 0..C {
+                for k in 0..N {
+                    if !M::CONSTRAINT_PATTERN[i][k] {
+                        assert_eq!(jac_ref[(i, k)], 0.0, "{name}: G[{i}][{k}] declared zero");
+                    }
+                }
+            }
             let mu = SVector::<f64, C>::from_fn(|_, _| rng.uniform(-1.0, 1.0));
             let h_ref = num_dual::hessian(
                 |x: SVector<Dual2Vec<f64, nalgebra::Const<N>>, N>| {
@@ -226,6 +235,32 @@ fn generated_terms_match_dual_numbers_in_both_views() {
     check("exotic maximal", Exotic::default().maximal());
     check("plain minimal", Plain::default().minimal());
     check("plain maximal", Plain::default().maximal());
+}
+
+/// G's declared structural zeros, counted by hand: in maximal coordinates
+/// (x, y, θ per link) a revolute joint's two rows read x₁ ± (l/2)cos θ₁ −
+/// x₂ ∓ … and y₁ ± (l/2)sin θ₁ − y₂ ∓ …, so each row has 4 entries (2 for
+/// a joint to the world, whose second body is fixed). The fourbar's five
+/// joints (two to the world) give 2·(2 + 4 + 2 + 4 + 4) = 32 of 10 × 12;
+/// the double pendulum's two 2·(2 + 4) = 12 of 4 × 6. A loop closure in
+/// minimal coordinates depends on every angle of its loop (fourbar: all
+/// four), so its pattern is dense there.
+#[test]
+fn constraint_patterns_have_the_joint_structure() {
+    fn count<M: Dynamics<N, C>, const N: usize, const C: usize>(_: &M) -> usize {
+        M::CONSTRAINT_PATTERN
+            .iter()
+            .map(|row| row.iter().filter(|x| **x).count())
+            .sum()
+    }
+    assert_eq!(count(&Fourbar::default().maximal()), 32);
+    assert_eq!(count(&DoublePendulum::default().maximal()), 12);
+    assert_eq!(count(&Fourbar::default().minimal()), 2 * 4);
+    // the parameter struct steps its minimal view and says so
+    assert_eq!(
+        <Fourbar as Dynamics<4, 2>>::CONSTRAINT_PATTERN,
+        <vigp::systems::FourbarMinimal as Dynamics<4, 2>>::CONSTRAINT_PATTERN
+    );
 }
 
 /// Perturbed run-time parameters flow into the constants: the terms of a

@@ -337,3 +337,77 @@ fn accepted_steps_meet_the_tolerance_by_an_independent_residual() {
     dp.joints.shoulder.damping = 0.1;
     check(dp, dp.minimal(), "damped double pendulum");
 }
+
+/// `Stepper::step_in` (a kept workspace, reset in O(N²)) gives the state of
+/// `step` (a fresh, zeroed one) bit for bit — also when the workspace was
+/// last used by a stepper with other parameters whose converged step left
+/// its cached constraint Jacobian exactly at the next step's x₁, with
+/// damping and without, with either rule, and in minimal coordinates
+/// (where ∂M/∂q is read and cleared).
+#[test]
+fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
+    use vigp::Coordinates;
+    use vigp::embedded::StepWorkspace;
+    fn same<const N: usize>(a: &State<N>, b: &State<N>) -> bool {
+        a.q.iter().chain(a.v.iter()).map(|x| x.to_bits()).eq(b
+            .q
+            .iter()
+            .chain(b.v.iter())
+            .map(|x| x.to_bits()))
+    }
+    let dt = 0.01;
+    let fb = Fourbar::default();
+    let mut long = fb;
+    long.links.link2.length = 1.3;
+    long.links.link4.length = 1.3;
+    let mut damped = fb;
+    damped.joints.middle1.damping = 0.4;
+    let mut rng = Rng(5);
+    // maximal view: three steppers of one type, one workspace
+    let steppers = [
+        Stepper::new(fb.maximal(), dt).unwrap(),
+        Stepper::new(long.maximal(), dt).unwrap(),
+        Stepper::new(damped.maximal(), dt).unwrap(),
+        Stepper::midpoint(fb.maximal(), dt).unwrap(),
+    ];
+    let mut ws = StepWorkspace::new();
+    let mut checked = 0;
+    for _ in 0..10 {
+        let z = random_state(&fb.minimal(), &mut rng, dt);
+        let zm = fb.minimal().to_maximal(&z, dt);
+        for a in &steppers {
+            // a's converged step leaves G cached at z1.q + dt·z1.v, the
+            // x₁ of every stepper's next step from z1
+            let z1 = a.step_in(&zm, &mut ws).unwrap();
+            assert!(same(&z1, &a.step(&zm).unwrap()));
+            for b in &steppers {
+                let fresh = b.step(&z1).unwrap();
+                let kept = b.step_in(&z1, &mut ws).unwrap();
+                assert!(same(&kept, &fresh), "{kept:?} vs {fresh:?}");
+                checked += 1;
+            }
+        }
+    }
+    assert_eq!(checked, 160);
+    // minimal coordinates (a moving mass matrix: ∂M/∂q is cleared too)
+    let mut ws = StepWorkspace::new();
+    let dp = DoublePendulum::default();
+    let mut dpd = dp;
+    dpd.joints.elbow.damping = 0.3;
+    let s = [
+        Stepper::new(dp, dt).unwrap(),
+        Stepper::new(dpd, dt).unwrap(),
+    ];
+    for _ in 0..10 {
+        let z = random_state(&dp.minimal(), &mut rng, dt);
+        for a in &s {
+            assert!(same(&a.step_in(&z, &mut ws).unwrap(), &a.step(&z).unwrap()));
+        }
+    }
+    // errors are those of `step`
+    let bad = State::new([f64::NAN, 0.0], [0.0, 0.0]);
+    assert!(matches!(
+        s[0].step_in(&bad, &mut ws),
+        Err(StepError::NonFiniteState)
+    ));
+}

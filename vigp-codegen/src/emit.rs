@@ -936,6 +936,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
             const DISSIPATIVE: bool = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::DISSIPATIVE;
             const CONSTANT_MASS: bool = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::CONSTANT_MASS;
             const DMASS_PATTERN: [[[bool; #n]; #n]; #n] = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::DMASS_PATTERN;
+            const CONSTRAINT_PATTERN: [[bool; #n]; #c] = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::CONSTRAINT_PATTERN;
             #inputs_delegate_const
             type Constants = <#minimal_ty as ::vigp::embedded::Dynamics<#n, #c>>::Constants;
             fn constants(&self) -> ::core::result::Result<Self::Constants, ::vigp::embedded::StepError> {

@@ -748,8 +748,8 @@ pub fn emit_dynamics(
     };
 
     // constraints
-    let constraint_fns = if c == 0 {
-        quote!()
+    let (constraint_const, constraint_fns) = if c == 0 {
+        (quote!(), quote!())
     } else {
         let rows = &mech.constraints;
         let outs: Vec<(TokenStream, &Expr)> = rows
@@ -812,7 +812,15 @@ pub fn emit_dynamics(
                 h
             }
         };
-        quote!(#g_fn #jac_fn #hess_fn)
+        // G's structural zeros, for the Schur complement of the step
+        let pattern = jac.iter().map(|row| {
+            let cells = row.iter().map(|e| !e.is_zero());
+            quote!([#(#cells),*])
+        });
+        (
+            quote!(const CONSTRAINT_PATTERN: [[bool; #nn]; #cc] = [#(#pattern),*];),
+            quote!(#g_fn #jac_fn #hess_fn),
+        )
     };
 
     // inputs (emitted last: the constants of the other functions keep
@@ -904,6 +912,7 @@ pub fn emit_dynamics(
             const DISSIPATIVE: bool = #dissipative;
             const CONSTANT_MASS: bool = #constant_mass;
             #pattern_const
+            #constraint_const
             #inputs_const
             type Constants = [f64; #nk];
 

@@ -79,6 +79,20 @@ pub trait Dynamics<const N: usize, const C: usize> {
     /// pendulum's M depends on the elbow angle only). Default: all `true`.
     const DMASS_PATTERN: [[[bool; N]; N]; N] = [[[true; N]; N]; N];
 
+    /// `CONSTRAINT_PATTERN[i][k]` is `false` where ∂g_i/∂q_k vanishes
+    /// identically: the structural zeros of the constraint Jacobian G(q)
+    /// returned by [`Dynamics::constraints_and_jacobian`]. In maximal
+    /// coordinates a joint's two constraint rows touch the coordinates of
+    /// two bodies only, so most of G is structurally zero; the step forms
+    /// the Schur complement G₂J⁻¹G₁ᵀ over the `true` entries only
+    /// (straight-line code over a pattern known at compile time, instead of
+    /// testing every entry for zero). An entry may be `true` and still
+    /// evaluate to zero; it must never be `false` where G can be nonzero
+    /// (that entry would be ignored). Default: all `true`, which keeps a
+    /// test of each entry for zero at run time. `mechanism!` emits the
+    /// pattern from its symbolic Jacobian.
+    const CONSTRAINT_PATTERN: [[bool; N]; C] = [[true; N]; C];
+
     /// Number of inputs: the joints declared `actuated`, in declaration
     /// order (0 for an unactuated mechanism, which has no input code).
     /// Input i is a torque on a revolute joint or a force along a prismatic

@@ -397,7 +397,15 @@ fn solve_with_rows<const N: usize, const C: usize>(
     c: &SVector<f64, C>,
 ) -> (SVector<f64, N>, [f64; C]) {
     let mut s = [[0.0f64; C]; C];
-    let rhs = schur_sparse(a, jb_rows, &[1.0; N], &jr, c, &mut s);
+    let rhs = schur_sparse(
+        a,
+        &ConstraintColumns::DENSE,
+        jb_rows,
+        &[1.0; N],
+        &jr,
+        c,
+        &mut s,
+    );
     let y = solve_schur(s, &rhs);
     (minus_rows_times(jr, jb_rows, &y), y)
 }
@@ -442,6 +450,61 @@ fn dot<const C: usize>(a: &[f64; C], b: &[f64; C]) -> f64 {
     s
 }
 
+/// The columns of each row of a C × N constraint Jacobian that may be
+/// nonzero: [`Dynamics::CONSTRAINT_PATTERN`](crate::Dynamics::CONSTRAINT_PATTERN)
+/// as index lists, built at compile time from the pattern
+/// (`const { &ConstraintColumns::new(&M::CONSTRAINT_PATTERN) }`), so that
+/// the Schur complement's loops visit only the entries that may be nonzero
+/// (for a planar four-bar in maximal coordinates 32 of G's 120).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ConstraintColumns<const N: usize, const C: usize> {
+    cols: [[usize; N]; C],
+    len: [usize; C],
+    // every entry may be nonzero: test each for zero at run time instead
+    dense: bool,
+}
+
+impl<const N: usize, const C: usize> ConstraintColumns<N, C> {
+    /// No structural zeros known: every entry is tested for zero at run
+    /// time (the default pattern of a hand-written model).
+    pub const DENSE: Self = Self::new(&[[true; N]; C]);
+
+    /// The index lists of `pattern` (`pattern[i][k]` is `false` where
+    /// entry (i, k) is identically zero).
+    pub const fn new(pattern: &[[bool; N]; C]) -> Self {
+        let mut cols = [[0usize; N]; C];
+        let mut len = [0usize; C];
+        let mut dense = true;
+        let mut i = 0;
+        while i < C {
+            let mut k = 0;
+            while k < N {
+                if pattern[i][k] {
+                    cols[i][len[i]] = k;
+                    len[i] += 1;
+                } else {
+                    dense = false;
+                }
+                k += 1;
+            }
+            i += 1;
+        }
+        Self { cols, len, dense }
+    }
+
+    /// Whether every entry may be nonzero (no structural zero known).
+    pub const fn is_dense(&self) -> bool {
+        self.dense
+    }
+
+    /// The columns of row `i` that may be nonzero, in increasing order.
+    /// Panics when `i ≥ C`.
+    #[inline(always)]
+    pub fn row(&self, i: usize) -> &[usize] {
+        &self.cols[i][..self.len[i]]
+    }
+}
+
 /// The Schur complement S = A·W·R (C×C, into `s`) and the right-hand side
 /// A·(J⁻¹r) − c (returned), for W = diag(`w`) and R given by its rows
 /// (R = J⁻¹B with W = I; R = B with W = J⁻¹ for a diagonal J), visiting
@@ -452,6 +515,7 @@ fn dot<const C: usize>(a: &[f64; C], b: &[f64; C]) -> f64 {
 #[inline(always)]
 fn schur_sparse<const N: usize, const C: usize>(
     a: &SMatrix<f64, C, N>,
+    cols: &ConstraintColumns<N, C>,
     rows: &[[f64; C]; N],
     w: &[f64; N],
     jr: &[f64],
@@ -461,6 +525,25 @@ fn schur_sparse<const N: usize, const C: usize>(
     // A is stored by columns: A_ik = a[k·C + i]
     let a_s = a.as_slice();
     let mut rhs = [0.0f64; C];
+    if !cols.dense {
+        // A's structural zeros known: the entries that may be nonzero
+        // only, with no test (a runtime zero among them adds 0·x)
+        for (i, (srow, rh)) in s.iter_mut().zip(rhs.iter_mut()).enumerate() {
+            let mut row = [0.0f64; C];
+            let mut acc = -c[i];
+            for &k in cols.row(i) {
+                let aik = a_s[k * C + i];
+                acc += aik * jr[k];
+                let f = aik * w[k];
+                for (sij, x) in row.iter_mut().zip(rows[k].iter()) {
+                    *sij += f * x;
+                }
+            }
+            *srow = row;
+            *rh = acc;
+        }
+        return rhs;
+    }
     for (i, (srow, rh)) in s.iter_mut().zip(rhs.iter_mut()).enumerate() {
         // the row accumulates in a local (registers), stored once: through
         // `s` every update would be stored
@@ -569,7 +652,7 @@ fn solve_kkt_diagonal<const N: usize, const C: usize>(
         jr[k] = r[k] * inv[k];
     }
     let mut s = [[0.0f64; C]; C];
-    let rhs = schur_sparse(a, &brow, inv, &jr, c, &mut s);
+    let rhs = schur_sparse(a, &ConstraintColumns::DENSE, &brow, inv, &jr, c, &mut s);
     let y = solve_schur(s, &rhs);
     let mut x = SVector::<f64, N>::zeros();
     for k in 0..N {
@@ -750,10 +833,15 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
     /// [`SchurFactor::is_formed`] when the solution is not finite). The
     /// caller keeps A for the chord steps (not copied here: the step keeps
     /// it where it was evaluated).
+    ///
+    /// `cols` lists the entries of A that may be nonzero (A's structural
+    /// zeros, [`ConstraintColumns::new`]); [`ConstraintColumns::DENSE`]
+    /// tests every entry for zero instead.
     #[inline(always)]
     pub fn solve_keeping(
         &self,
         a: &SMatrix<f64, C, N>,
+        cols: &ConstraintColumns<N, C>,
         r: &SVector<f64, N>,
         c: &SVector<f64, C>,
         schur: &mut SchurFactor<N, C>,
@@ -761,13 +849,13 @@ impl<const N: usize, const C: usize> KktFactors<N, C> {
         let jr = self.j_solve(r);
         // S formed and factored where it stays: formed elsewhere and moved
         // there, S and its factors would be copied (memcpy) on the way
-        let rhs = schur_sparse(a, &self.jb_rows, &[1.0; N], &jr, c, &mut schur.lu.lu);
+        let rhs = schur_sparse(a, cols, &self.jb_rows, &[1.0; N], &jr, c, &mut schur.lu.lu);
         schur.full = if schur.lu.factor(SCHUR_PIVOT_TOL) {
             None
         } else {
             // as `solve_schur`: S again (the attempt overwrote it)
             let mut s = [[0.0f64; C]; C];
-            schur_sparse(a, &self.jb_rows, &[1.0; N], &jr, c, &mut s);
+            schur_sparse(a, cols, &self.jb_rows, &[1.0; N], &jr, c, &mut s);
             Some(full_piv_schur(&s))
         };
         let y = schur.solve(&rhs);
@@ -1192,7 +1280,10 @@ mod tests {
             // constraint row stays A, whatever the current Jacobian)
             let mut schur = SchurFactor::default();
             assert!(!schur.is_formed());
-            assert_eq!(f.solve_keeping(&a, &r, &c, &mut schur), f.solve(&a, &r, &c));
+            assert_eq!(
+                f.solve_keeping(&a, &ConstraintColumns::DENSE, &r, &c, &mut schur),
+                f.solve(&a, &r, &c)
+            );
             assert!(schur.is_formed());
             let (r2, c2) = (r.map(|x| 0.01 * x - 0.003), c.map(|x| 1e-3 * x + 2e-4));
             let full = dense(&j, &a, &r2, &c2);
@@ -1201,7 +1292,10 @@ mod tests {
             assert!((full.fixed_rows::<C>(N) - y).amax() < 1e-15, "{y} {full}");
             // a non-finite solution keeps no S
             let nan = r.map(|_| f64::NAN);
-            assert!(f.solve_keeping(&a_next, &nan, &c, &mut schur).is_none());
+            assert!(
+                f.solve_keeping(&a_next, &ConstraintColumns::DENSE, &nan, &c, &mut schur)
+                    .is_none()
+            );
             assert!(!schur.is_formed());
             // redundant: row 3 repeated in place of row 2, consistent c
             let mut a2 = a;
@@ -1215,7 +1309,8 @@ mod tests {
             assert!((a2 * x2 - c2).amax() < 1e-13);
             // the kept S is singular (complete pivoting), consistent c
             let mut schur = SchurFactor::default();
-            f2.solve_keeping(&a2, &r, &c2, &mut schur).unwrap();
+            f2.solve_keeping(&a2, &ConstraintColumns::DENSE, &r, &c2, &mut schur)
+                .unwrap();
             let (r3, mut c3) = (r * 0.5, c * 0.25);
             c3[2] = c3[3];
             let (x3, y3) = f2.solve_chord(&schur, &a2, &r3, &c3).unwrap();
