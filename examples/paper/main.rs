@@ -31,7 +31,8 @@
 mod bounds;
 mod output;
 
-use clap::Parser;
+use clap::parser::ValueSource;
+use clap::{CommandFactory, FromArgMatches, Parser};
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::SVector;
 use output::{Fig1, Fig2Point, Series};
@@ -97,7 +98,8 @@ struct Cli {
     /// Output directory.
     #[arg(long, default_value = "target/paper")]
     out: PathBuf,
-    /// The paper's settings: 100 runs, 200/100 trajectories, N up to 512, 10 restarts.
+    /// The paper's settings: 100 runs, 200/100 trajectories, N up to 512,
+    /// 10 restarts (each unless given explicitly: `--full --runs 1`).
     #[arg(long)]
     full: bool,
     /// Skip the error-bound evaluation.
@@ -730,13 +732,27 @@ fn bound_findings(rows: &[bounds::BoundRow]) -> String {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let mut cli = Cli::from_arg_matches(&matches)?;
     if cli.full {
-        cli.runs = 100;
-        cli.train_trajectories = 200;
-        cli.test_trajectories = 100;
-        cli.restarts = 10;
-        cli.n = (1..=9).map(|k| 1usize << k).collect();
+        // the paper's settings, except where given on the command line
+        // (`--full --runs 1`: one run of the full protocol)
+        let given = |id: &str| matches.value_source(id) == Some(ValueSource::CommandLine);
+        if !given("runs") {
+            cli.runs = 100;
+        }
+        if !given("train_trajectories") {
+            cli.train_trajectories = 200;
+        }
+        if !given("test_trajectories") {
+            cli.test_trajectories = 100;
+        }
+        if !given("restarts") {
+            cli.restarts = 10;
+        }
+        if !given("n") {
+            cli.n = (1..=9).map(|k| 1usize << k).collect();
+        }
     }
     if cli.n.is_empty()
         || cli.runs == 0
