@@ -58,11 +58,16 @@ fn variational_steps_do_not_allocate() {
     let c4 = Composition::new(sys.minimal(), 0.01).unwrap();
     let mut outm = [zm; 20];
     let mut outx = [zx; 20];
+    let mut ws = vigp::embedded::StepWorkspace::new();
     let info = allocation_counter::measure(|| {
         mid.rollout_into(&zm, &mut outm).unwrap();
         max1.rollout_into(&zx, &mut outx).unwrap();
         max2.rollout_into(&zx, &mut outx).unwrap();
         c4.steps_into(&zm, &mut outm).unwrap();
+        // steps from states in a kept workspace
+        for z in &outx[..10] {
+            max1.step_in(z, &mut ws).unwrap();
+        }
     });
     assert_eq!(
         info.count_total, 0,

@@ -346,8 +346,8 @@ impl<const N: usize, const C: usize> Workspace<N, C> {
 /// A step from a state needs the terms workspace (M, ∂M/∂q, ∇V and D:
 /// 8·(N³ + 2N² + N) bytes), four constraint Jacobians and the KKT factors;
 /// [`Stepper::step`] builds them zeroed at every call. For the fourbar in
-/// maximal coordinates (N = 12, C = 10) that is about 21 KB of zeros, an
-/// eighth of the step's time. A kept workspace is reset in O(N²) instead
+/// maximal coordinates (N = 12, C = 10) that is about 21 KB of zeros, a
+/// sixth of the step's time. A kept workspace is reset in O(N²) instead
 /// (only the terms the model reads are cleared: ∂M/∂q only when the mass
 /// matrix moves, D only for a dissipative model), so the results are those
 /// of [`Stepper::step`], bit for bit, whatever stepper used the workspace
@@ -554,7 +554,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// [`Stepper::step`] in a kept workspace: the same state, bit for bit,
     /// without zeroing the solver's scratch at every call (see
-    /// [`StepWorkspace`]; for N = 12 about an eighth of the step). For
+    /// [`StepWorkspace`]; for N = 12 about a sixth of the step). For
     /// callers that step from many states (shooting, MPC candidates); a
     /// rollout ([`Stepper::rollout_into`]) keeps its workspace itself.
     pub fn step_in(

@@ -303,7 +303,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// [`Variational::step`] in a workspace the caller keeps across steps
     /// ([`vigp_core::StepWorkspace`]): the same state, bit for bit, without
     /// zeroing the solver's scratch at every call (for 12 coordinates about
-    /// 21 KB, an eighth of a step in maximal coordinates). For many steps
+    /// 21 KB, about a sixth of a step in maximal coordinates). For many steps
     /// from unrelated states; [`Integrator::rollout_into`] keeps its own.
     pub fn step_in(
         &self,
