@@ -547,9 +547,20 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
+        self.step_from_state(z, &mut Workspace::new())
+    }
+
+    /// The step from a (finite) state `z` in the workspace `ws`: its
+    /// momentum p₀, then the solve started at v₀ (shared by
+    /// [`Stepper::step_with_report`] and [`Stepper::step_with_report_in`]).
+    #[inline(always)]
+    fn step_from_state(
+        &self,
+        z: &State<N>,
+        ws: &mut Workspace<N, C>,
+    ) -> Result<(State<N>, StepReport), StepError> {
         let p0 = self.momentum_at(z, self.substep_dt());
-        self.advance(z, &p0, &z.v, &mut Workspace::new())
-            .map(|(z1, _, r)| (z1, r))
+        self.advance(z, &p0, &z.v, ws).map(|(z1, _, r)| (z1, r))
     }
 
     /// [`Stepper::step`] in a kept workspace: the same state, bit for bit,
@@ -579,9 +590,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
-        let p0 = self.momentum_at(z, self.substep_dt());
-        self.advance(z, &p0, &z.v, ws.reset::<M>())
-            .map(|(z1, _, r)| (z1, r))
+        self.step_from_state(z, ws.reset::<M>())
     }
 
     /// One step from `z` with its momentum `p0` known (from the previous
