@@ -26,7 +26,8 @@
 //! without and with its exact A and B; `driven_midpoint_step[_ab]` for the
 //! midpoint rule; `fourbar_maximal_single`: single steps from the states of
 //! a rollout, whose instruction count minus that of `fourbar_maximal` with
-//! the same count is the cost of the steps from a state); `callgrind_annotate` splits it by
+//! the same count is the cost of the steps from a state;
+//! `fourbar_maximal_single_in` the same in a kept workspace); `callgrind_annotate` splits it by
 //! function (build with `--release` instead to keep functions apart).
 
 use nalgebra::SVector;
@@ -74,6 +75,28 @@ fn run_single<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
             .q[0];
     }
     println!("{steps} single steps, sum of q[0] = {sum}");
+    Ok(())
+}
+
+/// As [`run_single`], in one kept [`vigp::embedded::StepWorkspace`]
+/// ([`Stepper::step_in`]).
+fn run_single_in<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
+    sys: M,
+    z0: State<N>,
+    steps: usize,
+) -> Result<(), Box<dyn std::error::Error>> {
+    let s = Stepper::new(sys, 0.01)?;
+    let mut out = vec![z0; steps + 1];
+    s.rollout_into(&z0, &mut out).map_err(|e| format!("{e}"))?;
+    let mut ws = vigp::embedded::StepWorkspace::new();
+    let mut sum = 0.0;
+    for z in &out[..steps] {
+        sum += s
+            .step_in(std::hint::black_box(z), &mut ws)
+            .map_err(|e| format!("{e}"))?
+            .q[0];
+    }
+    println!("{steps} single steps in a kept workspace, sum of q[0] = {sum}");
     Ok(())
 }
 
@@ -297,6 +320,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             let (fb, z0) = fourbar_start()?;
             use vigp::Coordinates;
             run_single(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
+        }
+        "fourbar_maximal_single_in" => {
+            let (fb, z0) = fourbar_start()?;
+            use vigp::Coordinates;
+            run_single_in(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
         }
         "fourbar_maximal" => {
             let (fb, z0) = fourbar_start()?;

@@ -410,4 +410,35 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
         s[0].step_in(&bad, &mut ws),
         Err(StepError::NonFiniteState)
     ));
+    // the std `Variational::step` keeps one workspace per size and thread:
+    // interleaved models of the same size (and other sizes in between)
+    // share it and still equal the fixed-size step in a fresh workspace
+    use vigp::Variational;
+    let vis = [
+        Variational::new(fb.maximal(), dt),
+        Variational::new(long.maximal(), dt),
+        Variational::new(damped.maximal(), dt),
+        Variational::midpoint(fb.maximal(), dt),
+    ];
+    let vdp = Variational::new(dpd.minimal(), dt);
+    let mut shared = 0;
+    for _ in 0..10 {
+        let z = random_state(&fb.minimal(), &mut rng, dt);
+        let zm = fb.minimal().to_maximal(&z, dt);
+        for (a, sa) in vis.iter().zip(&steppers) {
+            let z1 = a.step(&zm).unwrap();
+            assert!(same(&z1, &sa.step(&zm).unwrap()));
+            let zd = random_state(&dp.minimal(), &mut rng, dt);
+            assert!(same(&vdp.step(&zd).unwrap(), &s[1].step(&zd).unwrap()));
+            for (b, sb) in vis.iter().zip(&steppers) {
+                assert!(same(&b.step(&z1).unwrap(), &sb.step(&z1).unwrap()));
+                shared += 1;
+            }
+        }
+    }
+    assert_eq!(shared, 160);
+    assert!(matches!(
+        Variational::new(dp.minimal(), dt).step(&bad),
+        Err(vigp::StepError::NonFiniteState { .. })
+    ));
 }

@@ -43,6 +43,28 @@ fn variational_steps_do_not_allocate() {
         "fourbar rollout_into / projection allocated"
     );
 
+    // std steps from a state in maximal coordinates keep their 24 KB
+    // workspace per thread: the thread's first step of that size allocates
+    // it, once; the steps after it do not allocate
+    use vigp::Coordinates;
+    let fbm = Variational::new(Fourbar::default().maximal(), 0.01);
+    let zf = Fourbar::default().minimal().to_maximal(&z0, 0.01);
+    let first = allocation_counter::measure(|| {
+        fbm.step(&zf).unwrap();
+    });
+    // (one allocation or two: the box, and the thread's list of them on its
+    // first use; none would mean the step no longer keeps its workspace)
+    assert!(
+        (1..=2).contains(&first.count_total),
+        "first step: {first:?}"
+    );
+    let info = allocation_counter::measure(|| {
+        for _ in 0..10 {
+            fbm.step(&zf).unwrap();
+        }
+    });
+    assert_eq!(info.count_total, 0, "maximal fourbar std steps allocated");
+
     // the fixed-size core engine: the midpoint rule with sub-steps in
     // minimal coordinates, both rules in maximal coordinates (4 joint
     // constraints), and the fourth-order composition

@@ -292,12 +292,29 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 
     /// Multipliers are not part of the state; this returns only the state.
+    ///
+    /// With the `std` feature (default), when the solver's scratch
+    /// ([`StepWorkspace`]) is 2 KB or more (from about 5 coordinates with
+    /// constraints; 24 KB for 12 coordinates and 10 constraints), it is kept
+    /// per thread between calls, one per coordinate and constraint count,
+    /// allocated on the thread's first step of that size: the same state as
+    /// a step in a fresh workspace, bit for bit, without zeroing the scratch
+    /// at every call. Smaller workspaces are zeroed in less time than
+    /// fetching a kept one takes. Steps after a thread's first do not
+    /// allocate.
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         // the fixed-size step directly (no diagnostics to carry back); it
         // refuses a non-finite state itself
-        self.stepper()?
-            .step(z)
-            .map_err(|e| self.explain(StepError::from(e), z))
+        let stepper = self.stepper()?;
+        #[cfg(feature = "std")]
+        let r = if size_of::<StepWorkspace<N, C>>() >= crate::scratch::KEEP_FROM_BYTES {
+            crate::scratch::with_kept(|ws: &mut StepWorkspace<N, C>| stepper.step_in(z, ws))
+        } else {
+            stepper.step(z)
+        };
+        #[cfg(not(feature = "std"))]
+        let r = stepper.step(z);
+        r.map_err(|e| self.explain(StepError::from(e), z))
     }
 
     /// [`Variational::step`] in a workspace the caller keeps across steps
