@@ -283,6 +283,68 @@ fn training_is_bit_reproducible_across_thread_counts() {
     }
 }
 
+/// From N = 1024 an exact training run's evaluations also use the thread
+/// pool (faer's kernels, nested in the parallel starts); the bits must not
+/// depend on how the pool splits them, or training would not be
+/// reproducible across thread counts. Checked above and below that size.
+#[test]
+fn large_trainings_are_bit_reproducible_across_thread_counts() {
+    let n = 1100;
+    let x: Vec<f64> = (0..n)
+        .flat_map(|i| {
+            [
+                4.0 * weyl(i + 1, 0.618_033_988_7) - 2.0,
+                4.0 * weyl(i + 1, 0.414_213_562_4) - 2.0,
+            ]
+        })
+        .collect();
+    let y: Vec<f64> = x
+        .chunks(2)
+        .enumerate()
+        .map(|(i, r)| (2.0 * r[0]).sin() * r[1] + 0.01 * (weyl(i + 1, 0.7548776662) - 0.5))
+        .collect();
+    let in_pool = |threads: usize, f: &(dyn Fn() -> (f64, Vec<f64>) + Sync)| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(f)
+    };
+    let bits = |v: &(f64, Vec<f64>)| -> Vec<u64> {
+        std::iter::once(v.0)
+            .chain(v.1.iter().copied())
+            .map(f64::to_bits)
+            .collect()
+    };
+    // one evaluation: sequential, and split over 1, 2 and 3 threads
+    let theta = [0.1, -0.2, 0.3, -4.0];
+    let seq = log_marginal_likelihood(&x, 2, &y, &theta, false).unwrap();
+    for threads in [1, 2, 3] {
+        let par = in_pool(threads, &|| {
+            log_marginal_likelihood(&x, 2, &y, &theta, true).unwrap()
+        });
+        assert_eq!(bits(&par), bits(&seq), "{threads} thread(s)");
+    }
+    // a short training (two starts, five iterations each)
+    let opts = TrainOptions {
+        restarts: 1,
+        max_iters: 5,
+        ..Default::default()
+    };
+    let train = || {
+        let (gp, report) = Gp::train(&x, 2, &y, 1, &opts).unwrap();
+        let o = &gp.outputs()[0];
+        let h = o.hyperparameters_original();
+        let mut v = h.length_scales.clone();
+        v.extend([h.signal_variance, h.noise_variance]);
+        v.extend(o.alpha().iter().copied());
+        (report.outputs[0].log_marginal_likelihood, v)
+    };
+    let one = in_pool(1, &train);
+    let two = in_pool(2, &train);
+    assert_eq!(bits(&one), bits(&two));
+}
+
 #[test]
 fn gradient_matches_central_differences() {
     let (x, y) = data_multi();

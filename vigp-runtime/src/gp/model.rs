@@ -15,6 +15,11 @@ use super::options::{InducingInit, Method, OutputReport, TrainOptions, TrainRepo
 use super::rng::SplitMix64;
 use super::{sparse, tri};
 
+/// From this many samples an exact training run's evaluations use the
+/// thread pool too (see `Gp::train`): below it one evaluation is a few
+/// milliseconds and the starts alone keep the threads busy.
+const PARALLEL_EVALUATION_FROM: usize = 1024;
+
 /// How [`Gp::predict_into`] computes the posterior variance of an exact GP
 /// (both give σ_f² − kᵀ(K + σ²I)⁻¹k; the mean is not affected).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -510,6 +515,18 @@ impl Gp {
         } else {
             Par::Seq
         };
+        // Exact runs at large N offer their Cholesky, inverse and products
+        // to the pool as well: while every thread has a run of its own the
+        // offered halves run on the offering thread (no idle thread steals
+        // them), and when the last runs are left (the slowest start alone
+        // at the end) the idle threads take their share. faer splits these
+        // kernels by output blocks, so the bits do not depend on the split
+        // (`tests/gp_robustness.rs`).
+        let inner_exact = if n >= PARALLEL_EVALUATION_FROM {
+            Par::rayon(0)
+        } else {
+            Par::Seq
+        };
         let run = |jobs: &[(usize, usize, Vec<f64>)], lopt: LbfgsOptions| -> Vec<_> {
             jobs.par_iter()
                 .with_max_len(1)
@@ -522,7 +539,7 @@ impl Gp {
                             lbfgs::minimise(
                                 |t| {
                                     let e =
-                                        lml::lml_ws(&mut ws, &prep.xn, d, y, t, true, Par::Seq)?;
+                                        lml::lml_ws(&mut ws, &prep.xn, d, y, t, true, inner_exact)?;
                                     Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
                                 },
                                 t0,
