@@ -2,13 +2,13 @@
 //!
 //! [`crate::Variational::step`] is a step from a state: without a kept
 //! workspace every call would zero the fixed-size solver's scratch
-//! ([`vigp_core::StepWorkspace`], about 21 KB for 12 coordinates, a sixth of
+//! ([`vigp_core::StepWorkspace`], 24 KB for 12 coordinates, a sixth of
 //! a maximal-coordinate step). Each thread keeps one workspace per workspace
 //! type (one per coordinate count and constraint count) here, allocated on
 //! the thread's first step of that size and reused afterwards, so that
 //! `Variational` stays `Copy`, `Send` and `Sync` and its steps need no
 //! `&mut`. A workspace holds no result between calls: the step resets what
-//! it reads ([`vigp_core::StepWorkspace::reset`]), and the state equals a
+//! it reads (`StepWorkspace::reset`), and the state equals a
 //! step in a fresh workspace bit for bit.
 
 use std::any::Any;
