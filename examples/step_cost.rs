@@ -58,32 +58,14 @@ fn run<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
 /// `steps` single steps from the states of a `steps`-step rollout (the
 /// cost of a step from a state, which computes the momentum and starts
 /// Newton without a previous velocity); the rollout's own cost is that of
-/// [`run`] with the same count.
+/// [`run`] with the same count. `kept`: in one kept
+/// [`vigp::embedded::StepWorkspace`] ([`Stepper::step_in`]) instead of a
+/// fresh one per step ([`Stepper::step`]).
 fn run_single<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
     sys: M,
     z0: State<N>,
     steps: usize,
-) -> Result<(), Box<dyn std::error::Error>> {
-    let s = Stepper::new(sys, 0.01)?;
-    let mut out = vec![z0; steps + 1];
-    s.rollout_into(&z0, &mut out).map_err(|e| format!("{e}"))?;
-    let mut sum = 0.0;
-    for z in &out[..steps] {
-        sum += s
-            .step(std::hint::black_box(z))
-            .map_err(|e| format!("{e}"))?
-            .q[0];
-    }
-    println!("{steps} single steps, sum of q[0] = {sum}");
-    Ok(())
-}
-
-/// As [`run_single`], in one kept [`vigp::embedded::StepWorkspace`]
-/// ([`Stepper::step_in`]).
-fn run_single_in<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
-    sys: M,
-    z0: State<N>,
-    steps: usize,
+    kept: bool,
 ) -> Result<(), Box<dyn std::error::Error>> {
     let s = Stepper::new(sys, 0.01)?;
     let mut out = vec![z0; steps + 1];
@@ -91,12 +73,16 @@ fn run_single_in<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
     let mut ws = vigp::embedded::StepWorkspace::new();
     let mut sum = 0.0;
     for z in &out[..steps] {
-        sum += s
-            .step_in(std::hint::black_box(z), &mut ws)
-            .map_err(|e| format!("{e}"))?
-            .q[0];
+        let z = std::hint::black_box(z);
+        let z1 = if kept {
+            s.step_in(z, &mut ws)
+        } else {
+            s.step(z)
+        };
+        sum += z1.map_err(|e| format!("{e}"))?.q[0];
     }
-    println!("{steps} single steps in a kept workspace, sum of q[0] = {sum}");
+    let how = if kept { " in a kept workspace" } else { "" };
+    println!("{steps} single steps{how}, sum of q[0] = {sum}");
     Ok(())
 }
 
@@ -319,12 +305,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         "fourbar_maximal_single" => {
             let (fb, z0) = fourbar_start()?;
             use vigp::Coordinates;
-            run_single(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
+            run_single(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps, false)
         }
         "fourbar_maximal_single_in" => {
             let (fb, z0) = fourbar_start()?;
             use vigp::Coordinates;
-            run_single_in(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps)
+            run_single(fb.maximal(), fb.minimal().to_maximal(&z0, 0.01), steps, true)
         }
         "fourbar_maximal" => {
             let (fb, z0) = fourbar_start()?;
