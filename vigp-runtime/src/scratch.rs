@@ -12,6 +12,7 @@
 //! step in a fresh workspace bit for bit.
 
 use std::any::Any;
+use std::cell::RefCell;
 
 /// Workspaces from this size on are kept; smaller ones are zeroed about as
 /// fast as a kept one is fetched. Measured with `cargo bench --bench step`
@@ -21,7 +22,6 @@ use std::any::Any;
 /// 2 % slower, while the 4 KB ones of the maximal double pendulum and
 /// cartpole gained 8–11 % and the 24 KB one of the maximal fourbar 12 %.
 pub(crate) const KEEP_FROM_BYTES: usize = 2048;
-use std::cell::RefCell;
 
 thread_local! {
     // a handful of entries at most (one per mechanism size a thread steps)
