@@ -346,7 +346,7 @@ impl<const N: usize, const C: usize> Workspace<N, C> {
 /// A step from a state needs the terms workspace (M, ∂M/∂q, ∇V and D:
 /// 8·(N³ + 2N² + N) bytes), four constraint Jacobians and the KKT factors;
 /// [`Stepper::step`] builds them zeroed at every call. For the fourbar in
-/// maximal coordinates (N = 12, C = 10) that is about 21 KB of zeros, a
+/// maximal coordinates (N = 12, C = 10) that is about 24 KB of zeros, a
 /// sixth of the step's time. A kept workspace is reset in O(N²) instead
 /// (only the terms the model reads are cleared: ∂M/∂q only when the mass
 /// matrix moves, D only for a dissipative model), so the results are those

@@ -28,7 +28,6 @@ pub mod newton;
 pub mod params;
 pub mod projection;
 pub mod reference;
-#[cfg(feature = "std")]
 mod scratch;
 pub mod spatial;
 pub mod summary;

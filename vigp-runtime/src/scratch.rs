@@ -21,18 +21,30 @@ use std::cell::RefCell;
 /// 160 ns step 30 % slower and left the 1.5 KB one of the minimal fourbar
 /// 2 % slower, while the 4 KB ones of the maximal double pendulum and
 /// cartpole gained 8–11 % and the 24 KB one of the maximal fourbar 12 %.
-pub(crate) const KEEP_FROM_BYTES: usize = 2048;
+const KEEP_FROM_BYTES: usize = 2048;
 
 thread_local! {
     // a handful of entries at most (one per mechanism size a thread steps)
     static KEPT: RefCell<Vec<Box<dyn Any>>> = const { RefCell::new(Vec::new()) };
 }
 
+/// Run `f` on this thread's kept `W` (`Some`) when `W` is large enough to
+/// be worth keeping and the `std` feature is on, else on nothing (`None`:
+/// the caller steps in a fresh workspace). The one place that decides.
+#[inline(always)]
+pub(crate) fn with_workspace<W: Any + Default, R>(f: impl FnOnce(Option<&mut W>) -> R) -> R {
+    if cfg!(feature = "std") && size_of::<W>() >= KEEP_FROM_BYTES {
+        with_kept(|w| f(Some(w)))
+    } else {
+        f(None)
+    }
+}
+
 /// Run `f` on this thread's kept `W`, creating it on first use. The
 /// workspace is taken out for the call and put back after it, so a step
 /// called from inside a step (or during the thread's teardown) runs on a
 /// fresh `W` instead: the same result, only slower.
-pub(crate) fn with_kept<W: Any + Default, R>(f: impl FnOnce(&mut W) -> R) -> R {
+fn with_kept<W: Any + Default, R>(f: impl FnOnce(&mut W) -> R) -> R {
     let taken = KEPT
         .try_with(|cell| {
             let mut all = cell.try_borrow_mut().ok()?;

@@ -231,11 +231,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 
     /// One step with solver diagnostics (with sub-steps: iterations summed,
-    /// the largest residual, and any sub-step's flags).
+    /// the largest residual, and any sub-step's flags). The solver's
+    /// scratch is kept as in [`Variational::step`].
     pub fn step_with_info(&self, z: &State<N>) -> Result<(State<N>, StepInfo), StepError> {
-        let (z1, report) = self
-            .stepper()?
-            .step_with_report(z)
+        let stepper = self.stepper()?;
+        let (z1, report) =
+            crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
+                Some(ws) => stepper.step_with_report_in(z, ws),
+                None => stepper.step_with_report(z),
+            })
             .map_err(|e| self.explain(StepError::from(e), z))?;
         Ok((z1, StepInfo::from_report(&report)))
     }
@@ -306,21 +310,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         // the fixed-size step directly (no diagnostics to carry back); it
         // refuses a non-finite state itself
         let stepper = self.stepper()?;
-        #[cfg(feature = "std")]
-        let r = if size_of::<StepWorkspace<N, C>>() >= crate::scratch::KEEP_FROM_BYTES {
-            crate::scratch::with_kept(|ws: &mut StepWorkspace<N, C>| stepper.step_in(z, ws))
-        } else {
-            stepper.step(z)
-        };
-        #[cfg(not(feature = "std"))]
-        let r = stepper.step(z);
-        r.map_err(|e| self.explain(StepError::from(e), z))
+        crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
+            Some(ws) => stepper.step_in(z, ws),
+            None => stepper.step(z),
+        })
+        .map_err(|e| self.explain(StepError::from(e), z))
     }
 
     /// [`Variational::step`] in a workspace the caller keeps across steps
     /// ([`vigp_core::StepWorkspace`]): the same state, bit for bit, without
     /// zeroing the solver's scratch at every call (for 12 coordinates about
-    /// 21 KB, about a sixth of a step in maximal coordinates). For many steps
+    /// 24 KB, about a sixth of a step in maximal coordinates). For many steps
     /// from unrelated states; [`Integrator::rollout_into`] keeps its own.
     pub fn step_in(
         &self,
