@@ -79,7 +79,7 @@ fn bench_steps(c: &mut Criterion) {
     g.bench_function("fourbar/maximal/vi", |b| {
         b.iter(|| vim.step(black_box(&zm)).unwrap())
     });
-    // the same step in a kept workspace (no 21 KB of zeros per call)
+    // the same step in a kept workspace (no 24 KB of zeros per call)
     let mut ws = vigp::embedded::StepWorkspace::new();
     g.bench_function("fourbar/maximal/vi_in", |b| {
         b.iter(|| vim.step_in(black_box(&zm), &mut ws).unwrap())

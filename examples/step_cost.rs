@@ -3,14 +3,18 @@
 //! **Wall-time table** (`cargo run --profile bench --example step_cost -- table`):
 //! for every system, 64 states spread over a long trajectory (so that the
 //! angle ranges `libm::sincos` reduces are all visited), the time of a step
-//! from a state and of a 100-step rollout per step. Each entry is the
+//! from a state (the embedded `Stepper::step`, which zeroes its solver
+//! scratch at every call, and the std `vigp::Variational::step`, which keeps
+//! the scratch of larger systems per thread) and of a 100-step rollout per
+//! step. Each entry is the
 //! minimum over 15 repetitions of the mean over the 64 states: on a shared
 //! machine the minimum estimates the uninterrupted cost (criterion medians
 //! from `cargo bench --bench step` include interference).
 //!
 //! **Newton iterations** (`… --example step_cost -- iterations [steps]`): the
 //! mean and largest iteration count per step of a rollout of the double
-//! pendulum and the fourbar's modes.
+//! pendulum and the fourbar's modes, and of steps from the same states
+//! (momentum from the state, Newton started at its velocity).
 //!
 //! **Instruction counts** (load-independent):
 //!
@@ -99,25 +103,33 @@ fn iterations<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
     let s = Stepper::new(sys, 0.01)?;
     let (mut z, mut p, mut v_prev) = (z0, s.momentum(&z0), z0.v);
     let (mut total, mut most) = (0usize, 0usize);
+    let (mut total_single, mut most_single) = (0usize, 0usize);
     for _ in 0..steps {
         let x1 = z.q + z.v * s.dt();
         let guess = z.v * 2.0 - v_prev;
         let (v1, p1, r) = s.solve(&x1, &p, s.dt(), &guess)?;
         (total, most) = (total + r.iterations, most.max(r.iterations));
+        // the same state stepped from scratch (momentum from z, Newton
+        // started at v)
+        let (_, r1) = s.step_with_report(&z)?;
+        (total_single, most_single) =
+            (total_single + r1.iterations, most_single.max(r1.iterations));
         v_prev = z.v;
         (z, p) = (State { q: x1, v: v1 }, p1);
     }
     println!(
-        "| {name} | {:.3} | {most} |",
-        total as f64 / steps.max(1) as f64
+        "| {name} | {:.3} | {most} | {:.3} | {most_single} |",
+        total as f64 / steps.max(1) as f64,
+        total_single as f64 / steps.max(1) as f64
     );
     Ok(())
 }
 
-/// Mean time per step (ns) of `step` and of a 100-step rollout over 64
+/// Mean time per step (ns) of `step`, of the std `Variational::step` and
+/// of a 100-step rollout over 64
 /// states taken every 50 steps of a trajectory from `z0`; minimum over 15
 /// repetitions.
-fn table_row<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
+fn table_row<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     name: &str,
     sys: M,
     z0: State<N>,
@@ -125,11 +137,13 @@ fn table_row<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
     use std::hint::black_box;
     use std::time::Instant;
     let s = Stepper::new(sys, 0.01)?;
+    let vi = vigp::Variational::new(sys, 0.01);
     let mut long = vec![z0; 64 * 50 + 1];
     s.rollout_into(&z0, &mut long).map_err(|e| format!("{e}"))?;
     let states: Vec<State<N>> = long.iter().step_by(50).take(64).copied().collect();
     let mut out = [z0; 101];
     let (mut best_step, mut best_roll) = (f64::INFINITY, f64::INFINITY);
+    let mut best_std = f64::INFINITY;
     for _ in 0..15 {
         let t = Instant::now();
         for _ in 0..20 {
@@ -139,6 +153,13 @@ fn table_row<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
         }
         best_step = best_step.min(t.elapsed().as_secs_f64() / (20.0 * 64.0));
         let t = Instant::now();
+        for _ in 0..20 {
+            for z in &states {
+                black_box(vi.step(black_box(z)).map_err(|e| format!("{e}"))?);
+            }
+        }
+        best_std = best_std.min(t.elapsed().as_secs_f64() / (20.0 * 64.0));
+        let t = Instant::now();
         for z in &states {
             s.rollout_into(black_box(z), &mut out)
                 .map_err(|e| format!("{e}"))?;
@@ -147,8 +168,9 @@ fn table_row<M: Dynamics<N, C> + Copy, const N: usize, const C: usize>(
         best_roll = best_roll.min(t.elapsed().as_secs_f64() / (64.0 * 100.0));
     }
     println!(
-        "| {name} | {:.0} ns | {:.0} ns |",
+        "| {name} | {:.0} ns | {:.0} ns | {:.0} ns |",
         best_step * 1e9,
+        best_std * 1e9,
         best_roll * 1e9
     );
     Ok(())
@@ -234,21 +256,27 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     if args.get(1).map(String::as_str) == Some("table") {
         let (fb, fb_z0) = fourbar_start()?;
-        println!("| system | step from a state | per step of a rollout |");
-        println!("|---|---|---|");
-        table_row("pendulum", Pendulum::default(), State::new([1.0], [0.5]))?;
+        println!(
+            "| system | step from a state | std `Variational::step` | per step of a rollout |"
+        );
+        println!("|---|---|---|---|");
+        use vigp::Coordinates;
+        table_row(
+            "pendulum",
+            Pendulum::default().minimal(),
+            State::new([1.0], [0.5]),
+        )?;
         table_row(
             "cartpole",
-            Cartpole::default(),
+            Cartpole::default().minimal(),
             State::new([0.2, 2.0], [0.3, 0.5]),
         )?;
         table_row(
             "double pendulum",
-            DoublePendulum::default(),
+            DoublePendulum::default().minimal(),
             State::new([1.0, -0.5], [0.5, 1.0]),
         )?;
-        table_row("fourbar", fb, fb_z0)?;
-        use vigp::Coordinates;
+        table_row("fourbar", fb.minimal(), fb_z0)?;
         return table_row(
             "fourbar (maximal)",
             fb.maximal(),
@@ -264,8 +292,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         use vigp::Coordinates;
         let (fb, fb_z0) = fourbar_start()?;
         let damped = with_joint_damping(fb);
-        println!("| system ({steps}-step rollout) | Newton iterations per step | most |");
-        println!("|---|---|---|");
+        println!(
+            "| system ({steps}-step rollout) | Newton iterations per step | most | from a state | most |"
+        );
+        println!("|---|---|---|---|---|");
         iterations(
             "double pendulum",
             DoublePendulum::default(),

@@ -41,7 +41,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
-use vigp::gp::TrainOptions;
+use vigp::gp::{Hyperparameters, TrainOptions};
 use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
@@ -86,6 +86,17 @@ struct Cli {
     /// Extra random restarts of the GP hyperparameter optimisation.
     #[arg(long, default_value_t = 2)]
     restarts: usize,
+    /// Warm starts along the N sweep: within a run, each model after the
+    /// first N starts from the optimum of the same model at the previous N
+    /// (`TrainOptions::warm_start`) with `--warm-restarts` random restarts
+    /// instead of `--restarts`. The first N keeps `--restarts`. Cheaper,
+    /// but measured worse on this sweep (docs/paper-evaluation.md): an
+    /// optimum fitted to a few samples starts the next N on a poor branch.
+    #[arg(long)]
+    warm: bool,
+    /// Random restarts beside the warm start (with `--warm`).
+    #[arg(long, default_value_t = 0)]
+    warm_restarts: usize,
     /// Ground-truth integrator.
     #[arg(long, value_enum, default_value_t = GtMethod::Vi4)]
     gt_method: GtMethod,
@@ -368,15 +379,26 @@ where
                 .map(|z| z.q)
                 .collect())
         });
+        // `--warm`: each model's optimum at the previous N (minimal,
+        // sin/cos, maximal), the next N's start 0
+        let mut warm: [Option<Vec<Hyperparameters>>; 3] = [None, None, None];
         for &n in &cli.n {
             let n_eff = n.min(pool_min.len());
             let idx: Vec<usize> = (0..n_eff).map(|_| rng.below(pool_min.len())).collect();
             let dmin: Vec<_> = idx.iter().map(|&i| pool_min[i]).collect();
             let dmax: Vec<_> = idx.iter().map(|&i| pool_max[i]).collect();
-            let opts = TrainOptions {
-                restarts: cli.restarts,
-                seed: cli.seed ^ n as u64,
-                ..TrainOptions::default()
+            let opts = |model: usize| {
+                let warm_start = if cli.warm { warm[model].clone() } else { None };
+                TrainOptions {
+                    restarts: if warm_start.is_some() {
+                        cli.warm_restarts
+                    } else {
+                        cli.restarts
+                    },
+                    seed: cli.seed ^ n as u64,
+                    warm_start,
+                    ..TrainOptions::default()
+                }
             };
             points.push(Fig2Point {
                 system: spec.name.into(),
@@ -385,11 +407,18 @@ where
                 run,
                 mse: nominal_mse,
             });
-            for (method, enc) in [("minimal", Encoding::Raw), ("sincos", Encoding::SinCos)] {
-                let mse = match Learned::train(nmin, DT, &dmin, enc, spec.prior, &opts) {
-                    Ok((l, _)) => mean_mse(&windows, |z| {
-                        Ok(l.rollout(z, HORIZON)?.into_iter().map(|z| z.q).collect())
-                    }),
+            let mut next_warm: [Option<Vec<Hyperparameters>>; 3] = [None, None, None];
+            for (model, (method, enc)) in [("minimal", Encoding::Raw), ("sincos", Encoding::SinCos)]
+                .into_iter()
+                .enumerate()
+            {
+                let mse = match Learned::train(nmin, DT, &dmin, enc, spec.prior, &opts(model)) {
+                    Ok((l, _)) => {
+                        next_warm[model] = Some(l.gp().warm_start());
+                        mean_mse(&windows, |z| {
+                            Ok(l.rollout(z, HORIZON)?.into_iter().map(|z| z.q).collect())
+                        })
+                    }
                     Err(e) => {
                         eprintln!(
                             "{} run {run} N {n} {method}: training failed: {e}",
@@ -406,15 +435,18 @@ where
                     mse,
                 });
             }
-            let mse = match Learned::train(nmax, DT, &dmax, Encoding::Raw, spec.prior, &opts) {
-                Ok((l, _)) => mean_mse(&windows, |z| {
-                    let zm = nmin.to_maximal(z, DT);
-                    // the learned maximal model predicts; positions are compared in minimal coordinates
-                    Ok(l.rollout(&zm, HORIZON)?
-                        .into_iter()
-                        .map(|z| nmin.minimal_positions(&z.q))
-                        .collect())
-                }),
+            let mse = match Learned::train(nmax, DT, &dmax, Encoding::Raw, spec.prior, &opts(2)) {
+                Ok((l, _)) => {
+                    next_warm[2] = Some(l.gp().warm_start());
+                    mean_mse(&windows, |z| {
+                        let zm = nmin.to_maximal(z, DT);
+                        // the learned maximal model predicts; positions are compared in minimal coordinates
+                        Ok(l.rollout(&zm, HORIZON)?
+                            .into_iter()
+                            .map(|z| nmin.minimal_positions(&z.q))
+                            .collect())
+                    })
+                }
                 Err(e) => {
                     eprintln!(
                         "{} run {run} N {n} maximal: training failed: {e}",
@@ -430,6 +462,12 @@ where
                 run,
                 mse,
             });
+            // a failed training keeps the previous warm start
+            for (w, next) in warm.iter_mut().zip(next_warm) {
+                if next.is_some() {
+                    *w = next;
+                }
+            }
             progress.inc(1);
         }
     }
@@ -923,7 +961,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     bar.finish();
 
     let settings = format!(
-        "| setting | value |\n|---|---|\n| systems | {} |\n| training samples N | {:?} |\n| runs per system | {} |\n| trajectories (train + test) | {} + {} (2 s each, random configurations at rest) |\n| 20-step windows per test trajectory | {} |\n| model Δt | 10 ms |\n| ground truth | {}, Δt = {:e} s |\n| observation noise | σ = 1e-3 on training q, v and targets |\n| perturbations | masses, inertias ×U[0.9, 1.1]; damping as in the paper |\n| GP | ARD SE per velocity component, {} extra restarts, seed {} |\n| priors | pendulum, cartpole: nominal VI step; double pendulum, fourbar: constant mean |\n\nGround-truth accuracy over one 2 s trajectory of the first run (max position difference against the same integrator at Δt/2, and against the paper's reference, the midpoint VI at 0.1 ms, whose own error is ≈ 4/3 of its difference to 0.05 ms):\n\n| system | max \\|q(Δt) − q(Δt/2)\\| | max \\|q − q_midpoint(0.1 ms)\\| |\n|---|---|---|\n{}",
+        "| setting | value |\n|---|---|\n| systems | {} |\n| training samples N | {:?} |\n| runs per system | {} |\n| trajectories (train + test) | {} + {} (2 s each, random configurations at rest) |\n| 20-step windows per test trajectory | {} |\n| model Δt | 10 ms |\n| ground truth | {}, Δt = {:e} s |\n| observation noise | σ = 1e-3 on training q, v and targets |\n| perturbations | masses, inertias ×U[0.9, 1.1]; damping as in the paper |\n| GP | ARD SE per velocity component, {} |\n| priors | pendulum, cartpole: nominal VI step; double pendulum, fourbar: constant mean |\n\nGround-truth accuracy over one 2 s trajectory of the first run (max position difference against the same integrator at Δt/2, and against the paper's reference, the midpoint VI at 0.1 ms, whose own error is ≈ 4/3 of its difference to 0.05 ms):\n\n| system | max \\|q(Δt) − q(Δt/2)\\| | max \\|q − q_midpoint(0.1 ms)\\| |\n|---|---|---|\n{}",
         cli.systems.join(", "),
         cli.n,
         cli.runs,
@@ -932,8 +970,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cli.windows,
         cli.gt_method.describe(),
         cli.gt().dt,
-        cli.restarts,
-        cli.seed,
+        if cli.warm {
+            format!(
+                "{} extra restarts at the first N, then warm starts from the previous N's optimum with {} extra restarts, seed {}",
+                cli.restarts, cli.warm_restarts, cli.seed
+            )
+        } else {
+            format!("{} extra restarts, seed {}", cli.restarts, cli.seed)
+        },
         gt_notes
     );
     let findings = format!(
