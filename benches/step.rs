@@ -195,6 +195,27 @@ fn bench_derivatives(c: &mut Criterion) {
             })
         });
     }
+    // maximal coordinates (N = 6, C = 4): the embedded stepper zeroes the
+    // solver's 4 KB scratch at every call, the std runtime keeps it per
+    // thread (the same results, bit for bit)
+    let (mx, zx) = (m.maximal(), m.minimal().to_maximal(&z, dt));
+    let s = Stepper::new(mx, dt).unwrap();
+    let vi = Variational::new(mx, dt);
+    g.bench_function("double_pendulum/maximal/step", |b| {
+        b.iter(|| s.step_forced(black_box(&zx), black_box(&u)).unwrap())
+    });
+    g.bench_function("double_pendulum/maximal/vi_step", |b| {
+        b.iter(|| vi.step_forced(black_box(&zx), black_box(&u)).unwrap())
+    });
+    g.bench_function("double_pendulum/maximal/step_with_a_b", |b| {
+        b.iter(|| {
+            s.step_with_derivatives(black_box(&zx), black_box(&u))
+                .unwrap()
+        })
+    });
+    g.bench_function("double_pendulum/maximal/vi_step_with_a_b", |b| {
+        b.iter(|| vi.step_derivatives(black_box(&zx), black_box(&u)).unwrap())
+    });
     g.finish();
 }
 

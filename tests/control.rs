@@ -920,6 +920,129 @@ fn forced_steps_and_derivatives_do_not_allocate() {
         });
         assert_eq!(info.count_total, 0, "forced steps / derivatives allocated");
     }
+    // in maximal coordinates (N = 12, C = 10) the std forced step and the
+    // step with derivatives keep their 24 KB workspace per thread: the
+    // thread's first such call allocates it (once: the box, and the
+    // thread's list on its first use); the calls after it do not allocate
+    let fbm = DriveFourbar::default().maximal();
+    let zm = fb.to_maximal(&s[0], dt);
+    for (i, vi) in [Variational::new(fbm, dt), Variational::midpoint(fbm, dt)]
+        .iter()
+        .enumerate()
+    {
+        let first = allocation_counter::measure(|| {
+            let _ = vi.step_forced(&zm, &u).unwrap();
+        });
+        // none after the thread's first (the same workspace type); none at
+        // all would mean the step no longer keeps its workspace
+        let expected = if i == 0 { 1..=2 } else { 0..=0 };
+        assert!(
+            expected.contains(&first.count_total),
+            "first forced step: {first:?}"
+        );
+        let info = allocation_counter::measure(|| {
+            let z1 = vi.step_forced(&zm, &u).unwrap();
+            let _ = vi.step_derivatives(&z1, &u).unwrap();
+            let _ = vi.step_forced(&z1, &u).unwrap();
+        });
+        assert_eq!(info.count_total, 0, "maximal forced steps allocated");
+    }
+}
+
+/// The bits of a state and of a step's derivatives, in one list.
+fn bits<const N: usize, const U: usize>(
+    z: &State<N>,
+    d: Option<&vigp::embedded::StepDerivatives<N, U>>,
+) -> Vec<u64> {
+    let mut out: Vec<u64> = z.q.iter().chain(z.v.iter()).map(|x| x.to_bits()).collect();
+    if let Some(d) = d {
+        for m in [&d.a.q_q, &d.a.q_v, &d.a.v_q, &d.a.v_v] {
+            out.extend(m.iter().map(|x| x.to_bits()));
+        }
+        for m in [&d.b.q_u, &d.b.v_u] {
+            out.extend(m.iter().map(|x| x.to_bits()));
+        }
+    }
+    out
+}
+
+/// Forced steps and steps with derivatives in a kept workspace
+/// (`Stepper::step_forced_in`, `Stepper::step_with_derivatives_in`, which
+/// the std `Variational::step_forced` and `step_derivatives` use for the
+/// larger systems) give the bits of the same steps in a fresh workspace:
+/// the maximal driven fourbar (N = 12, C = 10, damped: the Newton matrix is
+/// not diagonal) under both rules, and the unactuated maximal fourbar
+/// (U = 0), interleaved through one workspace, so that every step finds it
+/// as another stepper, input or state left it. A non-finite state or input
+/// is the typed error of the fresh step.
+#[test]
+fn kept_workspace_forced_steps_equal_fresh_ones_bit_for_bit() {
+    let dt = 0.01;
+    let fb = DriveFourbar::default();
+    let (_, zs) = minimal_and_maximal_states::<_, 4, 2, 12>(&fb.minimal(), 11, 6, dt);
+    let twin = TwinFourbar::default().maximal();
+    let steppers = [
+        Stepper::new(fb.maximal(), dt).unwrap(),
+        Stepper::midpoint(fb.maximal(), dt).unwrap(),
+    ];
+    let plain = Stepper::new(twin, dt).unwrap();
+    let mut ws = vigp::embedded::StepWorkspace::<12, 10>::new();
+    let none = SVector::<f64, 0>::zeros();
+    let mut rng = Rng(5);
+    let vis = [
+        Variational::new(fb.maximal(), dt),
+        Variational::midpoint(fb.maximal(), dt),
+    ];
+    for (k, z) in zs.iter().enumerate() {
+        let u = SVector::<f64, 2>::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0));
+        for (s, vi) in steppers.iter().zip(&vis) {
+            let kept = s.step_forced_in(z, &u, &mut ws).unwrap();
+            let fresh = s.step_forced(z, &u).unwrap();
+            assert_eq!(
+                bits::<12, 0>(&kept, None),
+                bits::<12, 0>(&fresh, None),
+                "state {k}"
+            );
+            let (zk, dk) = s.step_with_derivatives_in(z, &u, &mut ws).unwrap();
+            let (zf, df) = s.step_with_derivatives(z, &u).unwrap();
+            assert_eq!(bits(&zk, Some(&dk)), bits(&zf, Some(&df)), "state {k}");
+            // the std runtime's steps (kept per thread) give the same bits
+            assert_eq!(
+                bits::<12, 0>(&vi.step_forced(z, &u).unwrap(), None),
+                bits::<12, 0>(&fresh, None)
+            );
+            let (zv, dv) = vi.step_derivatives(z, &u).unwrap();
+            assert_eq!(bits(&zv, Some(&dv)), bits(&zf, Some(&df)));
+        }
+        let kept = plain.step_forced_in(z, &none, &mut ws).unwrap();
+        assert_eq!(
+            bits::<12, 0>(&kept, None),
+            bits::<12, 0>(&plain.step(z).unwrap(), None)
+        );
+        let (zk, dk) = plain.step_with_derivatives_in(z, &none, &mut ws).unwrap();
+        let (zf, df) = plain.step_with_derivatives(z, &none).unwrap();
+        assert_eq!(bits(&zk, Some(&dk)), bits(&zf, Some(&df)));
+    }
+    let mut bad = zs[0];
+    bad.v[3] = f64::NAN;
+    let u = SVector::<f64, 2>::new(0.1, 0.2);
+    assert_eq!(
+        steppers[0].step_forced_in(&bad, &u, &mut ws).unwrap_err(),
+        steppers[0].step_forced(&bad, &u).unwrap_err()
+    );
+    let inf = SVector::<f64, 2>::new(f64::INFINITY, 0.0);
+    assert_eq!(
+        steppers[0]
+            .step_forced_in(&zs[0], &inf, &mut ws)
+            .unwrap_err(),
+        steppers[0].step_forced(&zs[0], &inf).unwrap_err()
+    );
+    assert_eq!(
+        steppers[1]
+            .step_with_derivatives_in(&bad, &u, &mut ws)
+            .unwrap_err(),
+        steppers[1].step_with_derivatives(&bad, &u).unwrap_err()
+    );
 }
 
 /// The learned integrator with inputs: a "true" cartpole (masses ×1.1,

@@ -53,7 +53,9 @@
 use crate::dynamics::{Dynamics, Terms};
 use crate::linalg::{FullPivLu, PartialLu, solve_kkt_regularised};
 use crate::state::State;
-use crate::step::{RolloutError, StepError, StepReport, Stepper, Workspace, max_abs};
+use crate::step::{
+    RolloutError, StepError, StepReport, StepWorkspace, Stepper, Workspace, max_abs,
+};
 use nalgebra::{SMatrix, SVector};
 
 /// ∂z₁/∂z₀ of a step, z = (q, v), by N × N blocks.
@@ -339,6 +341,25 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             .map(|(z1, _, r)| (z1, r))
     }
 
+    /// [`Stepper::step_forced`] in a kept workspace: the same state, bit for
+    /// bit, without zeroing the solver's scratch at every call (see
+    /// [`StepWorkspace`]; for the candidates of a shooting or MPC method,
+    /// stepped from many states).
+    pub fn step_forced_in<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut StepWorkspace<N, C>,
+    ) -> Result<State<N>, StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        Self::check_input(u)?;
+        let p0 = self.momentum(z);
+        self.advance_forced(z, &p0, &z.v, u, ws.reset::<M>())
+            .map(|(z1, _, _)| z1)
+    }
+
     /// One forced step from `z` with its momentum `p0` known (carried from
     /// the previous step); returns the new state, its momentum (with the
     /// input's αΔt share for the midpoint rule) and diagnostics.
@@ -484,23 +505,25 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// ∂p₀/∂q₀ and ∂p₀/∂v₀ of the input-free momentum p₀ of `z` with
     /// sub-step `h` ([`Stepper::momentum`]).
+    /// `t`: a terms workspace whose entries the model does not write are
+    /// zero (as [`Terms::zeros`]).
     fn momentum_derivatives_at(
         &self,
         z: &State<N>,
         h: f64,
+        t: &mut Terms<N>,
     ) -> (SMatrix<f64, N, N>, SMatrix<f64, N, N>) {
         let ah = self.alpha * h;
         let m0 = z.q + z.v * ah;
-        let mut t = Terms::zeros();
-        self.model.terms(&self.k, &m0, &mut t);
-        let (pm, pv) = self.momentum_parts::<0>(&t, &m0, &z.v, h, &SMatrix::zeros());
+        self.model.terms(&self.k, &m0, t);
+        let (pm, pv) = self.momentum_parts::<0>(t, &m0, &z.v, h, &SMatrix::zeros());
         (pm, pm * ah + pv)
     }
 
     /// ∂p/∂q and ∂p/∂v of the momentum of `z` ([`Stepper::momentum`]),
     /// exact: the first link of a rollout's derivative chain.
     pub fn momentum_derivatives(&self, z: &State<N>) -> (SMatrix<f64, N, N>, SMatrix<f64, N, N>) {
-        self.momentum_derivatives_at(z, self.substep_dt())
+        self.momentum_derivatives_at(z, self.substep_dt(), &mut Terms::zeros())
     }
 
     /// Propagates seeds through all sub-steps of a step from `z` with
@@ -516,12 +539,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         u: &SVector<f64, U>,
         mut seeds: Groups<N, U>,
         track_p: bool,
+        t: &mut Workspace<N, C>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport, Groups<N, U>), StepError> {
         let h = self.substep_dt();
         let (mut zc, mut pc) = (*z, *p0);
         let mut report = StepReport::default();
         let eye_u = SMatrix::<f64, U, U>::identity();
-        let mut t = Workspace::new();
         for i in 0..self.substeps {
             if i > 0 {
                 seeds.q.x += seeds.q.v * h;
@@ -534,7 +557,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             let x1 = zc.q + zc.v * h;
             // the solver leaves the terms at m₁(v₁) in `t`: the
             // derivatives reuse them
-            let (v1, p1, r, lambda) = self.solve_forced_any(&x1, &pc, h, &zc.v, u, &mut t)?;
+            let (v1, p1, r, lambda) = self.solve_forced_any(&x1, &pc, h, &zc.v, u, t)?;
             report.merge(&r);
             let l = self.local(&x1, &v1, &lambda, h, u, &t.t)?;
             for g in [&mut seeds.q, &mut seeds.v] {
@@ -564,13 +587,40 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         z: &State<N>,
         u: &SVector<f64, U>,
     ) -> Result<(State<N>, StepDerivatives<N, U>), StepError> {
+        self.derivatives_from_state(z, u, &mut Workspace::new())
+    }
+
+    /// [`Stepper::step_with_derivatives`] in a kept workspace: the same
+    /// state and derivatives, bit for bit, without zeroing the solver's
+    /// scratch at every call (see [`StepWorkspace`]).
+    pub fn step_with_derivatives_in<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut StepWorkspace<N, C>,
+    ) -> Result<(State<N>, StepDerivatives<N, U>), StepError> {
+        self.derivatives_from_state(z, u, ws.reset::<M>())
+    }
+
+    /// The step with derivatives from `z` in the workspace `t` (fresh or
+    /// reset: the entries the model does not write are zero). The terms at
+    /// the start's quadrature point (for the momentum's derivatives) and
+    /// then the solver's share `t`, as a rollout's steps do: every call of
+    /// [`Dynamics::terms`] rewrites the same entries.
+    #[inline(always)]
+    fn derivatives_from_state<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        t: &mut Workspace<N, C>,
+    ) -> Result<(State<N>, StepDerivatives<N, U>), StepError> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
         Self::check_input(u)?;
         let h = self.substep_dt();
         let p0 = self.momentum(z);
-        let (pq, pv) = self.momentum_derivatives_at(z, h);
+        let (pq, pv) = self.momentum_derivatives_at(z, h, &mut t.t);
         let eye = SMatrix::<f64, N, N>::identity();
         let seeds = Groups {
             q: Seeds::new(eye, pq),
@@ -578,7 +628,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             p: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
             u: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
         };
-        let (z1, _, _, s) = self.propagate(z, &p0, u, seeds, false)?;
+        let (z1, _, _, s) = self.propagate(z, &p0, u, seeds, false, t)?;
         Ok((
             z1,
             StepDerivatives {
@@ -622,7 +672,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             p: Seeds::new(zero, eye),
             u: Seeds::new(SMatrix::zeros(), SMatrix::zeros()),
         };
-        let (z1, p1, _, s) = self.propagate(z, p0, u, seeds, true)?;
+        let (z1, p1, _, s) = self.propagate(z, p0, u, seeds, true, &mut Workspace::new())?;
         Ok((
             z1,
             p1,

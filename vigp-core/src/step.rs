@@ -341,7 +341,8 @@ impl<const N: usize, const C: usize> Workspace<N, C> {
 }
 
 /// The scratch space of a step from a state, kept by the caller across
-/// steps ([`Stepper::step_in`]).
+/// steps ([`Stepper::step_in`], and for forced steps
+/// [`Stepper::step_forced_in`] and [`Stepper::step_with_derivatives_in`]).
 ///
 /// A step from a state needs the terms workspace (M, ∂M/∂q, ∇V and D:
 /// 8·(N³ + 2N² + N) bytes), four constraint Jacobians and the KKT factors;
@@ -372,7 +373,7 @@ impl<const N: usize, const C: usize> StepWorkspace<N, C> {
     /// [`Terms::zeros`]), and the cached G₁ (another stepper may have left
     /// it at the same point).
     #[inline(always)]
-    fn reset<M: Dynamics<N, C>>(&mut self) -> &mut Workspace<N, C> {
+    pub(crate) fn reset<M: Dynamics<N, C>>(&mut self) -> &mut Workspace<N, C> {
         let ws = &mut self.ws;
         ws.t.mass = SMatrix::zeros();
         ws.t.dpotential = SVector::zeros();

@@ -353,16 +353,20 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// order; `U` must equal the mechanism's `Dynamics::INPUTS`, checked at
     /// compile time), from the input-free momentum of `z` (the forced
     /// equations: `vigp_core::forced`). With u = 0 this is
-    /// [`Variational::step`], bit for bit.
+    /// [`Variational::step`], bit for bit. The solver's scratch is kept per
+    /// thread as for [`Variational::step`] (the same state as in a fresh
+    /// workspace, bit for bit).
     pub fn step_forced<const U: usize>(
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
     ) -> Result<State<N>, StepError> {
         let stepper = self.stepper()?;
-        stepper
-            .step_forced(z, u)
-            .map_err(|e| self.explain(StepError::from(e), z))
+        crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
+            Some(ws) => stepper.step_forced_in(z, u, ws),
+            None => stepper.step_forced(z, u),
+        })
+        .map_err(|e| self.explain(StepError::from(e), z))
     }
 
     /// Fill `out` with the states after 1, …, `out.len()` forced steps from
@@ -401,15 +405,19 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// One forced step with its exact derivatives A = ∂z₁/∂z₀ and
     /// B = ∂z₁/∂u by the implicit function theorem on the converged
     /// DEL/KKT system (`vigp_core::forced`). `A = d.a.matrix::<{2N}>()`.
+    /// The solver's scratch is kept per thread as for
+    /// [`Variational::step`] (bit for bit the same results).
     pub fn step_derivatives<const U: usize>(
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
     ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
         let stepper = self.stepper()?;
-        stepper
-            .step_with_derivatives(z, u)
-            .map_err(|e| self.explain(StepError::from(e), z))
+        crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
+            Some(ws) => stepper.step_with_derivatives_in(z, u, ws),
+            None => stepper.step_with_derivatives(z, u),
+        })
+        .map_err(|e| self.explain(StepError::from(e), z))
     }
 
     /// A forced rollout (as [`Variational::rollout_forced`]) with the exact
