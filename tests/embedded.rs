@@ -380,6 +380,10 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
             // x₁ of every stepper's next step from z1
             let z1 = a.step_in(&zm, &mut ws).unwrap();
             assert!(same(&z1, &a.step(&zm).unwrap()));
+            // the momentum from the public `momentum` (as a rollout starts)
+            // and the solve in a fresh workspace: the same bits
+            let (z1m, _, _) = a.step_with_momentum(&zm, &a.momentum(&zm)).unwrap();
+            assert!(same(&z1, &z1m));
             for b in &steppers {
                 let fresh = b.step(&z1).unwrap();
                 let kept = b.step_in(&z1, &mut ws).unwrap();
