@@ -504,9 +504,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     }
 
     /// ∂p₀/∂q₀ and ∂p₀/∂v₀ of the input-free momentum p₀ of `z` with
-    /// sub-step `h` ([`Stepper::momentum`]).
-    /// `t`: a terms workspace whose entries the model does not write are
-    /// zero (as [`Terms::zeros`]).
+    /// sub-step `h` ([`Stepper::momentum`]), with the terms evaluated into
+    /// `t`, whose entries the model does not write are zero (as
+    /// [`Terms::zeros`]).
     fn momentum_derivatives_at(
         &self,
         z: &State<N>,
