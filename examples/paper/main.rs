@@ -380,15 +380,16 @@ where
                 .collect())
         });
         // `--warm`: each model's optimum at the previous N (minimal,
-        // sin/cos, maximal), the next N's start 0
+        // sin/cos, maximal), the next N's start 0; a failed training
+        // keeps the one before
         let mut warm: [Option<Vec<Hyperparameters>>; 3] = [None, None, None];
         for &n in &cli.n {
             let n_eff = n.min(pool_min.len());
             let idx: Vec<usize> = (0..n_eff).map(|_| rng.below(pool_min.len())).collect();
             let dmin: Vec<_> = idx.iter().map(|&i| pool_min[i]).collect();
             let dmax: Vec<_> = idx.iter().map(|&i| pool_max[i]).collect();
-            let opts = |model: usize| {
-                let warm_start = if cli.warm { warm[model].clone() } else { None };
+            let opts = |warm_start: Option<Vec<Hyperparameters>>| {
+                let warm_start = warm_start.filter(|_| cli.warm);
                 TrainOptions {
                     restarts: if warm_start.is_some() {
                         cli.warm_restarts
@@ -407,14 +408,20 @@ where
                 run,
                 mse: nominal_mse,
             });
-            let mut next_warm: [Option<Vec<Hyperparameters>>; 3] = [None, None, None];
             for (model, (method, enc)) in [("minimal", Encoding::Raw), ("sincos", Encoding::SinCos)]
                 .into_iter()
                 .enumerate()
             {
-                let mse = match Learned::train(nmin, DT, &dmin, enc, spec.prior, &opts(model)) {
+                let mse = match Learned::train(
+                    nmin,
+                    DT,
+                    &dmin,
+                    enc,
+                    spec.prior,
+                    &opts(warm[model].clone()),
+                ) {
                     Ok((l, _)) => {
-                        next_warm[model] = Some(l.gp().warm_start());
+                        warm[model] = Some(l.gp().warm_start());
                         mean_mse(&windows, |z| {
                             Ok(l.rollout(z, HORIZON)?.into_iter().map(|z| z.q).collect())
                         })
@@ -435,9 +442,16 @@ where
                     mse,
                 });
             }
-            let mse = match Learned::train(nmax, DT, &dmax, Encoding::Raw, spec.prior, &opts(2)) {
+            let mse = match Learned::train(
+                nmax,
+                DT,
+                &dmax,
+                Encoding::Raw,
+                spec.prior,
+                &opts(warm[2].clone()),
+            ) {
                 Ok((l, _)) => {
-                    next_warm[2] = Some(l.gp().warm_start());
+                    warm[2] = Some(l.gp().warm_start());
                     mean_mse(&windows, |z| {
                         let zm = nmin.to_maximal(z, DT);
                         // the learned maximal model predicts; positions are compared in minimal coordinates
@@ -462,12 +476,6 @@ where
                 run,
                 mse,
             });
-            // a failed training keeps the previous warm start
-            for (w, next) in warm.iter_mut().zip(next_warm) {
-                if next.is_some() {
-                    *w = next;
-                }
-            }
             progress.inc(1);
         }
     }

@@ -3,7 +3,7 @@
 
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError, StepInfo};
-use vigp_core::{StepWorkspace, Stepper};
+use vigp_core::{StepError as CoreError, StepWorkspace, Stepper};
 
 /// A one-step map z_k ↦ z_{k+1} with a fixed time step.
 ///
@@ -234,14 +234,32 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// the largest residual, and any sub-step's flags). The solver's
     /// scratch is kept as in [`Variational::step`].
     pub fn step_with_info(&self, z: &State<N>) -> Result<(State<N>, StepInfo), StepError> {
-        let stepper = self.stepper()?;
-        let (z1, report) =
-            crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
-                Some(ws) => stepper.step_with_report_in(z, ws),
-                None => stepper.step_with_report(z),
-            })
-            .map_err(|e| self.explain(StepError::from(e), z))?;
+        let (z1, report) = self.step_from(
+            z,
+            |s, ws| s.step_with_report_in(z, ws),
+            |s| s.step_with_report(z),
+        )?;
         Ok((z1, StepInfo::from_report(&report)))
+    }
+
+    /// A step from the state `z`: `kept` on this thread's kept workspace
+    /// where the solver's scratch is worth keeping
+    /// (`scratch::with_workspace` decides), else `fresh` in a workspace
+    /// zeroed for the call; the two give the same bits. Errors are
+    /// explained at `z`. The one path of every std step from a state.
+    #[inline(always)]
+    fn step_from<R>(
+        &self,
+        z: &State<N>,
+        kept: impl FnOnce(&Stepper<M, N, C>, &mut StepWorkspace<N, C>) -> Result<R, CoreError>,
+        fresh: impl FnOnce(&Stepper<M, N, C>) -> Result<R, CoreError>,
+    ) -> Result<R, StepError> {
+        let stepper = self.stepper()?;
+        crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
+            Some(ws) => kept(stepper, ws),
+            None => fresh(stepper),
+        })
+        .map_err(|e| self.explain(StepError::from(e), z))
     }
 
     /// The tolerance into a `NotConverged`; a Newton failure from a
@@ -309,12 +327,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         // the fixed-size step directly (no diagnostics to carry back); it
         // refuses a non-finite state itself
-        let stepper = self.stepper()?;
-        crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
-            Some(ws) => stepper.step_in(z, ws),
-            None => stepper.step(z),
-        })
-        .map_err(|e| self.explain(StepError::from(e), z))
+        self.step_from(z, |s, ws| s.step_in(z, ws), |s| s.step(z))
     }
 
     /// [`Variational::step`] in a workspace the caller keeps across steps
@@ -361,12 +374,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
     ) -> Result<State<N>, StepError> {
-        let stepper = self.stepper()?;
-        crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
-            Some(ws) => stepper.step_forced_in(z, u, ws),
-            None => stepper.step_forced(z, u),
-        })
-        .map_err(|e| self.explain(StepError::from(e), z))
+        self.step_from(
+            z,
+            |s, ws| s.step_forced_in(z, u, ws),
+            |s| s.step_forced(z, u),
+        )
     }
 
     /// Fill `out` with the states after 1, …, `out.len()` forced steps from
@@ -412,12 +424,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
     ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
-        let stepper = self.stepper()?;
-        crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
-            Some(ws) => stepper.step_with_derivatives_in(z, u, ws),
-            None => stepper.step_with_derivatives(z, u),
-        })
-        .map_err(|e| self.explain(StepError::from(e), z))
+        self.step_from(
+            z,
+            |s, ws| s.step_with_derivatives_in(z, u, ws),
+            |s| s.step_with_derivatives(z, u),
+        )
     }
 
     /// A forced rollout (as [`Variational::rollout_forced`]) with the exact
