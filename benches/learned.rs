@@ -126,6 +126,35 @@ fn bench_learned(c: &mut Criterion) {
                 (next, bound.one_step(info.std_dev.as_slice()))
             })
         });
+        // A 20-step horizon with the one-step bound at every step (MPC):
+        // 20 `step_with` calls, against `rollout_with_info`, which steps on
+        // the mean and batches the 20 variances (one pass over each L⁻¹).
+        // Divide by 20 for the cost per step.
+        g.bench_function(format!("double_pendulum/N{n}/horizon20_step_with"), |b| {
+            b.iter(|| {
+                let mut z = *black_box(&z);
+                let mut s = 0.0;
+                for _ in 0..20 {
+                    let (next, info) = l.step_with(&z, &mut ws).unwrap();
+                    s += bound.one_step(info.std_dev.as_slice()).unwrap();
+                    z = next;
+                }
+                (z, s)
+            })
+        });
+        g.bench_function(
+            format!("double_pendulum/N{n}/horizon20_rollout_with_info"),
+            |b| {
+                b.iter(|| {
+                    let steps = l.rollout_with_info(black_box(&z), 20, &mut ws).unwrap();
+                    let s: f64 = steps
+                        .iter()
+                        .map(|(_, info)| bound.one_step(info.std_dev.as_slice()).unwrap())
+                        .sum();
+                    (steps.last().map(|(z, _)| *z), s)
+                })
+            },
+        );
         // The same step with the two outputs' variances on two threads
         // (opt-in `set_parallel_variance`).
         let mut seq = l.clone();

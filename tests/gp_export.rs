@@ -674,3 +674,144 @@ fn parallel_variance_equals_the_sequential_path() {
         .unwrap();
     assert_eq!(v.map(f64::to_bits), par[0].1.map(f64::to_bits));
 }
+
+/// `Gp::predict` over many points shares each pass over an output's stored
+/// L⁻¹ between the points of a chunk (at most 32); its means and variances
+/// equal `predict_into` point by point, bit for bit: across chunk
+/// boundaries (75 points), with a function prior mean, and in the
+/// `VarianceMode::Solve` path (which predicts point by point). A
+/// non-finite point is an error in both.
+#[test]
+fn batched_prediction_equals_single_points() {
+    let n = 300;
+    let (x, y) = data(n, 3, 3, 0.05, 5);
+    let opts = TrainOptions {
+        restarts: 0,
+        mean: PriorMean::function(|x, m| {
+            m[0] = x[0];
+            m[1] = 0.5 * x[1];
+            m[2] = x[2].sin();
+        }),
+        ..Default::default()
+    };
+    let mut gp = Gp::train(&x, 3, &y, 3, &opts).unwrap().0;
+    let mut rng = Rng(8);
+    let points: Vec<f64> = (0..75 * 3).map(|_| rng.uniform(-3.5, 3.5)).collect();
+    for mode in [VarianceMode::Inverse, VarianceMode::Solve] {
+        gp.set_variance_mode(mode);
+        let batch = gp.predict(&points).unwrap();
+        let mut ws = gp.workspace();
+        for (h, q) in points.chunks_exact(3).enumerate() {
+            let (mut m, mut v) = ([0.0; 3], [0.0; 3]);
+            gp.predict_into(q, &mut m, &mut v, &mut ws).unwrap();
+            assert!(
+                same_bits(&batch.mean[3 * h..3 * h + 3], &m),
+                "{mode:?}: means differ at point {h}"
+            );
+            assert!(
+                same_bits(&batch.variance[3 * h..3 * h + 3], &v),
+                "{mode:?}: variances differ at point {h}"
+            );
+            assert!(v.iter().all(|s| *s >= 0.0));
+        }
+        let mut bad = points.clone();
+        bad[40 * 3 + 1] = f64::NAN;
+        assert!(
+            matches!(gp.predict(&bad), Err(GpError::NonFinite { .. })),
+            "{mode:?}"
+        );
+    }
+}
+
+/// `Learned::rollout_with_info` (mean steps, then the variances of all
+/// visited points in one batched prediction) reports what `steps` calls of
+/// `step_with` report, bit for bit: states, unprojected velocities,
+/// standard deviations and projection corrections; with the nominal and the
+/// constant prior, and with a projection (fourbar). A non-finite start is
+/// the same typed error, at step 0.
+#[test]
+fn rollout_with_info_equals_repeated_full_steps() {
+    use vigp::learned::{Encoding, Learned, Prior, transitions};
+    use vigp::prelude::*;
+    use vigp::systems::{Fourbar, Pendulum};
+    let dt = 0.01;
+    let mut truth = Pendulum::default();
+    truth.joints.pivot.damping = 0.4;
+    let traj = Variational::new(truth.minimal(), dt)
+        .rollout(&State::new([1.0], [0.0]), 60)
+        .unwrap();
+    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
+    let data = transitions(&q, dt);
+    let opts = TrainOptions {
+        restarts: 1,
+        ..Default::default()
+    };
+    fn check<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
+        l: &Learned<M, N, C>,
+        z0: &State<N>,
+        steps: usize,
+    ) {
+        let mut ws = l.workspace();
+        let got = l.rollout_with_info(z0, steps, &mut ws).unwrap();
+        assert_eq!(got.len(), steps);
+        let mut z = *z0;
+        for (k, (state, info)) in got.iter().enumerate() {
+            let (next, want) = l.step_with(&z, &mut ws).unwrap();
+            assert!(
+                same_bits(next.q.as_slice(), state.q.as_slice()),
+                "q, step {k}"
+            );
+            assert!(
+                same_bits(next.v.as_slice(), state.v.as_slice()),
+                "v, step {k}"
+            );
+            assert!(
+                same_bits(want.unprojected.as_slice(), info.unprojected.as_slice()),
+                "v_u, step {k}"
+            );
+            assert!(
+                same_bits(want.std_dev.as_slice(), info.std_dev.as_slice()),
+                "σ, step {k}: {} vs {}",
+                want.std_dev,
+                info.std_dev
+            );
+            assert_eq!(
+                want.correction.to_bits(),
+                info.correction.to_bits(),
+                "step {k}"
+            );
+            z = next;
+        }
+        let mut bad = *z0;
+        bad.v[0] = f64::NAN;
+        let a = l.rollout_with_info(&bad, steps, &mut ws).unwrap_err();
+        let b = l.step_with(&bad, &mut ws).unwrap_err().at_step(0);
+        assert_eq!(format!("{a:?}"), format!("{b:?}"));
+    }
+    for prior in [Prior::Nominal, Prior::Constant] {
+        let (l, _) = Learned::train(
+            Pendulum::default().minimal(),
+            dt,
+            &data,
+            Encoding::SinCos,
+            prior,
+            &opts,
+        )
+        .unwrap();
+        check(&l, &data[3].z, 40);
+    }
+    let fb = Fourbar::default().minimal();
+    let z0 = vigp::projection::consistent_state(
+        &fb,
+        &nalgebra::SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &nalgebra::SVector::zeros(),
+        dt,
+    )
+    .unwrap();
+    let traj = Variational::new(fb, dt).rollout(&z0, 40).unwrap();
+    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
+    let data = transitions(&q, dt);
+    let (l, _) = Learned::train(fb, dt, &data, Encoding::Raw, Prior::Constant, &opts).unwrap();
+    assert!(l.projects());
+    check(&l, &z0, 25);
+}

@@ -696,15 +696,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// dimensions. A model trained with inputs steps under u = 0 (equal to
     /// [`Learned::step_mean_forced_with`] with zeros).
     pub fn step_mean_with(&self, z: &State<N>, ws: &mut Workspace) -> Result<State<N>, StepError> {
-        self.check_step(z)?;
-        let x1 = z.q + z.v * self.dt;
-        let vu = self.predict_mean_velocity(z, ws)?;
-        let v = if self.project && C > 0 {
-            project_velocity(&self.model, &x1, &vu, self.dt, &self.options)?.0
-        } else {
-            vu
-        };
-        Ok(State { q: x1, v })
+        Ok(self.mean_step_parts(z, ws)?.0)
     }
 
     fn check_step(&self, z: &State<N>) -> Result<(), StepError> {
@@ -715,6 +707,84 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             return Err(StepError::NonFiniteState { step: None });
         }
         Ok(())
+    }
+
+    /// `steps` learned steps from `z0`, each with what
+    /// [`step_with`](Self::step_with) reports (posterior standard deviations,
+    /// unprojected velocity, projection correction): the states and infos
+    /// equal those of `steps` calls of `step_with`, bit for bit. This is the
+    /// multi-step prediction with uncertainty an MPC horizon needs.
+    ///
+    /// The steps run on the posterior mean ([`step_mean_with`](Self::step_mean_with),
+    /// which gives the same next state), and the variances at all visited
+    /// points come afterwards from one [`Gp::predict`]. For an exact GP with
+    /// the stored inverse (the default) that shares each pass over an
+    /// output's L⁻¹ between the points, so the variance of a step costs a
+    /// fraction of `step_with`'s, which streams L⁻¹ (N²/2 values per output)
+    /// once per step. Allocates the result and the batch's buffers.
+    ///
+    /// Errors: those of `step_with`, tagged with the failing step.
+    pub fn rollout_with_info(
+        &self,
+        z0: &State<N>,
+        steps: usize,
+        ws: &mut Workspace,
+    ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
+        let d = self.gp.input_dim();
+        let e = self.encoding.dim(&M::KINDS);
+        if self.gp.output_dim() != N || e > d {
+            return Err(StepError::Prediction { step: None });
+        }
+        let mut points = vec![0.0; steps * d];
+        let mut out = Vec::with_capacity(steps);
+        let mut z = *z0;
+        for (k, x) in points.chunks_exact_mut(d).enumerate() {
+            let (next, vu) = self.mean_step_parts(&z, ws).map_err(|e| e.at_step(k))?;
+            // the GP input of z, followed by u = 0 for a model with inputs
+            self.encoding.encode(&M::KINDS, &z, &mut x[..e]);
+            out.push((
+                next,
+                LearnedStepInfo {
+                    unprojected: vu,
+                    std_dev: SVector::zeros(),
+                    correction: (next.v - vu).norm(),
+                },
+            ));
+            z = next;
+        }
+        let variance = match self.gp.predict(&points) {
+            Ok(p) => p.variance,
+            Err(_) => {
+                // Name the step whose prediction fails, as step_with would.
+                let mut z = *z0;
+                for (k, (next, _)) in out.iter().enumerate() {
+                    self.predict_velocity(&z, ws).map_err(|e| e.at_step(k))?;
+                    z = *next;
+                }
+                return Err(StepError::Prediction { step: None });
+            }
+        };
+        for ((_, info), var) in out.iter_mut().zip(variance.chunks_exact(N)) {
+            info.std_dev = SVector::from_iterator(var.iter().map(|s| s.max(0.0).sqrt()));
+        }
+        Ok(out)
+    }
+
+    /// The next state of a mean step and the unprojected velocity v_u.
+    fn mean_step_parts(
+        &self,
+        z: &State<N>,
+        ws: &mut Workspace,
+    ) -> Result<(State<N>, SVector<f64, N>), StepError> {
+        self.check_step(z)?;
+        let x1 = z.q + z.v * self.dt;
+        let vu = self.predict_mean_velocity(z, ws)?;
+        let v = if self.project && C > 0 {
+            project_velocity(&self.model, &x1, &vu, self.dt, &self.options)?.0
+        } else {
+            vu
+        };
+        Ok((State { q: x1, v }, vu))
     }
 
     /// One learned step with a caller-owned GP workspace (no allocation for

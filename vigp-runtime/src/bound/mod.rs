@@ -711,13 +711,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             corrections: Vec::with_capacity(steps),
         };
         t.states.push(*z0);
-        let mut z = *z0;
-        for k in 0..steps {
-            let (next, info) = self.step_with(&z, ws).map_err(|e| e.at_step(k))?;
+        for (next, info) in self.rollout_with_info(z0, steps, ws)? {
             t.std_devs.push(info.std_dev);
             t.corrections.push(info.correction);
             t.states.push(next);
-            z = next;
         }
         Ok(t)
     }

@@ -156,30 +156,219 @@ pub(crate) fn backward_rows(l: &[f64], v: &mut [f64]) {
 /// out = L⁻¹·v with L⁻¹ given (packed rows): out_i = Σ_{j≤i} (L⁻¹)_ij v_j,
 /// four rows at a time.
 pub(crate) fn lower_matvec(linv: &[f64], v: &[f64], out: &mut [f64]) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = pulp::x86::V3::try_new() {
+        return simd.vectorize(|| lower_matvec_avx2(simd, linv, v, out));
+    }
+    lower_matvec_impl(linv, v, out);
+}
+
+#[inline(always)]
+fn lower_matvec_impl(linv: &[f64], v: &[f64], out: &mut [f64]) {
     let n = v.len();
     let mut i = 0;
     while i + 4 <= n {
-        let s = dot4(
-            row(linv, i),
-            row(linv, i + 1),
-            row(linv, i + 2),
-            row(linv, i + 3),
-            &v[..=i],
-        );
-        // Entries right of column i in rows i+1..i+3.
-        let r1 = row(linv, i + 1);
-        let r2 = row(linv, i + 2);
-        let r3 = row(linv, i + 3);
-        out[i] = s[0];
-        out[i + 1] = s[1] + r1[i + 1] * v[i + 1];
-        out[i + 2] = s[2] + r2[i + 1] * v[i + 1] + r2[i + 2] * v[i + 2];
-        out[i + 3] = s[3] + r3[i + 1] * v[i + 1] + r3[i + 2] * v[i + 2] + r3[i + 3] * v[i + 3];
+        matvec_block(linv, i, v, out);
         i += 4;
     }
     while i < n {
         out[i] = dot(row(linv, i), &v[..=i]);
         i += 1;
     }
+}
+
+/// [`lower_matvec_impl`] with each row's four lane sums of [`dot4`] in one
+/// AVX2 register (same order, so the same bits).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn lower_matvec_avx2(simd: pulp::x86::V3, linv: &[f64], v: &[f64], out: &mut [f64]) {
+    use pulp::{Simd, x86::V3};
+    let n = v.len();
+    let mut i = 0;
+    while i + 4 <= n {
+        let m = i + 1;
+        let r = [
+            row(linv, i),
+            row(linv, i + 1),
+            row(linv, i + 2),
+            row(linv, i + 3),
+        ];
+        let rc = r.map(|x| &x[..m]);
+        let chunks = m / 4;
+        let rs = rc.map(|x| V3::as_simd_f64s(x).0);
+        let vc = &v[..m];
+        let zero = simd.splat_f64s(0.0);
+        let (mut a0, mut a1, mut a2, mut a3) = (zero, zero, zero, zero);
+        for ((((x0, x1), x2), x3), y) in rs[0]
+            .iter()
+            .zip(rs[1])
+            .zip(rs[2])
+            .zip(rs[3])
+            .zip(V3::as_simd_f64s(vc).0)
+        {
+            a0 = simd.add_f64s(a0, simd.mul_f64s(*x0, *y));
+            a1 = simd.add_f64s(a1, simd.mul_f64s(*x1, *y));
+            a2 = simd.add_f64s(a2, simd.mul_f64s(*x2, *y));
+            a3 = simd.add_f64s(a3, simd.mul_f64s(*x3, *y));
+        }
+        let mut lanes = [a0, a1, a2, a3].map(|x| [x.0, x.1, x.2, x.3]);
+        for (l, j) in (4 * chunks..m).enumerate() {
+            for k in 0..4 {
+                lanes[k][l] += rc[k][j] * vc[j];
+            }
+        }
+        block_tail(&r, i, lanes.map(|a| (a[0] + a[1]) + (a[2] + a[3])), v, out);
+        i += 4;
+    }
+    while i < n {
+        out[i] = dot(row(linv, i), &v[..=i]);
+        i += 1;
+    }
+}
+
+/// [`lower_matvec`] for m vectors at once (`vs` and `outs` hold them one
+/// after the other, each of length n), with the same arithmetic per vector,
+/// so each result equals `lower_matvec`'s bit for bit. Each block of four
+/// rows of L⁻¹ is read from memory once for all m vectors: at N = 512 the
+/// packed L⁻¹ (1 MB) does not fit a core's L2, and one vector at a time is
+/// bound by streaming it; m vectors share that stream. Keep m·n·8 bytes of
+/// vectors within L2 for the gain (the callers use chunks).
+pub(crate) fn lower_matvec_many(linv: &[f64], n: usize, vs: &[f64], outs: &mut [f64]) {
+    debug_assert_eq!(vs.len(), outs.len());
+    // Once L⁻¹ is read once per chunk the products dominate: with AVX2
+    // (detected at run time) each (row, vector) pair's four lane sums are
+    // one 256-bit register, added in the same order as the portable code
+    // (separate multiply and add, no fused multiply-add), so the same bits.
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = pulp::x86::V3::try_new() {
+        return simd.vectorize(|| lower_matvec_many_avx2(simd, linv, n, vs, outs));
+    }
+    lower_matvec_many_impl(linv, n, vs, outs);
+}
+
+/// [`lower_matvec_many_impl`] with two vectors per block of four rows
+/// (each row loaded once for both) and each (row, vector) pair's four lane
+/// sums of [`dot4`] in one AVX2 register.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn lower_matvec_many_avx2(
+    simd: pulp::x86::V3,
+    linv: &[f64],
+    n: usize,
+    vs: &[f64],
+    outs: &mut [f64],
+) {
+    use pulp::{Simd, x86::V3};
+    let mut i = 0;
+    while i + 4 <= n {
+        let m = i + 1;
+        let r = [
+            row(linv, i),
+            row(linv, i + 1),
+            row(linv, i + 2),
+            row(linv, i + 3),
+        ];
+        let rc = r.map(|x| &x[..m]);
+        let chunks = m / 4;
+        let rs = rc.map(|x| V3::as_simd_f64s(x).0);
+        let mut pairs_v = vs.chunks_exact(2 * n);
+        let mut pairs_o = outs.chunks_exact_mut(2 * n);
+        for (v, out) in (&mut pairs_v).zip(&mut pairs_o) {
+            let (v0, v1) = v.split_at(n);
+            let vc = [&v0[..m], &v1[..m]];
+            let (p0, p1) = (V3::as_simd_f64s(vc[0]).0, V3::as_simd_f64s(vc[1]).0);
+            let zero = simd.splat_f64s(0.0);
+            let (mut a00, mut a01, mut a02, mut a03) = (zero, zero, zero, zero);
+            let (mut a10, mut a11, mut a12, mut a13) = (zero, zero, zero, zero);
+            for (((((x0, x1), x2), x3), y0), y1) in rs[0]
+                .iter()
+                .zip(rs[1])
+                .zip(rs[2])
+                .zip(rs[3])
+                .zip(p0)
+                .zip(p1)
+            {
+                a00 = simd.add_f64s(a00, simd.mul_f64s(*x0, *y0));
+                a01 = simd.add_f64s(a01, simd.mul_f64s(*x1, *y0));
+                a02 = simd.add_f64s(a02, simd.mul_f64s(*x2, *y0));
+                a03 = simd.add_f64s(a03, simd.mul_f64s(*x3, *y0));
+                a10 = simd.add_f64s(a10, simd.mul_f64s(*x0, *y1));
+                a11 = simd.add_f64s(a11, simd.mul_f64s(*x1, *y1));
+                a12 = simd.add_f64s(a12, simd.mul_f64s(*x2, *y1));
+                a13 = simd.add_f64s(a13, simd.mul_f64s(*x3, *y1));
+            }
+            let acc = [[a00, a01, a02, a03], [a10, a11, a12, a13]];
+            let mut lanes = acc.map(|a| a.map(|x| [x.0, x.1, x.2, x.3]));
+            for (l, j) in (4 * chunks..m).enumerate() {
+                for h in 0..2 {
+                    for k in 0..4 {
+                        lanes[h][k][l] += rc[k][j] * vc[h][j];
+                    }
+                }
+            }
+            let (o0, o1) = out.split_at_mut(n);
+            for ((a, v), out) in lanes.iter().zip([v0, v1]).zip([o0, o1]) {
+                block_tail(&r, i, a.map(|a| (a[0] + a[1]) + (a[2] + a[3])), v, out);
+            }
+        }
+        if let (Some(v), Some(out)) = (
+            pairs_v.remainder().chunks_exact(n).next(),
+            pairs_o.into_remainder().chunks_exact_mut(n).next(),
+        ) {
+            matvec_block(linv, i, v, out);
+        }
+        i += 4;
+    }
+    while i < n {
+        let r = row(linv, i);
+        for (v, out) in vs.chunks_exact(n).zip(outs.chunks_exact_mut(n)) {
+            out[i] = dot(r, &v[..=i]);
+        }
+        i += 1;
+    }
+}
+
+/// Rows i..i+4 of out = L⁻¹·v from `s`, each row's product left of
+/// column i + 1, and the entries right of column i.
+#[inline(always)]
+fn block_tail(r: &[&[f64]; 4], i: usize, s: [f64; 4], v: &[f64], out: &mut [f64]) {
+    out[i] = s[0];
+    out[i + 1] = s[1] + r[1][i + 1] * v[i + 1];
+    out[i + 2] = s[2] + r[2][i + 1] * v[i + 1] + r[2][i + 2] * v[i + 2];
+    out[i + 3] = s[3] + r[3][i + 1] * v[i + 1] + r[3][i + 2] * v[i + 2] + r[3][i + 3] * v[i + 3];
+}
+
+/// The portable [`lower_matvec_many`]: per block of four rows, every
+/// vector in turn (the rows stay in L1 between them).
+#[inline(always)]
+fn lower_matvec_many_impl(linv: &[f64], n: usize, vs: &[f64], outs: &mut [f64]) {
+    let mut i = 0;
+    while i + 4 <= n {
+        for (v, out) in vs.chunks_exact(n).zip(outs.chunks_exact_mut(n)) {
+            matvec_block(linv, i, v, out);
+        }
+        i += 4;
+    }
+    while i < n {
+        let r = row(linv, i);
+        for (v, out) in vs.chunks_exact(n).zip(outs.chunks_exact_mut(n)) {
+            out[i] = dot(r, &v[..=i]);
+        }
+        i += 1;
+    }
+}
+
+/// Rows i..i+4 of out = L⁻¹·v (i + 4 ≤ n).
+#[inline(always)]
+fn matvec_block(linv: &[f64], i: usize, v: &[f64], out: &mut [f64]) {
+    let r = [
+        row(linv, i),
+        row(linv, i + 1),
+        row(linv, i + 2),
+        row(linv, i + 3),
+    ];
+    let s = dot4(r[0], r[1], r[2], r[3], &v[..=i]);
+    block_tail(&r, i, s, v, out);
 }
 
 /// Squared norm with eight partial sums.
@@ -289,6 +478,33 @@ mod tests {
 
     fn matvec(l: &[f64], x: &[f64]) -> Vec<f64> {
         (0..x.len()).map(|i| dot(row(l, i), &x[..=i])).collect()
+    }
+
+    /// The vectorised paths (AVX2 where this CPU has it) and the batched one
+    /// give the portable single-vector product's bits: the lane sums keep
+    /// their order and no multiply-add is fused.
+    #[test]
+    fn every_matvec_path_gives_the_portable_bits() {
+        let bits = |x: &[f64]| x.iter().map(|a| a.to_bits()).collect::<Vec<_>>();
+        for n in [1, 3, 4, 5, 9, 17, 64, 130] {
+            let l = example(n);
+            for m in [1, 2, 3, 7] {
+                let vs: Vec<f64> = (0..m * n).map(|i| (i as f64 * 0.77).sin()).collect();
+                let mut outs = vec![0.0; m * n];
+                lower_matvec_many(&l, n, &vs, &mut outs);
+                let mut portable = vec![0.0; m * n];
+                lower_matvec_many_impl(&l, n, &vs, &mut portable);
+                assert_eq!(bits(&portable), bits(&outs), "n = {n}, m = {m}");
+                for (v, got) in vs.chunks_exact(n).zip(outs.chunks_exact(n)) {
+                    let mut want = vec![0.0; n];
+                    lower_matvec_impl(&l, v, &mut want);
+                    assert_eq!(bits(got), bits(&want), "n = {n}, m = {m}");
+                    let mut single = vec![0.0; n];
+                    lower_matvec(&l, v, &mut single);
+                    assert_eq!(bits(&single), bits(&want), "n = {n}");
+                }
+            }
+        }
     }
 
     #[test]
