@@ -732,7 +732,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
         let d = self.gp.input_dim();
         let e = self.encoding.dim(&M::KINDS);
-        if self.gp.output_dim() != N || e > d {
+        if self.gp.output_dim() != N || e > d || d == 0 {
             return Err(StepError::Prediction { step: None });
         }
         let mut points = vec![0.0; steps * d];
