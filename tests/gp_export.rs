@@ -678,9 +678,10 @@ fn parallel_variance_equals_the_sequential_path() {
 /// `Gp::predict` over many points shares each pass over an output's stored
 /// L⁻¹ between the points of a chunk (at most 32); its means and variances
 /// equal `predict_into` point by point, bit for bit: across chunk
-/// boundaries (75 points), with a function prior mean, and in the
-/// `VarianceMode::Solve` path (which predicts point by point). A
-/// non-finite point is an error in both.
+/// boundaries (75 points), for one chunk whose outputs run in parallel (5
+/// points), with a function prior mean, and in the `VarianceMode::Solve`
+/// path (which predicts point by point). A non-finite point is an error in
+/// each.
 #[test]
 fn batched_prediction_equals_single_points() {
     let n = 300;
@@ -696,10 +697,21 @@ fn batched_prediction_equals_single_points() {
     };
     let mut gp = Gp::train(&x, 3, &y, 3, &opts).unwrap().0;
     let mut rng = Rng(8);
-    let points: Vec<f64> = (0..75 * 3).map(|_| rng.uniform(-3.5, 3.5)).collect();
-    for mode in [VarianceMode::Inverse, VarianceMode::Solve] {
+    let many: Vec<f64> = (0..75 * 3).map(|_| rng.uniform(-3.5, 3.5)).collect();
+    // 75 points: three chunks; 5 points: one chunk, whose three outputs run
+    // in parallel (fewer chunks than the pool's two threads)
+    for (points, mode) in [
+        (&many[..], VarianceMode::Inverse),
+        (&many[..5 * 3], VarianceMode::Inverse),
+        (&many[..], VarianceMode::Solve),
+    ] {
         gp.set_variance_mode(mode);
-        let batch = gp.predict(&points).unwrap();
+        let batch = rayon::ThreadPoolBuilder::new()
+            .num_threads(2)
+            .build()
+            .unwrap()
+            .install(|| gp.predict(points))
+            .unwrap();
         let mut ws = gp.workspace();
         for (h, q) in points.chunks_exact(3).enumerate() {
             let (mut m, mut v) = ([0.0; 3], [0.0; 3]);
@@ -714,8 +726,9 @@ fn batched_prediction_equals_single_points() {
             );
             assert!(v.iter().all(|s| *s >= 0.0));
         }
-        let mut bad = points.clone();
-        bad[40 * 3 + 1] = f64::NAN;
+        let mut bad = points.to_vec();
+        let middle = bad.len() / 2;
+        bad[middle] = f64::NAN;
         assert!(
             matches!(gp.predict(&bad), Err(GpError::NonFinite { .. })),
             "{mode:?}"

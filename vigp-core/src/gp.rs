@@ -440,6 +440,12 @@ fn block_kernel_any(inputs: &[f64], n: usize, q: &[f64], sf2: f64, start: usize,
 ///
 /// Errors: [`GpError::InvalidModel`] if `inputs.len() != d·n` or
 /// `out.len() != n`.
+///
+/// Always inlined, so a caller compiled for a wider vector unit (e.g. the
+/// std runtime's AVX2 dispatch) compiles it for that unit too; the values
+/// are the same bits either way (elementwise arithmetic, no fused
+/// multiply-adds).
+#[inline(always)]
 pub fn kernel_row(
     inputs: &[f64],
     n: usize,
@@ -499,6 +505,9 @@ fn reduce(acc: &[f64; LANES]) -> f64 {
 ///
 /// Errors: [`GpError::InvalidModel`] if `inputs.len() != d·n` or
 /// `weights.len() != n`.
+///
+/// Always inlined, as [`kernel_row`].
+#[inline(always)]
 pub fn kernel_dot(
     inputs: &[f64],
     n: usize,

@@ -983,7 +983,7 @@ impl Gp {
         }
         for (j, o) in self.outputs.iter().enumerate() {
             Self::scale_query(o, &ws.xn, &mut ws.xs);
-            core_gp::kernel_row(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
+            kernel_row_dispatched(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
                 .map_err(core_error)?;
             let mn = core_gp::dot(&ws.kstar, &o.alpha).map_err(core_error)?;
             let vv = match &o.post {
@@ -1029,7 +1029,7 @@ impl Gp {
             .zip(self.outputs.par_iter())
             .try_for_each(|(lane, o)| -> Result<(), GpError> {
                 Self::scale_query(o, xn, &mut lane.xs);
-                core_gp::kernel_row(
+                kernel_row_dispatched(
                     &o.xs_cols,
                     b,
                     &lane.xs,
@@ -1088,7 +1088,14 @@ impl Gp {
         let b = ws.n;
         for (j, o) in self.outputs.iter().enumerate() {
             Self::scale_query(o, &ws.xn, &mut ws.xs);
-            let mn = core_gp::kernel_dot(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &o.alpha)
+            let mn = pulp::Arch::new()
+                .dispatch(KernelDot {
+                    inputs: &o.xs_cols,
+                    n: b,
+                    q: &ws.xs,
+                    signal_variance: o.hp.signal_variance,
+                    weights: &o.alpha,
+                })
                 .map_err(core_error)?;
             mean[j] = ws.prior[j] + o.output_scale * mn;
         }
@@ -1129,7 +1136,7 @@ impl Gp {
         let b = ws.n;
         for (j, o) in self.outputs.iter().enumerate() {
             Self::scale_query(o, &ws.xn, &mut ws.xs);
-            core_gp::kernel_row(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
+            kernel_row_dispatched(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
                 .map_err(core_error)?;
             // as predict_mean_into (kernel_dot = kernel_row + dot), bit for bit
             let mn = core_gp::dot(&ws.kstar, &o.alpha).map_err(core_error)?;
@@ -1240,10 +1247,12 @@ impl Gp {
     /// Cost O(m·p·N·(d + N)) as m single-point predictions, but for an exact
     /// GP with the stored inverse ([`VarianceMode::Inverse`], the default)
     /// the points go in chunks that share one pass over each output's
-    /// packed L⁻¹ (N²/2 values, 1 MB at N = 512, more than a core's L2):
-    /// one point at a time is bound by streaming that matrix, a chunk
-    /// streams it once. Chunks run in parallel (rayon), as do single points
-    /// on the other paths. Allocates the outputs and O(chunk·N) buffers.
+    /// packed L⁻¹ (N²/2 values, 1 MB at N = 512, more than a core's L2)
+    /// once, with the products in AVX2 registers where the CPU has them.
+    /// Chunks run in parallel (rayon); with fewer chunks than threads the
+    /// outputs of a chunk do; single points run in parallel on the other
+    /// paths. Allocates the outputs and O(chunk·N) buffers (per output when
+    /// the outputs run in parallel).
     pub fn predict(&self, points: &[f64]) -> Result<Prediction, GpError> {
         if points.len() % self.d != 0 {
             return Err(GpError::DimensionMismatch {
@@ -1257,12 +1266,19 @@ impl Gp {
         let mut variance = vec![0.0; m * self.p];
         if self.batches_variance() && self.d > 0 {
             let chunk = self.batch_chunk();
+            // Fewer chunks than threads (a short horizon): the outputs of a
+            // chunk run in parallel instead.
+            let lanes = if m.div_ceil(chunk) < rayon::current_num_threads() {
+                self.p
+            } else {
+                1
+            };
             points
                 .par_chunks(chunk * self.d)
                 .zip(mean.par_chunks_mut(chunk * self.p))
                 .zip(variance.par_chunks_mut(chunk * self.p))
                 .try_for_each_init(
-                    || Batch::new(chunk, self.d, self.p, self.basis()),
+                    || Batch::new(chunk, self.d, self.p, self.basis(), lanes.max(1)),
                     |buf, ((x, mu), va)| self.predict_chunk(x, mu, va, buf),
                 )?;
             return Ok(Prediction { mean, variance });
@@ -1306,36 +1322,35 @@ impl Gp {
         var: &mut [f64],
         buf: &mut Batch,
     ) -> Result<(), GpError> {
-        let (d, p, b) = (self.d, self.p, self.basis());
+        let (d, p) = (self.d, self.p);
         let m = points.len() / d;
+        let Batch { xn, prior, lanes } = buf;
         for (h, x) in points.chunks_exact(d).enumerate() {
             check_finite("prediction input", x)?;
-            self.input_norm.apply(x, &mut buf.xn[h * d..(h + 1) * d]);
-            self.mean.eval(x, &mut buf.prior[h * p..(h + 1) * p]);
+            self.input_norm.apply(x, &mut xn[h * d..(h + 1) * d]);
+            self.mean.eval(x, &mut prior[h * p..(h + 1) * p]);
         }
-        let ks = &mut buf.kstar[..m * b];
-        let tmp = &mut buf.tmp[..m * b];
-        for (j, o) in self.outputs.iter().enumerate() {
-            let Posterior::Exact {
-                linv: Some(linv), ..
-            } = &o.post
-            else {
-                return Err(GpError::InvalidModel(
-                    "batched variance needs the stored inverse".into(),
-                ));
-            };
-            for (h, k) in ks.chunks_exact_mut(b).enumerate() {
-                Self::scale_query(o, &buf.xn[h * d..(h + 1) * d], &mut buf.xs);
-                core_gp::kernel_row(&o.xs_cols, b, &buf.xs, o.hp.signal_variance, k)
-                    .map_err(core_error)?;
-                buf.mn[h] = core_gp::dot(k, &o.alpha).map_err(core_error)?;
-            }
-            tri::lower_matvec_many(linv, b, ks, tmp);
+        let mut write = |j: usize, o: &OutputGp, lane: &OutputBatch| {
             let s = o.output_scale;
-            for (h, t) in tmp.chunks_exact(b).enumerate() {
-                let vv = tri::norm2(t);
-                mean[h * p + j] = buf.prior[h * p + j] + s * buf.mn[h];
-                var[h * p + j] = s * s * (o.hp.signal_variance - vv).max(0.0);
+            for h in 0..m {
+                mean[h * p + j] = prior[h * p + j] + s * lane.mn[h];
+                var[h * p + j] = s * s * (o.hp.signal_variance - lane.quad[h]).max(0.0);
+            }
+        };
+        if lanes.len() == p && p > 1 {
+            // one output per rayon task (one chunk, idle threads)
+            lanes
+                .par_iter_mut()
+                .zip(self.outputs.par_iter())
+                .try_for_each(|(lane, o)| self.output_chunk(o, xn, m, lane))?;
+            for (j, (o, lane)) in self.outputs.iter().zip(lanes.iter()).enumerate() {
+                write(j, o, lane);
+            }
+        } else {
+            let lane = &mut lanes[0];
+            for (j, o) in self.outputs.iter().enumerate() {
+                self.output_chunk(o, xn, m, lane)?;
+                write(j, o, lane);
             }
         }
         for (mu, va) in mean.chunks_exact(p).zip(var.chunks_exact(p)) {
@@ -1344,30 +1359,135 @@ impl Gp {
         }
         Ok(())
     }
+
+    /// One output's k*ᵀα (normalised units) and ‖L⁻¹k*‖² at the m points
+    /// of a chunk (`xn` holds their normalised inputs), into `lane.mn` and
+    /// `lane.quad`; the pass over L⁻¹ is shared between the points.
+    fn output_chunk(
+        &self,
+        o: &OutputGp,
+        xn: &[f64],
+        m: usize,
+        lane: &mut OutputBatch,
+    ) -> Result<(), GpError> {
+        let (d, b) = (self.d, self.basis());
+        let Posterior::Exact {
+            linv: Some(linv), ..
+        } = &o.post
+        else {
+            return Err(GpError::InvalidModel(
+                "batched variance needs the stored inverse".into(),
+            ));
+        };
+        let ks = &mut lane.kstar[..m * b];
+        for (h, k) in ks.chunks_exact_mut(b).enumerate() {
+            Self::scale_query(o, &xn[h * d..(h + 1) * d], &mut lane.xs);
+            kernel_row_dispatched(&o.xs_cols, b, &lane.xs, o.hp.signal_variance, k)
+                .map_err(core_error)?;
+            lane.mn[h] = core_gp::dot(k, &o.alpha).map_err(core_error)?;
+        }
+        let tmp = &mut lane.tmp[..m * b];
+        tri::lower_matvec_many(linv, b, ks, tmp);
+        for (q, t) in lane.quad.iter_mut().zip(tmp.chunks_exact(b)) {
+            *q = tri::norm2(t);
+        }
+        Ok(())
+    }
+}
+
+/// [`core_gp::kernel_row`] compiled for AVX2 where the CPU has it (see
+/// [`KernelDot`]; the same bits).
+fn kernel_row_dispatched(
+    inputs: &[f64],
+    n: usize,
+    q: &[f64],
+    signal_variance: f64,
+    out: &mut [f64],
+) -> Result<(), core_gp::GpError> {
+    struct Op<'a> {
+        inputs: &'a [f64],
+        n: usize,
+        q: &'a [f64],
+        signal_variance: f64,
+        out: &'a mut [f64],
+    }
+    impl pulp::WithSimd for Op<'_> {
+        type Output = Result<(), core_gp::GpError>;
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+            core_gp::kernel_row(self.inputs, self.n, self.q, self.signal_variance, self.out)
+        }
+    }
+    pulp::Arch::new().dispatch(Op {
+        inputs,
+        n,
+        q,
+        signal_variance,
+        out,
+    })
+}
+
+/// [`core_gp::kernel_dot`] as a pulp operation: inlined into pulp's AVX2
+/// function where the CPU has AVX2, so its exponentials run four to a
+/// register (two on baseline x86-64). The same bits either way: the
+/// exponential is elementwise and the sums keep their lanes and order.
+struct KernelDot<'a> {
+    inputs: &'a [f64],
+    n: usize,
+    q: &'a [f64],
+    signal_variance: f64,
+    weights: &'a [f64],
+}
+
+impl pulp::WithSimd for KernelDot<'_> {
+    type Output = Result<f64, core_gp::GpError>;
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+        core_gp::kernel_dot(
+            self.inputs,
+            self.n,
+            self.q,
+            self.signal_variance,
+            self.weights,
+        )
+    }
 }
 
 /// Bytes of kernel rows and products a chunk of [`Gp::predict`] keeps.
 const BATCH_BYTES: usize = 256 * 1024;
 
-/// Buffers of one chunk of [`Gp::predict`]'s batched variance.
+/// Buffers of one chunk of [`Gp::predict`]'s batched variance: the
+/// points' normalised inputs and prior means, and one [`OutputBatch`] (or
+/// one per output when the outputs run in parallel).
 struct Batch {
     xn: Vec<f64>,
-    xs: Vec<f64>,
     prior: Vec<f64>,
+    lanes: Vec<OutputBatch>,
+}
+
+/// One output's buffers and results for a chunk of points.
+struct OutputBatch {
+    xs: Vec<f64>,
     kstar: Vec<f64>,
     tmp: Vec<f64>,
     mn: Vec<f64>,
+    quad: Vec<f64>,
 }
 
 impl Batch {
-    fn new(chunk: usize, d: usize, p: usize, b: usize) -> Self {
+    fn new(chunk: usize, d: usize, p: usize, b: usize, lanes: usize) -> Self {
         Self {
             xn: vec![0.0; chunk * d],
-            xs: vec![0.0; d],
             prior: vec![0.0; chunk * p],
-            kstar: vec![0.0; chunk * b],
-            tmp: vec![0.0; chunk * b],
-            mn: vec![0.0; chunk],
+            lanes: (0..lanes)
+                .map(|_| OutputBatch {
+                    xs: vec![0.0; d],
+                    kstar: vec![0.0; chunk * b],
+                    tmp: vec![0.0; chunk * b],
+                    mn: vec![0.0; chunk],
+                    quad: vec![0.0; chunk],
+                })
+                .collect(),
         }
     }
 }
