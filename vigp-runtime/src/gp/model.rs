@@ -1246,9 +1246,9 @@ impl Gp {
     ///
     /// Cost O(m·p·N·(d + N)) as m single-point predictions, but for an exact
     /// GP with the stored inverse ([`VarianceMode::Inverse`], the default)
-    /// the points go in chunks that share one pass over each output's
-    /// packed L⁻¹ (N²/2 values, 1 MB at N = 512, more than a core's L2)
-    /// once, with the products in AVX2 registers where the CPU has them.
+    /// the points go in chunks, and each chunk reads each output's packed
+    /// L⁻¹ (N²/2 values, 1 MB at N = 512, more than a core's L2) once, with
+    /// the products in AVX2 registers where the CPU has them.
     /// Chunks run in parallel (rayon); with fewer chunks than threads the
     /// outputs of a chunk do; single points run in parallel on the other
     /// paths. Allocates the outputs and O(chunk·N) buffers (per output when
@@ -1307,7 +1307,8 @@ impl Gp {
 
     /// Points per chunk of the batched variance: their kernel rows and
     /// products (2 × chunk × N values) within ≈ 256 KB, half a Zen 3 L2,
-    /// and at most 32 (the gain is already ≥ 10× there).
+    /// and at most 32 (at N = 512, 20 points per pass already cut the
+    /// product from 28.6 to 8.6 µs per point).
     fn batch_chunk(&self) -> usize {
         (BATCH_BYTES / (16 * self.basis().max(1))).clamp(1, 32)
     }

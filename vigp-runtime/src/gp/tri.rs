@@ -154,7 +154,8 @@ pub(crate) fn backward_rows(l: &[f64], v: &mut [f64]) {
 }
 
 /// out = L⁻¹·v with L⁻¹ given (packed rows): out_i = Σ_{j≤i} (L⁻¹)_ij v_j,
-/// four rows at a time.
+/// four rows at a time; in AVX2 registers where the CPU has them (detected
+/// at run time), with the bits of the portable [`lower_matvec_impl`].
 pub(crate) fn lower_matvec(linv: &[f64], v: &[f64], out: &mut [f64]) {
     #[cfg(target_arch = "x86_64")]
     if let Some(simd) = pulp::x86::V3::try_new() {
@@ -163,6 +164,7 @@ pub(crate) fn lower_matvec(linv: &[f64], v: &[f64], out: &mut [f64]) {
     lower_matvec_impl(linv, v, out);
 }
 
+/// The portable [`lower_matvec`].
 #[inline(always)]
 fn lower_matvec_impl(linv: &[f64], v: &[f64], out: &mut [f64]) {
     let n = v.len();
@@ -230,9 +232,9 @@ fn lower_matvec_avx2(simd: pulp::x86::V3, linv: &[f64], v: &[f64], out: &mut [f6
 /// after the other, each of length n), with the same arithmetic per vector,
 /// so each result equals `lower_matvec`'s bit for bit. Each block of four
 /// rows of L⁻¹ is read from memory once for all m vectors: at N = 512 the
-/// packed L⁻¹ (1 MB) does not fit a core's L2, and one vector at a time is
-/// bound by streaming it; m vectors share that stream. Keep m·n·8 bytes of
-/// vectors within L2 for the gain (the callers use chunks).
+/// packed L⁻¹ (1 MB) does not fit a core's L2, so one vector at a time
+/// streams all of it from L3 per vector; m vectors share that stream. Keep
+/// m·n·8 bytes of vectors within L2 for the gain (the callers use chunks).
 pub(crate) fn lower_matvec_many(linv: &[f64], n: usize, vs: &[f64], outs: &mut [f64]) {
     debug_assert_eq!(vs.len(), outs.len());
     // Once L⁻¹ is read once per chunk the products dominate: with AVX2
