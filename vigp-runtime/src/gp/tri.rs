@@ -189,15 +189,8 @@ fn lower_matvec_avx2(simd: pulp::x86::V3, linv: &[f64], v: &[f64], out: &mut [f6
     let mut i = 0;
     while i + 4 <= n {
         let m = i + 1;
-        let r = [
-            row(linv, i),
-            row(linv, i + 1),
-            row(linv, i + 2),
-            row(linv, i + 3),
-        ];
-        let rc = r.map(|x| &x[..m]);
         let chunks = m / 4;
-        let rs = rc.map(|x| V3::as_simd_f64s(x).0);
+        let (r, rc, rs) = block_rows_avx2(linv, i);
         let vc = &v[..m];
         let zero = simd.splat_f64s(0.0);
         let (mut a0, mut a1, mut a2, mut a3) = (zero, zero, zero, zero);
@@ -264,15 +257,8 @@ fn lower_matvec_many_avx2(
     let mut i = 0;
     while i + 4 <= n {
         let m = i + 1;
-        let r = [
-            row(linv, i),
-            row(linv, i + 1),
-            row(linv, i + 2),
-            row(linv, i + 3),
-        ];
-        let rc = r.map(|x| &x[..m]);
         let chunks = m / 4;
-        let rs = rc.map(|x| V3::as_simd_f64s(x).0);
+        let (r, rc, rs) = block_rows_avx2(linv, i);
         let mut pairs_v = vs.chunks_exact(2 * n);
         let mut pairs_o = outs.chunks_exact_mut(2 * n);
         for (v, out) in (&mut pairs_v).zip(&mut pairs_o) {
@@ -321,12 +307,35 @@ fn lower_matvec_many_avx2(
         }
         i += 4;
     }
-    while i < n {
+    remainder_rows(linv, n, i, vs, outs);
+}
+
+/// The four rows of block i, their parts left of column i + 1, and those
+/// parts as AVX2 vectors (without their last (i + 1) mod 4 values).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+#[allow(clippy::type_complexity)]
+fn block_rows_avx2(linv: &[f64], i: usize) -> ([&[f64]; 4], [&[f64]; 4], [&[pulp::f64x4]; 4]) {
+    let r = [
+        row(linv, i),
+        row(linv, i + 1),
+        row(linv, i + 2),
+        row(linv, i + 3),
+    ];
+    let rc = r.map(|x| &x[..=i]);
+    let rs = rc.map(|x| <pulp::x86::V3 as pulp::Simd>::as_simd_f64s(x).0);
+    (r, rc, rs)
+}
+
+/// Rows `from`..n of every out = L⁻¹·v (the rows after the last block of
+/// four), one dot product each.
+#[inline(always)]
+fn remainder_rows(linv: &[f64], n: usize, from: usize, vs: &[f64], outs: &mut [f64]) {
+    for i in from..n {
         let r = row(linv, i);
         for (v, out) in vs.chunks_exact(n).zip(outs.chunks_exact_mut(n)) {
             out[i] = dot(r, &v[..=i]);
         }
-        i += 1;
     }
 }
 
@@ -351,13 +360,7 @@ fn lower_matvec_many_impl(linv: &[f64], n: usize, vs: &[f64], outs: &mut [f64]) 
         }
         i += 4;
     }
-    while i < n {
-        let r = row(linv, i);
-        for (v, out) in vs.chunks_exact(n).zip(outs.chunks_exact_mut(n)) {
-            out[i] = dot(r, &v[..=i]);
-        }
-        i += 1;
-    }
+    remainder_rows(linv, n, i, vs, outs);
 }
 
 /// Rows i..i+4 of out = L⁻¹·v (i + 4 ≤ n).
