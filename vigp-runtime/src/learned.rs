@@ -731,8 +731,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         ws: &mut Workspace,
     ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
         let d = self.gp.input_dim();
-        let e = self.encoding.dim(&M::KINDS);
-        if self.gp.output_dim() != N || e > d || d == 0 {
+        if self.gp.output_dim() != N || d == 0 {
             return Err(StepError::Prediction { step: None });
         }
         let mut points = vec![0.0; steps * d];
@@ -741,7 +740,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         for (k, x) in points.chunks_exact_mut(d).enumerate() {
             let (next, vu) = self.mean_step_parts(&z, ws).map_err(|e| e.at_step(k))?;
             // the GP input of z, followed by u = 0 for a model with inputs
-            self.encoding.encode(&M::KINDS, &z, &mut x[..e]);
+            self.with_input(&z, |input| {
+                if input.len() != x.len() {
+                    return Err(StepError::Prediction { step: Some(k) });
+                }
+                x.copy_from_slice(input);
+                Ok(())
+            })?;
             out.push((
                 next,
                 LearnedStepInfo {

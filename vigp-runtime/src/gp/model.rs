@@ -1088,14 +1088,7 @@ impl Gp {
         let b = ws.n;
         for (j, o) in self.outputs.iter().enumerate() {
             Self::scale_query(o, &ws.xn, &mut ws.xs);
-            let mn = pulp::Arch::new()
-                .dispatch(KernelDot {
-                    inputs: &o.xs_cols,
-                    n: b,
-                    q: &ws.xs,
-                    signal_variance: o.hp.signal_variance,
-                    weights: &o.alpha,
-                })
+            let mn = kernel_dot_dispatched(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &o.alpha)
                 .map_err(core_error)?;
             mean[j] = ws.prior[j] + o.output_scale * mn;
         }
@@ -1278,7 +1271,7 @@ impl Gp {
                 .zip(mean.par_chunks_mut(chunk * self.p))
                 .zip(variance.par_chunks_mut(chunk * self.p))
                 .try_for_each_init(
-                    || Batch::new(chunk, self.d, self.p, self.basis(), lanes.max(1)),
+                    || Batch::new(chunk, self.d, self.p, self.basis(), lanes),
                     |buf, ((x, mu), va)| self.predict_chunk(x, mu, va, buf),
                 )?;
             return Ok(Prediction { mean, variance });
@@ -1397,7 +1390,7 @@ impl Gp {
 }
 
 /// [`core_gp::kernel_row`] compiled for AVX2 where the CPU has it (see
-/// [`KernelDot`]; the same bits).
+/// [`kernel_dot_dispatched`]; the same bits).
 fn kernel_row_dispatched(
     inputs: &[f64],
     n: usize,
@@ -1428,30 +1421,44 @@ fn kernel_row_dispatched(
     })
 }
 
-/// [`core_gp::kernel_dot`] as a pulp operation: inlined into pulp's AVX2
-/// function where the CPU has AVX2, so its exponentials run four to a
-/// register (two on baseline x86-64). The same bits either way: the
-/// exponential is elementwise and the sums keep their lanes and order.
-struct KernelDot<'a> {
-    inputs: &'a [f64],
+/// [`core_gp::kernel_dot`] compiled for AVX2 where the CPU has it: inlined
+/// into pulp's AVX2 function, so its exponentials run four to a register
+/// (two on baseline x86-64). The same bits either way: the exponential is
+/// elementwise and the sums keep their lanes and order.
+fn kernel_dot_dispatched(
+    inputs: &[f64],
     n: usize,
-    q: &'a [f64],
+    q: &[f64],
     signal_variance: f64,
-    weights: &'a [f64],
-}
-
-impl pulp::WithSimd for KernelDot<'_> {
-    type Output = Result<f64, core_gp::GpError>;
-    #[inline(always)]
-    fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
-        core_gp::kernel_dot(
-            self.inputs,
-            self.n,
-            self.q,
-            self.signal_variance,
-            self.weights,
-        )
+    weights: &[f64],
+) -> Result<f64, core_gp::GpError> {
+    struct Op<'a> {
+        inputs: &'a [f64],
+        n: usize,
+        q: &'a [f64],
+        signal_variance: f64,
+        weights: &'a [f64],
     }
+    impl pulp::WithSimd for Op<'_> {
+        type Output = Result<f64, core_gp::GpError>;
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+            core_gp::kernel_dot(
+                self.inputs,
+                self.n,
+                self.q,
+                self.signal_variance,
+                self.weights,
+            )
+        }
+    }
+    pulp::Arch::new().dispatch(Op {
+        inputs,
+        n,
+        q,
+        signal_variance,
+        weights,
+    })
 }
 
 /// Bytes of kernel rows and products a chunk of [`Gp::predict`] keeps.
