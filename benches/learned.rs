@@ -155,6 +155,12 @@ fn bench_learned(c: &mut Criterion) {
                 })
             },
         );
+        // A bounded 20-step prediction (`Learned::predict`, Theorem 1):
+        // the 20 steps with variances, and the position bound propagated
+        // with the learned step's local Jacobian norms at every state.
+        g.bench_function(format!("double_pendulum/N{n}/predict20_theorem1"), |b| {
+            b.iter(|| l.predict(black_box(&z), 20, &bound).unwrap())
+        });
         // The same step with the two outputs' variances on two threads
         // (opt-in `set_parallel_variance`).
         let mut seq = l.clone();

@@ -485,6 +485,224 @@ fn predict_carries_a_bound_per_state() {
     assert!(b.one_step(&[1.0, 1.0]).is_err());
 }
 
+vigp::mechanism! {
+    /// A pendulum driven at its pivot, for a model trained with inputs.
+    pub DrivenPendulum {
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start) { damping: 0.1, actuated },
+        }
+    }
+}
+
+/// Spectral norm by nalgebra's SVD (the library's own is a power iteration).
+fn norm2<const N: usize>(a: &nalgebra::SMatrix<f64, N, N>) -> f64 {
+    DMatrix::from_column_slice(N, N, a.as_slice())
+        .svd(false, false)
+        .singular_values
+        .max()
+}
+
+/// The reference for `Learned::step_jacobian_norms`: central differences
+/// (h = 1e-4·max(|x|, 1)) of z ↦ v′ of `step_mean_with`, each perturbed
+/// state first made consistent when the model projects, i.e. the definition
+/// the analytic derivative implements, evaluated a second way.
+fn fd_norms<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
+    l: &Learned<M, N, C>,
+    z: &State<N>,
+) -> (f64, f64) {
+    let mut ws = l.workspace();
+    let mut eval = |p: State<N>| {
+        let p = if C > 0 && l.projects() {
+            vigp::projection::consistent_state(l.model(), &p.q, &p.v, l.dt()).unwrap()
+        } else {
+            p
+        };
+        l.step_mean_with(&p, &mut ws).unwrap().v
+    };
+    let mut dq = nalgebra::SMatrix::<f64, N, N>::zeros();
+    let mut dv = dq;
+    for k in 0..2 * N {
+        let x = if k < N { z.q[k] } else { z.v[k - N] };
+        let h = 1e-4 * x.abs().max(1.0);
+        let (mut plus, mut minus) = (*z, *z);
+        if k < N {
+            plus.q[k] += h;
+            minus.q[k] -= h;
+        } else {
+            plus.v[k - N] += h;
+            minus.v[k - N] -= h;
+        }
+        let col = (eval(plus) - eval(minus)) / (2.0 * h);
+        if k < N {
+            dq.set_column(k, &col);
+        } else {
+            dv.set_column(k - N, &col);
+        }
+    }
+    (norm2(&dq), norm2(&dv))
+}
+
+/// Noisy transitions (uniform noise of σ ≈ 3e-3 on the velocities) along a
+/// damped rollout of `truth` from `z0`: the noise keeps the GP's noise
+/// variance and weights moderate, so that differences of the mean are not
+/// swamped by rounding (noise-free data drives σ_n² → 0 and the rounding
+/// of Σ αᵢkᵢ up: 1e-6 relative already at σ ≈ 1e-4).
+fn noisy_transitions<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    truth: M,
+    z0: &State<N>,
+    steps: usize,
+    seed: u64,
+) -> Vec<Transition<N>> {
+    let traj = Variational::new(truth, DT).rollout(z0, steps).unwrap();
+    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
+    let mut rng = Rng(seed);
+    vigp::learned::transitions(&q, DT)
+        .into_iter()
+        .map(|mut t| {
+            for x in t.v_next.iter_mut() {
+                *x += rng.uniform(-5e-3, 5e-3);
+            }
+            t
+        })
+        .collect()
+}
+
+/// `Learned::step_jacobian_norms` (exact derivatives: the nominal step's,
+/// the GP mean's gradient, the projection's and the consistent-state map's
+/// KKT derivatives) against central differences of the mean step, on
+/// consistent states along each model's own prediction: the pendulum
+/// (sin/cos, nominal prior), the fourbar in minimal coordinates (2 loop
+/// equations; nominal and constant prior), the double pendulum in maximal
+/// coordinates (6 coordinates, 4 joint constraints) and a model trained
+/// with an input (differentiated under u = 0, the step `predict` takes).
+///
+/// Tolerance 1e-6 relative to the norm: the differences' truncation is
+/// ~h² = 1e-8 times the third derivative and their rounding ~1e-16·‖α‖₁/h;
+/// both sit at 1e-10–3e-7 here (h = 1e-3 and 1e-4 agree, h = 1e-5 is
+/// rounding-bound). An error in the chain rule (a dropped term of the
+/// projection's derivative or of the consistent-state map) changes the
+/// norms by O(1), the off-manifold directions being amplified by 1/Δt;
+/// the power iteration used before for ‖·‖₂ missed the fourbar's norm by
+/// 4e-5 (two close singular values), which this test caught.
+#[test]
+fn step_jacobian_norms_match_central_differences() {
+    use vigp::systems::{DoublePendulum, Fourbar};
+    let opts = TrainOptions {
+        restarts: 1,
+        seed: 5,
+        ..TrainOptions::default()
+    };
+    fn check<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
+        name: &str,
+        l: &Learned<M, N, C>,
+        z0: &State<N>,
+    ) {
+        let mut ws = l.workspace();
+        let states = l.rollout(z0, 12).unwrap();
+        for (k, z) in states.iter().enumerate().step_by(3) {
+            let (a, c) = l.step_jacobian_norms(z, &mut ws).unwrap();
+            let (fa, fc) = fd_norms(l, z);
+            for (got, want, what) in [(a, fa, "|dv'/dq|"), (c, fc, "|dv'/dv|")] {
+                assert!(
+                    (got - want).abs() <= 1e-6 * want.max(1.0),
+                    "{name}, state {k}, {what}: {got:e} vs differences {want:e}"
+                );
+            }
+        }
+    }
+    let mut pendulum = Pendulum::default();
+    pendulum.joints.pivot.damping = 0.3;
+    let data = noisy_transitions(pendulum.minimal(), &State::new([1.2], [0.0]), 50, 1);
+    for (encoding, prior) in [
+        (Encoding::SinCos, Prior::Nominal),
+        (Encoding::Raw, Prior::Constant),
+    ] {
+        let (l, _) = Learned::train(
+            Pendulum::default().minimal(),
+            DT,
+            &data,
+            encoding,
+            prior,
+            &opts,
+        )
+        .unwrap();
+        check("pendulum", &l, &data[7].z);
+    }
+
+    let mut fourbar = Fourbar::default();
+    fourbar.joints.top1.damping = 0.2;
+    let z0 = vigp::projection::consistent_state(
+        &fourbar.minimal(),
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::zeros(),
+        DT,
+    )
+    .unwrap();
+    let data = noisy_transitions(fourbar.minimal(), &z0, 50, 2);
+    for prior in [Prior::Nominal, Prior::Constant] {
+        let (l, _) = Learned::train(
+            Fourbar::default().minimal(),
+            DT,
+            &data,
+            Encoding::Raw,
+            prior,
+            &opts,
+        )
+        .unwrap();
+        assert!(l.projects());
+        check("fourbar", &l, &data[5].z);
+    }
+
+    let mut double = DoublePendulum::default();
+    double.joints.elbow.damping = 0.2;
+    let m = double.maximal();
+    let q0 = vigp::projection::consistent_state(
+        &m,
+        &SVector::from([0.4, -0.45, 0.5, 1.0, -1.4, 1.2]),
+        &SVector::zeros(),
+        DT,
+    )
+    .unwrap();
+    let data = noisy_transitions(m, &q0, 40, 3);
+    let (l, _) = Learned::train(
+        DoublePendulum::default().maximal(),
+        DT,
+        &data,
+        Encoding::Raw,
+        Prior::Nominal,
+        &opts,
+    )
+    .unwrap();
+    check("double pendulum, maximal", &l, &data[4].z);
+
+    // a model trained with an input: u is random per step in the data
+    let truth = DrivenPendulum::default().minimal();
+    let vi = Variational::new(truth, DT);
+    let mut rng = Rng(9);
+    let mut z = State::new([0.8], [0.0]);
+    let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, 1>::zeros()]);
+    for _ in 0..60 {
+        let u = SVector::<f64, 1>::new(rng.uniform(-2.0, 2.0));
+        z = vi.step_forced(&z, &u).unwrap();
+        positions.push(z.q);
+        inputs.push(u);
+    }
+    let data: Vec<_> = vigp::learned::forced_transitions(&positions, &inputs, DT)
+        .into_iter()
+        .map(|mut t| {
+            t.v_next[0] += rng.uniform(-5e-3, 5e-3);
+            t
+        })
+        .collect();
+    let (l, _) =
+        Learned::train_forced(truth, DT, &data, Encoding::SinCos, Prior::Nominal, &opts).unwrap();
+    assert_eq!(l.inputs(), 1);
+    check("driven pendulum, u = 0", &l, &data[3].z);
+}
+
 /// Decoding inverts encoding (angles modulo 2π).
 #[test]
 fn encoding_round_trips() {

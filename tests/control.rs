@@ -1470,3 +1470,34 @@ fn learned_a_error<M: Mechanism<N, C> + Clone, const N: usize, const C: usize>(
     }
     err / scale
 }
+
+/// `U = 0` is the input-free step for any mechanism, actuated ones
+/// included: `step_forced::<0>` and `step_with_derivatives::<0>` of the
+/// driven cartpole equal the step under u = 0 bit for bit (state and A),
+/// in the embedded `Stepper` and the std `Variational`, on both the
+/// minimal and the midpoint rule. (The learned step's bound differentiates
+/// the input-free step of every model through this.)
+#[test]
+fn zero_length_input_is_the_input_free_step() {
+    let z = State::new([0.3, -0.7], [0.4, 1.1]);
+    let zero = SVector::<f64, 1>::zeros();
+    let none = SVector::<f64, 0>::zeros();
+    for vi in [
+        Variational::new(DriveCartpole::default().minimal(), 0.01),
+        Variational::midpoint(DriveCartpole::default().minimal(), 0.01),
+    ] {
+        let (z1, d1) = vi.step_derivatives(&z, &zero).unwrap();
+        let (z0, d0) = vi.step_derivatives(&z, &none).unwrap();
+        assert_eq!(z0, z1);
+        assert_eq!(d0.a.matrix::<4>(), d1.a.matrix::<4>());
+        assert_eq!(vi.step_forced(&z, &none).unwrap(), vi.step(&z).unwrap());
+        let stepper = *vi.stepper().unwrap();
+        let (s1, e1) = stepper.step_with_derivatives(&z, &zero).unwrap();
+        let (s0, e0) = stepper.step_with_derivatives(&z, &none).unwrap();
+        assert_eq!((s0, e0.a.matrix::<4>()), (s1, e1.a.matrix::<4>()));
+        assert_eq!(
+            stepper.step_forced(&z, &none).unwrap(),
+            stepper.step(&z).unwrap()
+        );
+    }
+}

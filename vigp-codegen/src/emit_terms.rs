@@ -841,13 +841,18 @@ pub fn emit_dynamics(
         }
         let (body, uq, uk) = assign_body(&mut constants, &outs, quote!());
         let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
+        // U = 0 is the input-free step (no force): the derivatives of the
+        // unforced step need it for an actuated mechanism too
         let assert_u = quote! {
-            const { ::core::assert!(U == #uu, "the input vector's length U must equal Dynamics::INPUTS") };
+            const { ::core::assert!(U == #uu || U == 0, "the input vector's length U must equal Dynamics::INPUTS (or 0: no input)") };
         };
         let b_fn = quote! {
             fn input_matrix<const U: usize>(&self, #k_arg: &Self::Constants, #q_arg: &#svector<f64, #nn>) -> #smatrix<f64, #nn, U> {
                 #assert_u
                 let mut b = #smatrix::<f64, #nn, U>::zeros();
+                if U == 0 {
+                    return b;
+                }
                 #body
                 b
             }
@@ -868,6 +873,9 @@ pub fn emit_dynamics(
                 #assert_u
                 #[allow(unused_mut)]
                 let mut h = #smatrix::<f64, #nn, #nn>::zeros();
+                if U == 0 {
+                    return h;
+                }
                 #lets
                 #(#assigns)*
                 h

@@ -238,28 +238,41 @@ pub trait Dynamics<const N: usize, const C: usize> {
 
     /// The input matrix B(q) (N × U, column i = ∇s_i(q) of actuated joint
     /// i): the generalized force of inputs u is B(q)u. `U` must equal
-    /// [`Dynamics::INPUTS`] (checked at compile time). Default (no inputs):
+    /// [`Dynamics::INPUTS`] or be 0 (no input: the input-free step's
+    /// derivatives instantiate `U = 0` for every mechanism), checked at
+    /// compile time; with `U = 0` the matrix is empty. Default (no inputs):
     /// empty.
     fn input_matrix<const U: usize>(
         &self,
         k: &Self::Constants,
         q: &SVector<f64, N>,
     ) -> SMatrix<f64, N, U> {
-        const { assert!(U == Self::INPUTS, "U must equal Dynamics::INPUTS") };
+        const {
+            assert!(
+                U == Self::INPUTS || U == 0,
+                "U must equal Dynamics::INPUTS (or 0: no input)"
+            )
+        };
         let _ = (k, q);
         SMatrix::zeros()
     }
 
     /// ∂/∂q [B(q)u] = Σ_i u_i ∇²s_i(q) (N × N, symmetric; zero when every
     /// actuated joint's coordinate is linear in q, as for minimal
-    /// coordinates of a tree). `U` must equal [`Dynamics::INPUTS`].
+    /// coordinates of a tree). `U` must equal [`Dynamics::INPUTS`] or be 0
+    /// (then zero).
     fn input_force_jacobian<const U: usize>(
         &self,
         k: &Self::Constants,
         q: &SVector<f64, N>,
         u: &SVector<f64, U>,
     ) -> SMatrix<f64, N, N> {
-        const { assert!(U == Self::INPUTS, "U must equal Dynamics::INPUTS") };
+        const {
+            assert!(
+                U == Self::INPUTS || U == 0,
+                "U must equal Dynamics::INPUTS (or 0: no input)"
+            )
+        };
         let _ = (k, q, u);
         SMatrix::zeros()
     }

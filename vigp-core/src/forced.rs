@@ -237,9 +237,15 @@ struct Groups<const N: usize, const U: usize> {
 
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// Refuses an input vector with NaN or ±∞; `U` must equal
-    /// [`Dynamics::INPUTS`] (a compile-time check).
+    /// [`Dynamics::INPUTS`], or be 0 for the input-free step (a
+    /// compile-time check).
     fn check_input<const U: usize>(u: &SVector<f64, U>) -> Result<(), StepError> {
-        const { assert!(U == M::INPUTS, "U must equal Dynamics::INPUTS") };
+        const {
+            assert!(
+                U == M::INPUTS || U == 0,
+                "U must equal Dynamics::INPUTS (or 0: no input)"
+            )
+        };
         if max_abs(u).is_nan() {
             Err(StepError::NonFiniteInput)
         } else {
@@ -580,8 +586,9 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// One forced step from `z` (as [`Stepper::step_forced`]) with its exact
     /// derivatives A = ∂z₁/∂z₀ and B = ∂z₁/∂u (module docs). `U` must
-    /// equal [`Dynamics::INPUTS`] (`U = 0` for an unactuated mechanism: A
-    /// alone). No allocation.
+    /// equal [`Dynamics::INPUTS`], or be 0: then the step is input-free
+    /// (that of [`Stepper::step`]) and A comes alone, for any mechanism.
+    /// No allocation.
     pub fn step_with_derivatives<const U: usize>(
         &self,
         z: &State<N>,

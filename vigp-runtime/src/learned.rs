@@ -408,11 +408,25 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
-        use nalgebra::SMatrix;
-        self.check_step(z)?;
         if U != self.inputs {
             return Err(StepError::InputsNotSupported);
         }
+        self.step_derivatives_at(z, u, ws)
+    }
+
+    /// [`Learned::step_derivatives_forced`] for `U` equal to the model's
+    /// inputs, or `U = 0` for any model: the derivatives of the step under
+    /// u = 0 that [`Learned::step_mean_with`] takes (the GP input's input
+    /// tail zero-filled).
+    pub(crate) fn step_derivatives_at<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
+        use nalgebra::SMatrix;
+        debug_assert!(U == self.inputs || U == 0);
+        self.check_step(z)?;
         if !u.iter().all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
         }
@@ -432,14 +446,19 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         };
         // GP mean and its gradient in the GP input
         let e = self.encoding.dim(&M::KINDS);
-        let d = e + U;
+        let d = e + self.inputs;
         let mut mean = SVector::<f64, N>::zeros();
         let mut grad = vec![0.0; N * d];
-        self.with_input_u(z, u.as_slice(), |input| {
+        let gradient = |input: &[f64]| {
             self.gp
                 .predict_mean_gradient_into(input, mean.as_mut_slice(), &mut grad, ws)
                 .map_err(|_| StepError::Prediction { step: None })
-        })?;
+        };
+        if U == self.inputs {
+            self.with_input_u(z, u.as_slice(), gradient)?;
+        } else {
+            self.with_input(z, gradient)?;
+        }
         v += mean;
         // chain rule through the encoding
         for j in 0..N {

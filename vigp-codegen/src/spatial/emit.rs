@@ -193,7 +193,10 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
             },
             quote! {
                 fn input_matrix<const U: usize>(&self, _k: &(), q: &#svector<f64, #nm>) -> #smatrix<f64, #nm, U> {
-                    const { assert!(U == #u, "U must equal Dynamics::INPUTS") };
+                    const { assert!(U == #u || U == 0, "U must equal Dynamics::INPUTS (or 0: no input)") };
+                    if U == 0 {
+                        return #smatrix::zeros();
+                    }
                     #sp::minimal::input_matrix::<#name, #b, #j, #nm, U>(&self.sys, q)
                 }
                 fn input_force_jacobian<const U: usize>(
@@ -202,7 +205,10 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
                     q: &#svector<f64, #nm>,
                     u: &#svector<f64, U>,
                 ) -> #smatrix<f64, #nm, #nm> {
-                    const { assert!(U == #u, "U must equal Dynamics::INPUTS") };
+                    const { assert!(U == #u || U == 0, "U must equal Dynamics::INPUTS (or 0: no input)") };
+                    if U == 0 {
+                        return #smatrix::zeros();
+                    }
                     #sp::minimal::input_force_jacobian::<#name, #b, #j, #nm, U>(&self.sys, q, u)
                 }
             },

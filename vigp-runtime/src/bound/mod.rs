@@ -28,7 +28,8 @@
 //! Multi-step: the conformal kind calibrates the k-step position error
 //! itself. The rigorous kinds bound one step; over several steps
 //! [`Learned::predict`] propagates them with the learned step's local
-//! Jacobian norms at the predicted states (P_{k+1} = P_k + Δt·V_k,
+//! Jacobian norms at the predicted states ([`Learned::step_jacobian_norms`],
+//! exact derivatives) (P_{k+1} = P_k + Δt·V_k,
 //! V_{k+1} = ‖∂v′/∂q‖·P_k + ‖∂v′/∂v‖·V_k + b_k): a first-order estimate, not
 //! part of the theorems.
 //!
@@ -847,8 +848,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// step and the position bound of each state (see
     /// [`BoundedPrediction`]). Cost: `steps` learned steps with variances,
     /// plus, for the rigorous kinds (and a conformal bound that falls
-    /// back), 2N + 1 mean steps per step for the local Jacobian that
-    /// propagates the bound.
+    /// back), one mean step with its exact gradient per step for the local
+    /// Jacobian that propagates the bound
+    /// ([`Learned::step_jacobian_norms`]).
     ///
     /// Errors: a bound made for another model, more steps than a conformal
     /// bound was calibrated for, a failed step, or a non-finite bound.
