@@ -485,6 +485,94 @@ fn predict_carries_a_bound_per_state() {
     assert!(b.one_step(&[1.0, 1.0]).is_err());
 }
 
+/// `predict_bounds` (one trace and one Jacobian per state for every bound)
+/// gives what `predict` gives bound by bound, bit for bit, for every kind
+/// including a conformal bound with a fallback, from a start inside and
+/// one far outside the data; the rigorous kinds' position bounds equal the
+/// recurrence recomputed from `step_jacobian_norms` (1e-14 relative: the
+/// same operations); an empty list and a mismatched bound are typed
+/// errors.
+#[test]
+fn predict_bounds_equals_predict_bound_by_bound() {
+    let l = model();
+    let cal = calibration();
+    let kinds = [
+        BoundKind::theorem1(0.05),
+        BoundKind::rkhs(0.05),
+        BoundKind::conformal(0.05),
+        BoundKind::Conformal(ConformalSettings {
+            delta: 0.05,
+            score: Score::LatentStd,
+            fallback: Fallback::Theorem1,
+            ..ConformalSettings::default()
+        }),
+    ];
+    let bounds: Vec<_> = kinds
+        .iter()
+        .map(|k| l.error_bound(k, cal).unwrap())
+        .collect();
+    let refs: Vec<_> = bounds.iter().collect();
+    let inside = cal.windows()[0].start;
+    let outside = State::new([2.9], [7.0]);
+    let mut fell_back = false;
+    for z0 in [inside, outside] {
+        let all = l.predict_bounds(&z0, 5, &refs).unwrap();
+        assert_eq!(all.len(), bounds.len());
+        for (got, b) in all.iter().zip(&bounds) {
+            let want = l.predict(&z0, 5, b).unwrap();
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(&got.position_bounds), bits(&want.position_bounds));
+            assert_eq!(bits(&got.one_step_bounds), bits(&want.one_step_bounds));
+            assert_eq!(got, &want);
+            fell_back |= got.fell_back;
+        }
+        // the rigorous kinds' position bounds, propagated here from the
+        // public Jacobian norms: P₀ = V₀ = 0, P_{k+1} = P_k + Δt·V_k,
+        // V_{k+1} = ‖∂v′/∂q‖·P_k + ‖∂v′/∂v‖·V_k + b_k, the norms taken at
+        // the interior states (the first and last step add b alone)
+        let mut ws = l.workspace();
+        for p in &all[..2] {
+            let (mut pk, mut vk) = (0.0f64, 0.0f64);
+            let steps = p.one_step_bounds.len();
+            for (k, b) in p.one_step_bounds.iter().enumerate() {
+                let (a, c) = if k > 0 && k + 1 < steps {
+                    l.step_jacobian_norms(&p.states[k], &mut ws).unwrap()
+                } else {
+                    (0.0, 0.0)
+                };
+                (pk, vk) = (pk + DT * vk, a * pk + c * vk + b);
+                assert!(
+                    (p.position_bounds[k + 1] - pk).abs() <= 1e-14 * pk,
+                    "step {k}: {} vs {pk}",
+                    p.position_bounds[k + 1]
+                );
+            }
+        }
+    }
+    assert!(fell_back, "the far start exercises the fallback");
+    assert!(matches!(
+        l.predict_bounds(&inside, 5, &[]),
+        Err(BoundError::Empty(_))
+    ));
+    let (other, _) = Learned::train(
+        Pendulum::default().minimal(),
+        2.0 * DT,
+        &[Transition {
+            z: State::new([0.1], [0.0]),
+            v_next: SVector::from([0.1]),
+        }],
+        Encoding::Raw,
+        Prior::Nominal,
+        &TrainOptions::default(),
+    )
+    .unwrap();
+    let mismatched = l.error_bound(&BoundKind::rkhs(0.05), cal).unwrap();
+    assert!(matches!(
+        other.predict_bounds(&inside, 5, &[&mismatched]),
+        Err(BoundError::Mismatch(_))
+    ));
+}
+
 vigp::mechanism! {
     /// A pendulum driven at its pivot, for a model trained with inputs.
     pub DrivenPendulum {

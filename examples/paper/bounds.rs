@@ -20,7 +20,9 @@ use serde::Serialize;
 use std::error::Error;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use vigp::bound::{BoundKind, Calibration, ConformalSettings, Score, Window};
+use vigp::bound::{
+    BoundKind, BoundedPrediction, Calibration, ConformalSettings, ErrorBound, Score, Window,
+};
 use vigp::gp::TrainOptions;
 use vigp::learned::{Encoding, Learned, Transition, transitions};
 use vigp::prelude::*;
@@ -195,7 +197,7 @@ fn evaluate_model<Mo: Mechanism<P, Q> + Clone + Sync, const P: usize, const Q: u
         deviation: Vec::new(),
         bounds: Vec::new(),
     };
-    for (name, kind) in [
+    let kinds = [
         ("conformal", BoundKind::conformal(DELTA)),
         (
             "conformal-latent",
@@ -206,13 +208,37 @@ fn evaluate_model<Mo: Mechanism<P, Q> + Clone + Sync, const P: usize, const Q: u
         ),
         ("theorem1", BoundKind::theorem1(DELTA)),
         ("rkhs", BoundKind::rkhs(DELTA)),
-    ] {
-        let bound = learned.error_bound(&kind, cal)?;
-        for (set, windows) in sets {
+    ];
+    let bounds = kinds
+        .iter()
+        .map(|(_, kind)| learned.error_bound(kind, cal))
+        .collect::<Result<Vec<_>, _>>()?;
+    let refs: Vec<&ErrorBound> = bounds.iter().collect();
+    // every kind on the same predictions (`predict_bounds` shares the
+    // states, variances and Jacobians); a window whose joint prediction
+    // fails is retried kind by kind, so that one kind's failure (e.g. a
+    // non-finite bound) does not drop the others' cases
+    let predict_all = |start: &State<P>| -> Vec<Option<BoundedPrediction<P>>> {
+        match learned.predict_bounds(start, HORIZON, &refs) {
+            Ok(all) => all.into_iter().map(Some).collect(),
+            Err(_) => refs
+                .iter()
+                .map(|b| learned.predict(start, HORIZON, b).ok())
+                .collect(),
+        }
+    };
+    let predicted: Vec<Vec<Vec<Option<BoundedPrediction<P>>>>> = sets
+        .iter()
+        .map(|(_, windows)| windows.par_iter().map(|w| predict_all(&w.start)).collect())
+        .collect();
+    let tube_predictions = predict_all(&tube_window.start);
+    for (k, (name, _)) in kinds.iter().enumerate() {
+        for ((set, windows), per_window) in sets.iter().zip(&predicted) {
             let results: Vec<Option<Case>> = windows
-                .par_iter()
-                .map(|w| {
-                    let p = learned.predict(&w.start, HORIZON, &bound).ok()?;
+                .iter()
+                .zip(per_window)
+                .map(|(w, all)| {
+                    let p = all[k].as_ref()?;
                     let v1 = (w.positions[1] - w.positions[0]) / DT;
                     Some(Case {
                         one_error: (p.states[1].v - v1).norm(),
@@ -225,10 +251,14 @@ fn evaluate_model<Mo: Mechanism<P, Q> + Clone + Sync, const P: usize, const Q: u
                 .collect();
             rows.push(row(system, coords, name, set, &results));
         }
-        if name == "conformal-latent" {
+        if *name == "conformal-latent" {
             continue;
         }
-        let p = learned.predict(&tube_window.start, HORIZON, &bound)?;
+        let p = match &tube_predictions[k] {
+            Some(p) => p.clone(),
+            // the error itself, as before
+            None => learned.predict(&tube_window.start, HORIZON, &bounds[k])?,
+        };
         if tube.deviation.is_empty() {
             tube.deviation = std::iter::once(0.0)
                 .chain(

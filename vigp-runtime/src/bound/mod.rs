@@ -860,6 +860,42 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         steps: usize,
         bound: &ErrorBound,
     ) -> Result<BoundedPrediction<N>, BoundError> {
+        let mut all = self.predict_bounds(z0, steps, &[bound])?;
+        Ok(all.remove(0))
+    }
+
+    /// [`Learned::predict`] under several bounds at once (e.g. to compare
+    /// kinds on the same prediction): the predicted states and their
+    /// variances are computed once, and so is the learned step's Jacobian
+    /// at each state, which every rigorous bound (and fallback) shares.
+    /// Result `i` equals `predict(z0, steps, bounds[i])` bit for bit.
+    ///
+    /// Errors: as [`Learned::predict`] for any of the bounds; an empty
+    /// list is [`BoundError::Empty`].
+    pub fn predict_bounds(
+        &self,
+        z0: &State<N>,
+        steps: usize,
+        bounds: &[&ErrorBound],
+    ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
+        if bounds.is_empty() {
+            return Err(BoundError::Empty("list of bounds"));
+        }
+        for bound in bounds {
+            self.check_bound(bound, steps)?;
+        }
+        let mut ws = self.workspace();
+        let trace = self.trace(z0, steps, &mut ws)?;
+        let mut norms = vec![None; trace.states.len()];
+        let mut out = Vec::with_capacity(bounds.len());
+        for bound in bounds {
+            out.push(self.bounded(bound, &trace, &mut norms, &mut ws)?);
+        }
+        Ok(out)
+    }
+
+    /// The checks of [`Learned::predict`] on one bound.
+    fn check_bound(&self, bound: &ErrorBound, steps: usize) -> Result<(), BoundError> {
         let dt = Integrator::dt(self);
         if bound.outputs != self.gp().output_dim() {
             return Err(BoundError::Mismatch("number of GP outputs"));
@@ -880,9 +916,19 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 requested: steps,
             });
         }
-        let mut ws = self.workspace();
-        let trace = self.trace(z0, steps, &mut ws)?;
-        let (mut one_step, mut position, outside) = self.attach(bound, &trace, &mut ws, true)?;
+        Ok(())
+    }
+
+    /// `bound` (and its fallback where the trace leaves its domain) along
+    /// `trace`; `norms` caches the step's Jacobian norms per state.
+    fn bounded(
+        &self,
+        bound: &ErrorBound,
+        trace: &Trace<N>,
+        norms: &mut [Option<(f64, f64)>],
+        ws: &mut Workspace,
+    ) -> Result<BoundedPrediction<N>, BoundError> {
+        let (mut one_step, mut position, outside) = self.attach(bound, trace, norms, ws, true)?;
         let mut fell_back = false;
         if let Some(fb) = &bound.fallback
             && outside.iter().any(|o| *o)
@@ -890,7 +936,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             // the fallback's position bounds (which cost a Jacobian per
             // step) only when the start itself is outside
             let start_outside = outside.first().copied().unwrap_or(false);
-            let (one, pos, _) = self.attach(fb, &trace, &mut ws, start_outside)?;
+            let (one, pos, _) = self.attach(fb, trace, norms, ws, start_outside)?;
             for ((a, b), o) in one_step.iter_mut().zip(one).zip(&outside) {
                 if *o {
                     *a = a.max(b);
@@ -904,11 +950,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             fell_back = true;
         }
         Ok(BoundedPrediction {
-            states: trace.states,
+            states: trace.states.clone(),
             one_step_bounds: one_step,
             position_bounds: position,
-            std_devs: trace.std_devs,
-            corrections: trace.corrections,
+            std_devs: trace.std_devs.clone(),
+            corrections: trace.corrections.clone(),
             outside,
             fell_back,
         })
@@ -921,6 +967,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         &self,
         bound: &ErrorBound,
         trace: &Trace<N>,
+        norms: &mut [Option<(f64, f64)>],
         ws: &mut Workspace,
         positions: bool,
     ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>), BoundError> {
@@ -955,7 +1002,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 let (mut pk, mut vk) = (0.0f64, 0.0f64);
                 for (k, b) in one_step.iter().enumerate() {
                     let (a, c) = if k > 0 && k + 1 < steps {
-                        self.step_jacobian_norms(&trace.states[k], ws)?
+                        match norms[k] {
+                            Some(n) => n,
+                            None => {
+                                let n = self.step_jacobian_norms(&trace.states[k], ws)?;
+                                norms[k] = Some(n);
+                                n
+                            }
+                        }
                     } else {
                         (0.0, 0.0)
                     };
