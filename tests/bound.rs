@@ -121,6 +121,24 @@ fn calibration() -> &'static Calibration<1> {
     CAL.get_or_init(|| Calibration::new(DT, pendulum_windows(2, 120, 5)).unwrap())
 }
 
+/// A one-sample pendulum model at 2Δt: every bound of `model()` is a
+/// mismatch for it.
+fn other_dt_model() -> Learned<PendulumMinimal, 1, 0> {
+    Learned::train(
+        Pendulum::default().minimal(),
+        2.0 * DT,
+        &[Transition {
+            z: State::new([0.1], [0.0]),
+            v_next: SVector::from([0.1]),
+        }],
+        Encoding::Raw,
+        Prior::Nominal,
+        &TrainOptions::default(),
+    )
+    .unwrap()
+    .0
+}
+
 fn invalid(e: &BoundError) -> bool {
     matches!(
         e,
@@ -464,18 +482,7 @@ fn predict_carries_a_bound_per_state() {
         }
     }
     let b = l.error_bound(&BoundKind::rkhs(0.05), cal).unwrap();
-    let (other, _) = Learned::train(
-        Pendulum::default().minimal(),
-        2.0 * DT,
-        &[Transition {
-            z: State::new([0.1], [0.0]),
-            v_next: SVector::from([0.1]),
-        }],
-        Encoding::Raw,
-        Prior::Nominal,
-        &TrainOptions::default(),
-    )
-    .unwrap();
+    let other = other_dt_model();
     assert!(matches!(
         other.predict(&z0, 3, &b),
         Err(BoundError::Mismatch(_))
@@ -554,18 +561,7 @@ fn predict_bounds_equals_predict_bound_by_bound() {
         l.predict_bounds(&inside, 5, &[]),
         Err(BoundError::Empty(_))
     ));
-    let (other, _) = Learned::train(
-        Pendulum::default().minimal(),
-        2.0 * DT,
-        &[Transition {
-            z: State::new([0.1], [0.0]),
-            v_next: SVector::from([0.1]),
-        }],
-        Encoding::Raw,
-        Prior::Nominal,
-        &TrainOptions::default(),
-    )
-    .unwrap();
+    let other = other_dt_model();
     let mismatched = l.error_bound(&BoundKind::rkhs(0.05), cal).unwrap();
     assert!(matches!(
         other.predict_bounds(&inside, 5, &[&mismatched]),
