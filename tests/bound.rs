@@ -662,6 +662,8 @@ fn noisy_transitions<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: u
 /// equations; nominal and constant prior), the double pendulum in maximal
 /// coordinates (6 coordinates, 4 joint constraints) and a model trained
 /// with an input (differentiated under u = 0, the step `predict` takes).
+/// Off the manifold they are the norms at the consistent state (1e-9: the
+/// projection of a projected state moves it by rounding only).
 ///
 /// Tolerance 1e-6 relative to the norm: the differences' truncation is
 /// ~h² = 1e-8 times the third derivative and their rounding ~1e-16·‖α‖₁/h;
@@ -695,6 +697,16 @@ fn step_jacobian_norms_match_central_differences() {
                     "{name}, state {k}, {what}: {got:e} vs differences {want:e}"
                 );
             }
+        }
+        if C > 0 && l.projects() {
+            // off the manifold: the norms at consistent_state(z)
+            let mut off = states[4];
+            off.q[0] += 1e-3;
+            off.v[0] -= 2e-2;
+            let on = vigp::projection::consistent_state(l.model(), &off.q, &off.v, l.dt()).unwrap();
+            let (a, c) = l.step_jacobian_norms(&off, &mut ws).unwrap();
+            let (a0, c0) = l.step_jacobian_norms(&on, &mut ws).unwrap();
+            assert!((a - a0).abs() <= 1e-9 * a0 && (c - c0).abs() <= 1e-9 * c0);
         }
     }
     let mut pendulum = Pendulum::default();

@@ -6,7 +6,7 @@ use crate::learned::Learned;
 use crate::linalg::solve_kkt;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError};
-use crate::projection::project_velocity;
+use crate::projection::{consistent_state, project_velocity};
 use crate::variational::Integrator;
 use nalgebra::{SMatrix, SVector};
 use num_dual::Dual2Vec;
@@ -87,7 +87,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// The derivatives are exact: the step's (nominal prior, GP mean
     /// gradient through the encoding, projection by its KKT conditions;
     /// [`Learned::step_derivatives_forced`]). With constraints the step is
-    /// composed with the derivative of [`consistent_state`](crate::projection::consistent_state) at `z`, so the
+    /// composed with the derivative of [`consistent_state`] at `z`, so the
     /// norms measure how the step amplifies errors *along* the constraint
     /// manifold, where the errors of a projected prediction lie, and not
     /// the 1/Δt re-closing of a state pushed off it. At a consistent state
@@ -95,10 +95,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// orthogonal projector onto the tangent space of g(q) = 0 for q, and
     /// the linearised velocity projection onto g(q + Δt·v) = 0 for v.
     ///
+    /// When the model projects, the norms are those at
+    /// `consistent_state(z)`, which is `z` itself (to solver tolerance) for
+    /// every state a projected prediction visits.
+    ///
     /// Cost: one mean step with its gradient (O(n·d) per GP output for n
     /// training points and d inputs) and, with constraints, 3N small KKT
-    /// solves; not the 2N + 1 mean steps of finite differences. `z` should
-    /// be consistent when the model projects.
+    /// solves; not the 2N + 1 mean steps of finite differences.
     ///
     /// A model trained with inputs is differentiated under u = 0, the step
     /// [`Learned::step_mean_with`] and [`Learned::predict`] take.
@@ -110,10 +113,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         z: &State<N>,
         ws: &mut crate::gp::Workspace,
     ) -> Result<(f64, f64), StepError> {
-        let (_, d) = self.step_derivatives_at::<0>(z, &SVector::zeros(), ws)?;
+        let dt = Integrator::dt(self);
+        let constrained = C > 0 && self.projects();
+        let z = if constrained {
+            consistent_state(self.model(), &z.q, &z.v, dt)?
+        } else {
+            *z
+        };
+        let (_, d) = self.step_derivatives_at::<0>(&z, &SVector::zeros(), ws)?;
         let (mut dq, mut dv) = (d.a.v_q, d.a.v_v);
-        if C > 0 && self.projects() {
-            let (cq, cvq, cvv) = consistent_state_jacobian(self.model(), z, Integrator::dt(self))?;
+        if constrained {
+            let (cq, cvq, cvv) = consistent_state_jacobian(self.model(), &z, dt)?;
             // v′ ∘ consistent_state: ∂v′/∂q = V_q·C_q + V_v·C_vq, ∂v′/∂v = V_v·C_vv
             dq = d.a.v_q * cq + d.a.v_v * cvq;
             dv = d.a.v_v * cvv;
@@ -122,7 +132,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 }
 
-/// Derivative of [`consistent_state`](crate::projection::consistent_state) at a consistent state z = (q, v):
+/// Derivative of [`consistent_state`] at a consistent state z = (q, v):
 /// (∂q′/∂q, ∂v′/∂q, ∂v′/∂v). The configuration projection's is the
 /// orthogonal projector onto ker G(q), from the KKT system
 /// [I, Gᵀ; G, 0][dq′; μ] = [dq; 0]. The velocity projection
