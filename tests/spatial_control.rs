@@ -209,7 +209,8 @@ fn same_bits_max<const B: usize>(a: &SpatialState<B>, b: &SpatialState<B>) -> bo
 
 /// u = 0 steps the actuated mechanism exactly as the same mechanism
 /// without `actuated` (springs and damping in both), in both views: one
-/// step and 30-step rollouts, compared bit for bit.
+/// step and 30-step rollouts, compared bit for bit; so does an empty input
+/// vector (U = 0), with the same state derivatives A as under u = 0.
 #[test]
 fn zero_input_is_the_unactuated_spatial_mechanism_bit_for_bit() {
     let dt = 0.01;
@@ -219,11 +220,22 @@ fn zero_input_is_the_unactuated_spatial_mechanism_bit_for_bit() {
     let zero = SVector::<f64, 2>::zeros();
     let (va, vp) = (Variational::new(a, dt), Variational::new(p, dt));
     let (ma, mp) = (Variational::midpoint(a, dt), Variational::midpoint(p, dt));
+    let none = SVector::<f64, 0>::zeros();
     for z in arm_states(&mut rng, 5) {
         assert!(same_bits(
             &va.step_forced(&z, &zero).unwrap(),
             &vp.step(&z).unwrap()
         ));
+        // U = 0 (no input vector) is the input-free step, derivatives
+        // included, for an actuated mechanism too
+        assert!(same_bits(
+            &va.step_forced(&z, &none).unwrap(),
+            &vp.step(&z).unwrap()
+        ));
+        let (z1, d1) = va.step_derivatives(&z, &zero).unwrap();
+        let (z0, d0) = va.step_derivatives(&z, &none).unwrap();
+        assert!(same_bits(&z0, &z1));
+        assert_eq!(d0.a.matrix::<4>(), d1.a.matrix::<4>());
         assert!(same_bits(
             &ma.step_forced(&z, &zero).unwrap(),
             &mp.step(&z).unwrap()
