@@ -161,6 +161,11 @@ fn bench_learned(c: &mut Criterion) {
         g.bench_function(format!("double_pendulum/N{n}/predict20_theorem1"), |b| {
             b.iter(|| l.predict(black_box(&z), 20, &bound).unwrap())
         });
+        // Its share per state: the norms of the learned step's exact
+        // Jacobian (mean step, GP mean gradient, two 2 × 2 SVDs).
+        g.bench_function(format!("double_pendulum/N{n}/step_jacobian_norms"), |b| {
+            b.iter(|| l.step_jacobian_norms(black_box(&z), &mut ws).unwrap())
+        });
         // The same step with the two outputs' variances on two threads
         // (opt-in `set_parallel_variance`).
         let mut seq = l.clone();
