@@ -589,37 +589,32 @@ fn norm2<const N: usize>(a: &nalgebra::SMatrix<f64, N, N>) -> f64 {
         .max()
 }
 
-/// The reference for `Learned::step_jacobian_norms`: central differences
-/// (h = 1e-4·max(|x|, 1)) of z ↦ v′ of `step_mean_with`, each perturbed
-/// state first made consistent when the model projects, i.e. the definition
-/// the analytic derivative implements, evaluated a second way.
+/// The reference for `Learned::step_jacobian_norms`: five-point central
+/// differences ([`common::stencil`], h = 1e-4·max(|x|, 1)) of z ↦ v′ of
+/// `step_mean_with`, each perturbed state first made consistent when the
+/// model projects, i.e. the definition the analytic derivative implements,
+/// evaluated a second way.
 fn fd_norms<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
     l: &Learned<M, N, C>,
     z: &State<N>,
 ) -> (f64, f64) {
     let mut ws = l.workspace();
-    let mut eval = |p: State<N>| {
-        let p = if C > 0 && l.projects() {
-            vigp::projection::consistent_state(l.model(), &p.q, &p.v, l.dt()).unwrap()
-        } else {
-            p
-        };
-        l.step_mean_with(&p, &mut ws).unwrap().v
-    };
     let mut dq = nalgebra::SMatrix::<f64, N, N>::zeros();
     let mut dv = dq;
     for k in 0..2 * N {
         let x = if k < N { z.q[k] } else { z.v[k - N] };
-        let h = 1e-4 * x.abs().max(1.0);
-        let (mut plus, mut minus) = (*z, *z);
-        if k < N {
-            plus.q[k] += h;
-            minus.q[k] -= h;
-        } else {
-            plus.v[k - N] += h;
-            minus.v[k - N] -= h;
-        }
-        let col = (eval(plus) - eval(minus)) / (2.0 * h);
+        let (_, col) = common::stencil(1e-4 * x.abs().max(1.0), |e| {
+            let mut p = *z;
+            if k < N {
+                p.q[k] += e;
+            } else {
+                p.v[k - N] += e;
+            }
+            if C > 0 && l.projects() {
+                p = vigp::projection::consistent_state(l.model(), &p.q, &p.v, l.dt()).unwrap();
+            }
+            l.step_mean_with(&p, &mut ws).unwrap()
+        });
         if k < N {
             dq.set_column(k, &col);
         } else {
@@ -666,9 +661,9 @@ fn noisy_transitions<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: u
 /// projection of a projected state moves it by rounding only).
 ///
 /// Tolerance 1e-6 relative to the norm: the differences' truncation is
-/// ~h² = 1e-8 times the third derivative and their rounding ~1e-16·‖α‖₁/h;
-/// both sit at 1e-10–3e-7 here (h = 1e-3 and 1e-4 agree, h = 1e-5 is
-/// rounding-bound). An error in the chain rule (a dropped term of the
+/// ~h⁴ = 1e-16 times the fifth derivative and their rounding
+/// ~1e-16·‖α‖₁/h, which sat at 1e-10–3e-7 here with two-point central
+/// differences (h = 1e-3 and 1e-4 agreed, h = 1e-5 was rounding-bound). An error in the chain rule (a dropped term of the
 /// projection's derivative or of the consistent-state map) changes the
 /// norms by O(1), the off-manifold directions being amplified by 1/Δt;
 /// the power iteration used before for ‖·‖₂ missed the fourbar's norm by

@@ -885,13 +885,44 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             self.check_bound(bound, steps)?;
         }
         let mut ws = self.workspace();
-        let trace = self.trace(z0, steps, &mut ws)?;
+        let mut trace = self.trace(z0, steps, &mut ws)?;
         let mut norms = vec![None; trace.states.len()];
-        let mut out = Vec::with_capacity(bounds.len());
-        for bound in bounds {
-            out.push(self.bounded(bound, &trace, &mut norms, &mut ws)?);
-        }
-        Ok(out)
+        let parts = bounds
+            .iter()
+            .map(|bound| self.bounded(bound, &trace, &mut norms, &mut ws))
+            .collect::<Result<Vec<_>, _>>()?;
+        // the trace is cloned for all but the last result, which takes it
+        let last = parts.len() - 1;
+        Ok(parts
+            .into_iter()
+            .enumerate()
+            .map(
+                |(i, (one_step_bounds, position_bounds, outside, fell_back))| {
+                    let (states, std_devs, corrections) = if i == last {
+                        (
+                            core::mem::take(&mut trace.states),
+                            core::mem::take(&mut trace.std_devs),
+                            core::mem::take(&mut trace.corrections),
+                        )
+                    } else {
+                        (
+                            trace.states.clone(),
+                            trace.std_devs.clone(),
+                            trace.corrections.clone(),
+                        )
+                    };
+                    BoundedPrediction {
+                        states,
+                        one_step_bounds,
+                        position_bounds,
+                        std_devs,
+                        corrections,
+                        outside,
+                        fell_back,
+                    }
+                },
+            )
+            .collect())
     }
 
     /// The checks of [`Learned::predict`] on one bound.
@@ -919,15 +950,18 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Ok(())
     }
 
-    /// `bound` (and its fallback where the trace leaves its domain) along
-    /// `trace`; `norms` caches the step's Jacobian norms per state.
+    /// One-step bounds, position bounds, outside flags and whether the
+    /// fallback was used, for `bound` (and its fallback where the trace
+    /// leaves its domain) along `trace`; `norms` caches the step's Jacobian
+    /// norms per state.
+    #[allow(clippy::type_complexity)]
     fn bounded(
         &self,
         bound: &ErrorBound,
         trace: &Trace<N>,
         norms: &mut [Option<(f64, f64)>],
         ws: &mut Workspace,
-    ) -> Result<BoundedPrediction<N>, BoundError> {
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>, bool), BoundError> {
         let (mut one_step, mut position, outside) = self.attach(bound, trace, norms, ws, true)?;
         let mut fell_back = false;
         if let Some(fb) = &bound.fallback
@@ -949,15 +983,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             }
             fell_back = true;
         }
-        Ok(BoundedPrediction {
-            states: trace.states.clone(),
-            one_step_bounds: one_step,
-            position_bounds: position,
-            std_devs: trace.std_devs.clone(),
-            corrections: trace.corrections.clone(),
-            outside,
-            fell_back,
-        })
+        Ok((one_step, position, outside, fell_back))
     }
 
     /// One-step bounds, position bounds (only the initial 0 unless

@@ -1139,9 +1139,14 @@ impl Gp {
                 *k *= a;
             }
             for m in 0..d {
-                // Σ_i w_i (x̃s_i,m − x̃s_m), x̃s = x̃/ℓ (scaled inputs)
+                // Σ_i w_i (x̃s_i,m − x̃s_m), x̃s = x̃/ℓ (scaled inputs), by
+                // the lane-wise dot product (its sums do not wait on one
+                // another)
                 let col = &o.xs_cols[m * b..(m + 1) * b];
-                let g = weighted_differences(&ws.kstar, col, ws.xs[m]);
+                for (t, xi) in ws.tmp.iter_mut().zip(col) {
+                    *t = xi - ws.xs[m];
+                }
+                let g = core_gp::dot(&ws.kstar, &ws.tmp).map_err(core_error)?;
                 let dxs_dx = 1.0 / (o.hp.length_scales[m] * self.input_norm.scale[m]);
                 grad[j * d + m] = o.output_scale * g * dxs_dx;
             }
@@ -1499,25 +1504,6 @@ impl Batch {
                 .collect(),
         }
     }
-}
-
-/// Σ_i w_i·(c_i − x) with four independent partial sums, so the additions
-/// overlap instead of waiting on one another (one sum is bound by the
-/// add latency: ≈ 4 cycles per term).
-fn weighted_differences(w: &[f64], c: &[f64], x: f64) -> f64 {
-    let mut acc = [0.0f64; 4];
-    let (w4, c4) = (w.chunks_exact(4), c.chunks_exact(4));
-    let (wr, cr) = (w4.remainder(), c4.remainder());
-    for (wi, ci) in w4.zip(c4) {
-        for l in 0..4 {
-            acc[l] += wi[l] * (ci[l] - x);
-        }
-    }
-    let mut tail = 0.0;
-    for (wi, ci) in wr.iter().zip(cr) {
-        tail += wi * (ci - x);
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
 }
 
 impl OutputGp {
