@@ -408,6 +408,79 @@ fn invalid_inputs_are_typed_errors() {
     assert!(Variational::new(sys.minimal(), 0.01).step(&z).is_err());
 }
 
+/// Settings and parameters that cannot work are refused by name, with the
+/// Δt the user gave (found by probing unseen mechanisms through the public
+/// API: each of these used to pass, hang, or report another Δt).
+#[test]
+fn degenerate_settings_are_typed_errors() {
+    let model = Pendulum::default().minimal();
+    let z = State::new([0.5], [3.0]);
+    // the fourth-order VI names the user's Δt, not a stage's
+    for dt in [-0.01, 1e300, 5e-324, f64::NAN] {
+        let e = Variational4::new(model, dt).step(&z).unwrap_err();
+        assert!(
+            matches!(e, StepError::InvalidTimeStep { dt: d } if d.to_bits() == dt.to_bits()),
+            "{dt}: {e:?}"
+        );
+    }
+    // the classical integrators check Δt as the variational ones do
+    for dt in [5e-324, f64::MIN_POSITIVE, 1e300] {
+        let expect = |e: Result<State<1>, StepError>| {
+            assert!(
+                matches!(e, Err(StepError::InvalidTimeStep { dt: d }) if d == dt),
+                "{dt}: {e:?}"
+            )
+        };
+        expect(Rk4::new(model, dt).step(&z));
+        expect(ExplicitEuler::new(model, dt).step(&z));
+        expect(SymplecticEuler::new(model, dt).step(&z));
+        expect(Variational::new(model, dt).step(&z));
+    }
+    // no Newton iteration allowed, or a step that would never return
+    let invalid = |e: Result<State<1>, StepError>| matches!(e, Err(StepError::InvalidOptions(_)));
+    assert!(invalid(
+        Variational::new(model, 0.01).max_iterations(0).step(&z)
+    ));
+    assert!(invalid(
+        Variational::new(model, 0.01).substeps(usize::MAX).step(&z)
+    ));
+    assert!(invalid(
+        Variational::new(model, 0.01)
+            .substeps(vigp::embedded::MAX_SUBSTEPS + 1)
+            .step(&z)
+    ));
+    let stepper = vigp::embedded::Stepper::new(model, 0.01).unwrap();
+    assert!(stepper.substeps(usize::MAX).is_err());
+    assert!(stepper.substeps(vigp::embedded::MAX_SUBSTEPS).is_ok());
+    // a link without mass or inertia: M = 0, so the DEL equations do not
+    // determine v (every guess used to pass, returning v unchanged)
+    let mut massless = Pendulum::default();
+    massless.links.rod.mass = 0.0;
+    massless.links.rod.inertia = 0.0;
+    let singular = |e: Result<State<1>, StepError>| {
+        assert!(
+            matches!(e, Err(StepError::SingularJacobian { .. })),
+            "{e:?}"
+        )
+    };
+    singular(Variational::new(massless.minimal(), 0.01).step(&z));
+    singular(Variational::midpoint(massless.minimal(), 0.01).step(&z));
+    singular(Variational4::new(massless.minimal(), 0.01).step(&z));
+    let e = Variational::new(massless.maximal(), 0.01)
+        .step(
+            &massless
+                .maximal()
+                .state([0.5 * 0.5f64.sin(), -0.5 * 0.5f64.cos(), 0.5], [0.0; 3]),
+        )
+        .unwrap_err();
+    assert!(matches!(e, StepError::SingularJacobian { .. }), "{e:?}");
+    // a mass so small that M underflows likewise
+    let mut tiny = Pendulum::default();
+    tiny.links.rod.mass = 1e-320;
+    tiny.links.rod.inertia = 0.0;
+    singular(Variational::new(tiny.minimal(), 0.01).step(&z));
+}
+
 #[test]
 fn generated_constants_and_kinematics() {
     assert_eq!(Fourbar::DOF, 4);

@@ -152,8 +152,11 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
                 "composition coefficients must sum to 1",
             ));
         }
+        // the user's Δt first, then each stage's (errors name the user's Δt)
+        crate::step::check_time_step(dt)?;
         for g in gammas {
-            crate::step::check_time_step(g.abs() * dt)?;
+            crate::step::check_time_step(g.abs() * dt)
+                .map_err(|_| StepError::InvalidTimeStep { dt })?;
         }
         let midpoint = Stepper::midpoint(model, dt)?;
         Ok(Self {

@@ -44,7 +44,9 @@ pub use model::{Body, Model};
 pub use params::{ElasticJoint, Joint, Link, Parameters, Spring};
 pub use real::{Jet1, Jet2, Real};
 pub use state::{CoordinateKind, State};
-pub use step::{RolloutError, StepError, StepOptions, StepReport, StepWorkspace, Stepper};
+pub use step::{
+    MAX_SUBSTEPS, RolloutError, StepError, StepOptions, StepReport, StepWorkspace, Stepper,
+};
 
 /// Re-exports for generated code. Not part of the public API.
 #[doc(hidden)]

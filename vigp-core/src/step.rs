@@ -67,7 +67,7 @@ pub struct StepOptions {
     /// Convergence when the scaled residual max-norm is below this
     /// (module docs). Default 1e-12.
     pub tolerance: f64,
-    /// Iteration cap (default 25).
+    /// Iteration cap (default 25; at least 1).
     pub max_iterations: usize,
     /// Smallest line-search step before Newton is declared stalled
     /// (default 1/256).
@@ -107,6 +107,10 @@ impl StepOptions {
         }
         if !(self.min_step > 0.0 && self.min_step <= 1.0) {
             return Err(StepError::InvalidOptions("min_step must be in (0, 1]"));
+        }
+        if self.max_iterations == 0 {
+            // no Newton iteration could run: every step would fail
+            return Err(StepError::InvalidOptions("max_iterations must be >= 1"));
         }
         Ok(())
     }
@@ -239,6 +243,12 @@ impl StepReport {
         self.regularised |= other.regularised;
     }
 }
+
+/// The most sub-steps per step [`Stepper::substeps`] accepts: 2²⁰, about
+/// a million Newton solves per step. More is a mistake (a step that never
+/// returns, as `usize::MAX` would give), not a finer integrator: at that
+/// point a smaller Δt is the tool.
+pub const MAX_SUBSTEPS: usize = 1 << 20;
 
 /// Checks a time step: finite, > 0, and Δt² a normal number (the Newton
 /// matrix mixes Δt and Δt² scales; Δt = 1e300 or 1e-300 cannot work).
@@ -447,10 +457,16 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// integrator is then exactly the variational integrator at h, sampled
     /// every Δt, and **the state's velocity is the discrete velocity of the
     /// sub-step**, v = (q(t + h) − q(t))/h. For motions too fast for the DEL
-    /// equations to have a root near v₀ at Δt. `k = 0` is refused.
+    /// equations to have a root near v₀ at Δt. `k = 0` and
+    /// `k >` [`MAX_SUBSTEPS`] are refused ([`StepError::InvalidOptions`]).
     pub fn substeps(mut self, k: usize) -> Result<Self, StepError> {
         if k == 0 {
             return Err(StepError::InvalidOptions("substeps must be >= 1"));
+        }
+        if k > MAX_SUBSTEPS {
+            return Err(StepError::InvalidOptions(
+                "substeps must be <= MAX_SUBSTEPS (2^20)",
+            ));
         }
         check_time_step(self.dt / k as f64)?;
         self.substeps = k;
@@ -801,6 +817,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let mut m_bar = 0.0f64;
         for i in 0..N {
             m_bar = m_bar.max(t.mass[(i, i)].abs());
+        }
+        if !m_bar.is_normal() {
+            // M = 0 (every link massless, or masses so small that M
+            // underflows): the DEL equations do not determine v₁, and every
+            // guess would pass the residual test
+            return Err(StepError::SingularJacobian { iteration: 0 });
         }
         let p_scale = match max_abs(p0) + m_bar {
             0.0 => 1.0,

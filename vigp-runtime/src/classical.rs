@@ -60,8 +60,10 @@ classical! {
     Rk4
 }
 
+/// Δt as every integrator checks it (finite, > 0, Δt² a normal number:
+/// [`vigp_core::step::check_time_step`]), then the state.
 fn check<const N: usize>(dt: f64, z: &State<N>) -> Result<(), StepError> {
-    if !(dt.is_finite() && dt > 0.0) {
+    if vigp_core::step::check_time_step(dt).is_err() {
         return Err(StepError::InvalidTimeStep { dt });
     }
     if !z.is_finite() {

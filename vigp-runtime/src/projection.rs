@@ -7,10 +7,20 @@ use crate::linalg::FullPivLu;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError, StepInfo, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
+use vigp_core::CoordinateKind;
 
 /// Project a configuration onto g(q) = 0 by Gauss–Newton minimum-norm
 /// corrections q ← q − Gᵀ(GGᵀ)⁻¹g (the nearest consistent configuration to
 /// first order). Returns the iteration count and final |g|.
+///
+/// Far from the manifold a full correction can overshoot by whole turns (a
+/// loop's angles wind around), so each correction is shortened to at most
+/// 0.5 rad per angle (0.5 length scales per length) and halved until |g|
+/// decreases. On convergence every angle coordinate is moved by whole turns
+/// to lie within π of its value in `q`, when the constraints still hold
+/// there (they do for revolute joints and link orientations), so the result
+/// is the configuration near the guess, not a copy of it several turns
+/// away.
 pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     q: &SVector<f64, N>,
@@ -21,11 +31,52 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
         return Err(StepError::NonFiniteState { step: None });
     }
     let k = m.checked_constants()?;
-    let mut q = *q;
-    let scale = crate::mechanism::length_scale::<M, N, C>(&q);
+    let scale = crate::mechanism::length_scale::<M, N, C>(q);
+    gauss_newton(
+        q,
+        scale,
+        &[],
+        &correction_caps::<M, N, C>(scale, 1.0),
+        Some(&M::KINDS),
+        options,
+        |x| m.constraints_and_jacobian(&k, x),
+    )
+}
+
+/// The largest correction of one Gauss–Newton iteration: 0.5 rad per
+/// angle (or quaternion component), 0.5 length scales per length, divided
+/// by `per` (Δt for a velocity whose configuration is q + Δt·v).
+fn correction_caps<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    scale: f64,
+    per: f64,
+) -> SVector<f64, N> {
+    const MAX_CORRECTION: f64 = 0.5;
+    SVector::from_fn(|i, _| match M::KINDS[i] {
+        CoordinateKind::Length => MAX_CORRECTION * scale / per,
+        CoordinateKind::Angle | CoordinateKind::Quaternion => MAX_CORRECTION / per,
+    })
+}
+
+/// Gauss–Newton on the free coordinates of r(x) = 0: x ← x − α·Jᵀ(JJᵀ)⁺r
+/// with the held columns of J zeroed (complete pivoting drops
+/// rank-deficient directions), the correction shortened to `caps` and α
+/// halved (down to 2⁻¹⁰) until |r| decreases. Converged when
+/// |r|∞/`scale` ≤ the tolerance. With `angles`, the coordinates of kind
+/// [`CoordinateKind::Angle`] are then moved by whole turns to within π of
+/// `x0`'s, if r still converges there. `residual` returns r(x) and J(x).
+fn gauss_newton<const N: usize, const C: usize>(
+    x0: &SVector<f64, N>,
+    scale: f64,
+    hold: &[usize],
+    caps: &SVector<f64, N>,
+    angles: Option<&[CoordinateKind; N]>,
+    options: &NewtonOptions,
+    residual: impl Fn(&SVector<f64, N>) -> (SVector<f64, C>, SMatrix<f64, C, N>),
+) -> Result<(SVector<f64, N>, StepInfo), StepError> {
+    let mut x = *x0;
+    let (mut r, mut j) = residual(&x);
     for iter in 0..=options.max_iterations {
-        let (g, gj) = m.constraints_and_jacobian(&k, &q);
-        let res = g.amax() / scale;
+        let res = r.amax() / scale;
         if !res.is_finite() {
             return Err(StepError::NonFiniteResidual {
                 iteration: iter,
@@ -33,16 +84,26 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
             });
         }
         if res <= options.tolerance {
-            return Ok((
-                q,
-                StepInfo {
-                    iterations: iter,
-                    residual: res,
-                    stalled: false,
-                    regularised: false,
-                    restarted: false,
-                },
-            ));
+            if let Some(kinds) = angles {
+                let turn = 2.0 * core::f64::consts::PI;
+                let mut wound = x;
+                for ((w, a), kind) in wound.iter_mut().zip(x0.iter()).zip(kinds) {
+                    if *kind == CoordinateKind::Angle {
+                        *w -= turn * ((*w - a) / turn).round();
+                    }
+                }
+                if wound != x && residual(&wound).0.amax() / scale <= options.tolerance {
+                    x = wound;
+                }
+            }
+            let info = StepInfo {
+                iterations: iter,
+                residual: res,
+                stalled: false,
+                regularised: false,
+                restarted: false,
+            };
+            return Ok((x, info));
         }
         if iter == options.max_iterations {
             return Err(StepError::NotConverged {
@@ -52,8 +113,29 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
                 step: None,
             });
         }
-        let y = FullPivLu::new(gj * gj.transpose(), 1e-13).solve(&g);
-        q -= gj.transpose() * y;
+        for &i in hold {
+            j.set_column(i, &SVector::<f64, C>::zeros());
+        }
+        let y = FullPivLu::new(j * j.transpose(), 1e-13).solve(&r);
+        let mut dx = j.transpose() * y;
+        let over = dx
+            .iter()
+            .zip(caps)
+            .fold(0.0f64, |o, (d, c)| o.max(d.abs() / c));
+        if over > 1.0 {
+            dx /= over;
+        }
+        let r0 = r.norm();
+        let mut alpha = 1.0;
+        loop {
+            let x_try = x - dx * alpha;
+            let (r_try, j_try) = residual(&x_try);
+            if r_try.norm() < r0 || alpha <= 1.0 / 1024.0 {
+                (x, r, j) = (x_try, r_try, j_try);
+                break;
+            }
+            alpha *= 0.5;
+        }
     }
     unreachable!("the loop returns on its last iteration")
 }
@@ -228,7 +310,9 @@ pub fn consistent_state<M: Mechanism<N, C>, const N: usize, const C: usize>(
 /// given values (positions and discrete velocities), e.g. a crank angle set
 /// by the user while the rest of a linkage is solved: the configuration is
 /// projected onto g(q) = 0 and the velocity onto g(q + Δt·v) = 0 by
-/// Gauss–Newton minimum-norm corrections of the free coordinates only.
+/// Gauss–Newton minimum-norm corrections of the free coordinates only
+/// (shortened far from the manifold, and the angles kept within π of the
+/// guess, as in [`project_configuration`]).
 ///
 /// Errors: an index in `hold` out of range ([`StepError::InvalidOptions`]);
 /// [`StepError::NotConverged`] when the loop cannot close with the held
@@ -258,53 +342,28 @@ pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usi
     if C == 0 {
         return Ok(State { q: *q, v: *v });
     }
-    let scale = crate::mechanism::length_scale::<M, N, C>(q);
-    let q = solve_holding(q, scale, hold, |x| {
-        (m.constraints(x), m.constraint_jacobian(x))
-    })?;
-    let v = solve_holding(v, scale, hold, |w| {
-        let x2 = q + w * dt;
-        (m.constraints(&x2), m.constraint_jacobian(&x2) * dt)
-    })?;
-    Ok(State { q, v })
-}
-
-/// Gauss–Newton on the free coordinates of r(x) = 0: x ← x − Jᵀ(JJᵀ)⁺r with
-/// the held columns of J zeroed (complete pivoting drops rank-deficient
-/// directions). `residual` returns r(x) and J(x).
-fn solve_holding<const N: usize, const C: usize>(
-    x0: &SVector<f64, N>,
-    scale: f64,
-    hold: &[usize],
-    residual: impl Fn(&SVector<f64, N>) -> (SVector<f64, C>, SMatrix<f64, C, N>),
-) -> Result<SVector<f64, N>, StepError> {
     let options = NewtonOptions::default();
-    let mut x = *x0;
-    for iter in 0..=options.max_iterations {
-        let (r, mut j) = residual(&x);
-        let res = r.amax() / scale;
-        if !res.is_finite() {
-            return Err(StepError::NonFiniteResidual {
-                iteration: iter,
-                step: None,
-            });
-        }
-        if res <= options.tolerance {
-            return Ok(x);
-        }
-        if iter == options.max_iterations {
-            return Err(StepError::NotConverged {
-                iterations: iter,
-                residual: res,
-                tolerance: options.tolerance,
-                step: None,
-            });
-        }
-        for &i in hold {
-            j.set_column(i, &SVector::<f64, C>::zeros());
-        }
-        let y = FullPivLu::new(j * j.transpose(), 1e-13).solve(&r);
-        x -= j.transpose() * y;
-    }
-    unreachable!("the loop returns on its last iteration")
+    let scale = crate::mechanism::length_scale::<M, N, C>(q);
+    let (q, _) = gauss_newton(
+        q,
+        scale,
+        hold,
+        &correction_caps::<M, N, C>(scale, 1.0),
+        Some(&M::KINDS),
+        &options,
+        |x| (m.constraints(x), m.constraint_jacobian(x)),
+    )?;
+    let (v, _) = gauss_newton(
+        v,
+        scale,
+        hold,
+        &correction_caps::<M, N, C>(scale, dt),
+        None,
+        &options,
+        |w| {
+            let x2 = q + w * dt;
+            (m.constraints(&x2), m.constraint_jacobian(&x2) * dt)
+        },
+    )?;
+    Ok(State { q, v })
 }

@@ -185,7 +185,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         self.rebuild()
     }
 
-    /// Iteration cap (default 25).
+    /// Iteration cap (default 25; 0 is reported by `step` as
+    /// [`StepError::InvalidOptions`]).
     pub fn max_iterations(mut self, n: usize) -> Self {
         self.options.max_iterations = n;
         self.rebuild()
@@ -197,7 +198,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// discrete velocity of the sub-step**, v = (q(t + h) − q(t))/h (start it
     /// with h, e.g. [`crate::dynamics::discrete_velocity`]`(m, q, q̇, Δt/k)`).
     /// Use it when Δt·|v| is too large for the DEL equations to have a root
-    /// (type docs); cost k steps. `k = 0` is reported by `step` as
+    /// (type docs); cost k steps. `k = 0` and `k >`
+    /// [`vigp_core::MAX_SUBSTEPS`] (2²⁰) are reported by `step` as
     /// [`StepError::InvalidOptions`].
     pub fn substeps(mut self, k: usize) -> Self {
         self.substeps = k;
