@@ -56,12 +56,17 @@
 //! * a trial that repeats one of the last 16 evaluated points reuses it;
 //! * a search that stops without meeting the Wolfe conditions returns its
 //!   best trial if it decreased f (scipy takes the last trial, even a
-//!   worse one, and then stops on the ftol test), and otherwise ends the
-//!   run at the current point;
+//!   worse one, and then stops on the ftol test); without any decrease it
+//!   ends the run at the current point, unless the memory is not empty
+//!   and ½‖P(x − g) − x‖²∞ exceeds the negligible decrease a below: then,
+//!   as scipy does after a failed search, it retries with an empty memory
+//!   (on an ill-conditioned kernel matrix rounding can spoil a curvature
+//!   pair and shrink the model's direction to nothing far from any
+//!   optimum);
 //! * **negligible decreases** are not paid for: with a = `ftol`·max(|f|, 1),
 //!   the decrease below which the ftol test stops, (i) a search that has
 //!   backtracked to steps t with t·|gᵀd| ≤ a stops, returning its best
-//!   trial or, without a decrease, ending the run (near a minimum rounding
+//!   trial or, without a decrease, ending the run as above (near a minimum rounding
 //!   noise in f defeats the sufficient-decrease test, and scipy spends up
 //!   to 20 trials and a memory reset on it), and (ii) an iteration is not
 //!   taken if the model predicted the previous step's decrease within 25 %
@@ -857,12 +862,27 @@ where
         Some((t, p)) => Attempt::Step(p, predicted(t)),
         None => none,
     };
+    // A search that ends without any decrease: the end of the run, unless
+    // the memory is not empty and the projected gradient promises more than
+    // a negligible decrease even at unit curvature (½‖P(x − g) − x‖²∞ >
+    // the negligible decrease). Then the model's direction is the suspect
+    // (a curvature pair spoiled by rounding on an ill-conditioned kernel
+    // matrix can make it tiny), and scipy's remedy applies: retry with an
+    // empty memory.
+    let no_decrease = || {
+        let pg = projected_gradient_norm(x, g, lo, hi);
+        if !mem.is_empty() && 0.5 * pg * pg > negligible {
+            Attempt::Failed
+        } else {
+            Attempt::Stalled
+        }
+    };
     let mut trial = vec![0.0; n];
     for k in 0..LS_MAX_EVALS {
         if k > 0 && stp * -slope <= negligible {
             // Backtracked to steps whose decrease could not matter (rounding
             // noise in f defeats the sufficient-decrease test near a minimum).
-            return found(best, Attempt::Stalled);
+            return found(best, no_decrease());
         }
         if stp == 1.0 {
             trial.copy_from_slice(&z);
@@ -895,7 +915,7 @@ where
         }
         match search {
             Search::Converged => unreachable!("returned above"),
-            Search::Stop => return found(best, Attempt::Stalled),
+            Search::Stop => return found(best, no_decrease()),
             Search::Evaluate(s) => {
                 if s == ls.best() && best.as_ref().is_some_and(|(t, _)| *t == s) {
                     // The search falls back to its best point, already evaluated.
