@@ -592,3 +592,81 @@ fn the_optimiser_does_not_stop_on_a_spoiled_curvature_pair() {
         );
     }
 }
+
+/// The constant prior mean of targets with a large offset, 1e6 + k·2⁻³³
+/// (exact in f64; k < 2³³·1e-3, a signal spread of 1e-3): far from the
+/// data the predicted mean is the prior mean, which must be the exact mean
+/// 1e6 + Σk/(N·2³³) (integer sum) to within 1 ulp of 1e6 (1.16e-10). A
+/// plain running sum of these N = 1000 targets is 5 ulp off (5.8e-10, 6e-7
+/// of the signal's spread), a bias every normalised target carried.
+#[test]
+fn the_constant_mean_of_offset_targets_is_exact() {
+    let n = 1000usize;
+    let x: Vec<f64> = (0..n)
+        .map(|i| 4.0 * weyl(i + 1, 0.618_033_988_7) - 2.0)
+        .collect();
+    let scale = (1u64 << 33) as f64;
+    let k: Vec<u64> = (0..n)
+        .map(|i| (weyl(i + 7, 0.754_877_666_2) * scale * 1e-3) as u64)
+        .collect();
+    let y: Vec<f64> = k.iter().map(|&k| 1e6 + k as f64 / scale).collect();
+    let sum: u64 = k.iter().sum();
+    let exact = 1e6 + sum as f64 / n as f64 / scale;
+    let h = Hyperparameters::isotropic(1, 0.5, 1.0, 0.05);
+    let gp = Gp::fit(&x, 1, &y, 1, &[h], &TrainOptions::default()).unwrap();
+    let far = gp.predict(&[1e3]).unwrap().mean[0];
+    eprintln!("far mean − exact mean: {:.3e}", far - exact);
+    assert!(
+        (far - exact).abs() <= 1.1641532182693481e-10,
+        "{far} vs {exact}"
+    );
+}
+
+/// Settings and data that cannot give a usable model are refused when the
+/// model is built, not at the first prediction (found probing unseen data
+/// sets: each of these used to pass).
+#[test]
+fn unusable_options_and_scales_are_typed_errors() {
+    let (x, y) = data_1d(20, 1.0, 1.0);
+    let h = Hyperparameters::isotropic(1, 1.0, 1.0, 0.01);
+    let fixed =
+        |y: &[f64], h: Hyperparameters| Gp::fit(&x, 1, y, 1, &[h], &TrainOptions::default());
+    // a NaN or negative tolerance never stops a run by its test
+    for (ftol, pgtol) in [
+        (f64::NAN, 1e-5),
+        (-1.0, 1e-5),
+        (1e-9, f64::NAN),
+        (1e-9, -1.0),
+    ] {
+        let o = TrainOptions {
+            ftol,
+            pgtol,
+            restarts: 0,
+            ..Default::default()
+        };
+        let e = Gp::train(&x, 1, &y, 1, &o).unwrap_err();
+        assert!(matches!(e, GpError::InvalidOptions(_)), "{e:?}");
+    }
+    // a subnormal length scale (x/ℓ overflows) or variance
+    for h in [
+        Hyperparameters::isotropic(1, 1e-310, 1.0, 0.01),
+        Hyperparameters::isotropic(1, 1.0, 1e-310, 0.01),
+    ] {
+        let e = fixed(&y, h).unwrap_err();
+        assert!(matches!(e, GpError::InvalidHyperparameter { .. }), "{e:?}");
+    }
+    // targets whose squared scale overflows: every variance would be ∞
+    let big: Vec<f64> = y.iter().map(|v| v * 1e160).collect();
+    let e = fixed(&big, h.clone()).unwrap_err();
+    assert!(matches!(e, GpError::NonFinite { .. }), "{e:?}");
+    // 1e150 is still fine, and its variances finite
+    let large: Vec<f64> = y.iter().map(|v| v * 1e150).collect();
+    let p = fixed(&large, h.clone()).unwrap().predict(&[0.3]).unwrap();
+    assert!(p.mean[0].is_finite() && p.variance[0].is_finite());
+    // a saved model whose original-unit σ_f² overflows
+    let mut saved = fixed(&y, h).unwrap().to_saved();
+    saved.outputs[0].output_scale = 1e10;
+    saved.outputs[0].hyperparameters.signal_variance = 1e300;
+    let e = Gp::from_saved(&saved, None).unwrap_err();
+    assert!(matches!(e, GpError::InvalidModel(_)), "{e:?}");
+}

@@ -39,6 +39,10 @@ pub enum GpError {
         /// The offending value.
         value: f64,
     },
+    /// Training options that cannot work (a tolerance that is NaN or
+    /// negative).
+    #[error("invalid training options: {0}")]
+    InvalidOptions(&'static str),
     /// The kernel matrix stayed non positive definite even after the
     /// maximum jitter was added to its diagonal.
     #[error("kernel matrix not positive definite even with jitter {jitter:e}")]

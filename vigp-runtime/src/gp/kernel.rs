@@ -80,7 +80,8 @@ impl Hyperparameters {
         Ok(hp)
     }
 
-    /// Check dimensions and that every value is finite and strictly positive.
+    /// Check dimensions and that every value is finite, strictly positive
+    /// and a normal f64 (not subnormal).
     pub fn validate(&self, input_dim: usize) -> Result<(), GpError> {
         if self.length_scales.len() != input_dim {
             return Err(GpError::DimensionMismatch {
@@ -123,7 +124,9 @@ impl Hyperparameters {
 }
 
 pub(crate) fn check_positive(what: &'static str, value: f64) -> Result<(), GpError> {
-    if value.is_finite() && value > 0.0 {
+    // normal, not only > 0: a subnormal length scale turns the scaled
+    // inputs into ∞, a subnormal variance has no precision left
+    if value.is_normal() && value > 0.0 {
         Ok(())
     } else {
         Err(GpError::InvalidHyperparameter { what, value })

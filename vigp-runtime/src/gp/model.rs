@@ -283,16 +283,7 @@ pub(crate) fn prepare(
     }
     let resolved = match mean {
         PriorMean::Zero => Resolved::Zero,
-        PriorMean::Constant => {
-            let mut c = vec![0.0; p];
-            for row in targets.chunks_exact(p) {
-                for (a, b) in c.iter_mut().zip(row) {
-                    *a += b;
-                }
-            }
-            c.iter_mut().for_each(|a| *a /= n as f64);
-            Resolved::Constant(c)
-        }
+        PriorMean::Constant => Resolved::Constant(super::normalise::column_means(targets, p)),
         PriorMean::Function(f) => Resolved::Function(f.clone()),
     };
     let mut prior = vec![0.0; n * p];
@@ -327,6 +318,14 @@ fn residuals_of(
                 .collect();
             check_finite("residual y - m(x)", &r)?;
             let s = if normalise { output_scale(&r) } else { 1.0 };
+            if !(s * s).is_finite() {
+                // variances in original units are s² times the normalised
+                // ones: every prediction's variance would be ∞
+                return Err(GpError::NonFinite {
+                    what: "squared output scale (residuals beyond ~1e154: rescale the targets)",
+                    index: j,
+                });
+            }
             Ok((r.into_iter().map(|v| v / s).collect(), s))
         })
         .collect()
@@ -448,6 +447,7 @@ impl Gp {
             opts.normalise_outputs,
         )?;
         opts.bounds.validate()?;
+        opts.validate_tolerances()?;
         let (n, d, p) = (prep.n, prep.d, prep.p);
         let inducing = inducing_points(&prep, opts)?;
         let (lo, hi) = opts.bounds.log_box(d);

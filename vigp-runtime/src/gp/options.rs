@@ -184,6 +184,20 @@ impl Default for TrainOptions {
     }
 }
 
+impl TrainOptions {
+    /// `ftol` and `pgtol` must be finite and ≥ 0 (a NaN would never stop a
+    /// run by its test, a negative one never either).
+    pub(crate) fn validate_tolerances(&self) -> Result<(), GpError> {
+        if !(self.ftol.is_finite() && self.ftol >= 0.0) {
+            return Err(GpError::InvalidOptions("ftol must be finite and >= 0"));
+        }
+        if !(self.pgtol.is_finite() && self.pgtol >= 0.0) {
+            return Err(GpError::InvalidOptions("pgtol must be finite and >= 0"));
+        }
+        Ok(())
+    }
+}
+
 /// What happened during training, per output.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct TrainReport {
