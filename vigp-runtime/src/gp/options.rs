@@ -82,7 +82,11 @@ pub enum Method {
     /// bound) with M inducing points shared by all outputs: O(N·M²) per
     /// evaluation, O(N·M) memory. Hyperparameters maximise the evidence
     /// lower bound; the inducing points stay where [`SparseOptions`] puts
-    /// them (they are not optimised).
+    /// them (they are not optimised). Caveat: K_uu carries a relative
+    /// jitter 1e-10·σ_f², which enters the bound's trace term as
+    /// ≈ N·1e-10·σ_f²/(2σ_n²); with nearly noise-free data (σ_n² near its
+    /// lower bound) that term dominates even at M = N, so use the exact GP
+    /// there (`docs/gp.md`, "Nearly noise-free data").
     Sparse(SparseOptions),
 }
 
