@@ -668,6 +668,12 @@ where
     if a.max_samples == 0 {
         return Err(CliError::Usage("--max-samples must be at least 1".into()));
     }
+    if a.restarts > vigp_runtime::gp::MAX_RESTARTS {
+        return Err(CliError::Usage(format!(
+            "--restarts must be at most {}",
+            vigp_runtime::gp::MAX_RESTARTS
+        )));
+    }
     let prior = match a.prior {
         PriorArg::Nominal => Prior::Nominal,
         PriorArg::Constant => Prior::Constant,

@@ -108,6 +108,17 @@ fn uneven_time_is_an_error_naming_run_and_line_unless_resampling_is_asked() {
         assert!((p[0] - 0.01 * k as f64).abs() < 1e-15, "{k}: {}", p[0]);
     }
     assert_eq!(d.runs[1].dt, Some(0.01));
+    // a step far below the sampling is refused, not allocated (1e-9 s on
+    // this 0.03 s run would be 3·10⁷ samples; it used to abort the process
+    // on 10 ms data of a few seconds)
+    for dt in [1e-9, 1e-300] {
+        let tiny = ReadOptions {
+            resample: Some(dt),
+            ..Default::default()
+        };
+        let e = read1(text, &tiny).unwrap_err();
+        assert!(matches!(e, DataError::InvalidOption { .. }), "{e}");
+    }
     // time going backwards is an error even when resampling
     let e = read1("run,t,pivot\na,0,0\na,0.01,0\na,0.005,0\n", &opts).unwrap_err();
     assert!(

@@ -647,6 +647,15 @@ fn unusable_options_and_scales_are_typed_errors() {
         let e = Gp::train(&x, 1, &y, 1, &o).unwrap_err();
         assert!(matches!(e, GpError::InvalidOptions(_)), "{e:?}");
     }
+    // more restarts than any search needs (usize::MAX overflowed the count)
+    for restarts in [vigp::gp::MAX_RESTARTS + 1, usize::MAX] {
+        let o = TrainOptions {
+            restarts,
+            ..Default::default()
+        };
+        let e = Gp::train(&x, 1, &y, 1, &o).unwrap_err();
+        assert!(matches!(e, GpError::InvalidOptions(_)), "{e:?}");
+    }
     // a subnormal length scale (x/ℓ overflows) or variance
     for h in [
         Hyperparameters::isotropic(1, 1e-310, 1.0, 0.01),

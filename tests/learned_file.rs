@@ -190,6 +190,9 @@ fn every_mismatch_is_a_typed_error_naming_the_field() {
     })
     .unwrap_err();
     assert_eq!(field_of(&e), "parameters.links.cart.mass");
+    // a zero mass passes the mechanism's own check, so it passes here too
+    // (`vigp fit --set links.pole.mass=0` wrote files that nothing loaded)
+    load_edited(&json, |v| v["parameters"]["links.cart.mass"] = 0.0.into()).unwrap();
     let e = load_edited(&json, |v| {
         v["parameters"]["joints.hinge.damping"] = serde_json::Value::Null
     })

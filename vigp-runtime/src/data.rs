@@ -69,7 +69,8 @@ pub struct ReadOptions {
     /// relative to that step (default 1e-3: timestamps printed with a few
     /// decimals pass, a dropped or duplicated sample does not).
     pub time_tolerance: f64,
-    /// `Some(dt)`: resample every run by linear interpolation onto
+    /// `Some(dt)`: resample every run (at most [`MAX_RESAMPLED`] samples
+    /// each, else [`DataError::InvalidOption`]) by linear interpolation onto
     /// t_first + k·dt instead of requiring uniform time (t must still be
     /// strictly increasing). Positions between samples are then
     /// interpolated, which is only as good as the sampling is fine.
@@ -85,6 +86,11 @@ impl Default for ReadOptions {
         }
     }
 }
+
+/// The most samples one run may have after [`ReadOptions::resample`]
+/// (10⁷, ≈ 28 h at 10 ms): a resampling step far below the recorded
+/// sampling is refused rather than allocated.
+pub const MAX_RESAMPLED: usize = 10_000_000;
 
 /// Why a data file could not be read. Lines are the file's line numbers
 /// (the header is line 1).
@@ -460,7 +466,16 @@ impl<const N: usize> RawRun<N> {
             });
         }
         if let Some(dt) = opts.resample {
-            let steps = ((times[n - 1] - t0) / dt * (1.0 + 1e-12)).floor() as usize;
+            let steps = ((times[n - 1] - t0) / dt * (1.0 + 1e-12)).floor();
+            if steps >= MAX_RESAMPLED as f64 {
+                // a step far below the sampling (1e-9 s for 10 ms data)
+                // would allocate tens of gigabytes
+                return Err(DataError::InvalidOption {
+                    what: "resample (more than 10^7 samples in one run: a step far below the recorded sampling)",
+                    value: dt,
+                });
+            }
+            let steps = steps as usize;
             let mut out = Vec::with_capacity(steps + 1);
             let mut held = Vec::with_capacity(if inputs.is_empty() { 0 } else { steps + 1 });
             let mut seg = 0;

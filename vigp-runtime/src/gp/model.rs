@@ -447,7 +447,7 @@ impl Gp {
             opts.normalise_outputs,
         )?;
         opts.bounds.validate()?;
-        opts.validate_tolerances()?;
+        opts.validate_settings()?;
         let (n, d, p) = (prep.n, prep.d, prep.p);
         let inducing = inducing_points(&prep, opts)?;
         let (lo, hi) = opts.bounds.log_box(d);

@@ -144,7 +144,8 @@ pub struct TrainOptions {
     /// run; `None` means ℓ = 1, σ_f² = 1, σ_n² = 0.01 (clamped into the bounds).
     pub initial: Option<Hyperparameters>,
     /// Number of extra starts drawn log-uniformly inside the bounds
-    /// (scikit-learn's `n_restarts_optimizer`): 1 + restarts runs per output.
+    /// (scikit-learn's `n_restarts_optimizer`): 1 + restarts runs per output
+    /// (at most [`MAX_RESTARTS`]).
     pub restarts: usize,
     /// Seed of the restart points. Same seed and data → bit-identical model,
     /// whatever the thread count or scheduling.
@@ -188,10 +189,21 @@ impl Default for TrainOptions {
     }
 }
 
+/// The most random restarts [`TrainOptions::restarts`] accepts (10⁵):
+/// each is a full optimiser run, so more is a typo, not a search (and
+/// `usize::MAX` would overflow the start count).
+pub const MAX_RESTARTS: usize = 100_000;
+
 impl TrainOptions {
     /// `ftol` and `pgtol` must be finite and ≥ 0 (a NaN would never stop a
-    /// run by its test, a negative one never either).
-    pub(crate) fn validate_tolerances(&self) -> Result<(), GpError> {
+    /// run by its test, a negative one never either); `restarts` at most
+    /// [`MAX_RESTARTS`].
+    pub(crate) fn validate_settings(&self) -> Result<(), GpError> {
+        if self.restarts > MAX_RESTARTS {
+            return Err(GpError::InvalidOptions(
+                "restarts must be <= MAX_RESTARTS (100000)",
+            ));
+        }
         if !(self.ftol.is_finite() && self.ftol >= 0.0) {
             return Err(GpError::InvalidOptions("ftol must be finite and >= 0"));
         }

@@ -197,8 +197,9 @@ fn expect_len(name: &str, got: usize, expected: usize, what: &str) -> Result<(),
 }
 
 /// Checks a parameter value for its physical domain (by the naming
-/// convention of `Parameters`): masses and lengths > 0, inertias and
-/// damping ≥ 0, everything finite.
+/// convention of `Parameters`), as the mechanism's own run-time check does
+/// (so that every model `fit` writes loads): lengths > 0, masses, inertias
+/// and damping ≥ 0, everything finite.
 fn check_parameter(name: &str, value: f64) -> Result<(), LoadError> {
     let bad = |why: &str| {
         Err(field(
@@ -209,10 +210,12 @@ fn check_parameter(name: &str, value: f64) -> Result<(), LoadError> {
     if !value.is_finite() {
         return bad("is not finite");
     }
-    if (name.ends_with(".mass") || name.ends_with(".length")) && value <= 0.0 {
+    if name.ends_with(".length") && value <= 0.0 {
         return bad("must be > 0");
     }
-    if (name.ends_with(".inertia") || name.ends_with(".damping")) && value < 0.0 {
+    if (name.ends_with(".mass") || name.ends_with(".inertia") || name.ends_with(".damping"))
+        && value < 0.0
+    {
         return bad("must be >= 0");
     }
     Ok(())
