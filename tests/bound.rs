@@ -924,3 +924,64 @@ proptest! {
         }
     }
 }
+
+/// Nearly noise-free data, σ_n² = 1e-10 against σ_f² = 1e4 and length
+/// scales 20 (normalised; fixed by a zero-width box): σ_f² − kᵀ(K + σ_n²I)⁻¹k
+/// is lost to rounding at the training states and clamped to 0, and the
+/// RKHS and Theorem 1 bounds used to come out as 0 and ≈ 1e-14 whatever the
+/// error (found by a new user on a noise-free cart-pole fit through
+/// `vigp predict`). They are `VarianceLost` now; with σ_n² = 1e-4 the same
+/// prediction has its bounds.
+#[test]
+fn a_variance_lost_to_rounding_is_an_error_not_a_zero_bound() {
+    let data: Vec<Transition<1>> = pendulum_windows(1, 40, 2)
+        .iter()
+        .map(|w| Transition {
+            z: w.start,
+            v_next: (w.positions[1] - w.positions[0]) / DT,
+        })
+        .collect();
+    let fixed = |noise: f64| {
+        let opts = TrainOptions {
+            restarts: 0,
+            bounds: vigp::gp::Bounds {
+                length_scale: (20.0, 20.0),
+                signal_variance: (1e4, 1e4),
+                noise_variance: (noise, noise),
+            },
+            ..TrainOptions::default()
+        };
+        Learned::train(
+            Pendulum::default().minimal(),
+            DT,
+            &data,
+            Encoding::SinCos,
+            Prior::Nominal,
+            &opts,
+        )
+        .unwrap()
+        .0
+    };
+    let empty = Calibration::empty(DT);
+    let z0 = data[3].z;
+    let tight = fixed(1e-10);
+    let sd = tight
+        .step_with(&z0, &mut tight.workspace())
+        .unwrap()
+        .1
+        .std_dev[0];
+    eprintln!("std dev at a training state with σ_n² = 1e-10: {sd:e}");
+    for kind in [BoundKind::rkhs(0.05), BoundKind::theorem1(0.05)] {
+        let bound = tight.error_bound(&kind, &empty).unwrap();
+        let e = tight.predict(&z0, 5, &bound).unwrap_err();
+        assert!(
+            matches!(e, BoundError::VarianceLost { output: 0, .. }),
+            "{e:?}"
+        );
+        let loose = fixed(1e-4);
+        let bound = loose.error_bound(&kind, &empty).unwrap();
+        let p = loose.predict(&z0, 5, &bound).unwrap();
+        let b = &p.one_step_bounds;
+        assert!(b.iter().all(|b| *b > 0.0), "{b:?}");
+    }
+}

@@ -108,6 +108,21 @@ pub enum BoundError {
         /// Its value.
         value: f64,
     },
+    /// A variance-based bound (Theorem 1, RKHS) at a predicted state whose
+    /// GP posterior variance came out 0: with a noise variance tiny against
+    /// σ_f² (nearly noise-free data) σ_f² − kᵀ(K + σ_n²I)⁻¹k is lost to
+    /// rounding, and the bound would be 0 (or its γ term alone) whatever
+    /// the true error. A conformal bound, or a larger lower bound on the
+    /// noise variance when training, gives a usable bound.
+    #[error(
+        "the GP variance of output {output} at step {step} was lost to rounding (0):          a variance-based bound would be 0; use a conformal bound or a larger noise lower bound"
+    )]
+    VarianceLost {
+        /// The GP output.
+        output: usize,
+        /// The step of the prediction (0 = from the start state).
+        step: usize,
+    },
     /// A conformal bound is asked for more steps than it was calibrated for.
     #[error(
         "prediction of {requested} steps, but the conformal bound was calibrated on windows of {calibrated}"
@@ -1004,7 +1019,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let mut one_step = Vec::with_capacity(steps);
         let mut outside = Vec::with_capacity(steps);
         let mut scales = Vec::with_capacity(steps);
-        for (z, sd) in trace.states.iter().zip(&trace.std_devs) {
+        let variance_based = matches!(
+            bound.parts,
+            BoundParts::Theorem1 { .. } | BoundParts::Rkhs { .. }
+        );
+        for (step, (z, sd)) in trace.states.iter().zip(&trace.std_devs).enumerate() {
+            if variance_based {
+                if let Some(output) = sd.iter().position(|s| *s == 0.0) {
+                    return Err(BoundError::VarianceLost { output, step });
+                }
+            }
             one_step.push(bound.one_step(sd.as_slice())?);
             let s = predictive_scale(sd.as_slice(), &bound.noise_std);
             self.encoding().encode(&M::KINDS, z, &mut input);
