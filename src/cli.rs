@@ -25,8 +25,9 @@
 //!   `nominal_mse=<x> learned_mse=<y>`.
 //! * `predict` rolls the learned model out from the first two rows of every
 //!   run (position and discrete velocity) and writes the trajectories with
-//!   each predicted velocity's one-step error bound (paper Theorem 1,
-//!   δ = `--delta`).
+//!   each predicted velocity's one-step error bound and each position's
+//!   bound along the prediction (`--bound conformal|rkhs|theorem1`;
+//!   conformal with `--calibration`, RKHS without; δ = `--delta`).
 //! * `export` writes the Rust source of a `no_std` learned model for
 //!   [`crate::embedded::LearnedStepper`] and states its size.
 //!
