@@ -56,29 +56,38 @@ fn pendulum_windows(seed: u64, count: usize, k: usize) -> Vec<Window<1>> {
 fn model() -> &'static Learned<PendulumMinimal, 1, 0> {
     static MODEL: OnceLock<Learned<PendulumMinimal, 1, 0>> = OnceLock::new();
     MODEL.get_or_init(|| {
-        let data: Vec<Transition<1>> = pendulum_windows(1, 40, 2)
-            .iter()
-            .map(|w| Transition {
-                z: w.start,
-                v_next: (w.positions[1] - w.positions[0]) / DT,
-            })
-            .collect();
-        let opts = TrainOptions {
+        train_noise_free(&TrainOptions {
             restarts: 1,
             seed: 3,
             ..TrainOptions::default()
-        };
-        Learned::train(
-            Pendulum::default().minimal(),
-            DT,
-            &data,
-            Encoding::SinCos,
-            Prior::Nominal,
-            &opts,
-        )
-        .unwrap()
-        .0
+        })
     })
+}
+
+/// The noise-free transitions of 40 pendulum windows (seed 1).
+fn noise_free_transitions() -> Vec<Transition<1>> {
+    pendulum_windows(1, 40, 2)
+        .iter()
+        .map(|w| Transition {
+            z: w.start,
+            v_next: (w.positions[1] - w.positions[0]) / DT,
+        })
+        .collect()
+}
+
+/// A sin/cos, nominal-prior pendulum model trained on
+/// [`noise_free_transitions`] with `opts`.
+fn train_noise_free(opts: &TrainOptions) -> Learned<PendulumMinimal, 1, 0> {
+    Learned::train(
+        Pendulum::default().minimal(),
+        DT,
+        &noise_free_transitions(),
+        Encoding::SinCos,
+        Prior::Nominal,
+        opts,
+    )
+    .unwrap()
+    .0
 }
 
 /// The same with noisy targets (σ = 3e-3), so that the fitted noise is far
@@ -934,15 +943,8 @@ proptest! {
 /// prediction has its bounds.
 #[test]
 fn a_variance_lost_to_rounding_is_an_error_not_a_zero_bound() {
-    let data: Vec<Transition<1>> = pendulum_windows(1, 40, 2)
-        .iter()
-        .map(|w| Transition {
-            z: w.start,
-            v_next: (w.positions[1] - w.positions[0]) / DT,
-        })
-        .collect();
     let fixed = |noise: f64| {
-        let opts = TrainOptions {
+        train_noise_free(&TrainOptions {
             restarts: 0,
             bounds: vigp::gp::Bounds {
                 length_scale: (20.0, 20.0),
@@ -950,20 +952,10 @@ fn a_variance_lost_to_rounding_is_an_error_not_a_zero_bound() {
                 noise_variance: (noise, noise),
             },
             ..TrainOptions::default()
-        };
-        Learned::train(
-            Pendulum::default().minimal(),
-            DT,
-            &data,
-            Encoding::SinCos,
-            Prior::Nominal,
-            &opts,
-        )
-        .unwrap()
-        .0
+        })
     };
     let empty = Calibration::empty(DT);
-    let z0 = data[3].z;
+    let z0 = noise_free_transitions()[3].z;
     let tight = fixed(1e-10);
     let sd = tight
         .step_with(&z0, &mut tight.workspace())
