@@ -32,8 +32,27 @@ impl InputNormaliser {
     /// row-major `n × dim` matrix `x`.
     pub fn fit(x: &[f64], dim: usize) -> Self {
         let n = x.len() / dim;
-        let shift = column_means(x, dim);
+        // the plain mean: the stationary kernel sees only differences of
+        // inputs, so a shift off by a few ulps changes only rounding (unlike the
+        // targets' constant mean, `column_means`), and keeping it keeps
+        // every trained model's bits
+        let mut shift = vec![0.0; dim];
         let mut scale = vec![0.0; dim];
+        for row in x.chunks_exact(dim) {
+            for (s, v) in shift.iter_mut().zip(row) {
+                *s += v;
+            }
+        }
+        shift.iter_mut().for_each(|s| *s /= n as f64);
+        if shift.iter().any(|s| !s.is_finite()) {
+            // the sum overflowed (inputs near f64::MAX): mean of x/N instead
+            shift.iter_mut().for_each(|s| *s = 0.0);
+            for row in x.chunks_exact(dim) {
+                for (s, v) in shift.iter_mut().zip(row) {
+                    *s += v / n as f64;
+                }
+            }
+        }
         for row in x.chunks_exact(dim) {
             for ((q, v), m) in scale.iter_mut().zip(row).zip(&shift) {
                 *q += (v - m) * (v - m);
