@@ -628,7 +628,6 @@ fn the_constant_mean_of_offset_targets_is_exact() {
 #[test]
 fn unusable_options_and_scales_are_typed_errors() {
     let (x, y) = data_1d(20, 1.0, 1.0);
-    let h = Hyperparameters::isotropic(1, 1.0, 1.0, 0.01);
     let fixed =
         |y: &[f64], h: Hyperparameters| Gp::fit(&x, 1, y, 1, &[h], &TrainOptions::default());
     // a NaN or negative tolerance never stops a run by its test
@@ -664,18 +663,4 @@ fn unusable_options_and_scales_are_typed_errors() {
         let e = fixed(&y, h).unwrap_err();
         assert!(matches!(e, GpError::InvalidHyperparameter { .. }), "{e:?}");
     }
-    // targets whose squared scale overflows: every variance would be ∞
-    let big: Vec<f64> = y.iter().map(|v| v * 1e160).collect();
-    let e = fixed(&big, h.clone()).unwrap_err();
-    assert!(matches!(e, GpError::NonFinite { .. }), "{e:?}");
-    // 1e150 is still fine, and its variances finite
-    let large: Vec<f64> = y.iter().map(|v| v * 1e150).collect();
-    let p = fixed(&large, h.clone()).unwrap().predict(&[0.3]).unwrap();
-    assert!(p.mean[0].is_finite() && p.variance[0].is_finite());
-    // a saved model whose original-unit σ_f² overflows
-    let mut saved = fixed(&y, h).unwrap().to_saved();
-    saved.outputs[0].output_scale = 1e10;
-    saved.outputs[0].hyperparameters.signal_variance = 1e300;
-    let e = Gp::from_saved(&saved, None).unwrap_err();
-    assert!(matches!(e, GpError::InvalidModel(_)), "{e:?}");
 }

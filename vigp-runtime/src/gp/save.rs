@@ -160,14 +160,6 @@ impl Gp {
             if !(o.output_scale.is_finite() && o.output_scale > 0.0) {
                 return Err(bad("output scale must be positive and finite"));
             }
-            let s2 = o.output_scale * o.output_scale;
-            if !(o.hyperparameters.signal_variance * s2 + o.hyperparameters.noise_variance * s2)
-                .is_finite()
-            {
-                return Err(bad(
-                    "σ_f² + σ_n² in original units (times the squared output scale) overflows",
-                ));
-            }
             if !(o.jitter.is_finite() && o.jitter >= 0.0) {
                 return Err(bad("jitter must be finite and non-negative"));
             }
