@@ -115,7 +115,8 @@ pub enum BoundError {
     /// the true error. A conformal bound, or a larger lower bound on the
     /// noise variance when training, gives a usable bound.
     #[error(
-        "the GP variance of output {output} at step {step} was lost to rounding (0):          a variance-based bound would be 0; use a conformal bound or a larger noise lower bound"
+        "the GP variance of output {output} at step {step} was lost to rounding (0): \
+         a variance-based bound would be 0; use a conformal bound or a larger noise lower bound"
     )]
     VarianceLost {
         /// The GP output.

@@ -36,23 +36,8 @@ impl InputNormaliser {
         // inputs, so a shift off by a few ulps changes only rounding (unlike the
         // targets' constant mean, `column_means`), and keeping it keeps
         // every trained model's bits
-        let mut shift = vec![0.0; dim];
+        let shift = plain_means(x, dim);
         let mut scale = vec![0.0; dim];
-        for row in x.chunks_exact(dim) {
-            for (s, v) in shift.iter_mut().zip(row) {
-                *s += v;
-            }
-        }
-        shift.iter_mut().for_each(|s| *s /= n as f64);
-        if shift.iter().any(|s| !s.is_finite()) {
-            // the sum overflowed (inputs near f64::MAX): mean of x/N instead
-            shift.iter_mut().for_each(|s| *s = 0.0);
-            for row in x.chunks_exact(dim) {
-                for (s, v) in shift.iter_mut().zip(row) {
-                    *s += v / n as f64;
-                }
-            }
-        }
         for row in x.chunks_exact(dim) {
             for ((q, v), m) in scale.iter_mut().zip(row).zip(&shift) {
                 *q += (v - m) * (v - m);
@@ -90,13 +75,9 @@ impl InputNormaliser {
     }
 }
 
-/// The mean of each column of the row-major `n × dim` matrix `x`, to
-/// within a few ulps of the spread of the column rather than of its
-/// magnitude: the plain mean m₀, then m₀ + Σ(x − m₀)/N (the corrected
-/// two-pass algorithm). A plain running sum of 1e6 + 1e-3·f(x) loses
-/// ~1e-9 of the signal per sample and shifts every normalised target.
-/// Sums that overflow (values near f64::MAX) fall back to the mean of x/N.
-pub(crate) fn column_means(x: &[f64], dim: usize) -> Vec<f64> {
+/// The plain mean Σx/N of each column of the row-major `n × dim` matrix
+/// `x`; a sum that overflows (values near f64::MAX) falls back to Σ(x/N).
+fn plain_means(x: &[f64], dim: usize) -> Vec<f64> {
     let n = (x.len() / dim) as f64;
     let mut mean = vec![0.0; dim];
     for row in x.chunks_exact(dim) {
@@ -113,6 +94,17 @@ pub(crate) fn column_means(x: &[f64], dim: usize) -> Vec<f64> {
             }
         }
     }
+    mean
+}
+
+/// The mean of each column of the row-major `n × dim` matrix `x`, to
+/// within a few ulps of the spread of the column rather than of its
+/// magnitude: the plain mean m₀, then m₀ + Σ(x − m₀)/N (the corrected
+/// two-pass algorithm). A plain running sum of 1e6 + 1e-3·f(x) loses
+/// ~1e-9 of the signal per sample and shifts every normalised target.
+pub(crate) fn column_means(x: &[f64], dim: usize) -> Vec<f64> {
+    let n = (x.len() / dim) as f64;
+    let mut mean = plain_means(x, dim);
     let mut correction = vec![0.0; dim];
     for row in x.chunks_exact(dim) {
         for ((c, v), m) in correction.iter_mut().zip(row).zip(&mean) {
