@@ -99,10 +99,6 @@ vigp::mechanism! {
 vigp::mechanism! {
     /// The spatial slider-crank in its usual order (the rail a tree joint,
     /// the wristpin closing the loop) with the same inputs and springs.
-    /// (With the rail closing the loop, `DriveCrank3`, the minimal view's
-    /// Newton solver stalls after ~0.3 s even without inputs and springs;
-    /// see the report in docs/spatial.md, so its long rollouts use this
-    /// order.)
     pub DriveCrankTree {
         gravity: [0.0, 0.0, -9.81],
         links {
@@ -434,18 +430,81 @@ fn spatial_step_derivatives_match_central_differences() {
         1e-4,
     );
     let c = DriveCrank3::default().minimal();
-    // crank angles 0.3 and 1.0 rad at 3 rad/s. Before the projection kept
-    // the crank where it was put, the second state ("1.9") landed at 0.11
-    // rad. At 1.9 rad the midpoint step itself fails (`LineSearchFailed`,
-    // an open limitation). At 1.0 rad the central differences are
-    // rounding-limited: worst relative error 2.5e-6, 2.1e-6, 4.4e-7,
-    // 2.0e-7 at h = 1e-7, 1e-6, 3e-6, 1e-5 (falling as h grows, so not a
-    // wrong derivative); h = 1e-5.
-    let states: Vec<State<9>> = [0.3, 1.0]
+    // crank angles 0.3, 1.0 and 1.9 rad at 3 rad/s. At 1.9 rad the
+    // midpoint step failed (`LineSearchFailed`) until the KKT solve checked
+    // its solutions through an ill-conditioned J (see
+    // `the_rail_closed_slider_crank_steps_in_quaternion_coordinates`). At
+    // 1.0 rad the central differences are rounding-limited: worst relative
+    // error 2.5e-6, 2.1e-6, 4.4e-7, 2.0e-7 at h = 1e-7, 1e-6, 3e-6, 1e-5
+    // (falling as h grows, so not a wrong derivative); h = 1e-5.
+    let states: Vec<State<9>> = [0.3, 1.0, 1.9]
         .iter()
         .map(|&a| crank_state(&c, a, 3.0, dt))
         .collect();
     check_ab::<_, 9, 7, 2>("slider-crank (loop input)", c, &states, 1e-5);
+}
+
+/// The slider-crank with its rail closing the loop (`PlainCrank3` with its
+/// damping set to 0: springs and gravity only, so energy is conserved) in
+/// the minimal view, 20 s from crank angle 0.3 rad. In quaternion
+/// coordinates M is singular along each quaternion (the norm constraint
+/// fixes that direction), so the Newton matrix J = −M + O(Δt) had
+/// cond(J) ≈ 1e12–1e14 while the whole KKT system had ≈ 1e4: the solve
+/// through J⁻¹ lost the multipliers, and the step stalled after 4 steps at
+/// Δt = 4 ms (`LineSearchFailed`, residual 1.6e-4) and after 16 s at 1 ms
+/// (1.6e-10). The KKT solve now checks such a solution's residual and
+/// otherwise solves the augmented system. Every step must converge (not
+/// stall), |g| stay at rounding (≤ 1e-11), and the energy error fall with
+/// Δt at the rule's order: by more than 2.5 from 4 to 1 ms for the first
+/// order (4 expected), more than 10 for the midpoint rule (16).
+#[test]
+fn the_rail_closed_slider_crank_steps_in_quaternion_coordinates() {
+    let mut sys = PlainCrank3::default();
+    sys.joints.crankshaft.damping = 0.0;
+    let m = sys.minimal();
+    let mut errors = Vec::new();
+    for midpoint in [false, true] {
+        let mut rule = Vec::new();
+        for dt in [0.004, 0.001] {
+            let vi = if midpoint {
+                Variational::midpoint(m, dt)
+            } else {
+                Variational::new(m, dt)
+            };
+            let mut z = crank_state(&m, 0.3, 0.0, dt);
+            let e0 = vi.energy(&z);
+            let (mut de, mut g): (f64, f64) = (0.0, 0.0);
+            let n = (20.0 / dt).round() as usize;
+            for k in 0..n {
+                let (z1, info) = vi
+                    .step_with_info(&z)
+                    .unwrap_or_else(|e| panic!("midpoint {midpoint}, Δt {dt}, step {k}: {e}"));
+                assert!(
+                    !info.stalled,
+                    "midpoint {midpoint}, Δt {dt}, step {k}: {info:?}"
+                );
+                z = z1;
+                de = de.max((vi.energy(&z) - e0).abs());
+                g = g.max(m.constraint_violation(&z));
+            }
+            println!(
+                "rail-closed slider-crank, midpoint {midpoint}, Δt {dt}: 20 s, max |E − E₀| {de:.2e}, max |g| {g:.1e}"
+            );
+            assert!(g <= 1e-11, "midpoint {midpoint}, Δt {dt}: |g| {g:e}");
+            rule.push(de);
+        }
+        errors.push(rule);
+    }
+    assert!(
+        errors[0][1] < errors[0][0] / 2.5,
+        "first order: {:?}",
+        errors[0]
+    );
+    assert!(
+        errors[1][1] < errors[1][0] / 10.0,
+        "midpoint: {:?}",
+        errors[1]
+    );
 }
 
 /// A damped pendulum about a horizontal axis under a constant torque u

@@ -51,7 +51,7 @@
 //! every direction. Nothing here allocates.
 
 use crate::dynamics::{Dynamics, Terms};
-use crate::linalg::{FullPivLu, PartialLu, solve_kkt_regularised};
+use crate::linalg::{FullPivLu, KKT_SUSPECT_PIVOT_RATIO, PartialLu, solve_kkt_regularised};
 use crate::state::State;
 use crate::step::{
     RolloutError, StepError, StepReport, StepWorkspace, Stepper, Workspace, max_abs,
@@ -708,7 +708,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 /// Solves the KKT system [J, −G₁ᵀ; A, 0][X; Λ] = [R; S] for three
 /// right-hand sides (R₁ with S₁; R₂, R₃ with S = 0), returning the X
 /// parts. One factorisation of J and of the Schur complement A J⁻¹ G₁ᵀ;
-/// a singular J falls back to the regularised solve column by column.
+/// a singular J, or one that looks ill-conditioned (pivot ratio below
+/// [`KKT_SUSPECT_PIVOT_RATIO`]: quaternion coordinates, where M is
+/// singular along each quaternion), falls back to the solve of
+/// [`solve_kkt_regularised`] column by column, which checks residuals.
 #[allow(clippy::too_many_arguments)]
 fn kkt_solve3<const N: usize, const C: usize, const U: usize>(
     j: &SMatrix<f64, N, N>,
@@ -719,7 +722,9 @@ fn kkt_solve3<const N: usize, const C: usize, const U: usize>(
     r2: &SMatrix<f64, N, N>,
     r3: &SMatrix<f64, N, U>,
 ) -> Option<(SMatrix<f64, N, N>, SMatrix<f64, N, N>, SMatrix<f64, N, U>)> {
-    if let Some(lu) = PartialLu::new(*j, 1e-12) {
+    if let Some(lu) = PartialLu::new(*j, 1e-12)
+        && lu.pivot_ratio() >= KKT_SUSPECT_PIVOT_RATIO
+    {
         // J x − G₁ᵀ y = r, A x = s:  x = J⁻¹(r + G₁ᵀ y),  (A J⁻¹ G₁ᵀ) y = s − A J⁻¹ r
         let (x1, x2, x3) = (
             lu.solve_matrix(r1),

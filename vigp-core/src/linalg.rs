@@ -210,6 +210,20 @@ impl<const M: usize> PartialLu<M> {
         true
     }
 
+    /// min |u_kk| / max |u_kk| over U's diagonal: a cheap indicator of
+    /// ill-conditioning (a ratio of 1e-8 means that A⁻¹ may lose about
+    /// eight digits). Not an estimate of 1/cond(A) with guarantees: partial
+    /// pivoting can leave a nearly singular A with no small pivot, rarely.
+    pub fn pivot_ratio(&self) -> f64 {
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+        for (k, row) in self.lu.iter().enumerate() {
+            let u = row[k].abs();
+            lo = lo.min(u);
+            hi = hi.max(u);
+        }
+        if hi > 0.0 { lo / hi } else { 0.0 }
+    }
+
     /// Solve A x = b.
     // forward and back substitution read as the textbook formulas
     #[allow(clippy::needless_range_loop)]
@@ -347,6 +361,12 @@ pub type KktSolution<const N: usize, const C: usize> = (SVector<f64, N>, SVector
 /// e.g. a folded four-bar) meets a tiny pivot there and is handled by
 /// complete pivoting: the multiplier component in the deficient direction is
 /// set to zero. Returns `None` when J is singular.
+///
+/// Through J⁻¹ the solution loses digits when J is ill-conditioned even if
+/// the whole KKT matrix is not (in quaternion coordinates M is singular
+/// along each quaternion, whose norm constraint fixes that direction: a
+/// Newton matrix −M + O(Δt) can have cond(J) ≈ 1e13 while the KKT matrix
+/// has 1e4). [`solve_kkt_regularised`] checks for that.
 pub fn solve_kkt<const N: usize, const C: usize>(
     j: &SMatrix<f64, N, N>,
     b: &SMatrix<f64, N, C>,
@@ -354,24 +374,71 @@ pub fn solve_kkt<const N: usize, const C: usize>(
     r: &SVector<f64, N>,
     c: &SVector<f64, C>,
 ) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
+    solve_kkt_rated(j, b, a, r, c).map(|(sol, _)| sol)
+}
+
+/// [`solve_kkt`] and whether J looked ill-conditioned: a pivot ratio
+/// ([`PartialLu::pivot_ratio`]) below [`KKT_SUSPECT_PIVOT_RATIO`], or a
+/// J that needed complete pivoting.
+fn solve_kkt_rated<const N: usize, const C: usize>(
+    j: &SMatrix<f64, N, N>,
+    b: &SMatrix<f64, N, C>,
+    a: &SMatrix<f64, C, N>,
+    r: &SVector<f64, N>,
+    c: &SVector<f64, C>,
+) -> Option<(KktSolution<N, C>, bool)> {
     // J: partial pivoting (Newton matrices perturb −M, or I), complete
     // pivoting when that meets a tiny pivot (rank-revealing: a singular J
     // is reported, and the caller may regularise)
-    let (jr, jb) = match PartialLu::new(*j, 1e-12) {
-        Some(lu) => (lu.solve(r), lu.solve_matrix(b)),
+    let (jr, jb, suspect) = match PartialLu::new(*j, 1e-12) {
+        Some(lu) => (
+            lu.solve(r),
+            lu.solve_matrix(b),
+            lu.pivot_ratio() < KKT_SUSPECT_PIVOT_RATIO,
+        ),
         None => {
             let lu = FullPivLu::new(*j, 1e-14);
             if lu.rank() < N {
                 return None;
             }
-            (lu.solve(r), lu.solve_matrix(b))
+            (lu.solve(r), lu.solve_matrix(b), true)
         }
     };
     if C == 0 {
-        return Some((jr, SVector::zeros()));
+        return Some(((jr, SVector::zeros()), suspect));
     }
     let (x, y) = solve_with_rows(a, &rows_of(&jb), jr.into(), c);
-    Some((x, SVector::from(y)))
+    Some(((x, SVector::from(y)), suspect))
+}
+
+/// The pivot ratio of J ([`PartialLu::pivot_ratio`]) below which
+/// [`solve_kkt_regularised`] checks the residual of the solution through
+/// J⁻¹. The ratio is a loose indicator: on the spatial slider-crank in
+/// quaternion coordinates a J with cond(J) = 4e12 had a pivot ratio of
+/// 1.9e-8, and its Schur complement lost a multiplier. 1e-4 keeps the
+/// check off well-conditioned Newton matrices (the planar trees and loops).
+pub const KKT_SUSPECT_PIVOT_RATIO: f64 = 1e-4;
+
+/// `true` when (x, y) solves the KKT system of [`solve_kkt`] to a relative
+/// residual of 1e-8 in both block rows (each measured against the sizes of
+/// its terms, |J||x| + |B||y| + |r| and |A||x| + |c|, max-norms), and is
+/// finite. With a KKT matrix of condition κ the solution is then accurate
+/// to about κ·1e-8: enough for a Newton direction. O(N² + NC).
+pub fn kkt_solution_is_accurate<const N: usize, const C: usize>(
+    j: &SMatrix<f64, N, N>,
+    b: &SMatrix<f64, N, C>,
+    a: &SMatrix<f64, C, N>,
+    r: &SVector<f64, N>,
+    c: &SVector<f64, C>,
+    x: &SVector<f64, N>,
+    y: &SVector<f64, C>,
+) -> bool {
+    let e1 = (j * x + b * y - r).amax();
+    let e2 = (a * x - c).amax();
+    let s1 = j.amax() * x.amax() + b.amax() * y.amax() + r.amax();
+    let s2 = a.amax() * x.amax() + c.amax();
+    let ok = e1 <= 1e-8 * s1.max(f64::MIN_POSITIVE) && e2 <= 1e-8 * s2.max(f64::MIN_POSITIVE);
+    ok && x.iter().chain(y.iter()).all(|v| v.is_finite())
 }
 
 /// The rows of an N × C matrix (nalgebra stores it by columns), for the
@@ -961,8 +1028,16 @@ impl<const N: usize, const C: usize> SchurFactor<N, C> {
 /// first). ρ = ±‖J‖/‖B·A‖ (max-norms) with the sign of tr(J)·tr(B·A), so
 /// that ρ·B·A adds to J with J's own sign. The augmented solution is
 /// accepted only when it solves the original system to 1e-8 relative to
-/// ‖J‖‖x‖ + ‖B‖‖y‖ + ‖r‖ (rows of J) and ‖A‖‖x‖ + ‖c‖ (rows of A);
-/// otherwise, or when J is singular and C = 0, `None`.
+/// ‖J‖‖x‖ + ‖B‖‖y‖ + ‖r‖ (rows of J) and ‖A‖‖x‖ + ‖c‖ (rows of A)
+/// ([`kkt_solution_is_accurate`]); otherwise, or when J is singular and
+/// C = 0, `None`.
+///
+/// The same augmented solve replaces [`solve_kkt`]'s solution when J is
+/// invertible but looks ill-conditioned (pivot ratio below
+/// [`KKT_SUSPECT_PIVOT_RATIO`]) and that solution fails the same residual
+/// test; when the augmented one fails it too, the plain solution is
+/// returned (a singular Schur complement, whose rank-revealing solve
+/// leaves the residual of the deficient constraint).
 ///
 /// A diagonal J (maximal coordinates without damping) is inverted
 /// directly: the Schur complement S = A J⁻¹ B costs O(nnz(A)·C) (only the
@@ -984,16 +1059,26 @@ pub fn solve_kkt_regularised<const N: usize, const C: usize>(
     {
         return Some((sol, false));
     }
-    if let Some(sol) = solve_kkt(j, b, a, r, c) {
-        return Some((sol, false));
+    // through J⁻¹; when J looks ill-conditioned, kept only if accurate
+    // (otherwise the augmented system, and this solution as the last
+    // resort: a singular S, e.g. a folded four-bar, legitimately leaves a
+    // constraint residual that no solution removes)
+    let plain = solve_kkt_rated(j, b, a, r, c);
+    match plain {
+        Some((sol, false)) => return Some((sol, false)),
+        Some(((x, y), true)) if C == 0 || kkt_solution_is_accurate(j, b, a, r, c, &x, &y) => {
+            return Some(((x, y), false));
+        }
+        _ => {}
     }
+    let plain = plain.map(|(sol, _)| (sol, false));
     if C == 0 {
-        return None;
+        return plain;
     }
     let k = b * a;
     let (jn, kn) = (j.amax(), k.amax());
     if !(kn > 0.0 && kn.is_finite() && jn.is_finite()) {
-        return None;
+        return plain;
     }
     let sign = if j.trace() * k.trace() >= 0.0 {
         1.0
@@ -1001,13 +1086,10 @@ pub fn solve_kkt_regularised<const N: usize, const C: usize>(
         -1.0
     };
     let rho = sign * if jn > 0.0 { jn / kn } else { 1.0 / kn };
-    let (x, y) = solve_kkt(&(j + k * rho), b, a, &(r + b * c * rho), c)?;
-    let e1 = (j * x + b * y - r).amax();
-    let e2 = (a * x - c).amax();
-    let s1 = j.amax() * x.amax() + b.amax() * y.amax() + r.amax();
-    let s2 = a.amax() * x.amax() + c.amax();
-    let ok = e1 <= 1e-8 * s1.max(f64::MIN_POSITIVE) && e2 <= 1e-8 * s2.max(f64::MIN_POSITIVE);
-    (ok && x.iter().chain(y.iter()).all(|v| v.is_finite())).then_some(((x, y), true))
+    match solve_kkt(&(j + k * rho), b, a, &(r + b * c * rho), c) {
+        Some((x, y)) if kkt_solution_is_accurate(j, b, a, r, c, &x, &y) => Some(((x, y), true)),
+        _ => plain,
+    }
 }
 
 #[cfg(test)]
