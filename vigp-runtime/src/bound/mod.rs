@@ -340,7 +340,10 @@ pub enum Fallback {
     /// ([`BoundedPrediction::outside`]).
     None,
     /// Flag, and fall back to the RKHS bound (default settings, same δ),
-    /// whose guarantee covers every input.
+    /// whose guarantee covers every input. (Where the GP variance is lost
+    /// to rounding — a model trained on noise-free data, σ_n² at its floor
+    /// — the RKHS bound would be 0: such a flagged state keeps its
+    /// conformal bound and its flag, as with [`Fallback::None`].)
     Rkhs,
     /// Flag, and fall back to the Theorem-1 bound (default settings, same δ).
     Theorem1,
@@ -978,7 +981,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         norms: &mut [Option<(f64, f64)>],
         ws: &mut Workspace,
     ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>, bool), BoundError> {
-        let (mut one_step, mut position, outside) = self.attach(bound, trace, norms, ws, true)?;
+        let (mut one_step, mut position, outside, _) =
+            self.attach(bound, trace, norms, ws, true, false)?;
         let mut fell_back = false;
         if let Some(fb) = &bound.fallback
             && outside.iter().any(|o| *o)
@@ -986,24 +990,31 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             // the fallback's position bounds (which cost a Jacobian per
             // step) only when the start itself is outside
             let start_outside = outside.first().copied().unwrap_or(false);
-            let (one, pos, _) = self.attach(fb, trace, norms, ws, start_outside)?;
-            for ((a, b), o) in one_step.iter_mut().zip(one).zip(&outside) {
-                if *o {
+            // lenient: a state whose variance is lost to rounding has no
+            // fallback bound (it would be 0); it keeps its conformal bound
+            // and its flag
+            let (one, pos, _, lost) = self.attach(fb, trace, norms, ws, start_outside, true)?;
+            for (((a, b), o), l) in one_step.iter_mut().zip(one).zip(&outside).zip(&lost) {
+                if *o && !*l {
                     *a = a.max(b);
+                    fell_back = true;
                 }
             }
-            if start_outside {
+            if start_outside && !lost.iter().any(|l| *l) {
                 for (a, b) in position.iter_mut().zip(pos) {
                     *a = a.max(b);
                 }
+                fell_back = true;
             }
-            fell_back = true;
         }
         Ok((one_step, position, outside, fell_back))
     }
 
     /// One-step bounds, position bounds (only the initial 0 unless
-    /// `positions`) and outside flags of `bound` along a predicted trace.
+    /// `positions`), outside flags of `bound` along a predicted trace, and
+    /// the states where a variance-based bound's variance was lost to
+    /// rounding (an error unless `lenient`; with `lenient` the bounds there
+    /// and the position bounds are meaningless and must not be used).
     #[allow(clippy::type_complexity)]
     fn attach(
         &self,
@@ -1012,7 +1023,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         norms: &mut [Option<(f64, f64)>],
         ws: &mut Workspace,
         positions: bool,
-    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>), BoundError> {
+        lenient: bool,
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>, Vec<bool>), BoundError> {
         let dt = Integrator::dt(self);
         let steps = trace.std_devs.len();
         let mut input = vec![0.0; self.gp().input_dim()];
@@ -1024,12 +1036,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             bound.parts,
             BoundParts::Theorem1 { .. } | BoundParts::Rkhs { .. }
         );
+        let mut lost = Vec::with_capacity(steps);
         for (step, (z, sd)) in trace.states.iter().zip(&trace.std_devs).enumerate() {
-            if variance_based {
-                if let Some(output) = sd.iter().position(|s| *s == 0.0) {
-                    return Err(BoundError::VarianceLost { output, step });
-                }
+            let zero = sd.iter().position(|s| *s == 0.0);
+            if variance_based
+                && !lenient
+                && let Some(output) = zero
+            {
+                return Err(BoundError::VarianceLost { output, step });
             }
+            lost.push(variance_based && zero.is_some());
             one_step.push(bound.one_step(sd.as_slice())?);
             let s = predictive_scale(sd.as_slice(), &bound.noise_std);
             self.encoding().encode(&M::KINDS, z, &mut input);
@@ -1077,6 +1093,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 value: *bad,
             });
         }
-        Ok((one_step, position, outside))
+        Ok((one_step, position, outside, lost))
     }
 }
