@@ -80,7 +80,7 @@ pub enum CliError {
     #[error("{0}")]
     Usage(String),
     /// A data file could not be read.
-    #[error("{path}: {source}")]
+    #[error("{}", with_path(path, source, matches!(source, DataError::Io { .. })))]
     Data {
         /// The file.
         path: PathBuf,
@@ -88,7 +88,7 @@ pub enum CliError {
         source: DataError,
     },
     /// A model file could not be loaded or saved.
-    #[error("{path}: {source}")]
+    #[error("{}", with_path(path, source, matches!(source, LoadError::Io { .. })))]
     Model {
         /// The file.
         path: PathBuf,
@@ -115,6 +115,30 @@ pub enum CliError {
         /// Why.
         source: std::io::Error,
     },
+}
+
+/// "path: why", or "why" alone when it names the path already (the
+/// library's I/O errors do).
+fn with_path(path: &Path, why: &dyn std::fmt::Display, names_path: bool) -> String {
+    if names_path {
+        why.to_string()
+    } else {
+        format!("{}: {why}", path.display())
+    }
+}
+
+/// An output file's directory must exist (checked before any work).
+fn check_out_dir(path: &Path) -> Result<(), CliError> {
+    match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => Err(CliError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("directory {} does not exist", dir.display()),
+            ),
+        }),
+        _ => Ok(()),
+    }
 }
 
 fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
@@ -639,6 +663,8 @@ where
     Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
     Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
 {
+    // before the training, which the write would otherwise waste
+    check_out_dir(&a.out)?;
     let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
     let dt = data
         .dt(a.read.time_tolerance)
@@ -911,6 +937,14 @@ fn predict<L, const N: usize, const K: usize, const CK: usize>(
 where
     L: Mechanism<K, CK> + Clone,
 {
+    if a.steps == 0 {
+        return Err(CliError::Usage("--steps must be at least 1".into()));
+    }
+    check_out_dir(&a.out)?;
+    if a.steps == 0 {
+        return Err(CliError::Usage("--steps must be at least 1".into()));
+    }
+    check_out_dir(&a.out)?;
     let dt = learned.dt();
     data.check_dt(dt, a.read.time_tolerance)
         .map_err(|source| CliError::Data {
@@ -990,6 +1024,8 @@ where
     wtr.write_record(&header).map_err(csv_err)?;
     let pb = bar(starts.len(), "predicting");
     let mut failed = 0usize;
+    // states outside what the bound covers, and the runs holding them
+    let (mut outside, mut outside_runs) = (0usize, 0usize);
     for ((run, z0), zv) in starts.iter().zip(&view_starts) {
         let pred = match learned.predict(zv, a.steps, &bound) {
             Ok(p) => p,
@@ -999,6 +1035,9 @@ where
                 continue;
             }
         };
+        let n_out = pred.outside.iter().filter(|&&o| o).count();
+        outside += n_out;
+        outside_runs += usize::from(n_out > 0);
         for (k, z) in pred.states.iter().enumerate() {
             let zm = if k == 0 { *z0 } else { to_minimal(z) };
             let mut row = vec![run.name.clone(), format!("{:?}", run.t0 + k as f64 * dt)];
@@ -1016,6 +1055,27 @@ where
     }
     pb.finish_and_clear();
     wtr.flush().map_err(io_error(&a.out))?;
+    if outside > 0 {
+        let what = match (&bound.fallback, bound.kind_name()) {
+            (Some(f), _) => format!(
+                "outside the calibrated region: their bounds (and, where the start is \
+                 outside, the whole run's position bounds) are the larger of the conformal \
+                 and the {} bound",
+                f.kind_name()
+            ),
+            (None, "conformal") => {
+                "outside the calibrated region: the conformal guarantee does not cover them".into()
+            }
+            _ => {
+                "outside the box of the training inputs, where the bound's constants were estimated"
+                    .into()
+            }
+        };
+        w(
+            out,
+            format_args!("note: {outside} predicted states in {outside_runs} run(s) lie {what}"),
+        )?;
+    }
     w(
         out,
         format_args!(

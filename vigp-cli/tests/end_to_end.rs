@@ -247,6 +247,35 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
         "{v1} {q2}"
     );
 
+    // predict refuses what score refuses, before any work: no steps, an
+    // output in a directory that does not exist
+    let tool = vigp::cli::paper_systems();
+    let mut sink = Vec::new();
+    for (steps, out) in [("0", s(&pred)), ("5", "/nonexistent/pred.csv")] {
+        let e = vigp::cli::run(
+            &tool,
+            [
+                "vigp",
+                "predict",
+                "--model",
+                s(&model),
+                "--data",
+                s(&test),
+                "--steps",
+                steps,
+                "--out",
+                out,
+            ],
+            &mut sink,
+        )
+        .unwrap_err();
+        let e = e.to_string();
+        assert!(
+            e.contains("--steps must be at least 1") || e.contains("/nonexistent does not exist"),
+            "{e}"
+        );
+    }
+
     // export: the size is stated; mean only unless asked
     let rs = dir.join("model.rs");
     let out = vigp(&["export", "--model", s(&model), "--out", s(&rs)]);
@@ -382,7 +411,51 @@ fn usage_errors_are_reported_not_panicked() {
         &mut out,
     )
     .unwrap_err();
-    assert!(e.to_string().contains("/nonexistent.csv"), "{e}");
+    // the path once (the I/O error names it already)
+    assert_eq!(e.to_string().matches("/nonexistent.csv").count(), 1, "{e}");
+    // a directory is not a CSV file (it opens, and failed at "line 0")
+    let dir = std::env::temp_dir();
+    let e = vigp::cli::run(
+        &tool,
+        [
+            "vigp",
+            "fit",
+            "--system",
+            "double_pendulum",
+            "--data",
+            s(&dir),
+            "--out",
+            "m.json",
+        ],
+        &mut out,
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string().contains("is a directory") && !e.to_string().contains("line 0"),
+        "{e}"
+    );
+    // an output directory that does not exist is refused before the data
+    // are read and the model is trained
+    let e = vigp::cli::run(
+        &tool,
+        [
+            "vigp",
+            "fit",
+            "--system",
+            "double_pendulum",
+            "--data",
+            "/nonexistent.csv",
+            "--out",
+            "/nonexistent/m.json",
+        ],
+        &mut out,
+    )
+    .unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("/nonexistent/m.json: directory /nonexistent does not exist"),
+        "{e}"
+    );
     let e = vigp::cli::run(
         &tool,
         [
@@ -396,7 +469,7 @@ fn usage_errors_are_reported_not_panicked() {
         &mut out,
     )
     .unwrap_err();
-    assert!(e.to_string().contains("/nonexistent.json"), "{e}");
+    assert_eq!(e.to_string().matches("/nonexistent.json").count(), 1, "{e}");
     let e = vigp::cli::run(&tool, ["vigp", "frobnicate"], &mut out).unwrap_err();
     assert!(matches!(e, vigp::cli::CliError::Args(_)), "{e}");
 }
