@@ -414,8 +414,12 @@ where
     }
 
     /// The states after 1, 2, …, `out.len()` steps from `z0` (an MPC
-    /// prediction), into a caller-owned slice. On failure returns the index
-    /// of the failing step with the error.
+    /// prediction), into a caller-owned slice: `out[k]` is the state after
+    /// k + 1 steps, as in [`Stepper::steps_into`](crate::Stepper::steps_into)
+    /// and the std `Integrator::rollout_into` (the nominal
+    /// [`Stepper::rollout_into`](crate::Stepper::rollout_into) puts z₀ in
+    /// `out[0]`). On failure returns the index of the failing step with the
+    /// error.
     pub fn rollout_into(
         &self,
         z0: &State<N>,
