@@ -93,7 +93,8 @@ pub enum StepError {
     /// start (often a step too large for the motion; see
     /// `Variational::substeps`).
     #[error(
-        "Newton stalled at iteration {iteration}: residual {residual:.3e} cannot be decreased along the Newton direction{}",
+        "Newton stalled at iteration {iteration}: residual {residual:.3e} cannot be decreased along the Newton direction{} \
+         (no root near the start: often a step too large for the motion; try a smaller dt, `substeps`, or the midpoint rule)",
         at(step)
     )]
     LineSearchFailed {
