@@ -1,5 +1,6 @@
 //! The `vigp` command-line tool, for the paper's systems and for your own
-//! mechanism (feature `cli`).
+//! planar mechanism (feature `cli`; 3-D mechanisms are learned in Rust with
+//! `vigp::spatial::learned::LearnedSpatial`).
 //!
 //! ```text
 //! vigp fit     --system NAME --data train.csv --out model.json

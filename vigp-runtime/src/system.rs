@@ -12,9 +12,19 @@ pub use vigp_core::Parameters;
 
 use crate::mechanism::{Coordinates, Mechanism};
 
-/// A mechanism declared with `mechanism!`: its run-time parameters
+/// A planar mechanism declared with `mechanism!`: its run-time parameters
 /// ([`Parameters`], [`Default`] = the DSL's values) and both coordinate
 /// views.
+///
+/// Spatial mechanisms (`gravity: [gx, gy, gz]`) do not implement it: their
+/// maximal view is a Lie-group integrator, not a [`Mechanism`], so the
+/// command-line tool (`vigp::cli::main`) and other tools generic over
+/// `System` take planar mechanisms only. A 3-D mechanism is learned in
+/// Rust: `vigp::spatial::learned::LearnedSpatial` (see docs/spatial.md).
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` is not a planar `mechanism!`: tools generic over `System` (such as `vigp::cli::main`) take planar mechanisms only",
+    note = "a 3-D mechanism (`gravity: [gx, gy, gz]`) is learned in Rust with `vigp::spatial::learned::LearnedSpatial`; the command-line tool does not take it"
+)]
 pub trait System: Parameters + Default + Copy + Send + Sync + 'static {
     /// Calls `visitor` with the minimal and the maximal view of these
     /// parameters.
