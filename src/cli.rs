@@ -585,7 +585,7 @@ impl ViewVisitor for Visit<'_> {
                 let mut nominal = minimal;
                 restore_parameters(&mut nominal, &saved, &a.model)?;
                 let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
-                if saved.coordinates == Mn::COORDINATES {
+                if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
                     let l = load(&a.model, &saved, minimal)?;
                     score(a, &l, nominal, &data, |z| *z, |q| *q, out)
                 } else {
@@ -607,7 +607,7 @@ impl ViewVisitor for Visit<'_> {
                 let mut nominal = minimal;
                 restore_parameters(&mut nominal, &saved, &a.model)?;
                 let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
-                if saved.coordinates == Mn::COORDINATES {
+                if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
                     let l = load(&a.model, &saved, minimal)?;
                     let coords = (&Mn::COORDINATES, &Mn::KINDS);
                     predict(a, &l, &data, coords, |z| *z, |z| *z, out)
@@ -627,7 +627,7 @@ impl ViewVisitor for Visit<'_> {
             }
             Command::Export(a) => {
                 let saved = read_saved(&a.model)?;
-                if saved.coordinates != Mn::COORDINATES {
+                if !in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
                     return Err(CliError::Usage(format!(
                         "{}: only models in minimal coordinates ({}) can run on the embedded learned step; \
                          this one is in {}",
@@ -640,6 +640,34 @@ impl ViewVisitor for Visit<'_> {
                 export(a, &l, out)
             }
         }
+    }
+}
+
+/// `true` when a model file is in the minimal coordinates, `false` when in
+/// the maximal ones; an error naming both when in neither (an edited or
+/// corrupted file), rather than a complaint against one of them.
+fn in_minimal<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+    path: &Path,
+    saved: &SavedLearned,
+) -> Result<bool, CliError>
+where
+    Mn: Mechanism<N, C>,
+    Mx: Mechanism<NM, CM>,
+{
+    if saved.coordinates == Mn::COORDINATES {
+        Ok(true)
+    } else if saved.coordinates == Mx::COORDINATES {
+        Ok(false)
+    } else {
+        Err(CliError::Usage(format!(
+            "{}: field `coordinates`: [{}] are neither the minimal coordinates [{}] nor the \
+             maximal ones [{}] of {}",
+            path.display(),
+            saved.coordinates.join(", "),
+            Mn::COORDINATES.join(", "),
+            Mx::COORDINATES.join(", "),
+            saved.mechanism
+        )))
     }
 }
 

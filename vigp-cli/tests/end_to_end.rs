@@ -276,6 +276,41 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
         );
     }
 
+    // an edited file whose coordinates are neither view's is named as such
+    // (it was reported against the maximal coordinates)
+    let json = std::fs::read_to_string(&model).unwrap();
+    let swapped = json.replacen(
+        "\"coordinates\": [\n    \"rail\",\n    \"hinge\"",
+        "\"coordinates\": [\n    \"hinge\",\n    \"rail\"",
+        1,
+    );
+    assert_ne!(swapped, json, "the coordinates block moved: {json:.200}");
+    let edited = dir.join("edited.json");
+    std::fs::write(&edited, swapped).unwrap();
+    for args in [
+        vec![
+            "vigp",
+            "score",
+            "--model",
+            s(&edited),
+            "--data",
+            s(&test),
+            "--steps",
+            "5",
+        ],
+        vec!["vigp", "export", "--model", s(&edited), "--out", s(&pred)],
+    ] {
+        let e = vigp::cli::run(&tool, args, &mut sink)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains(
+                "[hinge, rail] are neither the minimal coordinates [rail, hinge] nor the maximal"
+            ),
+            "{e}"
+        );
+    }
+
     // export: the size is stated; mean only unless asked
     let rs = dir.join("model.rs");
     let out = vigp(&["export", "--model", s(&model), "--out", s(&rs)]);
