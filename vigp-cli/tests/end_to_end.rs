@@ -431,64 +431,33 @@ fn usage_errors_are_reported_not_panicked() {
     )
     .unwrap_err();
     assert!(e.to_string().contains("unknown mechanism `robot`"), "{e}");
-    let e = vigp::cli::run(
-        &tool,
-        [
+    // `fit` of the double pendulum on `data` into `out`: its error
+    let fit_error = |data: &str, out_path: &str| {
+        let args = [
             "vigp",
             "fit",
             "--system",
             "double_pendulum",
             "--data",
-            "/nonexistent.csv",
+            data,
             "--out",
-            "m.json",
-        ],
-        &mut out,
-    )
-    .unwrap_err();
+            out_path,
+        ];
+        vigp::cli::run(&tool, args, &mut Vec::new())
+            .unwrap_err()
+            .to_string()
+    };
     // the path once (the I/O error names it already)
-    assert_eq!(e.to_string().matches("/nonexistent.csv").count(), 1, "{e}");
+    let e = fit_error("/nonexistent.csv", "m.json");
+    assert_eq!(e.matches("/nonexistent.csv").count(), 1, "{e}");
     // a directory is not a CSV file (it opens, and failed at "line 0")
-    let dir = std::env::temp_dir();
-    let e = vigp::cli::run(
-        &tool,
-        [
-            "vigp",
-            "fit",
-            "--system",
-            "double_pendulum",
-            "--data",
-            s(&dir),
-            "--out",
-            "m.json",
-        ],
-        &mut out,
-    )
-    .unwrap_err();
-    assert!(
-        e.to_string().contains("is a directory") && !e.to_string().contains("line 0"),
-        "{e}"
-    );
+    let e = fit_error(s(&std::env::temp_dir()), "m.json");
+    assert!(e.contains("is a directory") && !e.contains("line 0"), "{e}");
     // an output directory that does not exist is refused before the data
     // are read and the model is trained
-    let e = vigp::cli::run(
-        &tool,
-        [
-            "vigp",
-            "fit",
-            "--system",
-            "double_pendulum",
-            "--data",
-            "/nonexistent.csv",
-            "--out",
-            "/nonexistent/m.json",
-        ],
-        &mut out,
-    )
-    .unwrap_err();
+    let e = fit_error("/nonexistent.csv", "/nonexistent/m.json");
     assert!(
-        e.to_string()
-            .contains("/nonexistent/m.json: directory /nonexistent does not exist"),
+        e.contains("/nonexistent/m.json: directory /nonexistent does not exist"),
         "{e}"
     );
     let e = vigp::cli::run(
