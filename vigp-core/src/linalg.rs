@@ -1205,6 +1205,48 @@ mod tests {
         assert!((full[3] - y[0]).abs() < 1e-13);
     }
 
+    /// A J that is nearly singular along a direction the constraint fixes
+    /// (as −M along a quaternion, whose norm constraint holds it): cond(J)
+    /// = 2e11 (pivot ratio above the 1e-12 that refuses J, below
+    /// [`KKT_SUSPECT_PIVOT_RATIO`]), the KKT matrix well conditioned.
+    /// [`solve_kkt_regularised`] against nalgebra's LU of the whole KKT
+    /// matrix (a second implementation) to 1e-10 (it reached 2e-16); the
+    /// plain solve through J⁻¹ misses by 2e-5, which the old code
+    /// returned.
+    #[test]
+    fn ill_conditioned_j_is_solved_through_the_augmented_system() {
+        use nalgebra::{Matrix4, Vector4};
+        // J = Q·diag(−1, −2, −1e-14)·Qᵀ, Q a rotation; the third column of
+        // Q (J's near-null direction) is what the constraint row sees
+        let q = nalgebra::Rotation3::from_euler_angles(0.3, -0.7, 1.1).into_inner();
+        let j = q * Matrix3::from_diagonal(&Vector3::new(-1.0, -2.0, -1e-11)) * q.transpose();
+        let n = q.column(2).into_owned();
+        let a = nalgebra::Matrix1x3::from_row_slice(&[n[0], n[1] + 0.2, n[2]]);
+        let b = -a.transpose();
+        let r = Vector3::new(0.3, -1.0, 0.7);
+        let c = nalgebra::Vector1::new(0.2);
+        let mut k = Matrix4::zeros();
+        k.fixed_view_mut::<3, 3>(0, 0).copy_from(&j);
+        k.fixed_view_mut::<3, 1>(0, 3).copy_from(&b);
+        k.fixed_view_mut::<1, 3>(3, 0).copy_from(&a);
+        let full = k.lu().solve(&Vector4::new(r[0], r[1], r[2], c[0])).unwrap();
+        let kkt_cond = {
+            let sv = k.svd(false, false).singular_values;
+            sv.max() / sv.min()
+        };
+        assert!(kkt_cond < 1e3, "{kkt_cond:e}");
+        let ((x, y), regularised) = solve_kkt_regularised(&j, &b, &a, &r, &c).unwrap();
+        let err = (full.fixed_rows::<3>(0) - x)
+            .amax()
+            .max((full[3] - y[0]).abs());
+        let (xp, yp) = solve_kkt(&j, &b, &a, &r, &c).unwrap();
+        let plain = (full.fixed_rows::<3>(0) - xp)
+            .amax()
+            .max((full[3] - yp[0]).abs());
+        assert!(regularised && err < 1e-10, "{err:e}");
+        assert!(plain > 1e-6, "{plain:e}");
+    }
+
     /// The diagonal-J Schur path against nalgebra's LU of the whole KKT
     /// matrix (a second implementation): sparse A (two-body rows, as a
     /// joint's constraint rows), B ≠ Aᵀ, and a redundant constraint (a row
