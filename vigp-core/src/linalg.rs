@@ -416,7 +416,8 @@ fn solve_kkt_rated<const N: usize, const C: usize>(
 /// J⁻¹. The ratio is a loose indicator: on the spatial slider-crank in
 /// quaternion coordinates a J with cond(J) = 4e12 had a pivot ratio of
 /// 1.9e-8, and its Schur complement lost a multiplier. 1e-4 keeps the
-/// check off well-conditioned Newton matrices (the planar trees and loops).
+/// check off well-conditioned Newton matrices (the planar fourbar's is at
+/// least 2.7e-2 over 200 configurations).
 pub const KKT_SUSPECT_PIVOT_RATIO: f64 = 1e-4;
 
 /// `true` when (x, y) solves the KKT system of [`solve_kkt`] to a relative
