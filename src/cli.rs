@@ -970,26 +970,37 @@ where
         return Err(CliError::Usage("--steps must be at least 1".into()));
     }
     check_out_dir(&a.out)?;
-    if a.steps == 0 {
-        return Err(CliError::Usage("--steps must be at least 1".into()));
-    }
-    check_out_dir(&a.out)?;
     let dt = learned.dt();
     data.check_dt(dt, a.read.time_tolerance)
         .map_err(|source| CliError::Data {
             path: a.data.clone(),
             source,
         })?;
+    // a start state needs two rows (position and discrete velocity): runs
+    // of one row are skipped with a note, as `fit` notes its short runs
     let mut starts = Vec::with_capacity(data.runs.len());
+    let mut lonely = Vec::new();
     for run in &data.runs {
-        let Some(z) = run.state(0) else {
-            return Err(CliError::Usage(format!(
-                "{}: run `{}` has one row; a start state needs two (position and discrete velocity)",
-                a.data.display(),
-                run.name
-            )));
-        };
-        starts.push((run, z));
+        match run.state(0) {
+            Some(z) => starts.push((run, z)),
+            None => lonely.push(run.name.as_str()),
+        }
+    }
+    if starts.is_empty() {
+        return Err(CliError::Usage(format!(
+            "{}: every run has one row; a start state needs two (position and discrete velocity)",
+            a.data.display()
+        )));
+    }
+    if !lonely.is_empty() {
+        w(
+            out,
+            format_args!(
+                "note: skipped {} run(s) of one row (a start state needs two): {}",
+                lonely.len(),
+                lonely.join(", ")
+            ),
+        )?;
     }
     let view_starts: Vec<State<K>> = starts.iter().map(|(_, z)| to_view(z)).collect();
     let kind_arg = a.bound.unwrap_or(if a.calibration.is_some() {

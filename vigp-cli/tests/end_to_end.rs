@@ -276,6 +276,30 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
         );
     }
 
+    // a run of one row cannot start a prediction: skipped with a note (it
+    // refused the whole file)
+    let with_lonely = dir.join("with_lonely.csv");
+    let mut text = std::fs::read_to_string(&test).unwrap();
+    text.push_str("lonely,0,0.1,0.2\n");
+    std::fs::write(&with_lonely, text).unwrap();
+    let report = vigp(&[
+        "predict",
+        "--model",
+        s(&model),
+        "--data",
+        s(&with_lonely),
+        "--steps",
+        "5",
+        "--out",
+        s(&pred),
+    ]);
+    assert!(
+        report.contains("note: skipped 1 run(s) of one row (a start state needs two): lonely"),
+        "{report}"
+    );
+    let rows = std::fs::read_to_string(&pred).unwrap().lines().count();
+    assert_eq!(rows, 1 + 4 * 6);
+
     // an edited file whose coordinates are neither view's is named as such
     // (it was reported against the maximal coordinates)
     let json = std::fs::read_to_string(&model).unwrap();
