@@ -934,6 +934,20 @@ proptest! {
     }
 }
 
+/// [`train_noise_free`] with the hyperparameters fixed (a zero-width box):
+/// length scales 20, σ_f² = 1e4 (normalised) and σ_n² = `noise`.
+fn fixed_noise_model(noise: f64) -> Learned<PendulumMinimal, 1, 0> {
+    train_noise_free(&TrainOptions {
+        restarts: 0,
+        bounds: vigp::gp::Bounds {
+            length_scale: (20.0, 20.0),
+            signal_variance: (1e4, 1e4),
+            noise_variance: (noise, noise),
+        },
+        ..TrainOptions::default()
+    })
+}
+
 /// Nearly noise-free data, σ_n² = 1e-10 against σ_f² = 1e4 and length
 /// scales 20 (normalised; fixed by a zero-width box): σ_f² − kᵀ(K + σ_n²I)⁻¹k
 /// is lost to rounding at the training states and clamped to 0, and the
@@ -943,20 +957,9 @@ proptest! {
 /// prediction has its bounds.
 #[test]
 fn a_variance_lost_to_rounding_is_an_error_not_a_zero_bound() {
-    let fixed = |noise: f64| {
-        train_noise_free(&TrainOptions {
-            restarts: 0,
-            bounds: vigp::gp::Bounds {
-                length_scale: (20.0, 20.0),
-                signal_variance: (1e4, 1e4),
-                noise_variance: (noise, noise),
-            },
-            ..TrainOptions::default()
-        })
-    };
     let empty = Calibration::empty(DT);
     let z0 = noise_free_transitions()[3].z;
-    let tight = fixed(1e-10);
+    let tight = fixed_noise_model(1e-10);
     let sd = tight
         .step_with(&z0, &mut tight.workspace())
         .unwrap()
@@ -970,7 +973,7 @@ fn a_variance_lost_to_rounding_is_an_error_not_a_zero_bound() {
             matches!(e, BoundError::VarianceLost { output: 0, .. }),
             "{e:?}"
         );
-        let loose = fixed(1e-4);
+        let loose = fixed_noise_model(1e-4);
         let bound = loose.error_bound(&kind, &empty).unwrap();
         let p = loose.predict(&z0, 5, &bound).unwrap();
         let b = &p.one_step_bounds;
@@ -990,15 +993,7 @@ fn a_variance_lost_to_rounding_is_an_error_not_a_zero_bound() {
 /// takes the larger of the two elsewhere; unflagged states are unchanged.
 #[test]
 fn a_conformal_bound_survives_a_fallback_without_variance() {
-    let tight = train_noise_free(&TrainOptions {
-        restarts: 0,
-        bounds: vigp::gp::Bounds {
-            length_scale: (20.0, 20.0),
-            signal_variance: (1e4, 1e4),
-            noise_variance: (1e-10, 1e-10),
-        },
-        ..TrainOptions::default()
-    });
+    let tight = fixed_noise_model(1e-10);
     let cal = calibration();
     let with = tight.error_bound(&BoundKind::conformal(0.05), cal).unwrap();
     let without = tight

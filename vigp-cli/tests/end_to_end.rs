@@ -140,6 +140,14 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// `predict --model MODEL --data DATA --steps STEPS --out OUT` (without the
+/// program name).
+fn predict_args<'a>(model: &'a str, data: &'a str, steps: &'a str, out: &'a str) -> Vec<&'a str> {
+    vec![
+        "predict", "--model", model, "--data", data, "--steps", steps, "--out", out,
+    ]
+}
+
 #[test]
 fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     let dir = temp_dir("cartpole");
@@ -184,17 +192,7 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
 
     // predict: trajectories with one-step bounds
     let pred = dir.join("pred.csv");
-    vigp(&[
-        "predict",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "5",
-        "--out",
-        s(&pred),
-    ]);
+    vigp(&predict_args(s(&model), s(&test), "5", s(&pred)));
     let text = std::fs::read_to_string(&pred).unwrap();
     let mut lines = text.lines();
     assert_eq!(
@@ -223,19 +221,9 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     let cal = dir.join("calibration.csv");
     std::fs::write(&cal, measured_csv(truth.minimal(), 200..204, 3)).unwrap();
     let pred_c = dir.join("pred_conformal.csv");
-    let out = vigp(&[
-        "predict",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "5",
-        "--out",
-        s(&pred_c),
-        "--calibration",
-        s(&cal),
-    ]);
+    let mut args = predict_args(s(&model), s(&test), "5", s(&pred_c));
+    args.extend(["--calibration", s(&cal)]);
+    let out = vigp(&args);
     assert!(out.contains("conformal"), "{out}");
     let text = std::fs::read_to_string(&pred_c).unwrap();
     let rows: Vec<&str> = text.lines().skip(1).collect();
@@ -252,23 +240,8 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     let tool = vigp::cli::paper_systems();
     let mut sink = Vec::new();
     for (steps, out) in [("0", s(&pred)), ("5", "/nonexistent/pred.csv")] {
-        let e = vigp::cli::run(
-            &tool,
-            [
-                "vigp",
-                "predict",
-                "--model",
-                s(&model),
-                "--data",
-                s(&test),
-                "--steps",
-                steps,
-                "--out",
-                out,
-            ],
-            &mut sink,
-        )
-        .unwrap_err();
+        let args = std::iter::once("vigp").chain(predict_args(s(&model), s(&test), steps, out));
+        let e = vigp::cli::run(&tool, args, &mut sink).unwrap_err();
         let e = e.to_string();
         assert!(
             e.contains("--steps must be at least 1") || e.contains("/nonexistent does not exist"),
@@ -282,17 +255,7 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     let mut text = std::fs::read_to_string(&test).unwrap();
     text.push_str("lonely,0,0.1,0.2\n");
     std::fs::write(&with_lonely, text).unwrap();
-    let report = vigp(&[
-        "predict",
-        "--model",
-        s(&model),
-        "--data",
-        s(&with_lonely),
-        "--steps",
-        "5",
-        "--out",
-        s(&pred),
-    ]);
+    let report = vigp(&predict_args(s(&model), s(&with_lonely), "5", s(&pred)));
     assert!(
         report.contains("note: skipped 1 run(s) of one row (a start state needs two): lonely"),
         "{report}"

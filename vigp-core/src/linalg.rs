@@ -1065,12 +1065,10 @@ pub fn solve_kkt_regularised<const N: usize, const C: usize>(
     // resort: a singular S, e.g. a folded four-bar, legitimately leaves a
     // constraint residual that no solution removes)
     let plain = solve_kkt_rated(j, b, a, r, c);
-    match plain {
-        Some((sol, false)) => return Some((sol, false)),
-        Some(((x, y), true)) if C == 0 || kkt_solution_is_accurate(j, b, a, r, c, &x, &y) => {
-            return Some(((x, y), false));
-        }
-        _ => {}
+    if let Some(((x, y), suspect)) = plain
+        && (!suspect || C == 0 || kkt_solution_is_accurate(j, b, a, r, c, &x, &y))
+    {
+        return Some(((x, y), false));
     }
     let plain = plain.map(|(sol, _)| (sol, false));
     if C == 0 {

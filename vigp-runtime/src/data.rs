@@ -654,15 +654,15 @@ impl<const N: usize> Dataset<N> {
         opts: &ReadOptions,
     ) -> Result<Self, DataError> {
         let path = path.as_ref();
-        let io = |source| DataError::Io {
+        let io_error = |source| DataError::Io {
             path: path.to_path_buf(),
             source,
         };
-        let file = std::fs::File::open(path).map_err(io)?;
+        let file = std::fs::File::open(path).map_err(io_error)?;
         // a directory opens on Unix and fails at the first read (which the
         // CSV reader would report at "line 0")
-        if file.metadata().map_err(io)?.is_dir() {
-            return Err(io(io::Error::new(
+        if file.metadata().map_err(io_error)?.is_dir() {
+            return Err(io_error(io::Error::new(
                 io::ErrorKind::IsADirectory,
                 "is a directory, not a CSV file",
             )));

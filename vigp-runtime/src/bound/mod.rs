@@ -1013,8 +1013,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// One-step bounds, position bounds (only the initial 0 unless
     /// `positions`), outside flags of `bound` along a predicted trace, and
     /// the states where a variance-based bound's variance was lost to
-    /// rounding (an error unless `lenient`; with `lenient` the bounds there
-    /// and the position bounds are meaningless and must not be used).
+    /// rounding (an error unless `lenient`; with `lenient` the one-step
+    /// bounds there are meaningless, and the position bounds are not
+    /// propagated when any state lost its variance).
     #[allow(clippy::type_complexity)]
     fn attach(
         &self,
@@ -1057,6 +1058,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         }
         let mut position = Vec::with_capacity(steps + 1);
         position.push(0.0);
+        // (a lost variance leaves nothing to propagate: the caller drops
+        // these position bounds, so their Jacobians are not formed)
+        let positions = positions && !lost.iter().any(|l| *l);
         match &bound.parts {
             _ if !positions => {}
             BoundParts::Conformal(c) => {
