@@ -465,6 +465,37 @@ pub fn kernel_row(
     Ok(())
 }
 
+/// [`kernel_row`] for the consecutive points `start .. start + out.len()`
+/// only: `out[i]` is the kernel value of point `start + i`, the same bits
+/// as `kernel_row`'s entry `start + i`. O(`out.len()`·d). A training
+/// Gram matrix's lower triangle is one call per column (`start` = column
+/// + 1).
+///
+/// Errors: [`GpError::InvalidModel`] if `inputs.len() != d·n` or
+/// `start + out.len() > n`.
+///
+/// Always inlined, as [`kernel_row`].
+#[inline(always)]
+pub fn kernel_row_range(
+    inputs: &[f64],
+    n: usize,
+    q: &[f64],
+    signal_variance: f64,
+    start: usize,
+    out: &mut [f64],
+) -> Result<(), GpError> {
+    check_kernel(inputs, n, q)?;
+    if start.checked_add(out.len()).is_none_or(|end| end > n) {
+        return Err(GpError::InvalidModel("kernel row range beyond n"));
+    }
+    let mut at = start;
+    for block in out.chunks_mut(BLOCK) {
+        block_kernel(inputs, n, q, signal_variance, at, block);
+        at += BLOCK;
+    }
+    Ok(())
+}
+
 /// Σ_i a_i·b_i with `LANES` interleaved partial sums (element i goes to
 /// sum i mod 8), added pairwise at the end: a fixed order, so results are
 /// reproducible, and one that vectorises.
@@ -533,8 +564,7 @@ pub fn kernel_dot(
 
 /// Solves L·y = v in place for a lower-triangular L packed column by
 /// column (N(N+1)/2 numbers, column j = L_jj … L_{N−1,j}): column-oriented
-/// forward substitution, skipping zero entries of y, in the same order as
-/// the std GP's solve. N²/2 multiply-adds.
+/// forward substitution, skipping zero entries of y. N²/2 multiply-adds.
 ///
 /// Errors: [`GpError::InvalidModel`] if `l.len() != N(N+1)/2` for N = `v.len()`.
 pub fn forward_solve_packed(l: &[f64], v: &mut [f64]) -> Result<(), GpError> {
@@ -710,6 +740,30 @@ mod tests {
             mag += t.abs();
         }
         assert!((fused - naive).abs() <= 1e-15 * mag, "{fused} vs {naive}");
+    }
+
+    #[test]
+    fn kernel_row_range_is_a_slice_of_kernel_row() {
+        let (n, d) = (150, 3);
+        let mut inputs = [0.0; 450];
+        for (i, v) in inputs.iter_mut().enumerate() {
+            *v = ((i as f64 * 0.754_877_666_246_692_7) % 1.0) * 4.0 - 2.0;
+        }
+        let q = [0.3, -0.2, 0.9];
+        let mut full = [0.0; 150];
+        kernel_row(&inputs, n, &q, 1.7, &mut full).unwrap();
+        // starts off the block grid, ranges crossing blocks, empty, to the end
+        for (start, len) in [(0, 150), (1, 149), (63, 2), (65, 80), (149, 1), (150, 0), (7, 0)] {
+            let mut part = [0.0; 150];
+            kernel_row_range(&inputs, n, &q, 1.7, start, &mut part[..len]).unwrap();
+            for i in 0..len {
+                assert_eq!(part[i].to_bits(), full[start + i].to_bits(), "{start} {i}");
+            }
+        }
+        let mut out = [0.0; 3];
+        assert!(kernel_row_range(&inputs, n, &q, 1.7, 148, &mut out).is_err());
+        assert!(kernel_row_range(&inputs, n, &q, 1.7, usize::MAX, &mut out).is_err());
+        assert!(kernel_row_range(&inputs, n, &q[..2], 1.7, 0, &mut out).is_err());
     }
 
     #[test]

@@ -25,9 +25,11 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt;
 use faer::linalg::matmul::triangular::{self as trmm, BlockStructure};
 use faer::linalg::triangular_inverse::invert_lower_triangular;
-use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, Par};
+
+use vigp_core::gp as core_gp;
 
 use super::error::GpError;
 use super::kernel::Hyperparameters;
@@ -61,7 +63,9 @@ pub(crate) struct Factor {
 /// size N² (the N×N matrices are created on first use and then reused).
 pub(crate) struct LmlWorkspace {
     n: usize,
-    /// Inputs scaled by the current length scales, row-major N × d.
+    /// Inputs scaled by the current length scales, column-major d × N
+    /// (dimension j of point a at `j·N + a`), the layout of the vectorised
+    /// kernel rows.
     xs: Vec<f64>,
     /// Noise-free kernel matrix K_f (lower triangle).
     kf: Mat<f64>,
@@ -74,6 +78,8 @@ pub(crate) struct LmlWorkspace {
     /// NB × N scratch for the blocked triangular inverse.
     tmp: Mat<f64>,
     alpha: Vec<f64>,
+    /// One column's gradient weights (α_aα_b − A⁻¹_ab)·K_ab, gradient only.
+    kw: Vec<f64>,
     /// Scratch of faer's Cholesky of one NB × NB diagonal block.
     mem: MemBuffer,
 }
@@ -89,6 +95,7 @@ impl LmlWorkspace {
             ainv: Mat::new(),
             tmp: Mat::new(),
             alpha: vec![0.0; n],
+            kw: Vec::new(),
             mem: MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
                 NB.min(n),
                 Par::Seq,
@@ -103,6 +110,7 @@ impl LmlWorkspace {
             self.linv = Mat::zeros(n, n);
             self.ainv = Mat::zeros(n, n);
             self.tmp = Mat::zeros(NB.min(n), n);
+            self.kw = vec![0.0; n];
         }
     }
 }
@@ -120,6 +128,19 @@ fn scale_inputs_into(x: &[f64], d: usize, ls: &[f64], xs: &mut Vec<f64>) {
     for row in xs.chunks_exact_mut(d) {
         for (v, l) in row.iter_mut().zip(ls) {
             *v /= l;
+        }
+    }
+}
+
+/// x (row-major N × d) scaled by the length scales, transposed:
+/// xs[j·N + a] = x[a, j] / ℓ_j (column-major d × N).
+fn scale_inputs_colmajor_into(x: &[f64], d: usize, ls: &[f64], xs: &mut Vec<f64>) {
+    let n = x.len() / d.max(1);
+    xs.clear();
+    xs.resize(x.len(), 0.0);
+    for (a, row) in x.chunks_exact(d).enumerate() {
+        for (j, (v, l)) in row.iter().zip(ls).enumerate() {
+            xs[j * n + a] = v / l;
         }
     }
 }
@@ -143,25 +164,126 @@ fn col_slice(m: &Mat<f64>, j: usize) -> &[f64] {
 }
 
 /// Noise-free kernel matrix K_f (lower triangle incl. diagonal) from scaled
-/// inputs; entries below e^{−R2_CUTOFF/2}·σ_f² are stored as 0.
+/// inputs `xs` (column-major d × N); entries below e^{−R2_CUTOFF/2}·σ_f²
+/// are stored as 0. Column b below the diagonal is one
+/// [`core_gp::kernel_row_range`], compiled for AVX2 where the CPU has it
+/// (pulp's dispatch; the same bits on every path: elementwise arithmetic,
+/// the exponential within 1 ulp of the correctly rounded one).
 fn kernel_lower_into(xs: &[f64], n: usize, d: usize, sf2: f64, k: &mut Mat<f64>) {
-    for b in 0..n {
-        let xb = &xs[b * d..(b + 1) * d];
-        let col = k
-            .col_mut(b)
-            .try_as_col_major_mut()
-            .expect("Mat columns are contiguous")
-            .as_slice_mut();
-        col[b] = sf2;
-        for (a, c) in col.iter_mut().enumerate().skip(b + 1) {
-            let r2 = sqdist(&xs[a * d..(a + 1) * d], xb);
-            *c = if r2 > R2_CUTOFF {
-                0.0
-            } else {
-                sf2 * (-0.5 * r2).exp()
-            };
+    struct Op<'a> {
+        xs: &'a [f64],
+        n: usize,
+        d: usize,
+        sf2: f64,
+        k: &'a mut Mat<f64>,
+    }
+    impl pulp::WithSimd for Op<'_> {
+        type Output = ();
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) {
+            let Op { xs, n, d, sf2, k } = self;
+            let mut q = vec![0.0; d];
+            for b in 0..n {
+                for (j, qj) in q.iter_mut().enumerate() {
+                    *qj = xs[j * n + b];
+                }
+                let col = k
+                    .col_mut(b)
+                    .try_as_col_major_mut()
+                    .expect("Mat columns are contiguous")
+                    .as_slice_mut();
+                col[b] = sf2;
+                core_gp::kernel_row_range(xs, n, &q, sf2, b + 1, &mut col[b + 1..n])
+                    .expect("shapes fixed by the workspace");
+            }
         }
     }
+    debug_assert_eq!(R2_CUTOFF, core_gp::R2_CUTOFF);
+    pulp::Arch::new().dispatch(Op { xs, n, d, sf2, k });
+}
+
+/// The strict-lower-triangle pass of the gradient: adds
+/// Σ_{a>b} W_ab·K_ab·(x̃_aj − x̃_bj)² to `gl[j]` (W = ααᵀ − A⁻¹) and
+/// returns Σ_a W_aa. Column b's weights W_ab·K_ab go to `kw` once, then
+/// each dimension is one contiguous multiply-add pass over that column
+/// with 8 interleaved partial sums (a fixed order, so the bits are the
+/// same on every run and thread count), compiled for AVX2 where the CPU
+/// has it.
+#[allow(clippy::too_many_arguments)]
+fn gradient_pass(
+    xs: &[f64],
+    n: usize,
+    d: usize,
+    alpha: &[f64],
+    ainv: &Mat<f64>,
+    kf: &Mat<f64>,
+    kw: &mut [f64],
+    gl: &mut [f64],
+) -> f64 {
+    struct Op<'a> {
+        xs: &'a [f64],
+        n: usize,
+        d: usize,
+        alpha: &'a [f64],
+        ainv: &'a Mat<f64>,
+        kf: &'a Mat<f64>,
+        kw: &'a mut [f64],
+        gl: &'a mut [f64],
+    }
+    impl pulp::WithSimd for Op<'_> {
+        type Output = f64;
+        #[inline(always)]
+        fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
+            const LANES: usize = 8;
+            let Op { xs, n, d, alpha, ainv, kf, kw, gl } = self;
+            let mut w_diag = 0.0;
+            for b in 0..n {
+                let ac = col_slice(ainv, b);
+                let kc = col_slice(kf, b);
+                let ab = alpha[b];
+                w_diag += ab * ab - ac[b];
+                let w = &mut kw[b + 1..n];
+                for (((w, &aa), &ai), &k) in w
+                    .iter_mut()
+                    .zip(&alpha[b + 1..n])
+                    .zip(&ac[b + 1..n])
+                    .zip(&kc[b + 1..n])
+                {
+                    *w = (aa * ab - ai) * k;
+                }
+                for (j, g) in gl.iter_mut().enumerate().take(d) {
+                    let xc = &xs[j * n + b + 1..(j + 1) * n];
+                    let xb = xs[j * n + b];
+                    let mut acc = [0.0; LANES];
+                    let mut cw = w.chunks_exact(LANES);
+                    let mut cx = xc.chunks_exact(LANES);
+                    for (wl, xl) in (&mut cw).zip(&mut cx) {
+                        for l in 0..LANES {
+                            let u = xl[l] - xb;
+                            acc[l] += wl[l] * (u * u);
+                        }
+                    }
+                    for (l, (wl, xl)) in cw.remainder().iter().zip(cx.remainder()).enumerate() {
+                        let u = xl - xb;
+                        acc[l] += wl * (u * u);
+                    }
+                    *g += ((acc[0] + acc[1]) + (acc[2] + acc[3]))
+                        + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
+                }
+            }
+            w_diag
+        }
+    }
+    pulp::Arch::new().dispatch(Op {
+        xs,
+        n,
+        d,
+        alpha,
+        ainv,
+        kf,
+        kw,
+        gl,
+    })
 }
 
 /// Sets the entries of `m` with |v| < tau to 0 (`m` has unit row stride).
@@ -333,39 +455,16 @@ pub(crate) fn factorise(
     par: Par,
 ) -> Result<Factor, GpError> {
     let mut ws = LmlWorkspace::new(n);
-    kernel_lower_into(xs, n, d, hp.signal_variance, &mut ws.kf);
-    let jitter = factorise_ws(&mut ws, hp, start_jitter, par)?;
-    Ok(Factor { l: ws.l, jitter })
-}
-
-/// Solves L·v = b in place (forward substitution, column-oriented).
-#[inline]
-pub(crate) fn forward_solve(l: &Mat<f64>, v: &mut [f64]) {
-    let n = v.len();
-    for j in 0..n {
-        let col = col_slice(l, j);
-        let vj = v[j] / col[j];
-        v[j] = vj;
-        if vj != 0.0 {
-            for (vi, lij) in v[j + 1..].iter_mut().zip(&col[j + 1..]) {
-                *vi -= lij * vj;
-            }
+    // `xs` is row-major N × d; the kernel rows read it column-major.
+    let mut xc = vec![0.0; xs.len()];
+    for (a, row) in xs.chunks_exact(d).enumerate() {
+        for (j, v) in row.iter().enumerate() {
+            xc[j * n + a] = *v;
         }
     }
-}
-
-/// Solves Lᵀ·x = v in place (backward substitution, column dot products).
-pub(crate) fn backward_solve(l: &Mat<f64>, v: &mut [f64]) {
-    let n = v.len();
-    for j in (0..n).rev() {
-        let col = col_slice(l, j);
-        let s: f64 = v[j + 1..]
-            .iter()
-            .zip(&col[j + 1..])
-            .map(|(a, b)| a * b)
-            .sum();
-        v[j] = (v[j] - s) / col[j];
-    }
+    kernel_lower_into(&xc, n, d, hp.signal_variance, &mut ws.kf);
+    let jitter = factorise_ws(&mut ws, hp, start_jitter, par)?;
+    Ok(Factor { l: ws.l, jitter })
 }
 
 /// ln det A = 2 Σ ln L_ii.
@@ -411,12 +510,16 @@ pub(crate) fn lml_ws(
 ) -> Result<LmlEval, GpError> {
     let n = ws.n;
     let hp = Hyperparameters::from_log(log_params)?;
-    scale_inputs_into(x, d, &hp.length_scales, &mut ws.xs);
+    scale_inputs_colmajor_into(x, d, &hp.length_scales, &mut ws.xs);
     kernel_lower_into(&ws.xs, n, d, hp.signal_variance, &mut ws.kf);
     let jitter = factorise_ws(ws, &hp, 0.0, par)?;
     ws.alpha.copy_from_slice(y);
-    forward_solve(&ws.l, &mut ws.alpha);
-    backward_solve(&ws.l, &mut ws.alpha);
+    {
+        // α = L⁻ᵀL⁻¹y with faer's blocked, vectorised triangular solves.
+        let mut a = faer::MatMut::from_column_major_slice_mut(&mut ws.alpha, n, 1);
+        solve_lower_triangular_in_place(ws.l.as_ref(), a.rb_mut(), Par::Seq);
+        solve_upper_triangular_in_place(ws.l.as_ref().transpose(), a, Par::Seq);
+    }
     let alpha = &ws.alpha;
     let fit: f64 = y.iter().zip(alpha).map(|(a, b)| a * b).sum();
     let value =
@@ -440,29 +543,10 @@ pub(crate) fn lml_ws(
             1.0,
             par,
         );
-        let alpha = &ws.alpha;
-        let xs = &ws.xs;
         let mut gl = vec![0.0; d];
-        let mut w_diag = 0.0; // Σ_a W_aa
-        for b in 0..n {
-            let ac = col_slice(&ws.ainv, b);
-            let kc = col_slice(&ws.kf, b);
-            let xb = &xs[b * d..(b + 1) * d];
-            let ab = alpha[b];
-            w_diag += ab * ab - ac[b];
-            for a in b + 1..n {
-                let k = kc[a];
-                if k == 0.0 {
-                    continue;
-                }
-                let kw = (alpha[a] * ab - ac[a]) * k;
-                let xa = &xs[a * d..(a + 1) * d];
-                for ((g, p), q) in gl.iter_mut().zip(xa).zip(xb) {
-                    let u = p - q;
-                    *g += kw * u * u;
-                }
-            }
-        }
+        let w_diag = gradient_pass(
+            &ws.xs, n, d, &ws.alpha, &ws.ainv, &ws.kf, &mut ws.kw, &mut gl,
+        );
         gradient.extend_from_slice(&gl);
         // ∂A/∂ln σ_f² = K = A − λI with λ = σ_n² + jitter, so
         // ½ tr(W K) = ½ tr(W A) − ½λ tr W = ½(rᵀα − N) − ½λ Σ_a W_aa
