@@ -5,6 +5,7 @@
 //! ```text
 //! vigp fit     --system NAME --data train.csv --out model.json
 //!              [--encoding sincos|minimal|maximal] [--prior nominal|constant] [--restarts K]
+//!              [--max-samples N] [--sparse M]
 //! vigp score   --model model.json --data test.csv --steps 20
 //! vigp predict --model model.json --data starts.csv --steps K --out pred.csv
 //! vigp export  --model model.json --out model.rs [--variance]
@@ -12,7 +13,9 @@
 //!
 //! * `fit` reads measured positions ([`crate::data`] format), builds the
 //!   transitions, trains a [`Learned`] model on at most `--max-samples`
-//!   of them (evenly spaced; GP training is O(N³)) with the mechanism's
+//!   of them (evenly spaced; default 512, as exact GP training is O(N³);
+//!   `--sparse M` trains the sparse variational GP with M inducing points
+//!   on all of them, O(N·M²)) with the mechanism's
 //!   DSL parameters as nominal prior (change them with
 //!   `--set links.pole.mass=1.1`), and saves it as one JSON file.
 //!   `--encoding minimal` learns on the minimal coordinates as they are,
@@ -59,7 +62,7 @@ use rayon::prelude::*;
 
 use crate::bound::{BoundError, BoundKind, Calibration};
 use crate::data::{DataError, Dataset, ReadOptions};
-use crate::gp::{GpError, TrainOptions};
+use crate::gp::{GpError, Method, SparseOptions, TrainOptions};
 use crate::learned::{
     EmbeddedExport, Encoding, LearnError, Learned, LoadError, Prior, SavedLearned, Transition,
     transitions,
@@ -248,9 +251,18 @@ struct FitArgs {
     /// Seed of the restarts.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Largest number of training transitions (evenly spaced over the data).
-    #[arg(long, default_value_t = 512)]
-    max_samples: usize,
+    /// Largest number of training transitions (evenly spaced over the data);
+    /// default 512 for the exact GP, every transition with `--sparse`.
+    #[arg(long)]
+    max_samples: Option<usize>,
+    /// Train Titsias' sparse variational GP with M inducing points
+    /// (k-means++ on the inputs) instead of the exact GP: O(N·M²) per
+    /// likelihood evaluation instead of O(N³), so long logs can be used
+    /// whole. `predict` bounds such a model with the conformal bound only
+    /// (`--calibration`; Theorem 1 and RKHS assume the exact GP), and
+    /// `export` writes its mean (M inducing points), not its variance.
+    #[arg(long, value_name = "M")]
+    sparse: Option<usize>,
     /// Change a nominal parameter, e.g. `--set links.pole.mass=1.1` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
@@ -558,6 +570,17 @@ fn read_data<const N: usize>(
 }
 
 /// Evenly spaced selection of at most `max` items.
+/// ", sparse GP, M = …" for a sparse model, "" for an exact one.
+fn sparse_note(gp: &crate::gp::Gp) -> String {
+    match gp.outputs().first() {
+        Some(o) if gp.is_sparse() => format!(", sparse GP, M = {}", o.alpha_normalised().len()),
+        _ => String::new(),
+    }
+}
+
+/// `--max-samples` of the exact GP when none is given (training is O(N³)).
+const DEFAULT_MAX_SAMPLES: usize = 512;
+
 fn spread<T: Copy>(all: &[T], max: usize) -> Vec<T> {
     if all.len() <= max {
         return all.to_vec();
@@ -721,8 +744,13 @@ where
             ),
         )?;
     }
-    if a.max_samples == 0 {
+    if a.max_samples == Some(0) {
         return Err(CliError::Usage("--max-samples must be at least 1".into()));
+    }
+    if a.sparse == Some(0) {
+        return Err(CliError::Usage(
+            "--sparse needs at least 1 inducing point".into(),
+        ));
     }
     if a.restarts > vigp_runtime::gp::MAX_RESTARTS {
         return Err(CliError::Usage(format!(
@@ -737,6 +765,10 @@ where
     let opts = TrainOptions {
         restarts: a.restarts,
         seed: a.seed,
+        method: match a.sparse {
+            Some(m) => Method::Sparse(SparseOptions::kmeans(m)),
+            None => Method::Exact,
+        },
         ..TrainOptions::default()
     };
     match a.encoding {
@@ -779,18 +811,33 @@ fn fit_view<M, const N: usize, const C: usize>(
 where
     M: Mechanism<N, C> + Parameters + Clone,
 {
-    let chosen = spread(all, a.max_samples);
+    let max = match (a.max_samples, a.sparse) {
+        (Some(max), _) => max,
+        (None, Some(_)) => usize::MAX,
+        (None, None) => DEFAULT_MAX_SAMPLES,
+    };
+    let chosen = spread(all, max);
+    if let Some(m) = a.sparse.filter(|&m| m > chosen.len()) {
+        return Err(CliError::Usage(format!(
+            "--sparse {m}: more inducing points than the {} training transitions",
+            chosen.len()
+        )));
+    }
     let d = encoding.dim(&M::KINDS);
     w(
         out,
         format_args!(
             "fit: {} in coordinates [{}], {encoding:?} encoding ({d} inputs), {prior:?} prior: \
-             N = {} of {} transitions, {} restarts",
+             N = {} of {} transitions, {} restarts{}",
             M::NAME,
             M::COORDINATES.join(", "),
             chosen.len(),
             all.len(),
-            opts.restarts
+            opts.restarts,
+            match a.sparse {
+                Some(m) => format!(", sparse GP with {m} inducing points"),
+                None => String::new(),
+            }
         ),
     )?;
     let pb = spinner(format!(
@@ -879,12 +926,13 @@ where
     w(
         out,
         format_args!(
-            "model: {} ({} coordinates, {:?} encoding, {:?} prior, N = {}, dt = {dt} s)",
+            "model: {} ({} coordinates, {:?} encoding, {:?} prior, N = {}{}, dt = {dt} s)",
             a.model.display(),
             K,
             learned.encoding(),
             learned.prior(),
-            learned.gp().n()
+            learned.gp().n(),
+            sparse_note(learned.gp())
         ),
     )?;
     w(
@@ -1103,9 +1151,14 @@ where
                  and the {} bound",
                 f.kind_name()
             ),
-            (None, "conformal") => {
-                "outside the calibrated region: the conformal guarantee does not cover them".into()
-            }
+            (None, "conformal") => format!(
+                "outside the calibrated region: the conformal guarantee does not cover them{}",
+                if learned.gp().is_sparse() {
+                    " (a sparse GP has no rigorous bound to fall back to)"
+                } else {
+                    ""
+                }
+            ),
             _ => {
                 "outside the box of the training inputs, where the bound's constants were estimated"
                     .into()
@@ -1152,15 +1205,18 @@ where
         )],
     };
     let (src, size) = learned.to_embedded_source(&opts)?;
+    let sparse = learned.gp().is_sparse();
     std::fs::write(&a.out, &src).map_err(io_error(&a.out))?;
     w(
         out,
         format_args!(
-            "wrote {}: {} GPs on N = {} points, d = {} inputs{}: {} numbers = {} bytes of f64 data \
-             ({}), {} bytes of source",
+            "wrote {}: {} GPs on {} = {} {}points, d = {} inputs{}: {} numbers = {} bytes of f64 \
+             data ({}), {} bytes of source",
             a.out.display(),
             size.outputs,
+            if sparse { "M" } else { "N" },
             size.n,
+            if sparse { "inducing " } else { "" },
             size.input_dim,
             if learned.inputs() > 0 {
                 format!(
@@ -1174,6 +1230,8 @@ where
             size.data_bytes,
             if a.variance {
                 "mean and variance"
+            } else if sparse {
+                "mean only: a sparse model exports no variance"
             } else {
                 "mean only; --variance adds the Cholesky factors"
             },

@@ -1046,3 +1046,73 @@ fn a_conformal_bound_survives_a_fallback_without_variance() {
         "the test does not exercise both cases"
     );
 }
+
+/// A sparse GP (SGPR) has no exact posterior: Theorem 1 and the RKHS bound
+/// are typed errors that name the conformal bound, and the conformal bound
+/// works, without a fallback whatever the setting (its flagged states keep
+/// their conformal bound, as with `Fallback::None`).
+#[test]
+fn a_sparse_model_is_bounded_conformally_only() {
+    use vigp::gp::{Method, SparseOptions};
+    let data: Vec<Transition<1>> = pendulum_windows(5, 60, 2)
+        .iter()
+        .map(|w| Transition {
+            z: w.start,
+            v_next: (w.positions[1] - w.positions[0]) / DT,
+        })
+        .collect();
+    let opts = TrainOptions {
+        method: Method::Sparse(SparseOptions::kmeans(16)),
+        ..TrainOptions::default()
+    };
+    let (sparse, _) = Learned::train(
+        Pendulum::default().minimal(),
+        DT,
+        &data,
+        Encoding::SinCos,
+        Prior::Nominal,
+        &opts,
+    )
+    .unwrap();
+    assert!(sparse.gp().is_sparse());
+    let cal = calibration();
+    for (kind, name) in [
+        (BoundKind::theorem1(0.05), "Theorem-1"),
+        (BoundKind::rkhs(0.05), "RKHS"),
+    ] {
+        let e = sparse.error_bound(&kind, cal).unwrap_err();
+        assert!(
+            matches!(e, BoundError::SparseModel { kind } if kind == name),
+            "{e}"
+        );
+        assert!(e.to_string().contains("use the conformal bound"), "{e}");
+    }
+    let flag_only = sparse
+        .error_bound(
+            &BoundKind::Conformal(ConformalSettings {
+                fallback: Fallback::None,
+                ..ConformalSettings::default()
+            }),
+            cal,
+        )
+        .unwrap();
+    for fallback in [Fallback::Rkhs, Fallback::Theorem1] {
+        let b = sparse
+            .error_bound(
+                &BoundKind::Conformal(ConformalSettings {
+                    fallback,
+                    ..ConformalSettings::default()
+                }),
+                cal,
+            )
+            .unwrap();
+        assert!(b.fallback.is_none());
+        let z = data[7].z;
+        let (p, q) = (
+            sparse.predict(&z, 5, &b).unwrap(),
+            sparse.predict(&z, 5, &flag_only).unwrap(),
+        );
+        assert_eq!(p.one_step_bounds, q.one_step_bounds);
+        assert!(p.one_step_bounds.iter().all(|v| v.is_finite() && *v > 0.0));
+    }
+}

@@ -398,6 +398,122 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// `fit --sparse M` trains the sparse GP on every transition (the exact
+/// GP takes at most 512 by default); its model scores, predicts with the
+/// conformal bound, refuses the bounds that assume the exact posterior with
+/// a message that says so, and exports its M inducing points.
+#[test]
+fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
+    let dir = temp_dir("sparse");
+    let mut truth = Cartpole::default();
+    truth.links.pole.mass *= 1.1;
+    truth.joints.rail.damping = 0.5;
+    truth.joints.hinge.damping = 0.1;
+    let (train, test, cal) = (
+        dir.join("train.csv"),
+        dir.join("test.csv"),
+        dir.join("cal.csv"),
+    );
+    std::fs::write(&train, measured_csv(truth.minimal(), 0..4, 11)).unwrap();
+    std::fs::write(&test, measured_csv(truth.minimal(), 100..102, 12)).unwrap();
+    std::fs::write(&cal, measured_csv(truth.minimal(), 200..204, 13)).unwrap();
+    let model = dir.join("model.json");
+    let fit_args = |sparse: &'static str| {
+        [
+            "fit",
+            "--system",
+            "cartpole",
+            "--data",
+            s(&train),
+            "--out",
+            s(&model),
+            "--restarts",
+            "0",
+            "--sparse",
+            sparse,
+        ]
+        .map(str::to_owned)
+    };
+    let tool = vigp::cli::paper_systems();
+    let fit_error = |sparse| {
+        let args = std::iter::once("vigp".to_owned()).chain(fit_args(sparse));
+        vigp::cli::run(&tool, args, &mut Vec::new())
+            .unwrap_err()
+            .to_string()
+    };
+    // 4 runs of 200 samples: 4 × 198 transitions, all of them (more than
+    // the exact GP's default 512)
+    let out = vigp(&fit_args("32").each_ref().map(String::as_str));
+    assert!(
+        out.contains("N = 792 of 792 transitions")
+            && out.contains("sparse GP with 32 inducing points"),
+        "{out}"
+    );
+    let report = vigp(&[
+        "score",
+        "--model",
+        s(&model),
+        "--data",
+        s(&test),
+        "--steps",
+        "20",
+    ]);
+    assert!(report.contains("N = 792, sparse GP, M = 32"), "{report}");
+    let (nominal, learned) = mse_line(&report);
+    assert!(
+        learned < nominal,
+        "learned {learned:e} ≥ nominal {nominal:e}"
+    );
+    let pred = dir.join("pred.csv");
+    // without calibration runs the RKHS bound is asked for: refused, and
+    // the message says why and what to use (it was "invalid saved model:
+    // log_det_normalised is defined for exact GPs only")
+    for bound in ["rkhs", "theorem1"] {
+        let mut args = vec!["vigp"];
+        args.extend(predict_args(s(&model), s(&test), "5", s(&pred)));
+        args.extend(["--bound", bound]);
+        let e = vigp::cli::run(&tool, args, &mut Vec::new())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("assumes the exact GP posterior, and this model is a sparse GP")
+                && e.contains("use the conformal bound"),
+            "{e}"
+        );
+    }
+    // the conformal bound (it failed on the RKHS fallback's log det)
+    let mut args = predict_args(s(&model), s(&test), "5", s(&pred));
+    args.extend(["--calibration", s(&cal)]);
+    let out = vigp(&args);
+    assert!(out.contains("conformal"), "{out}");
+    let text = std::fs::read_to_string(&pred).unwrap();
+    let rows: Vec<&str> = text.lines().skip(1).collect();
+    assert_eq!(rows.len(), 2 * 6);
+    let v1: f64 = rows[1].rsplit(',').nth(1).unwrap().parse().unwrap();
+    assert!(v1.is_finite() && v1 > 0.0, "{}", rows[1]);
+    // export: the M inducing points, not the N training samples
+    let rs = dir.join("model.rs");
+    let out = vigp(&["export", "--model", s(&model), "--out", s(&rs)]);
+    // per output: 32 points × (5 inputs + 1 weight) + 3·5 + 3 constants
+    assert!(
+        out.contains("M = 32 inducing points")
+            && out.contains(&format!("{} numbers", 2 * (32 * 6 + 18))),
+        "{out}"
+    );
+    // more inducing points than transitions, or none: usage errors
+    let e = fit_error("5000");
+    assert!(
+        e.contains("--sparse 5000: more inducing points than the 792 training transitions"),
+        "{e}"
+    );
+    let e = fit_error("0");
+    assert!(
+        e.contains("--sparse needs at least 1 inducing point"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn usage_errors_are_reported_not_panicked() {
     let tool = vigp::cli::paper_systems();

@@ -134,6 +134,19 @@ pub enum BoundError {
         /// The steps asked for.
         requested: usize,
     },
+    /// A Theorem-1 or RKHS bound asked of a sparse GP (trained with
+    /// [`Method::Sparse`](crate::gp::Method::Sparse)): both bound the
+    /// distance to the *exact* posterior mean with the exact posterior
+    /// variance, which a sparse model does not have. The conformal bound,
+    /// calibrated on held-out runs, makes no such assumption.
+    #[error(
+        "the {kind} bound assumes the exact GP posterior, and this model is a sparse GP: \
+         use the conformal bound (held-out calibration runs)"
+    )]
+    SparseModel {
+        /// `"Theorem-1"` or `"RKHS"`.
+        kind: &'static str,
+    },
     /// The bound was computed for another model (output count or Δt).
     #[error("bound and model do not match: {0}")]
     Mismatch(&'static str),
@@ -340,7 +353,9 @@ pub enum Fallback {
     /// ([`BoundedPrediction::outside`]).
     None,
     /// Flag, and fall back to the RKHS bound (default settings, same δ),
-    /// whose guarantee covers every input. (Where the GP variance is lost
+    /// whose guarantee covers every input. (A sparse GP has no such bound,
+    /// [`BoundError::SparseModel`]: its flagged states keep their conformal
+    /// bound, as with [`Fallback::None`], whatever the setting.) (Where the GP variance is lost
     /// to rounding — a model trained on noise-free data, σ_n² at its floor
     /// — the RKHS bound would be 0: such a flagged state keeps its
     /// conformal bound and its flag, as with [`Fallback::None`].)
@@ -814,6 +829,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             let parts = conformal::calibrate(self, s, calibration, &noise_std)?;
             let mut b = bound(BoundParts::Conformal(parts), 1.0, 0);
             let fallback = match s.fallback {
+                // No rigorous bound covers a sparse GP: flag only.
+                _ if gp.is_sparse() => None,
                 Fallback::None => None,
                 Fallback::Rkhs => Some(BoundKind::rkhs(s.delta)),
                 Fallback::Theorem1 => Some(BoundKind::theorem1(s.delta)),
@@ -824,6 +841,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             return Ok(b);
         }
         check_delta(kind.delta())?;
+        if gp.is_sparse() {
+            return Err(BoundError::SparseModel {
+                kind: match kind {
+                    BoundKind::Rkhs(_) => "RKHS",
+                    _ => "Theorem-1",
+                },
+            });
+        }
         let samples = self.sample_states(calibration);
         let mut ws = self.workspace();
         let mut sigma = vec![Vec::with_capacity(samples.len()); p];

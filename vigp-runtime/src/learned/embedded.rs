@@ -41,7 +41,8 @@ impl Default for EmbeddedExport {
 /// What an export holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct ExportSize {
-    /// Training points N.
+    /// Points in the exported arrays: the training points N of an exact
+    /// GP, the inducing points M of a sparse one.
     pub n: usize,
     /// GP inputs d.
     pub input_dim: usize,
@@ -90,7 +91,14 @@ where
         };
         let mut s = self.gp.to_rust_source(&gp_opts)?;
         let core = &opts.core_path;
-        let (n, d, p) = (self.gp.n(), self.gp.input_dim(), self.gp.output_dim());
+        let (d, p) = (self.gp.input_dim(), self.gp.output_dim());
+        // Points in the exported arrays: the N training points of an exact
+        // GP, the M inducing points of a sparse one.
+        let n = self
+            .gp
+            .outputs()
+            .first()
+            .map_or(self.gp.n(), |o| o.alpha_normalised().len());
         let lit = |v: f64| format!("{v:?}");
         let coords: Vec<String> = M::COORDINATES.iter().map(|c| format!("{c:?}")).collect();
         if self.inputs > M::INPUT_NAMES.len() {
