@@ -753,7 +753,15 @@ mod tests {
         let mut full = [0.0; 150];
         kernel_row(&inputs, n, &q, 1.7, &mut full).unwrap();
         // starts off the block grid, ranges crossing blocks, empty, to the end
-        for (start, len) in [(0, 150), (1, 149), (63, 2), (65, 80), (149, 1), (150, 0), (7, 0)] {
+        for (start, len) in [
+            (0, 150),
+            (1, 149),
+            (63, 2),
+            (65, 80),
+            (149, 1),
+            (150, 0),
+            (7, 0),
+        ] {
             let mut part = [0.0; 150];
             kernel_row_range(&inputs, n, &q, 1.7, start, &mut part[..len]).unwrap();
             for i in 0..len {

@@ -25,7 +25,9 @@ use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt;
 use faer::linalg::matmul::triangular::{self as trmm, BlockStructure};
 use faer::linalg::triangular_inverse::invert_lower_triangular;
-use faer::linalg::triangular_solve::{solve_lower_triangular_in_place, solve_upper_triangular_in_place};
+use faer::linalg::triangular_solve::{
+    solve_lower_triangular_in_place, solve_upper_triangular_in_place,
+};
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, MatMut, Par};
 
@@ -235,7 +237,16 @@ fn gradient_pass(
         #[inline(always)]
         fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
             const LANES: usize = 8;
-            let Op { xs, n, d, alpha, ainv, kf, kw, gl } = self;
+            let Op {
+                xs,
+                n,
+                d,
+                alpha,
+                ainv,
+                kf,
+                kw,
+                gl,
+            } = self;
             let mut w_diag = 0.0;
             for b in 0..n {
                 let ac = col_slice(ainv, b);
