@@ -599,7 +599,7 @@ fn norm2<const N: usize>(a: &nalgebra::SMatrix<f64, N, N>) -> f64 {
 }
 
 /// The reference for `Learned::step_jacobian_norms`: five-point central
-/// differences ([`common::stencil`], h = 1e-4·max(|x|, 1)) of z ↦ v′ of
+/// differences ([`common::stencil`], h = 1e-3·max(|x|, 1)) of z ↦ v′ of
 /// `step_mean_with`, each perturbed state first made consistent when the
 /// model projects, i.e. the definition the analytic derivative implements,
 /// evaluated a second way.
@@ -612,7 +612,7 @@ fn fd_norms<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
     let mut dv = dq;
     for k in 0..2 * N {
         let x = if k < N { z.q[k] } else { z.v[k - N] };
-        let (_, col) = common::stencil(1e-4 * x.abs().max(1.0), |e| {
+        let (_, col) = common::stencil(1e-3 * x.abs().max(1.0), |e| {
             let mut p = *z;
             if k < N {
                 p.q[k] += e;
@@ -669,10 +669,13 @@ fn noisy_transitions<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: u
 /// Off the manifold they are the norms at the consistent state (1e-9: the
 /// projection of a projected state moves it by rounding only).
 ///
-/// Tolerance 1e-6 relative to the norm: the differences' truncation is
-/// ~h⁴ = 1e-16 times the fifth derivative and their rounding
-/// ~1e-16·‖α‖₁/h, which sat at 1e-10–3e-7 here with two-point central
-/// differences (h = 1e-3 and 1e-4 agreed, h = 1e-5 was rounding-bound). An error in the chain rule (a dropped term of the
+/// Tolerance 1e-6 relative to the norm: the five-point differences'
+/// truncation is ~h⁴ = 1e-12 times the fifth derivative and their rounding
+/// ~1e-16·‖α‖₁/h. Measured on the pendulum model here (noise-level weights
+/// ‖α‖₁ after the training kernel's exponential changed in its last bit):
+/// worst relative error 9.1e-8 at h = 1e-3, 1.9e-7 at 3e-4, 1.1e-6 at 1e-4,
+/// 9.4e-6 at 1e-5 — the 1/h of rounding, so h = 1e-3 (1e-4 before). An
+/// error in the chain rule (a dropped term of the
 /// projection's derivative or of the consistent-state map) changes the
 /// norms by O(1), the off-manifold directions being amplified by 1/Δt;
 /// the power iteration used before for ‖·‖₂ missed the fourbar's norm by
@@ -903,7 +906,11 @@ proptest! {
     /// No setting yields a NaN, negative or infinite bound without a typed
     /// error: either `error_bound` fails, or every constant, every one-step
     /// bound (at any finite σ ≥ 0) and every position bound of a 5-step
-    /// prediction is finite and ≥ 0.
+    /// prediction is finite and ≥ 0. `model()` is fitted to noise-free data
+    /// (σ_n² at its floor), so a prediction may also meet a state whose GP
+    /// variance is lost to rounding: that is `VarianceLost`, the typed
+    /// error for a variance-based bound that would be 0 (which state, if
+    /// any, depends on the last bits of the trained model).
     #[test]
     fn no_setting_gives_a_bad_bound(kind in any_kind(), sd in 0.0..1e3f64, start in 0usize..120) {
         let l = model();
@@ -927,7 +934,10 @@ proptest! {
                             prop_assert!(v.is_finite() && *v >= 0.0, "bound {}", v);
                         }
                     }
-                    Err(e) => prop_assert!(matches!(e, BoundError::NonFinite { .. }), "{e}"),
+                    Err(e) => prop_assert!(
+                        matches!(e, BoundError::NonFinite { .. } | BoundError::VarianceLost { .. }),
+                        "{e}"
+                    ),
                 }
             }
         }
