@@ -650,17 +650,13 @@ impl ViewVisitor for Visit<'_> {
             }
             Command::Export(a) => {
                 let saved = read_saved(&a.model)?;
-                if !in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
-                    return Err(CliError::Usage(format!(
-                        "{}: only models in minimal coordinates ({}) can run on the embedded learned step; \
-                         this one is in {}",
-                        a.model.display(),
-                        Mn::COORDINATES.join(", "),
-                        saved.coordinates.join(", ")
-                    )));
+                if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
+                    let l = load(&a.model, &saved, minimal)?;
+                    export(a, &l, out)
+                } else {
+                    let l = load(&a.model, &saved, maximal)?;
+                    export(a, &l, out)
                 }
-                let l = load(&a.model, &saved, minimal)?;
-                export(a, &l, out)
             }
         }
     }

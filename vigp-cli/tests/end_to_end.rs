@@ -500,6 +500,19 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
             && out.contains(&format!("{} numbers", 2 * (32 * 6 + 18))),
         "{out}"
     );
+    // a model in maximal coordinates exports too (the tool refused it,
+    // though the embedded engine steps either view)
+    let mut args = fit_args("16").to_vec();
+    args.extend(["--encoding".into(), "maximal".into()]);
+    vigp(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let out = vigp(&["export", "--model", s(&model), "--out", s(&rs)]);
+    assert!(out.contains("6 GPs on M = 16 inducing points"), "{out}");
+    let src = std::fs::read_to_string(&rs).unwrap();
+    assert!(
+        src.contains("LearnedModel<'static, 6, 12>")
+            && src.contains("LearnedStepper::new(Cartpole::default().maximal(), &LEARNED)"),
+        "{src:.300}"
+    );
     // more inducing points than transitions, or none: usage errors
     let e = fit_error("5000");
     assert!(

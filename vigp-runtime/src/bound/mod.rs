@@ -795,7 +795,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// Errors: invalid settings (NaN, ∞, negative, δ ∉ (0, 1), wrong
     /// lengths), too few or malformed calibration windows, calibration data
     /// with another Δt, a failed projection or prior step at a sample state,
-    /// or a constant that comes out non-finite.
+    /// a constant that comes out non-finite, or a rigorous kind asked of a
+    /// sparse GP ([`BoundError::SparseModel`]: a sparse model takes the
+    /// conformal kind, without a fallback).
     pub fn error_bound(
         &self,
         kind: &BoundKind,

@@ -44,10 +44,6 @@ pub(crate) const JITTER_MAX: f64 = 1e-3;
 /// Block size of the blocked Cholesky and triangular inverse.
 const NB: usize = 64;
 
-/// Squared scaled distance beyond which k = σ_f² e^{−r²/2} is stored as 0
-/// (e^{−345} ≈ 1e-150: far below rounding, far above the subnormal range).
-const R2_CUTOFF: f64 = 690.0;
-
 /// Entries of L (relative to √(σ_f² + σ_n²)) and of L⁻¹ (relative to
 /// 1/√(σ_f² + σ_n²)) below this are set to 0 during the blocked algorithms.
 const SCRUB: f64 = 1e-100;
@@ -167,6 +163,7 @@ fn col_slice(m: &Mat<f64>, j: usize) -> &[f64] {
 
 /// Noise-free kernel matrix K_f (lower triangle incl. diagonal) from scaled
 /// inputs `xs` (column-major d × N); entries below e^{−R2_CUTOFF/2}·σ_f²
+/// ([`core_gp::R2_CUTOFF`])
 /// are stored as 0. Column b below the diagonal is one
 /// [`core_gp::kernel_row_range`], compiled for AVX2 where the CPU has it
 /// (pulp's dispatch; the same bits on every path: elementwise arithmetic,
@@ -200,7 +197,6 @@ fn kernel_lower_into(xs: &[f64], n: usize, d: usize, sf2: f64, k: &mut Mat<f64>)
             }
         }
     }
-    debug_assert_eq!(R2_CUTOFF, core_gp::R2_CUTOFF);
     pulp::Arch::new().dispatch(Op { xs, n, d, sf2, k });
 }
 

@@ -132,7 +132,9 @@ where
         let _ = write!(
             s,
             "\n/// The learned model of `{mech}` (Δt = {dt} s, {encoding} encoding, {prior} prior{with_inputs}):\n\
-             /// step it with `{core}::LearnedStepper::new({mech}::default(), &{name})`.\n\
+             /// step it in the view it was trained in (`coordinates` below):\n\
+             /// `{core}::LearnedStepper::new({mech}::default(), &{name})` in minimal coordinates,\n\
+             /// `{core}::LearnedStepper::new({mech}::default().maximal(), &{name})` in maximal ones.\n\
              #[rustfmt::skip]\n\
              pub static {name}: {core}::learned::LearnedModel<'static, {N}, {d}> = {core}::learned::LearnedModel {{\n\
              \x20   mechanism: {mech:?},\n\
