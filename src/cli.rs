@@ -569,7 +569,6 @@ fn read_data<const N: usize>(
     })
 }
 
-/// Evenly spaced selection of at most `max` items.
 /// ", sparse GP, M = …" for a sparse model, "" for an exact one.
 fn sparse_note(gp: &crate::gp::Gp) -> String {
     match gp.outputs().first() {
@@ -581,6 +580,7 @@ fn sparse_note(gp: &crate::gp::Gp) -> String {
 /// `--max-samples` of the exact GP when none is given (training is O(N³)).
 const DEFAULT_MAX_SAMPLES: usize = 512;
 
+/// Evenly spaced selection of at most `max` items.
 fn spread<T: Copy>(all: &[T], max: usize) -> Vec<T> {
     if all.len() <= max {
         return all.to_vec();
