@@ -353,12 +353,12 @@ pub enum Fallback {
     /// ([`BoundedPrediction::outside`]).
     None,
     /// Flag, and fall back to the RKHS bound (default settings, same δ),
-    /// whose guarantee covers every input. (A sparse GP has no such bound,
-    /// [`BoundError::SparseModel`]: its flagged states keep their conformal
-    /// bound, as with [`Fallback::None`], whatever the setting.) (Where the GP variance is lost
+    /// whose guarantee covers every input. (Where the GP variance is lost
     /// to rounding — a model trained on noise-free data, σ_n² at its floor
     /// — the RKHS bound would be 0: such a flagged state keeps its
-    /// conformal bound and its flag, as with [`Fallback::None`].)
+    /// conformal bound and its flag, as with [`Fallback::None`]. A sparse
+    /// GP has no RKHS or Theorem-1 bound, [`BoundError::SparseModel`]: its
+    /// flagged states keep their conformal bound whatever the setting.)
     Rkhs,
     /// Flag, and fall back to the Theorem-1 bound (default settings, same δ).
     Theorem1,
