@@ -571,9 +571,10 @@ fn read_data<const N: usize>(
 
 /// ", sparse GP, M = …" for a sparse model, "" for an exact one.
 fn sparse_note(gp: &crate::gp::Gp) -> String {
-    match gp.outputs().first() {
-        Some(o) if gp.is_sparse() => format!(", sparse GP, M = {}", o.alpha_normalised().len()),
-        _ => String::new(),
+    if gp.is_sparse() {
+        format!(", sparse GP, M = {}", gp.posterior_points())
+    } else {
+        String::new()
     }
 }
 

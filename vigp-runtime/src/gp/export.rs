@@ -256,10 +256,7 @@ impl Gp {
     /// ```
     pub fn to_rust_source(&self, opts: &ExportOptions) -> Result<String, GpError> {
         let (d, p) = (self.d, self.p);
-        let n = self
-            .outputs
-            .first()
-            .map_or(self.n, |o| o.alpha_normalised().len());
+        let n = self.posterior_points();
         opts.validate(d)?;
         let outputs = (0..p)
             .map(|j| self.export_output(j, opts.cholesky))

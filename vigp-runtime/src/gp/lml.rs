@@ -451,10 +451,11 @@ fn factorise_ws(
     }
 }
 
-/// Cholesky of K_f + (σ_n² + jitter)·I, escalating the jitter from
-/// `start_jitter` (absolute; 0 = try without first) until it succeeds.
+/// Cholesky of K_f + (σ_n² + jitter)·I from the scaled inputs `xs_cols`
+/// (column-major d × N), escalating the jitter from `start_jitter`
+/// (absolute; 0 = try without first) until it succeeds.
 pub(crate) fn factorise(
-    xs: &[f64],
+    xs_cols: &[f64],
     n: usize,
     d: usize,
     hp: &Hyperparameters,
@@ -462,14 +463,7 @@ pub(crate) fn factorise(
     par: Par,
 ) -> Result<Factor, GpError> {
     let mut ws = LmlWorkspace::new(n);
-    // `xs` is row-major N × d; the kernel rows read it column-major.
-    let mut xc = vec![0.0; xs.len()];
-    for (a, row) in xs.chunks_exact(d).enumerate() {
-        for (j, v) in row.iter().enumerate() {
-            xc[j * n + a] = *v;
-        }
-    }
-    kernel_lower_into(&xc, n, d, hp.signal_variance, &mut ws.kf);
+    kernel_lower_into(xs_cols, n, d, hp.signal_variance, &mut ws.kf);
     let jitter = factorise_ws(&mut ws, hp, start_jitter, par)?;
     Ok(Factor { l: ws.l, jitter })
 }

@@ -748,7 +748,9 @@ impl Gp {
                 let out = match &inducing {
                     None => {
                         let xs = lml::scale_inputs(&prep.xn, d, &hp.length_scales);
-                        let Factor { l, jitter } = lml::factorise(&xs, n, d, &hp, j0, Par::Seq)?;
+                        let xs_cols = column_major(&xs, d);
+                        let Factor { l, jitter } =
+                            lml::factorise(&xs_cols, n, d, &hp, j0, Par::Seq)?;
                         let linv = match mode {
                             VarianceMode::Inverse => Some(lower_inverse(&l)),
                             VarianceMode::Solve => None,
@@ -768,7 +770,7 @@ impl Gp {
                             return Err(GpError::NotPositiveDefinite { jitter });
                         }
                         OutputGp {
-                            xs_cols: column_major(&xs, d),
+                            xs_cols,
                             post: Posterior::Exact { l, linv, fwd },
                             alpha,
                             jitter,
@@ -1201,6 +1203,15 @@ impl Gp {
     /// `true` for a sparse (SGPR) model.
     pub fn is_sparse(&self) -> bool {
         self.inducing.is_some()
+    }
+
+    /// Points the posterior is written in (the length of each output's
+    /// weights): the N training points of an exact GP, the M inducing
+    /// points of a sparse one.
+    pub fn posterior_points(&self) -> usize {
+        self.outputs
+            .first()
+            .map_or(self.n, |o| o.alpha_normalised().len())
     }
 
     /// Inducing inputs of a sparse GP in original units (row-major M × d),

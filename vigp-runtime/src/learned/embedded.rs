@@ -92,13 +92,7 @@ where
         let mut s = self.gp.to_rust_source(&gp_opts)?;
         let core = &opts.core_path;
         let (d, p) = (self.gp.input_dim(), self.gp.output_dim());
-        // Points in the exported arrays: the N training points of an exact
-        // GP, the M inducing points of a sparse one.
-        let n = self
-            .gp
-            .outputs()
-            .first()
-            .map_or(self.gp.n(), |o| o.alpha_normalised().len());
+        let n = self.gp.posterior_points();
         let lit = |v: f64| format!("{v:?}");
         let coords: Vec<String> = M::COORDINATES.iter().map(|c| format!("{c:?}")).collect();
         if self.inputs > M::INPUT_NAMES.len() {
