@@ -26,68 +26,14 @@ use std::f64::consts::PI;
 
 use nalgebra::SVector;
 use vigp::gp::TrainOptions;
-use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
+use vigp::learned::{Encoding, Learned, Prior};
 use vigp::prelude::*;
 use vigp::systems::{DoublePendulum, DoublePendulumMinimal};
 
-const DT: f64 = 0.01;
+#[path = "../benches/learned/data.rs"]
+mod data;
 
-/// SplitMix64 with a Box–Muller normal.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn normal(&mut self) -> f64 {
-        let u = self.uniform(f64::MIN_POSITIVE, 1.0);
-        let v = self.uniform(0.0, 1.0);
-        (-2.0 * u.ln()).sqrt() * (2.0 * PI * v).cos()
-    }
-}
-
-/// The data of `benches/learned.rs`: a damped, mass-perturbed truth, 20
-/// trajectories of 2 s from rest, noise σ = 1e-3 on q, v and the targets.
-fn data(n: usize, seed: u64) -> Result<Vec<Transition<2>>, Box<dyn std::error::Error>> {
-    let mut rng = Rng(seed);
-    let mut truth = DoublePendulum::default();
-    truth.links.upper.mass *= 1.05;
-    truth.links.lower.mass *= 0.95;
-    truth.joints.shoulder.damping = 0.8;
-    truth.joints.elbow.damping = 0.2;
-    let vi = Variational::new(truth.minimal(), DT);
-    let mut pool = Vec::new();
-    for _ in 0..20 {
-        let q = SVector::from([rng.uniform(-PI, PI), rng.uniform(-PI, PI)]);
-        let traj = vi.rollout(
-            &State {
-                q,
-                v: SVector::zeros(),
-            },
-            200,
-        )?;
-        let qs: Vec<_> = traj.iter().map(|z| z.q).collect();
-        pool.extend(transitions(&qs, DT));
-    }
-    Ok((0..n)
-        .map(|_| {
-            let mut t = pool[(rng.next_u64() % pool.len() as u64) as usize];
-            for i in 0..2 {
-                t.z.q[i] += 1e-3 * rng.normal();
-                t.z.v[i] += 1e-3 * rng.normal();
-                t.v_next[i] += 1e-3 * rng.normal();
-            }
-            t
-        })
-        .collect())
-}
+use data::{DT, Rng, data};
 
 /// The median of `v` (sorted in place).
 fn median(v: &mut [f64]) -> f64 {
@@ -105,7 +51,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (model, _) = Learned::train(
         DoublePendulum::default().minimal(),
         DT,
-        &data(n, 7 + n as u64)?,
+        &data(n, 7 + n as u64),
         Encoding::SinCos,
         Prior::Constant,
         &opts,
