@@ -24,7 +24,7 @@
 
 use std::f64::consts::PI;
 
-use nalgebra::SVector;
+use nalgebra::{DMatrix, SVector};
 use vigp::gp::TrainOptions;
 use vigp::learned::{Encoding, Learned, Prior};
 use vigp::prelude::*;
@@ -90,25 +90,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for j in 0..2 {
         let a = model.gp().export_output(j, true)?;
         let packed = a.cholesky.as_ref().ok_or("no Cholesky factor")?;
-        // L packed by columns → dense row-major, then L⁻¹ by columns
-        let mut l = vec![0.0; n * n];
+        // L packed by columns (column c holds L_cc … L_{N−1,c}), then L⁻¹
+        // by nalgebra's triangular solve against the identity
+        let mut l = DMatrix::<f64>::zeros(n, n);
         let mut at = 0;
         for c in 0..n {
             for i in c..n {
-                l[i * n + c] = packed[at + i - c];
+                l[(i, c)] = packed[at + i - c];
             }
             at += n - c;
         }
-        let mut inv = vec![0.0; n * n];
-        for c in 0..n {
-            for i in c..n {
-                let mut t = if i == c { 1.0 } else { 0.0 };
-                for k in c..i {
-                    t -= l[i * n + k] * inv[k * n + c];
-                }
-                inv[i * n + c] = t / l[i * n + i];
-            }
-        }
+        let inv = l
+            .solve_lower_triangular(&DMatrix::identity(n, n))
+            .ok_or("singular Cholesky factor")?
+            .transpose(); // row-major below: inv[i * n + c] = (L⁻¹)_ic
+        let inv = inv.as_slice();
         let inv32: Vec<f32> = inv.iter().map(|x| *x as f32).collect();
         let sf2 = a.signal_variance;
         let (mut rel, mut err, mut width) = (Vec::new(), Vec::new(), Vec::new());

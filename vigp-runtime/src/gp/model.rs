@@ -442,13 +442,7 @@ impl Gp {
         opts.validate_settings()?;
         let (n, d, p) = (prep.n, prep.d, prep.p);
         let inducing = inducing_points(&prep, opts)?;
-        let (mut lo, hi) = opts.bounds.log_box(d);
-        if let Method::Sparse(so) = &opts.method
-            && so.min_noise_variance > 0.0
-        {
-            // the sparse GP's noise floor (see `SparseOptions`)
-            lo[d + 1] = lo[d + 1].max(so.min_noise_variance.ln()).min(hi[d + 1]);
-        }
+        let (lo, hi) = opts.log_box(d);
         let init = match &opts.initial {
             Some(h) => {
                 h.validate(d)?;

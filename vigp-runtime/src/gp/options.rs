@@ -245,6 +245,20 @@ impl TrainOptions {
         }
         Ok(())
     }
+
+    /// The box the optimiser searches, on θ = (ln ℓ, ln σ_f², ln σ_n²):
+    /// [`Bounds::log_box`] with a sparse GP's noise floor
+    /// ([`SparseOptions::min_noise_variance`]) raising σ_n²'s lower bound
+    /// (never above its upper bound).
+    pub(crate) fn log_box(&self, d: usize) -> (Vec<f64>, Vec<f64>) {
+        let (mut lo, hi) = self.bounds.log_box(d);
+        if let Method::Sparse(so) = &self.method
+            && so.min_noise_variance > 0.0
+        {
+            lo[d + 1] = lo[d + 1].max(so.min_noise_variance.ln()).min(hi[d + 1]);
+        }
+        (lo, hi)
+    }
 }
 
 /// What happened during training, per output.
