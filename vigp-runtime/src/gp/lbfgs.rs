@@ -4,9 +4,14 @@
 //!
 //! Why hand-written: `argmin` 0.11 has L-BFGS without bounds, and the pure-Rust
 //! L-BFGS-B ports on crates.io are young single-author 0.1 releases. GP
-//! hyperparameter problems have d + 2 ≤ a few dozen variables, so the
-//! limited-memory matrix is formed densely (n × n) instead of through the
-//! 2m × 2m compact factors of the Fortran code; the iteration is scipy's:
+//! hyperparameter problems have d + 2 ≤ a few dozen variables: up to
+//! [`DENSE_MAX`] variables the limited-memory matrix is formed densely
+//! (n × n); above it (a sparse GP's inducing points, M·d of them) it is
+//! applied through the compact representation of Byrd, Nocedal & Schnabel
+//! (1994), B = θI − W·M·Wᵀ with W = [Y θS] (n × 2m), in O(n·m) per product,
+//! and the subspace step solves its reduced system by the
+//! Sherman–Morrison–Woodbury formula in O(n·m² + m³). Both give the same
+//! matrix (the tests compare them); the iteration is scipy's:
 //!
 //! * **model**: B = θI updated by the last `memory` pairs (s, y), θ = yᵀy/sᵀy
 //!   of the newest pair (1 with an empty memory); pairs with
@@ -79,6 +84,8 @@
 //!   point instead of stopping the run.
 
 use std::collections::VecDeque;
+
+use faer::Mat;
 
 use super::error::GpError;
 
@@ -552,6 +559,144 @@ impl Memory {
     }
 }
 
+/// Above this many variables the model matrix is applied in compact form
+/// ([`Model::Compact`]) instead of being formed (n × n; forming it costs
+/// O(m·n²) per iteration and the subspace step's Cholesky O(n³)).
+pub(crate) const DENSE_MAX: usize = 64;
+
+impl Memory {
+    /// The model matrix B for `n` variables: dense when `dense`, else in
+    /// compact form; `None` if rounding spoiled positive curvature.
+    fn model(&self, n: usize, dense: bool) -> Option<Model> {
+        if dense {
+            return self.dense(n).map(|b| Model::Dense { n, b });
+        }
+        // B = θI − W·M·Wᵀ, W = [Y θS], M⁻¹ = [[−D, Lᵀ], [L, θSᵀS]] with
+        // D = diag(sᵢᵀyᵢ) and L_ij = sᵢᵀy_j for i > j (pairs oldest first).
+        let k = self.pairs.len();
+        let theta = self.theta;
+        let mut w: Vec<Vec<f64>> = self.pairs.iter().map(|(_, y, _)| y.clone()).collect();
+        w.extend(
+            self.pairs
+                .iter()
+                .map(|(s, _, _)| s.iter().map(|v| theta * v).collect::<Vec<f64>>()),
+        );
+        let pair = |i: usize| &self.pairs[i];
+        let minv = Mat::<f64>::from_fn(2 * k, 2 * k, |i, j| match (i < k, j < k) {
+            (true, true) if i == j => -pair(i).2,
+            (true, true) => 0.0,
+            // block (1, 0) = L: s_{i−k}ᵀy_j below the diagonal
+            (false, true) if i - k > j => dot(&pair(i - k).0, &pair(j).1),
+            // block (0, 1) = Lᵀ
+            (true, false) if j - k > i => dot(&pair(j - k).0, &pair(i).1),
+            (false, true) | (true, false) => 0.0,
+            (false, false) => theta * dot(&pair(i - k).0, &pair(j - k).0),
+        });
+        let finite = (0..2 * k).all(|j| (0..2 * k).all(|i| minv[(i, j)].is_finite()));
+        if !(finite && theta.is_finite() && theta > 0.0) {
+            return None;
+        }
+        let lu = minv.partial_piv_lu();
+        Some(Model::Compact { theta, w, minv, lu })
+    }
+}
+
+/// The model matrix B of one iteration.
+enum Model {
+    /// Formed: row-major n × n.
+    Dense { n: usize, b: Vec<f64> },
+    /// B = θI − W·M·Wᵀ: `w` the 2k columns of W = [Y θS], `minv` = M⁻¹
+    /// (2k × 2k) and its LU factors.
+    Compact {
+        theta: f64,
+        w: Vec<Vec<f64>>,
+        minv: Mat<f64>,
+        lu: faer::linalg::solvers::PartialPivLu<f64>,
+    },
+}
+
+impl Model {
+    /// With an empty memory: B = `scale`·I.
+    fn set_scaled_identity(&mut self, scale: f64) {
+        match self {
+            Model::Dense { n, b } => {
+                b.iter_mut().for_each(|v| *v = 0.0);
+                for i in 0..*n {
+                    b[i * *n + i] = scale;
+                }
+            }
+            Model::Compact { theta, w, .. } => {
+                debug_assert!(w.is_empty());
+                *theta = scale;
+            }
+        }
+    }
+
+    /// B·v.
+    fn apply(&self, v: &[f64]) -> Vec<f64> {
+        match self {
+            Model::Dense { b, .. } => matvec(b, v),
+            Model::Compact { theta, w, lu, .. } => {
+                use faer::linalg::solvers::Solve;
+                let mut out: Vec<f64> = v.iter().map(|x| theta * x).collect();
+                if !w.is_empty() {
+                    let wv = Mat::<f64>::from_fn(w.len(), 1, |i, _| dot(&w[i], v));
+                    let c = lu.solve(&wv);
+                    for (i, col) in w.iter().enumerate() {
+                        let ci = c[(i, 0)];
+                        for (o, wi) in out.iter_mut().zip(col) {
+                            *o -= ci * wi;
+                        }
+                    }
+                }
+                out
+            }
+        }
+    }
+
+    /// Solves B_FF·u = r on the variables `idx`; `None` if B_FF is not
+    /// numerically positive definite (dense: its Cholesky fails; compact:
+    /// rᵀu ≤ 0 for r ≠ 0, or a u that is not finite).
+    fn reduced_solve(&self, idx: &[usize], r: &[f64]) -> Option<Vec<f64>> {
+        match self {
+            Model::Dense { n, b } => {
+                let reduced: Vec<f64> = idx
+                    .iter()
+                    .flat_map(|&i| idx.iter().map(move |&j| b[i * n + j]))
+                    .collect();
+                cholesky_solve(reduced, r)
+            }
+            Model::Compact { theta, w, minv, .. } => {
+                use faer::linalg::solvers::Solve;
+                // Woodbury: B_FF⁻¹ = I/θ + W_F (M⁻¹ − W_FᵀW_F/θ)⁻¹ W_Fᵀ / θ².
+                let mut u: Vec<f64> = r.iter().map(|x| x / theta).collect();
+                if !w.is_empty() {
+                    let wf: Vec<Vec<f64>> = w
+                        .iter()
+                        .map(|c| idx.iter().map(|&i| c[i]).collect())
+                        .collect();
+                    let m2 = wf.len();
+                    let k = Mat::<f64>::from_fn(m2, m2, |i, j| {
+                        minv[(i, j)] - dot(&wf[i], &wf[j]) / theta
+                    });
+                    let wr = Mat::<f64>::from_fn(m2, 1, |i, _| dot(&wf[i], r));
+                    let c = k.partial_piv_lu().solve(&wr);
+                    for (i, col) in wf.iter().enumerate() {
+                        let ci = c[(i, 0)] / (theta * theta);
+                        for (o, wi) in u.iter_mut().zip(col) {
+                            *o += ci * wi;
+                        }
+                    }
+                }
+                let ru = dot(r, &u);
+                let ok =
+                    u.iter().all(|v| v.is_finite()) && (ru > 0.0 || r.iter().all(|v| *v == 0.0));
+                ok.then_some(u)
+            }
+        }
+    }
+}
+
 /// A·v for a dense row-major square A.
 fn matvec(a: &[f64], v: &[f64]) -> Vec<f64> {
     a.chunks_exact(v.len()).map(|row| dot(row, v)).collect()
@@ -601,7 +746,7 @@ fn cholesky_solve(mut a: Vec<f64>, r: &[f64]) -> Option<Vec<f64>> {
 /// between the breakpoints where variables reach their bounds. Returns the
 /// point and the variables free there: those neither held at a bound by
 /// the gradient nor stopped at one along the path.
-fn cauchy(x: &[f64], g: &[f64], lo: &[f64], hi: &[f64], b: &[f64]) -> (Vec<f64>, Vec<bool>) {
+fn cauchy(x: &[f64], g: &[f64], lo: &[f64], hi: &[f64], b: &Model) -> (Vec<f64>, Vec<bool>) {
     let n = x.len();
     let mut d = vec![0.0; n];
     let mut free = vec![true; n];
@@ -626,7 +771,7 @@ fn cauchy(x: &[f64], g: &[f64], lo: &[f64], hi: &[f64], b: &[f64]) -> (Vec<f64>,
     // z = xcp − x at the start of the current segment, which starts at
     // t_start; along it the model's slope is f1 + f2·(t − t_start).
     let mut z = vec![0.0; n];
-    let mut bd = matvec(b, &d);
+    let mut bd = b.apply(&d);
     let mut f1 = dot(g, &d);
     let f2_org = dot(&d, &bd);
     let mut f2 = f2_org;
@@ -650,7 +795,7 @@ fn cauchy(x: &[f64], g: &[f64], lo: &[f64], hi: &[f64], b: &[f64]) -> (Vec<f64>,
             dtm = 0.0;
             break;
         }
-        bd = matvec(b, &d);
+        bd = b.apply(&d);
         f1 = dot(g, &d) + dot(&z, &bd);
         // scipy's safeguard against a curvature lost to rounding.
         f2 = dot(&d, &bd).max(f64::EPSILON * f2_org);
@@ -675,7 +820,7 @@ fn subspace(
     at: &Point,
     lo: &[f64],
     hi: &[f64],
-    b: &[f64],
+    b: &Model,
     xcp: Vec<f64>,
     free: &[bool],
 ) -> Option<Vec<f64>> {
@@ -687,13 +832,9 @@ fn subspace(
     }
     // Reduced Newton step from xcp: (ZᵀBZ)·u = −Zᵀ(g + B(xcp − x)).
     let dx: Vec<f64> = xcp.iter().zip(x).map(|(a, b)| a - b).collect();
-    let bdx = matvec(b, &dx);
+    let bdx = b.apply(&dx);
     let r: Vec<f64> = idx.iter().map(|&i| -(g[i] + bdx[i])).collect();
-    let reduced: Vec<f64> = idx
-        .iter()
-        .flat_map(|&i| idx.iter().map(move |&j| b[i * n + j]))
-        .collect();
-    let mut du = cholesky_solve(reduced, &r)?;
+    let mut du = b.reduced_solve(&idx, &r)?;
     let mut z = xcp.clone();
     let mut at_bound = false;
     for (k, &i) in idx.iter().enumerate() {
@@ -756,6 +897,9 @@ struct Setting<'a> {
     ftol: f64,
     /// `unit_start` of [`LbfgsOptions`].
     unit_start: bool,
+    /// Largest n for the dense model matrix ([`DENSE_MAX`]; the tests
+    /// lower it to compare the two forms).
+    dense_max: usize,
 }
 
 /// How one iteration's search ended.
@@ -790,17 +934,14 @@ where
 {
     let (x, fx, g, lo, hi) = (&at.x, at.f, &at.g, set.lo, set.hi);
     let n = x.len();
-    let Some(mut b) = mem.dense(n) else {
+    let Some(mut b) = mem.model(n, n <= set.dense_max) else {
         return Attempt::Failed;
     };
     // `unit_start`: scipy's first trial P(x − g) would be a corner of the
     // box (every variable clipped), which keeps none of g's proportions.
     let scaled = mem.is_empty() && set.unit_start && corner_trial(x, g, lo, hi);
     if scaled {
-        let scale = dot(g, g).sqrt().max(1.0);
-        for i in 0..n {
-            b[i * n + i] = scale;
-        }
+        b.set_scaled_identity(dot(g, g).sqrt().max(1.0));
     }
     let (xcp, free) = if set.constrained || mem.is_empty() {
         cauchy(x, g, lo, hi, &b)
@@ -822,7 +963,7 @@ where
     }
     // The decrease below which the ftol test stops the run.
     let negligible = set.ftol * fx.abs().max(1.0);
-    let curv = dot(&d, &matvec(&b, &d));
+    let curv = dot(&d, &b.apply(&d));
     // The model's decrease at step t along d.
     let predicted = |t: f64| -(t * slope + 0.5 * t * t * curv);
     // The model's largest decrease along d is slope²/(2·curv). If the model
@@ -939,6 +1080,21 @@ pub(crate) fn minimise<F>(
 where
     F: FnMut(&[f64]) -> Result<(f64, Vec<f64>), GpError>,
 {
+    minimise_with(f, x0, lo, hi, opt, DENSE_MAX)
+}
+
+/// [`minimise`] with the dense model matrix up to `dense_max` variables.
+fn minimise_with<F>(
+    f: F,
+    x0: &[f64],
+    lo: &[f64],
+    hi: &[f64],
+    opt: LbfgsOptions,
+    dense_max: usize,
+) -> Result<LbfgsResult, GpError>
+where
+    F: FnMut(&[f64]) -> Result<(f64, Vec<f64>), GpError>,
+{
     let mut x = x0.to_vec();
     project(&mut x, lo, hi);
     let mut obj = Objective {
@@ -962,6 +1118,7 @@ where
         boxed: lo.iter().chain(hi).all(|v| v.is_finite()),
         ftol: opt.ftol,
         unit_start: opt.unit_start,
+        dense_max,
     };
     let mut at = Point { x, f: fx, g };
     let mut mem = Memory::new(opt.memory);
@@ -1039,6 +1196,129 @@ mod tests {
             200.0 * (b - a * a),
         ];
         Ok((v, g))
+    }
+
+    /// The chained Rosenbrock function Σ (1 − x_i)² + 100(x_{i+1} − x_i²)².
+    fn chained(x: &[f64]) -> Result<(f64, Vec<f64>), GpError> {
+        let mut v = 0.0;
+        let mut g = vec![0.0; x.len()];
+        for i in 0..x.len() - 1 {
+            let (a, b) = (x[i], x[i + 1]);
+            v += (1.0 - a).powi(2) + 100.0 * (b - a * a).powi(2);
+            g[i] += -2.0 * (1.0 - a) - 400.0 * a * (b - a * a);
+            g[i + 1] += 200.0 * (b - a * a);
+        }
+        Ok((v, g))
+    }
+
+    /// The chained problem of the tests below: start (−1.2, 1, −1.2, …), box
+    /// [−5, 5]ⁿ with x₃ ≤ 0.8 (active at the solution).
+    fn chained_problem(n: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+        let x0 = (0..n)
+            .map(|i| if i % 2 == 0 { -1.2 } else { 1.0 })
+            .collect();
+        let mut hi = vec![5.0; n];
+        hi[3] = 0.8;
+        (x0, vec![-5.0; n], hi)
+    }
+
+    /// scipy's defaults but gtol 1e-9.
+    fn chained_opts() -> LbfgsOptions {
+        LbfgsOptions {
+            max_iters: 2000,
+            ftol: 2.220446049250313e-9,
+            ..opts()
+        }
+    }
+
+    #[test]
+    fn compact_and_dense_models_agree() {
+        // Five curvature pairs of a convex quadratic (sᵀy > 0) in 12
+        // variables: B·v and the reduced solve on 7 free variables from
+        // the compact form against the formed matrix (relative 1e-10:
+        // both are O(n·m) sums of O(1) terms; the Woodbury solve adds a
+        // 10 × 10 LU, well conditioned here).
+        let n = 12;
+        let a = |i: usize, j: usize| {
+            if i == j {
+                2.0 + i as f64
+            } else {
+                0.3 / (1.0 + (i + j) as f64)
+            }
+        };
+        let mut mem = Memory::new(10);
+        for k in 0..5 {
+            let s: Vec<f64> = (0..n)
+                .map(|i| ((i * 7 + k * 3) as f64 * 0.37).sin())
+                .collect();
+            let y: Vec<f64> = (0..n)
+                .map(|i| (0..n).map(|j| a(i, j) * s[j]).sum())
+                .collect();
+            let sy = dot(&s, &y);
+            assert!(sy > 0.0);
+            mem.push(s, y, sy);
+        }
+        let dense = mem.model(n, true).unwrap();
+        let compact = mem.model(n, false).unwrap();
+        let v: Vec<f64> = (0..n).map(|i| (i as f64 * 1.3).cos()).collect();
+        let (bd, bc) = (dense.apply(&v), compact.apply(&v));
+        let scale = bd.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        for (p, q) in bd.iter().zip(&bc) {
+            assert!((p - q).abs() <= 1e-10 * scale, "{p} vs {q}");
+        }
+        let idx = [0, 2, 3, 5, 8, 10, 11];
+        let r: Vec<f64> = idx.iter().map(|&i| v[i]).collect();
+        let (ud, uc) = (
+            dense.reduced_solve(&idx, &r).unwrap(),
+            compact.reduced_solve(&idx, &r).unwrap(),
+        );
+        let scale = ud.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        for (p, q) in ud.iter().zip(&uc) {
+            assert!((p - q).abs() <= 1e-10 * scale, "{p} vs {q}");
+        }
+    }
+
+    #[test]
+    fn compact_form_follows_the_dense_iteration() {
+        // The same 20-variable bounded run with the formed and the compact
+        // matrix: the same iteration up to rounding, so the same local
+        // minimum, value and counts. scipy 1.17.1 (L-BFGS-B, maxcor 10,
+        // gtol 1e-9, its default ftol 2.22e-9) on this problem:
+        // f = 12.945063416168468 in 54 evaluations, 45 iterations.
+        let (x0, lo, hi) = chained_problem(20);
+        let o = chained_opts();
+        let d = minimise_with(chained, &x0, &lo, &hi, o, usize::MAX).unwrap();
+        let c = minimise_with(chained, &x0, &lo, &hi, o, 0).unwrap();
+        println!(
+            "dense: f {} in {} evaluations, {} iterations; compact: f {} in {}, {}",
+            d.f, d.evaluations, d.iterations, c.f, c.evaluations, c.iterations
+        );
+        assert!(d.converged && c.converged);
+        // the ftol test stops within 2.22e-9 relative of the minimum
+        assert!((d.f - 12.945063416168468).abs() <= 1e-8 * 12.95, "{}", d.f);
+        assert!((c.f - d.f).abs() <= 1e-12 * d.f, "{} vs {}", c.f, d.f);
+        for (p, q) in c.x.iter().zip(&d.x) {
+            assert!((p - q).abs() <= 1e-6, "{p} vs {q}");
+        }
+        assert_eq!(c.x[3], 0.8);
+        assert!(c.evaluations.abs_diff(d.evaluations) <= 2);
+    }
+
+    #[test]
+    fn compact_form_scales_to_hundreds_of_variables() {
+        // 200 variables (above DENSE_MAX): scipy 1.17.1 with the settings
+        // of the previous test reaches f = 191.12650077808004 in 51
+        // evaluations, 41 iterations.
+        let (x0, lo, hi) = chained_problem(200);
+        let o = chained_opts();
+        let r = minimise(chained, &x0, &lo, &hi, o).unwrap();
+        println!(
+            "f {} in {} evaluations, {} iterations",
+            r.f, r.evaluations, r.iterations
+        );
+        assert!(r.converged);
+        assert!((r.f - 191.12650077808004).abs() <= 1e-8 * 191.2, "{}", r.f);
+        assert!(r.evaluations <= 51, "{}", r.evaluations);
     }
 
     #[test]
