@@ -74,6 +74,12 @@ Usage (see docs/gp.md), each command under `flock /tmp/vigp-bench.lock`:
     cargo run --release --example gp_train -- --n 2000 --sparse 256 \
         --restarts 0 --runs 1 --dump-inducing /tmp/z2k.json
     python scripts/sgpr_peer.py --inducing /tmp/z2k.json --check
+    # Z trained on both sides (vigp: fixed-Z starts, then the joint refinement)
+    cargo run --release --example gp_train -- --n 10000 --sparse 64 \
+        --restarts 0 --runs 1 --dump-inducing /tmp/z10k.json
+    cargo run --release --example gp_train -- --n 10000 --sparse 64 \
+        --restarts 0 --runs 1 --optimise-inducing
+    python scripts/sgpr_peer.py --inducing /tmp/z10k.json --threads 2 --jitter relative --train-z
 `--threads` sets TensorFlow's intra- and inter-op thread pools (must be set
 before TensorFlow starts, hence one process per setting). `--train-z` adds a
 run with Z trainable (GPflow's default), capped at `--z-maxiter` iterations

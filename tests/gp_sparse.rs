@@ -49,6 +49,7 @@ fn raw_sparse(z: Vec<f64>) -> TrainOptions {
             init: InducingInit::Given(z),
             // the bound itself, as numpy evaluates it (raw units: no floor)
             min_noise_variance: 0.0,
+            optimise_inducing: false,
         }),
         ..Default::default()
     }
@@ -210,6 +211,105 @@ fn trained_sparse_bound_approaches_the_exact_optimum() {
         (exact - last).abs() < 0.01 * exact.abs(),
         "{last} vs {exact}"
     );
+}
+
+/// Optimising the inducing points with the hyperparameters
+/// (`SparseOptions::optimise_inducing`) on 300 smooth samples, two
+/// outputs, M = 16: the report's "before" is the fixed-Z training's bound,
+/// its "after" is the refined model's bound, the refinement closes most of
+/// the gap to the exact optimum, stays below it (a lower bound), keeps Z
+/// in its box and predicts held-out points better.
+#[test]
+fn optimised_inducing_points_close_the_gap_to_the_exact_optimum() {
+    let (n, d, p, m) = (300, 2, 2, 16);
+    let (x, y) = data(n, d, p, 5);
+    let base = TrainOptions {
+        restarts: 1,
+        ..Default::default()
+    };
+    let (_, exact) = Gp::train(&x, d, &y, p, &base).unwrap();
+    let exact: f64 = exact
+        .outputs
+        .iter()
+        .map(|o| o.log_marginal_likelihood)
+        .sum();
+    let fixed_opts = TrainOptions {
+        method: Method::Sparse(SparseOptions::kmeans(m)),
+        ..base.clone()
+    };
+    let (fixed, fixed_rep) = Gp::train(&x, d, &y, p, &fixed_opts).unwrap();
+    assert!(fixed_rep.inducing.is_none());
+    let fixed_bound: f64 = fixed_rep
+        .outputs
+        .iter()
+        .map(|o| o.log_marginal_likelihood)
+        .sum();
+    let opts = TrainOptions {
+        method: Method::Sparse(SparseOptions {
+            optimise_inducing: true,
+            ..SparseOptions::kmeans(m)
+        }),
+        ..base.clone()
+    };
+    let (gp, rep) = Gp::train(&x, d, &y, p, &opts).unwrap();
+    let r = rep.inducing.clone().expect("the refinement ran");
+    let after: f64 = rep.outputs.iter().map(|o| o.log_marginal_likelihood).sum();
+    println!(
+        "exact {exact:.6}; fixed Z {fixed_bound:.6}; refined: before {:.6}, after {:.6} \
+         (model {after:.6}), {} iterations, {} evaluations, converged {}",
+        r.bound_before, r.bound_after, r.iterations, r.evaluations, r.converged
+    );
+    // the same fixed-Z training came first (same seeds: same bits)
+    assert_eq!(r.bound_before, fixed_bound);
+    // the model rebuilt at the refined point has the report's bound
+    // (one factorisation against the optimiser's evaluation: the same
+    // sums, different code paths; 1e-9 relative)
+    assert!(
+        (after - r.bound_after).abs() <= 1e-9 * after.abs(),
+        "{after}"
+    );
+    assert!(r.bound_after >= r.bound_before);
+    // a lower bound: never above the exact optimum (optimiser tolerance)
+    assert!(after <= exact + 1e-6 * exact.abs(), "{after} > {exact}");
+    let gap_fixed = exact - fixed_bound;
+    let gap = exact - after;
+    println!("gap to the exact optimum: fixed {gap_fixed:.4}, refined {gap:.4}");
+    // measured: 14.86 → 0.32; a tenth leaves room for other platforms’
+    // rounding of a 200-iteration run, and still says "most of the gap"
+    assert!(gap < 0.1 * gap_fixed, "{gap} vs {gap_fixed}");
+    // Z moved and stayed in its box (inputs span [−2, 2]: [−6, 6])
+    let (z0, z1) = (
+        fixed.inducing_points().unwrap(),
+        gp.inducing_points().unwrap(),
+    );
+    assert_ne!(z0, z1);
+    assert!(z1.iter().all(|v| v.abs() <= 6.0 + 1e-9), "{z1:?}");
+    // held-out points, against the noise-free function of `data`
+    let mut rng = Rng(99);
+    let probes: Vec<f64> = (0..200 * d).map(|_| rng.uniform(-1.9, 1.9)).collect();
+    let rmse = |g: &Gp| {
+        let pred = g.predict(&probes).unwrap();
+        let mut s = 0.0;
+        for (i, r) in probes.chunks(d).enumerate() {
+            for j in 0..p {
+                let f = (1.5 * r[0] + j as f64).sin() + 0.3 * r[d - 1] * r[0] + 2.0;
+                s += (pred.mean[i * p + j] - f).powi(2);
+            }
+        }
+        (s / (200 * p) as f64).sqrt()
+    };
+    let (e_fixed, e_opt) = (rmse(&fixed), rmse(&gp));
+    println!("held-out RMSE: fixed {e_fixed:.3e}, refined {e_opt:.3e}");
+    assert!(e_opt < e_fixed, "{e_opt} vs {e_fixed}");
+    // the outputs' evaluations run in parallel; their sums are added in
+    // output order, so one thread gives the same bits
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap();
+    let (g1, r1) = one.install(|| Gp::train(&x, d, &y, p, &opts).unwrap());
+    assert_eq!(g1.to_saved(), gp.to_saved());
+    assert_eq!(r1, rep);
 }
 
 /// `add_samples` against a model rebuilt from the enlarged data with the

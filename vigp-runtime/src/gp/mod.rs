@@ -55,8 +55,8 @@ pub use mean::{MeanFn, PriorMean};
 pub use model::{Gp, OutputGp, PARALLEL_VARIANCE_MIN_N, Prediction, VarianceMode, Workspace};
 pub use normalise::InputNormaliser;
 pub use options::{
-    Bounds, InducingInit, MAX_RESTARTS, Method, OutputReport, SPARSE_MIN_NOISE_VARIANCE,
-    SparseOptions, TrainOptions, TrainReport,
+    Bounds, InducingInit, InducingReport, MAX_RESTARTS, Method, OutputReport,
+    SPARSE_MIN_NOISE_VARIANCE, SparseOptions, TrainOptions, TrainReport,
 };
 pub use save::{SavedGp, SavedMean, SavedOutput};
 

@@ -13,7 +13,9 @@ use super::lbfgs::{self, LbfgsOptions};
 use super::lml::{self, Factor};
 use super::mean::{PriorMean, Resolved};
 use super::normalise::{InputNormaliser, output_scale};
-use super::options::{InducingInit, Method, OutputReport, TrainOptions, TrainReport};
+use super::options::{
+    InducingInit, InducingReport, Method, OutputReport, TrainOptions, TrainReport,
+};
 use super::rng::SplitMix64;
 use super::{sparse, tri};
 
@@ -397,6 +399,100 @@ fn inducing_points(prep: &Prepared, opts: &TrainOptions) -> Result<Option<Vec<f6
     }))
 }
 
+/// The joint refinement of [`SparseOptions::optimise_inducing`]: maximises
+/// Σ_o F_o(θ_o, Z) over every output's θ_o (in the box `lo`, `hi`) and the
+/// shared inducing inputs Z (normalised units, row-major M × d; each
+/// coordinate within the inputs' range widened by the range on either side)
+/// with one L-BFGS run from `thetas` and `z0`, where the bounds sum to
+/// `bound_before`.
+///
+/// [`SparseOptions::optimise_inducing`]: super::SparseOptions::optimise_inducing
+fn refine_inducing(
+    prep: &Prepared,
+    z0: Vec<f64>,
+    thetas: &[Vec<f64>],
+    bound_before: f64,
+    lo: &[f64],
+    hi: &[f64],
+    lopt: LbfgsOptions,
+) -> Result<Refined, GpError> {
+    let (n, d, p) = (prep.n, prep.d, prep.p);
+    let m = z0.len() / d;
+    let k = d + 2;
+    let (mut xlo, mut xhi) = (vec![f64::INFINITY; d], vec![f64::NEG_INFINITY; d]);
+    for r in prep.xn.chunks_exact(d) {
+        for j in 0..d {
+            xlo[j] = xlo[j].min(r[j]);
+            xhi[j] = xhi[j].max(r[j]);
+        }
+    }
+    let (mut blo, mut bhi) = (Vec::with_capacity(p * k + m * d), Vec::new());
+    for _ in 0..p {
+        blo.extend_from_slice(lo);
+        bhi.extend_from_slice(hi);
+    }
+    for _ in 0..m {
+        for j in 0..d {
+            let w = xhi[j] - xlo[j];
+            let w = if w > 0.0 { w } else { 1.0 };
+            blo.push(xlo[j] - w);
+            bhi.push(xhi[j] + w);
+        }
+    }
+    let mut x0: Vec<f64> = thetas.iter().flatten().copied().collect();
+    x0.extend_from_slice(&z0);
+    // One workspace per output; outputs evaluated in parallel (a single
+    // output uses the pool inside its evaluation instead).
+    let mut wss: Vec<sparse::SparseWorkspace> =
+        (0..p).map(|_| sparse::SparseWorkspace::new(m, n)).collect();
+    let inner = if p == 1 { Par::rayon(0) } else { Par::Seq };
+    let mut objective = |x: &[f64]| -> Result<(f64, Vec<f64>), GpError> {
+        let z = &x[p * k..];
+        let evals: Vec<Result<lml::LmlEval, GpError>> = wss
+            .par_iter_mut()
+            .enumerate()
+            .map(|(o, ws)| {
+                let t = &x[o * k..(o + 1) * k];
+                sparse::elbo_z_ws(ws, &prep.xn, z, d, &prep.residuals[o].0, t, inner)
+            })
+            .collect();
+        let mut f = 0.0;
+        let mut g = vec![0.0; x.len()];
+        for (o, e) in evals.into_iter().enumerate() {
+            let e = e?;
+            f -= e.value;
+            for (gi, ei) in g[o * k..(o + 1) * k].iter_mut().zip(&e.gradient[..k]) {
+                *gi = -ei;
+            }
+            for (gi, ei) in g[p * k..].iter_mut().zip(&e.gradient[k..]) {
+                *gi -= ei;
+            }
+        }
+        Ok((f, g))
+    };
+    let r = lbfgs::minimise(&mut objective, &x0, &blo, &bhi, lopt)?;
+    Ok(Refined {
+        thetas: r.x[..p * k].chunks_exact(k).map(<[f64]>::to_vec).collect(),
+        z: r.x[p * k..].to_vec(),
+        report: InducingReport {
+            bound_before,
+            bound_after: -r.f,
+            iterations: r.iterations,
+            evaluations: r.evaluations,
+            converged: r.converged,
+        },
+    })
+}
+
+/// What [`refine_inducing`] returns.
+struct Refined {
+    /// Inducing inputs (normalised units, row-major M × d).
+    z: Vec<f64>,
+    /// Log hyperparameters, one vector per output.
+    thetas: Vec<Vec<f64>>,
+    report: InducingReport,
+}
+
 impl Gp {
     /// Trains p independent GPs on row-major `inputs` (N × d) and `targets`
     /// (N × p) by maximising each output's log marginal likelihood (or, for
@@ -653,10 +749,10 @@ impl Gp {
                 }
             }
         }
-        let mut hps = Vec::with_capacity(p);
+        let mut thetas = Vec::with_capacity(p);
         for (out, b) in best.iter().enumerate() {
             match b {
-                Some((_, t, _)) => hps.push(Hyperparameters::from_log(t)?),
+                Some((_, t, _)) => thetas.push(t.clone()),
                 None => {
                     return Err(GpError::OptimiserFailed {
                         output: out,
@@ -668,8 +764,27 @@ impl Gp {
                 }
             }
         }
+        let (inducing, inducing_report) = match (&opts.method, inducing) {
+            (Method::Sparse(so), Some(z)) if so.optimise_inducing => {
+                // the bounds at the winning starts (their optimiser's best points)
+                let before = best
+                    .iter()
+                    .zip(&reports)
+                    .map(|(b, r)| b.as_ref().map_or(f64::NAN, |(s, _, _)| r.0[*s]))
+                    .sum();
+                let r = refine_inducing(&prep, z, &thetas, before, &lo, &hi, lopt)?;
+                thetas = r.thetas;
+                (Some(r.z), Some(r.report))
+            }
+            (_, z) => (z, None),
+        };
+        let hps = thetas
+            .iter()
+            .map(|t| Hyperparameters::from_log(t))
+            .collect::<Result<Vec<_>, _>>()?;
         let gp = Self::from_prepared(inputs, targets, prep, &hps, None, inducing)?;
         let report = TrainReport {
+            inducing: inducing_report,
             outputs: (0..p)
                 .map(|o| {
                     let (start, _, converged) = best[o].as_ref().expect("checked above");
