@@ -664,3 +664,71 @@ fn unusable_options_and_scales_are_typed_errors() {
         assert!(matches!(e, GpError::InvalidHyperparameter { .. }), "{e:?}");
     }
 }
+
+/// An output left on the white-noise plateau (length scales so short that
+/// no two inputs correlate: the gradient vanishes there) is started again
+/// from the optimum of an output that did fit. That helps when the outputs
+/// depend on the same inputs, as the velocity components of one mechanism
+/// do (here sin 2x₁ + 0.1x₂ and cos 2x₁ − 0.2x₂; x₃ is irrelevant to
+/// both). Output 1 is warm-started on the plateau, output 0 at a sensible
+/// point, no random restarts: alone, output 1 stays on the plateau; beside
+/// output 0 its extra start (index 1, after the one regular start) fits it.
+#[test]
+fn an_output_on_the_white_noise_plateau_starts_again_from_a_fitted_one() {
+    let (x, _) = data_multi();
+    let (n, d) = (60, 3);
+    let y: Vec<f64> = x
+        .chunks(3)
+        .flat_map(|r| {
+            [
+                (2.0 * r[0]).sin() + 0.1 * r[1],
+                (2.0 * r[0]).cos() - 0.2 * r[1],
+            ]
+        })
+        .collect();
+    let plateau = Hyperparameters {
+        length_scales: vec![1e-3; d],
+        signal_variance: 1.0,
+        noise_variance: 1e-2,
+    };
+    let opts = |warm: Vec<Hyperparameters>| TrainOptions {
+        restarts: 0,
+        normalise_inputs: false,
+        normalise_outputs: false,
+        mean: PriorMean::Zero,
+        warm_start: Some(warm),
+        ..Default::default()
+    };
+    let white = |j: usize| {
+        let s2 = (0..n).map(|i| y[2 * i + j].powi(2)).sum::<f64>() / n as f64;
+        -0.5 * n as f64 * (1.0 + (2.0 * std::f64::consts::PI * s2).ln())
+    };
+    // output 1 alone: no fitted output to start from
+    let y1: Vec<f64> = (0..n).map(|i| y[2 * i + 1]).collect();
+    let (_, alone) = Gp::train(&x, d, &y1, 1, &opts(vec![plateau.clone()])).unwrap();
+    let lml_alone = alone.outputs[0].log_marginal_likelihood;
+    println!(
+        "output 1 alone: LML {lml_alone:.4} (white noise {:.4})",
+        white(1)
+    );
+    assert!(lml_alone - white(1) <= d as f64, "{lml_alone}");
+    // both outputs
+    let good = Hyperparameters::isotropic(d, 1.0, 1.0, 1e-2);
+    let (gp, rep) = Gp::train(&x, d, &y, 2, &opts(vec![good, plateau])).unwrap();
+    let (o0, o1) = (&rep.outputs[0], &rep.outputs[1]);
+    println!(
+        "beside output 0: LML {:.4} (starts {:?}), output 0 {:.4}",
+        o1.log_marginal_likelihood, o1.start_lmls, o0.log_marginal_likelihood
+    );
+    assert_eq!(o0.start_lmls.len(), 1);
+    assert_eq!(o1.start_lmls.len(), 2);
+    assert_eq!(o1.start_evaluations.len(), 2);
+    assert_eq!(o1.best_start, 1);
+    assert_eq!(o1.start_lmls[0], lml_alone);
+    assert!(o1.log_marginal_likelihood > white(1) + 10.0 * d as f64);
+    // the fitted model predicts output 1 at a held-out point
+    let probe = [0.3, -0.4, 0.7];
+    let truth = 0.6f64.cos() + 0.08;
+    let m = gp.predict(&probe).unwrap().mean[1];
+    assert!((m - truth).abs() < 0.05, "{m} vs {truth}");
+}

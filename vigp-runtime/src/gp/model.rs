@@ -513,7 +513,13 @@ impl Gp {
     /// scales are too short for any two inputs to correlate) are run again
     /// with a first step of unit length (see the `lbfgs` module), and the
     /// better end of each counts; the report's evaluations include both
-    /// runs.
+    /// runs. An output still not preferred over white noise after that,
+    /// when other outputs were (p > 1), gets one more start from each such
+    /// output's optimum (normalised units: the same inputs, and in a
+    /// mechanism's velocity components often the same relevant ones); the
+    /// report numbers these starts after the random restarts. On the
+    /// maximal-coordinate cart-pole log of `docs/gp.md` (sparse, 1 + 1
+    /// starts) this fitted v_pole.y, which had stayed on the plateau.
     ///
     /// Errors: empty data, mismatched lengths, non-finite values, invalid
     /// bounds, initial or warm-start hyperparameters, an inducing-point count
@@ -688,15 +694,17 @@ impl Gp {
                 lowest[*out] = lowest[*out].min(r.f);
             }
         }
-        let plateau: Vec<bool> = (0..p)
+        // −LML of white noise at its best variance yᵀy/N, per output
+        let white: Vec<f64> = (0..p)
             .map(|out| {
-                // −LML of white noise at its best variance yᵀy/N
                 let y = &prep.residuals[out].0;
                 let s2 = y.iter().map(|v| v * v).sum::<f64>() / n as f64;
-                let white = 0.5 * n as f64 * (1.0 + (2.0 * std::f64::consts::PI * s2).ln());
-                white.is_finite() && white - lowest[out] <= d as f64
+                0.5 * n as f64 * (1.0 + (2.0 * std::f64::consts::PI * s2).ln())
             })
             .collect();
+        let on_plateau =
+            |out: usize, lowest: f64| white[out].is_finite() && white[out] - lowest <= d as f64;
+        let plateau: Vec<bool> = (0..p).map(|out| on_plateau(out, lowest[out])).collect();
         let again: Vec<usize> = (0..jobs.len())
             .filter(|&j| {
                 let (out, _, _) = &jobs[j];
@@ -722,12 +730,49 @@ impl Gp {
                 first.iterations = iterations;
             }
         }
+        // Outputs still on the white-noise plateau, when other outputs (on
+        // the same inputs, in the same normalised units) did fit: one more
+        // start from each fitted output's optimum (its length scales are a
+        // start that sees the inputs' structure; random restarts can all
+        // miss it, e.g. one velocity of a maximal-coordinate model). These
+        // starts are numbered after the random restarts.
         let starts = 1 + opts.restarts;
+        let mut extra = vec![0usize; p];
+        if p > 1 {
+            let mut lowest = vec![f64::INFINITY; p];
+            let mut best_x: Vec<Option<&[f64]>> = vec![None; p];
+            for ((out, _, _), res) in jobs.iter().zip(&results) {
+                if let Ok(r) = res
+                    && r.f < lowest[*out]
+                {
+                    lowest[*out] = r.f;
+                    best_x[*out] = Some(&r.x);
+                }
+            }
+            let donors: Vec<Vec<f64>> = (0..p)
+                .filter(|&o| lowest[o].is_finite() && !on_plateau(o, lowest[o]))
+                .filter_map(|o| best_x[o].map(<[f64]>::to_vec))
+                .collect();
+            let mut rescue = Vec::new();
+            for out in (0..p).filter(|&o| on_plateau(o, lowest[o])) {
+                for t in &donors {
+                    rescue.push((out, starts + extra[out], t.clone()));
+                    extra[out] += 1;
+                }
+            }
+            if !rescue.is_empty() {
+                let more = run(&rescue, lopt);
+                jobs.extend(rescue);
+                results.extend(more);
+            }
+        }
         let mut best: Vec<Option<(usize, Vec<f64>, bool)>> = vec![None; p];
         // Per output: final LML and evaluations of every start, total
         // evaluations and iterations, the first error.
-        let mut reports: Vec<StartTally> =
-            vec![(vec![f64::NAN; starts], 0, None, 0, vec![0; starts]); p];
+        let mut reports: Vec<StartTally> = extra
+            .iter()
+            .map(|e| (vec![f64::NAN; starts + e], 0, None, 0, vec![0; starts + e]))
+            .collect();
         for ((out, start, _), res) in jobs.iter().zip(results) {
             match res {
                 Ok(r) => {

@@ -211,7 +211,9 @@ pub struct TrainOptions {
     /// fewer samples, or the previous run of a sweep). They replace
     /// `initial` as start 0 of each output (converted to the new
     /// normalisation and clamped into the bounds); the random restarts are
-    /// unchanged, so `restarts: 0` refines the previous optimum only.
+    /// unchanged, so `restarts: 0` refines the previous optimum only
+    /// (unless an output ends on the white-noise plateau, see
+    /// [`Gp::train`](super::Gp::train)).
     pub warm_start: Option<Vec<Hyperparameters>>,
 }
 
@@ -315,9 +317,13 @@ pub struct OutputReport {
     /// Best log marginal likelihood (normalised units), over all starts;
     /// for a sparse GP the evidence lower bound at the winning start.
     pub log_marginal_likelihood: f64,
-    /// Index of the winning start (0 = the initial point).
+    /// Index of the winning start (0 = the initial point, then the random
+    /// restarts, then any extra starts from other outputs' optima that
+    /// [`Gp::train`](super::Gp::train) gives an output left on the
+    /// white-noise plateau).
     pub best_start: usize,
-    /// Final LML of every start (`NaN` for a start that failed).
+    /// Final LML of every start (`NaN` for a start that failed):
+    /// 1 + restarts entries, plus the extra starts if any.
     pub start_lmls: Vec<f64>,
     /// Total L-BFGS iterations over all starts.
     pub iterations: usize,
