@@ -849,6 +849,16 @@ mod tests {
         (x, y)
     }
 
+    /// (f(a + h·e_k) − f(a − h·e_k))/(2h) with h = 1e-5.
+    fn central_difference(mut f: impl FnMut(&[f64]) -> f64, at: &[f64], k: usize) -> f64 {
+        let h = 1e-5;
+        let mut p = at.to_vec();
+        p[k] += h;
+        let fp = f(&p);
+        p[k] = at[k] - h;
+        (fp - f(&p)) / (2.0 * h)
+    }
+
     #[test]
     fn gradient_matches_central_differences() {
         let (n, d, m) = (120, 3, 15);
@@ -858,18 +868,15 @@ mod tests {
         let mut ws = SparseWorkspace::new(m, n);
         let e = elbo_ws(&mut ws, &x, &z, d, &y, &theta, true, Par::Seq).unwrap();
         for k in 0..theta.len() {
-            let h = 1e-5;
-            let mut tp = theta.clone();
-            tp[k] += h;
-            let mut tm = theta.clone();
-            tm[k] -= h;
-            let fp = elbo_ws(&mut ws, &x, &z, d, &y, &tp, false, Par::Seq)
-                .unwrap()
-                .value;
-            let fm = elbo_ws(&mut ws, &x, &z, d, &y, &tm, false, Par::Seq)
-                .unwrap()
-                .value;
-            let fd = (fp - fm) / (2.0 * h);
+            let fd = central_difference(
+                |t| {
+                    elbo_ws(&mut ws, &x, &z, d, &y, t, false, Par::Seq)
+                        .unwrap()
+                        .value
+                },
+                &theta,
+                k,
+            );
             // central differences: O(h²) truncation ≈ 1e-10·|f'''|, rounding
             // ≈ ε·|F|/h ≈ 1e-9 here
             assert!(
@@ -903,18 +910,15 @@ mod tests {
         assert_eq!(t.gradient[..], e.gradient[..d + 2]);
         let mut largest = 0.0f64;
         for k in 0..m * d {
-            let h = 1e-5;
-            let mut zp = z.clone();
-            zp[k] += h;
-            let mut zm = z.clone();
-            zm[k] -= h;
-            let fp = elbo_ws(&mut ws, &x, &zp, d, &y, &theta, false, Par::Seq)
-                .unwrap()
-                .value;
-            let fm = elbo_ws(&mut ws, &x, &zm, d, &y, &theta, false, Par::Seq)
-                .unwrap()
-                .value;
-            let fd = (fp - fm) / (2.0 * h);
+            let fd = central_difference(
+                |zk| {
+                    elbo_ws(&mut ws, &x, zk, d, &y, &theta, false, Par::Seq)
+                        .unwrap()
+                        .value
+                },
+                &z,
+                k,
+            );
             let an = e.gradient[d + 2 + k];
             largest = largest.max(an.abs());
             assert!(
