@@ -120,9 +120,10 @@ pub struct SparseOptions {
     /// parallel over outputs) plus 2·M·N·d flops each for the gradient in
     /// Z, and the run has M·d + p·(d + 2) variables, so it typically takes
     /// more iterations than a hyperparameter start (up to
-    /// [`TrainOptions::max_iters`]). Default `false` (GPflow's `SGPR`
-    /// trains Z by default; with k-means++ points at M ≪ N the gain is
-    /// usually modest, see `docs/gp.md`).
+    /// [`TrainOptions::max_iters`]). Default `false`, because of that cost
+    /// (GPflow's `SGPR` trains Z by default). Where M ≪ N the gain can be
+    /// large: N = 10⁴, d = 4, M = 64, bound 12 340 → 21 492 in 4.3 s
+    /// instead of 0.5 s (`docs/gp.md`, "Sparse GP (SGPR)").
     pub optimise_inducing: bool,
 }
 
