@@ -310,6 +310,25 @@ fn optimised_inducing_points_close_the_gap_to_the_exact_optimum() {
     let (g1, r1) = one.install(|| Gp::train(&x, d, &y, p, &opts).unwrap());
     assert_eq!(g1.to_saved(), gp.to_saved());
     assert_eq!(r1, rep);
+    // given inducing points, one far outside the data: the box widens to
+    // hold it, so the run starts where "before" was evaluated (the point
+    // sees no data there, its gradient is 0, so it stays put; clipped into
+    // a box of the data's range it would have moved)
+    let mut given = z0.clone();
+    given[0] = 100.0;
+    let far = TrainOptions {
+        method: Method::Sparse(SparseOptions {
+            init: InducingInit::Given(given),
+            optimise_inducing: true,
+            ..SparseOptions::kmeans(m)
+        }),
+        ..base.clone()
+    };
+    let (gf, rf) = Gp::train(&x, d, &y, p, &far).unwrap();
+    let r = rf.inducing.unwrap();
+    assert!(r.bound_after >= r.bound_before, "{r:?}");
+    let zf = gf.inducing_points().unwrap();
+    assert!((zf[0] - 100.0).abs() < 1e-9, "{}", zf[0]);
 }
 
 /// `add_samples` against a model rebuilt from the enlarged data with the

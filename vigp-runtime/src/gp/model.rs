@@ -402,7 +402,8 @@ fn inducing_points(prep: &Prepared, opts: &TrainOptions) -> Result<Option<Vec<f6
 /// The joint refinement of [`SparseOptions::optimise_inducing`]: maximises
 /// Σ_o F_o(θ_o, Z) over every output's θ_o (in the box `lo`, `hi`) and the
 /// shared inducing inputs Z (normalised units, row-major M × d; each
-/// coordinate within the inputs' range widened by the range on either side)
+/// coordinate within the inputs' range widened by the range on either
+/// side, or by as much more as a given initial point needs)
 /// with one L-BFGS run from `thetas` and `z0`, where the bounds sum to
 /// `bound_before`.
 ///
@@ -431,12 +432,14 @@ fn refine_inducing(
         blo.extend_from_slice(lo);
         bhi.extend_from_slice(hi);
     }
-    for _ in 0..m {
+    for zi in z0.chunks_exact(d) {
         for j in 0..d {
             let w = xhi[j] - xlo[j];
             let w = if w > 0.0 { w } else { 1.0 };
-            blo.push(xlo[j] - w);
-            bhi.push(xhi[j] + w);
+            // given inducing points outside that box widen it: the run
+            // starts where `bound_before` was evaluated
+            blo.push((xlo[j] - w).min(zi[j]));
+            bhi.push((xhi[j] + w).max(zi[j]));
         }
     }
     let mut x0: Vec<f64> = thetas.iter().flatten().copied().collect();

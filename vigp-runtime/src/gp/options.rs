@@ -114,7 +114,8 @@ pub struct SparseOptions {
     /// the analytic gradient in Z. The bound can only rise (the run keeps
     /// its best point); [`TrainReport::inducing`] records before and after.
     /// Each inducing coordinate is kept within the training inputs' range
-    /// widened by that range on either side.
+    /// widened by that range on either side (or wider, to include given
+    /// initial points that lie outside).
     ///
     /// Cost: one evaluation is p bound evaluations (one per output, in
     /// parallel over outputs) plus 2·M·N·d flops each for the gradient in
@@ -316,7 +317,8 @@ pub struct InducingReport {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct OutputReport {
     /// Best log marginal likelihood (normalised units), over all starts;
-    /// for a sparse GP the evidence lower bound at the winning start.
+    /// for a sparse GP the evidence lower bound at the winning start (after
+    /// [`SparseOptions::optimise_inducing`]'s refinement, the final bound).
     pub log_marginal_likelihood: f64,
     /// Index of the winning start (0 = the initial point, then the random
     /// restarts, then any extra starts from other outputs' optima that
