@@ -19,7 +19,7 @@ mod common;
 use common::Rng;
 use vigp::gp::{
     ExportOptions, Gp, GpError, InducingInit, Method, SavedGp, SparseOptions, TrainOptions,
-    VarianceMode, log_marginal_likelihood, sparse_bound,
+    TrainReport, VarianceMode, log_marginal_likelihood, sparse_bound,
 };
 
 fn fixture() -> serde_json::Value {
@@ -219,6 +219,11 @@ fn trained_sparse_bound_approaches_the_exact_optimum() {
 /// its "after" is the refined model's bound, the refinement closes most of
 /// the gap to the exact optimum, stays below it (a lower bound), keeps Z
 /// in its box and predicts held-out points better.
+/// The outputs' LMLs (bounds, for a sparse GP) summed.
+fn summed(rep: &TrainReport) -> f64 {
+    rep.outputs.iter().map(|o| o.log_marginal_likelihood).sum()
+}
+
 #[test]
 fn optimised_inducing_points_close_the_gap_to_the_exact_optimum() {
     let (n, d, p, m) = (300, 2, 2, 16);
@@ -228,22 +233,14 @@ fn optimised_inducing_points_close_the_gap_to_the_exact_optimum() {
         ..Default::default()
     };
     let (_, exact) = Gp::train(&x, d, &y, p, &base).unwrap();
-    let exact: f64 = exact
-        .outputs
-        .iter()
-        .map(|o| o.log_marginal_likelihood)
-        .sum();
+    let exact = summed(&exact);
     let fixed_opts = TrainOptions {
         method: Method::Sparse(SparseOptions::kmeans(m)),
         ..base.clone()
     };
     let (fixed, fixed_rep) = Gp::train(&x, d, &y, p, &fixed_opts).unwrap();
     assert!(fixed_rep.inducing.is_none());
-    let fixed_bound: f64 = fixed_rep
-        .outputs
-        .iter()
-        .map(|o| o.log_marginal_likelihood)
-        .sum();
+    let fixed_bound = summed(&fixed_rep);
     let opts = TrainOptions {
         method: Method::Sparse(SparseOptions {
             optimise_inducing: true,
@@ -253,7 +250,7 @@ fn optimised_inducing_points_close_the_gap_to_the_exact_optimum() {
     };
     let (gp, rep) = Gp::train(&x, d, &y, p, &opts).unwrap();
     let r = rep.inducing.clone().expect("the refinement ran");
-    let after: f64 = rep.outputs.iter().map(|o| o.log_marginal_likelihood).sum();
+    let after = summed(&rep);
     println!(
         "exact {exact:.6}; fixed Z {fixed_bound:.6}; refined: before {:.6}, after {:.6} \
          (model {after:.6}), {} iterations, {} evaluations, converged {}",

@@ -328,6 +328,24 @@ fn residuals_of(
 /// (start LMLs, evaluations, first error, iterations, start evaluations).
 type StartTally = (Vec<f64>, usize, Option<GpError>, usize, Vec<usize>);
 
+/// Per output, the successful run that reached the lowest objective (−LML;
+/// the first of equals), or `None` if every run of that output failed.
+fn best_runs<'a>(
+    jobs: &[(usize, usize, Vec<f64>)],
+    results: &'a [Result<lbfgs::LbfgsResult, GpError>],
+    p: usize,
+) -> Vec<Option<&'a lbfgs::LbfgsResult>> {
+    let mut best: Vec<Option<&lbfgs::LbfgsResult>> = vec![None; p];
+    for ((out, _, _), res) in jobs.iter().zip(results) {
+        if let Ok(r) = res
+            && best[*out].is_none_or(|b| r.f < b.f)
+        {
+            best[*out] = Some(r);
+        }
+    }
+    best
+}
+
 /// Mixes the seed and output index into an independent SplitMix64 stream.
 fn stream_seed(seed: u64, output: usize) -> u64 {
     let mut r = SplitMix64::new(seed ^ (output as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
@@ -420,26 +438,25 @@ fn refine_inducing(
     let (n, d, p) = (prep.n, prep.d, prep.p);
     let m = z0.len() / d;
     let k = d + 2;
-    let (mut xlo, mut xhi) = (vec![f64::INFINITY; d], vec![f64::NEG_INFINITY; d]);
+    // per input: the data's range widened by that range on either side
+    let (mut zlo, mut zhi) = (vec![f64::INFINITY; d], vec![f64::NEG_INFINITY; d]);
     for r in prep.xn.chunks_exact(d) {
         for j in 0..d {
-            xlo[j] = xlo[j].min(r[j]);
-            xhi[j] = xhi[j].max(r[j]);
+            zlo[j] = zlo[j].min(r[j]);
+            zhi[j] = zhi[j].max(r[j]);
         }
     }
-    let (mut blo, mut bhi) = (Vec::with_capacity(p * k + m * d), Vec::new());
-    for _ in 0..p {
-        blo.extend_from_slice(lo);
-        bhi.extend_from_slice(hi);
+    for (l, h) in zlo.iter_mut().zip(zhi.iter_mut()) {
+        let w = if *h > *l { *h - *l } else { 1.0 };
+        (*l, *h) = (*l - w, *h + w);
     }
+    let (mut blo, mut bhi) = (lo.repeat(p), hi.repeat(p));
     for zi in z0.chunks_exact(d) {
         for j in 0..d {
-            let w = xhi[j] - xlo[j];
-            let w = if w > 0.0 { w } else { 1.0 };
             // given inducing points outside that box widen it: the run
             // starts where `bound_before` was evaluated
-            blo.push((xlo[j] - w).min(zi[j]));
-            bhi.push((xhi[j] + w).max(zi[j]));
+            blo.push(zlo[j].min(zi[j]));
+            bhi.push(zhi[j].max(zi[j]));
         }
     }
     let mut x0: Vec<f64> = thetas.iter().flatten().copied().collect();
@@ -691,12 +708,13 @@ impl Gp {
         // better end counts, and both runs' evaluations.
         let mut results = run(&jobs, lopt);
         // per output: the lowest objective (−LML) reached
-        let mut lowest = vec![f64::INFINITY; p];
-        for ((out, _, _), res) in jobs.iter().zip(&results) {
-            if let Ok(r) = res {
-                lowest[*out] = lowest[*out].min(r.f);
-            }
-        }
+        let lowest_of = |results: &[Result<lbfgs::LbfgsResult, GpError>]| -> Vec<f64> {
+            best_runs(&jobs, results, p)
+                .iter()
+                .map(|r| r.map_or(f64::INFINITY, |r| r.f))
+                .collect()
+        };
+        let lowest = lowest_of(&results);
         // −LML of white noise at its best variance yᵀy/N, per output
         let white: Vec<f64> = (0..p)
             .map(|out| {
@@ -742,19 +760,12 @@ impl Gp {
         let starts = 1 + opts.restarts;
         let mut extra = vec![0usize; p];
         if p > 1 {
-            let mut lowest = vec![f64::INFINITY; p];
-            let mut best_x: Vec<Option<&[f64]>> = vec![None; p];
-            for ((out, _, _), res) in jobs.iter().zip(&results) {
-                if let Ok(r) = res
-                    && r.f < lowest[*out]
-                {
-                    lowest[*out] = r.f;
-                    best_x[*out] = Some(&r.x);
-                }
-            }
-            let donors: Vec<Vec<f64>> = (0..p)
-                .filter(|&o| lowest[o].is_finite() && !on_plateau(o, lowest[o]))
-                .filter_map(|o| best_x[o].map(<[f64]>::to_vec))
+            let lowest = lowest_of(&results);
+            let donors: Vec<Vec<f64>> = best_runs(&jobs, &results, p)
+                .iter()
+                .enumerate()
+                .filter_map(|(o, r)| r.filter(|r| !on_plateau(o, r.f)))
+                .map(|r| r.x.clone())
                 .collect();
             let mut rescue = Vec::new();
             for out in (0..p).filter(|&o| on_plateau(o, lowest[o])) {

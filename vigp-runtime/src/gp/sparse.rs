@@ -537,6 +537,8 @@ fn elbo_blocks(
     }
     let n = y.len();
     let m = zs.len() / d;
+    // inducing points whose gradient is wanted: all or none
+    let mz = if want_z { m } else { 0 };
     let (sf2, s2, sigma) = (hp.signal_variance, hp.noise_variance, c.sigma);
     // B⁻¹ from L_B.
     let mut binv = Mat::<f64>::identity(m, m);
@@ -565,11 +567,7 @@ fn elbo_blocks(
         let mut gl = vec![0.0; d];
         let mut rr_task = 0.0;
         // ∂F/∂Z: Σ_n H_in x̃_nk (column-major d × M) and Σ_n H_in (M).
-        let (mut hx, mut hsum) = if want_z {
-            (vec![0.0; m * d], vec![0.0; m])
-        } else {
-            (Vec::new(), Vec::new())
-        };
+        let (mut hx, mut hsum) = (vec![0.0; mz * d], vec![0.0; mz]);
         let mut sub = 0;
         while sub < w {
             let ws_ = blocks.sub.min(w - sub);
@@ -606,11 +604,7 @@ fn elbo_blocks(
     });
     let mut gl = vec![0.0; d];
     let mut rr_sum = 0.0;
-    let (mut hx, mut hsum) = if want_z {
-        (vec![0.0; m * d], vec![0.0; m])
-    } else {
-        (Vec::new(), Vec::new())
-    };
+    let (mut hx, mut hsum) = (vec![0.0; mz * d], vec![0.0; mz]);
     // Fixed order of the partial sums: the result does not depend on scheduling.
     for (g, rt, px, ps) in parts {
         for (a, b) in gl.iter_mut().zip(&g) {
@@ -643,12 +637,10 @@ fn elbo_blocks(
     let kuu0 = &c.kuu;
     // ∂F/∂z̃ (scaled units), row-major M × d: the K_uf part from the pass
     // above, then the K_uu part in the loop below.
-    let mut gz = vec![0.0; if want_z { m * d } else { 0 }];
-    if want_z {
-        for i in 0..m {
-            for k in 0..d {
-                gz[i * d + k] = hx[k * m + i] - zs[i * d + k] * hsum[i];
-            }
+    let mut gz = vec![0.0; mz * d];
+    for i in 0..mz {
+        for k in 0..d {
+            gz[i * d + k] = hx[k * m + i] - zs[i * d + k] * hsum[i];
         }
     }
     for i in 0..m {
@@ -849,6 +841,19 @@ mod tests {
         (x, y)
     }
 
+    /// Size of the tests' problem: N samples, d inputs, M inducing points.
+    const N: usize = 120;
+    const D: usize = 3;
+    const M: usize = 15;
+
+    /// The tests' problem: inputs, targets, inducing inputs (k-means++ with
+    /// two Lloyd iterations) and a point θ = (ln ℓ, ln σ_f², ln σ_n²).
+    fn problem() -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+        let (x, y) = data(N, D);
+        let z = kmeans_pp(&x, D, M, 2, 1);
+        (x, y, z, vec![0.2, -0.3, 0.5, 0.4, -3.0])
+    }
+
     /// (f(a + h·e_k) − f(a − h·e_k))/(2h) with h = 1e-5.
     fn central_difference(mut f: impl FnMut(&[f64]) -> f64, at: &[f64], k: usize) -> f64 {
         let h = 1e-5;
@@ -861,10 +866,8 @@ mod tests {
 
     #[test]
     fn gradient_matches_central_differences() {
-        let (n, d, m) = (120, 3, 15);
-        let (x, y) = data(n, d);
-        let z = kmeans_pp(&x, d, m, 2, 1);
-        let theta = vec![0.2, -0.3, 0.5, 0.4, -3.0];
+        let (n, d, m) = (N, D, M);
+        let (x, y, z, theta) = problem();
         let mut ws = SparseWorkspace::new(m, n);
         let e = elbo_ws(&mut ws, &x, &z, d, &y, &theta, true, Par::Seq).unwrap();
         for k in 0..theta.len() {
@@ -898,10 +901,8 @@ mod tests {
         // every inducing point (h = 1e-5 in units where the inputs span
         // [−2, 2]: truncation ≈ h²·|F‴| ≈ 1e-9, rounding ≈ ε·|F|/h ≈
         // 1e-9), and the θ part equal to elbo_ws's bit for bit.
-        let (n, d, m) = (120, 3, 15);
-        let (x, y) = data(n, d);
-        let z = kmeans_pp(&x, d, m, 2, 1);
-        let theta = vec![0.2, -0.3, 0.5, 0.4, -3.0];
+        let (n, d, m) = (N, D, M);
+        let (x, y, z, theta) = problem();
         let mut ws = SparseWorkspace::new(m, n);
         let e = elbo_z_ws(&mut ws, &x, &z, d, &y, &theta, Par::Seq).unwrap();
         assert_eq!(e.gradient.len(), d + 2 + m * d);
@@ -938,10 +939,8 @@ mod tests {
         // against many small tasks with a partial last one and several
         // panels per task: the same bound and gradient up to the order of
         // the sums (relative 1e-12: ≈ N·ε over N = 120 terms, with margin).
-        let (n, d, m) = (120, 3, 15);
-        let (x, y) = data(n, d);
-        let z = kmeans_pp(&x, d, m, 2, 1);
-        let theta = vec![0.2, -0.3, 0.5, 0.4, -3.0];
+        let (n, d, m) = (N, D, M);
+        let (x, y, z, theta) = problem();
         let mut ws = SparseWorkspace::new(m, n);
         let one = Blocks { task: n, sub: n };
         let e = elbo_blocks(&mut ws, &x, &z, d, &y, &theta, true, true, Par::Seq, one).unwrap();
