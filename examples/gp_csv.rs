@@ -6,7 +6,7 @@
 //!
 //! ```text
 //! cargo run --release --example gp_csv -- --csv data.csv [--restarts 10] [--seed 0]
-//!     [--raw] [--bounds LO HI] [--theta t1,…,t(d+2)] [--test test.csv]
+//!     [--raw] [--bounds LO HI] [--screen auto|off|M] [--theta t1,…,t(d+2)] [--test test.csv]
 //! ```
 //!
 //! * default: vigp's defaults (inputs standardised, `Bounds::default()`,
@@ -17,6 +17,8 @@
 //!   i.e. scikit-learn's `ConstantKernel(1) * RBF([1] * d) + WhiteKernel(1)`
 //!   with bounds (1e-5, 1e5) and `normalize_y=True`;
 //! * `--bounds LO HI`: other uniform bounds (normalised units);
+//! * `--screen auto|off|M`: [`Screening`] of the starts (default auto:
+//!   from N = 512 on a subset; `off` is scikit-learn's procedure);
 //! * `--start t1,…,t(d+2)`: start 0 at this θ (normalised units, vigp's
 //!   order, clamped into the bounds) instead; with `--restarts 0` this runs
 //!   the optimiser from one given point (e.g. one of scikit-learn's starts).
@@ -36,7 +38,9 @@
 
 use std::time::Instant;
 
-use vigp::gp::{Bounds, Gp, Hyperparameters, PriorMean, TrainOptions, log_marginal_likelihood};
+use vigp::gp::{
+    Bounds, Gp, Hyperparameters, PriorMean, Screening, TrainOptions, log_marginal_likelihood,
+};
 
 /// The command-line word after `name`, if any.
 fn str_arg(name: &str) -> Option<String> {
@@ -105,6 +109,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         opts.bounds = Bounds::uniform(1e-5, 1e5);
         opts.initial = Some(Hyperparameters::isotropic(d, 1.0, 1.0, 1.0));
     }
+    opts.screening = match str_arg("--screen").as_deref() {
+        None | Some("auto") => Screening::Auto,
+        Some("off") => Screening::Off,
+        Some(m) => Screening::Subset(m.parse()?),
+    };
     if let Some((lo, hi)) = pair_arg("--bounds") {
         opts.bounds = Bounds::uniform(lo.parse()?, hi.parse()?);
     }
@@ -165,6 +174,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 "converged": o.converged,
                 "jitter": o.jitter,
                 "seconds": secs,
+                "screening": o.screening.as_ref().map(|s| serde_json::json!({
+                    "subset": s.subset,
+                    "evaluations": s.evaluations,
+                    "refined": s.refined,
+                    "fell_back": s.fell_back,
+                })),
             })
         }
         Err(e) => serde_json::json!({"ok": false, "error": e.to_string(), "seconds": secs}),

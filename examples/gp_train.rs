@@ -43,7 +43,7 @@
 
 use std::time::Instant;
 
-use vigp::gp::{Gp, Method, SparseOptions, TrainOptions, sparse_bound};
+use vigp::gp::{Gp, Method, Screening, SparseOptions, TrainOptions, sparse_bound};
 
 /// Fractional parts of √p for the first primes: Weyl-sequence directions
 /// (the same as `benches/gp.rs` and `scripts/gp_sklearn_bench.py`).
@@ -181,8 +181,17 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if !(1..=8).contains(&d) {
         return Err("--d must be in 1..=8".into());
     }
+    let screening = match str_arg("--screen").as_deref() {
+        None | Some("auto") => Screening::Auto,
+        Some("off") => Screening::Off,
+        Some(m) => Screening::Subset(
+            m.parse()
+                .map_err(|_| "--screen takes auto, off or a subset size")?,
+        ),
+    };
     let (x, y) = bench_data(n, d);
     let opts = TrainOptions {
+        screening,
         restarts,
         seed,
         method: if sparse > 0 {
@@ -243,6 +252,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         );
         let lmls: Vec<String> = o.start_lmls.iter().map(|v| format!("{v:.3}")).collect();
         println!("  final LML per start: [{}]", lmls.join(", "));
+        if let Some(s) = &o.screening {
+            let lmls: Vec<String> = s.start_lmls.iter().map(|v| format!("{v:.3}")).collect();
+            println!(
+                "  screened on {} samples: {} evaluations there, per start {:?}, final LML there [{}]; refined starts {:?}{}",
+                s.subset,
+                s.evaluations,
+                s.start_evaluations,
+                lmls.join(", "),
+                s.refined,
+                if s.fell_back {
+                    ", fell back to unscreened starts"
+                } else {
+                    ""
+                }
+            );
+        }
         if let Some(z) = &rep.inducing {
             println!(
                 "  inducing points optimised: bound {:.6} -> {:.6}, {} evaluations in {} iterations (converged: {})",

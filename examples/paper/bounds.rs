@@ -358,6 +358,7 @@ where
     let opts = TrainOptions {
         restarts: cli.restarts,
         seed: cli.seed ^ n as u64,
+        screening: cli.screening(),
         ..TrainOptions::default()
     };
     let (cal_min, test_min, shift_min) =

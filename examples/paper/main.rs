@@ -41,7 +41,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
-use vigp::gp::{Hyperparameters, TrainOptions};
+use vigp::gp::{Hyperparameters, Screening, TrainOptions};
 use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
@@ -116,10 +116,26 @@ struct Cli {
     /// Skip the error-bound evaluation.
     #[arg(long)]
     no_bounds: bool,
+    /// Run every start of the GP training on all N samples (scikit-learn's
+    /// procedure) instead of screening the starts on a subset from N = 512
+    /// (`vigp::gp::Screening`, the default).
+    #[arg(long)]
+    no_screen: bool,
     /// Calibration trajectories, and as many test trajectories, per system
     /// for the error bounds (each gives 19 windows of 20 steps).
     #[arg(long, default_value_t = 60)]
     bound_trajectories: usize,
+}
+
+impl Cli {
+    /// The GP training's screening of its starts (`--no-screen`).
+    fn screening(&self) -> Screening {
+        if self.no_screen {
+            Screening::Off
+        } else {
+            Screening::Auto
+        }
+    }
 }
 
 const DT: f64 = 0.01;
@@ -398,6 +414,7 @@ where
                     },
                     seed: cli.seed ^ n as u64,
                     warm_start,
+                    screening: cli.screening(),
                     ..TrainOptions::default()
                 }
             };

@@ -45,6 +45,7 @@ mod options;
 mod rng;
 mod save;
 mod sparse;
+mod train;
 mod tri;
 mod update;
 
@@ -55,8 +56,9 @@ pub use mean::{MeanFn, PriorMean};
 pub use model::{Gp, OutputGp, PARALLEL_VARIANCE_MIN_N, Prediction, VarianceMode, Workspace};
 pub use normalise::InputNormaliser;
 pub use options::{
-    Bounds, InducingInit, InducingReport, MAX_RESTARTS, Method, OutputReport,
-    SPARSE_MIN_NOISE_VARIANCE, SparseOptions, TrainOptions, TrainReport,
+    Bounds, InducingInit, InducingReport, MAX_RESTARTS, Method, OutputReport, SCREEN_FROM,
+    SPARSE_MIN_NOISE_VARIANCE, Screening, ScreeningReport, SparseOptions, TrainOptions,
+    TrainReport,
 };
 pub use save::{SavedGp, SavedMean, SavedOutput};
 

@@ -1,8 +1,6 @@
 //! The trained multi-output GP: training, fitting at given hyperparameters,
 //! prediction and the accessors the error bound needs.
 
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use faer::{Mat, Par, Side};
 use rayon::prelude::*;
 use vigp_core::gp as core_gp;
@@ -17,13 +15,7 @@ use super::options::{
     InducingInit, InducingReport, Method, OutputReport, TrainOptions, TrainReport,
 };
 use super::rng::SplitMix64;
-use super::{sparse, tri};
-
-/// From this many samples an exact training run's evaluations use the
-/// thread pool too (see `Gp::train`): below it one evaluation is a few
-/// milliseconds and the starts alone keep the threads busy, until fewer
-/// runs than threads are left (then the remaining runs use the pool).
-const PARALLEL_EVALUATION_FROM: usize = 1024;
+use super::{sparse, train, tri};
 
 /// How [`Gp::predict_into`] computes the posterior variance of an exact GP
 /// (both give σ_f² − kᵀ(K + σ²I)⁻¹k; the mean is not affected).
@@ -328,24 +320,6 @@ fn residuals_of(
 /// (start LMLs, evaluations, first error, iterations, start evaluations).
 type StartTally = (Vec<f64>, usize, Option<GpError>, usize, Vec<usize>);
 
-/// Per output, the successful run that reached the lowest objective (−LML;
-/// the first of equals), or `None` if every run of that output failed.
-fn best_runs<'a>(
-    jobs: &[(usize, usize, Vec<f64>)],
-    results: &'a [Result<lbfgs::LbfgsResult, GpError>],
-    p: usize,
-) -> Vec<Option<&'a lbfgs::LbfgsResult>> {
-    let mut best: Vec<Option<&lbfgs::LbfgsResult>> = vec![None; p];
-    for ((out, _, _), res) in jobs.iter().zip(results) {
-        if let Ok(r) = res
-            && best[*out].is_none_or(|b| r.f < b.f)
-        {
-            best[*out] = Some(r);
-        }
-    }
-    best
-}
-
 /// Mixes the seed and output index into an independent SplitMix64 stream.
 fn stream_seed(seed: u64, output: usize) -> u64 {
     let mut r = SplitMix64::new(seed ^ (output as u64).wrapping_mul(0xD1B5_4A32_D192_ED03));
@@ -541,6 +515,14 @@ impl Gp {
     /// maximal-coordinate cart-pole log of `docs/gp.md` (sparse, 1 + 1
     /// starts) this fitted v_pole.y, which had stayed on the plateau.
     ///
+    /// An exact GP from N = [`SCREEN_FROM`](super::SCREEN_FROM) samples
+    /// screens its starts by default ([`TrainOptions::screening`]): all of
+    /// the above runs on a seeded subset, and the distinct optima found
+    /// there are refined on all samples, each from the subset run's end
+    /// point and curvature memory. At N = 512, d = 4, 1 + 10 starts that is
+    /// 42 evaluations on all samples (plus 396 on 256 of them) instead of
+    /// 381, at the same optimum (`docs/gp.md`, "Screening the starts").
+    ///
     /// Errors: empty data, mismatched lengths, non-finite values, invalid
     /// bounds, initial or warm-start hyperparameters, an inducing-point count
     /// outside 1..=N, or every start failing.
@@ -610,14 +592,14 @@ impl Gp {
                 .zip(lo.iter().zip(&hi))
                 .map(|(t, (l, h))| t.clamp(*l, *h))
                 .collect();
-            jobs.push((out, 0usize, t0));
+            jobs.push(train::Job::new(out, 0, t0));
             for s in 0..opts.restarts {
                 let t = lo
                     .iter()
                     .zip(&hi)
                     .map(|(l, h)| rng.uniform(*l, *h))
                     .collect();
-                jobs.push((out, s + 1, t));
+                jobs.push(train::Job::new(out, s + 1, t));
             }
         }
         let lopt = LbfgsOptions {
@@ -627,159 +609,41 @@ impl Gp {
             ftol: opts.ftol,
             unit_start: false,
         };
-        let inner = if jobs.len() == 1 && inducing.is_some() {
-            Par::rayon(0)
-        } else {
-            Par::Seq
+        let set = train::StageSettings {
+            lo: &lo,
+            hi: &hi,
+            lopt,
+            inducing: inducing.as_deref(),
+            // a single sparse run (one output, no restarts) uses all
+            // threads inside its evaluations
+            inner_sparse: if jobs.len() == 1 && inducing.is_some() {
+                Par::rayon(0)
+            } else {
+                Par::Seq
+            },
         };
-        // Exact runs at large N offer their Cholesky, inverse and products
-        // to the pool as well: while every thread has a run of its own the
-        // offered halves run on the offering thread (no idle thread steals
-        // them), and when the last runs are left (the slowest start alone
-        // at the end) the idle threads take their share. faer splits these
-        // kernels by output blocks, so the bits do not depend on the split
-        // (`tests/gp_robustness.rs`). Below that size the same happens once
-        // fewer runs than threads are left (see `run`): at N = 512, d = 4,
-        // 1 + 10 starts this took the busy share of two threads from 1.76
-        // to 1.93 and the wall time from 1.33 to 1.25 s.
-        let inner_exact = if n >= PARALLEL_EVALUATION_FROM {
-            Par::rayon(0)
-        } else {
-            Par::Seq
+        let full = train::StageData {
+            xn: &prep.xn,
+            n,
+            d,
+            ys: prep.residuals.iter().map(|r| r.0.as_slice()).collect(),
         };
-        let threads = rayon::current_num_threads();
-        let run = |jobs: &[(usize, usize, Vec<f64>)], lopt: LbfgsOptions| -> Vec<_> {
-            // Runs not yet finished: once fewer than the pool's threads are
-            // left, a thread is idle, and the remaining runs offer their
-            // evaluations to the pool as large N does from the start.
-            let unfinished = AtomicUsize::new(jobs.len());
-            jobs.par_iter()
-                .with_max_len(1)
-                .map(|(out, _, t0)| {
-                    let y = &prep.residuals[*out].0;
-                    let res = match &inducing {
-                        None => {
-                            // One workspace per (output, start) run: no N×N allocation per evaluation.
-                            let mut ws = lml::LmlWorkspace::new(n);
-                            lbfgs::minimise(
-                                |t| {
-                                    let par = if unfinished.load(Ordering::Relaxed) < threads {
-                                        Par::rayon(0)
-                                    } else {
-                                        inner_exact
-                                    };
-                                    let e = lml::lml_ws(&mut ws, &prep.xn, d, y, t, true, par)?;
-                                    Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
-                                },
-                                t0,
-                                &lo,
-                                &hi,
-                                lopt,
-                            )
-                        }
-                        Some(z) => {
-                            let mut ws = sparse::SparseWorkspace::new(z.len() / d, n);
-                            lbfgs::minimise(
-                                |t| {
-                                    let e = sparse::elbo_ws(
-                                        &mut ws, &prep.xn, z, d, y, t, true, inner,
-                                    )?;
-                                    Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
-                                },
-                                t0,
-                                &lo,
-                                &hi,
-                                lopt,
-                            )
-                        }
-                    };
-                    unfinished.fetch_sub(1, Ordering::Relaxed);
-                    res
-                })
-                .collect()
-        };
-        // scipy's iteration from every start first. An output whose best fit
-        // is not preferred over white noise by Akaike's criterion (LML gain
-        // ≤ d, the parameters the length scales add) has probably failed:
-        // starts whose first trial was a corner of the box end on the
-        // white-noise plateau (length scales too short for any two inputs to
-        // correlate; the LML's gradient in them vanishes there). Those
-        // starts are run again with `unit_start` (see `lbfgs`); per start the
-        // better end counts, and both runs' evaluations.
-        let mut results = run(&jobs, lopt);
-        // per output: the lowest objective (−LML) reached
-        let lowest_of = |results: &[Result<lbfgs::LbfgsResult, GpError>]| -> Vec<f64> {
-            best_runs(&jobs, results, p)
-                .iter()
-                .map(|r| r.map_or(f64::INFINITY, |r| r.f))
-                .collect()
-        };
-        let lowest = lowest_of(&results);
-        // −LML of white noise at its best variance yᵀy/N, per output
-        let white: Vec<f64> = (0..p)
-            .map(|out| {
-                let y = &prep.residuals[out].0;
-                let s2 = y.iter().map(|v| v * v).sum::<f64>() / n as f64;
-                0.5 * n as f64 * (1.0 + (2.0 * std::f64::consts::PI * s2).ln())
-            })
-            .collect();
-        let on_plateau =
-            |out: usize, lowest: f64| white[out].is_finite() && white[out] - lowest <= d as f64;
-        let plateau: Vec<bool> = (0..p).map(|out| on_plateau(out, lowest[out])).collect();
-        let again: Vec<usize> = (0..jobs.len())
-            .filter(|&j| {
-                let (out, _, _) = &jobs[j];
-                plateau[*out] && results[j].as_ref().is_ok_and(|r| r.corner_start)
-            })
-            .collect();
-        if !again.is_empty() {
-            let retry: Vec<_> = again.iter().map(|&j| jobs[j].clone()).collect();
-            let guarded = LbfgsOptions {
-                unit_start: true,
-                ..lopt
-            };
-            for (j, res) in again.into_iter().zip(run(&retry, guarded)) {
-                let (Ok(first), Ok(second)) = (&mut results[j], res) else {
-                    continue;
-                };
-                let evaluations = first.evaluations + second.evaluations;
-                let iterations = first.iterations + second.iterations;
-                if second.f < first.f {
-                    *first = second;
-                }
-                first.evaluations = evaluations;
-                first.iterations = iterations;
-            }
-        }
-        // Outputs still on the white-noise plateau, when other outputs (on
-        // the same inputs, in the same normalised units) did fit: one more
-        // start from each fitted output's optimum (its length scales are a
-        // start that sees the inputs' structure; random restarts can all
-        // miss it, e.g. one velocity of a maximal-coordinate model). These
-        // starts are numbered after the random restarts.
         let starts = 1 + opts.restarts;
-        let mut extra = vec![0usize; p];
-        if p > 1 {
-            let lowest = lowest_of(&results);
-            let donors: Vec<Vec<f64>> = best_runs(&jobs, &results, p)
-                .iter()
-                .enumerate()
-                .filter_map(|(o, r)| r.filter(|r| !on_plateau(o, r.f)))
-                .map(|r| r.x.clone())
-                .collect();
-            let mut rescue = Vec::new();
-            for out in (0..p).filter(|&o| on_plateau(o, lowest[o])) {
-                for t in &donors {
-                    rescue.push((out, starts + extra[out], t.clone()));
-                    extra[out] += 1;
-                }
+        let screen = opts
+            .screening
+            .subset(n, inducing.is_some(), opts.warm_start.is_some());
+        let (stage, screening) = match screen {
+            None => (train::optimise(&full, set, jobs, starts, p, &[]), None),
+            Some(m) => {
+                let (stage, reports) = train::screened(&full, set, jobs, starts, p, m, opts.seed);
+                (stage, Some(reports))
             }
-            if !rescue.is_empty() {
-                let more = run(&rescue, lopt);
-                jobs.extend(rescue);
-                results.extend(more);
-            }
-        }
+        };
+        let train::Stage {
+            jobs,
+            results,
+            extra,
+        } = stage;
         let mut best: Vec<Option<(usize, Vec<f64>, bool)>> = vec![None; p];
         // Per output: final LML and evaluations of every start, total
         // evaluations and iterations, the first error.
@@ -787,7 +651,8 @@ impl Gp {
             .iter()
             .map(|e| (vec![f64::NAN; starts + e], 0, None, 0, vec![0; starts + e]))
             .collect();
-        for ((out, start, _), res) in jobs.iter().zip(results) {
+        for (job, res) in jobs.iter().zip(results) {
+            let (out, start) = (&job.out, &job.start);
             match res {
                 Ok(r) => {
                     let value = -r.f;
@@ -856,6 +721,7 @@ impl Gp {
                         start_evaluations: reports[o].4.clone(),
                         converged: *converged,
                         jitter: gp.outputs[o].jitter,
+                        screening: screening.as_ref().map(|s| s[o].clone()),
                     }
                 })
                 .collect(),

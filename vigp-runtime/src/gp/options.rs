@@ -217,6 +217,70 @@ pub struct TrainOptions {
     /// (unless an output ends on the white-noise plateau, see
     /// [`Gp::train`](super::Gp::train)).
     pub warm_start: Option<Vec<Hyperparameters>>,
+    /// Whether the starts of an exact GP run first on a subset of the
+    /// samples ([`Screening`]; default [`Screening::Auto`]).
+    pub screening: Screening,
+}
+
+/// How the starts of an exact GP's training meet the data.
+///
+/// One likelihood evaluation costs ≈ N³ flops (Cholesky and inverse), so
+/// a start on m samples costs (m/N)³ of one on all N. With screening every
+/// start (the initial point or warm start, the random restarts, the
+/// white-noise plateau's retries and rescue starts) runs first on a seeded
+/// random subset of m samples, in the full data's normalised units; the
+/// distinct optima found there (equal LML to 1e-6 relative, or equal
+/// log-hyperparameters to 1e-2; plateau optima dropped when another is
+/// fitted) are then refined on all N samples from where they ended, and
+/// the best refined fit wins. An output whose best refined fit is still
+/// not preferred over white noise runs its starts again on all samples
+/// without screening. [`OutputReport::screening`] records the subset's
+/// work.
+///
+/// Caveat: this is a heuristic. An optimum of the full data whose basin
+/// no subset optimum lies in is missed; the refinement of every distinct
+/// subset optimum (not only the best) makes that rare. On the benchmark
+/// problems of `docs/gp.md` and the unseen data sets of
+/// `scripts/gp_screening_check.py` the screened fit reaches the
+/// unscreened best LML to 1e-6 relative (see there); [`Screening::Off`]
+/// is scikit-learn's procedure.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Screening {
+    /// Exact GP, no warm start and N ≥ [`SCREEN_FROM`]: a subset of
+    /// [`Screening::auto_size`]`(N)` samples; otherwise off.
+    #[default]
+    Auto,
+    /// Every start runs on all N samples (scikit-learn's procedure).
+    Off,
+    /// Screen on a subset of this many samples (exact GP only; at least 2;
+    /// N or more means no screening).
+    Subset(usize),
+}
+
+/// The smallest N that [`Screening::Auto`] screens: below it one
+/// evaluation takes about a millisecond and the subset would be too small
+/// to show the full data's optima.
+pub const SCREEN_FROM: usize = 512;
+
+impl Screening {
+    /// The subset size of [`Screening::Auto`] at N samples: N/4, at least
+    /// 256 (so N/2 at N = 512) and at most 1024.
+    pub fn auto_size(n: usize) -> usize {
+        (n / 4).clamp(256, 1024)
+    }
+
+    /// The subset size to screen on for N samples, or `None` for no
+    /// screening. `sparse`: the GP is sparse; `warm`: a warm start is given
+    /// (both turn `Auto` off).
+    pub(crate) fn subset(self, n: usize, sparse: bool, warm: bool) -> Option<usize> {
+        let m = match self {
+            Screening::Off => return None,
+            Screening::Auto if sparse || warm || n < SCREEN_FROM => return None,
+            Screening::Auto => Self::auto_size(n),
+            Screening::Subset(m) => m,
+        };
+        (m < n).then_some(m)
+    }
 }
 
 impl Default for TrainOptions {
@@ -234,6 +298,7 @@ impl Default for TrainOptions {
             pgtol: 1e-5,
             method: Method::Exact,
             warm_start: None,
+            screening: Screening::Auto,
         }
     }
 }
@@ -258,6 +323,18 @@ impl TrainOptions {
         }
         if !(self.pgtol.is_finite() && self.pgtol >= 0.0) {
             return Err(GpError::InvalidOptions("pgtol must be finite and >= 0"));
+        }
+        if let Screening::Subset(m) = self.screening {
+            if m < 2 {
+                return Err(GpError::InvalidOptions(
+                    "Screening::Subset needs at least 2 samples",
+                ));
+            }
+            if matches!(self.method, Method::Sparse(_)) {
+                return Err(GpError::InvalidOptions(
+                    "Screening::Subset applies to the exact GP only",
+                ));
+            }
         }
         if let Method::Sparse(so) = &self.method
             && !(so.min_noise_variance.is_finite() && so.min_noise_variance >= 0.0)
@@ -339,4 +416,31 @@ pub struct OutputReport {
     pub converged: bool,
     /// Absolute jitter (normalised units) on the diagonal of the final Gram matrix.
     pub jitter: f64,
+    /// The screening of the starts on a subset ([`Screening`]), `None`
+    /// when they ran on all samples. With screening, `start_lmls`,
+    /// `start_evaluations`, `evaluations` and `iterations` count the runs
+    /// on all samples only: a start whose subset optimum was not refined
+    /// (a duplicate, or a plateau optimum beside a fitted one) has `NaN`
+    /// and 0 there.
+    #[serde(default)]
+    pub screening: Option<ScreeningReport>,
+}
+
+/// What the screening of one output's starts did ([`Screening`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ScreeningReport {
+    /// Samples in the subset (m).
+    pub subset: usize,
+    /// Final LML on the subset of every start (`NaN` for a failed start),
+    /// numbered as [`OutputReport::start_lmls`].
+    pub start_lmls: Vec<f64>,
+    /// Evaluations on the subset, per start.
+    pub start_evaluations: Vec<usize>,
+    /// Evaluations on the subset in all (each ≈ (m/N)³ of one on all N).
+    pub evaluations: usize,
+    /// Starts whose subset optimum was refined on all samples.
+    pub refined: Vec<usize>,
+    /// The refined fit was not preferred over white noise, so the starts
+    /// ran again on all samples without screening.
+    pub fell_back: bool,
 }
