@@ -611,9 +611,11 @@ fn mean_only_learned_step_equals_the_full_step() {
     }
 }
 
-/// The opt-in parallel variance path (one output per rayon task, taken for
-/// an exact GP with p ≥ 2, N ≥ `PARALLEL_VARIANCE_MIN_N` and the stored
-/// inverse) gives the sequential path's means and variances bit for bit,
+/// The opt-in parallel variance path (the last output's variance on the
+/// model's helper thread, taken for an exact GP with p ≥ 2, N ≥
+/// `PARALLEL_VARIANCE_MIN_N` and the stored inverse) gives the sequential
+/// path's means and variances bit for bit, also with two clones predicting
+/// at once from two threads (one of them then takes the sequential path),
 /// and both agree with the dense reference (N = 300, p = 3, d = 3).
 #[test]
 fn parallel_variance_equals_the_sequential_path() {
@@ -641,6 +643,23 @@ fn parallel_variance_equals_the_sequential_path() {
         gp.predict_into(x, &mut m, &mut v, &mut ws).unwrap();
         par.push((m, v));
     }
+    // two clones sharing the helper, predicting at once
+    std::thread::scope(|scope| {
+        for _ in 0..2 {
+            let (g, pts, par) = (gp.clone(), &points, &par);
+            scope.spawn(move || {
+                let mut ws = g.workspace();
+                for _ in 0..20 {
+                    for (x, (pm, pv)) in pts.iter().zip(par) {
+                        let (mut m, mut v) = ([0.0; 3], [0.0; 3]);
+                        g.predict_into(x, &mut m, &mut v, &mut ws).unwrap();
+                        assert_eq!(m.map(f64::to_bits), pm.map(f64::to_bits));
+                        assert_eq!(v.map(f64::to_bits), pv.map(f64::to_bits));
+                    }
+                }
+            });
+        }
+    });
     gp.set_parallel_variance(false);
     // a workspace made with the parallel buffers serves the sequential path
     for (x, (pm, pv)) in points.iter().zip(&par) {

@@ -1,5 +1,6 @@
 //! `Gp::predict_into` and `Gp::predict_mean_into` do not allocate once the
-//! model and workspace exist, for exact and sparse (SGPR) models. A counting global allocator in this test
+//! model and workspace exist, for exact and sparse (SGPR) models, and with
+//! the parallel variance's helper thread. A counting global allocator in this test
 //! binary (its own process) observes every allocation; the test is the only
 //! one in the binary, so no other thread allocates meanwhile.
 
@@ -39,9 +40,33 @@ fn single_point_prediction_does_not_allocate() {
     let methods = [Method::Exact, Method::Sparse(SparseOptions::kmeans(20))];
     check(&x, &y, methods, 1);
     // N ≥ PARALLEL_VARIANCE_MIN_N with the default sequential variance
-    // (the opt-in parallel one hands tasks to rayon, whose queue allocates)
     let (x, y) = data(vigp::gp::PARALLEL_VARIANCE_MIN_N + 4);
     check(&x, &y, [Method::Exact], 0);
+    // and with the opt-in parallel variance (a helper thread): after the
+    // first call, which sizes the helper's buffers, neither thread allocates
+    let (mut gp, _) = Gp::train(
+        &x,
+        2,
+        &y,
+        2,
+        &TrainOptions {
+            restarts: 0,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    gp.set_parallel_variance(true);
+    let mut ws = gp.workspace();
+    let (mut m, mut v) = ([0.0; 2], [0.0; 2]);
+    gp.predict_into(&[0.3, 0.2], &mut m, &mut v, &mut ws)
+        .unwrap();
+    let before = ALLOCS.load(Ordering::SeqCst);
+    for i in 0..1000 {
+        let q = [(i as f64 * 0.01).sin(), 0.5];
+        gp.predict_into(&q, &mut m, &mut v, &mut ws).unwrap();
+        assert!(v[0] >= 0.0 && v[1] >= 0.0);
+    }
+    assert_eq!(ALLOCS.load(Ordering::SeqCst) - before, 0);
 }
 
 /// n points on [−1, 1]² (d = 2) and two smooth targets (p = 2).

@@ -578,9 +578,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// Whether the step with its bound ([`step_with`](Self::step_with)) may
-    /// compute the velocity outputs' variances on rayon's thread pool (see
-    /// [`Gp::set_parallel_variance`]; default `false`, results bit-identical
-    /// either way; not allocation-free when on).
+    /// compute some velocity outputs' variances on a helper thread (see
+    /// [`Gp::set_parallel_variance`]: default `false`, results bit-identical
+    /// either way; when on, a second core busy-waits for 200 µs after each
+    /// step).
     pub fn set_parallel_variance(&mut self, on: bool) {
         self.gp.set_parallel_variance(on);
     }

@@ -35,6 +35,7 @@
 
 mod error;
 mod export;
+mod helper;
 mod kernel;
 mod lbfgs;
 mod lml;

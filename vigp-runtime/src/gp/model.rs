@@ -1,11 +1,14 @@
 //! The trained multi-output GP: training, fitting at given hyperparameters,
 //! prediction and the accessors the error bound needs.
 
+use std::sync::Arc;
+
 use faer::{Mat, Par, Side};
 use rayon::prelude::*;
 use vigp_core::gp as core_gp;
 
 use super::error::GpError;
+use super::helper::{Helper, Task};
 use super::kernel::Hyperparameters;
 use super::lbfgs::{self, LbfgsOptions};
 use super::lml::{self, Factor};
@@ -38,7 +41,7 @@ pub(crate) enum Posterior {
     /// L⁻¹ (packed rows), and L⁻¹r (for appending samples).
     Exact {
         l: Vec<f64>,
-        linv: Option<Vec<f64>>,
+        linv: Option<Arc<Vec<f64>>>,
         fwd: Vec<f64>,
     },
     /// Sparse GP (see `sparse`): chol(K_uu + ε·σ_f²·I), chol(B), A·r.
@@ -90,6 +93,9 @@ pub struct Gp {
     pub(crate) inducing: Option<Vec<f64>>,
     pub(crate) variance_mode: VarianceMode,
     pub(crate) parallel_variance: bool,
+    /// The variance helper thread of [`Gp::set_parallel_variance`] (shared
+    /// by clones; `None` when off or when no thread could be started).
+    pub(crate) helper: Option<Arc<Helper>>,
 }
 
 impl Lane {
@@ -155,6 +161,10 @@ pub struct Workspace {
     /// One set of buffers per output for the parallel variance (empty when
     /// the model never takes that path).
     lanes: Vec<Lane>,
+    /// Visit the outputs and L⁻¹'s rows in reverse in the next call
+    /// (alternates: the part of L⁻¹ read last is then read first, from
+    /// the core's cache; see `tri::lower_matvec_dir`).
+    flip: bool,
     n: usize,
     d: usize,
     p: usize,
@@ -792,7 +802,7 @@ impl Gp {
                         let Factor { l, jitter } =
                             lml::factorise(&xs_cols, n, d, &hp, j0, Par::Seq)?;
                         let linv = match mode {
-                            VarianceMode::Inverse => Some(lower_inverse(&l)),
+                            VarianceMode::Inverse => Some(Arc::new(lower_inverse(&l))),
                             VarianceMode::Solve => None,
                         };
                         let l = tri::pack_rows(&l);
@@ -865,6 +875,7 @@ impl Gp {
             inducing,
             variance_mode: mode,
             parallel_variance: false,
+            helper: None,
         })
     }
 
@@ -927,6 +938,7 @@ impl Gp {
             } else {
                 Vec::new()
             },
+            flip: false,
             n: b,
             d: self.d,
             p: self.p,
@@ -1012,10 +1024,17 @@ impl Gp {
         self.input_norm.apply(x, &mut ws.xn);
         self.mean.eval(x, &mut ws.prior);
         let b = ws.n;
-        if self.takes_parallel_variance() && ws.lanes.len() == self.p {
-            return self.predict_parallel(mean, var, ws);
+        let flip = ws.flip;
+        ws.flip = !flip;
+        if self.takes_parallel_variance()
+            && ws.lanes.len() == self.p
+            && self.predict_parallel(mean, var, ws, flip)?
+        {
+            return Ok(());
         }
-        for (j, o) in self.outputs.iter().enumerate() {
+        for j in 0..self.p {
+            let j = if flip { self.p - 1 - j } else { j };
+            let o = &self.outputs[j];
             Self::scale_query(o, &ws.xn, &mut ws.xs);
             kernel_row_dispatched(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
                 .map_err(core_error)?;
@@ -1024,7 +1043,7 @@ impl Gp {
                 Posterior::Exact {
                     linv: Some(linv), ..
                 } if self.variance_mode == VarianceMode::Inverse => {
-                    tri::lower_matvec(linv, &ws.kstar, &mut ws.tmp);
+                    tri::lower_matvec_dir(linv, &ws.kstar, &mut ws.tmp, flip);
                     tri::norm2(&ws.tmp)
                 }
                 Posterior::Exact { l, .. } => {
@@ -1046,23 +1065,42 @@ impl Gp {
         check_finite("prediction variance", var)
     }
 
-    /// `predict_into`'s exact-GP, stored-inverse path with one output per
-    /// rayon task: each output runs the same kernels on its own buffers, so
-    /// the results equal the sequential path's bit for bit.
+    /// `predict_into`'s exact-GP, stored-inverse path with the variance
+    /// products of the outputs ⌈p/2⌉..p on the helper thread (see
+    /// [`set_parallel_variance`](Self::set_parallel_variance)): each output
+    /// runs the same kernels on its own buffers, so the results equal the
+    /// sequential path's bit for bit. Returns `Ok(false)` without touching
+    /// the outputs when the helper is taken (another clone of the model is
+    /// using it) or gone: the caller then takes the sequential path.
     fn predict_parallel(
         &self,
         mean: &mut [f64],
         var: &mut [f64],
         ws: &mut Workspace,
-    ) -> Result<(), GpError> {
-        use rayon::prelude::*;
-        let b = ws.n;
-        let xn = &ws.xn;
-        ws.lanes
-            .par_iter_mut()
-            .zip(self.outputs.par_iter())
-            .try_for_each(|(lane, o)| -> Result<(), GpError> {
-                Self::scale_query(o, xn, &mut lane.xs);
+        reverse: bool,
+    ) -> Result<bool, GpError> {
+        let Some(claim) = self.helper.as_ref().and_then(|h| h.claim()) else {
+            return Ok(false);
+        };
+        let (p, b) = (self.p, ws.n);
+        let h = p.div_ceil(2);
+        let linv_of = |o: &OutputGp| -> Result<Arc<Vec<f64>>, GpError> {
+            match &o.post {
+                Posterior::Exact {
+                    linv: Some(linv), ..
+                } => Ok(Arc::clone(linv)),
+                _ => Err(GpError::InvalidModel(
+                    "parallel variance needs the stored inverse".into(),
+                )),
+            }
+        };
+        // the helper's outputs first: their kernel rows, then the hand-off
+        {
+            let mut tasks = claim.tasks();
+            tasks.resize_with(p - h, Task::default);
+            for (t, j) in tasks.iter_mut().zip(h..p) {
+                let (o, lane) = (&self.outputs[j], &mut ws.lanes[j]);
+                Self::scale_query(o, &ws.xn, &mut lane.xs);
                 kernel_row_dispatched(
                     &o.xs_cols,
                     b,
@@ -1071,26 +1109,43 @@ impl Gp {
                     &mut lane.kstar,
                 )
                 .map_err(core_error)?;
-                lane.mean = core_gp::dot(&lane.kstar, &o.alpha).map_err(core_error)?;
-                let Posterior::Exact {
-                    linv: Some(linv), ..
-                } = &o.post
-                else {
-                    return Err(GpError::InvalidModel(
-                        "parallel variance needs the stored inverse".into(),
-                    ));
-                };
-                tri::lower_matvec(linv, &lane.kstar, &mut lane.tmp);
+                t.linv = Some(linv_of(o)?);
+                t.k.clear();
+                t.k.extend_from_slice(&lane.kstar);
+            }
+        }
+        let g = claim.post();
+        for (j, o) in self.outputs.iter().enumerate() {
+            let lane = &mut ws.lanes[j];
+            if j < h {
+                Self::scale_query(o, &ws.xn, &mut lane.xs);
+                kernel_row_dispatched(
+                    &o.xs_cols,
+                    b,
+                    &lane.xs,
+                    o.hp.signal_variance,
+                    &mut lane.kstar,
+                )
+                .map_err(core_error)?;
+            }
+            lane.mean = core_gp::dot(&lane.kstar, &o.alpha).map_err(core_error)?;
+            if j < h {
+                let linv = linv_of(o)?;
+                tri::lower_matvec_dir(&linv, &lane.kstar, &mut lane.tmp, reverse);
                 lane.quad = tri::norm2(&lane.tmp);
-                Ok(())
-            })?;
+            }
+        }
+        for (t, lane) in claim.wait(g).iter().zip(&mut ws.lanes[h..]) {
+            lane.quad = t.quad;
+        }
         for (j, (o, lane)) in self.outputs.iter().zip(&ws.lanes).enumerate() {
             let s = o.output_scale;
             mean[j] = ws.prior[j] + s * lane.mean;
             var[j] = s * s * (o.hp.signal_variance - lane.quad).max(0.0);
         }
         check_finite("prediction (prior mean function output)", mean)?;
-        check_finite("prediction variance", var)
+        check_finite("prediction variance", var)?;
+        Ok(true)
     }
 
     /// Whether `predict_into` takes the parallel variance path: an exact GP
@@ -1208,7 +1263,7 @@ impl Gp {
                     VarianceMode::Inverse => {
                         if linv.is_none() {
                             let n = o.alpha.len();
-                            *linv = Some(lower_inverse(&tri::unpack(l, n)));
+                            *linv = Some(Arc::new(lower_inverse(&tri::unpack(l, n))));
                         }
                     }
                 }
@@ -1216,22 +1271,34 @@ impl Gp {
         }
     }
 
-    /// Whether [`predict_into`](Self::predict_into) computes the outputs'
-    /// variances on rayon's thread pool, one output per task (default
-    /// `false`). It applies to an exact GP with [`VarianceMode::Inverse`],
-    /// p ≥ 2 outputs and N ≥ [`PARALLEL_VARIANCE_MIN_N`]: the variance
-    /// streams each output's N²/2 stored numbers, and two cores stream two
-    /// outputs at once. Measured on 2 cores (`cargo bench --bench learned`,
-    /// N = 512, p = 2): the learned step with its bound 110 → 74 µs. The
-    /// results equal the sequential path bit for bit. Off by default
-    /// because the call then waits on other threads and is not
-    /// allocation-free: handing tasks to rayon's pool from outside it
-    /// allocates one queue block per 63 calls. Leave it off in a real-time
-    /// loop or in code that already runs one task per core. A workspace
-    /// made before a switch stays valid (the first call after it may
-    /// allocate the per-output buffers).
+    /// Whether [`predict_into`](Self::predict_into) (and so the learned
+    /// step with its bound) computes some outputs' variances on a helper
+    /// thread (default `false`). It applies to an exact GP with
+    /// [`VarianceMode::Inverse`], p ≥ 2 outputs and N ≥
+    /// [`PARALLEL_VARIANCE_MIN_N`]: the variance streams each output's N²/2
+    /// stored numbers, and on two cores two outputs stream at once.
+    ///
+    /// Switching it on starts one thread for this model (shared by its
+    /// clones; one caller at a time, others take the sequential path). The
+    /// thread busy-waits for the next prediction for 200 µs after each one,
+    /// then parks: while predictions follow each other faster than that (a
+    /// control loop, a rollout with bounds) the hand-off takes well under a
+    /// microsecond, but the helper keeps a core busy; after a pause the
+    /// first prediction pays for waking it (tens of µs). Measured on 2 cores
+    /// (`cargo bench --bench learned`, N = 512, p = 2): see `docs/gp.md`,
+    /// "Prediction and the learned step". The results equal the sequential
+    /// path bit for bit, and after the first call (which sizes the buffers)
+    /// a prediction allocates nothing. Leave it off in code that already
+    /// runs one task per core. Switching it off stops the thread once no
+    /// clone uses it. A workspace made before a switch stays valid (the
+    /// first call after it may allocate the per-output buffers).
     pub fn set_parallel_variance(&mut self, on: bool) {
         self.parallel_variance = on;
+        if !on {
+            self.helper = None;
+        } else if self.helper.is_none() {
+            self.helper = Helper::spawn().map(Arc::new);
+        }
     }
 
     /// Whether the parallel variance is allowed (see

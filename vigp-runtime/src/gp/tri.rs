@@ -156,26 +156,46 @@ pub(crate) fn backward_rows(l: &[f64], v: &mut [f64]) {
 /// out = L⁻¹·v with L⁻¹ given (packed rows): out_i = Σ_{j≤i} (L⁻¹)_ij v_j,
 /// four rows at a time; in AVX2 registers where the CPU has them (detected
 /// at run time), with the bits of the portable [`lower_matvec_impl`].
-pub(crate) fn lower_matvec(linv: &[f64], v: &[f64], out: &mut [f64]) {
+/// With `reverse` the rows are visited last to first: the same blocks of
+/// four rows and the same arithmetic per row, so the same bits.
+/// Alternating the direction between calls finds the part of L⁻¹ the
+/// previous call read last still in the core's cache (L⁻¹ of N = 512 is
+/// 1 MB, a core's L2 here 512 KB).
+pub(crate) fn lower_matvec_dir(linv: &[f64], v: &[f64], out: &mut [f64], reverse: bool) {
     #[cfg(target_arch = "x86_64")]
     if let Some(simd) = pulp::x86::V3::try_new() {
-        return simd.vectorize(|| lower_matvec_avx2(simd, linv, v, out));
+        return simd.vectorize(|| lower_matvec_avx2(simd, linv, v, out, reverse));
     }
-    lower_matvec_impl(linv, v, out);
+    lower_matvec_impl(linv, v, out, reverse);
 }
 
-/// The portable [`lower_matvec`].
+/// The starts of [`lower_matvec_dir`]'s blocks of four rows, in the order
+/// visited, and the first row after them (rows from there on are done
+/// one by one: after the blocks, or before them when reversed).
+fn blocks(n: usize, reverse: bool) -> (impl Iterator<Item = usize>, usize) {
+    let full = n / 4;
+    let order = (0..full).map(move |b| if reverse { full - 1 - b } else { b });
+    (order.map(|b| 4 * b), 4 * full)
+}
+
+/// The portable [`lower_matvec_dir`].
 #[inline(always)]
-fn lower_matvec_impl(linv: &[f64], v: &[f64], out: &mut [f64]) {
+fn lower_matvec_impl(linv: &[f64], v: &[f64], out: &mut [f64], reverse: bool) {
     let n = v.len();
-    let mut i = 0;
-    while i + 4 <= n {
-        matvec_block(linv, i, v, out);
-        i += 4;
+    let (order, rest) = blocks(n, reverse);
+    let single = |out: &mut [f64]| {
+        for i in rest..n {
+            out[i] = dot(row(linv, i), &v[..=i]);
+        }
+    };
+    if reverse {
+        single(out);
     }
-    while i < n {
-        out[i] = dot(row(linv, i), &v[..=i]);
-        i += 1;
+    for i in order {
+        matvec_block(linv, i, v, out);
+    }
+    if !reverse {
+        single(out);
     }
 }
 
@@ -183,11 +203,19 @@ fn lower_matvec_impl(linv: &[f64], v: &[f64], out: &mut [f64]) {
 /// AVX2 register (same order, so the same bits).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn lower_matvec_avx2(simd: pulp::x86::V3, linv: &[f64], v: &[f64], out: &mut [f64]) {
+fn lower_matvec_avx2(simd: pulp::x86::V3, linv: &[f64], v: &[f64], out: &mut [f64], reverse: bool) {
     use pulp::{Simd, x86::V3};
     let n = v.len();
-    let mut i = 0;
-    while i + 4 <= n {
+    let (order, rest) = blocks(n, reverse);
+    let single = |out: &mut [f64]| {
+        for i in rest..n {
+            out[i] = dot(row(linv, i), &v[..=i]);
+        }
+    };
+    if reverse {
+        single(out);
+    }
+    for i in order {
         let m = i + 1;
         let chunks = m / 4;
         let (r, rc, rs) = block_rows_avx2(linv, i);
@@ -213,17 +241,15 @@ fn lower_matvec_avx2(simd: pulp::x86::V3, linv: &[f64], v: &[f64], out: &mut [f6
             }
         }
         block_tail(&r, i, lanes.map(|a| (a[0] + a[1]) + (a[2] + a[3])), v, out);
-        i += 4;
     }
-    while i < n {
-        out[i] = dot(row(linv, i), &v[..=i]);
-        i += 1;
+    if !reverse {
+        single(out);
     }
 }
 
-/// [`lower_matvec`] for m vectors at once (`vs` and `outs` hold them one
+/// [`lower_matvec_dir`] for m vectors at once (`vs` and `outs` hold them one
 /// after the other, each of length n), with the same arithmetic per vector,
-/// so each result equals `lower_matvec`'s bit for bit. Each block of four
+/// so each result equals `lower_matvec_dir`'s bit for bit. Each block of four
 /// rows of L⁻¹ is read from memory once for all m vectors: at N = 512 the
 /// packed L⁻¹ (1 MB) does not fit a core's L2, so one vector at a time
 /// streams all of it from L3 per vector; m vectors share that stream. Keep
@@ -409,7 +435,7 @@ pub(crate) fn extend_inverse(linv: &mut Vec<f64>, n: usize, c: &[f64], delta: f6
 /// of the extended inverse before its scaling by 1/δ, which
 /// [`finish_inverse_row`] applies once δ is known). Each row of L⁻¹ is read
 /// from memory once, for its dot product with b and, while in cache, for
-/// its share of w: half the memory traffic of [`lower_matvec`] followed by
+/// its share of w: half the memory traffic of [`lower_matvec_dir`] followed by
 /// [`extend_inverse`]. Four rows at a time.
 pub(crate) fn matvec_and_inverse_row(linv: &mut Vec<f64>, b: &[f64], c: &mut [f64]) {
     let n = b.len();
@@ -502,11 +528,17 @@ mod tests {
                 assert_eq!(bits(&portable), bits(&outs), "n = {n}, m = {m}");
                 for (v, got) in vs.chunks_exact(n).zip(outs.chunks_exact(n)) {
                     let mut want = vec![0.0; n];
-                    lower_matvec_impl(&l, v, &mut want);
+                    lower_matvec_impl(&l, v, &mut want, false);
                     assert_eq!(bits(got), bits(&want), "n = {n}, m = {m}");
-                    let mut single = vec![0.0; n];
-                    lower_matvec(&l, v, &mut single);
-                    assert_eq!(bits(&single), bits(&want), "n = {n}");
+                    // rows visited last to first: the same bits
+                    for reverse in [false, true] {
+                        let mut r = vec![f64::NAN; n];
+                        lower_matvec_dir(&l, v, &mut r, reverse);
+                        assert_eq!(bits(&r), bits(&want), "n = {n}, reverse");
+                        let mut r = vec![f64::NAN; n];
+                        lower_matvec_impl(&l, v, &mut r, reverse);
+                        assert_eq!(bits(&r), bits(&want), "n = {n}, portable reverse");
+                    }
                 }
             }
         }
@@ -542,16 +574,16 @@ mod tests {
                 extend_inverse(&mut linv, i, &r[..i], r[i]);
             }
             let mut out = vec![0.0; n];
-            lower_matvec(&linv, &b, &mut out);
+            lower_matvec_dir(&linv, &b, &mut out, false);
             for (a, e) in out.iter().zip(&x) {
                 assert!((a - e).abs() < 1e-13, "n = {n}: {a} vs {e}");
             }
             // the fused pass: the same c and the same appended row as
-            // lower_matvec + extend_inverse, up to the order of the sums
+            // lower_matvec_dir + extend_inverse, up to the order of the sums
             let v: Vec<f64> = (0..n).map(|i| (i as f64 * 0.9).sin()).collect();
             let delta = 1.7;
             let (mut c1, mut c2) = (vec![0.0; n], vec![0.0; n]);
-            lower_matvec(&linv, &v, &mut c1);
+            lower_matvec_dir(&linv, &v, &mut c1, false);
             let mut a = linv.clone();
             extend_inverse(&mut a, n, &c1, delta);
             let mut f = linv.clone();

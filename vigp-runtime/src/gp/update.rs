@@ -16,6 +16,8 @@
 //!   of L_B, A·r ← A·r + a·r_new (O(M²) per sample), and the weights
 //!   u re-solved once per call (O(M²)).
 
+use std::sync::Arc;
+
 use super::error::GpError;
 use super::lml::sqdist;
 use super::model::{Gp, OutputGp, Posterior, check_finite};
@@ -97,7 +99,7 @@ impl Undo {
             post: match &o.post {
                 Posterior::Exact { l, linv, fwd } => UndoPost::Exact {
                     l: l.len(),
-                    linv: linv.as_ref().map(Vec::len),
+                    linv: linv.as_ref().map(|li| li.len()),
                     fwd: fwd.len(),
                 },
                 Posterior::Sparse { lb, ay, .. } => UndoPost::Sparse {
@@ -125,7 +127,7 @@ impl Undo {
                 l.truncate(nl);
                 fwd.truncate(nf);
                 if let (Some(li), Some(n)) = (linv.as_mut(), ni) {
-                    li.truncate(n);
+                    Arc::make_mut(li).truncate(n);
                 }
             }
             (Posterior::Sparse { lb, ay, .. }, UndoPost::Sparse { lb: b, ay: a }) => {
@@ -183,7 +185,7 @@ fn update_output(
                 c.clear();
                 c.resize(n, 0.0);
                 if let Some(li) = linv.as_mut() {
-                    tri::matvec_and_inverse_row(li, &b, &mut c);
+                    tri::matvec_and_inverse_row(Arc::make_mut(li), &b, &mut c);
                 } else {
                     c.copy_from_slice(&b);
                     tri::forward_rows(l, &mut c);
@@ -197,6 +199,7 @@ fn update_output(
                 // A⁻¹b = L⁻ᵀc: the unscaled new row of L⁻¹, negated.
                 let ainv_b: Vec<f64> = match linv.as_mut() {
                     Some(li) => {
+                        let li = Arc::make_mut(li);
                         let start = tri::row_start(n);
                         let w: Vec<f64> = li[start..start + n].iter().map(|v| -v).collect();
                         tri::finish_inverse_row(li, n, delta);
