@@ -994,6 +994,20 @@ impl Gp {
         Ok(())
     }
 
+    /// One output's kernel row k(x*, X) for the normalised query `xn` into
+    /// `lane.kstar` (the query scaled by its length scales into `lane.xs`).
+    fn lane_kernel_row(o: &OutputGp, xn: &[f64], b: usize, lane: &mut Lane) -> Result<(), GpError> {
+        Self::scale_query(o, xn, &mut lane.xs);
+        kernel_row_dispatched(
+            &o.xs_cols,
+            b,
+            &lane.xs,
+            o.hp.signal_variance,
+            &mut lane.kstar,
+        )
+        .map_err(core_error)
+    }
+
     /// The scaled query x_n/ℓ of output `o` into `xs`.
     #[inline]
     fn scale_query(o: &OutputGp, xn: &[f64], xs: &mut [f64]) {
@@ -1100,15 +1114,7 @@ impl Gp {
             tasks.resize_with(p - h, Task::default);
             for (t, j) in tasks.iter_mut().zip(h..p) {
                 let (o, lane) = (&self.outputs[j], &mut ws.lanes[j]);
-                Self::scale_query(o, &ws.xn, &mut lane.xs);
-                kernel_row_dispatched(
-                    &o.xs_cols,
-                    b,
-                    &lane.xs,
-                    o.hp.signal_variance,
-                    &mut lane.kstar,
-                )
-                .map_err(core_error)?;
+                Self::lane_kernel_row(o, &ws.xn, b, lane)?;
                 t.linv = Some(linv_of(o)?);
                 t.k.clear();
                 t.k.extend_from_slice(&lane.kstar);
@@ -1118,15 +1124,7 @@ impl Gp {
         for (j, o) in self.outputs.iter().enumerate() {
             let lane = &mut ws.lanes[j];
             if j < h {
-                Self::scale_query(o, &ws.xn, &mut lane.xs);
-                kernel_row_dispatched(
-                    &o.xs_cols,
-                    b,
-                    &lane.xs,
-                    o.hp.signal_variance,
-                    &mut lane.kstar,
-                )
-                .map_err(core_error)?;
+                Self::lane_kernel_row(o, &ws.xn, b, lane)?;
             }
             lane.mean = core_gp::dot(&lane.kstar, &o.alpha).map_err(core_error)?;
             if j < h {

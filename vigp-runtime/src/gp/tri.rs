@@ -169,34 +169,42 @@ pub(crate) fn lower_matvec_dir(linv: &[f64], v: &[f64], out: &mut [f64], reverse
     lower_matvec_impl(linv, v, out, reverse);
 }
 
-/// The starts of [`lower_matvec_dir`]'s blocks of four rows, in the order
-/// visited, and the first row after them (rows from there on are done
-/// one by one: after the blocks, or before them when reversed).
-fn blocks(n: usize, reverse: bool) -> (impl Iterator<Item = usize>, usize) {
-    let full = n / 4;
-    let order = (0..full).map(move |b| if reverse { full - 1 - b } else { b });
-    (order.map(|b| 4 * b), 4 * full)
-}
-
-/// The portable [`lower_matvec_dir`].
+/// [`lower_matvec_dir`]'s traversal: `block(i, out)` for the blocks of
+/// four rows starting at i (in reverse order when `reverse`), and the rows
+/// past the last full block one by one, after the blocks (before them when
+/// reversed).
 #[inline(always)]
-fn lower_matvec_impl(linv: &[f64], v: &[f64], out: &mut [f64], reverse: bool) {
+fn traverse(
+    linv: &[f64],
+    v: &[f64],
+    out: &mut [f64],
+    reverse: bool,
+    mut block: impl FnMut(usize, &mut [f64]),
+) {
     let n = v.len();
-    let (order, rest) = blocks(n, reverse);
+    let full = n / 4;
     let single = |out: &mut [f64]| {
-        for i in rest..n {
+        for i in 4 * full..n {
             out[i] = dot(row(linv, i), &v[..=i]);
         }
     };
     if reverse {
         single(out);
     }
-    for i in order {
-        matvec_block(linv, i, v, out);
+    for b in 0..full {
+        block(4 * if reverse { full - 1 - b } else { b }, out);
     }
     if !reverse {
         single(out);
     }
+}
+
+/// The portable [`lower_matvec_dir`].
+#[inline(always)]
+fn lower_matvec_impl(linv: &[f64], v: &[f64], out: &mut [f64], reverse: bool) {
+    traverse(linv, v, out, reverse, |i, out| {
+        matvec_block(linv, i, v, out)
+    });
 }
 
 /// [`lower_matvec_impl`] with each row's four lane sums of [`dot4`] in one
@@ -205,17 +213,7 @@ fn lower_matvec_impl(linv: &[f64], v: &[f64], out: &mut [f64], reverse: bool) {
 #[inline(always)]
 fn lower_matvec_avx2(simd: pulp::x86::V3, linv: &[f64], v: &[f64], out: &mut [f64], reverse: bool) {
     use pulp::{Simd, x86::V3};
-    let n = v.len();
-    let (order, rest) = blocks(n, reverse);
-    let single = |out: &mut [f64]| {
-        for i in rest..n {
-            out[i] = dot(row(linv, i), &v[..=i]);
-        }
-    };
-    if reverse {
-        single(out);
-    }
-    for i in order {
+    traverse(linv, v, out, reverse, |i, out| {
         let m = i + 1;
         let chunks = m / 4;
         let (r, rc, rs) = block_rows_avx2(linv, i);
@@ -241,10 +239,7 @@ fn lower_matvec_avx2(simd: pulp::x86::V3, linv: &[f64], v: &[f64], out: &mut [f6
             }
         }
         block_tail(&r, i, lanes.map(|a| (a[0] + a[1]) + (a[2] + a[3])), v, out);
-    }
-    if !reverse {
-        single(out);
-    }
+    });
 }
 
 /// [`lower_matvec_dir`] for m vectors at once (`vs` and `outs` hold them one
