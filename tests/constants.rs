@@ -3,7 +3,7 @@
 //! bit, and so do the steps; a value known only at run time is checked at
 //! run time (a typed error), as a value set by hand is. The compile-time
 //! side (folded literals checked by the macro, geometry that must be known)
-//! is in `tests/ui/`.
+//! is in `compile-fail/tests/ui/`.
 
 use nalgebra::SVector;
 use vigp::embedded::{Parameters, StepError, Stepper};

@@ -1,7 +1,7 @@
 //! Invalid `mechanism!` descriptions are compile errors with spans that point
 //! at the offending token. One case per file in `tests/ui`; the
 //! expected compiler output sits next to it in `NAME.stderr`. Regenerate with
-//! `TRYBUILD=overwrite cargo test --test compile_fail` and review the diff.
+//! `TRYBUILD=overwrite cargo test -p vigp-compile-fail` and review the diff.
 
 #[test]
 fn invalid_descriptions() {
