@@ -445,7 +445,7 @@ fn quantile(v: &[f64], q: f64) -> f64 {
 fn register_font() -> Result<(), Box<dyn Error>> {
     static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/assets/fonts/DejaVuSans.ttf"
+        "/../assets/fonts/DejaVuSans.ttf"
     ));
     plotters::style::register_font(FONT, FontStyle::Normal, DEJAVU_SANS)
         .map_err(|_| "the embedded DejaVu Sans font is not a valid TTF".into())

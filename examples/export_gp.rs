@@ -155,8 +155,9 @@ pub fn generate(n: usize) -> Result<Exported, Box<dyn Error>> {
 #[allow(dead_code)] // when included by tests/gp_export.rs
 fn main() -> Result<(), Box<dyn Error>> {
     let mut n = 64;
+    // The example's package sits in `examples/`; the demo is beside it.
     let mut out = format!(
-        "{}/embedded-demo/src/gp_model.rs",
+        "{}/../embedded-demo/src/gp_model.rs",
         env!("CARGO_MANIFEST_DIR")
     );
     let mut args = std::env::args().skip(1);

@@ -386,7 +386,7 @@ fn figure(rows: &[Row], path: &str) -> Result<(), Box<dyn std::error::Error>> {
     use plotters::prelude::*;
     static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/assets/fonts/DejaVuSans.ttf"
+        "/../assets/fonts/DejaVuSans.ttf"
     ));
     plotters::style::register_font("sans-serif", FontStyle::Normal, DEJAVU_SANS)
         .map_err(|_| "embedded font")?;

@@ -57,7 +57,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let fixture: Value = serde_json::from_str(&std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/tests/fixtures/spatial_mujoco.json"
+        "/../tests/fixtures/spatial_mujoco.json"
     ))?)?;
     let models = &fixture["models"];
 

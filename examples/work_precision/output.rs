@@ -370,7 +370,7 @@ fn register_embedded_font() -> Result<(), Box<dyn Error>> {
     static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
     static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/assets/fonts/DejaVuSans.ttf"
+        "/../assets/fonts/DejaVuSans.ttf"
     ));
     REGISTERED
         .get_or_init(|| {
