@@ -27,6 +27,10 @@
 //! closed-loop cost, the final error, failures and planning time of both,
 //! and figures (SVG + PNG): a typical run and the cost distribution.
 
+#[path = "common/font.rs"]
+mod font;
+
+use font::{FONT, register_embedded_font};
 use std::cell::RefCell;
 use std::error::Error;
 use std::fmt::Write as _;
@@ -62,7 +66,6 @@ type A = SMatrix<f64, 4, 4>;
 
 const DT: f64 = 0.02;
 const STEPS: usize = 150;
-const FONT: &str = "sans-serif";
 
 fn stack(z: &State<2>) -> Z {
     Z::new(z.q[0], z.q[1], z.v[0], z.v[1])
@@ -442,15 +445,6 @@ fn quantile(v: &[f64], q: f64) -> f64 {
     s[lo] + (s[hi] - s[lo]) * (i - lo as f64)
 }
 
-fn register_font() -> Result<(), Box<dyn Error>> {
-    static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../assets/fonts/DejaVuSans.ttf"
-    ));
-    plotters::style::register_font(FONT, FontStyle::Normal, DEJAVU_SANS)
-        .map_err(|_| "the embedded DejaVu Sans font is not a valid TTF".into())
-}
-
 fn draw_typical<DB: DrawingBackend>(
     root: DrawingArea<DB, plotters::coord::Shift>,
     nominal: &[Z],
@@ -661,7 +655,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     std::fs::write(out.join("report.md"), &md)?;
     print!("{md}");
 
-    register_font()?;
+    register_embedded_font()?;
     let typical = rows
         .iter()
         .enumerate()

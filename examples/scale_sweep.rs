@@ -30,6 +30,9 @@
 //! cargo run --release --example scale_sweep -- --n 1024,2048,4096 --exact-max 4096 --sparse-m 256 --sparse-also --restarts 0
 //! ```
 
+#[path = "common/font.rs"]
+mod font;
+
 use std::f64::consts::PI;
 use std::time::Instant;
 
@@ -384,12 +387,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 /// nominal model's error dashed.
 fn figure(rows: &[Row], path: &str) -> Result<(), Box<dyn std::error::Error>> {
     use plotters::prelude::*;
-    static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../assets/fonts/DejaVuSans.ttf"
-    ));
-    plotters::style::register_font("sans-serif", FontStyle::Normal, DEJAVU_SANS)
-        .map_err(|_| "embedded font")?;
+    font::register_embedded_font()?;
     let ok = |v: f64| v.is_finite() && v > 0.0;
     let ys: Vec<f64> = rows
         .iter()

@@ -13,6 +13,7 @@
 //! rigorous kinds their sample states), the test windows are the cases.
 
 use super::{Cli, DT, HORIZON, Rng, SystemSpec, add_noise, ground_truth};
+use crate::font::FONT;
 use nalgebra::SVector;
 use plotters::prelude::*;
 use rayon::prelude::*;
@@ -438,7 +439,6 @@ pub fn report(rows: &[BoundRow], cli: &Cli) -> String {
     md
 }
 
-const FONT: &str = "sans-serif";
 const COLOURS: [RGBColor; 3] = [
     RGBColor(0, 90, 200),
     RGBColor(220, 60, 30),
@@ -480,7 +480,7 @@ pub fn write(
         }
         w.flush()?;
         written.push(path);
-        super::output::register_embedded_font()?;
+        crate::font::register_embedded_font()?;
         for (ext, path) in [
             ("svg", dir.join("bounds_tube.svg")),
             ("png", dir.join("bounds_tube.png")),

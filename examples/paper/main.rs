@@ -29,6 +29,8 @@
 //! truth); `--no-bounds` skips them.
 
 mod bounds;
+#[path = "../common/font.rs"]
+mod font;
 mod output;
 
 use clap::parser::ValueSource;

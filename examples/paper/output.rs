@@ -28,11 +28,11 @@
 //! registered with `plotters::style::register_font` (plotters' `ttf` feature
 //! would need fontconfig).
 
+use crate::font::{FONT, register_embedded_font};
 use std::collections::{BTreeMap, BTreeSet};
 use std::error::Error;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -117,7 +117,6 @@ const PALETTE: [RGBColor; 8] = [
     RGBColor(120, 120, 120),
 ];
 
-const FONT: &str = "sans-serif";
 const FIG_SIZE: (u32, u32) = (960, 640);
 
 /// Sorts the known names in the paper's order, then unknown names alphabetically.
@@ -335,22 +334,6 @@ fn systems_with_files(summary: &[Fig2Summary]) -> Result<Vec<(String, String)>, 
         systems.push((s.system.clone(), stem));
     }
     Ok(systems)
-}
-
-/// Registers DejaVu Sans (embedded) as plotters' `"sans-serif"` font, once.
-pub fn register_embedded_font() -> Result<(), Box<dyn Error>> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
-    static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../assets/fonts/DejaVuSans.ttf"
-    ));
-    REGISTERED
-        .get_or_init(|| {
-            plotters::style::register_font(FONT, FontStyle::Normal, DEJAVU_SANS)
-                .map_err(|_| "the embedded DejaVu Sans font is not a valid TTF".to_string())
-        })
-        .clone()
-        .map_err(Into::into)
 }
 
 /// One line of a plot.

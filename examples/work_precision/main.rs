@@ -28,6 +28,8 @@
 //!   failures are recorded as `diverged` / `failed`, never plotted.
 
 mod analysis;
+#[path = "../common/font.rs"]
+mod font;
 mod output;
 mod run;
 

@@ -18,10 +18,10 @@
 //! Text is rendered with DejaVu Sans, embedded from `assets/fonts/` and
 //! registered with `plotters::style::register_font` (as in the paper example).
 
+use crate::font::{FONT, register_embedded_font};
 use std::error::Error;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::sync::OnceLock;
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -362,24 +362,7 @@ fn write_energy_csv(dir: &Path, systems: &[SystemResult]) -> Result<PathBuf, Box
 
 // ---------------------------------------------------------------- plots
 
-const FONT: &str = "sans-serif";
 const FIG_SIZE: (u32, u32) = (1400, 1080);
-
-/// Registers DejaVu Sans (embedded) as plotters' `"sans-serif"` font, once.
-fn register_embedded_font() -> Result<(), Box<dyn Error>> {
-    static REGISTERED: OnceLock<Result<(), String>> = OnceLock::new();
-    static DEJAVU_SANS: &[u8] = include_bytes!(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../assets/fonts/DejaVuSans.ttf"
-    ));
-    REGISTERED
-        .get_or_init(|| {
-            plotters::style::register_font(FONT, FontStyle::Normal, DEJAVU_SANS)
-                .map_err(|_| "the embedded DejaVu Sans font is not a valid TTF".to_string())
-        })
-        .clone()
-        .map_err(Into::into)
-}
 
 fn colour(m: Method) -> RGBColor {
     match m {
