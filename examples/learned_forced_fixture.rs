@@ -1,7 +1,7 @@
 //! Writes the forced learned-model fixture of `tests/embedded_learned.rs`
 //! the way a user of an actuated mechanism would: train a learned model
-//! with inputs in Rust (`Learned::train_forced`: the `vigp fit` command
-//! reads no inputs), save it as JSON, and export it with `vigp export`
+//! with inputs in Rust (`Learned::train_forced`; `vigp fit` does the same
+//! from a CSV with `u_<joint>` columns), save it as JSON, and export it with `vigp export`
 //! (through `vigp::cli`, the tool that `vigp::cli::main::<M>()` gives a
 //! mechanism of one's own).
 //!

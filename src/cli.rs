@@ -38,6 +38,13 @@
 //! * `export` writes the Rust source of a `no_std` learned model for
 //!   [`crate::embedded::LearnedStepper`] and states its size.
 //!
+//! An actuated mechanism's data carry one `u_<joint>` column per input
+//! ([`crate::data`]): `fit` learns on state and input (the GP's inputs are
+//! the encoded state, then u; the prior is the forced nominal step),
+//! `score` rolls both models out under the logged inputs, `export` writes
+//! a model that steps under u, and `predict` refuses such a model (it does
+//! not bound forced predictions yet).
+//!
 //! Your own mechanism gets the same tool from one line:
 //!
 //! ```no_run
@@ -65,10 +72,10 @@ use rayon::prelude::*;
 
 use crate::bound::{BoundError, BoundKind, Calibration};
 use crate::data::{DataError, Dataset, ReadOptions};
-use crate::gp::{GpError, Method, Screening, SparseOptions, TrainOptions};
+use crate::gp::{GpError, Method, Screening, SparseOptions, TrainOptions, TrainReport};
 use crate::learned::{
-    EmbeddedExport, Encoding, LearnError, Learned, LoadError, Prior, SavedLearned, Transition,
-    transitions,
+    EmbeddedExport, Encoding, ForcedTransition, LearnError, Learned, LoadError, Prior,
+    SavedLearned, Transition, forced_transitions, transitions,
 };
 use crate::{
     Coordinates, Integrator, Mechanism, Parameters, SVector, State, StepError, System, Variational,
@@ -575,15 +582,20 @@ fn w(out: &mut dyn Write, text: std::fmt::Arguments<'_>) -> Result<(), CliError>
         .map_err(io_error(Path::new("<stdout>")))
 }
 
+/// Reads a data file with the mechanism's coordinates and, for an actuated
+/// mechanism, its input columns `u_<joint>`.
 fn read_data<const N: usize>(
     path: &Path,
     names: &[&'static str; N],
     kinds: &[crate::CoordinateKind; N],
+    inputs: &[&str],
     read: &ReadArgs,
 ) -> Result<Dataset<N>, CliError> {
-    Dataset::read_path(path, names, kinds, &read.options()).map_err(|source| CliError::Data {
-        path: path.to_path_buf(),
-        source,
+    Dataset::read_path_with_inputs(path, names, kinds, inputs, &read.options()).map_err(|source| {
+        CliError::Data {
+            path: path.to_path_buf(),
+            source,
+        }
     })
 }
 
@@ -610,7 +622,15 @@ fn spread<T: Copy>(all: &[T], max: usize) -> Vec<T> {
 impl ViewVisitor for Visit<'_> {
     type Output = Result<(), CliError>;
 
-    fn visit<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+    fn visit<
+        Mn,
+        Mx,
+        const N: usize,
+        const C: usize,
+        const NM: usize,
+        const CM: usize,
+        const U: usize,
+    >(
         self,
         minimal: Mn,
         maximal: Mx,
@@ -621,19 +641,25 @@ impl ViewVisitor for Visit<'_> {
     {
         let Visit { cmd, out } = self;
         match cmd {
-            Command::Fit(a) => fit(a, minimal, maximal, out),
+            Command::Fit(a) => fit::<Mn, Mx, N, C, NM, CM, U>(a, minimal, maximal, out),
             Command::Score(a) => {
                 let saved = read_saved(&a.model)?;
                 let mut nominal = minimal;
                 restore_parameters(&mut nominal, &saved, &a.model)?;
-                let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
+                let data = read_data(
+                    &a.data,
+                    &Mn::COORDINATES,
+                    &Mn::KINDS,
+                    Mn::INPUT_NAMES,
+                    &a.read,
+                )?;
                 if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
                     let l = load(&a.model, &saved, minimal)?;
-                    score(a, &l, nominal, &data, |z| *z, |q| *q, out)
+                    score::<_, _, N, C, N, C, U>(a, &l, nominal, &data, |z| *z, |q| *q, out)
                 } else {
                     let l = load(&a.model, &saved, maximal)?;
                     let dt = saved.dt;
-                    score(
+                    score::<_, _, N, C, NM, CM, U>(
                         a,
                         &l,
                         nominal,
@@ -648,10 +674,16 @@ impl ViewVisitor for Visit<'_> {
                 let saved = read_saved(&a.model)?;
                 let mut nominal = minimal;
                 restore_parameters(&mut nominal, &saved, &a.model)?;
-                let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
+                let data = read_data(
+                    &a.data,
+                    &Mn::COORDINATES,
+                    &Mn::KINDS,
+                    Mn::INPUT_NAMES,
+                    &a.read,
+                )?;
                 if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
                     let l = load(&a.model, &saved, minimal)?;
-                    let coords = (&Mn::COORDINATES, &Mn::KINDS);
+                    let coords = (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES);
                     predict(a, &l, &data, coords, |z| *z, |z| *z, out)
                 } else {
                     let l = load(&a.model, &saved, maximal)?;
@@ -660,7 +692,7 @@ impl ViewVisitor for Visit<'_> {
                         a,
                         &l,
                         &data,
-                        (&Mn::COORDINATES, &Mn::KINDS),
+                        (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES),
                         |z| nominal.to_maximal(z, dt),
                         |z| nominal.to_minimal(z, dt),
                         out,
@@ -720,7 +752,10 @@ fn load<M: Mechanism<N, C> + Parameters + Clone, const N: usize, const C: usize>
     })
 }
 
-fn fit<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+/// `U`: the mechanism's inputs; with inputs the data carries `u_<joint>`
+/// columns and the model learns on state and input (GP input: the encoded
+/// state, then u; prior: the forced nominal step).
+fn fit<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize, const U: usize>(
     a: &FitArgs,
     minimal: Mn,
     maximal: Mx,
@@ -732,7 +767,13 @@ where
 {
     // before the training, which the write would otherwise waste
     check_out_dir(&a.out)?;
-    let data = read_data(&a.data, &Mn::COORDINATES, &Mn::KINDS, &a.read)?;
+    let data = read_data(
+        &a.data,
+        &Mn::COORDINATES,
+        &Mn::KINDS,
+        Mn::INPUT_NAMES,
+        &a.read,
+    )?;
     let dt = data
         .dt(a.read.time_tolerance)
         .map_err(|source| CliError::Data {
@@ -794,6 +835,10 @@ where
         },
         ..TrainOptions::default()
     };
+    let data_err = |source| CliError::Data {
+        path: a.data.clone(),
+        source,
+    };
     match a.encoding {
         EncodingArg::Sincos | EncodingArg::Minimal => {
             let enc = if a.encoding == EncodingArg::Sincos {
@@ -801,38 +846,83 @@ where
             } else {
                 Encoding::Raw
             };
-            let all = data.transitions();
-            fit_view(a, minimal, dt, &all, enc, prior, &opts, out)
+            if U == 0 {
+                let all = data.transitions();
+                let train = |chosen: &[Transition<N>]| {
+                    Learned::train(minimal, dt, chosen, enc, prior, &opts)
+                };
+                fit_view(a, &all, enc, 0, &opts, train, out)
+            } else {
+                let all = data.forced_transitions::<U>().map_err(data_err)?;
+                let train = |chosen: &[ForcedTransition<N, U>]| {
+                    Learned::train_forced(minimal, dt, chosen, enc, prior, &opts)
+                };
+                fit_view(a, &all, enc, U, &opts, train, out)
+            }
         }
         EncodingArg::Maximal => {
-            let mut all: Vec<Transition<NM>> = Vec::new();
-            for run in &data.runs {
-                let Some(run_dt) = run.dt else { continue };
-                let xs: Vec<SVector<f64, NM>> = run
-                    .positions
-                    .iter()
-                    .map(|q| minimal.maximal_positions(q))
-                    .collect();
-                all.extend(transitions(&xs, run_dt));
+            // each run's positions in the maximal coordinates, its inputs
+            // as vectors (none when U = 0) and its time step
+            let runs: Vec<MaximalRun<NM, U>> = data
+                .runs
+                .iter()
+                .filter_map(|run| {
+                    let xs = run
+                        .positions
+                        .iter()
+                        .map(|q| minimal.maximal_positions(q))
+                        .collect();
+                    let us = run
+                        .inputs
+                        .iter()
+                        .map(|u| SVector::from_iterator(u.iter().copied()))
+                        .collect();
+                    Some((run.dt?, xs, us))
+                })
+                .collect();
+            if U == 0 {
+                let mut all: Vec<Transition<NM>> = Vec::new();
+                for (run_dt, xs, _) in &runs {
+                    all.extend(transitions(xs, *run_dt));
+                }
+                let train = |chosen: &[Transition<NM>]| {
+                    Learned::train(maximal, dt, chosen, Encoding::Raw, prior, &opts)
+                };
+                fit_view(a, &all, Encoding::Raw, 0, &opts, train, out)
+            } else {
+                let mut all: Vec<ForcedTransition<NM, U>> = Vec::new();
+                for (run_dt, xs, us) in &runs {
+                    all.extend(forced_transitions(xs, us, *run_dt));
+                }
+                let train = |chosen: &[ForcedTransition<NM, U>]| {
+                    Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior, &opts)
+                };
+                fit_view(a, &all, Encoding::Raw, U, &opts, train, out)
             }
-            fit_view(a, maximal, dt, &all, Encoding::Raw, prior, &opts, out)
         }
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn fit_view<M, const N: usize, const C: usize>(
+/// A run for the maximal-coordinate training: its time step, positions and
+/// inputs.
+type MaximalRun<const NM: usize, const U: usize> =
+    (f64, Vec<SVector<f64, NM>>, Vec<SVector<f64, U>>);
+
+/// Trains on at most `--max-samples` of `all` (`train`: the plain or the
+/// forced training of one view), reports and saves. `u_dim`: the GP inputs
+/// that are control inputs, after the `encoding`'s state inputs.
+fn fit_view<M, T, const N: usize, const C: usize>(
     a: &FitArgs,
-    model: M,
-    dt: f64,
-    all: &[Transition<N>],
+    all: &[T],
     encoding: Encoding,
-    prior: Prior,
+    u_dim: usize,
     opts: &TrainOptions,
+    train: impl FnOnce(&[T]) -> Result<(Learned<M, N, C>, TrainReport), LearnError>,
     out: &mut dyn Write,
 ) -> Result<(), CliError>
 where
     M: Mechanism<N, C> + Parameters + Clone,
+    T: Copy,
 {
     let max = match (a.max_samples, a.sparse) {
         (Some(max), _) => max,
@@ -846,14 +936,23 @@ where
             chosen.len()
         )));
     }
-    let d = encoding.dim(&M::KINDS);
+    let d = encoding.dim(&M::KINDS) + u_dim;
+    let prior = match a.prior {
+        PriorArg::Nominal => Prior::Nominal,
+        PriorArg::Constant => Prior::Constant,
+    };
     w(
         out,
         format_args!(
-            "fit: {} in coordinates [{}], {encoding:?} encoding ({d} inputs), {prior:?} prior: \
+            "fit: {} in coordinates [{}]{}, {encoding:?} encoding ({d} inputs), {prior:?} prior: \
              N = {} of {} transitions, {} restarts{}",
             M::NAME,
             M::COORDINATES.join(", "),
+            if u_dim > 0 {
+                format!(" with inputs [{}]", M::INPUT_NAMES.join(", "))
+            } else {
+                String::new()
+            },
             chosen.len(),
             all.len(),
             opts.restarts,
@@ -876,7 +975,7 @@ where
         1 + opts.restarts
     ));
     let start = Instant::now();
-    let result = Learned::train(model, dt, &chosen, encoding, prior, opts);
+    let result = train(&chosen);
     pb.finish_and_clear();
     let (learned, report) = result?;
     w(
@@ -899,9 +998,14 @@ where
                         s.subset
                     ),
                     Some(s) => format!(
-                        " (screened on {} transitions, {} optima refined on all)",
+                        " (screened on {} transitions, {} {} refined on all)",
                         s.subset,
-                        s.refined.len()
+                        s.refined.len(),
+                        if s.refined.len() == 1 {
+                            "optimum"
+                        } else {
+                            "optima"
+                        }
                     ),
                     None => String::new(),
                 }
@@ -941,7 +1045,9 @@ fn window_mse<const N: usize>(pred: &[SVector<f64, N>], truth: &[SVector<f64, N>
     s / pred.len() as f64
 }
 
-fn score<L, Mn, const N: usize, const C: usize, const K: usize, const CK: usize>(
+/// `U`: the mechanism's inputs (0 for none; then the data has no input
+/// columns and both models step unforced).
+fn score<L, Mn, const N: usize, const C: usize, const K: usize, const CK: usize, const U: usize>(
     a: &ScoreArgs,
     learned: &Learned<L, K, CK>,
     nominal: Mn,
@@ -957,6 +1063,18 @@ where
     let k = a.steps;
     if k == 0 {
         return Err(CliError::Usage("--steps must be at least 1".into()));
+    }
+    if learned.inputs() != U {
+        return Err(CliError::Usage(format!(
+            "{}: the model takes {} input(s), the mechanism has {U}{}",
+            a.model.display(),
+            learned.inputs(),
+            if U > 0 {
+                " (fit it with the input columns: `vigp fit` on data with `u_<joint>`)"
+            } else {
+                ""
+            }
+        )));
     }
     let dt = learned.dt();
     data.check_dt(dt, a.read.time_tolerance)
@@ -1016,14 +1134,38 @@ where
                 q: run.positions[s],
                 v: (run.positions[s + 1] - run.positions[s]) / dt,
             };
-            let nom = vi.rollout(&z0, k).ok().map(|traj| {
-                let p: Vec<_> = traj[1..].iter().map(|z| z.q).collect();
-                window_mse(&p, truth)
-            });
-            let lrn = learned.rollout(&to_view(&z0), k).ok().map(|traj| {
-                let p: Vec<_> = traj[1..].iter().map(|z| to_minimal(&z.q)).collect();
-                window_mse(&p, truth)
-            });
+            let (nom, lrn) = if U == 0 {
+                let nom = vi.rollout(&z0, k).ok().map(|traj| {
+                    let p: Vec<_> = traj[1..].iter().map(|z| z.q).collect();
+                    window_mse(&p, truth)
+                });
+                let lrn = learned.rollout(&to_view(&z0), k).ok().map(|traj| {
+                    let p: Vec<_> = traj[1..].iter().map(|z| to_minimal(&z.q)).collect();
+                    window_mse(&p, truth)
+                });
+                (nom, lrn)
+            } else {
+                // step j of the window (from sample s + j) under the input
+                // logged over its new velocity's interval
+                let us: Vec<SVector<f64, U>> = (0..k)
+                    .filter_map(|j| run.step_input(s + j))
+                    .map(|u| SVector::from_iterator(u.iter().copied()))
+                    .collect();
+                let mut buf = vec![z0; k];
+                let nom = vi.rollout_forced_into(&z0, &us, &mut buf).ok().map(|()| {
+                    let p: Vec<_> = buf.iter().map(|z| z.q).collect();
+                    window_mse(&p, truth)
+                });
+                let mut lbuf = vec![to_view(&z0); k];
+                let lrn = learned
+                    .rollout_forced_into(&to_view(&z0), &us, &mut lbuf)
+                    .ok()
+                    .map(|()| {
+                        let p: Vec<_> = lbuf.iter().map(|z| to_minimal(&z.q)).collect();
+                        window_mse(&p, truth)
+                    });
+                (nom, lrn)
+            };
             pb.inc(1);
             (nom, lrn)
         })
@@ -1060,7 +1202,11 @@ fn predict<L, const N: usize, const K: usize, const CK: usize>(
     a: &PredictArgs,
     learned: &Learned<L, K, CK>,
     data: &Dataset<N>,
-    (names, kinds): (&[&'static str; N], &[crate::CoordinateKind; N]),
+    (names, kinds, inputs): (
+        &[&'static str; N],
+        &[crate::CoordinateKind; N],
+        &[&'static str],
+    ),
     to_view: impl Fn(&State<N>) -> State<K>,
     to_minimal: impl Fn(&State<K>) -> State<N>,
     out: &mut dyn Write,
@@ -1070,6 +1216,15 @@ where
 {
     if a.steps == 0 {
         return Err(CliError::Usage("--steps must be at least 1".into()));
+    }
+    if learned.inputs() > 0 {
+        return Err(CliError::Usage(format!(
+            "{}: a model trained with inputs ({}): `predict` does not bound forced \
+             predictions yet; `score` scores it on logged inputs, and in Rust \
+             `Integrator::rollout_forced` predicts under planned ones",
+            a.model.display(),
+            inputs.join(", ")
+        )));
     }
     check_out_dir(&a.out)?;
     let dt = learned.dt();
@@ -1112,7 +1267,7 @@ where
     });
     let calibration = match &a.calibration {
         Some(path) => {
-            let held_out = read_data(path, names, kinds, &a.read)?;
+            let held_out = read_data(path, names, kinds, inputs, &a.read)?;
             held_out
                 .check_dt(dt, a.read.time_tolerance)
                 .map_err(|source| CliError::Data {

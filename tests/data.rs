@@ -365,3 +365,52 @@ fn input_columns_are_read() {
     assert_eq!(r.inputs[4], vec![3.0, 0.7]);
     assert!((r.positions[1][0] - 0.05).abs() < 1e-12);
 }
+
+/// `Dataset::forced_transitions` pairs each transition with the input of
+/// its step (row k+1's, as `Run::step_input`), equal to
+/// `learned::forced_transitions` on the run's arrays; asked for another
+/// input count it is a typed error.
+#[test]
+fn forced_transitions_take_each_steps_input() {
+    let text = "run,t,rail,hinge,u_rail,u_hinge\n\
+                a,0.0,0.0,0.1,1.0,0.5\n\
+                a,0.1,0.1,0.2,2.0,0.6\n\
+                a,0.2,0.3,0.3,3.0,0.7\n\
+                a,0.3,0.6,0.5,4.0,0.8\n\
+                b,0.0,1.0,1.0,9.0,9.0\n";
+    let d = Dataset::<2>::read_for::<DrivenCartpoleMinimal, 0, _>(
+        text.as_bytes(),
+        &ReadOptions::default(),
+    )
+    .unwrap();
+    let f = d.forced_transitions::<2>().unwrap();
+    // run a: 4 rows → 2 transitions; run b (one row) none
+    assert_eq!(f.len(), 2);
+    let r = &d.runs[0];
+    for (k, t) in f.iter().enumerate() {
+        assert_eq!(t.z, r.state(k).unwrap());
+        assert_eq!(t.u.as_slice(), r.step_input(k).unwrap());
+        assert_eq!(t.v_next, r.state(k + 1).unwrap().v);
+    }
+    assert_eq!(f[0].u.as_slice(), &[2.0, 0.6]);
+    let us: Vec<SVector<f64, 2>> = r
+        .inputs
+        .iter()
+        .map(|u| SVector::from_column_slice(u))
+        .collect();
+    assert_eq!(
+        f,
+        vigp::learned::forced_transitions(&r.positions, &us, r.dt.unwrap())
+    );
+    let e = d.forced_transitions::<1>().unwrap_err();
+    assert!(
+        matches!(
+            e,
+            DataError::InputCount {
+                expected: 1,
+                found: 2
+            }
+        ),
+        "{e}"
+    );
+}

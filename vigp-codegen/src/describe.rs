@@ -102,13 +102,14 @@ pub fn emit(m: &Model, target: Target) -> TokenStream {
     let nm = Literal::usize_unsuffixed(3 * m.links.len());
     // the maximal view: every joint is two constraint equations
     let cm = Literal::usize_unsuffixed(2 * m.joints.len());
+    let u = Literal::usize_unsuffixed(m.inputs().len());
     quote! {
         #own
         #minimal
         #maximal
         impl ::vigp::System for #name {
             fn visit<V: ::vigp::ViewVisitor>(&self, visitor: V) -> V::Output {
-                visitor.visit::<#minimal_ty, #maximal_ty, #n, #c, #nm, #cm>(self.minimal(), self.maximal())
+                visitor.visit::<#minimal_ty, #maximal_ty, #n, #c, #nm, #cm, #u>(self.minimal(), self.maximal())
             }
         }
     }

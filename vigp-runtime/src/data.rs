@@ -57,7 +57,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::SVector;
 
-use crate::learned::Transition;
+use crate::learned::{ForcedTransition, Transition};
 use crate::mechanism::{CoordinateKind, Mechanism, State};
 
 /// How [`Dataset::read_csv`] reads a file.
@@ -236,6 +236,15 @@ pub enum DataError {
         what: &'static str,
         /// Its value.
         value: f64,
+    },
+    /// Transitions with `expected` inputs asked of a dataset read with
+    /// `found` input columns.
+    #[error("the data has {found} input column(s), {expected} expected")]
+    InputCount {
+        /// Inputs asked for.
+        expected: usize,
+        /// Input columns read.
+        found: usize,
     },
 }
 
@@ -653,6 +662,18 @@ impl<const N: usize> Dataset<N> {
         kinds: &[CoordinateKind; N],
         opts: &ReadOptions,
     ) -> Result<Self, DataError> {
+        Self::read_path_with_inputs(path, names, kinds, &[], opts)
+    }
+
+    /// [`Dataset::read_path`] for a mechanism with inputs `inputs` (the
+    /// actuated joints' names; columns `u_<name>`, module docs).
+    pub fn read_path_with_inputs(
+        path: impl AsRef<Path>,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        inputs: &[&str],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
         let path = path.as_ref();
         let io_error = |source| DataError::Io {
             path: path.to_path_buf(),
@@ -667,7 +688,7 @@ impl<const N: usize> Dataset<N> {
                 "is a directory, not a CSV file",
             )));
         }
-        Self::read_csv(io::BufReader::new(file), names, kinds, opts)
+        Self::read_csv_with_inputs(io::BufReader::new(file), names, kinds, inputs, opts)
     }
 
     /// Reads CSV text with the coordinate names and kinds of mechanism `M`.
@@ -730,6 +751,33 @@ impl<const N: usize> Dataset<N> {
             .filter_map(|r| Some(crate::learned::transitions(&r.positions, r.dt?)))
             .flatten()
             .collect()
+    }
+
+    /// Training transitions with their inputs (an actuated mechanism's
+    /// data): transition k of a run is driven by [`Run::step_input`]`(k)`,
+    /// the input held over the interval of the new discrete velocity (see
+    /// [`crate::learned::forced_transitions`]). `U` must be the number of
+    /// input columns read ([`DataError::InputCount`] otherwise).
+    pub fn forced_transitions<const U: usize>(
+        &self,
+    ) -> Result<Vec<ForcedTransition<N, U>>, DataError> {
+        if self.inputs.len() != U {
+            return Err(DataError::InputCount {
+                expected: U,
+                found: self.inputs.len(),
+            });
+        }
+        let mut out = Vec::new();
+        for run in &self.runs {
+            let Some(dt) = run.dt else { continue };
+            let us: Vec<SVector<f64, U>> = run
+                .inputs
+                .iter()
+                .map(|u| SVector::from_iterator(u.iter().copied()))
+                .collect();
+            out.extend(crate::learned::forced_transitions(&run.positions, &us, dt));
+        }
+        Ok(out)
     }
 
     /// The runs too short to give a transition (fewer than three samples).

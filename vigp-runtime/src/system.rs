@@ -2,8 +2,9 @@
 //! implemented by every `mechanism!` parameter struct and hands its two
 //! coordinate views, with their sizes, to a [`ViewVisitor`].
 //!
-//! The sizes N, C (minimal) and NM, CM (maximal) are const generics of the
-//! views, which a trait cannot name as associated constants on stable Rust;
+//! The sizes N, C (minimal) and NM, CM (maximal), and the number U of
+//! inputs (actuated joints), are const generics of the views' methods,
+//! which a trait cannot derive from associated constants on stable Rust;
 //! the visitor receives them as const parameters instead. This is how
 //! `vigp::cli::main::<MyMechanism>()` runs the whole command-line tool on a
 //! user's mechanism from one line.
@@ -38,8 +39,18 @@ pub trait ViewVisitor {
     type Output;
 
     /// Runs on the minimal view (`N` coordinates, `C` loop equations) and
-    /// the maximal view (`NM` = 3 per link, `CM` joint equations).
-    fn visit<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+    /// the maximal view (`NM` = 3 per link, `CM` joint equations) of a
+    /// mechanism with `U` inputs (`Dynamics::INPUTS`, the actuated joints:
+    /// the length of the input vectors of its forced steps).
+    fn visit<
+        Mn,
+        Mx,
+        const N: usize,
+        const C: usize,
+        const NM: usize,
+        const CM: usize,
+        const U: usize,
+    >(
         self,
         minimal: Mn,
         maximal: Mx,
