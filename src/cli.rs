@@ -6,6 +6,7 @@
 //! vigp fit     --system NAME --data train.csv --out model.json
 //!              [--encoding sincos|minimal|maximal] [--prior nominal|constant] [--restarts K]
 //!              [--max-samples N] [--no-screen | --sparse M [--optimise-inducing]]
+//!              [--noise-floor VAR]
 //! vigp score   --model model.json --data test.csv --steps 20
 //! vigp predict --model model.json --data starts.csv --steps K --out pred.csv
 //! vigp export  --model model.json --out model.rs [--variance]
@@ -288,6 +289,14 @@ struct FitArgs {
     /// checked; `vigp::gp::Screening`).
     #[arg(long, conflicts_with = "sparse")]
     no_screen: bool,
+    /// Lower bound of each GP's noise variance, in the normalised units the
+    /// GP trains in (outputs scaled to unit variance); default 1e-10. On
+    /// nearly noise-free data the fitted noise can reach it, and then the
+    /// posterior variance σ_f² − kᵀ(K + σ_n²I)⁻¹k is lost to rounding at
+    /// some states, where `predict`'s variance-based bounds (RKHS, Theorem
+    /// 1) refuse the run; a larger floor (e.g. 1e-8) keeps them usable.
+    #[arg(long, value_name = "VAR")]
+    noise_floor: Option<f64>,
     /// Change a nominal parameter, e.g. `--set links.pole.mass=1.1` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE")]
     set: Vec<String>,
@@ -835,6 +844,16 @@ where
         },
         ..TrainOptions::default()
     };
+    let mut opts = opts;
+    if let Some(floor) = a.noise_floor {
+        let upper = opts.bounds.noise_variance.1;
+        if !(floor.is_finite() && floor > 0.0 && floor < upper) {
+            return Err(CliError::Usage(format!(
+                "--noise-floor must be finite and in (0, {upper}): {floor}"
+            )));
+        }
+        opts.bounds.noise_variance.0 = floor;
+    }
     let data_err = |source| CliError::Data {
         path: a.data.clone(),
         source,

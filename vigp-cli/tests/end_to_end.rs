@@ -504,6 +504,50 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     ))
     .unwrap_err();
     assert!(e.to_string().contains("does not bound forced"), "{e}");
+    // --noise-floor: the fitted noise variances (normalised units) sit at
+    // or above it; on these noise-free data the default fit goes below
+    let noise = |path: &Path| -> Vec<f64> {
+        let l = vigp::learned::Learned::load(path, DriveCartpole::default().minimal()).unwrap();
+        l.gp()
+            .outputs()
+            .iter()
+            .map(|o| o.hyperparameters().noise_variance)
+            .collect()
+    };
+    let floored = dir.join("floored.json");
+    run(&[
+        "fit",
+        "--data",
+        s(&train),
+        "--out",
+        s(&floored),
+        "--restarts",
+        "1",
+        "--noise-floor",
+        "1e-6",
+    ])
+    .unwrap();
+    assert!(
+        noise(&floored).iter().all(|&n| n >= 1e-6),
+        "{:?}",
+        noise(&floored)
+    );
+    assert!(
+        noise(&model).iter().any(|&n| n < 1e-6),
+        "{:?}",
+        noise(&model)
+    );
+    let e = run(&[
+        "fit",
+        "--data",
+        s(&train),
+        "--out",
+        s(&floored),
+        "--noise-floor",
+        "10",
+    ])
+    .unwrap_err();
+    assert!(e.to_string().contains("--noise-floor must be"), "{e}");
     // data without the input column
     let bare = dir.join("bare.csv");
     std::fs::write(&bare, "run,t,rail,hinge\na,0,0,0\na,0.01,0,0\na,0.02,0,0\n").unwrap();

@@ -116,7 +116,8 @@ pub enum BoundError {
     /// noise variance when training, gives a usable bound.
     #[error(
         "the GP variance of output {output} at step {step} was lost to rounding (0): \
-         a variance-based bound would be 0; use a conformal bound or a larger noise lower bound"
+         a variance-based bound would be 0; use a conformal bound or a larger noise lower bound \
+         (TrainOptions::bounds, `vigp fit --noise-floor`)"
     )]
     VarianceLost {
         /// The GP output.
