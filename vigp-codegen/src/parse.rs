@@ -166,6 +166,19 @@ impl Parse for Field {
             });
         }
         input.parse::<Token![:]>()?;
+        // `actuated: true` reads naturally but is not the syntax: name the
+        // flag form instead of "expected a number"
+        if input.peek(syn::LitBool) {
+            let b: syn::LitBool = input.parse()?;
+            return Err(syn::Error::new(
+                b.span(),
+                format!(
+                    "`{key}: {}`: no booleans here; a flag is written bare (`{key}`) to set \
+                     it and left out to unset it",
+                    b.value
+                ),
+            ));
+        }
         let value = input.parse()?;
         Ok(Field { key, value })
     }
