@@ -870,13 +870,13 @@ where
                 let train = |chosen: &[Transition<N>]| {
                     Learned::train(minimal, dt, chosen, enc, prior, &opts)
                 };
-                fit_view(a, &all, enc, 0, &opts, train, out)
+                fit_view(a, &all, (enc, prior), 0, &opts, train, out)
             } else {
                 let all = data.forced_transitions::<U>().map_err(data_err)?;
                 let train = |chosen: &[ForcedTransition<N, U>]| {
                     Learned::train_forced(minimal, dt, chosen, enc, prior, &opts)
                 };
-                fit_view(a, &all, enc, U, &opts, train, out)
+                fit_view(a, &all, (enc, prior), U, &opts, train, out)
             }
         }
         EncodingArg::Maximal => {
@@ -907,7 +907,7 @@ where
                 let train = |chosen: &[Transition<NM>]| {
                     Learned::train(maximal, dt, chosen, Encoding::Raw, prior, &opts)
                 };
-                fit_view(a, &all, Encoding::Raw, 0, &opts, train, out)
+                fit_view(a, &all, (Encoding::Raw, prior), 0, &opts, train, out)
             } else {
                 let mut all: Vec<ForcedTransition<NM, U>> = Vec::new();
                 for (run_dt, xs, us) in &runs {
@@ -916,7 +916,7 @@ where
                 let train = |chosen: &[ForcedTransition<NM, U>]| {
                     Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior, &opts)
                 };
-                fit_view(a, &all, Encoding::Raw, U, &opts, train, out)
+                fit_view(a, &all, (Encoding::Raw, prior), U, &opts, train, out)
             }
         }
     }
@@ -928,12 +928,13 @@ type MaximalRun<const NM: usize, const U: usize> =
     (f64, Vec<SVector<f64, NM>>, Vec<SVector<f64, U>>);
 
 /// Trains on at most `--max-samples` of `all` (`train`: the plain or the
-/// forced training of one view), reports and saves. `u_dim`: the GP inputs
-/// that are control inputs, after the `encoding`'s state inputs.
+/// forced training of one view, with `encoding` and `prior`), reports and
+/// saves. `u_dim`: the GP inputs that are control inputs, after the
+/// `encoding`'s state inputs.
 fn fit_view<M, T, const N: usize, const C: usize>(
     a: &FitArgs,
     all: &[T],
-    encoding: Encoding,
+    (encoding, prior): (Encoding, Prior),
     u_dim: usize,
     opts: &TrainOptions,
     train: impl FnOnce(&[T]) -> Result<(Learned<M, N, C>, TrainReport), LearnError>,
@@ -956,10 +957,6 @@ where
         )));
     }
     let d = encoding.dim(&M::KINDS) + u_dim;
-    let prior = match a.prior {
-        PriorArg::Nominal => Prior::Nominal,
-        PriorArg::Constant => Prior::Constant,
-    };
     w(
         out,
         format_args!(
@@ -1240,7 +1237,7 @@ where
         return Err(CliError::Usage(format!(
             "{}: a model trained with inputs ({}): `predict` does not bound forced \
              predictions yet; `score` scores it on logged inputs, and in Rust \
-             `Integrator::rollout_forced` predicts under planned ones",
+             `Integrator::rollout_forced_into` predicts under planned ones",
             a.model.display(),
             inputs.join(", ")
         )));
