@@ -652,16 +652,7 @@ impl ViewVisitor for Visit<'_> {
         match cmd {
             Command::Fit(a) => fit::<Mn, Mx, N, C, NM, CM, U>(a, minimal, maximal, out),
             Command::Score(a) => {
-                let saved = read_saved(&a.model)?;
-                let mut nominal = minimal;
-                restore_parameters(&mut nominal, &saved, &a.model)?;
-                let data = read_data(
-                    &a.data,
-                    &Mn::COORDINATES,
-                    &Mn::KINDS,
-                    Mn::INPUT_NAMES,
-                    &a.read,
-                )?;
+                let (saved, nominal, data) = model_and_data(&a.model, &a.data, &a.read, minimal)?;
                 if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
                     let l = load(&a.model, &saved, minimal)?;
                     score::<_, _, N, C, N, C, U>(a, &l, nominal, &data, |z| *z, |q| *q, out)
@@ -680,16 +671,7 @@ impl ViewVisitor for Visit<'_> {
                 }
             }
             Command::Predict(a) => {
-                let saved = read_saved(&a.model)?;
-                let mut nominal = minimal;
-                restore_parameters(&mut nominal, &saved, &a.model)?;
-                let data = read_data(
-                    &a.data,
-                    &Mn::COORDINATES,
-                    &Mn::KINDS,
-                    Mn::INPUT_NAMES,
-                    &a.read,
-                )?;
+                let (saved, nominal, data) = model_and_data(&a.model, &a.data, &a.read, minimal)?;
                 if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
                     let l = load(&a.model, &saved, minimal)?;
                     let coords = (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES);
@@ -720,6 +702,25 @@ impl ViewVisitor for Visit<'_> {
             }
         }
     }
+}
+
+/// A saved model, the nominal minimal model with the file's parameters, and
+/// the data (with the mechanism's input columns): what `score` and
+/// `predict` start from.
+fn model_and_data<Mn, const N: usize, const C: usize>(
+    model: &Path,
+    data: &Path,
+    read: &ReadArgs,
+    minimal: Mn,
+) -> Result<(SavedLearned, Mn, Dataset<N>), CliError>
+where
+    Mn: Mechanism<N, C> + Parameters,
+{
+    let saved = read_saved(model)?;
+    let mut nominal = minimal;
+    restore_parameters(&mut nominal, &saved, model)?;
+    let data = read_data(data, &Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES, read)?;
+    Ok((saved, nominal, data))
 }
 
 /// `true` when a model file is in the minimal coordinates, `false` when in

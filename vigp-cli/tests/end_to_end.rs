@@ -141,6 +141,22 @@ fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
+/// The tool of `systems` run in-process as the program `name`, its report
+/// echoed to stderr.
+fn run_tool(
+    systems: &[vigp::cli::SystemEntry],
+    name: &str,
+    args: &[&str],
+) -> Result<String, vigp::cli::CliError> {
+    let mut out = Vec::new();
+    let mut argv = vec![name];
+    argv.extend_from_slice(args);
+    let r = vigp::cli::run(systems, argv, &mut out);
+    let text = String::from_utf8(out).unwrap();
+    eprintln!("$ {name} {}\n{text}", args.join(" "));
+    r.map(|()| text)
+}
+
 /// `predict --model MODEL --data DATA --steps STEPS --out OUT` (without the
 /// program name).
 fn predict_args<'a>(model: &'a str, data: &'a str, steps: &'a str, out: &'a str) -> Vec<&'a str> {
@@ -327,13 +343,7 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
     let model = dir.join("crane.json");
     let tool = [vigp::cli::system::<Crane>()];
     let run = |args: &[&str]| {
-        let mut out = Vec::new();
-        let mut argv = vec!["crane-tool"];
-        argv.extend_from_slice(args);
-        vigp::cli::run(&tool, argv, &mut out).unwrap_or_else(|e| panic!("{args:?}: {e}"));
-        let text = String::from_utf8(out).unwrap();
-        eprintln!("$ crane-tool {}\n{text}", args.join(" "));
-        text
+        run_tool(&tool, "crane-tool", args).unwrap_or_else(|e| panic!("{args:?}: {e}"))
     };
     // no --system needed with one mechanism
     run(&[
@@ -447,15 +457,7 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     std::fs::write(&test, csv(6..9)).unwrap();
     let model = dir.join("drive.json");
     let tool = [vigp::cli::system::<DriveCartpole>()];
-    let run = |args: &[&str]| {
-        let mut out = Vec::new();
-        let mut argv = vec!["drive-tool"];
-        argv.extend_from_slice(args);
-        let r = vigp::cli::run(&tool, argv, &mut out);
-        let text = String::from_utf8(out).unwrap();
-        eprintln!("$ drive-tool {}\n{text}", args.join(" "));
-        r.map(|()| text)
-    };
+    let run = |args: &[&str]| run_tool(&tool, "drive-tool", args);
     let fit = run(&[
         "fit",
         "--data",
