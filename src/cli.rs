@@ -828,7 +828,7 @@ where
         PriorArg::Nominal => Prior::Nominal,
         PriorArg::Constant => Prior::Constant,
     };
-    let opts = TrainOptions {
+    let mut opts = TrainOptions {
         restarts: a.restarts,
         seed: a.seed,
         method: match a.sparse {
@@ -845,7 +845,6 @@ where
         },
         ..TrainOptions::default()
     };
-    let mut opts = opts;
     if let Some(floor) = a.noise_floor {
         let upper = opts.bounds.noise_variance.1;
         if !(floor.is_finite() && floor > 0.0 && floor < upper) {
@@ -881,52 +880,37 @@ where
             }
         }
         EncodingArg::Maximal => {
-            // each run's positions in the maximal coordinates, its inputs
-            // as vectors (none when U = 0) and its time step
-            let runs: Vec<MaximalRun<NM, U>> = data
-                .runs
-                .iter()
-                .filter_map(|run| {
-                    let xs = run
-                        .positions
-                        .iter()
-                        .map(|q| minimal.maximal_positions(q))
-                        .collect();
-                    let us = run
-                        .inputs
-                        .iter()
-                        .map(|u| SVector::from_iterator(u.iter().copied()))
-                        .collect();
-                    Some((run.dt?, xs, us))
-                })
-                .collect();
-            if U == 0 {
-                let mut all: Vec<Transition<NM>> = Vec::new();
-                for (run_dt, xs, _) in &runs {
-                    all.extend(transitions(xs, *run_dt));
+            // each run's transitions in the maximal coordinates, with its
+            // inputs when the mechanism has some
+            let inputs = data.input_vectors::<U>().map_err(data_err)?;
+            let (mut plain, mut forced) = (Vec::new(), Vec::new());
+            for (run, us) in data.runs.iter().zip(&inputs) {
+                let Some(run_dt) = run.dt else { continue };
+                let xs: Vec<SVector<f64, NM>> = run
+                    .positions
+                    .iter()
+                    .map(|q| minimal.maximal_positions(q))
+                    .collect();
+                if U == 0 {
+                    plain.extend(transitions(&xs, run_dt));
+                } else {
+                    forced.extend(forced_transitions(&xs, us, run_dt));
                 }
+            }
+            if U == 0 {
                 let train = |chosen: &[Transition<NM>]| {
                     Learned::train(maximal, dt, chosen, Encoding::Raw, prior, &opts)
                 };
-                fit_view(a, &all, (Encoding::Raw, prior), 0, &opts, train, out)
+                fit_view(a, &plain, (Encoding::Raw, prior), 0, &opts, train, out)
             } else {
-                let mut all: Vec<ForcedTransition<NM, U>> = Vec::new();
-                for (run_dt, xs, us) in &runs {
-                    all.extend(forced_transitions(xs, us, *run_dt));
-                }
                 let train = |chosen: &[ForcedTransition<NM, U>]| {
                     Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior, &opts)
                 };
-                fit_view(a, &all, (Encoding::Raw, prior), U, &opts, train, out)
+                fit_view(a, &forced, (Encoding::Raw, prior), U, &opts, train, out)
             }
         }
     }
 }
-
-/// A run for the maximal-coordinate training: its time step, positions and
-/// inputs.
-type MaximalRun<const NM: usize, const U: usize> =
-    (f64, Vec<SVector<f64, NM>>, Vec<SVector<f64, U>>);
 
 /// Trains on at most `--max-samples` of `all` (`train`: the plain or the
 /// forced training of one view, with `encoding` and `prior`), reports and
@@ -1140,6 +1124,11 @@ where
             k + 2
         )));
     }
+    // each run's logged inputs, once (none without inputs)
+    let inputs = data.input_vectors::<U>().map_err(|source| CliError::Data {
+        path: a.data.clone(),
+        source,
+    })?;
     let vi = Variational::new(nominal, dt);
     let pb = bar(windows.len(), "scoring");
     let results: Vec<(Option<f64>, Option<f64>)> = windows
@@ -1151,38 +1140,34 @@ where
                 q: run.positions[s],
                 v: (run.positions[s + 1] - run.positions[s]) / dt,
             };
-            let (nom, lrn) = if U == 0 {
-                let nom = vi.rollout(&z0, k).ok().map(|traj| {
-                    let p: Vec<_> = traj[1..].iter().map(|z| z.q).collect();
-                    window_mse(&p, truth)
-                });
-                let lrn = learned.rollout(&to_view(&z0), k).ok().map(|traj| {
-                    let p: Vec<_> = traj[1..].iter().map(|z| to_minimal(&z.q)).collect();
-                    window_mse(&p, truth)
-                });
-                (nom, lrn)
+            // step j of the window (from sample s + j) under the input
+            // logged over its new velocity's interval, row s + j + 1's
+            let us = if U == 0 {
+                &[][..]
             } else {
-                // step j of the window (from sample s + j) under the input
-                // logged over its new velocity's interval
-                let us: Vec<SVector<f64, U>> = (0..k)
-                    .filter_map(|j| run.step_input(s + j))
-                    .map(|u| SVector::from_iterator(u.iter().copied()))
-                    .collect();
-                let mut buf = vec![z0; k];
-                let nom = vi.rollout_forced_into(&z0, &us, &mut buf).ok().map(|()| {
-                    let p: Vec<_> = buf.iter().map(|z| z.q).collect();
-                    window_mse(&p, truth)
-                });
-                let mut lbuf = vec![to_view(&z0); k];
-                let lrn = learned
-                    .rollout_forced_into(&to_view(&z0), &us, &mut lbuf)
-                    .ok()
-                    .map(|()| {
-                        let p: Vec<_> = lbuf.iter().map(|z| to_minimal(&z.q)).collect();
-                        window_mse(&p, truth)
-                    });
-                (nom, lrn)
+                &inputs[r][s + 1..=s + k]
             };
+            let mut buf = vec![z0; k];
+            let nom = if U == 0 {
+                vi.rollout_into(&z0, &mut buf)
+            } else {
+                vi.rollout_forced_into(&z0, us, &mut buf)
+            };
+            let nom = nom.ok().map(|()| {
+                let p: Vec<_> = buf.iter().map(|z| z.q).collect();
+                window_mse(&p, truth)
+            });
+            let zv = to_view(&z0);
+            let mut buf = vec![zv; k];
+            let lrn = if U == 0 {
+                learned.rollout_into(&zv, &mut buf)
+            } else {
+                learned.rollout_forced_into(&zv, us, &mut buf)
+            };
+            let lrn = lrn.ok().map(|()| {
+                let p: Vec<_> = buf.iter().map(|z| to_minimal(&z.q)).collect();
+                window_mse(&p, truth)
+            });
             pb.inc(1);
             (nom, lrn)
         })

@@ -753,6 +753,30 @@ impl<const N: usize> Dataset<N> {
             .collect()
     }
 
+    /// Each run's inputs as vectors of the `U` input columns, one per
+    /// sample (row k's input, held from t_k; the step from state k is
+    /// driven by row k+1's, [`Run::step_input`]); empty for a mechanism
+    /// without inputs (`U` = 0). `U` must be the number of input columns
+    /// read ([`DataError::InputCount`] otherwise).
+    pub fn input_vectors<const U: usize>(&self) -> Result<Vec<Vec<SVector<f64, U>>>, DataError> {
+        if self.inputs.len() != U {
+            return Err(DataError::InputCount {
+                expected: U,
+                found: self.inputs.len(),
+            });
+        }
+        Ok(self
+            .runs
+            .iter()
+            .map(|run| {
+                run.inputs
+                    .iter()
+                    .map(|u| SVector::from_column_slice(u))
+                    .collect()
+            })
+            .collect())
+    }
+
     /// Training transitions with their inputs (an actuated mechanism's
     /// data): transition k of a run is driven by [`Run::step_input`]`(k)`,
     /// the input held over the interval of the new discrete velocity (see
@@ -761,21 +785,11 @@ impl<const N: usize> Dataset<N> {
     pub fn forced_transitions<const U: usize>(
         &self,
     ) -> Result<Vec<ForcedTransition<N, U>>, DataError> {
-        if self.inputs.len() != U {
-            return Err(DataError::InputCount {
-                expected: U,
-                found: self.inputs.len(),
-            });
-        }
+        let inputs = self.input_vectors::<U>()?;
         let mut out = Vec::new();
-        for run in &self.runs {
+        for (run, us) in self.runs.iter().zip(&inputs) {
             let Some(dt) = run.dt else { continue };
-            let us: Vec<SVector<f64, U>> = run
-                .inputs
-                .iter()
-                .map(|u| SVector::from_iterator(u.iter().copied()))
-                .collect();
-            out.extend(crate::learned::forced_transitions(&run.positions, &us, dt));
+            out.extend(crate::learned::forced_transitions(&run.positions, us, dt));
         }
         Ok(out)
     }
