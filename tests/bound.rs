@@ -590,6 +590,26 @@ vigp::mechanism! {
     }
 }
 
+vigp::mechanism! {
+    /// The paper's four-bar rhombus, driven at the top pivot and at the
+    /// loop-closing joint.
+    pub DrivenFourbar {
+        links {
+            link1: { mass: 1.0, length: 1.0 },
+            link2: { mass: 1.0, length: 1.0 },
+            link3: { mass: 1.0, length: 1.0 },
+            link4: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            top1: revolute(world, link1.start) { damping: 0.1, actuated },
+            middle1: revolute(link1.end, link2.start) { damping: 0.0 },
+            top2: revolute(world, link3.start) { damping: 0.0 },
+            middle2: revolute(link3.end, link4.start) { damping: 0.0 },
+            bottom: revolute(link2.end, link4.end) { damping: 0.05, actuated },
+        }
+    }
+}
+
 /// Spectral norm by nalgebra's SVD (the library's own is a power iteration).
 fn norm2<const N: usize>(a: &nalgebra::SMatrix<f64, N, N>) -> f64 {
     DMatrix::from_column_slice(N, N, a.as_slice())
@@ -607,6 +627,15 @@ fn fd_norms<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
     l: &Learned<M, N, C>,
     z: &State<N>,
 ) -> (f64, f64) {
+    fd_norms_by(l, z, |p, ws| l.step_mean_with(p, ws).unwrap())
+}
+
+/// [`fd_norms`] of the mean step `step`.
+fn fd_norms_by<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
+    l: &Learned<M, N, C>,
+    z: &State<N>,
+    step: impl Fn(&State<N>, &mut vigp::gp::Workspace) -> State<N>,
+) -> (f64, f64) {
     let mut ws = l.workspace();
     let mut dq = nalgebra::SMatrix::<f64, N, N>::zeros();
     let mut dv = dq;
@@ -622,7 +651,7 @@ fn fd_norms<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
             if C > 0 && l.projects() {
                 p = vigp::projection::consistent_state(l.model(), &p.q, &p.v, l.dt()).unwrap();
             }
-            l.step_mean_with(&p, &mut ws).unwrap()
+            step(&p, &mut ws)
         });
         if k < N {
             dq.set_column(k, &col);
@@ -804,6 +833,80 @@ fn step_jacobian_norms_match_central_differences() {
         Learned::train_forced(truth, DT, &data, Encoding::SinCos, Prior::Nominal, &opts).unwrap();
     assert_eq!(l.inputs(), 1);
     check("driven pendulum, u = 0", &l, &data[3].z);
+    check_forced::<_, 1, 0, 1>("driven pendulum", &l, &data[3].z, &mut rng);
+
+    // a driven loop (two inputs, one of them on the loop-closing joint):
+    // the forced step projects, and so do the differences
+    let truth = DrivenFourbar::default().minimal();
+    let vi = Variational::new(truth, DT);
+    let mut z = vigp::projection::consistent_state(
+        &truth,
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::zeros(),
+        DT,
+    )
+    .unwrap();
+    let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, 2>::zeros()]);
+    for _ in 0..50 {
+        let u = SVector::<f64, 2>::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0));
+        z = vi.step_forced(&z, &u).unwrap();
+        positions.push(z.q);
+        inputs.push(u);
+    }
+    let data: Vec<_> = vigp::learned::forced_transitions(&positions, &inputs, DT)
+        .into_iter()
+        .map(|mut t| {
+            for x in t.v_next.iter_mut() {
+                *x += rng.uniform(-5e-3, 5e-3);
+            }
+            t
+        })
+        .collect();
+    let (l, _) =
+        Learned::train_forced(truth, DT, &data, Encoding::Raw, Prior::Nominal, &opts).unwrap();
+    assert!(l.projects());
+    check_forced::<_, 4, 2, 2>("driven fourbar", &l, &data[5].z, &mut rng);
+}
+
+/// `step_jacobian_norms_forced` at states of a forced prediction against
+/// central differences of `step_mean_forced_with` under the same input.
+fn check_forced<
+    M: vigp::Mechanism<N, C> + Clone,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
+    name: &str,
+    l: &Learned<M, N, C>,
+    z0: &State<N>,
+    rng: &mut Rng,
+) {
+    let mut ws = l.workspace();
+    let us: Vec<SVector<f64, U>> = (0..12)
+        .map(|_| SVector::from_fn(|_, _| rng.uniform(-1.5, 1.5)))
+        .collect();
+    let mut states = vec![*z0];
+    for u in &us {
+        let next = l
+            .step_mean_forced_with(states.last().unwrap(), u, &mut ws)
+            .unwrap();
+        states.push(next);
+    }
+    for k in (0..us.len()).step_by(3) {
+        let (z, u) = (&states[k], &us[k]);
+        let (a, c) = l.step_jacobian_norms_forced(z, u, &mut ws).unwrap();
+        let (fa, fc) = fd_norms_by(l, z, |p, ws| l.step_mean_forced_with(p, u, ws).unwrap());
+        for (got, want, what) in [(a, fa, "|dv'/dq|"), (c, fc, "|dv'/dv|")] {
+            assert!(
+                (got - want).abs() <= 1e-6 * want.max(1.0),
+                "{name}, state {k} under u = {u:?}, {what}: {got:e} vs differences {want:e}"
+            );
+        }
+        // the input matters: under u = 0 the norms differ (the GP mean's
+        // gradient depends on the input)
+        let (a0, c0) = l.step_jacobian_norms(z, &mut ws).unwrap();
+        assert!(a0 != a || c0 != c, "{name}, state {k}");
+    }
 }
 
 /// Decoding inverts encoding (angles modulo 2π).
@@ -1125,4 +1228,219 @@ fn a_sparse_model_is_bounded_conformally_only() {
         assert_eq!(p.one_step_bounds, q.one_step_bounds);
         assert!(p.one_step_bounds.iter().all(|v| v.is_finite() && *v > 0.0));
     }
+}
+
+/// The driven pendulum's truth for the forced bounds: heavier (×1.08) and
+/// with three times the nominal pivot friction.
+fn driven_truth() -> DrivenPendulumMinimal {
+    let mut truth = DrivenPendulum::default();
+    truth.links.rod.mass = 1.08;
+    truth.joints.pivot.damping = 0.3;
+    truth.minimal()
+}
+
+/// A forced model of the driven pendulum (sin/cos, nominal prior: the
+/// unperturbed pendulum) trained on 150 transitions of [`driven_truth`]
+/// (the midpoint VI at Δt) along six trajectories from random states under
+/// inputs drawn uniformly from [−2, 2] per step, with uniform velocity
+/// noise of σ = 1e-3 (as the paper).
+fn driven_model() -> &'static Learned<DrivenPendulumMinimal, 1, 0> {
+    static MODEL: OnceLock<Learned<DrivenPendulumMinimal, 1, 0>> = OnceLock::new();
+    MODEL.get_or_init(|| {
+        let vi = Variational::new(driven_truth(), DT);
+        let mut rng = Rng(21);
+        let half = 1e-3 * 3f64.sqrt();
+        let mut data = Vec::new();
+        for _ in 0..6 {
+            let mut z = State::new([rng.uniform(-2.0, 2.0)], [rng.uniform(-2.0, 2.0)]);
+            let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, 1>::zeros()]);
+            for _ in 0..25 {
+                let u = SVector::<f64, 1>::new(rng.uniform(-2.0, 2.0));
+                z = vi.step_forced(&z, &u).unwrap();
+                positions.push(z.q);
+                inputs.push(u);
+            }
+            data.extend(vigp::learned::forced_transitions(&positions, &inputs, DT));
+        }
+        for t in &mut data {
+            t.v_next[0] += rng.uniform(-half, half);
+        }
+        let opts = TrainOptions {
+            restarts: 2,
+            seed: 4,
+            ..TrainOptions::default()
+        };
+        let nominal = DrivenPendulum::default().minimal();
+        Learned::train_forced(nominal, DT, &data, Encoding::SinCos, Prior::Nominal, &opts)
+            .unwrap()
+            .0
+    })
+}
+
+/// Bounds of predictions under inputs (`Learned::predict_forced`, constants
+/// from `Learned::error_bound_forced`) against the truth under the same
+/// inputs: 200 windows of 10 steps from random states of the training
+/// region, each step's input drawn from the training distribution. The
+/// one-step bound at predicted state z_k must cover ‖v_{k+1} −
+/// v_true(z_k, u_k)‖, the truth's step from z_k under u_k (the truth is the
+/// midpoint VI at Δt, so v_true is exact): the RKHS and Theorem-1 bounds
+/// hold with probability ≥ 1 − δ = 0.95 under their assumptions, and the
+/// asserted coverage is ≥ 0.95 of the 2000 cases. The propagated position
+/// bounds (a first-order estimate, not part of the theorems) are printed.
+///
+/// That the inputs matter: the same windows predicted by `Learned::predict`
+/// (the model under u = 0) are compared with the same forced truth; their
+/// one-step bounds must fail on most cases (asserted coverage < 0.5), so a
+/// forced path that dropped its inputs somewhere (in the step, the GP
+/// input of the variance or the Jacobians) would not pass.
+#[test]
+fn forced_predictions_carry_bounds_that_hold() {
+    let l = driven_model();
+    let truth = Variational::new(driven_truth(), DT);
+    let empty = Calibration::empty(DT);
+    let mut rng = Rng(77);
+    let windows: Vec<(State<1>, Vec<SVector<f64, 1>>)> = (0..200)
+        .map(|_| {
+            let z = State::new([rng.uniform(-1.5, 1.5)], [rng.uniform(-1.5, 1.5)]);
+            let us = (0..10)
+                .map(|_| SVector::<f64, 1>::new(rng.uniform(-2.0, 2.0)))
+                .collect();
+            (z, us)
+        })
+        .collect();
+    for kind in [BoundKind::rkhs(0.05), BoundKind::theorem1(0.05)] {
+        let bound = l.error_bound_forced::<1>(&kind, &empty).unwrap();
+        let (mut covered, mut cases, mut pos_covered, mut pos_cases) = (0, 0, 0, 0);
+        let (mut unforced_covered, mut ratio) = (0, Vec::new());
+        let mut ws = l.workspace();
+        for (w, (z0, us)) in windows.iter().enumerate() {
+            let p = l.predict_forced(z0, us, &bound).unwrap();
+            let free = l.predict(z0, us.len(), &bound).unwrap();
+            if w < 10 {
+                // the variance is the GP's at (z_k, u_k), the one-step
+                // prediction's own
+                for k in 0..us.len() {
+                    let (v, sd) = l
+                        .predict_velocity_forced(&p.states[k], &us[k], &mut ws)
+                        .unwrap();
+                    assert_eq!(sd, p.std_devs[k]);
+                    assert_eq!(v, p.states[k + 1].v);
+                }
+            }
+            let mut zt = *z0;
+            for k in 0..us.len() {
+                let want = truth.step_forced(&p.states[k], &us[k]).unwrap().v;
+                let err = (p.states[k + 1].v - want).norm();
+                covered += usize::from(err <= p.one_step_bounds[k]);
+                ratio.push(p.one_step_bounds[k] / err);
+                let want = truth.step_forced(&free.states[k], &us[k]).unwrap().v;
+                let err = (free.states[k + 1].v - want).norm();
+                unforced_covered += usize::from(err <= free.one_step_bounds[k]);
+                cases += 1;
+                zt = truth.step_forced(&zt, &us[k]).unwrap();
+                let err = (p.states[k + 1].q - zt.q).norm();
+                pos_covered += usize::from(err <= p.position_bounds[k + 1]);
+                pos_cases += 1;
+            }
+        }
+        ratio.sort_by(f64::total_cmp);
+        let frac = |a: usize, b: usize| a as f64 / b as f64;
+        println!(
+            "{}: one-step coverage {:.4} (bound/error median {:.2}), positions {:.4}; \
+             ignoring the inputs: {:.4}",
+            bound.kind_name(),
+            frac(covered, cases),
+            ratio[ratio.len() / 2],
+            frac(pos_covered, pos_cases),
+            frac(unforced_covered, cases)
+        );
+        assert!(frac(covered, cases) >= 0.95, "{}", bound.kind_name());
+        assert!(frac(unforced_covered, cases) < 0.5, "{}", bound.kind_name());
+    }
+}
+
+/// With zero inputs the forced prediction is the unforced one of the same
+/// model (which steps under u = 0 through its own code path: the nominal
+/// step without inputs and a zero-filled GP input): states, standard
+/// deviations, corrections and every bound equal bit for bit. A model
+/// without inputs predicts with `U = 0` as `predict` does.
+#[test]
+fn forced_prediction_under_zero_inputs_is_the_unforced_one() {
+    let l = driven_model();
+    let empty = Calibration::empty(DT);
+    let zeros = vec![SVector::<f64, 1>::zeros(); 8];
+    let z0 = State::new([0.7], [-0.4]);
+    for kind in [BoundKind::rkhs(0.05), BoundKind::theorem1(0.01)] {
+        let bound = l.error_bound_forced::<1>(&kind, &empty).unwrap();
+        let forced = l.predict_forced(&z0, &zeros, &bound).unwrap();
+        let free = l.predict(&z0, zeros.len(), &bound).unwrap();
+        assert_eq!(forced, free, "{}", bound.kind_name());
+        assert!(forced.position_bounds[8] > 0.0);
+        // an input outside the training range [−2, 2] leaves Theorem 1's
+        // box X (the inputs are part of the GP input); inside it does not
+        let mut us = vec![SVector::<f64, 1>::new(1.0); 4];
+        us[2][0] = 5.0;
+        let p = l.predict_forced(&z0, &us, &bound).unwrap();
+        if bound.kind_name() == "theorem1" {
+            assert_eq!(p.outside, [false, false, true, false]);
+        }
+    }
+    let m = noisy_model();
+    let bound = m.error_bound(&BoundKind::rkhs(0.05), &empty).unwrap();
+    let free = m.predict(&z0, 6, &bound).unwrap();
+    let none: [SVector<f64, 0>; 6] = [SVector::zeros(); 6];
+    assert_eq!(m.predict_forced(&z0, &none, &bound).unwrap(), free);
+    assert_eq!(
+        m.error_bound_forced::<0>(&BoundKind::rkhs(0.05), &empty)
+            .unwrap(),
+        bound
+    );
+}
+
+/// Misuse of the forced bounds is a typed error: inputs for a model
+/// trained without them (an input count other than the mechanism's does
+/// not compile: the forced steps assert it), a conformal bound (calibrated
+/// on unforced windows) for a prediction under inputs, a NaN input.
+#[test]
+fn forced_bound_misuse_is_a_typed_error() {
+    let l = driven_model();
+    let empty = Calibration::empty(DT);
+    let z0 = State::new([0.2], [0.1]);
+    let data = noisy_transitions(driven_truth(), &State::new([1.0], [0.0]), 30, 8);
+    let opts = TrainOptions {
+        restarts: 0,
+        ..TrainOptions::default()
+    };
+    let nominal = DrivenPendulum::default().minimal();
+    let (plain, _) =
+        Learned::train(nominal, DT, &data, Encoding::SinCos, Prior::Nominal, &opts).unwrap();
+    assert_eq!(plain.inputs(), 0);
+    assert!(matches!(
+        plain.error_bound_forced::<1>(&BoundKind::rkhs(0.05), &empty),
+        Err(BoundError::Mismatch(_))
+    ));
+    let bound = l
+        .error_bound_forced::<1>(&BoundKind::rkhs(0.05), &empty)
+        .unwrap();
+    let us = [SVector::<f64, 1>::new(0.5); 2];
+    assert!(matches!(
+        plain.predict_forced(&z0, &us, &bound),
+        Err(BoundError::Mismatch(_))
+    ));
+    let e = l
+        .error_bound_forced::<1>(&BoundKind::conformal(0.1), calibration())
+        .unwrap_err();
+    assert!(matches!(e, BoundError::Unsupported(_)), "{e}");
+    // a conformal bound made under u = 0 is not used under inputs
+    let windows: Vec<Window<1>> = calibration().windows().to_vec();
+    let cal = Calibration::new(DT, windows).unwrap();
+    let conformal = l.error_bound(&BoundKind::conformal(0.1), &cal).unwrap();
+    let e = l.predict_forced(&z0, &us, &conformal).unwrap_err();
+    assert!(matches!(e, BoundError::Unsupported(_)), "{e}");
+    let nan = [SVector::<f64, 1>::new(f64::NAN); 2];
+    let e = l.predict_forced(&z0, &nan, &bound).unwrap_err();
+    assert!(
+        matches!(e, BoundError::Step(StepError::NonFiniteInput { .. })),
+        "{e}"
+    );
 }

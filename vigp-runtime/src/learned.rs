@@ -554,6 +554,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<State<N>, StepError> {
+        Ok(self.mean_step_forced_parts(z, u, ws)?.0)
+    }
+
+    /// The next state of a mean step under `u` and the unprojected
+    /// velocity v_u.
+    fn mean_step_forced_parts<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<(State<N>, SVector<f64, N>), StepError> {
         self.check_step(z)?;
         let x1 = z.q + z.v * self.dt;
         let vu = self.predict_mean_velocity_forced(z, u, ws)?;
@@ -562,7 +573,68 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         } else {
             vu
         };
-        Ok(State { q: x1, v })
+        Ok((State { q: x1, v }, vu))
+    }
+
+    /// [`Learned::predict_velocity`] under inputs `u` (a model from
+    /// [`Learned::train_forced`]): v_u = forced prior(z, u) + μ(z, u) and
+    /// the posterior standard deviations σ(z, u), the GP input being the
+    /// encoded state followed by u. The mean equals
+    /// [`Learned::predict_mean_velocity_forced`] bit for bit.
+    ///
+    /// Errors: `U` other than the model's inputs
+    /// ([`StepError::InputsNotSupported`]), a NaN or ∞ in `u`, a failed
+    /// prior step or GP prediction.
+    pub fn predict_velocity_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
+        if U != self.inputs {
+            return Err(StepError::InputsNotSupported);
+        }
+        if !u.iter().all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput { step: None });
+        }
+        let mut mean = SVector::<f64, N>::zeros();
+        let mut var = SVector::<f64, N>::zeros();
+        self.with_input_u(z, u.as_slice(), |input| {
+            self.gp
+                .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)
+                .map_err(|_| StepError::Prediction { step: None })
+        })?;
+        let prior = match self.prior {
+            Prior::Nominal => self.nominal.step_forced(z, u)?.v,
+            Prior::Constant => SVector::zeros(),
+        };
+        let v = prior + mean;
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(StepError::Prediction { step: None });
+        }
+        Ok((v, var.map(|s| s.max(0.0).sqrt())))
+    }
+
+    /// [`Learned::rollout_with_info`] under planned inputs: step k goes from
+    /// z_k under `inputs[k]` (held over [t_k, t_{k+1}], as
+    /// [`Integrator::rollout_forced_into`]), so `inputs.len()` steps. The
+    /// states equal those of [`Learned::step_mean_forced_with`] step by
+    /// step, and the standard deviations are σ(z_k, u_k), from one batched
+    /// [`Gp::predict`] as in `rollout_with_info`.
+    ///
+    /// Errors: `U` other than the model's inputs
+    /// ([`StepError::InputsNotSupported`]), and those of the steps, tagged
+    /// with the failing step.
+    pub fn rollout_forced_with_info<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[SVector<f64, U>],
+        ws: &mut Workspace,
+    ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
+        if U != self.inputs {
+            return Err(StepError::InputsNotSupported);
+        }
+        self.rollout_info(z0, inputs.len(), inputs, ws)
     }
 
     /// Switch the projection off (eq. 7 even for a constrained model), e.g.
@@ -750,23 +822,42 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         steps: usize,
         ws: &mut Workspace,
     ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
+        self.rollout_info::<0>(z0, steps, &[], ws)
+    }
+
+    /// `steps` mean steps with their standard deviations: unforced (u = 0
+    /// for a model with inputs) when `U = 0`, else under `inputs[k]`.
+    pub(crate) fn rollout_info<const U: usize>(
+        &self,
+        z0: &State<N>,
+        steps: usize,
+        inputs: &[SVector<f64, U>],
+        ws: &mut Workspace,
+    ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
         let d = self.gp.input_dim();
-        if self.gp.output_dim() != N || d == 0 {
+        if self.gp.output_dim() != N || d == 0 || (U > 0 && inputs.len() != steps) {
             return Err(StepError::Prediction { step: None });
         }
         let mut points = vec![0.0; steps * d];
         let mut out = Vec::with_capacity(steps);
         let mut z = *z0;
         for (k, x) in points.chunks_exact_mut(d).enumerate() {
-            let (next, vu) = self.mean_step_parts(&z, ws).map_err(|e| e.at_step(k))?;
-            // the GP input of z, followed by u = 0 for a model with inputs
-            self.with_input(&z, |input| {
+            let copy = |input: &[f64]| {
                 if input.len() != x.len() {
                     return Err(StepError::Prediction { step: Some(k) });
                 }
                 x.copy_from_slice(input);
                 Ok(())
-            })?;
+            };
+            let (next, vu) = if U == 0 {
+                // the GP input of z, followed by u = 0 for a model with inputs
+                self.with_input(&z, copy)?;
+                self.mean_step_parts(&z, ws)
+            } else {
+                self.with_input_u(&z, inputs[k].as_slice(), copy)?;
+                self.mean_step_forced_parts(&z, &inputs[k], ws)
+            }
+            .map_err(|e| e.at_step(k))?;
             out.push((
                 next,
                 LearnedStepInfo {
@@ -783,7 +874,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 // Name the step whose prediction fails, as step_with would.
                 let mut z = *z0;
                 for (k, (next, _)) in out.iter().enumerate() {
-                    self.predict_velocity(&z, ws).map_err(|e| e.at_step(k))?;
+                    if U == 0 {
+                        self.predict_velocity(&z, ws).map(|_| ())
+                    } else {
+                        self.predict_velocity_forced(&z, &inputs[k], ws).map(|_| ())
+                    }
+                    .map_err(|e| e.at_step(k))?;
                     z = *next;
                 }
                 return Err(StepError::Prediction { step: None });

@@ -25,6 +25,14 @@
 //!   position error directly, on held-out windows; see
 //!   [`ConformalSettings`].
 //!
+//! Inputs: for a model trained with inputs ([`Learned::train_forced`]) the
+//! GP input is the encoded state followed by u, and the rigorous kinds
+//! bound the forced step the same way: [`Learned::error_bound_forced`]
+//! estimates the constants at the training inputs (states with their
+//! logged u), and [`Learned::predict_forced`] predicts under planned inputs
+//! with a bound at every state (Theorem 1's box X includes the inputs'
+//! range). The conformal kind calibrates unforced windows only.
+//!
 //! Multi-step: the conformal kind calibrates the k-step position error
 //! itself. The rigorous kinds bound one step; over several steps
 //! [`Learned::predict`] propagates them with the learned step's local
@@ -148,9 +156,13 @@ pub enum BoundError {
         /// `"Theorem-1"` or `"RKHS"`.
         kind: &'static str,
     },
-    /// The bound was computed for another model (output count or Δt).
+    /// The bound was computed for another model (output count or Δt), or
+    /// the inputs do not fit the model.
     #[error("bound and model do not match: {0}")]
     Mismatch(&'static str),
+    /// What was asked has no bound yet.
+    #[error("not supported: {0}")]
+    Unsupported(&'static str),
     /// A step, projection or nominal prior failed.
     #[error(transparent)]
     Step(#[from] StepError),
@@ -722,11 +734,13 @@ pub struct BoundedPrediction<const N: usize> {
     pub fell_back: bool,
 }
 
-/// States, standard deviations and corrections of a learned prediction.
-pub(crate) struct Trace<const N: usize> {
+/// States, standard deviations and corrections of a learned prediction,
+/// and the inputs it was made under (empty: unforced, U = 0).
+pub(crate) struct Trace<'a, const N: usize, const U: usize> {
     pub states: Vec<State<N>>,
     pub std_devs: Vec<SVector<f64, N>>,
     pub corrections: Vec<f64>,
+    pub inputs: &'a [SVector<f64, U>],
 }
 
 /// At most this many training and this many calibration states are used to
@@ -740,14 +754,27 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         z0: &State<N>,
         steps: usize,
         ws: &mut Workspace,
-    ) -> Result<Trace<N>, StepError> {
+    ) -> Result<Trace<'static, N, 0>, StepError> {
+        self.trace_at(z0, steps, &[], ws)
+    }
+
+    /// `steps` learned steps with variances from `z0`: unforced when
+    /// `U = 0`, else under `inputs` (one per step).
+    fn trace_at<'a, const U: usize>(
+        &self,
+        z0: &State<N>,
+        steps: usize,
+        inputs: &'a [SVector<f64, U>],
+        ws: &mut Workspace,
+    ) -> Result<Trace<'a, N, U>, StepError> {
         let mut t = Trace {
             states: Vec::with_capacity(steps + 1),
             std_devs: Vec::with_capacity(steps),
             corrections: Vec::with_capacity(steps),
+            inputs,
         };
         t.states.push(*z0);
-        for (next, info) in self.rollout_with_info(z0, steps, ws)? {
+        for (next, info) in self.rollout_info(z0, steps, inputs, ws)? {
             t.std_devs.push(info.std_dev);
             t.corrections.push(info.correction);
             t.states.push(next);
@@ -782,6 +809,25 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         out
     }
 
+    /// Training states with their inputs (decoded from the GP inputs),
+    /// evenly strided to at most [`MAX_SAMPLES`].
+    fn sample_forced<const U: usize>(&self) -> Vec<(State<N>, SVector<f64, U>)> {
+        let gp = self.gp();
+        let d = gp.input_dim();
+        let e = self.encoding().dim(&M::KINDS);
+        let stride = gp.n().div_ceil(MAX_SAMPLES).max(1);
+        gp.inputs()
+            .chunks_exact(d)
+            .step_by(stride)
+            .map(|x| {
+                (
+                    self.encoding().decode(&M::KINDS, &x[..e]),
+                    SVector::from_column_slice(&x[e..]),
+                )
+            })
+            .collect()
+    }
+
     /// The error bound of this trained model: one entry point for the three
     /// kinds. `calibration` holds held-out windows: required by the
     /// conformal kind; the rigorous kinds also estimate L and pick τ at its
@@ -799,7 +845,46 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// a constant that comes out non-finite, or a rigorous kind asked of a
     /// sparse GP ([`BoundError::SparseModel`]: a sparse model takes the
     /// conformal kind, without a fallback).
+    ///
+    /// A model trained with inputs is sampled under u = 0 here, the step
+    /// [`Learned::predict`] takes; for predictions under inputs use
+    /// [`Learned::error_bound_forced`].
     pub fn error_bound(
+        &self,
+        kind: &BoundKind,
+        calibration: &Calibration<N>,
+    ) -> Result<ErrorBound, BoundError> {
+        self.error_bound_at::<0>(kind, calibration)
+    }
+
+    /// [`Learned::error_bound`] for predictions under inputs
+    /// ([`Learned::predict_forced`]) of a model from
+    /// [`Learned::train_forced`]: the rigorous kinds estimate the projection's
+    /// Lipschitz constant and pick τ at the training inputs, each state
+    /// with the input logged with it (the calibration windows carry no
+    /// inputs and are not sampled). Theorem 1's box X spans the GP inputs,
+    /// the inputs' range included. `U = 0` on a model without inputs is
+    /// `error_bound`.
+    ///
+    /// Errors: those of `error_bound`; `U` other than the model's inputs
+    /// ([`BoundError::Mismatch`]); the conformal kind on a model with
+    /// inputs ([`BoundError::Unsupported`]: its calibration windows carry
+    /// no inputs).
+    pub fn error_bound_forced<const U: usize>(
+        &self,
+        kind: &BoundKind,
+        calibration: &Calibration<N>,
+    ) -> Result<ErrorBound, BoundError> {
+        if U != self.inputs() {
+            return Err(BoundError::Mismatch(
+                "number of inputs (U must be the model's inputs)",
+            ));
+        }
+        self.error_bound_at::<U>(kind, calibration)
+    }
+
+    /// `error_bound` (U = 0: unforced samples) or `error_bound_forced`.
+    fn error_bound_at<const U: usize>(
         &self,
         kind: &BoundKind,
         calibration: &Calibration<N>,
@@ -824,6 +909,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             noise_std: noise_std.clone(),
         };
         if let BoundKind::Conformal(s) = kind {
+            if U > 0 {
+                return Err(BoundError::Unsupported(
+                    "a conformal bound of predictions under inputs (its calibration windows \
+                     carry no inputs); use the Theorem-1 or RKHS bound",
+                ));
+            }
             if calibration.is_empty() {
                 return Err(BoundError::Empty(
                     "calibration windows (the conformal bound needs held-out data)",
@@ -852,12 +943,22 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 },
             });
         }
-        let samples = self.sample_states(calibration);
+        let samples: Vec<(State<N>, SVector<f64, U>)> = if U == 0 {
+            let zero = SVector::zeros();
+            let states = self.sample_states(calibration);
+            states.into_iter().map(|z| (z, zero)).collect()
+        } else {
+            self.sample_forced()
+        };
         let mut ws = self.workspace();
         let mut sigma = vec![Vec::with_capacity(samples.len()); p];
         let mut lip = 1.0f64;
-        for z in &samples {
-            let (vu, sd) = self.predict_velocity(z, &mut ws)?;
+        for (z, u) in &samples {
+            let (vu, sd) = if U == 0 {
+                self.predict_velocity(z, &mut ws)?
+            } else {
+                self.predict_velocity_forced(z, u, &mut ws)?
+            };
             for (i, o) in gp.outputs().iter().enumerate() {
                 sigma[i].push(sd[i] / o.output_scale());
             }
@@ -901,6 +1002,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     ///
     /// Errors: a bound made for another model, more steps than a conformal
     /// bound was calibrated for, a failed step, or a non-finite bound.
+    ///
+    /// A model trained with inputs predicts under u = 0 here (as
+    /// [`Learned::step_mean_with`]); [`Learned::predict_forced`] predicts
+    /// under planned inputs.
     pub fn predict(
         &self,
         z0: &State<N>,
@@ -909,6 +1014,46 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     ) -> Result<BoundedPrediction<N>, BoundError> {
         let mut all = self.predict_bounds(z0, steps, &[bound])?;
         Ok(all.remove(0))
+    }
+
+    /// [`Learned::predict`] under planned inputs, for a model from
+    /// [`Learned::train_forced`]: `inputs.len()` steps, step k from the
+    /// predicted z_k under `inputs[k]` (held over [t_k, t_{k+1}]), each
+    /// state with its bound. The one-step bounds are those of the GP at
+    /// (z_k, u_k), and the rigorous kinds propagate them to positions with
+    /// the forced step's Jacobian norms at (z_k, u_k)
+    /// ([`Learned::step_jacobian_norms_forced`]): the bounds are on the
+    /// distance to the true trajectory under the same inputs. Use a bound
+    /// from [`Learned::error_bound_forced`]. `U = 0` on a model without
+    /// inputs is `predict` with `inputs.len()` steps.
+    ///
+    /// Errors: those of `predict`; `U` other than the model's inputs
+    /// ([`BoundError::Mismatch`]); a NaN or ∞ input (a step error).
+    pub fn predict_forced<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[SVector<f64, U>],
+        bound: &ErrorBound,
+    ) -> Result<BoundedPrediction<N>, BoundError> {
+        let mut all = self.predict_bounds_forced(z0, inputs, &[bound])?;
+        Ok(all.remove(0))
+    }
+
+    /// [`Learned::predict_forced`] under several bounds at once, as
+    /// [`Learned::predict_bounds`]: result `i` equals
+    /// `predict_forced(z0, inputs, bounds[i])` bit for bit.
+    pub fn predict_bounds_forced<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[SVector<f64, U>],
+        bounds: &[&ErrorBound],
+    ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
+        if U != self.inputs() {
+            return Err(BoundError::Mismatch(
+                "number of inputs (U must be the model's inputs)",
+            ));
+        }
+        self.predict_bounds_at(z0, inputs.len(), inputs, bounds)
     }
 
     /// [`Learned::predict`] under several bounds at once (e.g. to compare
@@ -925,14 +1070,31 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         steps: usize,
         bounds: &[&ErrorBound],
     ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
+        self.predict_bounds_at::<0>(z0, steps, &[], bounds)
+    }
+
+    /// `predict_bounds` (U = 0: unforced) or `predict_bounds_forced`.
+    fn predict_bounds_at<const U: usize>(
+        &self,
+        z0: &State<N>,
+        steps: usize,
+        inputs: &[SVector<f64, U>],
+        bounds: &[&ErrorBound],
+    ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
         if bounds.is_empty() {
             return Err(BoundError::Empty("list of bounds"));
         }
         for bound in bounds {
             self.check_bound(bound, steps)?;
+            if U > 0 && matches!(bound.parts, BoundParts::Conformal(_)) {
+                return Err(BoundError::Unsupported(
+                    "a conformal bound for a prediction under inputs (it was calibrated on \
+                     unforced windows); use the Theorem-1 or RKHS bound",
+                ));
+            }
         }
         let mut ws = self.workspace();
-        let mut trace = self.trace(z0, steps, &mut ws)?;
+        let mut trace = self.trace_at(z0, steps, inputs, &mut ws)?;
         let mut norms = vec![None; trace.states.len()];
         let parts = bounds
             .iter()
@@ -1002,10 +1164,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// leaves its domain) along `trace`; `norms` caches the step's Jacobian
     /// norms per state.
     #[allow(clippy::type_complexity)]
-    fn bounded(
+    fn bounded<const U: usize>(
         &self,
         bound: &ErrorBound,
-        trace: &Trace<N>,
+        trace: &Trace<'_, N, U>,
         norms: &mut [Option<(f64, f64)>],
         ws: &mut Workspace,
     ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>, bool), BoundError> {
@@ -1045,10 +1207,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// bounds there are meaningless, and the position bounds are not
     /// propagated when any state lost its variance).
     #[allow(clippy::type_complexity)]
-    fn attach(
+    fn attach<const U: usize>(
         &self,
         bound: &ErrorBound,
-        trace: &Trace<N>,
+        trace: &Trace<'_, N, U>,
         norms: &mut [Option<(f64, f64)>],
         ws: &mut Workspace,
         positions: bool,
@@ -1077,7 +1239,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             lost.push(variance_based && zero.is_some());
             one_step.push(bound.one_step(sd.as_slice())?);
             let s = predictive_scale(sd.as_slice(), &bound.noise_std);
+            // the GP input: the encoded state, then the step's input (a
+            // model with inputs predicting unforced keeps u = 0)
             self.encoding().encode(&M::KINDS, z, &mut input);
+            if let Some(u) = trace.inputs.get(step) {
+                let e = input.len() - U;
+                input[e..].copy_from_slice(u.as_slice());
+            }
             self.gp().input_normaliser().apply(&input, &mut input_n);
             outside.push(bound.outside(&input, &input_n, s));
             if let BoundParts::Conformal(c) = &bound.parts {
@@ -1104,7 +1272,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                         match norms[k] {
                             Some(n) => n,
                             None => {
-                                let n = self.step_jacobian_norms(&trace.states[k], ws)?;
+                                let n = match trace.inputs.get(k) {
+                                    Some(u) => {
+                                        self.step_jacobian_norms_at(&trace.states[k], u, ws)?
+                                    }
+                                    None => self.step_jacobian_norms(&trace.states[k], ws)?,
+                                };
                                 norms[k] = Some(n);
                                 n
                             }
