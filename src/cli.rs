@@ -43,8 +43,11 @@
 //! ([`crate::data`]): `fit` learns on state and input (the GP's inputs are
 //! the encoded state, then u; the prior is the forced nominal step),
 //! `score` rolls both models out under the logged inputs, `export` writes
-//! a model that steps under u, and `predict` refuses such a model (it does
-//! not bound forced predictions yet).
+//! a model that steps under u, and `predict` predicts under the inputs
+//! logged in each run (the run needs `--steps` + 1 rows; the input in row
+//! k + 1 drives the step from row k, as in the data) with the RKHS or
+//! Theorem-1 bound of [`crate::learned::Learned::predict_forced`] (the
+//! conformal bound calibrates unforced windows only and is refused).
 //!
 //! Your own mechanism gets the same tool from one line:
 //!
@@ -324,13 +327,14 @@ struct PredictArgs {
     /// A model saved by `vigp fit`.
     #[arg(long)]
     model: PathBuf,
-    /// Start states: the first two rows of every run.
+    /// Start states: the first two rows of every run (an actuated mechanism's
+    /// runs also give the inputs of the predicted steps: rows 1 to `--steps`).
     #[arg(long)]
     data: PathBuf,
     /// Steps to predict.
     #[arg(long)]
     steps: usize,
-    /// Output CSV: run,t,<coordinates>,v_<coordinate>…,bound,position_bound.
+    /// Output CSV: run,t,<coordinates>,v_<coordinate>…,[u_<joint>…,]bound,position_bound.
     #[arg(long)]
     out: PathBuf,
     /// Failure probability δ of the bounds.
@@ -675,11 +679,11 @@ impl ViewVisitor for Visit<'_> {
                 if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
                     let l = load(&a.model, &saved, minimal)?;
                     let coords = (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES);
-                    predict(a, &l, &data, coords, |z| *z, |z| *z, out)
+                    predict::<_, N, N, C, U>(a, &l, &data, coords, |z| *z, |z| *z, out)
                 } else {
                     let l = load(&a.model, &saved, maximal)?;
                     let dt = saved.dt;
-                    predict(
+                    predict::<_, N, NM, CM, U>(
                         a,
                         &l,
                         &data,
@@ -1200,7 +1204,9 @@ where
     )
 }
 
-fn predict<L, const N: usize, const K: usize, const CK: usize>(
+/// `U`: the mechanism's inputs (0 for none; with inputs each run's logged
+/// inputs drive its prediction).
+fn predict<L, const N: usize, const K: usize, const CK: usize, const U: usize>(
     a: &PredictArgs,
     learned: &Learned<L, K, CK>,
     data: &Dataset<N>,
@@ -1219,11 +1225,23 @@ where
     if a.steps == 0 {
         return Err(CliError::Usage("--steps must be at least 1".into()));
     }
-    if learned.inputs() > 0 {
+    if learned.inputs() != U {
         return Err(CliError::Usage(format!(
-            "{}: a model trained with inputs ({}): `predict` does not bound forced \
-             predictions yet; `score` scores it on logged inputs, and in Rust \
-             `Integrator::rollout_forced_into` predicts under planned ones",
+            "{}: the model takes {} input(s), the mechanism has {U}{}",
+            a.model.display(),
+            learned.inputs(),
+            if U > 0 {
+                " (fit it with the input columns: `vigp fit` on data with `u_<joint>`)"
+            } else {
+                ""
+            }
+        )));
+    }
+    if U > 0 && (a.bound == Some(BoundArg::Conformal) || a.calibration.is_some()) {
+        return Err(CliError::Usage(format!(
+            "{}: a model trained with inputs ({}) is bounded by --bound rkhs (the default) or \
+             --bound theorem1: the conformal bound is calibrated on unforced windows \
+             (drop --calibration)",
             a.model.display(),
             inputs.join(", ")
         )));
@@ -1235,33 +1253,61 @@ where
             path: a.data.clone(),
             source,
         })?;
-    // a start state needs two rows (position and discrete velocity): runs
-    // of one row are skipped with a note, as `fit` notes its short runs
+    // each run's logged inputs (none without inputs)
+    let logged = data.input_vectors::<U>().map_err(|source| CliError::Data {
+        path: a.data.clone(),
+        source,
+    })?;
+    // a start state needs two rows (position and discrete velocity), and a
+    // forced prediction of k steps the inputs of rows 1..=k: shorter runs
+    // are skipped with a note, as `fit` notes its short runs
+    let rows = if U > 0 { a.steps + 1 } else { 2 };
     let mut starts = Vec::with_capacity(data.runs.len());
-    let mut lonely = Vec::new();
-    for run in &data.runs {
+    let mut short = Vec::new();
+    for (r, run) in data.runs.iter().enumerate() {
         match run.state(0) {
-            Some(z) => starts.push((run, z)),
-            None => lonely.push(run.name.as_str()),
+            Some(z) if run.positions.len() >= rows => {
+                let us: &[SVector<f64, U>] = if U > 0 { &logged[r][1..=a.steps] } else { &[] };
+                starts.push((run, z, us));
+            }
+            _ => short.push(run.name.as_str()),
         }
     }
     if starts.is_empty() {
+        let why = if U > 0 {
+            format!(
+                "a start state needs two, and a forced prediction of {} steps the inputs \
+                 logged in rows 1 to {}",
+                a.steps, a.steps
+            )
+        } else {
+            "a start state needs two (position and discrete velocity)".to_string()
+        };
         return Err(CliError::Usage(format!(
-            "{}: every run has one row; a start state needs two (position and discrete velocity)",
+            "{}: every run has fewer than {rows} rows: {why}",
             a.data.display()
         )));
     }
-    if !lonely.is_empty() {
+    if !short.is_empty() {
         w(
             out,
             format_args!(
-                "note: skipped {} run(s) of one row (a start state needs two): {}",
-                lonely.len(),
-                lonely.join(", ")
+                "note: skipped {} run(s) of {}: {}",
+                short.len(),
+                if U > 0 {
+                    format!(
+                        "fewer than {rows} rows (a start state needs two, and the prediction \
+                         the inputs logged in rows 1 to {})",
+                        a.steps
+                    )
+                } else {
+                    "one row (a start state needs two)".to_string()
+                },
+                short.join(", ")
             ),
         )?;
     }
-    let view_starts: Vec<State<K>> = starts.iter().map(|(_, z)| to_view(z)).collect();
+    let view_starts: Vec<State<K>> = starts.iter().map(|(_, z, _)| to_view(z)).collect();
     let kind_arg = a.bound.unwrap_or(if a.calibration.is_some() {
         BoundArg::Conformal
     } else {
@@ -1307,13 +1353,19 @@ where
         BoundArg::Theorem1 => BoundKind::theorem1(a.delta),
         BoundArg::Rkhs => BoundKind::rkhs(a.delta),
     };
-    let bound = learned.error_bound(&kind, &calibration)?;
+    let bound = if U > 0 {
+        learned.error_bound_forced::<U>(&kind, &calibration)?
+    } else {
+        learned.error_bound(&kind, &calibration)?
+    };
     let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
     let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
     let coords: Vec<String> = data.coordinates.clone();
     let mut header = vec!["run".to_string(), "t".to_string()];
     header.extend(coords.iter().cloned());
     header.extend(coords.iter().map(|c| format!("v_{c}")));
+    // the input that drove the step into each row (the data's convention)
+    header.extend(inputs.iter().map(|j| format!("u_{j}")));
     header.push("bound".into());
     header.push("position_bound".into());
     let csv_err = |e: csv::Error| CliError::Io {
@@ -1325,8 +1377,13 @@ where
     let mut failed = 0usize;
     // states outside what the bound covers, and the runs holding them
     let (mut outside, mut outside_runs) = (0usize, 0usize);
-    for ((run, z0), zv) in starts.iter().zip(&view_starts) {
-        let pred = match learned.predict(zv, a.steps, &bound) {
+    for ((run, z0, us), zv) in starts.iter().zip(&view_starts) {
+        let pred = if U > 0 {
+            learned.predict_forced(zv, us, &bound)
+        } else {
+            learned.predict(zv, a.steps, &bound)
+        };
+        let pred = match pred {
             Ok(p) => p,
             Err(e) => {
                 failed += 1;
@@ -1342,6 +1399,10 @@ where
             let mut row = vec![run.name.clone(), format!("{:?}", run.t0 + k as f64 * dt)];
             row.extend(zm.q.iter().map(|x| format!("{x:?}")));
             row.extend(zm.v.iter().map(|x| format!("{x:?}")));
+            match us.get(k.wrapping_sub(1)) {
+                Some(u) => row.extend(u.iter().map(|x| format!("{x:?}"))),
+                None => row.extend(inputs.iter().map(|_| String::new())),
+            }
             row.push(if k == 0 {
                 String::new()
             } else {

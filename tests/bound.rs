@@ -1319,25 +1319,23 @@ fn forced_predictions_carry_bounds_that_hold() {
             if w < 10 {
                 // the variance is the GP's at (z_k, u_k), the one-step
                 // prediction's own
-                for k in 0..us.len() {
-                    let (v, sd) = l
-                        .predict_velocity_forced(&p.states[k], &us[k], &mut ws)
-                        .unwrap();
+                for (k, u) in us.iter().enumerate() {
+                    let (v, sd) = l.predict_velocity_forced(&p.states[k], u, &mut ws).unwrap();
                     assert_eq!(sd, p.std_devs[k]);
                     assert_eq!(v, p.states[k + 1].v);
                 }
             }
             let mut zt = *z0;
-            for k in 0..us.len() {
-                let want = truth.step_forced(&p.states[k], &us[k]).unwrap().v;
+            for (k, u) in us.iter().enumerate() {
+                let want = truth.step_forced(&p.states[k], u).unwrap().v;
                 let err = (p.states[k + 1].v - want).norm();
                 covered += usize::from(err <= p.one_step_bounds[k]);
                 ratio.push(p.one_step_bounds[k] / err);
-                let want = truth.step_forced(&free.states[k], &us[k]).unwrap().v;
+                let want = truth.step_forced(&free.states[k], u).unwrap().v;
                 let err = (free.states[k + 1].v - want).norm();
                 unforced_covered += usize::from(err <= free.one_step_bounds[k]);
                 cases += 1;
-                zt = truth.step_forced(&zt, &us[k]).unwrap();
+                zt = truth.step_forced(&zt, u).unwrap();
                 let err = (p.states[k + 1].q - zt.q).norm();
                 pos_covered += usize::from(err <= p.position_bounds[k + 1]);
                 pos_cases += 1;

@@ -415,8 +415,9 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
 /// far below the nominal one (data from a heavier cart-pole with more rail
 /// friction, pushed by piecewise-constant forces, logged as the data format
 /// defines: row k's input is held from t_k, so the step from state k is
-/// driven by row k+1's). Without the input column `fit` is a data error,
-/// and `predict`, which does not bound forced predictions, says so.
+/// driven by row k+1's). `predict` predicts each run under its logged
+/// inputs with the RKHS bound, whose position bounds cover the driven
+/// truth. Without the input column `fit` is a data error.
 #[test]
 fn an_actuated_mechanism_learns_from_its_input_columns() {
     let dir = temp_dir("actuated");
@@ -498,14 +499,6 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
         export.contains("(state, then control inputs rail)"),
         "{export}"
     );
-    let e = run(&predict_args(
-        s(&model),
-        s(&test),
-        "5",
-        s(&dir.join("p.csv")),
-    ))
-    .unwrap_err();
-    assert!(e.to_string().contains("does not bound forced"), "{e}");
     // --noise-floor: the fitted noise variances (normalised units) sit at
     // or above it; on these noise-free data the default fit goes below
     let noise = |path: &Path| -> Vec<f64> {
@@ -550,6 +543,65 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     ])
     .unwrap_err();
     assert!(e.to_string().contains("--noise-floor must be"), "{e}");
+    // `predict` under each run's logged inputs, with the RKHS bound (the
+    // floored model: on noise-free data the default fit's variance is lost
+    // to rounding, see `--noise-floor`)
+    let pred = dir.join("p.csv");
+    let said = run(&predict_args(s(&floored), s(&test), "5", s(&pred))).unwrap();
+    assert!(
+        said.contains("3 runs × 5 steps (0 failed); rkhs bound"),
+        "{said}"
+    );
+    let table = |path: &Path| -> Vec<Vec<String>> {
+        std::fs::read_to_string(path)
+            .unwrap()
+            .lines()
+            .map(|l| l.split(',').map(str::to_string).collect())
+            .collect()
+    };
+    let (p, truth) = (table(&pred), table(&test));
+    assert_eq!(
+        p[0].join(","),
+        "run,t,rail,hinge,v_rail,v_hinge,u_rail,bound,position_bound"
+    );
+    let mut worst = 0.0f64;
+    for run in 0..3 {
+        // 6 rows per run in the prediction, 81 in the data
+        for k in 0..6 {
+            let (row, want) = (&p[1 + 6 * run + k], &truth[1 + 81 * run + k]);
+            assert_eq!(row[0], want[0]);
+            let x = |r: &[String], i: usize| r[i].parse::<f64>().unwrap();
+            // the input that drove the step into row k is the data's row k
+            if k > 0 {
+                assert_eq!(x(row, 6), x(want, 4), "run {run}, row {k}");
+            } else {
+                assert_eq!(row[6], "");
+            }
+            let err = ((x(row, 2) - x(want, 2)).powi(2) + (x(row, 3) - x(want, 3)).powi(2)).sqrt();
+            assert!(
+                err <= x(row, 8),
+                "run {run}, row {k}: {err:e} vs {}",
+                row[8]
+            );
+            worst = worst.max(err);
+        }
+    }
+    // the prediction follows the driven truth: measured worst 3.6e-7 against
+    // position bounds of up to 1.5e-5; predicting under u = 0 instead missed
+    // it by 1.7e-4 at the second step (bound 8.5e-7)
+    assert!(worst < 1e-6, "{worst:e}");
+    let mut args = predict_args(s(&floored), s(&test), "5", s(&pred));
+    args.extend(["--bound", "conformal", "--calibration", s(&test)]);
+    let e = run(&args).unwrap_err();
+    assert!(
+        e.to_string().contains("calibrated on unforced windows"),
+        "{e}"
+    );
+    let e = run(&predict_args(s(&floored), s(&test), "100", s(&pred))).unwrap_err();
+    assert!(
+        e.to_string().contains("every run has fewer than 101 rows"),
+        "{e}"
+    );
     // data without the input column
     let bare = dir.join("bare.csv");
     std::fs::write(&bare, "run,t,rail,hinge\na,0,0,0\na,0.01,0,0\na,0.02,0,0\n").unwrap();
