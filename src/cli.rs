@@ -45,9 +45,9 @@
 //! `score` rolls both models out under the logged inputs, `export` writes
 //! a model that steps under u, and `predict` predicts under the inputs
 //! logged in each run (the run needs `--steps` + 1 rows; the input in row
-//! k + 1 drives the step from row k, as in the data) with the RKHS or
-//! Theorem-1 bound of [`crate::learned::Learned::predict_forced`] (the
-//! conformal bound calibrates unforced windows only and is refused).
+//! k + 1 drives the step from row k, as in the data) with the bound of
+//! [`crate::learned::Learned::predict_forced`] (conformal: the held-out
+//! runs of `--calibration` carry their inputs too).
 //!
 //! Your own mechanism gets the same tool from one line:
 //!
@@ -1237,15 +1237,6 @@ where
             }
         )));
     }
-    if U > 0 && (a.bound == Some(BoundArg::Conformal) || a.calibration.is_some()) {
-        return Err(CliError::Usage(format!(
-            "{}: a model trained with inputs ({}) is bounded by --bound rkhs (the default) or \
-             --bound theorem1: the conformal bound is calibrated on unforced windows \
-             (drop --calibration)",
-            a.model.display(),
-            inputs.join(", ")
-        )));
-    }
     check_out_dir(&a.out)?;
     let dt = learned.dt();
     data.check_dt(dt, a.read.time_tolerance)
@@ -1323,6 +1314,7 @@ where
                     source,
                 })?;
             // windows in the model's coordinates: positions of the view
+            // (and, with inputs, each sample's logged input)
             let trajectories: Vec<Vec<SVector<f64, K>>> = held_out
                 .runs
                 .iter()
@@ -1339,7 +1331,23 @@ where
                         .collect()
                 })
                 .collect();
-            Calibration::from_trajectories(&trajectories, dt, a.steps.max(2), 1)?
+            if U > 0 {
+                let logged = held_out
+                    .input_vectors::<U>()
+                    .map_err(|source| CliError::Data {
+                        path: path.clone(),
+                        source,
+                    })?;
+                Calibration::from_trajectories_forced(
+                    &trajectories,
+                    &logged,
+                    dt,
+                    a.steps.max(2),
+                    1,
+                )?
+            } else {
+                Calibration::from_trajectories(&trajectories, dt, a.steps.max(2), 1)?
+            }
         }
         None if kind_arg == BoundArg::Conformal => {
             return Err(CliError::Usage(

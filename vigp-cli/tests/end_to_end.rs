@@ -417,7 +417,8 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
 /// defines: row k's input is held from t_k, so the step from state k is
 /// driven by row k+1's). `predict` predicts each run under its logged
 /// inputs with the RKHS bound, whose position bounds cover the driven
-/// truth. Without the input column `fit` is a data error.
+/// truth, or with the conformal bound calibrated on runs with inputs.
+/// Without the input column `fit` is a data error.
 #[test]
 fn an_actuated_mechanism_learns_from_its_input_columns() {
     let dir = temp_dir("actuated");
@@ -590,13 +591,19 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     // position bounds of up to 1.5e-5; predicting under u = 0 instead missed
     // it by 1.7e-4 at the second step (bound 8.5e-7)
     assert!(worst < 1e-6, "{worst:e}");
+    // the conformal bound, calibrated on held-out runs under their inputs
+    // (the training runs stand in: only the tool's path is checked here;
+    // coverage is `tests/bound.rs`'s)
     let mut args = predict_args(s(&floored), s(&test), "5", s(&pred));
-    args.extend(["--bound", "conformal", "--calibration", s(&test)]);
-    let e = run(&args).unwrap_err();
+    args.extend(["--calibration", s(&train)]);
+    let said = run(&args).unwrap();
     assert!(
-        e.to_string().contains("calibrated on unforced windows"),
-        "{e}"
+        said.contains("3 runs × 5 steps (0 failed); conformal bound"),
+        "{said}"
     );
+    let p = table(&pred);
+    assert_eq!(p.len(), 1 + 3 * 6);
+    assert!(p[1..].iter().all(|r| r[8].parse::<f64>().unwrap() >= 0.0));
     let e = run(&predict_args(s(&floored), s(&test), "100", s(&pred))).unwrap_err();
     assert!(
         e.to_string().contains("every run has fewer than 101 rows"),

@@ -40,10 +40,20 @@ pub struct Window<const N: usize> {
 /// of starts). Overlapping windows of one trajectory are dependent: the
 /// coverage then holds only approximately; prefer one window per
 /// trajectory, or a stride of at least the horizon.
+///
+/// Windows of an actuated mechanism carry the inputs their steps were
+/// taken under ([`Calibration::new_forced`],
+/// [`Calibration::from_trajectories_forced`]); they calibrate the bound of
+/// predictions under inputs ([`Learned::error_bound_forced`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Calibration<const N: usize> {
     dt: f64,
     windows: Vec<Window<N>>,
+    /// Inputs per window (K·U values each: step k's input at k·U), empty
+    /// without inputs.
+    inputs: Vec<Vec<f64>>,
+    /// U (0: the windows carry no inputs).
+    input_count: usize,
 }
 
 impl<const N: usize> Calibration<N> {
@@ -53,6 +63,8 @@ impl<const N: usize> Calibration<N> {
         Self {
             dt,
             windows: Vec::new(),
+            inputs: Vec::new(),
+            input_count: 0,
         }
     }
 
@@ -87,7 +99,58 @@ impl<const N: usize> Calibration<N> {
                 });
             }
         }
-        Ok(Self { dt, windows })
+        Ok(Self {
+            dt,
+            windows,
+            inputs: Vec::new(),
+            input_count: 0,
+        })
+    }
+
+    /// Windows of an actuated mechanism with time step `dt`: `inputs[i]`
+    /// holds window i's K inputs, step k (from the start's k-th successor,
+    /// towards `positions[k]`) taken under `inputs[i][k]` held over the
+    /// step. Errors: those of [`Calibration::new`]; `U = 0`; a window's
+    /// input count other than its K; a NaN or ∞ input.
+    pub fn new_forced<const U: usize>(
+        dt: f64,
+        windows: Vec<Window<N>>,
+        inputs: Vec<Vec<SVector<f64, U>>>,
+    ) -> Result<Self, BoundError> {
+        if U == 0 {
+            return Err(BoundError::InvalidSetting {
+                what: "number of inputs of forced calibration windows (must be >= 1)",
+                value: 0.0,
+            });
+        }
+        if inputs.len() != windows.len() {
+            return Err(BoundError::WrongLength {
+                what: "calibration inputs (one sequence per window)",
+                expected: windows.len(),
+                got: inputs.len(),
+            });
+        }
+        let mut cal = Self::new(dt, windows)?;
+        for (index, (w, us)) in cal.windows.iter().zip(&inputs).enumerate() {
+            if us.len() != w.positions.len() {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "a window needs one input per step (as many as positions)",
+                });
+            }
+            if !us.iter().flatten().all(|x| x.is_finite()) {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "NaN or infinity in the window's inputs",
+                });
+            }
+        }
+        cal.inputs = inputs
+            .iter()
+            .map(|us| us.iter().flat_map(|u| u.iter().copied()).collect())
+            .collect();
+        cal.input_count = U;
+        Ok(cal)
     }
 
     /// One-step calibration cases from held-out transitions (K = 2:
@@ -153,9 +216,77 @@ impl<const N: usize> Calibration<N> {
         Self::new(dt, windows)
     }
 
+    /// [`Calibration::from_trajectories`] for an actuated mechanism:
+    /// `inputs[r][i]` is the input logged with sample i of trajectory r
+    /// and held from t_i to t_{i+1} (the data files' convention), so the
+    /// step from a window's state at sample s + k (whose velocity spans
+    /// [t_{s+k}, t_{s+k+1}]) to the next one is driven by sample
+    /// s + k + 1's input. Errors: those of `from_trajectories` and
+    /// [`Calibration::new_forced`]; a trajectory whose inputs are not one
+    /// per sample.
+    pub fn from_trajectories_forced<T, I, const U: usize>(
+        trajectories: &[T],
+        inputs: &[I],
+        dt: f64,
+        horizon: usize,
+        stride: usize,
+    ) -> Result<Self, BoundError>
+    where
+        T: AsRef<[SVector<f64, N>]>,
+        I: AsRef<[SVector<f64, U>]>,
+    {
+        if inputs.len() != trajectories.len() {
+            return Err(BoundError::WrongLength {
+                what: "calibration inputs (one sequence per trajectory)",
+                expected: trajectories.len(),
+                got: inputs.len(),
+            });
+        }
+        for (index, (p, u)) in trajectories.iter().zip(inputs).enumerate() {
+            if p.as_ref().len() != u.as_ref().len() {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "a trajectory needs one input per sample",
+                });
+            }
+        }
+        let plain = Self::from_trajectories(trajectories, dt, horizon, stride)?;
+        // the same windows, in the same order, with their inputs
+        let mut window_inputs = Vec::with_capacity(plain.len());
+        for (p, u) in trajectories.iter().zip(inputs) {
+            let (p, u) = (p.as_ref(), u.as_ref());
+            let mut s = 0;
+            while s + horizon < p.len() {
+                window_inputs.push(u[s + 1..=s + horizon].to_vec());
+                s += stride;
+            }
+        }
+        Self::new_forced(dt, plain.windows, window_inputs)
+    }
+
     /// The windows.
     pub fn windows(&self) -> &[Window<N>] {
         &self.windows
+    }
+
+    /// Number of inputs per step the windows carry (0: unforced windows).
+    pub fn input_count(&self) -> usize {
+        self.input_count
+    }
+
+    /// Window `index`'s inputs as `U`-vectors, one per step (None when
+    /// `U` is not [`Calibration::input_count`] or the index is out of
+    /// range).
+    pub fn window_inputs<const U: usize>(&self, index: usize) -> Option<Vec<SVector<f64, U>>> {
+        if U != self.input_count || U == 0 {
+            return None;
+        }
+        let flat = self.inputs.get(index)?;
+        Some(
+            flat.chunks_exact(U)
+                .map(SVector::from_column_slice)
+                .collect(),
+        )
     }
 
     /// Number of windows n.
@@ -213,6 +344,11 @@ pub struct ConformalParts {
     /// start is outside: the 99 % conformal quantile of the calibration
     /// starts' leave-one-out nearest-neighbour distances.
     pub distance_threshold: f64,
+    /// Number of inputs the calibration windows were predicted under (0:
+    /// unforced): the bound covers predictions under that many inputs
+    /// only.
+    #[serde(default)]
+    pub inputs: usize,
 }
 
 /// Level of the nearest-neighbour distance threshold: about 1 % of cases
@@ -419,7 +555,12 @@ fn select_score(
     best.map(|(_, s)| s)
 }
 
-pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usize>(
+pub(super) fn calibrate<
+    M: Mechanism<N, C> + Clone,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
     learned: &Learned<M, N, C>,
     settings: &ConformalSettings,
     cal: &Calibration<N>,
@@ -439,8 +580,20 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
     let mut upper = vec![f64::NEG_INFINITY; d];
     let mut starts_normalised = vec![0.0; n * d];
     let mut traced = Vec::with_capacity(n);
+    let e = learned.encoding().dim(&M::KINDS);
     for (index, w) in cal.windows().iter().enumerate() {
+        // the start's GP input: encoded state, then the first step's input
+        let us: Vec<SVector<f64, U>> = if U > 0 {
+            cal.window_inputs(index).ok_or(BoundError::Mismatch(
+                "calibration windows carry other inputs",
+            ))?
+        } else {
+            Vec::new()
+        };
         learned.encoding().encode(&M::KINDS, &w.start, &mut input);
+        if let Some(u) = us.first() {
+            input[e..e + U].copy_from_slice(u.as_slice());
+        }
         learned
             .gp()
             .input_normaliser()
@@ -449,7 +602,7 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
             lower[j] = lower[j].min(input[j]);
             upper[j] = upper[j].max(input[j]);
         }
-        let Ok(trace) = learned.trace(&w.start, k_max, &mut ws) else {
+        let Ok(trace) = learned.trace(&w.start, k_max, &us, &mut ws) else {
             traced.push(None);
             continue;
         };
@@ -500,6 +653,7 @@ pub(super) fn calibrate<M: Mechanism<N, C> + Clone, const N: usize, const C: usi
         input_upper: upper,
         starts_normalised,
         distance_threshold: f64::INFINITY,
+        inputs: U,
     };
     // leave-one-out nearest-neighbour distances of the calibration starts
     // (O(n²·d)); with n ≥ 99 their 99 % quantile, else their maximum

@@ -31,7 +31,8 @@
 //! estimates the constants at the training inputs (states with their
 //! logged u), and [`Learned::predict_forced`] predicts under planned inputs
 //! with a bound at every state (Theorem 1's box X includes the inputs'
-//! range). The conformal kind calibrates unforced windows only.
+//! range). The conformal kind calibrates on windows that carry their
+//! inputs ([`Calibration::from_trajectories_forced`]).
 //!
 //! Multi-step: the conformal kind calibrates the k-step position error
 //! itself. The rigorous kinds bound one step; over several steps
@@ -160,9 +161,6 @@ pub enum BoundError {
     /// the inputs do not fit the model.
     #[error("bound and model do not match: {0}")]
     Mismatch(&'static str),
-    /// What was asked has no bound yet.
-    #[error("not supported: {0}")]
-    Unsupported(&'static str),
     /// A step, projection or nominal prior failed.
     #[error(transparent)]
     Step(#[from] StepError),
@@ -748,19 +746,9 @@ pub(crate) struct Trace<'a, const N: usize, const U: usize> {
 const MAX_SAMPLES: usize = 256;
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
-    /// `steps` learned steps with variances from `z0`.
-    pub(crate) fn trace(
-        &self,
-        z0: &State<N>,
-        steps: usize,
-        ws: &mut Workspace,
-    ) -> Result<Trace<'static, N, 0>, StepError> {
-        self.trace_at(z0, steps, &[], ws)
-    }
-
     /// `steps` learned steps with variances from `z0`: unforced when
     /// `U = 0`, else under `inputs` (one per step).
-    fn trace_at<'a, const U: usize>(
+    pub(crate) fn trace<'a, const U: usize>(
         &self,
         z0: &State<N>,
         steps: usize,
@@ -809,14 +797,19 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         out
     }
 
-    /// Training states with their inputs (decoded from the GP inputs),
-    /// evenly strided to at most [`MAX_SAMPLES`].
-    fn sample_forced<const U: usize>(&self) -> Vec<(State<N>, SVector<f64, U>)> {
+    /// Training states with their inputs (decoded from the GP inputs) and
+    /// the starts of calibration windows that carry `U` inputs (with their
+    /// first step's), each evenly strided to at most [`MAX_SAMPLES`].
+    fn sample_forced<const U: usize>(
+        &self,
+        calibration: &Calibration<N>,
+    ) -> Vec<(State<N>, SVector<f64, U>)> {
         let gp = self.gp();
         let d = gp.input_dim();
         let e = self.encoding().dim(&M::KINDS);
         let stride = gp.n().div_ceil(MAX_SAMPLES).max(1);
-        gp.inputs()
+        let mut out: Vec<_> = gp
+            .inputs()
             .chunks_exact(d)
             .step_by(stride)
             .map(|x| {
@@ -825,7 +818,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                     SVector::from_column_slice(&x[e..]),
                 )
             })
-            .collect()
+            .collect();
+        let w = calibration.windows();
+        let stride = w.len().div_ceil(MAX_SAMPLES).max(1);
+        for (i, w) in w.iter().enumerate().step_by(stride) {
+            if let Some(us) = calibration.window_inputs::<U>(i) {
+                out.push((w.start, us[0]));
+            }
+        }
+        out
     }
 
     /// The error bound of this trained model: one entry point for the three
@@ -848,7 +849,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     ///
     /// A model trained with inputs is sampled under u = 0 here, the step
     /// [`Learned::predict`] takes; for predictions under inputs use
-    /// [`Learned::error_bound_forced`].
+    /// [`Learned::error_bound_forced`]. Calibration windows that carry
+    /// inputs are a [`BoundError::Mismatch`] here.
     pub fn error_bound(
         &self,
         kind: &BoundKind,
@@ -859,17 +861,19 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
 
     /// [`Learned::error_bound`] for predictions under inputs
     /// ([`Learned::predict_forced`]) of a model from
-    /// [`Learned::train_forced`]: the rigorous kinds estimate the projection's
-    /// Lipschitz constant and pick τ at the training inputs, each state
-    /// with the input logged with it (the calibration windows carry no
-    /// inputs and are not sampled). Theorem 1's box X spans the GP inputs,
-    /// the inputs' range included. `U = 0` on a model without inputs is
-    /// `error_bound`.
+    /// [`Learned::train_forced`]. The conformal kind predicts each
+    /// calibration window under its inputs (windows from
+    /// [`Calibration::from_trajectories_forced`] or
+    /// [`Calibration::new_forced`]); the GP inputs of its region test are
+    /// the starts' with their first step's input. The rigorous kinds
+    /// estimate the projection's Lipschitz constant and pick τ at the
+    /// training inputs and the calibration starts, each state with its
+    /// input. Theorem 1's box X spans the GP inputs, the inputs' range
+    /// included. `U = 0` on a model without inputs is `error_bound`.
     ///
-    /// Errors: those of `error_bound`; `U` other than the model's inputs
-    /// ([`BoundError::Mismatch`]); the conformal kind on a model with
-    /// inputs ([`BoundError::Unsupported`]: its calibration windows carry
-    /// no inputs).
+    /// Errors: those of `error_bound`; `U` other than the model's inputs,
+    /// or conformal calibration windows without inputs
+    /// ([`BoundError::Mismatch`]).
     pub fn error_bound_forced<const U: usize>(
         &self,
         kind: &BoundKind,
@@ -909,18 +913,21 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             noise_std: noise_std.clone(),
         };
         if let BoundKind::Conformal(s) = kind {
-            if U > 0 {
-                return Err(BoundError::Unsupported(
-                    "a conformal bound of predictions under inputs (its calibration windows \
-                     carry no inputs); use the Theorem-1 or RKHS bound",
-                ));
-            }
             if calibration.is_empty() {
                 return Err(BoundError::Empty(
                     "calibration windows (the conformal bound needs held-out data)",
                 ));
             }
-            let parts = conformal::calibrate(self, s, calibration, &noise_std)?;
+            if calibration.input_count() != U {
+                return Err(BoundError::Mismatch(if U == 0 {
+                    "the calibration windows carry inputs: bound predictions under inputs \
+                     (error_bound_forced)"
+                } else {
+                    "the calibration windows carry no inputs (or other inputs): build them \
+                     with Calibration::from_trajectories_forced or new_forced"
+                }));
+            }
+            let parts = conformal::calibrate::<M, N, C, U>(self, s, calibration, &noise_std)?;
             let mut b = bound(BoundParts::Conformal(parts), 1.0, 0);
             let fallback = match s.fallback {
                 // No rigorous bound covers a sparse GP: flag only.
@@ -930,7 +937,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 Fallback::Theorem1 => Some(BoundKind::theorem1(s.delta)),
             };
             if let Some(kind) = fallback {
-                b.fallback = Some(Box::new(self.error_bound(&kind, calibration)?));
+                b.fallback = Some(Box::new(self.error_bound_at::<U>(&kind, calibration)?));
             }
             return Ok(b);
         }
@@ -948,7 +955,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             let states = self.sample_states(calibration);
             states.into_iter().map(|z| (z, zero)).collect()
         } else {
-            self.sample_forced()
+            self.sample_forced(calibration)
         };
         let mut ws = self.workspace();
         let mut sigma = vec![Vec::with_capacity(samples.len()); p];
@@ -1086,15 +1093,18 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         }
         for bound in bounds {
             self.check_bound(bound, steps)?;
-            if U > 0 && matches!(bound.parts, BoundParts::Conformal(_)) {
-                return Err(BoundError::Unsupported(
-                    "a conformal bound for a prediction under inputs (it was calibrated on \
-                     unforced windows); use the Theorem-1 or RKHS bound",
+            if let BoundParts::Conformal(c) = &bound.parts
+                && c.inputs != U
+            {
+                return Err(BoundError::Mismatch(
+                    "the conformal bound was calibrated under other inputs than the \
+                     prediction's (error_bound_forced with forced windows bounds \
+                     predict_forced)",
                 ));
             }
         }
         let mut ws = self.workspace();
-        let mut trace = self.trace_at(z0, steps, inputs, &mut ws)?;
+        let mut trace = self.trace(z0, steps, inputs, &mut ws)?;
         let mut norms = vec![None; trace.states.len()];
         let parts = bounds
             .iter()
