@@ -1,4 +1,4 @@
-//! Spatial example systems, declared with [`mechanism!`](crate::mechanism)
+//! Spatial example systems, declared with [`mechanism!`](crate::mechanism!)
 //! and `gravity: [gx, gy, gz]` (z up). Link inertias are those of thin
 //! solid cylinders (radius r): about the axis ½mr², across it
 //! m(3r² + l²)/12, rounded. Every joint declares `damping: 0.0` so that
