@@ -812,23 +812,9 @@ fn step_jacobian_norms_match_central_differences() {
 
     // a model trained with an input: u is random per step in the data
     let truth = DrivenPendulum::default().minimal();
-    let vi = Variational::new(truth, DT);
     let mut rng = Rng(9);
-    let mut z = State::new([0.8], [0.0]);
-    let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, 1>::zeros()]);
-    for _ in 0..60 {
-        let u = SVector::<f64, 1>::new(rng.uniform(-2.0, 2.0));
-        z = vi.step_forced(&z, &u).unwrap();
-        positions.push(z.q);
-        inputs.push(u);
-    }
-    let data: Vec<_> = vigp::learned::forced_transitions(&positions, &inputs, DT)
-        .into_iter()
-        .map(|mut t| {
-            t.v_next[0] += rng.uniform(-5e-3, 5e-3);
-            t
-        })
-        .collect();
+    let z = State::new([0.8], [0.0]);
+    let data = forced_data::<_, 1, 0, 1>(truth, &z, 60, 2.0, 5e-3, &mut rng);
     let (l, _) =
         Learned::train_forced(truth, DT, &data, Encoding::SinCos, Prior::Nominal, &opts).unwrap();
     assert_eq!(l.inputs(), 1);
@@ -838,34 +824,47 @@ fn step_jacobian_norms_match_central_differences() {
     // a driven loop (two inputs, one of them on the loop-closing joint):
     // the forced step projects, and so do the differences
     let truth = DrivenFourbar::default().minimal();
-    let vi = Variational::new(truth, DT);
-    let mut z = vigp::projection::consistent_state(
+    let z = vigp::projection::consistent_state(
         &truth,
         &SVector::from([0.9, -1.3, -0.4, 1.3]),
         &SVector::zeros(),
         DT,
     )
     .unwrap();
-    let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, 2>::zeros()]);
-    for _ in 0..50 {
-        let u = SVector::<f64, 2>::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0));
-        z = vi.step_forced(&z, &u).unwrap();
-        positions.push(z.q);
-        inputs.push(u);
-    }
-    let data: Vec<_> = vigp::learned::forced_transitions(&positions, &inputs, DT)
-        .into_iter()
-        .map(|mut t| {
-            for x in t.v_next.iter_mut() {
-                *x += rng.uniform(-5e-3, 5e-3);
-            }
-            t
-        })
-        .collect();
+    let data = forced_data::<_, 4, 2, 2>(truth, &z, 50, 1.0, 5e-3, &mut rng);
     let (l, _) =
         Learned::train_forced(truth, DT, &data, Encoding::Raw, Prior::Nominal, &opts).unwrap();
     assert!(l.projects());
     check_forced::<_, 4, 2, 2>("driven fourbar", &l, &data[5].z, &mut rng);
+}
+
+/// Transitions of `truth` (the VI at Δt) along `steps` steps from `z0`,
+/// each under an input drawn uniformly from [−amplitude, amplitude] per
+/// component, with uniform velocity noise of half-width `noise`.
+fn forced_data<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize, const U: usize>(
+    truth: M,
+    z0: &State<N>,
+    steps: usize,
+    amplitude: f64,
+    noise: f64,
+    rng: &mut Rng,
+) -> Vec<vigp::learned::ForcedTransition<N, U>> {
+    let vi = Variational::new(truth, DT);
+    let mut z = *z0;
+    let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, U>::zeros()]);
+    for _ in 0..steps {
+        let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-amplitude, amplitude));
+        z = vi.step_forced(&z, &u).unwrap();
+        positions.push(z.q);
+        inputs.push(u);
+    }
+    let mut data = vigp::learned::forced_transitions(&positions, &inputs, DT);
+    for t in &mut data {
+        for x in t.v_next.iter_mut() {
+            *x += rng.uniform(-noise, noise);
+        }
+    }
+    data
 }
 
 /// `step_jacobian_norms_forced` at states of a forced prediction against
@@ -1247,23 +1246,19 @@ fn driven_truth() -> DrivenPendulumMinimal {
 fn driven_model() -> &'static Learned<DrivenPendulumMinimal, 1, 0> {
     static MODEL: OnceLock<Learned<DrivenPendulumMinimal, 1, 0>> = OnceLock::new();
     MODEL.get_or_init(|| {
-        let vi = Variational::new(driven_truth(), DT);
         let mut rng = Rng(21);
         let half = 1e-3 * 3f64.sqrt();
         let mut data = Vec::new();
         for _ in 0..6 {
-            let mut z = State::new([rng.uniform(-2.0, 2.0)], [rng.uniform(-2.0, 2.0)]);
-            let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, 1>::zeros()]);
-            for _ in 0..25 {
-                let u = SVector::<f64, 1>::new(rng.uniform(-2.0, 2.0));
-                z = vi.step_forced(&z, &u).unwrap();
-                positions.push(z.q);
-                inputs.push(u);
-            }
-            data.extend(vigp::learned::forced_transitions(&positions, &inputs, DT));
-        }
-        for t in &mut data {
-            t.v_next[0] += rng.uniform(-half, half);
+            let z = State::new([rng.uniform(-2.0, 2.0)], [rng.uniform(-2.0, 2.0)]);
+            data.extend(forced_data::<_, 1, 0, 1>(
+                driven_truth(),
+                &z,
+                26,
+                2.0,
+                half,
+                &mut rng,
+            ));
         }
         let opts = TrainOptions {
             restarts: 2,

@@ -368,6 +368,18 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, StepError> {
+        self.forced_velocity(z, u, ws, None)
+    }
+
+    /// prior(z, u) + μ(z, u), and the posterior variances into `var` when
+    /// given (the GP's mean is the same bits either way).
+    fn forced_velocity<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+        var: Option<&mut SVector<f64, N>>,
+    ) -> Result<SVector<f64, N>, StepError> {
         if U != self.inputs {
             return Err(StepError::InputsNotSupported);
         }
@@ -376,9 +388,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         }
         let mut mean = SVector::<f64, N>::zeros();
         self.with_input_u(z, u.as_slice(), |input| {
-            self.gp
-                .predict_mean_into(input, mean.as_mut_slice(), ws)
-                .map_err(|_| StepError::Prediction { step: None })
+            match var {
+                Some(var) => {
+                    self.gp
+                        .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)
+                }
+                None => self.gp.predict_mean_into(input, mean.as_mut_slice(), ws),
+            }
+            .map_err(|_| StepError::Prediction { step: None })
         })?;
         let prior = match self.prior {
             Prior::Nominal => self.nominal.step_forced(z, u)?.v,
@@ -591,27 +608,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
-        if U != self.inputs {
-            return Err(StepError::InputsNotSupported);
-        }
-        if !u.iter().all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteInput { step: None });
-        }
-        let mut mean = SVector::<f64, N>::zeros();
         let mut var = SVector::<f64, N>::zeros();
-        self.with_input_u(z, u.as_slice(), |input| {
-            self.gp
-                .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)
-                .map_err(|_| StepError::Prediction { step: None })
-        })?;
-        let prior = match self.prior {
-            Prior::Nominal => self.nominal.step_forced(z, u)?.v,
-            Prior::Constant => SVector::zeros(),
-        };
-        let v = prior + mean;
-        if !v.iter().all(|x| x.is_finite()) {
-            return Err(StepError::Prediction { step: None });
-        }
+        let v = self.forced_velocity(z, u, ws, Some(&mut var))?;
         Ok((v, var.map(|s| s.max(0.0).sqrt())))
     }
 
