@@ -23,9 +23,18 @@
 //!    exact derivatives (`Learned::step_derivatives_forced`) plans again,
 //!    executed the same way.
 //!
+//! 3. **Bounded predictions.** From every 25th state of the learned
+//!    controller's executed trajectory, the learned model predicts the next
+//!    `HORIZON` steps under the inputs that were applied, each state with
+//!    its conformal error bound (`Learned::predict_forced`, calibrated by
+//!    `Learned::error_bound_forced` on two held-out exploration runs of the
+//!    true system, `Calibration::from_trajectories_forced`), and the report
+//!    states how often the true trajectory stayed inside.
+//!
 //! Prints and writes (`target/control/`) a markdown report with the
 //! closed-loop cost, the final error, failures and planning time of both,
-//! and figures (SVG + PNG): a typical run and the cost distribution.
+//! the bounds' coverage, and figures (SVG + PNG): a typical run and the
+//! cost distribution.
 
 #[path = "common/font.rs"]
 mod font;
@@ -40,6 +49,7 @@ use std::time::Instant;
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{SMatrix, SVector};
 use plotters::prelude::*;
+use vigp::bound::{BoundError, BoundKind, Calibration, ErrorBound};
 use vigp::gp::{TrainOptions, Workspace};
 use vigp::learned::{Encoding, Learned, Prior, forced_transitions};
 use vigp::{State, Variational};
@@ -66,6 +76,8 @@ type A = SMatrix<f64, 4, 4>;
 
 const DT: f64 = 0.02;
 const STEPS: usize = 150;
+/// Steps of the bounded predictions along the executed trajectory (0.5 s).
+const HORIZON: usize = 25;
 
 fn stack(z: &State<2>) -> Z {
     Z::new(z.q[0], z.q[1], z.v[0], z.v[1])
@@ -358,9 +370,35 @@ fn true_system(rng: &mut Rng) -> DrivenCartpole {
     s
 }
 
-/// Learned model of `truth` from six runs of the nominal plan's feedback
-/// law on the true system with random piecewise-constant forces added
-/// (U[−3, 3] N, held 5 steps): exploration around the task.
+/// Positions and logged inputs (input i held from sample i) of `truth`.
+type Run = (Vec<SVector<f64, 2>>, Vec<SVector<f64, 1>>);
+
+/// One run of the nominal plan's feedback law on the true system with
+/// random piecewise-constant forces added (U[−3, 3] N, held 5 steps):
+/// exploration around the task.
+fn explore(
+    truth: &Variational<View, 2, 0>,
+    plan: &Plan,
+    rng: &mut Rng,
+) -> Result<Run, Box<dyn Error>> {
+    let mut z = State::new([rng.uniform(-0.1, 0.1), rng.uniform(-0.2, 0.2)], [0.0, 0.0]);
+    let mut positions = vec![z.q];
+    let mut logged = vec![SVector::<f64, 1>::zeros()];
+    let mut noise = 0.0;
+    for k in 0..STEPS {
+        if k % 5 == 0 {
+            noise = rng.uniform(-3.0, 3.0);
+        }
+        let fb = (plan.gains[k] * (stack(&z) - plan.xs[k]))[0];
+        let u = SVector::<f64, 1>::new(plan.us[k] + fb + noise);
+        z = truth.step_forced(&z, &u)?;
+        positions.push(z.q);
+        logged.push(u);
+    }
+    Ok((positions, logged))
+}
+
+/// Learned model of `truth` from six exploration runs ([`explore`]).
 fn learn(
     truth: &Variational<View, 2, 0>,
     plan: &Plan,
@@ -368,20 +406,7 @@ fn learn(
 ) -> Result<Learned<View, 2, 0>, Box<dyn Error>> {
     let mut data = Vec::new();
     for _ in 0..6 {
-        let mut z = State::new([rng.uniform(-0.1, 0.1), rng.uniform(-0.2, 0.2)], [0.0, 0.0]);
-        let mut positions = vec![z.q];
-        let mut logged = vec![SVector::<f64, 1>::zeros()];
-        let mut noise = 0.0;
-        for k in 0..STEPS {
-            if k % 5 == 0 {
-                noise = rng.uniform(-3.0, 3.0);
-            }
-            let fb = (plan.gains[k] * (stack(&z) - plan.xs[k]))[0];
-            let u = SVector::<f64, 1>::new(plan.us[k] + fb + noise);
-            z = truth.step_forced(&z, &u)?;
-            positions.push(z.q);
-            logged.push(u);
-        }
+        let (positions, logged) = explore(truth, plan, rng)?;
         data.extend(forced_transitions(&positions, &logged, DT));
     }
     let data: Vec<_> = data.iter().step_by(2).copied().collect();
@@ -435,6 +460,88 @@ fn outcome(run: Option<(Vec<Z>, f64)>, plan_seconds: f64) -> Outcome {
             trajectory: Vec::new(),
         },
     }
+}
+
+/// The conformal and the RKHS bound of `l`'s predictions under inputs
+/// (δ = 0.05, `HORIZON` steps); the conformal one calibrated on two
+/// held-out exploration runs of the true system (windows every 2 samples;
+/// their own random stream, so the training data and the plans do not
+/// depend on it).
+fn bounds(
+    l: &Learned<View, 2, 0>,
+    truth: &Variational<View, 2, 0>,
+    plan: &Plan,
+    seed: u64,
+) -> Result<[ErrorBound; 2], Box<dyn Error>> {
+    let mut rng = Rng(seed);
+    let runs = [
+        explore(truth, plan, &mut rng)?,
+        explore(truth, plan, &mut rng)?,
+    ];
+    let positions: Vec<_> = runs.iter().map(|r| r.0.clone()).collect();
+    let inputs: Vec<_> = runs.iter().map(|r| r.1.clone()).collect();
+    let cal = Calibration::from_trajectories_forced(&positions, &inputs, DT, HORIZON, 2)?;
+    Ok([
+        l.error_bound_forced::<1>(&BoundKind::conformal(0.05), &cal)?,
+        l.error_bound_forced::<1>(&BoundKind::rkhs(0.05), &cal)?,
+    ])
+}
+
+/// What the bounded predictions along one executed trajectory showed.
+#[derive(Default)]
+struct Coverage {
+    /// Predicted states (after the start) and those inside their bound.
+    states: usize,
+    covered: usize,
+    /// Predictions, and those whose every state was inside its bound.
+    windows: usize,
+    whole: usize,
+    /// Bound ÷ error of the position at the horizon, per prediction.
+    ratios: Vec<f64>,
+    /// Predicted states flagged outside the calibrated region.
+    outside: usize,
+    /// Predictions without a bound: the GP variance was lost to rounding
+    /// at some state (a variance-based bound on noise-free training data).
+    lost: usize,
+}
+
+/// From every 25th state of the executed trajectory `xs` (of `plan` with its
+/// gains), the learned model's `HORIZON`-step prediction under the inputs
+/// that were applied, against the true positions.
+fn bounded_predictions(
+    l: &Learned<View, 2, 0>,
+    bound: &ErrorBound,
+    plan: &Plan,
+    xs: &[Z],
+    c: &mut Coverage,
+) -> Result<(), Box<dyn Error>> {
+    let applied: Vec<SVector<f64, 1>> = (0..STEPS)
+        .map(|k| SVector::<f64, 1>::new(plan.us[k] + (plan.gains[k] * (xs[k] - plan.xs[k]))[0]))
+        .collect();
+    for k0 in (0..=STEPS - HORIZON).step_by(25) {
+        let p = match l.predict_forced(&unstack(&xs[k0]), &applied[k0..k0 + HORIZON], bound) {
+            Err(BoundError::VarianceLost { .. }) => {
+                c.lost += 1;
+                continue;
+            }
+            p => p?,
+        };
+        let mut all = true;
+        for j in 1..=HORIZON {
+            let err = (p.states[j].q - unstack(&xs[k0 + j]).q).norm();
+            let inside = err <= p.position_bounds[j];
+            c.covered += usize::from(inside);
+            all &= inside;
+            if j == HORIZON {
+                c.ratios.push(p.position_bounds[j] / err);
+            }
+        }
+        c.states += HORIZON;
+        c.windows += 1;
+        c.whole += usize::from(all);
+        c.outside += p.outside.iter().filter(|o| **o).count();
+    }
+    Ok(())
 }
 
 fn quantile(v: &[f64], q: f64) -> f64 {
@@ -572,7 +679,8 @@ fn main() -> Result<(), Box<dyn Error>> {
         "{bar:40} {pos}/{len} true systems, {elapsed} ({eta} left)",
     )?);
     let mut rows = Vec::new();
-    for _ in 0..systems {
+    let mut coverage = [Coverage::default(), Coverage::default()];
+    for system in 0..systems {
         let sys = true_system(&mut rng);
         let truth = Variational::new(sys.minimal(), DT);
         let n = outcome(execute(&truth, &nominal_plan, &z0, &cost), nominal_seconds);
@@ -590,7 +698,16 @@ fn main() -> Result<(), Box<dyn Error>> {
             eprintln!("learned plan: predicted cost {:.4}", p.cost);
         }
         let l = match plan {
-            Some(p) => outcome(execute(&truth, &p, &z0, &cost), plan_seconds),
+            Some(p) => {
+                let run = execute(&truth, &p, &z0, &cost);
+                if let Some((xs, _)) = &run {
+                    let b = bounds(&learned.0, &truth, &nominal_plan, 7000 + system as u64)?;
+                    for (bound, c) in b.iter().zip(&mut coverage) {
+                        bounded_predictions(&learned.0, bound, &p, xs, c)?;
+                    }
+                }
+                outcome(run, plan_seconds)
+            }
             None => outcome(None, plan_seconds),
         };
         rows.push((sys, n, l, train_seconds));
@@ -652,6 +769,56 @@ fn main() -> Result<(), Box<dyn Error>> {
         ml / mn,
         quantile(&train, 0.5)
     )?;
+    if coverage[0].windows > 0 {
+        writeln!(
+            md,
+            "\n**Bounded predictions.** From every 25th state of the learned controller's executed trajectories, the learned model predicted the next {HORIZON} steps ({:.1} s) under the applied inputs, each state with its position bound (δ = 0.05; `Learned::predict_forced`). Conformal: calibrated per system on two held-out exploration runs (windows every 2 samples); where a state leaves the calibrated region its bound is the larger of the conformal and the RKHS bound. The executed trajectories are not drawn like the calibration runs (no exploration forces), so the conformal guarantee is approximate here.\n",
+            HORIZON as f64 * DT
+        )?;
+        writeln!(md, "| | conformal | RKHS |")?;
+        writeln!(md, "|---|---|---|")?;
+        let cell =
+            |f: &dyn Fn(&Coverage) -> String| format!("{} | {}", f(&coverage[0]), f(&coverage[1]));
+        writeln!(
+            md,
+            "| predicted states inside their bound | {} |",
+            cell(&|c| format!(
+                "{} / {} ({:.1} %)",
+                c.covered,
+                c.states,
+                100.0 * c.covered as f64 / c.states.max(1) as f64
+            ))
+        )?;
+        writeln!(
+            md,
+            "| predictions inside at every step | {} |",
+            cell(&|c| format!("{} / {}", c.whole, c.windows))
+        )?;
+        writeln!(
+            md,
+            "| bound ÷ error at the horizon: median (10 %, 90 %) | {} |",
+            cell(&|c| if c.ratios.is_empty() {
+                "–".into()
+            } else {
+                format!(
+                    "{:.2} ({:.2}, {:.2})",
+                    quantile(&c.ratios, 0.5),
+                    quantile(&c.ratios, 0.1),
+                    quantile(&c.ratios, 0.9)
+                )
+            })
+        )?;
+        writeln!(
+            md,
+            "| predicted states outside the bound's region | {} |",
+            cell(&|c| c.outside.to_string())
+        )?;
+        writeln!(
+            md,
+            "| predictions without a bound (variance lost to rounding) | {} |",
+            cell(&|c| c.lost.to_string())
+        )?;
+    }
     std::fs::write(out.join("report.md"), &md)?;
     print!("{md}");
 
