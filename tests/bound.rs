@@ -836,6 +836,16 @@ fn step_jacobian_norms_match_central_differences() {
         Learned::train_forced(truth, DT, &data, Encoding::Raw, Prior::Nominal, &opts).unwrap();
     assert!(l.projects());
     check_forced::<_, 4, 2, 2>("driven fourbar", &l, &data[5].z, &mut rng);
+
+    // the same loop in maximal coordinates (12 coordinates, 10 joint
+    // constraints), the view `vigp fit --encoding maximal` trains
+    let maximal = DrivenFourbar::default().maximal();
+    let zm = truth.to_maximal(&z, DT);
+    let data = forced_data::<_, 12, 10, 2>(maximal, &zm, 40, 1.0, 5e-3, &mut rng);
+    let (l, _) =
+        Learned::train_forced(maximal, DT, &data, Encoding::Raw, Prior::Nominal, &opts).unwrap();
+    assert!(l.projects());
+    check_forced::<_, 12, 10, 2>("driven fourbar, maximal", &l, &data[4].z, &mut rng);
 }
 
 /// Transitions of `truth` (the VI at Δt) along `steps` steps from `z0`,
@@ -868,7 +878,9 @@ fn forced_data<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize, 
 }
 
 /// `step_jacobian_norms_forced` at states of a forced prediction against
-/// central differences of `step_mean_forced_with` under the same input.
+/// central differences of `step_mean_forced_with` under the same input;
+/// `predict_forced` along the same inputs, and under zero inputs against
+/// `predict`.
 fn check_forced<
     M: vigp::Mechanism<N, C> + Clone,
     const N: usize,
@@ -906,6 +918,20 @@ fn check_forced<
         let (a0, c0) = l.step_jacobian_norms(z, &mut ws).unwrap();
         assert!(a0 != a || c0 != c, "{name}, state {k}");
     }
+    // the bounded prediction steps as the mean steps above (bit for bit),
+    // and under zero inputs it is the unforced prediction
+    let bound = l
+        .error_bound_forced::<U>(&BoundKind::rkhs(0.05), &Calibration::empty(l.dt()))
+        .unwrap();
+    let p = l.predict_forced(z0, &us, &bound).unwrap();
+    assert_eq!(p.states, states, "{name}");
+    assert!(p.position_bounds.iter().all(|b| b.is_finite()), "{name}");
+    let zeros = vec![SVector::<f64, U>::zeros(); 6];
+    assert_eq!(
+        l.predict_forced(z0, &zeros, &bound).unwrap(),
+        l.predict(z0, 6, &bound).unwrap(),
+        "{name}"
+    );
 }
 
 /// Decoding inverts encoding (angles modulo 2π).
