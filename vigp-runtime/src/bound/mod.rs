@@ -849,8 +849,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     ///
     /// A model trained with inputs is sampled under u = 0 here, the step
     /// [`Learned::predict`] takes; for predictions under inputs use
-    /// [`Learned::error_bound_forced`]. Calibration windows that carry
-    /// inputs are a [`BoundError::Mismatch`] here.
+    /// [`Learned::error_bound_forced`]. The conformal kind on calibration
+    /// windows that carry inputs is a [`BoundError::Mismatch`] here.
     pub fn error_bound(
         &self,
         kind: &BoundKind,
