@@ -178,6 +178,13 @@ struct Plan {
     cost: f64,
 }
 
+impl Plan {
+    /// The plan's feedback law at step k: u_k + K_k·(z − x_k).
+    fn policy(&self, k: usize, z: &Z) -> f64 {
+        self.us[k] + (self.gains[k] * (z - self.xs[k]))[0]
+    }
+}
+
 fn rollout(model: &dyn Model, z0: &Z, us: &[f64], cost: &Cost) -> Option<(Vec<Z>, f64)> {
     let mut xs = vec![*z0];
     let mut j = 0.0;
@@ -211,7 +218,7 @@ fn ilqr(
             let mut z = *z0;
             let mut us = Vec::with_capacity(STEPS);
             for k in 0..STEPS {
-                let u = p.us[k] + (p.gains[k] * (z - p.xs[k]))[0];
+                let u = p.policy(k, &z);
                 us.push(u);
                 z = model.step(&z, u)?;
             }
@@ -331,7 +338,7 @@ fn execute(
     let mut xs = vec![z];
     let mut j = 0.0;
     for k in 0..STEPS {
-        let u = plan.us[k] + (plan.gains[k] * (z - plan.xs[k]))[0];
+        let u = plan.policy(k, &z);
         j += cost.stage(&z, u);
         z = stack(
             &truth
@@ -389,8 +396,7 @@ fn explore(
         if k % 5 == 0 {
             noise = rng.uniform(-3.0, 3.0);
         }
-        let fb = (plan.gains[k] * (stack(&z) - plan.xs[k]))[0];
-        let u = SVector::<f64, 1>::new(plan.us[k] + fb + noise);
+        let u = SVector::<f64, 1>::new(plan.policy(k, &stack(&z)) + noise);
         z = truth.step_forced(&z, &u)?;
         positions.push(z.q);
         logged.push(u);
@@ -474,12 +480,12 @@ fn bounds(
     seed: u64,
 ) -> Result<[ErrorBound; 2], Box<dyn Error>> {
     let mut rng = Rng(seed);
-    let runs = [
+    let (positions, inputs): (Vec<_>, Vec<_>) = [
         explore(truth, plan, &mut rng)?,
         explore(truth, plan, &mut rng)?,
-    ];
-    let positions: Vec<_> = runs.iter().map(|r| r.0.clone()).collect();
-    let inputs: Vec<_> = runs.iter().map(|r| r.1.clone()).collect();
+    ]
+    .into_iter()
+    .unzip();
     let cal = Calibration::from_trajectories_forced(&positions, &inputs, DT, HORIZON, 2)?;
     Ok([
         l.error_bound_forced::<1>(&BoundKind::conformal(0.05), &cal)?,
@@ -505,19 +511,24 @@ struct Coverage {
     lost: usize,
 }
 
-/// From every 25th state of the executed trajectory `xs` (of `plan` with its
-/// gains), the learned model's `HORIZON`-step prediction under the inputs
-/// that were applied, against the true positions.
+/// The inputs that executing `plan` with its feedback law applied along
+/// `xs`.
+fn applied_inputs(plan: &Plan, xs: &[Z]) -> Vec<SVector<f64, 1>> {
+    (0..STEPS)
+        .map(|k| SVector::<f64, 1>::new(plan.policy(k, &xs[k])))
+        .collect()
+}
+
+/// From every 25th state of the executed trajectory `xs`, the learned
+/// model's `HORIZON`-step prediction under the inputs that were `applied`,
+/// against the true positions.
 fn bounded_predictions(
     l: &Learned<View, 2, 0>,
     bound: &ErrorBound,
-    plan: &Plan,
     xs: &[Z],
+    applied: &[SVector<f64, 1>],
     c: &mut Coverage,
 ) -> Result<(), Box<dyn Error>> {
-    let applied: Vec<SVector<f64, 1>> = (0..STEPS)
-        .map(|k| SVector::<f64, 1>::new(plan.us[k] + (plan.gains[k] * (xs[k] - plan.xs[k]))[0]))
-        .collect();
     for k0 in (0..=STEPS - HORIZON).step_by(25) {
         let p = match l.predict_forced(&unstack(&xs[k0]), &applied[k0..k0 + HORIZON], bound) {
             Err(BoundError::VarianceLost { .. }) => {
@@ -702,8 +713,9 @@ fn main() -> Result<(), Box<dyn Error>> {
                 let run = execute(&truth, &p, &z0, &cost);
                 if let Some((xs, _)) = &run {
                     let b = bounds(&learned.0, &truth, &nominal_plan, 7000 + system as u64)?;
+                    let applied = applied_inputs(&p, xs);
                     for (bound, c) in b.iter().zip(&mut coverage) {
-                        bounded_predictions(&learned.0, bound, &p, xs, c)?;
+                        bounded_predictions(&learned.0, bound, xs, &applied, c)?;
                     }
                 }
                 outcome(run, plan_seconds)

@@ -166,6 +166,13 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
     }
 }
 
+fn data_error(path: &Path) -> impl FnOnce(DataError) -> CliError + '_ {
+    move |source| CliError::Data {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
 #[derive(Parser, Debug)]
 #[command(
     name = "vigp",
@@ -604,12 +611,8 @@ fn read_data<const N: usize>(
     inputs: &[&str],
     read: &ReadArgs,
 ) -> Result<Dataset<N>, CliError> {
-    Dataset::read_path_with_inputs(path, names, kinds, inputs, &read.options()).map_err(|source| {
-        CliError::Data {
-            path: path.to_path_buf(),
-            source,
-        }
-    })
+    Dataset::read_path_with_inputs(path, names, kinds, inputs, &read.options())
+        .map_err(data_error(path))
 }
 
 /// ", sparse GP, M = …" for a sparse model, "" for an exact one.
@@ -790,10 +793,7 @@ where
     )?;
     let dt = data
         .dt(a.read.time_tolerance)
-        .map_err(|source| CliError::Data {
-            path: a.data.clone(),
-            source,
-        })?;
+        .map_err(data_error(&a.data))?;
     let short: Vec<&str> = data.short_runs().map(|r| r.name.as_str()).collect();
     w(
         out,
@@ -858,10 +858,6 @@ where
         }
         opts.bounds.noise_variance.0 = floor;
     }
-    let data_err = |source| CliError::Data {
-        path: a.data.clone(),
-        source,
-    };
     match a.encoding {
         EncodingArg::Sincos | EncodingArg::Minimal => {
             let enc = if a.encoding == EncodingArg::Sincos {
@@ -876,7 +872,9 @@ where
                 };
                 fit_view(a, &all, (enc, prior), 0, &opts, train, out)
             } else {
-                let all = data.forced_transitions::<U>().map_err(data_err)?;
+                let all = data
+                    .forced_transitions::<U>()
+                    .map_err(data_error(&a.data))?;
                 let train = |chosen: &[ForcedTransition<N, U>]| {
                     Learned::train_forced(minimal, dt, chosen, enc, prior, &opts)
                 };
@@ -886,7 +884,7 @@ where
         EncodingArg::Maximal => {
             // each run's transitions in the maximal coordinates, with its
             // inputs when the mechanism has some
-            let inputs = data.input_vectors::<U>().map_err(data_err)?;
+            let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
             let (mut plain, mut forced) = (Vec::new(), Vec::new());
             for (run, us) in data.runs.iter().zip(&inputs) {
                 let Some(run_dt) = run.dt else { continue };
@@ -1083,10 +1081,7 @@ where
     }
     let dt = learned.dt();
     data.check_dt(dt, a.read.time_tolerance)
-        .map_err(|source| CliError::Data {
-            path: a.data.clone(),
-            source,
-        })?;
+        .map_err(data_error(&a.data))?;
     // windows: every sample with k more after it (and one more for v₀)
     let mut windows: Vec<(usize, usize)> = Vec::new();
     for (r, run) in data.runs.iter().enumerate() {
@@ -1129,10 +1124,7 @@ where
         )));
     }
     // each run's logged inputs, once (none without inputs)
-    let inputs = data.input_vectors::<U>().map_err(|source| CliError::Data {
-        path: a.data.clone(),
-        source,
-    })?;
+    let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
     let vi = Variational::new(nominal, dt);
     let pb = bar(windows.len(), "scoring");
     let results: Vec<(Option<f64>, Option<f64>)> = windows
@@ -1240,15 +1232,9 @@ where
     check_out_dir(&a.out)?;
     let dt = learned.dt();
     data.check_dt(dt, a.read.time_tolerance)
-        .map_err(|source| CliError::Data {
-            path: a.data.clone(),
-            source,
-        })?;
+        .map_err(data_error(&a.data))?;
     // each run's logged inputs (none without inputs)
-    let logged = data.input_vectors::<U>().map_err(|source| CliError::Data {
-        path: a.data.clone(),
-        source,
-    })?;
+    let logged = data.input_vectors::<U>().map_err(data_error(&a.data))?;
     // a start state needs two rows (position and discrete velocity), and a
     // forced prediction of k steps the inputs of rows 1..=k: shorter runs
     // are skipped with a note, as `fit` notes its short runs
@@ -1264,18 +1250,21 @@ where
             _ => short.push(run.name.as_str()),
         }
     }
-    if starts.is_empty() {
-        let why = if U > 0 {
+    // what a skipped run lacks, for the note and the error
+    let (too_few, why) = if U > 0 {
+        (
+            format!("fewer than {rows} rows"),
             format!(
-                "a start state needs two, and a forced prediction of {} steps the inputs \
-                 logged in rows 1 to {}",
-                a.steps, a.steps
-            )
-        } else {
-            "a start state needs two (position and discrete velocity)".to_string()
-        };
+                "a start state needs two, and the prediction the inputs logged in rows 1 to {}",
+                a.steps
+            ),
+        )
+    } else {
+        ("one row".to_string(), "a start state needs two".to_string())
+    };
+    if starts.is_empty() {
         return Err(CliError::Usage(format!(
-            "{}: every run has fewer than {rows} rows: {why}",
+            "{}: every run has {too_few} ({why})",
             a.data.display()
         )));
     }
@@ -1283,17 +1272,8 @@ where
         w(
             out,
             format_args!(
-                "note: skipped {} run(s) of {}: {}",
+                "note: skipped {} run(s) of {too_few} ({why}): {}",
                 short.len(),
-                if U > 0 {
-                    format!(
-                        "fewer than {rows} rows (a start state needs two, and the prediction \
-                         the inputs logged in rows 1 to {})",
-                        a.steps
-                    )
-                } else {
-                    "one row (a start state needs two)".to_string()
-                },
                 short.join(", ")
             ),
         )?;
@@ -1309,10 +1289,7 @@ where
             let held_out = read_data(path, names, kinds, inputs, &a.read)?;
             held_out
                 .check_dt(dt, a.read.time_tolerance)
-                .map_err(|source| CliError::Data {
-                    path: path.clone(),
-                    source,
-                })?;
+                .map_err(data_error(path))?;
             // windows in the model's coordinates: positions of the view
             // (and, with inputs, each sample's logged input)
             let trajectories: Vec<Vec<SVector<f64, K>>> = held_out
@@ -1332,12 +1309,7 @@ where
                 })
                 .collect();
             if U > 0 {
-                let logged = held_out
-                    .input_vectors::<U>()
-                    .map_err(|source| CliError::Data {
-                        path: path.clone(),
-                        source,
-                    })?;
+                let logged = held_out.input_vectors::<U>().map_err(data_error(path))?;
                 Calibration::from_trajectories_forced(
                     &trajectories,
                     &logged,
@@ -1361,11 +1333,8 @@ where
         BoundArg::Theorem1 => BoundKind::theorem1(a.delta),
         BoundArg::Rkhs => BoundKind::rkhs(a.delta),
     };
-    let bound = if U > 0 {
-        learned.error_bound_forced::<U>(&kind, &calibration)?
-    } else {
-        learned.error_bound(&kind, &calibration)?
-    };
+    // (U = 0 is `error_bound`; the model's input count is checked above)
+    let bound = learned.error_bound_forced::<U>(&kind, &calibration)?;
     let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
     let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
     let coords: Vec<String> = data.coordinates.clone();

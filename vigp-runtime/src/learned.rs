@@ -583,14 +583,21 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         ws: &mut Workspace,
     ) -> Result<(State<N>, SVector<f64, N>), StepError> {
         self.check_step(z)?;
-        let x1 = z.q + z.v * self.dt;
         let vu = self.predict_mean_velocity_forced(z, u, ws)?;
+        Ok((self.next_state(z, &vu)?, vu))
+    }
+
+    /// The next state from `z` and the unprojected velocity v_u:
+    /// q₁ = q + Δt·v, and v_u projected onto g(q₁ + Δt·v₁) = 0 when the
+    /// model projects (v_u itself otherwise).
+    fn next_state(&self, z: &State<N>, vu: &SVector<f64, N>) -> Result<State<N>, StepError> {
+        let x1 = z.q + z.v * self.dt;
         let v = if self.project && C > 0 {
-            project_velocity(&self.model, &x1, &vu, self.dt, &self.options)?.0
+            project_velocity(&self.model, &x1, vu, self.dt, &self.options)?.0
         } else {
-            vu
+            *vu
         };
-        Ok((State { q: x1, v }, vu))
+        Ok(State { q: x1, v })
     }
 
     /// [`Learned::predict_velocity`] under inputs `u` (a model from
@@ -896,14 +903,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         ws: &mut Workspace,
     ) -> Result<(State<N>, SVector<f64, N>), StepError> {
         self.check_step(z)?;
-        let x1 = z.q + z.v * self.dt;
         let vu = self.predict_mean_velocity(z, ws)?;
-        let v = if self.project && C > 0 {
-            project_velocity(&self.model, &x1, &vu, self.dt, &self.options)?.0
-        } else {
-            vu
-        };
-        Ok((State { q: x1, v }, vu))
+        Ok((self.next_state(z, &vu)?, vu))
     }
 
     /// One learned step with a caller-owned GP workspace (no allocation for
@@ -914,19 +915,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         ws: &mut Workspace,
     ) -> Result<(State<N>, LearnedStepInfo<N>), StepError> {
         self.check_step(z)?;
-        let x1 = z.q + z.v * self.dt;
         let (vu, std_dev) = self.predict_velocity(z, ws)?;
-        let v = if self.project && C > 0 {
-            project_velocity(&self.model, &x1, &vu, self.dt, &self.options)?.0
-        } else {
-            vu
-        };
+        let next = self.next_state(z, &vu)?;
         Ok((
-            State { q: x1, v },
+            next,
             LearnedStepInfo {
                 unprojected: vu,
                 std_dev,
-                correction: (v - vu).norm(),
+                correction: (next.v - vu).norm(),
             },
         ))
     }

@@ -1282,12 +1282,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                         match norms[k] {
                             Some(n) => n,
                             None => {
-                                let n = match trace.inputs.get(k) {
-                                    Some(u) => {
-                                        self.step_jacobian_norms_at(&trace.states[k], u, ws)?
-                                    }
-                                    None => self.step_jacobian_norms(&trace.states[k], ws)?,
-                                };
+                                // the step's input (u = 0 for an unforced trace)
+                                let u = trace.inputs.get(k).copied().unwrap_or_else(SVector::zeros);
+                                let n = self.step_jacobian_norms_at(&trace.states[k], &u, ws)?;
                                 norms[k] = Some(n);
                                 n
                             }
