@@ -22,6 +22,16 @@
 //! nothing at −q and falls back to its prior there; canonicalising the
 //! sign (w ≥ 0) instead makes the input jump at half turns.
 //! `tests/spatial_learned.rs` measures the difference.
+//!
+//! # Under inputs
+//!
+//! An actuated mechanism's model learns under the inputs its data were
+//! logged with ([`forced_transitions`], [`LearnedSpatial::train_forced`]):
+//! the GP input is the encoded state followed by u, and the prior is the
+//! nominal forced step ([`LieStepper::step_forced`]). Such a model steps
+//! with [`LearnedSpatial::step_forced_with`] or
+//! [`SpatialIntegrator::rollout_forced`]; its plain step, without inputs,
+//! is a typed error ([`LearnSpatialError::Inputs`]), never a silent u = 0.
 
 use super::{SpatialError, SpatialIntegrator};
 use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
@@ -131,6 +141,46 @@ pub fn transitions<const B: usize>(
         .collect()
 }
 
+/// One training pair of an actuated spatial mechanism: a discrete state,
+/// the input that drove the step from it, and the next discrete velocities.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpatialForcedTransition<const B: usize, const U: usize> {
+    /// z_k: configuration k and the velocities of the step to k+1.
+    pub z: SpatialState<B>,
+    /// The input over [t_{k+1}, t_{k+2}] (one per actuated joint, in
+    /// declaration order), held over the step from z_k
+    /// ([`LieStepper::step_forced`]).
+    pub u: SVector<f64, U>,
+    /// Linear velocities of the step from k+1 to k+2.
+    pub v_next: [Vector3<f64>; B],
+    /// Body angular velocities of the step from k+1 to k+2.
+    pub w_next: [Vector3<f64>; B],
+}
+
+/// Transitions of a trajectory of configurations sampled every Δt with the
+/// input logged at each sample and held until the next (zero-order hold):
+/// transition k, from configurations k, k+1, k+2, is driven by
+/// `inputs[k + 1]`, the input held over [t_{k+1}, t_{k+2}] — the planar
+/// convention of `vigp::learned::forced_transitions`. K configurations give
+/// K − 2 transitions; `inputs` must be as long as `configurations`
+/// (shorter: fewer transitions).
+pub fn forced_transitions<const B: usize, const U: usize>(
+    configurations: &[Configuration<B>],
+    inputs: &[SVector<f64, U>],
+    dt: f64,
+) -> Vec<SpatialForcedTransition<B, U>> {
+    transitions(configurations, dt)
+        .into_iter()
+        .zip(inputs.iter().skip(1))
+        .map(|(t, u)| SpatialForcedTransition {
+            z: t.z,
+            u: *u,
+            v_next: t.v_next,
+            w_next: t.w_next,
+        })
+        .collect()
+}
+
 /// Why training or prediction of a learned spatial integrator failed.
 #[derive(Debug, thiserror::Error)]
 pub enum LearnSpatialError {
@@ -146,6 +196,16 @@ pub enum LearnSpatialError {
     /// A training transition contains NaN or ±∞.
     #[error("training transition {0} is not finite")]
     NonFinite(usize),
+    /// A prediction was asked under a number of inputs other than the one
+    /// the model was trained with (0: trained without inputs, by
+    /// [`LearnedSpatial::train`]).
+    #[error("the model was trained with {trained} inputs, and was given {given}")]
+    Inputs {
+        /// Inputs of the training data.
+        trained: usize,
+        /// Inputs given to the prediction.
+        given: usize,
+    },
 }
 
 /// A learned spatial integrator: prior + GP velocity map, projected onto
@@ -161,6 +221,8 @@ pub struct LearnedSpatial<S, const B: usize, const J: usize, const N: usize, con
     prior: Prior,
     rotation: Rotation,
     project: bool,
+    /// Inputs of the training data (0: trained without inputs).
+    inputs: usize,
 }
 
 impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
@@ -170,6 +232,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// (for [`Prior::Nominal`]), Δt, and the constraints of the projection.
     /// With constraints, the prior of a (noisy, inconsistent) training state
     /// is evaluated at its consistent neighbour, as at prediction time.
+    /// An actuated mechanism's model trained here predicts under u = 0;
+    /// [`LearnedSpatial::train_forced`] learns under inputs.
     pub fn train(
         stepper: LieStepper<S, B, J, N, C>,
         data: &[SpatialTransition<B>],
@@ -177,18 +241,71 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         prior: Prior,
         options: &TrainOptions,
     ) -> Result<(Self, TrainReport), LearnSpatialError> {
+        let data: Vec<SpatialForcedTransition<B, 0>> = data
+            .iter()
+            .map(|t| SpatialForcedTransition {
+                z: t.z,
+                u: SVector::zeros(),
+                v_next: t.v_next,
+                w_next: t.w_next,
+            })
+            .collect();
+        Self::train_inputs(stepper, &data, rotation, prior, options, |s, z, _| {
+            s.step(z)
+        })
+    }
+
+    /// [`LearnedSpatial::train`] for an actuated mechanism on transitions
+    /// with their inputs ([`forced_transitions`]): the GP input is the
+    /// encoded state followed by u, and the nominal prior is the forced
+    /// Lie-group step under u ([`LieStepper::step_forced`]). `U` must equal
+    /// the mechanism's number of actuated joints (checked at compile time).
+    /// Predict with [`LearnedSpatial::step_forced_with`] or
+    /// [`SpatialIntegrator::rollout_forced`].
+    pub fn train_forced<const U: usize>(
+        stepper: LieStepper<S, B, J, N, C>,
+        data: &[SpatialForcedTransition<B, U>],
+        rotation: Rotation,
+        prior: Prior,
+        options: &TrainOptions,
+    ) -> Result<(Self, TrainReport), LearnSpatialError> {
+        Self::train_inputs(stepper, data, rotation, prior, options, |s, z, u| {
+            s.step_forced(z, u)
+        })
+    }
+
+    /// Training with the GP input = encoded state followed by u (U values,
+    /// none for U = 0) and the prior's next velocities from
+    /// `nominal(stepper, z, u)`.
+    fn train_inputs<const U: usize>(
+        stepper: LieStepper<S, B, J, N, C>,
+        data: &[SpatialForcedTransition<B, U>],
+        rotation: Rotation,
+        prior: Prior,
+        options: &TrainOptions,
+        nominal: impl Fn(
+            &LieStepper<S, B, J, N, C>,
+            &SpatialState<B>,
+            &SVector<f64, U>,
+        ) -> Result<SpatialState<B>, vigp_core::StepError>,
+    ) -> Result<(Self, TrainReport), LearnSpatialError> {
         if data.is_empty() {
             return Err(LearnSpatialError::Empty);
         }
-        let d = rotation.input_dim(B);
+        let e = rotation.input_dim(B);
+        let d = e + U;
         let mut inputs = vec![0.0; data.len() * d];
         let mut targets = Vec::with_capacity(data.len() * N);
         for (i, t) in data.iter().enumerate() {
             let next: SVector<f64, N> = pack(&t.v_next, &t.w_next);
-            if !(t.z.is_finite() && next.iter().all(|x| x.is_finite())) {
+            if !(t.z.is_finite()
+                && next.iter().all(|x| x.is_finite())
+                && t.u.iter().all(|x| x.is_finite()))
+            {
                 return Err(LearnSpatialError::NonFinite(i));
             }
-            rotation.encode(&t.z, &mut inputs[i * d..(i + 1) * d]);
+            rotation.encode(&t.z, &mut inputs[i * d..i * d + e]);
+            inputs[i * d + e..(i + 1) * d].copy_from_slice(t.u.as_slice());
             let base: SVector<f64, N> = match prior {
                 Prior::Nominal => {
                     let z = if C > 0 {
@@ -196,7 +313,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     } else {
                         t.z
                     };
-                    let z1 = stepper.step(&z)?;
+                    let z1 = nominal(&stepper, &z, &t.u)?;
                     pack(&z1.v, &z1.w)
                 }
                 Prior::Constant => SVector::zeros(),
@@ -216,6 +333,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 prior,
                 rotation,
                 project: C > 0,
+                inputs: U,
             },
             report,
         ))
@@ -242,20 +360,68 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         self.rotation
     }
 
+    /// Number of inputs the model was trained with (0: without inputs).
+    pub fn inputs(&self) -> usize {
+        self.inputs
+    }
+
     /// A GP workspace for [`Self::step_with`].
     pub fn workspace(&self) -> Workspace {
         self.gp.workspace()
     }
 
-    /// The unprojected velocities ν_u = prior(z) + μ(z) (eq. 7).
+    /// The unprojected velocities ν_u = prior(z) + μ(z) (eq. 7) of a model
+    /// trained without inputs ([`LearnSpatialError::Inputs`] otherwise).
     pub fn predict_velocity(
         &self,
         z: &SpatialState<B>,
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
+        self.check_inputs(0)?;
+        self.velocity(z, &[], ws, |z| self.stepper.step(z))
+    }
+
+    /// The unprojected velocities under inputs `u` of a model from
+    /// [`LearnedSpatial::train_forced`]: ν_u = prior(z, u) + μ(z, u), the
+    /// prior being the forced nominal step. Errors: `U` other than the
+    /// training data's ([`LearnSpatialError::Inputs`]), NaN or ±∞ in `u`.
+    pub fn predict_velocity_forced<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<SVector<f64, N>, LearnSpatialError> {
+        self.check_inputs(U)?;
+        if !u.iter().all(|x| x.is_finite()) {
+            return Err(vigp_core::StepError::NonFiniteInput.into());
+        }
+        self.velocity(z, u.as_slice(), ws, |z| self.stepper.step_forced(z, u))
+    }
+
+    fn check_inputs(&self, given: usize) -> Result<(), LearnSpatialError> {
+        if given == self.inputs {
+            Ok(())
+        } else {
+            Err(LearnSpatialError::Inputs {
+                trained: self.inputs,
+                given,
+            })
+        }
+    }
+
+    /// prior + μ at the GP input (encoded z, then `u`), the prior's next
+    /// state from `nominal` (unused for [`Prior::Constant`]).
+    fn velocity(
+        &self,
+        z: &SpatialState<B>,
+        u: &[f64],
+        ws: &mut Workspace,
+        nominal: impl FnOnce(&SpatialState<B>) -> Result<SpatialState<B>, vigp_core::StepError>,
+    ) -> Result<SVector<f64, N>, LearnSpatialError> {
         // the GP input on the stack (heap only above 128 dimensions, i.e.
         // more than 7 links with rotation matrices)
-        let d = self.rotation.input_dim(B);
+        let e = self.rotation.input_dim(B);
+        let d = e + u.len();
         let mut stack = [0.0f64; 128];
         let mut heap;
         let input: &mut [f64] = if d <= stack.len() {
@@ -264,12 +430,13 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             heap = vec![0.0; d];
             &mut heap
         };
-        self.rotation.encode(z, input);
+        self.rotation.encode(z, &mut input[..e]);
+        input[e..].copy_from_slice(u);
         let mut mean = SVector::<f64, N>::zeros();
         self.gp.predict_mean_into(input, mean.as_mut_slice(), ws)?;
         let prior: SVector<f64, N> = match self.prior {
             Prior::Nominal => {
-                let z1 = self.stepper.step(z)?;
+                let z1 = nominal(z)?;
                 pack(&z1.v, &z1.w)
             }
             Prior::Constant => SVector::zeros(),
@@ -285,7 +452,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
 
     /// One learned step: configuration k+1 exactly, velocities predicted
     /// and projected so that configuration k+2 is consistent. No
-    /// allocation (GP inputs of up to 128 dimensions).
+    /// allocation (GP inputs of up to 128 dimensions). A model trained
+    /// with inputs steps with [`Self::step_forced_with`].
     pub fn step_with(
         &self,
         z: &SpatialState<B>,
@@ -294,8 +462,36 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         if !z.is_finite() {
             return Err(vigp_core::StepError::NonFiniteState.into());
         }
-        let (x1, q1) = z.advanced(self.stepper.dt());
         let nu = self.predict_velocity(z, ws)?;
+        self.advance(z, nu)
+    }
+
+    /// One learned step under inputs `u` (held over the step, as in
+    /// [`LieStepper::step_forced`]) of a model from
+    /// [`LearnedSpatial::train_forced`]: the configuration update is
+    /// exact, the velocities are the forced prior plus the GP mean at
+    /// (z, u), projected as in [`Self::step_with`]. No allocation.
+    pub fn step_forced_with<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<SpatialState<B>, LearnSpatialError> {
+        if !z.is_finite() {
+            return Err(vigp_core::StepError::NonFiniteState.into());
+        }
+        let nu = self.predict_velocity_forced(z, u, ws)?;
+        self.advance(z, nu)
+    }
+
+    /// z's exact configuration update with the predicted velocities `nu`,
+    /// projected onto the joints of the next configuration.
+    fn advance(
+        &self,
+        z: &SpatialState<B>,
+        nu: SVector<f64, N>,
+    ) -> Result<SpatialState<B>, LearnSpatialError> {
+        let (x1, q1) = z.advanced(self.stepper.dt());
         let nu = if self.project && C > 0 {
             self.stepper.project_velocity(&x1, &q1, &nu)?
         } else {
@@ -331,14 +527,77 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         out.push(*z0);
         let mut z = *z0;
         for k in 0..steps {
-            z = self.step_with(&z, &mut ws).map_err(|e| match e {
-                LearnSpatialError::Step(error) => {
-                    SpatialError::Rollout(vigp_core::RolloutError { step: k, error })
-                }
-                other => SpatialError::Learn(Box::new(other)),
-            })?;
+            z = self.step_with(&z, &mut ws).map_err(|e| in_rollout(e, k))?;
             out.push(z);
         }
         Ok(out)
+    }
+
+    /// A model from [`LearnedSpatial::train_forced`] steps under `u`
+    /// ([`LearnedSpatial::step_forced_with`]; `U` must be the training
+    /// data's). A model trained without inputs takes u = 0 as
+    /// [`SpatialIntegrator::step`] and refuses other inputs with
+    /// [`SpatialError::InputsNotSupported`], as integrators without inputs
+    /// do. Allocates a GP workspace per call.
+    fn step_forced<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &SVector<f64, U>,
+    ) -> Result<SpatialState<B>, SpatialError> {
+        self.forced_step_in(z, u, &mut self.gp.workspace(), None)
+    }
+
+    /// [`SpatialIntegrator::step_forced`] with one workspace.
+    fn rollout_forced<const U: usize>(
+        &self,
+        z0: &SpatialState<B>,
+        inputs: &[SVector<f64, U>],
+    ) -> Result<Vec<SpatialState<B>>, SpatialError> {
+        let mut ws = self.gp.workspace();
+        let mut out = Vec::with_capacity(inputs.len() + 1);
+        out.push(*z0);
+        let mut z = *z0;
+        for (k, u) in inputs.iter().enumerate() {
+            z = self.forced_step_in(&z, u, &mut ws, Some(k))?;
+            out.push(z);
+        }
+        Ok(out)
+    }
+}
+
+impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
+    LearnedSpatial<S, B, J, N, C>
+{
+    /// The rule of [`SpatialIntegrator::step_forced`] in workspace `ws`;
+    /// a step error is reported at rollout step `k` when given.
+    fn forced_step_in<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+        k: Option<usize>,
+    ) -> Result<SpatialState<B>, SpatialError> {
+        let step = if self.inputs == 0 {
+            if !u.iter().all(|x| *x == 0.0) {
+                return Err(SpatialError::InputsNotSupported);
+            }
+            self.step_with(z, ws)
+        } else {
+            self.step_forced_with(z, u, ws)
+        };
+        step.map_err(|e| match k {
+            Some(k) => in_rollout(e, k),
+            None => e.into(),
+        })
+    }
+}
+
+/// A learned step's error inside a rollout, at step `k`.
+fn in_rollout(e: LearnSpatialError, k: usize) -> SpatialError {
+    match e {
+        LearnSpatialError::Step(error) => {
+            SpatialError::Rollout(vigp_core::RolloutError { step: k, error })
+        }
+        other => SpatialError::Learn(Box::new(other)),
     }
 }

@@ -31,7 +31,7 @@ pub enum SpatialError {
     #[error(transparent)]
     Model(#[from] ModelError),
     /// Non-zero inputs given to an integrator that takes none (a learned
-    /// spatial integrator).
+    /// spatial integrator trained without inputs).
     #[error("this spatial integrator takes no inputs")]
     InputsNotSupported,
     /// A learned integrator's GP failed.
@@ -64,7 +64,8 @@ pub trait SpatialIntegrator<const B: usize> {
     /// default, for integrators without inputs, takes u = 0 as
     /// [`SpatialIntegrator::step`] and refuses anything else with
     /// [`SpatialError::InputsNotSupported`]; [`LieStepper`] implements it
-    /// ([`LieStepper::step_forced`]).
+    /// ([`LieStepper::step_forced`]), and so does a learned integrator
+    /// trained under inputs (`learned::LearnedSpatial::train_forced`).
     fn step_forced<const U: usize>(
         &self,
         z: &SpatialState<B>,
