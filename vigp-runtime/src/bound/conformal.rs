@@ -455,13 +455,64 @@ pub(crate) fn position_scales(scales: &[f64], dt: f64) -> Vec<f64> {
 }
 
 /// What calibration keeps of one window's prediction (None: it failed).
-struct Traced {
+pub(crate) struct Traced {
     /// One-step velocity error ‖v̂₁ − v₁‖.
-    e1: f64,
+    pub e1: f64,
     /// Position errors ‖q̂_k − q_k‖, k = 1…K.
-    e: Vec<f64>,
+    pub e: Vec<f64>,
     /// Per output latent standard deviations along the prediction (K × p).
-    std_devs: Vec<Vec<f64>>,
+    pub std_devs: Vec<Vec<f64>>,
+}
+
+/// The calibrated quantiles of traced windows.
+pub(crate) struct Calibrated {
+    /// The normalisation (the one [`Score::Auto`] chose).
+    pub score: Score,
+    /// q̂ of the one-step velocity scores.
+    pub one_step: f64,
+    /// q̂_k of the k-step position scores, k = 1…K.
+    pub positions: Vec<f64>,
+    /// Windows the quantiles were calibrated on.
+    pub calibration_size: usize,
+    /// Windows [`Score::Auto`] chose on (0: no choice made).
+    pub selection_size: usize,
+}
+
+/// Quantiles of `traced` (K = `k_max` steps each) with `settings`:
+/// [`Score::Auto`] chooses the normalisation on the first fifth of the
+/// windows and calibrates it on the rest (independent of the choice), when
+/// both parts are large enough for δ; else the default normalisation on
+/// all of them.
+pub(crate) fn calibrate_traced(
+    traced: &[Option<Traced>],
+    settings: &ConformalSettings,
+    noise: &[f64],
+    dt: f64,
+    k_max: usize,
+) -> Result<Calibrated, BoundError> {
+    let n = traced.len();
+    let (score, calibrate_on, selection_size) = match settings.score {
+        Score::Auto => {
+            let n_select = n / 5;
+            let enough = |m: usize| quantile_index(m, settings.delta).is_ok();
+            if enough(n_select) && enough(n - n_select) {
+                let choice = select_score(&traced[..n_select], settings, noise, dt, k_max)
+                    .unwrap_or(Score::GpStd);
+                (choice, &traced[n_select..], n_select)
+            } else {
+                (Score::GpStd, traced, 0)
+            }
+        }
+        s => (s, traced, 0),
+    };
+    let (one_step, positions) = quantiles(calibrate_on, score, settings, noise, dt, k_max)?;
+    Ok(Calibrated {
+        score,
+        one_step,
+        positions,
+        calibration_size: calibrate_on.len(),
+        selection_size,
+    })
 }
 
 /// The scores of `windows` with normalisation `score`: one-step, per
@@ -621,33 +672,15 @@ pub(super) fn calibrate<
         }));
     }
     let failed = traced.iter().filter(|t| t.is_none()).count();
-    // Score::Auto: choose the normalisation on the first fifth of the
-    // windows, calibrate it on the rest (independent of the choice), when
-    // both parts are large enough for δ; else the default normalisation
-    let (score, calibrate_on, selected_on) = match settings.score {
-        Score::Auto => {
-            let n_select = n / 5;
-            let enough = |m: usize| quantile_index(m, settings.delta).is_ok();
-            if enough(n_select) && enough(n - n_select) {
-                let choice = select_score(&traced[..n_select], settings, noise, dt, k_max)
-                    .unwrap_or(Score::GpStd);
-                (choice, &traced[n_select..], n_select)
-            } else {
-                (Score::GpStd, &traced[..], 0)
-            }
-        }
-        s => (s, &traced[..], 0),
-    };
-    let (one_step_quantile, position_quantiles) =
-        quantiles(calibrate_on, score, settings, noise, dt, k_max)?;
+    let c = calibrate_traced(&traced, settings, noise, dt, k_max)?;
     let mut parts = ConformalParts {
-        score,
+        score: c.score,
         tube: settings.tube,
-        calibration_size: calibrate_on.len(),
-        selection_size: selected_on,
+        calibration_size: c.calibration_size,
+        selection_size: c.selection_size,
         failed,
-        one_step_quantile,
-        position_quantiles,
+        one_step_quantile: c.one_step,
+        position_quantiles: c.positions,
         max_scale,
         input_lower: lower,
         input_upper: upper,

@@ -45,7 +45,7 @@
 //! The derivations, the choice of τ, of the Lipschitz constants and of the
 //! norm bound, and measured coverage and tightness are in `docs/bounds.md`.
 
-mod conformal;
+pub(crate) mod conformal;
 mod jacobian;
 mod rkhs;
 mod theorem1;
@@ -772,11 +772,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
 
     /// Per output √(σ_n² + jitter) in velocity units.
     fn noise_std(&self) -> Vec<f64> {
-        self.gp()
-            .outputs()
-            .iter()
-            .map(|o| o.regularisation_normalised().sqrt() * o.output_scale())
-            .collect()
+        self.gp().noise_std()
     }
 
     /// Training states (decoded from the GP inputs) and calibration starts,

@@ -924,6 +924,15 @@ impl Gp {
         &self.outputs
     }
 
+    /// Per output √(σ_n² + jitter) in the targets' units: the noise part
+    /// of a predictive standard deviation (the error bounds' scales).
+    pub(crate) fn noise_std(&self) -> Vec<f64> {
+        self.outputs
+            .iter()
+            .map(|o| o.regularisation_normalised().sqrt() * o.output_scale())
+            .collect()
+    }
+
     /// Buffers for the allocation-free [`predict_into`](Self::predict_into).
     pub fn workspace(&self) -> Workspace {
         let b = self.basis();

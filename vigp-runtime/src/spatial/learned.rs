@@ -206,6 +206,18 @@ pub enum LearnSpatialError {
         /// Inputs given to the prediction.
         given: usize,
     },
+    /// An error bound could not be calibrated or used
+    /// ([`super::bound`]).
+    #[error(transparent)]
+    Bound(#[from] crate::bound::BoundError),
+}
+
+/// A mean prediction with the GP's latent standard deviations along it.
+pub(crate) struct Trace<const B: usize, const N: usize> {
+    /// z₀, …, z_K.
+    pub states: Vec<SpatialState<B>>,
+    /// σ at z₀, …, z_{K−1}: the uncertainty of each step's velocities.
+    pub std_devs: Vec<SVector<f64, N>>,
 }
 
 /// A learned spatial integrator: prior + GP velocity map, projected onto
@@ -378,7 +390,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
         self.check_inputs(0)?;
-        self.velocity(z, &[], ws, |z| self.stepper.step(z))
+        self.velocity(z, &[], ws, None, |z| self.stepper.step(z))
     }
 
     /// The unprojected velocities under inputs `u` of a model from
@@ -395,7 +407,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         if !u.iter().all(|x| x.is_finite()) {
             return Err(vigp_core::StepError::NonFiniteInput.into());
         }
-        self.velocity(z, u.as_slice(), ws, |z| self.stepper.step_forced(z, u))
+        self.velocity(z, u.as_slice(), ws, None, |z| {
+            self.stepper.step_forced(z, u)
+        })
     }
 
     fn check_inputs(&self, given: usize) -> Result<(), LearnSpatialError> {
@@ -410,12 +424,15 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// prior + μ at the GP input (encoded z, then `u`), the prior's next
-    /// state from `nominal` (unused for [`Prior::Constant`]).
+    /// state from `nominal` (unused for [`Prior::Constant`]); the GP's
+    /// latent variances into `var` when given (the mean is the same bits
+    /// either way).
     fn velocity(
         &self,
         z: &SpatialState<B>,
         u: &[f64],
         ws: &mut Workspace,
+        var: Option<&mut SVector<f64, N>>,
         nominal: impl FnOnce(&SpatialState<B>) -> Result<SpatialState<B>, vigp_core::StepError>,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
         // the GP input on the stack (heap only above 128 dimensions, i.e.
@@ -433,7 +450,13 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         self.rotation.encode(z, &mut input[..e]);
         input[e..].copy_from_slice(u);
         let mut mean = SVector::<f64, N>::zeros();
-        self.gp.predict_mean_into(input, mean.as_mut_slice(), ws)?;
+        match var {
+            Some(var) => {
+                self.gp
+                    .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)?
+            }
+            None => self.gp.predict_mean_into(input, mean.as_mut_slice(), ws)?,
+        }
         let prior: SVector<f64, N> = match self.prior {
             Prior::Nominal => {
                 let z1 = nominal(z)?;
@@ -448,6 +471,71 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             ));
         }
         Ok(nu)
+    }
+
+    /// The mean prediction z₀, …, z_steps with the GP's latent standard
+    /// deviations at z₀, …, z_{steps−1} (those of each step's velocities), a
+    /// model trained without inputs.
+    pub(crate) fn trace(
+        &self,
+        z0: &SpatialState<B>,
+        steps: usize,
+        ws: &mut Workspace,
+    ) -> Result<Trace<B, N>, LearnSpatialError> {
+        self.check_inputs(0)?;
+        self.trace_with(z0, steps, ws, |_| &[], |z, _| self.stepper.step(z))
+    }
+
+    /// [`Self::trace`] under `inputs` (one per step), a model from
+    /// [`LearnedSpatial::train_forced`].
+    pub(crate) fn trace_forced<const U: usize>(
+        &self,
+        z0: &SpatialState<B>,
+        inputs: &[SVector<f64, U>],
+        ws: &mut Workspace,
+    ) -> Result<Trace<B, N>, LearnSpatialError> {
+        self.check_inputs(U)?;
+        if !inputs.iter().flatten().all(|x| x.is_finite()) {
+            return Err(vigp_core::StepError::NonFiniteInput.into());
+        }
+        self.trace_with(
+            z0,
+            inputs.len(),
+            ws,
+            |k| inputs[k].as_slice(),
+            |z, k| self.stepper.step_forced(z, &inputs[k]),
+        )
+    }
+
+    fn trace_with<'u>(
+        &self,
+        z0: &SpatialState<B>,
+        steps: usize,
+        ws: &mut Workspace,
+        input: impl Fn(usize) -> &'u [f64],
+        nominal: impl Fn(&SpatialState<B>, usize) -> Result<SpatialState<B>, vigp_core::StepError>,
+    ) -> Result<Trace<B, N>, LearnSpatialError> {
+        if !z0.is_finite() {
+            return Err(vigp_core::StepError::NonFiniteState.into());
+        }
+        let mut states = Vec::with_capacity(steps + 1);
+        let mut std_devs = Vec::with_capacity(steps);
+        states.push(*z0);
+        let mut z = *z0;
+        for k in 0..steps {
+            let mut var = SVector::<f64, N>::zeros();
+            let nu = self.velocity(&z, input(k), ws, Some(&mut var), |z| nominal(z, k))?;
+            z = self.advance(&z, nu)?;
+            states.push(z);
+            std_devs.push(var.map(|v| v.max(0.0).sqrt()));
+        }
+        Ok(Trace { states, std_devs })
+    }
+
+    /// Per output √(σ_n² + jitter) in velocity units (the noise part of the
+    /// predictive standard deviation).
+    pub(crate) fn noise_std(&self) -> Vec<f64> {
+        self.gp.noise_std()
     }
 
     /// One learned step: configuration k+1 exactly, velocities predicted

@@ -2,7 +2,8 @@
 //! description, minimal coordinates, the Lie-group variational integrator
 //! in maximal coordinates) re-exported, plus the std conveniences: a
 //! typed error, rollouts into a `Vec`, run summaries and the learned
-//! integrator in space ([`learned`]).
+//! integrator in space ([`learned`]) and its conformal error bounds
+//! ([`bound`]).
 //!
 //! A `mechanism!` with `gravity: [gx, gy, gz]` generates a parameter type
 //! `Name` implementing [`Spatial`], with `Name::minimal()` (a
@@ -10,6 +11,8 @@
 //! integrator and the projections work on it unchanged) and
 //! `Name::maximal()` (a [`Maximal`] view for [`LieStepper`]).
 
+#[cfg(feature = "alloc")]
+pub mod bound;
 #[cfg(feature = "alloc")]
 pub mod learned;
 

@@ -1,0 +1,636 @@
+//! Conformal error bounds for learned spatial predictions
+//! ([`LearnedSpatial`]): split conformal prediction on held-out windows, as
+//! the planar [`ConformalSettings`] bound (`crate::bound`), with the error
+//! of a pose measured per link.
+//!
+//! A window is a start state z₀ and the true configurations after it. The
+//! learned model predicts the window (under its inputs, for a model trained
+//! with them), and two errors are scored at every horizon k = 1…K:
+//! * **translation**: max over links of ‖x̂_k − x_k‖ (centre of mass, m);
+//! * **rotation**: max over links of the angle of q̂_k⁻¹ q_k (rad).
+//!
+//! Each is divided by its scale u_k = Δt·Σ_{j<k} Σ_{i≤j} ũ_i, where ũ_i is
+//! the predictive standard deviation of step i's linear (translation) or
+//! angular (rotation) velocities ([`Score`]): a velocity error made at step
+//! i moves every later pose. The bound at a new prediction is q̂_k·u_k, with
+//! q̂_k the ⌈(n+1)(1−δ)⌉-th smallest of the n calibration scores.
+//!
+//! **Guarantee.** If the new case (start and inputs) and the n calibration
+//! windows are exchangeable, P(error_k ≤ q̂_k·u_k) ≥ 1 − δ for each k
+//! ([`Tube::PerStep`]) or for all k at once ([`Tube::Simultaneous`]),
+//! separately for the translation and the rotation bound, marginally over
+//! the calibration and the new case. Windows cut with a stride shorter than
+//! the horizon from one trajectory are dependent, and a start unlike every
+//! calibration start is not covered by the guarantee; unlike the planar
+//! bound, no region test flags such starts here. The one-step velocity
+//! quantiles are kept as well.
+//!
+//! Cost: calibration predicts every window once with the GP variance
+//! (O(N²) per output and step, N training samples); a bounded prediction
+//! is one such prediction.
+
+use super::learned::{Configuration, LearnSpatialError, LearnedSpatial, Trace};
+use super::{Spatial, SpatialState, so3};
+use crate::bound::conformal::{
+    Traced, calibrate_traced, position_scales, quantile_index, score_scale,
+};
+use crate::bound::{BoundError, ConformalSettings, Score, Tube, check_delta};
+use nalgebra::{SVector, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// One held-out case: a start state and the true configurations after it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpatialWindow<const B: usize> {
+    /// z₀: configuration 0 and the velocities of the step to configuration
+    /// 1 (from the data: (x₁ − x₀)/Δt and log(q₀⁻¹q₁)/Δt).
+    pub start: SpatialState<B>,
+    /// The true configurations 1, …, K (K ≥ 2). Configuration 1 follows
+    /// from z₀ exactly; the one-step velocity targets come from
+    /// configurations 1 and 2.
+    pub configurations: Vec<Configuration<B>>,
+}
+
+/// Held-out calibration windows of equal length K for the spatial
+/// conformal bound, with their inputs for a model trained under inputs.
+///
+/// The guarantee needs the calibration windows and the windows you predict
+/// to be exchangeable (e.g. starts and input sequences drawn the same way).
+/// Overlapping windows of one trajectory are dependent: prefer a stride of
+/// at least the horizon.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SpatialCalibration<const B: usize> {
+    dt: f64,
+    windows: Vec<SpatialWindow<B>>,
+    /// Inputs per window (K·U values each: step k's at k·U), empty without.
+    inputs: Vec<Vec<f64>>,
+    /// U (0: no inputs).
+    input_count: usize,
+}
+
+/// The discrete velocities between two configurations (the data's
+/// convention, as [`super::learned::transitions`]).
+fn velocities<const B: usize>(
+    a: &Configuration<B>,
+    b: &Configuration<B>,
+    dt: f64,
+) -> ([Vector3<f64>; B], [Vector3<f64>; B]) {
+    (
+        core::array::from_fn(|i| (b.0[i] - a.0[i]) / dt),
+        core::array::from_fn(|i| so3::log(&(a.1[i].inverse() * b.1[i])) / dt),
+    )
+}
+
+impl<const B: usize> SpatialCalibration<B> {
+    /// Windows with time step `dt`. Errors: `dt` not finite and positive,
+    /// no window, a window with fewer than 2 configurations, windows of
+    /// different lengths, or a NaN/∞ anywhere.
+    pub fn new(dt: f64, windows: Vec<SpatialWindow<B>>) -> Result<Self, BoundError> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(BoundError::InvalidSetting {
+                what: "calibration dt (must be finite and > 0)",
+                value: dt,
+            });
+        }
+        if windows.is_empty() {
+            return Err(BoundError::Empty("spatial calibration windows"));
+        }
+        let k = windows[0].configurations.len();
+        for (index, w) in windows.iter().enumerate() {
+            if w.configurations.len() < 2 {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "a window needs at least 2 configurations after its start",
+                });
+            }
+            if w.configurations.len() != k {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "windows of different lengths",
+                });
+            }
+            let finite = w.configurations.iter().all(|(x, q)| {
+                x.iter().all(|x| x.iter().all(|v| v.is_finite()))
+                    && q.iter().all(|q| q.coords.iter().all(|v| v.is_finite()))
+            });
+            if !(w.start.is_finite() && finite) {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "NaN or infinity in the window",
+                });
+            }
+        }
+        Ok(Self {
+            dt,
+            windows,
+            inputs: Vec::new(),
+            input_count: 0,
+        })
+    }
+
+    /// Windows of an actuated mechanism: `inputs[i]` holds window i's K
+    /// inputs, step k (from the start's k-th successor to configuration
+    /// k + 1's velocities) taken under `inputs[i][k]`. Errors: those of
+    /// [`SpatialCalibration::new`]; `U = 0`; a window whose input count is
+    /// not its K; a NaN or ∞ input.
+    pub fn new_forced<const U: usize>(
+        dt: f64,
+        windows: Vec<SpatialWindow<B>>,
+        inputs: Vec<Vec<SVector<f64, U>>>,
+    ) -> Result<Self, BoundError> {
+        if U == 0 {
+            return Err(BoundError::InvalidSetting {
+                what: "number of inputs of forced calibration windows (must be >= 1)",
+                value: 0.0,
+            });
+        }
+        if inputs.len() != windows.len() {
+            return Err(BoundError::WrongLength {
+                what: "calibration inputs (one sequence per window)",
+                expected: windows.len(),
+                got: inputs.len(),
+            });
+        }
+        let mut cal = Self::new(dt, windows)?;
+        for (index, (w, us)) in cal.windows.iter().zip(&inputs).enumerate() {
+            if us.len() != w.configurations.len() {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "a window needs one input per step (as many as configurations)",
+                });
+            }
+            if !us.iter().flatten().all(|x| x.is_finite()) {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "NaN or infinity in the window's inputs",
+                });
+            }
+        }
+        cal.inputs = inputs
+            .iter()
+            .map(|us| us.iter().flat_map(|u| u.iter().copied()).collect())
+            .collect();
+        cal.input_count = U;
+        Ok(cal)
+    }
+
+    /// Windows of `horizon` steps from trajectories of configurations
+    /// sampled every `dt`: a window starts at every `stride`-th sample that
+    /// leaves room for its horizon, its start velocities from the first
+    /// two samples. Errors: `horizon` < 2, `stride` = 0, no window, or what
+    /// [`SpatialCalibration::new`] rejects.
+    pub fn from_trajectories<T: AsRef<[Configuration<B>]>>(
+        trajectories: &[T],
+        dt: f64,
+        horizon: usize,
+        stride: usize,
+    ) -> Result<Self, BoundError> {
+        let starts = window_starts(trajectories, horizon, stride)?;
+        let windows = starts
+            .iter()
+            .map(|&(r, s)| {
+                let c = trajectories[r].as_ref();
+                let (v, w) = velocities(&c[s], &c[s + 1], dt);
+                SpatialWindow {
+                    start: SpatialState {
+                        x: c[s].0,
+                        q: c[s].1,
+                        v,
+                        w,
+                    },
+                    configurations: c[s + 1..=s + horizon].to_vec(),
+                }
+            })
+            .collect();
+        Self::new(dt, windows)
+    }
+
+    /// [`SpatialCalibration::from_trajectories`] for an actuated mechanism:
+    /// `inputs[r][i]` is the input logged with sample i of trajectory r and
+    /// held from t_i (the convention of
+    /// [`super::learned::forced_transitions`]), so the step from the
+    /// window's state at sample s + k is driven by sample s + k + 1's
+    /// input. Errors: those of `from_trajectories` and
+    /// [`SpatialCalibration::new_forced`]; a trajectory whose inputs are
+    /// not one per sample.
+    pub fn from_trajectories_forced<T, I, const U: usize>(
+        trajectories: &[T],
+        inputs: &[I],
+        dt: f64,
+        horizon: usize,
+        stride: usize,
+    ) -> Result<Self, BoundError>
+    where
+        T: AsRef<[Configuration<B>]>,
+        I: AsRef<[SVector<f64, U>]>,
+    {
+        if inputs.len() != trajectories.len() {
+            return Err(BoundError::WrongLength {
+                what: "calibration inputs (one sequence per trajectory)",
+                expected: trajectories.len(),
+                got: inputs.len(),
+            });
+        }
+        for (index, (c, u)) in trajectories.iter().zip(inputs).enumerate() {
+            if c.as_ref().len() != u.as_ref().len() {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "a trajectory needs one input per sample",
+                });
+            }
+        }
+        let plain = Self::from_trajectories(trajectories, dt, horizon, stride)?;
+        let window_inputs = window_starts(trajectories, horizon, stride)?
+            .iter()
+            .map(|&(r, s)| inputs[r].as_ref()[s + 1..=s + horizon].to_vec())
+            .collect();
+        Self::new_forced(dt, plain.windows, window_inputs)
+    }
+
+    /// The windows.
+    pub fn windows(&self) -> &[SpatialWindow<B>] {
+        &self.windows
+    }
+
+    /// Window `index`'s inputs as `U`-vectors, one per step (None when `U`
+    /// is not [`SpatialCalibration::input_count`], is 0, or the index is
+    /// out of range).
+    pub fn window_inputs<const U: usize>(&self, index: usize) -> Option<Vec<SVector<f64, U>>> {
+        if U != self.input_count || U == 0 {
+            return None;
+        }
+        let flat = self.inputs.get(index)?;
+        Some(
+            flat.chunks_exact(U)
+                .map(SVector::from_column_slice)
+                .collect(),
+        )
+    }
+
+    /// Number of inputs per step the windows carry (0: none).
+    pub fn input_count(&self) -> usize {
+        self.input_count
+    }
+
+    /// Number of windows n.
+    pub fn len(&self) -> usize {
+        self.windows.len()
+    }
+
+    /// `true` without windows (never, for a constructed calibration).
+    pub fn is_empty(&self) -> bool {
+        self.windows.is_empty()
+    }
+
+    /// Window length K.
+    pub fn horizon(&self) -> usize {
+        self.windows.first().map_or(0, |w| w.configurations.len())
+    }
+
+    /// The time step of the windows.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+}
+
+/// (trajectory, first sample) of every window of `horizon` steps at
+/// `stride`.
+fn window_starts<const B: usize, T: AsRef<[Configuration<B>]>>(
+    trajectories: &[T],
+    horizon: usize,
+    stride: usize,
+) -> Result<Vec<(usize, usize)>, BoundError> {
+    if horizon < 2 {
+        return Err(BoundError::InvalidSetting {
+            what: "calibration horizon (must be >= 2)",
+            value: horizon as f64,
+        });
+    }
+    if stride == 0 {
+        return Err(BoundError::InvalidSetting {
+            what: "calibration stride (must be >= 1)",
+            value: 0.0,
+        });
+    }
+    let mut starts = Vec::new();
+    for (r, t) in trajectories.iter().enumerate() {
+        let mut s = 0;
+        while s + horizon < t.as_ref().len() {
+            starts.push((r, s));
+            s += stride;
+        }
+    }
+    if starts.is_empty() {
+        return Err(BoundError::Empty(
+            "calibration trajectories (none is longer than the horizon)",
+        ));
+    }
+    Ok(starts)
+}
+
+/// The calibrated constants of one part of the spatial bound
+/// (translations or rotations).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct PoseQuantiles {
+    /// The normalisation (the one [`Score::Auto`] chose).
+    pub score: Score,
+    /// q̂ of the one-step scores ‖ν̂₁ − ν₁‖/ũ₀ of the linear (translation)
+    /// or angular (rotation) velocities.
+    pub one_step: f64,
+    /// q̂_k of the k-step pose scores, k = 1…K (one value repeated for
+    /// [`Tube::Simultaneous`]).
+    pub per_step: Vec<f64>,
+    /// Windows the quantiles were calibrated on.
+    pub calibration_size: usize,
+    /// Windows [`Score::Auto`] chose the normalisation on (0: no choice).
+    pub selection_size: usize,
+}
+
+/// A calibrated conformal bound for a [`LearnedSpatial`] model
+/// ([`LearnedSpatial::conformal_bound`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SpatialConformal {
+    /// Miscoverage δ.
+    pub delta: f64,
+    /// Per-step or simultaneous tube.
+    pub tube: Tube,
+    /// Centres of mass: max over links of ‖x̂_k − x_k‖ (m).
+    pub translation: PoseQuantiles,
+    /// Orientations: max over links of the angle of q̂_k⁻¹q_k (rad).
+    pub rotation: PoseQuantiles,
+    /// Windows whose prediction failed (counted as misses: score +∞).
+    pub failed: usize,
+    /// The calibration horizon K: predictions of at most K steps.
+    pub horizon: usize,
+    /// Δt of the model the bound was calibrated for.
+    pub dt: f64,
+    /// Number of inputs the windows were predicted under (0: unforced).
+    pub inputs: usize,
+    /// Per GP output, √(σ_n² + jitter) in velocity units.
+    pub noise_std: Vec<f64>,
+}
+
+/// A predicted state with its bounds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoundedSpatialState<const B: usize> {
+    /// The mean prediction z_k.
+    pub state: SpatialState<B>,
+    /// Every link's centre of mass lies within this distance (m) of its
+    /// prediction, with probability ≥ 1 − δ (0 at k = 0; at k = 1 of the
+    /// order of rounding, configuration 1 following from z₀ exactly).
+    pub translation: f64,
+    /// Every link's orientation lies within this angle (rad) of its
+    /// prediction, with probability ≥ 1 − δ.
+    pub rotation: f64,
+}
+
+/// The linear-velocity (translation) and angular-velocity (rotation)
+/// parts of a GP output vector ν = (v₀, ω₀, v₁, ω₁, …).
+fn split<const B: usize>(nu: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let (mut v, mut w) = (Vec::with_capacity(3 * B), Vec::with_capacity(3 * B));
+    for i in 0..B {
+        v.extend_from_slice(&nu[6 * i..6 * i + 3]);
+        w.extend_from_slice(&nu[6 * i + 3..6 * i + 6]);
+    }
+    (v, w)
+}
+
+/// max over links of the centre-of-mass distance and of the rotation angle
+/// between a state and a configuration.
+fn pose_errors<const B: usize>(z: &SpatialState<B>, c: &Configuration<B>) -> (f64, f64) {
+    (0..B).fold((0.0f64, 0.0f64), |(t, r), i| {
+        (
+            t.max((z.x[i] - c.0[i]).norm()),
+            r.max(z.q[i].angle_to(&c.1[i])),
+        )
+    })
+}
+
+impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
+    LearnedSpatial<S, B, J, N, C>
+{
+    /// The conformal bound of a model trained without inputs, calibrated
+    /// on `calibration` (windows without inputs) with `settings` (δ, score
+    /// normalisation, tube; `settings.fallback` does not apply here). See
+    /// the [module docs](self) for the guarantee. Errors: δ ∉ (0, 1), too
+    /// few windows for δ (at least ⌈1/δ − 1⌉), windows with inputs or
+    /// another Δt ([`BoundError::Mismatch`]), a model trained with inputs;
+    /// a quantile that is not finite (too many failed windows).
+    pub fn conformal_bound(
+        &self,
+        calibration: &SpatialCalibration<B>,
+        settings: &ConformalSettings,
+    ) -> Result<SpatialConformal, LearnSpatialError> {
+        self.check_bound_inputs(0)?;
+        let mut ws = self.workspace();
+        self.calibrate(calibration, settings, 0, |_, w| {
+            self.trace(&w.start, w.configurations.len(), &mut ws)
+        })
+    }
+
+    /// [`LearnedSpatial::conformal_bound`] for a model from
+    /// [`LearnedSpatial::train_forced`]: each window is predicted under its
+    /// own inputs ([`SpatialCalibration::new_forced`],
+    /// [`SpatialCalibration::from_trajectories_forced`]), and the bound
+    /// covers predictions under inputs
+    /// ([`LearnedSpatial::predict_bounded_forced`]).
+    pub fn conformal_bound_forced<const U: usize>(
+        &self,
+        calibration: &SpatialCalibration<B>,
+        settings: &ConformalSettings,
+    ) -> Result<SpatialConformal, LearnSpatialError> {
+        self.check_bound_inputs(U)?;
+        if calibration.input_count() != U {
+            return Err(BoundError::Mismatch("calibration windows carry other inputs").into());
+        }
+        let mut ws = self.workspace();
+        self.calibrate(calibration, settings, U, |i, w| {
+            let us: Vec<SVector<f64, U>> = calibration
+                .window_inputs(i)
+                .expect("input count checked above");
+            self.trace_forced(&w.start, &us, &mut ws)
+        })
+    }
+
+    /// The mean prediction of `steps` steps from `z0` with its conformal
+    /// bounds (a model trained without inputs): entry k is z_k with the
+    /// translation and rotation bounds at horizon k. Errors: more steps
+    /// than the bound's horizon ([`BoundError::HorizonTooLong`]), a bound
+    /// of another model or one calibrated under inputs
+    /// ([`BoundError::Mismatch`]), a failed step.
+    pub fn predict_bounded(
+        &self,
+        z0: &SpatialState<B>,
+        steps: usize,
+        bound: &SpatialConformal,
+    ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
+        self.check_bound(bound, 0, steps)?;
+        let trace = self.trace(z0, steps, &mut self.workspace())?;
+        Ok(bounded(trace, bound, self.stepper().dt()))
+    }
+
+    /// [`LearnedSpatial::predict_bounded`] under `inputs` (one per step) for
+    /// a model from [`LearnedSpatial::train_forced`] with a bound from
+    /// [`LearnedSpatial::conformal_bound_forced`].
+    pub fn predict_bounded_forced<const U: usize>(
+        &self,
+        z0: &SpatialState<B>,
+        inputs: &[SVector<f64, U>],
+        bound: &SpatialConformal,
+    ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
+        self.check_bound(bound, U, inputs.len())?;
+        let trace = self.trace_forced(z0, inputs, &mut self.workspace())?;
+        Ok(bounded(trace, bound, self.stepper().dt()))
+    }
+
+    fn check_bound_inputs(&self, given: usize) -> Result<(), LearnSpatialError> {
+        if given == self.inputs() {
+            Ok(())
+        } else {
+            Err(LearnSpatialError::Inputs {
+                trained: self.inputs(),
+                given,
+            })
+        }
+    }
+
+    fn check_bound(
+        &self,
+        bound: &SpatialConformal,
+        inputs: usize,
+        steps: usize,
+    ) -> Result<(), LearnSpatialError> {
+        self.check_bound_inputs(inputs)?;
+        if bound.inputs != inputs {
+            return Err(BoundError::Mismatch(
+                "the bound was calibrated under another number of inputs",
+            )
+            .into());
+        }
+        if bound.noise_std.len() != N || !same_dt(bound.dt, self.stepper().dt()) {
+            return Err(BoundError::Mismatch("the bound was calibrated for another model").into());
+        }
+        if steps > bound.horizon {
+            return Err(BoundError::HorizonTooLong {
+                calibrated: bound.horizon,
+                requested: steps,
+            }
+            .into());
+        }
+        Ok(())
+    }
+
+    /// Predicts every window with `trace(index, window)`, scores both
+    /// parts and calibrates their quantiles.
+    fn calibrate(
+        &self,
+        cal: &SpatialCalibration<B>,
+        settings: &ConformalSettings,
+        inputs: usize,
+        mut trace: impl FnMut(usize, &SpatialWindow<B>) -> Result<Trace<B, N>, LearnSpatialError>,
+    ) -> Result<SpatialConformal, LearnSpatialError> {
+        check_delta(settings.delta)?;
+        // fail early, before the predictions
+        quantile_index(cal.len(), settings.delta)?;
+        let dt = self.stepper().dt();
+        if !same_dt(cal.dt(), dt) {
+            return Err(BoundError::Mismatch("calibration dt differs from the model's").into());
+        }
+        let noise_std = self.noise_std();
+        let (noise_v, noise_w) = split::<B>(&noise_std);
+        let k_max = cal.horizon();
+        let mut translation = Vec::with_capacity(cal.len());
+        let mut rotation = Vec::with_capacity(cal.len());
+        for (i, w) in cal.windows().iter().enumerate() {
+            let Ok(t) = trace(i, w) else {
+                translation.push(None);
+                rotation.push(None);
+                continue;
+            };
+            let c = &w.configurations;
+            let (v1, w1) = velocities(&c[0], &c[1], dt);
+            let e1v = (0..B)
+                .map(|b| (t.states[1].v[b] - v1[b]).norm_squared())
+                .sum::<f64>()
+                .sqrt();
+            let e1w = (0..B)
+                .map(|b| (t.states[1].w[b] - w1[b]).norm_squared())
+                .sum::<f64>()
+                .sqrt();
+            let (et, er): (Vec<f64>, Vec<f64>) = (1..=k_max)
+                .map(|k| pose_errors(&t.states[k], &c[k - 1]))
+                .unzip();
+            let (sv, sw): (Vec<Vec<f64>>, Vec<Vec<f64>>) =
+                t.std_devs.iter().map(|s| split::<B>(s.as_slice())).unzip();
+            translation.push(Some(Traced {
+                e1: e1v,
+                e: et,
+                std_devs: sv,
+            }));
+            rotation.push(Some(Traced {
+                e1: e1w,
+                e: er,
+                std_devs: sw,
+            }));
+        }
+        let failed = translation.iter().filter(|t| t.is_none()).count();
+        let part = |traced: &[Option<Traced>], noise: &[f64]| {
+            calibrate_traced(traced, settings, noise, dt, k_max).map(|c| PoseQuantiles {
+                score: c.score,
+                one_step: c.one_step,
+                per_step: c.positions,
+                calibration_size: c.calibration_size,
+                selection_size: c.selection_size,
+            })
+        };
+        Ok(SpatialConformal {
+            delta: settings.delta,
+            tube: settings.tube,
+            translation: part(&translation, &noise_v)?,
+            rotation: part(&rotation, &noise_w)?,
+            failed,
+            horizon: k_max,
+            dt,
+            inputs,
+            noise_std,
+        })
+    }
+}
+
+fn same_dt(a: f64, b: f64) -> bool {
+    (a - b).abs() <= 1e-12 * b.abs()
+}
+
+/// The bounds along a traced prediction.
+fn bounded<const B: usize, const N: usize>(
+    trace: Trace<B, N>,
+    bound: &SpatialConformal,
+    dt: f64,
+) -> Vec<BoundedSpatialState<B>> {
+    let (noise_v, noise_w) = split::<B>(&bound.noise_std);
+    let (mut st, mut sr) = (Vec::new(), Vec::new());
+    for sd in &trace.std_devs {
+        let (v, w) = split::<B>(sd.as_slice());
+        st.push(score_scale(bound.translation.score, &v, &noise_v));
+        sr.push(score_scale(bound.rotation.score, &w, &noise_w));
+    }
+    let (ut, ur) = (position_scales(&st, dt), position_scales(&sr, dt));
+    trace
+        .states
+        .iter()
+        .enumerate()
+        .map(|(k, z)| {
+            let at = |q: &PoseQuantiles, u: &[f64]| {
+                if k == 0 {
+                    0.0
+                } else {
+                    q.per_step[k - 1] * u[k - 1]
+                }
+            };
+            BoundedSpatialState {
+                state: *z,
+                translation: at(&bound.translation, &ut),
+                rotation: at(&bound.rotation, &ur),
+            }
+        })
+        .collect()
+}
