@@ -314,6 +314,26 @@ fn logged_run(
     configs
 }
 
+/// The driven arm's training data: 6 logged runs of 25 samples under
+/// piecewise-constant random torques.
+fn driven_data(
+    truth: &impl SpatialIntegrator<2>,
+    rng: &mut Rng,
+    dt: f64,
+) -> Vec<SpatialForcedTransition<2, 2>> {
+    let mut data = Vec::new();
+    for _ in 0..6 {
+        let z0 = arm_state(rng, dt);
+        let logged = arm_inputs(rng, 25);
+        data.extend(forced_transitions(
+            &logged_run(truth, &z0, &logged),
+            &logged,
+            dt,
+        ));
+    }
+    data
+}
+
 /// Learning a driven 3-D arm (heavier lower link, 6× the joint friction)
 /// on top of the nominal model, from 6 logged runs of 25 samples under
 /// piecewise-constant random torques; 30-step predictions (0.3 s) from 10
@@ -332,16 +352,7 @@ fn a_forced_learned_spatial_model_follows_a_driven_arm() {
     let t_step = LieStepper::new(driven_truth().maximal(), dt).unwrap();
     let n_step = LieStepper::new(DrivenArm::default().maximal(), dt).unwrap();
     let mut rng = Rng(11);
-    let mut data = Vec::new();
-    for _ in 0..6 {
-        let z0 = arm_state(&mut rng, dt);
-        let logged = arm_inputs(&mut rng, 25);
-        data.extend(forced_transitions(
-            &logged_run(&t_step, &z0, &logged),
-            &logged,
-            dt,
-        ));
-    }
+    let data = driven_data(&t_step, &mut rng, dt);
     assert_eq!(data.len(), 6 * 23);
     let (learned, _) =
         LearnedSpatial::train_forced(n_step, &data, Rotation::Matrix, Prior::Nominal, &options())
@@ -707,24 +718,15 @@ fn start_velocities(
 /// drawn alike: coverage ≥ 0.93 as above. The windows' inputs follow the
 /// data convention: from each window's start under its inputs the truth
 /// reproduces the window's configurations to 1e-10 (one sample early:
-/// ≥ 1e-4). Predicting the test
-/// windows under u = 0 with the same bound covers far less (≤ 0.5).
+/// ≥ 1e-4). Predicting the test windows under u = 0 with the same bound
+/// covers far less (≤ 0.5).
 #[test]
 fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
     let dt = 0.01;
     let t_step = LieStepper::new(driven_truth().maximal(), dt).unwrap();
     let n_step = LieStepper::new(DrivenArm::default().maximal(), dt).unwrap();
     let mut rng = Rng(11);
-    let mut data = Vec::new();
-    for _ in 0..6 {
-        let z0 = arm_state(&mut rng, dt);
-        let logged = arm_inputs(&mut rng, 25);
-        data.extend(forced_transitions(
-            &logged_run(&t_step, &z0, &logged),
-            &logged,
-            dt,
-        ));
-    }
+    let data = driven_data(&t_step, &mut rng, dt);
     let (learned, _) =
         LearnedSpatial::train_forced(n_step, &data, Rotation::Matrix, Prior::Nominal, &options())
             .unwrap();
@@ -938,7 +940,14 @@ fn spatial_bound_misuse_is_a_typed_error() {
     assert!(SpatialCalibration::<2>::from_trajectories(&runs, dt, 1, 5).is_err());
     assert!(SpatialCalibration::<2>::from_trajectories(&runs, dt, horizon, 0).is_err());
     assert!(SpatialCalibration::<2>::from_trajectories(&runs, dt, 40, 5).is_err());
-    assert!(SpatialCalibration::<2>::new(dt, Vec::new()).is_err());
+    let none = SpatialCalibration::<2>::new(dt, Vec::new()).unwrap();
+    assert!(matches!(
+        plain.conformal_bound(&none, &loose),
+        Err(LearnSpatialError::Bound(BoundError::TooFewCalibration {
+            got: 0,
+            ..
+        }))
+    ));
     let mut w = cal_p.windows()[0].clone();
     w.configurations[1].0[0].x = f64::INFINITY;
     assert!(SpatialCalibration::new(dt, vec![w]).is_err());

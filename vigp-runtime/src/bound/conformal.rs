@@ -15,6 +15,7 @@
 //! P(error ≤ q̂·u) ≥ 1 − δ (marginally over both), and ≤ 1 − δ + 1/(n+1) when
 //! the scores have no ties.
 
+use super::windows::{Steps, Windows, logged_inputs, window_starts};
 use super::{BoundError, ConformalSettings, Score, Tube, check_delta};
 use crate::learned::{Learned, Transition};
 use crate::mechanism::{Mechanism, State};
@@ -47,13 +48,17 @@ pub struct Window<const N: usize> {
 /// predictions under inputs ([`Learned::error_bound_forced`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Calibration<const N: usize> {
-    dt: f64,
-    windows: Vec<Window<N>>,
-    /// Inputs per window (K·U values each: step k's input at k·U), empty
-    /// without inputs.
-    inputs: Vec<Vec<f64>>,
-    /// U (0: the windows carry no inputs).
-    input_count: usize,
+    set: Windows<Window<N>>,
+}
+
+impl<const N: usize> Steps for Window<N> {
+    fn steps(&self) -> usize {
+        self.positions.len()
+    }
+
+    fn is_finite(&self) -> bool {
+        self.start.is_finite() && self.positions.iter().flatten().all(|x| x.is_finite())
+    }
 }
 
 impl<const N: usize> Calibration<N> {
@@ -61,10 +66,12 @@ impl<const N: usize> Calibration<N> {
     /// sample states from the training data).
     pub fn empty(dt: f64) -> Self {
         Self {
-            dt,
-            windows: Vec::new(),
-            inputs: Vec::new(),
-            input_count: 0,
+            set: Windows {
+                dt,
+                windows: Vec::new(),
+                inputs: Vec::new(),
+                input_count: 0,
+            },
         }
     }
 
@@ -72,38 +79,8 @@ impl<const N: usize> Calibration<N> {
     /// a window with fewer than 2 positions, windows of different lengths,
     /// or a NaN/∞ anywhere.
     pub fn new(dt: f64, windows: Vec<Window<N>>) -> Result<Self, BoundError> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(BoundError::InvalidSetting {
-                what: "calibration dt (must be finite and > 0)",
-                value: dt,
-            });
-        }
-        let k = windows.first().map_or(2, |w| w.positions.len());
-        for (index, w) in windows.iter().enumerate() {
-            if w.positions.len() < 2 {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "a window needs at least 2 positions after its start",
-                });
-            }
-            if w.positions.len() != k {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "windows of different lengths",
-                });
-            }
-            if !(w.start.is_finite() && w.positions.iter().flatten().all(|x| x.is_finite())) {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "NaN or infinity in the window",
-                });
-            }
-        }
         Ok(Self {
-            dt,
-            windows,
-            inputs: Vec::new(),
-            input_count: 0,
+            set: Windows::new(dt, windows)?,
         })
     }
 
@@ -117,40 +94,9 @@ impl<const N: usize> Calibration<N> {
         windows: Vec<Window<N>>,
         inputs: Vec<Vec<SVector<f64, U>>>,
     ) -> Result<Self, BoundError> {
-        if U == 0 {
-            return Err(BoundError::InvalidSetting {
-                what: "number of inputs of forced calibration windows (must be >= 1)",
-                value: 0.0,
-            });
-        }
-        if inputs.len() != windows.len() {
-            return Err(BoundError::WrongLength {
-                what: "calibration inputs (one sequence per window)",
-                expected: windows.len(),
-                got: inputs.len(),
-            });
-        }
-        let mut cal = Self::new(dt, windows)?;
-        for (index, (w, us)) in cal.windows.iter().zip(&inputs).enumerate() {
-            if us.len() != w.positions.len() {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "a window needs one input per step (as many as positions)",
-                });
-            }
-            if !us.iter().flatten().all(|x| x.is_finite()) {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "NaN or infinity in the window's inputs",
-                });
-            }
-        }
-        cal.inputs = inputs
-            .iter()
-            .map(|us| us.iter().flat_map(|u| u.iter().copied()).collect())
-            .collect();
-        cal.input_count = U;
-        Ok(cal)
+        Ok(Self {
+            set: Windows::new(dt, windows)?.with_inputs(inputs)?,
+        })
     }
 
     /// One-step calibration cases from held-out transitions (K = 2:
@@ -181,38 +127,20 @@ impl<const N: usize> Calibration<N> {
         horizon: usize,
         stride: usize,
     ) -> Result<Self, BoundError> {
-        if horizon < 2 {
-            return Err(BoundError::InvalidSetting {
-                what: "calibration horizon (must be >= 2)",
-                value: horizon as f64,
-            });
-        }
-        if stride == 0 {
-            return Err(BoundError::InvalidSetting {
-                what: "calibration stride (must be >= 1)",
-                value: 0.0,
-            });
-        }
-        let mut windows = Vec::new();
-        for traj in trajectories {
-            let p = traj.as_ref();
-            let mut s = 0;
-            while s + horizon < p.len() {
-                windows.push(Window {
+        let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
+        let windows = window_starts(&lengths, horizon, stride)?
+            .into_iter()
+            .map(|(r, s)| {
+                let p = trajectories[r].as_ref();
+                Window {
                     start: State {
                         q: p[s],
                         v: (p[s + 1] - p[s]) / dt,
                     },
                     positions: p[s + 1..=s + horizon].to_vec(),
-                });
-                s += stride;
-            }
-        }
-        if windows.is_empty() {
-            return Err(BoundError::Empty(
-                "calibration trajectories (none is longer than the horizon)",
-            ));
-        }
+                }
+            })
+            .collect();
         Self::new(dt, windows)
     }
 
@@ -235,78 +163,48 @@ impl<const N: usize> Calibration<N> {
         T: AsRef<[SVector<f64, N>]>,
         I: AsRef<[SVector<f64, U>]>,
     {
-        if inputs.len() != trajectories.len() {
-            return Err(BoundError::WrongLength {
-                what: "calibration inputs (one sequence per trajectory)",
-                expected: trajectories.len(),
-                got: inputs.len(),
-            });
-        }
-        for (index, (p, u)) in trajectories.iter().zip(inputs).enumerate() {
-            if p.as_ref().len() != u.as_ref().len() {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "a trajectory needs one input per sample",
-                });
-            }
-        }
+        let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
+        let starts = window_starts(&lengths, horizon, stride)?;
+        let window_inputs = logged_inputs(&lengths, inputs, &starts, horizon)?;
         let plain = Self::from_trajectories(trajectories, dt, horizon, stride)?;
-        // the same windows, in the same order, with their inputs
-        let mut window_inputs = Vec::with_capacity(plain.len());
-        for (p, u) in trajectories.iter().zip(inputs) {
-            let (p, u) = (p.as_ref(), u.as_ref());
-            let mut s = 0;
-            while s + horizon < p.len() {
-                window_inputs.push(u[s + 1..=s + horizon].to_vec());
-                s += stride;
-            }
-        }
-        Self::new_forced(dt, plain.windows, window_inputs)
+        Self::new_forced(dt, plain.set.windows, window_inputs)
     }
 
     /// The windows.
     pub fn windows(&self) -> &[Window<N>] {
-        &self.windows
+        &self.set.windows
     }
 
     /// Number of inputs per step the windows carry (0: unforced windows).
     pub fn input_count(&self) -> usize {
-        self.input_count
+        self.set.input_count
     }
 
     /// Window `index`'s inputs as `U`-vectors, one per step (None when
     /// `U` is not [`Calibration::input_count`] or the index is out of
     /// range).
     pub fn window_inputs<const U: usize>(&self, index: usize) -> Option<Vec<SVector<f64, U>>> {
-        if U != self.input_count || U == 0 {
-            return None;
-        }
-        let flat = self.inputs.get(index)?;
-        Some(
-            flat.chunks_exact(U)
-                .map(SVector::from_column_slice)
-                .collect(),
-        )
+        self.set.window_inputs(index)
     }
 
     /// Number of windows n.
     pub fn len(&self) -> usize {
-        self.windows.len()
+        self.set.windows.len()
     }
 
     /// `true` without windows.
     pub fn is_empty(&self) -> bool {
-        self.windows.is_empty()
+        self.set.windows.is_empty()
     }
 
     /// Window length K (0 when empty).
     pub fn horizon(&self) -> usize {
-        self.windows.first().map_or(0, |w| w.positions.len())
+        self.set.horizon()
     }
 
     /// The time step of the windows.
     pub fn dt(&self) -> f64 {
-        self.dt
+        self.set.dt
     }
 }
 

@@ -49,6 +49,7 @@ pub(crate) mod conformal;
 mod jacobian;
 mod rkhs;
 mod theorem1;
+pub(crate) mod windows;
 
 pub use conformal::{Calibration, ConformalParts, Window};
 pub use jacobian::projection_jacobian;

@@ -34,6 +34,7 @@ use super::{Spatial, SpatialState, so3};
 use crate::bound::conformal::{
     Traced, calibrate_traced, position_scales, quantile_index, score_scale,
 };
+use crate::bound::windows::{Steps, Windows, logged_inputs, window_starts};
 use crate::bound::{BoundError, ConformalSettings, Score, Tube, check_delta};
 use nalgebra::{SVector, Vector3};
 use serde::{Deserialize, Serialize};
@@ -59,12 +60,21 @@ pub struct SpatialWindow<const B: usize> {
 /// at least the horizon.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SpatialCalibration<const B: usize> {
-    dt: f64,
-    windows: Vec<SpatialWindow<B>>,
-    /// Inputs per window (K·U values each: step k's at k·U), empty without.
-    inputs: Vec<Vec<f64>>,
-    /// U (0: no inputs).
-    input_count: usize,
+    set: Windows<SpatialWindow<B>>,
+}
+
+impl<const B: usize> Steps for SpatialWindow<B> {
+    fn steps(&self) -> usize {
+        self.configurations.len()
+    }
+
+    fn is_finite(&self) -> bool {
+        self.start.is_finite()
+            && self.configurations.iter().all(|(x, q)| {
+                x.iter().all(|x| x.iter().all(|v| v.is_finite()))
+                    && q.iter().all(|q| q.coords.iter().all(|v| v.is_finite()))
+            })
+    }
 }
 
 /// The discrete velocities between two configurations (the data's
@@ -82,48 +92,12 @@ fn velocities<const B: usize>(
 
 impl<const B: usize> SpatialCalibration<B> {
     /// Windows with time step `dt`. Errors: `dt` not finite and positive,
-    /// no window, a window with fewer than 2 configurations, windows of
-    /// different lengths, or a NaN/∞ anywhere.
+    /// a window with fewer than 2 configurations, windows of different
+    /// lengths, or a NaN/∞ anywhere. (Without windows, calibrating a bound
+    /// is [`BoundError::TooFewCalibration`].)
     pub fn new(dt: f64, windows: Vec<SpatialWindow<B>>) -> Result<Self, BoundError> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(BoundError::InvalidSetting {
-                what: "calibration dt (must be finite and > 0)",
-                value: dt,
-            });
-        }
-        if windows.is_empty() {
-            return Err(BoundError::Empty("spatial calibration windows"));
-        }
-        let k = windows[0].configurations.len();
-        for (index, w) in windows.iter().enumerate() {
-            if w.configurations.len() < 2 {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "a window needs at least 2 configurations after its start",
-                });
-            }
-            if w.configurations.len() != k {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "windows of different lengths",
-                });
-            }
-            let finite = w.configurations.iter().all(|(x, q)| {
-                x.iter().all(|x| x.iter().all(|v| v.is_finite()))
-                    && q.iter().all(|q| q.coords.iter().all(|v| v.is_finite()))
-            });
-            if !(w.start.is_finite() && finite) {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "NaN or infinity in the window",
-                });
-            }
-        }
         Ok(Self {
-            dt,
-            windows,
-            inputs: Vec::new(),
-            input_count: 0,
+            set: Windows::new(dt, windows)?,
         })
     }
 
@@ -137,40 +111,9 @@ impl<const B: usize> SpatialCalibration<B> {
         windows: Vec<SpatialWindow<B>>,
         inputs: Vec<Vec<SVector<f64, U>>>,
     ) -> Result<Self, BoundError> {
-        if U == 0 {
-            return Err(BoundError::InvalidSetting {
-                what: "number of inputs of forced calibration windows (must be >= 1)",
-                value: 0.0,
-            });
-        }
-        if inputs.len() != windows.len() {
-            return Err(BoundError::WrongLength {
-                what: "calibration inputs (one sequence per window)",
-                expected: windows.len(),
-                got: inputs.len(),
-            });
-        }
-        let mut cal = Self::new(dt, windows)?;
-        for (index, (w, us)) in cal.windows.iter().zip(&inputs).enumerate() {
-            if us.len() != w.configurations.len() {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "a window needs one input per step (as many as configurations)",
-                });
-            }
-            if !us.iter().flatten().all(|x| x.is_finite()) {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "NaN or infinity in the window's inputs",
-                });
-            }
-        }
-        cal.inputs = inputs
-            .iter()
-            .map(|us| us.iter().flat_map(|u| u.iter().copied()).collect())
-            .collect();
-        cal.input_count = U;
-        Ok(cal)
+        Ok(Self {
+            set: Windows::new(dt, windows)?.with_inputs(inputs)?,
+        })
     }
 
     /// Windows of `horizon` steps from trajectories of configurations
@@ -184,10 +127,10 @@ impl<const B: usize> SpatialCalibration<B> {
         horizon: usize,
         stride: usize,
     ) -> Result<Self, BoundError> {
-        let starts = window_starts(trajectories, horizon, stride)?;
-        let windows = starts
-            .iter()
-            .map(|&(r, s)| {
+        let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
+        let windows = window_starts(&lengths, horizon, stride)?
+            .into_iter()
+            .map(|(r, s)| {
                 let c = trajectories[r].as_ref();
                 let (v, w) = velocities(&c[s], &c[s + 1], dt);
                 SpatialWindow {
@@ -223,108 +166,49 @@ impl<const B: usize> SpatialCalibration<B> {
         T: AsRef<[Configuration<B>]>,
         I: AsRef<[SVector<f64, U>]>,
     {
-        if inputs.len() != trajectories.len() {
-            return Err(BoundError::WrongLength {
-                what: "calibration inputs (one sequence per trajectory)",
-                expected: trajectories.len(),
-                got: inputs.len(),
-            });
-        }
-        for (index, (c, u)) in trajectories.iter().zip(inputs).enumerate() {
-            if c.as_ref().len() != u.as_ref().len() {
-                return Err(BoundError::Calibration {
-                    index,
-                    reason: "a trajectory needs one input per sample",
-                });
-            }
-        }
+        let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
+        let starts = window_starts(&lengths, horizon, stride)?;
+        let window_inputs = logged_inputs(&lengths, inputs, &starts, horizon)?;
         let plain = Self::from_trajectories(trajectories, dt, horizon, stride)?;
-        let window_inputs = window_starts(trajectories, horizon, stride)?
-            .iter()
-            .map(|&(r, s)| inputs[r].as_ref()[s + 1..=s + horizon].to_vec())
-            .collect();
-        Self::new_forced(dt, plain.windows, window_inputs)
+        Self::new_forced(dt, plain.set.windows, window_inputs)
     }
 
     /// The windows.
     pub fn windows(&self) -> &[SpatialWindow<B>] {
-        &self.windows
+        &self.set.windows
     }
 
     /// Window `index`'s inputs as `U`-vectors, one per step (None when `U`
     /// is not [`SpatialCalibration::input_count`], is 0, or the index is
     /// out of range).
     pub fn window_inputs<const U: usize>(&self, index: usize) -> Option<Vec<SVector<f64, U>>> {
-        if U != self.input_count || U == 0 {
-            return None;
-        }
-        let flat = self.inputs.get(index)?;
-        Some(
-            flat.chunks_exact(U)
-                .map(SVector::from_column_slice)
-                .collect(),
-        )
+        self.set.window_inputs(index)
     }
 
     /// Number of inputs per step the windows carry (0: none).
     pub fn input_count(&self) -> usize {
-        self.input_count
+        self.set.input_count
     }
 
     /// Number of windows n.
     pub fn len(&self) -> usize {
-        self.windows.len()
+        self.set.windows.len()
     }
 
-    /// `true` without windows (never, for a constructed calibration).
+    /// `true` without windows.
     pub fn is_empty(&self) -> bool {
-        self.windows.is_empty()
+        self.set.windows.is_empty()
     }
 
-    /// Window length K.
+    /// Window length K (0 without windows).
     pub fn horizon(&self) -> usize {
-        self.windows.first().map_or(0, |w| w.configurations.len())
+        self.set.horizon()
     }
 
     /// The time step of the windows.
     pub fn dt(&self) -> f64 {
-        self.dt
+        self.set.dt
     }
-}
-
-/// (trajectory, first sample) of every window of `horizon` steps at
-/// `stride`.
-fn window_starts<const B: usize, T: AsRef<[Configuration<B>]>>(
-    trajectories: &[T],
-    horizon: usize,
-    stride: usize,
-) -> Result<Vec<(usize, usize)>, BoundError> {
-    if horizon < 2 {
-        return Err(BoundError::InvalidSetting {
-            what: "calibration horizon (must be >= 2)",
-            value: horizon as f64,
-        });
-    }
-    if stride == 0 {
-        return Err(BoundError::InvalidSetting {
-            what: "calibration stride (must be >= 1)",
-            value: 0.0,
-        });
-    }
-    let mut starts = Vec::new();
-    for (r, t) in trajectories.iter().enumerate() {
-        let mut s = 0;
-        while s + horizon < t.as_ref().len() {
-            starts.push((r, s));
-            s += stride;
-        }
-    }
-    if starts.is_empty() {
-        return Err(BoundError::Empty(
-            "calibration trajectories (none is longer than the horizon)",
-        ));
-    }
-    Ok(starts)
 }
 
 /// The calibrated constants of one part of the spatial bound

@@ -1,0 +1,196 @@
+//! Held-out windows with the inputs their steps were taken under: what the
+//! planar ([`Calibration`](super::Calibration)) and the spatial
+//! (`crate::spatial::bound::SpatialCalibration`) calibration sets share —
+//! validation, the inputs' layout and the cutting of trajectories.
+
+use super::BoundError;
+use nalgebra::SVector;
+
+/// What the shared code needs of a window.
+pub(crate) trait Steps {
+    /// K: the true states after the start.
+    fn steps(&self) -> usize;
+    /// No NaN or ±∞ in the start or the true states.
+    fn is_finite(&self) -> bool;
+}
+
+/// Windows of equal length K ≥ 2 with time step `dt`, and their inputs.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Windows<W> {
+    pub dt: f64,
+    pub windows: Vec<W>,
+    /// Inputs per window (K·U values each: step k's input at k·U), empty
+    /// without inputs.
+    pub inputs: Vec<Vec<f64>>,
+    /// U (0: the windows carry no inputs).
+    pub input_count: usize,
+}
+
+impl<W: Steps> Windows<W> {
+    /// Errors: `dt` not finite and positive, a window with fewer than 2
+    /// steps, windows of different lengths, or a NaN/∞ anywhere.
+    pub fn new(dt: f64, windows: Vec<W>) -> Result<Self, BoundError> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(BoundError::InvalidSetting {
+                what: "calibration dt (must be finite and > 0)",
+                value: dt,
+            });
+        }
+        let k = windows.first().map_or(2, W::steps);
+        for (index, w) in windows.iter().enumerate() {
+            if w.steps() < 2 {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "a window needs at least 2 true states after its start",
+                });
+            }
+            if w.steps() != k {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "windows of different lengths",
+                });
+            }
+            if !w.is_finite() {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "NaN or infinity in the window",
+                });
+            }
+        }
+        Ok(Self {
+            dt,
+            windows,
+            inputs: Vec::new(),
+            input_count: 0,
+        })
+    }
+
+    /// The windows with `inputs[i]`, window i's K inputs. Errors: `U = 0`;
+    /// not one sequence per window; a window's input count other than its
+    /// K; a NaN or ∞ input.
+    pub fn with_inputs<const U: usize>(
+        mut self,
+        inputs: Vec<Vec<SVector<f64, U>>>,
+    ) -> Result<Self, BoundError> {
+        if U == 0 {
+            return Err(BoundError::InvalidSetting {
+                what: "number of inputs of forced calibration windows (must be >= 1)",
+                value: 0.0,
+            });
+        }
+        if inputs.len() != self.windows.len() {
+            return Err(BoundError::WrongLength {
+                what: "calibration inputs (one sequence per window)",
+                expected: self.windows.len(),
+                got: inputs.len(),
+            });
+        }
+        for (index, (w, us)) in self.windows.iter().zip(&inputs).enumerate() {
+            if us.len() != w.steps() {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "a window needs one input per step",
+                });
+            }
+            if !us.iter().flatten().all(|x| x.is_finite()) {
+                return Err(BoundError::Calibration {
+                    index,
+                    reason: "NaN or infinity in the window's inputs",
+                });
+            }
+        }
+        self.inputs = inputs
+            .iter()
+            .map(|us| us.iter().flat_map(|u| u.iter().copied()).collect())
+            .collect();
+        self.input_count = U;
+        Ok(self)
+    }
+
+    /// Window `index`'s inputs as `U`-vectors, one per step (None when `U`
+    /// is not the windows' input count, is 0, or the index is out of
+    /// range).
+    pub fn window_inputs<const U: usize>(&self, index: usize) -> Option<Vec<SVector<f64, U>>> {
+        if U != self.input_count || U == 0 {
+            return None;
+        }
+        let flat = self.inputs.get(index)?;
+        Some(
+            flat.chunks_exact(U)
+                .map(SVector::from_column_slice)
+                .collect(),
+        )
+    }
+
+    /// K (0 without windows).
+    pub fn horizon(&self) -> usize {
+        self.windows.first().map_or(0, W::steps)
+    }
+}
+
+/// (trajectory, first sample) of every window of `horizon` steps that
+/// starts at a `stride`-th sample of trajectories of `lengths` samples.
+/// Errors: `horizon` < 2, `stride` = 0, no window at all.
+pub(crate) fn window_starts(
+    lengths: &[usize],
+    horizon: usize,
+    stride: usize,
+) -> Result<Vec<(usize, usize)>, BoundError> {
+    if horizon < 2 {
+        return Err(BoundError::InvalidSetting {
+            what: "calibration horizon (must be >= 2)",
+            value: horizon as f64,
+        });
+    }
+    if stride == 0 {
+        return Err(BoundError::InvalidSetting {
+            what: "calibration stride (must be >= 1)",
+            value: 0.0,
+        });
+    }
+    let mut starts = Vec::new();
+    for (r, &len) in lengths.iter().enumerate() {
+        let mut s = 0;
+        while s + horizon < len {
+            starts.push((r, s));
+            s += stride;
+        }
+    }
+    if starts.is_empty() {
+        return Err(BoundError::Empty(
+            "calibration trajectories (none is longer than the horizon)",
+        ));
+    }
+    Ok(starts)
+}
+
+/// Each window's inputs from inputs logged with every sample and held from
+/// it (the data files' convention): the step from the window's state at
+/// sample s + k is driven by sample s + k + 1's input. Errors: not one
+/// input sequence per trajectory, or not one input per sample.
+pub(crate) fn logged_inputs<I: AsRef<[SVector<f64, U>]>, const U: usize>(
+    lengths: &[usize],
+    inputs: &[I],
+    starts: &[(usize, usize)],
+    horizon: usize,
+) -> Result<Vec<Vec<SVector<f64, U>>>, BoundError> {
+    if inputs.len() != lengths.len() {
+        return Err(BoundError::WrongLength {
+            what: "calibration inputs (one sequence per trajectory)",
+            expected: lengths.len(),
+            got: inputs.len(),
+        });
+    }
+    for (index, (&len, u)) in lengths.iter().zip(inputs).enumerate() {
+        if u.as_ref().len() != len {
+            return Err(BoundError::Calibration {
+                index,
+                reason: "a trajectory needs one input per sample",
+            });
+        }
+    }
+    Ok(starts
+        .iter()
+        .map(|&(r, s)| inputs[r].as_ref()[s + 1..=s + horizon].to_vec())
+        .collect())
+}
