@@ -366,6 +366,42 @@ fn input_columns_are_read() {
     assert!((r.positions[1][0] - 0.05).abs() < 1e-12);
 }
 
+/// Resampling at the logging rate changes nothing: times logged with two
+/// decimals from t = 0.50 (so t0 + k·Δt rounds a hair below some logged
+/// times, 0.50 + 18·0.01 = 0.6799999999999999 < 0.68), input = row
+/// index; every resampled sample holds its own row's input. Before the
+/// fix 11 of 200 rows held the previous row's.
+#[test]
+fn resampling_at_the_logging_rate_holds_each_rows_own_input() {
+    let mut text = String::from("run,t,rail,hinge,u_rail,u_hinge\n");
+    for i in 0..200 {
+        let t = 0.5 + 0.01 * i as f64;
+        text += &format!(
+            "a,{t:.2},{},{},{i},{}\n",
+            0.001 * i as f64,
+            0.1,
+            -(i as f64)
+        );
+    }
+    let opts = ReadOptions {
+        resample: Some(0.01),
+        ..ReadOptions::default()
+    };
+    let d = Dataset::<2>::read_for::<DrivenCartpoleMinimal, 0, _>(text.as_bytes(), &opts).unwrap();
+    let r = &d.runs[0];
+    assert_eq!(r.inputs.len(), 200);
+    let wrong: Vec<usize> = (0..200)
+        .filter(|&i| r.inputs[i] != vec![i as f64, -(i as f64)])
+        .collect();
+    assert!(
+        wrong.is_empty(),
+        "rows holding another row's input: {wrong:?}"
+    );
+    for (i, p) in r.positions.iter().enumerate() {
+        assert!((p[0] - 0.001 * i as f64).abs() <= 1e-15, "row {i}");
+    }
+}
+
 /// `Dataset::forced_transitions` pairs each transition with the input of
 /// its step (row k+1's, as `Run::step_input`), equal to
 /// `learned::forced_transitions` on the run's arrays; asked for another

@@ -87,6 +87,10 @@ impl Default for ReadOptions {
     }
 }
 
+/// Resampling's zero-order hold takes a logged sample this close (as a
+/// fraction of the sampling interval) before a resampled time as at it.
+const HOLD_SLACK: f64 = 1e-6;
+
 /// The most samples one run may have after [`ReadOptions::resample`]
 /// (10⁷, ≈ 28 h at 10 ms): a resampling step far below the recorded
 /// sampling is refused rather than allocated.
@@ -497,8 +501,12 @@ impl<const N: usize> RawRun<N> {
                 let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
                 out.push(positions[seg] * (1.0 - w) + positions[seg + 1] * w);
                 if !inputs.is_empty() {
-                    // zero-order hold: the last sample at or before t
-                    let at = if w >= 1.0 { seg + 1 } else { seg };
+                    // zero-order hold: the last sample at or before t. A
+                    // sample within 1e-6 of the interval before t counts
+                    // as at t: t0 + k·Δt rounds a hair below a logged time
+                    // such as 0.68 (0.50 + 18·0.01 = 0.679999…), and the
+                    // previous sample's input would be held instead
+                    let at = if w >= 1.0 - HOLD_SLACK { seg + 1 } else { seg };
                     held.push(inputs[at].clone());
                 }
             }
