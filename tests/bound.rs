@@ -130,6 +130,43 @@ fn calibration() -> &'static Calibration<1> {
     CAL.get_or_init(|| Calibration::new(DT, pendulum_windows(2, 120, 5)).unwrap())
 }
 
+/// Overlapping windows (stride 1) of independent runs calibrate the region
+/// test by distances to *other* runs: a new start comes from a new run,
+/// while a window's neighbours in its own run lie a sample apart. 60 runs
+/// of 41 samples cut at stride 1 (2160 windows of 5 steps) calibrate the
+/// bound; of 300 starts cut alike from 60 fresh runs, the share flagged
+/// outside the calibrated region is the distance test's 1 % plus the box
+/// and scale tests' ≈ 2d/(n + 1) (d = 3 GP inputs): ≤ 5 % asserted.
+/// With distances to every other window, the same run's included (the
+/// rule before), 103 of the 300 (34 %) were flagged.
+#[test]
+fn overlapping_windows_of_independent_runs_do_not_flag_new_starts() {
+    let runs = |seed| -> Vec<Vec<SVector<f64, 1>>> {
+        pendulum_windows(seed, 60, 40)
+            .into_iter()
+            .map(|w| std::iter::once(w.start.q).chain(w.positions).collect())
+            .collect()
+    };
+    let cal = Calibration::from_trajectories(&runs(5), DT, 5, 1).unwrap();
+    assert_eq!(cal.len(), 60 * 36);
+    assert_eq!(cal.window_runs()[36], 1);
+    let bound = model()
+        .error_bound(&BoundKind::conformal(0.05), &cal)
+        .unwrap();
+    let fresh = Calibration::from_trajectories(&runs(6), DT, 5, 1).unwrap();
+    let starts: Vec<_> = fresh.windows().iter().step_by(7).take(300).collect();
+    let flagged = starts
+        .iter()
+        .filter(|w| model().predict(&w.start, 5, &bound).unwrap().outside[0])
+        .count();
+    let share = flagged as f64 / starts.len() as f64;
+    println!(
+        "stride-1 calibration of 60 runs: {flagged} of {} fresh starts flagged ({share:.3})",
+        starts.len()
+    );
+    assert!(share <= 0.05, "{share}");
+}
+
 /// A one-sample pendulum model at 2Δt: every bound of `model()` is a
 /// mismatch for it.
 fn other_dt_model() -> Learned<PendulumMinimal, 1, 0> {

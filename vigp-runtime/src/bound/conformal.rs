@@ -71,6 +71,7 @@ impl<const N: usize> Calibration<N> {
                 windows: Vec::new(),
                 inputs: Vec::new(),
                 input_count: 0,
+                runs: Vec::new(),
             },
         }
     }
@@ -128,9 +129,10 @@ impl<const N: usize> Calibration<N> {
         stride: usize,
     ) -> Result<Self, BoundError> {
         let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
-        let windows = window_starts(&lengths, horizon, stride)?
-            .into_iter()
-            .map(|(r, s)| {
+        let starts = window_starts(&lengths, horizon, stride)?;
+        let windows = starts
+            .iter()
+            .map(|&(r, s)| {
                 let p = trajectories[r].as_ref();
                 Window {
                     start: State {
@@ -141,7 +143,9 @@ impl<const N: usize> Calibration<N> {
                 }
             })
             .collect();
-        Self::new(dt, windows)
+        Ok(Self {
+            set: Windows::new(dt, windows)?.with_runs(starts.iter().map(|s| s.0).collect()),
+        })
     }
 
     /// [`Calibration::from_trajectories`] for an actuated mechanism:
@@ -167,12 +171,20 @@ impl<const N: usize> Calibration<N> {
         let starts = window_starts(&lengths, horizon, stride)?;
         let window_inputs = logged_inputs(&lengths, inputs, &starts, horizon)?;
         let plain = Self::from_trajectories(trajectories, dt, horizon, stride)?;
-        Self::new_forced(dt, plain.set.windows, window_inputs)
+        Ok(Self {
+            set: plain.set.with_inputs(window_inputs)?,
+        })
     }
 
     /// The windows.
     pub fn windows(&self) -> &[Window<N>] {
         &self.set.windows
+    }
+
+    /// The run each window was cut from ([`Calibration::from_trajectories`]:
+    /// the trajectory's index; windows given directly: each its own).
+    pub fn window_runs(&self) -> &[usize] {
+        &self.set.runs
     }
 
     /// Number of inputs per step the windows carry (0: unforced windows).
@@ -255,12 +267,12 @@ const DISTANCE_LEVEL: f64 = 0.01;
 
 impl ConformalParts {
     /// Distance (normalised units) from `xn` to the nearest calibration
-    /// start, skipping index `skip`.
-    fn nearest(&self, xn: &[f64], skip: Option<usize>) -> f64 {
+    /// start, skipping the indices `skip` is true of.
+    fn nearest(&self, xn: &[f64], skip: impl Fn(usize) -> bool) -> f64 {
         let d = xn.len();
         let mut best = f64::INFINITY;
         for (i, row) in self.starts_normalised.chunks_exact(d).enumerate() {
-            if Some(i) == skip {
+            if skip(i) {
                 continue;
             }
             let mut s = 0.0;
@@ -278,7 +290,7 @@ impl ConformalParts {
     /// Whether the normalised GP input `xn` is farther from every
     /// calibration start than [`ConformalParts::distance_threshold`].
     pub(crate) fn far(&self, xn: &[f64]) -> bool {
-        !self.starts_normalised.is_empty() && self.nearest(xn, None) > self.distance_threshold
+        !self.starts_normalised.is_empty() && self.nearest(xn, |_| false) > self.distance_threshold
     }
 }
 
@@ -587,9 +599,22 @@ pub(super) fn calibrate<
         inputs: U,
     };
     // leave-one-out nearest-neighbour distances of the calibration starts
-    // (O(n²·d)); with n ≥ 99 their 99 % quantile, else their maximum
+    // (O(n²·d)); with n ≥ 99 their 99 % quantile, else their maximum. A
+    // new start comes from a new run, so each start's distance is to the
+    // starts of other runs: overlapping windows of one run (stride 1) lie
+    // next to each other, and their distances would set a threshold that
+    // flags nearly every new start. With a single run, to the other starts.
+    let runs = cal.window_runs();
+    let one_run = runs.iter().all(|r| *r == runs[0]);
     let mut nn: Vec<f64> = (0..n)
-        .map(|i| parts.nearest(&parts.starts_normalised[i * d..(i + 1) * d], Some(i)))
+        .map(|i| {
+            let xi = &parts.starts_normalised[i * d..(i + 1) * d];
+            if one_run {
+                parts.nearest(xi, |j| j == i)
+            } else {
+                parts.nearest(xi, |j| runs[j] == runs[i])
+            }
+        })
         .collect();
     nn.sort_by(f64::total_cmp);
     let level = quantile_index(n, DISTANCE_LEVEL).unwrap_or(n);

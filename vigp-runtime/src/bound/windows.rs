@@ -24,6 +24,10 @@ pub(crate) struct Windows<W> {
     pub inputs: Vec<Vec<f64>>,
     /// U (0: the windows carry no inputs).
     pub input_count: usize,
+    /// The run (trajectory) each window was cut from: windows of one run
+    /// are not independent of each other (each window its own run unless
+    /// cut by [`window_starts`]).
+    pub runs: Vec<usize>,
 }
 
 impl<W: Steps> Windows<W> {
@@ -59,10 +63,18 @@ impl<W: Steps> Windows<W> {
         }
         Ok(Self {
             dt,
+            runs: (0..windows.len()).collect(),
             windows,
             inputs: Vec::new(),
             input_count: 0,
         })
+    }
+
+    /// The windows, window i cut from run `runs[i]`.
+    pub fn with_runs(mut self, runs: Vec<usize>) -> Self {
+        debug_assert_eq!(runs.len(), self.windows.len());
+        self.runs = runs;
+        self
     }
 
     /// The windows with `inputs[i]`, window i's K inputs. Errors: `U = 0`;

@@ -128,9 +128,10 @@ impl<const B: usize> SpatialCalibration<B> {
         stride: usize,
     ) -> Result<Self, BoundError> {
         let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
-        let windows = window_starts(&lengths, horizon, stride)?
-            .into_iter()
-            .map(|(r, s)| {
+        let starts = window_starts(&lengths, horizon, stride)?;
+        let windows = starts
+            .iter()
+            .map(|&(r, s)| {
                 let c = trajectories[r].as_ref();
                 let (v, w) = velocities(&c[s], &c[s + 1], dt);
                 SpatialWindow {
@@ -144,7 +145,9 @@ impl<const B: usize> SpatialCalibration<B> {
                 }
             })
             .collect();
-        Self::new(dt, windows)
+        Ok(Self {
+            set: Windows::new(dt, windows)?.with_runs(starts.iter().map(|s| s.0).collect()),
+        })
     }
 
     /// [`SpatialCalibration::from_trajectories`] for an actuated mechanism:
@@ -170,7 +173,9 @@ impl<const B: usize> SpatialCalibration<B> {
         let starts = window_starts(&lengths, horizon, stride)?;
         let window_inputs = logged_inputs(&lengths, inputs, &starts, horizon)?;
         let plain = Self::from_trajectories(trajectories, dt, horizon, stride)?;
-        Self::new_forced(dt, plain.set.windows, window_inputs)
+        Ok(Self {
+            set: plain.set.with_inputs(window_inputs)?,
+        })
     }
 
     /// The windows.
