@@ -200,13 +200,13 @@ enum Command {
 #[derive(Args, Debug, Clone)]
 struct ReadArgs {
     /// Resample uneven runs onto this time step (s) by linear interpolation.
-    #[arg(long, value_name = "DT")]
+    #[arg(long, value_name = "DT", allow_negative_numbers = true)]
     resample: Option<f64>,
     /// Do not unwrap angle coordinates.
     #[arg(long)]
     no_unwrap: bool,
     /// Accepted deviation of a time step from its run's mean step (relative).
-    #[arg(long, default_value_t = 1e-3)]
+    #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true)]
     time_tolerance: f64,
 }
 
@@ -305,7 +305,8 @@ struct FitArgs {
     /// posterior variance σ_f² − kᵀ(K + σ_n²I)⁻¹k is lost to rounding at
     /// some states, where `predict`'s variance-based bounds (RKHS, Theorem
     /// 1) refuse the run; a larger floor (e.g. 1e-8) keeps them usable.
-    #[arg(long, value_name = "VAR")]
+    // negative numbers are values to refuse with a reason, not flags
+    #[arg(long, value_name = "VAR", allow_negative_numbers = true)]
     noise_floor: Option<f64>,
     /// Change a nominal parameter, e.g. `--set links.pole.mass=1.1` (repeatable).
     #[arg(long = "set", value_name = "NAME=VALUE")]
@@ -345,7 +346,7 @@ struct PredictArgs {
     #[arg(long)]
     out: PathBuf,
     /// Failure probability δ of the bounds.
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.05, allow_negative_numbers = true)]
     delta: f64,
     /// Kind of error bound [default: conformal with `--calibration`, rkhs without].
     #[arg(long, value_enum)]
@@ -1453,6 +1454,7 @@ where
             )
         )],
     };
+    check_out_dir(&a.out)?;
     let (src, size) = learned.to_embedded_source(&opts)?;
     let sparse = learned.gp().is_sparse();
     std::fs::write(&a.out, &src).map_err(io_error(&a.out))?;

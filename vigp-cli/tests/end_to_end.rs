@@ -265,6 +265,17 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
             "{e}"
         );
     }
+    // export says so too, rather than the operating system's bare error
+    let args = [
+        "vigp",
+        "export",
+        "--model",
+        s(&model),
+        "--out",
+        "/nonexistent/model.rs",
+    ];
+    let e = vigp::cli::run(&tool, args, &mut sink).unwrap_err();
+    assert!(e.to_string().contains("/nonexistent does not exist"), "{e}");
 
     // a run of one row cannot start a prediction: skipped with a note (it
     // refused the whole file)
@@ -541,6 +552,18 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
         s(&floored),
         "--noise-floor",
         "10",
+    ])
+    .unwrap_err();
+    assert!(e.to_string().contains("--noise-floor must be"), "{e}");
+    // a negative value is a value to refuse with its reason, not a flag
+    let e = run(&[
+        "fit",
+        "--data",
+        s(&train),
+        "--out",
+        s(&floored),
+        "--noise-floor",
+        "-1",
     ])
     .unwrap_err();
     assert!(e.to_string().contains("--noise-floor must be"), "{e}");

@@ -167,7 +167,7 @@ impl core::fmt::Display for StepError {
         match self {
             Self::InvalidTimeStep { dt } => write!(
                 f,
-                "invalid time step dt = {dt} (must be finite and > 0, with dt² a normal number)"
+                "invalid time step dt = {dt:e} (must be finite and > 0, with dt² a normal number)"
             ),
             Self::InvalidOptions(why) => write!(f, "invalid step options: {why}"),
             Self::InvalidModel(why) => write!(f, "invalid model parameters: {why}"),

@@ -35,8 +35,9 @@ pub use vigp_core::linalg::solve_kkt_regularised;
 /// failing step.
 #[derive(Clone, Copy, Debug, PartialEq, thiserror::Error)]
 pub enum StepError {
-    /// Δt is not finite or not positive.
-    #[error("invalid time step dt = {dt} (must be finite and > 0)")]
+    /// Δt is not finite, not positive, or so large or small that Δt² is
+    /// not a normal f64.
+    #[error("invalid time step dt = {dt:e} (must be finite and > 0, with dt² a normal number)")]
     InvalidTimeStep {
         /// The offending Δt.
         dt: f64,

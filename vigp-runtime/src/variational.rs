@@ -437,6 +437,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// derivatives of every state with respect to z_0 and to every input,
     /// chained through the carried momentum (exact for both rules). Cost:
     /// K steps with derivatives plus O(K²) small matrix products.
+    ///
+    /// The states solve the same discrete equations as
+    /// `rollout_forced`'s to the solver's tolerance, not bit for bit: each
+    /// step here starts Newton from the previous velocity and carries the
+    /// momentum, while `rollout_forced` extrapolates its start (a
+    /// difference of ≈ 1e-13 relative was seen on a loop).
     #[cfg(feature = "alloc")]
     pub fn rollout_derivatives<const U: usize>(
         &self,

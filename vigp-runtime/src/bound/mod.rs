@@ -868,9 +868,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// input. Theorem 1's box X spans the GP inputs, the inputs' range
     /// included. `U = 0` on a model without inputs is `error_bound`.
     ///
-    /// Errors: those of `error_bound`; `U` other than the model's inputs,
-    /// or conformal calibration windows without inputs
-    /// ([`BoundError::Mismatch`]).
+    /// Errors: those of `error_bound`; `U` other than the model's inputs
+    /// (inputs for a model trained without them, or none for one trained
+    /// with them), or conformal calibration windows without inputs
+    /// ([`BoundError::Mismatch`]). A `U` other than the mechanism's number
+    /// of actuated joints does not compile (the forced step's assertion).
     pub fn error_bound_forced<const U: usize>(
         &self,
         kind: &BoundKind,
@@ -1032,7 +1034,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// inputs is `predict` with `inputs.len()` steps.
     ///
     /// Errors: those of `predict`; `U` other than the model's inputs
-    /// ([`BoundError::Mismatch`]); a NaN or ∞ input (a step error).
+    /// (inputs for a model trained without them, or none for one trained
+    /// with them: [`BoundError::Mismatch`]); a NaN or ∞ input (a step
+    /// error). A `U` other than the mechanism's number of actuated joints
+    /// does not compile.
     pub fn predict_forced<const U: usize>(
         &self,
         z0: &State<N>,
