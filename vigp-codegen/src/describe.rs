@@ -47,15 +47,16 @@ fn parameter_places(m: &Model) -> Vec<(String, TokenStream)> {
     out
 }
 
-/// `impl Parameters` for `ty`, whose parameter struct is reached as `base`
-/// (`self` or `self.sys`).
-fn parameters_impl(
-    m: &Model,
+/// `impl Parameters` for `ty` of the mechanism called `name`, whose
+/// parameter struct is reached as `base` (`self` or `self.sys`); planar and
+/// spatial mechanisms share it.
+pub(crate) fn parameters_impl(
+    name: &syn::Ident,
     ty: &TokenStream,
     base: &TokenStream,
     places: &[(String, TokenStream)],
 ) -> TokenStream {
-    let name = m.name.unraw().to_string();
+    let name = name.unraw().to_string();
     let names = places.iter().map(|(n, _)| n);
     let read = places.iter().enumerate().map(|(i, (_, p))| {
         let i = Literal::usize_unsuffixed(i);
@@ -89,14 +90,14 @@ fn parameters_impl(
 pub fn emit(m: &Model, target: Target) -> TokenStream {
     let name = &m.name;
     let places = parameter_places(m);
-    let own = parameters_impl(m, &quote!(#name), &quote!(self), &places);
+    let own = parameters_impl(&m.name, &quote!(#name), &quote!(self), &places);
     if target != Target::Std {
         return own;
     }
     let minimal_ty = format_ident!("{}Minimal", name);
     let maximal_ty = format_ident!("{}Maximal", name);
-    let minimal = parameters_impl(m, &quote!(#minimal_ty), &quote!(self.sys), &places);
-    let maximal = parameters_impl(m, &quote!(#maximal_ty), &quote!(self.sys), &places);
+    let minimal = parameters_impl(&m.name, &quote!(#minimal_ty), &quote!(self.sys), &places);
+    let maximal = parameters_impl(&m.name, &quote!(#maximal_ty), &quote!(self.sys), &places);
     let n = Literal::usize_unsuffixed(m.dof());
     let c = Literal::usize_unsuffixed(m.loop_constraints());
     let nm = Literal::usize_unsuffixed(3 * m.links.len());

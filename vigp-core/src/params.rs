@@ -84,7 +84,10 @@ pub struct ElasticJoint {
 /// `.com.x`, `.com.y`, then (for a damped mechanism) per joint
 /// `joints.<joint>.damping`, then (for a mechanism with springs) per joint
 /// `joints.<joint>.stiffness` and `joints.<joint>.rest`, in declaration
-/// order.
+/// order. A spatial mechanism (and its minimal view) lists `gravity.x`,
+/// `.y`, `.z`, then per link `mass`, `length`, the nine entries
+/// `inertia.xx`, `inertia.xy`, …, `inertia.zz` (row by row) and `com.x`,
+/// `.y`, `.z`, then the joints as above.
 ///
 /// ```
 /// use vigp_core::{Link, Parameters};

@@ -330,6 +330,20 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         m.maximal_constraints()
     );
 
+    // the parameter list of the struct and of the minimal view (saved and
+    // exported models record it); the maximal view is a `vigp::spatial`
+    // type, which the orphan rule keeps this crate from implementing for
+    let places = parameter_places(m);
+    let parameters = {
+        let own = crate::describe::parameters_impl(&m.name, &quote!(#name), &quote!(self), &places);
+        let minimal = crate::describe::parameters_impl(
+            &m.name,
+            &quote!(#minimal_ty),
+            &quote!(self.sys),
+            &places,
+        );
+        quote!(#own #minimal)
+    };
     let mechanism_impl = if target == crate::Target::Std {
         let dissipation = if dissipative {
             quote! {
@@ -538,5 +552,53 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         }
 
         #mechanism_impl
+        #parameters
     }
+}
+
+/// `(name, place)` of every parameter of a spatial mechanism, in the order
+/// documented on `vigp_core::Parameters`.
+fn parameter_places(m: &Model) -> Vec<(String, TokenStream)> {
+    const AXES: [&str; 3] = ["x", "y", "z"];
+    let mut out: Vec<(String, TokenStream)> = (0..3)
+        .map(|i| {
+            let k = Literal::usize_unsuffixed(i);
+            (format!("gravity.{}", AXES[i]), quote!(gravity[#k]))
+        })
+        .collect();
+    for l in &m.links {
+        let (ln, s) = (&l.name, l.name.unraw().to_string());
+        out.push((format!("links.{s}.mass"), quote!(links.#ln.mass)));
+        out.push((format!("links.{s}.length"), quote!(links.#ln.length)));
+        for (r, row) in AXES.iter().enumerate() {
+            for (c, col) in AXES.iter().enumerate() {
+                let (kr, kc) = (Literal::usize_unsuffixed(r), Literal::usize_unsuffixed(c));
+                out.push((
+                    format!("links.{s}.inertia.{row}{col}"),
+                    quote!(links.#ln.inertia[#kr][#kc]),
+                ));
+            }
+        }
+        for (i, axis) in AXES.iter().enumerate() {
+            let k = Literal::usize_unsuffixed(i);
+            out.push((format!("links.{s}.com.{axis}"), quote!(links.#ln.com[#k])));
+        }
+    }
+    if m.dissipative() {
+        for j in &m.joints {
+            let (jn, s) = (&j.name, j.name.unraw().to_string());
+            out.push((format!("joints.{s}.damping"), quote!(joints.#jn.damping)));
+        }
+    }
+    if m.elastic() {
+        for j in &m.joints {
+            let (jn, s) = (&j.name, j.name.unraw().to_string());
+            out.push((
+                format!("joints.{s}.stiffness"),
+                quote!(joints.#jn.stiffness),
+            ));
+            out.push((format!("joints.{s}.rest"), quote!(joints.#jn.rest)));
+        }
+    }
+    out
 }
