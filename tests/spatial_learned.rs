@@ -682,13 +682,8 @@ fn a_spatial_conformal_bound_covers_exchangeable_windows() {
         let cases: Vec<_> = tests
             .iter()
             .map(|c| {
-                let (v, w) = start_velocities(&c[0], &c[1], dt);
-                let z0 = SpatialState {
-                    x: c[0].0,
-                    q: c[0].1,
-                    v,
-                    w,
-                };
+                // the start as the data give it (velocities from samples 0, 1)
+                let z0 = transitions(&c[..3], dt)[0].z;
                 (
                     learned.predict_bounded(&z0, horizon, &bound).unwrap(),
                     c.clone(),
@@ -716,17 +711,6 @@ fn a_spatial_conformal_bound_covers_exchangeable_windows() {
         }
         assert!(c.tightness < 20.0, "{c:?}");
     }
-}
-
-fn start_velocities(
-    a: &Configuration<2>,
-    b: &Configuration<2>,
-    dt: f64,
-) -> ([nalgebra::Vector3<f64>; 2], [nalgebra::Vector3<f64>; 2]) {
-    (
-        std::array::from_fn(|i| (b.0[i] - a.0[i]) / dt),
-        std::array::from_fn(|i| vigp::spatial::so3::log(&(a.1[i].inverse() * b.1[i])) / dt),
-    )
 }
 
 /// The spatial conformal bound under inputs: the driven arm's forced
@@ -800,13 +784,8 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
             .iter()
             .zip(&test_inputs)
             .map(|(c, u)| {
-                let (v, w) = start_velocities(&c[0], &c[1], dt);
-                let z0 = SpatialState {
-                    x: c[0].0,
-                    q: c[0].1,
-                    v,
-                    w,
-                };
+                // the start as the data give it (velocities from samples 0, 1)
+                let z0 = transitions(&c[..3], dt)[0].z;
                 let us: Vec<SVector<f64, 2>> = if zero {
                     vec![SVector::zeros(); horizon]
                 } else {

@@ -28,15 +28,32 @@ fn parameter_places(m: &Model) -> Vec<(String, TokenStream)> {
         out.push((format!("links.{s}.com.x"), quote!(links.#ln.com[0])));
         out.push((format!("links.{s}.com.y"), quote!(links.#ln.com[1])));
     }
-    if m.dissipative() {
-        for j in &m.joints {
-            let (jn, s) = (&j.name, j.name.unraw().to_string());
+    out.extend(joint_places(
+        m.joints.iter().map(|j| &j.name),
+        m.dissipative(),
+        m.elastic(),
+    ));
+    out
+}
+
+/// The joints' `(name, place)` pairs, planar and spatial alike: per joint
+/// `damping` (a damped mechanism), then per joint `stiffness` and `rest`
+/// (a mechanism with springs), in declaration order.
+pub(crate) fn joint_places<'a>(
+    joints: impl Iterator<Item = &'a syn::Ident> + Clone,
+    dissipative: bool,
+    elastic: bool,
+) -> Vec<(String, TokenStream)> {
+    let mut out = Vec::new();
+    if dissipative {
+        for jn in joints.clone() {
+            let s = jn.unraw().to_string();
             out.push((format!("joints.{s}.damping"), quote!(joints.#jn.damping)));
         }
     }
-    if m.elastic() {
-        for j in &m.joints {
-            let (jn, s) = (&j.name, j.name.unraw().to_string());
+    if elastic {
+        for jn in joints {
+            let s = jn.unraw().to_string();
             out.push((
                 format!("joints.{s}.stiffness"),
                 quote!(joints.#jn.stiffness),

@@ -584,21 +584,10 @@ fn parameter_places(m: &Model) -> Vec<(String, TokenStream)> {
             out.push((format!("links.{s}.com.{axis}"), quote!(links.#ln.com[#k])));
         }
     }
-    if m.dissipative() {
-        for j in &m.joints {
-            let (jn, s) = (&j.name, j.name.unraw().to_string());
-            out.push((format!("joints.{s}.damping"), quote!(joints.#jn.damping)));
-        }
-    }
-    if m.elastic() {
-        for j in &m.joints {
-            let (jn, s) = (&j.name, j.name.unraw().to_string());
-            out.push((
-                format!("joints.{s}.stiffness"),
-                quote!(joints.#jn.stiffness),
-            ));
-            out.push((format!("joints.{s}.rest"), quote!(joints.#jn.rest)));
-        }
-    }
+    out.extend(crate::describe::joint_places(
+        m.joints.iter().map(|j| &j.name),
+        m.dissipative(),
+        m.elastic(),
+    ));
     out
 }

@@ -15,7 +15,7 @@
 //! P(error ≤ q̂·u) ≥ 1 − δ (marginally over both), and ≤ 1 − δ + 1/(n+1) when
 //! the scores have no ties.
 
-use super::windows::{Steps, Windows, logged_inputs, window_starts};
+use super::windows::{Steps, Windows};
 use super::{BoundError, ConformalSettings, Score, Tube, check_delta};
 use crate::learned::{Learned, Transition};
 use crate::mechanism::{Mechanism, State};
@@ -58,6 +58,22 @@ impl<const N: usize> Steps for Window<N> {
 
     fn is_finite(&self) -> bool {
         self.start.is_finite() && self.positions.iter().flatten().all(|x| x.is_finite())
+    }
+}
+
+/// Sample counts of trajectories.
+pub(crate) fn lengths<T: AsRef<[E]>, E>(trajectories: &[T]) -> Vec<usize> {
+    trajectories.iter().map(|t| t.as_ref().len()).collect()
+}
+
+/// The window of `horizon` steps of positions `p` from sample `s`.
+fn window<const N: usize>(p: &[SVector<f64, N>], s: usize, horizon: usize, dt: f64) -> Window<N> {
+    Window {
+        start: State {
+            q: p[s],
+            v: (p[s + 1] - p[s]) / dt,
+        },
+        positions: p[s + 1..=s + horizon].to_vec(),
     }
 }
 
@@ -128,23 +144,10 @@ impl<const N: usize> Calibration<N> {
         horizon: usize,
         stride: usize,
     ) -> Result<Self, BoundError> {
-        let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
-        let starts = window_starts(&lengths, horizon, stride)?;
-        let windows = starts
-            .iter()
-            .map(|&(r, s)| {
-                let p = trajectories[r].as_ref();
-                Window {
-                    start: State {
-                        q: p[s],
-                        v: (p[s + 1] - p[s]) / dt,
-                    },
-                    positions: p[s + 1..=s + horizon].to_vec(),
-                }
-            })
-            .collect();
         Ok(Self {
-            set: Windows::new(dt, windows)?.with_runs(starts.iter().map(|s| s.0).collect()),
+            set: Windows::cut(&lengths(trajectories), dt, horizon, stride, |r, s| {
+                window(trajectories[r].as_ref(), s, horizon, dt)
+            })?,
         })
     }
 
@@ -167,12 +170,15 @@ impl<const N: usize> Calibration<N> {
         T: AsRef<[SVector<f64, N>]>,
         I: AsRef<[SVector<f64, U>]>,
     {
-        let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
-        let starts = window_starts(&lengths, horizon, stride)?;
-        let window_inputs = logged_inputs(&lengths, inputs, &starts, horizon)?;
-        let plain = Self::from_trajectories(trajectories, dt, horizon, stride)?;
         Ok(Self {
-            set: plain.set.with_inputs(window_inputs)?,
+            set: Windows::cut_forced(
+                &lengths(trajectories),
+                inputs,
+                dt,
+                horizon,
+                stride,
+                |r, s| window(trajectories[r].as_ref(), s, horizon, dt),
+            )?,
         })
     }
 

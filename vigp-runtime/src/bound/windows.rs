@@ -26,7 +26,7 @@ pub(crate) struct Windows<W> {
     pub input_count: usize,
     /// The run (trajectory) each window was cut from: windows of one run
     /// are not independent of each other (each window its own run unless
-    /// cut by [`window_starts`]).
+    /// cut by [`Windows::cut`]).
     pub runs: Vec<usize>,
 }
 
@@ -68,13 +68,6 @@ impl<W: Steps> Windows<W> {
             inputs: Vec::new(),
             input_count: 0,
         })
-    }
-
-    /// The windows, window i cut from run `runs[i]`.
-    pub fn with_runs(mut self, runs: Vec<usize>) -> Self {
-        debug_assert_eq!(runs.len(), self.windows.len());
-        self.runs = runs;
-        self
     }
 
     /// The windows with `inputs[i]`, window i's K inputs. Errors: `U = 0`;
@@ -138,12 +131,53 @@ impl<W: Steps> Windows<W> {
     pub fn horizon(&self) -> usize {
         self.windows.first().map_or(0, W::steps)
     }
+
+    /// Windows of `horizon` steps cut from trajectories of `lengths`
+    /// samples at every `stride`-th sample, `window(r, s)` the one of
+    /// trajectory r from sample s; each remembers its run. Errors: those of
+    /// [`window_starts`] and [`Windows::new`].
+    pub fn cut(
+        lengths: &[usize],
+        dt: f64,
+        horizon: usize,
+        stride: usize,
+        window: impl Fn(usize, usize) -> W,
+    ) -> Result<Self, BoundError> {
+        let starts = window_starts(lengths, horizon, stride)?;
+        Self::from_starts(&starts, dt, window)
+    }
+
+    /// [`Windows::cut`] with the inputs logged with every sample
+    /// ([`logged_inputs`]).
+    pub fn cut_forced<I: AsRef<[SVector<f64, U>]>, const U: usize>(
+        lengths: &[usize],
+        inputs: &[I],
+        dt: f64,
+        horizon: usize,
+        stride: usize,
+        window: impl Fn(usize, usize) -> W,
+    ) -> Result<Self, BoundError> {
+        let starts = window_starts(lengths, horizon, stride)?;
+        let window_inputs = logged_inputs(lengths, inputs, &starts, horizon)?;
+        Self::from_starts(&starts, dt, window)?.with_inputs(window_inputs)
+    }
+
+    fn from_starts(
+        starts: &[(usize, usize)],
+        dt: f64,
+        window: impl Fn(usize, usize) -> W,
+    ) -> Result<Self, BoundError> {
+        let windows = starts.iter().map(|&(r, s)| window(r, s)).collect();
+        let mut set = Self::new(dt, windows)?;
+        set.runs = starts.iter().map(|&(r, _)| r).collect();
+        Ok(set)
+    }
 }
 
 /// (trajectory, first sample) of every window of `horizon` steps that
 /// starts at a `stride`-th sample of trajectories of `lengths` samples.
 /// Errors: `horizon` < 2, `stride` = 0, no window at all.
-pub(crate) fn window_starts(
+fn window_starts(
     lengths: &[usize],
     horizon: usize,
     stride: usize,
@@ -180,7 +214,7 @@ pub(crate) fn window_starts(
 /// it (the data files' convention): the step from the window's state at
 /// sample s + k is driven by sample s + k + 1's input. Errors: not one
 /// input sequence per trajectory, or not one input per sample.
-pub(crate) fn logged_inputs<I: AsRef<[SVector<f64, U>]>, const U: usize>(
+fn logged_inputs<I: AsRef<[SVector<f64, U>]>, const U: usize>(
     lengths: &[usize],
     inputs: &[I],
     starts: &[(usize, usize)],

@@ -29,14 +29,15 @@
 //! (O(N²) per output and step, N training samples); a bounded prediction
 //! is one such prediction.
 
-use super::learned::{Configuration, LearnSpatialError, LearnedSpatial, Trace};
-use super::{Spatial, SpatialState, so3};
+use super::learned::{Configuration, LearnSpatialError, LearnedSpatial, Trace, velocities};
+use super::{Spatial, SpatialState};
+use crate::bound::conformal::lengths;
 use crate::bound::conformal::{
     Traced, calibrate_traced, position_scales, quantile_index, score_scale,
 };
-use crate::bound::windows::{Steps, Windows, logged_inputs, window_starts};
+use crate::bound::windows::{Steps, Windows};
 use crate::bound::{BoundError, ConformalSettings, Score, Tube, check_delta};
-use nalgebra::{SVector, Vector3};
+use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
 
 /// One held-out case: a start state and the true configurations after it.
@@ -77,17 +78,24 @@ impl<const B: usize> Steps for SpatialWindow<B> {
     }
 }
 
-/// The discrete velocities between two configurations (the data's
-/// convention, as [`super::learned::transitions`]).
-fn velocities<const B: usize>(
-    a: &Configuration<B>,
-    b: &Configuration<B>,
+/// The window of `horizon` steps of configurations `c` from sample `s`,
+/// its start velocities from the first two samples.
+fn window<const B: usize>(
+    c: &[Configuration<B>],
+    s: usize,
+    horizon: usize,
     dt: f64,
-) -> ([Vector3<f64>; B], [Vector3<f64>; B]) {
-    (
-        core::array::from_fn(|i| (b.0[i] - a.0[i]) / dt),
-        core::array::from_fn(|i| so3::log(&(a.1[i].inverse() * b.1[i])) / dt),
-    )
+) -> SpatialWindow<B> {
+    let (v, w) = velocities(&c[s], &c[s + 1], dt);
+    SpatialWindow {
+        start: SpatialState {
+            x: c[s].0,
+            q: c[s].1,
+            v,
+            w,
+        },
+        configurations: c[s + 1..=s + horizon].to_vec(),
+    }
 }
 
 impl<const B: usize> SpatialCalibration<B> {
@@ -127,26 +135,10 @@ impl<const B: usize> SpatialCalibration<B> {
         horizon: usize,
         stride: usize,
     ) -> Result<Self, BoundError> {
-        let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
-        let starts = window_starts(&lengths, horizon, stride)?;
-        let windows = starts
-            .iter()
-            .map(|&(r, s)| {
-                let c = trajectories[r].as_ref();
-                let (v, w) = velocities(&c[s], &c[s + 1], dt);
-                SpatialWindow {
-                    start: SpatialState {
-                        x: c[s].0,
-                        q: c[s].1,
-                        v,
-                        w,
-                    },
-                    configurations: c[s + 1..=s + horizon].to_vec(),
-                }
-            })
-            .collect();
         Ok(Self {
-            set: Windows::new(dt, windows)?.with_runs(starts.iter().map(|s| s.0).collect()),
+            set: Windows::cut(&lengths(trajectories), dt, horizon, stride, |r, s| {
+                window(trajectories[r].as_ref(), s, horizon, dt)
+            })?,
         })
     }
 
@@ -169,12 +161,15 @@ impl<const B: usize> SpatialCalibration<B> {
         T: AsRef<[Configuration<B>]>,
         I: AsRef<[SVector<f64, U>]>,
     {
-        let lengths: Vec<usize> = trajectories.iter().map(|t| t.as_ref().len()).collect();
-        let starts = window_starts(&lengths, horizon, stride)?;
-        let window_inputs = logged_inputs(&lengths, inputs, &starts, horizon)?;
-        let plain = Self::from_trajectories(trajectories, dt, horizon, stride)?;
         Ok(Self {
-            set: plain.set.with_inputs(window_inputs)?,
+            set: Windows::cut_forced(
+                &lengths(trajectories),
+                inputs,
+                dt,
+                horizon,
+                stride,
+                |r, s| window(trajectories[r].as_ref(), s, horizon, dt),
+            )?,
         })
     }
 
@@ -309,7 +304,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         calibration: &SpatialCalibration<B>,
         settings: &ConformalSettings,
     ) -> Result<SpatialConformal, LearnSpatialError> {
-        self.check_bound_inputs(0)?;
+        self.check_inputs(0)?;
         let mut ws = self.workspace();
         self.calibrate(calibration, settings, 0, |_, w| {
             self.trace(&w.start, w.configurations.len(), &mut ws)
@@ -327,7 +322,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         calibration: &SpatialCalibration<B>,
         settings: &ConformalSettings,
     ) -> Result<SpatialConformal, LearnSpatialError> {
-        self.check_bound_inputs(U)?;
+        self.check_inputs(U)?;
         if calibration.input_count() != U {
             return Err(BoundError::Mismatch("calibration windows carry other inputs").into());
         }
@@ -371,24 +366,13 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         Ok(bounded(trace, bound, self.stepper().dt()))
     }
 
-    fn check_bound_inputs(&self, given: usize) -> Result<(), LearnSpatialError> {
-        if given == self.inputs() {
-            Ok(())
-        } else {
-            Err(LearnSpatialError::Inputs {
-                trained: self.inputs(),
-                given,
-            })
-        }
-    }
-
     fn check_bound(
         &self,
         bound: &SpatialConformal,
         inputs: usize,
         steps: usize,
     ) -> Result<(), LearnSpatialError> {
-        self.check_bound_inputs(inputs)?;
+        self.check_inputs(inputs)?;
         if bound.inputs != inputs {
             return Err(BoundError::Mismatch(
                 "the bound was calibrated under another number of inputs",
@@ -424,7 +408,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         if !same_dt(cal.dt(), dt) {
             return Err(BoundError::Mismatch("calibration dt differs from the model's").into());
         }
-        let noise_std = self.noise_std();
+        let noise_std = self.gp().noise_std();
         let (noise_v, noise_w) = split::<B>(&noise_std);
         let k_max = cal.horizon();
         let mut translation = Vec::with_capacity(cal.len());

@@ -115,18 +115,11 @@ pub fn transitions<const B: usize>(
     configurations: &[Configuration<B>],
     dt: f64,
 ) -> Vec<SpatialTransition<B>> {
-    let vel =
-        |a: &Configuration<B>, b: &Configuration<B>| -> ([Vector3<f64>; B], [Vector3<f64>; B]) {
-            (
-                std::array::from_fn(|i| (b.0[i] - a.0[i]) / dt),
-                std::array::from_fn(|i| so3::log(&(a.1[i].inverse() * b.1[i])) / dt),
-            )
-        };
     configurations
         .windows(3)
         .map(|w| {
-            let (v, ww) = vel(&w[0], &w[1]);
-            let (v_next, w_next) = vel(&w[1], &w[2]);
+            let (v, ww) = velocities(&w[0], &w[1], dt);
+            let (v_next, w_next) = velocities(&w[1], &w[2], dt);
             SpatialTransition {
                 z: SpatialState {
                     x: w[0].0,
@@ -139,6 +132,19 @@ pub fn transitions<const B: usize>(
             }
         })
         .collect()
+}
+
+/// The discrete velocities from configuration `a` to `b` a step Δt later:
+/// (x_b − x_a)/Δt and log(q_a⁻¹ q_b)/Δt per link.
+pub(crate) fn velocities<const B: usize>(
+    a: &Configuration<B>,
+    b: &Configuration<B>,
+    dt: f64,
+) -> ([Vector3<f64>; B], [Vector3<f64>; B]) {
+    (
+        std::array::from_fn(|i| (b.0[i] - a.0[i]) / dt),
+        std::array::from_fn(|i| so3::log(&(a.1[i].inverse() * b.1[i])) / dt),
+    )
 }
 
 /// One training pair of an actuated spatial mechanism: a discrete state,
@@ -412,7 +418,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         })
     }
 
-    fn check_inputs(&self, given: usize) -> Result<(), LearnSpatialError> {
+    /// `given` inputs must be the training data's.
+    pub(crate) fn check_inputs(&self, given: usize) -> Result<(), LearnSpatialError> {
         if given == self.inputs {
             Ok(())
         } else {
@@ -530,12 +537,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             std_devs.push(var.map(|v| v.max(0.0).sqrt()));
         }
         Ok(Trace { states, std_devs })
-    }
-
-    /// Per output √(σ_n² + jitter) in velocity units (the noise part of the
-    /// predictive standard deviation).
-    pub(crate) fn noise_std(&self) -> Vec<f64> {
-        self.gp.noise_std()
     }
 
     /// One learned step: configuration k+1 exactly, velocities predicted
