@@ -5,6 +5,9 @@
 
 use nalgebra::SVector;
 use vigp::bound::{BoundError, ConformalSettings, Score, Tube};
+use vigp::embedded::gp::ExportedGp;
+use vigp::embedded::learned::{Encoding as CoreEncoding, LearnedModel, Prior as CorePrior};
+use vigp::embedded::{LearnedStepper, StepOptions};
 use vigp::gp::TrainOptions;
 use vigp::learned::{Encoding, Learned, Prior, transitions as minimal_transitions};
 use vigp::prelude::*;
@@ -15,7 +18,7 @@ use vigp::spatial::learned::{
     forced_transitions, transitions,
 };
 use vigp::spatial::{LieStepper, SpatialError, SpatialIntegrator, SpatialState};
-use vigp::systems::spatial::{Furuta, SphericalPendulum};
+use vigp::systems::spatial::{Furuta, SphericalPendulum, SphericalPendulumMinimal};
 
 fn options() -> TrainOptions {
     TrainOptions {
@@ -151,7 +154,9 @@ fn rotation_matrix_inputs_are_sign_invariant_quaternion_inputs_are_not() {
 /// spatial minimal view: the spherical pendulum's coordinates are a
 /// quaternion, the unit norm is its constraint, and the projection keeps
 /// |‖u‖² − 1| at solver tolerance every learned step while the GP corrects
-/// the unmodelled damping (learned error at least 5× below nominal).
+/// the unmodelled damping (learned error at least 5× below nominal). The
+/// model round-trips through JSON, exports, and the no_std
+/// `LearnedStepper` on the minimal view follows the std rollout.
 #[test]
 fn learned_minimal_view_projects_onto_the_unit_quaternion() {
     let dt = 0.01;
@@ -225,6 +230,67 @@ fn learned_minimal_view_projects_onto_the_unit_quaternion() {
     // and exports for firmware
     let (source, size) = learned.to_embedded_source(&Default::default()).unwrap();
     assert!(source.contains("\"SphericalPendulum\"") && size.numbers > 0);
+
+    // and steps on the target: the no_std `LearnedStepper` on the minimal
+    // view, fed the exported arrays and the file's parameter list (what the
+    // generated statics hold), follows the std learned rollout to 1e-12
+    // (the same Newton solves to 1e-12 and the same GP mean; the embedded
+    // side's libm may differ in the last bit), keeps the quaternion on the
+    // unit sphere and allocates nothing
+    let arrays: Vec<_> = (0..4)
+        .map(|j| learned.gp().export_output(j, false).unwrap())
+        .collect();
+    let gps: [ExportedGp<'_, 8>; 4] = core::array::from_fn(|j| arrays[j].as_exported().unwrap());
+    let parameters: Vec<(&str, f64)> =
+        <SphericalPendulum as vigp::embedded::Parameters>::PARAMETER_NAMES
+            .iter()
+            .enumerate()
+            .map(|(i, n)| {
+                (
+                    *n,
+                    vigp::embedded::Parameters::parameter(learned.model(), i).unwrap(),
+                )
+            })
+            .collect();
+    let lm = LearnedModel {
+        mechanism: "SphericalPendulum",
+        coordinates: <SphericalPendulumMinimal as Mechanism<4, 1>>::COORDINATES,
+        inputs: &[],
+        parameters: &parameters,
+        dt,
+        encoding: CoreEncoding::Raw,
+        prior: CorePrior::Nominal,
+        project: learned.projects(),
+        options: StepOptions {
+            tolerance: 1e-12,
+            max_iterations: 100,
+            min_step: 1.0 / 256.0,
+            stall_tolerance: 1e-10,
+        },
+        gps: &gps,
+    };
+    assert!(lm.project);
+    // the stepper takes the file's parameters, not those of `other`
+    let stepper = LearnedStepper::new(other.minimal(), &lm).unwrap();
+    let mut out = [zt; 30];
+    let info = allocation_counter::measure(|| {
+        stepper.rollout_into(&zt, &mut out).unwrap();
+    });
+    assert_eq!(info.count_total, 0, "the embedded learned step allocated");
+    let diff = learned_run[1..]
+        .iter()
+        .zip(&out)
+        .map(|(a, b)| (a.q - b.q).amax().max((a.v - b.v).amax()))
+        .fold(0.0, f64::max);
+    let worst_unit = out
+        .iter()
+        .map(|z| ((z.q + z.v * dt).norm_squared() - 1.0).abs())
+        .fold(0.0, f64::max);
+    println!(
+        "spherical pendulum, embedded LearnedStepper: max |std − embedded| over {horizon} steps {diff:.1e}, max |‖u‖² − 1| {worst_unit:.1e}"
+    );
+    assert!(diff <= 1e-12, "{diff:e}");
+    assert!(worst_unit <= 1e-10, "{worst_unit:e}");
 }
 
 /// A learned spatial step with a caller-owned workspace allocates nothing
