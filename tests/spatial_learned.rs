@@ -696,6 +696,16 @@ fn coverage(
     }
 }
 
+/// Largest share of fresh starts drawn like the calibration starts that
+/// the region test may flag in these tests: the distance test flags about
+/// 1 %, the box test at most 2d/(n+1) (a new start is the smallest or
+/// largest of n + 1 exchangeable values in a coordinate with probability
+/// 2/(n+1)), the scale test 1/(n+1); with d ≤ 38 GP inputs and n = 1000
+/// that sums to ≤ 0.087, and 3 standard deviations of the share over 1000
+/// test starts add 0.027. (Measured: 0.023 for the Furuta pendulum, 0.048
+/// for the driven arm.)
+const REGION_RATE: f64 = 0.12;
+
 /// The spatial conformal bound on windows drawn like its calibration
 /// windows: the Furuta pendulum with unmodelled friction (the first test's
 /// model and data), 1000 calibration windows of 10 steps from fresh random
@@ -707,6 +717,9 @@ fn coverage(
 /// 0.01).
 /// The bound is not vacuous: its median ratio to the error at k = 10 is
 /// below 20. A bound calibrated with `Score::Absolute` covers as well.
+/// The region test flags few of the test starts ([`REGION_RATE`]) and
+/// every start spinning 2–10× faster than any calibration start or
+/// hanging below the base.
 #[test]
 fn a_spatial_conformal_bound_covers_exchangeable_windows() {
     let dt = 0.01;
@@ -776,6 +789,52 @@ fn a_spatial_conformal_bound_covers_exchangeable_windows() {
             assert!(v >= 0.93, "{c:?}");
         }
         assert!(c.tightness < 20.0, "{c:?}");
+        if score == Score::Auto {
+            // the region test: starts drawn like the calibration starts are
+            // rarely flagged; starts spinning 5× faster than any
+            // calibration start, or hanging below the base (the pendulum
+            // angle outside the calibration range), are
+            let flagged = |starts: &[SpatialState<2>]| {
+                starts
+                    .iter()
+                    .filter(|z0| learned.predict_bounded(z0, horizon, &bound).unwrap()[0].outside)
+                    .count() as f64
+                    / starts.len() as f64
+            };
+            let like: Vec<_> = tests
+                .iter()
+                .map(|c| transitions(&c[..3], dt)[0].z)
+                .collect();
+            let m = Furuta::default().minimal();
+            let mut unlike = |lo: f64, hi: f64, rate: f64| -> Vec<SpatialState<2>> {
+                (0..200)
+                    .map(|_| {
+                        let q = SVector::from([
+                            rng.uniform(0.0, std::f64::consts::TAU),
+                            rng.uniform(lo, hi),
+                        ]);
+                        // |base rate| in [rate, 5·rate]
+                        let sign = if rng.uniform(-1.0, 1.0) < 0.0 {
+                            -1.0
+                        } else {
+                            1.0
+                        };
+                        let v = SVector::from([
+                            sign * rng.uniform(rate, 5.0 * rate),
+                            rng.uniform(-2.0, 2.0),
+                        ]);
+                        m.to_maximal(&consistent_state(&m, &q, &v, dt).unwrap(), dt)
+                    })
+                    .collect()
+            };
+            let (fast, hanging) = (unlike(1.8, 4.4, 8.0), unlike(-0.5, 0.5, 0.0));
+            let (f_like, f_fast, f_hanging) = (flagged(&like), flagged(&fast), flagged(&hanging));
+            println!(
+                "furuta spatial region test: flagged starts drawn like the calibration {f_like:.3}, spinning 2–10× faster {f_fast:.3}, hanging {f_hanging:.3}"
+            );
+            assert!(f_like <= REGION_RATE, "{f_like}");
+            assert!(f_fast == 1.0 && f_hanging == 1.0, "{f_fast} {f_hanging}");
+        }
     }
 }
 
@@ -886,6 +945,30 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
     }
     assert!(c.tightness < 20.0, "{c:?}");
     assert!(z.translation <= 0.5 && z.rotation <= 0.5, "{z:?}");
+    // the region test includes the first step's input: few test starts
+    // under their own inputs are flagged, every one whose first torque on
+    // the first motor exceeds the calibration range (|u₀| ≤ 3 N·m)
+    let flagged = |beyond: bool| {
+        test_runs
+            .iter()
+            .zip(&test_inputs)
+            .filter(|(c, u)| {
+                let z0 = transitions(&c[..3], dt)[0].z;
+                let mut us = u[1..].to_vec();
+                if beyond {
+                    us[0][0] = us[0][0].signum() * (3.0 + us[0][0].abs());
+                }
+                learned.predict_bounded_forced(&z0, &us, &bound).unwrap()[0].outside
+            })
+            .count() as f64
+            / test_runs.len() as f64
+    };
+    let (f_like, f_strong) = (flagged(false), flagged(true));
+    println!(
+        "driven arm spatial region test: flagged starts under their inputs {f_like:.3}, first torque beyond the calibration range {f_strong:.3}"
+    );
+    assert!(f_like <= REGION_RATE, "{f_like}");
+    assert!(f_strong == 1.0, "{f_strong}");
 }
 
 /// Misuse of the spatial bound is a typed error: a bound calibrated

@@ -245,6 +245,35 @@ pub struct ConformalParts {
     /// q̂_k of the k-step position scores, k = 1…K (per step), or one value
     /// repeated K times (simultaneous).
     pub position_quantiles: Vec<f64>,
+    /// Where the calibration starts lie: a state outside it is unlike
+    /// every calibration case ([`super::Fallback`]). Saved as the five
+    /// fields of [`Region`] beside the others.
+    #[serde(flatten)]
+    pub region: Region,
+    /// Number of inputs the calibration windows were predicted under (0:
+    /// unforced): the bound covers predictions under that many inputs
+    /// only.
+    #[serde(default)]
+    pub inputs: usize,
+}
+
+/// The calibrated region of a conformal bound: where its calibration
+/// starts lie, in the GP's inputs. A state is *outside* when its GP input
+/// lies outside the box of the starts' inputs, or farther (in the GP's
+/// normalised inputs) from every start than 99 % of the starts are from
+/// their nearest start of another run, or when its predictive standard
+/// deviation exceeds every start's. Such a case is unlike the calibration
+/// cases, and the conformal guarantee does not apply to it. A heuristic
+/// detector: about 1 % of new starts drawn like the calibration starts
+/// are flagged by the distance test, and the box test flags about 2d/(n+1)
+/// of them (d inputs, n starts); states late in a prediction, unlike any
+/// start, are flagged more often.
+///
+/// Shared by the planar ([`ConformalParts`]) and the spatial
+/// (`vigp::spatial::bound::SpatialConformal`) conformal bounds. Cost of a
+/// test: O(n·d).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Region {
     /// The largest predictive standard deviation ũ at a calibration start
     /// (a start beyond it is unlike every calibration case).
     pub max_scale: f64,
@@ -260,18 +289,13 @@ pub struct ConformalParts {
     /// start is outside: the 99 % conformal quantile of the calibration
     /// starts' leave-one-out nearest-neighbour distances.
     pub distance_threshold: f64,
-    /// Number of inputs the calibration windows were predicted under (0:
-    /// unforced): the bound covers predictions under that many inputs
-    /// only.
-    #[serde(default)]
-    pub inputs: usize,
 }
 
 /// Level of the nearest-neighbour distance threshold: about 1 % of cases
 /// drawn like the calibration starts are flagged.
 const DISTANCE_LEVEL: f64 = 0.01;
 
-impl ConformalParts {
+impl Region {
     /// Distance (normalised units) from `xn` to the nearest calibration
     /// start, skipping the indices `skip` is true of.
     fn nearest(&self, xn: &[f64], skip: impl Fn(usize) -> bool) -> f64 {
@@ -294,9 +318,90 @@ impl ConformalParts {
     }
 
     /// Whether the normalised GP input `xn` is farther from every
-    /// calibration start than [`ConformalParts::distance_threshold`].
-    pub(crate) fn far(&self, xn: &[f64]) -> bool {
+    /// calibration start than [`Region::distance_threshold`].
+    fn far(&self, xn: &[f64]) -> bool {
         !self.starts_normalised.is_empty() && self.nearest(xn, |_| false) > self.distance_threshold
+    }
+
+    /// Whether a state with GP input `input` (`input_n` in the GP's
+    /// normalised units) and predictive standard deviation `scale` lies
+    /// outside the region (see [`Region`]); `scale = 0` skips the scale
+    /// test. The inputs must have the calibration's dimension d.
+    pub fn outside(&self, input: &[f64], input_n: &[f64], scale: f64) -> bool {
+        scale > self.max_scale
+            || input
+                .iter()
+                .zip(self.input_lower.iter().zip(&self.input_upper))
+                .any(|(x, (lo, hi))| x < lo || x > hi)
+            || self.far(input_n)
+    }
+}
+
+/// Collects the calibration starts of a [`Region`]: their GP inputs (in
+/// order), and the predictive scales of those whose prediction succeeded.
+pub(crate) struct RegionBuilder {
+    region: Region,
+}
+
+impl RegionBuilder {
+    /// An empty region for d GP inputs.
+    pub(crate) fn new(d: usize) -> Self {
+        Self {
+            region: Region {
+                max_scale: 0.0,
+                input_lower: vec![f64::INFINITY; d],
+                input_upper: vec![f64::NEG_INFINITY; d],
+                starts_normalised: Vec::new(),
+                distance_threshold: f64::INFINITY,
+            },
+        }
+    }
+
+    /// One more start: its GP input and the same normalised.
+    pub(crate) fn start(&mut self, input: &[f64], input_n: &[f64]) {
+        let r = &mut self.region;
+        for (j, x) in input.iter().enumerate() {
+            r.input_lower[j] = r.input_lower[j].min(*x);
+            r.input_upper[j] = r.input_upper[j].max(*x);
+        }
+        r.starts_normalised.extend_from_slice(input_n);
+    }
+
+    /// The predictive scale at a start whose prediction succeeded.
+    pub(crate) fn scale(&mut self, scale: f64) {
+        self.region.max_scale = self.region.max_scale.max(scale);
+    }
+
+    /// The region, with its distance threshold from the starts'
+    /// leave-one-out nearest-neighbour distances (O(n²·d)): with n ≥ 99
+    /// their 99 % quantile, else their maximum. `runs[i]` is the run start
+    /// i was cut from. A new start comes from a new run, so each start's
+    /// distance is to the starts of other runs: overlapping windows of one
+    /// run (stride 1) lie next to each other, and their distances would set
+    /// a threshold that flags nearly every new start. With a single run,
+    /// to the other starts.
+    pub(crate) fn finish(self, runs: &[usize]) -> Region {
+        let mut region = self.region;
+        let d = region.input_lower.len();
+        let n = region.starts_normalised.len().checked_div(d).unwrap_or(0);
+        let one_run = runs.iter().all(|r| *r == runs[0]);
+        let mut nn: Vec<f64> = (0..n)
+            .map(|i| {
+                let xi = &region.starts_normalised[i * d..(i + 1) * d];
+                if one_run {
+                    region.nearest(xi, |j| j == i)
+                } else {
+                    region.nearest(xi, |j| runs[j] == runs[i])
+                }
+            })
+            .collect();
+        nn.sort_by(f64::total_cmp);
+        let level = quantile_index(n, DISTANCE_LEVEL).unwrap_or(n);
+        region.distance_threshold = nn
+            .get(level.saturating_sub(1))
+            .copied()
+            .unwrap_or(f64::INFINITY);
+        region
     }
 }
 
@@ -540,12 +645,10 @@ pub(super) fn calibrate<
     let dt = Integrator::dt(learned);
     let k_max = cal.horizon();
     let mut ws = learned.workspace();
-    let mut max_scale = 0.0f64;
     let d = learned.gp().input_dim();
     let mut input = vec![0.0; d];
-    let mut lower = vec![f64::INFINITY; d];
-    let mut upper = vec![f64::NEG_INFINITY; d];
-    let mut starts_normalised = vec![0.0; n * d];
+    let mut input_n = vec![0.0; d];
+    let mut region = RegionBuilder::new(d);
     let mut traced = Vec::with_capacity(n);
     let e = learned.encoding().dim(&M::KINDS);
     for (index, w) in cal.windows().iter().enumerate() {
@@ -561,19 +664,13 @@ pub(super) fn calibrate<
         if let Some(u) = us.first() {
             input[e..e + U].copy_from_slice(u.as_slice());
         }
-        learned
-            .gp()
-            .input_normaliser()
-            .apply(&input, &mut starts_normalised[index * d..(index + 1) * d]);
-        for j in 0..d {
-            lower[j] = lower[j].min(input[j]);
-            upper[j] = upper[j].max(input[j]);
-        }
+        learned.gp().input_normaliser().apply(&input, &mut input_n);
+        region.start(&input, &input_n);
         let Ok(trace) = learned.trace(&w.start, k_max, &us, &mut ws) else {
             traced.push(None);
             continue;
         };
-        max_scale = max_scale.max(predictive_scale(trace.std_devs[0].as_slice(), noise));
+        region.scale(predictive_scale(trace.std_devs[0].as_slice(), noise));
         let v1 = (w.positions[1] - w.positions[0]) / dt;
         traced.push(Some(Traced {
             e1: (trace.states[1].v - v1).norm(),
@@ -589,7 +686,7 @@ pub(super) fn calibrate<
     }
     let failed = traced.iter().filter(|t| t.is_none()).count();
     let c = calibrate_traced(&traced, settings, noise, dt, k_max)?;
-    let mut parts = ConformalParts {
+    Ok(ConformalParts {
         score: c.score,
         tube: settings.tube,
         calibration_size: c.calibration_size,
@@ -597,43 +694,58 @@ pub(super) fn calibrate<
         failed,
         one_step_quantile: c.one_step,
         position_quantiles: c.positions,
-        max_scale,
-        input_lower: lower,
-        input_upper: upper,
-        starts_normalised,
-        distance_threshold: f64::INFINITY,
+        region: region.finish(cal.window_runs()),
         inputs: U,
-    };
-    // leave-one-out nearest-neighbour distances of the calibration starts
-    // (O(n²·d)); with n ≥ 99 their 99 % quantile, else their maximum. A
-    // new start comes from a new run, so each start's distance is to the
-    // starts of other runs: overlapping windows of one run (stride 1) lie
-    // next to each other, and their distances would set a threshold that
-    // flags nearly every new start. With a single run, to the other starts.
-    let runs = cal.window_runs();
-    let one_run = runs.iter().all(|r| *r == runs[0]);
-    let mut nn: Vec<f64> = (0..n)
-        .map(|i| {
-            let xi = &parts.starts_normalised[i * d..(i + 1) * d];
-            if one_run {
-                parts.nearest(xi, |j| j == i)
-            } else {
-                parts.nearest(xi, |j| runs[j] == runs[i])
-            }
-        })
-        .collect();
-    nn.sort_by(f64::total_cmp);
-    let level = quantile_index(n, DISTANCE_LEVEL).unwrap_or(n);
-    parts.distance_threshold = nn
-        .get(level.saturating_sub(1))
-        .copied()
-        .unwrap_or(f64::INFINITY);
-    Ok(parts)
+    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The region's fields are saved beside the other constants, as before
+    /// [`Region`] held them (`#[serde(flatten)]`), and round-trip.
+    #[test]
+    fn conformal_parts_keep_their_saved_form() {
+        let mut region = RegionBuilder::new(2);
+        region.start(&[0.0, 1.0], &[0.0, 0.5]);
+        region.start(&[2.0, -1.0], &[1.0, -0.5]);
+        region.scale(0.25);
+        let parts = ConformalParts {
+            score: Score::GpStd,
+            tube: Tube::PerStep,
+            calibration_size: 2,
+            selection_size: 0,
+            failed: 0,
+            one_step_quantile: 1.5,
+            position_quantiles: vec![0.0, 2.0],
+            region: region.finish(&[0, 1]),
+            inputs: 0,
+        };
+        // two starts of two runs: each one's nearest other start is the other
+        assert_eq!(parts.region.distance_threshold, 2f64.sqrt());
+        assert_eq!(parts.region.input_lower, [0.0, -1.0]);
+        assert_eq!(parts.region.input_upper, [2.0, 1.0]);
+        let json = serde_json::to_value(&parts).unwrap();
+        for key in [
+            "max_scale",
+            "input_lower",
+            "input_upper",
+            "starts_normalised",
+            "distance_threshold",
+            "one_step_quantile",
+        ] {
+            assert!(json.get(key).is_some(), "{key} missing from {json}");
+        }
+        assert!(json.get("region").is_none());
+        let back: ConformalParts = serde_json::from_value(json).unwrap();
+        assert_eq!(back, parts);
+        // inside: the box, near a start, scale within; outside: each test
+        assert!(!parts.region.outside(&[1.0, 0.0], &[0.5, 0.0], 0.2));
+        assert!(parts.region.outside(&[1.0, 0.0], &[0.5, 0.0], 0.3));
+        assert!(parts.region.outside(&[2.5, 0.0], &[0.5, 0.0], 0.2));
+        assert!(parts.region.outside(&[1.0, 0.0], &[3.0, 0.0], 0.2));
+    }
 
     /// The quantile index against its definition, including the exact
     /// products that rounding could push over n.

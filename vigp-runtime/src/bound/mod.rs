@@ -51,7 +51,7 @@ mod rkhs;
 mod theorem1;
 pub(crate) mod windows;
 
-pub use conformal::{Calibration, ConformalParts, Window};
+pub use conformal::{Calibration, ConformalParts, Region, Window};
 pub use jacobian::projection_jacobian;
 pub use rkhs::RkhsOutput;
 pub use theorem1::Theorem1Output;
@@ -346,14 +346,15 @@ pub enum Tube {
     Simultaneous,
 }
 
-/// What the conformal bound does outside its calibrated region: for a
+/// What the conformal bound does outside its calibrated [`Region`]: for a
 /// state whose GP input lies outside the box of the calibration starts'
 /// inputs, or farther (in the GP's normalised inputs) from every
 /// calibration start than 99 % of the calibration starts are from their
-/// nearest other one, or whose predictive standard deviation exceeds every
-/// calibration start's. Such a case is unlike the calibration cases, and
-/// the conformal guarantee does not apply to it. (A heuristic detector:
-/// about 1 % of cases drawn like the calibration starts are flagged.)
+/// nearest one of another run, or whose predictive standard deviation
+/// exceeds every calibration start's. Such a case is unlike the
+/// calibration cases, and the conformal guarantee does not apply to it. (A
+/// heuristic detector: about 1 % of cases drawn like the calibration
+/// starts are flagged by the distance test, about 2d/(n + 1) by the box.)
 ///
 /// With a fallback, a flagged state's one-step bound is the larger of the
 /// conformal and the fallback bound, and when the *start* z₀ is flagged the
@@ -597,14 +598,7 @@ impl ErrorBound {
                 .zip(domain_lower.iter().zip(domain_upper))
                 .any(|(x, (lo, hi))| x < lo || x > hi),
             BoundParts::Rkhs { .. } => false,
-            BoundParts::Conformal(c) => {
-                scale > c.max_scale
-                    || input
-                        .iter()
-                        .zip(c.input_lower.iter().zip(&c.input_upper))
-                        .any(|(x, (lo, hi))| x < lo || x > hi)
-                    || c.far(input_n)
-            }
+            BoundParts::Conformal(c) => c.region.outside(input, input_n, scale),
         }
     }
 }

@@ -21,9 +21,13 @@
 //! separately for the translation and the rotation bound, marginally over
 //! the calibration and the new case. Windows cut with a stride shorter than
 //! the horizon from one trajectory are dependent, and a start unlike every
-//! calibration start is not covered by the guarantee; unlike the planar
-//! bound, no region test flags such starts here. The one-step velocity
-//! quantiles are kept as well.
+//! calibration start is not covered by the guarantee. Such states are
+//! flagged ([`BoundedSpatialState::outside`]) by the planar bound's region
+//! test ([`Region`]: the box of the calibration starts' GP inputs, their
+//! nearest-neighbour distances, their largest predictive standard
+//! deviation). Unlike the planar bound there is no rigorous bound to fall
+//! back to: a flagged state keeps its conformal bounds and its flag. The
+//! one-step velocity quantiles are kept as well.
 //!
 //! Cost: calibration predicts every window once with the GP variance
 //! (O(N²) per output and step, N training samples); a bounded prediction
@@ -33,10 +37,11 @@ use super::learned::{Configuration, LearnSpatialError, LearnedSpatial, Trace, ve
 use super::{Spatial, SpatialState};
 use crate::bound::conformal::lengths;
 use crate::bound::conformal::{
-    Traced, calibrate_traced, position_scales, quantile_index, score_scale,
+    RegionBuilder, Traced, calibrate_traced, position_scales, predictive_scale, quantile_index,
+    score_scale,
 };
 use crate::bound::windows::{Steps, Windows};
-use crate::bound::{BoundError, ConformalSettings, Score, Tube, check_delta};
+use crate::bound::{BoundError, ConformalSettings, Region, Score, Tube, check_delta};
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
 
@@ -185,6 +190,14 @@ impl<const B: usize> SpatialCalibration<B> {
         self.set.window_inputs(index)
     }
 
+    /// The run each window was cut from
+    /// ([`SpatialCalibration::from_trajectories`]: the trajectory's index;
+    /// windows given directly: each its own). The region test measures a
+    /// start's distance to the starts of other runs.
+    pub fn window_runs(&self) -> &[usize] {
+        &self.set.runs
+    }
+
     /// Number of inputs per step the windows carry (0: none).
     pub fn input_count(&self) -> usize {
         self.set.input_count
@@ -251,6 +264,10 @@ pub struct SpatialConformal {
     pub inputs: usize,
     /// Per GP output, √(σ_n² + jitter) in velocity units.
     pub noise_std: Vec<f64>,
+    /// Where the calibration starts lie (their GP inputs: the encoded pose
+    /// and velocities, then the first step's input), and the largest
+    /// predictive standard deviation over all 6B velocity outputs there.
+    pub region: Region,
 }
 
 /// A predicted state with its bounds.
@@ -265,6 +282,15 @@ pub struct BoundedSpatialState<const B: usize> {
     /// Every link's orientation lies within this angle (rad) of its
     /// prediction, with probability ≥ 1 − δ.
     pub rotation: f64,
+    /// z_k lies outside the calibrated region ([`Region`]): the GP input
+    /// of the step from it (the state, then the step's input) is outside
+    /// the box of the calibration starts', far from all of them, or its
+    /// predictive standard deviation exceeds theirs. At k = K, where no
+    /// step follows, the state is tested with the last step's input and
+    /// without the scale test. The guarantee is about predictions from
+    /// starts like the calibration starts: when z₀ is flagged, it does not
+    /// cover any bound of this prediction.
+    pub outside: bool,
 }
 
 /// The linear-velocity (translation) and angular-velocity (rotation)
@@ -306,9 +332,13 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<SpatialConformal, LearnSpatialError> {
         self.check_inputs(0)?;
         let mut ws = self.workspace();
-        self.calibrate(calibration, settings, 0, |_, w| {
-            self.trace(&w.start, w.configurations.len(), &mut ws)
-        })
+        self.calibrate(
+            calibration,
+            settings,
+            0,
+            |_| Vec::new(),
+            |_, w| self.trace(&w.start, w.configurations.len(), &mut ws),
+        )
     }
 
     /// [`LearnedSpatial::conformal_bound`] for a model from
@@ -327,12 +357,22 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             return Err(BoundError::Mismatch("calibration windows carry other inputs").into());
         }
         let mut ws = self.workspace();
-        self.calibrate(calibration, settings, U, |i, w| {
-            let us: Vec<SVector<f64, U>> = calibration
+        let inputs = |i| -> Vec<SVector<f64, U>> {
+            calibration
                 .window_inputs(i)
-                .expect("input count checked above");
-            self.trace_forced(&w.start, &us, &mut ws)
-        })
+                .expect("input count checked above")
+        };
+        self.calibrate(
+            calibration,
+            settings,
+            U,
+            |i| {
+                inputs(i)
+                    .first()
+                    .map_or(Vec::new(), |u| u.as_slice().to_vec())
+            },
+            |i, w| self.trace_forced(&w.start, &inputs(i), &mut ws),
+        )
     }
 
     /// The mean prediction of `steps` steps from `z0` with its conformal
@@ -349,7 +389,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
         self.check_bound(bound, 0, steps)?;
         let trace = self.trace(z0, steps, &mut self.workspace())?;
-        Ok(bounded(trace, bound, self.stepper().dt()))
+        Ok(self.bounded(trace, bound, |_| &[]))
     }
 
     /// [`LearnedSpatial::predict_bounded`] under `inputs` (one per step) for
@@ -363,7 +403,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
         self.check_bound(bound, U, inputs.len())?;
         let trace = self.trace_forced(z0, inputs, &mut self.workspace())?;
-        Ok(bounded(trace, bound, self.stepper().dt()))
+        // z_K is tested with the last step's input
+        Ok(self.bounded(trace, bound, |k| {
+            inputs[k.min(inputs.len().saturating_sub(1))].as_slice()
+        }))
     }
 
     fn check_bound(
@@ -393,12 +436,14 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// Predicts every window with `trace(index, window)`, scores both
-    /// parts and calibrates their quantiles.
+    /// parts and calibrates their quantiles; `first_input(index)` is the
+    /// input of a window's first step (empty: unforced), for the region.
     fn calibrate(
         &self,
         cal: &SpatialCalibration<B>,
         settings: &ConformalSettings,
         inputs: usize,
+        first_input: impl Fn(usize) -> Vec<f64>,
         mut trace: impl FnMut(usize, &SpatialWindow<B>) -> Result<Trace<B, N>, LearnSpatialError>,
     ) -> Result<SpatialConformal, LearnSpatialError> {
         check_delta(settings.delta)?;
@@ -413,12 +458,19 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let k_max = cal.horizon();
         let mut translation = Vec::with_capacity(cal.len());
         let mut rotation = Vec::with_capacity(cal.len());
+        let d = self.gp().input_dim();
+        let (mut input, mut input_n) = (vec![0.0; d], vec![0.0; d]);
+        let mut region = RegionBuilder::new(d);
         for (i, w) in cal.windows().iter().enumerate() {
+            self.gp_input(&w.start, &first_input(i), &mut input);
+            self.gp().input_normaliser().apply(&input, &mut input_n);
+            region.start(&input, &input_n);
             let Ok(t) = trace(i, w) else {
                 translation.push(None);
                 rotation.push(None);
                 continue;
             };
+            region.scale(predictive_scale(t.std_devs[0].as_slice(), &noise_std));
             let c = &w.configurations;
             let (v1, w1) = velocities(&c[0], &c[1], dt);
             let e1v = (0..B)
@@ -465,45 +517,58 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             dt,
             inputs,
             noise_std,
+            region: region.finish(cal.window_runs()),
         })
+    }
+
+    /// The bounds and region flags along a traced prediction; `input(k)`
+    /// is the input of the step from z_k (empty: unforced).
+    fn bounded<'u>(
+        &self,
+        trace: Trace<B, N>,
+        bound: &SpatialConformal,
+        input: impl Fn(usize) -> &'u [f64],
+    ) -> Vec<BoundedSpatialState<B>> {
+        let dt = self.stepper().dt();
+        let (noise_v, noise_w) = split::<B>(&bound.noise_std);
+        let (mut st, mut sr) = (Vec::new(), Vec::new());
+        for sd in &trace.std_devs {
+            let (v, w) = split::<B>(sd.as_slice());
+            st.push(score_scale(bound.translation.score, &v, &noise_v));
+            sr.push(score_scale(bound.rotation.score, &w, &noise_w));
+        }
+        let (ut, ur) = (position_scales(&st, dt), position_scales(&sr, dt));
+        let d = self.gp().input_dim();
+        let (mut x, mut xn) = (vec![0.0; d], vec![0.0; d]);
+        trace
+            .states
+            .iter()
+            .enumerate()
+            .map(|(k, z)| {
+                let at = |q: &PoseQuantiles, u: &[f64]| {
+                    if k == 0 {
+                        0.0
+                    } else {
+                        q.per_step[k - 1] * u[k - 1]
+                    }
+                };
+                self.gp_input(z, input(k), &mut x);
+                self.gp().input_normaliser().apply(&x, &mut xn);
+                let scale = trace
+                    .std_devs
+                    .get(k)
+                    .map_or(0.0, |s| predictive_scale(s.as_slice(), &bound.noise_std));
+                BoundedSpatialState {
+                    state: *z,
+                    translation: at(&bound.translation, &ut),
+                    rotation: at(&bound.rotation, &ur),
+                    outside: bound.region.outside(&x, &xn, scale),
+                }
+            })
+            .collect()
     }
 }
 
 fn same_dt(a: f64, b: f64) -> bool {
     (a - b).abs() <= 1e-12 * b.abs()
-}
-
-/// The bounds along a traced prediction.
-fn bounded<const B: usize, const N: usize>(
-    trace: Trace<B, N>,
-    bound: &SpatialConformal,
-    dt: f64,
-) -> Vec<BoundedSpatialState<B>> {
-    let (noise_v, noise_w) = split::<B>(&bound.noise_std);
-    let (mut st, mut sr) = (Vec::new(), Vec::new());
-    for sd in &trace.std_devs {
-        let (v, w) = split::<B>(sd.as_slice());
-        st.push(score_scale(bound.translation.score, &v, &noise_v));
-        sr.push(score_scale(bound.rotation.score, &w, &noise_w));
-    }
-    let (ut, ur) = (position_scales(&st, dt), position_scales(&sr, dt));
-    trace
-        .states
-        .iter()
-        .enumerate()
-        .map(|(k, z)| {
-            let at = |q: &PoseQuantiles, u: &[f64]| {
-                if k == 0 {
-                    0.0
-                } else {
-                    q.per_step[k - 1] * u[k - 1]
-                }
-            };
-            BoundedSpatialState {
-                state: *z,
-                translation: at(&bound.translation, &ut),
-                rotation: at(&bound.rotation, &ur),
-            }
-        })
-        .collect()
 }

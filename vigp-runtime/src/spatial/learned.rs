@@ -444,8 +444,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
         // the GP input on the stack (heap only above 128 dimensions, i.e.
         // more than 7 links with rotation matrices)
-        let e = self.rotation.input_dim(B);
-        let d = e + u.len();
+        let d = self.rotation.input_dim(B) + u.len();
         let mut stack = [0.0f64; 128];
         let mut heap;
         let input: &mut [f64] = if d <= stack.len() {
@@ -454,8 +453,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             heap = vec![0.0; d];
             &mut heap
         };
-        self.rotation.encode(z, &mut input[..e]);
-        input[e..].copy_from_slice(u);
+        self.gp_input(z, u, input);
         let mut mean = SVector::<f64, N>::zeros();
         match var {
             Some(var) => {
@@ -478,6 +476,15 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             ));
         }
         Ok(nu)
+    }
+
+    /// The GP input of a step from `z` under `u` (empty: unforced): the
+    /// encoded state, then u. `out` has length `rotation.input_dim(B) +
+    /// u.len()`.
+    pub(crate) fn gp_input(&self, z: &SpatialState<B>, u: &[f64], out: &mut [f64]) {
+        let e = self.rotation.input_dim(B);
+        self.rotation.encode(z, &mut out[..e]);
+        out[e..].copy_from_slice(u);
     }
 
     /// The mean prediction z₀, …, z_steps with the GP's latent standard
