@@ -1059,6 +1059,54 @@ fn spatial_bound_misuse_is_a_typed_error() {
     let mut nan = logged[1..=horizon].to_vec();
     nan[2][0] = f64::NAN;
     assert!(forced.predict_bounded_forced(&z0, &nan, &bound).is_err());
+    // a bound edited or loaded from a file (its fields are public and it
+    // is serde): short quantiles, NaN or negative constants, a region of
+    // another input dimension are typed errors, never a panic or a NaN
+    let edited = |edit: &dyn Fn(&mut SpatialConformal)| {
+        let mut b = pb.clone();
+        edit(&mut b);
+        plain.predict_bounded(&z0, horizon, &b).map(|_| ())
+    };
+    assert!(matches!(
+        edited(&|b| b.translation.per_step.truncate(3)),
+        Err(LearnSpatialError::Bound(BoundError::HorizonTooLong {
+            calibrated: 3,
+            requested: 4
+        }))
+    ));
+    assert!(matches!(
+        edited(&|b| b.rotation.per_step.clear()),
+        Err(LearnSpatialError::Bound(BoundError::HorizonTooLong {
+            calibrated: 0,
+            ..
+        }))
+    ));
+    let non_finite = |r: Result<(), LearnSpatialError>| {
+        matches!(
+            r,
+            Err(LearnSpatialError::Bound(BoundError::NonFinite { .. }))
+        )
+    };
+    assert!(non_finite(
+        edited(&|b| b.translation.per_step[3] = f64::NAN)
+    ));
+    assert!(non_finite(edited(&|b| b.rotation.per_step[1] = -1.0)));
+    assert!(non_finite(edited(&|b| b.noise_std[0] = f64::INFINITY)));
+    assert!(non_finite(edited(
+        &|b| b.region.distance_threshold = f64::NAN
+    )));
+    assert!(is_mismatch(
+        &edited(&|b| {
+            b.region.input_lower.pop();
+        })
+        .unwrap_err()
+    ));
+    assert!(is_mismatch(
+        &edited(&|b| {
+            b.region.starts_normalised.pop();
+        })
+        .unwrap_err()
+    ));
     // Δt, δ and the window count
     let other_dt = SpatialCalibration::from_trajectories(&runs, 0.02, horizon, 5).unwrap();
     assert!(is_mismatch(

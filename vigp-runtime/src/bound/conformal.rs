@@ -323,6 +323,27 @@ impl Region {
         !self.starts_normalised.is_empty() && self.nearest(xn, |_| false) > self.distance_threshold
     }
 
+    /// Checks that the region fits GP inputs of dimension `d` (a bound
+    /// edited or loaded from a file): the box corners have d entries, the
+    /// starts whole rows of d, and the thresholds are not NaN.
+    pub(crate) fn check(&self, d: usize) -> Result<(), BoundError> {
+        if self.input_lower.len() != d
+            || self.input_upper.len() != d
+            || self.starts_normalised.len().checked_rem(d) != Some(0)
+        {
+            return Err(BoundError::Mismatch("GP input dimension of the region"));
+        }
+        for (what, value) in [
+            ("region scale", self.max_scale),
+            ("region distance threshold", self.distance_threshold),
+        ] {
+            if value.is_nan() {
+                return Err(BoundError::NonFinite { what, value });
+            }
+        }
+        Ok(())
+    }
+
     /// Whether a state with GP input `input` (`input_n` in the GP's
     /// normalised units) and predictive standard deviation `scale` lies
     /// outside the region (see [`Region`]); `scale = 0` skips the scale

@@ -1154,6 +1154,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         {
             return Err(BoundError::Mismatch("GP input dimension"));
         }
+        if let BoundParts::Conformal(c) = &bound.parts {
+            c.region.check(self.gp().input_dim())?;
+        }
         if let Some(h) = bound.horizon()
             && steps > h
         {

@@ -389,7 +389,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
         self.check_bound(bound, 0, steps)?;
         let trace = self.trace(z0, steps, &mut self.workspace())?;
-        Ok(self.bounded(trace, bound, |_| &[]))
+        self.bounded(trace, bound, |_| &[])
     }
 
     /// [`LearnedSpatial::predict_bounded`] under `inputs` (one per step) for
@@ -404,9 +404,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         self.check_bound(bound, U, inputs.len())?;
         let trace = self.trace_forced(z0, inputs, &mut self.workspace())?;
         // z_K is tested with the last step's input
-        Ok(self.bounded(trace, bound, |k| {
+        self.bounded(trace, bound, |k| {
             inputs[k.min(inputs.len().saturating_sub(1))].as_slice()
-        }))
+        })
     }
 
     fn check_bound(
@@ -422,12 +422,30 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             )
             .into());
         }
+        if let Some(bad) = bound
+            .noise_std
+            .iter()
+            .find(|s| !(s.is_finite() && **s >= 0.0))
+        {
+            return Err(BoundError::NonFinite {
+                what: "noise standard deviation",
+                value: *bad,
+            }
+            .into());
+        }
         if bound.noise_std.len() != N || !same_dt(bound.dt, self.stepper().dt()) {
             return Err(BoundError::Mismatch("the bound was calibrated for another model").into());
         }
-        if steps > bound.horizon {
+        bound.region.check(self.gp().input_dim())?;
+        // a bound edited or loaded from a file: its quantiles must cover
+        // the steps asked for
+        let calibrated = bound
+            .horizon
+            .min(bound.translation.per_step.len())
+            .min(bound.rotation.per_step.len());
+        if steps > calibrated {
             return Err(BoundError::HorizonTooLong {
-                calibrated: bound.horizon,
+                calibrated,
                 requested: steps,
             }
             .into());
@@ -522,13 +540,15 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// The bounds and region flags along a traced prediction; `input(k)`
-    /// is the input of the step from z_k (empty: unforced).
+    /// is the input of the step from z_k (empty: unforced). A bound that
+    /// is NaN, infinite or negative (the constants of an edited or loaded
+    /// bound) is [`BoundError::NonFinite`].
     fn bounded<'u>(
         &self,
         trace: Trace<B, N>,
         bound: &SpatialConformal,
         input: impl Fn(usize) -> &'u [f64],
-    ) -> Vec<BoundedSpatialState<B>> {
+    ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
         let dt = self.stepper().dt();
         let (noise_v, noise_w) = split::<B>(&bound.noise_std);
         let (mut st, mut sr) = (Vec::new(), Vec::new());
@@ -558,12 +578,21 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     .std_devs
                     .get(k)
                     .map_or(0.0, |s| predictive_scale(s.as_slice(), &bound.noise_std));
-                BoundedSpatialState {
+                let state = BoundedSpatialState {
                     state: *z,
                     translation: at(&bound.translation, &ut),
                     rotation: at(&bound.rotation, &ur),
                     outside: bound.region.outside(&x, &xn, scale),
+                };
+                for (what, value) in [
+                    ("translation bound", state.translation),
+                    ("rotation bound", state.rotation),
+                ] {
+                    if !(value.is_finite() && value >= 0.0) {
+                        return Err(BoundError::NonFinite { what, value }.into());
+                    }
                 }
+                Ok(state)
             })
             .collect()
     }
