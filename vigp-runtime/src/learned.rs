@@ -621,8 +621,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// [`Learned::rollout_with_info`] under planned inputs: step k goes from
-    /// z_k under `inputs[k]` (held over [t_k, t_{k+1}], as
-    /// [`Integrator::rollout_forced_into`]), so `inputs.len()` steps. The
+    /// z_k under `inputs[k]` (as [`Integrator::rollout_forced_into`]; u is
+    /// held over the interval of the velocity the step predicts,
+    /// [t_{k+1}, t_{k+2}], as in [`ForcedTransition::u`]), so
+    /// `inputs.len()` steps. The
     /// states equal those of [`Learned::step_mean_forced_with`] step by
     /// step, and the standard deviations are σ(z_k, u_k), from one batched
     /// [`Gp::predict`] as in `rollout_with_info`.

@@ -1018,7 +1018,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
 
     /// [`Learned::predict`] under planned inputs, for a model from
     /// [`Learned::train_forced`]: `inputs.len()` steps, step k from the
-    /// predicted z_k under `inputs[k]` (held over [t_k, t_{k+1}]), each
+    /// predicted z_k under `inputs[k]` (held over [t_{k+1}, t_{k+2}], the
+    /// interval of the velocity the step predicts, as in
+    /// [`crate::learned::ForcedTransition::u`]), each
     /// state with its bound. The one-step bounds are those of the GP at
     /// (z_k, u_k), and the rigorous kinds propagate them to positions with
     /// the forced step's Jacobian norms at (z_k, u_k)
