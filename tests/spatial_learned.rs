@@ -609,6 +609,14 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
         LearnedSpatial::train_forced(n_step, &bad, Rotation::Matrix, Prior::Nominal, &opts),
         Err(LearnSpatialError::NonFinite(4))
     ));
+    // a quaternion of norm 2 (new_unchecked on unnormalised data) is named,
+    // not left to fail as a projection's line search
+    let mut bad = data.clone();
+    bad[2].z.q[1] = nalgebra::UnitQuaternion::new_unchecked(bad[2].z.q[1].into_inner() * 2.0);
+    assert!(matches!(
+        LearnedSpatial::train_forced(n_step, &bad, Rotation::Matrix, Prior::Nominal, &opts),
+        Err(LearnSpatialError::NotUnit { transition: 2, link: 1, norm }) if (norm - 2.0).abs() < 1e-12
+    ));
 
     let plain: Vec<_> = transitions(&configs, dt);
     let (unforced, _) =

@@ -187,8 +187,11 @@ pub enum LearnError {
         /// The offending value.
         value: f64,
     },
-    /// A training transition contains NaN or ±∞.
-    #[error("training transition {0} is not finite")]
+    /// A training transition contains NaN or ±∞ (in the data, or
+    /// velocities differenced with Δt = 0).
+    #[error(
+        "training transition {0} is not finite (NaN or ∞ in the data, or velocities from dt = 0)"
+    )]
     NonFinite(usize),
 }
 

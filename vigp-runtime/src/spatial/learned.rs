@@ -199,9 +199,26 @@ pub enum LearnSpatialError {
     /// No training data.
     #[error("no training transitions")]
     Empty,
-    /// A training transition contains NaN or ±∞.
-    #[error("training transition {0} is not finite")]
+    /// A training transition contains NaN or ±∞ (in the data, or
+    /// velocities differenced with Δt = 0).
+    #[error(
+        "training transition {0} is not finite (NaN or ∞ in the data, or velocities from dt = 0)"
+    )]
     NonFinite(usize),
+    /// A training transition's orientation is not a unit quaternion
+    /// (|‖q‖ − 1| > 1e-9: built with `UnitQuaternion::new_unchecked` from
+    /// unnormalised data).
+    #[error(
+        "training transition {transition}: the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize)"
+    )]
+    NotUnit {
+        /// The transition.
+        transition: usize,
+        /// The link.
+        link: usize,
+        /// ‖q‖.
+        norm: f64,
+    },
     /// A prediction was asked under a number of inputs other than the one
     /// the model was trained with (0: trained without inputs, by
     /// [`LearnedSpatial::train`]).
@@ -321,6 +338,18 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 && t.u.iter().all(|x| x.is_finite()))
             {
                 return Err(LearnSpatialError::NonFinite(i));
+            }
+            if let Some((link, q)) =
+                t.z.q
+                    .iter()
+                    .enumerate()
+                    .find(|(_, q)| (q.norm() - 1.0).abs() > 1e-9)
+            {
+                return Err(LearnSpatialError::NotUnit {
+                    transition: i,
+                    link,
+                    norm: q.norm(),
+                });
             }
             rotation.encode(&t.z, &mut inputs[i * d..i * d + e]);
             inputs[i * d + e..(i + 1) * d].copy_from_slice(t.u.as_slice());
