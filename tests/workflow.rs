@@ -73,6 +73,12 @@ fn consistent_state_can_hold_chosen_coordinates() {
     assert!(matches!(e, StepError::NotConverged { .. }), "{e:?}");
     let e = consistent_state_holding(&m, &q, &v, dt, &[4]).unwrap_err();
     assert!(matches!(e, StepError::InvalidOptions(_)), "{e:?}");
+    // every coordinate held: nothing can move, and the error says so
+    let e = consistent_state_holding(&m, &q, &v, dt, &[0, 1, 2, 3]).unwrap_err();
+    assert!(
+        matches!(e, StepError::InvalidOptions(why) if why.contains("every coordinate is held")),
+        "{e:?}"
+    );
 }
 
 vigp::mechanism! {

@@ -342,6 +342,11 @@ pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usi
     if C == 0 {
         return Ok(State { q: *q, v: *v });
     }
+    if (0..N).all(|i| hold.contains(&i)) {
+        return Err(StepError::InvalidOptions(
+            "consistent_state_holding: every coordinate is held, none is free to close the loops",
+        ));
+    }
     let options = NewtonOptions::default();
     let scale = crate::mechanism::length_scale::<M, N, C>(q);
     let (q, _) = gauss_newton(
