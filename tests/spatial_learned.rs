@@ -1064,6 +1064,13 @@ fn spatial_bound_misuse_is_a_typed_error() {
             requested: 5
         }))
     ));
+    // no steps: the start alone, bounds 0
+    let alone = forced
+        .predict_bounded_forced::<2>(&z0, &[], &bound)
+        .unwrap();
+    assert_eq!(alone.len(), 1);
+    assert_eq!((alone[0].translation, alone[0].rotation), (0.0, 0.0));
+    assert_eq!(plain.predict_bounded(&z0, 0, &pb).unwrap().len(), 1);
     let mut nan = logged[1..=horizon].to_vec();
     nan[2][0] = f64::NAN;
     assert!(forced.predict_bounded_forced(&z0, &nan, &bound).is_err());

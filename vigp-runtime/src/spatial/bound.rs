@@ -403,10 +403,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
         self.check_bound(bound, U, inputs.len())?;
         let trace = self.trace_forced(z0, inputs, &mut self.workspace())?;
-        // z_K is tested with the last step's input
-        self.bounded(trace, bound, |k| {
-            inputs[k.min(inputs.len().saturating_sub(1))].as_slice()
-        })
+        // z_K is tested with the last step's input (u = 0 without steps)
+        let zero = SVector::<f64, U>::zeros();
+        let last = inputs.last().unwrap_or(&zero);
+        self.bounded(trace, bound, |k| inputs.get(k).unwrap_or(last).as_slice())
     }
 
     fn check_bound(
