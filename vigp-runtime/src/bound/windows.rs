@@ -127,6 +127,14 @@ impl<W: Steps> Windows<W> {
         )
     }
 
+    /// Window `index`'s first input (U values; empty without inputs or
+    /// out of range).
+    pub fn first_input(&self, index: usize) -> &[f64] {
+        self.inputs
+            .get(index)
+            .map_or(&[], |flat| &flat[..self.input_count])
+    }
+
     /// K (0 without windows).
     pub fn horizon(&self) -> usize {
         self.windows.first().map_or(0, W::steps)

@@ -332,13 +332,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<SpatialConformal, LearnSpatialError> {
         self.check_inputs(0)?;
         let mut ws = self.workspace();
-        self.calibrate(
-            calibration,
-            settings,
-            0,
-            |_| Vec::new(),
-            |_, w| self.trace(&w.start, w.configurations.len(), &mut ws),
-        )
+        self.calibrate(calibration, settings, 0, |_, w| {
+            self.trace(&w.start, w.configurations.len(), &mut ws)
+        })
     }
 
     /// [`LearnedSpatial::conformal_bound`] for a model from
@@ -357,22 +353,12 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             return Err(BoundError::Mismatch("calibration windows carry other inputs").into());
         }
         let mut ws = self.workspace();
-        let inputs = |i| -> Vec<SVector<f64, U>> {
-            calibration
+        self.calibrate(calibration, settings, U, |i, w| {
+            let us: Vec<SVector<f64, U>> = calibration
                 .window_inputs(i)
-                .expect("input count checked above")
-        };
-        self.calibrate(
-            calibration,
-            settings,
-            U,
-            |i| {
-                inputs(i)
-                    .first()
-                    .map_or(Vec::new(), |u| u.as_slice().to_vec())
-            },
-            |i, w| self.trace_forced(&w.start, &inputs(i), &mut ws),
-        )
+                .expect("input count checked above");
+            self.trace_forced(&w.start, &us, &mut ws)
+        })
     }
 
     /// The mean prediction of `steps` steps from `z0` with its conformal
@@ -454,14 +440,13 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// Predicts every window with `trace(index, window)`, scores both
-    /// parts and calibrates their quantiles; `first_input(index)` is the
-    /// input of a window's first step (empty: unforced), for the region.
+    /// parts and calibrates their quantiles and region (the starts' GP
+    /// inputs with their first step's input).
     fn calibrate(
         &self,
         cal: &SpatialCalibration<B>,
         settings: &ConformalSettings,
         inputs: usize,
-        first_input: impl Fn(usize) -> Vec<f64>,
         mut trace: impl FnMut(usize, &SpatialWindow<B>) -> Result<Trace<B, N>, LearnSpatialError>,
     ) -> Result<SpatialConformal, LearnSpatialError> {
         check_delta(settings.delta)?;
@@ -480,7 +465,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let (mut input, mut input_n) = (vec![0.0; d], vec![0.0; d]);
         let mut region = RegionBuilder::new(d);
         for (i, w) in cal.windows().iter().enumerate() {
-            self.gp_input(&w.start, &first_input(i), &mut input);
+            self.gp_input(&w.start, cal.set.first_input(i), &mut input);
             self.gp().input_normaliser().apply(&input, &mut input_n);
             region.start(&input, &input_n);
             let Ok(t) = trace(i, w) else {

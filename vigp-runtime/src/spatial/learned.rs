@@ -64,6 +64,19 @@ impl Rotation {
         links * (9 + self.dim())
     }
 
+    /// The GP input of a step from `z` under `u` (empty: unforced): the
+    /// encoded state, then u. `out` has length `input_dim(B) + u.len()`.
+    pub(crate) fn encode_input<const B: usize>(
+        self,
+        z: &SpatialState<B>,
+        u: &[f64],
+        out: &mut [f64],
+    ) {
+        let e = self.input_dim(B);
+        self.encode(z, &mut out[..e]);
+        out[e..].copy_from_slice(u);
+    }
+
     /// Write the GP input of `z` into `out` (length [`Rotation::input_dim`]).
     pub fn encode<const B: usize>(self, z: &SpatialState<B>, out: &mut [f64]) {
         let mut k = 0;
@@ -327,8 +340,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         if data.is_empty() {
             return Err(LearnSpatialError::Empty);
         }
-        let e = rotation.input_dim(B);
-        let d = e + U;
+        let d = rotation.input_dim(B) + U;
         let mut inputs = vec![0.0; data.len() * d];
         let mut targets = Vec::with_capacity(data.len() * N);
         for (i, t) in data.iter().enumerate() {
@@ -351,8 +363,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     norm: q.norm(),
                 });
             }
-            rotation.encode(&t.z, &mut inputs[i * d..i * d + e]);
-            inputs[i * d + e..(i + 1) * d].copy_from_slice(t.u.as_slice());
+            rotation.encode_input(&t.z, t.u.as_slice(), &mut inputs[i * d..(i + 1) * d]);
             let base: SVector<f64, N> = match prior {
                 Prior::Nominal => {
                     let z = if C > 0 {
@@ -507,13 +518,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         Ok(nu)
     }
 
-    /// The GP input of a step from `z` under `u` (empty: unforced): the
-    /// encoded state, then u. `out` has length `rotation.input_dim(B) +
-    /// u.len()`.
+    /// The GP input of a step from `z` under `u` (empty: unforced).
     pub(crate) fn gp_input(&self, z: &SpatialState<B>, u: &[f64], out: &mut [f64]) {
-        let e = self.rotation.input_dim(B);
-        self.rotation.encode(z, &mut out[..e]);
-        out[e..].copy_from_slice(u);
+        self.rotation.encode_input(z, u, out);
     }
 
     /// The mean prediction z₀, …, z_steps with the GP's latent standard
