@@ -1116,6 +1116,34 @@ fn spatial_errors_are_typed() {
     ));
     let mut out = [z0; 3];
     assert!(stepper.rollout_into(&nan, &mut out).is_err());
+    // A quaternion that is not of unit norm (nalgebra's `new_unchecked`
+    // does not normalise) is not a rotation: refused, never stepped.
+    let mut long = z0;
+    long.q[0] = UnitQuaternion::new_unchecked(z0.q[0].quaternion() * 1.001);
+    match stepper.step(&long) {
+        Err(E::NonUnitQuaternion { link: 0, norm }) => assert!((norm - 1.001).abs() < 1e-12),
+        other => panic!("a non-unit quaternion was stepped: {other:?}"),
+    }
+    assert!(matches!(
+        stepper.rollout_into(&long, &mut out),
+        Err(vigp::embedded::RolloutError {
+            step: 0,
+            error: E::NonUnitQuaternion { link: 0, .. }
+        })
+    ));
+    // consistent_state projects it back onto the unit sphere (and the
+    // joints): the same state as from the unit quaternion.
+    let fixed = stepper.consistent_state(&long).unwrap();
+    let unit = stepper.consistent_state(&z0).unwrap();
+    assert!(fixed.norm_error() <= 1e-15, "{}", fixed.norm_error());
+    assert!((fixed.q[0].coords - unit.q[0].coords).amax() <= 1e-12);
+    assert!(stepper.step(&fixed).is_ok());
+    let mut zero = z0;
+    zero.q[0] = UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(0.0, 0.0, 0.0, 0.0));
+    assert!(matches!(
+        stepper.consistent_state(&zero),
+        Err(E::NonUnitQuaternion { link: 0, .. })
+    ));
     // 1e6 rad/s against Δt = 10 ms: no root near the start; typed, finite
     let mut fast = z0;
     fast.w[0] = Vector3::new(1e6, -3e5, 2e5);

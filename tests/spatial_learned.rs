@@ -618,6 +618,23 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
         Err(LearnSpatialError::NotUnit { transition: 2, link: 1, norm }) if (norm - 2.0).abs() < 1e-12
     ));
 
+    // a state whose quaternion is not unit is refused by every learned
+    // step, as by the nominal one
+    let mut long = z0;
+    long.q[1] = nalgebra::UnitQuaternion::new_unchecked(z0.q[1].into_inner() * 1.01);
+    assert!(matches!(
+        forced.step_forced_with(&long, &u, &mut ws),
+        Err(LearnSpatialError::Step(
+            vigp::embedded::StepError::NonUnitQuaternion { link: 1, .. }
+        ))
+    ));
+    assert!(matches!(
+        forced.predict_velocity_forced(&long, &u, &mut ws),
+        Err(LearnSpatialError::Step(
+            vigp::embedded::StepError::NonUnitQuaternion { link: 1, .. }
+        ))
+    ));
+
     let plain: Vec<_> = transitions(&configs, dt);
     let (unforced, _) =
         LearnedSpatial::train(n_step, &plain, Rotation::Matrix, Prior::Nominal, &opts).unwrap();
@@ -630,6 +647,12 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
         .step_forced(&z0, &SVector::<f64, 2>::zeros())
         .unwrap();
     assert!(same_state(&zero, &unforced.step(&z0).unwrap()));
+    assert!(matches!(
+        unforced.step(&long),
+        Err(SpatialError::Step(
+            vigp::embedded::StepError::NonUnitQuaternion { link: 1, .. }
+        ))
+    ));
     assert!(matches!(
         unforced.predict_velocity_forced(&z0, &SVector::from([0.1, 0.0]), &mut ws),
         Err(LearnSpatialError::Inputs {

@@ -132,6 +132,14 @@ pub enum StepError {
     InvalidModel(&'static str),
     /// The state (or the momentum) holds NaN or ±∞.
     NonFiniteState,
+    /// A spatial state's orientation quaternion is not of unit norm (see
+    /// [`crate::spatial::SpatialState::validate`]).
+    NonUnitQuaternion {
+        /// The link, in declaration order.
+        link: usize,
+        /// Its quaternion's norm ‖q‖.
+        norm: f64,
+    },
     /// An input (actuator torque or force) holds NaN or ±∞, or a forced
     /// rollout has fewer inputs than steps.
     NonFiniteInput,
@@ -172,6 +180,10 @@ impl core::fmt::Display for StepError {
             Self::InvalidOptions(why) => write!(f, "invalid step options: {why}"),
             Self::InvalidModel(why) => write!(f, "invalid model parameters: {why}"),
             Self::NonFiniteState => write!(f, "non-finite state or momentum"),
+            Self::NonUnitQuaternion { link, norm } => write!(
+                f,
+                "the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize)"
+            ),
             Self::NonFiniteInput => write!(f, "non-finite or missing input"),
             Self::NonFiniteResidual { iteration } => {
                 write!(f, "non-finite residual at Newton iteration {iteration}")

@@ -63,6 +63,20 @@ pub enum StepError {
         /// Rollout step index, if in a rollout.
         step: Option<usize>,
     },
+    /// A spatial state's quaternion is not of unit norm (the core's
+    /// [`vigp_core::StepError::NonUnitQuaternion`]).
+    #[error(
+        "the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize){}",
+        at(step)
+    )]
+    NonUnitQuaternion {
+        /// The link, in declaration order.
+        link: usize,
+        /// Its quaternion's norm.
+        norm: f64,
+        /// Rollout step index, if in a rollout.
+        step: Option<usize>,
+    },
     /// Non-zero inputs given to an integrator that cannot take them (the
     /// default of [`crate::Integrator::step_forced`]).
     #[error("this integrator does not take inputs")]
@@ -157,6 +171,7 @@ impl StepError {
         match &mut self {
             StepError::NonFiniteState { step }
             | StepError::NonFiniteInput { step }
+            | StepError::NonUnitQuaternion { step, .. }
             | StepError::NonFiniteResidual { step, .. }
             | StepError::SingularJacobian { step, .. }
             | StepError::NotConverged { step, .. }
@@ -184,6 +199,11 @@ impl From<vigp_core::StepError> for StepError {
             E::InvalidModel(why) => StepError::InvalidModel(why),
             E::NonFiniteState => StepError::NonFiniteState { step: None },
             E::NonFiniteInput => StepError::NonFiniteInput { step: None },
+            E::NonUnitQuaternion { link, norm } => StepError::NonUnitQuaternion {
+                link,
+                norm,
+                step: None,
+            },
             E::NonFiniteResidual { iteration } => StepError::NonFiniteResidual {
                 iteration,
                 step: None,

@@ -67,7 +67,34 @@ pub struct SpatialState<const B: usize> {
     pub w: [Vector3<f64>; B],
 }
 
+/// The largest |‖q‖ − 1| a [`SpatialState`]'s orientations may have when
+/// it is stepped: the steps keep ‖q‖ at 1 to rounding (≈ 1e-16 per step),
+/// so a larger error means a quaternion that was never normalised (e.g.
+/// built with `UnitQuaternion::new_unchecked` from rounded data).
+pub const UNIT_TOLERANCE: f64 = 1e-9;
+
 impl<const B: usize> SpatialState<B> {
+    /// Checks a state before it is stepped: [`StepError::NonFiniteState`]
+    /// when an entry is NaN or ±∞, [`StepError::NonUnitQuaternion`] when a
+    /// link's |‖q‖ − 1| exceeds [`UNIT_TOLERANCE`] (nalgebra's
+    /// `UnitQuaternion` does not enforce its norm, and a non-unit q is not
+    /// a rotation: the step would scale the link's geometry by ‖q‖²).
+    pub fn validate(&self) -> Result<(), StepError> {
+        if !self.is_finite() {
+            return Err(StepError::NonFiniteState);
+        }
+        match self
+            .q
+            .iter()
+            .map(|q| q.quaternion().norm())
+            .enumerate()
+            .find(|(_, n)| (n - 1.0).abs() > UNIT_TOLERANCE)
+        {
+            Some((link, norm)) => Err(StepError::NonUnitQuaternion { link, norm }),
+            None => Ok(()),
+        }
+    }
+
     /// `true` when every entry is finite.
     pub fn is_finite(&self) -> bool {
         self.x
@@ -596,9 +623,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z: &SpatialState<B>,
     ) -> Result<(SpatialState<B>, LieStepReport), StepError> {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
-        }
+        z.validate()?;
         let guess = pack(&z.v, &z.w);
         self.solve(z, &guess, &[])
     }
@@ -630,9 +655,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 "U must equal the number of inputs"
             )
         };
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
-        }
+        z.validate()?;
         if !u.iter().all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput);
         }
@@ -661,9 +684,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             return Ok(());
         };
         let fail = |step, error| RolloutError { step, error };
-        if !z0.is_finite() {
-            return Err(fail(0, StepError::NonFiniteState));
-        }
+        z0.validate().map_err(|error| fail(0, error))?;
         if inputs.len() < rest.len() {
             return Err(fail(inputs.len(), StepError::NonFiniteInput));
         }
@@ -697,12 +718,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let Some((first, rest)) = out.split_first_mut() else {
             return Ok(());
         };
-        if !z0.is_finite() {
-            return Err(RolloutError {
-                step: 0,
-                error: StepError::NonFiniteState,
-            });
-        }
+        z0.validate()
+            .map_err(|error| RolloutError { step: 0, error })?;
         *first = *z0;
         let mut z = *z0;
         let mut prev = pack(&z0.v, &z0.w);
@@ -859,12 +876,23 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// onto g = 0 ([`Self::project_configuration`]) and its velocities
     /// projected so that the next configuration is consistent too
     /// ([`Self::project_velocity`]). A state whose velocities only satisfy
-    /// Ġ = 0 would leave the first step off the manifold by O(Δt²).
+    /// Ġ = 0 would leave the first step off the manifold by O(Δt²). The
+    /// guess's quaternions are normalised first (projected onto the unit
+    /// sphere, as its configuration onto the joints), so a guess from
+    /// rounded data need not be exactly unit; a zero quaternion is
+    /// [`StepError::NonUnitQuaternion`].
     pub fn consistent_state(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, StepError> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
         let (mut x, mut q) = (z.x, z.q);
+        for (link, qi) in q.iter_mut().enumerate() {
+            let norm = qi.quaternion().norm();
+            if !(norm > f64::MIN_POSITIVE) {
+                return Err(StepError::NonUnitQuaternion { link, norm });
+            }
+            *qi = UnitQuaternion::new_unchecked(qi.quaternion() / norm);
+        }
         self.project_configuration(&mut x, &mut q)?;
         let nu = self.project_velocity(&x, &q, &pack(&z.v, &z.w))?;
         let (v, w) = unpack(&nu);

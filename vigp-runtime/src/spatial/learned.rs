@@ -482,6 +482,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         var: Option<&mut SVector<f64, N>>,
         nominal: impl FnOnce(&SpatialState<B>) -> Result<SpatialState<B>, vigp_core::StepError>,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
+        z.validate()?;
         // the GP input on the stack (heap only above 128 dimensions, i.e.
         // more than 7 links with rotation matrices)
         let d = self.rotation.input_dim(B) + u.len();
@@ -565,9 +566,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         input: impl Fn(usize) -> &'u [f64],
         nominal: impl Fn(&SpatialState<B>, usize) -> Result<SpatialState<B>, vigp_core::StepError>,
     ) -> Result<Trace<B, N>, LearnSpatialError> {
-        if !z0.is_finite() {
-            return Err(vigp_core::StepError::NonFiniteState.into());
-        }
+        z0.validate()?;
         let mut states = Vec::with_capacity(steps + 1);
         let mut std_devs = Vec::with_capacity(steps);
         states.push(*z0);
@@ -591,9 +590,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z: &SpatialState<B>,
         ws: &mut Workspace,
     ) -> Result<SpatialState<B>, LearnSpatialError> {
-        if !z.is_finite() {
-            return Err(vigp_core::StepError::NonFiniteState.into());
-        }
+        z.validate()?;
         let nu = self.predict_velocity(z, ws)?;
         self.advance(z, nu)
     }
@@ -609,9 +606,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<SpatialState<B>, LearnSpatialError> {
-        if !z.is_finite() {
-            return Err(vigp_core::StepError::NonFiniteState.into());
-        }
+        z.validate()?;
         let nu = self.predict_velocity_forced(z, u, ws)?;
         self.advance(z, nu)
     }
