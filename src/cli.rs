@@ -205,7 +205,7 @@ struct ReadArgs {
     /// Do not unwrap angle coordinates.
     #[arg(long)]
     no_unwrap: bool,
-    /// Accepted deviation of a time step from its run's mean step (relative).
+    /// Accepted deviation of a time step from its run's median step (relative).
     #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true)]
     time_tolerance: f64,
 }

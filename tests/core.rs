@@ -435,6 +435,31 @@ fn degenerate_settings_are_typed_errors() {
         expect(ExplicitEuler::new(model, dt).step(&z));
         expect(SymplecticEuler::new(model, dt).step(&z));
         expect(Variational::new(model, dt).step(&z));
+        // the projections and the Lie-group stepper check it likewise
+        // (they accepted 1e300 and 5e-324, and LieStepper stepped with
+        // Δt² = 0 at 1e-200)
+        let fourbar = Fourbar::default().minimal();
+        let q = SVector::from([0.9, -1.3, -0.4, 1.3]);
+        let e = consistent_state(&fourbar, &q, &SVector::zeros(), dt);
+        assert!(
+            matches!(e, Err(StepError::InvalidTimeStep { dt: d }) if d == dt),
+            "{dt}: {e:?}"
+        );
+        let e = consistent_state(&model, &z.q, &z.v, dt);
+        assert!(
+            matches!(e, Err(StepError::InvalidTimeStep { dt: d }) if d == dt),
+            "{dt}: {e:?}"
+        );
+    }
+    for dt in [5e-324, 1e-200, 1e200, 1e300] {
+        let e = vigp::spatial::LieStepper::new(
+            vigp::systems::spatial::SphericalPendulum::default().maximal(),
+            dt,
+        );
+        assert!(
+            matches!(e, Err(vigp::embedded::StepError::InvalidTimeStep { dt: d }) if d == dt),
+            "{dt}"
+        );
     }
     // no Newton iteration allowed, or a step that would never return
     let invalid = |e: Result<State<1>, StepError>| matches!(e, Err(StepError::InvalidOptions(_)));

@@ -224,6 +224,103 @@ fn nan_and_infinity_are_rejected_with_line_and_column() {
     );
 }
 
+/// Finite readings can still overflow what is made of them: an angle
+/// unwrapped across readings ±1e308 apart, a velocity (x_{k+1} − x_k)/Δt,
+/// a time step 5e-324. Each is an error naming where, never a NaN or ±∞
+/// handed on (the old reader returned positions [1e308, NaN, NaN]).
+#[test]
+fn finite_readings_that_overflow_are_errors() {
+    let e = read2("run,t,rail,hinge\na,0,0,1e308\na,0.01,0,-1e308\na,0.02,0,1e308\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::Overflow { line: 3, column, .. } if column == "hinge"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("line 3, column `hinge`"), "{e}");
+    // a length is not unwrapped: its velocity overflows
+    let e = read2("run,t,rail,hinge\na,0,1e308,0\na,0.01,-1e308,0\na,0.02,0,0\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::Overflow { line: 3, column, .. } if column == "rail"),
+        "{e}"
+    );
+    let e = read2("run,t,rail,hinge\na,0,0,0\na,5e-324,0,0\na,1e-323,0,0\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::TimeStepOutOfRange { run, dt } if run == "a" && *dt == 5e-324),
+        "{e}"
+    );
+    // resampled runs are checked too (the run's first line is named)
+    let opts = ReadOptions {
+        resample: Some(0.01),
+        ..Default::default()
+    };
+    assert!(matches!(
+        Dataset::<2>::read_for::<CartpoleMinimal, 0, _>(
+            "run,t,rail,hinge\na,0,0,0\na,0.02,1e308,0\na,0.04,-1e308,0\n".as_bytes(),
+            &opts
+        ),
+        Err(DataError::Overflow { line: 2, .. })
+    ));
+    // every accepted reading gives finite states
+    let d = read2("run,t,rail,hinge\na,0,1e300,3\na,0.01,1e300,-3\na,0.02,1e300,3\n").unwrap();
+    for k in 0..2 {
+        let z = d.runs[0].state(k).unwrap();
+        assert!(z.q.iter().chain(z.v.iter()).all(|x| x.is_finite()));
+    }
+}
+
+/// One dropped sample is reported at the line that ends the gap, not at
+/// the regular steps before it (the reference is the median step).
+#[test]
+fn a_dropped_sample_is_reported_at_its_own_line() {
+    let text = "run,t,pivot\na,0,0\na,0.01,0.01\na,0.03,0.03\na,0.04,0.04\na,0.05,0.05\n";
+    match read1(text, &ReadOptions::default()) {
+        Err(DataError::NonUniformTime {
+            line,
+            expected,
+            found,
+            ..
+        }) => {
+            assert_eq!(line, 4);
+            assert!((expected - 0.01).abs() < 1e-15 && (found - 0.02).abs() < 1e-15);
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+/// `Dataset::dt` and `check_dt` refuse NaN arguments, with which every
+/// comparison would pass.
+#[test]
+fn time_step_checks_refuse_nan() {
+    let d = read1(
+        "run,t,pivot\na,0,0\na,0.01,0.01\nb,0,0\nb,0.05,0.01\n",
+        &ReadOptions::default(),
+    )
+    .unwrap();
+    assert!(matches!(
+        d.dt(1e-6),
+        Err(DataError::TimeStepMismatch { .. })
+    ));
+    assert!(matches!(
+        d.dt(f64::NAN),
+        Err(DataError::InvalidOption { .. })
+    ));
+    assert!(matches!(
+        d.check_dt(f64::NAN, 1e-6),
+        Err(DataError::InvalidOption { .. })
+    ));
+    assert!(matches!(
+        d.check_dt(0.01, f64::NAN),
+        Err(DataError::InvalidOption { .. })
+    ));
+    assert!(matches!(
+        d.check_dt(1e300, 1e-6),
+        Err(DataError::InvalidOption { .. })
+    ));
+    assert!(matches!(
+        d.check_dt(0.01, 1e-6),
+        Err(DataError::TimeStepMismatch { .. })
+    ));
+}
+
 #[test]
 fn empty_runs_files_and_labels() {
     let e = read2("").unwrap_err();

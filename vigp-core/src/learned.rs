@@ -474,9 +474,7 @@ pub fn project_velocity<M: Dynamics<N, C>, const N: usize, const C: usize>(
     dt: f64,
     options: &StepOptions,
 ) -> Result<SVector<f64, N>, StepError> {
-    if !(dt.is_finite() && dt > 0.0) {
-        return Err(StepError::InvalidTimeStep { dt });
-    }
+    crate::step::check_time_step(dt)?;
     if !(x1.iter().chain(v_u.iter()).all(|x| x.is_finite())) {
         return Err(StepError::NonFiniteState);
     }

@@ -25,9 +25,14 @@
 //!   not parse, NaN or ±∞: each is a [`DataError`] naming the line (the
 //!   file's line number, header = line 1) and the column.
 //! * **Uniform time.** Within a run every step t_{k+1} − t_k must equal the
-//!   run's mean step (t_last − t_first)/(rows − 1) to within
-//!   [`ReadOptions::time_tolerance`] (relative, default 1e-3); otherwise
-//!   [`DataError::NonUniformTime`] names the run and the line. Resampling
+//!   run's median step to within [`ReadOptions::time_tolerance`] (relative,
+//!   default 1e-3); otherwise [`DataError::NonUniformTime`] names the run
+//!   and the line that ends the odd step (a dropped sample is reported at
+//!   its gap). The run's time step is then the mean step
+//!   (t_last − t_first)/(rows − 1); one that no integrator can take (Δt²
+//!   not a normal number) is [`DataError::TimeStepOutOfRange`]. Finite
+//!   readings whose unwrapped angle or discrete velocity overflows f64 are
+//!   [`DataError::Overflow`], with line and column. Resampling
 //!   (linear interpolation onto a uniform grid) happens only if asked, with
 //!   [`ReadOptions::resample`].
 //! * **Angles** (coordinates of kind [`CoordinateKind::Angle`]) are
@@ -65,7 +70,7 @@ use crate::mechanism::{CoordinateKind, Mechanism, State};
 pub struct ReadOptions {
     /// Unwrap angle coordinates within each run (default `true`).
     pub unwrap_angles: bool,
-    /// Largest accepted deviation of a time step from its run's mean step,
+    /// Largest accepted deviation of a time step from its run's median step,
     /// relative to that step (default 1e-3: timestamps printed with a few
     /// decimals pass, a dropped or duplicated sample does not).
     pub time_tolerance: f64,
@@ -199,9 +204,9 @@ pub enum DataError {
         /// The previous row's t.
         previous: f64,
     },
-    /// A time step differs from the run's mean step.
+    /// A time step differs from the run's median step.
     #[error(
-        "run `{run}`, line {line}: time step {found} differs from the run's mean step {expected} \
+        "run `{run}`, line {line}: time step {found} differs from the run's median step {expected} \
          by more than {tolerance} relative (missing or repeated samples?); \
          resample if the sampling is truly uneven"
     )]
@@ -210,12 +215,40 @@ pub enum DataError {
         run: String,
         /// Line of the row that ends the offending step.
         line: u64,
-        /// The run's mean step.
+        /// The run's median step.
         expected: f64,
         /// The step found.
         found: f64,
         /// The tolerance in force.
         tolerance: f64,
+    },
+    /// Finite readings whose derived value overflows f64: an angle
+    /// unwrapped across readings ±1e308 apart, or a discrete velocity
+    /// (x_{k+1} − x_k)/Δt.
+    #[error(
+        "run `{run}`, line {line}, column `{column}`: {what} is not finite (readings too far apart for f64)"
+    )]
+    Overflow {
+        /// The run.
+        run: String,
+        /// Line of the row whose value overflows (for a resampled run,
+        /// the run's first line).
+        line: u64,
+        /// The coordinate's name.
+        column: String,
+        /// What overflowed.
+        what: &'static str,
+    },
+    /// A run's time step that no integrator can take (Δt² not a normal
+    /// number, e.g. timestamps 5e-324 apart).
+    #[error(
+        "run `{run}`: time step {dt:e} cannot be integrated (dt must be finite and > 0, with dt² a normal number)"
+    )]
+    TimeStepOutOfRange {
+        /// The run.
+        run: String,
+        /// Its time step.
+        dt: f64,
     },
     /// Runs with different time steps, or a time step other than the
     /// model's.
@@ -411,6 +444,19 @@ fn header_roles(
     Ok(roles)
 }
 
+/// A relative time tolerance: finite and ≥ 0 (NaN would let every
+/// comparison pass).
+fn check_tolerance(tolerance: f64) -> Result<(), DataError> {
+    if tolerance.is_finite() && tolerance >= 0.0 {
+        Ok(())
+    } else {
+        Err(DataError::InvalidOption {
+            what: "time tolerance (finite, >= 0)",
+            value: tolerance,
+        })
+    }
+}
+
 /// Wraps an angle difference into (−π, π].
 fn wrap(d: f64) -> f64 {
     use core::f64::consts::{PI, TAU};
@@ -435,7 +481,12 @@ struct RawRun<const N: usize> {
 }
 
 impl<const N: usize> RawRun<N> {
-    fn finish(self, kinds: &[CoordinateKind; N], opts: &ReadOptions) -> Result<Run<N>, DataError> {
+    fn finish(
+        self,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        opts: &ReadOptions,
+    ) -> Result<Run<N>, DataError> {
         let RawRun {
             name,
             times,
@@ -463,6 +514,16 @@ impl<const N: usize> RawRun<N> {
                     let raw = positions[k][i];
                     positions[k][i] = positions[k - 1][i] + wrap(raw - prev_raw);
                     prev_raw = raw;
+                    if !positions[k][i].is_finite() {
+                        // finite readings ±1e308 apart: the difference
+                        // overflows
+                        return Err(DataError::Overflow {
+                            run: name,
+                            line: lines[k],
+                            column: names[i].into(),
+                            what: "the unwrapped angle",
+                        });
+                    }
                 }
             }
         }
@@ -510,37 +571,78 @@ impl<const N: usize> RawRun<N> {
                     held.push(inputs[at].clone());
                 }
             }
-            return Ok(Run {
-                name,
-                t0,
-                dt: Some(dt),
-                positions: out,
-                inputs: held,
-                line,
-            });
+            // resampled rows have no file line: name the run's first
+            return check_velocities(
+                Run {
+                    name,
+                    t0,
+                    dt: Some(dt),
+                    positions: out,
+                    inputs: held,
+                    line,
+                },
+                |_| line,
+                names,
+            );
         }
-        let dt = tidy((times[n - 1] - t0) / (n - 1) as f64);
+        // Each step is compared with the run's median step, so that one
+        // dropped or repeated sample is reported at its own line (the mean
+        // step shifts with the gap and would flag the regular steps too).
+        let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+        steps.sort_by(f64::total_cmp);
+        let typical = steps[steps.len() / 2];
         for k in 1..n {
             let step = times[k] - times[k - 1];
-            if (step - dt).abs() > opts.time_tolerance * dt {
+            if (step - typical).abs() > opts.time_tolerance * typical {
                 return Err(DataError::NonUniformTime {
                     run: name,
                     line: lines[k],
-                    expected: dt,
+                    expected: typical,
                     found: step,
                     tolerance: opts.time_tolerance,
                 });
             }
         }
-        Ok(Run {
-            name,
-            t0,
-            dt: Some(dt),
-            positions,
-            inputs,
-            line,
-        })
+        let dt = tidy((times[n - 1] - t0) / (n - 1) as f64);
+        if vigp_core::step::check_time_step(dt).is_err() {
+            return Err(DataError::TimeStepOutOfRange { run: name, dt });
+        }
+        check_velocities(
+            Run {
+                name,
+                t0,
+                dt: Some(dt),
+                positions,
+                inputs,
+                line,
+            },
+            |k| lines[k],
+            names,
+        )
     }
+}
+
+/// The run unchanged if every discrete velocity (x_{k+1} − x_k)/Δt is
+/// finite: finite readings far apart (±1e308) or a tiny Δt overflow.
+/// `line(k)` is the file line of sample k.
+fn check_velocities<const N: usize>(
+    run: Run<N>,
+    line: impl Fn(usize) -> u64,
+    names: &[&str; N],
+) -> Result<Run<N>, DataError> {
+    let Some(dt) = run.dt else { return Ok(run) };
+    for k in 1..run.positions.len() {
+        let v = (run.positions[k] - run.positions[k - 1]) / dt;
+        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+            return Err(DataError::Overflow {
+                run: run.name,
+                line: line(k),
+                column: names[i].into(),
+                what: "the discrete velocity (x_{k+1} − x_k)/Δt",
+            });
+        }
+    }
+    Ok(run)
 }
 
 impl<const N: usize> Dataset<N> {
@@ -571,9 +673,9 @@ impl<const N: usize> Dataset<N> {
             });
         }
         if let Some(dt) = opts.resample {
-            if !(dt.is_finite() && dt > 0.0) {
+            if vigp_core::step::check_time_step(dt).is_err() {
                 return Err(DataError::InvalidOption {
-                    what: "resample (a time step, finite and > 0)",
+                    what: "resample (a time step, finite and > 0, with dt² a normal number)",
                     value: dt,
                 });
             }
@@ -633,7 +735,7 @@ impl<const N: usize> Dataset<N> {
                 }
                 if let Some(done) = current.take() {
                     finished.insert(done.name.clone());
-                    runs.push(done.finish(kinds, opts)?);
+                    runs.push(done.finish(names, kinds, opts)?);
                 }
                 current = Some(RawRun {
                     name: run.into(),
@@ -653,7 +755,7 @@ impl<const N: usize> Dataset<N> {
             }
         }
         match current {
-            Some(done) => runs.push(done.finish(kinds, opts)?),
+            Some(done) => runs.push(done.finish(names, kinds, opts)?),
             None => return Err(DataError::Empty("a header but no data rows")),
         }
         Ok(Self {
@@ -713,6 +815,7 @@ impl<const N: usize> Dataset<N> {
     /// must have the first such run's step to within `tolerance`
     /// (relative).
     pub fn dt(&self, tolerance: f64) -> Result<f64, DataError> {
+        check_tolerance(tolerance)?;
         let mut dt = None;
         for r in &self.runs {
             let Some(d) = r.dt else { continue };
@@ -736,6 +839,13 @@ impl<const N: usize> Dataset<N> {
     /// Checks that every run's time step is `dt` to within `tolerance`
     /// (relative), e.g. the time step of a trained model.
     pub fn check_dt(&self, dt: f64, tolerance: f64) -> Result<(), DataError> {
+        check_tolerance(tolerance)?;
+        if vigp_core::step::check_time_step(dt).is_err() {
+            return Err(DataError::InvalidOption {
+                what: "dt (finite and > 0, with dt² a normal number)",
+                value: dt,
+            });
+        }
         for r in &self.runs {
             if let Some(d) = r.dt {
                 if (d - dt).abs() > tolerance * dt {

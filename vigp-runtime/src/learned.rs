@@ -297,7 +297,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         if data.is_empty() {
             return Err(LearnError::Empty);
         }
-        if !(dt.is_finite() && dt > 0.0) {
+        if vigp_core::step::check_time_step(dt).is_err() {
             return Err(StepError::InvalidTimeStep { dt }.into());
         }
         let u_dim = if forced { U } else { 0 };

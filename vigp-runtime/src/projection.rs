@@ -160,7 +160,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     dt: f64,
     options: &NewtonOptions,
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
-    if !(dt.is_finite() && dt > 0.0) {
+    if vigp_core::step::check_time_step(dt).is_err() {
         return Err(StepError::InvalidTimeStep { dt });
     }
     options.validate()?;
@@ -328,7 +328,7 @@ pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usi
     dt: f64,
     hold: &[usize],
 ) -> Result<State<N>, StepError> {
-    if !(dt.is_finite() && dt > 0.0) {
+    if vigp_core::step::check_time_step(dt).is_err() {
         return Err(StepError::InvalidTimeStep { dt });
     }
     if hold.iter().any(|&i| i >= N) {

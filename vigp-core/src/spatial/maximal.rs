@@ -494,9 +494,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         dt: f64,
         options: StepOptions,
     ) -> Result<Self, StepError> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(StepError::InvalidTimeStep { dt });
-        }
+        crate::step::check_time_step(dt)?;
         if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
             return Err(StepError::InvalidOptions(
                 "tolerance must be finite and > 0",

@@ -34,9 +34,9 @@ impl<W: Steps> Windows<W> {
     /// Errors: `dt` not finite and positive, a window with fewer than 2
     /// steps, windows of different lengths, or a NaN/∞ anywhere.
     pub fn new(dt: f64, windows: Vec<W>) -> Result<Self, BoundError> {
-        if !(dt.is_finite() && dt > 0.0) {
+        if vigp_core::step::check_time_step(dt).is_err() {
             return Err(BoundError::InvalidSetting {
-                what: "calibration dt (must be finite and > 0)",
+                what: "calibration dt (must be finite and > 0, with dt² a normal number)",
                 value: dt,
             });
         }
