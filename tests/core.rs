@@ -461,6 +461,25 @@ fn degenerate_settings_are_typed_errors() {
             "{dt}"
         );
     }
+    // run-time parameters: every std integrator refuses a negative or NaN
+    // mass (docs/stability.md)
+    for mass in [-1.0, f64::NAN] {
+        let mut bad = Pendulum::default();
+        bad.links.rod.mass = mass;
+        let m = bad.minimal();
+        let refused = |e: Result<State<1>, StepError>| {
+            assert!(
+                matches!(e, Err(StepError::InvalidModel(_))),
+                "{mass}: {e:?}"
+            )
+        };
+        refused(Variational::new(m, 0.01).step(&z));
+        refused(Variational::midpoint(m, 0.01).step(&z));
+        refused(Variational4::new(m, 0.01).step(&z));
+        refused(Rk4::new(m, 0.01).step(&z));
+        refused(ExplicitEuler::new(m, 0.01).step(&z));
+        refused(SymplecticEuler::new(m, 0.01).step(&z));
+    }
     // no Newton iteration allowed, or a step that would never return
     let invalid = |e: Result<State<1>, StepError>| matches!(e, Err(StepError::InvalidOptions(_)));
     assert!(invalid(

@@ -785,6 +785,13 @@ mod tests {
         }
         let mut s: Vec<f64> = (1..=20).map(f64::from).rev().collect();
         assert_eq!(quantile(&mut s, 0.1).unwrap(), 19.0);
+        // a δ near 0 saturates the count: the message says so instead of
+        // printing usize::MAX and 300 digits of δ
+        let e = quantile_index(51, 1e-300).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "too few calibration windows for delta = 1e-300: need at least 1.8446744073709552e19 (delta is far too small), got 51"
+        );
     }
 
     /// Exchangeable scores: over independent calibration/test draws the

@@ -93,11 +93,15 @@ pub enum BoundError {
     Empty(&'static str),
     /// Too few calibration cases for δ: the conformal quantile would be
     /// infinite.
-    #[error("too few calibration windows for delta = {delta}: need at least {needed}, got {got}")]
+    #[error(
+        "too few calibration windows for delta = {delta:e}: need at least {}, got {got}",
+        windows(*needed)
+    )]
     TooFewCalibration {
         /// The δ asked for.
         delta: f64,
-        /// The least number of windows, ⌈1/δ − 1⌉.
+        /// The least number of windows, ⌈1/δ − 1⌉ (`usize::MAX` when that
+        /// does not fit).
         needed: usize,
         /// The number given.
         got: usize,
@@ -1307,5 +1311,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             });
         }
         Ok((one_step, position, outside, lost))
+    }
+}
+
+/// A window count for messages: `usize::MAX` stands for "more than any
+/// count" (⌈1/δ − 1⌉ saturates for δ near 0).
+fn windows(n: usize) -> String {
+    if n == usize::MAX {
+        format!("{:e} (delta is far too small)", n as f64)
+    } else {
+        n.to_string()
     }
 }
