@@ -71,7 +71,10 @@
 //!   prismatic(parent, child) { axis: [ax, ay], damping? }, … }` with points
 //!   `world`, `world @ [x, y]`, `link.start`, `link.end`, `link.center`,
 //!   `link @ [x, y]`. A joint whose child is already placed closes a loop and
-//!   becomes two constraint equations in minimal coordinates.
+//!   becomes two constraint equations in minimal coordinates; `world` is
+//!   always placed, so `revolute(crank.end, world @ [x, y])` pins a point
+//!   to the ground that way (the spatial DSL refuses `world` as a child:
+//!   there the ground is always a joint's parent).
 //! * Angles: θ = 0 hangs straight down, counter-clockwise positive; a
 //!   revolute coordinate is the child's angle relative to its parent; a
 //!   prismatic coordinate is the slide distance along the unit axis.

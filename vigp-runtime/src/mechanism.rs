@@ -155,6 +155,11 @@ pub trait Coordinates<const N: usize, const M: usize> {
     /// A discrete minimal state as a discrete maximal state: X_k = X(q_k) and
     /// V_k = (X(q_k + Δt·v_k) − X(q_k))/Δt, so that the maximal discrete
     /// trajectory is exactly the image of the minimal one.
+    ///
+    /// Δt must be a valid time step (`vigp_core::step::check_time_step`):
+    /// the conversion has no error path and does not check it; with Δt = 0,
+    /// NaN or ±∞ the velocities are not finite, which every step then
+    /// refuses ([`crate::newton::StepError::NonFiniteState`]).
     fn to_maximal(&self, z: &State<N>, dt: f64) -> State<M> {
         let x0 = self.maximal_positions(&z.q);
         let x1 = self.maximal_positions(&(z.q + z.v * dt));
@@ -166,6 +171,11 @@ pub trait Coordinates<const N: usize, const M: usize> {
 
     /// A discrete maximal state as a discrete minimal state (the inverse of
     /// [`Coordinates::to_maximal`] on consistent states).
+    ///
+    /// Δt must be a valid time step (`vigp_core::step::check_time_step`):
+    /// the conversion has no error path and does not check it; with Δt = 0,
+    /// NaN or ±∞ the velocities are not finite, which every step then
+    /// refuses ([`crate::newton::StepError::NonFiniteState`]).
     fn to_minimal(&self, z: &State<M>, dt: f64) -> State<N> {
         let q0 = self.minimal_positions(&z.q);
         let q1 = self.minimal_positions(&(z.q + z.v * dt));

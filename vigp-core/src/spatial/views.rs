@@ -52,6 +52,11 @@ pub fn configuration<S: Spatial<B, J>, const B: usize, const J: usize, const N: 
 }
 
 /// The maximal discrete state of a minimal discrete state.
+///
+/// Δt must be a valid time step ([`crate::step::check_time_step`]): the
+/// conversion has no error path and does not check it; with Δt = 0, NaN or
+/// ±∞ the velocities are not finite, which every step then refuses
+/// ([`crate::StepError::NonFiniteState`]).
 pub fn to_maximal<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize>(
     sys: &S,
     z: &State<N>,
@@ -140,6 +145,11 @@ pub fn minimal_coordinates<S: Spatial<B, J>, const B: usize, const J: usize, con
 /// The minimal discrete state of a consistent maximal state (the inverse
 /// of [`to_maximal`]): q_k from configuration k, q_{k+1} from configuration
 /// k+1 unwrapped near q_k, v = (q_{k+1} − q_k)/Δt.
+///
+/// Δt must be a valid time step ([`crate::step::check_time_step`]): the
+/// conversion has no error path and does not check it; with Δt = 0, NaN or
+/// ±∞ the velocities are not finite, which every step then refuses
+/// ([`crate::StepError::NonFiniteState`]).
 pub fn to_minimal<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize>(
     sys: &S,
     z: &SpatialState<B>,
