@@ -886,7 +886,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let (mut x, mut q) = (z.x, z.q);
         for (link, qi) in q.iter_mut().enumerate() {
             let norm = qi.quaternion().norm();
-            if !(norm > f64::MIN_POSITIVE) {
+            if norm.is_nan() || norm <= f64::MIN_POSITIVE {
                 return Err(StepError::NonUnitQuaternion { link, norm });
             }
             *qi = UnitQuaternion::new_unchecked(qi.quaternion() / norm);
