@@ -875,10 +875,11 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// projected so that the next configuration is consistent too
     /// ([`Self::project_velocity`]). A state whose velocities only satisfy
     /// Ġ = 0 would leave the first step off the manifold by O(Δt²). The
-    /// guess's quaternions are normalised first (projected onto the unit
-    /// sphere, as its configuration onto the joints), so a guess from
-    /// rounded data need not be exactly unit; a zero quaternion is
-    /// [`StepError::NonUnitQuaternion`].
+    /// guess's quaternions farther than [`UNIT_TOLERANCE`] from unit norm
+    /// are normalised first (projected onto the unit sphere, as its
+    /// configuration onto the joints), so a guess from rounded data need
+    /// not be unit; a zero quaternion is [`StepError::NonUnitQuaternion`].
+    /// An already consistent state is returned bit for bit.
     pub fn consistent_state(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, StepError> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
@@ -889,7 +890,11 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             if norm.is_nan() || norm <= f64::MIN_POSITIVE {
                 return Err(StepError::NonUnitQuaternion { link, norm });
             }
-            *qi = UnitQuaternion::new_unchecked(qi.quaternion() / norm);
+            // a quaternion the steps accept keeps its bits (a consistent
+            // state is returned unchanged)
+            if (norm - 1.0).abs() > UNIT_TOLERANCE {
+                *qi = UnitQuaternion::new_unchecked(qi.quaternion() / norm);
+            }
         }
         self.project_configuration(&mut x, &mut q)?;
         let nu = self.project_velocity(&x, &q, &pack(&z.v, &z.w))?;
