@@ -63,9 +63,7 @@ classical! {
 /// Δt as every integrator checks it (finite, > 0, Δt² a normal number:
 /// [`vigp_core::step::check_time_step`]), then the state.
 fn check<const N: usize>(dt: f64, z: &State<N>) -> Result<(), StepError> {
-    if vigp_core::step::check_time_step(dt).is_err() {
-        return Err(StepError::InvalidTimeStep { dt });
-    }
+    vigp_core::step::check_time_step(dt)?;
     if !z.is_finite() {
         return Err(StepError::NonFiniteState { step: None });
     }

@@ -297,9 +297,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         if data.is_empty() {
             return Err(LearnError::Empty);
         }
-        if vigp_core::step::check_time_step(dt).is_err() {
-            return Err(StepError::InvalidTimeStep { dt }.into());
-        }
+        vigp_core::step::check_time_step(dt).map_err(StepError::from)?;
         let u_dim = if forced { U } else { 0 };
         let e = encoding.dim(&M::KINDS);
         let d = e + u_dim;

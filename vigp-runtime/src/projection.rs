@@ -160,9 +160,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     dt: f64,
     options: &NewtonOptions,
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
-    if vigp_core::step::check_time_step(dt).is_err() {
-        return Err(StepError::InvalidTimeStep { dt });
-    }
+    vigp_core::step::check_time_step(dt)?;
     options.validate()?;
     if q1.iter().chain(v_u.iter()).any(|x| !x.is_finite()) {
         return Err(StepError::NonFiniteState { step: None });
@@ -328,9 +326,7 @@ pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usi
     dt: f64,
     hold: &[usize],
 ) -> Result<State<N>, StepError> {
-    if vigp_core::step::check_time_step(dt).is_err() {
-        return Err(StepError::InvalidTimeStep { dt });
-    }
+    vigp_core::step::check_time_step(dt)?;
     if hold.iter().any(|&i| i >= N) {
         return Err(StepError::InvalidOptions(
             "consistent_state_holding: a held coordinate index is out of range",

@@ -38,9 +38,7 @@ pub fn step_forced<M: Mechanism<N, C>, const N: usize, const C: usize>(
     z: &State<N>,
     u: &[f64],
 ) -> Result<(State<N>, StepInfo), StepError> {
-    if vigp_core::step::check_time_step(dt).is_err() {
-        return Err(StepError::InvalidTimeStep { dt });
-    }
+    vigp_core::step::check_time_step(dt)?;
     if !z.is_finite() {
         return Err(StepError::NonFiniteState { step: None });
     }

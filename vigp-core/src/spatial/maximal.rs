@@ -83,16 +83,20 @@ impl<const B: usize> SpatialState<B> {
         if !self.is_finite() {
             return Err(StepError::NonFiniteState);
         }
-        match self
-            .q
+        match self.non_unit() {
+            Some((link, norm)) => Err(StepError::NonUnitQuaternion { link, norm }),
+            None => Ok(()),
+        }
+    }
+
+    /// The first link whose |‖q‖ − 1| exceeds [`UNIT_TOLERANCE`], with its
+    /// ‖q‖.
+    pub fn non_unit(&self) -> Option<(usize, f64)> {
+        self.q
             .iter()
             .map(|q| q.quaternion().norm())
             .enumerate()
             .find(|(_, n)| (n - 1.0).abs() > UNIT_TOLERANCE)
-        {
-            Some((link, norm)) => Err(StepError::NonUnitQuaternion { link, norm }),
-            None => Ok(()),
-        }
     }
 
     /// `true` when every entry is finite.

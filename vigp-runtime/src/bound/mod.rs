@@ -174,6 +174,16 @@ pub enum BoundError {
     Gp(#[from] GpError),
 }
 
+/// A window count for messages: `usize::MAX` stands for "more than any
+/// count" (⌈1/δ − 1⌉ saturates for δ near 0).
+fn windows(n: usize) -> String {
+    if n == usize::MAX {
+        format!("{:e} (delta is far too small)", n as f64)
+    } else {
+        n.to_string()
+    }
+}
+
 impl From<LearnError> for BoundError {
     fn from(e: LearnError) -> Self {
         match e {
@@ -1311,15 +1321,5 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             });
         }
         Ok((one_step, position, outside, lost))
-    }
-}
-
-/// A window count for messages: `usize::MAX` stands for "more than any
-/// count" (⌈1/δ − 1⌉ saturates for δ near 0).
-fn windows(n: usize) -> String {
-    if n == usize::MAX {
-        format!("{:e} (delta is far too small)", n as f64)
-    } else {
-        n.to_string()
     }
 }

@@ -219,7 +219,8 @@ pub enum LearnSpatialError {
     )]
     NonFinite(usize),
     /// A training transition's orientation is not a unit quaternion
-    /// (|‖q‖ − 1| > 1e-9: built with `UnitQuaternion::new_unchecked` from
+    /// (|‖q‖ − 1| > [`UNIT_TOLERANCE`](vigp_core::spatial::maximal::UNIT_TOLERANCE):
+    /// built with `UnitQuaternion::new_unchecked` from
     /// unnormalised data).
     #[error(
         "training transition {transition}: the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize)"
@@ -351,16 +352,11 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             {
                 return Err(LearnSpatialError::NonFinite(i));
             }
-            if let Some((link, q)) =
-                t.z.q
-                    .iter()
-                    .enumerate()
-                    .find(|(_, q)| (q.norm() - 1.0).abs() > 1e-9)
-            {
+            if let Some((link, norm)) = t.z.non_unit() {
                 return Err(LearnSpatialError::NotUnit {
                     transition: i,
                     link,
-                    norm: q.norm(),
+                    norm,
                 });
             }
             rotation.encode_input(&t.z, t.u.as_slice(), &mut inputs[i * d..(i + 1) * d]);
@@ -435,6 +431,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z: &SpatialState<B>,
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
+        z.validate()?;
         self.check_inputs(0)?;
         self.velocity(z, &[], ws, None, |z| self.stepper.step(z))
     }
@@ -449,6 +446,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
+        z.validate()?;
         self.check_inputs(U)?;
         if !u.iter().all(|x| x.is_finite()) {
             return Err(vigp_core::StepError::NonFiniteInput.into());
@@ -482,7 +480,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         var: Option<&mut SVector<f64, N>>,
         nominal: impl FnOnce(&SpatialState<B>) -> Result<SpatialState<B>, vigp_core::StepError>,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
-        z.validate()?;
         // the GP input on the stack (heap only above 128 dimensions, i.e.
         // more than 7 links with rotation matrices)
         let d = self.rotation.input_dim(B) + u.len();
@@ -590,7 +587,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z: &SpatialState<B>,
         ws: &mut Workspace,
     ) -> Result<SpatialState<B>, LearnSpatialError> {
-        z.validate()?;
         let nu = self.predict_velocity(z, ws)?;
         self.advance(z, nu)
     }
@@ -606,7 +602,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<SpatialState<B>, LearnSpatialError> {
-        z.validate()?;
         let nu = self.predict_velocity_forced(z, u, ws)?;
         self.advance(z, nu)
     }
