@@ -779,6 +779,25 @@ fn non_finite_inputs_are_refused() {
     );
 }
 
+/// The explicit integrators report an acceleration that overflows (a
+/// velocity of 1e200 squared, an input of 1e300) as a non-finite state,
+/// not as a singular Newton matrix they do not have.
+#[test]
+fn explicit_integrators_report_overflow_as_a_non_finite_state() {
+    use vigp::{ExplicitEuler, Integrator, Rk4, SymplecticEuler};
+    let m = DriveCartpole::default().minimal();
+    let fast = State::new([0.0, 0.3], [0.0, 1e200]);
+    let z = State::new([0.0, 0.3], [0.0, 0.0]);
+    let huge = SVector::<f64, 1>::new(1e300);
+    let check =
+        |e: vigp::StepError| assert!(matches!(e, vigp::StepError::NonFiniteState { .. }), "{e:?}");
+    check(Rk4::new(m, 0.01).step(&fast).unwrap_err());
+    check(Rk4::new(m, 0.01).step_forced(&z, &huge).unwrap_err());
+    check(SymplecticEuler::new(m, 0.01).step(&fast).unwrap_err());
+    check(ExplicitEuler::new(m, 0.01).step(&fast).unwrap_err());
+    check(vigp::dynamics::acceleration(&m, &fast.q, &fast.v).unwrap_err());
+}
+
 /// For the first-order rule a step with k sub-steps is k steps of Δt/k
 /// (the momentum M(x)v carried between sub-steps is that of the state),
 /// so its derivatives are the product of the sub-steps' derivatives: an
@@ -1213,6 +1232,34 @@ fn learned_integrator_takes_inputs() {
     assert_eq!(back.inputs(), 1);
     let c = vigp::Integrator::step_forced(&back, &z, &SVector::<f64, 1>::new(3.0)).unwrap();
     assert_eq!(a, c);
+    // U = 0 is "no input" (u = 0), as for every other integrator: the
+    // trait's step, the mean step, the prediction with variances, the
+    // derivatives (A equal, B empty) and the rollout with information all
+    // equal the calls under u = 0 bit for bit
+    let none = SVector::<f64, 0>::zeros();
+    let zero = SVector::<f64, 1>::zeros();
+    let z = State::new([0.2, -0.4], [0.3, 0.9]);
+    assert_eq!(
+        vigp::Integrator::step_forced(&l, &z, &none).unwrap(),
+        vigp::Integrator::step_forced(&l, &z, &zero).unwrap()
+    );
+    assert_eq!(
+        l.step_mean_forced_with(&z, &none, &mut ws).unwrap(),
+        l.step_mean_with(&z, &mut ws).unwrap()
+    );
+    assert_eq!(
+        l.predict_velocity_forced(&z, &none, &mut ws).unwrap(),
+        l.predict_velocity_forced(&z, &zero, &mut ws).unwrap()
+    );
+    let (z0, d0) = l.step_derivatives_forced(&z, &none, &mut ws).unwrap();
+    let (z1, d1) = l.step_derivatives_forced(&z, &zero, &mut ws).unwrap();
+    assert_eq!((z0, d0.a.matrix::<4>()), (z1, d1.a.matrix::<4>()));
+    let r0 = l.rollout_forced_with_info(&z, &[none; 5], &mut ws).unwrap();
+    let r1 = l.rollout_forced_with_info(&z, &[zero; 5], &mut ws).unwrap();
+    assert_eq!(r0.len(), 5);
+    for ((s0, i0), (s1, i1)) in r0.iter().zip(&r1) {
+        assert_eq!((s0, i0.std_dev), (s1, i1.std_dev));
+    }
 }
 
 /// A (B is empty: no inputs) of learned steps of unactuated tree systems

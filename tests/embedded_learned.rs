@@ -515,11 +515,18 @@ where
                 .step_forced(z, &SVector::<f64, U>::zeros())
                 .unwrap()
         );
+        // U = 0 is "no input" (u = 0), as for the nominal `Stepper`
+        let none = SVector::<f64, 0>::zeros();
+        assert_eq!(free, embedded.step_forced(z, &none).unwrap());
         let std_free = l.step_mean_with(z, &mut ws).unwrap();
         assert_eq!(
             std_free,
             l.step_mean_forced_with(z, &SVector::<f64, U>::zeros(), &mut ws)
                 .unwrap()
+        );
+        assert_eq!(
+            std_free,
+            l.step_mean_forced_with(z, &none, &mut ws).unwrap()
         );
         worst = worst.max(diff(&std_free, &free));
     }

@@ -266,12 +266,19 @@ fn zero_input_is_the_unactuated_spatial_mechanism_bit_for_bit() {
             &la.step_forced(&x, &zero).unwrap(),
             &lp.step(&x).unwrap()
         ));
+        // U = 0 (no input vector) as in the minimal view
+        assert!(same_bits_max(
+            &la.step_forced(&x, &none).unwrap(),
+            &lp.step(&x).unwrap()
+        ));
     }
     let x0 = sa.minimal().to_maximal(&z0, dt);
     let mut ra = [x0; 31];
     let mut rp = ra;
     la.rollout_forced_into(&x0, &[zero; 30], &mut ra).unwrap();
     lp.rollout_into(&x0, &mut rp).unwrap();
+    assert!(ra.iter().zip(&rp).all(|(x, y)| same_bits_max(x, y)));
+    la.rollout_forced_into(&x0, &[none; 30], &mut ra).unwrap();
     assert!(ra.iter().zip(&rp).all(|(x, y)| same_bits_max(x, y)));
     let (sc, scp) = (DriveCrank3::default(), PlainCrank3::default());
     let x0 = sc.minimal().to_maximal(&z, dt);

@@ -365,6 +365,22 @@ pub fn acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize>(
     force: Option<&SVector<f64, N>>,
     t: &mut Terms<N>,
 ) -> Option<(SVector<f64, N>, SVector<f64, C>)> {
+    try_acceleration_forced(model, k, q, qdot, force, t).ok()
+}
+
+/// [`acceleration_forced`] saying why it failed: an overflow (the mass
+/// matrix, the right-hand side or the result not finite, e.g. a velocity
+/// of 1e200 whose square overflows) is [`StepError::NonFiniteState`], a
+/// singular KKT system [`StepError::SingularJacobian`] (iteration 0: there
+/// is no Newton iteration).
+pub fn try_acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize>(
+    model: &M,
+    k: &M::Constants,
+    q: &SVector<f64, N>,
+    qdot: &SVector<f64, N>,
+    force: Option<&SVector<f64, N>>,
+    t: &mut Terms<N>,
+) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
     model.terms(k, q, t);
     let mut rhs = -t.dpotential;
     if let Some(f) = force {
@@ -394,13 +410,22 @@ pub fn acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize>(
     } else {
         (SMatrix::zeros(), SVector::zeros())
     };
-    if !t.mass.iter().chain(rhs.iter()).all(|x| x.is_finite()) {
-        return None;
+    let finite = |x: &f64| x.is_finite();
+    if !(t
+        .mass
+        .iter()
+        .chain(rhs.iter())
+        .chain(gamma.iter())
+        .all(finite))
+    {
+        return Err(StepError::NonFiniteState);
     }
     let ((a, lambda), _) =
-        crate::linalg::solve_kkt_regularised(&t.mass, &(-g.transpose()), &g, &rhs, &(-gamma))?;
-    a.iter()
-        .chain(lambda.iter())
-        .all(|x| x.is_finite())
-        .then_some((a, lambda))
+        crate::linalg::solve_kkt_regularised(&t.mass, &(-g.transpose()), &g, &rhs, &(-gamma))
+            .ok_or(StepError::SingularJacobian { iteration: 0 })?;
+    if a.iter().chain(lambda.iter()).all(finite) {
+        Ok((a, lambda))
+    } else {
+        Err(StepError::NonFiniteState)
+    }
 }

@@ -30,9 +30,10 @@
 //! ```
 //!
 //! The input count is a type-level fact: `U` must equal
-//! [`Dynamics::INPUTS`] (a `const` assertion, evaluated when the code is
-//! generated: `cargo build` reports a wrong `U`, `cargo check` does not),
-//! so a wrong-length input does not build; NaN or ±∞ in u is [`StepError::NonFiniteInput`].
+//! [`Dynamics::INPUTS`], or be 0 for no input (u = 0, as
+//! [`Stepper::step_forced`] takes it) — a `const` assertion, evaluated when
+//! the code is generated: `cargo build` reports a wrong `U`, `cargo check`
+//! does not — so a wrong-length input does not build; NaN or ±∞ in u is [`StepError::NonFiniteInput`].
 //! [`LearnedStepper::step`] (no input) of a model with inputs is the forced
 //! step under u = 0, as the std runtime's unforced step of such a model. A
 //! model trained without inputs takes only u = 0 in `step_forced` (which is
@@ -319,14 +320,24 @@ where
 
     /// The unprojected prediction v_u = v̄(z, u) + μ(enc(z), u) of the next
     /// velocity under inputs `u` (module docs, "Inputs"). `U` must equal
-    /// [`Dynamics::INPUTS`] (a `const` assertion: `cargo build` reports a
-    /// wrong `U`).
+    /// [`Dynamics::INPUTS`], or be 0 for no input (then this is
+    /// [`predict_velocity`](Self::predict_velocity)); a `const` assertion:
+    /// `cargo build` reports a wrong `U`.
     pub fn predict_velocity_forced<const U: usize>(
         &self,
         z: &State<N>,
         u: &SVector<f64, U>,
     ) -> Result<SVector<f64, N>, LearnedError> {
-        const { assert!(U == M::INPUTS, "U must equal Dynamics::INPUTS") };
+        const {
+            assert!(
+                U == M::INPUTS || U == 0,
+                "U must equal Dynamics::INPUTS (or 0: no input)"
+            )
+        };
+        if U == 0 {
+            // no input: u = 0, as `Stepper::step_forced` takes it
+            return self.predict_velocity(z);
+        }
         if !z.is_finite() {
             return Err(StepError::NonFiniteState.into());
         }
@@ -398,8 +409,8 @@ where
     }
 
     /// One learned step from `z` under inputs `u` (one per actuated joint,
-    /// in declaration order; `U` must equal [`Dynamics::INPUTS`], checked
-    /// when the code is built): GP input (enc(z), u), nominal prior the forced
+    /// in declaration order; `U` must equal [`Dynamics::INPUTS`], or 0 for
+    /// no input, checked when the code is built): GP input (enc(z), u), nominal prior the forced
     /// step [`Stepper::step_forced`], projection for loops. Equal to the
     /// std runtime's learned forced mean step to solver tolerance. NaN or
     /// ±∞ in `u` is [`StepError::NonFiniteInput`]; a model trained without

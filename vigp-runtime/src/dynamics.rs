@@ -67,7 +67,9 @@ pub fn constraint_curvature<M: Mechanism<N, C>, const N: usize, const C: usize>(
 /// A mass matrix that is singular only in directions the constraints fix
 /// (a link without rotational inertia in maximal coordinates) is handled by
 /// the regularised KKT solve ([`solve_kkt_regularised`]); NaN or ±∞ in
-/// (q, q̇) is [`StepError::NonFiniteState`], invalid run-time parameters
+/// (q, q̇), or an overflow on the way (a velocity of 1e200), is
+/// [`StepError::NonFiniteState`], a singular system
+/// [`StepError::SingularJacobian`], invalid run-time parameters
 /// [`StepError::InvalidModel`].
 pub fn acceleration<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
@@ -90,15 +92,15 @@ pub fn acceleration_with<M: Mechanism<N, C>, const N: usize, const C: usize>(
         return Err(StepError::NonFiniteState { step: None });
     }
     let mut t = vigp_core::Terms::zeros();
-    vigp_core::dynamics::acceleration(m, k, q, qdot, &mut t).ok_or(StepError::SingularJacobian {
-        iteration: 0,
-        step: None,
-    })
+    Ok(vigp_core::dynamics::try_acceleration_forced(
+        m, k, q, qdot, None, &mut t,
+    )?)
 }
 
 /// [`acceleration_with`] under inputs `u` (one per actuated joint; `U`
-/// must equal the mechanism's `Dynamics::INPUTS`): the generalized force
-/// B(q)u joins the right-hand side. u = 0 is [`acceleration_with`].
+/// must equal the mechanism's `Dynamics::INPUTS`, or be 0 for no input):
+/// the generalized force B(q)u joins the right-hand side. u = 0 is
+/// [`acceleration_with`].
 pub fn acceleration_forced_with<
     M: Mechanism<N, C>,
     const N: usize,
@@ -113,8 +115,8 @@ pub fn acceleration_forced_with<
 ) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
     const {
         assert!(
-            U == <M as vigp_core::Dynamics<N, C>>::INPUTS,
-            "U must equal Dynamics::INPUTS"
+            U == <M as vigp_core::Dynamics<N, C>>::INPUTS || U == 0,
+            "U must equal Dynamics::INPUTS (or 0: no input)"
         )
     };
     if !u.iter().all(|x| x.is_finite()) {
@@ -128,12 +130,14 @@ pub fn acceleration_forced_with<
     }
     let force = m.input_matrix::<U>(k, q) * u;
     let mut t = vigp_core::Terms::zeros();
-    vigp_core::dynamics::acceleration_forced(m, k, q, qdot, Some(&force), &mut t).ok_or(
-        StepError::SingularJacobian {
-            iteration: 0,
-            step: None,
-        },
-    )
+    Ok(vigp_core::dynamics::try_acceleration_forced(
+        m,
+        k,
+        q,
+        qdot,
+        Some(&force),
+        &mut t,
+    )?)
 }
 
 /// [`acceleration`] by dual numbers (the reference implementation).

@@ -381,14 +381,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         ws: &mut Workspace,
         var: Option<&mut SVector<f64, N>>,
     ) -> Result<SVector<f64, N>, StepError> {
-        if U != self.inputs {
-            return Err(StepError::InputsNotSupported);
-        }
+        self.check_input_count::<U>()?;
         if !u.iter().all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
         }
         let mut mean = SVector::<f64, N>::zeros();
-        self.with_input_u(z, u.as_slice(), |input| {
+        let predict = |input: &[f64]| {
             match var {
                 Some(var) => {
                     self.gp
@@ -397,7 +395,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 None => self.gp.predict_mean_into(input, mean.as_mut_slice(), ws),
             }
             .map_err(|_| StepError::Prediction { step: None })
-        })?;
+        };
+        if U == 0 {
+            // no input: u = 0 in the GP input of a model trained with inputs
+            self.with_input(z, predict)?;
+        } else {
+            self.with_input_u(z, u.as_slice(), predict)?;
+        }
         let prior = match self.prior {
             Prior::Nominal => self.nominal.step_forced(z, u)?.v,
             Prior::Constant => SVector::zeros(),
@@ -410,8 +414,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// One learned mean step under inputs `u` (as
-    /// [`Learned::step_mean_forced_with`]; `U = 0` for a model trained
-    /// without inputs) with its exact derivatives A = ∂z₁/∂z₀ and
+    /// [`Learned::step_mean_forced_with`]; `U = 0` for no input, u = 0)
+    /// with its exact derivatives A = ∂z₁/∂z₀ and
     /// B = ∂z₁/∂u: q₁ = q₀ + Δt·v₀, and v₁ = prior(z₀, u) + μ(enc(z₀), u)
     /// differentiates into the nominal forced step's derivatives
     /// (`Variational::step_derivatives`) plus the GP mean's gradient
@@ -420,16 +424,38 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// differentiates implicitly through its KKT conditions at the
     /// projected velocity (multipliers and the constraints' second
     /// derivatives included).
+    ///
+    /// Numerical caveat for finite-difference checks: the GP mean
+    /// μ = k(x)ᵀα sums terms much larger than itself when the trained noise
+    /// variance sits on its lower bound (near noise-free data: |α| grows
+    /// like 1/σ_n²), so the learned step carries rounding noise of about
+    /// 1e-9–1e-7 in v₁. Central differences with ε = 1e-6 then show
+    /// apparent errors of 1e-4 and more; use ε ≈ 1e-3 with a five-point
+    /// stencil, or raise the noise floor (`TrainOptions::bounds`, e.g.
+    /// `noise_variance: (1e-6, 10.0)` in the GP's normalised units), which
+    /// also smooths the step for line searches. The exact derivatives returned here are not affected.
     pub fn step_derivatives_forced<const U: usize>(
         &self,
         z: &State<N>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
-        if U != self.inputs {
-            return Err(StepError::InputsNotSupported);
-        }
+        self.check_input_count::<U>()?;
         self.step_derivatives_at(z, u, ws)
+    }
+
+    /// The forced calls take `U` equal to the inputs the model was trained
+    /// with, or `U = 0` (no input: u = 0, as every [`Integrator`] takes
+    /// it). A `U` other than 0 and the mechanism's input count does not
+    /// compile (the nominal forced step's `const` assertion), so the only
+    /// run-time refusal is the mechanism's input count on a model trained
+    /// without inputs.
+    fn check_input_count<const U: usize>(&self) -> Result<(), StepError> {
+        if U == 0 || U == self.inputs {
+            Ok(())
+        } else {
+            Err(StepError::InputsNotSupported)
+        }
     }
 
     /// [`Learned::step_derivatives_forced`] for `U` equal to the model's
@@ -564,8 +590,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
 
     /// One learned step under inputs `u` using the posterior mean (and the
     /// projection for constrained models), as
-    /// [`Learned::step_mean_with`]. `U` must be the number of inputs the
-    /// model was trained with.
+    /// [`Learned::step_mean_with`]. `U` is the number of inputs the model
+    /// was trained with, or 0 for no input (u = 0).
     pub fn step_mean_forced_with<const U: usize>(
         &self,
         z: &State<N>,
@@ -607,7 +633,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// encoded state followed by u. The mean equals
     /// [`Learned::predict_mean_velocity_forced`] bit for bit.
     ///
-    /// Errors: `U` other than the model's inputs
+    /// `U` is the model's input count, or 0 for no input (u = 0; a
+    /// different `U` does not compile). Errors: the mechanism's input count
+    /// on a model trained without inputs
     /// ([`StepError::InputsNotSupported`]), a NaN or ∞ in `u`, a failed
     /// prior step or GP prediction.
     pub fn predict_velocity_forced<const U: usize>(
@@ -630,7 +658,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// step, and the standard deviations are σ(z_k, u_k), from one batched
     /// [`Gp::predict`] as in `rollout_with_info`.
     ///
-    /// Errors: `U` other than the model's inputs
+    /// `U` is the model's input count, or 0 for no input (u = 0; a
+    /// different `U` does not compile). Errors: the mechanism's input count
+    /// on a model trained without inputs
     /// ([`StepError::InputsNotSupported`]), and those of the steps, tagged
     /// with the failing step.
     pub fn rollout_forced_with_info<const U: usize>(
@@ -639,9 +669,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         inputs: &[SVector<f64, U>],
         ws: &mut Workspace,
     ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
-        if U != self.inputs {
-            return Err(StepError::InputsNotSupported);
-        }
+        self.check_input_count::<U>()?;
         self.rollout_info(z0, inputs.len(), inputs, ws)
     }
 

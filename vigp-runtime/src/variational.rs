@@ -441,8 +441,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// The states solve the same discrete equations as
     /// `rollout_forced`'s to the solver's tolerance, not bit for bit: each
     /// step here starts Newton from the previous velocity and carries the
-    /// momentum, while `rollout_forced` extrapolates its start (a
-    /// difference of ≈ 1e-13 relative was seen on a loop).
+    /// momentum, while `rollout_forced` extrapolates its start. Over 8
+    /// steps at the default tolerance (1e-12) the two differed by up to
+    /// 1.3e-10 absolute (≈ 4e-11 relative) on a cart with a double
+    /// pendulum and ≈ 1e-11 on two loops; with `.tolerance(1e-14)` by
+    /// ≤ 1.4e-12.
     #[cfg(feature = "alloc")]
     pub fn rollout_derivatives<const U: usize>(
         &self,

@@ -631,8 +631,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// One step under inputs `u` (one per actuated joint in declaration
-    /// order, [`Spatial::INPUT_JOINTS`]; `U` must equal their number,
-    /// checked at compile time), held over the step: input i adds the
+    /// order, [`Spatial::INPUT_JOINTS`]; `U` must equal their number, or be
+    /// 0 for no input, checked at compile time), held over the step: input i adds the
     /// generalized force u_i·∂ṡ_i/∂ν at configuration k+1 to the DEL,
     /// where the damping force −D·ν enters (a torque about a revolute
     /// axis on the child and its reaction on the parent, a force along a
@@ -653,8 +653,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<(SpatialState<B>, LieStepReport), StepError> {
         const {
             assert!(
-                U == S::INPUT_JOINTS.len(),
-                "U must equal the number of inputs"
+                U == S::INPUT_JOINTS.len() || U == 0,
+                "U must equal the number of inputs (or 0: no input)"
             )
         };
         z.validate()?;
@@ -678,8 +678,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<(), RolloutError> {
         const {
             assert!(
-                U == S::INPUT_JOINTS.len(),
-                "U must equal the number of inputs"
+                U == S::INPUT_JOINTS.len() || U == 0,
+                "U must equal the number of inputs (or 0: no input)"
             )
         };
         let Some((first, rest)) = out.split_first_mut() else {
