@@ -145,8 +145,18 @@ fn with_path(path: &Path, why: &dyn std::fmt::Display, names_path: bool) -> Stri
     }
 }
 
-/// An output file's directory must exist (checked before any work).
+/// An output file's directory must exist, and the path must not be a
+/// directory itself (checked before any work).
 fn check_out_dir(path: &Path) -> Result<(), CliError> {
+    if path.is_dir() {
+        return Err(CliError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::IsADirectory,
+                "is a directory: give a file name",
+            ),
+        });
+    }
     match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => Err(CliError::Io {
             path: path.to_path_buf(),
@@ -205,7 +215,8 @@ struct ReadArgs {
     /// Do not unwrap angle coordinates.
     #[arg(long)]
     no_unwrap: bool,
-    /// Accepted deviation of a time step from its run's median step (relative).
+    /// Accepted deviation of a time step from its run's median step
+    /// (relative), on top of the rounding of the printed timestamps.
     #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true)]
     time_tolerance: f64,
 }
@@ -303,8 +314,11 @@ struct FitArgs {
     /// GP trains in (outputs scaled to unit variance); default 1e-10. On
     /// nearly noise-free data the fitted noise can reach it, and then the
     /// posterior variance σ_f² − kᵀ(K + σ_n²I)⁻¹k is lost to rounding at
-    /// some states, where `predict`'s variance-based bounds (RKHS, Theorem
-    /// 1) refuse the run; a larger floor (e.g. 1e-8) keeps them usable.
+    /// some states, where `predict`'s variance-based bounds (RKHS and
+    /// Theorem 1) refuse the run. What counts is the ratio to the fitted signal
+    /// variance σ_f² (which can grow to 1e4 on smooth data): a floor of
+    /// about 1e-10·σ_f² keeps the bounds usable, and `fit` prints that
+    /// value when a fitted noise variance is below it.
     // negative numbers are values to refuse with a reason, not flags
     #[arg(long, value_name = "VAR", allow_negative_numbers = true)]
     noise_floor: Option<f64>,
@@ -919,6 +933,12 @@ where
 /// forced training of one view, with `encoding` and `prior`), reports and
 /// saves. `u_dim`: the GP inputs that are control inputs, after the
 /// `encoding`'s state inputs.
+/// A fitted noise variance below this fraction of the signal variance
+/// leaves the posterior variance σ_f² − kᵀ(K + σ_n²I)⁻¹k at the level of
+/// its rounding error near the data (≈ N·ε·σ_f² ≈ 1e-13·σ_f² at N = 512,
+/// with a margin of 10³): `fit` then says so and names a floor.
+const VARIANCE_RESOLVED: f64 = 1e-10;
+
 fn fit_view<M, T, const N: usize, const C: usize>(
     a: &FitArgs,
     all: &[T],
@@ -1027,6 +1047,30 @@ where
                 if z.converged { "" } else { " (iteration cap)" }
             ),
         )?;
+    }
+    if a.sparse.is_none() {
+        for (j, o) in learned.gp().outputs().iter().enumerate() {
+            let hp = o.hyperparameters();
+            let ratio = hp.noise_variance / hp.signal_variance;
+            // the smallest power of ten at or above the resolvable floor
+            // (the 1e-9 keeps an exact power of ten from rounding up)
+            let floor =
+                10f64.powf(((VARIANCE_RESOLVED * hp.signal_variance).log10() - 1e-9).ceil());
+            if hp.noise_variance < 0.5 * floor {
+                w(
+                    out,
+                    format_args!(
+                        "note: v_{}: noise variance {:.1e} is {ratio:.0e} of the signal variance \
+                         {:.1e} (normalised units): the posterior variance can be lost to rounding \
+                         and `predict --bound rkhs|theorem1` refuse such states; refit with \
+                         --noise-floor {floor:e} or bound with --calibration",
+                        M::COORDINATES[j],
+                        hp.noise_variance,
+                        hp.signal_variance,
+                    ),
+                )?;
+            }
+        }
     }
     learned.save(&a.out).map_err(|source| CliError::Model {
         path: a.out.clone(),
@@ -1353,6 +1397,7 @@ where
     wtr.write_record(&header).map_err(csv_err)?;
     let pb = bar(starts.len(), "predicting");
     let mut failed = 0usize;
+    let mut first_error = None;
     // states outside what the bound covers, and the runs holding them
     let (mut outside, mut outside_runs) = (0usize, 0usize);
     for ((run, z0, us), zv) in starts.iter().zip(&view_starts) {
@@ -1366,6 +1411,7 @@ where
             Err(e) => {
                 failed += 1;
                 w(out, format_args!("run `{}`: {e}", run.name))?;
+                first_error.get_or_insert(e);
                 continue;
             }
         };
@@ -1393,6 +1439,19 @@ where
     }
     pb.finish_and_clear();
     wtr.flush().map_err(io_error(&a.out))?;
+    if failed == starts.len()
+        && let Some(e) = first_error
+    {
+        // a file with the header alone is no result: fail (exit code 1)
+        w(
+            out,
+            format_args!(
+                "every run failed ({failed}); {} holds no predictions",
+                a.out.display()
+            ),
+        )?;
+        return Err(e.into());
+    }
     if outside > 0 {
         let what = match (&bound.fallback, bound.kind_name()) {
             (Some(f), _) => format!(

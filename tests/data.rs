@@ -125,19 +125,27 @@ fn uneven_time_is_an_error_naming_run_and_line_unless_resampling_is_asked() {
         matches!(e, DataError::TimeNotIncreasing { line: 4, .. }),
         "{e}"
     );
-    // a 300 Hz log with timestamps rounded to 6 decimals (steps off by up
-    // to 1e-6 s = 3e-4 of Δt) passes the default tolerance (1e-3 of Δt);
-    // rounded to 4 decimals (3e-2 of Δt) it does not
-    for (decimals, ok) in [(6, true), (4, false)] {
+    // a 300 Hz log with timestamps rounded to 6 or 4 decimals (steps off
+    // by up to 1e-6 s = 3e-4 of Δt, or 1e-4 s = 3e-2 of Δt) passes: the
+    // check allows the printed rounding on top of the tolerance (1e-3 of
+    // Δt). One step 1 % long, printed to 6 decimals, does not.
+    for (decimals, late) in [(6, 0.0), (4, 0.0), (6, 0.01)] {
         let mut text = String::from("run,t,pivot\n");
         for k in 0..50 {
-            text.push_str(&format!("a,{:.*},0\n", decimals, k as f64 / 300.0));
+            let t = (k as f64 + if k >= 30 { late } else { 0.0 }) / 300.0;
+            text.push_str(&format!("a,{:.*},0\n", decimals, t));
         }
-        assert_eq!(
-            read1(&text, &ReadOptions::default()).is_ok(),
-            ok,
-            "{decimals}"
-        );
+        let read = read1(&text, &ReadOptions::default());
+        if late == 0.0 {
+            let dt = read.unwrap().runs[0].dt.unwrap();
+            assert!((dt - 1.0 / 300.0).abs() < 1e-4 / 49.0, "{decimals}: {dt}");
+        } else {
+            // row k = 30 (line 32) ends the long step
+            assert!(
+                matches!(read, Err(DataError::NonUniformTime { line: 32, .. })),
+                "{read:?}"
+            );
+        }
     }
     // runs with different steps are caught when a common step is needed
     let d = read1(
@@ -284,6 +292,56 @@ fn a_dropped_sample_is_reported_at_its_own_line() {
         }
         other => panic!("{other:?}"),
     }
+}
+
+/// An evenly sampled 120 Hz log whose timestamps were printed with few
+/// decimals passes (its steps differ by a printed unit, up to 12 %), with
+/// Δt the mean step; the same log with one sample dropped is still refused
+/// at the gap. Timestamps printed in exponent form count their digits too.
+#[test]
+fn rounded_timestamps_of_an_even_log_pass_and_a_gap_does_not() {
+    let h = 1.0 / 120.0;
+    let log = |decimals: usize, skip: Option<usize>, exponent: bool| {
+        let mut text = String::from("run,t,pivot\n");
+        for k in (0..241).filter(|k| Some(*k) != skip) {
+            let t = k as f64 * h;
+            let t = if exponent {
+                format!("{t:.decimals$e}")
+            } else {
+                format!("{t:.decimals$}")
+            };
+            text += &format!("a,{t},{}\n", 0.1 * (k as f64 * h).sin());
+        }
+        text
+    };
+    for (decimals, exponent) in [(3, false), (4, false), (5, false), (3, true)] {
+        let d = read1(&log(decimals, None, exponent), &ReadOptions::default())
+            .unwrap_or_else(|e| panic!("{decimals} decimals (exponent {exponent}): {e}"));
+        let dt = d.runs[0].dt.unwrap();
+        // the mean step of 240 steps: off by at most two half-units / 240
+        assert!(
+            (dt - h).abs() <= 1e-5 / 240.0,
+            "{decimals} decimals: dt {dt}"
+        );
+        match read1(&log(decimals, Some(100), exponent), &ReadOptions::default()) {
+            // rows k = 0..99 are lines 2..101; k = 101 ends the gap
+            Err(DataError::NonUniformTime { line, .. }) => assert_eq!(line, 102),
+            other => panic!("{decimals} decimals, a dropped sample: {other:?}"),
+        }
+    }
+    // without the rounding allowance the 3-decimal log fails: the steps
+    // (0.008 or 0.009) differ from the median by 12 %
+    let text = log(3, None, false);
+    let steps: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(1).unwrap().parse::<f64>().unwrap())
+        .collect::<Vec<_>>()
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .collect();
+    assert!(steps.iter().any(|s| (s - 0.008).abs() < 1e-12));
+    assert!(steps.iter().any(|s| (s - 0.009).abs() < 1e-12));
 }
 
 /// `Dataset::dt` and `check_dt` refuse NaN arguments, with which every

@@ -521,8 +521,15 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
             .map(|o| o.hyperparameters().noise_variance)
             .collect()
     };
+    // the default fit says that its noise variances are too small against
+    // the signal variances for the variance-based bounds, and names a floor
+    // (1e-10·σ_f², a power of ten); the floored fit says nothing
+    assert!(
+        fit.contains("of the signal variance") && fit.contains("refit with --noise-floor 1e-6"),
+        "{fit}"
+    );
     let floored = dir.join("floored.json");
-    run(&[
+    let said = run(&[
         "fit",
         "--data",
         s(&train),
@@ -534,6 +541,15 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
         "1e-6",
     ])
     .unwrap();
+    assert!(!said.contains("note: v_"), "{said}");
+    // the default fit's RKHS bound loses the variance in every run: an
+    // error (exit code 1), not a file with the header alone
+    let pred = dir.join("p.csv");
+    let e = run(&predict_args(s(&model), s(&test), "5", s(&pred))).unwrap_err();
+    assert!(e.to_string().contains("lost to rounding"), "{e}");
+    // an output path that is a directory is refused before any work
+    let e = run(&["fit", "--data", s(&train), "--out", s(&dir)]).unwrap_err();
+    assert!(e.to_string().contains("is a directory"), "{e}");
     assert!(
         noise(&floored).iter().all(|&n| n >= 1e-6),
         "{:?}",
@@ -562,7 +578,6 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     // `predict` under each run's logged inputs, with the RKHS bound (the
     // floored model: on noise-free data the default fit's variance is lost
     // to rounding, see `--noise-floor`)
-    let pred = dir.join("p.csv");
     let said = run(&predict_args(s(&floored), s(&test), "5", s(&pred))).unwrap();
     assert!(
         said.contains("3 runs × 5 steps (0 failed); rkhs bound"),

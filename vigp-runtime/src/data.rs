@@ -26,7 +26,8 @@
 //!   file's line number, header = line 1) and the column.
 //! * **Uniform time.** Within a run every step t_{k+1} − t_k must equal the
 //!   run's median step to within [`ReadOptions::time_tolerance`] (relative,
-//!   default 1e-3); otherwise [`DataError::NonUniformTime`] names the run
+//!   default 1e-3) plus the rounding of the printed timestamps (four
+//!   half-units of their last digit, at most a quarter step); otherwise [`DataError::NonUniformTime`] names the run
 //!   and the line that ends the odd step (a dropped sample is reported at
 //!   its gap). The run's time step is then the mean step
 //!   (t_last − t_first)/(rows − 1); one that no integrator can take (Δt²
@@ -71,8 +72,11 @@ pub struct ReadOptions {
     /// Unwrap angle coordinates within each run (default `true`).
     pub unwrap_angles: bool,
     /// Largest accepted deviation of a time step from its run's median step,
-    /// relative to that step (default 1e-3: timestamps printed with a few
-    /// decimals pass, a dropped or duplicated sample does not).
+    /// relative to that step (default 1e-3), on top of the rounding of the
+    /// printed timestamps (four half-units of their last digit, at most a
+    /// quarter step): evenly sampled logs pass however few decimals their
+    /// timestamps were printed with (a 120 Hz log with t to 3 decimals), a
+    /// dropped or duplicated sample (a step off by a whole step) does not.
     pub time_tolerance: f64,
     /// `Some(dt)`: resample every run (at most [`MAX_RESAMPLED`] samples
     /// each, else [`DataError::InvalidOption`]) by linear interpolation onto
@@ -207,7 +211,8 @@ pub enum DataError {
     /// A time step differs from the run's median step.
     #[error(
         "run `{run}`, line {line}: time step {found} differs from the run's median step {expected} \
-         by more than {tolerance} relative (missing or repeated samples?); \
+         by more than {tolerance} relative plus the timestamps' printed rounding \
+         (missing or repeated samples?); \
          resample if the sampling is truly uneven"
     )]
     NonUniformTime {
@@ -471,10 +476,27 @@ fn tidy(dt: f64) -> f64 {
     format!("{dt:.11e}").parse().unwrap_or(dt)
 }
 
+/// Half a unit of the last digit a number was printed with: the most the
+/// printed value can differ from the one it was rounded from ("0.00833" →
+/// 5e-6, "8.33e-3" → 5e-6, "12" → 0.5).
+fn printed_half_unit(text: &str) -> f64 {
+    let text = text.trim();
+    let (mantissa, exponent) = match text.find(['e', 'E']) {
+        Some(i) => (&text[..i], text[i + 1..].parse::<i32>().unwrap_or(0)),
+        None => (text, 0),
+    };
+    let decimals = mantissa.find('.').map_or(0, |p| {
+        mantissa[p + 1..].bytes().filter(u8::is_ascii_digit).count()
+    });
+    0.5 * 10f64.powi(exponent.saturating_sub(decimals as i32))
+}
+
 /// A run being read: times, positions and the line of each row.
 struct RawRun<const N: usize> {
     name: String,
     times: Vec<f64>,
+    /// The largest rounding of a printed t ([`printed_half_unit`]).
+    time_rounding: f64,
     positions: Vec<SVector<f64, N>>,
     inputs: Vec<Vec<f64>>,
     lines: Vec<u64>,
@@ -490,6 +512,7 @@ impl<const N: usize> RawRun<N> {
         let RawRun {
             name,
             times,
+            time_rounding,
             mut positions,
             inputs,
             lines,
@@ -588,12 +611,17 @@ impl<const N: usize> RawRun<N> {
         // Each step is compared with the run's median step, so that one
         // dropped or repeated sample is reported at its own line (the mean
         // step shifts with the gap and would flag the regular steps too).
+        // Printed timestamps are rounded: a step is off by up to the
+        // rounding of its two ends, the median step by that of its two, so
+        // four times the largest rounding is allowed on top, at most a
+        // quarter step (a dropped or repeated sample is a whole step off).
         let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
         steps.sort_by(f64::total_cmp);
         let typical = steps[steps.len() / 2];
+        let slack = (4.0 * time_rounding).min(0.25 * typical);
         for k in 1..n {
             let step = times[k] - times[k - 1];
-            if (step - typical).abs() > opts.time_tolerance * typical {
+            if (step - typical).abs() > opts.time_tolerance * typical + slack {
                 return Err(DataError::NonUniformTime {
                     run: name,
                     line: lines[k],
@@ -697,6 +725,7 @@ impl<const N: usize> Dataset<N> {
             let line = record.position().map_or(0, |p| p.line());
             let mut run = "";
             let mut t = 0.0;
+            let mut t_rounding = 0.0;
             let mut q = SVector::<f64, N>::zeros();
             let mut u = vec![0.0; inputs.len()];
             for (field, (role, col)) in record.iter().zip(roles.iter().zip(header.iter())) {
@@ -717,7 +746,10 @@ impl<const N: usize> Dataset<N> {
                 };
                 match role {
                     Role::Run => run = field,
-                    Role::Time => t = number()?,
+                    Role::Time => {
+                        t = number()?;
+                        t_rounding = printed_half_unit(field);
+                    }
                     Role::Coordinate(k) => q[*k] = number()?,
                     Role::Input(k) => u[*k] = number()?,
                 }
@@ -740,6 +772,7 @@ impl<const N: usize> Dataset<N> {
                 current = Some(RawRun {
                     name: run.into(),
                     times: Vec::new(),
+                    time_rounding: 0.0,
                     positions: Vec::new(),
                     inputs: Vec::new(),
                     lines: Vec::new(),
@@ -747,6 +780,7 @@ impl<const N: usize> Dataset<N> {
             }
             if let Some(c) = current.as_mut() {
                 c.times.push(t);
+                c.time_rounding = f64::max(c.time_rounding, t_rounding);
                 c.positions.push(q);
                 if !inputs.is_empty() {
                     c.inputs.push(u);
