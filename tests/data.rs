@@ -230,6 +230,13 @@ fn nan_and_infinity_are_rejected_with_line_and_column() {
         matches!(&e, DataError::NonFinite { line: 2, column, .. } if column == "t"),
         "{e}"
     );
+    // a number beyond f64's range reads as ∞: the message says so
+    let e = read2("run,t,rail,hinge\na,0,1e400,0\n").unwrap_err();
+    assert!(
+        matches!(&e, DataError::NonFinite { line: 2, column, .. } if column == "rail"),
+        "{e}"
+    );
+    assert!(e.to_string().contains("beyond ±1.8e308"), "{e}");
 }
 
 /// Finite readings can still overflow what is made of them: an angle

@@ -186,8 +186,11 @@ pub enum DataError {
         /// The text found.
         value: String,
     },
-    /// NaN or ±∞ in the data.
-    #[error("line {line}, column `{column}`: {value} is not finite")]
+    /// NaN or ±∞ in the data (a number beyond f64's range, such as 1e400,
+    /// reads as ±∞).
+    #[error(
+        "line {line}, column `{column}`: {value} is not finite (NaN, ±inf, or a number beyond ±1.8e308)"
+    )]
     NonFinite {
         /// Line of the row.
         line: u64,
