@@ -1183,6 +1183,32 @@ fn spatial_bound_misuse_is_a_typed_error() {
     let mut w = cal_p.windows()[0].clone();
     w.configurations[1].0[0].x = f64::INFINITY;
     assert!(SpatialCalibration::new(dt, vec![w]).is_err());
+    // a quaternion off the unit sphere, in a start or a true orientation,
+    // is refused with the window named (it used to count as a failed
+    // prediction and widen the bound silently)
+    let scaled = |q: &nalgebra::UnitQuaternion<f64>| {
+        nalgebra::UnitQuaternion::new_unchecked(q.quaternion() * 1.001)
+    };
+    let mut ws = cal_p.windows()[..3].to_vec();
+    ws[2].start.q[1] = scaled(&ws[2].start.q[1]);
+    let e = SpatialCalibration::new(dt, ws).unwrap_err();
+    assert!(
+        matches!(e, BoundError::Calibration { index: 2, .. })
+            && e.to_string().contains("unit norm"),
+        "{e}"
+    );
+    let mut ws = cal_p.windows()[..3].to_vec();
+    ws[1].configurations[2].1[0] = scaled(&ws[1].configurations[2].1[0]);
+    assert!(matches!(
+        SpatialCalibration::new(dt, ws),
+        Err(BoundError::Calibration { index: 1, .. })
+    ));
+    let mut off_runs = runs.clone();
+    off_runs[0][4].1[1] = scaled(&off_runs[0][4].1[1]);
+    assert!(matches!(
+        SpatialCalibration::from_trajectories(&off_runs, dt, horizon, 5),
+        Err(BoundError::Calibration { .. })
+    ));
     let short = SpatialWindow {
         start: z0,
         configurations: vec![configs[1]],

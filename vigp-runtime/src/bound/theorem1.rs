@@ -97,7 +97,7 @@ pub(super) fn compute(
     if let LipschitzF::Given(v) = &settings.lipschitz_f {
         if v.len() != p {
             return Err(BoundError::WrongLength {
-                what: "lipschitz_f",
+                what: "lipschitz_f (one per GP output)",
                 expected: p,
                 got: v.len(),
             });

@@ -12,6 +12,10 @@ pub(crate) trait Steps {
     fn steps(&self) -> usize;
     /// No NaN or ±∞ in the start or the true states.
     fn is_finite(&self) -> bool;
+    /// What else makes the (finite) window unusable, if anything.
+    fn defect(&self) -> Option<&'static str> {
+        None
+    }
 }
 
 /// Windows of equal length K ≥ 2 with time step `dt`, and their inputs.
@@ -32,7 +36,8 @@ pub(crate) struct Windows<W> {
 
 impl<W: Steps> Windows<W> {
     /// Errors: `dt` not finite and positive, a window with fewer than 2
-    /// steps, windows of different lengths, or a NaN/∞ anywhere.
+    /// steps, windows of different lengths, a NaN/∞ anywhere, or what the
+    /// window's [`Steps::defect`] names.
     pub fn new(dt: f64, windows: Vec<W>) -> Result<Self, BoundError> {
         if vigp_core::step::check_time_step(dt).is_err() {
             return Err(BoundError::InvalidSetting {
@@ -59,6 +64,9 @@ impl<W: Steps> Windows<W> {
                     index,
                     reason: "NaN or infinity in the window",
                 });
+            }
+            if let Some(reason) = w.defect() {
+                return Err(BoundError::Calibration { index, reason });
             }
         }
         Ok(Self {

@@ -44,6 +44,7 @@ use crate::bound::windows::{Steps, Windows};
 use crate::bound::{BoundError, ConformalSettings, Region, Score, Tube, check_delta};
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
+use vigp_core::spatial::maximal::UNIT_TOLERANCE;
 
 /// One held-out case: a start state and the true configurations after it.
 #[derive(Clone, Debug, PartialEq)]
@@ -81,6 +82,20 @@ impl<const B: usize> Steps for SpatialWindow<B> {
                     && q.iter().all(|q| q.coords.iter().all(|v| v.is_finite()))
             })
     }
+
+    /// A start or a true orientation whose quaternion is not of unit norm
+    /// (to [`UNIT_TOLERANCE`]): the step refuses such a start, and a true
+    /// orientation off the unit sphere would distort the rotation errors
+    /// the bound is calibrated on.
+    fn defect(&self) -> Option<&'static str> {
+        let off = |q: &nalgebra::UnitQuaternion<f64>| {
+            (q.quaternion().norm() - 1.0).abs() > UNIT_TOLERANCE
+        };
+        (self.start.non_unit().is_some() || self.configurations.iter().any(|(_, q)| q.iter().any(off)))
+            .then_some(
+                "a quaternion is not of unit norm (to 1e-9): normalise it, e.g. UnitQuaternion::new_normalize",
+            )
+    }
 }
 
 /// The window of `horizon` steps of configurations `c` from sample `s`,
@@ -106,7 +121,9 @@ fn window<const B: usize>(
 impl<const B: usize> SpatialCalibration<B> {
     /// Windows with time step `dt`. Errors: `dt` not finite and positive,
     /// a window with fewer than 2 configurations, windows of different
-    /// lengths, or a NaN/∞ anywhere. (Without windows, calibrating a bound
+    /// lengths, a NaN/∞ anywhere, or a quaternion (start or true
+    /// orientation) not of unit norm to 1e-9
+    /// ([`BoundError::Calibration`], naming the window). (Without windows, calibrating a bound
     /// is [`BoundError::TooFewCalibration`].)
     pub fn new(dt: f64, windows: Vec<SpatialWindow<B>>) -> Result<Self, BoundError> {
         Ok(Self {
