@@ -221,6 +221,84 @@ fn edge_cases_do_not_panic() {
     }
 }
 
+/// A mechanism named like a primitive type is refused at its name (it
+/// used to give 15–35 rustc errors at the whole macro call), in both the
+/// planar and the 3-D syntax, raw or not.
+#[test]
+fn a_primitive_type_name_is_refused_at_the_name() {
+    for (name, gravity) in [
+        ("f64", "[0.0, -9.81]"),
+        ("usize", "[0.0, -9.81]"),
+        ("r#bool", "[0.0, -9.81]"),
+        ("f64", "[0.0, 0.0, -9.81]"),
+    ] {
+        let src = format!(
+            "pub {name} {{ gravity: {gravity}, links {{ a: {{ mass: 1.0, length: 1.0 }} }} \
+             joints {{ j: revolute(world, a.start) }} }}"
+        );
+        let e = vigp_codegen::expand_to_string(&src).unwrap_err();
+        assert!(e.contains("primitive type"), "{name} {gravity}: {e}");
+    }
+    assert!(
+        vigp_codegen::expand_to_string(
+            "pub F64 { links { a: { mass: 1.0, length: 1.0 } } joints { j: revolute(world, a.start) } }"
+        )
+        .is_ok()
+    );
+}
+
+/// A boolean on a numeric key says that the key takes a number (it used
+/// to say that a flag is written bare, which `mass` is not); on
+/// `actuated`, the one flag, it still names the flag form.
+#[test]
+fn a_boolean_on_a_numeric_key_asks_for_a_number() {
+    let e = vigp_codegen::expand_to_string(
+        "pub X { links { a: { mass: true, length: 1.0 } } joints { j: revolute(world, a.start) } }",
+    )
+    .unwrap_err();
+    assert!(e.contains("`mass` takes a number, not `true`"), "{e}");
+    let e = vigp_codegen::expand_to_string(
+        "pub X { links { a: { mass: 1.0, length: 1.0 } } joints { j: revolute(world, a.start) { actuated: true } } }",
+    )
+    .unwrap_err();
+    assert!(e.contains("a flag is written bare"), "{e}");
+}
+
+/// A planar chain of n links, each on a revolute joint at the previous
+/// link's end.
+fn chain(n: usize) -> String {
+    let links: Vec<String> = (0..n)
+        .map(|i| format!("l{i}: {{ mass: 1.0, length: 0.3 }}"))
+        .collect();
+    let mut joints = vec!["j0: revolute(world, l0.start)".to_string()];
+    joints.extend((1..n).map(|i| format!("j{i}: revolute(l{}.end, l{i}.start)", i - 1)));
+    format!(
+        "pub Chain {{ links {{ {} }} joints {{ {} }} }}",
+        links.join(", "),
+        joints.join(", ")
+    )
+}
+
+/// The closed-form planar terms grow ≈ 1.5× per link of a chain; past
+/// `MAX_PLANAR_EXPANSION` (8 MB of tokens, between 14 and 15 links) the
+/// macro refuses with the size, the limit and the way out, at the name,
+/// instead of handing rustc code it cannot compile (a 20-link chain
+/// expanded to 83 MB and rustc was killed after 5 minutes).
+#[test]
+fn a_planar_expansion_too_large_to_compile_is_refused_with_the_remedy() {
+    let tokens = |n: usize| {
+        let ts: TokenStream = chain(n).parse().unwrap();
+        vigp_codegen::expand(ts).map(|t| t.to_string().len())
+    };
+    let fourteen = tokens(14).expect("14 links are within the limit");
+    assert!(fourteen > 5_000_000 && fourteen < 8_000_000, "{fourteen}");
+    let e = tokens(15).unwrap_err().to_string();
+    assert!(
+        e.contains("would expand to 11.") && e.contains("3-D syntax"),
+        "{e}"
+    );
+}
+
 proptest! {
     #![proptest_config(ProptestConfig { cases: 512, ..ProptestConfig::default() })]
 

@@ -344,6 +344,9 @@ fn path_span(path: &syn::Path) -> Span {
 /// Validate a parsed description.
 pub fn validate(input: Input) -> syn::Result<Model> {
     let mut errs = Errors(None);
+    if let Some(e) = crate::check_mechanism_name(&input.name) {
+        errs.add(e);
+    }
     check_attrs(&mut errs, &input.attrs, true);
 
     // gravity

@@ -170,14 +170,17 @@ impl Parse for Field {
         // flag form instead of "expected a number"
         if input.peek(syn::LitBool) {
             let b: syn::LitBool = input.parse()?;
-            return Err(syn::Error::new(
-                b.span(),
+            // `actuated` is the DSL's one flag; every other key takes a number
+            let msg = if key == "actuated" {
                 format!(
                     "`{key}: {}`: no booleans here; a flag is written bare (`{key}`) to set \
                      it and left out to unset it",
                     b.value
-                ),
-            ));
+                )
+            } else {
+                format!("`{key}` takes a number, not `{}`", b.value)
+            };
+            return Err(syn::Error::new(b.span(), msg));
         }
         let value = input.parse()?;
         Ok(Field { key, value })

@@ -664,6 +664,9 @@ fn frame(errs: &mut Errors, f: &Field) -> Option<[[f64; 3]; 3]> {
 /// Validate a parsed spatial description.
 pub fn validate(input: Input) -> syn::Result<Model> {
     let mut errs = Errors(None);
+    if let Some(e) = crate::check_mechanism_name(&input.name) {
+        errs.add(e);
+    }
     check_attrs(&mut errs, &input.attrs, true);
 
     let mut gravity = [0.0, 0.0, -9.81].map(DefaultValue::Known);
