@@ -746,6 +746,7 @@ mod tests {
     fn kernel_row_range_is_a_slice_of_kernel_row() {
         let (n, d) = (150, 3);
         let mut inputs = [0.0; 450];
+        assert_eq!(inputs.len(), n * d);
         for (i, v) in inputs.iter_mut().enumerate() {
             *v = ((i as f64 * 0.754_877_666_246_692_7) % 1.0) * 4.0 - 2.0;
         }
