@@ -27,9 +27,9 @@
 //! * **Uniform time.** Within a run every step t_{k+1} − t_k must equal the
 //!   run's median step to within [`ReadOptions::time_tolerance`] (relative,
 //!   default 1e-3) plus the rounding of the printed timestamps (four
-//!   half-units of their last digit, at most a quarter step); otherwise [`DataError::NonUniformTime`] names the run
-//!   and the line that ends the odd step (a dropped sample is reported at
-//!   its gap). The run's time step is then the mean step
+//!   half-units of their last digit, at most a quarter step); otherwise
+//!   [`DataError::NonUniformTime`] names the run and the line that ends the
+//!   odd step (a dropped sample is reported at its gap). The run's time step is then the mean step
 //!   (t_last − t_first)/(rows − 1); one that no integrator can take (Δt²
 //!   not a normal number) is [`DataError::TimeStepOutOfRange`]. Finite
 //!   readings whose unwrapped angle or discrete velocity overflows f64 are
