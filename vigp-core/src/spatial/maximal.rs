@@ -73,6 +73,15 @@ pub struct SpatialState<const B: usize> {
 /// built with `UnitQuaternion::new_unchecked` from rounded data).
 pub const UNIT_TOLERANCE: f64 = 1e-9;
 
+/// Whether a quaternion of norm `norm` is farther than [`UNIT_TOLERANCE`]
+/// from unit norm (the one test behind [`SpatialState::non_unit`], the
+/// normalisation in [`LieStepper::consistent_state`] and the spatial
+/// calibration windows' check). NaN is not reported: callers test
+/// finiteness first.
+pub fn off_unit_sphere(norm: f64) -> bool {
+    (norm - 1.0).abs() > UNIT_TOLERANCE
+}
+
 impl<const B: usize> SpatialState<B> {
     /// Checks a state before it is stepped: [`StepError::NonFiniteState`]
     /// when an entry is NaN or ±∞, [`StepError::NonUnitQuaternion`] when a
@@ -96,7 +105,7 @@ impl<const B: usize> SpatialState<B> {
             .iter()
             .map(|q| q.quaternion().norm())
             .enumerate()
-            .find(|(_, n)| (n - 1.0).abs() > UNIT_TOLERANCE)
+            .find(|(_, n)| off_unit_sphere(*n))
     }
 
     /// `true` when every entry is finite.
@@ -896,7 +905,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             }
             // a quaternion the steps accept keeps its bits (a consistent
             // state is returned unchanged)
-            if (norm - 1.0).abs() > UNIT_TOLERANCE {
+            if off_unit_sphere(norm) {
                 *qi = UnitQuaternion::new_unchecked(qi.quaternion() / norm);
             }
         }

@@ -44,7 +44,7 @@ use crate::bound::windows::{Steps, Windows};
 use crate::bound::{BoundError, ConformalSettings, Region, Score, Tube, check_delta};
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
-use vigp_core::spatial::maximal::UNIT_TOLERANCE;
+use vigp_core::spatial::maximal::off_unit_sphere;
 
 /// One held-out case: a start state and the true configurations after it.
 #[derive(Clone, Debug, PartialEq)]
@@ -84,14 +84,17 @@ impl<const B: usize> Steps for SpatialWindow<B> {
     }
 
     /// A start or a true orientation whose quaternion is not of unit norm
-    /// (to [`UNIT_TOLERANCE`]): the step refuses such a start, and a true
+    /// ([`off_unit_sphere`]): the step refuses such a start, and a true
     /// orientation off the unit sphere would distort the rotation errors
     /// the bound is calibrated on.
     fn defect(&self) -> Option<&'static str> {
-        let off = |q: &nalgebra::UnitQuaternion<f64>| {
-            (q.quaternion().norm() - 1.0).abs() > UNIT_TOLERANCE
-        };
-        (self.start.non_unit().is_some() || self.configurations.iter().any(|(_, q)| q.iter().any(off)))
+        let mut orientations = self
+            .start
+            .q
+            .iter()
+            .chain(self.configurations.iter().flat_map(|(_, q)| q));
+        orientations
+            .any(|q| off_unit_sphere(q.quaternion().norm()))
             .then_some(
                 "a quaternion is not of unit norm (to 1e-9): normalise it, e.g. UnitQuaternion::new_normalize",
             )
