@@ -6,7 +6,8 @@
 //!
 //! ```text
 //! cargo run --release --example gp_csv -- --csv data.csv [--restarts 10] [--seed 0]
-//!     [--raw] [--bounds LO HI] [--screen auto|off|M] [--theta t1,…,t(d+2)] [--test test.csv]
+//!     [--raw] [--bounds LO HI] [--screen auto|off|M] [--memory K] [--theta t1,…,t(d+2)]
+//!     [--test test.csv]
 //! ```
 //!
 //! * default: vigp's defaults (inputs standardised, `Bounds::default()`,
@@ -19,6 +20,8 @@
 //! * `--bounds LO HI`: other uniform bounds (normalised units);
 //! * `--screen auto|off|M`: [`Screening`] of the starts (default auto:
 //!   from N = 512 on a subset; `off` is scikit-learn's procedure);
+//! * `--memory K`: L-BFGS-B curvature pairs (`TrainOptions::memory`;
+//!   default 10, scipy's `maxcor`);
 //! * `--start t1,…,t(d+2)`: start 0 at this θ (normalised units, vigp's
 //!   order, clamped into the bounds) instead; with `--restarts 0` this runs
 //!   the optimiser from one given point (e.g. one of scikit-learn's starts).
@@ -114,6 +117,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some("off") => Screening::Off,
         Some(m) => Screening::Subset(m.parse()?),
     };
+    if let Some(m) = str_arg("--memory") {
+        opts.memory = m.parse()?;
+    }
     if let Some((lo, hi)) = pair_arg("--bounds") {
         opts.bounds = Bounds::uniform(lo.parse()?, hi.parse()?);
     }

@@ -806,6 +806,14 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
         e.contains("--sparse needs at least 1 inducing point"),
         "{e}"
     );
+    // an optimiser memory of 0 is a usage error, not a training failure
+    let args = std::iter::once("vigp".to_owned())
+        .chain(fit_args("32"))
+        .chain(["--memory".to_owned(), "0".to_owned()]);
+    let e = vigp::cli::run(&tool, args, &mut Vec::new())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("--memory must be from 1 to 1000"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

@@ -613,7 +613,7 @@ impl Gp {
             }
         }
         let lopt = LbfgsOptions {
-            memory: 10,
+            memory: opts.memory,
             max_iters: opts.max_iters,
             pgtol: opts.pgtol,
             ftol: opts.ftol,
