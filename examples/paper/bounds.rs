@@ -360,6 +360,7 @@ where
         restarts: cli.restarts,
         seed: cli.seed ^ n as u64,
         screening: cli.screening(),
+        memory: cli.memory,
         ..TrainOptions::default()
     };
     let (cal_min, test_min, shift_min) =

@@ -88,6 +88,13 @@ struct Cli {
     /// Extra random restarts of the GP hyperparameter optimisation.
     #[arg(long, default_value_t = 2)]
     restarts: usize,
+    /// Curvature pairs of the L-BFGS-B optimiser (`TrainOptions::memory`;
+    /// scipy's `maxcor` is 10). 30 covers every model's d + 2
+    /// hyperparameters (the fourbar in maximal coordinates has 26) and
+    /// needs 30 % fewer likelihood evaluations at N = 512 (docs/gp.md,
+    /// "Optimiser memory").
+    #[arg(long, default_value_t = 30)]
+    memory: usize,
     /// Warm starts along the N sweep: within a run, each model after the
     /// first N starts from the optimum of the same model at the previous N
     /// (`TrainOptions::warm_start`) with `--warm-restarts` random restarts
@@ -417,6 +424,7 @@ where
                     seed: cli.seed ^ n as u64,
                     warm_start,
                     screening: cli.screening(),
+                    memory: cli.memory,
                     ..TrainOptions::default()
                 }
             };
@@ -581,6 +589,7 @@ fn figure1(cli: &Cli) -> Result<(Fig1, String), Box<dyn std::error::Error>> {
     let opts = TrainOptions {
         restarts: cli.restarts,
         seed: cli.seed,
+        memory: cli.memory,
         ..TrainOptions::default()
     };
     let series = |label: &str, values: Vec<f64>| Series {
@@ -819,6 +828,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             cli.n = (1..=9).map(|k| 1usize << k).collect();
         }
     }
+    if !(1..=vigp::gp::MAX_MEMORY).contains(&cli.memory) {
+        return Err(format!("--memory must be from 1 to {}", vigp::gp::MAX_MEMORY).into());
+    }
     if cli.n.is_empty()
         || cli.runs == 0
         || cli.train_trajectories == 0
@@ -837,13 +849,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let t0 = Instant::now();
     println!(
-        "vigp paper reproduction: systems {:?}, N {:?}, {} runs, {}+{} trajectories, {} restarts, gt dt {:e} s, seed {}",
+        "vigp paper reproduction: systems {:?}, N {:?}, {} runs, {}+{} trajectories, {} restarts, L-BFGS memory {}, gt dt {:e} s, seed {}",
         cli.systems,
         cli.n,
         cli.runs,
         cli.train_trajectories,
         cli.test_trajectories,
         cli.restarts,
+        cli.memory,
         cli.gt().dt,
         cli.seed
     );
@@ -999,11 +1012,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cli.gt().dt,
         if cli.warm {
             format!(
-                "{} extra restarts at the first N, then warm starts from the previous N's optimum with {} extra restarts, seed {}",
-                cli.restarts, cli.warm_restarts, cli.seed
+                "{} extra restarts at the first N, then warm starts from the previous N's optimum with {} extra restarts, L-BFGS memory {}, seed {}",
+                cli.restarts, cli.warm_restarts, cli.memory, cli.seed
             )
         } else {
-            format!("{} extra restarts, seed {}", cli.restarts, cli.seed)
+            format!(
+                "{} extra restarts, L-BFGS memory {}, seed {}",
+                cli.restarts, cli.memory, cli.seed
+            )
         },
         gt_notes
     );
