@@ -286,8 +286,8 @@ struct FitArgs {
     /// Curvature pairs of the L-BFGS-B optimiser (scipy's `maxcor`, 10 by
     /// default). A memory of at least d + 2 (d GP inputs) needs fewer
     /// likelihood evaluations on many inputs, e.g. `--encoding maximal`
-    /// (3 per link, doubled with velocities): 30 cut them by 30 % on the
-    /// paper's evaluation at N = 512.
+    /// (3 per link, doubled with velocities): 30 cut those on all 512
+    /// samples by 30 % in the paper's evaluation.
     #[arg(long, default_value_t = 10, value_name = "K")]
     memory: usize,
     /// Largest number of training transitions (evenly spaced over the data);

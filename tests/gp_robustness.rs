@@ -748,11 +748,13 @@ fn an_output_on_the_white_noise_plateau_starts_again_from_a_fitted_one() {
 /// inputs and ignores eight, with noise 0.01, so the likelihood has one
 /// fitted optimum; both memories must reach it to 1e-6 relative (the
 /// optimiser's ftol, 2.2e-9 per iteration, keeps the gap well below
-/// that: measured 2.7e-10), and the larger memory must not need more
-/// evaluations in all (measured: 69 against 77; the bits of each run are
-/// fixed by the seed, so this is not a timing).
+/// that: measured 2.7e-10). The runs are bit-reproducible, so equal
+/// evaluation counts would mean the option was ignored (measured: 69 with
+/// memory 30, 77 with 10; fewer is typical, not guaranteed, and another
+/// CPU's rounding may change the counts, so only their inequality is
+/// asserted).
 #[test]
-fn a_larger_optimiser_memory_reaches_the_same_optimum_in_fewer_evaluations() {
+fn the_optimiser_memory_changes_the_path_not_the_optimum() {
     let (n, d) = (96, 12);
     let x: Vec<f64> = (0..n * d)
         .map(|k| 4.0 * weyl(k + 1, 0.618_033_988_7 + 0.01 * (k % d) as f64) - 2.0)
@@ -784,11 +786,5 @@ fn a_larger_optimiser_memory_reaches_the_same_optimum_in_fewer_evaluations() {
     assert_ne!(
         m10.evaluations, m30.evaluations,
         "the memory did not change the path"
-    );
-    assert!(
-        m30.evaluations <= m10.evaluations,
-        "memory 30: {} evaluations, memory 10: {}",
-        m30.evaluations,
-        m10.evaluations
     );
 }

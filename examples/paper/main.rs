@@ -91,8 +91,8 @@ struct Cli {
     /// Curvature pairs of the L-BFGS-B optimiser (`TrainOptions::memory`;
     /// scipy's `maxcor` is 10). 30 covers every model's d + 2
     /// hyperparameters (the fourbar in maximal coordinates has 26) and
-    /// needs 30 % fewer likelihood evaluations at N = 512 (docs/gp.md,
-    /// "Optimiser memory").
+    /// needs 30 % fewer likelihood evaluations on all 512 samples at
+    /// N = 512 (docs/gp.md, "Optimiser memory").
     #[arg(long, default_value_t = 30)]
     memory: usize,
     /// Warm starts along the N sweep: within a run, each model after the

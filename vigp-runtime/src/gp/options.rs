@@ -178,7 +178,7 @@ pub enum InducingInit {
 ///
 /// Defaults: the exact GP, constant prior mean, inputs and outputs
 /// normalised, 5 random restarts besides the initial point, seed 0,
-/// [`Bounds::default`], no warm start.
+/// [`Bounds::default`], L-BFGS memory 10 (scipy's), no warm start.
 #[derive(Clone, Debug)]
 pub struct TrainOptions {
     /// Prior mean m(x); the GPs model y − m(x).
@@ -211,13 +211,14 @@ pub struct TrainOptions {
     ///
     /// With d + 2 hyperparameters, a memory of at least d + 2 lets the
     /// quasi-Newton model see the whole curvature, which pays on
-    /// high-dimensional inputs: on the paper's evaluation at N = 512 (d = 1
-    /// to 24, the maximal-coordinate models the largest) a memory of 30
-    /// needed 30 % fewer likelihood evaluations than 10 to the same
+    /// high-dimensional inputs: in the paper's evaluation (d = 2 to 24, the
+    /// maximal-coordinate models the largest) a memory of 30 needed 30 %
+    /// fewer likelihood evaluations on all 512 samples than 10, to the same
     /// stopping test (see `docs/gp.md`, "Optimiser memory"). Where the
     /// likelihood has several optima the one reached can differ, either
     /// way; the extra cost per iteration is O((d + 2)²·memory), negligible
-    /// against one O(N³) evaluation.
+    /// against one O(N³) evaluation (with more than 64 variables, a sparse
+    /// GP's inducing-point refinement, O(memory³) per iteration).
     pub memory: usize,
     /// Exact or sparse GP.
     pub method: Method,
