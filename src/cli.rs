@@ -804,37 +804,12 @@ where
     Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
     Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
 {
-    // before the training, which the write would otherwise waste
-    check_out_dir(&a.out)?;
-    let data = read_data(
-        &a.data,
-        &Mn::COORDINATES,
-        &Mn::KINDS,
-        Mn::INPUT_NAMES,
-        &a.read,
-    )?;
-    let dt = data
-        .dt(a.read.time_tolerance)
-        .map_err(data_error(&a.data))?;
-    let short: Vec<&str> = data.short_runs().map(|r| r.name.as_str()).collect();
-    w(
-        out,
-        format_args!(
-            "data: {}: {} runs, {} samples, dt = {dt} s",
-            a.data.display(),
-            data.runs.len(),
-            data.samples()
-        ),
-    )?;
-    if !short.is_empty() {
-        w(
-            out,
-            format_args!(
-                "note: {} run(s) with fewer than 3 samples give no transitions: {}",
-                short.len(),
-                short.join(", ")
-            ),
-        )?;
+    // usage errors before the data are read (a long log takes a while)
+    // the nominal parameters (`--set` may have made a mass negative)
+    if let Err(e) = minimal.constants().and_then(|_| maximal.constants()) {
+        return Err(CliError::Usage(format!(
+            "the nominal model (with --set): {e}"
+        )));
     }
     if a.max_samples == Some(0) {
         return Err(CliError::Usage("--max-samples must be at least 1".into()));
@@ -886,6 +861,38 @@ where
             )));
         }
         opts.bounds.noise_variance.0 = floor;
+    }
+    // before the training, which the write would otherwise waste
+    check_out_dir(&a.out)?;
+    let data = read_data(
+        &a.data,
+        &Mn::COORDINATES,
+        &Mn::KINDS,
+        Mn::INPUT_NAMES,
+        &a.read,
+    )?;
+    let dt = data
+        .dt(a.read.time_tolerance)
+        .map_err(data_error(&a.data))?;
+    let short: Vec<&str> = data.short_runs().map(|r| r.name.as_str()).collect();
+    w(
+        out,
+        format_args!(
+            "data: {}: {} runs, {} samples, dt = {dt} s",
+            a.data.display(),
+            data.runs.len(),
+            data.samples()
+        ),
+    )?;
+    if !short.is_empty() {
+        w(
+            out,
+            format_args!(
+                "note: {} run(s) with fewer than 3 samples give no transitions: {}",
+                short.len(),
+                short.join(", ")
+            ),
+        )?;
     }
     match a.encoding {
         EncodingArg::Sincos | EncodingArg::Minimal => {

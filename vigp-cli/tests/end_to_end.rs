@@ -871,6 +871,31 @@ fn usage_errors_are_reported_not_panicked() {
             .unwrap_err()
             .to_string()
     };
+    // usage errors come before the data are read: an out-of-range `--set`
+    // (a negative mass) and an optimiser memory of 0
+    for (extra, expect) in [
+        (
+            ["--set", "links.rod.mass=-1"],
+            "link `rod`: mass must be finite and >= 0",
+        ),
+        (["--memory", "0"], "--memory must be from 1 to 1000"),
+    ] {
+        let mut args = vec![
+            "vigp",
+            "fit",
+            "--system",
+            "pendulum",
+            "--data",
+            "/nonexistent.csv",
+            "--out",
+            "m.json",
+        ];
+        args.extend(extra);
+        let e = vigp::cli::run(&tool, args, &mut Vec::new())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains(expect) && !e.contains("nonexistent"), "{e}");
+    }
     // the path once (the I/O error names it already)
     let e = fit_error("/nonexistent.csv", "m.json");
     assert_eq!(e.matches("/nonexistent.csv").count(), 1, "{e}");
