@@ -39,8 +39,10 @@ pub enum GpError {
         /// The offending value.
         value: f64,
     },
-    /// Training options that cannot work (a tolerance that is NaN or
-    /// negative).
+    /// Training options that cannot work: a tolerance that is NaN or
+    /// negative, restarts beyond `MAX_RESTARTS`, an optimiser memory
+    /// outside 1..=`MAX_MEMORY`, a screening subset below 2 samples or
+    /// with a sparse GP, a negative sparse noise floor.
     #[error("invalid training options: {0}")]
     InvalidOptions(&'static str),
     /// The kernel matrix stayed non positive definite even after the

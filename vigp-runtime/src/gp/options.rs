@@ -209,9 +209,9 @@ pub struct TrainOptions {
     /// Curvature pairs the L-BFGS-B optimiser keeps (scipy's `maxcor`,
     /// default 10 as in scipy and scikit-learn; 1 to [`MAX_MEMORY`]).
     ///
-    /// With d + 2 hyperparameters, a memory of at least d + 2 lets the
-    /// quasi-Newton model see the whole curvature, which pays on
-    /// high-dimensional inputs: in the paper's evaluation (d = 2 to 24, the
+    /// With d + 2 hyperparameters, a memory of at least d + 2 keeps one
+    /// curvature pair per hyperparameter, which paid on many inputs (on
+    /// few it can also lengthen the path): in the paper's evaluation (d = 2 to 24, the
     /// maximal-coordinate models the largest) a memory of 30 needed 30 %
     /// fewer likelihood evaluations on all 512 samples than 10, to the same
     /// stopping test (see `docs/gp.md`, "Optimiser memory"). Where the
@@ -253,11 +253,15 @@ pub struct TrainOptions {
 ///
 /// Caveat: this is a heuristic. An optimum of the full data whose basin
 /// no subset optimum lies in is missed; the refinement of every distinct
-/// subset optimum (not only the best) makes that rare. On the benchmark
-/// problems of `docs/gp.md` and the unseen data sets of
-/// `scripts/gp_screening_check.py` the screened fit reaches the
-/// unscreened best LML to 1e-6 relative (see there); [`Screening::Off`]
-/// is scikit-learn's procedure.
+/// subset optimum (not only the best) makes that rare on a few inputs. On
+/// the benchmark problems of `docs/gp.md` and the unseen data sets of
+/// `scripts/gp_screening_check.py` (d ≤ 8) the screened fit reaches the
+/// unscreened best LML to 1e-6 relative (see there). On many inputs it
+/// does not: of the paper evaluation's 45 outputs at N = 512 (d = 2 to
+/// 24), 12 ended lower screened (up to 16 nats, 8.5e-3 relative) and 6
+/// higher, and a 20-input set lost 19.5 nats (docs/gp.md, "Screening
+/// the starts"). [`Screening::Off`] is scikit-learn's procedure; use it
+/// where the last nats of a many-input fit matter.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 pub enum Screening {
     /// Exact GP, no warm start and N ≥ [`SCREEN_FROM`]: a subset of
