@@ -804,8 +804,8 @@ where
     Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
     Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
 {
-    // usage errors before the data are read (a long log takes a while)
-    // the nominal parameters (`--set` may have made a mass negative)
+    // usage errors before the data are read (a long log takes a while),
+    // the nominal parameters first (`--set` may have made a mass negative)
     if let Err(e) = minimal.constants().and_then(|_| maximal.constants()) {
         return Err(CliError::Usage(format!(
             "the nominal model (with --set): {e}"

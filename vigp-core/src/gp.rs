@@ -744,14 +744,15 @@ mod tests {
 
     #[test]
     fn kernel_row_range_is_a_slice_of_kernel_row() {
-        let (n, d) = (150, 3);
-        let mut inputs = [0.0; 450];
-        assert_eq!(inputs.len(), n * d);
+        const N: usize = 150;
+        const D: usize = 3;
+        let n = N;
+        let mut inputs = [0.0; N * D];
         for (i, v) in inputs.iter_mut().enumerate() {
             *v = ((i as f64 * 0.754_877_666_246_692_7) % 1.0) * 4.0 - 2.0;
         }
         let q = [0.3, -0.2, 0.9];
-        let mut full = [0.0; 150];
+        let mut full = [0.0; N];
         kernel_row(&inputs, n, &q, 1.7, &mut full).unwrap();
         // starts off the block grid, ranges crossing blocks, empty, to the end
         for (start, len) in [
@@ -763,7 +764,7 @@ mod tests {
             (150, 0),
             (7, 0),
         ] {
-            let mut part = [0.0; 150];
+            let mut part = [0.0; N];
             kernel_row_range(&inputs, n, &q, 1.7, start, &mut part[..len]).unwrap();
             for i in 0..len {
                 assert_eq!(part[i].to_bits(), full[start + i].to_bits(), "{start} {i}");

@@ -88,12 +88,10 @@ impl<const B: usize> Steps for SpatialWindow<B> {
     /// orientation off the unit sphere would distort the rotation errors
     /// the bound is calibrated on.
     fn defect(&self) -> Option<&'static str> {
-        let mut orientations = self
-            .start
+        self.start
             .q
             .iter()
-            .chain(self.configurations.iter().flat_map(|(_, q)| q));
-        orientations
+            .chain(self.configurations.iter().flat_map(|(_, q)| q))
             .any(|q| off_unit_sphere(q.quaternion().norm()))
             .then_some(
                 "a quaternion is not of unit norm (to 1e-9): normalise it, e.g. UnitQuaternion::new_normalize",
