@@ -126,10 +126,18 @@ struct Cli {
     #[arg(long)]
     no_bounds: bool,
     /// Run every start of the GP training on all N samples (scikit-learn's
-    /// procedure) instead of screening the starts on a subset from N = 512
-    /// (`vigp::gp::Screening`, the default).
+    /// procedure) instead of screening the starts from N = 512.
     #[arg(long)]
     no_screen: bool,
+    /// Screen the starts from N = 512 on a fresh random subset of N/2
+    /// samples (the library's `Screening::Auto`) instead of refining the
+    /// previous N's optima. The training sets are nested (each N's samples
+    /// are the first N of one draw), so the previous N's training (N/2
+    /// samples, all starts) is such a subset run already: by default
+    /// `TrainOptions::candidates` hands its distinct optima over and the
+    /// subset runs are not repeated.
+    #[arg(long)]
+    subset_screen: bool,
     /// Calibration trajectories, and as many test trajectories, per system
     /// for the error bounds (each gives 19 windows of 20 steps).
     #[arg(long, default_value_t = 60)]
@@ -144,6 +152,18 @@ impl Cli {
         } else {
             Screening::Auto
         }
+    }
+
+    /// Whether a training on N samples refines the optima of the previous
+    /// N's (on `prev` samples, the first `prev` of the same draw) instead
+    /// of screening its starts: where the library would screen, on a
+    /// subset at least as large as its own, and neither `--no-screen`,
+    /// `--subset-screen` nor `--warm` is given.
+    fn refines_previous(&self, n: usize, prev: usize) -> bool {
+        !(self.no_screen || self.subset_screen || self.warm)
+            && n >= vigp::gp::SCREEN_FROM
+            && prev < n
+            && prev >= Screening::auto_size(n)
     }
 }
 
@@ -408,13 +428,23 @@ where
         // sin/cos, maximal), the next N's start 0; a failed training
         // keeps the one before
         let mut warm: [Option<Vec<Hyperparameters>>; 3] = [None, None, None];
+        // nested training sets: each N's samples are the first N of one draw
+        let n_max = cli.n.iter().copied().max().unwrap_or(0).min(pool_min.len());
+        let draw: Vec<usize> = (0..n_max).map(|_| rng.below(pool_min.len())).collect();
+        // per model: the previous N's sample count and distinct optima
+        let mut previous: [Option<(usize, Vec<Vec<Hyperparameters>>)>; 3] = [None, None, None];
         for &n in &cli.n {
             let n_eff = n.min(pool_min.len());
-            let idx: Vec<usize> = (0..n_eff).map(|_| rng.below(pool_min.len())).collect();
+            let idx = &draw[..n_eff];
             let dmin: Vec<_> = idx.iter().map(|&i| pool_min[i]).collect();
             let dmax: Vec<_> = idx.iter().map(|&i| pool_max[i]).collect();
-            let opts = |warm_start: Option<Vec<Hyperparameters>>| {
-                let warm_start = warm_start.filter(|_| cli.warm);
+            // each model's options at this N (from the previous N's fits)
+            let options: [TrainOptions; 3] = core::array::from_fn(|model| {
+                let warm_start = warm[model].clone().filter(|_| cli.warm);
+                let candidates = previous[model]
+                    .clone()
+                    .filter(|(prev, _)| cli.refines_previous(n_eff, *prev))
+                    .map(|(_, optima)| optima);
                 TrainOptions {
                     restarts: if warm_start.is_some() {
                         cli.warm_restarts
@@ -425,8 +455,12 @@ where
                     warm_start,
                     screening: cli.screening(),
                     memory: cli.memory,
+                    candidates,
                     ..TrainOptions::default()
                 }
+            });
+            let optima = |r: &vigp::gp::TrainReport| -> Vec<Vec<Hyperparameters>> {
+                r.outputs.iter().map(|o| o.optima.clone()).collect()
             };
             points.push(Fig2Point {
                 system: spec.name.into(),
@@ -439,16 +473,10 @@ where
                 .into_iter()
                 .enumerate()
             {
-                let mse = match Learned::train(
-                    nmin,
-                    DT,
-                    &dmin,
-                    enc,
-                    spec.prior,
-                    &opts(warm[model].clone()),
-                ) {
-                    Ok((l, _)) => {
+                let mse = match Learned::train(nmin, DT, &dmin, enc, spec.prior, &options[model]) {
+                    Ok((l, report)) => {
                         warm[model] = Some(l.gp().warm_start());
+                        previous[model] = Some((n_eff, optima(&report)));
                         mean_mse(&windows, |z| {
                             Ok(l.rollout(z, HORIZON)?.into_iter().map(|z| z.q).collect())
                         })
@@ -469,16 +497,11 @@ where
                     mse,
                 });
             }
-            let mse = match Learned::train(
-                nmax,
-                DT,
-                &dmax,
-                Encoding::Raw,
-                spec.prior,
-                &opts(warm[2].clone()),
-            ) {
-                Ok((l, _)) => {
+            let mse = match Learned::train(nmax, DT, &dmax, Encoding::Raw, spec.prior, &options[2])
+            {
+                Ok((l, report)) => {
                     warm[2] = Some(l.gp().warm_start());
+                    previous[2] = Some((n_eff, optima(&report)));
                     mean_mse(&windows, |z| {
                         let zm = nmin.to_maximal(z, DT);
                         // the learned maximal model predicts; positions are compared in minimal coordinates

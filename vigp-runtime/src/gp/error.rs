@@ -42,7 +42,8 @@ pub enum GpError {
     /// Training options that cannot work: a tolerance that is NaN or
     /// negative, restarts beyond `MAX_RESTARTS`, an optimiser memory
     /// outside 1..=`MAX_MEMORY`, a screening subset below 2 samples or
-    /// with a sparse GP, a negative sparse noise floor.
+    /// with a sparse GP, a negative sparse noise floor, candidates with a
+    /// sparse GP or beside a warm start.
     #[error("invalid training options: {0}")]
     InvalidOptions(&'static str),
     /// The kernel matrix stayed non positive definite even after the

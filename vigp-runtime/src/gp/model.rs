@@ -532,6 +532,10 @@ impl Gp {
     /// point and curvature memory. At N = 512, d = 4, 1 + 10 starts that is
     /// 42 evaluations on all samples (plus 396 on 256 of them) instead of
     /// 381, at the same optimum (`docs/gp.md`, "Screening the starts").
+    /// [`TrainOptions::candidates`] hands over the optima of an earlier
+    /// training on a subset of the samples instead (a nested sweep's
+    /// previous N, [`OutputReport::optima`](super::OutputReport::optima)):
+    /// those are refined, and no start runs unless an output falls back.
     ///
     /// Errors: empty data, mismatched lengths, non-finite values, invalid
     /// bounds, initial or warm-start hyperparameters, an inducing-point count
@@ -564,45 +568,68 @@ impl Gp {
             }
             None => Hyperparameters::isotropic(d, 1.0, 1.0, 1e-2).to_log(),
         };
+        // original units → this model's normalised log-hyperparameters
+        let normalised = |h: &Hyperparameters, s: f64| -> Result<Vec<f64>, GpError> {
+            h.validate(d)?;
+            let hn = Hyperparameters {
+                length_scales: h
+                    .length_scales
+                    .iter()
+                    .zip(&prep.norm.scale)
+                    .map(|(l, sx)| l / sx)
+                    .collect(),
+                signal_variance: h.signal_variance / (s * s),
+                noise_variance: h.noise_variance / (s * s),
+            };
+            Ok(hn.to_log())
+        };
+        let per_output = |what: &'static str, got: usize| {
+            if got == p {
+                Ok(())
+            } else {
+                Err(GpError::DimensionMismatch {
+                    what,
+                    expected: p,
+                    got,
+                })
+            }
+        };
+        let clamp = |t: &[f64]| -> Vec<f64> {
+            t.iter()
+                .zip(lo.iter().zip(&hi))
+                .map(|(t, (l, h))| t.clamp(*l, *h))
+                .collect()
+        };
         let warm: Option<Vec<Vec<f64>>> = match &opts.warm_start {
             None => None,
             Some(w) => {
-                if w.len() != p {
-                    return Err(GpError::DimensionMismatch {
-                        what: "warm_start (one per output)",
-                        expected: p,
-                        got: w.len(),
-                    });
-                }
-                let mut out = Vec::with_capacity(p);
-                for (h, (_, s)) in w.iter().zip(&prep.residuals) {
-                    h.validate(d)?;
-                    // original units → this model's normalised units
-                    let hn = Hyperparameters {
-                        length_scales: h
-                            .length_scales
-                            .iter()
-                            .zip(&prep.norm.scale)
-                            .map(|(l, sx)| l / sx)
-                            .collect(),
-                        signal_variance: h.signal_variance / (s * s),
-                        noise_variance: h.noise_variance / (s * s),
-                    };
-                    out.push(hn.to_log());
-                }
+                per_output("warm_start (one per output)", w.len())?;
+                let out = w
+                    .iter()
+                    .zip(&prep.residuals)
+                    .map(|(h, (_, s))| normalised(h, *s))
+                    .collect::<Result<_, _>>()?;
                 Some(out)
+            }
+        };
+        let candidates: Option<Vec<train::Job>> = match &opts.candidates {
+            None => None,
+            Some(c) => {
+                per_output("candidates (one list per output)", c.len())?;
+                let mut jobs = Vec::new();
+                for (out, (list, (_, s))) in c.iter().zip(&prep.residuals).enumerate() {
+                    for (k, h) in list.iter().enumerate() {
+                        jobs.push(train::Job::new(out, k, clamp(&normalised(h, *s)?)));
+                    }
+                }
+                Some(jobs)
             }
         };
         let mut jobs = Vec::with_capacity(p * (1 + opts.restarts));
         for out in 0..p {
             let mut rng = SplitMix64::new(stream_seed(opts.seed, out));
             let start = warm.as_ref().map_or(&init, |w| &w[out]);
-            let t0: Vec<f64> = start
-                .iter()
-                .zip(lo.iter().zip(&hi))
-                .map(|(t, (l, h))| t.clamp(*l, *h))
-                .collect();
-            jobs.push(train::Job::new(out, 0, t0));
+            jobs.push(train::Job::new(out, 0, clamp(start)));
             for s in 0..opts.restarts {
                 let t = lo
                     .iter()
@@ -638,17 +665,48 @@ impl Gp {
             d,
             ys: prep.residuals.iter().map(|r| r.0.as_slice()).collect(),
         };
-        let starts = 1 + opts.restarts;
+        // start indices run to the longest candidate list when that is longer
+        let starts = opts
+            .candidates
+            .iter()
+            .flatten()
+            .map(Vec::len)
+            .fold(1 + opts.restarts, usize::max);
         let screen = opts
             .screening
             .subset(n, inducing.is_some(), opts.warm_start.is_some());
-        let (stage, screening) = match screen {
-            None => (train::optimise(&full, set, jobs, starts, p, &[]), None),
-            Some(m) => {
+        let (stage, screening) = match (candidates, screen) {
+            (Some(c), _) => {
+                let (stage, reports) = train::from_candidates(&full, set, c, jobs, starts, p);
+                (stage, Some(reports))
+            }
+            (None, None) => (train::optimise(&full, set, jobs, starts, p, &[]), None),
+            (None, Some(m)) => {
                 let (stage, reports) = train::screened(&full, set, jobs, starts, p, m, opts.seed);
                 (stage, Some(reports))
             }
         };
+        // every distinct optimum on all samples, original units, best first
+        let optima: Vec<Vec<Hyperparameters>> = train::distinct(&stage, &full, p)
+            .iter()
+            .zip(&prep.residuals)
+            .map(|(kept, (_, s))| {
+                kept.iter()
+                    .map(|(r, _)| {
+                        Hyperparameters::from_log(&r.x).map(|h| Hyperparameters {
+                            length_scales: h
+                                .length_scales
+                                .iter()
+                                .zip(&prep.norm.scale)
+                                .map(|(l, sx)| l * sx)
+                                .collect(),
+                            signal_variance: h.signal_variance * s * s,
+                            noise_variance: h.noise_variance * s * s,
+                        })
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+            })
+            .collect::<Result<_, _>>()?;
         let train::Stage {
             jobs,
             results,
@@ -732,6 +790,7 @@ impl Gp {
                         converged: *converged,
                         jitter: gp.outputs[o].jitter,
                         screening: screening.as_ref().map(|s| s[o].clone()),
+                        optima: optima[o].clone(),
                     }
                 })
                 .collect(),

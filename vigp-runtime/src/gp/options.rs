@@ -234,6 +234,26 @@ pub struct TrainOptions {
     /// Whether the starts of an exact GP run first on a subset of the
     /// samples ([`Screening`]; default [`Screening::Auto`]).
     pub screening: Screening,
+    /// Optima found on a subset of these samples, to refine on all of
+    /// them **instead of** running the starts: one list per output, in
+    /// original units, e.g. [`OutputReport::optima`] of a model trained on
+    /// the first N/2 samples of a nested sweep. That earlier training then
+    /// plays the part of [`Screening`]'s subset runs, which are not
+    /// repeated. Exact GP only; not with `warm_start`.
+    ///
+    /// Each candidate is one optimiser run on all samples from that point
+    /// (converted to this model's normalisation, clamped into the bounds),
+    /// numbered by its index in the list. An output without candidates, or
+    /// whose best refined fit is not preferred over white noise (see
+    /// [`Gp::train`](super::Gp::train)), runs the initial point and the
+    /// random restarts on all samples instead, as a screened output that
+    /// falls back. The report's [`OutputReport::screening`] says which
+    /// (`subset` 0, `refined` the candidates' indices).
+    ///
+    /// Only as good as the candidates: an optimum that no start found on
+    /// the subset is not looked for (`docs/gp.md`, "Screening the starts",
+    /// measures how often a subset misses the full data's best optimum).
+    pub candidates: Option<Vec<Vec<Hyperparameters>>>,
 }
 
 /// How the starts of an exact GP's training meet the data.
@@ -318,6 +338,7 @@ impl Default for TrainOptions {
             method: Method::Exact,
             warm_start: None,
             screening: Screening::Auto,
+            candidates: None,
         }
     }
 }
@@ -362,6 +383,18 @@ impl TrainOptions {
             if matches!(self.method, Method::Sparse(_)) {
                 return Err(GpError::InvalidOptions(
                     "Screening::Subset applies to the exact GP only",
+                ));
+            }
+        }
+        if self.candidates.is_some() {
+            if matches!(self.method, Method::Sparse(_)) {
+                return Err(GpError::InvalidOptions(
+                    "candidates apply to the exact GP only",
+                ));
+            }
+            if self.warm_start.is_some() {
+                return Err(GpError::InvalidOptions(
+                    "give candidates or a warm start, not both",
                 ));
             }
         }
@@ -453,12 +486,23 @@ pub struct OutputReport {
     /// and 0 there.
     #[serde(default)]
     pub screening: Option<ScreeningReport>,
+    /// The distinct optima of the runs on all samples, best first, in
+    /// original units (equal LML to 1e-6 relative, or equal
+    /// log-hyperparameters to 1e-2, count once; optima not preferred over
+    /// white noise are left out when a fitted one exists). The first is
+    /// the winning start's (the model's, unless a sparse GP's inducing
+    /// points were refined after it). [`TrainOptions::candidates`] of a
+    /// training on more samples takes them.
+    #[serde(default)]
+    pub optima: Vec<Hyperparameters>,
 }
 
 /// What the screening of one output's starts did ([`Screening`]).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct ScreeningReport {
-    /// Samples in the subset (m).
+    /// Samples in the subset (m); 0 when the optima refined were
+    /// [`TrainOptions::candidates`] (no subset run: `start_lmls` and
+    /// `start_evaluations` are empty, `evaluations` 0).
     pub subset: usize,
     /// Final LML on the subset of every start (`NaN` for a failed start),
     /// numbered as [`OutputReport::start_lmls`].

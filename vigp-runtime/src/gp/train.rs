@@ -15,6 +15,10 @@
 //! 3. an output whose best refined fit is still not preferred over white
 //!    noise runs its starts again on all samples without screening.
 //!
+//! With [`TrainOptions::candidates`](super::TrainOptions::candidates) the
+//! given optima (of an earlier training on a subset) replace step 1 and
+//! its optima; steps 2 and 3 are the same.
+//!
 //! One evaluation costs ≈ N³ flops, so a start on m = N/4 samples costs
 //! 1/64 of one on all of them; the refinements start near an optimum and
 //! need fewer evaluations than a random start.
@@ -336,50 +340,65 @@ pub(crate) fn subset_indices(n: usize, m: usize, seed: u64) -> Vec<usize> {
     idx
 }
 
-/// Per output, the subset's optima to refine on all samples: successful
-/// runs ordered by objective (best first, then by start index), one per
-/// distinct optimum ([`SAME_LML`], [`SAME_THETA`]); plateau optima are left
-/// out when the output has a fitted one. Returns refinement jobs keyed by
-/// the start index whose optimum they refine.
-pub(crate) fn distinct_optima(stage: &Stage, data: &StageData, p: usize) -> Vec<Job> {
+/// Per output, the distinct optima of a stage's successful runs, best
+/// first (then by start index): one per optimum ([`SAME_LML`],
+/// [`SAME_THETA`]), with plateau optima left out when the output has a
+/// fitted one. Each comes with its start index.
+pub(crate) fn distinct<'a>(
+    stage: &'a Stage,
+    data: &StageData,
+    p: usize,
+) -> Vec<Vec<(&'a LbfgsResult, usize)>> {
     let d = data.d;
-    let mut refine = Vec::new();
-    for out in 0..p {
-        let white = white_noise(data.ys[out]);
-        let mut cands: Vec<(&LbfgsResult, usize)> = stage
-            .jobs
-            .iter()
-            .zip(&stage.results)
-            .filter(|(j, _)| j.out == out)
-            .filter_map(|(j, r)| r.as_ref().ok().map(|r| (r, j.start)))
-            .filter(|(r, _)| r.f.is_finite())
-            .collect();
-        cands.sort_by(|a, b| a.0.f.total_cmp(&b.0.f).then(a.1.cmp(&b.1)));
-        let fitted = cands.iter().any(|c| !on_plateau(white, c.0.f, d));
-        let mut kept: Vec<&LbfgsResult> = Vec::new();
-        for (r, start) in cands {
-            if fitted && on_plateau(white, r.f, d) {
-                continue;
-            }
-            let same = kept.iter().any(|k| {
-                (r.f - k.f).abs() <= SAME_LML * k.f.abs().max(1.0)
-                    || k.x
-                        .iter()
-                        .zip(&r.x)
-                        .all(|(a, b)| (a - b).abs() <= SAME_THETA)
-            });
-            if !same {
-                kept.push(r);
-                refine.push(Job {
-                    out,
-                    start,
-                    theta: r.x.clone(),
-                    memory: r.memory.clone(),
+    (0..p)
+        .map(|out| {
+            let white = white_noise(data.ys[out]);
+            let mut cands: Vec<(&LbfgsResult, usize)> = stage
+                .jobs
+                .iter()
+                .zip(&stage.results)
+                .filter(|(j, _)| j.out == out)
+                .filter_map(|(j, r)| r.as_ref().ok().map(|r| (r, j.start)))
+                .filter(|(r, _)| r.f.is_finite())
+                .collect();
+            cands.sort_by(|a, b| a.0.f.total_cmp(&b.0.f).then(a.1.cmp(&b.1)));
+            let fitted = cands.iter().any(|c| !on_plateau(white, c.0.f, d));
+            let mut kept: Vec<(&LbfgsResult, usize)> = Vec::new();
+            for (r, start) in cands {
+                if fitted && on_plateau(white, r.f, d) {
+                    continue;
+                }
+                let same = kept.iter().any(|(k, _)| {
+                    (r.f - k.f).abs() <= SAME_LML * k.f.abs().max(1.0)
+                        || k.x
+                            .iter()
+                            .zip(&r.x)
+                            .all(|(a, b)| (a - b).abs() <= SAME_THETA)
                 });
+                if !same {
+                    kept.push((r, start));
+                }
             }
-        }
-    }
-    refine
+            kept
+        })
+        .collect()
+}
+
+/// Per output, the subset's optima to refine on all samples ([`distinct`]),
+/// as refinement jobs keyed by the start index whose optimum they refine.
+pub(crate) fn distinct_optima(stage: &Stage, data: &StageData, p: usize) -> Vec<Job> {
+    distinct(stage, data, p)
+        .into_iter()
+        .enumerate()
+        .flat_map(|(out, kept)| {
+            kept.into_iter().map(move |(r, start)| Job {
+                out,
+                start,
+                theta: r.x.clone(),
+                memory: r.memory.clone(),
+            })
+        })
+        .collect()
 }
 
 /// Training with screening ([`Screening`](super::Screening)): `jobs` on a
@@ -416,9 +435,103 @@ pub(crate) fn screened(
     let refine = distinct_optima(&screen, &sub, p);
     // the likelihood's curvature grows with the sample count
     let y_scale = full.n as f64 / sub.n as f64;
+    let (stage, fell_back) = refine_or_fall_back(
+        full,
+        set,
+        refine,
+        originals,
+        starts,
+        p,
+        y_scale,
+        screen.extra.clone(),
+    );
+    let reports = (0..p)
+        .map(|o| {
+            let mut start_lmls = vec![f64::NAN; starts + screen.extra[o]];
+            let mut start_evaluations = vec![0; starts + screen.extra[o]];
+            for (j, r) in screen.jobs.iter().zip(&screen.results) {
+                if j.out == o
+                    && let Ok(r) = r
+                {
+                    start_lmls[j.start] = -r.f;
+                    start_evaluations[j.start] = r.evaluations;
+                }
+            }
+            ScreeningReport {
+                subset: idx.len(),
+                evaluations: start_evaluations.iter().sum(),
+                start_lmls,
+                start_evaluations,
+                refined: refined_starts(&stage, o, fell_back[o]),
+                fell_back: fell_back[o],
+            }
+        })
+        .collect();
+    (stage, reports)
+}
+
+/// Training from given candidate optima ([`TrainOptions::candidates`](
+/// super::TrainOptions::candidates)): `candidates` (one job per candidate,
+/// numbered by its index) refined on all samples, and the unscreened
+/// [`optimise`] of `originals` for an output whose refined fit is not
+/// preferred over white noise (or that has no candidate).
+pub(crate) fn from_candidates(
+    full: &StageData,
+    set: StageSettings,
+    candidates: Vec<Job>,
+    originals: Vec<Job>,
+    starts: usize,
+    p: usize,
+) -> (Stage, Vec<ScreeningReport>) {
+    let (stage, fell_back) =
+        refine_or_fall_back(full, set, candidates, originals, starts, p, 1.0, vec![0; p]);
+    let reports = (0..p)
+        .map(|o| ScreeningReport {
+            subset: 0,
+            start_lmls: Vec::new(),
+            start_evaluations: Vec::new(),
+            evaluations: 0,
+            refined: refined_starts(&stage, o, fell_back[o]),
+            fell_back: fell_back[o],
+        })
+        .collect();
+    (stage, reports)
+}
+
+/// The starts of output `o` refined on all samples (none if it fell back).
+fn refined_starts(stage: &Stage, o: usize, fell_back: bool) -> Vec<usize> {
+    if fell_back {
+        return Vec::new();
+    }
+    stage
+        .jobs
+        .iter()
+        .filter(|j| j.out == o)
+        .map(|j| j.start)
+        .collect()
+}
+
+/// The refinement on all samples shared by [`screened`] and
+/// [`from_candidates`]: every `refine` job runs on `full` (its seed memory
+/// scaled by `y_scale`), and an output whose best refined fit is not
+/// preferred over white noise, or that had nothing to refine, runs its
+/// `originals` again on all samples with [`optimise`] (the fitted outputs'
+/// optima as rescue starts), replacing its refinements. `extra`: rescue
+/// starts per output so far. Returns the stage and which outputs fell back.
+#[allow(clippy::too_many_arguments)]
+fn refine_or_fall_back(
+    full: &StageData,
+    set: StageSettings,
+    refine: Vec<Job>,
+    originals: Vec<Job>,
+    starts: usize,
+    p: usize,
+    y_scale: f64,
+    mut extra: Vec<usize>,
+) -> (Stage, Vec<bool>) {
+    let d = full.d;
     let mut results = run_jobs(full, set, &refine, set.lopt, y_scale);
     let mut jobs = refine;
-    let mut extra = screen.extra.clone();
     // outputs whose refined fit is not preferred over white noise: their
     // starts again on all samples, with the fitted outputs' optima as
     // rescue starts
@@ -447,39 +560,13 @@ pub(crate) fn screened(
             *e = (*e).max(r);
         }
     }
-    let reports = (0..p)
-        .map(|o| {
-            let mut start_lmls = vec![f64::NAN; starts + extra[o]];
-            let mut start_evaluations = vec![0; starts + extra[o]];
-            for (j, r) in screen.jobs.iter().zip(&screen.results) {
-                if j.out == o
-                    && let Ok(r) = r
-                {
-                    start_lmls[j.start] = -r.f;
-                    start_evaluations[j.start] = r.evaluations;
-                }
-            }
-            ScreeningReport {
-                subset: idx.len(),
-                evaluations: start_evaluations.iter().sum(),
-                start_lmls,
-                start_evaluations,
-                refined: jobs
-                    .iter()
-                    .filter(|j| j.out == o && !fell_back[o])
-                    .map(|j| j.start)
-                    .collect(),
-                fell_back: fell_back[o],
-            }
-        })
-        .collect();
     (
         Stage {
             jobs,
             results,
             extra,
         },
-        reports,
+        fell_back,
     )
 }
 
