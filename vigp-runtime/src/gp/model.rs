@@ -537,9 +537,11 @@ impl Gp {
     /// previous N, [`OutputReport::optima`](super::OutputReport::optima)):
     /// those are refined, and no start runs unless an output falls back.
     ///
-    /// Errors: empty data, mismatched lengths, non-finite values, invalid
-    /// bounds, initial or warm-start hyperparameters, an inducing-point count
-    /// outside 1..=N, or every start failing.
+    /// Errors: empty data, mismatched lengths (also a warm start or
+    /// candidate list per output), non-finite values, invalid bounds,
+    /// initial, warm-start or candidate hyperparameters, unusable options
+    /// ([`GpError::InvalidOptions`]), an inducing-point count outside
+    /// 1..=N, or every start failing.
     pub fn train(
         inputs: &[f64],
         input_dim: usize,
