@@ -19,8 +19,9 @@ fn weyl(i: usize, k: f64) -> f64 {
     (i as f64 * k).fract()
 }
 
-/// N × 2 inputs in [−2, 2]², a smooth target plus 0.02 uniform noise.
-fn smooth(n: usize) -> (Vec<f64>, Vec<f64>) {
+/// N × 2 Weyl inputs (a, b) in [−2, 2]² and the target f(i, a, b) at
+/// each (i = 1…N).
+fn sample(n: usize, f: impl Fn(usize, f64, f64) -> f64) -> (Vec<f64>, Vec<f64>) {
     let mut x = Vec::with_capacity(2 * n);
     let mut y = Vec::with_capacity(n);
     for i in 1..=n {
@@ -29,9 +30,16 @@ fn smooth(n: usize) -> (Vec<f64>, Vec<f64>) {
             4.0 * weyl(i, 0.732_050_807_568_877) - 2.0,
         );
         x.extend([a, b]);
-        y.push((2.0 * a).sin() * b.cos() + 0.3 * b + 0.04 * (weyl(i, 0.754_877_666_246_693) - 0.5));
+        y.push(f(i, a, b));
     }
     (x, y)
+}
+
+/// N × 2 inputs in [−2, 2]², a smooth target plus 0.02 uniform noise.
+fn smooth(n: usize) -> (Vec<f64>, Vec<f64>) {
+    sample(n, |i, a, b| {
+        (2.0 * a).sin() * b.cos() + 0.3 * b + 0.04 * (weyl(i, 0.754_877_666_246_693) - 0.5)
+    })
 }
 
 fn opts(screening: Screening) -> TrainOptions {
@@ -273,18 +281,12 @@ fn optima_are_distinct_best_first_and_in_original_units() {
     // each one (`Gp::fit` takes normalised units) gives its LML. A wiggly
     // target on 60 samples: the starts end at two optima beside the
     // white-noise plateau (seed 3, 1 + 8 starts).
-    let n = 60;
-    let mut xs = Vec::with_capacity(2 * n);
-    let mut ys = Vec::with_capacity(n);
-    for i in 1..=n {
-        let (a, b) = (
-            4.0 * weyl(i, 0.414_213_562_373_095) - 2.0,
-            4.0 * weyl(i, 0.732_050_807_568_877) - 2.0,
-        );
-        xs.extend([0.01 * a, 0.01 * b]);
+    let (x, y) = sample(60, |i, a, b| {
         let noise = 0.3 * (weyl(i, 0.754_877_666_246_693) - 0.5);
-        ys.push(1000.0 * ((5.0 * a).sin() + 0.2 * b + noise));
-    }
+        (5.0 * a).sin() + 0.2 * b + noise
+    });
+    let xs: Vec<f64> = x.iter().map(|v| 0.01 * v).collect();
+    let ys: Vec<f64> = y.iter().map(|v| 1000.0 * v).collect();
     let o = TrainOptions {
         restarts: 8,
         ..opts(Screening::Off)

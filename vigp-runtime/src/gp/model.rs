@@ -211,6 +211,22 @@ pub(crate) struct Prepared {
 
 /// The shared kernels only fail on inconsistent lengths, which the model's
 /// own invariants exclude; reported as an invalid model all the same.
+/// Normalised-unit hyperparameters in original units: ℓ_j·s_x,j,
+/// σ_f²·s_y², σ_n²·s_y² (`input_scale` s_x, `output_scale` s_y).
+fn original_units(hp: &Hyperparameters, input_scale: &[f64], output_scale: f64) -> Hyperparameters {
+    let s2 = output_scale * output_scale;
+    Hyperparameters {
+        length_scales: hp
+            .length_scales
+            .iter()
+            .zip(input_scale)
+            .map(|(l, s)| l * s)
+            .collect(),
+        signal_variance: hp.signal_variance * s2,
+        noise_variance: hp.noise_variance * s2,
+    }
+}
+
 fn core_error(e: core_gp::GpError) -> GpError {
     GpError::InvalidModel(e.to_string())
 }
@@ -695,16 +711,8 @@ impl Gp {
             .map(|(kept, (_, s))| {
                 kept.iter()
                     .map(|(r, _)| {
-                        Hyperparameters::from_log(&r.x).map(|h| Hyperparameters {
-                            length_scales: h
-                                .length_scales
-                                .iter()
-                                .zip(&prep.norm.scale)
-                                .map(|(l, sx)| l * sx)
-                                .collect(),
-                            signal_variance: h.signal_variance * s * s,
-                            noise_variance: h.noise_variance * s * s,
-                        })
+                        Hyperparameters::from_log(&r.x)
+                            .map(|h| original_units(&h, &prep.norm.scale, *s))
                     })
                     .collect::<Result<Vec<_>, _>>()
             })
@@ -1692,18 +1700,7 @@ impl OutputGp {
 
     /// Hyperparameters in original units: ℓ_j·s_x,j, σ_f²·s_y², σ_n²·s_y².
     pub fn hyperparameters_original(&self) -> Hyperparameters {
-        let s2 = self.output_scale * self.output_scale;
-        Hyperparameters {
-            length_scales: self
-                .hp
-                .length_scales
-                .iter()
-                .zip(&self.input_scale)
-                .map(|(l, s)| l * s)
-                .collect(),
-            signal_variance: self.hp.signal_variance * s2,
-            noise_variance: self.hp.noise_variance * s2,
-        }
+        original_units(&self.hp, &self.input_scale, self.output_scale)
     }
 
     /// The output scale s_y (1 if output normalisation was off).
