@@ -327,6 +327,18 @@ pub fn kernel_exp(x: f64) -> f64 {
     exp_above(x, EXP_MIN)
 }
 
+/// Turns squared scaled distances r² into kernel values σ_f²·e^{−r²/2}
+/// (0 where r² > [`R2_CUTOFF`]) in place: the last step of [`kernel_row`],
+/// for callers that compute the distances themselves (e.g. several rows
+/// at once). Elementwise, so the values are those of [`kernel_row`] bit
+/// for bit. O(len).
+#[inline(always)]
+pub fn kernel_from_sqdist(signal_variance: f64, r2: &mut [f64]) {
+    for v in r2.iter_mut() {
+        *v = kernel_value(signal_variance, *v);
+    }
+}
+
 /// σ_f²·e^{−r²/2}, or 0 when r² > [`R2_CUTOFF`].
 #[inline(always)]
 fn kernel_value(sf2: f64, r2: f64) -> f64 {
@@ -417,13 +429,26 @@ fn block_kernel_fixed<const D: usize>(
     }
 }
 
-/// [`block_kernel`] for any dimension: one pass over the block per column.
+/// [`block_kernel`] for any dimension: one pass over the block per four
+/// columns, each squared distance held in a register within a pass and
+/// summed in column order (so the bits of the one-pass sum).
 #[inline(always)]
 fn block_kernel_any(inputs: &[f64], n: usize, q: &[f64], sf2: f64, start: usize, k: &mut [f64]) {
+    let len = k.len();
+    let col = |j: usize| &inputs[j * n + start..j * n + start + len];
     k.iter_mut().for_each(|v| *v = 0.0);
-    for (j, qj) in q.iter().enumerate() {
-        let col = &inputs[j * n + start..j * n + start + k.len()];
-        for (s, x) in k.iter_mut().zip(col) {
+    let mut j = 0;
+    while j + 4 <= q.len() {
+        let (c0, c1, c2, c3) = (col(j), col(j + 1), col(j + 2), col(j + 3));
+        let (q0, q1, q2, q3) = (q[j], q[j + 1], q[j + 2], q[j + 3]);
+        for ((((s, x0), x1), x2), x3) in k.iter_mut().zip(c0).zip(c1).zip(c2).zip(c3) {
+            let (u0, u1, u2, u3) = (x0 - q0, x1 - q1, x2 - q2, x3 - q3);
+            *s = (((*s + u0 * u0) + u1 * u1) + u2 * u2) + u3 * u3;
+        }
+        j += 4;
+    }
+    for (qj, jj) in q[j..].iter().zip(j..) {
+        for (s, x) in k.iter_mut().zip(col(jj)) {
             let u = x - qj;
             *s += u * u;
         }
@@ -740,6 +765,36 @@ mod tests {
             mag += t.abs();
         }
         assert!((fused - naive).abs() <= 1e-15 * mag, "{fused} vs {naive}");
+    }
+
+    #[test]
+    fn kernel_row_sums_the_dimensions_in_order_for_every_d() {
+        // d = 1…26 covers the fixed-dimension paths (≤ 8) and the
+        // any-dimension path with 0–3 columns past its groups of four.
+        // Reference: r² summed from 0 in column order, then
+        // kernel_from_sqdist; bit for bit, and within 1e-15 of libm's exp.
+        let n = 70;
+        for d in 1..=26 {
+            let inputs: std::vec::Vec<f64> = (0..n * d)
+                .map(|i| ((i as f64 * 0.754_877_666_246_692_7) % 1.0) * 2.0 - 1.0)
+                .collect();
+            let q: std::vec::Vec<f64> = (0..d).map(|j| 0.1 * j as f64 - 0.5).collect();
+            let mut got = std::vec![0.0; n];
+            kernel_row(&inputs, n, &q, 1.3, &mut got).unwrap();
+            let mut r2 = std::vec![0.0; n];
+            for (i, r) in r2.iter_mut().enumerate() {
+                for j in 0..d {
+                    let u = inputs[j * n + i] - q[j];
+                    *r += u * u;
+                }
+            }
+            let naive: std::vec::Vec<f64> = r2.iter().map(|r| 1.3 * libm::exp(-0.5 * r)).collect();
+            kernel_from_sqdist(1.3, &mut r2);
+            for i in 0..n {
+                assert_eq!(got[i].to_bits(), r2[i].to_bits(), "d {d} i {i}");
+                assert!((got[i] - naive[i]).abs() <= 1e-15 * naive[i], "d {d} i {i}");
+            }
+        }
     }
 
     #[test]

@@ -167,8 +167,50 @@ fn col_slice(m: &Mat<f64>, j: usize) -> &[f64] {
 /// are stored as 0. Column b below the diagonal is one
 /// [`core_gp::kernel_row_range`], compiled for AVX2 where the CPU has it
 /// (pulp's dispatch; the same bits on every path: elementwise arithmetic,
-/// the exponential within 1 ulp of the correctly rounded one).
+/// the exponential within 1 ulp of the correctly rounded one). With AVX2
+/// the squared distances are computed four columns at a time instead
+/// ([`sqdist_tile_avx2`]), summed in the same order, so the same bits.
 fn kernel_lower_into(xs: &[f64], n: usize, d: usize, sf2: f64, k: &mut Mat<f64>) {
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = pulp::x86::V3::try_new() {
+        // A struct, not a closure: `with_simd` is always inlined into
+        // pulp's AVX2 function, a closure's body is not reliably, and its
+        // intrinsics then become calls (measured 30× slower).
+        struct Op<'a> {
+            simd: pulp::x86::V3,
+            xs: &'a [f64],
+            n: usize,
+            d: usize,
+            sf2: f64,
+            k: &'a mut Mat<f64>,
+        }
+        impl pulp::WithSimd for Op<'_> {
+            type Output = ();
+            #[inline(always)]
+            fn with_simd<S: pulp::Simd>(self, _simd: S) {
+                let Op {
+                    simd,
+                    xs,
+                    n,
+                    d,
+                    sf2,
+                    k,
+                } = self;
+                kernel_lower_avx2(simd, xs, n, d, sf2, k);
+            }
+        }
+        return pulp::Simd::vectorize(
+            simd,
+            Op {
+                simd,
+                xs,
+                n,
+                d,
+                sf2,
+                k,
+            },
+        );
+    }
     struct Op<'a> {
         xs: &'a [f64],
         n: usize,
@@ -181,32 +223,160 @@ fn kernel_lower_into(xs: &[f64], n: usize, d: usize, sf2: f64, k: &mut Mat<f64>)
         #[inline(always)]
         fn with_simd<S: pulp::Simd>(self, _simd: S) {
             let Op { xs, n, d, sf2, k } = self;
-            let mut q = vec![0.0; d];
-            for b in 0..n {
-                for (j, qj) in q.iter_mut().enumerate() {
-                    *qj = xs[j * n + b];
-                }
-                let col = k
-                    .col_mut(b)
-                    .try_as_col_major_mut()
-                    .expect("Mat columns are contiguous")
-                    .as_slice_mut();
-                col[b] = sf2;
-                core_gp::kernel_row_range(xs, n, &q, sf2, b + 1, &mut col[b + 1..n])
-                    .expect("shapes fixed by the workspace");
-            }
+            kernel_columns(xs, n, d, sf2, k, 0..n);
         }
     }
     pulp::Arch::new().dispatch(Op { xs, n, d, sf2, k });
+}
+
+/// Columns `cols` of [`kernel_lower_into`], one [`core_gp::kernel_row_range`]
+/// each.
+#[inline(always)]
+fn kernel_columns(
+    xs: &[f64],
+    n: usize,
+    d: usize,
+    sf2: f64,
+    k: &mut Mat<f64>,
+    cols: core::ops::Range<usize>,
+) {
+    let mut q = vec![0.0; d];
+    for b in cols {
+        for (j, qj) in q.iter_mut().enumerate() {
+            *qj = xs[j * n + b];
+        }
+        let col = k
+            .col_mut(b)
+            .try_as_col_major_mut()
+            .expect("Mat columns are contiguous")
+            .as_slice_mut();
+        col[b] = sf2;
+        core_gp::kernel_row_range(xs, n, &q, sf2, b + 1, &mut col[b + 1..n])
+            .expect("shapes fixed by the workspace");
+    }
+}
+
+/// [`kernel_lower_into`] with AVX2: for each group of four columns
+/// b₀…b₀+3, the small triangle above row b₀+4 column by column, then the
+/// rows below it for all four columns at once ([`sqdist_tile_avx2`]), so
+/// that each input is read once per four columns instead of once per
+/// column; the columns past the last group of four one by one.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn kernel_lower_avx2(
+    simd: pulp::x86::V3,
+    xs: &[f64],
+    n: usize,
+    d: usize,
+    sf2: f64,
+    k: &mut Mat<f64>,
+) {
+    const T: usize = 4;
+    let groups = n / T;
+    let mut q = vec![0.0; d];
+    for g in 0..groups {
+        let b0 = T * g;
+        // the triangle: rows b0 + 1 .. b0 + T of each column
+        for b in b0..b0 + T {
+            for (j, qj) in q.iter_mut().enumerate() {
+                *qj = xs[j * n + b];
+            }
+            let col = k
+                .col_mut(b)
+                .try_as_col_major_mut()
+                .expect("Mat columns are contiguous")
+                .as_slice_mut();
+            col[b] = sf2;
+            core_gp::kernel_row_range(xs, n, &q, sf2, b + 1, &mut col[b + 1..b0 + T])
+                .expect("shapes fixed by the workspace");
+        }
+        // the rows below, four columns at once
+        let r0 = b0 + T;
+        if r0 < n {
+            let block = k.as_mut().submatrix_mut(r0, b0, n - r0, T);
+            let (c0, rest) = block.split_at_col_mut(1);
+            let (c1, rest) = rest.split_at_col_mut(1);
+            let (c2, c3) = rest.split_at_col_mut(1);
+            let mut out = [c0, c1, c2, c3].map(single_col_slice);
+            sqdist_tile_avx2(simd, xs, n, d, b0, r0, &mut out);
+            for o in out {
+                core_gp::kernel_from_sqdist(sf2, o);
+            }
+        }
+    }
+    kernel_columns(xs, n, d, sf2, k, T * groups..n);
+}
+
+/// The entries of a one-column block of a column-major matrix.
+fn single_col_slice(c: MatMut<'_, f64>) -> &mut [f64] {
+    c.col_mut(0)
+        .try_as_col_major_mut()
+        .expect("Mat columns are contiguous")
+        .as_slice_mut()
+}
+
+/// out[c][i] = Σ_j (x̃_j,r0+i − x̃_j,b0+c)² for c = 0..3, each sum from 0
+/// in column order j = 0, 1, …, d − 1, the order of
+/// [`core_gp::kernel_row_range`], so the same bits. Eight rows by four
+/// columns are held in eight AVX2 registers through all d dimensions.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn sqdist_tile_avx2(
+    simd: pulp::x86::V3,
+    xs: &[f64],
+    n: usize,
+    d: usize,
+    b0: usize,
+    r0: usize,
+    out: &mut [&mut [f64]; 4],
+) {
+    use pulp::{Simd, x86::V3};
+    let rows = n - r0;
+    let full = rows / 8 * 8;
+    let mut i = 0;
+    while i < full {
+        let zero = simd.splat_f64s(0.0);
+        let mut s = [[zero; 2]; 4];
+        for j in 0..d {
+            let xc = &xs[j * n..(j + 1) * n];
+            let (xv, _) = V3::as_simd_f64s(&xc[r0 + i..r0 + i + 8]);
+            for (c, sc) in s.iter_mut().enumerate() {
+                let q = simd.splat_f64s(xc[b0 + c]);
+                for (h, sh) in sc.iter_mut().enumerate() {
+                    let u = simd.sub_f64s(xv[h], q);
+                    *sh = simd.add_f64s(*sh, simd.mul_f64s(u, u));
+                }
+            }
+        }
+        for (o, sc) in out.iter_mut().zip(&s) {
+            let (ov, _) = V3::as_mut_simd_f64s(&mut o[i..i + 8]);
+            ov[0] = sc[0];
+            ov[1] = sc[1];
+        }
+        i += 8;
+    }
+    for (c, o) in out.iter_mut().enumerate() {
+        for (ii, v) in o[full..rows].iter_mut().enumerate() {
+            let mut acc = 0.0;
+            for j in 0..d {
+                let u = xs[j * n + r0 + full + ii] - xs[j * n + b0 + c];
+                acc += u * u;
+            }
+            *v = acc;
+        }
+    }
 }
 
 /// The strict-lower-triangle pass of the gradient: adds
 /// Σ_{a>b} W_ab·K_ab·(x̃_aj − x̃_bj)² to `gl[j]` (W = ααᵀ − A⁻¹) and
 /// returns Σ_a W_aa. Column b's weights W_ab·K_ab go to `kw` once, then
 /// each dimension is one contiguous multiply-add pass over that column
-/// with 8 interleaved partial sums (a fixed order, so the bits are the
-/// same on every run and thread count), compiled for AVX2 where the CPU
-/// has it.
+/// ([`weighted_sqdist_sum`]: 8 interleaved partial sums in a fixed order,
+/// so the bits are the same on every run and thread count). Where the CPU
+/// has AVX2 (detected at run time) the partial sums are two 256-bit
+/// registers with the same arithmetic, so the same bits: left to the
+/// compiler, the 8 sums came out as a mix of 128-bit and scalar
+/// instructions, and the pass took 1.6× as long (N = 512, d = 24).
 #[allow(clippy::too_many_arguments)]
 fn gradient_pass(
     xs: &[f64],
@@ -218,79 +388,146 @@ fn gradient_pass(
     kw: &mut [f64],
     gl: &mut [f64],
 ) -> f64 {
-    struct Op<'a> {
-        xs: &'a [f64],
-        n: usize,
-        d: usize,
-        alpha: &'a [f64],
-        ainv: &'a Mat<f64>,
-        kf: &'a Mat<f64>,
-        kw: &'a mut [f64],
-        gl: &'a mut [f64],
-    }
-    impl pulp::WithSimd for Op<'_> {
-        type Output = f64;
-        #[inline(always)]
-        fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
-            const LANES: usize = 8;
-            let Op {
-                xs,
-                n,
-                d,
-                alpha,
-                ainv,
-                kf,
-                kw,
-                gl,
-            } = self;
-            let mut w_diag = 0.0;
-            for b in 0..n {
-                let ac = col_slice(ainv, b);
-                let kc = col_slice(kf, b);
-                let ab = alpha[b];
-                w_diag += ab * ab - ac[b];
-                let w = &mut kw[b + 1..n];
-                for (((w, &aa), &ai), &k) in w
-                    .iter_mut()
-                    .zip(&alpha[b + 1..n])
-                    .zip(&ac[b + 1..n])
-                    .zip(&kc[b + 1..n])
-                {
-                    *w = (aa * ab - ai) * k;
-                }
-                for (j, g) in gl.iter_mut().enumerate().take(d) {
-                    let xc = &xs[j * n + b + 1..(j + 1) * n];
-                    let xb = xs[j * n + b];
-                    let mut acc = [0.0; LANES];
-                    let mut cw = w.chunks_exact(LANES);
-                    let mut cx = xc.chunks_exact(LANES);
-                    for (wl, xl) in (&mut cw).zip(&mut cx) {
-                        for l in 0..LANES {
-                            let u = xl[l] - xb;
-                            acc[l] += wl[l] * (u * u);
-                        }
+    #[cfg(target_arch = "x86_64")]
+    if let Some(simd) = pulp::x86::V3::try_new() {
+        // a struct, not a closure: see `kernel_lower_into`
+        struct Op<'a> {
+            simd: pulp::x86::V3,
+            xs: &'a [f64],
+            n: usize,
+            d: usize,
+            alpha: &'a [f64],
+            ainv: &'a Mat<f64>,
+            kf: &'a Mat<f64>,
+            kw: &'a mut [f64],
+            gl: &'a mut [f64],
+        }
+        impl pulp::WithSimd for Op<'_> {
+            type Output = f64;
+            #[inline(always)]
+            fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
+                let Op {
+                    simd,
+                    xs,
+                    n,
+                    d,
+                    alpha,
+                    ainv,
+                    kf,
+                    kw,
+                    gl,
+                } = self;
+                gradient_pass_with(n, d, alpha, ainv, kf, kw, gl, |w, b, gl| {
+                    for (j, g) in gl.iter_mut().enumerate() {
+                        let col = &xs[j * n + b + 1..(j + 1) * n];
+                        *g += weighted_sqdist_sum_avx2(simd, w, col, xs[j * n + b]);
                     }
-                    for (l, (wl, xl)) in cw.remainder().iter().zip(cx.remainder()).enumerate() {
-                        let u = xl - xb;
-                        acc[l] += wl * (u * u);
-                    }
-                    *g += ((acc[0] + acc[1]) + (acc[2] + acc[3]))
-                        + ((acc[4] + acc[5]) + (acc[6] + acc[7]));
-                }
+                })
             }
-            w_diag
+        }
+        let op = Op {
+            simd,
+            xs,
+            n,
+            d,
+            alpha,
+            ainv,
+            kf,
+            kw,
+            gl,
+        };
+        return pulp::Simd::vectorize(simd, op);
+    }
+    gradient_pass_with(n, d, alpha, ainv, kf, kw, gl, |w, b, gl| {
+        for (j, g) in gl.iter_mut().enumerate() {
+            *g += weighted_sqdist_sum(w, &xs[j * n + b + 1..(j + 1) * n], xs[j * n + b]);
+        }
+    })
+}
+
+/// [`gradient_pass`] with `sums(w, b, gl)` adding each dimension j's
+/// Σ_{a>b} w_a·(x̃_aj − x̃_bj)² to `gl[j]`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn gradient_pass_with(
+    n: usize,
+    d: usize,
+    alpha: &[f64],
+    ainv: &Mat<f64>,
+    kf: &Mat<f64>,
+    kw: &mut [f64],
+    gl: &mut [f64],
+    sums: impl Fn(&[f64], usize, &mut [f64]),
+) -> f64 {
+    let mut w_diag = 0.0;
+    for b in 0..n {
+        let ac = col_slice(ainv, b);
+        let kc = col_slice(kf, b);
+        let ab = alpha[b];
+        w_diag += ab * ab - ac[b];
+        let w = &mut kw[b + 1..n];
+        for (((w, &aa), &ai), &k) in w
+            .iter_mut()
+            .zip(&alpha[b + 1..n])
+            .zip(&ac[b + 1..n])
+            .zip(&kc[b + 1..n])
+        {
+            *w = (aa * ab - ai) * k;
+        }
+        sums(w, b, &mut gl[..d]);
+    }
+    w_diag
+}
+
+/// Partial sums of [`weighted_sqdist_sum`].
+const LANES: usize = 8;
+
+/// Σ_a w_a·(x_a − x_b)² with element a added to partial sum a mod 8, and
+/// the 8 sums added pairwise at the end (`w.len() == x.len()`).
+#[inline(always)]
+fn weighted_sqdist_sum(w: &[f64], x: &[f64], xb: f64) -> f64 {
+    let mut acc = [0.0; LANES];
+    let mut cw = w.chunks_exact(LANES);
+    let mut cx = x.chunks_exact(LANES);
+    for (wl, xl) in (&mut cw).zip(&mut cx) {
+        for l in 0..LANES {
+            let u = xl[l] - xb;
+            acc[l] += wl[l] * (u * u);
         }
     }
-    pulp::Arch::new().dispatch(Op {
-        xs,
-        n,
-        d,
-        alpha,
-        ainv,
-        kf,
-        kw,
-        gl,
-    })
+    weighted_sqdist_tail(acc, cw.remainder(), cx.remainder(), xb)
+}
+
+/// The elements past the last full group of 8, then the pairwise sum.
+#[inline(always)]
+fn weighted_sqdist_tail(mut acc: [f64; LANES], w: &[f64], x: &[f64], xb: f64) -> f64 {
+    for (l, (wl, xl)) in w.iter().zip(x).enumerate() {
+        let u = xl - xb;
+        acc[l] += wl * (u * u);
+    }
+    ((acc[0] + acc[1]) + (acc[2] + acc[3])) + ((acc[4] + acc[5]) + (acc[6] + acc[7]))
+}
+
+/// [`weighted_sqdist_sum`] with partial sums 0–3 and 4–7 in two AVX2
+/// registers (separate multiply and add, as the portable code): the same
+/// bits.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn weighted_sqdist_sum_avx2(simd: pulp::x86::V3, w: &[f64], x: &[f64], xb: f64) -> f64 {
+    use pulp::{Simd, x86::V3};
+    let full = w.len() / LANES * LANES;
+    let (wv, _) = V3::as_simd_f64s(&w[..full]);
+    let (xv, _) = V3::as_simd_f64s(&x[..full]);
+    let b = simd.splat_f64s(xb);
+    let (mut a0, mut a1) = (simd.splat_f64s(0.0), simd.splat_f64s(0.0));
+    for (wp, xp) in wv.chunks_exact(2).zip(xv.chunks_exact(2)) {
+        let u0 = simd.sub_f64s(xp[0], b);
+        let u1 = simd.sub_f64s(xp[1], b);
+        a0 = simd.add_f64s(a0, simd.mul_f64s(wp[0], simd.mul_f64s(u0, u0)));
+        a1 = simd.add_f64s(a1, simd.mul_f64s(wp[1], simd.mul_f64s(u1, u1)));
+    }
+    let acc = [a0.0, a0.1, a0.2, a0.3, a1.0, a1.1, a1.2, a1.3];
+    weighted_sqdist_tail(acc, &w[full..], &x[full..], xb)
 }
 
 /// Sets the entries of `m` with |v| < tau to 0 (`m` has unit row stride).
@@ -561,4 +798,110 @@ pub(crate) fn lml_ws(
         }
     }
     Ok(LmlEval { value, gradient })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Quasi-random scaled inputs in [−2, 2], column-major d × n.
+    fn inputs(n: usize, d: usize) -> Vec<f64> {
+        (0..n * d)
+            .map(|i| ((i as f64 * 0.754_877_666_246_692_7 + 0.1) % 1.0) * 4.0 - 2.0)
+            .collect()
+    }
+
+    /// The AVX2 kernel matrix (four columns at a time) has the bits of the
+    /// portable column-by-column one, for sizes off the tile grid and
+    /// dimensions on both the fixed and the any-dimension paths.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_kernel_matrix_has_the_portable_bits() {
+        let Some(simd) = pulp::x86::V3::try_new() else {
+            eprintln!("no AVX2 on this CPU: nothing to compare");
+            return;
+        };
+        for n in [1, 2, 3, 4, 5, 7, 8, 9, 12, 13, 17, 40, 75] {
+            for d in [1, 3, 4, 8, 9, 12, 14, 24] {
+                let xs = inputs(n, d);
+                let mut fast = Mat::zeros(n, n);
+                kernel_lower_into(&xs, n, d, 1.7, &mut fast);
+                let mut portable = Mat::zeros(n, n);
+                kernel_columns(&xs, n, d, 1.7, &mut portable, 0..n);
+                let mut direct = Mat::zeros(n, n);
+                simd.vectorize(|| kernel_lower_avx2(simd, &xs, n, d, 1.7, &mut direct));
+                for b in 0..n {
+                    for a in b..n {
+                        let p = portable[(a, b)].to_bits();
+                        assert_eq!(fast[(a, b)].to_bits(), p, "n {n} d {d} ({a}, {b})");
+                        assert_eq!(direct[(a, b)].to_bits(), p, "n {n} d {d} ({a}, {b})");
+                    }
+                }
+            }
+        }
+    }
+
+    /// The AVX2 sums of the gradient pass have the bits of the portable
+    /// ones, for lengths around the 8-lane grid.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_gradient_sums_have_the_portable_bits() {
+        let Some(simd) = pulp::x86::V3::try_new() else {
+            eprintln!("no AVX2 on this CPU: nothing to compare");
+            return;
+        };
+        for m in 0..=41 {
+            let w: Vec<f64> = (0..m).map(|i| (i as f64 * 0.37).sin() * 1e3).collect();
+            let x = inputs(m, 1);
+            for xb in [0.3, -1.7] {
+                let portable = weighted_sqdist_sum(&w, &x, xb);
+                let fast = simd.vectorize(|| weighted_sqdist_sum_avx2(simd, &w, &x, xb));
+                assert_eq!(fast.to_bits(), portable.to_bits(), "m {m}");
+                // and the sum itself, to rounding
+                let (naive, mag) = w.iter().zip(&x).fold((0.0, 0.0), |(s, g), (w, x)| {
+                    let t = w * (x - xb) * (x - xb);
+                    (s + t, g + t.abs())
+                });
+                assert!((portable - naive).abs() <= 1e-14 * mag, "m {m}");
+            }
+        }
+    }
+
+    /// The gradient pass (this CPU's path) agrees with a direct double sum
+    /// over the pairs to rounding (relative to the sum of |terms|).
+    #[test]
+    fn gradient_pass_matches_a_direct_double_sum() {
+        let (n, d) = (37, 5);
+        let xs = inputs(n, d);
+        let mut kf = Mat::zeros(n, n);
+        kernel_lower_into(&xs, n, d, 1.0, &mut kf);
+        let ainv = Mat::from_fn(n, n, |a, b| 0.1 / (1.0 + (a as f64 - b as f64).abs()));
+        let alpha: Vec<f64> = (0..n).map(|i| (i as f64 * 0.7).cos()).collect();
+        let mut kw = vec![0.0; n];
+        let mut gl = vec![0.0; d];
+        let w_diag = gradient_pass(&xs, n, d, &alpha, &ainv, &kf, &mut kw, &mut gl);
+        let mut want = vec![0.0; d];
+        let mut mag = vec![0.0; d];
+        let mut diag = 0.0;
+        for b in 0..n {
+            diag += alpha[b] * alpha[b] - ainv[(b, b)];
+            for a in b + 1..n {
+                let w = (alpha[a] * alpha[b] - ainv[(a, b)]) * kf[(a, b)];
+                for j in 0..d {
+                    let u = xs[j * n + a] - xs[j * n + b];
+                    want[j] += w * u * u;
+                    mag[j] += (w * u * u).abs();
+                }
+            }
+        }
+        assert!((w_diag - diag).abs() <= 1e-14 * n as f64);
+        for j in 0..d {
+            assert!(
+                (gl[j] - want[j]).abs() <= 1e-14 * mag[j],
+                "{j}: {} vs {}",
+                gl[j],
+                want[j]
+            );
+        }
+    }
 }
