@@ -229,8 +229,7 @@ fn kernel_lower_into(xs: &[f64], n: usize, d: usize, sf2: f64, k: &mut Mat<f64>)
     pulp::Arch::new().dispatch(Op { xs, n, d, sf2, k });
 }
 
-/// Columns `cols` of [`kernel_lower_into`], one [`core_gp::kernel_row_range`]
-/// each.
+/// Columns `cols` of [`kernel_lower_into`], one [`kernel_column`] each.
 #[inline(always)]
 fn kernel_columns(
     xs: &[f64],
@@ -242,18 +241,34 @@ fn kernel_columns(
 ) {
     let mut q = vec![0.0; d];
     for b in cols {
-        for (j, qj) in q.iter_mut().enumerate() {
-            *qj = xs[j * n + b];
-        }
-        let col = k
-            .col_mut(b)
-            .try_as_col_major_mut()
-            .expect("Mat columns are contiguous")
-            .as_slice_mut();
-        col[b] = sf2;
-        core_gp::kernel_row_range(xs, n, &q, sf2, b + 1, &mut col[b + 1..n])
-            .expect("shapes fixed by the workspace");
+        kernel_column(xs, n, sf2, &mut q, k, b, n);
     }
+}
+
+/// Column b of K_f from its diagonal σ_f² down to row `end` (exclusive):
+/// one [`core_gp::kernel_row_range`], with `q` (length d) as the buffer
+/// for input b.
+#[inline(always)]
+fn kernel_column(
+    xs: &[f64],
+    n: usize,
+    sf2: f64,
+    q: &mut [f64],
+    k: &mut Mat<f64>,
+    b: usize,
+    end: usize,
+) {
+    for (j, qj) in q.iter_mut().enumerate() {
+        *qj = xs[j * n + b];
+    }
+    let col = k
+        .col_mut(b)
+        .try_as_col_major_mut()
+        .expect("Mat columns are contiguous")
+        .as_slice_mut();
+    col[b] = sf2;
+    core_gp::kernel_row_range(xs, n, q, sf2, b + 1, &mut col[b + 1..end])
+        .expect("shapes fixed by the workspace");
 }
 
 /// [`kernel_lower_into`] with AVX2: for each group of four columns
@@ -278,17 +293,7 @@ fn kernel_lower_avx2(
         let b0 = T * g;
         // the triangle: rows b0 + 1 .. b0 + T of each column
         for b in b0..b0 + T {
-            for (j, qj) in q.iter_mut().enumerate() {
-                *qj = xs[j * n + b];
-            }
-            let col = k
-                .col_mut(b)
-                .try_as_col_major_mut()
-                .expect("Mat columns are contiguous")
-                .as_slice_mut();
-            col[b] = sf2;
-            core_gp::kernel_row_range(xs, n, &q, sf2, b + 1, &mut col[b + 1..b0 + T])
-                .expect("shapes fixed by the workspace");
+            kernel_column(xs, n, sf2, &mut q, k, b, b0 + T);
         }
         // the rows below, four columns at once
         let r0 = b0 + T;
@@ -304,7 +309,9 @@ fn kernel_lower_avx2(
             }
         }
     }
-    kernel_columns(xs, n, d, sf2, k, T * groups..n);
+    for b in T * groups..n {
+        kernel_column(xs, n, sf2, &mut q, k, b, n);
+    }
 }
 
 /// The entries of a one-column block of a column-major matrix.
