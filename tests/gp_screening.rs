@@ -10,8 +10,8 @@ mod common;
 
 use common::Rng;
 use vigp::gp::{
-    Gp, GpError, Hyperparameters, Method, SCREEN_FROM, Screening, SparseOptions, TrainOptions,
-    log_marginal_likelihood,
+    Curvature, Gp, GpError, Hyperparameters, Method, SCREEN_FROM, Screening, SparseOptions,
+    TrainOptions, log_marginal_likelihood,
 };
 
 /// Deterministic pseudo-random numbers in [0, 1) (Weyl sequence).
@@ -271,6 +271,140 @@ fn candidates_from_a_nested_subset_reach_the_unscreened_optimum() {
         );
         assert!(close(a.signal_variance, b.signal_variance));
         assert!(close(a.noise_variance, b.noise_variance));
+    }
+}
+
+#[test]
+fn candidate_curvature_seeds_the_refinements() {
+    // The setting of the test above, with the half data's curvature pairs
+    // handed over too: the same optimum (the acceptance tolerance against
+    // the unscreened LML) in fewer evaluations on all samples than with
+    // empty memories. The pairs themselves are checked against the
+    // likelihood's gradient recomputed at the half data's model.
+    let n = 600;
+    let (x, t) = two_outputs(n);
+    let half = n / 2;
+    let (gp_h, rep_h) =
+        Gp::train(&x[..2 * half], 2, &t[..2 * half], 2, &opts(Screening::Off)).unwrap();
+    let optima: Vec<Vec<Hyperparameters>> =
+        rep_h.outputs.iter().map(|o| o.optima.clone()).collect();
+    let curvature: Vec<Vec<Curvature>> = rep_h
+        .outputs
+        .iter()
+        .map(|o| o.optima_curvature.clone())
+        .collect();
+    // the newest pair of the winning run ends at the model: y is the
+    // change of the gradient of −LML (normalised units) along s
+    let norm = gp_h.input_normaliser();
+    let xn: Vec<f64> = x[..2 * half]
+        .chunks_exact(2)
+        .flat_map(|r| (0..2).map(move |j| (r[j] - norm.shift[j]) / norm.scale[j]))
+        .collect();
+    for (o, cs) in curvature.iter().enumerate() {
+        assert_eq!(cs.len(), optima[o].len());
+        assert!(cs.iter().all(|c| c.samples == half && !c.pairs.is_empty()));
+        assert!(cs.iter().flat_map(|c| &c.pairs).all(|(s, y)| {
+            s.len() == 4 && y.len() == 4 && s.iter().zip(y).map(|(a, b)| a * b).sum::<f64>() > 0.0
+        }));
+        let out = gp_h.output(o);
+        let theta = out.hyperparameters().to_log();
+        let r = out.residual_normalised();
+        let grad = |th: &[f64]| -> Vec<f64> {
+            let (_, g) = log_marginal_likelihood(&xn, 2, r, th, false).unwrap();
+            g.into_iter().map(|v| -v).collect()
+        };
+        let (s, y) = cs[0].pairs.last().unwrap();
+        let before: Vec<f64> = theta.iter().zip(s).map(|(a, b)| a - b).collect();
+        let (g1, g0) = (grad(&theta), grad(&before));
+        let scale = g0.iter().chain(&g1).fold(1.0f64, |m, v| m.max(v.abs()));
+        for k in 0..4 {
+            // two gradients of one code at the same points: rounding only
+            assert!(
+                (g1[k] - g0[k] - y[k]).abs() <= 1e-9 * scale,
+                "output {o}, coordinate {k}: {} vs {}",
+                g1[k] - g0[k],
+                y[k]
+            );
+        }
+    }
+    let without = TrainOptions {
+        candidates: Some(optima.clone()),
+        ..opts(Screening::Auto)
+    };
+    let with = TrainOptions {
+        candidate_curvature: Some(curvature),
+        ..without.clone()
+    };
+    let (_, rep_w) = Gp::train(&x, 2, &t, 2, &with).unwrap();
+    let (_, rep_0) = Gp::train(&x, 2, &t, 2, &without).unwrap();
+    let (_, rep_u) = Gp::train(&x, 2, &t, 2, &opts(Screening::Off)).unwrap();
+    for o in 0..2 {
+        let (w, z, u) = (&rep_w.outputs[o], &rep_0.outputs[o], &rep_u.outputs[o]);
+        println!(
+            "output {o}: seeded LML {:.9} with {} evaluations; empty memories {:.9} with {}; unscreened {:.9} with {}",
+            w.log_marginal_likelihood,
+            w.evaluations,
+            z.log_marginal_likelihood,
+            z.evaluations,
+            u.log_marginal_likelihood,
+            u.evaluations
+        );
+        assert!(!w.screening.as_ref().unwrap().fell_back);
+        let rel = (w.log_marginal_likelihood - u.log_marginal_likelihood)
+            / u.log_marginal_likelihood.abs();
+        assert!(rel >= -1e-6, "output {o}: {rel:e} below the unscreened LML");
+        assert!(w.evaluations < z.evaluations);
+    }
+}
+
+#[test]
+fn candidate_curvature_is_checked() {
+    let (x, y) = smooth(40);
+    let h = Hyperparameters::isotropic(2, 1.0, 1.0, 1e-2);
+    let pair = (vec![0.1, 0.0, 0.0, 0.0], vec![1.0, 0.0, 0.0, 0.0]);
+    let with = |c: Vec<Vec<Curvature>>| TrainOptions {
+        candidates: Some(vec![vec![h.clone()]]),
+        candidate_curvature: Some(c),
+        ..opts(Screening::Auto)
+    };
+    let curv = |samples: usize, pairs: Vec<(Vec<f64>, Vec<f64>)>| Curvature { samples, pairs };
+    // a valid seed trains
+    assert!(
+        Gp::train(
+            &x,
+            2,
+            &y,
+            1,
+            &with(vec![vec![curv(20, vec![pair.clone()])]])
+        )
+        .is_ok()
+    );
+    // shapes: per output, per candidate, d + 2 per vector
+    for c in [
+        vec![],
+        vec![vec![]],
+        vec![vec![curv(20, vec![]), curv(20, vec![])]],
+        vec![vec![curv(20, vec![(vec![0.1; 3], vec![1.0; 3])])]],
+    ] {
+        assert!(matches!(
+            Gp::train(&x, 2, &y, 1, &with(c)),
+            Err(GpError::DimensionMismatch { .. })
+        ));
+    }
+    // values: samples 0, a non-finite pair, curvature without candidates
+    let nan = (vec![0.1, 0.0, 0.0, f64::NAN], vec![1.0; 4]);
+    for o in [
+        with(vec![vec![curv(0, vec![pair.clone()])]]),
+        with(vec![vec![curv(20, vec![nan])]]),
+        TrainOptions {
+            candidates: None,
+            ..with(vec![vec![curv(20, vec![pair])]])
+        },
+    ] {
+        assert!(matches!(
+            Gp::train(&x, 2, &y, 1, &o),
+            Err(GpError::InvalidOptions(_))
+        ));
     }
 }
 

@@ -44,7 +44,7 @@ use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
-use vigp::gp::{Hyperparameters, Screening, TrainOptions};
+use vigp::gp::{Curvature, Hyperparameters, Screening, TrainOptions};
 use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
@@ -135,8 +135,9 @@ struct Cli {
     /// previous N's optima. The training sets are nested (each N's samples
     /// are the first N of one draw), so the previous N's training (N/2
     /// samples, all starts) is such a subset run already: by default
-    /// `TrainOptions::candidates` hands its distinct optima over and the
-    /// subset runs are not repeated.
+    /// `TrainOptions::candidates` hands its distinct optima over (with the
+    /// optimiser's curvature at each, `TrainOptions::candidate_curvature`)
+    /// and the subset runs are not repeated.
     #[arg(long)]
     subset_screen: bool,
     /// Calibration trajectories, and as many test trajectories, per system
@@ -162,7 +163,7 @@ impl Cli {
         } else if self.subset_screen {
             "from N = 512 the starts screened on a random subset of N/2 samples"
         } else {
-            "from N = 512 the previous N's distinct optima refined on all samples instead of the starts"
+            "from N = 512 the previous N's distinct optima refined on all samples (seeded with the optimiser's curvature there) instead of the starts"
         }
     }
 
@@ -178,6 +179,10 @@ impl Cli {
             && prev >= Screening::auto_size(n)
     }
 }
+
+/// A training's distinct optima per output and the optimiser's curvature
+/// at each (`OutputReport::optima`, `OutputReport::optima_curvature`).
+type Optima = (Vec<Vec<Hyperparameters>>, Vec<Vec<Curvature>>);
 
 const DT: f64 = 0.01;
 
@@ -444,7 +449,7 @@ where
         let n_max = cli.n.iter().copied().max().unwrap_or(0).min(pool_min.len());
         let draw: Vec<usize> = (0..n_max).map(|_| rng.below(pool_min.len())).collect();
         // per model: the previous N's sample count and distinct optima
-        let mut previous: [Option<(usize, Vec<Vec<Hyperparameters>>)>; 3] = [None, None, None];
+        let mut previous: [Option<(usize, Optima)>; 3] = [None, None, None];
         for &n in &cli.n {
             let n_eff = n.min(pool_min.len());
             let idx = &draw[..n_eff];
@@ -453,10 +458,11 @@ where
             // each model's options at this N (from the previous N's fits)
             let options: [TrainOptions; 3] = core::array::from_fn(|model| {
                 let warm_start = warm[model].clone().filter(|_| cli.warm);
-                let candidates = previous[model]
+                let (candidates, candidate_curvature) = previous[model]
                     .clone()
                     .filter(|(prev, _)| cli.refines_previous(n_eff, *prev))
-                    .map(|(_, optima)| optima);
+                    .map(|(_, (optima, curvature))| (optima, curvature))
+                    .unzip();
                 TrainOptions {
                     restarts: if warm_start.is_some() {
                         cli.warm_restarts
@@ -468,11 +474,15 @@ where
                     screening: cli.screening(),
                     memory: cli.memory,
                     candidates,
+                    candidate_curvature,
                     ..TrainOptions::default()
                 }
             });
-            let optima = |r: &vigp::gp::TrainReport| -> Vec<Vec<Hyperparameters>> {
-                r.outputs.iter().map(|o| o.optima.clone()).collect()
+            let optima = |r: &vigp::gp::TrainReport| -> Optima {
+                r.outputs
+                    .iter()
+                    .map(|o| (o.optima.clone(), o.optima_curvature.clone()))
+                    .unzip()
             };
             points.push(Fig2Point {
                 system: spec.name.into(),

@@ -57,9 +57,9 @@ pub use mean::{MeanFn, PriorMean};
 pub use model::{Gp, OutputGp, PARALLEL_VARIANCE_MIN_N, Prediction, VarianceMode, Workspace};
 pub use normalise::InputNormaliser;
 pub use options::{
-    Bounds, InducingInit, InducingReport, MAX_MEMORY, MAX_RESTARTS, Method, OutputReport,
-    SCREEN_FROM, SPARSE_MIN_NOISE_VARIANCE, Screening, ScreeningReport, SparseOptions,
-    TrainOptions, TrainReport,
+    Bounds, Curvature, InducingInit, InducingReport, MAX_MEMORY, MAX_RESTARTS, Method,
+    OutputReport, SCREEN_FROM, SPARSE_MIN_NOISE_VARIANCE, Screening, ScreeningReport,
+    SparseOptions, TrainOptions, TrainReport,
 };
 pub use save::{SavedGp, SavedMean, SavedOutput};
 

@@ -15,7 +15,7 @@ use super::lml::{self, Factor};
 use super::mean::{PriorMean, Resolved};
 use super::normalise::{InputNormaliser, output_scale};
 use super::options::{
-    InducingInit, InducingReport, Method, OutputReport, TrainOptions, TrainReport,
+    Curvature, InducingInit, InducingReport, Method, OutputReport, TrainOptions, TrainReport,
 };
 use super::rng::SplitMix64;
 use super::{sparse, train, tri};
@@ -213,6 +213,42 @@ pub(crate) struct Prepared {
 /// own invariants exclude; reported as an invalid model all the same.
 /// Normalised-unit hyperparameters in original units: ℓ_j·s_x,j,
 /// σ_f²·s_y², σ_n²·s_y² (`input_scale` s_x, `output_scale` s_y).
+/// Curvature pairs (s, y), oldest first.
+type CurvaturePairs = Vec<(Vec<f64>, Vec<f64>)>;
+
+/// A candidate's curvature pairs as the seed memory of its refinement on
+/// `n` samples: every y scaled by n / `samples` (the likelihood's curvature
+/// grows with the sample count). Errors for pairs that are not d + 2 long
+/// or not finite, or for `samples` 0.
+fn seed_memory(c: &Curvature, n: usize, d: usize) -> Result<CurvaturePairs, GpError> {
+    if c.samples == 0 {
+        return Err(GpError::InvalidOptions(
+            "candidate_curvature: samples must be at least 1",
+        ));
+    }
+    let scale = n as f64 / c.samples as f64;
+    c.pairs
+        .iter()
+        .map(|(s, y)| {
+            for v in [s, y] {
+                if v.len() != d + 2 {
+                    return Err(GpError::DimensionMismatch {
+                        what: "candidate_curvature pair (d + 2 log-hyperparameters)",
+                        expected: d + 2,
+                        got: v.len(),
+                    });
+                }
+                if v.iter().any(|x| !x.is_finite()) {
+                    return Err(GpError::InvalidOptions(
+                        "candidate_curvature: pairs must be finite",
+                    ));
+                }
+            }
+            Ok((s.clone(), y.iter().map(|v| v * scale).collect()))
+        })
+        .collect()
+}
+
 fn original_units(hp: &Hyperparameters, input_scale: &[f64], output_scale: f64) -> Hyperparameters {
     let s2 = output_scale * output_scale;
     Hyperparameters {
@@ -551,7 +587,9 @@ impl Gp {
     /// [`TrainOptions::candidates`] hands over the optima of an earlier
     /// training on a subset of the samples instead (a nested sweep's
     /// previous N, [`OutputReport::optima`](super::OutputReport::optima)):
-    /// those are refined, and no start runs unless an output falls back.
+    /// those are refined, and no start runs unless an output falls back;
+    /// with [`TrainOptions::candidate_curvature`] each refinement starts
+    /// from the earlier run's curvature pairs, as a screened one does.
     ///
     /// Errors: empty data, mismatched lengths (also a warm start or
     /// candidate list per output), non-finite values, invalid bounds,
@@ -634,10 +672,28 @@ impl Gp {
             None => None,
             Some(c) => {
                 per_output("candidates (one list per output)", c.len())?;
+                let curvature = opts.candidate_curvature.as_ref();
+                if let Some(cc) = curvature {
+                    per_output("candidate_curvature (one list per output)", cc.len())?;
+                }
                 let mut jobs = Vec::new();
                 for (out, (list, (_, s))) in c.iter().zip(&prep.residuals).enumerate() {
+                    let curv = curvature.map(|cc| &cc[out]);
+                    if let Some(cv) = curv
+                        && cv.len() != list.len()
+                    {
+                        return Err(GpError::DimensionMismatch {
+                            what: "candidate_curvature (one per candidate)",
+                            expected: list.len(),
+                            got: cv.len(),
+                        });
+                    }
                     for (k, h) in list.iter().enumerate() {
-                        jobs.push(train::Job::new(out, k, clamp(&normalised(h, *s)?)));
+                        let mut job = train::Job::new(out, k, clamp(&normalised(h, *s)?));
+                        if let Some(cv) = curv {
+                            job.memory = seed_memory(&cv[k], n, d)?;
+                        }
+                        jobs.push(job);
                     }
                 }
                 Some(jobs)
@@ -704,8 +760,10 @@ impl Gp {
                 (stage, Some(reports))
             }
         };
-        // every distinct optimum on all samples, original units, best first
-        let optima: Vec<Vec<Hyperparameters>> = train::distinct(&stage, &full, p)
+        // every distinct optimum on all samples, original units, best
+        // first, with the curvature pairs of the run that reached it
+        let kept = train::distinct(&stage, &full, p);
+        let optima: Vec<Vec<Hyperparameters>> = kept
             .iter()
             .zip(&prep.residuals)
             .map(|(kept, (_, s))| {
@@ -717,6 +775,18 @@ impl Gp {
                     .collect::<Result<Vec<_>, _>>()
             })
             .collect::<Result<_, _>>()?;
+        let optima_curvature: Vec<Vec<Curvature>> = kept
+            .iter()
+            .map(|kept| {
+                kept.iter()
+                    .map(|(r, _)| Curvature {
+                        samples: n,
+                        pairs: r.memory.clone(),
+                    })
+                    .collect()
+            })
+            .collect();
+        drop(kept);
         let train::Stage {
             jobs,
             results,
@@ -801,6 +871,7 @@ impl Gp {
                         jitter: gp.outputs[o].jitter,
                         screening: screening.as_ref().map(|s| s[o].clone()),
                         optima: optima[o].clone(),
+                        optima_curvature: optima_curvature[o].clone(),
                     }
                 })
                 .collect(),

@@ -254,6 +254,35 @@ pub struct TrainOptions {
     /// the subset is not looked for (`docs/gp.md`, "Screening the starts",
     /// measures how often a subset misses the full data's best optimum).
     pub candidates: Option<Vec<Vec<Hyperparameters>>>,
+    /// The optimiser's curvature at each of `candidates` (same shape: one
+    /// list per output, one entry per candidate), e.g.
+    /// [`OutputReport::optima_curvature`] of the same earlier training.
+    /// Each candidate's refinement then starts from a quasi-Newton model
+    /// of the likelihood instead of scipy's steepest-descent first step,
+    /// with every y scaled by N / [`Curvature::samples`] (the likelihood's
+    /// curvature grows with the sample count), as the refinements of
+    /// [`Screening`] start from their subset run's pairs. `None`: every
+    /// refinement starts with an empty memory. Needs `candidates`.
+    pub candidate_curvature: Option<Vec<Vec<Curvature>>>,
+}
+
+/// The L-BFGS model at an optimum: the curvature pairs of the run that
+/// reached it, to seed a refinement of that optimum on more samples
+/// ([`TrainOptions::candidate_curvature`]).
+///
+/// The pairs are in the coordinates of [`Hyperparameters::to_log`]
+/// (log ℓ₁, …, log ℓ_d, log σ_f², log σ_n²) of the negative log marginal
+/// likelihood (of a sparse GP: of its negative bound). Steps and gradient differences there do not depend on the
+/// normalisation (a change of units shifts every coordinate by a constant
+/// and the likelihood by a constant), so the pairs carry over to a
+/// training whose normaliser differs.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Curvature {
+    /// Samples of the training the pairs come from (N there).
+    pub samples: usize,
+    /// The pairs (s, y), oldest first: s a step, y the change of the
+    /// gradient along it, both of length d + 2.
+    pub pairs: Vec<(Vec<f64>, Vec<f64>)>,
 }
 
 /// How the starts of an exact GP's training meet the data.
@@ -339,6 +368,7 @@ impl Default for TrainOptions {
             warm_start: None,
             screening: Screening::Auto,
             candidates: None,
+            candidate_curvature: None,
         }
     }
 }
@@ -397,6 +427,11 @@ impl TrainOptions {
                     "give candidates or a warm start, not both",
                 ));
             }
+        }
+        if self.candidate_curvature.is_some() && self.candidates.is_none() {
+            return Err(GpError::InvalidOptions(
+                "candidate_curvature needs candidates",
+            ));
         }
         if let Method::Sparse(so) = &self.method
             && !(so.min_noise_variance.is_finite() && so.min_noise_variance >= 0.0)
@@ -495,6 +530,12 @@ pub struct OutputReport {
     /// training on more samples takes them.
     #[serde(default)]
     pub optima: Vec<Hyperparameters>,
+    /// The optimiser's curvature at each of `optima` (same order): the
+    /// curvature pairs held at the end of the run that reached it (of a
+    /// sparse GP's bound for a sparse GP). [`TrainOptions::candidate_curvature`]
+    /// of an exact training on more samples takes them.
+    #[serde(default)]
+    pub optima_curvature: Vec<Curvature>,
 }
 
 /// What the screening of one output's starts did ([`Screening`]).
