@@ -184,6 +184,10 @@ impl Cli {
 /// at each (`OutputReport::optima`, `OutputReport::optima_curvature`).
 type Optima = (Vec<Vec<Hyperparameters>>, Vec<Vec<Curvature>>);
 
+/// One run's Fig. 2 points, and for run 0 the ground truth's accuracy
+/// (see `ground_truth_error`).
+type RunPoints = (Vec<Fig2Point>, Option<(f64, f64)>);
+
 const DT: f64 = 0.01;
 
 /// The ground truth's integrator.
@@ -380,9 +384,11 @@ where
     Mn: Mechanism<N, C> + Coordinates<N, M> + Copy + Send + Sync,
     Mx: Mechanism<M, K> + Copy + Send + Sync,
 {
-    let mut points = Vec::new();
-    let mut gt_err = (0.0f64, 0.0f64);
-    for run in 0..cli.runs {
+    // The runs are independent (each its own seeded RNG, its own training
+    // sets and fits), so they run side by side: the idle ends of one run's
+    // trainings take the other's work. The points come back in run order.
+    let one_run = |run: usize| -> Result<RunPoints, StepError> {
+        let mut points = Vec::new();
         let mut rng = Rng(cli.seed
             ^ (run as u64 + 1).wrapping_mul(0x2545_F491_4F6C_DD1D)
             ^ spec.name.len() as u64);
@@ -401,9 +407,11 @@ where
             .par_iter()
             .map(|q0| ground_truth(tmin, q0, cli.gt()))
             .collect::<Result<_, _>>()?;
-        if run == 0 {
-            gt_err = ground_truth_error(tmin, &starts[0], cli.gt())?;
-        }
+        let gt_err = if run == 0 {
+            Some(ground_truth_error(tmin, &starts[0], cli.gt())?)
+        } else {
+            None
+        };
         let (train, test) = trajs.split_at(cli.train_trajectories);
         // training pool (noisy), in minimal and maximal coordinates
         let mut pool_min = Vec::new();
@@ -550,7 +558,14 @@ where
             });
             progress.inc(1);
         }
-    }
+        Ok((points, gt_err))
+    };
+    let runs: Vec<_> = (0..cli.runs)
+        .into_par_iter()
+        .map(one_run)
+        .collect::<Result<_, _>>()?;
+    let gt_err = runs.iter().find_map(|r| r.1).unwrap_or((0.0, 0.0));
+    let points = runs.into_iter().flat_map(|r| r.0).collect();
     Ok((points, gt_err))
 }
 
