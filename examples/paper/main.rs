@@ -469,7 +469,7 @@ where
                 let (candidates, candidate_curvature) = previous[model]
                     .clone()
                     .filter(|(prev, _)| cli.refines_previous(n_eff, *prev))
-                    .map(|(_, (optima, curvature))| (optima, curvature))
+                    .map(|(_, optima)| optima)
                     .unzip();
                 TrainOptions {
                     restarts: if warm_start.is_some() {

@@ -209,10 +209,6 @@ pub(crate) struct Prepared {
     pub residuals: Vec<(Vec<f64>, f64)>,
 }
 
-/// The shared kernels only fail on inconsistent lengths, which the model's
-/// own invariants exclude; reported as an invalid model all the same.
-/// Normalised-unit hyperparameters in original units: ℓ_j·s_x,j,
-/// σ_f²·s_y², σ_n²·s_y² (`input_scale` s_x, `output_scale` s_y).
 /// Curvature pairs (s, y), oldest first.
 type CurvaturePairs = Vec<(Vec<f64>, Vec<f64>)>;
 
@@ -249,6 +245,8 @@ fn seed_memory(c: &Curvature, n: usize, d: usize) -> Result<CurvaturePairs, GpEr
         .collect()
 }
 
+/// Normalised-unit hyperparameters in original units: ℓ_j·s_x,j,
+/// σ_f²·s_y², σ_n²·s_y² (`input_scale` s_x, `output_scale` s_y).
 fn original_units(hp: &Hyperparameters, input_scale: &[f64], output_scale: f64) -> Hyperparameters {
     let s2 = output_scale * output_scale;
     Hyperparameters {
@@ -263,6 +261,8 @@ fn original_units(hp: &Hyperparameters, input_scale: &[f64], output_scale: f64) 
     }
 }
 
+/// The shared kernels only fail on inconsistent lengths, which the model's
+/// own invariants exclude; reported as an invalid model all the same.
 fn core_error(e: core_gp::GpError) -> GpError {
     GpError::InvalidModel(e.to_string())
 }
@@ -760,33 +760,31 @@ impl Gp {
                 (stage, Some(reports))
             }
         };
-        // every distinct optimum on all samples, original units, best
-        // first, with the curvature pairs of the run that reached it
-        let kept = train::distinct(&stage, &full, p);
-        let optima: Vec<Vec<Hyperparameters>> = kept
-            .iter()
-            .zip(&prep.residuals)
-            .map(|(kept, (_, s))| {
-                kept.iter()
-                    .map(|(r, _)| {
-                        Hyperparameters::from_log(&r.x)
-                            .map(|h| original_units(&h, &prep.norm.scale, *s))
-                    })
-                    .collect::<Result<Vec<_>, _>>()
-            })
-            .collect::<Result<_, _>>()?;
-        let optima_curvature: Vec<Vec<Curvature>> = kept
-            .iter()
-            .map(|kept| {
-                kept.iter()
-                    .map(|(r, _)| Curvature {
-                        samples: n,
-                        pairs: r.memory.clone(),
-                    })
-                    .collect()
-            })
-            .collect();
-        drop(kept);
+        // every distinct optimum on all samples (original units, best
+        // first) and the curvature pairs of the run that reached it
+        let (optima, optima_curvature): (Vec<Vec<Hyperparameters>>, Vec<Vec<Curvature>>) =
+            train::distinct(&stage, &full, p)
+                .iter()
+                .zip(&prep.residuals)
+                .map(|(kept, (_, s))| {
+                    let curvature = kept
+                        .iter()
+                        .map(|(r, _)| Curvature {
+                            samples: n,
+                            pairs: r.memory.clone(),
+                        })
+                        .collect();
+                    kept.iter()
+                        .map(|(r, _)| {
+                            Hyperparameters::from_log(&r.x)
+                                .map(|h| original_units(&h, &prep.norm.scale, *s))
+                        })
+                        .collect::<Result<Vec<_>, _>>()
+                        .map(|h| (h, curvature))
+                })
+                .collect::<Result<Vec<_>, _>>()?
+                .into_iter()
+                .unzip();
         let train::Stage {
             jobs,
             results,
