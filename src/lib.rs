@@ -174,6 +174,11 @@ pub mod systems;
 #[doc = include_str!("../README.md")]
 pub struct ReadmeDoctests;
 
+/// The example of docs/embedded.md, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/embedded.md")]
+pub struct EmbeddedDoctests;
+
 /// The examples of docs/spatial.md, compiled and run as doctests.
 #[cfg(doctest)]
 #[doc = include_str!("../docs/spatial.md")]
