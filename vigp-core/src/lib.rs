@@ -10,6 +10,8 @@
 //! * [`gp`]: prediction with a Gaussian process exported as Rust source.
 //! * [`LearnedStepper`]: the learned step (nominal prior + exported GP
 //!   means + projection for loops) of a model exported by the std runtime.
+//! * [`Tangent`]: step derivatives A, B in tangent coordinates (2·DoF) for
+//!   minimal views with unit quaternions, for controllers.
 //! * [`spatial`]: 3-D mechanisms: minimal coordinates and the Lie-group
 //!   variational integrator in maximal coordinates (unit quaternions).
 //!
@@ -34,6 +36,7 @@ pub mod real;
 pub mod spatial;
 pub mod state;
 pub mod step;
+pub mod tangent;
 
 pub use compose::Composition;
 pub use dynamics::{Dynamics, Terms};
@@ -47,6 +50,7 @@ pub use state::{CoordinateKind, State};
 pub use step::{
     MAX_SUBSTEPS, RolloutError, StepError, StepOptions, StepReport, StepWorkspace, Stepper,
 };
+pub use tangent::{Tangent, TangentDerivatives, TangentError};
 
 /// Re-exports for generated code. Not part of the public API.
 #[doc(hidden)]
