@@ -8,7 +8,7 @@
 //! without touching what saved models record.
 
 use crate::Target;
-use crate::model::Model;
+use crate::desc::planar::Model;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::ext::IdentExt;

@@ -5,17 +5,13 @@
 //!
 //! [`Mechanism`]: https://docs.rs/vigp-runtime
 
-use crate::model::{Anchor, DefaultValue, JointKind, Model, Point};
+use crate::desc::DefaultValue;
+use crate::desc::planar::{Anchor, JointKind, Model, Point};
+use crate::lit::lit;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::Ident;
 use syn::ext::IdentExt;
-
-/// An f64 literal (a leading minus for negative values).
-pub fn lit(x: f64) -> TokenStream {
-    let l = Literal::f64_unsuffixed(x.abs());
-    if x < 0.0 { quote!(-#l) } else { quote!(#l) }
-}
 
 fn pair(p: [f64; 2]) -> TokenStream {
     let (a, b) = (lit(p[0]), lit(p[1]));

@@ -7,9 +7,9 @@
 //! `stiffness`, no input code without `actuated`, no constraint code when
 //! the minimal view has no constraint.
 
-use super::model::{Anchor, JointKind, Model, Point};
-use crate::emit::lit;
-use crate::model::DefaultValue;
+use crate::desc::DefaultValue;
+use crate::desc::spatial::{Anchor, JointKind, Model, Point};
+use crate::lit::lit;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::ext::IdentExt;
@@ -247,7 +247,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         let pa = anchor_expr(m, jt.parent);
         let ca = anchor_expr(m, jt.child);
         let axis = triple(jt.kind.axis());
-        let rel = quad(jt.rel);
+        let rel = quad(m.rel(jt));
         let damping = if dissipative {
             let jn = &jt.name;
             quote!(self.joints.#jn.damping)
