@@ -492,7 +492,7 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
 /// The whole expansion.
 /// The generated items for a validated model; `target` chooses whether the
 /// std runtime's items (dual-number views) are included.
-pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
+pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream> {
     let Model {
         attrs, vis, name, ..
     } = m;
@@ -813,7 +813,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     } else {
         quote!(#(#lagrangian_terms)+*)
     };
-    let std_items = if target == crate::Target::Std {
+    let std_items = if target == crate::target::Target::Std {
         quote! {
             impl ::vigp::Mechanism<#n, #c> for #minimal_ty {
             const COORDINATES: [&'static str; #n] = [#(#coord_names),*];

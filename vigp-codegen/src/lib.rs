@@ -16,7 +16,7 @@
 //! spatial ([`syntax::Dim::of`]) and is emitted by [`spatial`] instead.
 //!
 //! To add a source of descriptions (another syntax), produce a
-//! [`syntax::Input`] and hand it to [`desc::validate`]; to add a joint
+//! [`syntax::Input`] and hand it to [`desc::validate()`]; to add a joint
 //! type, add it to the dimension's `JOINTS` table ([`desc::planar`],
 //! [`desc::spatial`]) and to its `kind`.
 
@@ -35,6 +35,9 @@ pub mod number;
 pub mod spatial;
 pub mod symbolic;
 pub mod syntax;
+pub mod target;
+
+pub use target::Target;
 
 use proc_macro2::TokenStream;
 
@@ -44,18 +47,6 @@ use proc_macro2::TokenStream;
 /// 3.9 GB; 14 links 7.8 MB; 16 links 17 MB, which rustc could not
 /// finish in 5 minutes on a 24 GB machine).
 const MAX_PLANAR_EXPANSION: usize = 8_000_000;
-
-/// Which items a mechanism expands to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Target {
-    /// Everything: the `no_std` items plus the std runtime's dual-number
-    /// views (`Mechanism` impls, the maximal view, the coordinate maps).
-    /// What `vigp` with its default `std` feature gets.
-    Std,
-    /// Only the `no_std` items: parameters, forward kinematics and the
-    /// `vigp::embedded::Model` impl. What `vigp` without `std` gets.
-    NoStd,
-}
 
 /// Expand a `mechanism!` body into Rust items ([`Target::Std`]), or a
 /// spanned error.

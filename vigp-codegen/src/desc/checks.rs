@@ -3,7 +3,7 @@
 //! positive, non-negative, known to the macro), lists of numbers, and a
 //! joint's inputs and springs.
 
-use super::DefaultValue;
+use super::model::DefaultValue;
 use crate::ctxt::Ctxt;
 use crate::number::Number;
 use crate::syntax::{Field, LinkDecl, Value};
@@ -233,4 +233,13 @@ pub fn actuation(cx: &mut Ctxt, f: &Fields, joint: &str) -> Actuation {
         stiffness,
         rest,
     }
+}
+
+/// "`what` takes three numbers `[x, y, z]`".
+pub fn shape<const D: usize>(what: &str) -> String {
+    let (count, point) = match D {
+        2 => ("two", "[x, y]"),
+        _ => ("three", "[x, y, z]"),
+    };
+    format!("{what} takes {count} numbers `{point}`")
 }

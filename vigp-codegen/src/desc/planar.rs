@@ -3,9 +3,9 @@
 //! gravity `[gx, gy]`. What a planar description means beyond the checks
 //! every description shares.
 
-use super::DefaultValue;
 use super::checks::{self, Fields};
-use super::validate::{JointType, Rules, shape};
+use super::model::DefaultValue;
+use super::validate::{JointType, Rules};
 use crate::ctxt::Ctxt;
 use crate::syntax::{self, JointDecl, LinkDecl, Value};
 use syn::{Attribute, Ident};
@@ -55,13 +55,13 @@ pub enum JointKind {
 }
 
 /// A resolved point.
-pub type Point = super::Point<2, Anchor>;
+pub type Point = super::model::Point<2, Anchor>;
 
 /// A validated joint.
-pub type Joint = super::Joint<JointKind, Anchor, 2>;
+pub type Joint = super::model::Joint<JointKind, Anchor, 2>;
 
 /// A validated planar mechanism.
-pub type Model = super::Model<Link, JointKind, Anchor, 2>;
+pub type Model = super::model::Model<Link, JointKind, Anchor, 2>;
 
 impl Model {
     /// Number of minimal coordinates.
@@ -183,7 +183,7 @@ impl Rules<2> for Planar {
             syntax::Anchor::End(_) => Anchor::End,
             syntax::Anchor::Center(_) => Anchor::Center,
             syntax::Anchor::At(v) => {
-                let p = checks::numbers::<2>(cx, v, || shape::<2>(WHAT))?;
+                let p = checks::numbers::<2>(cx, v, || checks::shape::<2>(WHAT))?;
                 Anchor::At(checks::known(cx, p, WHAT)?)
             }
             // the planar grammar does not read `link.com`

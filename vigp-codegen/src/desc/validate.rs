@@ -3,7 +3,8 @@
 //! dimension's [`Rules`] only for what differs.
 
 use super::checks::{self, ACTUATION_KEYS, Fields};
-use super::{DefaultValue, Joint, Model, Point};
+use super::graph::Tree;
+use super::model::{DefaultValue, Joint, Model, Point};
 use crate::ctxt::Ctxt;
 use crate::syntax::{self, Input, JointDecl, LinkDecl, PointRef, Value};
 use std::collections::HashMap;
@@ -269,7 +270,7 @@ fn point<const D: usize, R: Rules<D>>(
     match p {
         PointRef::World { at: None, .. } => Some(Point::World([0.0; D])),
         PointRef::World { at: Some(v), .. } => {
-            let x = checks::numbers::<D>(cx, v, || shape::<D>(R::WORLD_POINT))?;
+            let x = checks::numbers::<D>(cx, v, || checks::shape::<D>(R::WORLD_POINT))?;
             checks::known(cx, x, R::WORLD_POINT).map(Point::World)
         }
         PointRef::Link { link, anchor } => {
@@ -279,61 +280,6 @@ fn point<const D: usize, R: Rules<D>>(
             };
             let anchor = R::anchor(cx, (&links[i], link), anchor)?;
             Some(Point::Link { link: i, anchor })
-        }
-    }
-}
-
-/// "`what` takes three numbers `[x, y, z]`".
-pub fn shape<const D: usize>(what: &str) -> String {
-    let (count, point) = match D {
-        2 => ("two", "[x, y]"),
-        _ => ("three", "[x, y, z]"),
-    };
-    format!("{what} takes {count} numbers `{point}`")
-}
-
-/// The spanning tree from the world: joints in declaration order, each
-/// placing its child when its parent is placed.
-struct Tree {
-    /// For each link, the joint that places it.
-    placed_by: Vec<Option<usize>>,
-    /// Per joint: does it place a link?
-    is_tree: Vec<bool>,
-    /// Tree joints in placement order.
-    placement: Vec<usize>,
-    /// Links in placement order.
-    order: Vec<usize>,
-}
-
-impl Tree {
-    fn grow<K, A, const D: usize>(joints: &[Joint<K, A, D>], links: usize) -> Tree {
-        let mut t = Tree {
-            placed_by: vec![None; links],
-            is_tree: vec![false; joints.len()],
-            placement: Vec::new(),
-            order: Vec::new(),
-        };
-        loop {
-            let mut progress = false;
-            for (j, joint) in joints.iter().enumerate() {
-                if t.is_tree[j] {
-                    continue;
-                }
-                let parent_ready = joint.parent.link().is_none_or(|l| t.placed_by[l].is_some());
-                if let Some(c) = joint.child.link()
-                    && parent_ready
-                    && t.placed_by[c].is_none()
-                {
-                    t.placed_by[c] = Some(j);
-                    t.is_tree[j] = true;
-                    t.placement.push(j);
-                    t.order.push(c);
-                    progress = true;
-                }
-            }
-            if !progress {
-                return t;
-            }
         }
     }
 }

@@ -56,7 +56,7 @@ fn doc_or(attrs: &[syn::Attribute], fallback: String) -> TokenStream {
 }
 
 /// The whole expansion of a spatial description.
-pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
+pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
     let Model {
         attrs, vis, name, ..
     } = m;
@@ -344,7 +344,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         );
         quote!(#own #minimal)
     };
-    let mechanism_impl = if target == crate::Target::Std {
+    let mechanism_impl = if target == crate::target::Target::Std {
         let dissipation = if dissipative {
             quote! {
                 fn dissipation<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {

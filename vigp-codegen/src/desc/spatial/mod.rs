@@ -3,12 +3,17 @@
 //! points `[x, y, z]` and `link.com`; gravity `[gx, gy, gz]`. What a
 //! spatial description means beyond the checks every description shares.
 
-use super::DefaultValue;
-use super::checks::{self, Fields};
-use super::validate::{JointType, Rules, shape};
+mod frame;
+mod inertia;
+
 use crate::ctxt::Ctxt;
-use crate::geom3::{IDENTITY, cross, dot, eigenvalues, matrix_to_quaternion, mul_tn, unit};
-use crate::syntax::{self, Field, JointDecl, LinkDecl, Value};
+use crate::desc::checks::{self, Fields};
+use crate::desc::model::DefaultValue;
+use crate::desc::validate::{JointType, Rules};
+use crate::geom3::{IDENTITY, matrix_to_quaternion, mul_tn, unit};
+use crate::syntax::{self, JointDecl, LinkDecl, Value};
+use frame::frame;
+use inertia::inertia;
 use syn::{Attribute, Ident};
 
 /// A validated link.
@@ -111,13 +116,13 @@ impl JointKind {
 }
 
 /// A resolved point.
-pub type Point = super::Point<3, Anchor>;
+pub type Point = crate::desc::model::Point<3, Anchor>;
 
 /// A validated joint.
-pub type Joint = super::Joint<JointKind, Anchor, 3>;
+pub type Joint = crate::desc::model::Joint<JointKind, Anchor, 3>;
 
 /// A validated spatial mechanism.
-pub type Model = super::Model<Link, JointKind, Anchor, 3>;
+pub type Model = crate::desc::model::Model<Link, JointKind, Anchor, 3>;
 
 impl Model {
     /// Number of minimal coordinates.
@@ -309,157 +314,11 @@ impl Rules<3> for Spatial {
 
 /// Three run-time parameters.
 fn param3(cx: &mut Ctxt, v: &Value, what: &str) -> Option<[DefaultValue; 3]> {
-    checks::numbers::<3>(cx, v, || shape::<3>(what)).map(|x| x.map(DefaultValue::from))
+    checks::numbers::<3>(cx, v, || checks::shape::<3>(what)).map(|x| x.map(DefaultValue::from))
 }
 
 /// Three numbers the macro must know (geometry that shapes the code).
-fn triple(cx: &mut Ctxt, v: &Value, what: &str) -> Option<[f64; 3]> {
-    let x = checks::numbers::<3>(cx, v, || shape::<3>(what))?;
+pub(crate) fn triple(cx: &mut Ctxt, v: &Value, what: &str) -> Option<[f64; 3]> {
+    let x = checks::numbers::<3>(cx, v, || checks::shape::<3>(what))?;
     checks::known(cx, x, what)
-}
-
-/// Tolerance on the orthogonality (cosine between axes) of a `frame`.
-const FRAME_TOL: f64 = 1e-6;
-
-/// The inertia: three principal moments (link frame axes) or a symmetric
-/// 3×3 matrix; positive definite and physically realisable (each principal
-/// moment at most the sum of the other two).
-fn inertia(cx: &mut Ctxt, f: &Field) -> Option<[[DefaultValue; 3]; 3]> {
-    let v = &f.value;
-    let zero = || DefaultValue::Known(0.0);
-    let params = if let Some(d) = v.items(3) {
-        let d: Vec<DefaultValue> = d.into_iter().map(DefaultValue::from).collect();
-        [
-            [d[0].clone(), zero(), zero()],
-            [zero(), d[1].clone(), zero()],
-            [zero(), zero(), d[2].clone()],
-        ]
-    } else if let Some(m) = v.matrix3() {
-        m.map(|r| r.map(DefaultValue::from))
-    } else {
-        cx.push(
-            v.span(),
-            "`inertia` takes principal moments `[i1, i2, i3]` or a symmetric matrix `[[..], [..], [..]]` (kg·m², about the centre of mass, link frame)",
-        );
-        return None;
-    };
-    // Checked here when the macro knows every entry; otherwise the
-    // generated model's run-time validation checks symmetry and
-    // definiteness (a typed error).
-    let mut m = [[0.0; 3]; 3];
-    for (row, prow) in m.iter_mut().zip(&params) {
-        for (x, p) in row.iter_mut().zip(prow) {
-            match p.known() {
-                Some(k) => *x = k,
-                None => return Some(params),
-            }
-        }
-    }
-    if check_inertia(cx, v, &m) {
-        Some(params)
-    } else {
-        None
-    }
-}
-
-/// The compile-time checks of a known inertia tensor; `false` after
-/// reporting a problem.
-fn check_inertia(cx: &mut Ctxt, v: &Value, m: &[[f64; 3]; 3]) -> bool {
-    let big = m.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
-    let asym = (m[0][1] - m[1][0])
-        .abs()
-        .max((m[0][2] - m[2][0]).abs())
-        .max((m[1][2] - m[2][1]).abs());
-    if asym > 1e-12 * big {
-        cx.push(v.span(), "`inertia` must be symmetric");
-        return false;
-    }
-    let e = eigenvalues(m);
-    let big = e.iter().fold(0.0f64, |a, x| a.max(x.abs()));
-    if !e.iter().all(|x| x.is_finite()) || e.iter().any(|&x| x <= 1e-12 * big) || big == 0.0 {
-        cx.push(
-            v.span(),
-            format!(
-                "`inertia` must be positive definite (principal moments {:.6e}, {:.6e}, {:.6e}): every rotation of a rigid link needs inertia",
-                e[0], e[1], e[2]
-            ),
-        );
-        return false;
-    }
-    for i in 0..3 {
-        let others = e[(i + 1) % 3] + e[(i + 2) % 3];
-        if e[i] > others * (1.0 + 1e-9) {
-            cx.push(
-                v.span(),
-                format!(
-                    "`inertia` is not physically realisable: principal moment {:.6e} exceeds the sum {:.6e} of the other two",
-                    e[i], others
-                ),
-            );
-            return false;
-        }
-    }
-    true
-}
-
-/// `frame: [[x axis], [y axis], [z axis]]`: the link's axes in world
-/// coordinates in the reference configuration (rows normalised, mutually
-/// orthogonal to 1e-6, right-handed), as the rotation R⁰ (columns = axes),
-/// re-orthonormalised exactly.
-fn frame(cx: &mut Ctxt, f: &Field) -> Option<[[f64; 3]; 3]> {
-    let v = &f.value;
-    let Some(items) = v.matrix3() else {
-        cx.push(
-            v.span(),
-            "`frame` takes the link's axes in world coordinates `[[x axis], [y axis], [z axis]]`",
-        );
-        return None;
-    };
-    let mut rows = [[0.0; 3]; 3];
-    for (row, r) in rows.iter_mut().zip(items) {
-        *row = checks::known(cx, r, "`frame`")?;
-    }
-    let mut axes = [[0.0; 3]; 3];
-    for (i, r) in rows.iter().enumerate() {
-        match unit(*r) {
-            Some(u) => axes[i] = u,
-            None => {
-                cx.push(v.span(), "`frame` axes must not be zero");
-                return None;
-            }
-        }
-    }
-    let worst = dot(axes[0], axes[1])
-        .abs()
-        .max(dot(axes[0], axes[2]).abs())
-        .max(dot(axes[1], axes[2]).abs());
-    if worst > FRAME_TOL {
-        cx.push(
-            v.span(),
-            format!(
-                "`frame` axes must be mutually orthogonal (largest cosine {worst:.3e} > {FRAME_TOL:e})"
-            ),
-        );
-        return None;
-    }
-    if dot(cross(axes[0], axes[1]), axes[2]) <= 0.0 {
-        cx.push(
-            v.span(),
-            "`frame` must be right-handed: x axis × y axis = z axis",
-        );
-        return None;
-    }
-    // Gram–Schmidt: x, then y ⊥ x, then z = x × y
-    let x = axes[0];
-    let y = unit({
-        let d = dot(axes[1], x);
-        [
-            axes[1][0] - d * x[0],
-            axes[1][1] - d * x[1],
-            axes[1][2] - d * x[2],
-        ]
-    })?;
-    let z = cross(x, y);
-    // columns are the axes
-    Some([[x[0], y[0], z[0]], [x[1], y[1], z[1]], [x[2], y[2], z[2]]])
 }
