@@ -7,8 +7,8 @@
 //! Kept apart from `emit` so that the kinematics generator can change
 //! without touching what saved models record.
 
-use crate::Target;
-use crate::model::Model;
+use crate::desc::planar::Model;
+use crate::target::Target;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::ext::IdentExt;

@@ -5,17 +5,13 @@
 //!
 //! [`Mechanism`]: https://docs.rs/vigp-runtime
 
-use crate::model::{Anchor, DefaultValue, JointKind, Model, Point};
+use crate::desc::DefaultValue;
+use crate::desc::planar::{Anchor, JointKind, Model, Point};
+use crate::lit::lit;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::Ident;
 use syn::ext::IdentExt;
-
-/// An f64 literal (a leading minus for negative values).
-pub fn lit(x: f64) -> TokenStream {
-    let l = Literal::f64_unsuffixed(x.abs());
-    if x < 0.0 { quote!(-#l) } else { quote!(#l) }
-}
 
 fn pair(p: [f64; 2]) -> TokenStream {
     let (a, b) = (lit(p[0]), lit(p[1]));
@@ -496,7 +492,7 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
 /// The whole expansion.
 /// The generated items for a validated model; `target` chooses whether the
 /// std runtime's items (dual-number views) are included.
-pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
+pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream> {
     let Model {
         attrs, vis, name, ..
     } = m;
@@ -817,7 +813,7 @@ pub fn emit(m: &Model, target: crate::Target) -> syn::Result<TokenStream> {
     } else {
         quote!(#(#lagrangian_terms)+*)
     };
-    let std_items = if target == crate::Target::Std {
+    let std_items = if target == crate::target::Target::Std {
         quote! {
             impl ::vigp::Mechanism<#n, #c> for #minimal_ty {
             const COORDINATES: [&'static str; #n] = [#(#coord_names),*];

@@ -13,8 +13,8 @@
 // formulas they implement; iterator chains would hide the indices.
 #![allow(clippy::needless_range_loop)]
 
+use crate::desc::planar::Model;
 use crate::mechanics::{Mechanics, Param};
-use crate::model::Model;
 use crate::symbolic::{Expr, Freq, Monomial, Poly, Sym};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};

@@ -4,50 +4,42 @@
 //! library so that users and tests can see exactly what a description
 //! expands to ([`expand_to_string`]) and snapshot it.
 //!
-//! Pipeline: tokens → [`parse`] (syntax with spans) → [`model`] (names
-//! resolved, numbers checked, joint graph split into a spanning tree and
-//! loop-closing joints) → [`emit`] (Rust generic over a scalar: `vigp::Real`
-//! for the kinematics and the `no_std` model, num-dual numbers for the std
-//! runtime's views; [`Target`] selects which are emitted), plus [`describe`]
-//! (the mechanism's name and named parameters, and the `vigp::System` impl).
-//! A description with a 3-component gravity goes through [`spatial`] instead.
+//! Pipeline: tokens → [`syntax`] (one grammar for planar and spatial
+//! descriptions, with spans) → [`desc`] (one validation driver with the
+//! rules of each dimension: names resolved, numbers checked, joint graph
+//! split into a spanning tree and loop-closing joints; every mistake
+//! collected in a [`ctxt::Ctxt`]) → [`emit`] (Rust generic over a scalar:
+//! `vigp::Real` for the kinematics and the `no_std` model, num-dual numbers
+//! for the std runtime's views; [`Target`] selects which are emitted), plus
+//! [`describe`] (the mechanism's name and named parameters, and the
+//! `vigp::System` impl). A description with a 3-component gravity is
+//! spatial ([`syntax::Dim::of`]) and is emitted by [`spatial`] instead.
+//!
+//! To add a source of descriptions (another syntax), produce a
+//! [`syntax::Input`] and hand it to [`desc::validate()`]; to add a joint
+//! type, add it to the dimension's `JOINTS` table ([`desc::planar`],
+//! [`desc::spatial`]) and to its `kind`.
 
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod ctxt;
+pub mod desc;
 pub mod describe;
 pub mod emit;
 pub mod emit_terms;
+pub mod geom3;
+pub mod lit;
 pub mod mechanics;
-pub mod model;
-pub mod parse;
+pub mod number;
 pub mod spatial;
 pub mod symbolic;
+pub mod syntax;
+pub mod target;
+
+pub use target::Target;
 
 use proc_macro2::TokenStream;
-
-/// Rust's primitive type names: a mechanism named like one shadows it in
-/// the generated items (`f64` fields, `[f64; N]` arrays), and rustc's
-/// errors then point at the whole macro call.
-const PRIMITIVE_TYPES: [&str; 17] = [
-    "bool", "char", "str", "f32", "f64", "i8", "i16", "i32", "i64", "i128", "isize", "u8", "u16",
-    "u32", "u64", "u128", "usize",
-];
-
-/// An error at the mechanism's name if the generated items cannot use it.
-pub(crate) fn check_mechanism_name(name: &proc_macro2::Ident) -> Option<syn::Error> {
-    let text = name.to_string();
-    let text = text.strip_prefix("r#").unwrap_or(&text);
-    PRIMITIVE_TYPES.contains(&text).then(|| {
-        syn::Error::new(
-            name.span(),
-            format!(
-                "a mechanism cannot be named `{text}`: the generated items use the primitive type \
-                 `{text}`, which the name would shadow; choose another name"
-            ),
-        )
-    })
-}
 
 /// The largest planar expansion accepted, in bytes of token text. The
 /// closed-form planar terms grow about 1.5× per link of a chain (a
@@ -55,18 +47,6 @@ pub(crate) fn check_mechanism_name(name: &proc_macro2::Ident) -> Option<syn::Err
 /// 3.9 GB; 14 links 7.8 MB; 16 links 17 MB, which rustc could not
 /// finish in 5 minutes on a 24 GB machine).
 const MAX_PLANAR_EXPANSION: usize = 8_000_000;
-
-/// Which items a mechanism expands to.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Target {
-    /// Everything: the `no_std` items plus the std runtime's dual-number
-    /// views (`Mechanism` impls, the maximal view, the coordinate maps).
-    /// What `vigp` with its default `std` feature gets.
-    Std,
-    /// Only the `no_std` items: parameters, forward kinematics and the
-    /// `vigp::embedded::Model` impl. What `vigp` without `std` gets.
-    NoStd,
-}
 
 /// Expand a `mechanism!` body into Rust items ([`Target::Std`]), or a
 /// spanned error.
@@ -77,13 +57,15 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 /// Expand a `mechanism!` body into the items of `target`, or a spanned
 /// error.
 pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream> {
-    // `gravity: [gx, gy, gz]` selects the spatial path; everything else is
+    // `gravity: [gx, gy, gz]` selects the spatial rules; everything else is
     // planar (which reports any other shape of `gravity`).
-    if spatial::is_spatial(&input) {
-        return spatial::expand(input, target);
+    let dim = syntax::Dim::of(&input);
+    let parsed = syntax::Input::parse2(input, dim)?;
+    if dim == syntax::Dim::Spatial {
+        let model = desc::validate::<3, desc::spatial::Spatial>(parsed)?;
+        return Ok(spatial::emit::emit(&model, target));
     }
-    let parsed: parse::Input = syn::parse2(input)?;
-    let model = model::validate(parsed)?;
+    let model = desc::validate::<2, desc::planar::Planar>(parsed)?;
     let mut out = emit::emit(&model, target)?;
     out.extend(describe::emit(&model, target));
     let bytes = out.to_string().len();

@@ -12,7 +12,7 @@
 // formulas they implement; iterator chains would hide the indices.
 #![allow(clippy::needless_range_loop)]
 
-use crate::model::{Anchor, JointKind, Model, Point};
+use crate::desc::planar::{Anchor, JointKind, Model, Point};
 use crate::symbolic::{Expr, Freq, Poly, Sym, Vec2};
 use syn::ext::IdentExt;
 

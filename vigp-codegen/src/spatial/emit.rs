@@ -7,9 +7,9 @@
 //! `stiffness`, no input code without `actuated`, no constraint code when
 //! the minimal view has no constraint.
 
-use super::model::{Anchor, JointKind, Model, Point};
-use crate::emit::lit;
-use crate::model::DefaultValue;
+use crate::desc::DefaultValue;
+use crate::desc::spatial::{Anchor, JointKind, Model, Point};
+use crate::lit::lit;
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::ext::IdentExt;
@@ -56,7 +56,7 @@ fn doc_or(attrs: &[syn::Attribute], fallback: String) -> TokenStream {
 }
 
 /// The whole expansion of a spatial description.
-pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
+pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
     let Model {
         attrs, vis, name, ..
     } = m;
@@ -247,7 +247,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         let pa = anchor_expr(m, jt.parent);
         let ca = anchor_expr(m, jt.child);
         let axis = triple(jt.kind.axis());
-        let rel = quad(jt.rel);
+        let rel = quad(m.rel(jt));
         let damping = if dissipative {
             let jn = &jt.name;
             quote!(self.joints.#jn.damping)
@@ -344,7 +344,7 @@ pub fn emit(m: &Model, target: crate::Target) -> TokenStream {
         );
         quote!(#own #minimal)
     };
-    let mechanism_impl = if target == crate::Target::Std {
+    let mechanism_impl = if target == crate::target::Target::Std {
         let dissipation = if dissipative {
             quote! {
                 fn dissipation<D: ::vigp::Scalar>(&self, q: &#svector<D, #nm>, v: &#svector<D, #nm>) -> D {
