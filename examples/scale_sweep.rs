@@ -426,8 +426,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let files = dirs
             .iter()
             .map(|d| shard::read::<Cli, SystemRows>(d))
-            .collect::<Result<Vec<_>, _>>()?;
-        let (_, units) = shard::merge(files, SHARD_FORMAT, units)?;
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| e.to_string())?;
+        let (_, units) = shard::merge(files, SHARD_FORMAT, units).map_err(|e| e.to_string())?;
         println!("merged {} shards", dirs.len());
         return report(units, &out);
     }
@@ -483,13 +484,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     match cli.shard {
         Some(shard) => {
-            let path = shard::write(&cli.out, SHARD_FORMAT, shard, &cli, &this.units)?;
+            let path = shard::write(&cli.out, SHARD_FORMAT, shard, &cli, &this.units)
+                .map_err(|e| e.to_string())?;
             println!("shard {shard}: wrote {}", path.display());
             Ok(())
         }
         // the unsharded run is the one shard 0/1, checked as `merge` checks
         None => {
-            let (_, units) = shard::merge(vec![("this run".into(), this)], SHARD_FORMAT, units)?;
+            let (_, units) = shard::merge(vec![("this run".into(), this)], SHARD_FORMAT, units)
+                .map_err(|e| e.to_string())?;
             report(units, &cli.out)
         }
     }

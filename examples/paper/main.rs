@@ -1034,8 +1034,9 @@ fn merge(dirs: &[PathBuf], out: PathBuf) -> Result<(), Box<dyn std::error::Error
     let files = dirs
         .iter()
         .map(|d| shard::read::<Cli, Output>(d))
-        .collect::<Result<Vec<_>, _>>()?;
-    let (mut cli, outputs) = shard::merge(files, SHARD_FORMAT, units)?;
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| e.to_string())?;
+    let (mut cli, outputs) = shard::merge(files, SHARD_FORMAT, units).map_err(|e| e.to_string())?;
     cli.out = out;
     println!(
         "merged {} shards: {} units of systems {:?}, N {:?}, {} runs, seed {}",
@@ -1269,7 +1270,8 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
     bar.finish();
     match cli.shard {
         Some(shard) => {
-            let path = shard::write(&cli.out, SHARD_FORMAT, shard, &cli, &outputs)?;
+            let path = shard::write(&cli.out, SHARD_FORMAT, shard, &cli, &outputs)
+                .map_err(|e| e.to_string())?;
             println!(
                 "shard {shard}: wrote {} units to {} in {:.0} s",
                 outputs.len(),
@@ -1287,7 +1289,8 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 options: cli.clone(),
                 units: outputs,
             };
-            let (_, outputs) = shard::merge(vec![("this run".into(), this)], SHARD_FORMAT, units)?;
+            let (_, outputs) = shard::merge(vec![("this run".into(), this)], SHARD_FORMAT, units)
+                .map_err(|e| e.to_string())?;
             report(&cli, outputs, t0)
         }
     }
