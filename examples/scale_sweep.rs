@@ -29,12 +29,34 @@
 //! ```text
 //! cargo run --release --example scale_sweep -- --n 1024,2048,4096 --exact-max 4096 --sparse-m 256 --sparse-also --restarts 0
 //! ```
+//!
+//! `--out DIR` writes `DIR/scale_sweep.csv` and `.svg` (default `target`).
+//! Sharding (docs/sharding.md): the units of work are the two systems
+//! (each its own seed; its N values are one chain of warm starts), so
+//! `--shard i/N` (0-based) computes every N-th system from the i-th and
+//! writes its raw rows (`shard.json`, floats exact) to
+//! `target/scale-shards/shard-i-of-N/` (or `--out`); more than two shards
+//! leave the extra ones empty. `merge DIR… [--out DIR]` checks the shards
+//! and writes the CSV and the figure as an unsharded run does: the figure
+//! and every column but `train_s` (the measured training time, wherever
+//! the unit ran) are the same bytes.
+//!
+//! ```text
+//! cargo run --release --example scale_sweep -- --shard 0/2   # and 1/2, anywhere
+//! cargo run --release --example scale_sweep -- merge target/scale-shards/shard-*-of-2
+//! ```
 
 #[path = "common/font.rs"]
 mod font;
+#[path = "common/shard.rs"]
+mod shard;
 
 use std::f64::consts::PI;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
+
+use serde::{Deserialize, Serialize};
+use shard::{Shard, ShardFile};
 
 use nalgebra::SVector;
 use rayon::prelude::*;
@@ -69,11 +91,16 @@ impl Rng {
     }
 }
 
+/// Settings of a run. All but `out` and `shard` are written into every
+/// shard's file, and `merge` requires them equal.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Cli {
     n: Vec<usize>,
     exact_max: usize,
     sparse_m: usize,
+    #[serde(with = "shard::exact")]
     noise: f64,
+    #[serde(with = "shard::exact")]
     gt_dt: f64,
     restarts: usize,
     test_trajectories: usize,
@@ -81,6 +108,37 @@ struct Cli {
     seed: u64,
     /// Also train the sparse GP where the exact one runs (N > M).
     sparse_also: bool,
+    /// Output directory.
+    #[serde(skip)]
+    out: PathBuf,
+    /// `--shard i/N`: compute only this shard's systems.
+    #[serde(skip)]
+    shard: Option<Shard>,
+}
+
+/// The tag of this example's shard files.
+const SHARD_FORMAT: &str = "vigp-scale-sweep-shard/1";
+
+/// The systems, in order: the sweep's units of work.
+const SYSTEMS: [&str; 2] = ["pendulum", "cartpole"];
+
+/// The result of one unit: a system's rows.
+#[derive(Debug, Serialize, Deserialize)]
+struct SystemRows {
+    system: String,
+    rows: Vec<Row>,
+}
+
+impl shard::UnitResult for SystemRows {
+    type Key = String;
+    fn key(&self) -> String {
+        self.system.clone()
+    }
+}
+
+/// The sweep's units (they do not depend on the options).
+fn units(_: &Cli) -> Vec<String> {
+    SYSTEMS.iter().map(|s| s.to_string()).collect()
 }
 
 fn parse() -> Result<Cli, String> {
@@ -100,6 +158,15 @@ fn parse() -> Result<Cli, String> {
             .collect::<Result<Vec<usize>, _>>()?,
         None => vec![64, 128, 256, 512, 1024, 2048, 4096, 8192, 16384],
     };
+    let shard: Option<Shard> = get("--shard")
+        .map(|s| s.parse())
+        .transpose()
+        .map_err(|e: shard::ShardError| e.to_string())?;
+    let out = match (get("--out"), shard) {
+        (Some(dir), _) => PathBuf::from(dir),
+        (None, Some(shard)) => Path::new("target/scale-shards").join(shard.dir_name()),
+        (None, None) => PathBuf::from("target"),
+    };
     Ok(Cli {
         n,
         exact_max: num("--exact-max", 4096.0)? as usize,
@@ -111,6 +178,8 @@ fn parse() -> Result<Cli, String> {
         windows: num("--windows", 10.0)? as usize,
         seed: num("--seed", 1.0)? as u64,
         sparse_also: args.iter().any(|a| a == "--sparse-also"),
+        out,
+        shard,
     })
 }
 
@@ -135,13 +204,20 @@ fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     Ok(out)
 }
 
+/// One trained model's result.
+#[derive(Debug, Serialize, Deserialize)]
 struct Row {
-    system: &'static str,
+    system: String,
     n: usize,
     method: String,
+    #[serde(with = "shard::exact")]
     mse: f64,
+    #[serde(with = "shard::exact")]
     nominal_mse: f64,
+    /// Measured training time (s): the one value that differs from run to run.
+    #[serde(with = "shard::exact")]
     train_s: f64,
+    #[serde(with = "shard::exact")]
     noise_var: f64,
 }
 
@@ -286,7 +362,7 @@ where
                 Some(e) => println!("{name:9} N {n:6} sparse / exact 20-step MSE: {:.3}", m / e),
             }
             rows.push(Row {
-                system: name,
+                system: name.into(),
                 n,
                 method,
                 mse: m,
@@ -310,8 +386,7 @@ fn read_csv(path: &str) -> Result<Vec<Row>, Box<dyn std::error::Error>> {
         }
         rows.push(Row {
             system: match f[0] {
-                "pendulum" => "pendulum",
-                "cartpole" => "cartpole",
+                s if SYSTEMS.contains(&s) => s.into(),
                 other => return Err(format!("unknown system {other}").into()),
             },
             n: f[1].parse()?,
@@ -336,39 +411,96 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("wrote {svg}");
         return Ok(());
     }
+    // `merge DIR… [--out DIR]`: the report of the shards' rows.
+    if args.get(1).map(String::as_str) == Some("merge") {
+        let mut dirs = Vec::new();
+        let mut out = PathBuf::from("target");
+        let mut rest = args[2..].iter();
+        while let Some(a) = rest.next() {
+            if a == "--out" {
+                out = rest.next().ok_or("--out needs a directory")?.into();
+            } else {
+                dirs.push(PathBuf::from(a));
+            }
+        }
+        let files = dirs
+            .iter()
+            .map(|d| shard::read::<Cli, SystemRows>(d))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| e.to_string())?;
+        let (_, units) = shard::merge(files, SHARD_FORMAT, units).map_err(|e| e.to_string())?;
+        println!("merged {} shards", dirs.len());
+        return report(units, &out);
+    }
     let cli = parse()?;
     println!(
         "scale sweep: N {:?}, exact up to {}, sparse M = {}, noise σ = {:e}, ground truth dt {:e}, {} restarts, seed {}",
         cli.n, cli.exact_max, cli.sparse_m, cli.noise, cli.gt_dt, cli.restarts, cli.seed
     );
-    let mut rows = Vec::new();
-    sweep(
-        "pendulum",
-        &cli,
-        |s: &mut Pendulum, r| {
-            s.links.rod.mass *= r.uniform(0.9, 1.1);
-            s.links.rod.inertia *= r.uniform(0.9, 1.1);
-            s.joints.pivot.damping = r.uniform(0.0, 1.0);
-        },
-        Pendulum::minimal,
-        |r| SVector::from([r.uniform(-PI, PI)]),
-        &mut rows,
-    )?;
-    sweep(
-        "cartpole",
-        &cli,
-        |s: &mut Cartpole, r| {
-            for l in [&mut s.links.cart, &mut s.links.pole] {
-                l.mass *= r.uniform(0.9, 1.1);
-                l.inertia *= r.uniform(0.9, 1.1);
-            }
-            s.joints.rail.damping = r.uniform(0.0, 0.5);
-            s.joints.hinge.damping = r.uniform(0.0, 1.0);
-        },
-        Cartpole::minimal,
-        |r| SVector::from([r.uniform(-1.0, 1.0), r.uniform(-PI, PI)]),
-        &mut rows,
-    )?;
+    let whole = cli.shard.unwrap_or(Shard::WHOLE);
+    let mut done = Vec::new();
+    for (k, system) in units(&cli).into_iter().enumerate() {
+        if !whole.owns(k) {
+            continue;
+        }
+        let mut rows = Vec::new();
+        match system.as_str() {
+            "pendulum" => sweep(
+                "pendulum",
+                &cli,
+                |s: &mut Pendulum, r| {
+                    s.links.rod.mass *= r.uniform(0.9, 1.1);
+                    s.links.rod.inertia *= r.uniform(0.9, 1.1);
+                    s.joints.pivot.damping = r.uniform(0.0, 1.0);
+                },
+                Pendulum::minimal,
+                |r| SVector::from([r.uniform(-PI, PI)]),
+                &mut rows,
+            )?,
+            "cartpole" => sweep(
+                "cartpole",
+                &cli,
+                |s: &mut Cartpole, r| {
+                    for l in [&mut s.links.cart, &mut s.links.pole] {
+                        l.mass *= r.uniform(0.9, 1.1);
+                        l.inertia *= r.uniform(0.9, 1.1);
+                    }
+                    s.joints.rail.damping = r.uniform(0.0, 0.5);
+                    s.joints.hinge.damping = r.uniform(0.0, 1.0);
+                },
+                Cartpole::minimal,
+                |r| SVector::from([r.uniform(-1.0, 1.0), r.uniform(-PI, PI)]),
+                &mut rows,
+            )?,
+            other => return Err(format!("unknown system {other}").into()),
+        }
+        done.push(SystemRows { system, rows });
+    }
+    let this = ShardFile {
+        format: SHARD_FORMAT.into(),
+        shard: whole,
+        options: cli.clone(),
+        units: done,
+    };
+    match cli.shard {
+        Some(shard) => {
+            let path = shard::write(&cli.out, SHARD_FORMAT, shard, &cli, &this.units)
+                .map_err(|e| e.to_string())?;
+            println!("shard {shard}: wrote {}", path.display());
+            Ok(())
+        }
+        // the unsharded run is the one shard 0/1, checked as `merge` checks
+        None => {
+            let (_, units) = shard::merge(vec![("this run".into(), this)], SHARD_FORMAT, units)
+                .map_err(|e| e.to_string())?;
+            report(units, &cli.out)
+        }
+    }
+}
+
+/// Writes `scale_sweep.csv` and `scale_sweep.svg` into `dir`.
+fn report(units: Vec<SystemRows>, dir: &Path) -> Result<(), Box<dyn std::error::Error>> {
+    let rows: Vec<Row> = units.into_iter().flat_map(|u| u.rows).collect();
     let mut csv = String::from("system,n,method,mse,nominal_mse,train_s,noise_variance\n");
     for r in &rows {
         csv.push_str(&format!(
@@ -376,10 +508,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.system, r.n, r.method, r.mse, r.nominal_mse, r.train_s, r.noise_var
         ));
     }
-    std::fs::create_dir_all("target")?;
-    std::fs::write("target/scale_sweep.csv", csv)?;
-    figure(&rows, "target/scale_sweep.svg")?;
-    println!("wrote target/scale_sweep.csv and target/scale_sweep.svg");
+    std::fs::create_dir_all(dir)?;
+    let (csv_path, svg_path) = (dir.join("scale_sweep.csv"), dir.join("scale_sweep.svg"));
+    std::fs::write(&csv_path, csv)?;
+    let svg = svg_path.to_str().ok_or("output path is not UTF-8")?;
+    figure(&rows, svg)?;
+    println!("wrote {} and {}", csv_path.display(), svg_path.display());
     Ok(())
 }
 

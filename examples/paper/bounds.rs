@@ -17,7 +17,7 @@ use crate::font::FONT;
 use nalgebra::SVector;
 use plotters::prelude::*;
 use rayon::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 use std::error::Error;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -35,50 +35,59 @@ pub const DELTA: f64 = 0.05;
 const STRIDE: usize = 10;
 
 /// Coverage and tightness of one bound on one set of cases.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct BoundRow {
     /// System name.
     pub system: String,
     /// `minimal`, `sincos` or `maximal`.
-    pub coords: &'static str,
+    pub coords: String,
     /// `conformal`, `conformal-latent` (score normalised by the latent σ,
     /// for noise-free targets such as these), `theorem1` or `rkhs`.
-    pub kind: &'static str,
+    pub kind: String,
     /// `held-out` (starts like the training ones) or `shifted`.
-    pub set: &'static str,
+    pub set: String,
     /// Cases evaluated.
     pub cases: usize,
     /// Predictions that failed (a projection or nominal step), left out.
     pub failed: usize,
     /// Fraction of cases whose start the bound flags as outside its region.
+    #[serde(with = "crate::shard::exact")]
     pub flagged: f64,
     /// Fraction of one-step velocity errors within their bound.
+    #[serde(with = "crate::shard::exact")]
     pub one_step_coverage: f64,
     /// Median one-step bound ÷ median one-step error.
+    #[serde(with = "crate::shard::exact")]
     pub one_step_tightness: f64,
     /// Fraction of 20-step position errors within their bound.
+    #[serde(with = "crate::shard::exact")]
     pub k_step_coverage: f64,
     /// Median 20-step bound ÷ median 20-step error.
+    #[serde(with = "crate::shard::exact")]
     pub k_step_tightness: f64,
     /// Median 20-step position error.
+    #[serde(with = "crate::shard::exact")]
     pub k_step_median_error: f64,
 }
 
 /// One predicted window with its bound tubes, for the figure.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct Tube {
     /// System name.
     pub system: String,
     /// Coordinate choice.
-    pub coords: &'static str,
+    pub coords: String,
     /// Name of the first coordinate (the one plotted).
-    pub coordinate: &'static str,
+    pub coordinate: String,
     /// Time of each step (s).
+    #[serde(with = "crate::shard::exact")]
     pub t: Vec<f64>,
     /// True minus predicted first coordinate at each step.
+    #[serde(with = "crate::shard::exact")]
     pub deviation: Vec<f64>,
     /// Per kind: the position bound at each step.
-    pub bounds: Vec<(&'static str, Vec<f64>)>,
+    #[serde(with = "crate::shard::exact")]
+    pub bounds: Vec<(String, Vec<f64>)>,
 }
 
 /// Positions every DT for 2 s from (q0, q̇0), by the ground truth's
@@ -164,9 +173,9 @@ fn row(
     let med = |f: &dyn Fn(&Case) -> f64| median(&ok.iter().map(|c| f(c)).collect::<Vec<_>>());
     BoundRow {
         system: system.into(),
-        coords,
-        kind,
-        set,
+        coords: coords.into(),
+        kind: kind.into(),
+        set: set.into(),
         cases: ok.len(),
         failed: results.len() - ok.len(),
         flagged: frac(&|c| c.flagged),
@@ -192,8 +201,8 @@ fn evaluate_model<Mo: Mechanism<P, Q> + Clone + Sync, const P: usize, const Q: u
     let tube_window = &sets[0].1[sets[0].1.len() / 2];
     let mut tube = Tube {
         system: system.into(),
-        coords,
-        coordinate: Mo::COORDINATES[0],
+        coords: coords.into(),
+        coordinate: Mo::COORDINATES[0].into(),
         t: (0..=HORIZON).map(|k| k as f64 * DT).collect(),
         deviation: Vec::new(),
         bounds: Vec::new(),
@@ -270,7 +279,7 @@ fn evaluate_model<Mo: Mechanism<P, Q> + Clone + Sync, const P: usize, const Q: u
                 )
                 .collect();
         }
-        tube.bounds.push((name, p.position_bounds));
+        tube.bounds.push((name.to_string(), p.position_bounds));
     }
     Ok((rows, tube))
 }
@@ -544,7 +553,7 @@ where
             * 1.15;
         let t1 = tube.t.last().copied().unwrap_or(1.0);
         let mut chart = ChartBuilder::on(area)
-            .caption(*kind, (FONT, 20))
+            .caption(kind.as_str(), (FONT, 20))
             .margin(12)
             .x_label_area_size(44)
             .y_label_area_size(84)

@@ -22,6 +22,21 @@
 //! trajectories, position MSE in minimal coordinates. Output: plots (SVG, PNG), CSV and a Markdown
 //! report in one directory, named at the end.
 //!
+//! Sharding (across processes or machines; docs/sharding.md): the sweep is
+//! a list of independent units (Fig. 1; each run of each system; the error
+//! bounds of each system), each seeded from (seed, system, run) alone.
+//! `--shard i/N` (0-based) computes every N-th unit from the i-th and
+//! writes their raw results (`shard.json`, floats exact) to its own folder,
+//! `target/paper-shards/shard-i-of-N/` unless `--out` is given; `merge`
+//! checks the shards and writes the report. A run without `--shard` is the
+//! one shard `0/1` and goes through the same check and report, so the
+//! merged files equal an unsharded run's byte for byte:
+//!
+//! ```text
+//! for i in 0 1 2 3; do cargo run --release --example paper -- --shard $i/4; done
+//! cargo run --release --example paper -- merge target/paper-shards/shard-*-of-4
+//! ```
+//!
 //! Error bounds ([`bounds`]): coverage and tightness of the conformal,
 //! Theorem-1 and RKHS bounds at δ = 0.05, one step and 20 steps, per system
 //! and coordinate choice, on held-out data from other seeds and on starts
@@ -33,15 +48,20 @@ mod bounds;
 #[path = "../common/font.rs"]
 mod font;
 mod output;
+#[path = "../common/shard.rs"]
+mod shard;
 
 use clap::parser::ValueSource;
-use clap::{CommandFactory, FromArgMatches, Parser};
+use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser};
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::SVector;
 use output::{Fig1, Fig2Point, Series};
 use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use shard::{Shard, ShardFile};
+use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, PI};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 use vigp::gp::{Curvature, Hyperparameters, Screening, TrainOptions};
@@ -60,9 +80,38 @@ impl Cli {
     }
 }
 
-/// Command-line settings.
-#[derive(Parser, Debug, Clone)]
-#[command(about = "Reproduce the paper's evaluation (Fig. 1 and Fig. 2)")]
+/// The command line: a run (or one shard of it), or `merge`.
+#[derive(Parser, Debug)]
+#[command(
+    about = "Reproduce the paper's evaluation (Fig. 1 and Fig. 2)",
+    args_conflicts_with_subcommands = true
+)]
+struct Args {
+    #[command(subcommand)]
+    command: Option<Command>,
+    #[command(flatten)]
+    cli: Cli,
+}
+
+/// Subcommands.
+#[derive(clap::Subcommand, Debug)]
+enum Command {
+    /// Merge the folders of `--shard i/N` runs (all N of them) into the
+    /// report of one unsharded run.
+    Merge {
+        /// The shard folders (or their `shard.json` files).
+        #[arg(required = true)]
+        shards: Vec<PathBuf>,
+        /// Output directory of the report.
+        #[arg(long, default_value = "target/paper")]
+        out: PathBuf,
+    },
+}
+
+/// Settings of a run. All but `--out`, `--shard` and `--full` (already
+/// applied to the others) are written into every shard's file, and `merge`
+/// requires them equal.
+#[derive(clap::Args, Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Cli {
     /// Systems to evaluate (comma separated).
     #[arg(
@@ -112,16 +161,27 @@ struct Cli {
     gt_method: GtMethod,
     /// Ground-truth time step (s) [default: 2.5e-3 for vi4, 1e-4 for midpoint].
     #[arg(long)]
+    #[serde(with = "shard::exact")]
     gt_dt: Option<f64>,
     /// Seed of everything random.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Output directory.
+    /// Output directory [default: target/paper; with --shard i/N:
+    /// target/paper-shards/shard-i-of-N].
     #[arg(long, default_value = "target/paper")]
+    #[serde(skip)]
     out: PathBuf,
+    /// Compute only shard i of N (0-based, `0/4` … `3/4`): every N-th unit
+    /// of work (Fig. 1, a run of a system, a system's bounds) from the i-th,
+    /// written as raw results to `shard.json` in the output directory;
+    /// `merge` makes the report of all N.
+    #[arg(long, value_name = "i/N")]
+    #[serde(skip)]
+    shard: Option<Shard>,
     /// The paper's settings: 100 runs, 200/100 trajectories, N up to 512,
     /// 10 restarts (each unless given explicitly: `--full --runs 1`).
     #[arg(long)]
+    #[serde(skip)]
     full: bool,
     /// Skip the error-bound evaluation.
     #[arg(long)]
@@ -184,14 +244,79 @@ impl Cli {
 /// at each (`OutputReport::optima`, `OutputReport::optima_curvature`).
 type Optima = (Vec<Vec<Hyperparameters>>, Vec<Vec<Curvature>>);
 
-/// One run's Fig. 2 points, and for run 0 the ground truth's accuracy
-/// (see `ground_truth_error`).
-type RunPoints = (Vec<Fig2Point>, Option<(f64, f64)>);
+/// The tag of this example's shard files.
+const SHARD_FORMAT: &str = "vigp-paper-shard/1";
+
+/// One unit of work of the sweep: units are independent (each seeded from
+/// the seed, its system and its run alone) and their results make the
+/// report in any grouping into shards.
+#[derive(Clone, Debug, PartialEq, Eq, PartialOrd, Ord)]
+enum Unit {
+    /// Fig. 1.
+    Fig1,
+    /// The error bounds of a system.
+    Bounds(String),
+    /// One run (perturbed system, data, every N) of a system.
+    Run(String, usize),
+}
+
+/// The sweep's units in order: shard i of N computes those at positions
+/// k with k mod N = i. The bounds (the costliest units of the default)
+/// come first, so that they spread over the shards.
+fn units(cli: &Cli) -> Vec<Unit> {
+    let mut units = vec![Unit::Fig1];
+    if !cli.no_bounds {
+        units.extend(cli.systems.iter().map(|s| Unit::Bounds(s.clone())));
+    }
+    for s in &cli.systems {
+        units.extend((0..cli.runs).map(|r| Unit::Run(s.clone(), r)));
+    }
+    units
+}
+
+/// The result of one unit.
+#[derive(Debug, Serialize, Deserialize)]
+enum Output {
+    /// Fig. 1 and its finding lines.
+    Fig1 { fig1: Fig1, notes: String },
+    /// The error bounds of a system.
+    Bounds {
+        system: String,
+        rows: Vec<bounds::BoundRow>,
+        tubes: Vec<bounds::Tube>,
+    },
+    /// One run of a system.
+    Run(RunOutput),
+}
+
+impl shard::UnitResult for Output {
+    type Key = Unit;
+    fn key(&self) -> Unit {
+        match self {
+            Output::Fig1 { .. } => Unit::Fig1,
+            Output::Bounds { system, .. } => Unit::Bounds(system.clone()),
+            Output::Run(r) => Unit::Run(r.system.clone(), r.run),
+        }
+    }
+}
+
+/// One run's Fig. 2 points, for run 0 the ground truth's accuracy (see
+/// `ground_truth_error`), and its failed and attempted prediction windows.
+#[derive(Debug, Serialize, Deserialize)]
+struct RunOutput {
+    system: String,
+    run: usize,
+    points: Vec<Fig2Point>,
+    #[serde(with = "shard::exact")]
+    gt_err: Option<(f64, f64)>,
+    failed: usize,
+    windows: usize,
+}
 
 const DT: f64 = 0.01;
 
 /// The ground truth's integrator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
 enum GtMethod {
     /// Fourth-order variational integrator (Suzuki's composition).
     Vi4,
@@ -231,10 +356,6 @@ const GT_SOLVER: NewtonOptions = NewtonOptions {
     min_step: 1.0 / 256.0,
     stall_tolerance: 1e-10,
 };
-
-/// Fig. 2 points of one system and its ground truth's accuracy (against
-/// half the step, against the midpoint VI at 0.1 ms).
-type SystemResult = (Vec<Fig2Point>, (f64, f64));
 
 /// The ground truth: an integrator and its step.
 #[derive(Clone, Copy, Debug)]
@@ -382,9 +503,10 @@ struct SystemSpec<S, Mn, Mx> {
 fn evaluate_system<S, Mn, Mx, const N: usize, const C: usize, const M: usize, const K: usize>(
     spec: &SystemSpec<S, Mn, Mx>,
     sample_q0: impl Fn(&mut Rng) -> SVector<f64, N> + Sync,
+    runs: &[usize],
     cli: &Cli,
     progress: &ProgressBar,
-) -> Result<SystemResult, Box<dyn std::error::Error>>
+) -> Result<Vec<RunOutput>, Box<dyn std::error::Error>>
 where
     S: Default + Copy + Send + Sync,
     Mn: Mechanism<N, C> + Coordinates<N, M> + Copy + Send + Sync,
@@ -393,8 +515,9 @@ where
     // The runs are independent (each its own seeded RNG, its own training
     // sets and fits), so they run side by side: the idle ends of one run's
     // trainings take the other's work. The points come back in run order.
-    let one_run = |run: usize| -> Result<RunPoints, StepError> {
+    let one_run = |run: usize| -> Result<RunOutput, StepError> {
         let mut points = Vec::new();
+        let counts = Counts::default();
         let mut rng = Rng(cli.seed
             ^ (run as u64 + 1).wrapping_mul(0x2545_F491_4F6C_DD1D)
             ^ spec.name.len() as u64);
@@ -448,7 +571,7 @@ where
             }
         }
         let nominal_vi = Variational::new(nmin, DT);
-        let nominal_mse = mean_mse(&windows, |z| {
+        let nominal_mse = mean_mse(&windows, &counts, |z| {
             Ok(nominal_vi
                 .rollout(z, HORIZON)?
                 .into_iter()
@@ -513,7 +636,7 @@ where
                     Ok((l, report)) => {
                         warm[model] = Some(l.gp().warm_start());
                         previous[model] = Some((n_eff, optima(&report)));
-                        mean_mse(&windows, |z| {
+                        mean_mse(&windows, &counts, |z| {
                             Ok(l.rollout(z, HORIZON)?.into_iter().map(|z| z.q).collect())
                         })
                     }
@@ -538,7 +661,7 @@ where
                 Ok((l, report)) => {
                     warm[2] = Some(l.gp().warm_start());
                     previous[2] = Some((n_eff, optima(&report)));
-                    mean_mse(&windows, |z| {
+                    mean_mse(&windows, &counts, |z| {
                         let zm = nmin.to_maximal(z, DT);
                         // the learned maximal model predicts; positions are compared in minimal coordinates
                         Ok(l.rollout(&zm, HORIZON)?
@@ -564,37 +687,55 @@ where
             });
             progress.inc(1);
         }
-        Ok((points, gt_err))
+        Ok(RunOutput {
+            system: spec.name.into(),
+            run,
+            points,
+            gt_err,
+            failed: counts.failed.load(Ordering::Relaxed),
+            windows: counts.windows.load(Ordering::Relaxed),
+        })
     };
-    let runs: Vec<_> = (0..cli.runs)
-        .into_par_iter()
-        .map(one_run)
-        .collect::<Result<_, _>>()?;
-    let gt_err = runs.iter().find_map(|r| r.1).unwrap_or((0.0, 0.0));
-    let points = runs.into_iter().flat_map(|r| r.0).collect();
-    Ok((points, gt_err))
+    Ok(runs
+        .par_iter()
+        .map(|&run| one_run(run))
+        .collect::<Result<_, _>>()?)
 }
 
-/// Fig. 2 of one system, then (unless `--no-bounds`) its error bounds.
+/// The units of one system among `todo`: its runs (Fig. 2), then its error
+/// bounds.
 fn run_system<S, Mn, Mx, const N: usize, const C: usize, const M: usize, const K: usize>(
     spec: &SystemSpec<S, Mn, Mx>,
     sample: &bounds::Start<'_, N>,
     shifted: &bounds::MovingStart<'_, N>,
     cli: &Cli,
+    todo: &[Unit],
     progress: &ProgressBar,
-    bound_out: &mut (Vec<bounds::BoundRow>, Vec<bounds::Tube>),
-) -> Result<SystemResult, Box<dyn std::error::Error>>
+) -> Result<Vec<Output>, Box<dyn std::error::Error>>
 where
     S: Default + Copy + Send + Sync,
     Mn: Mechanism<N, C> + Coordinates<N, M> + Copy + Send + Sync,
     Mx: Mechanism<M, K> + Copy + Send + Sync,
 {
-    let out = evaluate_system(spec, sample, cli, progress)?;
-    if !cli.no_bounds {
+    let runs: Vec<usize> = todo
+        .iter()
+        .filter_map(|u| match u {
+            Unit::Run(s, r) if s == spec.name => Some(*r),
+            _ => None,
+        })
+        .collect();
+    let mut out: Vec<Output> = evaluate_system(spec, sample, &runs, cli, progress)?
+        .into_iter()
+        .map(Output::Run)
+        .collect();
+    if todo.contains(&Unit::Bounds(spec.name.into())) {
         progress.set_message(format!("{}: error bounds", spec.name));
         let (rows, tubes) = bounds::evaluate(spec, sample, shifted, cli)?;
-        bound_out.0.extend(rows);
-        bound_out.1.extend(tubes);
+        out.push(Output::Bounds {
+            system: spec.name.into(),
+            rows,
+            tubes,
+        });
     }
     Ok(out)
 }
@@ -607,9 +748,10 @@ fn spin(r: &mut Rng, lo: f64, hi: f64) -> f64 {
 
 /// Mean window MSE over the windows whose prediction succeeded; failed
 /// windows (a step that did not converge or was not finite) are counted in
-/// `FAILED` and reported. A run whose windows all fail gives NaN.
+/// `counts` and reported. A run whose windows all fail gives NaN.
 fn mean_mse<const N: usize>(
     windows: &[(State<N>, Vec<SVector<f64, N>>)],
+    counts: &Counts,
     predict: impl Fn(&State<N>) -> Result<Vec<SVector<f64, N>>, StepError> + Sync,
 ) -> f64 {
     let results: Vec<Option<f64>> = windows
@@ -625,8 +767,10 @@ fn mean_mse<const N: usize>(
         })
         .collect();
     let ok: Vec<f64> = results.iter().flatten().copied().collect();
-    FAILED.fetch_add(results.len() - ok.len(), Ordering::Relaxed);
-    WINDOWS.fetch_add(results.len(), Ordering::Relaxed);
+    counts
+        .failed
+        .fetch_add(results.len() - ok.len(), Ordering::Relaxed);
+    counts.windows.fetch_add(results.len(), Ordering::Relaxed);
     if ok.is_empty() {
         f64::NAN
     } else {
@@ -634,9 +778,13 @@ fn mean_mse<const N: usize>(
     }
 }
 
-/// Prediction windows that failed / were attempted (reported in the findings).
-static FAILED: AtomicUsize = AtomicUsize::new(0);
-static WINDOWS: AtomicUsize = AtomicUsize::new(0);
+/// Prediction windows of one run that failed / were attempted (reported in
+/// the findings).
+#[derive(Default)]
+struct Counts {
+    failed: AtomicUsize,
+    windows: AtomicUsize,
+}
 
 fn perturb_links<const L: usize>(links: [&mut vigp::Link; L], rng: &mut Rng) {
     for l in links {
@@ -872,12 +1020,42 @@ fn bound_findings(rows: &[bounds::BoundRow]) -> String {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let matches = Cli::command().get_matches();
-    let mut cli = Cli::from_arg_matches(&matches)?;
+    let matches = Args::command().get_matches();
+    let args = Args::from_arg_matches(&matches)?;
+    match args.command {
+        Some(Command::Merge { shards, out }) => merge(&shards, out),
+        None => run(args.cli, &matches),
+    }
+}
+
+/// `merge`: the shards' units, checked, into the report.
+fn merge(dirs: &[PathBuf], out: PathBuf) -> Result<(), Box<dyn std::error::Error>> {
+    let t0 = Instant::now();
+    let files = dirs
+        .iter()
+        .map(|d| shard::read::<Cli, Output>(d))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| e.to_string())?;
+    let (mut cli, outputs) = shard::merge(files, SHARD_FORMAT, units).map_err(|e| e.to_string())?;
+    cli.out = out;
+    println!(
+        "merged {} shards: {} units of systems {:?}, N {:?}, {} runs, seed {}",
+        dirs.len(),
+        outputs.len(),
+        cli.systems,
+        cli.n,
+        cli.runs,
+        cli.seed
+    );
+    report(&cli, outputs, t0)
+}
+
+/// A run: every unit, or those of `--shard i/N`.
+fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Error>> {
+    let given = |id: &str| matches.value_source(id) == Some(ValueSource::CommandLine);
     if cli.full {
         // the paper's settings, except where given on the command line
         // (`--full --runs 1`: one run of the full protocol)
-        let given = |id: &str| matches.value_source(id) == Some(ValueSource::CommandLine);
         if !given("runs") {
             cli.runs = 100;
         }
@@ -913,6 +1091,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         )
         .into());
     }
+    if let Some(twice) = cli
+        .systems
+        .iter()
+        .enumerate()
+        .find(|(i, s)| cli.systems[..*i].contains(s))
+    {
+        return Err(format!("system `{}` given twice", twice.1).into());
+    }
+    if let Some(shard) = cli.shard.filter(|_| !given("out")) {
+        cli.out = Path::new("target/paper-shards").join(shard.dir_name());
+    }
+    let whole = cli.shard.unwrap_or(Shard::WHOLE);
+    let todo: Vec<Unit> = units(&cli)
+        .into_iter()
+        .enumerate()
+        .filter(|(k, _)| whole.owns(*k))
+        .map(|(_, u)| u)
+        .collect();
     let t0 = Instant::now();
     println!(
         "vigp paper reproduction: systems {:?}, N {:?}, {} runs, {}+{} trajectories, {} restarts, L-BFGS memory {}, gt dt {:e} s, seed {}",
@@ -926,24 +1122,33 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         cli.gt().dt,
         cli.seed
     );
+    if let Some(shard) = cli.shard {
+        println!(
+            "shard {shard}: {} of {} units",
+            todo.len(),
+            units(&cli).len()
+        );
+    }
+    let mut outputs = Vec::new();
 
-    let spinner = ProgressBar::new_spinner()
-        .with_message("Fig. 1: energy and constraint drift (10^4 steps each)");
-    spinner.enable_steady_tick(std::time::Duration::from_millis(200));
-    let (fig1, notes1) = figure1(&cli)?;
-    spinner.finish_with_message(format!("Fig. 1 done ({:.0} s)", t0.elapsed().as_secs_f64()));
+    if todo.contains(&Unit::Fig1) {
+        let spinner = ProgressBar::new_spinner()
+            .with_message("Fig. 1: energy and constraint drift (10^4 steps each)");
+        spinner.enable_steady_tick(std::time::Duration::from_millis(200));
+        let (fig1, notes) = figure1(&cli)?;
+        spinner.finish_with_message(format!("Fig. 1 done ({:.0} s)", t0.elapsed().as_secs_f64()));
+        outputs.push(Output::Fig1 { fig1, notes });
+    }
 
-    let total = (cli.systems.len() * cli.runs * cli.n.len()) as u64;
+    let runs = todo.iter().filter(|u| matches!(u, Unit::Run(..))).count();
+    let total = (runs * cli.n.len()) as u64;
     let bar = ProgressBar::new(total).with_style(ProgressStyle::with_template(
         "Fig. 2 {bar:40} {pos}/{len} (system, run, N) {msg} [{elapsed_precise}, eta {eta}]",
     )?);
-    let mut points = Vec::new();
-    let mut gt_notes = String::new();
-    let mut bound_out = (Vec::new(), Vec::new());
     let angle = |rng: &mut Rng| rng.uniform(-PI, PI);
     for system in &cli.systems {
         bar.set_message(system.clone());
-        let (p, err) = match system.as_str() {
+        outputs.extend(match system.as_str() {
             // shifted starts (error bounds): more energy than any training
             // start, which is at rest
             "pendulum" => run_system(
@@ -965,8 +1170,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     )
                 },
                 &cli,
+                &todo,
                 &bar,
-                &mut bound_out,
             )?,
             "cartpole" => run_system(
                 &SystemSpec {
@@ -988,8 +1193,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     )
                 },
                 &cli,
+                &todo,
                 &bar,
-                &mut bound_out,
             )?,
             "double_pendulum" => run_system(
                 &SystemSpec {
@@ -1011,8 +1216,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     )
                 },
                 &cli,
+                &todo,
                 &bar,
-                &mut bound_out,
             )?,
             "fourbar" => run_system(
                 &SystemSpec {
@@ -1051,8 +1256,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     )
                 },
                 &cli,
+                &todo,
                 &bar,
-                &mut bound_out,
             )?,
             other => {
                 return Err(format!(
@@ -1060,11 +1265,69 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 )
                 .into());
             }
-        };
-        points.extend(p);
-        gt_notes += &format!("| {system} | {:.2e} | {:.2e} |\n", err.0, err.1);
+        });
     }
     bar.finish();
+    match cli.shard {
+        Some(shard) => {
+            let path = shard::write(&cli.out, SHARD_FORMAT, shard, &cli, &outputs)
+                .map_err(|e| e.to_string())?;
+            println!(
+                "shard {shard}: wrote {} units to {} in {:.0} s",
+                outputs.len(),
+                path.display(),
+                t0.elapsed().as_secs_f64()
+            );
+            Ok(())
+        }
+        None => {
+            // the unsharded run is the one shard 0/1, checked as `merge`
+            // checks shards
+            let this = ShardFile {
+                format: SHARD_FORMAT.into(),
+                shard: Shard::WHOLE,
+                options: cli.clone(),
+                units: outputs,
+            };
+            let (_, outputs) = shard::merge(vec![("this run".into(), this)], SHARD_FORMAT, units)
+                .map_err(|e| e.to_string())?;
+            report(&cli, outputs, t0)
+        }
+    }
+}
+
+/// Writes the report (figures, CSV files, `report.md`, `bounds.*`) of
+/// every unit's output, in the sweep's order (as `shard::merge` returns
+/// them).
+fn report(cli: &Cli, outputs: Vec<Output>, t0: Instant) -> Result<(), Box<dyn std::error::Error>> {
+    let mut fig1 = Fig1::default();
+    let mut notes1 = String::new();
+    let mut points = Vec::new();
+    let mut gt_err = BTreeMap::new();
+    let (mut failed, mut windows) = (0, 0);
+    let mut bound_out = (Vec::new(), Vec::new());
+    for output in outputs {
+        match output {
+            Output::Fig1 { fig1: f, notes } => (fig1, notes1) = (f, notes),
+            Output::Bounds { rows, tubes, .. } => {
+                bound_out.0.extend(rows);
+                bound_out.1.extend(tubes);
+            }
+            Output::Run(r) => {
+                points.extend(r.points);
+                if let Some(e) = r.gt_err {
+                    gt_err.insert(r.system, e);
+                }
+                failed += r.failed;
+                windows += r.windows;
+            }
+        }
+    }
+    let mut gt_notes = String::new();
+    for system in &cli.systems {
+        let err = gt_err.get(system).copied().unwrap_or((0.0, 0.0));
+        gt_notes += &format!("| {system} | {:.2e} | {:.2e} |\n", err.0, err.1);
+    }
 
     let settings = format!(
         "| setting | value |\n|---|---|\n| systems | {} |\n| training samples N | {:?} (nested: the first N of one draw per run) |\n| runs per system | {} |\n| trajectories (train + test) | {} + {} (2 s each, random configurations at rest) |\n| 20-step windows per test trajectory | {} |\n| model Δt | 10 ms |\n| ground truth | {}, Δt = {:e} s |\n| observation noise | σ = 1e-3 on training q, v and targets |\n| perturbations | masses, inertias ×U[0.9, 1.1]; damping as in the paper |\n| GP | ARD SE per velocity component, {} |\n| priors | pendulum, cartpole: nominal VI step; double pendulum, fourbar: constant mean |\n\nGround-truth accuracy over one 2 s trajectory of the first run (max position difference against the same integrator at Δt/2, and against the paper's reference, the midpoint VI at 0.1 ms, whose own error is ≈ 4/3 of its difference to 0.05 ms):\n\n| system | max \\|q(Δt) − q(Δt/2)\\| | max \\|q − q_midpoint(0.1 ms)\\| |\n|---|---|---|\n{}",
@@ -1094,9 +1357,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     );
     let findings = format!(
         "{notes1}{}- prediction windows that failed (a projection or nominal step that did not converge): {} of {}; their runs average the remaining windows.\n",
-        findings(&points, &cli),
-        FAILED.load(Ordering::Relaxed),
-        WINDOWS.load(Ordering::Relaxed)
+        findings(&points, cli),
+        failed,
+        windows
     );
     let mut findings = findings;
     let mut files = Vec::new();
@@ -1106,7 +1369,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .find(|t| t.system == "double_pendulum" && t.coords == "minimal")
             .or(tubes.first());
-        files.extend(bounds::write(&cli.out, rows, tube, &cli)?);
+        files.extend(bounds::write(&cli.out, rows, tube, cli)?);
         findings += &bound_findings(rows);
     }
     files.extend(output::write_all(

@@ -36,10 +36,10 @@ use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 /// One point of Fig. 2: a 20-step prediction's position MSE for one run.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Fig2Point {
     /// System name: `"pendulum"`, `"cartpole"`, `"double_pendulum"` or `"fourbar"`
     /// (other names are accepted and plotted with their raw name).
@@ -52,22 +52,25 @@ pub struct Fig2Point {
     /// Index of the run (perturbed system and data set).
     pub run: usize,
     /// 20-step position mean squared error of this run.
+    #[serde(with = "crate::shard::exact")]
     pub mse: f64,
 }
 
 /// A time series for Fig. 1.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Series {
     /// Legend label, e.g. `"explicit Euler"`.
     pub label: String,
     /// Time stamps (s); must have the same length as `y`.
+    #[serde(with = "crate::shard::exact")]
     pub t: Vec<f64>,
     /// Values at the time stamps.
+    #[serde(with = "crate::shard::exact")]
     pub y: Vec<f64>,
 }
 
 /// Fig. 1: (a) energy error |E(t) − E(0)| (J) over time, (b) constraint violation |g| over time.
-#[derive(Debug, Clone, PartialEq, Default)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 pub struct Fig1 {
     /// Panel (a): one series per integrator, energy error in J.
     pub energy: Vec<Series>,
