@@ -12,6 +12,9 @@
 //!   means + projection for loops) of a model exported by the std runtime.
 //! * [`spatial`]: 3-D mechanisms: minimal coordinates and the Lie-group
 //!   variational integrator in maximal coordinates (unit quaternions).
+//! * [`tree`]: the linear-time engine of kinematic trees (robots): the
+//!   variational step in O(N) per residual and solve, with adaptive
+//!   sub-steps.
 //!
 //! Everything here works on `nalgebra` static vectors and plain arrays, and
 //! never allocates. The std runtime (`vigp-runtime`) re-exports the shared
@@ -34,6 +37,7 @@ pub mod real;
 pub mod spatial;
 pub mod state;
 pub mod step;
+pub mod tree;
 
 pub use compose::Composition;
 pub use dynamics::{Dynamics, Terms};
