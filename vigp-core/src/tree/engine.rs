@@ -4,8 +4,8 @@
 
 use super::model::{InvalidTree, JointKind, Tree, validate};
 use super::spatial::{
-    IDENTITY, Inertia6, M3, M6, V3, V6, add, axis_angle, congruence, cross, cross_motion, dot6,
-    mul_mm, mul_mv, mul6, scale,
+    IDENTITY, Inertia6, M3, M6, V3, V6, add, axis_angle, congruence, cross, cross_force,
+    cross_motion, dot6, mul_mm, mul_mv, mul6, scale,
 };
 
 /// The workspace of one body: its pose, world axis and inertias at the
@@ -44,6 +44,8 @@ pub struct BodyScratch {
     r: f64,
     x: f64,
     tau: f64,
+    /// The first iteration's start of the step (the caller's guess, or v).
+    guess: f64,
 }
 
 impl BodyScratch {
@@ -468,10 +470,15 @@ impl<T: Tree> Engine<T> {
 
     /// One sub-step of h from the committed (q, v, p) in `ws`; commits on
     /// success and returns (iterations, scaled residual).
-    fn substep(&self, h: f64, ws: &mut [BodyScratch]) -> Result<(usize, f64), SubFail> {
+    fn substep(
+        &self,
+        h: f64,
+        guessed: bool,
+        ws: &mut [BodyScratch],
+    ) -> Result<(usize, f64), SubFail> {
         for w in ws.iter_mut() {
             w.at = w.q + h * w.v;
-            w.vn = w.v;
+            w.vn = if guessed { w.guess } else { w.v };
         }
         self.kinematics(ws);
         let mbar = self.mass_scale(ws);
@@ -569,6 +576,55 @@ impl<T: Tree> Engine<T> {
             p[i] = w.pn;
             dtdq[i] = w.dtq;
             dvdq[i] = w.dv;
+        }
+        Ok(())
+    }
+
+    /// The bias forces of the equations of motion M(q)q̈ + b(q, q̇) = τ at
+    /// (q, v): b = Ṁv − ∂T/∂q + ∇V, by the recursive Newton–Euler pass with
+    /// zero acceleration (Ṁv − ∂T/∂q = Σ_j∈subtree S_i·(I_j c_j + V_j ×* I_j V_j),
+    /// c_j the velocity-product acceleration). The "nonlinear effects" of
+    /// other libraries (plus the spring forces, which they do not model).
+    pub fn bias_forces(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        out: &mut [f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        let ws = self.scratch(ws)?;
+        check_len("out", out.len(), ws.len())?;
+        self.load(q, v, ws)?;
+        self.kinematics(ws);
+        let t = &self.tree;
+        for i in 0..ws.len() {
+            let (vp, ap) = match t.body(i).parent {
+                Some(p) => (ws[p].vel, ws[p].acc),
+                None => ([0.0; 6], [0.0; 6]),
+            };
+            let w = &mut ws[i];
+            for c in 0..6 {
+                w.vel[c] = vp[c] + w.s[c] * w.vn;
+            }
+            let sd = cross_motion(&w.vel, &w.s);
+            for c in 0..6 {
+                w.acc[c] = ap[c] + sd[c] * w.vn;
+            }
+            let h = w.inertia.mul(&w.vel);
+            let f = w.inertia.mul(&w.acc);
+            let x = cross_force(&w.vel, &h);
+            for c in 0..6 {
+                w.hc[c] = f[c] + x[c];
+            }
+        }
+        for i in (0..ws.len()).rev() {
+            out[i] = dot6(&ws[i].s, &ws[i].hc) + ws[i].dv;
+            if let Some(p) = t.body(i).parent {
+                let h = ws[i].hc;
+                for c in 0..6 {
+                    ws[p].hc[c] += h[c];
+                }
+            }
         }
         Ok(())
     }
@@ -672,6 +728,24 @@ impl<T: Tree> Engine<T> {
         dt: f64,
         ws: &mut [BodyScratch],
     ) -> Result<EngineReport, EngineError> {
+        self.step_guessed(q, v, p, tau, dt, None, ws)
+    }
+
+    /// [`Engine::step`] with the iteration of the full step started at
+    /// `guess` instead of v (a rollout passes the extrapolation
+    /// 2v_k − v_{k−1}; the converged step is the same to the tolerance).
+    /// A non-finite guess is ignored.
+    #[allow(clippy::too_many_arguments)]
+    pub fn step_guessed(
+        &self,
+        q: &mut [f64],
+        v: &mut [f64],
+        p: &mut [f64],
+        tau: &[f64],
+        dt: f64,
+        guess: Option<&[f64]>,
+        ws: &mut [BodyScratch],
+    ) -> Result<EngineReport, EngineError> {
         if !(dt.is_finite() && dt > 0.0 && (dt * dt).is_normal()) {
             return Err(EngineError::InvalidTimeStep { dt });
         }
@@ -686,6 +760,14 @@ impl<T: Tree> Engine<T> {
         if !tau.iter().all(|x| x.is_finite()) {
             return Err(EngineError::NonFiniteInput);
         }
+        let mut guessed = false;
+        if let Some(g) = guess {
+            check_len("guess", g.len(), n)?;
+            guessed = g.iter().all(|x| x.is_finite());
+            for (w, &x) in ws.iter_mut().zip(g) {
+                w.guess = x;
+            }
+        }
         for (i, w) in ws.iter_mut().enumerate() {
             w.p = p[i];
             w.tau = tau[i];
@@ -694,7 +776,7 @@ impl<T: Tree> Engine<T> {
         let (mut depth, mut done, mut total) = (0u32, 0usize, 1usize);
         while done < total {
             let h = dt / total as f64;
-            match self.substep(h, ws) {
+            match self.substep(h, guessed && total == 1, ws) {
                 Ok((it, res)) => {
                     report.iterations += it;
                     report.substeps += 1;

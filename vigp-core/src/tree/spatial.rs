@@ -127,6 +127,17 @@ pub fn cross_motion(a: &V6, b: &V6) -> V6 {
     [w[0], w[1], w[2], v[0], v[1], v[2]]
 }
 
+/// The force cross product a ×f f = (ωa × n + va × f_lin, ωa × f_lin): the
+/// rate of change of the world-fixed wrench f carried by the motion a.
+#[inline(always)]
+pub fn cross_force(a: &V6, f: &V6) -> V6 {
+    let (wa, va) = ([a[0], a[1], a[2]], [a[3], a[4], a[5]]);
+    let (n, fl) = ([f[0], f[1], f[2]], [f[3], f[4], f[5]]);
+    let m = add(cross(wa, n), cross(va, fl));
+    let l = cross(wa, fl);
+    [m[0], m[1], m[2], l[0], l[1], l[2]]
+}
+
 /// The spatial inertia of a body (or a set of bodies) about the world
 /// origin in world axes: mass m, first moment m·c (c the centre of mass)
 /// and the rotational inertia about the origin I_O = I_c + m(|c|²1 − ccᵀ).

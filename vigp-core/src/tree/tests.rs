@@ -188,3 +188,34 @@ fn damping_dissipates_and_a_massless_leaf_is_singular() {
     let r = e.step(&mut q, &mut v, &mut p, &[0.0; 5], 2e-3, &mut ws);
     assert_eq!(r, Err(EngineError::SingularMass { body: 4 }));
 }
+
+#[test]
+fn bias_forces_match_the_euler_lagrange_terms() {
+    // b = Ṁv − ∂T/∂q + ∇V, with Ṁv = d/dε M(q + εv)v by central differences
+    let b = bodies(false);
+    let e = engine(&b);
+    let mut ws = [BodyScratch::default(); 5];
+    let mut bias = [0.0; 5];
+    e.bias_forces(&Q, &V, &mut bias, &mut ws).unwrap();
+    let (mut p, mut dt, mut dv) = ([0.0; 5], [0.0; 5], [0.0; 5]);
+    e.terms(&Q, &V, &mut p, &mut dt, &mut dv, &mut ws).unwrap();
+    let eps = 1e-6;
+    let (mut qp, mut qm) = (Q, Q);
+    for i in 0..5 {
+        qp[i] += eps * V[i];
+        qm[i] -= eps * V[i];
+    }
+    let (mut pp, mut pm) = ([0.0; 5], [0.0; 5]);
+    e.momentum_of(&qp, &V, &mut pp, &mut ws).unwrap();
+    e.momentum_of(&qm, &V, &mut pm, &mut ws).unwrap();
+    for i in 0..5 {
+        let mdot_v = (pp[i] - pm[i]) / (2.0 * eps);
+        let expect = mdot_v - dt[i] + dv[i];
+        // O(ε²) truncation and 1e-16/ε rounding, on terms of order 10
+        assert!(
+            (bias[i] - expect).abs() < 1e-7,
+            "b[{i}] {} vs {expect}",
+            bias[i]
+        );
+    }
+}
