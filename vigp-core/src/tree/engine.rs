@@ -68,6 +68,22 @@ pub struct EngineOptions {
     /// Largest number of halvings of a step that does not converge
     /// (default 10: down to Δt/1024). 0 turns the subdivision off.
     pub max_depth: u32,
+    /// Largest contraction of the scaled residual by the first iteration
+    /// (default 0.5): a step whose iteration contracts less is too long for
+    /// the quasi-Newton map to be a contraction around v₀ (the DEL equations
+    /// then may have their root far away, or another root nearer), and is
+    /// subdivided. Not tested when the first residual is already within
+    /// 1000 × tolerance.
+    pub max_contraction: f64,
+    /// Largest energy jump of a sub-step, relative to the energy scale
+    /// T₀ + T₁ + Σ m_i|g|·|c_i| (c_i the centres of mass from the world
+    /// origin), after the work of inputs and damping over the sub-step
+    /// (h·Σ(τ_i − d_i v_i)v_i) is taken off; default 1e-3. A variational
+    /// step's energy error is bounded and changes by O(Δt²) per step; a
+    /// larger jump means Δt resolves the motion no more (the first-order
+    /// rule's discrete flow turns unstable), and the step is subdivided.
+    /// `f64::INFINITY` turns the test off.
+    pub energy_tolerance: f64,
 }
 
 impl Default for EngineOptions {
@@ -76,6 +92,8 @@ impl Default for EngineOptions {
             tolerance: 1e-12,
             max_iterations: 50,
             max_depth: 10,
+            max_contraction: 0.5,
+            energy_tolerance: 1e-3,
         }
     }
 }
@@ -112,6 +130,16 @@ pub enum EngineError {
         /// The body (= coordinate) whose articulated inertia vanished.
         body: usize,
     },
+    /// The sub-steps converged, but down to `substep_dt` one still changed
+    /// the energy by more than [`EngineOptions::energy_tolerance`].
+    EnergyJump {
+        /// Halvings made (the options' `max_depth`).
+        depth: u32,
+        /// The sub-step (s).
+        substep_dt: f64,
+        /// Its relative energy jump.
+        jump: f64,
+    },
     /// No sub-step converged: the step was halved `depth` times down to
     /// `substep_dt` and the iteration still failed there.
     NotConverged {
@@ -145,6 +173,14 @@ impl core::fmt::Display for EngineError {
             Self::SingularMass { body } => write!(
                 f,
                 "singular mass matrix: the subtree of body {body} has no inertia along its joint"
+            ),
+            Self::EnergyJump {
+                depth,
+                substep_dt,
+                jump,
+            } => write!(
+                f,
+                "halved {depth} times down to dt = {substep_dt:e}, a sub-step still changed the energy by {jump:.3e} of its scale"
             ),
             Self::NotConverged {
                 depth,
@@ -185,6 +221,7 @@ pub struct EngineReport {
 /// A failed sub-step.
 enum SubFail {
     NotConverged { iterations: usize, residual: f64 },
+    EnergyJump { iterations: usize, jump: f64 },
     Singular(usize),
 }
 
@@ -280,6 +317,14 @@ impl<T: Tree> Engine<T> {
         }
         if options.max_iterations == 0 {
             return Err(EngineError::InvalidOptions("max_iterations must be >= 1"));
+        }
+        if !(options.max_contraction > 0.0 && options.max_contraction <= 1.0) {
+            return Err(EngineError::InvalidOptions(
+                "max_contraction must be in (0, 1]",
+            ));
+        }
+        if options.energy_tolerance.is_nan() || options.energy_tolerance <= 0.0 {
+            return Err(EngineError::InvalidOptions("energy_tolerance must be > 0"));
         }
         if options.max_depth > 30 {
             return Err(EngineError::InvalidOptions("max_depth must be <= 30"));
@@ -474,6 +519,7 @@ impl<T: Tree> Engine<T> {
         &self,
         h: f64,
         guessed: bool,
+        e0: &mut (f64, f64),
         ws: &mut [BodyScratch],
     ) -> Result<(usize, f64), SubFail> {
         for w in ws.iter_mut() {
@@ -486,6 +532,7 @@ impl<T: Tree> Engine<T> {
         let scale = max_abs(ws, |w| w.p) + mbar;
         let tol = self.options.tolerance;
         let mut best = f64::INFINITY;
+        let mut first = f64::NAN;
         let mut iterations = 0;
         loop {
             let res = self.residual_in(h, ws) / scale;
@@ -496,6 +543,16 @@ impl<T: Tree> Engine<T> {
                 });
             }
             if res <= tol {
+                if self.options.energy_tolerance.is_finite() {
+                    let (e_start, t_start) = *e0;
+                    let (e1, t1, work, grav) = self.energy_terms(h, ws);
+                    let jump =
+                        (e1 - e_start - work).abs() / (t_start + t1 + grav + f64::MIN_POSITIVE);
+                    if !(jump <= self.options.energy_tolerance) {
+                        return Err(SubFail::EnergyJump { iterations, jump });
+                    }
+                    *e0 = (e1, t1);
+                }
                 for w in ws.iter_mut() {
                     w.q = w.at;
                     w.v = w.vn;
@@ -503,7 +560,12 @@ impl<T: Tree> Engine<T> {
                 }
                 return Ok((iterations, res));
             }
-            if iterations >= self.options.max_iterations || res > 4.0 * best {
+            if iterations == 0 {
+                first = res;
+            }
+            let slow =
+                iterations == 1 && first > 1e3 * tol && res > self.options.max_contraction * first;
+            if slow || iterations >= self.options.max_iterations || res > 4.0 * best {
                 return Err(SubFail::NotConverged {
                     iterations,
                     residual: res,
@@ -698,6 +760,22 @@ impl<T: Tree> Engine<T> {
         Ok(self.energy_loaded(ws))
     }
 
+    /// (E, T, h·Σ(τ − d·v)v, Σ m|g||c|) at the iterate (after kinematics
+    /// and momentum).
+    fn energy_terms(&self, h: f64, ws: &[BodyScratch]) -> (f64, f64, f64, f64) {
+        let g = self.tree.gravity();
+        let gn = (g[0] * g[0] + g[1] * g[1] + g[2] * g[2]).sqrt();
+        let (mut t, mut work, mut grav) = (0.0, 0.0, 0.0);
+        for (i, w) in ws.iter().enumerate() {
+            let b = self.tree.body(i);
+            t += 0.5 * w.vn * w.pn;
+            work += h * (w.tau - b.damping * w.vn) * w.vn;
+            let f = w.inertia.first;
+            grav += gn * (f[0] * f[0] + f[1] * f[1] + f[2] * f[2]).sqrt();
+        }
+        (self.energy_loaded(ws), t, work, grav)
+    }
+
     /// T + V from a workspace after kinematics and momentum.
     fn energy_loaded(&self, ws: &[BodyScratch]) -> f64 {
         let g = self.tree.gravity();
@@ -772,11 +850,23 @@ impl<T: Tree> Engine<T> {
             w.p = p[i];
             w.tau = tau[i];
         }
+        let mut e0 = (0.0, 0.0);
+        if self.options.energy_tolerance.is_finite() {
+            // the energy at the start (the committed q, v and p)
+            for w in ws.iter_mut() {
+                w.at = w.q;
+                w.vn = w.v;
+                w.pn = w.p;
+            }
+            self.kinematics(ws);
+            let (e, t, _, _) = self.energy_terms(0.0, ws);
+            e0 = (e, t);
+        }
         let mut report = EngineReport::default();
         let (mut depth, mut done, mut total) = (0u32, 0usize, 1usize);
         while done < total {
             let h = dt / total as f64;
-            match self.substep(h, guessed && total == 1, ws) {
+            match self.substep(h, guessed && total == 1, &mut e0, ws) {
                 Ok((it, res)) => {
                     report.iterations += it;
                     report.substeps += 1;
@@ -784,6 +874,19 @@ impl<T: Tree> Engine<T> {
                     done += 1;
                 }
                 Err(SubFail::Singular(body)) => return Err(EngineError::SingularMass { body }),
+                Err(SubFail::EnergyJump { iterations, jump }) => {
+                    report.iterations += iterations;
+                    if depth >= self.options.max_depth || !(h * 0.5 * h * 0.5).is_normal() {
+                        return Err(EngineError::EnergyJump {
+                            depth,
+                            substep_dt: h,
+                            jump,
+                        });
+                    }
+                    depth += 1;
+                    done *= 2;
+                    total *= 2;
+                }
                 Err(SubFail::NotConverged {
                     iterations,
                     residual,
