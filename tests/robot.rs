@@ -60,6 +60,12 @@ impl Rng {
 fn urdf_arm_matches_the_generated_spatial_code() {
     let robot = Robot::from_urdf(fixture("arm3.urdf")).unwrap();
     assert_eq!(robot.joint_names(), ["j1", "j2", "j3"]);
+    assert_eq!(robot.link_names(), ["link1", "link2", "link3"]);
+    // limits kept as written; the welded tool's mass merged into link3
+    let l = robot.tree().bodies[0].limits;
+    assert_eq!((l.lower, l.upper, l.effort, l.velocity), (-2.9, 2.9, 50.0, 2.0));
+    assert_eq!(robot.tree().bodies[2].mass, 0.5 + 0.2);
+    assert_eq!(robot.tree().bodies[1].damping, 0.1);
     let sys = Arm3::default();
     let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
     let dt = 0.01;

@@ -37,7 +37,8 @@
 //!   joint frame; `<inertial>` origin and inertia are in the link frame.
 //! * `<dynamics damping>` is viscous damping on the joint rate (friction
 //!   is ignored); `<limit>` is kept ([`vigp_core::tree::Limits`]) and not
-//!   enforced. Visuals, collisions, meshes, materials are ignored.
+//!   enforced (a joint without one, or a continuous joint's position,
+//!   has none). Visuals, collisions, meshes, materials are ignored.
 //! * Coordinates are in depth-first order from the root, child joints in
 //!   file order (Pinocchio's order). Gravity is (0, 0, −9.81) m/s²
 //!   ([`Robot::with_gravity`]).
@@ -860,7 +861,13 @@ impl Robot {
     }
 }
 
+/// The limits of a `<limit>` element. The parser gives an absent element
+/// as all zeros (lower = upper = effort = velocity = 0, which no moving
+/// joint can mean): that reads as no limits.
 fn limit_values(l: &urdf_rs::JointLimit) -> Limits {
+    if l.lower == 0.0 && l.upper == 0.0 && l.effort == 0.0 && l.velocity == 0.0 {
+        return Limits::NONE;
+    }
     Limits {
         lower: l.lower,
         upper: l.upper,
