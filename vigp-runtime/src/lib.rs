@@ -28,7 +28,7 @@ pub mod newton;
 pub mod params;
 pub mod projection;
 pub mod reference;
-#[cfg(feature = "alloc")]
+#[cfg(feature = "urdf")]
 pub mod robot;
 mod scratch;
 pub mod spatial;
@@ -45,7 +45,7 @@ pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
 pub use nalgebra::{self, SMatrix, SVector};
 pub use newton::{NewtonOptions, StepError, StepInfo};
 pub use params::{ElasticJoint, Joint, Link, Spring};
-#[cfg(feature = "alloc")]
+#[cfg(feature = "urdf")]
 pub use robot::{Robot, RobotError, RobotState};
 pub use summary::RolloutSummary;
 #[cfg(feature = "std")]

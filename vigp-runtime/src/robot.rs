@@ -4,7 +4,7 @@
 //! as data.
 //!
 //! ```
-//! use vigp::robot::{Robot, RobotState};
+//! use vigp_runtime::robot::{Robot, RobotState};
 //! let urdf = r#"<robot name="pendulum">
 //!   <link name="base"/>
 //!   <link name="arm">
@@ -23,7 +23,7 @@
 //! let run = robot.rollout(&z0, 0.002, 1000)?;
 //! assert_eq!(run.states.len(), 1001);
 //! # let _ = z1;
-//! # Ok::<(), vigp::robot::RobotError>(())
+//! # Ok::<(), vigp_runtime::robot::RobotError>(())
 //! ```
 //!
 //! # From URDF
