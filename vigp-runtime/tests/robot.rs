@@ -106,35 +106,59 @@ fn urdf_robots_match_pinocchio() {
 
 #[test]
 fn long_rollouts_keep_their_energy() {
-    // A first-order VI's energy error is O(Δt) and bounded (no drift): over
-    // 10^4 steps of 1 ms it stays within 1% of the energy scale Σ m·|g|·1 m
-    // (the UR5 has no damping; the Panda's 0.003 N·m·s/rad dissipates less
-    // than 0.1 J over these 10 s).
+    // A first-order VI's energy error is bounded (no drift) and O(Δt·ω)
+    // relative to the energy scale, ω the fastest joint rate: over 10^4
+    // steps of 1 ms, |E − E0| ≤ Δt·max|v|·(Σ m·|g|·1 m + max T). The UR5 has
+    // no damping. The Panda's joints are damped (0.003 N·m·s/rad) and its
+    // wrist spins up to ~70 rad/s while the arm falls, so it loses tens of
+    // joules: there the bound holds for the energy gained above the start
+    // (a flow that gained more would break the energy balance
+    // dE/dt = −Σ d_i v_i²), and the energy ends lower.
     for (file, q) in [
         ("ur5.urdf", vec![0.3, -1.2, 1.0, -0.5, 0.8, 0.2]),
         ("panda.urdf", vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]),
     ] {
         let robot = Robot::from_urdf(fixture(file)).unwrap();
+        let damped = robot.tree().bodies.iter().any(|b| b.damping > 0.0);
         let n = robot.dof();
         let z0 = RobotState::new(q, vec![0.5; n]);
         let run = robot.rollout(&z0, 1e-3, 10_000).unwrap();
         let e0 = robot.energy(&z0).unwrap();
-        let err: Vec<f64> = run
+        let de: Vec<f64> = run
             .states
             .iter()
-            .map(|z| (robot.energy(z).unwrap() - e0).abs())
+            .map(|z| robot.energy(z).unwrap() - e0)
             .collect();
-        let scale = robot.tree().bodies.iter().map(|b| b.mass).sum::<f64>() * 9.81;
-        let worst = err.iter().fold(0.0f64, |a, &x| a.max(x));
-        let first = err[..1000].iter().fold(0.0f64, |a, &x| a.max(x));
-        let last = err[9000..].iter().fold(0.0f64, |a, &x| a.max(x));
+        let kinetic = run
+            .states
+            .iter()
+            .map(|z| {
+                let p = robot.momentum(z).unwrap();
+                0.5 * p.iter().zip(&z.v).map(|(a, b)| a * b).sum::<f64>()
+            })
+            .fold(0.0f64, f64::max);
+        let scale = robot.tree().bodies.iter().map(|b| b.mass).sum::<f64>() * 9.81 + kinetic;
+        let vmax = run
+            .states
+            .iter()
+            .flat_map(|z| z.v.iter())
+            .fold(0.0f64, |a, x| a.max(x.abs()));
+        let bound = 1e-3 * vmax * scale;
+        let gain = de.iter().fold(f64::NEG_INFINITY, |a, &x| a.max(x));
+        let worst = de.iter().fold(0.0f64, |a, &x| a.max(x.abs()));
         println!(
-            "{file} 10^4 steps of 1 ms: energy error max {worst:.3e} J (first 1000 steps {first:.3e}, \
-             last 1000 {last:.3e}), scale {scale:.1} J, {:.2} iterations/step, {} subdivided",
+            "{file} 10^4 steps of 1 ms: largest |E − E0| {worst:.3e} J, largest gain {gain:.3e} J, \
+             final {:.3e} J, scale {scale:.1} J, max |v| {vmax:.1}, bound {bound:.3e} J, {:.2} iterations/step, {} subdivided",
+            de.last().unwrap(),
             run.report.iterations as f64 / run.report.steps as f64,
             run.report.subdivided
         );
-        assert!(worst < 1e-2 * scale, "{file}: {worst}");
+        if damped {
+            assert!(gain < bound, "{file}: gain {gain}");
+            assert!(*de.last().unwrap() < 0.0, "{file}: no dissipation");
+        } else {
+            assert!(worst < bound, "{file}: {worst}");
+        }
     }
 }
 
