@@ -285,12 +285,10 @@ impl Accum {
             }
         }
         // the parallel-axis shift leaves rounding asymmetry: symmetrise
-        for i in 0..3 {
-            for j in 0..i {
-                let s = 0.5 * (ic[i][j] + ic[j][i]);
-                ic[i][j] = s;
-                ic[j][i] = s;
-            }
+        for (i, j) in [(1, 0), (2, 0), (2, 1)] {
+            let s = 0.5 * (ic[i][j] + ic[j][i]);
+            ic[i][j] = s;
+            ic[j][i] = s;
         }
         (self.mass, c, ic)
     }
