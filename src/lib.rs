@@ -184,6 +184,11 @@ pub struct EmbeddedDoctests;
 #[doc = include_str!("../docs/spatial.md")]
 pub struct SpatialDoctests;
 
+/// The examples of docs/robots.md, compiled and run as doctests.
+#[cfg(all(doctest, feature = "std"))]
+#[doc = include_str!("../docs/robots.md")]
+pub struct RobotsDoctests;
+
 /// The examples of docs/control.md, compiled and run as doctests.
 #[cfg(doctest)]
 #[doc = include_str!("../docs/control.md")]

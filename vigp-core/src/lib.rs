@@ -14,6 +14,9 @@
 //!   minimal views with unit quaternions, for controllers.
 //! * [`spatial`]: 3-D mechanisms: minimal coordinates and the Lie-group
 //!   variational integrator in maximal coordinates (unit quaternions).
+//! * [`tree`]: the linear-time engine of kinematic trees (robots): the
+//!   variational step in O(N) per residual and solve, with adaptive
+//!   sub-steps.
 //!
 //! Everything here works on `nalgebra` static vectors and plain arrays, and
 //! never allocates. The std runtime (`vigp-runtime`) re-exports the shared
@@ -37,6 +40,7 @@ pub mod spatial;
 pub mod state;
 pub mod step;
 pub mod tangent;
+pub mod tree;
 
 pub use compose::Composition;
 pub use dynamics::{Dynamics, Terms};

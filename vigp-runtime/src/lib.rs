@@ -28,6 +28,8 @@ pub mod newton;
 pub mod params;
 pub mod projection;
 pub mod reference;
+#[cfg(feature = "urdf")]
+pub mod robot;
 mod scratch;
 pub mod spatial;
 pub mod summary;
@@ -43,6 +45,8 @@ pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
 pub use nalgebra::{self, SMatrix, SVector};
 pub use newton::{NewtonOptions, StepError, StepInfo};
 pub use params::{ElasticJoint, Joint, Link, Spring};
+#[cfg(feature = "urdf")]
+pub use robot::{Robot, RobotError, RobotState};
 pub use summary::RolloutSummary;
 #[cfg(feature = "std")]
 pub use summary::summarize;

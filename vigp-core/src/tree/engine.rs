@@ -1,0 +1,1012 @@
+//! The linear-time variational step of a [`Tree`]: kinematics, momentum,
+//! the discrete Euler–Lagrange residual and the articulated-body solve,
+//! each one recursive pass (or two) over the bodies.
+
+// Loops over the six components of spatial vectors and over bodies by index
+// follow the equations (parent and child bodies are read in one loop).
+#![allow(clippy::needless_range_loop)]
+
+use super::model::{InvalidTree, JointKind, Tree, validate};
+use super::spatial::{
+    IDENTITY, Inertia6, M3, M6, V3, V6, add, axis_angle, congruence, cross, cross_force,
+    cross_motion, dot6, mul_mm, mul_mv, mul6, scale,
+};
+
+/// The workspace of one body: its pose, world axis and inertias at the
+/// configuration being evaluated, its articulated-body factors, twists,
+/// momenta and the per-coordinate numbers of the solve. A step needs
+/// `tree.len()` of them (`core::mem::size_of::<BodyScratch>()` bytes each,
+/// about 0.9 KB); they are overwritten by every call, so one slice serves
+/// any number of steps and trees.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct BodyScratch {
+    rot: M3,
+    pos: V3,
+    s: V6,
+    inertia: Inertia6,
+    composite: Inertia6,
+    ia: M6,
+    u6: V6,
+    d: f64,
+    vel: V6,
+    hc: V6,
+    pa: V6,
+    acc: V6,
+    /// ∂V/∂q at `at` (gravity and spring).
+    dv: f64,
+    // per coordinate: the committed state (q, v) and its momentum p, the
+    // configuration `at` evaluated, the iterate `vn`, its momentum `pn`
+    // and ∂T/∂q `dtq`, the residual `r`, the solve's `x` and the
+    // generalized force `tau`
+    q: f64,
+    v: f64,
+    p: f64,
+    at: f64,
+    vn: f64,
+    pn: f64,
+    dtq: f64,
+    r: f64,
+    x: f64,
+    tau: f64,
+    /// The first iteration's start of the step (the caller's guess, or v).
+    guess: f64,
+    // Anderson acceleration: the last iterate and step, and the last
+    // differences of iterates and steps
+    vprev: f64,
+    fprev: f64,
+    dvs: [f64; ANDERSON],
+    dfs: [f64; ANDERSON],
+}
+
+/// Memory of the Anderson acceleration of the quasi-Newton iteration.
+const ANDERSON: usize = 3;
+
+/// Solves the m×m system g[..m][..m]·γ = g[..m][ANDERSON] by Gaussian
+/// elimination with partial pivoting; `None` when a pivot is below 1e-12 of
+/// the largest diagonal entry (differences that are linearly dependent).
+fn solve_small(g: &mut [[f64; ANDERSON + 1]; ANDERSON], m: usize) -> Option<[f64; ANDERSON]> {
+    let big = (0..m).map(|i| g[i][i]).fold(0.0f64, f64::max);
+    if !(big > 0.0 && big.is_finite()) {
+        return None;
+    }
+    for c in 0..m {
+        let p = (c..m).max_by(|&a, &b| g[a][c].abs().total_cmp(&g[b][c].abs()))?;
+        if g[p][c].abs() <= 1e-12 * big {
+            return None;
+        }
+        g.swap(c, p);
+        for r in c + 1..m {
+            let f = g[r][c] / g[c][c];
+            for k in c..m {
+                g[r][k] -= f * g[c][k];
+            }
+            g[r][ANDERSON] -= f * g[c][ANDERSON];
+        }
+    }
+    let mut x = [0.0; ANDERSON];
+    for c in (0..m).rev() {
+        let mut s = g[c][ANDERSON];
+        for k in c + 1..m {
+            s -= g[c][k] * x[k];
+        }
+        x[c] = s / g[c][c];
+    }
+    Some(x)
+}
+
+impl BodyScratch {
+    /// The body's world pose (rotation, origin) at the last evaluated
+    /// configuration.
+    pub fn pose(&self) -> (M3, V3) {
+        (self.rot, self.pos)
+    }
+}
+
+/// Options of the engine's step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EngineOptions {
+    /// Convergence when max|r| / (max|p₀| + m̄) is below this, r the DEL
+    /// residual, p₀ the momentum and m̄ the largest diagonal entry of M
+    /// (the scaling of [`crate::Stepper`]). Default 1e-12.
+    pub tolerance: f64,
+    /// Iterations per sub-step before it counts as failed (default 50).
+    pub max_iterations: usize,
+    /// Largest number of halvings of a step that does not converge
+    /// (default 10: down to Δt/1024). 0 turns the subdivision off.
+    pub max_depth: u32,
+    /// Largest contraction of the scaled residual by the first iteration
+    /// (default 0.5): a step whose iteration contracts less is too long for
+    /// the quasi-Newton map to be a contraction around v₀ (the DEL equations
+    /// then may have their root far away, or another root nearer), and is
+    /// subdivided. Not tested when the first residual is already within
+    /// 1000 × tolerance.
+    pub max_contraction: f64,
+    /// Largest energy jump of a sub-step, relative to the energy scale
+    /// T₀ + T₁ + Σ m_i|g|·|c_i| (c_i the centres of mass from the world
+    /// origin), after the work of inputs and damping over the sub-step
+    /// (h·Σ(τ_i − d_i v_i)v_i) is taken off; default 1e-3. A variational
+    /// step's energy error is bounded and changes by O(Δt²) per step; a
+    /// larger jump means Δt resolves the motion no more (the first-order
+    /// rule's discrete flow turns unstable), and the step is subdivided.
+    /// `f64::INFINITY` turns the test off.
+    pub energy_tolerance: f64,
+}
+
+impl Default for EngineOptions {
+    fn default() -> Self {
+        Self {
+            tolerance: 1e-12,
+            max_iterations: 50,
+            max_depth: 10,
+            max_contraction: 0.5,
+            energy_tolerance: 1e-3,
+        }
+    }
+}
+
+/// Why the engine refused or failed a step.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum EngineError {
+    /// The tree does not describe a mechanism.
+    InvalidTree(InvalidTree),
+    /// Options that cannot work (the message says which).
+    InvalidOptions(&'static str),
+    /// A slice has the wrong length.
+    WrongLength {
+        /// Which slice.
+        what: &'static str,
+        /// Length required.
+        expected: usize,
+        /// Length given.
+        got: usize,
+    },
+    /// Δt is not finite and > 0, or Δt² is not a normal number.
+    InvalidTimeStep {
+        /// The offending Δt.
+        dt: f64,
+    },
+    /// The state or momentum holds NaN or ±∞.
+    NonFiniteState,
+    /// A generalized force holds NaN or ±∞.
+    NonFiniteInput,
+    /// The mass matrix (plus Δt·damping) is singular at this configuration:
+    /// the subtree of `body` has no inertia along its joint (e.g. a
+    /// massless leaf).
+    SingularMass {
+        /// The body (= coordinate) whose articulated inertia vanished.
+        body: usize,
+    },
+    /// The sub-steps converged, but down to `substep_dt` one still changed
+    /// the energy by more than [`EngineOptions::energy_tolerance`].
+    EnergyJump {
+        /// Halvings made (the options' `max_depth`).
+        depth: u32,
+        /// The sub-step (s).
+        substep_dt: f64,
+        /// Its relative energy jump.
+        jump: f64,
+    },
+    /// No sub-step converged: the step was halved `depth` times down to
+    /// `substep_dt` and the iteration still failed there.
+    NotConverged {
+        /// Halvings made (the options' `max_depth`).
+        depth: u32,
+        /// The sub-step that failed (s).
+        substep_dt: f64,
+        /// Iterations of that last attempt.
+        iterations: usize,
+        /// Its scaled residual (NaN: the iterate blew up).
+        residual: f64,
+    },
+}
+
+impl core::fmt::Display for EngineError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::InvalidTree(e) => write!(f, "{e}"),
+            Self::InvalidOptions(why) => write!(f, "invalid engine options: {why}"),
+            Self::WrongLength {
+                what,
+                expected,
+                got,
+            } => write!(f, "{what} has length {got}, expected {expected}"),
+            Self::InvalidTimeStep { dt } => write!(
+                f,
+                "invalid time step dt = {dt:e} (must be finite and > 0, with dt² a normal number)"
+            ),
+            Self::NonFiniteState => write!(f, "non-finite state or momentum"),
+            Self::NonFiniteInput => write!(f, "non-finite generalized force"),
+            Self::SingularMass { body } => write!(
+                f,
+                "singular mass matrix: the subtree of body {body} has no inertia along its joint"
+            ),
+            Self::EnergyJump {
+                depth,
+                substep_dt,
+                jump,
+            } => write!(
+                f,
+                "halved {depth} times down to dt = {substep_dt:e}, a sub-step still changed the energy by {jump:.3e} of its scale"
+            ),
+            Self::NotConverged {
+                depth,
+                substep_dt,
+                iterations,
+                residual,
+            } => write!(
+                f,
+                "no sub-step converged: halved {depth} times down to dt = {substep_dt:e}, \
+                 still not converged after {iterations} iterations (scaled residual {residual:.3e})"
+            ),
+        }
+    }
+}
+
+impl core::error::Error for EngineError {}
+
+impl From<InvalidTree> for EngineError {
+    fn from(e: InvalidTree) -> Self {
+        Self::InvalidTree(e)
+    }
+}
+
+/// Diagnostics of a step (sums and maxima over its sub-steps).
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct EngineReport {
+    /// Quasi-Newton iterations (articulated-body solves) over all sub-steps,
+    /// failed attempts included.
+    pub iterations: usize,
+    /// Sub-steps that converged (1 when the step was not subdivided).
+    pub substeps: usize,
+    /// Halvings: the step's sub-step is Δt/2^depth.
+    pub depth: u32,
+    /// Largest final scaled residual of a sub-step.
+    pub residual: f64,
+}
+
+/// A failed sub-step.
+enum SubFail {
+    NotConverged { iterations: usize, residual: f64 },
+    EnergyJump { iterations: usize, jump: f64 },
+    Singular(usize),
+}
+
+/// The variational integrator of a [`Tree`] in minimal coordinates, O(N)
+/// per residual and per solve.
+///
+/// # The step
+///
+/// L(q, v) = ½vᵀM(q)v − V(q), V = gravity + joint springs; the first-order
+/// rule L_d(a, b) = Δt·L(a, (b − a)/Δt). From (q₀, v₀) with momentum
+/// p₀ = M(q₀)v₀, q₁ = q₀ + Δt·v₀ and v₁ solves
+///
+/// ```text
+/// r(v₁) = p₀ − M(q₁)v₁ + Δt·(∂T/∂q(q₁, v₁) − ∇V(q₁) − D·v₁ + τ) = 0,
+/// ```
+///
+/// D = diag(damping), τ the generalized forces. The momentum carried is
+/// p₁ = M(q₁)v₁ — the equations of [`crate::Stepper::new`].
+///
+/// # The passes
+///
+/// With world-frame joint axes S_i (unit twists), body twists
+/// V_i = V_λ(i) + S_i v_i, body momenta I_i V_i and composite momenta
+/// h_i = Σ_{j ∈ subtree(i)} I_j V_j (one backward pass):
+/// p_i = S_i·h_i, ∂T/∂q_i = (V_i ×ₘ S_i)·h_i (the axis moves as
+/// Ṡ_i = V_i ×ₘ S_i), ∂V/∂q_i = −S_i·W_i with W_i the gravity wrench of
+/// subtree i, plus k_i(q_i − rest_i). q₁ is fixed during a step, so the
+/// kinematics, the composite inertias and ∇V are evaluated once per
+/// sub-step; each residual is a forward and a backward pass.
+///
+/// # The iteration: quasi-Newton with M + Δt·D, Anderson-accelerated
+///
+/// The exact Newton matrix is −(M + Δt·D) + Δt·∂(∂T/∂q)/∂v. The engine
+/// iterates the fixed-point map v ← v + (M(q₁) + Δt·D)⁻¹ r(v), solving with
+/// the articulated-body factorisation of M + Δt·D (the damping enters as
+/// joint armature): factored once per sub-step (one backward pass of 6×6
+/// articulated inertias), each solve is a backward and a forward pass on
+/// 6-vectors. The plain map contracts by about
+/// ‖Δt·M⁻¹∂(vᵀ∂M/∂q v)/∂v‖ ~ Δt·|ω|; from the second iteration on it is
+/// Anderson-accelerated (memory 3), which on the nearly linear residual
+/// near its root acts as GMRES. It converges to the scaled residual of
+/// [`crate::Stepper`] (module docs of [`EngineOptions::tolerance`]). Where
+/// it does not (the first iteration contracts less than
+/// [`EngineOptions::max_contraction`], a scaled residual grows fourfold
+/// above its best, NaN, or `max_iterations`), the sub-step counts as failed
+/// and the step is halved; so is a converged sub-step whose energy jumps
+/// ([`EngineOptions::energy_tolerance`]).
+///
+/// # Adaptive sub-steps
+///
+/// A step that fails is redone as two steps of Δt/2 from the same state
+/// (the variational integrator at Δt/2: the velocity of the state is then
+/// the discrete velocity of the last sub-step), recursively up to
+/// `max_depth` halvings; once halved, the rest of the step keeps the finer
+/// sub-step. [`EngineReport`] says how deep a step went.
+#[derive(Clone, Copy, Debug)]
+pub struct Engine<T: Tree> {
+    tree: T,
+    options: EngineOptions,
+}
+
+fn check_len(what: &'static str, got: usize, expected: usize) -> Result<(), EngineError> {
+    if got == expected {
+        Ok(())
+    } else {
+        Err(EngineError::WrongLength {
+            what,
+            expected,
+            got,
+        })
+    }
+}
+
+/// max |x_i| over the bodies' `field`, NaN when any is NaN or ±∞.
+#[inline(always)]
+fn max_abs(ws: &[BodyScratch], field: impl Fn(&BodyScratch) -> f64) -> f64 {
+    let (mut m, mut poison) = (0.0f64, 0.0f64);
+    for b in ws {
+        let x = field(b);
+        m = m.max(x.abs());
+        poison += x * 0.0;
+    }
+    m + poison
+}
+
+impl<T: Tree> Engine<T> {
+    /// The engine of `tree` with default options; the tree is validated.
+    pub fn new(tree: T) -> Result<Self, EngineError> {
+        Self::with_options(tree, EngineOptions::default())
+    }
+
+    /// The engine with the given options.
+    pub fn with_options(tree: T, options: EngineOptions) -> Result<Self, EngineError> {
+        validate(&tree)?;
+        if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
+            return Err(EngineError::InvalidOptions(
+                "tolerance must be finite and > 0",
+            ));
+        }
+        if options.max_iterations == 0 {
+            return Err(EngineError::InvalidOptions("max_iterations must be >= 1"));
+        }
+        if !(options.max_contraction > 0.0 && options.max_contraction <= 1.0) {
+            return Err(EngineError::InvalidOptions(
+                "max_contraction must be in (0, 1]",
+            ));
+        }
+        if options.energy_tolerance.is_nan() || options.energy_tolerance <= 0.0 {
+            return Err(EngineError::InvalidOptions("energy_tolerance must be > 0"));
+        }
+        if options.max_depth > 30 {
+            return Err(EngineError::InvalidOptions("max_depth must be <= 30"));
+        }
+        Ok(Self { tree, options })
+    }
+
+    /// The tree.
+    pub fn tree(&self) -> &T {
+        &self.tree
+    }
+
+    /// The options.
+    pub fn options(&self) -> &EngineOptions {
+        &self.options
+    }
+
+    /// Number of coordinates.
+    pub fn dof(&self) -> usize {
+        self.tree.len()
+    }
+
+    fn scratch<'w>(&self, ws: &'w mut [BodyScratch]) -> Result<&'w mut [BodyScratch], EngineError> {
+        let n = self.tree.len();
+        if ws.len() < n {
+            return Err(EngineError::WrongLength {
+                what: "workspace",
+                expected: n,
+                got: ws.len(),
+            });
+        }
+        Ok(&mut ws[..n])
+    }
+
+    /// Poses, axes, inertias, composite inertias and ∇V at the
+    /// configuration `ws[i].at`; also the articulated inertias' start
+    /// values.
+    fn kinematics(&self, ws: &mut [BodyScratch]) {
+        let t = &self.tree;
+        let g = t.gravity();
+        for i in 0..ws.len() {
+            let b = t.body(i);
+            let (rp, pp) = match b.parent {
+                Some(p) => (ws[p].rot, ws[p].pos),
+                None => (IDENTITY, [0.0; 3]),
+            };
+            let w = &mut ws[i];
+            let rj = mul_mm(&rp, &b.rotation);
+            let pj = add(pp, mul_mv(&rp, b.translation));
+            let axis = mul_mv(&rj, b.axis);
+            match b.joint {
+                JointKind::Revolute => {
+                    w.rot = mul_mm(&rj, &axis_angle(b.axis, w.at));
+                    w.pos = pj;
+                    let m = cross(pj, axis);
+                    w.s = [axis[0], axis[1], axis[2], m[0], m[1], m[2]];
+                }
+                JointKind::Prismatic => {
+                    w.rot = rj;
+                    w.pos = add(pj, scale(axis, w.at));
+                    w.s = [0.0, 0.0, 0.0, axis[0], axis[1], axis[2]];
+                }
+            }
+            let c = add(w.pos, mul_mv(&w.rot, b.com));
+            w.inertia = Inertia6::from_com(b.mass, c, &congruence(&w.rot, &b.inertia));
+            w.composite = w.inertia;
+            w.ia = w.inertia.matrix();
+        }
+        for i in (0..ws.len()).rev() {
+            let b = t.body(i);
+            let w = &mut ws[i];
+            w.dv = -dot6(&w.s, &w.composite.gravity_wrench(g)) + b.stiffness * (w.at - b.rest);
+            if let Some(p) = b.parent {
+                let c = ws[i].composite;
+                ws[p].composite = ws[p].composite.add(&c);
+            }
+        }
+    }
+
+    /// m̄, the largest diagonal entry of M (after [`Engine::kinematics`]).
+    fn mass_scale(&self, ws: &[BodyScratch]) -> f64 {
+        ws.iter()
+            .map(|w| dot6(&w.s, &w.composite.mul(&w.s)))
+            .fold(0.0, f64::max)
+    }
+
+    /// Articulated-body factorisation of M + h·D (after kinematics).
+    fn factor(&self, h: f64, mbar: f64, ws: &mut [BodyScratch]) -> Result<(), usize> {
+        let t = &self.tree;
+        for i in (0..ws.len()).rev() {
+            let b = t.body(i);
+            let w = &mut ws[i];
+            w.u6 = mul6(&w.ia, &w.s);
+            w.d = dot6(&w.s, &w.u6) + h * b.damping;
+            // NaN fails this test too
+            if w.d.is_nan() || w.d <= 1e-13 * mbar {
+                return Err(i);
+            }
+            if let Some(p) = b.parent {
+                let (u, d) = (w.u6, w.d);
+                let mut ia = w.ia;
+                for (r, row) in ia.iter_mut().enumerate() {
+                    for (c, x) in row.iter_mut().enumerate() {
+                        *x -= u[r] * u[c] / d;
+                    }
+                }
+                let pa = &mut ws[p].ia;
+                for (prow, row) in pa.iter_mut().zip(&ia) {
+                    for (x, y) in prow.iter_mut().zip(row) {
+                        *x += y;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// x = (M + h·D)⁻¹ r with the factors (`ws[i].r` in, `ws[i].x` out).
+    fn solve(&self, ws: &mut [BodyScratch]) {
+        let t = &self.tree;
+        for w in ws.iter_mut() {
+            w.pa = [0.0; 6];
+        }
+        for i in (0..ws.len()).rev() {
+            let w = &mut ws[i];
+            let u = w.r - dot6(&w.s, &w.pa);
+            w.x = u;
+            if let Some(p) = t.body(i).parent {
+                let (pa, u6, k) = (w.pa, w.u6, u / w.d);
+                let pp = &mut ws[p].pa;
+                for c in 0..6 {
+                    pp[c] += pa[c] + u6[c] * k;
+                }
+            }
+        }
+        for i in 0..ws.len() {
+            let ap = match t.body(i).parent {
+                Some(p) => ws[p].acc,
+                None => [0.0; 6],
+            };
+            let w = &mut ws[i];
+            w.x = (w.x - dot6(&w.u6, &ap)) / w.d;
+            for c in 0..6 {
+                w.acc[c] = ap[c] + w.s[c] * w.x;
+            }
+        }
+    }
+
+    /// Twists, composite momenta, p = M v and ∂T/∂q for v = `ws[i].vn`
+    /// (after kinematics).
+    fn momentum(&self, ws: &mut [BodyScratch]) {
+        let t = &self.tree;
+        for i in 0..ws.len() {
+            let vp = match t.body(i).parent {
+                Some(p) => ws[p].vel,
+                None => [0.0; 6],
+            };
+            let w = &mut ws[i];
+            for c in 0..6 {
+                w.vel[c] = vp[c] + w.s[c] * w.vn;
+            }
+            w.hc = w.inertia.mul(&w.vel);
+        }
+        for i in (0..ws.len()).rev() {
+            let w = &mut ws[i];
+            w.pn = dot6(&w.s, &w.hc);
+            w.dtq = dot6(&cross_motion(&w.vel, &w.s), &w.hc);
+            if let Some(p) = t.body(i).parent {
+                let h = w.hc;
+                let hp = &mut ws[p].hc;
+                for c in 0..6 {
+                    hp[c] += h[c];
+                }
+            }
+        }
+    }
+
+    /// The residual at the iterate `vn`, sub-step h; returns max|r|.
+    fn residual_in(&self, h: f64, ws: &mut [BodyScratch]) -> f64 {
+        self.momentum(ws);
+        let t = &self.tree;
+        for (i, w) in ws.iter_mut().enumerate() {
+            let b = t.body(i);
+            w.r = w.p - w.pn + h * (w.dtq - w.dv - b.damping * w.vn + w.tau);
+        }
+        max_abs(ws, |w| w.r)
+    }
+
+    /// The Anderson-accelerated update (type II, memory [`ANDERSON`]) of the
+    /// fixed-point map G(v) = v + (M + hD)⁻¹r(v) after its `k`-th difference
+    /// (k = 0, 1, …): with ΔV, ΔF the last differences of iterates and of
+    /// steps f = G(v) − v, γ = argmin ‖f − ΔFγ‖₂ (normal equations, at
+    /// most 3×3) and v ← v + f − (ΔV + ΔF)γ. On the nearly linear DEL
+    /// residual near its root this is GMRES in disguise; a singular Gram
+    /// matrix falls back to the plain step.
+    fn anderson(&self, k: usize, ws: &mut [BodyScratch]) {
+        let slot = k % ANDERSON;
+        for w in ws.iter_mut() {
+            w.dvs[slot] = w.vn - w.vprev;
+            w.dfs[slot] = w.x - w.fprev;
+            w.vprev = w.vn;
+            w.fprev = w.x;
+        }
+        let m = (k + 1).min(ANDERSON);
+        let mut g = [[0.0f64; ANDERSON + 1]; ANDERSON];
+        for w in ws.iter() {
+            for a in 0..m {
+                for b in 0..m {
+                    g[a][b] += w.dfs[a] * w.dfs[b];
+                }
+                g[a][ANDERSON] += w.dfs[a] * w.x;
+            }
+        }
+        let gamma = solve_small(&mut g, m);
+        for w in ws.iter_mut() {
+            let mut step = w.x;
+            if let Some(gm) = gamma {
+                for a in 0..m {
+                    step -= (w.dvs[a] + w.dfs[a]) * gm[a];
+                }
+            }
+            w.vn += step;
+        }
+    }
+
+    /// One sub-step of h from the committed (q, v, p) in `ws`; commits on
+    /// success and returns (iterations, scaled residual).
+    fn substep(
+        &self,
+        h: f64,
+        guessed: bool,
+        e0: &mut (f64, f64),
+        ws: &mut [BodyScratch],
+    ) -> Result<(usize, f64), SubFail> {
+        for w in ws.iter_mut() {
+            w.at = w.q + h * w.v;
+            w.vn = if guessed { w.guess } else { w.v };
+        }
+        self.kinematics(ws);
+        let mbar = self.mass_scale(ws);
+        self.factor(h, mbar, ws).map_err(SubFail::Singular)?;
+        let scale = max_abs(ws, |w| w.p) + mbar;
+        let tol = self.options.tolerance;
+        let mut best = f64::INFINITY;
+        let mut first = f64::NAN;
+        let mut iterations = 0;
+        loop {
+            let res = self.residual_in(h, ws) / scale;
+            if res.is_nan() {
+                return Err(SubFail::NotConverged {
+                    iterations,
+                    residual: f64::NAN,
+                });
+            }
+            if res <= tol {
+                if self.options.energy_tolerance.is_finite() {
+                    let (e_start, t_start) = *e0;
+                    let (e1, t1, work, grav) = self.energy_terms(h, ws);
+                    let jump =
+                        (e1 - e_start - work).abs() / (t_start + t1 + grav + f64::MIN_POSITIVE);
+                    if jump.is_nan() || jump > self.options.energy_tolerance {
+                        return Err(SubFail::EnergyJump { iterations, jump });
+                    }
+                    *e0 = (e1, t1);
+                }
+                for w in ws.iter_mut() {
+                    w.q = w.at;
+                    w.v = w.vn;
+                    w.p = w.pn;
+                }
+                return Ok((iterations, res));
+            }
+            if iterations == 0 {
+                first = res;
+            }
+            let slow =
+                iterations == 1 && first > 1e3 * tol && res > self.options.max_contraction * first;
+            if slow || iterations >= self.options.max_iterations || res > 4.0 * best {
+                return Err(SubFail::NotConverged {
+                    iterations,
+                    residual: res,
+                });
+            }
+            best = best.min(res);
+            self.solve(ws);
+            if iterations == 0 {
+                for w in ws.iter_mut() {
+                    w.vprev = w.vn;
+                    w.fprev = w.x;
+                    w.vn += w.x;
+                }
+            } else {
+                self.anderson(iterations - 1, ws);
+            }
+            iterations += 1;
+        }
+    }
+
+    fn load(&self, q: &[f64], v: &[f64], ws: &mut [BodyScratch]) -> Result<(), EngineError> {
+        let n = self.tree.len();
+        check_len("q", q.len(), n)?;
+        check_len("v", v.len(), n)?;
+        if !q.iter().chain(v).all(|x| x.is_finite()) {
+            return Err(EngineError::NonFiniteState);
+        }
+        for (w, (&a, &b)) in ws.iter_mut().zip(q.iter().zip(v)) {
+            w.q = a;
+            w.v = b;
+            w.at = a;
+            w.vn = b;
+        }
+        Ok(())
+    }
+
+    /// p = M(q)v (into `p`).
+    pub fn momentum_of(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        p: &mut [f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        let ws = self.scratch(ws)?;
+        check_len("p", p.len(), ws.len())?;
+        self.load(q, v, ws)?;
+        self.kinematics(ws);
+        self.momentum(ws);
+        for (x, w) in p.iter_mut().zip(ws.iter()) {
+            *x = w.pn;
+        }
+        Ok(())
+    }
+
+    /// At (q, v): the momentum M(q)v, ∂T/∂q and ∇V(q) (gravity and
+    /// springs), each O(N).
+    pub fn terms(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        p: &mut [f64],
+        dtdq: &mut [f64],
+        dvdq: &mut [f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        let ws = self.scratch(ws)?;
+        let n = ws.len();
+        check_len("p", p.len(), n)?;
+        check_len("dtdq", dtdq.len(), n)?;
+        check_len("dvdq", dvdq.len(), n)?;
+        self.load(q, v, ws)?;
+        self.kinematics(ws);
+        self.momentum(ws);
+        for (i, w) in ws.iter().enumerate() {
+            p[i] = w.pn;
+            dtdq[i] = w.dtq;
+            dvdq[i] = w.dv;
+        }
+        Ok(())
+    }
+
+    /// The bias forces of the equations of motion M(q)q̈ + b(q, q̇) = τ at
+    /// (q, v): b = Ṁv − ∂T/∂q + ∇V, by the recursive Newton–Euler pass with
+    /// zero acceleration (Ṁv − ∂T/∂q = Σ_j∈subtree S_i·(I_j c_j + V_j ×* I_j V_j),
+    /// c_j the velocity-product acceleration). The "nonlinear effects" of
+    /// other libraries (plus the spring forces, which they do not model).
+    pub fn bias_forces(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        out: &mut [f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        let ws = self.scratch(ws)?;
+        check_len("out", out.len(), ws.len())?;
+        self.load(q, v, ws)?;
+        self.kinematics(ws);
+        let t = &self.tree;
+        for i in 0..ws.len() {
+            let (vp, ap) = match t.body(i).parent {
+                Some(p) => (ws[p].vel, ws[p].acc),
+                None => ([0.0; 6], [0.0; 6]),
+            };
+            let w = &mut ws[i];
+            for c in 0..6 {
+                w.vel[c] = vp[c] + w.s[c] * w.vn;
+            }
+            let sd = cross_motion(&w.vel, &w.s);
+            for c in 0..6 {
+                w.acc[c] = ap[c] + sd[c] * w.vn;
+            }
+            let h = w.inertia.mul(&w.vel);
+            let f = w.inertia.mul(&w.acc);
+            let x = cross_force(&w.vel, &h);
+            for c in 0..6 {
+                w.hc[c] = f[c] + x[c];
+            }
+        }
+        for i in (0..ws.len()).rev() {
+            out[i] = dot6(&ws[i].s, &ws[i].hc) + ws[i].dv;
+            if let Some(p) = t.body(i).parent {
+                let h = ws[i].hc;
+                for c in 0..6 {
+                    ws[p].hc[c] += h[c];
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The mass matrix M(q), row-major into `out` (N² entries): N momentum
+    /// passes, O(N²). For tests and inspection; the step never forms M.
+    pub fn mass_matrix(
+        &self,
+        q: &[f64],
+        out: &mut [f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        let ws = self.scratch(ws)?;
+        let n = ws.len();
+        check_len("out", out.len(), n * n)?;
+        self.load(q, q, ws)?;
+        self.kinematics(ws);
+        for j in 0..n {
+            for (k, w) in ws.iter_mut().enumerate() {
+                w.vn = if k == j { 1.0 } else { 0.0 };
+            }
+            self.momentum(ws);
+            for (i, w) in ws.iter().enumerate() {
+                out[i * n + j] = w.pn;
+            }
+        }
+        Ok(())
+    }
+
+    /// The DEL residual r(v₁) of a step of `dt` from (q₀, v₀) with momentum
+    /// p₀ and generalized forces τ (module docs of [`Engine`]), into `out`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn residual(
+        &self,
+        q0: &[f64],
+        v0: &[f64],
+        p0: &[f64],
+        tau: &[f64],
+        v1: &[f64],
+        dt: f64,
+        out: &mut [f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        let ws = self.scratch(ws)?;
+        let n = ws.len();
+        check_len("p0", p0.len(), n)?;
+        check_len("tau", tau.len(), n)?;
+        check_len("v1", v1.len(), n)?;
+        check_len("out", out.len(), n)?;
+        self.load(q0, v0, ws)?;
+        for (i, w) in ws.iter_mut().enumerate() {
+            w.at = w.q + dt * w.v;
+            w.p = p0[i];
+            w.tau = tau[i];
+            w.vn = v1[i];
+        }
+        self.kinematics(ws);
+        self.residual_in(dt, ws);
+        for (x, w) in out.iter_mut().zip(ws.iter()) {
+            *x = w.r;
+        }
+        Ok(())
+    }
+
+    /// Energy T + V at (q, v): kinetic, gravity and spring.
+    pub fn energy(&self, q: &[f64], v: &[f64], ws: &mut [BodyScratch]) -> Result<f64, EngineError> {
+        let ws = self.scratch(ws)?;
+        self.load(q, v, ws)?;
+        self.kinematics(ws);
+        self.momentum(ws);
+        Ok(self.energy_loaded(ws))
+    }
+
+    /// (E, T, h·Σ(τ − d·v)v, Σ m|g||c|) at the iterate (after kinematics
+    /// and momentum).
+    fn energy_terms(&self, h: f64, ws: &[BodyScratch]) -> (f64, f64, f64, f64) {
+        let g = self.tree.gravity();
+        let gn = libm::sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2]);
+        let (mut t, mut work, mut grav) = (0.0, 0.0, 0.0);
+        for (i, w) in ws.iter().enumerate() {
+            let b = self.tree.body(i);
+            t += 0.5 * w.vn * w.pn;
+            work += h * (w.tau - b.damping * w.vn) * w.vn;
+            let f = w.inertia.first;
+            grav += gn * libm::sqrt(f[0] * f[0] + f[1] * f[1] + f[2] * f[2]);
+        }
+        (self.energy_loaded(ws), t, work, grav)
+    }
+
+    /// T + V from a workspace after kinematics and momentum.
+    fn energy_loaded(&self, ws: &[BodyScratch]) -> f64 {
+        let g = self.tree.gravity();
+        let mut e = 0.0;
+        for (i, w) in ws.iter().enumerate() {
+            let b = self.tree.body(i);
+            let dq = w.at - b.rest;
+            e += 0.5 * w.vn * w.pn
+                - (g[0] * w.inertia.first[0]
+                    + g[1] * w.inertia.first[1]
+                    + g[2] * w.inertia.first[2])
+                + 0.5 * b.stiffness * dq * dq;
+        }
+        e
+    }
+
+    /// One step of `dt` in place: (q, v) → (q₁, v₁), with the momentum `p`
+    /// carried (p must be M(q)v for the state, from
+    /// [`Engine::momentum_of`] or the previous step) and generalized forces
+    /// `tau` held over the step. Subdivides itself when the iteration fails
+    /// (type docs). No allocation: `ws` holds at least N bodies.
+    pub fn step(
+        &self,
+        q: &mut [f64],
+        v: &mut [f64],
+        p: &mut [f64],
+        tau: &[f64],
+        dt: f64,
+        ws: &mut [BodyScratch],
+    ) -> Result<EngineReport, EngineError> {
+        self.step_guessed(q, v, p, tau, dt, None, ws)
+    }
+
+    /// [`Engine::step`] with the iteration of the full step started at
+    /// `guess` instead of v (a rollout passes the extrapolation
+    /// 2v_k − v_{k−1}; the converged step is the same to the tolerance).
+    /// A non-finite guess is ignored.
+    #[allow(clippy::too_many_arguments)]
+    pub fn step_guessed(
+        &self,
+        q: &mut [f64],
+        v: &mut [f64],
+        p: &mut [f64],
+        tau: &[f64],
+        dt: f64,
+        guess: Option<&[f64]>,
+        ws: &mut [BodyScratch],
+    ) -> Result<EngineReport, EngineError> {
+        if !(dt.is_finite() && dt > 0.0 && (dt * dt).is_normal()) {
+            return Err(EngineError::InvalidTimeStep { dt });
+        }
+        let ws = self.scratch(ws)?;
+        let n = ws.len();
+        check_len("p", p.len(), n)?;
+        check_len("tau", tau.len(), n)?;
+        self.load(q, v, ws)?;
+        if !p.iter().all(|x| x.is_finite()) {
+            return Err(EngineError::NonFiniteState);
+        }
+        if !tau.iter().all(|x| x.is_finite()) {
+            return Err(EngineError::NonFiniteInput);
+        }
+        let mut guessed = false;
+        if let Some(g) = guess {
+            check_len("guess", g.len(), n)?;
+            guessed = g.iter().all(|x| x.is_finite());
+            for (w, &x) in ws.iter_mut().zip(g) {
+                w.guess = x;
+            }
+        }
+        for (i, w) in ws.iter_mut().enumerate() {
+            w.p = p[i];
+            w.tau = tau[i];
+        }
+        let mut e0 = (0.0, 0.0);
+        if self.options.energy_tolerance.is_finite() {
+            // the energy at the start (the committed q, v and p)
+            for w in ws.iter_mut() {
+                w.at = w.q;
+                w.vn = w.v;
+                w.pn = w.p;
+            }
+            self.kinematics(ws);
+            let (e, t, _, _) = self.energy_terms(0.0, ws);
+            e0 = (e, t);
+        }
+        let mut report = EngineReport::default();
+        let (mut depth, mut done, mut total) = (0u32, 0usize, 1usize);
+        while done < total {
+            let h = dt / total as f64;
+            match self.substep(h, guessed && total == 1, &mut e0, ws) {
+                Ok((it, res)) => {
+                    report.iterations += it;
+                    report.substeps += 1;
+                    report.residual = report.residual.max(res);
+                    done += 1;
+                }
+                Err(SubFail::Singular(body)) => return Err(EngineError::SingularMass { body }),
+                Err(SubFail::EnergyJump { iterations, jump }) => {
+                    report.iterations += iterations;
+                    if depth >= self.options.max_depth || !(h * 0.5 * h * 0.5).is_normal() {
+                        return Err(EngineError::EnergyJump {
+                            depth,
+                            substep_dt: h,
+                            jump,
+                        });
+                    }
+                    depth += 1;
+                    done *= 2;
+                    total *= 2;
+                }
+                Err(SubFail::NotConverged {
+                    iterations,
+                    residual,
+                }) => {
+                    report.iterations += iterations;
+                    if depth >= self.options.max_depth || !(h * 0.5 * h * 0.5).is_normal() {
+                        return Err(EngineError::NotConverged {
+                            depth,
+                            substep_dt: h,
+                            iterations,
+                            residual,
+                        });
+                    }
+                    depth += 1;
+                    done *= 2;
+                    total *= 2;
+                }
+            }
+        }
+        report.depth = depth;
+        for (i, w) in ws.iter().enumerate() {
+            q[i] = w.q;
+            v[i] = w.v;
+            p[i] = w.p;
+        }
+        Ok(report)
+    }
+}

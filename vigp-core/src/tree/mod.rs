@@ -1,0 +1,26 @@
+//! The linear-time engine of kinematic trees: minimal coordinates (one per
+//! revolute or prismatic joint) of a fixed-base tree of rigid bodies, the
+//! first-order variational step in O(N) per residual and per solve.
+//!
+//! * [`model`]: the tree as data ([`Body`]: parent, joint type and axis,
+//!   joint placement, mass properties, damping, spring, limits) and the
+//!   [`Tree`] trait through which the engine reads it. Run-time data
+//!   ([`TreeRef`], or a `Vec`-backed model in the std runtime) and
+//!   generated constants implement the same trait.
+//! * [`spatial`]: 6-D motion and force vectors and spatial inertias, all in
+//!   world coordinates at the world origin.
+//! * [`Engine`]: momentum, ∂T/∂q, ∇V, the DEL residual, the articulated-body
+//!   solve and the self-subdividing step ([`engine`] has the equations).
+//!
+//! Nothing here allocates: the caller passes a slice of [`BodyScratch`],
+//! one per body (about 0.9 KB each).
+
+pub mod engine;
+pub mod model;
+pub mod spatial;
+
+pub use engine::{BodyScratch, Engine, EngineError, EngineOptions, EngineReport};
+pub use model::{Body, InvalidTree, JointKind, Limits, Tree, TreeRef, validate};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,221 @@
+//! The engine against finite differences of its own energy (central
+//! differences of functions that are quadratic in v are exact up to
+//! rounding; in q they carry an O(ε²) truncation), the mass matrix's
+//! symmetry, and the step's residual and energy behaviour.
+
+use super::spatial::{IDENTITY, axis_angle, mul_mm, rpy};
+use super::*;
+
+/// A branched 5-body tree: mixed axes, a prismatic joint, offset centres
+/// of mass, full inertias, rotated joint frames, damping and a spring.
+fn bodies(damped: bool) -> [Body; 5] {
+    let ic = [
+        [0.03, 0.002, -0.001],
+        [0.002, 0.025, 0.003],
+        [-0.001, 0.003, 0.02],
+    ];
+    let d = if damped { 0.3 } else { 0.0 };
+    let base = Body {
+        parent: None,
+        joint: JointKind::Revolute,
+        axis: [0.0, 0.0, 1.0],
+        rotation: IDENTITY,
+        translation: [0.0, 0.0, 0.3],
+        mass: 2.0,
+        com: [0.05, 0.0, 0.1],
+        inertia: ic,
+        damping: d,
+        stiffness: 0.0,
+        rest: 0.0,
+        limits: Limits::NONE,
+    };
+    let n = 1.0 / 3f64.sqrt();
+    [
+        base,
+        Body {
+            parent: Some(0),
+            axis: [0.0, 1.0, 0.0],
+            rotation: rpy(0.3, -0.2, 0.5),
+            translation: [0.1, 0.02, 0.2],
+            mass: 1.5,
+            com: [0.2, 0.01, -0.02],
+            ..base
+        },
+        Body {
+            parent: Some(1),
+            joint: JointKind::Prismatic,
+            axis: [n, n, n],
+            rotation: axis_angle([1.0, 0.0, 0.0], 0.7),
+            translation: [0.4, 0.0, 0.0],
+            mass: 0.8,
+            com: [0.0, 0.05, 0.0],
+            stiffness: 20.0,
+            rest: 0.05,
+            ..base
+        },
+        Body {
+            parent: Some(1),
+            axis: [1.0, 0.0, 0.0],
+            rotation: mul_mm(&rpy(0.0, 1.0, 0.0), &rpy(0.2, 0.0, 0.0)),
+            translation: [0.2, -0.1, 0.05],
+            mass: 0.6,
+            com: [0.1, 0.1, 0.0],
+            ..base
+        },
+        Body {
+            parent: Some(3),
+            axis: [0.0, 0.0, 1.0],
+            rotation: rpy(-0.4, 0.1, 0.9),
+            translation: [0.25, 0.0, 0.0],
+            mass: 0.4,
+            com: [0.12, 0.0, 0.03],
+            ..base
+        },
+    ]
+}
+
+const Q: [f64; 5] = [0.3, -0.8, 0.12, 1.1, -0.5];
+const V: [f64; 5] = [0.7, -1.3, 0.4, 2.0, -0.9];
+
+fn engine(b: &[Body; 5]) -> Engine<TreeRef<'_>> {
+    Engine::new(TreeRef {
+        bodies: b,
+        gravity: [0.0, 0.0, -9.81],
+    })
+    .unwrap()
+}
+
+#[test]
+fn momentum_and_forces_match_finite_differences_of_the_energy() {
+    let b = bodies(false);
+    let e = engine(&b);
+    let mut ws = [BodyScratch::default(); 5];
+    let (mut p, mut dt, mut dv) = ([0.0; 5], [0.0; 5], [0.0; 5]);
+    e.terms(&Q, &V, &mut p, &mut dt, &mut dv, &mut ws).unwrap();
+    let eps = 1e-6;
+    let zero = [0.0; 5];
+    for i in 0..5 {
+        let mut en = |q: &[f64; 5], v: &[f64; 5]| e.energy(q, v, &mut ws).unwrap();
+        let (mut vp, mut vm) = (V, V);
+        vp[i] += eps;
+        vm[i] -= eps;
+        // E is quadratic in v: the central difference is exact but for rounding
+        let fd_p = (en(&Q, &vp) - en(&Q, &vm)) / (2.0 * eps);
+        assert!((fd_p - p[i]).abs() < 1e-8, "p[{i}] {} vs {fd_p}", p[i]);
+        let (mut qp, mut qm) = (Q, Q);
+        qp[i] += eps;
+        qm[i] -= eps;
+        let fd_v = (en(&qp, &zero) - en(&qm, &zero)) / (2.0 * eps);
+        let fd_t = (en(&qp, &V) - en(&qm, &V)) / (2.0 * eps) - fd_v;
+        // truncation O(ε²)·|∂³E| ≈ 1e-12, rounding |E|·1e-16/ε ≈ 1e-10
+        assert!(
+            (fd_v - dv[i]).abs() < 1e-7,
+            "dV/dq[{i}] {} vs {fd_v}",
+            dv[i]
+        );
+        assert!(
+            (fd_t - dt[i]).abs() < 1e-7,
+            "dT/dq[{i}] {} vs {fd_t}",
+            dt[i]
+        );
+    }
+}
+
+#[test]
+fn mass_matrix_is_symmetric_and_gives_the_momentum() {
+    let b = bodies(false);
+    let e = engine(&b);
+    let mut ws = [BodyScratch::default(); 5];
+    let mut m = [0.0; 25];
+    e.mass_matrix(&Q, &mut m, &mut ws).unwrap();
+    let mut p = [0.0; 5];
+    e.momentum_of(&Q, &V, &mut p, &mut ws).unwrap();
+    for i in 0..5 {
+        let mv: f64 = (0..5).map(|j| m[i * 5 + j] * V[j]).sum();
+        assert!((mv - p[i]).abs() < 1e-13, "(Mv)[{i}]");
+        for j in 0..5 {
+            assert!((m[i * 5 + j] - m[j * 5 + i]).abs() < 1e-14, "M[{i},{j}]");
+        }
+    }
+}
+
+#[test]
+fn step_solves_the_residual_and_conserves_energy_without_damping() {
+    let b = bodies(false);
+    let e = engine(&b);
+    let mut ws = [BodyScratch::default(); 5];
+    let (mut q, mut v, mut p) = (Q, V, [0.0; 5]);
+    e.momentum_of(&q, &v, &mut p, &mut ws).unwrap();
+    let e0 = e.energy(&q, &v, &mut ws).unwrap();
+    let dt = 1e-3;
+    let (q0, v0, p0) = (q, v, p);
+    let r = e
+        .step(&mut q, &mut v, &mut p, &[0.0; 5], dt, &mut ws)
+        .unwrap();
+    assert_eq!(r.substeps, 1);
+    let mut res = [0.0; 5];
+    e.residual(&q0, &v0, &p0, &[0.0; 5], &v, dt, &mut res, &mut ws)
+        .unwrap();
+    let scale = p0.iter().fold(0.0f64, |a, x| a.max(x.abs())) + 1.0;
+    assert!(res.iter().all(|x| x.abs() < 1e-11 * scale), "{res:?}");
+    let mut worst = 0.0f64;
+    for _ in 0..2000 {
+        e.step(&mut q, &mut v, &mut p, &[0.0; 5], dt, &mut ws)
+            .unwrap();
+        worst = worst.max((e.energy(&q, &v, &mut ws).unwrap() - e0).abs());
+    }
+    // a first-order VI: energy error O(Δt) and bounded, no drift
+    assert!(worst < 0.05 * e0.abs().max(1.0), "energy error {worst}");
+}
+
+#[test]
+fn damping_dissipates_and_a_massless_leaf_is_singular() {
+    let b = bodies(true);
+    let e = engine(&b);
+    let mut ws = [BodyScratch::default(); 5];
+    let (mut q, mut v, mut p) = (Q, V, [0.0; 5]);
+    e.momentum_of(&q, &v, &mut p, &mut ws).unwrap();
+    let e0 = e.energy(&q, &v, &mut ws).unwrap();
+    for _ in 0..3000 {
+        e.step(&mut q, &mut v, &mut p, &[0.0; 5], 2e-3, &mut ws)
+            .unwrap();
+    }
+    assert!(e.energy(&q, &v, &mut ws).unwrap() < e0 - 1.0);
+    let mut b = bodies(false);
+    b[4].mass = 0.0;
+    b[4].inertia = [[0.0; 3]; 3];
+    let e = engine(&b);
+    let r = e.step(&mut q, &mut v, &mut p, &[0.0; 5], 2e-3, &mut ws);
+    assert_eq!(r, Err(EngineError::SingularMass { body: 4 }));
+}
+
+#[test]
+fn bias_forces_match_the_euler_lagrange_terms() {
+    // b = Ṁv − ∂T/∂q + ∇V, with Ṁv = d/dε M(q + εv)v by central differences
+    let b = bodies(false);
+    let e = engine(&b);
+    let mut ws = [BodyScratch::default(); 5];
+    let mut bias = [0.0; 5];
+    e.bias_forces(&Q, &V, &mut bias, &mut ws).unwrap();
+    let (mut p, mut dt, mut dv) = ([0.0; 5], [0.0; 5], [0.0; 5]);
+    e.terms(&Q, &V, &mut p, &mut dt, &mut dv, &mut ws).unwrap();
+    let eps = 1e-6;
+    let (mut qp, mut qm) = (Q, Q);
+    for i in 0..5 {
+        qp[i] += eps * V[i];
+        qm[i] -= eps * V[i];
+    }
+    let (mut pp, mut pm) = ([0.0; 5], [0.0; 5]);
+    e.momentum_of(&qp, &V, &mut pp, &mut ws).unwrap();
+    e.momentum_of(&qm, &V, &mut pm, &mut ws).unwrap();
+    for i in 0..5 {
+        let mdot_v = (pp[i] - pm[i]) / (2.0 * eps);
+        let expect = mdot_v - dt[i] + dv[i];
+        // O(ε²) truncation and 1e-16/ε rounding, on terms of order 10
+        assert!(
+            (bias[i] - expect).abs() < 1e-7,
+            "b[{i}] {} vs {expect}",
+            bias[i]
+        );
+    }
+}

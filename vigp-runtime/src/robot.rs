@@ -1,0 +1,875 @@
+//! Robots loaded while the program runs: a URDF file becomes a
+//! [`Robot`], a fixed-base tree of revolute and prismatic joints stepped
+//! by the linear-time engine of `vigp_core::tree` with its constants held
+//! as data.
+//!
+//! ```
+//! use vigp_runtime::robot::{Robot, RobotState};
+//! let urdf = r#"<robot name="pendulum">
+//!   <link name="base"/>
+//!   <link name="arm">
+//!     <inertial><origin xyz="0 0 -0.5"/><mass value="1"/>
+//!       <inertia ixx="0.02" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.001"/></inertial>
+//!   </link>
+//!   <joint name="hinge" type="continuous">
+//!     <parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
+//!     <dynamics damping="0.01"/>
+//!   </joint>
+//! </robot>"#;
+//! let robot = Robot::from_urdf_str(urdf)?.with_actuated(&["hinge"])?;
+//! let z0 = RobotState::new(vec![0.5], vec![0.0]);
+//! let (z1, report) = robot.step(&z0, &[0.1], 0.002)?;
+//! assert_eq!(report.substeps, 1);
+//! let run = robot.rollout(&z0, 0.002, 1000)?;
+//! assert_eq!(run.states.len(), 1001);
+//! # let _ = z1;
+//! # Ok::<(), vigp_runtime::robot::RobotError>(())
+//! ```
+//!
+//! # From URDF
+//!
+//! * `revolute` and `continuous` joints become revolute coordinates,
+//!   `prismatic` joints prismatic ones; `fixed` joints are merged: the
+//!   child link's inertia (and everything fixed to it) joins its parent
+//!   body. Links fixed to the root belong to the world (a fixed base).
+//! * Joint `<origin>` (xyz, rpy: R = Rz(y)Ry(p)Rx(r)) places the joint frame
+//!   in the parent link frame; `<axis>` (default x, normalised) is in the
+//!   joint frame; `<inertial>` origin and inertia are in the link frame.
+//! * `<dynamics damping>` is viscous damping on the joint rate (friction
+//!   is ignored); `<limit>` is kept ([`vigp_core::tree::Limits`]) and not
+//!   enforced (a joint without one, or a continuous joint's position,
+//!   has none). Visuals, collisions, meshes, materials are ignored.
+//! * Coordinates are in depth-first order from the root, child joints in
+//!   file order (Pinocchio's order). Gravity is (0, 0, −9.81) m/s²
+//!   ([`Robot::with_gravity`]).
+//! * Refused, with a [`RobotError`] naming the element: XML the parser
+//!   rejects, mimic joints, floating, planar and spherical joints, NaN or
+//!   ±∞ in any number read, a zero axis, a negative mass, an unknown or
+//!   duplicate link, a link with two parent joints, no single root, and a
+//!   mass matrix that is singular (a moving subtree without inertia).
+
+use std::path::Path;
+
+use vigp_core::tree::spatial::{
+    IDENTITY, M3, V3, add, congruence, dot, mul_mm, mul_mv, rpy, scale,
+};
+use vigp_core::tree::{
+    Body, BodyScratch, Engine, EngineError, EngineOptions, EngineReport, JointKind, Limits, Tree,
+};
+
+/// The bodies of a robot as run-time data: what the engine reads.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobotTree {
+    /// The bodies, parents first (one per coordinate).
+    pub bodies: Vec<Body>,
+    /// Gravity in world coordinates (m/s²).
+    pub gravity: V3,
+}
+
+impl Tree for RobotTree {
+    #[inline(always)]
+    fn len(&self) -> usize {
+        self.bodies.len()
+    }
+    #[inline(always)]
+    fn body(&self, i: usize) -> &Body {
+        &self.bodies[i]
+    }
+    #[inline(always)]
+    fn gravity(&self) -> V3 {
+        self.gravity
+    }
+}
+
+/// Why a robot could not be loaded or stepped.
+#[derive(Debug, thiserror::Error)]
+pub enum RobotError {
+    /// The file could not be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The path.
+        path: String,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The XML parser refused the file (its message names the place).
+    #[error("malformed URDF: {0}")]
+    Parse(String),
+    /// A number in the file is NaN or ±∞.
+    #[error("non-finite number in {element}")]
+    NonFinite {
+        /// The element, e.g. "joint `elbow` <origin>".
+        element: String,
+    },
+    /// A value out of its domain.
+    #[error("invalid {element}: {why}")]
+    Invalid {
+        /// The element.
+        element: String,
+        /// What is wrong.
+        why: &'static str,
+    },
+    /// A joint type the tree engine does not take.
+    #[error(
+        "joint `{joint}`: type {kind} is not supported (revolute, continuous, prismatic and fixed are)"
+    )]
+    UnsupportedJoint {
+        /// The joint.
+        joint: String,
+        /// Its type.
+        kind: &'static str,
+    },
+    /// A mimic joint (a constraint between coordinates, not a tree joint).
+    #[error(
+        "joint `{joint}`: mimic joints are not supported (it mimics `{mimics}`); make it fixed or free it"
+    )]
+    Mimic {
+        /// The joint.
+        joint: String,
+        /// The joint it mimics.
+        mimics: String,
+    },
+    /// The links and joints do not form one tree.
+    #[error("not a tree: {0}")]
+    NotATree(String),
+    /// A joint name not among the robot's coordinates.
+    #[error("unknown joint `{name}` (joints with a coordinate: {known})")]
+    UnknownJoint {
+        /// The name.
+        name: String,
+        /// The known names.
+        known: String,
+    },
+    /// The mass matrix is singular: the named joint moves no inertia.
+    #[error("singular mass matrix: joint `{joint}` moves no inertia (a massless subtree)")]
+    SingularMass {
+        /// The joint.
+        joint: String,
+    },
+    /// A slice or state of the wrong length.
+    #[error("{what} has length {got}, expected {expected}")]
+    WrongLength {
+        /// What.
+        what: &'static str,
+        /// Required length.
+        expected: usize,
+        /// Given length.
+        got: usize,
+    },
+    /// The engine failed (time step, state, convergence).
+    #[error("{0}")]
+    Engine(EngineError),
+    /// A step of a rollout failed.
+    #[error("rollout step {step}: {source}")]
+    Rollout {
+        /// Index of the failing step (0: the step from the initial state).
+        step: usize,
+        /// Why.
+        source: Box<RobotError>,
+    },
+}
+
+/// A state of a robot: joint coordinates and (discrete) joint velocities,
+/// in [`Robot::joint_names`] order.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RobotState {
+    /// Coordinates (rad or m).
+    pub q: Vec<f64>,
+    /// Velocities (rad/s or m/s).
+    pub v: Vec<f64>,
+}
+
+impl RobotState {
+    /// A state.
+    pub fn new(q: Vec<f64>, v: Vec<f64>) -> Self {
+        Self { q, v }
+    }
+}
+
+/// A rollout: the states (the initial one first) and what the steps took.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Rollout {
+    /// States at t = 0, Δt, 2Δt, …
+    pub states: Vec<RobotState>,
+    /// Diagnostics.
+    pub report: RolloutReport,
+}
+
+/// What a rollout's steps took.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct RolloutReport {
+    /// Steps taken.
+    pub steps: usize,
+    /// Steps that subdivided themselves (their iteration failed at Δt).
+    pub subdivided: usize,
+    /// The deepest halving: the smallest sub-step was Δt/2^deepest.
+    pub deepest: u32,
+    /// Sub-steps solved in all.
+    pub substeps: usize,
+    /// Iterations (articulated-body solves) in all.
+    pub iterations: usize,
+    /// Largest final scaled residual of a sub-step.
+    pub residual: f64,
+}
+
+impl RolloutReport {
+    fn add(&mut self, r: &EngineReport) {
+        self.steps += 1;
+        self.subdivided += usize::from(r.depth > 0);
+        self.deepest = self.deepest.max(r.depth);
+        self.substeps += r.substeps;
+        self.iterations += r.iterations;
+        self.residual = self.residual.max(r.residual);
+    }
+}
+
+/// The kept scratch of a robot's steps ([`Robot::step_in`]): one
+/// [`BodyScratch`] per body and the generalized forces.
+#[derive(Clone, Debug)]
+pub struct RobotWorkspace {
+    bodies: Vec<BodyScratch>,
+    tau: Vec<f64>,
+}
+
+/// A robot: a tree of rigid bodies in minimal coordinates with its joint
+/// names, the actuated joints, and the engine that steps it.
+#[derive(Clone, Debug)]
+pub struct Robot {
+    name: String,
+    joints: Vec<String>,
+    links: Vec<String>,
+    engine: Engine<RobotTree>,
+    inputs: Vec<usize>,
+}
+
+fn finite(element: impl Fn() -> String, xs: &[f64]) -> Result<(), RobotError> {
+    if xs.iter().all(|x| x.is_finite()) {
+        Ok(())
+    } else {
+        Err(RobotError::NonFinite { element: element() })
+    }
+}
+
+/// Mass, first moment and inertia about the body origin (body axes).
+#[derive(Clone, Copy, Default)]
+struct Accum {
+    mass: f64,
+    first: V3,
+    rot: M3,
+}
+
+impl Accum {
+    /// Adds a link with mass m, centre c and inertia ic about it (body axes).
+    fn add(&mut self, m: f64, c: V3, ic: &M3) {
+        let cc = dot(c, c);
+        self.mass += m;
+        self.first = add(self.first, scale(c, m));
+        for i in 0..3 {
+            for j in 0..3 {
+                self.rot[i][j] += ic[i][j] + m * (if i == j { cc } else { 0.0 } - c[i] * c[j]);
+            }
+        }
+    }
+
+    /// (mass, centre of mass, inertia about it).
+    fn finish(&self) -> (f64, V3, M3) {
+        if self.mass <= 0.0 {
+            return (0.0, [0.0; 3], self.rot);
+        }
+        let c = scale(self.first, 1.0 / self.mass);
+        let cc = dot(c, c);
+        let mut ic = self.rot;
+        for i in 0..3 {
+            for j in 0..3 {
+                ic[i][j] -= self.mass * (if i == j { cc } else { 0.0 } - c[i] * c[j]);
+            }
+        }
+        // the parallel-axis shift leaves rounding asymmetry: symmetrise
+        for (i, j) in [(1, 0), (2, 0), (2, 1)] {
+            let s = 0.5 * (ic[i][j] + ic[j][i]);
+            ic[i][j] = s;
+            ic[j][i] = s;
+        }
+        (self.mass, c, ic)
+    }
+}
+
+fn pose(element: impl Fn() -> String, p: &urdf_rs::Pose) -> Result<(M3, V3), RobotError> {
+    finite(&element, &p.xyz.0)?;
+    finite(&element, &p.rpy.0)?;
+    Ok((rpy(p.rpy[0], p.rpy[1], p.rpy[2]), p.xyz.0))
+}
+
+impl Robot {
+    /// Loads a URDF file (module docs).
+    pub fn from_urdf(path: impl AsRef<Path>) -> Result<Self, RobotError> {
+        let path = path.as_ref();
+        let text = std::fs::read_to_string(path).map_err(|source| RobotError::Io {
+            path: path.display().to_string(),
+            source,
+        })?;
+        Self::from_urdf_str(&text)
+    }
+
+    /// Loads a URDF document from a string (module docs).
+    pub fn from_urdf_str(urdf: &str) -> Result<Self, RobotError> {
+        let r = urdf_rs::read_from_string(urdf).map_err(|e| RobotError::Parse(e.to_string()))?;
+        Self::from_urdf_robot(&r)
+    }
+
+    fn from_urdf_robot(r: &urdf_rs::Robot) -> Result<Self, RobotError> {
+        use std::collections::HashMap;
+        let mut link_index = HashMap::new();
+        for (i, l) in r.links.iter().enumerate() {
+            if link_index.insert(l.name.as_str(), i).is_some() {
+                return Err(RobotError::NotATree(format!(
+                    "link `{}` is declared twice",
+                    l.name
+                )));
+            }
+        }
+        // link inertias in their own frames
+        let mut link_inertia = Vec::with_capacity(r.links.len());
+        for l in &r.links {
+            let el = |what: &str| format!("link `{}` <inertial> {what}", l.name);
+            let (ro, c) = pose(|| el("<origin>"), &l.inertial.origin)?;
+            let m = l.inertial.mass.value;
+            finite(|| el("<mass>"), &[m])?;
+            if m < 0.0 {
+                return Err(RobotError::Invalid {
+                    element: el("<mass>"),
+                    why: "negative mass",
+                });
+            }
+            let i = &l.inertial.inertia;
+            let ii = [
+                [i.ixx, i.ixy, i.ixz],
+                [i.ixy, i.iyy, i.iyz],
+                [i.ixz, i.iyz, i.izz],
+            ];
+            finite(
+                || el("<inertia>"),
+                &[i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz],
+            )?;
+            if i.ixx < 0.0 || i.iyy < 0.0 || i.izz < 0.0 {
+                return Err(RobotError::Invalid {
+                    element: el("<inertia>"),
+                    why: "a negative principal moment (ixx, iyy, izz)",
+                });
+            }
+            link_inertia.push((m, c, congruence(&ro, &ii)));
+        }
+        // the tree: children of each link, in file order
+        let mut children: Vec<Vec<usize>> = vec![Vec::new(); r.links.len()];
+        let mut has_parent = vec![None::<&str>; r.links.len()];
+        for j in &r.joints {
+            let find = |name: &str| {
+                link_index.get(name).copied().ok_or_else(|| {
+                    RobotError::NotATree(format!(
+                        "joint `{}` names an unknown link `{name}`",
+                        j.name
+                    ))
+                })
+            };
+            let (p, c) = (find(&j.parent.link)?, find(&j.child.link)?);
+            if let Some(other) = has_parent[c] {
+                return Err(RobotError::NotATree(format!(
+                    "link `{}` is the child of both `{other}` and `{}`",
+                    j.child.link, j.name
+                )));
+            }
+            has_parent[c] = Some(j.name.as_str());
+            children[p].push(c);
+        }
+        let roots: Vec<usize> = (0..r.links.len())
+            .filter(|&i| has_parent[i].is_none())
+            .collect();
+        let root = match roots.as_slice() {
+            [root] => *root,
+            [] => {
+                return Err(RobotError::NotATree(
+                    "no root link (a cycle of joints)".into(),
+                ));
+            }
+            [a, b, ..] => {
+                return Err(RobotError::NotATree(format!(
+                    "links `{}` and `{}` both have no parent joint",
+                    r.links[*a].name, r.links[*b].name
+                )));
+            }
+        };
+        let joint_of_child: HashMap<usize, &urdf_rs::Joint> = r
+            .joints
+            .iter()
+            .map(|j| (link_index[j.child.link.as_str()], j))
+            .collect();
+
+        let mut bodies = Vec::new();
+        let mut joints = Vec::new();
+        let mut links = Vec::new();
+        let mut accum: Vec<Accum> = Vec::new();
+        // (link, body it is fixed to, rotation and origin of the link frame
+        // in that body's frame); depth first, children in file order
+        let mut stack: Vec<(usize, Option<usize>, M3, V3)> = vec![(root, None, IDENTITY, [0.0; 3])];
+        let mut visited = 0usize;
+        while let Some((link, body, rot, pos)) = stack.pop() {
+            visited += 1;
+            if let Some(b) = body {
+                let (m, c, ic) = link_inertia[link];
+                accum[b].add(m, add(pos, mul_mv(&rot, c)), &congruence(&rot, &ic));
+            }
+            for &child in children[link].iter().rev() {
+                let j = joint_of_child[&child];
+                let el = |what: &str| format!("joint `{}` {what}", j.name);
+                if let Some(m) = &j.mimic {
+                    return Err(RobotError::Mimic {
+                        joint: j.name.clone(),
+                        mimics: m.joint.clone(),
+                    });
+                }
+                let (ro, xyz) = pose(|| el("<origin>"), &j.origin)?;
+                let jrot = mul_mm(&rot, &ro);
+                let jpos = add(pos, mul_mv(&rot, xyz));
+                let kind = match j.joint_type {
+                    urdf_rs::JointType::Fixed => {
+                        stack.push((child, body, jrot, jpos));
+                        continue;
+                    }
+                    urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
+                        JointKind::Revolute
+                    }
+                    urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+                    urdf_rs::JointType::Floating => {
+                        return Err(RobotError::UnsupportedJoint {
+                            joint: j.name.clone(),
+                            kind: "floating",
+                        });
+                    }
+                    urdf_rs::JointType::Planar => {
+                        return Err(RobotError::UnsupportedJoint {
+                            joint: j.name.clone(),
+                            kind: "planar",
+                        });
+                    }
+                    urdf_rs::JointType::Spherical => {
+                        return Err(RobotError::UnsupportedJoint {
+                            joint: j.name.clone(),
+                            kind: "spherical",
+                        });
+                    }
+                };
+                let a = j.axis.xyz.0;
+                finite(|| el("<axis>"), &a)?;
+                let n = dot(a, a).sqrt();
+                if n < 1e-12 {
+                    return Err(RobotError::Invalid {
+                        element: el("<axis>"),
+                        why: "zero axis",
+                    });
+                }
+                let damping = match &j.dynamics {
+                    Some(d) => {
+                        finite(|| el("<dynamics>"), &[d.damping, d.friction])?;
+                        if d.damping < 0.0 {
+                            return Err(RobotError::Invalid {
+                                element: el("<dynamics>"),
+                                why: "negative damping",
+                            });
+                        }
+                        d.damping
+                    }
+                    None => 0.0,
+                };
+                let l = &j.limit;
+                let limits = if j.joint_type == urdf_rs::JointType::Continuous {
+                    Limits {
+                        lower: f64::NEG_INFINITY,
+                        upper: f64::INFINITY,
+                        ..limit_values(l)
+                    }
+                } else {
+                    limit_values(l)
+                };
+                if [limits.lower, limits.upper, limits.effort, limits.velocity]
+                    .iter()
+                    .any(|x| x.is_nan())
+                {
+                    return Err(RobotError::NonFinite {
+                        element: el("<limit>"),
+                    });
+                }
+                if limits.lower > limits.upper {
+                    return Err(RobotError::Invalid {
+                        element: el("<limit>"),
+                        why: "lower > upper",
+                    });
+                }
+                let k = bodies.len();
+                bodies.push(Body {
+                    parent: body,
+                    joint: kind,
+                    axis: scale(a, 1.0 / n),
+                    rotation: jrot,
+                    translation: jpos,
+                    mass: 0.0,
+                    com: [0.0; 3],
+                    inertia: [[0.0; 3]; 3],
+                    damping,
+                    stiffness: 0.0,
+                    rest: 0.0,
+                    limits,
+                });
+                accum.push(Accum::default());
+                joints.push(j.name.clone());
+                links.push(j.child.link.clone());
+                stack.push((child, Some(k), IDENTITY, [0.0; 3]));
+            }
+        }
+        if visited != r.links.len() {
+            return Err(RobotError::NotATree(
+                "some links are not reached from the root".into(),
+            ));
+        }
+        for (b, a) in bodies.iter_mut().zip(&accum) {
+            let (m, c, ic) = a.finish();
+            b.mass = m;
+            b.com = c;
+            b.inertia = ic;
+        }
+        let tree = RobotTree {
+            bodies,
+            gravity: [0.0, 0.0, -9.81],
+        };
+        let robot = Robot {
+            name: r.name.clone(),
+            joints,
+            links,
+            engine: Engine::new(tree).map_err(RobotError::Engine)?,
+            inputs: Vec::new(),
+        };
+        robot.check_mass()?;
+        Ok(robot)
+    }
+
+    /// A robot from bodies built by hand (names per body: joint, link).
+    pub fn from_tree(
+        name: &str,
+        tree: RobotTree,
+        joints: Vec<String>,
+        links: Vec<String>,
+    ) -> Result<Self, RobotError> {
+        let n = tree.bodies.len();
+        for (what, got) in [("joint names", joints.len()), ("link names", links.len())] {
+            if got != n {
+                return Err(RobotError::WrongLength {
+                    what,
+                    expected: n,
+                    got,
+                });
+            }
+        }
+        let robot = Robot {
+            name: name.to_string(),
+            joints,
+            links,
+            engine: Engine::new(tree).map_err(RobotError::Engine)?,
+            inputs: Vec::new(),
+        };
+        robot.check_mass()?;
+        Ok(robot)
+    }
+
+    /// Factorises M at q = 0 to name a joint that moves no inertia.
+    fn check_mass(&self) -> Result<(), RobotError> {
+        let n = self.dof();
+        let z = RobotState::new(vec![0.0; n], vec![0.0; n]);
+        self.step(&z, &vec![0.0; self.inputs.len()], 1e-3)
+            .map(|_| ())
+    }
+
+    /// The robot with these joints actuated: input i is a torque (force)
+    /// on joint `names[i]`. Replaces any earlier choice.
+    pub fn with_actuated(mut self, names: &[&str]) -> Result<Self, RobotError> {
+        let mut inputs = Vec::with_capacity(names.len());
+        for name in names {
+            let Some(i) = self.joints.iter().position(|j| j == name) else {
+                return Err(RobotError::UnknownJoint {
+                    name: name.to_string(),
+                    known: self.joints.join(", "),
+                });
+            };
+            if inputs.contains(&i) {
+                return Err(RobotError::Invalid {
+                    element: format!("actuated joint `{name}`"),
+                    why: "listed twice",
+                });
+            }
+            inputs.push(i);
+        }
+        self.inputs = inputs;
+        Ok(self)
+    }
+
+    /// The robot under another gravity (m/s², world frame).
+    pub fn with_gravity(self, gravity: [f64; 3]) -> Result<Self, RobotError> {
+        let mut tree = self.engine.tree().clone();
+        tree.gravity = gravity;
+        let engine =
+            Engine::with_options(tree, *self.engine.options()).map_err(RobotError::Engine)?;
+        Ok(Self { engine, ..self })
+    }
+
+    /// The robot with other engine options (tolerance, iterations, the
+    /// deepest subdivision).
+    pub fn with_options(self, options: EngineOptions) -> Result<Self, RobotError> {
+        let engine = Engine::with_options(self.engine.tree().clone(), options)
+            .map_err(RobotError::Engine)?;
+        Ok(Self { engine, ..self })
+    }
+
+    /// The robot's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Number of coordinates.
+    pub fn dof(&self) -> usize {
+        self.joints.len()
+    }
+
+    /// The joints with a coordinate, in coordinate order.
+    pub fn joint_names(&self) -> &[String] {
+        &self.joints
+    }
+
+    /// The link each coordinate moves (the body's own link; fixed children
+    /// are merged into it).
+    pub fn link_names(&self) -> &[String] {
+        &self.links
+    }
+
+    /// The actuated joints, in input order.
+    pub fn input_names(&self) -> Vec<&str> {
+        self.inputs
+            .iter()
+            .map(|&i| self.joints[i].as_str())
+            .collect()
+    }
+
+    /// The bodies and gravity.
+    pub fn tree(&self) -> &RobotTree {
+        self.engine.tree()
+    }
+
+    /// The engine.
+    pub fn engine(&self) -> &Engine<RobotTree> {
+        &self.engine
+    }
+
+    /// A workspace for [`Robot::step_in`].
+    pub fn workspace(&self) -> RobotWorkspace {
+        RobotWorkspace {
+            bodies: vec![BodyScratch::default(); self.dof()],
+            tau: vec![0.0; self.dof()],
+        }
+    }
+
+    fn engine_error(&self, e: EngineError) -> RobotError {
+        match e {
+            EngineError::SingularMass { body } => RobotError::SingularMass {
+                joint: self.joints[body].clone(),
+            },
+            e => RobotError::Engine(e),
+        }
+    }
+
+    fn check_state(&self, z: &RobotState) -> Result<(), RobotError> {
+        let n = self.dof();
+        for (what, got) in [("q", z.q.len()), ("v", z.v.len())] {
+            if got != n {
+                return Err(RobotError::WrongLength {
+                    what,
+                    expected: n,
+                    got,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// The discrete momentum p = M(q)v of a state (what a rollout carries).
+    pub fn momentum(&self, z: &RobotState) -> Result<Vec<f64>, RobotError> {
+        self.check_state(z)?;
+        let mut ws = self.workspace();
+        let mut p = vec![0.0; self.dof()];
+        self.engine
+            .momentum_of(&z.q, &z.v, &mut p, &mut ws.bodies)
+            .map_err(|e| self.engine_error(e))?;
+        Ok(p)
+    }
+
+    /// One step of `dt` from `z` with inputs `u` (one per actuated joint,
+    /// held over the step), with the engine's report.
+    pub fn step(
+        &self,
+        z: &RobotState,
+        u: &[f64],
+        dt: f64,
+    ) -> Result<(RobotState, EngineReport), RobotError> {
+        let mut ws = self.workspace();
+        let mut z1 = z.clone();
+        let mut p = self.momentum(z)?;
+        let r = self.step_in(&mut z1, &mut p, u, dt, &mut ws)?;
+        Ok((z1, r))
+    }
+
+    /// One step in place: `z` and its momentum `p` (from
+    /// [`Robot::momentum`] or the previous step) advance by `dt`. No
+    /// allocation.
+    pub fn step_in(
+        &self,
+        z: &mut RobotState,
+        p: &mut [f64],
+        u: &[f64],
+        dt: f64,
+        ws: &mut RobotWorkspace,
+    ) -> Result<EngineReport, RobotError> {
+        self.step_guessed(z, p, u, dt, None, ws)
+    }
+
+    fn step_guessed(
+        &self,
+        z: &mut RobotState,
+        p: &mut [f64],
+        u: &[f64],
+        dt: f64,
+        guess: Option<&[f64]>,
+        ws: &mut RobotWorkspace,
+    ) -> Result<EngineReport, RobotError> {
+        self.check_state(z)?;
+        if u.len() != self.inputs.len() {
+            return Err(RobotError::WrongLength {
+                what: "inputs",
+                expected: self.inputs.len(),
+                got: u.len(),
+            });
+        }
+        if ws.tau.len() != self.dof() || ws.bodies.len() < self.dof() {
+            *ws = self.workspace();
+        }
+        ws.tau.iter_mut().for_each(|t| *t = 0.0);
+        for (&i, &x) in self.inputs.iter().zip(u) {
+            ws.tau[i] = x;
+        }
+        self.engine
+            .step_guessed(&mut z.q, &mut z.v, p, &ws.tau, dt, guess, &mut ws.bodies)
+            .map_err(|e| self.engine_error(e))
+    }
+
+    /// `steps` unforced steps of `dt` from `z0` (inputs zero).
+    pub fn rollout(&self, z0: &RobotState, dt: f64, steps: usize) -> Result<Rollout, RobotError> {
+        let u = vec![0.0; self.inputs.len()];
+        self.rollout_with(z0, dt, steps, |_, _| u.clone())
+    }
+
+    /// A rollout whose input at step k is `input(k, z_k)`. Each step's
+    /// iteration starts from the extrapolation 2v_k − v_{k−1} (the converged
+    /// steps are those of [`Robot::step`] to the solver tolerance).
+    pub fn rollout_with(
+        &self,
+        z0: &RobotState,
+        dt: f64,
+        steps: usize,
+        mut input: impl FnMut(usize, &RobotState) -> Vec<f64>,
+    ) -> Result<Rollout, RobotError> {
+        let fail = |step, e| RobotError::Rollout {
+            step,
+            source: Box::new(e),
+        };
+        let mut ws = self.workspace();
+        let mut p = self.momentum(z0).map_err(|e| fail(0, e))?;
+        let mut z = z0.clone();
+        let mut states = Vec::with_capacity(steps + 1);
+        states.push(z.clone());
+        let mut report = RolloutReport::default();
+        let n = self.dof();
+        let (mut v_prev, mut guess) = (z0.v.clone(), vec![0.0; n]);
+        for k in 0..steps {
+            let u = input(k, &z);
+            for ((g, &v), &w) in guess.iter_mut().zip(&z.v).zip(&v_prev) {
+                *g = 2.0 * v - w;
+            }
+            v_prev.copy_from_slice(&z.v);
+            let g = (k > 0).then_some(guess.as_slice());
+            let r = self
+                .step_guessed(&mut z, &mut p, &u, dt, g, &mut ws)
+                .map_err(|e| fail(k, e))?;
+            report.add(&r);
+            states.push(z.clone());
+        }
+        Ok(Rollout { states, report })
+    }
+
+    /// Energy T + V of a state (kinetic, gravity; no spring in URDF).
+    pub fn energy(&self, z: &RobotState) -> Result<f64, RobotError> {
+        self.check_state(z)?;
+        let mut ws = self.workspace();
+        self.engine
+            .energy(&z.q, &z.v, &mut ws.bodies)
+            .map_err(|e| self.engine_error(e))
+    }
+
+    /// The mass matrix M(q), row-major (N² entries; O(N²)).
+    pub fn mass_matrix(&self, q: &[f64]) -> Result<Vec<f64>, RobotError> {
+        let n = self.dof();
+        let mut ws = self.workspace();
+        let mut m = vec![0.0; n * n];
+        self.engine
+            .mass_matrix(q, &mut m, &mut ws.bodies)
+            .map_err(|e| self.engine_error(e))?;
+        Ok(m)
+    }
+
+    /// The bias forces b(q, v) = Ṁv − ∂T/∂q + ∇V of M q̈ + b = τ
+    /// (Pinocchio's `rnea(q, v, 0)`, "nonlinear effects").
+    pub fn bias_forces(&self, q: &[f64], v: &[f64]) -> Result<Vec<f64>, RobotError> {
+        let mut ws = self.workspace();
+        let mut b = vec![0.0; self.dof()];
+        self.engine
+            .bias_forces(q, v, &mut b, &mut ws.bodies)
+            .map_err(|e| self.engine_error(e))?;
+        Ok(b)
+    }
+
+    /// (p, ∂T/∂q, ∇V) at (q, v): the momentum M(q)v, the kinetic energy's
+    /// configuration gradient and the potential's gradient.
+    #[allow(clippy::type_complexity)]
+    pub fn terms(
+        &self,
+        q: &[f64],
+        v: &[f64],
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>), RobotError> {
+        let n = self.dof();
+        let mut ws = self.workspace();
+        let (mut p, mut dt, mut dv) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        self.engine
+            .terms(q, v, &mut p, &mut dt, &mut dv, &mut ws.bodies)
+            .map_err(|e| self.engine_error(e))?;
+        Ok((p, dt, dv))
+    }
+}
+
+/// The limits of a `<limit>` element. The parser gives an absent element
+/// as all zeros (lower = upper = effort = velocity = 0, which no moving
+/// joint can mean): that reads as no limits.
+fn limit_values(l: &urdf_rs::JointLimit) -> Limits {
+    if l.lower == 0.0 && l.upper == 0.0 && l.effort == 0.0 && l.velocity == 0.0 {
+        return Limits::NONE;
+    }
+    Limits {
+        lower: l.lower,
+        upper: l.upper,
+        effort: l.effort,
+        velocity: l.velocity,
+    }
+}
