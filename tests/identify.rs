@@ -60,19 +60,24 @@ const DT: f64 = 0.01;
 /// mechanism unlike the declared one.
 fn perturbed<M: Parameters + Copy>(m: M, rng: &mut Rng) -> M {
     let mut t = m;
+    let mut factor = 1.0;
     for (i, name) in M::PARAMETER_NAMES.iter().enumerate() {
         let p = t.parameter_mut(i).unwrap();
         if name.ends_with(".mass") || name.ends_with(".stiffness") {
             *p *= rng.uniform(0.8, 1.2);
         } else if name.contains(".inertia") {
-            // Principal moments scaled; off-diagonal entries stay (zero)
-            // so that the tensor stays symmetric and realisable.
+            // One factor per link on its principal moments (drawn at the
+            // first entry, `inertia` or `inertia.xx`); off-diagonal entries
+            // stay (zero): the tensor stays symmetric and realisable.
+            if name.ends_with(".inertia") || name.ends_with(".xx") {
+                factor = rng.uniform(0.8, 1.2);
+            }
             let diag = name.ends_with(".inertia")
                 || name.ends_with(".xx")
                 || name.ends_with(".yy")
                 || name.ends_with(".zz");
             if diag {
-                *p *= rng.uniform(0.8, 1.2);
+                *p *= factor;
             }
         } else if name.contains(".com.") {
             *p += rng.uniform(-0.05, 0.05);
@@ -252,7 +257,7 @@ fn regressor_matches_residual_at_random_parameters() {
 fn linearity_check_rejects_a_length() {
     let m = DoublePendulum::default().minimal();
     let log = vi_log::<_, 2, 0, 0>(m, 0.5, SVector::from([1.2, -0.5]), 20, |_| SVector::zeros());
-    let residual = |model: &_| {
+    let residual = |model: &vigp::systems::DoublePendulumMinimal| {
         let r = DelRegressor::midpoint(*model, DT).unwrap();
         let t = Transition {
             positions: [&log.positions[5], &log.positions[6], &log.positions[7]],
@@ -636,4 +641,46 @@ fn bad_input_is_an_error() {
         Err(IdentifyError::NonFinite { .. })
     ));
     assert!(DelRegressor::midpoint(m, f64::NAN).is_err());
+}
+
+/// Coverage of the 95 % intervals under position noise (σ = 1e-4, 10 ms,
+/// instrumental variables, position-noise covariance): over 16 seeds of
+/// the driven, sprung double pendulum, the fraction of (seed, base
+/// parameter) pairs whose interval holds the truth. With 16 × 12 = 192
+/// pairs the binomial standard error at 95 % is 1.6 %: the test asks for
+/// 0.88–1.0 (more than four standard errors below 95 %). The large sweep
+/// is `cargo run --release --example identify_coverage`.
+#[test]
+fn noisy_intervals_cover_the_truth() {
+    let declared = DrivenSprung::default().minimal();
+    let truth = perturbed(declared, &mut Rng(9));
+    let clean = vi_log::<_, 2, 0, 2>(truth, 0.5, SVector::from([0.5, 0.2]), 1500, |k| {
+        let t = k as f64 * DT;
+        SVector::from([3.0 * (1.3 * t).sin() + 1.0, 2.0 * (2.1 * t + 0.4).cos()])
+    });
+    let r = DelRegressor::midpoint(declared, DT).unwrap();
+    let t = standard(&truth);
+    let options = Options {
+        noise: Noise::IV,
+        ..Options::default()
+    };
+    let (mut covered, mut total) = (0, 0);
+    for seed in 0..16 {
+        let log = noisy(&clean, 1e-4, &mut Rng(1000 + seed));
+        let id = identify(&r, &[log], &options).unwrap();
+        let k = &id.base.k;
+        for i in 0..k.nrows() {
+            let true_i: f64 = (0..k.ncols()).map(|j| k[(i, j)] * t[j]).sum();
+            total += 1;
+            if (id.base_estimate[i] - true_i).abs() <= id.base_half_width[i] {
+                covered += 1;
+            }
+        }
+        if seed == 0 {
+            println!("position σ estimated {:?} (true 1e-4)", id.position_sigma);
+        }
+    }
+    let frac = covered as f64 / total as f64;
+    println!("95 % intervals cover the truth in {covered}/{total} = {frac:.3}");
+    assert!((0.88..=1.0).contains(&frac), "{frac}");
 }
