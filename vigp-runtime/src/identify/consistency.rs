@@ -235,6 +235,27 @@ pub fn project(
         })?);
     }
     theta.extend_from_slice(&start[theta.len()..]);
+    // The realisable set is open; its boundary (a zero mass, a zero
+    // principal moment of Σ) is approached but kept at a margin, so that
+    // π(θ) is strictly realisable in floating point too: the planar
+    // ln m, ln I_c stay above their start − ln 1e8, the spatial
+    // log-diagonal of U (J = U Uᵀ: squares) above its start − ln 1e4.
+    let mut floor = vec![f64::NEG_INFINITY; p];
+    for (i, b) in structure.bodies.iter().enumerate() {
+        let o = offsets[i];
+        let (logs, margin): (&[usize], f64) = match b {
+            BodySlots::Planar { .. } => (&[0, 3], 1e8f64.ln()),
+            BodySlots::Spatial { .. } => (&[0, 1, 2, 3], 1e4f64.ln()),
+        };
+        for k in logs {
+            floor[o + k] = theta[o + k] - margin;
+        }
+    }
+    let clamp = |th: &mut Vec<f64>| {
+        for (t, f) in th.iter_mut().zip(&floor) {
+            *t = t.max(*f);
+        }
+    };
     let cost = |th: &[f64]| {
         let (pi, _) = full_pi(structure, th);
         (&metric.f * pi - &metric.rhs).norm_squared()
@@ -263,7 +284,8 @@ pub fn project(
                 .svd(true, true)
                 .solve(&rhs, 0.0)
                 .map_err(|_| IdentifyError::Singular)?;
-            let trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(t, s)| t + s).collect();
+            let mut trial: Vec<f64> = theta.iter().zip(step.iter()).map(|(t, s)| t + s).collect();
+            clamp(&mut trial);
             let c = cost(&trial);
             if c.is_finite() && c < c0 {
                 let rel = (c0 - c) / c0.max(f64::MIN_POSITIVE);
