@@ -443,9 +443,11 @@ pub fn identify<R: Regressor>(
     logs: &[Log],
     options: &Options,
 ) -> Result<Identification, IdentifyError> {
-    if !(options.prior.relative > 0.0 && options.prior.relative.is_finite())
-        || !(options.prior.joint_floor > 0.0 && options.prior.joint_floor.is_finite())
-        || !(options.rank_tolerance > 0.0 && options.rank_tolerance < 1.0)
+    let positive = |x: f64| x > 0.0 && x.is_finite();
+    if !(positive(options.prior.relative)
+        && positive(options.prior.joint_floor)
+        && options.rank_tolerance > 0.0
+        && options.rank_tolerance < 1.0)
     {
         return Err(IdentifyError::Options {
             message: "the prior's scales must be positive and finite, the rank tolerance in (0, 1)"
