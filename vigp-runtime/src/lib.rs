@@ -19,6 +19,8 @@ pub mod composition;
 pub mod data;
 pub mod del;
 pub mod dynamics;
+#[cfg(feature = "alloc")]
+pub mod identify;
 pub mod kinematics;
 #[cfg(feature = "alloc")]
 pub mod learned;

@@ -1,0 +1,583 @@
+//! Physical parameters from logged positions: masses, first moments,
+//! inertias, joint damping and springs, by regression on the discrete
+//! Euler–Lagrange (DEL) residual.
+//!
+//! The DEL residual of a transition (x_{k−1}, x_k, x_{k+1}) is affine in
+//! the standard parameters π of every body and joint
+//! ([`regressor`]): Y·π − b = residual. It needs positions only — no
+//! accelerations differentiated from noisy samples — and, on a log that
+//! the variational integrator wrote, it is zero at the true parameters.
+//!
+//! [`identify`] stacks the rows of every transition of the logs and
+//!
+//! 1. finds the **base parameters**, the combinations of π that the data
+//!    determine, by a rank-revealing QR decomposition, and names them
+//!    ([`base`]);
+//! 2. estimates π by least squares with a **prior** centred on the declared
+//!    values (each standard parameter ~ 𝒩(declared, s²), s stated in
+//!    [`Prior`]), treating the **position noise** by instrumental
+//!    variables ([`Noise`]) and outliers by an optional **robust loss**
+//!    ([`Loss`]) ([`estimate`]);
+//! 3. keeps every body **physically consistent** (positive mass, positive
+//!    definite pseudo-inertia) by projecting an unrealisable estimate onto
+//!    the realisable set in a log-Cholesky parameterisation
+//!    ([`consistency`]);
+//! 4. gives the **covariance** and the 95 % interval of each base
+//!    parameter ([`covariance`]) and a table ([`report`]).
+//!
+//! **Loops** are handled by projecting each transition's rows onto the
+//! null space of the constraint Jacobian G(x_k), which removes the term
+//! −G(x_k)ᵀλ with the unknown multipliers (the multipliers are not
+//! estimated; [`regressor`]).
+//!
+//! ```
+//! use vigp_runtime::identify::{DelRegressor, Log, Options, identify};
+//! use vigp_runtime::{Joint, Link, Mechanism, Parameters, Variational};
+//! # use vigp_runtime::identify::IdentifyError;
+//! # fn demo<M>(model: M, log: Log) -> Result<(), IdentifyError>
+//! # where M: Mechanism<1, 0> + Parameters + Copy {
+//! // `model`: a mechanism with its declared parameters; `log`: positions
+//! // sampled every 10 ms.
+//! let regressor = DelRegressor::midpoint(model, 0.01)?;
+//! let id = identify(&regressor, &[log], &Options::default())?;
+//! println!("{}", id.report());
+//! # Ok(()) }
+//! ```
+
+pub mod base;
+pub mod consistency;
+pub mod covariance;
+pub mod estimate;
+pub mod regressor;
+pub mod report;
+
+pub use base::Base;
+pub use estimate::{Loss, Noise};
+pub use regressor::{
+    BodySlots, DelRegressor, JointSlots, ParameterKind, Regressor, Structure, Transition,
+};
+pub use report::{Report, Status};
+
+use nalgebra::{DMatrix, DVector};
+
+/// What can go wrong in identification.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum IdentifyError {
+    /// The mechanism's parameter names do not have the documented layout.
+    #[error("parameter layout: {message}")]
+    Layout {
+        /// What is wrong.
+        message: String,
+    },
+    /// A vector of the wrong length.
+    #[error("{what}: expected {expected} entries, found {found}")]
+    Dimension {
+        /// Which vector.
+        what: &'static str,
+        /// Expected length.
+        expected: usize,
+        /// Found length.
+        found: usize,
+    },
+    /// NaN or ±∞ in the input or on the way.
+    #[error("not finite: {what}")]
+    NonFinite {
+        /// Which value.
+        what: String,
+    },
+    /// A standard-parameter vector with no form in the DSL's names (a zero
+    /// mass, or k·s₀ ≠ 0 with k = 0).
+    #[error("`{parameter}` has no form in the DSL's parameters (zero mass or stiffness)")]
+    NoDslForm {
+        /// The offending standard parameter.
+        parameter: String,
+    },
+    /// Too few transitions for the number of base parameters.
+    #[error("too few data: {rows} rows for {needed} needed")]
+    TooFewTransitions {
+        /// Rows available.
+        rows: usize,
+        /// Rows needed.
+        needed: usize,
+    },
+    /// A linear system that should be regular is not.
+    #[error("singular system in the estimate")]
+    Singular,
+    /// Options out of range.
+    #[error("options: {message}")]
+    Options {
+        /// What is wrong.
+        message: String,
+    },
+    /// Physical consistency could not be established.
+    #[error("physical consistency: {message}")]
+    Inconsistent {
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// One logged run: positions every Δt (the regressor's time step) and the
+/// inputs.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Log {
+    /// Positions x_0, …, x_K (one vector of the mechanism's coordinates
+    /// per sample).
+    pub positions: Vec<Vec<f64>>,
+    /// Inputs: empty (none), or one vector per sample, `inputs[k]` held
+    /// over [t_k, t_{k+1}] (the convention of `vigp::data`: row k's input
+    /// drives the step whose new velocity is (x_{k+1} − x_k)/Δt). A forced
+    /// rollout from a state (`Variational::rollout_forced`) applies its
+    /// input j over [t_{j+1}, t_{j+2}]: the log's `inputs[j + 1]`, with
+    /// `inputs[0]` zero.
+    pub inputs: Vec<Vec<f64>>,
+}
+
+impl Log {
+    /// A log of positions without inputs.
+    pub fn new(positions: Vec<Vec<f64>>) -> Self {
+        Log {
+            positions,
+            inputs: Vec::new(),
+        }
+    }
+
+    /// A log from a run read by `vigp::data` (the same input convention).
+    pub fn from_run<const N: usize>(run: &crate::data::Run<N>) -> Self {
+        Log {
+            positions: run
+                .positions
+                .iter()
+                .map(|q| q.as_slice().to_vec())
+                .collect(),
+            inputs: run.inputs.clone(),
+        }
+    }
+}
+
+/// The prior on π: independent Gaussians centred on the declared values,
+/// standard deviation s_p = `relative` × a scale per parameter:
+///
+/// * mass: the declared mass m;
+/// * first moments: m·ℓ, inertias about the frame origin: m·ℓ², with ℓ
+///   the body's radius of gyration about its frame origin (√(I_O/m)
+///   planar, √(tr I_O/(2m)) spatial);
+/// * joint damping, stiffness, stiffness·rest: |declared|, at least
+///   `joint_floor` (SI units).
+///
+/// The default, `relative` = 0.5, says "within about 50 % of the declared
+/// values"; where the data speak, its weight against theirs is (σ/s)² and
+/// vanishes as the log grows.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Prior {
+    /// Relative standard deviation.
+    pub relative: f64,
+    /// Smallest scale of a joint parameter (SI units).
+    pub joint_floor: f64,
+}
+
+impl Default for Prior {
+    fn default() -> Self {
+        Prior {
+            relative: 0.5,
+            joint_floor: 1.0,
+        }
+    }
+}
+
+impl Prior {
+    /// The standard deviation of every entry of π (declared values `pi`).
+    pub fn sd(&self, structure: &Structure, pi: &[f64]) -> Vec<f64> {
+        let mut sd = Vec::with_capacity(pi.len());
+        let offsets = structure.body_offsets();
+        for (b, o) in structure.bodies.iter().zip(&offsets) {
+            let m = pi[*o].abs();
+            let l2 = match b {
+                BodySlots::Planar { .. } => pi[o + 3].abs() / m,
+                BodySlots::Spatial { .. } => (pi[o + 4] + pi[o + 7] + pi[o + 9]).abs() / (2.0 * m),
+            };
+            let l = l2.sqrt();
+            sd.push(self.relative * m);
+            let (h, i) = if b.len() == 4 { (2, 1) } else { (3, 6) };
+            sd.extend(std::iter::repeat_n(self.relative * m * l, h));
+            sd.extend(std::iter::repeat_n(self.relative * m * l2, i));
+        }
+        for x in &pi[sd.len()..] {
+            sd.push(self.relative * x.abs().max(self.joint_floor));
+        }
+        sd
+    }
+}
+
+/// Options of [`identify`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Options {
+    /// The prior (default: 50 % of the declared values).
+    pub prior: Prior,
+    /// The noise treatment (default: least squares; use
+    /// [`Noise::IV`] on measured logs).
+    pub noise: Noise,
+    /// The loss (default: squares).
+    pub loss: Loss,
+    /// Rank tolerance of the base-parameter decomposition, relative to the
+    /// largest pivot of the unit-norm columns (default 1e-8).
+    pub rank_tolerance: f64,
+    /// Project an unrealisable estimate onto the realisable set (default
+    /// true).
+    pub consistent: bool,
+    /// The covariance model of the intervals (default: position noise).
+    pub intervals: Intervals,
+}
+
+/// How the covariance of the estimate is computed ([`covariance`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Intervals {
+    /// Independent rows with variance σ_j² per row position.
+    Independent,
+    /// Independent noise on every logged position coordinate, σ_q
+    /// estimated from the residuals, propagated through the exact
+    /// dependence of each residual on its three samples (neighbouring
+    /// transitions share samples: their errors are correlated).
+    PositionNoise,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            prior: Prior::default(),
+            noise: Noise::LeastSquares,
+            loss: Loss::Squared,
+            rank_tolerance: 1e-8,
+            consistent: true,
+            intervals: Intervals::PositionNoise,
+        }
+    }
+}
+
+/// The result of [`identify`].
+#[derive(Clone, Debug)]
+pub struct Identification {
+    /// The layout of π.
+    pub structure: Structure,
+    /// Declared π (the prior's centre).
+    pub declared: Vec<f64>,
+    /// The prior's standard deviations.
+    pub prior_sd: Vec<f64>,
+    /// The identified π (physically consistent).
+    pub estimate: Vec<f64>,
+    /// The estimate before the consistency projection.
+    pub unconstrained: Vec<f64>,
+    /// Whether the consistency projection moved the estimate, and the
+    /// links it found unrealisable.
+    pub projected: Vec<usize>,
+    /// Posterior covariance of π (independent rows).
+    pub covariance: DMatrix<f64>,
+    /// The base parameters.
+    pub base: Base,
+    /// Their names (combinations of standard names).
+    pub base_names: Vec<String>,
+    /// Their declared values K·π₀.
+    pub base_declared: Vec<f64>,
+    /// Their identified values K·π̂ (of the consistent estimate).
+    pub base_estimate: Vec<f64>,
+    /// Half-widths of their 95 % intervals.
+    pub base_half_width: Vec<f64>,
+    /// Whether the data informed each base parameter (posterior variance
+    /// below half the prior's).
+    pub base_informed: Vec<bool>,
+    /// Noise standard deviation per row position (residual units).
+    pub sigma: Vec<f64>,
+    /// The position noise σ_q estimated from the residuals (with
+    /// [`Intervals::PositionNoise`]).
+    pub position_sigma: Option<f64>,
+    /// The covariance of the base parameters behind the intervals.
+    pub base_covariance: DMatrix<f64>,
+    /// Transitions used.
+    pub transitions: usize,
+}
+
+impl Identification {
+    /// The table: parameter, declared, identified, ±95 %, status.
+    pub fn report(&self) -> Report {
+        report::build(self)
+    }
+
+    /// Whether each standard parameter is identifiable by itself (no
+    /// direction that the data cannot see moves it).
+    pub fn standard_identifiable(&self) -> Vec<bool> {
+        (0..self.structure.len())
+            .map(|i| self.base.identifiable(i))
+            .collect()
+    }
+}
+
+/// Stack the rows of every transition of `logs` (and the instruments).
+pub fn stack<R: Regressor>(
+    regressor: &R,
+    logs: &[Log],
+    noise: Noise,
+) -> Result<(estimate::Stack, usize), IdentifyError> {
+    let (n, u) = (regressor.coordinates(), regressor.inputs());
+    let p = regressor.structure().len();
+    let block = regressor.rows();
+    let instruments = match noise {
+        Noise::LeastSquares => None,
+        Noise::InstrumentalVariables {
+            half_window,
+            degree,
+        } => Some(estimate::leave_out_weights(half_window, degree)?),
+    };
+    let reach = match noise {
+        Noise::LeastSquares => 1,
+        Noise::InstrumentalVariables { half_window, .. } => half_window + 1,
+    };
+    let zeros = vec![0.0; u];
+    let mut w_rows: Vec<DMatrix<f64>> = Vec::new();
+    let mut z_rows: Vec<DMatrix<f64>> = Vec::new();
+    let mut b_rows: Vec<DVector<f64>> = Vec::new();
+    let mut origin = Vec::new();
+    for (li, log) in logs.iter().enumerate() {
+        for x in &log.positions {
+            if x.len() != n {
+                return Err(IdentifyError::Dimension {
+                    what: "positions",
+                    expected: n,
+                    found: x.len(),
+                });
+            }
+        }
+        if !log.inputs.is_empty() {
+            if log.inputs.len() != log.positions.len() {
+                return Err(IdentifyError::Dimension {
+                    what: "inputs (one per sample)",
+                    expected: log.positions.len(),
+                    found: log.inputs.len(),
+                });
+            }
+            if let Some(x) = log.inputs.iter().find(|x| x.len() != u) {
+                return Err(IdentifyError::Dimension {
+                    what: "input vector",
+                    expected: u,
+                    found: x.len(),
+                });
+            }
+        }
+        let input = |k: usize| -> &[f64] {
+            if log.inputs.is_empty() {
+                &zeros
+            } else {
+                &log.inputs[k]
+            }
+        };
+        let k_count = log.positions.len();
+        if k_count < 2 * reach + 1 {
+            continue;
+        }
+        for k in reach..k_count - reach {
+            let t = Transition {
+                positions: [
+                    &log.positions[k - 1],
+                    &log.positions[k],
+                    &log.positions[k + 1],
+                ],
+                inputs: [input(k - 1), input(k)],
+            };
+            let (y, b) = regressor.transition(&t)?;
+            if let Some((taus, weights)) = &instruments {
+                let smooth: Vec<Vec<f64>> = (0..3)
+                    .map(|e| {
+                        (0..n)
+                            .map(|c| {
+                                taus.iter()
+                                    .enumerate()
+                                    .map(|(j, tau)| {
+                                        weights[(e, j)]
+                                            * log.positions[(k as i64 + tau) as usize][c]
+                                    })
+                                    .sum()
+                            })
+                            .collect()
+                    })
+                    .collect();
+                let tz = Transition {
+                    positions: [&smooth[0], &smooth[1], &smooth[2]],
+                    inputs: t.inputs,
+                };
+                z_rows.push(regressor.transition(&tz)?.0);
+            }
+            w_rows.push(y);
+            b_rows.push(b);
+            origin.push((li, k));
+        }
+    }
+    let transitions = w_rows.len();
+    let rows = transitions * block;
+    let mut w = DMatrix::zeros(rows, p);
+    let mut b = DVector::zeros(rows);
+    let mut z = instruments.as_ref().map(|_| DMatrix::zeros(rows, p));
+    for (t, (y, bb)) in w_rows.iter().zip(&b_rows).enumerate() {
+        w.rows_mut(t * block, block).copy_from(y);
+        b.rows_mut(t * block, block).copy_from(bb);
+        if let Some(z) = z.as_mut() {
+            z.rows_mut(t * block, block).copy_from(&z_rows[t]);
+        }
+    }
+    let slot = (0..rows).map(|i| i % block.max(1)).collect();
+    Ok((
+        estimate::Stack {
+            w,
+            b,
+            z,
+            slot,
+            origin,
+            block,
+        },
+        transitions,
+    ))
+}
+
+/// Identify the standard parameters of `regressor`'s mechanism from
+/// `logs` (module docs).
+pub fn identify<R: Regressor>(
+    regressor: &R,
+    logs: &[Log],
+    options: &Options,
+) -> Result<Identification, IdentifyError> {
+    let positive = |x: f64| x > 0.0 && x.is_finite();
+    if !(positive(options.prior.relative)
+        && positive(options.prior.joint_floor)
+        && options.rank_tolerance > 0.0
+        && options.rank_tolerance < 1.0)
+    {
+        return Err(IdentifyError::Options {
+            message: "the prior's scales must be positive and finite, the rank tolerance in (0, 1)"
+                .into(),
+        });
+    }
+    if let Loss::Huber(k) | Loss::Cauchy(k) = options.loss
+        && !(k > 0.0 && k.is_finite())
+    {
+        return Err(IdentifyError::Options {
+            message: format!("robust loss threshold {k}"),
+        });
+    }
+    let structure = regressor.structure().clone();
+    let declared = regressor.standard();
+    let prior_sd = options.prior.sd(&structure, &declared);
+    if let Some(i) = prior_sd.iter().position(|s| !(s.is_finite() && *s > 0.0)) {
+        return Err(IdentifyError::NonFinite {
+            what: format!(
+                "prior scale of `{}` (declared mass zero?)",
+                structure.names[i]
+            ),
+        });
+    }
+    let (stack, transitions) = stack(regressor, logs, options.noise)?;
+    let base = Base::new(&stack.w, options.rank_tolerance);
+    let fit = estimate::solve(&stack, &base, &declared, &prior_sd, options.loss)?;
+    let unconstrained: Vec<f64> = fit.pi.iter().cloned().collect();
+    let bad = consistency::inconsistent_bodies(&structure, &unconstrained);
+    let estimate = if options.consistent && !bad.is_empty() {
+        // The objective |R(Kπ − θ_data)|² + |S⁻¹(π − π₀)|².
+        let (theta_data, r) = &fit.data;
+        let p = structure.len();
+        let rk = r * &base.k;
+        let mut f = DMatrix::zeros(rk.nrows() + p, p);
+        f.rows_mut(0, rk.nrows()).copy_from(&rk);
+        let mut rhs = DVector::zeros(rk.nrows() + p);
+        rhs.rows_mut(0, rk.nrows()).copy_from(&(r * theta_data));
+        for j in 0..p {
+            f[(rk.nrows() + j, j)] = 1.0 / prior_sd[j];
+            rhs[rk.nrows() + j] = declared[j] / prior_sd[j];
+        }
+        let metric = consistency::Metric { f, rhs };
+        consistency::project(&structure, &metric, &declared)?.0
+    } else {
+        unconstrained.clone()
+    };
+    let k = &base.k;
+    let pv = DVector::from_column_slice(&estimate);
+    let base_estimate: Vec<f64> = (k * &pv).iter().cloned().collect();
+    let base_declared: Vec<f64> = (k * DVector::from_column_slice(&declared))
+        .iter()
+        .cloned()
+        .collect();
+    let (base_covariance, position_sigma) = match options.intervals {
+        Intervals::Independent => (fit.base_covariance.clone(), None),
+        Intervals::PositionNoise => {
+            let pi_hat = &fit.pi;
+            let mut jacs = Vec::with_capacity(stack.origin.len());
+            let zeros = vec![0.0; regressor.inputs()];
+            for &(li, k) in &stack.origin {
+                let log = &logs[li];
+                let input = |k: usize| -> &[f64] {
+                    if log.inputs.is_empty() {
+                        &zeros
+                    } else {
+                        &log.inputs[k]
+                    }
+                };
+                let t = Transition {
+                    positions: [
+                        &log.positions[k - 1],
+                        &log.positions[k],
+                        &log.positions[k + 1],
+                    ],
+                    inputs: [input(k - 1), input(k)],
+                };
+                jacs.push(regressor.noise_jacobian(&t, pi_hat.as_slice())?);
+            }
+            let offsets: Vec<usize> = logs
+                .iter()
+                .scan(0, |o, l| {
+                    let at = *o;
+                    *o += l.positions.len();
+                    Some(at)
+                })
+                .collect();
+            let first: Vec<usize> = stack
+                .origin
+                .iter()
+                .map(|(li, k)| offsets[*li] + k - 1)
+                .collect();
+            let (sq, b) = covariance::position_noise(
+                &fit,
+                &jacs,
+                &first,
+                regressor.coordinates(),
+                base.rank(),
+            );
+            let hinv = &fit.base_covariance;
+            (hinv * (b + &fit.prior_precision) * hinv, Some(sq))
+        }
+    };
+    let base_half_width = covariance::half_widths(&base_covariance);
+    let s2 = DMatrix::from_diagonal(&DVector::from_iterator(
+        prior_sd.len(),
+        prior_sd.iter().map(|s| s * s),
+    ));
+    let prior_base = k * s2 * k.transpose();
+    let base_informed = (0..base.rank())
+        .map(|i| base_covariance[(i, i)] < 0.5 * prior_base[(i, i)])
+        .collect();
+    let base_names = base.names(&structure.names);
+    Ok(Identification {
+        declared,
+        prior_sd,
+        estimate,
+        unconstrained,
+        projected: if options.consistent { bad } else { Vec::new() },
+        covariance: fit.covariance,
+        base,
+        base_names,
+        base_declared,
+        base_estimate,
+        base_half_width,
+        base_informed,
+        sigma: fit.sigma,
+        position_sigma,
+        base_covariance,
+        transitions,
+        structure,
+    })
+}

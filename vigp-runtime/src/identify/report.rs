@@ -1,0 +1,285 @@
+//! The identification table: parameter, declared, identified, ±95 %, and
+//! whether the data identify it.
+//!
+//! Three sections: the base parameters (the combinations the data
+//! determine; a base parameter whose posterior variance is not below half
+//! its prior variance is marked uninformed: its value is the prior's); the
+//! standard parameters that are not identifiable by themselves (their
+//! value comes from the prior through the combinations they enter); and
+//! the parameters in the DSL's own names (mass, centre of mass, inertia
+//! about the centre of mass, damping, stiffness, rest), identifiable when
+//! every standard parameter they derive from is.
+
+use super::Identification;
+use super::regressor::{BodySlots, SYM};
+use std::fmt;
+
+/// Whether the data determine a row of the table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Status {
+    /// Identifiable and informed by the data.
+    Identified,
+    /// Identifiable in principle, but this log hardly informs it: the
+    /// value is essentially the prior's.
+    Uninformed,
+    /// Not identifiable from this log: no data can tell it apart from
+    /// other parameters (it enters only through base combinations).
+    NotIdentifiable,
+}
+
+impl fmt::Display for Status {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(match self {
+            Status::Identified => "identified",
+            Status::Uninformed => "uninformed (prior)",
+            Status::NotIdentifiable => "not identifiable",
+        })
+    }
+}
+
+/// One row of the table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Row {
+    /// The parameter (a standard name, a combination, or a DSL name).
+    pub parameter: String,
+    /// Its declared value.
+    pub declared: f64,
+    /// Its identified value.
+    pub identified: f64,
+    /// Half-width of its 95 % interval (base parameters only).
+    pub half_width: Option<f64>,
+    /// Whether the data determine it.
+    pub status: Status,
+}
+
+/// The table of an [`Identification`] (printable).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Report {
+    /// Base parameters.
+    pub base: Vec<Row>,
+    /// Standard parameters not identifiable by themselves.
+    pub unidentifiable: Vec<Row>,
+    /// The DSL's parameters.
+    pub dsl: Vec<Row>,
+    /// Links whose unconstrained estimate was not physically realisable
+    /// (projected).
+    pub projected: Vec<String>,
+}
+
+impl Report {
+    /// Names of the rows (all sections) whose status is not
+    /// [`Status::Identified`].
+    pub fn uninformed(&self) -> Vec<&str> {
+        self.base
+            .iter()
+            .chain(&self.unidentifiable)
+            .chain(&self.dsl)
+            .filter(|r| r.status != Status::Identified)
+            .map(|r| r.parameter.as_str())
+            .collect()
+    }
+}
+
+pub(crate) fn build(id: &Identification) -> Report {
+    let s = &id.structure;
+    let base = (0..id.base.rank())
+        .map(|i| Row {
+            parameter: id.base_names[i].clone(),
+            declared: id.base_declared[i],
+            identified: id.base_estimate[i],
+            half_width: Some(id.base_half_width[i]),
+            status: if id.base_informed[i] {
+                Status::Identified
+            } else {
+                Status::Uninformed
+            },
+        })
+        .collect();
+    let ident = id.standard_identifiable();
+    let unidentifiable = (0..s.len())
+        .filter(|i| !ident[*i])
+        .map(|i| Row {
+            parameter: s.names[i].clone(),
+            declared: id.declared[i],
+            identified: id.estimate[i],
+            half_width: None,
+            status: Status::NotIdentifiable,
+        })
+        .collect();
+    // A standard parameter counts as identified when identifiable and
+    // every base parameter it enters is informed.
+    let informed = |i: usize| {
+        ident[i] && (0..id.base.rank()).all(|b| id.base.k[(b, i)] == 0.0 || id.base_informed[b])
+    };
+    let status = |idx: &[usize]| {
+        if idx.iter().all(|i| informed(*i)) {
+            Status::Identified
+        } else if idx.iter().all(|i| ident[*i]) {
+            Status::Uninformed
+        } else {
+            Status::NotIdentifiable
+        }
+    };
+    let dsl_of = |pi: &[f64]| -> Vec<(String, f64)> {
+        let mut out = Vec::new();
+        let offsets = s.body_offsets();
+        for (b, o) in s.bodies.iter().zip(&offsets) {
+            let l = b.name();
+            let m = pi[*o];
+            out.push((format!("links.{l}.mass"), m));
+            match b {
+                BodySlots::Planar { .. } => {
+                    let c = [pi[o + 1] / m, pi[o + 2] / m];
+                    out.push((format!("links.{l}.com.x"), c[0]));
+                    out.push((format!("links.{l}.com.y"), c[1]));
+                    out.push((
+                        format!("links.{l}.inertia"),
+                        pi[o + 3] - m * (c[0] * c[0] + c[1] * c[1]),
+                    ));
+                }
+                BodySlots::Spatial { .. } => {
+                    let c = [pi[o + 1] / m, pi[o + 2] / m, pi[o + 3] / m];
+                    for (a, v) in ["x", "y", "z"].iter().zip(c) {
+                        out.push((format!("links.{l}.com.{a}"), v));
+                    }
+                    let cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
+                    for (k, (r, t)) in SYM.iter().enumerate() {
+                        let d = if r == t { cc } else { 0.0 };
+                        let name = ["xx", "xy", "xz", "yy", "yz", "zz"][k];
+                        out.push((
+                            format!("links.{l}.inertia.{name}"),
+                            pi[o + 4 + k] - m * (d - c[*r] * c[*t]),
+                        ));
+                    }
+                }
+            }
+        }
+        let mut at = offsets
+            .last()
+            .map(|o| o + s.bodies.last().map_or(0, |b| b.len()))
+            .unwrap_or(0);
+        for j in &s.joints {
+            if j.damping.is_some() {
+                out.push((format!("joints.{}.damping", j.name), pi[at]));
+                at += 1;
+            }
+            if j.spring.is_some() {
+                out.push((format!("joints.{}.stiffness", j.name), pi[at]));
+                out.push((format!("joints.{}.rest", j.name), pi[at + 1] / pi[at]));
+                at += 2;
+            }
+        }
+        out
+    };
+    // Which standard entries each DSL value derives from.
+    let mut deps: Vec<Vec<usize>> = Vec::new();
+    let offsets = s.body_offsets();
+    for (b, o) in s.bodies.iter().zip(&offsets) {
+        deps.push(vec![*o]);
+        let h = if b.len() == 4 { 2 } else { 3 };
+        for a in 0..h {
+            deps.push(vec![*o, o + 1 + a]);
+        }
+        for _ in 0..b.len() - 1 - h {
+            deps.push((*o..o + b.len()).collect());
+        }
+    }
+    let mut at = offsets
+        .last()
+        .map(|o| o + s.bodies.last().map_or(0, |b| b.len()))
+        .unwrap_or(0);
+    for j in &s.joints {
+        if j.damping.is_some() {
+            deps.push(vec![at]);
+            at += 1;
+        }
+        if j.spring.is_some() {
+            deps.push(vec![at]);
+            deps.push(vec![at, at + 1]);
+            at += 2;
+        }
+    }
+    let declared = dsl_of(&id.declared);
+    let identified = dsl_of(&id.estimate);
+    let dsl = declared
+        .into_iter()
+        .zip(identified)
+        .zip(&deps)
+        .map(|(((name, d), (_, v)), dep)| Row {
+            parameter: name,
+            declared: d,
+            identified: v,
+            half_width: None,
+            status: status(dep),
+        })
+        .collect();
+    Report {
+        base,
+        unidentifiable,
+        dsl,
+        projected: id
+            .projected
+            .iter()
+            .map(|b| s.bodies[*b].name().to_string())
+            .collect(),
+    }
+}
+
+impl fmt::Display for Report {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let width = self
+            .base
+            .iter()
+            .chain(&self.unidentifiable)
+            .chain(&self.dsl)
+            .map(|r| r.parameter.chars().count())
+            .max()
+            .unwrap_or(9)
+            .max(9);
+        let row = |f: &mut fmt::Formatter<'_>, r: &Row| {
+            let hw = r
+                .half_width
+                .map_or_else(|| "—".to_string(), |h| format!("{h:.3e}"));
+            writeln!(
+                f,
+                "{:<width$}  {:>13.6e}  {:>13.6e}  {:>10}  {}",
+                r.parameter, r.declared, r.identified, hw, r.status
+            )
+        };
+        let header = |f: &mut fmt::Formatter<'_>, title: &str| {
+            writeln!(f, "{title}")?;
+            writeln!(
+                f,
+                "{:<width$}  {:>13}  {:>13}  {:>10}  status",
+                "parameter", "declared", "identified", "±95 %"
+            )
+        };
+        header(f, "base parameters (identifiable combinations)")?;
+        for r in &self.base {
+            row(f, r)?;
+        }
+        if !self.unidentifiable.is_empty() {
+            writeln!(f)?;
+            header(
+                f,
+                "standard parameters not identifiable by themselves (value from the prior)",
+            )?;
+            for r in &self.unidentifiable {
+                row(f, r)?;
+            }
+        }
+        writeln!(f)?;
+        header(f, "in the mechanism's own parameters")?;
+        for r in &self.dsl {
+            row(f, r)?;
+        }
+        if !self.projected.is_empty() {
+            writeln!(
+                f,
+                "\nprojected onto physically realisable parameters: {}",
+                self.projected.join(", ")
+            )?;
+        }
+        Ok(())
+    }
+}
