@@ -144,29 +144,29 @@ impl Model for Nominal {
 
 struct LearnedModel(Learned<View, 2, 0>, RefCell<Workspace>);
 
+/// The planner's model is a map of (z, u): the learned step takes the
+/// input as held across the start (u_prev = u). The truth here is the
+/// first-order VI, whose next velocity does not depend on the previous
+/// input.
 impl Model for LearnedModel {
     fn step(&self, z: &Z, u: f64) -> Option<Z> {
+        let u = SVector::<f64, 1>::new(u);
         self.0
-            .step_mean_forced_with(
-                &unstack(z),
-                &SVector::<f64, 1>::new(u),
-                &mut self.1.borrow_mut(),
-            )
+            .step_mean_forced_with(&unstack(z), &u, &u, &mut self.1.borrow_mut())
             .ok()
             .map(|z| stack(&z))
     }
     /// The exact derivatives of the learned step (nominal forced step's
     /// A, B plus the GP mean's gradient through the encoding).
+    /// With u_prev = u, ∂z₁/∂u is B + B_prev.
     fn linearize(&self, z: &Z, u: f64) -> Option<(A, Z)> {
-        let (_, d) = self
+        let u = SVector::<f64, 1>::new(u);
+        let (_, d, dp) = self
             .0
-            .step_derivatives_forced(
-                &unstack(z),
-                &SVector::<f64, 1>::new(u),
-                &mut self.1.borrow_mut(),
-            )
+            .step_derivatives_forced(&unstack(z), &u, &u, &mut self.1.borrow_mut())
             .ok()?;
-        Some((d.a.matrix::<4>(), d.b.matrix::<4>().column(0).into_owned()))
+        let b = d.b.matrix::<4>().column(0) + dp.matrix::<4>().column(0);
+        Some((d.a.matrix::<4>(), b))
     }
 }
 
@@ -530,7 +530,10 @@ fn bounded_predictions(
     c: &mut Coverage,
 ) -> Result<(), Box<dyn Error>> {
     for k0 in (0..=STEPS - HORIZON).step_by(25) {
-        let p = match l.predict_forced(&unstack(&xs[k0]), &applied[k0..k0 + HORIZON], bound) {
+        // xs[k0]'s velocity was produced by the input applied before it
+        let u_prev = &applied[k0.saturating_sub(1)];
+        let p = match l.predict_forced(&unstack(&xs[k0]), u_prev, &applied[k0..k0 + HORIZON], bound)
+        {
             Err(BoundError::VarianceLost { .. }) => {
                 c.lost += 1;
                 continue;

@@ -41,11 +41,13 @@
 //!
 //! An actuated mechanism's data carry one `u_<joint>` column per input
 //! ([`crate::data`]): `fit` learns on state and input (the GP's inputs are
-//! the encoded state, then u; the prior is the forced nominal step),
+//! the encoded state, then the previous and the current input; the prior is
+//! the forced nominal step),
 //! `score` rolls both models out under the logged inputs, `export` writes
 //! a model that steps under u, and `predict` predicts under the inputs
 //! logged in each run (the run needs `--steps` + 1 rows; the input in row
-//! k + 1 drives the step from row k, as in the data) with the bound of
+//! k + 1 drives the step from row k, after row k's, as in the data) with
+//! the bound of
 //! [`crate::learned::Learned::predict_forced`] (conformal: the held-out
 //! runs of `--calibration` carry their inputs too).
 //!
@@ -793,7 +795,8 @@ fn load<M: Mechanism<N, C> + Parameters + Clone, const N: usize, const C: usize>
 
 /// `U`: the mechanism's inputs; with inputs the data carries `u_<joint>`
 /// columns and the model learns on state and input (GP input: the encoded
-/// state, then u; prior: the forced nominal step).
+/// state, then the previous and the current input; prior: the forced
+/// nominal step).
 fn fit<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize, const U: usize>(
     a: &FitArgs,
     minimal: Mn,
@@ -1203,7 +1206,8 @@ where
                 v: (run.positions[s + 1] - run.positions[s]) / dt,
             };
             // step j of the window (from sample s + j) under the input
-            // logged over its new velocity's interval, row s + j + 1's
+            // logged over its new velocity's interval, row s + j + 1's,
+            // after row s + j's (the learned step takes both)
             let us = if U == 0 {
                 &[][..]
             } else {
@@ -1224,7 +1228,7 @@ where
             let lrn = if U == 0 {
                 learned.rollout_into(&zv, &mut buf)
             } else {
-                learned.rollout_forced_into(&zv, us, &mut buf)
+                learned.rollout_mean_forced_into(&zv, &inputs[r][s], us, &mut buf)
             };
             let lrn = lrn.ok().map(|()| {
                 let p: Vec<_> = buf.iter().map(|z| to_minimal(&z.q)).collect();
@@ -1310,8 +1314,14 @@ where
     for (r, run) in data.runs.iter().enumerate() {
         match run.state(0) {
             Some(z) if run.positions.len() >= rows => {
-                let us: &[SVector<f64, U>] = if U > 0 { &logged[r][1..=a.steps] } else { &[] };
-                starts.push((run, z, us));
+                // the inputs of rows 1..=k, after row 0's (which produced
+                // the start's velocity)
+                let (up, us): (SVector<f64, U>, &[SVector<f64, U>]) = if U > 0 {
+                    (logged[r][0], &logged[r][1..=a.steps])
+                } else {
+                    (SVector::zeros(), &[])
+                };
+                starts.push((run, z, up, us));
             }
             _ => short.push(run.name.as_str()),
         }
@@ -1344,7 +1354,7 @@ where
             ),
         )?;
     }
-    let view_starts: Vec<State<K>> = starts.iter().map(|(_, z, _)| to_view(z)).collect();
+    let view_starts: Vec<State<K>> = starts.iter().map(|(_, z, _, _)| to_view(z)).collect();
     let kind_arg = a.bound.unwrap_or(if a.calibration.is_some() {
         BoundArg::Conformal
     } else {
@@ -1421,9 +1431,9 @@ where
     let mut first_error = None;
     // states outside what the bound covers, and the runs holding them
     let (mut outside, mut outside_runs) = (0usize, 0usize);
-    for ((run, z0, us), zv) in starts.iter().zip(&view_starts) {
+    for ((run, z0, up, us), zv) in starts.iter().zip(&view_starts) {
         let pred = if U > 0 {
-            learned.predict_forced(zv, us, &bound)
+            learned.predict_forced(zv, up, us, &bound)
         } else {
             learned.predict(zv, a.steps, &bound)
         };
@@ -1551,8 +1561,13 @@ where
             size.input_dim,
             if learned.inputs() > 0 {
                 format!(
-                    " (state, then control inputs {})",
-                    M::INPUT_NAMES[..learned.inputs().min(M::INPUT_NAMES.len())].join(", ")
+                    " (state, then control inputs {}{})",
+                    M::INPUT_NAMES[..learned.inputs().min(M::INPUT_NAMES.len())].join(", "),
+                    if learned.takes_previous_input() {
+                        ", previous then current"
+                    } else {
+                        ""
+                    }
                 )
             } else {
                 String::new()

@@ -933,17 +933,23 @@ fn check_forced<
     let us: Vec<SVector<f64, U>> = (0..12)
         .map(|_| SVector::from_fn(|_, _| rng.uniform(-1.5, 1.5)))
         .collect();
+    // the input before the first (that produced z0's velocity), then the
+    // previous step's
+    let up0 = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-1.5, 1.5));
+    let prev = |k: usize| if k == 0 { up0 } else { us[k - 1] };
     let mut states = vec![*z0];
-    for u in &us {
+    for (k, u) in us.iter().enumerate() {
         let next = l
-            .step_mean_forced_with(states.last().unwrap(), u, &mut ws)
+            .step_mean_forced_with(states.last().unwrap(), &prev(k), u, &mut ws)
             .unwrap();
         states.push(next);
     }
     for k in (0..us.len()).step_by(3) {
-        let (z, u) = (&states[k], &us[k]);
-        let (a, c) = l.step_jacobian_norms_forced(z, u, &mut ws).unwrap();
-        let (fa, fc) = fd_norms_by(l, z, |p, ws| l.step_mean_forced_with(p, u, ws).unwrap());
+        let (z, up, u) = (&states[k], prev(k), &us[k]);
+        let (a, c) = l.step_jacobian_norms_forced(z, &up, u, &mut ws).unwrap();
+        let (fa, fc) = fd_norms_by(l, z, |p, ws| {
+            l.step_mean_forced_with(p, &up, u, ws).unwrap()
+        });
         for (got, want, what) in [(a, fa, "|dv'/dq|"), (c, fc, "|dv'/dv|")] {
             assert!(
                 (got - want).abs() <= 1e-6 * want.max(1.0),
@@ -960,12 +966,12 @@ fn check_forced<
     let bound = l
         .error_bound_forced::<U>(&BoundKind::rkhs(0.05), &Calibration::empty(l.dt()))
         .unwrap();
-    let p = l.predict_forced(z0, &us, &bound).unwrap();
+    let p = l.predict_forced(z0, &up0, &us, &bound).unwrap();
     assert_eq!(p.states, states, "{name}");
     assert!(p.position_bounds.iter().all(|b| b.is_finite()), "{name}");
     let zeros = vec![SVector::<f64, U>::zeros(); 6];
     assert_eq!(
-        l.predict_forced(z0, &zeros, &bound).unwrap(),
+        l.predict_forced(z0, &zeros[0], &zeros, &bound).unwrap(),
         l.predict(z0, 6, &bound).unwrap(),
         "{name}"
     );
@@ -1379,7 +1385,8 @@ fn forced_windows_from_trajectories_follow_the_data_convention() {
     let (mut trajectories, mut logged) = (Vec::new(), Vec::new());
     for _ in 0..3 {
         let mut z = State::new([rng.uniform(-1.0, 1.0)], [0.0]);
-        // sample 0's input is never used (no step ends before t_0)
+        // sample 0's input drives no step (no step ends before t_0); it is
+        // the previous input of the windows that start at sample 0
         let (mut q, mut u) = (vec![z.q], vec![SVector::<f64, 1>::new(9.0)]);
         for _ in 0..30 {
             let ui = SVector::<f64, 1>::new(rng.uniform(-2.0, 2.0));
@@ -1398,6 +1405,11 @@ fn forced_windows_from_trajectories_follow_the_data_convention() {
         let us = cal.window_inputs::<1>(i).unwrap();
         assert_eq!(us.len(), 6);
         assert!(us.iter().all(|u| u[0] != 9.0));
+        // the previous input: the one logged with the start's sample (runs
+        // of 31 samples, windows every 4 samples: 7 per run)
+        let (r, start) = (cal.window_runs()[i], 4 * (i % 7));
+        assert_eq!(r, i / 7);
+        assert_eq!(cal.window_previous_input::<1>(i).unwrap(), logged[r][start]);
         let mut z = w.start;
         for (u, q) in us.iter().zip(&w.positions) {
             z = truth.step_forced(&z, u).unwrap();
@@ -1441,7 +1453,8 @@ fn a_conformal_bound_under_inputs_covers_exchangeable_windows() {
     let (mut one, mut last, mut n) = (0usize, 0usize, 0usize);
     let (mut ratio1, mut ratio_k) = (Vec::new(), Vec::new());
     for (w, us) in driven_windows(42, 1000, 10) {
-        let p = l.predict_forced(&w.start, &us, &bound).unwrap();
+        // the windows take their first input as held across the start
+        let p = l.predict_forced(&w.start, &us[0], &us, &bound).unwrap();
         let v1 = truth.step_forced(&w.start, &us[0]).unwrap().v;
         let e1 = (p.states[1].v - v1).norm();
         let ek = (p.states[10].q - w.positions[9]).norm();
@@ -1501,13 +1514,16 @@ fn forced_predictions_carry_bounds_that_hold() {
         let (mut unforced_covered, mut ratio) = (0, Vec::new());
         let mut ws = l.workspace();
         for (w, (z0, us)) in windows.iter().enumerate() {
-            let p = l.predict_forced(z0, us, &bound).unwrap();
+            let p = l.predict_forced(z0, &us[0], us, &bound).unwrap();
             let free = l.predict(z0, us.len(), &bound).unwrap();
             if w < 10 {
-                // the variance is the GP's at (z_k, u_k), the one-step
-                // prediction's own
+                // the variance is the GP's at (z_k, u_{k−1}, u_k), the
+                // one-step prediction's own
                 for (k, u) in us.iter().enumerate() {
-                    let (v, sd) = l.predict_velocity_forced(&p.states[k], u, &mut ws).unwrap();
+                    let up = &us[k.saturating_sub(1)];
+                    let (v, sd) = l
+                        .predict_velocity_forced(&p.states[k], up, u, &mut ws)
+                        .unwrap();
                     assert_eq!(sd, p.std_devs[k]);
                     assert_eq!(v, p.states[k + 1].v);
                 }
@@ -1557,24 +1573,28 @@ fn forced_prediction_under_zero_inputs_is_the_unforced_one() {
     let z0 = State::new([0.7], [-0.4]);
     for kind in [BoundKind::rkhs(0.05), BoundKind::theorem1(0.01)] {
         let bound = l.error_bound_forced::<1>(&kind, &empty).unwrap();
-        let forced = l.predict_forced(&z0, &zeros, &bound).unwrap();
+        let forced = l.predict_forced(&z0, &zeros[0], &zeros, &bound).unwrap();
         let free = l.predict(&z0, zeros.len(), &bound).unwrap();
         assert_eq!(forced, free, "{}", bound.kind_name());
         assert!(forced.position_bounds[8] > 0.0);
         // an input outside the training range [−2, 2] leaves Theorem 1's
-        // box X (the inputs are part of the GP input); inside it does not
-        let mut us = vec![SVector::<f64, 1>::new(1.0); 4];
+        // box X (the inputs are part of the GP input); inside it does not.
+        // The step after it takes it as its previous input: outside too
+        let mut us = vec![SVector::<f64, 1>::new(1.0); 5];
         us[2][0] = 5.0;
-        let p = l.predict_forced(&z0, &us, &bound).unwrap();
+        let p = l.predict_forced(&z0, &us[0], &us, &bound).unwrap();
         if bound.kind_name() == "theorem1" {
-            assert_eq!(p.outside, [false, false, true, false]);
+            assert_eq!(p.outside, [false, false, true, true, false]);
         }
     }
     let m = noisy_model();
     let bound = m.error_bound(&BoundKind::rkhs(0.05), &empty).unwrap();
     let free = m.predict(&z0, 6, &bound).unwrap();
     let none: [SVector<f64, 0>; 6] = [SVector::zeros(); 6];
-    assert_eq!(m.predict_forced(&z0, &none, &bound).unwrap(), free);
+    assert_eq!(
+        m.predict_forced(&z0, &none[0], &none, &bound).unwrap(),
+        free
+    );
     assert_eq!(
         m.error_bound_forced::<0>(&BoundKind::rkhs(0.05), &empty)
             .unwrap(),
@@ -1609,7 +1629,7 @@ fn forced_bound_misuse_is_a_typed_error() {
         .unwrap();
     let us = [SVector::<f64, 1>::new(0.5); 2];
     assert!(matches!(
-        plain.predict_forced(&z0, &us, &bound),
+        plain.predict_forced(&z0, &us[0], &us, &bound),
         Err(BoundError::Mismatch(_))
     ));
     // conformal: windows without inputs do not calibrate a forced bound,
@@ -1627,7 +1647,7 @@ fn forced_bound_misuse_is_a_typed_error() {
     let unforced = l
         .error_bound(&BoundKind::conformal(0.1), calibration())
         .unwrap();
-    let e = l.predict_forced(&z0, &us, &unforced).unwrap_err();
+    let e = l.predict_forced(&z0, &us[0], &us, &unforced).unwrap_err();
     assert!(matches!(e, BoundError::Mismatch(_)), "{e}");
     let forced = l
         .error_bound_forced::<1>(&BoundKind::conformal(0.1), &forced_cal)
@@ -1652,7 +1672,7 @@ fn forced_bound_misuse_is_a_typed_error() {
         Err(BoundError::WrongLength { .. })
     ));
     let nan = [SVector::<f64, 1>::new(f64::NAN); 2];
-    let e = l.predict_forced(&z0, &nan, &bound).unwrap_err();
+    let e = l.predict_forced(&z0, &nan[0], &nan, &bound).unwrap_err();
     assert!(
         matches!(e, BoundError::Step(StepError::NonFiniteInput { .. })),
         "{e}"

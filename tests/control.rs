@@ -1114,6 +1114,9 @@ fn learned_integrator_takes_inputs() {
     let t0: ForcedTransition<2, 1> = data[0];
     let again = true_vi.step_forced(&t0.z, &t0.u).unwrap();
     assert!((again.v - t0.v_next).amax() < 1e-9);
+    // and the previous input is the one logged a row earlier
+    let t1: ForcedTransition<2, 1> = data[1];
+    assert_eq!(t1.u_prev, t0.u);
     // measurement noise on the velocities (σ = 1e-4, uniform): it keeps
     // the GP's noise variance, and with it the weights α, moderate, so
     // that the learned step can be checked against finite differences
@@ -1154,7 +1157,9 @@ fn learned_integrator_takes_inputs() {
         );
         let u = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
         let target = true_vi.step_forced(&z, &u).unwrap().v;
-        let learned = l.step_mean_forced_with(&z, &u, &mut ws).unwrap().v;
+        // the first-order VI's step does not depend on the previous input:
+        // the one held over z's velocity interval, here u itself
+        let learned = l.step_mean_forced_with(&z, &u, &u, &mut ws).unwrap().v;
         let nominal_next = nominal_vi.step_forced(&z, &u).unwrap().v;
         e_learned += (learned - target).norm_squared();
         e_nominal += (nominal_next - target).norm_squared();
@@ -1176,8 +1181,9 @@ fn learned_integrator_takes_inputs() {
             [rng.uniform(-0.5, 0.5), rng.uniform(-1.5, 1.5)],
         );
         let u = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
-        let (z1, d) = l.step_derivatives_forced(&z, &u, &mut ws).unwrap();
-        assert_eq!(z1, l.step_mean_forced_with(&z, &u, &mut ws).unwrap());
+        let up = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
+        let (z1, d, dp) = l.step_derivatives_forced(&z, &up, &u, &mut ws).unwrap();
+        assert_eq!(z1, l.step_mean_forced_with(&z, &up, &u, &mut ws).unwrap());
         let mut ws2 = l.workspace();
         let mut err = 0.0f64;
         let mut scale = 0.0f64;
@@ -1190,7 +1196,7 @@ fn learned_integrator_takes_inputs() {
                     } else {
                         zp.v[j] += e;
                     }
-                    l.step_mean_forced_with(&zp, &u, &mut ws2).unwrap()
+                    l.step_mean_forced_with(&zp, &up, &u, &mut ws2).unwrap()
                 });
                 let (aq, av) = if pos {
                     (
@@ -1208,15 +1214,29 @@ fn learned_integrator_takes_inputs() {
             }
         }
         let (dq, dv) = stencil(1e-3, |e| {
-            l.step_mean_forced_with(&z, &(u + SVector::<f64, 1>::new(e)), &mut ws2)
+            l.step_mean_forced_with(&z, &up, &(u + SVector::<f64, 1>::new(e)), &mut ws2)
                 .unwrap()
         });
         let eb = (d.b.q_u.column(0) - dq)
             .amax()
             .max((d.b.v_u.column(0) - dv).amax());
         let bscale = dv.amax();
-        println!("A err {:.2e}, B err {:.2e}", err / scale, eb / bscale);
-        worst = worst.max(err / scale).max(eb / bscale);
+        // ∂z₁/∂u_prev: the truth does not depend on u_prev, so the GP's
+        // dependence is small; compare against the whole of B's scale
+        let (pq, pv) = stencil(1e-3, |e| {
+            l.step_mean_forced_with(&z, &(up + SVector::<f64, 1>::new(e)), &u, &mut ws2)
+                .unwrap()
+        });
+        let ep = (dp.q_u.column(0) - pq)
+            .amax()
+            .max((dp.v_u.column(0) - pv).amax());
+        println!(
+            "A err {:.2e}, B err {:.2e}, B_prev err {:.2e}",
+            err / scale,
+            eb / bscale,
+            ep / bscale
+        );
+        worst = worst.max(err / scale).max(eb / bscale).max(ep / bscale);
     }
     println!("learned step derivatives: worst relative error {worst:.1e}");
     assert!(worst <= 1e-6, "{worst:e}");
@@ -1244,18 +1264,28 @@ fn learned_integrator_takes_inputs() {
         vigp::Integrator::step_forced(&l, &z, &zero).unwrap()
     );
     assert_eq!(
-        l.step_mean_forced_with(&z, &none, &mut ws).unwrap(),
+        l.step_mean_forced_with(&z, &none, &none, &mut ws).unwrap(),
         l.step_mean_with(&z, &mut ws).unwrap()
     );
     assert_eq!(
-        l.predict_velocity_forced(&z, &none, &mut ws).unwrap(),
-        l.predict_velocity_forced(&z, &zero, &mut ws).unwrap()
+        l.predict_velocity_forced(&z, &none, &none, &mut ws)
+            .unwrap(),
+        l.predict_velocity_forced(&z, &zero, &zero, &mut ws)
+            .unwrap()
     );
-    let (z0, d0) = l.step_derivatives_forced(&z, &none, &mut ws).unwrap();
-    let (z1, d1) = l.step_derivatives_forced(&z, &zero, &mut ws).unwrap();
+    let (z0, d0, _) = l
+        .step_derivatives_forced(&z, &none, &none, &mut ws)
+        .unwrap();
+    let (z1, d1, _) = l
+        .step_derivatives_forced(&z, &zero, &zero, &mut ws)
+        .unwrap();
     assert_eq!((z0, d0.a.matrix::<4>()), (z1, d1.a.matrix::<4>()));
-    let r0 = l.rollout_forced_with_info(&z, &[none; 5], &mut ws).unwrap();
-    let r1 = l.rollout_forced_with_info(&z, &[zero; 5], &mut ws).unwrap();
+    let r0 = l
+        .rollout_forced_with_info(&z, &none, &[none; 5], &mut ws)
+        .unwrap();
+    let r1 = l
+        .rollout_forced_with_info(&z, &zero, &[zero; 5], &mut ws)
+        .unwrap();
     assert_eq!(r0.len(), 5);
     for ((s0, i0), (s1, i1)) in r0.iter().zip(&r1) {
         assert_eq!((s0, i0.std_dev), (s1, i1.std_dev));
@@ -1321,8 +1351,8 @@ fn learned_step_derivatives_of_the_paper_systems() {
                 q: SVector::from_fn(|_, _| rng.uniform(-0.8, 0.8)),
                 v: SVector::from_fn(|_, _| rng.uniform(-1.0, 1.0)),
             };
-            let (z1, d) = l.step_derivatives_forced(&z, &u, &mut ws).unwrap();
-            assert_eq!(z1, l.step_mean_forced_with(&z, &u, &mut ws).unwrap());
+            let (z1, d, _) = l.step_derivatives_forced(&z, &u, &u, &mut ws).unwrap();
+            assert_eq!(z1, l.step_mean_forced_with(&z, &u, &u, &mut ws).unwrap());
             worst = worst.max(learned_a_error(&l, &z, &d, eps, &mut ws2));
         }
         println!("{name}: learned A, worst relative error {worst:.1e}");
@@ -1419,8 +1449,10 @@ fn projected_learned_step_derivatives_match_differences() {
                 q: q[k],
                 v: (q[k + 1] - q[k]) / dt,
             };
-            let (z1, d) = l.step_derivatives_forced(&z, &u, &mut ws).unwrap();
-            assert!((z1.v - l.step_mean_forced_with(&z, &u, &mut ws).unwrap().v).amax() < 1e-12);
+            let (z1, d, _) = l.step_derivatives_forced(&z, &u, &u, &mut ws).unwrap();
+            assert!(
+                (z1.v - l.step_mean_forced_with(&z, &u, &u, &mut ws).unwrap().v).amax() < 1e-12
+            );
             worst = worst.max(learned_a_error(&l, &z, &d, eps, &mut ws2));
         }
         println!("{name}: projected learned A, worst relative error {worst:.1e}");
@@ -1504,7 +1536,7 @@ fn learned_a_error<M: Mechanism<N, C> + Clone, const N: usize, const C: usize>(
                 } else {
                     zp.v[j] += e;
                 }
-                l.step_mean_forced_with(&zp, &u, ws).unwrap()
+                l.step_mean_forced_with(&zp, &u, &u, ws).unwrap()
             });
             let (aq, av) = if pos {
                 (d.a.q_q.column(j), d.a.v_q.column(j))

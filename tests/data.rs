@@ -565,7 +565,8 @@ fn resampling_at_the_logging_rate_holds_each_rows_own_input() {
 }
 
 /// `Dataset::forced_transitions` pairs each transition with the input of
-/// its step (row k+1's, as `Run::step_input`), equal to
+/// its step (row k+1's, as `Run::step_input`) and the previous input (row
+/// k's, which produced the state's velocity), equal to
 /// `learned::forced_transitions` on the run's arrays; asked for another
 /// input count it is a typed error.
 #[test]
@@ -588,9 +589,11 @@ fn forced_transitions_take_each_steps_input() {
     for (k, t) in f.iter().enumerate() {
         assert_eq!(t.z, r.state(k).unwrap());
         assert_eq!(t.u.as_slice(), r.step_input(k).unwrap());
+        assert_eq!(t.u_prev.as_slice(), r.inputs[k].as_slice());
         assert_eq!(t.v_next, r.state(k + 1).unwrap().v);
     }
     assert_eq!(f[0].u.as_slice(), &[2.0, 0.6]);
+    assert_eq!(f[0].u_prev.as_slice(), &[1.0, 0.5]);
     let us: Vec<SVector<f64, 2>> = r
         .inputs
         .iter()

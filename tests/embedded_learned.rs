@@ -469,8 +469,9 @@ fn forced_data<M: Mechanism<N, C> + Copy, const N: usize, const C: usize, const 
 }
 
 /// Forced steps and rollouts of the embedded stepper against the std
-/// learned forced mean step, at `tests` states with random inputs and along
-/// a 30-step rollout under a random input sequence: max |difference|.
+/// learned forced mean step, at states with random previous and current
+/// inputs and along a 30-step rollout under a random input sequence after
+/// a random previous input: max |difference|.
 /// Also: the unforced `step` of both is the forced step under u = 0 (bit
 /// for bit on the embedded side), the input changes the step, and the
 /// forced rollout does not allocate.
@@ -489,10 +490,21 @@ where
     let inputs: Vec<SVector<f64, U>> = (0..30)
         .map(|_| SVector::from_fn(|_, _| rng.uniform(-amp, amp)))
         .collect();
+    let u_prev = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-amp, amp));
     let mut reference = vec![*z0; 30];
-    l.rollout_forced_into(z0, &inputs, &mut reference).unwrap();
+    l.rollout_mean_forced_into(z0, &u_prev, &inputs, &mut reference)
+        .unwrap();
     let mut out = [*z0; 30];
-    embedded.rollout_forced_into(z0, &inputs, &mut out).unwrap();
+    embedded
+        .rollout_forced_into(z0, &u_prev, &inputs, &mut out)
+        .unwrap();
+    // the Integrator trait's rollout takes the first input as the previous
+    let mut held = vec![*z0; 30];
+    l.rollout_forced_into(z0, &inputs, &mut held).unwrap();
+    let mut explicit = vec![*z0; 30];
+    l.rollout_mean_forced_into(z0, &inputs[0], &inputs, &mut explicit)
+        .unwrap();
+    assert_eq!(held, explicit);
     let diff = |a: &State<N>, b: &State<N>| (a.q - b.q).amax().max((a.v - b.v).amax());
     let mut worst = reference
         .iter()
@@ -502,36 +514,34 @@ where
     // single steps from the states of the rollout, under fresh inputs
     for z in out.iter().step_by(3) {
         let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-amp, amp));
-        let a = l.step_mean_forced_with(z, &u, &mut ws).unwrap();
-        let b = embedded.step_forced(z, &u).unwrap();
+        let up = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-amp, amp));
+        let a = l.step_mean_forced_with(z, &up, &u, &mut ws).unwrap();
+        let b = embedded.step_forced(z, &up, &u).unwrap();
         worst = worst.max(diff(&a, &b));
         // the input is used
         let free = embedded.step(z).unwrap();
         assert!((free.v - b.v).amax() > 1e-6, "{free:?} {b:?}");
         // unforced step = forced step under u = 0, on both sides
-        assert_eq!(
-            free,
-            embedded
-                .step_forced(z, &SVector::<f64, U>::zeros())
-                .unwrap()
-        );
+        let zero = SVector::<f64, U>::zeros();
+        assert_eq!(free, embedded.step_forced(z, &zero, &zero).unwrap());
         // U = 0 is "no input" (u = 0), as for the nominal `Stepper`
         let none = SVector::<f64, 0>::zeros();
-        assert_eq!(free, embedded.step_forced(z, &none).unwrap());
+        assert_eq!(free, embedded.step_forced(z, &none, &none).unwrap());
         let std_free = l.step_mean_with(z, &mut ws).unwrap();
         assert_eq!(
             std_free,
-            l.step_mean_forced_with(z, &SVector::<f64, U>::zeros(), &mut ws)
-                .unwrap()
+            l.step_mean_forced_with(z, &zero, &zero, &mut ws).unwrap()
         );
         assert_eq!(
             std_free,
-            l.step_mean_forced_with(z, &none, &mut ws).unwrap()
+            l.step_mean_forced_with(z, &none, &none, &mut ws).unwrap()
         );
         worst = worst.max(diff(&std_free, &free));
     }
     let info = allocation_counter::measure(|| {
-        embedded.rollout_forced_into(z0, &inputs, &mut out).unwrap();
+        embedded
+            .rollout_forced_into(z0, &u_prev, &inputs, &mut out)
+            .unwrap();
     });
     assert_eq!(info.count_total, 0, "the forced embedded step allocated");
     worst
@@ -576,19 +586,21 @@ fn forced_learned_stepper_equals_the_std_forced_step() {
         let o = owned(&l);
         let worst = match encoding {
             Encoding::SinCos => {
-                let gps: [ExportedGp<'_, 6>; 2] =
+                // D = 5 (encoded state) + 2 (previous and current input)
+                let gps: [ExportedGp<'_, 7>; 2] =
                     core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
                 let lm = core_model(&l, &o, &gps);
                 assert_eq!(lm.inputs, ["rail"]);
                 let stepper = LearnedStepper::new(DriveCartpole::default(), &lm).unwrap();
-                compare_forced::<_, _, 2, 0, 6, 1>(&l, &stepper, &z0, 3.0, &mut rng)
+                assert!(stepper.takes_previous_input());
+                compare_forced::<_, _, 2, 0, 7, 1>(&l, &stepper, &z0, 3.0, &mut rng)
             }
             Encoding::Raw => {
-                let gps: [ExportedGp<'_, 5>; 2] =
+                let gps: [ExportedGp<'_, 6>; 2] =
                     core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
                 let lm = core_model(&l, &o, &gps);
                 let stepper = LearnedStepper::new(DriveCartpole::default(), &lm).unwrap();
-                compare_forced::<_, _, 2, 0, 5, 1>(&l, &stepper, &z0, 3.0, &mut rng)
+                compare_forced::<_, _, 2, 0, 6, 1>(&l, &stepper, &z0, 3.0, &mut rng)
             }
         };
         eprintln!("forced cartpole ({encoding:?}, {prior:?}): max |std − embedded| = {worst:.2e}");
@@ -619,23 +631,25 @@ fn forced_learned_stepper_equals_the_std_forced_step() {
         let o = owned(&l);
         let worst = match encoding {
             Encoding::Raw => {
-                let gps: [ExportedGp<'_, 10>; 4] =
+                let gps: [ExportedGp<'_, 12>; 4] =
                     core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
                 let lm = core_model(&l, &o, &gps);
                 assert_eq!(lm.inputs, ["top1", "bottom"]);
                 let stepper = LearnedStepper::new(DriveFourbar::default(), &lm).unwrap();
-                compare_forced::<_, _, 4, 2, 10, 2>(&l, &stepper, &z0, 1.0, &mut rng)
+                compare_forced::<_, _, 4, 2, 12, 2>(&l, &stepper, &z0, 1.0, &mut rng)
             }
             Encoding::SinCos => {
-                let gps: [ExportedGp<'_, 14>; 4] =
+                let gps: [ExportedGp<'_, 16>; 4] =
                     core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
                 let lm = core_model(&l, &o, &gps);
                 let stepper = LearnedStepper::new(DriveFourbar::default(), &lm).unwrap();
-                let w = compare_forced::<_, _, 4, 2, 14, 2>(&l, &stepper, &z0, 1.0, &mut rng);
+                let w = compare_forced::<_, _, 4, 2, 16, 2>(&l, &stepper, &z0, 1.0, &mut rng);
                 // the projected forced rollout stays on the loop
                 let mut out = [z0; 30];
                 let inputs = [SVector::from([0.5, -0.5]); 30];
-                stepper.rollout_forced_into(&z0, &inputs, &mut out).unwrap();
+                stepper
+                    .rollout_forced_into(&z0, &inputs[0], &inputs, &mut out)
+                    .unwrap();
                 let viol = out
                     .iter()
                     .map(|z| nominal.minimal().constraint_violation(z))
@@ -678,10 +692,10 @@ fn forced_models_that_do_not_fit_are_refused() {
     )
     .unwrap();
     let o = owned(&l);
-    let gps: [ExportedGp<'_, 5>; 2] = core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
+    let gps: [ExportedGp<'_, 6>; 2] = core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
     let lm = core_model(&l, &o, &gps);
     let refused =
-        |m: &LearnedModel<'_, 2, 5>| LearnedStepper::new(DriveCartpole::default(), m).err();
+        |m: &LearnedModel<'_, 2, 6>| LearnedStepper::new(DriveCartpole::default(), m).err();
     assert_eq!(refused(&lm), None);
     assert_eq!(
         refused(&LearnedModel {
@@ -700,12 +714,12 @@ fn forced_models_that_do_not_fit_are_refused() {
             got: 2
         })
     );
-    // without its inputs the model's GPs take one number too many
+    // without its inputs the model's GPs take two numbers too many
     assert_eq!(
         refused(&LearnedModel { inputs: &[], ..lm }),
         Some(LearnedError::InputDimension {
             expected: 4,
-            got: 5
+            got: 6
         })
     );
     // the unactuated cart-pole has no input to give
@@ -730,22 +744,36 @@ fn forced_models_that_do_not_fit_are_refused() {
     let stepper = LearnedStepper::new(DriveCartpole::default(), &lm).unwrap();
     let z = data[5].z;
     for bad in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY] {
+        let ok = SVector::from([0.5]);
         assert_eq!(
-            stepper.step_forced(&z, &SVector::from([bad])),
+            stepper.step_forced(&z, &ok, &SVector::from([bad])),
             Err(LearnedError::Step(StepError::NonFiniteInput))
         );
-        let mut inputs = [SVector::from([0.5]); 10];
+        assert_eq!(
+            stepper.step_forced(&z, &SVector::from([bad]), &ok),
+            Err(LearnedError::Step(StepError::NonFiniteInput))
+        );
+        let mut inputs = [ok; 10];
         inputs[4] = SVector::from([bad]);
         let mut out = [z; 10];
         assert_eq!(
-            stepper.rollout_forced_into(&z, &inputs, &mut out),
+            stepper.rollout_forced_into(&z, &ok, &inputs, &mut out),
             Err((4, LearnedError::Step(StepError::NonFiniteInput)))
+        );
+        assert_eq!(
+            stepper.rollout_forced_into(&z, &SVector::from([bad]), &[ok; 10], &mut out),
+            Err((0, LearnedError::Step(StepError::NonFiniteInput)))
         );
         assert!(out.iter().all(|s| s.is_finite()));
     }
     let mut out = [z; 10];
     assert_eq!(
-        stepper.rollout_forced_into(&z, &[SVector::from([0.5]); 9], &mut out),
+        stepper.rollout_forced_into(
+            &z,
+            &SVector::from([0.5]),
+            &[SVector::from([0.5]); 9],
+            &mut out
+        ),
         Err((9, LearnedError::Step(StepError::NonFiniteInput)))
     );
     assert!(out.iter().all(|s| *s == z), "stepped before failing");
@@ -773,12 +801,13 @@ fn forced_models_that_do_not_fit_are_refused() {
     let lm0 = core_model(&l0, &o0, &gps0);
     assert!(lm0.inputs.is_empty());
     let s0 = LearnedStepper::new(DriveCartpole::default(), &lm0).unwrap();
+    let zero = SVector::from([0.0]);
     assert_eq!(
-        s0.step_forced(&z, &SVector::from([0.0])).unwrap(),
+        s0.step_forced(&z, &zero, &zero).unwrap(),
         s0.step(&z).unwrap()
     );
     assert_eq!(
-        s0.step_forced(&z, &SVector::from([1.0])),
+        s0.step_forced(&z, &zero, &SVector::from([1.0])),
         Err(LearnedError::NoInputs)
     );
     // as the std side: u = 0 is the unforced step, anything else refused
@@ -799,25 +828,33 @@ mod exported_forced {
     include!("fixtures/learned_drive_cartpole.rs");
 }
 
-/// The exported forced model compiles, records its input, and its forced
-/// rollout equals the std model loaded from the JSON it was exported from
-/// (1e-12, as above), without allocating.
-#[test]
-fn exported_forced_source_matches_the_model_file() {
-    use vigp::learned::Learned;
-    let json = include_str!("fixtures/learned_drive_cartpole.json");
-    let l: Learned<_, 2, 0> = Learned::from_json(DriveCartpole::default().minimal(), json).unwrap();
-    assert_eq!(l.inputs(), 1);
-    assert_eq!(exported_forced::LEARNED.inputs, ["rail"]);
-    let stepper = LearnedStepper::new(DriveCartpole::default(), &exported_forced::LEARNED).unwrap();
+/// A model file and its export in the GP input layout (enc(z), u), without
+/// the previous input (`previous_input` absent from the file): the format
+/// every such file keeps loading as.
+#[allow(dead_code)]
+mod exported_forced_enc_u {
+    include!("fixtures/learned_drive_cartpole_enc_u.rs");
+}
+
+/// 30 std and embedded forced steps of `l` and `stepper` from one state
+/// after `u_prev`: max |difference| (and the embedded rollout does not
+/// allocate).
+fn fixture_rollouts<M: Mechanism<2, 0> + Clone, const D: usize>(
+    l: &Learned<M, 2, 0>,
+    stepper: &LearnedStepper<'_, DriveCartpole, 2, 0, D>,
+    u_prev: &SVector<f64, 1>,
+) -> ([State<2>; 30], f64) {
     let z0 = State::new([0.05, 0.4], [0.1, -0.3]);
     let inputs: [SVector<f64, 1>; 30] =
         core::array::from_fn(|k| SVector::from([2.0 * (0.3 * k as f64).sin()]));
     let mut reference = [z0; 30];
-    l.rollout_forced_into(&z0, &inputs, &mut reference).unwrap();
+    l.rollout_mean_forced_into(&z0, u_prev, &inputs, &mut reference)
+        .unwrap();
     let mut out = [z0; 30];
     let info = allocation_counter::measure(|| {
-        stepper.rollout_forced_into(&z0, &inputs, &mut out).unwrap();
+        stepper
+            .rollout_forced_into(&z0, u_prev, &inputs, &mut out)
+            .unwrap();
     });
     assert_eq!(info.count_total, 0);
     let diff = reference
@@ -825,10 +862,70 @@ fn exported_forced_source_matches_the_model_file() {
         .zip(&out)
         .map(|(a, b)| (a.q - b.q).amax().max((a.v - b.v).amax()))
         .fold(0.0, f64::max);
-    eprintln!("exported forced fixture: max |std − embedded| over 30 steps = {diff:.2e}");
-    assert!(diff <= 1e-12, "{diff:e}");
     // the input drives the prediction
     let mut free = [z0; 30];
     stepper.rollout_into(&z0, &mut free).unwrap();
     assert!((free[29].q - out[29].q).amax() > 1e-3);
+    (out, diff)
+}
+
+/// The exported forced model compiles, records its input, takes the
+/// previous input (D = 5 + 2), and its forced rollout equals the std model
+/// loaded from the JSON it was exported from (1e-12, as above), without
+/// allocating.
+#[test]
+fn exported_forced_source_matches_the_model_file() {
+    let json = include_str!("fixtures/learned_drive_cartpole.json");
+    let l: Learned<_, 2, 0> = Learned::from_json(DriveCartpole::default().minimal(), json).unwrap();
+    assert_eq!(l.inputs(), 1);
+    assert!(l.takes_previous_input());
+    assert!(json.contains("\"previous_input\": true"));
+    assert_eq!(exported_forced::LEARNED.inputs, ["rail"]);
+    let stepper = LearnedStepper::new(DriveCartpole::default(), &exported_forced::LEARNED).unwrap();
+    assert!(stepper.takes_previous_input());
+    let (a, diff) = fixture_rollouts(&l, &stepper, &SVector::from([0.0]));
+    eprintln!("exported forced fixture: max |std − embedded| over 30 steps = {diff:.2e}");
+    assert!(diff <= 1e-12, "{diff:e}");
+    let (b, diff) = fixture_rollouts(&l, &stepper, &SVector::from([2.0]));
+    assert!(diff <= 1e-12, "{diff:e}");
+    // the previous input enters the first step
+    assert!((a[0].v - b[0].v).amax() > 0.0);
+}
+
+/// A model file without `previous_input` (GP input (enc(z), u)) loads as
+/// that layout on both sides: D = 5 + 1, the previous input is ignored,
+/// and std and embedded agree to 1e-12.
+#[test]
+fn forced_model_files_without_the_previous_input_load_as_their_layout() {
+    let json = include_str!("fixtures/learned_drive_cartpole_enc_u.json");
+    assert!(!json.contains("previous_input"));
+    let l: Learned<_, 2, 0> = Learned::from_json(DriveCartpole::default().minimal(), json).unwrap();
+    assert_eq!(l.inputs(), 1);
+    assert!(!l.takes_previous_input());
+    assert_eq!(l.gp().input_dim(), 6);
+    let stepper =
+        LearnedStepper::new(DriveCartpole::default(), &exported_forced_enc_u::LEARNED).unwrap();
+    assert!(!stepper.takes_previous_input());
+    let (a, diff) = fixture_rollouts(&l, &stepper, &SVector::from([0.0]));
+    eprintln!("exported (enc(z), u) fixture: max |std − embedded| over 30 steps = {diff:.2e}");
+    assert!(diff <= 1e-12, "{diff:e}");
+    let (b, _) = fixture_rollouts(&l, &stepper, &SVector::from([2.0]));
+    assert_eq!(a, b);
+    // the file saves back in its own layout
+    let back = l.to_json();
+    assert!(!back.contains("previous_input"));
+    let again: Learned<_, 2, 0> =
+        Learned::from_json(DriveCartpole::default().minimal(), &back).unwrap();
+    assert!(!again.takes_previous_input());
+    // and claiming the previous input for it is a typed error naming the GP
+    // input dimension
+    let claimed = json.replacen(
+        "\"inputs\": [",
+        "\"previous_input\": true,\n  \"inputs\": [",
+        1,
+    );
+    let e = Learned::<_, 2, 0>::from_json(DriveCartpole::default().minimal(), &claimed)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("gp.input_dim"), "{e}");
 }

@@ -442,7 +442,8 @@ fn a_forced_learned_spatial_model_follows_a_driven_arm() {
         LearnedSpatial::train_forced(n_step, &data, Rotation::Matrix, Prior::Nominal, &options())
             .unwrap();
     assert_eq!(learned.inputs(), 2);
-    assert_eq!(learned.gp().input_dim(), Rotation::Matrix.input_dim(2) + 2);
+    // the encoded state, then the previous and the current input
+    assert_eq!(learned.gp().input_dim(), Rotation::Matrix.input_dim(2) + 4);
 
     let horizon = 30;
     let tests = 10;
@@ -456,7 +457,9 @@ fn a_forced_learned_spatial_model_follows_a_driven_arm() {
         let pred = learned.rollout_forced(&z0, &inputs).unwrap();
         let mut z = z0;
         for (k, u) in inputs.iter().enumerate() {
-            z = learned.step_forced_with(&z, u, &mut ws).unwrap();
+            // the rollout takes its first input as held across the start
+            let up = &inputs[k.saturating_sub(1)];
+            z = learned.step_forced_with(&z, up, u, &mut ws).unwrap();
             assert!(same_state(&z, &pred[k + 1]), "rollout_forced step {k}");
             assert!(t_step.constraint_violation(&z) <= 1e-10);
             assert!(z.norm_error() <= 1e-14);
@@ -574,7 +577,7 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     let (mut z, u) = (z0, SVector::from([0.4, -0.2]));
     let info = allocation_counter::measure(|| {
         for _ in 0..10 {
-            z = forced.step_forced_with(&z, &u, &mut ws).unwrap();
+            z = forced.step_forced_with(&z, &u, &u, &mut ws).unwrap();
         }
     });
     assert_eq!(info.count_total, 0, "forced learned spatial step allocated");
@@ -591,12 +594,14 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     ));
     assert!(matches!(forced.step(&z0), Err(SpatialError::Learn(_))));
     let nan = SVector::from([f64::NAN, 0.0]);
-    assert!(matches!(
-        forced.step_forced_with(&z0, &nan, &mut ws),
-        Err(LearnSpatialError::Step(
-            vigp::embedded::StepError::NonFiniteInput
-        ))
-    ));
+    for (up, u) in [(&u, &nan), (&nan, &u)] {
+        assert!(matches!(
+            forced.step_forced_with(&z0, up, u, &mut ws),
+            Err(LearnSpatialError::Step(
+                vigp::embedded::StepError::NonFiniteInput
+            ))
+        ));
+    }
     let mut inputs = vec![SVector::from([0.5, -0.5]); 5];
     inputs[3] = nan;
     assert!(matches!(
@@ -608,6 +613,12 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     assert!(matches!(
         LearnedSpatial::train_forced(n_step, &bad, Rotation::Matrix, Prior::Nominal, &opts),
         Err(LearnSpatialError::NonFinite(4))
+    ));
+    let mut bad = data.clone();
+    bad[6].u_prev[0] = f64::NAN;
+    assert!(matches!(
+        LearnedSpatial::train_forced(n_step, &bad, Rotation::Matrix, Prior::Nominal, &opts),
+        Err(LearnSpatialError::NonFinite(6))
     ));
     // a quaternion of norm 2 (new_unchecked on unnormalised data) is named,
     // not left to fail as a projection's line search
@@ -623,13 +634,13 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     let mut long = z0;
     long.q[1] = nalgebra::UnitQuaternion::new_unchecked(z0.q[1].into_inner() * 1.01);
     assert!(matches!(
-        forced.step_forced_with(&long, &u, &mut ws),
+        forced.step_forced_with(&long, &u, &u, &mut ws),
         Err(LearnSpatialError::Step(
             vigp::embedded::StepError::NonUnitQuaternion { link: 1, .. }
         ))
     ));
     assert!(matches!(
-        forced.predict_velocity_forced(&long, &u, &mut ws),
+        forced.predict_velocity_forced(&long, &u, &u, &mut ws),
         Err(LearnSpatialError::Step(
             vigp::embedded::StepError::NonUnitQuaternion { link: 1, .. }
         ))
@@ -654,7 +665,12 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
         ))
     ));
     assert!(matches!(
-        unforced.predict_velocity_forced(&z0, &SVector::from([0.1, 0.0]), &mut ws),
+        unforced.predict_velocity_forced(
+            &z0,
+            &SVector::from([0.1, 0.0]),
+            &SVector::from([0.1, 0.0]),
+            &mut ws
+        ),
         Err(LearnSpatialError::Inputs {
             trained: 0,
             given: 2
@@ -922,6 +938,8 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
     };
     for (i, logged) in cal_inputs.iter().enumerate().take(50) {
         assert_eq!(cal.window_inputs::<2>(i).unwrap(), logged[1..].to_vec());
+        // the previous input: the one logged with the start's sample
+        assert_eq!(cal.window_previous_input::<2>(i).unwrap(), logged[0]);
     }
     // the start's velocities are differences of configurations (rounding
     // ≈ 1e-16/Δt), which ten steps of the dynamics amplify: 1e-10, against
@@ -942,13 +960,15 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
             .map(|(c, u)| {
                 // the start as the data give it (velocities from samples 0, 1)
                 let z0 = transitions(&c[..3], dt)[0].z;
-                let us: Vec<SVector<f64, 2>> = if zero {
-                    vec![SVector::zeros(); horizon]
+                let (up, us): (SVector<f64, 2>, Vec<SVector<f64, 2>>) = if zero {
+                    (SVector::zeros(), vec![SVector::zeros(); horizon])
                 } else {
-                    u[1..].to_vec()
+                    (u[0], u[1..].to_vec())
                 };
                 (
-                    learned.predict_bounded_forced(&z0, &us, &bound).unwrap(),
+                    learned
+                        .predict_bounded_forced(&z0, &up, &us, &bound)
+                        .unwrap(),
                     c.clone(),
                 )
             })
@@ -989,7 +1009,10 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
                 if beyond {
                     us[0][0] = us[0][0].signum() * (3.0 + us[0][0].abs());
                 }
-                learned.predict_bounded_forced(&z0, &us, &bound).unwrap()[0].outside
+                learned
+                    .predict_bounded_forced(&z0, &u[0], &us, &bound)
+                    .unwrap()[0]
+                    .outside
             })
             .count() as f64
             / test_runs.len() as f64
@@ -1073,7 +1096,7 @@ fn spatial_bound_misuse_is_a_typed_error() {
     assert!(plain.predict_bounded(&z0, horizon, &pb).is_ok());
     assert!(
         forced
-            .predict_bounded_forced(&z0, &logged[1..=horizon], &bound)
+            .predict_bounded_forced(&z0, &logged[0], &logged[1..=horizon], &bound)
             .is_ok()
     );
     assert!(matches!(
@@ -1081,7 +1104,7 @@ fn spatial_bound_misuse_is_a_typed_error() {
         Err(LearnSpatialError::Bound(BoundError::Mismatch(_)))
     ));
     assert!(matches!(
-        forced.predict_bounded_forced(&z0, &logged[1..=horizon + 1], &bound),
+        forced.predict_bounded_forced(&z0, &logged[0], &logged[1..=horizon + 1], &bound),
         Err(LearnSpatialError::Bound(BoundError::HorizonTooLong {
             calibrated: 4,
             requested: 5
@@ -1089,14 +1112,23 @@ fn spatial_bound_misuse_is_a_typed_error() {
     ));
     // no steps: the start alone, bounds 0
     let alone = forced
-        .predict_bounded_forced::<2>(&z0, &[], &bound)
+        .predict_bounded_forced::<2>(&z0, &logged[0], &[], &bound)
         .unwrap();
     assert_eq!(alone.len(), 1);
     assert_eq!((alone[0].translation, alone[0].rotation), (0.0, 0.0));
     assert_eq!(plain.predict_bounded(&z0, 0, &pb).unwrap().len(), 1);
     let mut nan = logged[1..=horizon].to_vec();
     nan[2][0] = f64::NAN;
-    assert!(forced.predict_bounded_forced(&z0, &nan, &bound).is_err());
+    assert!(
+        forced
+            .predict_bounded_forced(&z0, &logged[0], &nan, &bound)
+            .is_err()
+    );
+    assert!(
+        forced
+            .predict_bounded_forced(&z0, &nan[2], &logged[1..=horizon], &bound)
+            .is_err()
+    );
     // a bound edited or loaded from a file (its fields are public and it
     // is serde): short quantiles, NaN or negative constants, a region of
     // another input dimension are typed errors, never a panic or a NaN

@@ -410,7 +410,7 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
     .unwrap();
     let out = String::from_utf8(out).unwrap();
     assert!(
-        out.contains("d = 6 inputs (state, then control inputs rail)"),
+        out.contains("d = 7 inputs (state, then control inputs rail, previous then current)"),
         "{out}"
     );
     assert_eq!(
@@ -444,7 +444,9 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
         for run in runs {
             let mut z = State::new([rng.uniform(-0.2, 0.2), rng.uniform(-0.6, 0.6)], [0.0, 0.0]);
             let mut u = SVector::<f64, 1>::zeros();
-            // row 0's input is never used (no step ends before t_0)
+            // row 0's input drives no step (no step ends before t_0); it is
+            // the first transition's previous input, on which this
+            // first-order truth's step does not depend
             let mut rows = vec![(z.q, 0.0)];
             for k in 0..80 {
                 if k % 10 == 0 {
@@ -482,7 +484,7 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     ])
     .unwrap();
     assert!(
-        fit.contains("with inputs [rail], SinCos encoding (6 inputs)"),
+        fit.contains("with inputs [rail], SinCos encoding (7 inputs)"),
         "{fit}"
     );
     let (nominal, learned) = mse_line(
@@ -508,7 +510,7 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     let rs = dir.join("drive.rs");
     let export = run(&["export", "--model", s(&model), "--out", s(&rs)]).unwrap();
     assert!(
-        export.contains("(state, then control inputs rail)"),
+        export.contains("(state, then control inputs rail, previous then current)"),
         "{export}"
     );
     // --noise-floor: the fitted noise variances (normalised units) sit at

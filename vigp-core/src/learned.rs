@@ -22,12 +22,24 @@
 //! A model trained with inputs on an actuated mechanism (the std runtime's
 //! `Learned::train_forced`) takes them in [`LearnedStepper::step_forced`]
 //! and [`LearnedStepper::rollout_forced_into`]: the GP input is the encoded
-//! state followed by u, (enc(z₀), u), and the nominal prior is the nominal
-//! forced step [`Stepper::step_forced`] under u, as in the std runtime:
+//! state followed by the previous and the current input,
+//! (enc(z₀), u_prev, u), and the nominal prior is the nominal forced step
+//! [`Stepper::step_forced`] under u, as in the std runtime:
 //!
 //! ```text
-//! v_u = v̄(z₀, u) + μ(enc(z₀), u)
+//! v_u = v̄(z₀, u) + μ(enc(z₀), u_prev, u)
 //! ```
+//!
+//! Here u is held over [t₁, t₂], the interval of the velocity the step
+//! predicts, and u_prev over [t₀, t₁], the interval of z₀'s velocity: under
+//! a zero-order-held input the true next discrete velocity depends on both
+//! (the std runtime's `vigp::learned`, "Under inputs"). A step takes u_prev
+//! explicitly; a rollout takes the input that produced z₀'s velocity and
+//! then runs step k under `inputs[k]` after `inputs[k − 1]`. A model
+//! exported with the GP input (enc(z₀), u) (from a model file without
+//! `previous_input`) has `D` = encoding + inputs instead of encoding +
+//! 2·inputs; [`LearnedStepper::new`] tells the two apart by `D`, and such a
+//! model ignores u_prev ([`LearnedStepper::takes_previous_input`]).
 //!
 //! The input count is a type-level fact: `U` must equal
 //! [`Dynamics::INPUTS`], or be 0 for no input (u = 0, as
@@ -111,7 +123,8 @@ pub enum Prior {
 
 /// A learned model as exported data (normally a `static` in a generated
 /// file). `N` coordinates, `D` GP inputs: the encoding's dimension plus
-/// the number of control inputs.
+/// twice the number of control inputs (previous, then current; once for a
+/// model with the GP input (enc(z), u), module docs "Inputs").
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LearnedModel<'a, const N: usize, const D: usize> {
     /// The mechanism's name (`Parameters::NAME`).
@@ -120,8 +133,8 @@ pub struct LearnedModel<'a, const N: usize, const D: usize> {
     pub coordinates: [&'a str; N],
     /// Names of the control inputs the GPs take after the encoded state
     /// (the actuated joints, in declaration order, as
-    /// [`Dynamics::INPUT_NAMES`]); empty for a model trained without
-    /// inputs.
+    /// [`Dynamics::INPUT_NAMES`]; the GPs take the previous values, then
+    /// the current ones); empty for a model trained without inputs.
     pub inputs: &'a [&'a str],
     /// Every parameter of the nominal model, by name.
     pub parameters: &'a [(&'a str, f64)],
@@ -150,7 +163,8 @@ pub enum LearnedError {
     /// The model has a parameter the mechanism does not (index into
     /// [`LearnedModel::parameters`]).
     UnknownParameter(usize),
-    /// `D` is not the encoding's dimension for this mechanism.
+    /// `D` is neither the encoding's dimension plus twice the model's
+    /// inputs nor plus once.
     InputDimension {
         /// The encoding's dimension.
         expected: usize,
@@ -247,7 +261,8 @@ where
     /// they are the prior the GPs were trained on). Checks the mechanism's
     /// name, every parameter name, the control inputs (none, or exactly the
     /// mechanism's, by name and order), the GP input dimension (encoding
-    /// plus inputs) and the options.
+    /// plus twice the inputs, or plus once for a model without the
+    /// previous input) and the options.
     pub fn new(mut model: M, learned: &'a LearnedModel<'a, N, D>) -> Result<Self, LearnedError> {
         if learned.mechanism != M::NAME {
             return Err(LearnedError::WrongMechanism);
@@ -284,9 +299,13 @@ where
                 return Err(LearnedError::UnknownInput(i));
             }
         }
-        let expected = learned.encoding.dim(&M::KINDS) + learned.inputs.len();
-        if expected != D {
-            return Err(LearnedError::InputDimension { expected, got: D });
+        let e = learned.encoding.dim(&M::KINDS);
+        let m = learned.inputs.len();
+        if D != e + 2 * m && D != e + m {
+            return Err(LearnedError::InputDimension {
+                expected: e + 2 * m,
+                got: D,
+            });
         }
         if learned.project && C == 0 {
             return Err(LearnedError::NothingToProject);
@@ -305,6 +324,15 @@ where
         self.learned
     }
 
+    /// Whether the GPs take the previous input, (enc(z), u_prev, u): a
+    /// model with inputs whose `D` is the encoding's dimension plus twice
+    /// the inputs. `false` without inputs and for a model exported with
+    /// the GP input (enc(z), u), whose steps ignore u_prev.
+    pub fn takes_previous_input(&self) -> bool {
+        !self.learned.inputs.is_empty()
+            && D == self.learned.encoding.dim(&M::KINDS) + 2 * self.learned.inputs.len()
+    }
+
     /// The unprojected prediction v_u = v̄(z) + μ(enc(z)) of the next
     /// velocity (for a model with inputs: under u = 0).
     pub fn predict_velocity(&self, z: &State<N>) -> Result<SVector<f64, N>, LearnedError> {
@@ -315,17 +343,19 @@ where
             Prior::Nominal => self.stepper.step(z)?.v,
             Prior::Constant => SVector::zeros(),
         };
-        self.add_gp_mean(z, &[], prior)
+        self.add_gp_mean(z, &[], &[], prior)
     }
 
-    /// The unprojected prediction v_u = v̄(z, u) + μ(enc(z), u) of the next
-    /// velocity under inputs `u` (module docs, "Inputs"). `U` must equal
+    /// The unprojected prediction v_u = v̄(z, u) + μ(enc(z), u_prev, u) of
+    /// the next velocity under inputs `u` after `u_prev`, the input that
+    /// produced z's velocity (module docs, "Inputs"). `U` must equal
     /// [`Dynamics::INPUTS`], or be 0 for no input (then this is
     /// [`predict_velocity`](Self::predict_velocity)); a `const` assertion:
     /// `cargo build` reports a wrong `U`.
     pub fn predict_velocity_forced<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
     ) -> Result<SVector<f64, N>, LearnedError> {
         const {
@@ -341,7 +371,7 @@ where
         if !z.is_finite() {
             return Err(StepError::NonFiniteState.into());
         }
-        if !u.iter().all(|x| x.is_finite()) {
+        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput.into());
         }
         if self.learned.inputs.is_empty() {
@@ -355,23 +385,31 @@ where
             Prior::Nominal => self.stepper.step_forced(z, u)?.v,
             Prior::Constant => SVector::zeros(),
         };
-        self.add_gp_mean(z, u.as_slice(), prior)
+        self.add_gp_mean(z, u_prev.as_slice(), u.as_slice(), prior)
     }
 
-    /// v + μ(enc(z), u): the GP input is the encoded state followed by `u`
-    /// (zeros where `u` is shorter than the model's inputs).
+    /// v + μ(enc(z), u_prev, u): the GP input is the encoded state
+    /// followed by `u_prev` (when the model takes it) and `u` (zeros where
+    /// they are empty).
     fn add_gp_mean(
         &self,
         z: &State<N>,
+        u_prev: &[f64],
         u: &[f64],
         mut v: SVector<f64, N>,
     ) -> Result<SVector<f64, N>, LearnedError> {
         let mut x = [0.0f64; D];
-        // `new` checked D = encoding dimension + inputs
-        let e = D.saturating_sub(self.learned.inputs.len());
+        let m = self.learned.inputs.len();
+        let previous = self.takes_previous_input();
+        // `new` checked D = encoding dimension + 2·inputs (or + inputs)
+        let e = D.saturating_sub(if previous { 2 * m } else { m });
         let (state, inputs) = x.split_at_mut(e);
         self.learned.encoding.encode(&M::KINDS, z, state);
-        for (xi, ui) in inputs.iter_mut().zip(u) {
+        let (before, current) = inputs.split_at_mut(if previous { m } else { 0 });
+        for (xi, ui) in before.iter_mut().zip(u_prev) {
+            *xi = *ui;
+        }
+        for (xi, ui) in current.iter_mut().zip(u) {
             *xi = *ui;
         }
         for (vi, gp) in v.iter_mut().zip(self.learned.gps.iter()) {
@@ -410,17 +448,20 @@ where
 
     /// One learned step from `z` under inputs `u` (one per actuated joint,
     /// in declaration order; `U` must equal [`Dynamics::INPUTS`], or 0 for
-    /// no input, checked when the code is built): GP input (enc(z), u), nominal prior the forced
-    /// step [`Stepper::step_forced`], projection for loops. Equal to the
-    /// std runtime's learned forced mean step to solver tolerance. NaN or
-    /// ±∞ in `u` is [`StepError::NonFiniteInput`]; a model trained without
-    /// inputs takes only u = 0 ([`LearnedError::NoInputs`]).
+    /// no input, checked when the code is built) after `u_prev`, the input
+    /// that produced z's velocity (module docs, "Inputs"): GP input
+    /// (enc(z), u_prev, u), nominal prior the forced step
+    /// [`Stepper::step_forced`], projection for loops. Equal to the std
+    /// runtime's learned forced mean step to solver tolerance. NaN or ±∞
+    /// in `u_prev` or `u` is [`StepError::NonFiniteInput`]; a model trained
+    /// without inputs takes only u = 0 ([`LearnedError::NoInputs`]).
     pub fn step_forced<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
     ) -> Result<State<N>, LearnedError> {
-        let vu = self.predict_velocity_forced(z, u)?;
+        let vu = self.predict_velocity_forced(z, u_prev, u)?;
         self.finish(z, vu)
     }
 
@@ -445,16 +486,17 @@ where
     }
 
     /// The states after 1, 2, …, `out.len()` forced steps from `z0`, step k
-    /// under `inputs[k]` (an MPC prediction along an input sequence), into
-    /// a caller-owned slice; each step is [`step_forced`](Self::step_forced)
-    /// (the learned step is a map of the state: no momentum is carried).
-    /// `inputs` must be at least as long as `out`: a shorter one fails at
-    /// step `inputs.len()` with [`StepError::NonFiniteInput`], before any
-    /// step. On failure returns the index of the failing step with the
-    /// error. No allocation.
+    /// under `inputs[k]` after `inputs[k − 1]`, the first after `u_prev`
+    /// (the input that produced z₀'s velocity; an MPC prediction along an
+    /// input sequence), into a caller-owned slice; each step is
+    /// [`step_forced`](Self::step_forced). `inputs` must be at least as
+    /// long as `out`: a shorter one fails at step `inputs.len()` with
+    /// [`StepError::NonFiniteInput`], before any step. On failure returns
+    /// the index of the failing step with the error. No allocation.
     pub fn rollout_forced_into<const U: usize>(
         &self,
         z0: &State<N>,
+        u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         out: &mut [State<N>],
     ) -> Result<(), (usize, LearnedError)> {
@@ -463,7 +505,8 @@ where
         }
         let mut z = *z0;
         for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
-            z = self.step_forced(&z, u).map_err(|e| (k, e))?;
+            let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+            z = self.step_forced(&z, up, u).map_err(|e| (k, e))?;
             *slot = z;
         }
         Ok(())

@@ -934,7 +934,8 @@ impl<const N: usize> Dataset<N> {
 
     /// Training transitions with their inputs (an actuated mechanism's
     /// data): transition k of a run is driven by [`Run::step_input`]`(k)`,
-    /// the input held over the interval of the new discrete velocity (see
+    /// the input held over the interval of the new discrete velocity, after
+    /// row k's input (its `u_prev`, which produced the state's velocity; see
     /// [`crate::learned::forced_transitions`]). `U` must be the number of
     /// input columns read ([`DataError::InputCount`] otherwise).
     pub fn forced_transitions<const U: usize>(

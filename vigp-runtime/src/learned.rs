@@ -6,6 +6,30 @@
 //! Positions are never learned: x_{k+1} = x_k + Δt·v_k is exact for discrete
 //! velocities, so training targets are v_{k+1} = (x_{k+2} − x_{k+1})/Δt from
 //! positions sampled at Δt ([`transitions`]).
+//!
+//! # Under inputs
+//!
+//! An actuated mechanism's data carry a zero-order-held input per sample:
+//! u_k acts over [t_k, t_{k+1}]. The discrete velocity v_{k+1} then depends
+//! on the state z_k = (x_k, v_k) *and on two inputs*: the one held over
+//! [t_k, t_{k+1}] (`u_prev`), which together with x_k and x_{k+1} fixes the
+//! true velocity at t_{k+1} (a two-point boundary problem of the continuous
+//! motion), and the one held over [t_{k+1}, t_{k+2}] (`u`), which carries
+//! the motion on to x_{k+2}. So the velocity map that is exact in structure
+//! for any truth (a continuous system, a higher-order integrator, a real
+//! robot) is v_{k+1} = f(z_k, u_prev, u), and a forced model's GP input is
+//! (enc(z_k), u_prev, u) ([`ForcedTransition`], [`Learned::train_forced`]).
+//! Only vigp's own first-order VI carries no `u_prev` (its velocity is the
+//! state), and the nominal prior is that VI's forced step under `u`.
+//!
+//! Every prediction of a forced model takes the previous input explicitly:
+//! a step from z_k takes `u_prev` (the input that produced v_k) and `u`;
+//! a rollout from z₀ takes the input that produced v₀ and the sequence
+//! `inputs`, step k running under `inputs[k]` after `inputs[k − 1]`. The
+//! [`Integrator`] trait's forced calls, which have no slot for it, take the
+//! input as held across the start: `step_forced(z, u)` is the step with
+//! `u_prev = u`, and `rollout_forced_into(z0, inputs, …)` starts with
+//! `u_prev = inputs[0]`.
 
 use crate::gp::{Gp, GpError, PriorMean, TrainOptions, TrainReport, Workspace};
 use crate::mechanism::{CoordinateKind, Mechanism, State};
@@ -116,12 +140,16 @@ pub struct Transition<const N: usize> {
 }
 
 /// One training pair of an actuated mechanism: a discrete state, the
-/// input that drove the step from it (held over the interval of the new
-/// discrete velocity, `vigp_core::forced`) and the next discrete velocity.
+/// input that produced its velocity, the input that drove the step from it
+/// (held over the interval of the new discrete velocity,
+/// `vigp_core::forced`) and the next discrete velocity (module docs,
+/// "Under inputs": the GP input is (enc(z), u_prev, u)).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ForcedTransition<const N: usize, const U: usize> {
     /// z_k = (x_k, v_k), v_k = (x_{k+1} − x_k)/Δt.
     pub z: State<N>,
+    /// The input over [t_k, t_{k+1}] (the one that produced v_k).
+    pub u_prev: SVector<f64, U>,
     /// The input over [t_{k+1}, t_{k+2}] (one per actuated joint).
     pub u: SVector<f64, U>,
     /// v_{k+1} = (x_{k+2} − x_{k+1})/Δt.
@@ -130,9 +158,10 @@ pub struct ForcedTransition<const N: usize, const U: usize> {
 
 /// Transitions of a trajectory of positions sampled every Δt with the
 /// input logged at each sample (held until the next): transition k is
-/// driven by `inputs[k + 1]` (see `vigp::data::Run::step_input`). K
-/// positions give K − 2 transitions; `inputs` must be as long as
-/// `positions` (shorter: fewer transitions).
+/// driven by `inputs[k + 1]` (see `vigp::data::Run::step_input`) after
+/// `inputs[k]` (its `u_prev`, the input that produced v_k). K positions
+/// give K − 2 transitions; `inputs` must be as long as `positions`
+/// (shorter: fewer transitions).
 pub fn forced_transitions<const N: usize, const U: usize>(
     positions: &[SVector<f64, N>],
     inputs: &[SVector<f64, U>],
@@ -140,13 +169,14 @@ pub fn forced_transitions<const N: usize, const U: usize>(
 ) -> Vec<ForcedTransition<N, U>> {
     positions
         .windows(3)
-        .zip(inputs.iter().skip(1))
+        .zip(inputs.windows(2))
         .map(|(w, u)| ForcedTransition {
             z: State {
                 q: w[0],
                 v: (w[1] - w[0]) / dt,
             },
-            u: *u,
+            u_prev: u[0],
+            u: u[1],
             v_next: (w[2] - w[1]) / dt,
         })
         .collect()
@@ -227,9 +257,14 @@ pub struct Learned<M: Mechanism<N, C>, const N: usize, const C: usize> {
     project: bool,
     gp: Gp,
     options: NewtonOptions,
-    /// Number of inputs appended to the GP input (0: trained without
+    /// Number of inputs of the mechanism the GP takes (0: trained without
     /// inputs, [`Learned::train`]; else [`Learned::train_forced`]).
     pub(crate) inputs: usize,
+    /// Whether the GP input carries the previous input before the current
+    /// one, (enc(z), u_prev, u) (every model from
+    /// [`Learned::train_forced`]), or only the current one, (enc(z), u) (a
+    /// model file without `previous_input`, [`SavedLearned`]).
+    pub(crate) previous_input: bool,
 }
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
@@ -249,6 +284,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             .iter()
             .map(|t| ForcedTransition {
                 z: t.z,
+                u_prev: SVector::zeros(),
                 u: SVector::zeros(),
                 v_next: t.v_next,
             })
@@ -259,9 +295,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// [`Learned::train`] for an actuated mechanism on transitions with
-    /// their inputs: the GP input is the encoded state followed by u, and
-    /// the nominal prior is the forced step under u. `U` must equal the
-    /// mechanism's `Dynamics::INPUTS`.
+    /// their inputs ([`forced_transitions`]): the GP input is the encoded
+    /// state followed by the previous and the current input,
+    /// (enc(z), u_prev, u) (module docs, "Under inputs"), and the nominal
+    /// prior is the forced step under u. `U` must equal the mechanism's
+    /// `Dynamics::INPUTS`.
     pub fn train_forced<const U: usize>(
         model: M,
         dt: f64,
@@ -276,7 +314,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Self::train_inputs(model, dt, data, encoding, prior, options, true, nominal)
     }
 
-    /// Training with the GP input = encoded state (+ u when `forced`) and
+    /// Training with the GP input = encoded state (+ u_prev, u when
+    /// `forced`) and
     /// the prior's next velocity `nominal(vi, z, u)` of the nominal
     /// first-order VI `vi` (default Newton options, built once here).
     #[allow(clippy::too_many_arguments)]
@@ -300,20 +339,21 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         vigp_core::step::check_time_step(dt).map_err(StepError::from)?;
         let u_dim = if forced { U } else { 0 };
         let e = encoding.dim(&M::KINDS);
-        let d = e + u_dim;
+        let d = e + 2 * u_dim;
         let mut inputs = vec![0.0; data.len() * d];
         let mut targets = Vec::with_capacity(data.len() * N);
         let prior_vi = Variational::new(model.clone(), dt);
         for (i, t) in data.iter().enumerate() {
             if !(t.z.is_finite()
                 && t.v_next.iter().all(|x| x.is_finite())
-                && t.u.iter().all(|x| x.is_finite()))
+                && t.u.iter().chain(t.u_prev.iter()).all(|x| x.is_finite()))
             {
                 return Err(LearnError::NonFinite(i));
             }
             encoding.encode(&M::KINDS, &t.z, &mut inputs[i * d..i * d + e]);
             if forced {
-                inputs[i * d + e..(i + 1) * d].copy_from_slice(t.u.as_slice());
+                inputs[i * d + e..i * d + e + U].copy_from_slice(t.u_prev.as_slice());
+                inputs[i * d + e + U..(i + 1) * d].copy_from_slice(t.u.as_slice());
             }
             let base = match prior {
                 // With constraints, a noisy state is off the manifold and the
@@ -351,6 +391,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 gp,
                 options,
                 inputs: u_dim,
+                previous_input: forced && U > 0,
             },
             report,
         ))
@@ -361,28 +402,69 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         self.inputs
     }
 
-    /// The unprojected mean prediction under inputs `u` (a model from
-    /// [`Learned::train_forced`]): v_u = forced prior(z, u) + μ(z, u).
+    /// Whether the GP takes the previous input, (enc(z), u_prev, u): `true`
+    /// for every model trained with inputs by [`Learned::train_forced`];
+    /// `false` without inputs, and for a model file written with the GP
+    /// input (enc(z), u) ([`SavedLearned::previous_input`]), whose
+    /// predictions ignore `u_prev`.
+    pub fn takes_previous_input(&self) -> bool {
+        self.previous_input
+    }
+
+    /// Number of GP input components after the encoded state.
+    fn input_tail(&self) -> usize {
+        if self.previous_input {
+            2 * self.inputs
+        } else {
+            self.inputs
+        }
+    }
+
+    /// Writes the GP input of a step from `z` after `u_prev` under `u`
+    /// into `out` (length `gp().input_dim()`): the encoded state, then
+    /// u_prev (when the model takes it) and u; empty `u_prev` and `u` (or
+    /// a model without inputs) leave zeros.
+    pub(crate) fn gp_input_into(&self, z: &State<N>, u_prev: &[f64], u: &[f64], out: &mut [f64]) {
+        let e = self.encoding.dim(&M::KINDS);
+        self.encoding.encode(&M::KINDS, z, &mut out[..e]);
+        out[e..].fill(0.0);
+        if u.is_empty() || self.inputs == 0 {
+            return;
+        }
+        let m = self.inputs;
+        if self.previous_input {
+            out[e..e + m].copy_from_slice(&u_prev[..m]);
+            out[e + m..e + 2 * m].copy_from_slice(&u[..m]);
+        } else {
+            out[e..e + m].copy_from_slice(&u[..m]);
+        }
+    }
+
+    /// The unprojected mean prediction under inputs `u` after `u_prev` (a
+    /// model from [`Learned::train_forced`]): v_u = forced prior(z, u) +
+    /// μ(enc(z), u_prev, u).
     pub fn predict_mean_velocity_forced<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, StepError> {
-        self.forced_velocity(z, u, ws, None)
+        self.forced_velocity(z, u_prev, u, ws, None)
     }
 
-    /// prior(z, u) + μ(z, u), and the posterior variances into `var` when
-    /// given (the GP's mean is the same bits either way).
+    /// prior(z, u) + μ(enc(z), u_prev, u), and the posterior variances into
+    /// `var` when given (the GP's mean is the same bits either way).
     fn forced_velocity<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
         var: Option<&mut SVector<f64, N>>,
     ) -> Result<SVector<f64, N>, StepError> {
         self.check_input_count::<U>()?;
-        if !u.iter().all(|x| x.is_finite()) {
+        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
         }
         let mut mean = SVector::<f64, N>::zeros();
@@ -400,7 +482,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             // no input: u = 0 in the GP input of a model trained with inputs
             self.with_input(z, predict)?;
         } else {
-            self.with_input_u(z, u.as_slice(), predict)?;
+            self.with_input_u(z, u_prev.as_slice(), u.as_slice(), predict)?;
         }
         let prior = match self.prior {
             Prior::Nominal => self.nominal.step_forced(z, u)?.v,
@@ -413,12 +495,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Ok(v)
     }
 
-    /// One learned mean step under inputs `u` (as
+    /// One learned mean step under inputs `u` after `u_prev` (as
     /// [`Learned::step_mean_forced_with`]; `U = 0` for no input, u = 0)
-    /// with its exact derivatives A = ∂z₁/∂z₀ and
-    /// B = ∂z₁/∂u: q₁ = q₀ + Δt·v₀, and v₁ = prior(z₀, u) + μ(enc(z₀), u)
-    /// differentiates into the nominal forced step's derivatives
-    /// (`Variational::step_derivatives`) plus the GP mean's gradient
+    /// with its exact derivatives A = ∂z₁/∂z₀, B = ∂z₁/∂u and
+    /// B_prev = ∂z₁/∂u_prev (the third value; zero for a model that does
+    /// not take the previous input): q₁ = q₀ + Δt·v₀, and
+    /// v₁ = prior(z₀, u) + μ(enc(z₀), u_prev, u) differentiates into the
+    /// nominal forced step's derivatives (`Variational::step_derivatives`;
+    /// the prior does not depend on u_prev) plus the GP mean's gradient
     /// (`Gp::predict_mean_gradient_into`) through the encoding. The
     /// projection (constrained models: loops, maximal coordinates)
     /// differentiates implicitly through its KKT conditions at the
@@ -434,14 +518,23 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// stencil, or raise the noise floor (`TrainOptions::bounds`, e.g.
     /// `noise_variance: (1e-6, 10.0)` in the GP's normalised units), which
     /// also smooths the step for line searches. The exact derivatives returned here are not affected.
+    #[allow(clippy::type_complexity)]
     pub fn step_derivatives_forced<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
+    ) -> Result<
+        (
+            State<N>,
+            vigp_core::StepDerivatives<N, U>,
+            vigp_core::InputJacobian<N, U>,
+        ),
+        StepError,
+    > {
         self.check_input_count::<U>()?;
-        self.step_derivatives_at(z, u, ws)
+        self.step_derivatives_at(z, u_prev, u, ws)
     }
 
     /// The forced calls take `U` equal to the inputs the model was trained
@@ -462,16 +555,25 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// inputs, or `U = 0` for any model: the derivatives of the step under
     /// u = 0 that [`Learned::step_mean_with`] takes (the GP input's input
     /// tail zero-filled).
+    #[allow(clippy::type_complexity)]
     pub(crate) fn step_derivatives_at<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
+    ) -> Result<
+        (
+            State<N>,
+            vigp_core::StepDerivatives<N, U>,
+            vigp_core::InputJacobian<N, U>,
+        ),
+        StepError,
+    > {
         use nalgebra::SMatrix;
         debug_assert!(U == self.inputs || U == 0);
         self.check_step(z)?;
-        if !u.iter().all(|x| x.is_finite()) {
+        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
         }
         let h = self.dt;
@@ -488,9 +590,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 SMatrix::zeros(),
             ),
         };
+        let mut v_p = SMatrix::<f64, N, U>::zeros();
         // GP mean and its gradient in the GP input
         let e = self.encoding.dim(&M::KINDS);
-        let d = e + self.inputs;
+        let d = e + self.input_tail();
         let mut mean = SVector::<f64, N>::zeros();
         let mut grad = vec![0.0; N * d];
         let gradient = |input: &[f64]| {
@@ -499,10 +602,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 .map_err(|_| StepError::Prediction { step: None })
         };
         if U == self.inputs {
-            self.with_input_u(z, u.as_slice(), gradient)?;
+            self.with_input_u(z, u_prev.as_slice(), u.as_slice(), gradient)?;
         } else {
             self.with_input(z, gradient)?;
         }
+        // where u and u_prev sit in the GP input (U = 0: nowhere)
+        let (at_prev, at_u) = if self.previous_input {
+            (Some(e), e + U)
+        } else {
+            (None, e)
+        };
         v += mean;
         // chain rule through the encoding
         for j in 0..N {
@@ -522,7 +631,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 v_v[(j, i)] += g[k + i];
             }
             for i in 0..U {
-                v_u[(j, i)] += g[e + i];
+                v_u[(j, i)] += g[at_u + i];
+                if let Some(p) = at_prev {
+                    v_p[(j, i)] += g[p + i];
+                }
             }
         }
         if !v.iter().all(|x| x.is_finite()) {
@@ -560,7 +672,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                     .map(|(dv, _)| dv)
                     .ok_or(singular)
             };
-            let (mut pq, mut pv, mut pu) = (v_q, v_v, v_u);
+            let (mut pq, mut pv, mut pu, mut pp) = (v_q, v_v, v_u, v_p);
             for i in 0..N {
                 let e = eye.column(i).into_owned();
                 pq.set_column(i, &solve(v_q.column(i).into_owned(), e)?);
@@ -568,8 +680,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             }
             for i in 0..U {
                 pu.set_column(i, &solve(v_u.column(i).into_owned(), SVector::zeros())?);
+                pp.set_column(i, &solve(v_p.column(i).into_owned(), SVector::zeros())?);
             }
-            (v, v_q, v_v, v_u) = (vp, pq, pv, pu);
+            (v, v_q, v_v, v_u, v_p) = (vp, pq, pv, pu, pp);
         }
         Ok((
             State { q: x1, v },
@@ -585,32 +698,39 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                     v_u,
                 },
             },
+            vigp_core::InputJacobian {
+                q_u: SMatrix::zeros(),
+                v_u: v_p,
+            },
         ))
     }
 
-    /// One learned step under inputs `u` using the posterior mean (and the
-    /// projection for constrained models), as
+    /// One learned step from `z` under inputs `u` after `u_prev` (the
+    /// input that produced z's velocity; module docs, "Under inputs") using
+    /// the posterior mean (and the projection for constrained models), as
     /// [`Learned::step_mean_with`]. `U` is the number of inputs the model
     /// was trained with, or 0 for no input (u = 0).
     pub fn step_mean_forced_with<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<State<N>, StepError> {
-        Ok(self.mean_step_forced_parts(z, u, ws)?.0)
+        Ok(self.mean_step_forced_parts(z, u_prev, u, ws)?.0)
     }
 
-    /// The next state of a mean step under `u` and the unprojected
-    /// velocity v_u.
+    /// The next state of a mean step under `u` after `u_prev` and the
+    /// unprojected velocity v_u.
     fn mean_step_forced_parts<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<(State<N>, SVector<f64, N>), StepError> {
         self.check_step(z)?;
-        let vu = self.predict_mean_velocity_forced(z, u, ws)?;
+        let vu = self.predict_mean_velocity_forced(z, u_prev, u, ws)?;
         Ok((self.next_state(z, &vu)?, vu))
     }
 
@@ -627,11 +747,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Ok(State { q: x1, v })
     }
 
-    /// [`Learned::predict_velocity`] under inputs `u` (a model from
-    /// [`Learned::train_forced`]): v_u = forced prior(z, u) + μ(z, u) and
-    /// the posterior standard deviations σ(z, u), the GP input being the
-    /// encoded state followed by u. The mean equals
-    /// [`Learned::predict_mean_velocity_forced`] bit for bit.
+    /// [`Learned::predict_velocity`] under inputs `u` after `u_prev` (a
+    /// model from [`Learned::train_forced`]): v_u = forced prior(z, u) +
+    /// μ(enc(z), u_prev, u) and the posterior standard deviations, the GP
+    /// input being the encoded state followed by u_prev and u. The mean
+    /// equals [`Learned::predict_mean_velocity_forced`] bit for bit.
     ///
     /// `U` is the model's input count, or 0 for no input (u = 0; a
     /// different `U` does not compile). Errors: the mechanism's input count
@@ -641,22 +761,23 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     pub fn predict_velocity_forced<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
         let mut var = SVector::<f64, N>::zeros();
-        let v = self.forced_velocity(z, u, ws, Some(&mut var))?;
+        let v = self.forced_velocity(z, u_prev, u, ws, Some(&mut var))?;
         Ok((v, var.map(|s| s.max(0.0).sqrt())))
     }
 
     /// [`Learned::rollout_with_info`] under planned inputs: step k goes from
-    /// z_k under `inputs[k]` (as [`Integrator::rollout_forced_into`]; u is
-    /// held over the interval of the velocity the step predicts,
-    /// [t_{k+1}, t_{k+2}], as in [`ForcedTransition::u`]), so
-    /// `inputs.len()` steps. The
-    /// states equal those of [`Learned::step_mean_forced_with`] step by
-    /// step, and the standard deviations are σ(z_k, u_k), from one batched
-    /// [`Gp::predict`] as in `rollout_with_info`.
+    /// z_k under `inputs[k]` (u is held over the interval of the velocity
+    /// the step predicts, [t_{k+1}, t_{k+2}], as in [`ForcedTransition::u`])
+    /// after `inputs[k − 1]`, and after `u_prev` for k = 0 (the input that
+    /// produced z₀'s velocity), so `inputs.len()` steps. The states equal
+    /// those of [`Learned::step_mean_forced_with`] step by step, and the
+    /// standard deviations are those at (z_k, u_{k−1}, u_k), from one
+    /// batched [`Gp::predict`] as in `rollout_with_info`.
     ///
     /// `U` is the model's input count, or 0 for no input (u = 0; a
     /// different `U` does not compile). Errors: the mechanism's input count
@@ -666,11 +787,48 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     pub fn rollout_forced_with_info<const U: usize>(
         &self,
         z0: &State<N>,
+        u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         ws: &mut Workspace,
     ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
         self.check_input_count::<U>()?;
-        self.rollout_info(z0, inputs.len(), inputs, ws)
+        self.rollout_info(z0, inputs.len(), u_prev, inputs, ws)
+    }
+
+    /// The states after 1, …, `out.len()` mean steps from `z0`, step k
+    /// under `inputs[k]` after `inputs[k − 1]` and the first after `u_prev`
+    /// (the input that produced z₀'s velocity): the states of
+    /// [`Learned::rollout_forced_with_info`] without the variances, and of
+    /// [`Learned::step_mean_forced_with`] step by step. `inputs` must be at
+    /// least as long as `out` (shorter: [`StepError::NonFiniteInput`] at
+    /// step `inputs.len()`, before any step). A model trained without
+    /// inputs takes only zeros ([`Integrator::step_forced`]). Stops at the
+    /// first error (which names the step).
+    pub fn rollout_mean_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        u_prev: &SVector<f64, U>,
+        inputs: &[SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), StepError> {
+        if inputs.len() < out.len() {
+            return Err(StepError::NonFiniteInput {
+                step: Some(inputs.len()),
+            });
+        }
+        let mut ws = self.gp.workspace();
+        let mut z = *z0;
+        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
+            z = if self.inputs == 0 {
+                Integrator::step_forced(self, &z, u)
+            } else {
+                let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+                self.step_mean_forced_with(&z, up, u, &mut ws)
+            }
+            .map_err(|e| e.at_step(k))?;
+            *slot = z;
+        }
+        Ok(())
     }
 
     /// Switch the projection off (eq. 7 even for a constrained model), e.g.
@@ -733,11 +891,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     fn with_input_u<T>(
         &self,
         z: &State<N>,
+        u_prev: &[f64],
         u: &[f64],
         f: impl FnOnce(&[f64]) -> Result<T, StepError>,
     ) -> Result<T, StepError> {
-        let e = self.encoding.dim(&M::KINDS);
-        let d = e + u.len();
+        let d = self.encoding.dim(&M::KINDS) + self.input_tail();
         let mut x = [0.0f64; 64];
         let mut heap;
         let input: &mut [f64] = if d <= x.len() {
@@ -746,21 +904,20 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             heap = vec![0.0; d];
             &mut heap
         };
-        self.encoding.encode(&M::KINDS, z, &mut input[..e]);
-        input[e..].copy_from_slice(u);
+        self.gp_input_into(z, u_prev, u, input);
         f(input)
     }
 
     /// Encodes `z` into a stack buffer (heap only above 64 input
-    /// dimensions), followed by u = 0 for a model trained with inputs, and
-    /// passes the GP input to `f`.
+    /// dimensions), followed by u_prev = u = 0 for a model trained with
+    /// inputs, and passes the GP input to `f`.
     fn with_input<T>(
         &self,
         z: &State<N>,
         f: impl FnOnce(&[f64]) -> Result<T, StepError>,
     ) -> Result<T, StepError> {
         let e = self.encoding.dim(&M::KINDS);
-        let d = e + self.inputs;
+        let d = e + self.input_tail();
         let mut x = [0.0f64; 64];
         let mut heap;
         let input: &mut [f64] = if d <= x.len() {
@@ -858,15 +1015,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         steps: usize,
         ws: &mut Workspace,
     ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
-        self.rollout_info::<0>(z0, steps, &[], ws)
+        self.rollout_info::<0>(z0, steps, &SVector::zeros(), &[], ws)
     }
 
     /// `steps` mean steps with their standard deviations: unforced (u = 0
-    /// for a model with inputs) when `U = 0`, else under `inputs[k]`.
+    /// for a model with inputs) when `U = 0`, else under `inputs[k]` after
+    /// `inputs[k − 1]` (`u_prev` for k = 0).
     pub(crate) fn rollout_info<const U: usize>(
         &self,
         z0: &State<N>,
         steps: usize,
+        u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         ws: &mut Workspace,
     ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
@@ -890,8 +1049,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 self.with_input(&z, copy)?;
                 self.mean_step_parts(&z, ws)
             } else {
-                self.with_input_u(&z, inputs[k].as_slice(), copy)?;
-                self.mean_step_forced_parts(&z, &inputs[k], ws)
+                let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+                self.with_input_u(&z, up.as_slice(), inputs[k].as_slice(), copy)?;
+                self.mean_step_forced_parts(&z, up, &inputs[k], ws)
             }
             .map_err(|e| e.at_step(k))?;
             out.push((
@@ -913,7 +1073,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                     if U == 0 {
                         self.predict_velocity(&z, ws).map(|_| ())
                     } else {
-                        self.predict_velocity_forced(&z, &inputs[k], ws).map(|_| ())
+                        let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+                        self.predict_velocity_forced(&z, up, &inputs[k], ws)
+                            .map(|_| ())
                     }
                     .map_err(|e| e.at_step(k))?;
                     z = *next;
@@ -975,8 +1137,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     }
 
     /// A model trained with inputs ([`Learned::train_forced`]) steps under
-    /// them ([`Learned::step_mean_forced_with`]); one trained without
-    /// inputs takes only u = 0.
+    /// them ([`Learned::step_mean_forced_with`]) with the input taken as
+    /// held across the start, u_prev = u (the trait has no slot for the
+    /// previous input; pass it to `step_mean_forced_with` where it
+    /// differs); one trained without inputs takes only u = 0.
     fn step_forced<const U: usize>(
         &self,
         z: &State<N>,
@@ -990,7 +1154,24 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
             };
         }
         let mut ws = self.gp.workspace();
-        self.step_mean_forced_with(z, u, &mut ws)
+        self.step_mean_forced_with(z, u, u, &mut ws)
+    }
+
+    /// Step k under `inputs[k]` after `inputs[k − 1]`, the first step after
+    /// `inputs[0]` (the input taken as held across the start;
+    /// [`Learned::rollout_mean_forced_into`] takes the previous input
+    /// explicitly). A model trained without inputs takes only zeros.
+    fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[SVector<f64, U>],
+        out: &mut [State<N>],
+    ) -> Result<(), StepError> {
+        match inputs.first() {
+            Some(u0) => self.rollout_mean_forced_into(z0, u0, inputs, out),
+            None if out.is_empty() => Ok(()),
+            None => Err(StepError::NonFiniteInput { step: Some(0) }),
+        }
     }
 
     /// Mean-only steps ([`Learned::step_mean_with`]) with one workspace.

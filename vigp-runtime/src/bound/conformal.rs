@@ -86,6 +86,7 @@ impl<const N: usize> Calibration<N> {
                 dt,
                 windows: Vec::new(),
                 inputs: Vec::new(),
+                previous: Vec::new(),
                 input_count: 0,
                 runs: Vec::new(),
             },
@@ -104,8 +105,12 @@ impl<const N: usize> Calibration<N> {
     /// Windows of an actuated mechanism with time step `dt`: `inputs[i]`
     /// holds window i's K inputs, step k (from the start's k-th successor,
     /// towards `positions[k]`) taken under `inputs[i][k]` held over the
-    /// step. Errors: those of [`Calibration::new`]; `U = 0`; a window's
-    /// input count other than its K; a NaN or ∞ input.
+    /// step. Each window's previous input (the one that produced its
+    /// start's velocity, which a forced learned step takes: see
+    /// `crate::learned`, "Under inputs") is taken as its first, held
+    /// across the start; [`Calibration::with_previous_inputs`] sets it.
+    /// Errors: those of [`Calibration::new`]; `U = 0`; a window's input
+    /// count other than its K; a NaN or ∞ input.
     pub fn new_forced<const U: usize>(
         dt: f64,
         windows: Vec<Window<N>>,
@@ -114,6 +119,29 @@ impl<const N: usize> Calibration<N> {
         Ok(Self {
             set: Windows::new(dt, windows)?.with_inputs(inputs)?,
         })
+    }
+
+    /// These forced windows with `previous[i]` as window i's previous
+    /// input (held over the interval of its start's velocity). Errors: not one per window, a NaN or ∞, or windows
+    /// without inputs of this count ([`BoundError::Mismatch`]).
+    pub fn with_previous_inputs<const U: usize>(
+        self,
+        previous: Vec<SVector<f64, U>>,
+    ) -> Result<Self, BoundError> {
+        if U == 0 || self.set.input_count != U {
+            return Err(BoundError::Mismatch(
+                "previous inputs for windows without inputs of that count",
+            ));
+        }
+        Ok(Self {
+            set: self.set.with_previous(previous)?,
+        })
+    }
+
+    /// Window `index`'s previous input (None without `U` inputs or out of
+    /// range).
+    pub fn window_previous_input<const U: usize>(&self, index: usize) -> Option<SVector<f64, U>> {
+        self.set.window_previous_input(index)
     }
 
     /// One-step calibration cases from held-out transitions (K = 2:
@@ -156,7 +184,8 @@ impl<const N: usize> Calibration<N> {
     /// and held from t_i to t_{i+1} (the data files' convention), so the
     /// step from a window's state at sample s + k (whose velocity spans
     /// [t_{s+k}, t_{s+k+1}]) to the next one is driven by sample
-    /// s + k + 1's input. Errors: those of `from_trajectories` and
+    /// s + k + 1's input, after sample s + k's (sample s's for the first
+    /// step: each window's previous input). Errors: those of `from_trajectories` and
     /// [`Calibration::new_forced`]; a trajectory whose inputs are not one
     /// per sample.
     pub fn from_trajectories_forced<T, I, const U: usize>(
@@ -671,7 +700,6 @@ pub(super) fn calibrate<
     let mut input_n = vec![0.0; d];
     let mut region = RegionBuilder::new(d);
     let mut traced = Vec::with_capacity(n);
-    let e = learned.encoding().dim(&M::KINDS);
     for (index, w) in cal.windows().iter().enumerate() {
         // the start's GP input: encoded state, then the first step's input
         let us: Vec<SVector<f64, U>> = if U > 0 {
@@ -681,13 +709,17 @@ pub(super) fn calibrate<
         } else {
             Vec::new()
         };
-        learned.encoding().encode(&M::KINDS, &w.start, &mut input);
-        if let Some(u) = us.first() {
-            input[e..e + U].copy_from_slice(u.as_slice());
+        let prev: SVector<f64, U> = cal
+            .window_previous_input(index)
+            .or_else(|| us.first().copied())
+            .unwrap_or_else(SVector::zeros);
+        match us.first() {
+            Some(u) => learned.gp_input_into(&w.start, prev.as_slice(), u.as_slice(), &mut input),
+            None => learned.gp_input_into(&w.start, &[], &[], &mut input),
         }
         learned.gp().input_normaliser().apply(&input, &mut input_n);
         region.start(&input, &input_n);
-        let Ok(trace) = learned.trace(&w.start, k_max, &us, &mut ws) else {
+        let Ok(trace) = learned.trace(&w.start, k_max, &prev, &us, &mut ws) else {
             traced.push(None);
             continue;
         };

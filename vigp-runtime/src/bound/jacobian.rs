@@ -113,31 +113,35 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         z: &State<N>,
         ws: &mut crate::gp::Workspace,
     ) -> Result<(f64, f64), StepError> {
-        self.step_jacobian_norms_at::<0>(z, &SVector::zeros(), ws)
+        self.step_jacobian_norms_at::<0>(z, &SVector::zeros(), &SVector::zeros(), ws)
     }
 
-    /// [`Learned::step_jacobian_norms`] of the step under inputs `u` (a
-    /// model from [`Learned::train_forced`]; `u` held fixed): the factors
-    /// with which [`Learned::predict_forced`] propagates its bounds.
+    /// [`Learned::step_jacobian_norms`] of the step under inputs `u` after
+    /// `u_prev` (a model from [`Learned::train_forced`]; both held fixed):
+    /// the factors with which [`Learned::predict_forced`] propagates its
+    /// bounds.
     ///
     /// Errors: those of `step_jacobian_norms`; `U` other than the model's
     /// inputs ([`StepError::InputsNotSupported`]); a NaN or ∞ in `u`.
     pub fn step_jacobian_norms_forced<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut crate::gp::Workspace,
     ) -> Result<(f64, f64), StepError> {
         if U != self.inputs() {
             return Err(StepError::InputsNotSupported);
         }
-        self.step_jacobian_norms_at(z, u, ws)
+        self.step_jacobian_norms_at(z, u_prev, u, ws)
     }
 
-    /// The norms under `u` (`U` the model's inputs, or 0 for u = 0).
+    /// The norms under `u` after `u_prev` (`U` the model's inputs, or 0
+    /// for u = 0).
     pub(super) fn step_jacobian_norms_at<const U: usize>(
         &self,
         z: &State<N>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut crate::gp::Workspace,
     ) -> Result<(f64, f64), StepError> {
@@ -148,7 +152,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         } else {
             *z
         };
-        let (_, d) = self.step_derivatives_at(&z, u, ws)?;
+        let (_, d, _) = self.step_derivatives_at(&z, u_prev, u, ws)?;
         let (mut dq, mut dv) = (d.a.v_q, d.a.v_v);
         if constrained {
             let (cq, cvq, cvv) = consistent_state_jacobian(self.model(), &z, dt)?;

@@ -26,13 +26,15 @@
 //!   [`ConformalSettings`].
 //!
 //! Inputs: for a model trained with inputs ([`Learned::train_forced`]) the
-//! GP input is the encoded state followed by u, and the rigorous kinds
-//! bound the forced step the same way: [`Learned::error_bound_forced`]
-//! estimates the constants at the training inputs (states with their
-//! logged u), and [`Learned::predict_forced`] predicts under planned inputs
-//! with a bound at every state (Theorem 1's box X includes the inputs'
-//! range). The conformal kind calibrates on windows that carry their
-//! inputs ([`Calibration::from_trajectories_forced`]).
+//! GP input is the encoded state followed by the previous and the current
+//! input, and the rigorous kinds bound the forced step the same way:
+//! [`Learned::error_bound_forced`] estimates the constants at the training
+//! inputs (states with their logged inputs), and
+//! [`Learned::predict_forced`] predicts under planned inputs, after the
+//! input that produced the start's velocity, with a bound at every state
+//! (Theorem 1's box X includes the inputs' range). The conformal kind
+//! calibrates on windows that carry their inputs and previous input
+//! ([`Calibration::from_trajectories_forced`]).
 //!
 //! Multi-step: the conformal kind calibrates the k-step position error
 //! itself. The rigorous kinds bound one step; over several steps
@@ -748,12 +750,29 @@ pub struct BoundedPrediction<const N: usize> {
 }
 
 /// States, standard deviations and corrections of a learned prediction,
-/// and the inputs it was made under (empty: unforced, U = 0).
+/// the inputs it was made under (empty: unforced, U = 0) and the input
+/// before the first (that produced the start's velocity).
 pub(crate) struct Trace<'a, const N: usize, const U: usize> {
     pub states: Vec<State<N>>,
     pub std_devs: Vec<SVector<f64, N>>,
     pub corrections: Vec<f64>,
+    pub u_prev: SVector<f64, U>,
     pub inputs: &'a [SVector<f64, U>],
+}
+
+impl<const N: usize, const U: usize> Trace<'_, N, U> {
+    /// The previous and the current input of step k (None: unforced).
+    pub fn step_inputs(&self, k: usize) -> Option<(&SVector<f64, U>, &SVector<f64, U>)> {
+        let u = self.inputs.get(k)?;
+        Some((
+            if k == 0 {
+                &self.u_prev
+            } else {
+                &self.inputs[k - 1]
+            },
+            u,
+        ))
+    }
 }
 
 /// At most this many training and this many calibration states are used to
@@ -762,11 +781,12 @@ const MAX_SAMPLES: usize = 256;
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
     /// `steps` learned steps with variances from `z0`: unforced when
-    /// `U = 0`, else under `inputs` (one per step).
+    /// `U = 0`, else under `inputs` (one per step) after `u_prev`.
     pub(crate) fn trace<'a, const U: usize>(
         &self,
         z0: &State<N>,
         steps: usize,
+        u_prev: &SVector<f64, U>,
         inputs: &'a [SVector<f64, U>],
         ws: &mut Workspace,
     ) -> Result<Trace<'a, N, U>, StepError> {
@@ -774,10 +794,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             states: Vec::with_capacity(steps + 1),
             std_devs: Vec::with_capacity(steps),
             corrections: Vec::with_capacity(steps),
+            u_prev: *u_prev,
             inputs,
         };
         t.states.push(*z0);
-        for (next, info) in self.rollout_info(z0, steps, inputs, ws)? {
+        for (next, info) in self.rollout_info(z0, steps, u_prev, inputs, ws)? {
             t.std_devs.push(info.std_dev);
             t.corrections.push(info.correction);
             t.states.push(next);
@@ -808,16 +829,24 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         out
     }
 
-    /// Training states with their inputs (decoded from the GP inputs) and
-    /// the starts of calibration windows that carry `U` inputs (with their
-    /// first step's), each evenly strided to at most [`MAX_SAMPLES`].
+    /// Training states with their previous and current inputs (decoded
+    /// from the GP inputs; a model without the previous input gets the
+    /// current one twice) and the starts of calibration windows that carry
+    /// `U` inputs (with their previous and first step's), each evenly
+    /// strided to at most [`MAX_SAMPLES`].
+    #[allow(clippy::type_complexity)]
     fn sample_forced<const U: usize>(
         &self,
         calibration: &Calibration<N>,
-    ) -> Vec<(State<N>, SVector<f64, U>)> {
+    ) -> Vec<(State<N>, SVector<f64, U>, SVector<f64, U>)> {
         let gp = self.gp();
         let d = gp.input_dim();
         let e = self.encoding().dim(&M::KINDS);
+        let at_u = if self.takes_previous_input() {
+            e + U
+        } else {
+            e
+        };
         let stride = gp.n().div_ceil(MAX_SAMPLES).max(1);
         let mut out: Vec<_> = gp
             .inputs()
@@ -826,7 +855,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             .map(|x| {
                 (
                     self.encoding().decode(&M::KINDS, &x[..e]),
-                    SVector::from_column_slice(&x[e..]),
+                    SVector::from_column_slice(&x[e..e + U]),
+                    SVector::from_column_slice(&x[at_u..at_u + U]),
                 )
             })
             .collect();
@@ -834,7 +864,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let stride = w.len().div_ceil(MAX_SAMPLES).max(1);
         for (i, w) in w.iter().enumerate().step_by(stride) {
             if let Some(us) = calibration.window_inputs::<U>(i) {
-                out.push((w.start, us[0]));
+                let prev = calibration.window_previous_input(i).unwrap_or(us[0]);
+                out.push((w.start, prev, us[0]));
             }
         }
         out
@@ -963,21 +994,22 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 },
             });
         }
-        let samples: Vec<(State<N>, SVector<f64, U>)> = if U == 0 {
+        #[allow(clippy::type_complexity)]
+        let samples: Vec<(State<N>, SVector<f64, U>, SVector<f64, U>)> = if U == 0 {
             let zero = SVector::zeros();
             let states = self.sample_states(calibration);
-            states.into_iter().map(|z| (z, zero)).collect()
+            states.into_iter().map(|z| (z, zero, zero)).collect()
         } else {
             self.sample_forced(calibration)
         };
         let mut ws = self.workspace();
         let mut sigma = vec![Vec::with_capacity(samples.len()); p];
         let mut lip = 1.0f64;
-        for (z, u) in &samples {
+        for (z, u_prev, u) in &samples {
             let (vu, sd) = if U == 0 {
                 self.predict_velocity(z, &mut ws)?
             } else {
-                self.predict_velocity_forced(z, u, &mut ws)?
+                self.predict_velocity_forced(z, u_prev, u, &mut ws)?
             };
             for (i, o) in gp.outputs().iter().enumerate() {
                 sigma[i].push(sd[i] / o.output_scale());
@@ -1040,10 +1072,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// [`Learned::train_forced`]: `inputs.len()` steps, step k from the
     /// predicted z_k under `inputs[k]` (held over [t_{k+1}, t_{k+2}], the
     /// interval of the velocity the step predicts, as in
-    /// [`crate::learned::ForcedTransition::u`]), each
-    /// state with its bound. The one-step bounds are those of the GP at
-    /// (z_k, u_k), and the rigorous kinds propagate them to positions with
-    /// the forced step's Jacobian norms at (z_k, u_k)
+    /// [`crate::learned::ForcedTransition::u`]) after `inputs[k − 1]`, the
+    /// first step after `u_prev` (the input that produced z₀'s velocity;
+    /// `crate::learned`, "Under inputs"), each state with its bound. The
+    /// one-step bounds are those of the GP at (z_k, u_{k−1}, u_k), and the
+    /// rigorous kinds propagate them to positions with the forced step's
+    /// Jacobian norms there
     /// ([`Learned::step_jacobian_norms_forced`]): the bounds are on the
     /// distance to the true trajectory under the same inputs. Use a bound
     /// from [`Learned::error_bound_forced`]. `U = 0` on a model without
@@ -1057,19 +1091,21 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     pub fn predict_forced<const U: usize>(
         &self,
         z0: &State<N>,
+        u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bound: &ErrorBound,
     ) -> Result<BoundedPrediction<N>, BoundError> {
-        let mut all = self.predict_bounds_forced(z0, inputs, &[bound])?;
+        let mut all = self.predict_bounds_forced(z0, u_prev, inputs, &[bound])?;
         Ok(all.remove(0))
     }
 
     /// [`Learned::predict_forced`] under several bounds at once, as
     /// [`Learned::predict_bounds`]: result `i` equals
-    /// `predict_forced(z0, inputs, bounds[i])` bit for bit.
+    /// `predict_forced(z0, u_prev, inputs, bounds[i])` bit for bit.
     pub fn predict_bounds_forced<const U: usize>(
         &self,
         z0: &State<N>,
+        u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bounds: &[&ErrorBound],
     ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
@@ -1078,7 +1114,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 "number of inputs (U must be the model's inputs)",
             ));
         }
-        self.predict_bounds_at(z0, inputs.len(), inputs, bounds)
+        self.predict_bounds_at(z0, inputs.len(), u_prev, inputs, bounds)
     }
 
     /// [`Learned::predict`] under several bounds at once (e.g. to compare
@@ -1095,7 +1131,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         steps: usize,
         bounds: &[&ErrorBound],
     ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
-        self.predict_bounds_at::<0>(z0, steps, &[], bounds)
+        self.predict_bounds_at::<0>(z0, steps, &SVector::zeros(), &[], bounds)
     }
 
     /// `predict_bounds` (U = 0: unforced) or `predict_bounds_forced`.
@@ -1103,6 +1139,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         &self,
         z0: &State<N>,
         steps: usize,
+        u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bounds: &[&ErrorBound],
     ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
@@ -1122,7 +1159,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             }
         }
         let mut ws = self.workspace();
-        let mut trace = self.trace(z0, steps, inputs, &mut ws)?;
+        let mut trace = self.trace(z0, steps, u_prev, inputs, &mut ws)?;
         let mut norms = vec![None; trace.states.len()];
         let parts = bounds
             .iter()
@@ -1270,12 +1307,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             lost.push(variance_based && zero.is_some());
             one_step.push(bound.one_step(sd.as_slice())?);
             let s = predictive_scale(sd.as_slice(), &bound.noise_std);
-            // the GP input: the encoded state, then the step's input (a
-            // model with inputs predicting unforced keeps u = 0)
-            self.encoding().encode(&M::KINDS, z, &mut input);
-            if let Some(u) = trace.inputs.get(step) {
-                let e = input.len() - U;
-                input[e..].copy_from_slice(u.as_slice());
+            // the GP input: the encoded state, then the step's previous and
+            // current inputs (a model with inputs predicting unforced keeps
+            // them 0)
+            match trace.step_inputs(step) {
+                Some((up, u)) => self.gp_input_into(z, up.as_slice(), u.as_slice(), &mut input),
+                None => self.gp_input_into(z, &[], &[], &mut input),
             }
             self.gp().input_normaliser().apply(&input, &mut input_n);
             outside.push(bound.outside(&input, &input_n, s));
@@ -1303,9 +1340,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                         match norms[k] {
                             Some(n) => n,
                             None => {
-                                // the step's input (u = 0 for an unforced trace)
-                                let u = trace.inputs.get(k).copied().unwrap_or_else(SVector::zeros);
-                                let n = self.step_jacobian_norms_at(&trace.states[k], &u, ws)?;
+                                // the step's inputs (0 for an unforced trace)
+                                let (up, u) = trace
+                                    .step_inputs(k)
+                                    .map_or((SVector::zeros(), SVector::zeros()), |(a, b)| {
+                                        (*a, *b)
+                                    });
+                                let n =
+                                    self.step_jacobian_norms_at(&trace.states[k], &up, &u, ws)?;
                                 norms[k] = Some(n);
                                 n
                             }

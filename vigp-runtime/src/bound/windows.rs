@@ -26,6 +26,10 @@ pub(crate) struct Windows<W> {
     /// Inputs per window (K·U values each: step k's input at k·U), empty
     /// without inputs.
     pub inputs: Vec<Vec<f64>>,
+    /// Per window the input held before its start, over the interval of
+    /// the start's velocity (U values each; empty without inputs): the
+    /// previous input of the first step.
+    pub previous: Vec<Vec<f64>>,
     /// U (0: the windows carry no inputs).
     pub input_count: usize,
     /// The run (trajectory) each window was cut from: windows of one run
@@ -74,11 +78,14 @@ impl<W: Steps> Windows<W> {
             runs: (0..windows.len()).collect(),
             windows,
             inputs: Vec::new(),
+            previous: Vec::new(),
             input_count: 0,
         })
     }
 
-    /// The windows with `inputs[i]`, window i's K inputs. Errors: `U = 0`;
+    /// The windows with `inputs[i]`, window i's K inputs, each window's
+    /// previous input taken as its first (held across the start; see
+    /// [`Windows::with_previous`]). Errors: `U = 0`;
     /// not one sequence per window; a window's input count other than its
     /// K; a NaN or ∞ input.
     pub fn with_inputs<const U: usize>(
@@ -116,8 +123,54 @@ impl<W: Steps> Windows<W> {
             .iter()
             .map(|us| us.iter().flat_map(|u| u.iter().copied()).collect())
             .collect();
+        self.previous = inputs
+            .iter()
+            .map(|us| {
+                us.first()
+                    .map_or(Vec::new(), |u| u.iter().copied().collect())
+            })
+            .collect();
         self.input_count = U;
         Ok(self)
+    }
+
+    /// The windows with `previous[i]` as window i's previous input (the
+    /// one that produced its start's velocity), after
+    /// [`Windows::with_inputs`]. Errors: not one per window; a NaN or ∞.
+    pub fn with_previous<const U: usize>(
+        mut self,
+        previous: Vec<SVector<f64, U>>,
+    ) -> Result<Self, BoundError> {
+        if previous.len() != self.windows.len() {
+            return Err(BoundError::WrongLength {
+                what: "previous inputs of calibration windows (one per window)",
+                expected: self.windows.len(),
+                got: previous.len(),
+            });
+        }
+        if let Some(index) = previous
+            .iter()
+            .position(|u| !u.iter().all(|x| x.is_finite()))
+        {
+            return Err(BoundError::Calibration {
+                index,
+                reason: "NaN or infinity in the window's previous input",
+            });
+        }
+        self.previous = previous
+            .iter()
+            .map(|u| u.iter().copied().collect())
+            .collect();
+        Ok(self)
+    }
+
+    /// Window `index`'s previous input (the input held over its start's
+    /// velocity interval; None as [`Windows::window_inputs`]).
+    pub fn window_previous_input<const U: usize>(&self, index: usize) -> Option<SVector<f64, U>> {
+        if U != self.input_count || U == 0 {
+            return None;
+        }
+        Some(SVector::from_column_slice(self.previous.get(index)?))
     }
 
     /// Window `index`'s inputs as `U`-vectors, one per step (None when `U`
@@ -133,6 +186,12 @@ impl<W: Steps> Windows<W> {
                 .map(SVector::from_column_slice)
                 .collect(),
         )
+    }
+
+    /// Window `index`'s previous input (U values; empty without inputs or
+    /// out of range).
+    pub fn previous_input(&self, index: usize) -> &[f64] {
+        self.previous.get(index).map_or(&[], Vec::as_slice)
     }
 
     /// Window `index`'s first input (U values; empty without inputs or
@@ -175,7 +234,11 @@ impl<W: Steps> Windows<W> {
     ) -> Result<Self, BoundError> {
         let starts = window_starts(lengths, horizon, stride)?;
         let window_inputs = logged_inputs(lengths, inputs, &starts, horizon)?;
-        Self::from_starts(&starts, dt, window)?.with_inputs(window_inputs)
+        // the input logged with the start's sample produced its velocity
+        let previous = starts.iter().map(|&(r, s)| inputs[r].as_ref()[s]).collect();
+        Self::from_starts(&starts, dt, window)?
+            .with_inputs(window_inputs)?
+            .with_previous(previous)
     }
 
     fn from_starts(

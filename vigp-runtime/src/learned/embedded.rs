@@ -70,8 +70,12 @@ where
     /// A model trained with inputs ([`Learned::train_forced`]) records
     /// their names (`inputs: &["rail"]`, the mechanism's
     /// `Dynamics::INPUT_NAMES`); its GPs take the encoded state followed by
-    /// u, and on the target it steps with `LearnedStepper::step_forced`.
-    /// A model trained without inputs writes `inputs: &[]`.
+    /// the previous and the current input, (enc(z), u_prev, u), so the GP
+    /// input dimension `D` is the encoding's plus twice the inputs (a model
+    /// loaded from a file with the layout (enc(z), u) keeps it: plus once;
+    /// `LearnedStepper::new` tells the two apart by `D`), and on the target
+    /// it steps with `LearnedStepper::step_forced`. A model trained without
+    /// inputs writes `inputs: &[]`.
     ///
     /// Models in either coordinate view export; `LearnedStepper::new` then
     /// takes the same view (`sys.minimal()` or the parameter struct for a
@@ -149,6 +153,11 @@ where
             inputs = inputs.join(", "),
             with_inputs = if inputs.is_empty() {
                 String::new()
+            } else if self.previous_input {
+                format!(
+                    ", inputs {}; GP input (enc(z), u_prev, u)",
+                    inputs.join(", ")
+                )
             } else {
                 format!(", inputs {}", inputs.join(", "))
             },

@@ -47,6 +47,14 @@ pub struct SavedLearned {
     /// Names of the control inputs the GP takes after the encoded state
     /// (the actuated joints; empty for a model trained without inputs).
     pub inputs: Vec<String>,
+    /// The GP input layout of a model with inputs: `true` for
+    /// (enc(z), u_prev, u), the previous input (the one that produced z's
+    /// velocity) before the current one, as [`Learned::train_forced`]
+    /// trains; `false` for (enc(z), u). A file without the field reads as
+    /// `false` and loads as that layout (its predictions ignore the
+    /// previous input); the field is written only when `true`.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub previous_input: bool,
     /// Every run-time parameter of the nominal model, by name.
     pub parameters: BTreeMap<String, f64>,
     /// Time step Δt (s).
@@ -61,6 +69,10 @@ pub struct SavedLearned {
     pub newton: SavedNewton,
     /// The GP (its own format, see [`SavedGp`]).
     pub gp: SavedGp,
+}
+
+fn is_false(b: &bool) -> bool {
+    !*b
 }
 
 /// A coordinate kind in a saved model.
@@ -228,7 +240,7 @@ fn check_gp(saved: &SavedGp, d: usize, p: usize, prior: Prior) -> Result<(), Loa
         return Err(field(
             "gp.input_dim",
             format!(
-                "the encoding of this model's state has {d} components, the file says {}",
+                "the encoding of this model's state and its inputs has {d} components, the file says {}",
                 saved.input_dim
             ),
         ));
@@ -324,6 +336,7 @@ where
                 .iter()
                 .map(|s| s.to_string())
                 .collect(),
+            previous_input: self.previous_input,
             parameters,
             dt: self.dt,
             encoding: self.encoding,
@@ -429,7 +442,18 @@ where
         if saved.project && C == 0 {
             return Err(field("project", "true, but the model has no constraints"));
         }
-        let d = saved.encoding.dim(&M::KINDS) + saved.inputs.len();
+        if saved.previous_input && saved.inputs.is_empty() {
+            return Err(field(
+                "previous_input",
+                "true, but the model takes no inputs",
+            ));
+        }
+        let tail = if saved.previous_input {
+            2 * saved.inputs.len()
+        } else {
+            saved.inputs.len()
+        };
+        let d = saved.encoding.dim(&M::KINDS) + tail;
         check_gp(&saved.gp, d, N, saved.prior)?;
         let gp = Gp::from_saved(&saved.gp, None)?;
         Ok(Self {
@@ -442,6 +466,7 @@ where
             gp,
             options,
             inputs: saved.inputs.len(),
+            previous_input: saved.previous_input,
         })
     }
 

@@ -136,7 +136,10 @@ impl<const B: usize> SpatialCalibration<B> {
     /// inputs, step k (from the start's k-th successor to configuration
     /// k + 1's velocities) taken under `inputs[i][k]`. Errors: those of
     /// [`SpatialCalibration::new`]; `U = 0`; a window whose input count is
-    /// not its K; a NaN or ∞ input.
+    /// not its K; a NaN or ∞ input. Each window's previous input (the
+    /// one that produced its start's velocities, which a forced learned
+    /// step takes) is taken as its first, held across the start;
+    /// [`SpatialCalibration::with_previous_inputs`] sets it.
     pub fn new_forced<const U: usize>(
         dt: f64,
         windows: Vec<SpatialWindow<B>>,
@@ -145,6 +148,29 @@ impl<const B: usize> SpatialCalibration<B> {
         Ok(Self {
             set: Windows::new(dt, windows)?.with_inputs(inputs)?,
         })
+    }
+
+    /// These forced windows with `previous[i]` as window i's previous
+    /// input. Errors: not one per window, a NaN or ∞, or windows without
+    /// inputs of this count ([`BoundError::Mismatch`]).
+    pub fn with_previous_inputs<const U: usize>(
+        self,
+        previous: Vec<SVector<f64, U>>,
+    ) -> Result<Self, BoundError> {
+        if U == 0 || self.set.input_count != U {
+            return Err(BoundError::Mismatch(
+                "previous inputs for windows without inputs of that count",
+            ));
+        }
+        Ok(Self {
+            set: self.set.with_previous(previous)?,
+        })
+    }
+
+    /// Window `index`'s previous input (None without `U` inputs or out of
+    /// range).
+    pub fn window_previous_input<const U: usize>(&self, index: usize) -> Option<SVector<f64, U>> {
+        self.set.window_previous_input(index)
     }
 
     /// Windows of `horizon` steps from trajectories of configurations
@@ -170,7 +196,8 @@ impl<const B: usize> SpatialCalibration<B> {
     /// held from t_i (the convention of
     /// [`super::learned::forced_transitions`]), so the step from the
     /// window's state at sample s + k is driven by sample s + k + 1's
-    /// input. Errors: those of `from_trajectories` and
+    /// input, after sample s + k's (sample s's for the first step: the
+    /// window's previous input). Errors: those of `from_trajectories` and
     /// [`SpatialCalibration::new_forced`]; a trajectory whose inputs are
     /// not one per sample.
     pub fn from_trajectories_forced<T, I, const U: usize>(
@@ -375,7 +402,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             let us: Vec<SVector<f64, U>> = calibration
                 .window_inputs(i)
                 .expect("input count checked above");
-            self.trace_forced(&w.start, &us, &mut ws)
+            let up: SVector<f64, U> = calibration
+                .window_previous_input(i)
+                .expect("input count checked above");
+            self.trace_forced(&w.start, &up, &us, &mut ws)
         })
     }
 
@@ -393,24 +423,30 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
         self.check_bound(bound, 0, steps)?;
         let trace = self.trace(z0, steps, &mut self.workspace())?;
-        self.bounded(trace, bound, |_| &[])
+        self.bounded(trace, bound, |_| (&[], &[]))
     }
 
-    /// [`LearnedSpatial::predict_bounded`] under `inputs` (one per step) for
-    /// a model from [`LearnedSpatial::train_forced`] with a bound from
+    /// [`LearnedSpatial::predict_bounded`] under `inputs` (one per step)
+    /// after `u_prev` (the input that produced z₀'s velocities; step k runs
+    /// after `inputs[k − 1]`) for a model from
+    /// [`LearnedSpatial::train_forced`] with a bound from
     /// [`LearnedSpatial::conformal_bound_forced`].
     pub fn predict_bounded_forced<const U: usize>(
         &self,
         z0: &SpatialState<B>,
+        u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bound: &SpatialConformal,
     ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
         self.check_bound(bound, U, inputs.len())?;
-        let trace = self.trace_forced(z0, inputs, &mut self.workspace())?;
-        // z_K is tested with the last step's input (u = 0 without steps)
+        let trace = self.trace_forced(z0, u_prev, inputs, &mut self.workspace())?;
+        // z_K is tested with the last step's inputs (u_prev and 0 without
+        // steps)
         let zero = SVector::<f64, U>::zeros();
-        let last = inputs.last().unwrap_or(&zero);
-        self.bounded(trace, bound, |k| inputs.get(k).unwrap_or(last).as_slice())
+        self.bounded(trace, bound, |k| match inputs.len() {
+            0 => (zero.as_slice(), zero.as_slice()),
+            n => super::learned::step_inputs(u_prev, inputs, k.min(n - 1)),
+        })
     }
 
     fn check_bound(
@@ -483,7 +519,12 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let (mut input, mut input_n) = (vec![0.0; d], vec![0.0; d]);
         let mut region = RegionBuilder::new(d);
         for (i, w) in cal.windows().iter().enumerate() {
-            self.gp_input(&w.start, cal.set.first_input(i), &mut input);
+            self.gp_input(
+                &w.start,
+                cal.set.previous_input(i),
+                cal.set.first_input(i),
+                &mut input,
+            );
             self.gp().input_normaliser().apply(&input, &mut input_n);
             region.start(&input, &input_n);
             let Ok(t) = trace(i, w) else {
@@ -543,14 +584,15 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// The bounds and region flags along a traced prediction; `input(k)`
-    /// is the input of the step from z_k (empty: unforced). A bound that
+    /// is the previous and the current input of the step from z_k (empty:
+    /// unforced). A bound that
     /// is NaN, infinite or negative (the constants of an edited or loaded
     /// bound) is [`BoundError::NonFinite`].
     fn bounded<'u>(
         &self,
         trace: Trace<B, N>,
         bound: &SpatialConformal,
-        input: impl Fn(usize) -> &'u [f64],
+        input: impl Fn(usize) -> (&'u [f64], &'u [f64]),
     ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
         let dt = self.stepper().dt();
         let (noise_v, noise_w) = split::<B>(&bound.noise_std);
@@ -575,7 +617,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                         q.per_step[k - 1] * u[k - 1]
                     }
                 };
-                self.gp_input(z, input(k), &mut x);
+                let (up, u) = input(k);
+                self.gp_input(z, up, u, &mut x);
                 self.gp().input_normaliser().apply(&x, &mut xn);
                 let scale = trace
                     .std_devs

@@ -27,11 +27,17 @@
 //!
 //! An actuated mechanism's model learns under the inputs its data were
 //! logged with ([`forced_transitions`], [`LearnedSpatial::train_forced`]):
-//! the GP input is the encoded state followed by u, and the prior is the
-//! nominal forced step ([`LieStepper::step_forced`]). Such a model steps
-//! with [`LearnedSpatial::step_forced_with`] or
-//! [`SpatialIntegrator::rollout_forced`]; its plain step, without inputs,
-//! is a typed error ([`LearnSpatialError::Inputs`]), never a silent u = 0.
+//! the GP input is the encoded state followed by the previous and the
+//! current input, (enc(z), u_prev, u) — the next discrete velocities depend
+//! on the input that produced z's velocities as well as on the one held
+//! over the step (the planar `vigp::learned`, "Under inputs", explains
+//! why) — and the prior is the nominal forced step under u
+//! ([`LieStepper::step_forced`]). Such a model steps with
+//! [`LearnedSpatial::step_forced_with`] (previous input explicit) or
+//! [`SpatialIntegrator::rollout_forced`] (step k after `inputs[k − 1]`, the
+//! first after `inputs[0]`: the input taken as held across the start); its
+//! plain step, without inputs, is a typed error
+//! ([`LearnSpatialError::Inputs`]), never a silent u = 0.
 
 use super::{SpatialError, SpatialIntegrator};
 use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
@@ -64,17 +70,20 @@ impl Rotation {
         links * (9 + self.dim())
     }
 
-    /// The GP input of a step from `z` under `u` (empty: unforced): the
-    /// encoded state, then u. `out` has length `input_dim(B) + u.len()`.
+    /// The GP input of a step from `z` after `u_prev` under `u` (both
+    /// empty: unforced): the encoded state, then u_prev, then u. `out` has
+    /// length `input_dim(B) + u_prev.len() + u.len()`.
     pub(crate) fn encode_input<const B: usize>(
         self,
         z: &SpatialState<B>,
+        u_prev: &[f64],
         u: &[f64],
         out: &mut [f64],
     ) {
         let e = self.input_dim(B);
         self.encode(z, &mut out[..e]);
-        out[e..].copy_from_slice(u);
+        out[e..e + u_prev.len()].copy_from_slice(u_prev);
+        out[e + u_prev.len()..].copy_from_slice(u);
     }
 
     /// Write the GP input of `z` into `out` (length [`Rotation::input_dim`]).
@@ -161,11 +170,14 @@ pub(crate) fn velocities<const B: usize>(
 }
 
 /// One training pair of an actuated spatial mechanism: a discrete state,
-/// the input that drove the step from it, and the next discrete velocities.
+/// the input that produced its velocities, the input that drove the step
+/// from it, and the next discrete velocities.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SpatialForcedTransition<const B: usize, const U: usize> {
     /// z_k: configuration k and the velocities of the step to k+1.
     pub z: SpatialState<B>,
+    /// The input over [t_k, t_{k+1}], which produced z_k's velocities.
+    pub u_prev: SVector<f64, U>,
     /// The input over [t_{k+1}, t_{k+2}] (one per actuated joint, in
     /// declaration order), held over the step from z_k
     /// ([`LieStepper::step_forced`]).
@@ -179,8 +191,9 @@ pub struct SpatialForcedTransition<const B: usize, const U: usize> {
 /// Transitions of a trajectory of configurations sampled every Δt with the
 /// input logged at each sample and held until the next (zero-order hold):
 /// transition k, from configurations k, k+1, k+2, is driven by
-/// `inputs[k + 1]`, the input held over [t_{k+1}, t_{k+2}] — the planar
-/// convention of `vigp::learned::forced_transitions`. K configurations give
+/// `inputs[k + 1]`, the input held over [t_{k+1}, t_{k+2}], after
+/// `inputs[k]` (its `u_prev`) — the planar convention of
+/// `vigp::learned::forced_transitions`. K configurations give
 /// K − 2 transitions; `inputs` must be as long as `configurations`
 /// (shorter: fewer transitions).
 pub fn forced_transitions<const B: usize, const U: usize>(
@@ -190,10 +203,11 @@ pub fn forced_transitions<const B: usize, const U: usize>(
 ) -> Vec<SpatialForcedTransition<B, U>> {
     transitions(configurations, dt)
         .into_iter()
-        .zip(inputs.iter().skip(1))
+        .zip(inputs.windows(2))
         .map(|(t, u)| SpatialForcedTransition {
             z: t.z,
-            u: *u,
+            u_prev: u[0],
+            u: u[1],
             v_next: t.v_next,
             w_next: t.w_next,
         })
@@ -294,6 +308,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             .iter()
             .map(|t| SpatialForcedTransition {
                 z: t.z,
+                u_prev: SVector::zeros(),
                 u: SVector::zeros(),
                 v_next: t.v_next,
                 w_next: t.w_next,
@@ -306,7 +321,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
 
     /// [`LearnedSpatial::train`] for an actuated mechanism on transitions
     /// with their inputs ([`forced_transitions`]): the GP input is the
-    /// encoded state followed by u, and the nominal prior is the forced
+    /// encoded state followed by u_prev and u (module docs, "Under
+    /// inputs"), and the nominal prior is the forced
     /// Lie-group step under u ([`LieStepper::step_forced`]). `U` must equal
     /// the mechanism's number of actuated joints (checked at compile time).
     /// Predict with [`LearnedSpatial::step_forced_with`] or
@@ -323,8 +339,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         })
     }
 
-    /// Training with the GP input = encoded state followed by u (U values,
-    /// none for U = 0) and the prior's next velocities from
+    /// Training with the GP input = encoded state followed by u_prev and u
+    /// (U values each, none for U = 0) and the prior's next velocities from
     /// `nominal(stepper, z, u)`.
     fn train_inputs<const U: usize>(
         stepper: LieStepper<S, B, J, N, C>,
@@ -341,14 +357,14 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         if data.is_empty() {
             return Err(LearnSpatialError::Empty);
         }
-        let d = rotation.input_dim(B) + U;
+        let d = rotation.input_dim(B) + 2 * U;
         let mut inputs = vec![0.0; data.len() * d];
         let mut targets = Vec::with_capacity(data.len() * N);
         for (i, t) in data.iter().enumerate() {
             let next: SVector<f64, N> = pack(&t.v_next, &t.w_next);
             if !(t.z.is_finite()
                 && next.iter().all(|x| x.is_finite())
-                && t.u.iter().all(|x| x.is_finite()))
+                && t.u.iter().chain(t.u_prev.iter()).all(|x| x.is_finite()))
             {
                 return Err(LearnSpatialError::NonFinite(i));
             }
@@ -359,7 +375,12 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     norm,
                 });
             }
-            rotation.encode_input(&t.z, t.u.as_slice(), &mut inputs[i * d..(i + 1) * d]);
+            rotation.encode_input(
+                &t.z,
+                t.u_prev.as_slice(),
+                t.u.as_slice(),
+                &mut inputs[i * d..(i + 1) * d],
+            );
             let base: SVector<f64, N> = match prior {
                 Prior::Nominal => {
                     let z = if C > 0 {
@@ -433,25 +454,28 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
         z.validate()?;
         self.check_inputs(0)?;
-        self.velocity(z, &[], ws, None, |z| self.stepper.step(z))
+        self.velocity(z, &[], &[], ws, None, |z| self.stepper.step(z))
     }
 
-    /// The unprojected velocities under inputs `u` of a model from
-    /// [`LearnedSpatial::train_forced`]: ν_u = prior(z, u) + μ(z, u), the
-    /// prior being the forced nominal step. Errors: `U` other than the
-    /// training data's ([`LearnSpatialError::Inputs`]), NaN or ±∞ in `u`.
+    /// The unprojected velocities under inputs `u` after `u_prev` (the
+    /// input that produced z's velocities) of a model from
+    /// [`LearnedSpatial::train_forced`]: ν_u = prior(z, u) +
+    /// μ(enc(z), u_prev, u), the prior being the forced nominal step.
+    /// Errors: `U` other than the training data's
+    /// ([`LearnSpatialError::Inputs`]), NaN or ±∞ in `u_prev` or `u`.
     pub fn predict_velocity_forced<const U: usize>(
         &self,
         z: &SpatialState<B>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
         z.validate()?;
         self.check_inputs(U)?;
-        if !u.iter().all(|x| x.is_finite()) {
+        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(vigp_core::StepError::NonFiniteInput.into());
         }
-        self.velocity(z, u.as_slice(), ws, None, |z| {
+        self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, None, |z| {
             self.stepper.step_forced(z, u)
         })
     }
@@ -468,13 +492,14 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         }
     }
 
-    /// prior + μ at the GP input (encoded z, then `u`), the prior's next
+    /// prior + μ at the GP input (encoded z, then `u_prev` and `u`), the prior's next
     /// state from `nominal` (unused for [`Prior::Constant`]); the GP's
     /// latent variances into `var` when given (the mean is the same bits
     /// either way).
     fn velocity(
         &self,
         z: &SpatialState<B>,
+        u_prev: &[f64],
         u: &[f64],
         ws: &mut Workspace,
         var: Option<&mut SVector<f64, N>>,
@@ -482,7 +507,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
         // the GP input on the stack (heap only above 128 dimensions, i.e.
         // more than 7 links with rotation matrices)
-        let d = self.rotation.input_dim(B) + u.len();
+        let d = self.rotation.input_dim(B) + u_prev.len() + u.len();
         let mut stack = [0.0f64; 128];
         let mut heap;
         let input: &mut [f64] = if d <= stack.len() {
@@ -491,7 +516,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             heap = vec![0.0; d];
             &mut heap
         };
-        self.gp_input(z, u, input);
+        self.gp_input(z, u_prev, u, input);
         let mut mean = SVector::<f64, N>::zeros();
         match var {
             Some(var) => {
@@ -516,9 +541,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         Ok(nu)
     }
 
-    /// The GP input of a step from `z` under `u` (empty: unforced).
-    pub(crate) fn gp_input(&self, z: &SpatialState<B>, u: &[f64], out: &mut [f64]) {
-        self.rotation.encode_input(z, u, out);
+    /// The GP input of a step from `z` after `u_prev` under `u` (both
+    /// empty: unforced).
+    pub(crate) fn gp_input(&self, z: &SpatialState<B>, u_prev: &[f64], u: &[f64], out: &mut [f64]) {
+        self.rotation.encode_input(z, u_prev, u, out);
     }
 
     /// The mean prediction z₀, …, z_steps with the GP's latent standard
@@ -531,26 +557,32 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         ws: &mut Workspace,
     ) -> Result<Trace<B, N>, LearnSpatialError> {
         self.check_inputs(0)?;
-        self.trace_with(z0, steps, ws, |_| &[], |z, _| self.stepper.step(z))
+        self.trace_with(z0, steps, ws, |_| (&[], &[]), |z, _| self.stepper.step(z))
     }
 
-    /// [`Self::trace`] under `inputs` (one per step), a model from
-    /// [`LearnedSpatial::train_forced`].
+    /// [`Self::trace`] under `inputs` (one per step) after `u_prev`, a
+    /// model from [`LearnedSpatial::train_forced`].
     pub(crate) fn trace_forced<const U: usize>(
         &self,
         z0: &SpatialState<B>,
+        u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         ws: &mut Workspace,
     ) -> Result<Trace<B, N>, LearnSpatialError> {
         self.check_inputs(U)?;
-        if !inputs.iter().flatten().all(|x| x.is_finite()) {
+        if !inputs
+            .iter()
+            .chain([u_prev])
+            .flatten()
+            .all(|x| x.is_finite())
+        {
             return Err(vigp_core::StepError::NonFiniteInput.into());
         }
         self.trace_with(
             z0,
             inputs.len(),
             ws,
-            |k| inputs[k].as_slice(),
+            |k| step_inputs(u_prev, inputs, k),
             |z, k| self.stepper.step_forced(z, &inputs[k]),
         )
     }
@@ -560,7 +592,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z0: &SpatialState<B>,
         steps: usize,
         ws: &mut Workspace,
-        input: impl Fn(usize) -> &'u [f64],
+        input: impl Fn(usize) -> (&'u [f64], &'u [f64]),
         nominal: impl Fn(&SpatialState<B>, usize) -> Result<SpatialState<B>, vigp_core::StepError>,
     ) -> Result<Trace<B, N>, LearnSpatialError> {
         z0.validate()?;
@@ -570,7 +602,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let mut z = *z0;
         for k in 0..steps {
             let mut var = SVector::<f64, N>::zeros();
-            let nu = self.velocity(&z, input(k), ws, Some(&mut var), |z| nominal(z, k))?;
+            let (up, u) = input(k);
+            let nu = self.velocity(&z, up, u, ws, Some(&mut var), |z| nominal(z, k))?;
             z = self.advance(&z, nu)?;
             states.push(z);
             std_devs.push(var.map(|v| v.max(0.0).sqrt()));
@@ -592,17 +625,19 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// One learned step under inputs `u` (held over the step, as in
-    /// [`LieStepper::step_forced`]) of a model from
-    /// [`LearnedSpatial::train_forced`]: the configuration update is
-    /// exact, the velocities are the forced prior plus the GP mean at
-    /// (z, u), projected as in [`Self::step_with`]. No allocation.
+    /// [`LieStepper::step_forced`]) after `u_prev` (the input that produced
+    /// z's velocities) of a model from [`LearnedSpatial::train_forced`]:
+    /// the configuration update is exact, the velocities are the forced
+    /// prior plus the GP mean at (enc(z), u_prev, u), projected as in
+    /// [`Self::step_with`]. No allocation.
     pub fn step_forced_with<const U: usize>(
         &self,
         z: &SpatialState<B>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
     ) -> Result<SpatialState<B>, LearnSpatialError> {
-        let nu = self.predict_velocity_forced(z, u, ws)?;
+        let nu = self.predict_velocity_forced(z, u_prev, u, ws)?;
         self.advance(z, nu)
     }
 
@@ -657,7 +692,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
 
     /// A model from [`LearnedSpatial::train_forced`] steps under `u`
     /// ([`LearnedSpatial::step_forced_with`]; `U` must be the training
-    /// data's). A model trained without inputs takes u = 0 as
+    /// data's) with the input taken as held across the start, u_prev = u
+    /// (the trait has no slot for the previous input). A model trained
+    /// without inputs takes u = 0 as
     /// [`SpatialIntegrator::step`] and refuses other inputs with
     /// [`SpatialError::InputsNotSupported`], as integrators without inputs
     /// do. Allocates a GP workspace per call.
@@ -666,10 +703,12 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z: &SpatialState<B>,
         u: &SVector<f64, U>,
     ) -> Result<SpatialState<B>, SpatialError> {
-        self.forced_step_in(z, u, &mut self.gp.workspace(), None)
+        self.forced_step_in(z, u, u, &mut self.gp.workspace(), None)
     }
 
-    /// [`SpatialIntegrator::step_forced`] with one workspace.
+    /// [`SpatialIntegrator::step_forced`] with one workspace, step k after
+    /// `inputs[k − 1]` (the first after `inputs[0]`, held across the
+    /// start).
     fn rollout_forced<const U: usize>(
         &self,
         z0: &SpatialState<B>,
@@ -680,7 +719,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         out.push(*z0);
         let mut z = *z0;
         for (k, u) in inputs.iter().enumerate() {
-            z = self.forced_step_in(&z, u, &mut ws, Some(k))?;
+            let up = if k == 0 { u } else { &inputs[k - 1] };
+            z = self.forced_step_in(&z, up, u, &mut ws, Some(k))?;
             out.push(z);
         }
         Ok(out)
@@ -695,6 +735,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     fn forced_step_in<const U: usize>(
         &self,
         z: &SpatialState<B>,
+        u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
         k: Option<usize>,
@@ -705,13 +746,24 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             }
             self.step_with(z, ws)
         } else {
-            self.step_forced_with(z, u, ws)
+            self.step_forced_with(z, u_prev, u, ws)
         };
         step.map_err(|e| match k {
             Some(k) => in_rollout(e, k),
             None => e.into(),
         })
     }
+}
+
+/// The previous and the current input of step k of a rollout after
+/// `u_prev` under `inputs`.
+pub(crate) fn step_inputs<'u, const U: usize>(
+    u_prev: &'u SVector<f64, U>,
+    inputs: &'u [SVector<f64, U>],
+    k: usize,
+) -> (&'u [f64], &'u [f64]) {
+    let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+    (up.as_slice(), inputs[k].as_slice())
 }
 
 /// A learned step's error inside a rollout, at step `k`.

@@ -1,0 +1,444 @@
+//! Learning under zero-order-held inputs from truths other than vigp's own
+//! first-order variational integrator.
+//!
+//! Under a held input the next discrete velocity v_{k+1} depends on the
+//! state z_k = (x_k, v_k), the input held over the new interval (u) and the
+//! input that produced v_k (u_prev): for a continuous system, x_k, x_{k+1}
+//! and u_prev fix the true velocity at t_{k+1}. A forced learned model's
+//! GP therefore takes (enc(z_k), u_prev, u) (`vigp::learned`, "Under
+//! inputs"). Here three actuated mechanisms (a torque pendulum, an acrobot,
+//! a cart-pole pushed along its rail) are logged from two truths that carry
+//! the previous input — the midpoint VI, whose momentum keeps the input's
+//! share of the last interval, and RK4 on the continuous equations at
+//! Δt/20 sampled every Δt — with inputs held for segments of 1 to 20
+//! steps. A model learned on these logs (the nominal prior is the
+//! first-order VI of the same mechanism, without any parameter error: all
+//! there is to learn is the truth's integration) must predict 20 steps
+//! more accurately than the nominal model at every switch length.
+//!
+//! The learned step's exact derivatives A = ∂z₁/∂z₀, B = ∂z₁/∂u and
+//! B_prev = ∂z₁/∂u_prev are checked against five-point central
+//! differences.
+
+mod common;
+
+use common::{Rng, stencil};
+use nalgebra::SVector;
+use vigp::gp::TrainOptions;
+use vigp::learned::{Encoding, ForcedTransition, Learned, Prior, forced_transitions};
+use vigp::{Integrator, Mechanism, Rk4, State, Variational};
+
+vigp::mechanism! {
+    /// A damped pendulum driven by a torque at its pivot.
+    pub HeldPendulum {
+        gravity: [0.0, -9.81],
+        links {
+            rod: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            pivot: revolute(world, rod.start) { damping: 0.5, actuated },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// An acrobot: a double pendulum driven at the elbow.
+    pub HeldAcrobot {
+        gravity: [0.0, -9.81],
+        links {
+            upper: { mass: 1.0, length: 1.0 },
+            lower: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            shoulder: revolute(world, upper.start) { damping: 0.1 },
+            elbow: revolute(upper.end, lower.start) { damping: 0.1, actuated },
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// A cart-pole pushed along its rail.
+    pub HeldCartpole {
+        gravity: [0.0, -9.81],
+        links {
+            cart: { mass: 1.0, length: 0.5 },
+            pole: { mass: 0.3, length: 0.8 },
+        }
+        joints {
+            rail: prismatic(world, cart.center) { axis: [1.0, 0.0], damping: 0.3, actuated },
+            hinge: revolute(cart.center, pole.start) { damping: 0.05 },
+        }
+    }
+}
+
+const DT: f64 = 0.01;
+/// RK4 sub-steps per Δt: RK4's error at Δt/20 = 5e-4 s is orders below
+/// the first-order VI's at Δt, so the RK4 log is the continuous motion
+/// for this comparison.
+const SUBSTEPS: usize = 20;
+/// Prediction horizon (steps).
+const HORIZON: usize = 20;
+/// Start samples of the test windows of each switch length: 1..=STARTS
+/// covers every phase of a segment of up to 20 steps.
+const STARTS: usize = 20;
+
+#[derive(Clone, Copy, Debug)]
+enum Truth {
+    Midpoint,
+    Rk4,
+}
+
+/// Inputs logged with each of `samples` samples, held until the next:
+/// u_0 = 0 (the log starts at rest), then segments of `length(rng)` steps,
+/// each a uniform draw in ±`scale`.
+fn held_inputs<const U: usize>(
+    rng: &mut Rng,
+    samples: usize,
+    scale: f64,
+    mut length: impl FnMut(&mut Rng) -> usize,
+) -> Vec<SVector<f64, U>> {
+    let mut out = vec![SVector::zeros()];
+    while out.len() < samples {
+        let u = SVector::from_fn(|_, _| rng.uniform(-scale, scale));
+        for _ in 0..length(rng) {
+            out.push(u);
+        }
+    }
+    out.truncate(samples);
+    out
+}
+
+/// Positions x_0, …, x_{K−1} of `truth` from rest at `q0` under `logged`
+/// (K inputs, `logged[k]` held over [t_k, t_{k+1}]).
+fn log<M, const N: usize, const U: usize>(
+    model: M,
+    truth: Truth,
+    q0: SVector<f64, N>,
+    logged: &[SVector<f64, U>],
+) -> Vec<SVector<f64, N>>
+where
+    M: Mechanism<N, 0> + Clone,
+{
+    match truth {
+        Truth::Midpoint => {
+            // the rollout carries the momentum (with the midpoint rule's
+            // share of the last interval's input); step k runs under the
+            // input over [t_{k+1}, t_{k+2}], and the first interval's
+            // input is 0 (at rest, as `held_inputs` logs it)
+            let vi = Variational::midpoint(model, DT);
+            let z0 = State {
+                q: q0,
+                v: SVector::zeros(),
+            };
+            let mut out = vec![z0; logged.len() - 1];
+            vi.rollout_forced_into(&z0, &logged[1..], &mut out).unwrap();
+            std::iter::once(q0).chain(out.iter().map(|z| z.q)).collect()
+        }
+        Truth::Rk4 => {
+            let rk = Rk4::new(model, DT / SUBSTEPS as f64);
+            let mut z = State {
+                q: q0,
+                v: SVector::zeros(),
+            };
+            let mut out = vec![q0];
+            for u in &logged[..logged.len() - 1] {
+                for _ in 0..SUBSTEPS {
+                    z = rk.step_forced(&z, u).unwrap();
+                }
+                out.push(z.q);
+            }
+            out
+        }
+    }
+}
+
+/// RMS position error over all steps of all test windows, nominal and
+/// learned, for one switch length.
+struct Errors {
+    nominal: f64,
+    learned: f64,
+}
+
+/// Trains a forced model on logs of `truth` with switch lengths drawn from
+/// 1..=20 and measures nominal and learned 20-step errors for every switch
+/// length 1..=20 (windows starting at samples 1..=20 of a fresh log each).
+fn held_input_errors<M, const N: usize, const U: usize>(
+    name: &str,
+    model: M,
+    truth: Truth,
+    encoding: Encoding,
+    scale: f64,
+    q_range: [f64; N],
+    seed: u64,
+) -> Vec<Errors>
+where
+    M: Mechanism<N, 0> + Clone,
+{
+    let mut rng = Rng(seed);
+    let start =
+        |rng: &mut Rng| SVector::<f64, N>::from_fn(|i, _| rng.uniform(-1.0, 1.0) * q_range[i]);
+    let mut data: Vec<ForcedTransition<N, U>> = Vec::new();
+    for _ in 0..6 {
+        let logged = held_inputs::<U>(&mut rng, 72, scale, |r| 1 + (r.next_u64() % 20) as usize);
+        let q0 = start(&mut rng);
+        let positions = log(model.clone(), truth, q0, &logged);
+        data.extend(forced_transitions(&positions, &logged, DT));
+    }
+    let options = TrainOptions {
+        restarts: 1,
+        seed,
+        ..TrainOptions::default()
+    };
+    let (learned, _) =
+        Learned::train_forced(model.clone(), DT, &data, encoding, Prior::Nominal, &options)
+            .unwrap();
+    assert!(learned.takes_previous_input());
+    let nominal = Variational::new(model.clone(), DT);
+    let mut out = Vec::new();
+    for length in 1..=20 {
+        let samples = STARTS + HORIZON + 2;
+        let logged = held_inputs::<U>(&mut rng, samples, scale, |_| length);
+        let q0 = start(&mut rng);
+        let x = log(model.clone(), truth, q0, &logged);
+        let (mut e_nom, mut e_lrn, mut n) = (0.0, 0.0, 0usize);
+        for s in 1..=STARTS {
+            let z0 = State {
+                q: x[s],
+                v: (x[s + 1] - x[s]) / DT,
+            };
+            // step k from sample s + k under the input of row s + k + 1,
+            // after row s + k's: the start's velocity was produced by row s's
+            let us = &logged[s + 1..=s + HORIZON];
+            let mut pn = vec![z0; HORIZON];
+            nominal.rollout_forced_into(&z0, us, &mut pn).unwrap();
+            let mut pl = vec![z0; HORIZON];
+            learned
+                .rollout_mean_forced_into(&z0, &logged[s], us, &mut pl)
+                .unwrap();
+            for k in 0..HORIZON {
+                let truth = x[s + k + 1];
+                e_nom += (pn[k].q - truth).norm_squared();
+                e_lrn += (pl[k].q - truth).norm_squared();
+                n += 1;
+            }
+        }
+        let e = Errors {
+            nominal: (e_nom / n as f64).sqrt(),
+            learned: (e_lrn / n as f64).sqrt(),
+        };
+        println!(
+            "{name} {truth:?} switch every {length:2} steps: nominal {:.2e}, learned {:.2e}, \
+             learned/nominal {:.3}",
+            e.nominal,
+            e.learned,
+            e.learned / e.nominal
+        );
+        out.push(e);
+    }
+    out
+}
+
+/// At every switch length 1..=20 the learned model's RMS position error
+/// over 20-step predictions is below the nominal model's.
+fn assert_learned_wins(errors: &[Errors]) {
+    let worst = errors
+        .iter()
+        .map(|e| e.learned / e.nominal)
+        .fold(0.0, f64::max);
+    println!("worst learned/nominal ratio over switch lengths 1..=20: {worst:.3}");
+    for (i, e) in errors.iter().enumerate() {
+        assert!(
+            e.learned < e.nominal,
+            "switch length {}: learned {:e} >= nominal {:e}",
+            i + 1,
+            e.learned,
+            e.nominal
+        );
+    }
+}
+
+#[test]
+fn pendulum_midpoint_truth() {
+    let m = HeldPendulum::default().minimal();
+    let e = held_input_errors::<_, 1, 1>(
+        "pendulum",
+        m,
+        Truth::Midpoint,
+        Encoding::SinCos,
+        4.0,
+        [1.5],
+        1,
+    );
+    assert_learned_wins(&e);
+}
+
+#[test]
+fn pendulum_rk4_truth() {
+    let m = HeldPendulum::default().minimal();
+    let e =
+        held_input_errors::<_, 1, 1>("pendulum", m, Truth::Rk4, Encoding::SinCos, 4.0, [1.5], 2);
+    assert_learned_wins(&e);
+}
+
+#[test]
+fn acrobot_midpoint_truth() {
+    let m = HeldAcrobot::default().minimal();
+    let e = held_input_errors::<_, 2, 1>(
+        "acrobot",
+        m,
+        Truth::Midpoint,
+        Encoding::SinCos,
+        4.0,
+        [0.8, 0.8],
+        3,
+    );
+    assert_learned_wins(&e);
+}
+
+#[test]
+fn acrobot_rk4_truth() {
+    let m = HeldAcrobot::default().minimal();
+    let e = held_input_errors::<_, 2, 1>(
+        "acrobot",
+        m,
+        Truth::Rk4,
+        Encoding::SinCos,
+        4.0,
+        [0.8, 0.8],
+        4,
+    );
+    assert_learned_wins(&e);
+}
+
+#[test]
+fn cartpole_midpoint_truth() {
+    let m = HeldCartpole::default().minimal();
+    let e = held_input_errors::<_, 2, 1>(
+        "cart-pole",
+        m,
+        Truth::Midpoint,
+        Encoding::SinCos,
+        5.0,
+        [0.3, 0.8],
+        5,
+    );
+    assert_learned_wins(&e);
+}
+
+#[test]
+fn cartpole_rk4_truth() {
+    let m = HeldCartpole::default().minimal();
+    let e = held_input_errors::<_, 2, 1>(
+        "cart-pole",
+        m,
+        Truth::Rk4,
+        Encoding::SinCos,
+        5.0,
+        [0.3, 0.8],
+        6,
+    );
+    assert_learned_wins(&e);
+}
+
+/// A = ∂z₁/∂z₀, B = ∂z₁/∂u and B_prev = ∂z₁/∂u_prev of the learned step
+/// (an acrobot learned from the RK4 log, velocities with uniform noise of
+/// σ = 1e-4) against five-point central differences with ε = 1e-3.
+///
+/// Tolerance 1e-6 relative to the largest entry of each matrix (the
+/// tolerance of tests/control.rs for the same step): the five-point
+/// stencil's truncation error is O(ε⁴) and its rounding error is the GP
+/// mean's rounding (~1e-16·Σ|α_i k_i|) divided by ε; measured worst 3.9e-7
+/// over the six states (A ≤ 3.2e-8, B ≤ 3.4e-7, B_prev ≤ 3.9e-7). The
+/// noise on the targets keeps the GP's noise variance off its floor, as in
+/// tests/control.rs (noise-free data drives α up and the mean's rounding
+/// noise up to ~1e-7, which no stencil resolves to 1e-6).
+#[test]
+fn learned_step_derivatives_with_previous_input() {
+    let model = HeldAcrobot::default().minimal();
+    let mut rng = Rng(11);
+    let mut data = Vec::new();
+    for _ in 0..4 {
+        let logged = held_inputs::<1>(&mut rng, 60, 4.0, |r| 1 + (r.next_u64() % 8) as usize);
+        let q0 = SVector::<f64, 2>::new(rng.uniform(-0.8, 0.8), rng.uniform(-0.8, 0.8));
+        let positions = log(model, Truth::Rk4, q0, &logged);
+        data.extend(forced_transitions(&positions, &logged, DT));
+    }
+    let data: Vec<_> = data
+        .into_iter()
+        .step_by(2)
+        .map(|mut t: ForcedTransition<2, 1>| {
+            for x in t.v_next.iter_mut() {
+                *x += rng.uniform(-1.7e-4, 1.7e-4);
+            }
+            t
+        })
+        .collect();
+    let options = TrainOptions {
+        restarts: 1,
+        seed: 5,
+        ..TrainOptions::default()
+    };
+    let (l, _) =
+        Learned::train_forced(model, DT, &data, Encoding::SinCos, Prior::Nominal, &options)
+            .unwrap();
+    let mut ws = l.workspace();
+    let mut ws2 = l.workspace();
+    let mut worst = 0.0f64;
+    for t in data.iter().step_by(17).take(6) {
+        let (z, up, u) = (t.z, t.u_prev, t.u);
+        let (z1, d, dp) = l.step_derivatives_forced(&z, &up, &u, &mut ws).unwrap();
+        assert_eq!(z1, l.step_mean_forced_with(&z, &up, &u, &mut ws).unwrap());
+        let mut step = |z: State<2>, up: SVector<f64, 1>, u: SVector<f64, 1>| {
+            l.step_mean_forced_with(&z, &up, &u, &mut ws2).unwrap()
+        };
+        let (mut err_a, mut scale_a) = (0.0f64, 0.0f64);
+        for j in 0..2 {
+            for pos in [true, false] {
+                let (dq, dv) = stencil(1e-3, |e| {
+                    let mut zp = z;
+                    if pos {
+                        zp.q[j] += e;
+                    } else {
+                        zp.v[j] += e;
+                    }
+                    step(zp, up, u)
+                });
+                let (aq, av) = if pos {
+                    (
+                        d.a.q_q.column(j).into_owned(),
+                        d.a.v_q.column(j).into_owned(),
+                    )
+                } else {
+                    (
+                        d.a.q_v.column(j).into_owned(),
+                        d.a.v_v.column(j).into_owned(),
+                    )
+                };
+                err_a = err_a.max((aq - dq).amax()).max((av - dv).amax());
+                scale_a = scale_a.max(dq.amax()).max(dv.amax());
+            }
+        }
+        let one = SVector::<f64, 1>::new(1.0);
+        let (bq, bv) = stencil(1e-3, |e| step(z, up, u + one * e));
+        let err_b = (d.b.q_u.column(0) - bq)
+            .amax()
+            .max((d.b.v_u.column(0) - bv).amax());
+        let (pq, pv) = stencil(1e-3, |e| step(z, up + one * e, u));
+        let err_p = (dp.q_u.column(0) - pq)
+            .amax()
+            .max((dp.v_u.column(0) - pv).amax());
+        // the previous input matters: its derivative is not negligible
+        assert!(pv.amax() > 1e-4, "∂v₁/∂u_prev = {:e}", pv.amax());
+        let rel = [err_a / scale_a, err_b / bv.amax(), err_p / pv.amax()];
+        println!(
+            "A err {:.1e}, B err {:.1e}, B_prev err {:.1e} (|∂v₁/∂u_prev| = {:.1e})",
+            rel[0],
+            rel[1],
+            rel[2],
+            pv.amax()
+        );
+        worst = rel.iter().fold(worst, |w, r| w.max(*r));
+    }
+    println!("learned step derivatives: worst relative error {worst:.1e}");
+    assert!(worst <= 1e-6, "{worst:e}");
+}
