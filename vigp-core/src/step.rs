@@ -168,6 +168,24 @@ pub enum StepError {
         /// Scaled residual reached.
         residual: f64,
     },
+    /// Newton converged, but to a root that is not the continuation of the
+    /// motion: the step's velocity-dependent and constraint impulse
+    /// |M(m₁)v₁ − p̂|∞ is more than `bound` times the momentum of the
+    /// explicit predictor p̂ = p₀ + (1−α)Δt·(−∇V(m₁) + B(m₁)u) (see
+    /// [`Stepper::continuation_bound`]).
+    NotContinuation {
+        /// |M(m₁)v₁ − p̂|∞ / |p̂|∞ at the root.
+        ratio: f64,
+        /// The bound in force.
+        bound: f64,
+    },
+    /// A rollout of this many steps whose states cannot be stored:
+    /// (steps + 1)·(size of a state) exceeds the address space (a duration
+    /// divided by Δt = 0 gives such a count). See [`check_step_count`].
+    TooManySteps {
+        /// The step count asked for.
+        steps: usize,
+    },
 }
 
 impl core::fmt::Display for StepError {
@@ -205,11 +223,59 @@ impl core::fmt::Display for StepError {
                 f,
                 "Newton did not converge: {iterations} iterations, residual {residual:.3e}"
             ),
+            Self::NotContinuation { ratio, bound } => write!(
+                f,
+                "{NOT_CONTINUATION_TEXT}: impulse ratio {ratio:.3e} > bound {bound:e}; {NOT_CONTINUATION_REMEDY}"
+            ),
+            Self::TooManySteps { steps } => write!(f, "{TOO_MANY_STEPS_TEXT} ({steps} steps)"),
         }
     }
 }
 
 impl core::error::Error for StepError {}
+
+/// The message of [`StepError::NotContinuation`] (shared with the std
+/// runtime's error).
+pub const NOT_CONTINUATION_TEXT: &str = "Newton converged to a root that is not the continuation of the motion \
+     (the step's velocity-dependent and constraint impulse dwarfs the momentum it starts with)";
+
+/// The remedy named by [`StepError::NotContinuation`].
+pub const NOT_CONTINUATION_REMEDY: &str = "the step is too large for the motion: use a smaller dt or `substeps` \
+     (or turn the check off with `continuation_bound(f64::INFINITY)`)";
+
+/// The message of [`StepError::TooManySteps`].
+pub const TOO_MANY_STEPS_TEXT: &str = "a rollout whose states do not fit in memory \
+     (a duration divided by a zero or tiny dt?)";
+
+/// The default of [`Stepper::continuation_bound`]: 4.
+///
+/// On a step that resolves the motion the ratio
+/// |M(m₁)v₁ − p̂|∞ / |p̂|∞ is about 1 at most from the constraint and
+/// damping impulses (at rest under gravity the constraint impulse cancels
+/// the predictor's, ratio 1; a damper removes at most the momentum there
+/// is) plus about Δt·|v|·|∂M/∂q|/|M| from the velocity terms, so it
+/// exceeds 4 only when the root carries more than three times the
+/// predictor's momentum: the quadratic velocity terms of the discrete
+/// equations, not the forces, set it.
+pub const DEFAULT_CONTINUATION_BOUND: f64 = 4.0;
+
+/// Checks a rollout length before anything is allocated: the `steps + 1`
+/// states of type `T` a trajectory holds must fit in the address space
+/// (at most `isize::MAX` bytes). Returns `steps + 1`. Every rollout that
+/// allocates its trajectory calls this first; `usize::MAX` and
+/// `usize::MAX / 2` are [`StepError::TooManySteps`], not a panic.
+pub fn check_step_count<T>(steps: usize) -> Result<usize, StepError> {
+    let len = steps
+        .checked_add(1)
+        .ok_or(StepError::TooManySteps { steps })?;
+    let bytes = len
+        .checked_mul(core::mem::size_of::<T>().max(1))
+        .ok_or(StepError::TooManySteps { steps })?;
+    if bytes > isize::MAX as usize {
+        return Err(StepError::TooManySteps { steps });
+    }
+    Ok(len)
+}
 
 /// A step error inside a rollout, with the index of the failing step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -245,12 +311,16 @@ pub struct StepReport {
     /// Some Newton matrix was singular and the equivalent regularised KKT
     /// system was solved instead.
     pub regularised: bool,
+    /// The continuation ratio |M(m₁)v₁ − p̂|∞ / |p̂|∞ of the root (largest
+    /// over sub-steps; [`Stepper::continuation_bound`]).
+    pub continuation: f64,
 }
 
 impl StepReport {
     pub(crate) fn merge(&mut self, other: &StepReport) {
         self.iterations += other.iterations;
         self.residual = self.residual.max(other.residual);
+        self.continuation = self.continuation.max(other.continuation);
         self.stalled |= other.stalled;
         self.regularised |= other.regularised;
     }
@@ -296,6 +366,7 @@ pub struct Stepper<M: Dynamics<N, C>, const N: usize, const C: usize> {
     pub(crate) alpha: f64,
     pub(crate) options: StepOptions,
     pub(crate) substeps: usize,
+    pub(crate) continuation: f64,
 }
 
 /// max |x_i|, NaN if any entry is NaN or ±∞ (`f64::max` alone would drop
@@ -447,7 +518,34 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             alpha: 0.0,
             options,
             substeps: 1,
+            continuation: DEFAULT_CONTINUATION_BOUND,
         })
+    }
+
+    /// The same integrator with another continuation bound (default
+    /// [`DEFAULT_CONTINUATION_BOUND`]). After every converged (sub-)step
+    /// the root v₁ is compared with the explicit predictor: with
+    /// p̂ = p₀ + (1−α)h·(−∇V(m₁) + B(m₁)u) the momentum the step would have
+    /// without velocity-dependent and constraint forces, a root with
+    /// |M(m₁)v₁ − p̂|∞ > bound·|p̂|∞ + 1e-9·(|p₀|∞ + m̄) is
+    /// [`StepError::NotContinuation`]: the discrete equations, quadratic
+    /// in v₁, were solved on a branch no physical motion has (the double
+    /// pendulum at Δt = 2 s). The ratio is reported as
+    /// [`StepReport::continuation`]. `f64::INFINITY` turns the check off;
+    /// NaN or a bound ≤ 0 is [`StepError::InvalidOptions`].
+    pub fn continuation_bound(mut self, bound: f64) -> Result<Self, StepError> {
+        if !(bound > 0.0) {
+            return Err(StepError::InvalidOptions(
+                "continuation bound must be > 0 (f64::INFINITY turns the check off)",
+            ));
+        }
+        self.continuation = bound;
+        Ok(self)
+    }
+
+    /// The continuation bound in force ([`Stepper::continuation_bound`]).
+    pub fn continuation(&self) -> f64 {
+        self.continuation
     }
 
     /// The second-order variational integrator of the midpoint discrete
@@ -776,12 +874,72 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// is that of the unforced step. `t` is the solver's workspace; after a
     /// converged solve it holds the terms at the solution's quadrature
     /// point m₁(v₁) = x₁ + αh·v₁ (the derivatives reuse them).
+    ///
+    /// A converged root is then checked to be the continuation of the
+    /// motion ([`Stepper::continuation_bound`]).
     #[inline(always)]
     #[expect(
         clippy::too_many_arguments,
         reason = "internal: the sub-step's data, the two input closures and the terms workspace"
     )]
     pub(crate) fn solve_forced_rule<const MID: bool, const FORCED: bool>(
+        &self,
+        x1: &SVector<f64, N>,
+        p0: &SVector<f64, N>,
+        h: f64,
+        guess: &SVector<f64, N>,
+        input_force: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+        input_jac: impl Fn(&SVector<f64, N>) -> SMatrix<f64, N, N>,
+        ws: &mut Workspace<N, C>,
+    ) -> Result<Forced<N, C>, StepError> {
+        let (v1, p1, mut report, lambda) = self.newton_forced_rule::<MID, FORCED>(
+            x1,
+            p0,
+            h,
+            guess,
+            &input_force,
+            input_jac,
+            ws,
+        )?;
+        // the terms are at the root's quadrature point m₁ (see above)
+        let t = &ws.t;
+        let alpha = if MID { 0.5 } else { 0.0 };
+        let mut f0 = -t.dpotential;
+        if FORCED {
+            f0 += input_force(&if MID { x1 + v1 * (alpha * h) } else { *x1 });
+        }
+        let p_hat = p0 + f0 * ((1.0 - alpha) * h);
+        let impulse = max_abs(&(M::mass_times(t, &v1) - p_hat));
+        let mut m_bar = 0.0f64;
+        for i in 0..N {
+            m_bar = m_bar.max(t.mass[(i, i)].abs());
+        }
+        let scale = max_abs(&p_hat);
+        let ratio = if scale > 0.0 {
+            impulse / scale
+        } else if impulse > 0.0 {
+            f64::INFINITY
+        } else {
+            0.0
+        };
+        report.continuation = ratio;
+        if impulse > self.continuation * scale + 1e-9 * (max_abs(p0) + m_bar) {
+            return Err(StepError::NotContinuation {
+                ratio,
+                bound: self.continuation,
+            });
+        }
+        Ok((v1, p1, report, lambda))
+    }
+
+    /// The Newton solve of [`Stepper::solve_forced_rule`], without the
+    /// continuation check.
+    #[inline(always)]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "internal: the sub-step's data, the two input closures and the terms workspace"
+    )]
+    fn newton_forced_rule<const MID: bool, const FORCED: bool>(
         &self,
         x1: &SVector<f64, N>,
         p0: &SVector<f64, N>,
@@ -981,6 +1139,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     residual: err,
                     stalled: false,
                     regularised,
+                    continuation: 0.0,
                 };
                 if C > 0 {
                     // c and G at x₁ + h·v, the next step's x₁
@@ -1051,6 +1210,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                                 residual: bound,
                                 stalled: false,
                                 regularised,
+                                continuation: 0.0,
                             };
                             return Ok((v1, M::mass_times(t, &v1), report, lambda));
                         }
@@ -1167,6 +1327,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                             residual: err,
                             stalled: true,
                             regularised,
+                            continuation: 0.0,
                         };
                         if C > 0 {
                             // c and G at x₁ + h·v, the next step's x₁
@@ -1187,6 +1348,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 residual: err,
                 stalled: false,
                 regularised,
+                continuation: 0.0,
             };
             if C > 0 {
                 // c and G at x₁ + h·v, the next step's x₁
