@@ -42,6 +42,22 @@
 //!   in (−π, π] turning past π does not become a 600 rad/s spike. This
 //!   assumes |θ̇|·Δt < π (at 100 Hz, below 314 rad/s); turn it off with
 //!   [`ReadOptions::unwrap_angles`].
+//! * **Outliers.** A reading whose jump from its neighbour implies an
+//!   implausible speed is [`DataError::Outlier`], naming run, line and
+//!   column. The bound is [`ReadOptions::max_speed`] when set; otherwise an
+//!   angle's raw jump beyond 3π (neither a sensor wrap of 2π nor, under the
+//!   unwrapping assumption, a motion) or any coordinate's jump beyond twice
+//!   the run's extent without its two extreme readings (runs of five or
+//!   more samples): one reading of 1e6 or 1e308 in a pendulum's angle
+//!   column is refused, not unwrapped to a plausible angle. With
+//!   [`ReadOptions::drop_outliers`] a spike's row is dropped instead, its
+//!   run split there, and the drop recorded in [`Dataset::dropped`].
+//! * **Units.** Angle columns whose readings exceed a turn but stay within
+//!   ±400 with implied speeds above 50 rad/s (degrees read as radians),
+//!   and integer timestamps a second or more apart (milliseconds read as
+//!   seconds), are read as they are and reported in
+//!   [`Dataset::warnings`] ([`DataWarning`]). A Δt given to a trainer is
+//!   checked against the transitions with [`check_transitions_dt`].
 //! * **Short runs.** A run of one or two rows is kept (it is data) but gives
 //!   no transition (a transition needs three positions); a run of one row
 //!   has no time step. [`Dataset::transitions`] skips them and
