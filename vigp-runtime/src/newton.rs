@@ -27,7 +27,7 @@ pub struct StepInfo {
     /// from a feasible point (the velocity projection from far off the
     /// manifold, see [`crate::projection::project_velocity`]).
     pub restarted: bool,
-    /// The continuation ratio of the root (the core's
+    /// The bend |Δt·(v₁ − v₀)|∞ of the step's discrete path (the core's
     /// [`vigp_core::StepReport::continuation`]; 0 where not measured).
     pub continuation: f64,
 }
@@ -143,13 +143,14 @@ pub enum StepError {
     /// motion (the core's [`vigp_core::StepError::NotContinuation`]; see
     /// `Variational::continuation_bound`).
     #[error(
-        "{}: impulse ratio {ratio:.3e} > bound {bound:e}{}; {}",
+        "{}: it bends the path by {ratio:.3e} rad > bound {bound:e}{}; {}",
         vigp_core::step::NOT_CONTINUATION_TEXT,
         at(step),
         vigp_core::step::NOT_CONTINUATION_REMEDY
     )]
     NotContinuation {
-        /// |M(m₁)v₁ − p̂|∞ / |p̂|∞ at the root.
+        /// The bend |Δt·(v₁ − v₀)|∞ of the step (radians, or scaled
+        /// lengths).
         ratio: f64,
         /// The bound in force.
         bound: f64,

@@ -248,13 +248,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 
     /// The bound of the continuation check (default
-    /// [`vigp_core::step::DEFAULT_CONTINUATION_BOUND`], 4): a step whose
-    /// Newton root carries a velocity-dependent and constraint impulse
-    /// |M(m₁)v₁ − p̂|∞ above `bound` times the explicit predictor's momentum
-    /// |p̂|∞ (p̂ = p₀ + (1−α)Δt·(−∇V + Bu) at the root's quadrature point)
-    /// is [`StepError::NotContinuation`]: the discrete equations were
-    /// solved on a branch that is not the continuation of the motion (the
-    /// double pendulum at Δt = 2 s). The ratio of each step is
+    /// [`vigp_core::step::DEFAULT_CONTINUATION_BOUND`], 1 rad): a step
+    /// whose velocity change bends the discrete path by more,
+    /// |Δt·(v₁ − v₀)|∞ (radians; lengths in units of 1 + the largest length
+    /// coordinate; per sub-step with [`Variational::substeps`]), is
+    /// [`StepError::NotContinuation`]: Newton's root solves the discrete
+    /// equations but does not continue the motion (the double pendulum
+    /// released from rest at Δt = 2 s bends 32 rad in its first step). The
+    /// bend of each step is
     /// [`StepInfo::continuation`](crate::StepInfo::continuation).
     /// `f64::INFINITY` turns the check off; NaN or a bound ≤ 0 is reported
     /// by `step` as [`StepError::InvalidOptions`].
@@ -352,6 +353,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         fresh: impl FnOnce(&Stepper<M, N, C>) -> Result<R, CoreError>,
     ) -> Result<R, StepError> {
         let stepper = self.stepper()?;
+        check_quaternions::<M, N, C>(z)?;
         crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
             Some(ws) => kept(stepper, ws),
             None => fresh(stepper),
@@ -453,6 +455,37 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 }
 
+/// A start state whose quaternion is not of unit norm (to 1e-9) is
+/// [`StepError::NonUnitQuaternion`], with the `consistent_state` hint in its
+/// message (free for mechanisms without quaternion coordinates).
+fn check_quaternions<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    z: &State<N>,
+) -> Result<(), StepError> {
+    let has = const {
+        let mut i = 0;
+        let mut any = false;
+        while i < N {
+            if matches!(M::KINDS[i], vigp_core::CoordinateKind::Quaternion) {
+                any = true;
+            }
+            i += 1;
+        }
+        any
+    };
+    if has {
+        if let Some((link, norm)) = non_unit_quaternion::<M, N, C>(&z.q) {
+            if norm.is_finite() {
+                return Err(StepError::NonUnitQuaternion {
+                    link,
+                    norm,
+                    step: None,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
 /// The first quaternion block (four consecutive coordinates of kind
 /// [`vigp_core::CoordinateKind::Quaternion`], counted from 0) of `q`
 /// whose norm is not 1 to 1e-9, with its norm.
@@ -519,6 +552,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         inputs: &[nalgebra::SVector<f64, U>],
         out: &mut [State<N>],
     ) -> Result<(), StepError> {
+        check_quaternions::<M, N, C>(z0)?;
         self.stepper()?
             .steps_forced_into(z0, inputs, out)
             .map_err(|e| {
@@ -671,6 +705,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     /// converged steps are those of repeated `step` calls to the solver
     /// tolerance). No allocation.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
+        check_quaternions::<M, N, C>(z0)?;
         self.stepper()?.steps_into(z0, out).map_err(|e| {
             let from = if e.step == 0 { z0 } else { &out[e.step - 1] };
             self.explain(StepError::from(e.error), from).at_step(e.step)

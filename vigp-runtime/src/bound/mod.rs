@@ -785,6 +785,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         inputs: &'a [SVector<f64, U>],
         ws: &mut Workspace,
     ) -> Result<Trace<'a, N, U>, StepError> {
+        // the count checked before anything is allocated (the rollout's
+        // GP input buffer holds steps × d numbers)
+        let d = self.gp().input_dim().max(1);
+        vigp_core::step::check_step_count::<State<N>>(steps)?;
+        if steps
+            .checked_mul(d)
+            .and_then(|n| n.checked_mul(core::mem::size_of::<f64>()))
+            .is_none_or(|bytes| bytes > isize::MAX as usize)
+        {
+            return Err(StepError::TooManySteps { steps });
+        }
         let mut t = Trace {
             states: Vec::with_capacity(steps + 1),
             std_devs: Vec::with_capacity(steps),
