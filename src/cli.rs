@@ -1272,12 +1272,13 @@ where
         .collect();
     // the first failure of each model, with the run and the line its
     // window starts at
-    for (what, pick) in [
-        ("nominal", 0usize),
-        ("learned", 1usize),
-    ] {
+    for (what, pick) in [("nominal", 0usize), ("learned", 1usize)] {
         let first = windows.iter().zip(&results).find_map(|(&(r, s), res)| {
-            let e = if pick == 0 { res.0.as_ref() } else { res.1.as_ref() };
+            let e = if pick == 0 {
+                res.0.as_ref()
+            } else {
+                res.1.as_ref()
+            };
             e.err().map(|e| (r, s, *e))
         });
         if let Some((r, s, e)) = first {

@@ -145,7 +145,10 @@ fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
         other => panic!("expected NotContinuation, got {other:?}"),
     }
     let text = e.to_string();
-    assert!(text.contains("not the continuation of the motion"), "{text}");
+    assert!(
+        text.contains("not the continuation of the motion"),
+        "{text}"
+    );
     assert!(text.contains("substeps"), "{text}");
     // a bound ≤ 0 or NaN is refused
     for bad in [0.0, -1.0, f64::NAN] {
@@ -288,14 +291,23 @@ fn read(text: &str, opts: &ReadOptions) -> Result<Dataset<1>, DataError> {
 fn a_sensor_spike_is_an_outlier_naming_run_line_and_column() {
     for spike in [1e6, 1e308, -1e6] {
         // run r1, row 30: file line 1 (header) + 60 (run r0) + 30 + 1
-        let text = pendulum_log(2, 60, seconds, |r, k, x| {
-            if r == 1 && k == 30 { spike } else { x }
-        });
+        let text = pendulum_log(
+            2,
+            60,
+            seconds,
+            |r, k, x| {
+                if r == 1 && k == 30 { spike } else { x }
+            },
+        );
         let e = read(&text, &ReadOptions::default()).unwrap_err();
         println!("{e}");
         match &e {
             DataError::Outlier {
-                run, line, column, value, ..
+                run,
+                line,
+                column,
+                value,
+                ..
             } => {
                 assert_eq!((run.as_str(), *line, column.as_str()), ("r1", 92, "pivot"));
                 assert_eq!(*value, spike);
@@ -325,7 +337,11 @@ fn a_sensor_spike_is_an_outlier_naming_run_line_and_column() {
         }
     }
     // the clean log reads as before: no outlier, no warning
-    let d = read(&pendulum_log(2, 60, seconds, |_, _, x| x), &ReadOptions::default()).unwrap();
+    let d = read(
+        &pendulum_log(2, 60, seconds, |_, _, x| x),
+        &ReadOptions::default(),
+    )
+    .unwrap();
     assert!(d.dropped.is_empty() && d.warnings.is_empty());
     assert_eq!(d.runs.len(), 2);
 }
@@ -357,9 +373,9 @@ fn degrees_and_milliseconds_get_a_unit_warning() {
     let d = read(&degrees, &ReadOptions::default()).unwrap();
     println!("{:?}", d.warnings);
     assert!(
-        d.warnings
-            .iter()
-            .any(|w| matches!(w, DataWarning::LooksLikeDegrees { column, .. } if column == "pivot")),
+        d.warnings.iter().any(
+            |w| matches!(w, DataWarning::LooksLikeDegrees { column, .. } if column == "pivot")
+        ),
         "{:?}",
         d.warnings
     );
@@ -379,7 +395,11 @@ fn degrees_and_milliseconds_get_a_unit_warning() {
 /// and refuses another, with the factor.
 #[test]
 fn a_dt_that_contradicts_the_data_is_a_typed_error() {
-    let d = read(&pendulum_log(2, 60, seconds, |_, _, x| x), &ReadOptions::default()).unwrap();
+    let d = read(
+        &pendulum_log(2, 60, seconds, |_, _, x| x),
+        &ReadOptions::default(),
+    )
+    .unwrap();
     let tr = d.transitions();
     check_transitions_dt(&tr, 0.01, 1e-6).unwrap();
     let e = check_transitions_dt(&tr, 0.02, 1e-6).unwrap_err();

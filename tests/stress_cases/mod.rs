@@ -178,11 +178,10 @@ fn check_typed_failure(row: &mut Row, e: &StepError) {
         StepError::SingularJacobian { .. } | StepError::NonFiniteResidual { .. } => {}
         // a converged root that does not resolve the motion (the bend of
         // the step above the continuation bound)
-        StepError::NotContinuation { ratio, bound, .. } => {
-            row.check(ratio.is_finite() && ratio > bound, || {
+        StepError::NotContinuation { ratio, bound, .. } => row
+            .check(ratio.is_finite() && ratio > bound, || {
                 format!("bad diagnostics: {e:?}")
-            })
-        }
+            }),
         other => row.fail(format!("unexpected error {other:?}")),
     }
 }

@@ -928,15 +928,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         input_jac: impl Fn(&SVector<f64, N>) -> SMatrix<f64, N, N>,
         ws: &mut Workspace<N, C>,
     ) -> Result<Forced<N, C>, StepError> {
-        self.newton_forced_rule::<MID, FORCED>(
-            x1,
-            p0,
-            h,
-            guess,
-            input_force,
-            input_jac,
-            ws,
-        )
+        self.newton_forced_rule::<MID, FORCED>(x1, p0, h, guess, input_force, input_jac, ws)
     }
 
     /// The Newton solve of [`Stepper::solve_forced_rule`].

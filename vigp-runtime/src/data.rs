@@ -774,8 +774,7 @@ impl<const N: usize> RawRun<N> {
                         && match opts.max_speed {
                             Some(_) => d.abs() / dt > bound,
                             None if angle => {
-                                raw_d.abs() > 3.0 * core::f64::consts::PI
-                                    || d.abs() > 2.0 * extent
+                                raw_d.abs() > 3.0 * core::f64::consts::PI || d.abs() > 2.0 * extent
                             }
                             None => d.abs() > 2.0 * extent,
                         }
@@ -1027,7 +1026,10 @@ fn check_pairs_dt<const N: usize>(
     let mut estimates: Vec<(f64, usize)> = Vec::new();
     for (i, w) in pairs.windows(2).enumerate() {
         let ((z0, v_next), (z1, _)) = (&w[0], &w[1]);
-        let same_run = z1.v.iter().zip(v_next.iter()).all(|(a, b)| a.to_bits() == b.to_bits());
+        let same_run =
+            z1.v.iter()
+                .zip(v_next.iter())
+                .all(|(a, b)| a.to_bits() == b.to_bits());
         let vv = z0.v.dot(&z0.v);
         if !same_run || !(vv > 0.0) {
             continue;

@@ -192,13 +192,27 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// An integrator for `model` with time step `dt` and default Newton
     /// options (the paper's first-order rule).
     pub fn new(model: M, dt: f64) -> Self {
-        Self::build(model, dt, 0.0, NewtonOptions::default(), 1, DEFAULT_CONTINUATION)
+        Self::build(
+            model,
+            dt,
+            0.0,
+            NewtonOptions::default(),
+            1,
+            DEFAULT_CONTINUATION,
+        )
     }
 
     /// The second-order variational integrator of the midpoint discrete
     /// Lagrangian L_d = Δt·L((x_k + x_{k+1})/2, (x_{k+1} − x_k)/Δt).
     pub fn midpoint(model: M, dt: f64) -> Self {
-        Self::build(model, dt, 0.5, NewtonOptions::default(), 1, DEFAULT_CONTINUATION)
+        Self::build(
+            model,
+            dt,
+            0.5,
+            NewtonOptions::default(),
+            1,
+            DEFAULT_CONTINUATION,
+        )
     }
 
     fn build(
