@@ -221,6 +221,15 @@ struct ReadArgs {
     /// (relative), on top of the rounding of the printed timestamps.
     #[arg(long, default_value_t = 1e-3, allow_negative_numbers = true)]
     time_tolerance: f64,
+    /// Drop readings that imply an implausible speed (sensor spikes) and
+    /// split their runs there, instead of refusing the file; the count is
+    /// printed.
+    #[arg(long)]
+    drop_outliers: bool,
+    /// The largest plausible speed of any coordinate (rad/s or m/s);
+    /// default: from the data's own extent.
+    #[arg(long, value_name = "SPEED", allow_negative_numbers = true)]
+    max_speed: Option<f64>,
 }
 
 impl ReadArgs {
@@ -229,6 +238,8 @@ impl ReadArgs {
             unwrap_angles: !self.no_unwrap,
             time_tolerance: self.time_tolerance,
             resample: self.resample,
+            max_speed: self.max_speed,
+            drop_outliers: self.drop_outliers,
         }
     }
 }
@@ -635,8 +646,25 @@ fn read_data<const N: usize>(
     inputs: &[&str],
     read: &ReadArgs,
 ) -> Result<Dataset<N>, CliError> {
-    Dataset::read_path_with_inputs(path, names, kinds, inputs, &read.options())
-        .map_err(data_error(path))
+    let data = Dataset::read_path_with_inputs(path, names, kinds, inputs, &read.options())
+        .map_err(data_error(path))?;
+    // unit heuristics and dropped outliers: on stderr, the results stay
+    // on stdout
+    for warning in &data.warnings {
+        eprintln!("warning: {}: {warning}", path.display());
+    }
+    if !data.dropped.is_empty() {
+        let first = &data.dropped[0];
+        eprintln!(
+            "note: {}: dropped {} outlier reading(s) (--drop-outliers), the first at run `{}`, line {}, column `{}`",
+            path.display(),
+            data.dropped.len(),
+            first.run,
+            first.line,
+            first.column
+        );
+    }
+    Ok(data)
 }
 
 /// ", sparse GP, M = …" for a sparse model, "" for an exact one.
@@ -1196,7 +1224,8 @@ where
     let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
     let vi = Variational::new(nominal, dt);
     let pb = bar(windows.len(), "scoring");
-    let results: Vec<(Option<f64>, Option<f64>)> = windows
+    type Scored = Result<f64, StepError>;
+    let results: Vec<(Scored, Scored)> = windows
         .par_iter()
         .map(|&(r, s)| {
             let run = &data.runs[r];
@@ -1219,7 +1248,7 @@ where
             } else {
                 vi.rollout_forced_into(&z0, us, &mut buf)
             };
-            let nom = nom.ok().map(|()| {
+            let nom = nom.map(|()| {
                 let p: Vec<_> = buf.iter().map(|z| z.q).collect();
                 window_mse(&p, truth)
             });
@@ -1230,7 +1259,7 @@ where
             } else {
                 learned.rollout_mean_forced_into(&zv, &inputs[r][s], us, &mut buf)
             };
-            let lrn = lrn.ok().map(|()| {
+            let lrn = lrn.map(|()| {
                 let p: Vec<_> = buf.iter().map(|z| to_minimal(&z.q)).collect();
                 window_mse(&p, truth)
             });
@@ -1239,12 +1268,34 @@ where
         })
         .collect();
     pb.finish_and_clear();
-    let nominal_failed = results.iter().filter(|r| r.0.is_none()).count();
-    let learned_failed = results.iter().filter(|r| r.1.is_none()).count();
+    let nominal_failed = results.iter().filter(|r| r.0.is_err()).count();
+    let learned_failed = results.iter().filter(|r| r.1.is_err()).count();
     let both: Vec<(f64, f64)> = results
         .iter()
-        .filter_map(|(a, b)| Some(((*a)?, (*b)?)))
+        .filter_map(|(a, b)| Some(((*a).ok()?, (*b).ok()?)))
         .collect();
+    // the first failure of each model, with the run and the line its
+    // window starts at
+    for (what, pick) in [("nominal", 0usize), ("learned", 1usize)] {
+        let first = windows.iter().zip(&results).find_map(|(&(r, s), res)| {
+            let e = if pick == 0 {
+                res.0.as_ref()
+            } else {
+                res.1.as_ref()
+            };
+            e.err().map(|e| (r, s, *e))
+        });
+        if let Some((r, s, e)) = first {
+            let run = &data.runs[r];
+            w(
+                out,
+                format_args!(
+                    "first {what} failure: {}: {e}",
+                    window_place(run, s, a.read.resample.is_some())
+                ),
+            )?;
+        }
+    }
     w(
         out,
         format_args!(
@@ -1264,6 +1315,20 @@ where
         out,
         format_args!("nominal_mse={nominal_mse:e} learned_mse={learned_mse:e}"),
     )
+}
+
+/// Where a window from sample `s` of `run` starts: the run, the sample and
+/// its file line (not for a resampled run, whose samples have none).
+fn window_place<const N: usize>(run: &crate::data::Run<N>, s: usize, resampled: bool) -> String {
+    if resampled {
+        format!("run `{}`, window from sample {s} (resampled)", run.name)
+    } else {
+        format!(
+            "run `{}`, window from line {} (sample {s})",
+            run.name,
+            run.line + s as u64
+        )
+    }
 }
 
 /// `U`: the mechanism's inputs (0 for none; with inputs each run's logged
@@ -1441,7 +1506,10 @@ where
             Ok(p) => p,
             Err(e) => {
                 failed += 1;
-                w(out, format_args!("run `{}`: {e}", run.name))?;
+                w(
+                    out,
+                    format_args!("{}: {e}", window_place(run, 0, a.read.resample.is_some())),
+                )?;
                 first_error.get_or_insert(e);
                 continue;
             }

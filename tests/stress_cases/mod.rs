@@ -176,6 +176,12 @@ fn check_typed_failure(row: &mut Row, e: &StepError) {
             row.check(residual.is_finite(), || format!("bad diagnostics: {e:?}"))
         }
         StepError::SingularJacobian { .. } | StepError::NonFiniteResidual { .. } => {}
+        // a converged root that does not resolve the motion (the bend of
+        // the step above the continuation bound)
+        StepError::NotContinuation { ratio, bound, .. } => row
+            .check(ratio.is_finite() && ratio > bound, || {
+                format!("bad diagnostics: {e:?}")
+            }),
         other => row.fail(format!("unexpected error {other:?}")),
     }
 }

@@ -313,7 +313,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         for i in 0..self.substeps {
             let x1 = z.q + z.v * h;
             let g = if i == 0 { *guess } else { z.v };
-            let (v1, p1, r, _) = self.solve_forced_any(&x1, &p, h, &g, u, t)?;
+            let (v1, p1, mut r, _) = self.solve_forced_any(&x1, &p, h, &g, u, t)?;
+            self.check_continuation(&z.v, &v1, h, &x1, &mut r)?;
             report.merge(&r);
             (z, p) = (State { q: x1, v: v1 }, p1);
         }

@@ -168,6 +168,23 @@ pub enum StepError {
         /// Scaled residual reached.
         residual: f64,
     },
+    /// Newton converged, but to a root that is not the continuation of the
+    /// motion: the step bends the discrete path by |h·(v₁ − v₀)|∞ = `ratio`
+    /// (radians, or scaled lengths), more than `bound` (see
+    /// [`Stepper::continuation_bound`]).
+    NotContinuation {
+        /// The bend |h·(v₁ − v₀)|∞ of the step.
+        ratio: f64,
+        /// The bound in force.
+        bound: f64,
+    },
+    /// A rollout of this many steps whose states cannot be stored:
+    /// (steps + 1)·(size of a state) exceeds the address space (a duration
+    /// divided by Δt = 0 gives such a count). See [`check_step_count`].
+    TooManySteps {
+        /// The step count asked for.
+        steps: usize,
+    },
 }
 
 impl core::fmt::Display for StepError {
@@ -205,11 +222,51 @@ impl core::fmt::Display for StepError {
                 f,
                 "Newton did not converge: {iterations} iterations, residual {residual:.3e}"
             ),
+            Self::NotContinuation { ratio, bound } => write!(
+                f,
+                "{NOT_CONTINUATION_TEXT}: it bends the path by {ratio:.3e} rad > bound {bound:e}; {NOT_CONTINUATION_REMEDY}"
+            ),
+            Self::TooManySteps { steps } => write!(f, "{TOO_MANY_STEPS_TEXT} ({steps} steps)"),
         }
     }
 }
 
 impl core::error::Error for StepError {}
+
+/// The message of [`StepError::NotContinuation`] (shared with the std
+/// runtime's error).
+pub const NOT_CONTINUATION_TEXT: &str = "Newton converged to a root that is not the continuation of the motion \
+     (the step does not resolve the motion: its velocity change Δt·|v₁ − v₀| moves the path by more than the bound)";
+
+/// The remedy named by [`StepError::NotContinuation`].
+pub const NOT_CONTINUATION_REMEDY: &str = "the step is too large for the motion: use a smaller dt or `substeps` \
+     (or turn the check off with `continuation_bound(f64::INFINITY)`)";
+
+/// The message of [`StepError::TooManySteps`].
+pub const TOO_MANY_STEPS_TEXT: &str = "a rollout whose states do not fit in memory \
+     (a duration divided by a zero or tiny dt?)";
+
+/// The default of [`Stepper::continuation_bound`]: a step may bend the
+/// discrete path, |Δt·(v₁ − v₀)|∞, by at most 1 rad (or 1 length scale).
+pub const DEFAULT_CONTINUATION_BOUND: f64 = 1.0;
+
+/// Checks a rollout length before anything is allocated: the `steps + 1`
+/// states of type `T` a trajectory holds must fit in the address space
+/// (at most `isize::MAX` bytes). Returns `steps + 1`. Every rollout that
+/// allocates its trajectory calls this first; `usize::MAX` and
+/// `usize::MAX / 2` are [`StepError::TooManySteps`], not a panic.
+pub fn check_step_count<T>(steps: usize) -> Result<usize, StepError> {
+    let len = steps
+        .checked_add(1)
+        .ok_or(StepError::TooManySteps { steps })?;
+    let bytes = len
+        .checked_mul(core::mem::size_of::<T>().max(1))
+        .ok_or(StepError::TooManySteps { steps })?;
+    if bytes > isize::MAX as usize {
+        return Err(StepError::TooManySteps { steps });
+    }
+    Ok(len)
+}
 
 /// A step error inside a rollout, with the index of the failing step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -245,12 +302,16 @@ pub struct StepReport {
     /// Some Newton matrix was singular and the equivalent regularised KKT
     /// system was solved instead.
     pub regularised: bool,
+    /// The bend |h·(v₁ − v₀)|∞ of the step's discrete path (largest over
+    /// sub-steps; [`Stepper::continuation_bound`]).
+    pub continuation: f64,
 }
 
 impl StepReport {
     pub(crate) fn merge(&mut self, other: &StepReport) {
         self.iterations += other.iterations;
         self.residual = self.residual.max(other.residual);
+        self.continuation = self.continuation.max(other.continuation);
         self.stalled |= other.stalled;
         self.regularised |= other.regularised;
     }
@@ -296,6 +357,7 @@ pub struct Stepper<M: Dynamics<N, C>, const N: usize, const C: usize> {
     pub(crate) alpha: f64,
     pub(crate) options: StepOptions,
     pub(crate) substeps: usize,
+    pub(crate) continuation: f64,
 }
 
 /// max |x_i|, NaN if any entry is NaN or ±∞ (`f64::max` alone would drop
@@ -447,7 +509,80 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             alpha: 0.0,
             options,
             substeps: 1,
+            continuation: DEFAULT_CONTINUATION_BOUND,
         })
+    }
+
+    /// The same integrator with another continuation bound (default
+    /// [`DEFAULT_CONTINUATION_BOUND`], 1 rad). After every converged
+    /// (sub-)step of size h the bend of the discrete path,
+    /// |h·(v₁ − v₀)|∞ = |x₂ − 2x₁ + x₀|∞ (radians for angles and quaternion
+    /// components; lengths in units of 1 + the largest length coordinate),
+    /// must not exceed the bound, else the step is
+    /// [`StepError::NotContinuation`]. A step that resolves the motion
+    /// bends its path by h²·|a|, a fraction of a radian (0.15 rad for a
+    /// pendulum at Δt = 0.1 s); a step that bends it by more than a radian
+    /// has sampled the forces and the velocity terms at configurations the
+    /// motion does not pass through, and Newton's root, though it solves
+    /// the discrete equations, is no continuation of the motion (the double
+    /// pendulum released from rest at Δt = 2 s: 32 rad in its first step,
+    /// its energy from −17 J to 59 J, then thousands). The bend is reported
+    /// as [`StepReport::continuation`]. `f64::INFINITY` turns the check
+    /// off; NaN or a bound ≤ 0 is [`StepError::InvalidOptions`].
+    pub fn continuation_bound(mut self, bound: f64) -> Result<Self, StepError> {
+        if !(bound > 0.0) {
+            return Err(StepError::InvalidOptions(
+                "continuation bound must be > 0 (f64::INFINITY turns the check off)",
+            ));
+        }
+        self.continuation = bound;
+        Ok(self)
+    }
+
+    /// The continuation bound in force ([`Stepper::continuation_bound`]).
+    pub fn continuation(&self) -> f64 {
+        self.continuation
+    }
+
+    /// The continuation test of a converged (sub-)step of size `h` from
+    /// velocity `v0` to `v1` at x₁: the bend of the discrete path,
+    /// |h|·|v₁ − v₀| per coordinate (the second difference
+    /// x₂ − 2x₁ + x₀), in radians for angles and quaternion components
+    /// and in units of 1 + the largest length coordinate for lengths,
+    /// recorded in `report` and refused above the bound.
+    #[inline(always)]
+    pub(crate) fn check_continuation(
+        &self,
+        v0: &SVector<f64, N>,
+        v1: &SVector<f64, N>,
+        h: f64,
+        x1: &SVector<f64, N>,
+        report: &mut StepReport,
+    ) -> Result<(), StepError> {
+        let mut l_scale = 1.0f64;
+        for (x, kind) in x1.iter().zip(M::KINDS.iter()) {
+            if *kind == CoordinateKind::Length {
+                l_scale = l_scale.max(1.0 + x.abs());
+            }
+        }
+        let mut bend = 0.0f64;
+        for i in 0..N {
+            let d = (h * (v1[i] - v0[i])).abs();
+            let d = if M::KINDS[i] == CoordinateKind::Length {
+                d / l_scale
+            } else {
+                d
+            };
+            bend = bend.max(d);
+        }
+        report.continuation = bend;
+        if bend > self.continuation {
+            return Err(StepError::NotContinuation {
+                ratio: bend,
+                bound: self.continuation,
+            });
+        }
+        Ok(())
     }
 
     /// The second-order variational integrator of the midpoint discrete
@@ -653,7 +788,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         }
         if self.substeps == 1 {
             let x1 = z.q + z.v * self.dt;
-            let (v1, p1, r) = self.solve_in(&x1, p0, self.dt, guess, t)?;
+            let (v1, p1, mut r) = self.solve_in(&x1, p0, self.dt, guess, t)?;
+            self.check_continuation(&z.v, &v1, self.dt, &x1, &mut r)?;
             return Ok((State { q: x1, v: v1 }, p1, r));
         }
         let h = self.substep_dt();
@@ -662,7 +798,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         for i in 0..self.substeps {
             let x1 = z.q + z.v * h;
             let g = if i == 0 { *guess } else { z.v };
-            let (v1, p1, r) = self.solve_in(&x1, &p, h, &g, t)?;
+            let (v1, p1, mut r) = self.solve_in(&x1, &p, h, &g, t)?;
+            self.check_continuation(&z.v, &v1, h, &x1, &mut r)?;
             report.merge(&r);
             (z, p) = (State { q: x1, v: v1 }, p1);
         }
@@ -782,6 +919,25 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         reason = "internal: the sub-step's data, the two input closures and the terms workspace"
     )]
     pub(crate) fn solve_forced_rule<const MID: bool, const FORCED: bool>(
+        &self,
+        x1: &SVector<f64, N>,
+        p0: &SVector<f64, N>,
+        h: f64,
+        guess: &SVector<f64, N>,
+        input_force: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
+        input_jac: impl Fn(&SVector<f64, N>) -> SMatrix<f64, N, N>,
+        ws: &mut Workspace<N, C>,
+    ) -> Result<Forced<N, C>, StepError> {
+        self.newton_forced_rule::<MID, FORCED>(x1, p0, h, guess, input_force, input_jac, ws)
+    }
+
+    /// The Newton solve of [`Stepper::solve_forced_rule`].
+    #[inline(always)]
+    #[expect(
+        clippy::too_many_arguments,
+        reason = "internal: the sub-step's data, the two input closures and the terms workspace"
+    )]
+    fn newton_forced_rule<const MID: bool, const FORCED: bool>(
         &self,
         x1: &SVector<f64, N>,
         p0: &SVector<f64, N>,
@@ -981,6 +1137,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     residual: err,
                     stalled: false,
                     regularised,
+                    continuation: 0.0,
                 };
                 if C > 0 {
                     // c and G at x₁ + h·v, the next step's x₁
@@ -1051,6 +1208,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                                 residual: bound,
                                 stalled: false,
                                 regularised,
+                                continuation: 0.0,
                             };
                             return Ok((v1, M::mass_times(t, &v1), report, lambda));
                         }
@@ -1167,6 +1325,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                             residual: err,
                             stalled: true,
                             regularised,
+                            continuation: 0.0,
                         };
                         if C > 0 {
                             // c and G at x₁ + h·v, the next step's x₁
@@ -1187,6 +1346,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 residual: err,
                 stalled: false,
                 regularised,
+                continuation: 0.0,
             };
             if C > 0 {
                 // c and G at x₁ + h·v, the next step's x₁

@@ -42,6 +42,22 @@
 //!   in (−π, π] turning past π does not become a 600 rad/s spike. This
 //!   assumes |θ̇|·Δt < π (at 100 Hz, below 314 rad/s); turn it off with
 //!   [`ReadOptions::unwrap_angles`].
+//! * **Outliers.** A reading whose jump from its neighbour implies an
+//!   implausible speed is [`DataError::Outlier`], naming run, line and
+//!   column. The bound is [`ReadOptions::max_speed`] when set; otherwise an
+//!   angle's raw jump beyond 3π (neither a sensor wrap of 2π nor, under the
+//!   unwrapping assumption, a motion) or any coordinate's jump beyond twice
+//!   the run's extent without its two extreme readings (runs of five or
+//!   more samples): one reading of 1e6 or 1e308 in a pendulum's angle
+//!   column is refused, not unwrapped to a plausible angle. With
+//!   [`ReadOptions::drop_outliers`] a spike's row is dropped instead, its
+//!   run split there, and the drop recorded in [`Dataset::dropped`].
+//! * **Units.** Angle columns whose readings exceed a turn but stay within
+//!   ±400 with implied speeds above 50 rad/s (degrees read as radians),
+//!   and integer timestamps a second or more apart (milliseconds read as
+//!   seconds), are read as they are and reported in
+//!   [`Dataset::warnings`] ([`DataWarning`]). A Δt given to a trainer is
+//!   checked against the transitions with [`check_transitions_dt`].
 //! * **Short runs.** A run of one or two rows is kept (it is data) but gives
 //!   no transition (a transition needs three positions); a run of one row
 //!   has no time step. [`Dataset::transitions`] skips them and
@@ -84,6 +100,18 @@ pub struct ReadOptions {
     /// strictly increasing). Positions between samples are then
     /// interpolated, which is only as good as the sampling is fine.
     pub resample: Option<f64>,
+    /// `Some(v)`: the largest plausible speed, in coordinate units per
+    /// second (rad/s, m/s), for every coordinate: a reading whose jump
+    /// from its neighbour implies more is an outlier (module docs,
+    /// *Outliers*). `None` (default): the bound comes from the data
+    /// itself (a jump larger than the run's extent, or an angle jump
+    /// that is neither a sensor wrap nor a motion).
+    pub max_speed: Option<f64>,
+    /// Drop outlier readings instead of refusing the file: the row is
+    /// removed, its run split there (the pieces are runs of their own,
+    /// named `<run>@<line>` after the first), and each drop is recorded
+    /// in [`Dataset::dropped`] (default `false`: [`DataError::Outlier`]).
+    pub drop_outliers: bool,
 }
 
 impl Default for ReadOptions {
@@ -92,8 +120,55 @@ impl Default for ReadOptions {
             unwrap_angles: true,
             time_tolerance: 1e-3,
             resample: None,
+            max_speed: None,
+            drop_outliers: false,
         }
     }
+}
+
+/// A reading removed by [`ReadOptions::drop_outliers`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Dropped {
+    /// The run it belonged to.
+    pub run: String,
+    /// Its file line.
+    pub line: u64,
+    /// The coordinate whose jump exposed it.
+    pub column: String,
+    /// The reading.
+    pub value: f64,
+}
+
+/// Something in the data that reads but looks like a unit mistake; the
+/// reader keeps the data and reports it in [`Dataset::warnings`].
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum DataWarning {
+    /// An angle column whose readings look like degrees: values beyond
+    /// one turn (2π) but within ±400, with implied speeds above 50 rad/s.
+    #[error(
+        "column `{column}` holds angles up to {max_abs} and implies speeds up to {max_speed:.0} rad/s: \
+         are these degrees? The reader expects radians (multiply by π/180)"
+    )]
+    LooksLikeDegrees {
+        /// The column.
+        column: String,
+        /// The largest |reading|.
+        max_abs: f64,
+        /// The largest implied speed |Δx|/Δt, rad/s.
+        max_speed: f64,
+    },
+    /// A run whose time step is 1 or more with integer timestamps.
+    #[error(
+        "run `{run}`: time step {dt} with integer timestamps: is t in milliseconds? \
+         The reader expects seconds (divide t by 1000)"
+    )]
+    LooksLikeMilliseconds {
+        /// The run.
+        run: String,
+        /// Its time step.
+        dt: f64,
+    },
 }
 
 /// Resampling's zero-order hold takes a logged sample this close (as a
@@ -247,6 +322,45 @@ pub enum DataError {
         /// What overflowed.
         what: &'static str,
     },
+    /// A reading that implies an implausible speed (module docs,
+    /// *Outliers*): a sensor spike, or a jump in the log.
+    #[error(
+        "run `{run}`, line {line}, column `{column}`: reading {value:e} jumps by {jump:e} from its neighbour \
+         (implied speed {speed:.3e} per second, bound {bound:.3e}): a sensor spike or a jump in the log{hint}; \
+         ReadOptions::drop_outliers (vigp --drop-outliers) drops such rows and counts them, \
+         ReadOptions::max_speed sets the bound"
+    )]
+    Outlier {
+        /// The run.
+        run: String,
+        /// Line of the reading.
+        line: u64,
+        /// The coordinate's name.
+        column: String,
+        /// The reading.
+        value: f64,
+        /// Its jump from the neighbouring sample (after unwrapping).
+        jump: f64,
+        /// The implied speed |jump|/Δt.
+        speed: f64,
+        /// The speed bound in force.
+        bound: f64,
+        /// A unit hint (degrees) or empty.
+        hint: &'static str,
+    },
+    /// A time step given with the data (to a trainer or a check) that
+    /// contradicts the data's timestamps.
+    #[error("dt = {given} contradicts the data: {source_of} is sampled every {found} s{hint}")]
+    DtContradictsData {
+        /// The Δt given.
+        given: f64,
+        /// Where the data's time step was found (a run, or transitions).
+        source_of: String,
+        /// Its time step.
+        found: f64,
+        /// A hint when the two differ by a round factor.
+        hint: &'static str,
+    },
     /// A run's time step that no integrator can take (Δt² not a normal
     /// number, e.g. timestamps 5e-324 apart).
     #[error(
@@ -361,6 +475,11 @@ pub struct Dataset<const N: usize> {
     pub inputs: Vec<String>,
     /// The runs, in file order.
     pub runs: Vec<Run<N>>,
+    /// Readings dropped as outliers ([`ReadOptions::drop_outliers`]).
+    pub dropped: Vec<Dropped>,
+    /// Unit heuristics that fired ([`DataWarning`]); the data was read as
+    /// it is.
+    pub warnings: Vec<DataWarning>,
 }
 
 fn join_names(names: &[&str]) -> String {
@@ -494,6 +613,15 @@ fn printed_half_unit(text: &str) -> f64 {
     0.5 * 10f64.powi(exponent.saturating_sub(decimals as i32))
 }
 
+/// Where an outlier cuts a run ([`RawRun::outliers`]).
+#[derive(Clone, Copy, Debug)]
+enum Cut {
+    /// Drop the row (a spike in `column`).
+    Drop { row: usize, column: usize },
+    /// Split before the row (a jump between it and the previous one).
+    Split { row: usize },
+}
+
 /// A run being read: times, positions and the line of each row.
 struct RawRun<const N: usize> {
     name: String,
@@ -506,7 +634,208 @@ struct RawRun<const N: usize> {
 }
 
 impl<const N: usize> RawRun<N> {
+    /// The run's rows as one or more runs: time checked to increase,
+    /// outliers refused or (with [`ReadOptions::drop_outliers`]) dropped
+    /// into `dropped` with the run split at them, then each piece checked
+    /// and unwrapped ([`RawRun::finish_piece`]).
     fn finish(
+        self,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        opts: &ReadOptions,
+        dropped: &mut Vec<Dropped>,
+    ) -> Result<Vec<Run<N>>, DataError> {
+        for k in 1..self.times.len() {
+            if self.times[k] <= self.times[k - 1] {
+                return Err(DataError::TimeNotIncreasing {
+                    run: self.name,
+                    line: self.lines[k],
+                    t: self.times[k],
+                    previous: self.times[k - 1],
+                });
+            }
+        }
+        let cuts = self.outliers(names, kinds, opts)?;
+        if cuts.is_empty() {
+            return Ok(vec![self.finish_piece(names, kinds, opts)?]);
+        }
+        // pieces between the cuts: a dropped row is left out, a jump
+        // splits between its two rows
+        let mut out = Vec::new();
+        let mut start = 0;
+        let n = self.times.len();
+        let mut bounds: Vec<(usize, usize)> = Vec::new();
+        for cut in &cuts {
+            match *cut {
+                Cut::Drop { row, column } => {
+                    dropped.push(Dropped {
+                        run: self.name.clone(),
+                        line: self.lines[row],
+                        column: names[column].into(),
+                        value: self.positions[row][column],
+                    });
+                    bounds.push((start, row));
+                    start = row + 1;
+                }
+                Cut::Split { row } => {
+                    bounds.push((start, row));
+                    start = row;
+                }
+            }
+        }
+        bounds.push((start, n));
+        for (a, b) in bounds {
+            if a >= b {
+                continue;
+            }
+            let piece = RawRun {
+                name: if out.is_empty() {
+                    self.name.clone()
+                } else {
+                    format!("{}@{}", self.name, self.lines[a])
+                },
+                times: self.times[a..b].to_vec(),
+                time_rounding: self.time_rounding,
+                positions: self.positions[a..b].to_vec(),
+                inputs: if self.inputs.is_empty() {
+                    Vec::new()
+                } else {
+                    self.inputs[a..b].to_vec()
+                },
+                lines: self.lines[a..b].to_vec(),
+            };
+            out.push(piece.finish_piece(names, kinds, opts)?);
+        }
+        Ok(out)
+    }
+
+    /// Readings whose jumps imply an implausible speed. A jump j → j+1 is
+    /// *big* when |Δx|/Δt exceeds [`ReadOptions::max_speed`], or, without
+    /// it, when an angle's raw jump exceeds 3π (neither a sensor wrap of
+    /// 2π nor, under the unwrapping assumption |θ̇|Δt < π, a motion) or any
+    /// coordinate's jump exceeds twice the run's extent without its two
+    /// extreme readings (runs of five or more samples). A reading with big
+    /// jumps on both sides (or on its only side, at a run's end) is a
+    /// spike; a big jump between two plausible readings is a jump in the
+    /// log. Without [`ReadOptions::drop_outliers`] the first is
+    /// [`DataError::Outlier`]; with it a spike's row is dropped and a jump
+    /// splits the run. Non-finite jumps (readings ±1e308 apart) are left
+    /// to the overflow checks.
+    fn outliers(
+        &self,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        opts: &ReadOptions,
+    ) -> Result<Vec<Cut>, DataError> {
+        let n = self.times.len();
+        if n < 2 {
+            return Ok(Vec::new());
+        }
+        let mut steps: Vec<f64> = self.times.windows(2).map(|w| w[1] - w[0]).collect();
+        steps.sort_by(f64::total_cmp);
+        let dt = steps[steps.len() / 2];
+        let mut cuts = Vec::new();
+        for i in 0..N {
+            let angle = kinds[i] == CoordinateKind::Angle && opts.unwrap_angles;
+            let raw: Vec<f64> = self.positions.iter().map(|p| p[i]).collect();
+            // the jump j → j+1 as the reader will see it (angles unwrapped)
+            let jump = |j: usize| {
+                let d = raw[j + 1] - raw[j];
+                if angle && d.abs() <= 3.0 * core::f64::consts::PI {
+                    wrap(d)
+                } else {
+                    d
+                }
+            };
+            let extent = if n >= 5 {
+                let mut sorted = raw.clone();
+                sorted.sort_by(f64::total_cmp);
+                let mid = sorted[n / 2].abs();
+                (sorted[n - 2] - sorted[1]).max(1e-6 * (1.0 + mid))
+            } else {
+                f64::INFINITY
+            };
+            let (bound, hint) = match opts.max_speed {
+                Some(v) => (v, ""),
+                None => (
+                    if angle {
+                        (3.0 * core::f64::consts::PI).min(2.0 * extent) / dt
+                    } else {
+                        2.0 * extent / dt
+                    },
+                    "",
+                ),
+            };
+            let big: Vec<bool> = (0..n - 1)
+                .map(|j| {
+                    let d = jump(j);
+                    let raw_d = raw[j + 1] - raw[j];
+                    raw_d.is_finite()
+                        && match opts.max_speed {
+                            Some(_) => d.abs() / dt > bound,
+                            None if angle => {
+                                raw_d.abs() > 3.0 * core::f64::consts::PI || d.abs() > 2.0 * extent
+                            }
+                            None => d.abs() > 2.0 * extent,
+                        }
+                })
+                .collect();
+            let mut j = 0;
+            while j < n - 1 {
+                if !big[j] {
+                    j += 1;
+                    continue;
+                }
+                // spike at j+1 (big jumps in and out, or the run's last
+                // reading), or at j (the run's first reading), or a jump
+                let (row, spike) = if j + 1 == n - 1 || (j + 1 < n - 1 && big[j + 1]) {
+                    (j + 1, true)
+                } else if j == 0 && n > 2 {
+                    (0, true)
+                } else {
+                    (j + 1, false)
+                };
+                if !opts.drop_outliers {
+                    let d = jump(j);
+                    let degrees = angle && ((raw[j + 1] - raw[j]).abs() - 360.0).abs() < 10.0;
+                    return Err(DataError::Outlier {
+                        run: self.name.clone(),
+                        line: self.lines[row],
+                        column: names[i].into(),
+                        value: raw[row],
+                        jump: d,
+                        speed: d.abs() / dt,
+                        bound,
+                        hint: if degrees {
+                            " (a jump of about 360: angles in degrees?)"
+                        } else {
+                            hint
+                        },
+                    });
+                }
+                cuts.push(if spike {
+                    Cut::Drop { row, column: i }
+                } else {
+                    Cut::Split { row }
+                });
+                j = if spike { row + 1 } else { j + 1 };
+            }
+        }
+        // one cut per row, in row order
+        cuts.sort_by_key(|c| match *c {
+            Cut::Drop { row, .. } => (row, 0),
+            Cut::Split { row } => (row, 1),
+        });
+        cuts.dedup_by_key(|c| match *c {
+            Cut::Drop { row, .. } | Cut::Split { row } => row,
+        });
+        Ok(cuts)
+    }
+
+    /// One piece of a run (time already increasing, outliers gone):
+    /// angles unwrapped, time checked uniform (or resampled), velocities
+    /// checked finite.
+    fn finish_piece(
         self,
         names: &[&str; N],
         kinds: &[CoordinateKind; N],
@@ -653,6 +982,132 @@ impl<const N: usize> RawRun<N> {
     }
 }
 
+/// Checks that transitions were formed with the time step `dt` a trainer
+/// is given (relative `tolerance`, e.g. 1e-6): consecutive transitions of
+/// one run (recognised by z_{k+1}.v = v_next of z_k, bit for bit) satisfy
+/// x_{k+1} = x_k + Δt·v_k, which gives the Δt they were formed with. The
+/// median of those estimates other than `dt` is
+/// [`DataError::DtContradictsData`] (with a hint for a factor of 2 or
+/// 1000). Transitions with no such pair (all from different runs, or at
+/// rest) pass.
+pub fn check_transitions_dt<const N: usize>(
+    transitions: &[Transition<N>],
+    dt: f64,
+    tolerance: f64,
+) -> Result<(), DataError> {
+    let pairs: Vec<(State<N>, SVector<f64, N>)> =
+        transitions.iter().map(|t| (t.z, t.v_next)).collect();
+    check_pairs_dt(&pairs, dt, tolerance)
+}
+
+/// [`check_transitions_dt`] for the transitions of an actuated mechanism.
+pub fn check_forced_transitions_dt<const N: usize, const U: usize>(
+    transitions: &[ForcedTransition<N, U>],
+    dt: f64,
+    tolerance: f64,
+) -> Result<(), DataError> {
+    let pairs: Vec<(State<N>, SVector<f64, N>)> =
+        transitions.iter().map(|t| (t.z, t.v_next)).collect();
+    check_pairs_dt(&pairs, dt, tolerance)
+}
+
+fn check_pairs_dt<const N: usize>(
+    pairs: &[(State<N>, SVector<f64, N>)],
+    dt: f64,
+    tolerance: f64,
+) -> Result<(), DataError> {
+    check_tolerance(tolerance)?;
+    if vigp_core::step::check_time_step(dt).is_err() {
+        return Err(DataError::InvalidOption {
+            what: "dt (finite and > 0, with dt² a normal number)",
+            value: dt,
+        });
+    }
+    let mut estimates: Vec<(f64, usize)> = Vec::new();
+    for (i, w) in pairs.windows(2).enumerate() {
+        let ((z0, v_next), (z1, _)) = (&w[0], &w[1]);
+        let same_run =
+            z1.v.iter()
+                .zip(v_next.iter())
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+        let vv = z0.v.dot(&z0.v);
+        if !same_run || !(vv > 0.0) {
+            continue;
+        }
+        let est = (z1.q - z0.q).dot(&z0.v) / vv;
+        if est.is_finite() && est > 0.0 {
+            estimates.push((est, i));
+        }
+    }
+    if estimates.is_empty() {
+        return Ok(());
+    }
+    estimates.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (found, i) = estimates[estimates.len() / 2];
+    // printed data carries ~1e-12 relative rounding in Δt·v
+    if (found - dt).abs() > tolerance.max(1e-9) * dt {
+        let ratio = dt / found;
+        let near = |r: f64| (ratio / r - 1.0).abs() < 1e-3;
+        let hint = if near(1000.0) || near(1e-3) {
+            " (a factor of 1000: milliseconds against seconds?)"
+        } else if near(2.0) || near(0.5) {
+            " (a factor of 2)"
+        } else {
+            ""
+        };
+        return Err(DataError::DtContradictsData {
+            given: dt,
+            source_of: format!("the run of transitions {i} and {}", i + 1),
+            found: tidy(found),
+            hint,
+        });
+    }
+    Ok(())
+}
+
+/// The unit heuristics ([`DataWarning`]) over the runs read:
+/// `integer_times` when every timestamp was an integer.
+fn unit_warnings<const N: usize>(
+    runs: &[Run<N>],
+    names: &[&str; N],
+    kinds: &[CoordinateKind; N],
+    integer_times: &bool,
+) -> Vec<DataWarning> {
+    let mut out = Vec::new();
+    for i in 0..N {
+        if kinds[i] != CoordinateKind::Angle {
+            continue;
+        }
+        let (mut max_abs, mut max_speed) = (0.0f64, 0.0f64);
+        for r in runs {
+            for p in &r.positions {
+                max_abs = max_abs.max(p[i].abs());
+            }
+            if let Some(dt) = r.dt {
+                for w in r.positions.windows(2) {
+                    max_speed = max_speed.max((w[1][i] - w[0][i]).abs() / dt);
+                }
+            }
+        }
+        if max_abs > core::f64::consts::TAU && max_abs <= 400.0 && max_speed > 50.0 {
+            out.push(DataWarning::LooksLikeDegrees {
+                column: names[i].into(),
+                max_abs,
+                max_speed,
+            });
+        }
+    }
+    if *integer_times {
+        if let Some(r) = runs.iter().find(|r| r.dt.is_some_and(|dt| dt >= 1.0)) {
+            out.push(DataWarning::LooksLikeMilliseconds {
+                run: r.name.clone(),
+                dt: r.dt.unwrap_or_default(),
+            });
+        }
+    }
+    out
+}
+
 /// The run unchanged if every discrete velocity (x_{k+1} − x_k)/Δt is
 /// finite: finite readings far apart (±1e308) or a tiny Δt overflow.
 /// `line(k)` is the file line of sample k.
@@ -723,6 +1178,9 @@ impl<const N: usize> Dataset<N> {
         let mut runs: Vec<Run<N>> = Vec::new();
         let mut finished: HashSet<String> = HashSet::new();
         let mut current: Option<RawRun<N>> = None;
+        let mut dropped = Vec::new();
+        // every timestamp integral (for the milliseconds heuristic)
+        let mut time_texts = true;
         let mut record = csv::StringRecord::new();
         while rdr.read_record(&mut record)? {
             let line = record.position().map_or(0, |p| p.line());
@@ -751,6 +1209,7 @@ impl<const N: usize> Dataset<N> {
                     Role::Run => run = field,
                     Role::Time => {
                         t = number()?;
+                        time_texts &= t.fract() == 0.0;
                         t_rounding = printed_half_unit(field);
                     }
                     Role::Coordinate(k) => q[*k] = number()?,
@@ -770,7 +1229,7 @@ impl<const N: usize> Dataset<N> {
                 }
                 if let Some(done) = current.take() {
                     finished.insert(done.name.clone());
-                    runs.push(done.finish(names, kinds, opts)?);
+                    runs.extend(done.finish(names, kinds, opts, &mut dropped)?);
                 }
                 current = Some(RawRun {
                     name: run.into(),
@@ -792,13 +1251,16 @@ impl<const N: usize> Dataset<N> {
             }
         }
         match current {
-            Some(done) => runs.push(done.finish(names, kinds, opts)?),
+            Some(done) => runs.extend(done.finish(names, kinds, opts, &mut dropped)?),
             None => return Err(DataError::Empty("a header but no data rows")),
         }
+        let warnings = unit_warnings(&runs, names, kinds, &time_texts);
         Ok(Self {
             coordinates: names.iter().map(|s| s.to_string()).collect(),
             inputs: inputs.iter().map(|s| s.to_string()).collect(),
             runs,
+            dropped,
+            warnings,
         })
     }
 

@@ -27,6 +27,9 @@ pub struct StepInfo {
     /// from a feasible point (the velocity projection from far off the
     /// manifold, see [`crate::projection::project_velocity`]).
     pub restarted: bool,
+    /// The bend |Δt·(v₁ − v₀)|∞ of the step's discrete path (the core's
+    /// [`vigp_core::StepReport::continuation`]; 0 where not measured).
+    pub continuation: f64,
 }
 
 pub use vigp_core::linalg::solve_kkt_regularised;
@@ -66,7 +69,8 @@ pub enum StepError {
     /// A spatial state's quaternion is not of unit norm (the core's
     /// [`vigp_core::StepError::NonUnitQuaternion`]).
     #[error(
-        "the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize){}",
+        "the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize, \
+         or start from a consistent state, vigp::projection::consistent_state){}",
         at(step)
     )]
     NonUnitQuaternion {
@@ -135,6 +139,43 @@ pub enum StepError {
         /// Rollout step index, if in a rollout.
         step: Option<usize>,
     },
+    /// Newton converged to a root that is not the continuation of the
+    /// motion (the core's [`vigp_core::StepError::NotContinuation`]; see
+    /// `Variational::continuation_bound`).
+    #[error(
+        "{}: it bends the path by {ratio:.3e} rad > bound {bound:e}{}; {}",
+        vigp_core::step::NOT_CONTINUATION_TEXT,
+        at(step),
+        vigp_core::step::NOT_CONTINUATION_REMEDY
+    )]
+    NotContinuation {
+        /// The bend |Δt·(v₁ − v₀)|∞ of the step (radians, or scaled
+        /// lengths).
+        ratio: f64,
+        /// The bound in force.
+        bound: f64,
+        /// Rollout step index, if in a rollout.
+        step: Option<usize>,
+    },
+    /// A rollout of `steps` steps whose states cannot be stored (checked
+    /// before anything is allocated: [`trajectory_buffer`]).
+    #[error("{} ({steps} steps)", vigp_core::step::TOO_MANY_STEPS_TEXT)]
+    TooManySteps {
+        /// The step count asked for.
+        steps: usize,
+    },
+    /// A mechanism whose loop equations g(q) = 0 have no solution that
+    /// Gauss–Newton finds from several starts (links too short or too long
+    /// to close the loop): refused when the integrator is built, with the
+    /// smallest scaled residual |g(q)|∞ / (1 + |q|∞) found.
+    #[error(
+        "the loop cannot close: no configuration satisfies the loop equations \
+         (smallest scaled residual |g(q)| found: {residual:.3e}); check the link lengths and the joints' anchor points"
+    )]
+    LoopCannotClose {
+        /// The smallest scaled residual found.
+        residual: f64,
+    },
     /// Newton did not converge from a state whose configuration violates
     /// the constraints: the step had to close the gap |g(q)| at once. The
     /// remedy is a consistent initial state.
@@ -177,8 +218,11 @@ impl StepError {
             | StepError::NotConverged { step, .. }
             | StepError::LineSearchFailed { step, .. }
             | StepError::OffConstraints { step, .. }
+            | StepError::NotContinuation { step, .. }
             | StepError::Prediction { step } => *step = Some(k),
             StepError::InvalidTimeStep { .. }
+            | StepError::TooManySteps { .. }
+            | StepError::LoopCannotClose { .. }
             | StepError::InputsNotSupported
             | StepError::InvalidOptions(_)
             | StepError::InvalidModel(_) => {}
@@ -229,8 +273,29 @@ impl From<vigp_core::StepError> for StepError {
                 tolerance: f64::NAN,
                 step: None,
             },
+            E::NotContinuation { ratio, bound } => StepError::NotContinuation {
+                ratio,
+                bound,
+                step: None,
+            },
+            E::TooManySteps { steps } => StepError::TooManySteps { steps },
         }
     }
+}
+
+/// A trajectory of `steps + 1` copies of `first`, the storage of a
+/// rollout of `steps` steps, allocated only after the length is checked
+/// ([`vigp_core::step::check_step_count`]) and with a fallible
+/// reservation: `usize::MAX`, `usize::MAX / 2` or a count the allocator
+/// refuses is [`StepError::TooManySteps`], not a panic. Every allocating
+/// rollout of vigp should take its buffer from here.
+pub fn trajectory_buffer<T: Clone>(first: T, steps: usize) -> Result<Vec<T>, StepError> {
+    let len = vigp_core::step::check_step_count::<T>(steps)?;
+    let mut v = Vec::new();
+    v.try_reserve_exact(len)
+        .map_err(|_| StepError::TooManySteps { steps })?;
+    v.resize(len, first);
+    Ok(v)
 }
 
 impl StepError {
@@ -252,6 +317,7 @@ impl StepInfo {
             stalled: r.stalled,
             regularised: r.regularised,
             restarted: false,
+            continuation: r.continuation,
         }
     }
 }

@@ -102,6 +102,7 @@ fn gauss_newton<const N: usize, const C: usize>(
                 stalled: false,
                 regularised: false,
                 restarted: false,
+                continuation: 0.0,
             };
             return Ok((x, info));
         }
@@ -174,6 +175,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
                 stalled: false,
                 regularised: false,
                 restarted: false,
+                continuation: 0.0,
             },
         ));
     }
@@ -190,6 +192,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
             v,
             StepInfo {
                 restarted: true,
+                continuation: 0.0,
                 ..info
             },
         )),
@@ -247,6 +250,7 @@ fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
                     stalled: !converged,
                     regularised,
                     restarted: false,
+                    continuation: 0.0,
                 },
             ));
         }

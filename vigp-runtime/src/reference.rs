@@ -122,6 +122,7 @@ pub fn step_forced<M: Mechanism<N, C>, const N: usize, const C: usize>(
                     stalled: !converged,
                     regularised,
                     restarted: false,
+                    continuation: 0.0,
                 },
             ));
         }

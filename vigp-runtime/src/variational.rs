@@ -3,6 +3,7 @@
 
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError, StepInfo};
+use nalgebra::SVector;
 use vigp_core::{StepError as CoreError, StepWorkspace, Stepper};
 
 /// A one-step map z_k ↦ z_{k+1} with a fixed time step.
@@ -83,8 +84,12 @@ pub trait Integrator<const N: usize> {
 
     /// The trajectory z_0, z_1, …, z_steps (`steps + 1` states).
     #[cfg(feature = "alloc")]
+    ///
+    /// A `steps` whose trajectory cannot be stored (`usize::MAX`, a
+    /// duration divided by Δt = 0) is [`StepError::TooManySteps`], checked
+    /// before allocation ([`crate::newton::trajectory_buffer`]).
     fn rollout(&self, z0: &State<N>, steps: usize) -> Result<Vec<State<N>>, StepError> {
-        let mut traj = vec![*z0; steps + 1];
+        let mut traj = crate::newton::trajectory_buffer(*z0, steps)?;
         self.rollout_into(z0, &mut traj[1..])?;
         Ok(traj)
     }
@@ -121,37 +126,124 @@ pub struct Variational<M: Mechanism<N, C>, const N: usize, const C: usize> {
     alpha: f64,
     options: NewtonOptions,
     substeps: usize,
-    stepper: Result<Stepper<M, N, C>, vigp_core::StepError>,
+    continuation: f64,
+    stepper: Result<Stepper<M, N, C>, StepError>,
+}
+
+/// The default continuation bound of [`Variational`].
+const DEFAULT_CONTINUATION: f64 = vigp_core::step::DEFAULT_CONTINUATION_BOUND;
+
+/// Refuses a mechanism whose loop equations cannot be satisfied: for
+/// `C > 0`, Gauss–Newton ([`crate::projection::project_configuration`], up
+/// to 100 iterations) from a few fixed configurations must reach a scaled
+/// residual |g(q)|∞/(1 + |q|∞ lengths) ≤ 1e-6 from one of them; else
+/// [`StepError::LoopCannotClose`] with the smallest residual found. (A loop
+/// that closes only at a rank-deficient pose, a chain pinned at full
+/// stretch, converges linearly there and passes: 1e-6 is far above what
+/// 100 such iterations leave, far below a gap between links.)
+fn loop_closes<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    model: &M,
+) -> Result<(), StepError> {
+    if C == 0 {
+        return Ok(());
+    }
+    let options = NewtonOptions {
+        max_iterations: 100,
+        ..NewtonOptions::default()
+    };
+    let Ok(k) = model.checked_constants() else {
+        // invalid parameters are reported by the stepper's own check
+        return Ok(());
+    };
+    let mut best = f64::INFINITY;
+    for s in [0.0, 0.7, -1.3, 2.1, -2.6, 1.6] {
+        let mut q = SVector::<f64, N>::zeros();
+        let mut i = 0;
+        while i < N {
+            match M::KINDS[i] {
+                vigp_core::CoordinateKind::Angle => q[i] = s * (1.0 + 0.37 * i as f64),
+                vigp_core::CoordinateKind::Length => q[i] = 0.0,
+                vigp_core::CoordinateKind::Quaternion => {
+                    // a unit quaternion block of four
+                    q[i] = 1.0;
+                    i += 3;
+                }
+            }
+            i += 1;
+        }
+        let q = match crate::projection::project_configuration(model, &q, &options) {
+            Ok((q, _)) => q,
+            Err(_) => q,
+        };
+        let scale = crate::mechanism::length_scale::<M, N, C>(&q);
+        let (g, _) = model.constraints_and_jacobian(&k, &q);
+        let r = g.amax() / scale;
+        if r.is_finite() {
+            best = best.min(r);
+        }
+        if best <= 1e-6 {
+            return Ok(());
+        }
+    }
+    Err(StepError::LoopCannotClose { residual: best })
 }
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, N, C> {
     /// An integrator for `model` with time step `dt` and default Newton
     /// options (the paper's first-order rule).
     pub fn new(model: M, dt: f64) -> Self {
-        Self::build(model, dt, 0.0, NewtonOptions::default(), 1)
+        Self::build(
+            model,
+            dt,
+            0.0,
+            NewtonOptions::default(),
+            1,
+            DEFAULT_CONTINUATION,
+        )
     }
 
     /// The second-order variational integrator of the midpoint discrete
     /// Lagrangian L_d = Δt·L((x_k + x_{k+1})/2, (x_{k+1} − x_k)/Δt).
     pub fn midpoint(model: M, dt: f64) -> Self {
-        Self::build(model, dt, 0.5, NewtonOptions::default(), 1)
+        Self::build(
+            model,
+            dt,
+            0.5,
+            NewtonOptions::default(),
+            1,
+            DEFAULT_CONTINUATION,
+        )
     }
 
-    fn build(model: M, dt: f64, alpha: f64, options: NewtonOptions, substeps: usize) -> Self {
+    fn build(
+        model: M,
+        dt: f64,
+        alpha: f64,
+        options: NewtonOptions,
+        substeps: usize,
+        continuation: f64,
+    ) -> Self {
         let stepper = (|| {
             let s = if alpha == 0.0 {
                 Stepper::new(model.clone(), dt)?
             } else {
                 Stepper::midpoint(model.clone(), dt)?
             };
-            s.options(options)?.substeps(substeps)
+            s.options(options)?
+                .substeps(substeps)?
+                .continuation_bound(continuation)
         })();
+        let stepper = stepper.map_err(StepError::from).and_then(|s| {
+            loop_closes(&model)?;
+            Ok(s)
+        });
         Self {
             model,
             dt,
             alpha,
             options,
             substeps,
+            continuation,
             stepper,
         }
     }
@@ -163,9 +255,27 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             alpha,
             options,
             substeps,
+            continuation,
             ..
         } = self;
-        Self::build(model, dt, alpha, options, substeps)
+        Self::build(model, dt, alpha, options, substeps, continuation)
+    }
+
+    /// The bound of the continuation check (default
+    /// [`vigp_core::step::DEFAULT_CONTINUATION_BOUND`], 1 rad): a step
+    /// whose velocity change bends the discrete path by more,
+    /// |Δt·(v₁ − v₀)|∞ (radians; lengths in units of 1 + the largest length
+    /// coordinate; per sub-step with [`Variational::substeps`]), is
+    /// [`StepError::NotContinuation`]: Newton's root solves the discrete
+    /// equations but does not continue the motion (the double pendulum
+    /// released from rest at Δt = 2 s bends 32 rad in its first step). The
+    /// bend of each step is
+    /// [`StepInfo::continuation`](crate::StepInfo::continuation).
+    /// `f64::INFINITY` turns the check off; NaN or a bound ≤ 0 is reported
+    /// by `step` as [`StepError::InvalidOptions`].
+    pub fn continuation_bound(mut self, bound: f64) -> Self {
+        self.continuation = bound;
+        self.rebuild()
     }
 
     /// Order of accuracy of the discretisation (1 or 2).
@@ -223,7 +333,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
 
     /// The fixed-size engine, or why the settings cannot work.
     pub fn stepper(&self) -> Result<&Stepper<M, N, C>, StepError> {
-        self.stepper.as_ref().map_err(|e| StepError::from(*e))
+        self.stepper.as_ref().map_err(|e| *e)
     }
 
     /// `Ok` when Δt, the options and the model's run-time parameters are
@@ -257,6 +367,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         fresh: impl FnOnce(&Stepper<M, N, C>) -> Result<R, CoreError>,
     ) -> Result<R, StepError> {
         let stepper = self.stepper()?;
+        check_quaternions::<M, N, C>(z)?;
         crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
             Some(ws) => kept(stepper, ws),
             None => fresh(stepper),
@@ -269,6 +380,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// [`StepError::OffConstraints`], which names the remedy.
     fn explain(&self, e: StepError, z: &State<N>) -> StepError {
         let e = e.with_tolerance(self.options.tolerance);
+        if let StepError::SingularJacobian { step, .. }
+        | StepError::NotConverged { step, .. }
+        | StepError::LineSearchFailed { step, .. }
+        | StepError::NonFiniteResidual { step, .. }
+        | StepError::NotContinuation { step, .. } = e
+        {
+            if let Some((link, norm)) = non_unit_quaternion::<M, N, C>(&z.q) {
+                return StepError::NonUnitQuaternion { link, norm, step };
+            }
+        }
         let (iterations, residual, step) = match e {
             StepError::NotConverged {
                 iterations,
@@ -348,6 +469,59 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 }
 
+/// A start state whose quaternion is not of unit norm (to 1e-9) is
+/// [`StepError::NonUnitQuaternion`], with the `consistent_state` hint in its
+/// message (free for mechanisms without quaternion coordinates).
+fn check_quaternions<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    z: &State<N>,
+) -> Result<(), StepError> {
+    let has = const {
+        let mut i = 0;
+        let mut any = false;
+        while i < N {
+            if matches!(M::KINDS[i], vigp_core::CoordinateKind::Quaternion) {
+                any = true;
+            }
+            i += 1;
+        }
+        any
+    };
+    if has {
+        if let Some((link, norm)) = non_unit_quaternion::<M, N, C>(&z.q) {
+            if norm.is_finite() {
+                return Err(StepError::NonUnitQuaternion {
+                    link,
+                    norm,
+                    step: None,
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The first quaternion block (four consecutive coordinates of kind
+/// [`vigp_core::CoordinateKind::Quaternion`], counted from 0) of `q`
+/// whose norm is not 1 to 1e-9, with its norm.
+fn non_unit_quaternion<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    q: &SVector<f64, N>,
+) -> Option<(usize, f64)> {
+    let (mut i, mut block) = (0, 0);
+    while i + 4 <= N {
+        if M::KINDS[i] == vigp_core::CoordinateKind::Quaternion {
+            let norm = q.fixed_rows::<4>(i).norm();
+            if (norm - 1.0).abs() > 1e-9 {
+                return Some((block, norm));
+            }
+            block += 1;
+            i += 4;
+        } else {
+            i += 1;
+        }
+    }
+    None
+}
+
 /// A forced rollout with the exact derivatives of every state with respect
 /// to the initial state and to every input ([`Variational::rollout_derivatives`]),
 /// for shooting methods.
@@ -392,6 +566,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         inputs: &[nalgebra::SVector<f64, U>],
         out: &mut [State<N>],
     ) -> Result<(), StepError> {
+        check_quaternions::<M, N, C>(z0)?;
         self.stepper()?
             .steps_forced_into(z0, inputs, out)
             .map_err(|e| {
@@ -411,7 +586,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
     ) -> Result<Vec<State<N>>, StepError> {
-        let mut traj = vec![*z0; inputs.len() + 1];
+        let mut traj = crate::newton::trajectory_buffer(*z0, inputs.len())?;
         self.rollout_forced_into(z0, inputs, &mut traj[1..])?;
         Ok(traj)
     }
@@ -544,6 +719,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     /// converged steps are those of repeated `step` calls to the solver
     /// tolerance). No allocation.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
+        check_quaternions::<M, N, C>(z0)?;
         self.stepper()?.steps_into(z0, out).map_err(|e| {
             let from = if e.step == 0 { z0 } else { &out[e.step - 1] };
             self.explain(StepError::from(e.error), from).at_step(e.step)

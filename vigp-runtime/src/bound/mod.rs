@@ -109,6 +109,21 @@ pub enum BoundError {
         /// The number given.
         got: usize,
     },
+    /// Calibration windows that start at training states: the conformal
+    /// guarantee needs held-out data, and windows from the training runs
+    /// score the model where it was fitted (coverage falls below 1 − δ).
+    #[error(
+        "{overlapping} of {total} calibration windows start at a training state (the first: window {first}): \
+         calibrate on runs held out from training"
+    )]
+    CalibrationOverlapsTraining {
+        /// Windows whose start is a training state.
+        overlapping: usize,
+        /// Windows in all.
+        total: usize,
+        /// The first such window.
+        first: usize,
+    },
     /// A calibration window is unusable.
     #[error("calibration window {index}: {reason}")]
     Calibration {
@@ -790,6 +805,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         inputs: &'a [SVector<f64, U>],
         ws: &mut Workspace,
     ) -> Result<Trace<'a, N, U>, StepError> {
+        // the count checked before anything is allocated (the rollout's
+        // GP input buffer holds steps × d numbers)
+        let d = self.gp().input_dim().max(1);
+        vigp_core::step::check_step_count::<State<N>>(steps)?;
+        if steps
+            .checked_mul(d)
+            .and_then(|n| n.checked_mul(core::mem::size_of::<f64>()))
+            .is_none_or(|bytes| bytes > isize::MAX as usize)
+        {
+            return Err(StepError::TooManySteps { steps });
+        }
         let mut t = Trace {
             states: Vec::with_capacity(steps + 1),
             std_devs: Vec::with_capacity(steps),
@@ -827,6 +853,53 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let stride = w.len().div_ceil(MAX_SAMPLES).max(1);
         out.extend(w.iter().step_by(stride).map(|w| w.start));
         out
+    }
+
+    /// Refuses calibration windows that start at training states: a window
+    /// start whose encoding equals a GP training input's state part to
+    /// 1e-12 relative (run contents, not run names, are compared; held-out
+    /// runs of a real system never repeat a state to 12 digits, while
+    /// windows cut from the training runs start exactly at them).
+    fn check_held_out(&self, calibration: &Calibration<N>) -> Result<(), BoundError> {
+        let gp = self.gp();
+        let d = gp.input_dim();
+        let e = self.encoding().dim(&M::KINDS);
+        if e > d {
+            return Ok(());
+        }
+        let train: Vec<&[f64]> = gp.inputs().chunks_exact(d).map(|x| &x[..e]).collect();
+        // sort the training states by their first entry to look windows up
+        let mut order: Vec<usize> = (0..train.len()).collect();
+        order.sort_by(|&a, &b| train[a][0].total_cmp(&train[b][0]));
+        let keys: Vec<f64> = order.iter().map(|&i| train[i][0]).collect();
+        let mut buf = vec![0.0; e];
+        let (mut overlapping, mut first) = (0, 0);
+        let windows = calibration.windows();
+        for (wi, w) in windows.iter().enumerate() {
+            self.encoding().encode(&M::KINDS, &w.start, &mut buf);
+            let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs().max(b.abs()));
+            let tol = 1e-12 * (1.0 + buf[0].abs());
+            let lo = keys.partition_point(|k| *k < buf[0] - tol);
+            let hit = keys[lo..]
+                .iter()
+                .zip(&order[lo..])
+                .take_while(|(k, _)| **k <= buf[0] + tol)
+                .any(|(_, &i)| train[i].iter().zip(&buf).all(|(a, b)| close(*a, *b)));
+            if hit {
+                if overlapping == 0 {
+                    first = wi;
+                }
+                overlapping += 1;
+            }
+        }
+        if overlapping > 0 {
+            return Err(BoundError::CalibrationOverlapsTraining {
+                overlapping,
+                total: windows.len(),
+                first,
+            });
+        }
+        Ok(())
     }
 
     /// Training states with their previous and current inputs (decoded
@@ -971,6 +1044,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                      with Calibration::from_trajectories_forced or new_forced"
                 }));
             }
+            self.check_held_out(calibration)?;
             let parts = conformal::calibrate::<M, N, C, U>(self, s, calibration, &noise_std)?;
             let mut b = bound(BoundParts::Conformal(parts), 1.0, 0);
             let fallback = match s.fallback {

@@ -94,7 +94,7 @@ pub trait SpatialIntegrator<const B: usize> {
     where
         Self: Sized,
     {
-        let mut out = Vec::with_capacity(inputs.len() + 1);
+        let mut out = spatial_trajectory::<B>(inputs.len())?;
         out.push(*z0);
         let mut z = *z0;
         for (k, u) in inputs.iter().enumerate() {
@@ -114,7 +114,7 @@ pub trait SpatialIntegrator<const B: usize> {
         z0: &SpatialState<B>,
         steps: usize,
     ) -> Result<Vec<SpatialState<B>>, SpatialError> {
-        let mut out = Vec::with_capacity(steps + 1);
+        let mut out = spatial_trajectory::<B>(steps)?;
         out.push(*z0);
         let mut z = *z0;
         for k in 0..steps {
@@ -145,7 +145,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z0: &SpatialState<B>,
         steps: usize,
     ) -> Result<Vec<SpatialState<B>>, SpatialError> {
-        let mut out = vec![*z0; steps + 1];
+        let mut out = spatial_trajectory::<B>(steps)?;
+        out.resize(steps + 1, *z0);
         self.rollout_into(z0, &mut out)?;
         Ok(out)
     }
@@ -164,10 +165,25 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z0: &SpatialState<B>,
         inputs: &[nalgebra::SVector<f64, U>],
     ) -> Result<Vec<SpatialState<B>>, SpatialError> {
-        let mut out = vec![*z0; inputs.len() + 1];
+        let mut out = spatial_trajectory::<B>(inputs.len())?;
+        out.resize(inputs.len() + 1, *z0);
         self.rollout_forced_into(z0, inputs, &mut out)?;
         Ok(out)
     }
+}
+
+/// An empty vector with room for the `steps + 1` states of a rollout,
+/// the count checked before allocation
+/// ([`vigp_core::step::check_step_count`]; [`CoreStepError::TooManySteps`]
+/// for a count whose states cannot be stored, not a panic).
+pub fn spatial_trajectory<const B: usize>(
+    steps: usize,
+) -> Result<Vec<SpatialState<B>>, SpatialError> {
+    let len = vigp_core::step::check_step_count::<SpatialState<B>>(steps)?;
+    let mut out = Vec::new();
+    out.try_reserve_exact(len)
+        .map_err(|_| CoreStepError::TooManySteps { steps })?;
+    Ok(out)
 }
 
 /// What a run did to the invariants: energy error, constraint violation

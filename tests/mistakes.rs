@@ -1,0 +1,523 @@
+//! Mistakes a new user makes (issue "data that lies" and "panics and
+//! silent nonsense"), each with the typed error it now gets. The table in
+//! docs/stability.md lists them with these tests. Every test asserts the
+//! error variant and the key words of its message, so each fails if the
+//! mistake is accepted again or fails another way.
+
+use nalgebra::{SVector, UnitQuaternion, Vector3};
+use vigp::bound::{BoundError, BoundKind, Calibration, Window};
+use vigp::data::{DataError, DataWarning, check_transitions_dt};
+use vigp::gp::TrainOptions;
+use vigp::learned::{Encoding, Learned, Prior, Transition};
+use vigp::prelude::*;
+use vigp::spatial::{LieStepper, SpatialError, SpatialIntegrator, SpatialState};
+use vigp::systems::{DoublePendulum, Fourbar, Pendulum, PendulumMinimal};
+
+vigp::mechanism! {
+    /// Three 1 m links pinned at the origin and at (5, 0): the chain
+    /// reaches 3 m, the loop cannot close.
+    pub ShortChain {
+        gravity: [0.0, -9.81],
+        links {
+            a: { mass: 1.0, length: 1.0 },
+            b: { mass: 1.0, length: 1.0 },
+            c: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            p: revolute(world, a.start),
+            q: revolute(a.end, b.start),
+            r: revolute(b.end, c.start),
+            s: revolute(c.end, world @ [5.0, 0.0]),
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// The same chain pinned exactly 3 m apart: it closes, but only at
+    /// full stretch (the loop Jacobian loses rank there).
+    pub TautChain3 {
+        gravity: [0.0, -9.81],
+        links {
+            a: { mass: 1.0, length: 1.0 },
+            b: { mass: 1.0, length: 1.0 },
+            c: { mass: 1.0, length: 1.0 },
+        }
+        joints {
+            p: revolute(world, a.start),
+            q: revolute(a.end, b.start),
+            r: revolute(b.end, c.start),
+            s: revolute(c.end, world @ [3.0, 0.0]),
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// A rod on a ball joint (minimal coordinates: one quaternion).
+    pub BallPendulum {
+        gravity: [0.0, 0.0, -9.81],
+        links {
+            rod: { mass: 1.0, length: 1.0, inertia: [0.001, 0.0833333, 0.0833333] },
+        }
+        joints {
+            ball: spherical(world, rod.start),
+        }
+    }
+}
+
+// ---- panics ----
+
+/// `rollout(&z, usize::MAX)` panicked ("range start index 1 out of range"),
+/// `usize::MAX / 2` with "capacity overflow"; a duration over Δt = 0 gives
+/// such a count (`(10.0 / 0.0) as usize` saturates to `usize::MAX`).
+#[test]
+fn rollouts_of_impossible_lengths_are_typed_errors() {
+    let vi = Variational::new(DoublePendulum::default().minimal(), 0.01);
+    let z = State::new([0.5, 0.3], [0.0, 0.0]);
+    let from_zero_dt = (10.0f64 / 0.0) as usize;
+    for steps in [usize::MAX, usize::MAX / 2, usize::MAX / 64, from_zero_dt] {
+        let e = vi.rollout(&z, steps).unwrap_err();
+        assert!(
+            matches!(e, StepError::TooManySteps { steps: s } if s == steps),
+            "{e:?}"
+        );
+        assert!(e.to_string().contains("do not fit in memory"), "{e}");
+    }
+    // the forced rollout's buffer goes through the same check, and a
+    // plausible count still runs
+    assert_eq!(vi.rollout(&z, 3).unwrap().len(), 4);
+    // the 3-D rollouts
+    let stepper = LieStepper::new(BallPendulum::default().maximal(), 0.01).unwrap();
+    let z3 = SpatialState::<1> {
+        x: [Vector3::new(0.0, 0.0, -0.5)],
+        q: [UnitQuaternion::identity()],
+        v: [Vector3::zeros()],
+        w: [Vector3::zeros()],
+    };
+    let e = SpatialIntegrator::rollout(&stepper, &z3, usize::MAX).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            SpatialError::Step(vigp::embedded::StepError::TooManySteps { .. })
+        ),
+        "{e:?}"
+    );
+    assert!(e.to_string().contains("do not fit in memory"), "{e}");
+}
+
+/// The double pendulum at Δt = 2 s: Newton converges, but to a root no
+/// motion has (with the check off the energy goes from −17 J to thousands
+/// of joules). By default the step is `NotContinuation`, with the ratio.
+#[test]
+fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
+    let m = DoublePendulum::default().minimal();
+    let z0 = State::new([0.5, 0.0], [0.0, 0.0]);
+    let e0 = m.energy(&z0);
+    // with the check off: Ok, and nonsense
+    let off = Variational::new(m, 2.0).continuation_bound(f64::INFINITY);
+    let mut z = z0;
+    let mut max_e = e0;
+    let mut ratios = Vec::new();
+    for _ in 0..20 {
+        match off.step_with_info(&z) {
+            Ok((next, info)) => {
+                z = next;
+                max_e = max_e.max(m.energy(&z));
+                ratios.push(info.continuation);
+            }
+            Err(_) => break,
+        }
+    }
+    println!("E0 = {e0:.2} J, check off: max E = {max_e:.3e} J, ratios {ratios:.3?}");
+    // energy grows by far more than any motion from rest at −17 J allows
+    // (the potential's range is ±29.4 J); the first step bends 32 rad
+    // (a second implementation of the first-order rule, numpy: 16.1 rad/s
+    // after 2 s from rest, E = 58.6 J)
+    assert!(max_e > 100.0, "max energy {max_e}");
+    assert!(ratios[0] > 30.0, "{ratios:?}");
+    // default: a typed error naming the ratio and the remedy
+    let on = Variational::new(m, 2.0);
+    let e = on.rollout(&z0, 20).unwrap_err();
+    println!("default: {e}");
+    match e {
+        StepError::NotContinuation { ratio, bound, .. } => {
+            assert!(ratio > bound && bound == 1.0, "{e:?}")
+        }
+        other => panic!("expected NotContinuation, got {other:?}"),
+    }
+    let text = e.to_string();
+    assert!(
+        text.contains("not the continuation of the motion"),
+        "{text}"
+    );
+    assert!(text.contains("substeps"), "{text}");
+    // a bound ≤ 0 or NaN is refused
+    for bad in [0.0, -1.0, f64::NAN] {
+        let e = Variational::new(m, 0.01)
+            .continuation_bound(bad)
+            .check()
+            .unwrap_err();
+        assert!(matches!(e, StepError::InvalidOptions(_)), "{e:?}");
+    }
+}
+
+/// The check does not fire on motions resolved by the step: the double
+/// pendulum and the fourbar at Δt = 10 ms, 2000 steps from a fast start
+/// (the largest bend is printed).
+#[test]
+fn resolved_motions_pass_the_continuation_check() {
+    let dt = 0.01;
+    let dp = DoublePendulum::default().minimal();
+    let vi = Variational::new(dp, dt);
+    let mut z = State::new([2.0, -1.0], [3.0, -3.0]);
+    let mut worst = 0.0f64;
+    for _ in 0..2000 {
+        let (next, info) = vi.step_with_info(&z).unwrap();
+        worst = worst.max(info.continuation);
+        z = next;
+    }
+    let fb = Fourbar::default().minimal();
+    let z0 = vigp::projection::consistent_state(
+        &fb,
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::from([3.0, 0.0, 0.0, 0.0]),
+        dt,
+    )
+    .unwrap();
+    let fvi = Variational::new(fb, dt);
+    let mut z = z0;
+    let mut worst_fb = 0.0f64;
+    for _ in 0..2000 {
+        let (next, info) = fvi.step_with_info(&z).unwrap();
+        worst_fb = worst_fb.max(info.continuation);
+        z = next;
+    }
+    println!("largest continuation ratio: double pendulum {worst:.3}, fourbar {worst_fb:.3}");
+    // the default bound is 1 rad
+    assert!(worst < 1.0 && worst_fb < 1.0);
+}
+
+/// A loop that cannot close compiled and failed at the first step
+/// (`NotConverged … residual 7.0`); it is now refused when the integrator
+/// is built, with the residual. Loops that close (the fourbar, a chain at
+/// full stretch) pass.
+#[test]
+fn a_loop_that_cannot_close_is_refused_at_construction() {
+    let vi = Variational::new(ShortChain::default().minimal(), 0.01);
+    let e = vi.check().unwrap_err();
+    println!("{e}");
+    match e {
+        StepError::LoopCannotClose { residual } => assert!(residual > 0.1, "{e:?}"),
+        other => panic!("expected LoopCannotClose, got {other:?}"),
+    }
+    assert!(e.to_string().contains("cannot close"), "{e}");
+    let z = State::new([0.0; 3], [0.0; 3]);
+    assert!(matches!(
+        vi.step(&z),
+        Err(StepError::LoopCannotClose { .. })
+    ));
+    Variational::new(TautChain3::default().minimal(), 0.01)
+        .check()
+        .unwrap();
+    Variational::new(Fourbar::default().minimal(), 0.01)
+        .check()
+        .unwrap();
+}
+
+/// A 3-D start state with a non-unit quaternion failed with "singular
+/// Newton matrix at iteration 0" (or another Newton failure) and no hint;
+/// it now names the quaternion, its norm and `consistent_state`.
+#[test]
+fn a_non_unit_quaternion_start_gets_the_consistent_state_hint() {
+    let m = BallPendulum::default().minimal();
+    let vi = Variational::new(m, 0.01);
+    vi.check().unwrap();
+    // a unit start steps
+    let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.3);
+    let q = tilt.quaternion();
+    let unit = State::new([q.w, q.i, q.j, q.k], [0.0; 4]);
+    vi.step(&unit).unwrap();
+    for scale in [2.0, 0.5] {
+        let z = State::new(
+            [scale * q.w, scale * q.i, scale * q.j, scale * q.k],
+            [0.0; 4],
+        );
+        let e = vi.step(&z).unwrap_err();
+        println!("norm {scale}: {e}");
+        match e {
+            StepError::NonUnitQuaternion { link: 0, norm, .. } => {
+                assert!((norm - scale).abs() < 1e-12, "{e:?}")
+            }
+            other => panic!("expected NonUnitQuaternion, got {other:?}"),
+        }
+        assert!(e.to_string().contains("consistent_state"), "{e}");
+    }
+}
+
+// ---- data that lies ----
+
+/// A pendulum log at 100 Hz (positions from the VI), `runs` runs of
+/// `rows` rows, as CSV text; `edit(run, row, value)` may replace a reading.
+fn pendulum_log(
+    runs: usize,
+    rows: usize,
+    time: impl Fn(usize) -> String,
+    edit: impl Fn(usize, usize, f64) -> f64,
+) -> String {
+    let vi = Variational::new(Pendulum::default().minimal(), 0.01);
+    let mut text = String::from("run,t,pivot\n");
+    for r in 0..runs {
+        let mut z = State::new([0.4 + 0.3 * r as f64], [0.0]);
+        for k in 0..rows {
+            let x = edit(r, k, z.q[0]);
+            text.push_str(&format!("r{r},{},{x}\n", time(k)));
+            z = vi.step(&z).unwrap();
+        }
+    }
+    text
+}
+
+fn seconds(k: usize) -> String {
+    format!("{:.2}", k as f64 * 0.01)
+}
+
+fn read(text: &str, opts: &ReadOptions) -> Result<Dataset<1>, DataError> {
+    Dataset::<1>::read_for::<PendulumMinimal, 0, _>(text.as_bytes(), opts)
+}
+
+/// One angle reading of 1e6 or 1e308 was unwrapped to −0.358 rad and
+/// accepted; it is now an outlier naming run, line and column, or, with
+/// `drop_outliers`, dropped, counted, and its run split there.
+#[test]
+fn a_sensor_spike_is_an_outlier_naming_run_line_and_column() {
+    for spike in [1e6, 1e308, -1e6] {
+        // run r1, row 30: file line 1 (header) + 60 (run r0) + 30 + 1
+        let text = pendulum_log(
+            2,
+            60,
+            seconds,
+            |r, k, x| {
+                if r == 1 && k == 30 { spike } else { x }
+            },
+        );
+        let e = read(&text, &ReadOptions::default()).unwrap_err();
+        println!("{e}");
+        match &e {
+            DataError::Outlier {
+                run,
+                line,
+                column,
+                value,
+                ..
+            } => {
+                assert_eq!((run.as_str(), *line, column.as_str()), ("r1", 92, "pivot"));
+                assert_eq!(*value, spike);
+            }
+            other => panic!("expected Outlier, got {other:?}"),
+        }
+        assert!(e.to_string().contains("drop_outliers"), "{e}");
+        let d = read(
+            &text,
+            &ReadOptions {
+                drop_outliers: true,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(d.dropped.len(), 1);
+        assert_eq!((d.dropped[0].line, d.dropped[0].value), (92, spike));
+        // r0, r1 before the spike (30 rows), r1 after it (29 rows)
+        let names: Vec<&str> = d.runs.iter().map(|r| r.name.as_str()).collect();
+        assert_eq!(names, ["r0", "r1", "r1@93"]);
+        assert_eq!(d.samples(), 119);
+        // every velocity is a motion again: below 3 rad/s
+        for run in &d.runs {
+            for k in 0..run.positions.len() - 1 {
+                assert!(run.state(k).unwrap().v[0].abs() < 3.0);
+            }
+        }
+    }
+    // the clean log reads as before: no outlier, no warning
+    let d = read(
+        &pendulum_log(2, 60, seconds, |_, _, x| x),
+        &ReadOptions::default(),
+    )
+    .unwrap();
+    assert!(d.dropped.is_empty() && d.warnings.is_empty());
+    assert_eq!(d.runs.len(), 2);
+}
+
+/// An explicit speed bound (`max_speed`) applies to every coordinate.
+#[test]
+fn a_speed_bound_set_by_the_user_refuses_faster_readings() {
+    // a jump of 0.05 rad in one sample (5 rad/s) against a 2 rad/s bound
+    let text = pendulum_log(1, 40, seconds, |_, k, x| if k == 20 { x + 0.05 } else { x });
+    let opts = ReadOptions {
+        max_speed: Some(2.0),
+        ..Default::default()
+    };
+    let e = read(&text, &opts).unwrap_err();
+    assert!(
+        matches!(&e, DataError::Outlier { line: 22, bound, .. } if *bound == 2.0),
+        "{e:?}"
+    );
+    // the default bound (the run's extent) lets it pass: it is plausible
+    read(&text, &ReadOptions::default()).unwrap();
+}
+
+/// A log in degrees was read with max |v| = 313 rad/s, and timestamps in
+/// milliseconds were read too, with no word. Both now come with a warning
+/// that names the likely unit.
+#[test]
+fn degrees_and_milliseconds_get_a_unit_warning() {
+    let degrees = pendulum_log(1, 200, seconds, |_, _, x| x.to_degrees());
+    let d = read(&degrees, &ReadOptions::default()).unwrap();
+    println!("{:?}", d.warnings);
+    assert!(
+        d.warnings.iter().any(
+            |w| matches!(w, DataWarning::LooksLikeDegrees { column, .. } if column == "pivot")
+        ),
+        "{:?}",
+        d.warnings
+    );
+    assert!(d.warnings[0].to_string().contains("degrees"));
+    let ms = pendulum_log(1, 50, |k| format!("{}", k * 10), |_, _, x| x);
+    let d = read(&ms, &ReadOptions::default()).unwrap();
+    assert!(
+        matches!(&d.warnings[..], [DataWarning::LooksLikeMilliseconds { dt, .. }] if *dt == 10.0),
+        "{:?}",
+        d.warnings
+    );
+    assert!(d.warnings[0].to_string().contains("milliseconds"));
+}
+
+/// `train` took Δt = 0.02 on 0.01 s data without a word. The transitions
+/// carry the Δt they were formed with; `check_transitions_dt` finds it
+/// and refuses another, with the factor.
+#[test]
+fn a_dt_that_contradicts_the_data_is_a_typed_error() {
+    let d = read(
+        &pendulum_log(2, 60, seconds, |_, _, x| x),
+        &ReadOptions::default(),
+    )
+    .unwrap();
+    let tr = d.transitions();
+    check_transitions_dt(&tr, 0.01, 1e-6).unwrap();
+    let e = check_transitions_dt(&tr, 0.02, 1e-6).unwrap_err();
+    println!("{e}");
+    match &e {
+        DataError::DtContradictsData { given, found, .. } => {
+            assert_eq!((*given, *found), (0.02, 0.01))
+        }
+        other => panic!("expected DtContradictsData, got {other:?}"),
+    }
+    assert!(e.to_string().contains("factor of 2"), "{e}");
+    // and the dataset's own check against a model's Δt
+    assert!(matches!(
+        d.check_dt(0.02, 1e-6),
+        Err(DataError::TimeStepMismatch { .. })
+    ));
+}
+
+const DT: f64 = 0.01;
+
+/// Windows of 5 steps of the pendulum from pseudo-random states (a fixed
+/// linear congruential sequence per seed).
+fn windows(seed: u64, count: usize) -> Vec<Window<1>> {
+    let vi = Variational::new(Pendulum::default().minimal(), DT);
+    let mut s = seed;
+    let mut next = || {
+        s = s
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    (0..count)
+        .map(|_| {
+            let q0 = 4.0 * next() - 2.0;
+            let v0 = 5.0 * next() - 2.5;
+            let traj = vi.rollout(&State::new([q0], [v0]), 6).unwrap();
+            let p: Vec<_> = traj.iter().map(|z| z.q).collect();
+            Window {
+                start: State {
+                    q: p[0],
+                    v: (p[1] - p[0]) / DT,
+                },
+                positions: p[1..].to_vec(),
+            }
+        })
+        .collect()
+}
+
+/// Calibrating on the training runs was accepted (coverage then fell to
+/// 0.90 at δ = 0.05); windows that start at training states are refused.
+#[test]
+fn calibration_on_the_training_runs_is_refused() {
+    let train: Vec<Transition<1>> = windows(1, 40)
+        .iter()
+        .map(|w| Transition {
+            z: w.start,
+            v_next: (w.positions[1] - w.positions[0]) / DT,
+        })
+        .collect();
+    let opts = TrainOptions {
+        restarts: 1,
+        seed: 3,
+        ..TrainOptions::default()
+    };
+    let (learned, _) = Learned::train(
+        Pendulum::default().minimal(),
+        DT,
+        &train,
+        Encoding::SinCos,
+        Prior::Nominal,
+        &opts,
+    )
+    .unwrap();
+    let kind = BoundKind::conformal(0.05);
+    let same = Calibration::new(DT, windows(1, 40)).unwrap();
+    let e = learned.error_bound(&kind, &same).unwrap_err();
+    println!("{e}");
+    assert!(
+        matches!(
+            e,
+            BoundError::CalibrationOverlapsTraining {
+                overlapping: 40,
+                total: 40,
+                first: 0
+            }
+        ),
+        "{e:?}"
+    );
+    assert!(e.to_string().contains("held out"), "{e}");
+    // half of them mixed into held-out windows: still refused
+    let mut mixed = windows(2, 40);
+    mixed.extend(windows(1, 20));
+    let e = learned
+        .error_bound(&kind, &Calibration::new(DT, mixed).unwrap())
+        .unwrap_err();
+    assert!(matches!(
+        e,
+        BoundError::CalibrationOverlapsTraining {
+            overlapping: 20,
+            first: 40,
+            ..
+        }
+    ));
+    // held-out windows calibrate
+    learned
+        .error_bound(&kind, &Calibration::new(DT, windows(2, 40)).unwrap())
+        .unwrap();
+    // a bounded prediction of usize::MAX steps is refused before its
+    // buffers are allocated (it overflowed steps × d)
+    let rkhs = learned
+        .error_bound(&BoundKind::rkhs(0.05), &Calibration::empty(DT))
+        .unwrap();
+    let start = windows(3, 1)[0].start;
+    for steps in [usize::MAX, usize::MAX / 2] {
+        let e = learned.predict(&start, steps, &rkhs).unwrap_err();
+        assert!(
+            matches!(e, BoundError::Step(StepError::TooManySteps { .. })),
+            "{e:?}"
+        );
+    }
+}
