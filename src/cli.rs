@@ -100,12 +100,13 @@ pub enum CliError {
     #[error("{0}")]
     Usage(String),
     /// A data file could not be read.
-    #[error("{}", with_path(path, source, matches!(source, DataError::Io { .. })))]
+    #[error("{}", with_path(path, source, matches!(**source, DataError::Io { .. })))]
     Data {
         /// The file.
         path: PathBuf,
-        /// Why.
-        source: DataError,
+        /// Why (boxed: the data errors carry run names and values, and
+        /// every command returns this type).
+        source: Box<DataError>,
     },
     /// A model file could not be loaded or saved.
     #[error("{}", with_path(path, source, matches!(source, LoadError::Io { .. })))]
@@ -181,7 +182,7 @@ fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
 fn data_error(path: &Path) -> impl FnOnce(DataError) -> CliError + '_ {
     move |source| CliError::Data {
         path: path.to_path_buf(),
-        source,
+        source: Box::new(source),
     }
 }
 

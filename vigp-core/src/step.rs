@@ -530,7 +530,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// as [`StepReport::continuation`]. `f64::INFINITY` turns the check
     /// off; NaN or a bound ≤ 0 is [`StepError::InvalidOptions`].
     pub fn continuation_bound(mut self, bound: f64) -> Result<Self, StepError> {
-        if !(bound > 0.0) {
+        if bound.is_nan() || bound <= 0.0 {
             return Err(StepError::InvalidOptions(
                 "continuation bound must be > 0 (f64::INFINITY turns the check off)",
             ));

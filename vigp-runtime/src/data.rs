@@ -1031,7 +1031,7 @@ fn check_pairs_dt<const N: usize>(
                 .zip(v_next.iter())
                 .all(|(a, b)| a.to_bits() == b.to_bits());
         let vv = z0.v.dot(&z0.v);
-        if !same_run || !(vv > 0.0) {
+        if !same_run || vv.is_nan() || vv <= 0.0 {
             continue;
         }
         let est = (z1.q - z0.q).dot(&z0.v) / vv;
