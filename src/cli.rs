@@ -946,7 +946,7 @@ where
                 let train = |chosen: &[ForcedTransition<N, U>]| {
                     Learned::train_forced(minimal, dt, chosen, enc, prior, &opts)
                 };
-                fit_view(a, &all, (enc, prior), U, &opts, train, out)
+                fit_view(a, &all, (enc, prior), 2 * U, &opts, train, out)
             }
         }
         EncodingArg::Maximal => {
@@ -976,7 +976,7 @@ where
                 let train = |chosen: &[ForcedTransition<NM, U>]| {
                     Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior, &opts)
                 };
-                fit_view(a, &forced, (Encoding::Raw, prior), U, &opts, train, out)
+                fit_view(a, &forced, (Encoding::Raw, prior), 2 * U, &opts, train, out)
             }
         }
     }
@@ -985,7 +985,8 @@ where
 /// Trains on at most `--max-samples` of `all` (`train`: the plain or the
 /// forced training of one view, with `encoding` and `prior`), reports and
 /// saves. `u_dim`: the GP inputs that are control inputs, after the
-/// `encoding`'s state inputs.
+/// `encoding`'s state inputs (2·U for a forced model: the previous and the
+/// current input).
 /// A fitted noise variance below this fraction of the signal variance
 /// leaves the posterior variance σ_f² − kᵀ(K + σ_n²I)⁻¹k at the level of
 /// its rounding error near the data (≈ N·ε·σ_f² ≈ 1e-13·σ_f² at N = 512,

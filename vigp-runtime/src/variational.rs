@@ -266,7 +266,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// whose velocity change bends the discrete path by more,
     /// |Δt·(v₁ − v₀)|∞ (radians; lengths in units of 1 + the largest length
     /// coordinate; per sub-step with [`Variational::substeps`]), is
-    /// [`StepError::NotContinuation`]: Newton's root solves the discrete
+    /// [`StepError::NotContinuation`] when the step also gains more energy
+    /// than ½(|E₀| + |E₁|) (a stiff, damped link may bend more and lose
+    /// energy): Newton's root solves the discrete
     /// equations but does not continue the motion (the double pendulum
     /// released from rest at Δt = 2 s bends 32 rad in its first step). The
     /// bend of each step is
@@ -469,7 +471,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 }
 
-/// A start state whose quaternion is not of unit norm (to 1e-9) is
+/// A start state whose quaternion is not of unit norm (to
+/// [`START_UNIT_TOLERANCE`]) is
 /// [`StepError::NonUnitQuaternion`], with the `consistent_state` hint in its
 /// message (free for mechanisms without quaternion coordinates).
 fn check_quaternions<M: Mechanism<N, C>, const N: usize, const C: usize>(
@@ -487,7 +490,7 @@ fn check_quaternions<M: Mechanism<N, C>, const N: usize, const C: usize>(
         any
     };
     if has {
-        if let Some((link, norm)) = non_unit_quaternion::<M, N, C>(&z.q) {
+        if let Some((link, norm)) = non_unit_quaternion_to::<M, N, C>(&z.q, START_UNIT_TOLERANCE) {
             if norm.is_finite() {
                 return Err(StepError::NonUnitQuaternion {
                     link,
@@ -500,17 +503,34 @@ fn check_quaternions<M: Mechanism<N, C>, const N: usize, const C: usize>(
     Ok(())
 }
 
+/// How far from unit norm a start state's quaternion may be before the
+/// step refuses it. The loop constraint |u|² − 1 = 0 brings a nearby
+/// quaternion back within the step, and finite differences perturb
+/// quaternion coordinates by ~1e-5; a quaternion off by more than 1e-3 is
+/// a mistake (an unnormalised guess), not rounding. A step that fails from
+/// a quaternion off by more than 1e-9 still gets the hint ([`Variational`]'s
+/// error explanation).
+const START_UNIT_TOLERANCE: f64 = 1e-3;
+
 /// The first quaternion block (four consecutive coordinates of kind
 /// [`vigp_core::CoordinateKind::Quaternion`], counted from 0) of `q`
 /// whose norm is not 1 to 1e-9, with its norm.
 fn non_unit_quaternion<M: Mechanism<N, C>, const N: usize, const C: usize>(
     q: &SVector<f64, N>,
 ) -> Option<(usize, f64)> {
+    non_unit_quaternion_to::<M, N, C>(q, 1e-9)
+}
+
+/// [`non_unit_quaternion`] with the tolerance `tol` on |‖u‖ − 1|.
+fn non_unit_quaternion_to<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    q: &SVector<f64, N>,
+    tol: f64,
+) -> Option<(usize, f64)> {
     let (mut i, mut block) = (0, 0);
     while i + 4 <= N {
         if M::KINDS[i] == vigp_core::CoordinateKind::Quaternion {
             let norm = q.fixed_rows::<4>(i).norm();
-            if (norm - 1.0).abs() > 1e-9 {
+            if (norm - 1.0).abs() > tol {
                 return Some((block, norm));
             }
             block += 1;
