@@ -522,8 +522,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// components; lengths in units of 1 + the largest length coordinate),
     /// must not exceed the bound while the step also gains more energy than
     /// ½(|E₀| + |E₁|), else the step is [`StepError::NotContinuation`]
-    /// (a stiff, damped link may bend the path by more in one step, and
-    /// loses energy doing so). A step that resolves the motion
+    /// (a stiff, damped link may bend the path by more in one step while
+    /// its energy barely changes). A step that resolves the motion
     /// bends its path by h²·|a|, a fraction of a radian (0.15 rad for a
     /// pendulum at Δt = 0.1 s); a step that bends it by more than a radian
     /// has sampled the forces and the velocity terms at configurations the
@@ -581,8 +581,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         }
         report.continuation = bend;
         // A stiff, damped link legitimately bends the path by more than the
-        // bound in one step (its relative velocity is damped out), and then
-        // loses energy. A root no motion has gains energy: refuse a large
+        // bound in one step (its relative velocity is damped out) while the
+        // energy barely changes. A root no motion has gains energy: refuse a large
         // bend only together with an energy jump beyond the energy's own
         // size, E₁ − E₀ > ½(|E₀| + |E₁|) (the double pendulum released at
         // Δt = 2 s: −17 J → 59 J). Evaluated only past the bound.

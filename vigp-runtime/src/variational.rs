@@ -267,8 +267,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// |Δt·(v₁ − v₀)|∞ (radians; lengths in units of 1 + the largest length
     /// coordinate; per sub-step with [`Variational::substeps`]), is
     /// [`StepError::NotContinuation`] when the step also gains more energy
-    /// than ½(|E₀| + |E₁|) (a stiff, damped link may bend more and lose
-    /// energy): Newton's root solves the discrete
+    /// than ½(|E₀| + |E₁|) (a stiff, damped link may bend more while its
+    /// energy barely changes): Newton's root solves the discrete
     /// equations but does not continue the motion (the double pendulum
     /// released from rest at Δt = 2 s bends 32 rad in its first step). The
     /// bend of each step is
