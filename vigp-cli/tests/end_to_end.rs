@@ -470,6 +470,10 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     let (train, test) = (dir.join("train.csv"), dir.join("test.csv"));
     std::fs::write(&train, csv(0..6)).unwrap();
     std::fs::write(&test, csv(6..9)).unwrap();
+    // held-out runs for the conformal calibration (drawn after the others,
+    // so that the training and test runs are unchanged)
+    let held_out = dir.join("held_out.csv");
+    std::fs::write(&held_out, csv(9..15)).unwrap();
     let model = dir.join("drive.json");
     let tool = [vigp::cli::system::<DriveCartpole>()];
     let run = |args: &[&str]| run_tool(&tool, "drive-tool", args);
@@ -624,10 +628,17 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     // it by 1.7e-4 at the second step (bound 8.5e-7)
     assert!(worst < 1e-6, "{worst:e}");
     // the conformal bound, calibrated on held-out runs under their inputs
-    // (the training runs stand in: only the tool's path is checked here;
-    // coverage is `tests/bound.rs`'s)
+    // (only the tool's path is checked here; coverage is
+    // `tests/bound.rs`'s); calibrating on the training runs is refused
     let mut args = predict_args(s(&floored), s(&test), "5", s(&pred));
     args.extend(["--calibration", s(&train)]);
+    let e = run(&args).unwrap_err().to_string();
+    assert!(
+        e.contains("calibration windows start at a training state"),
+        "{e}"
+    );
+    let mut args = predict_args(s(&floored), s(&test), "5", s(&pred));
+    args.extend(["--calibration", s(&held_out)]);
     let said = run(&args).unwrap();
     assert!(
         said.contains("3 runs × 5 steps (0 failed); conformal bound"),
