@@ -701,12 +701,24 @@ impl<T: Tree> Engine<T> {
     ) -> Result<(), EngineError> {
         let ws = self.scratch(ws)?;
         check_len("p", p.len(), ws.len())?;
-        self.load(q, v, ws)?;
-        self.kinematics(ws);
-        self.momentum(ws);
+        self.momentum_pass(q, v, ws)?;
         for (x, w) in p.iter_mut().zip(ws.iter()) {
             *x = w.pn;
         }
+        Ok(())
+    }
+
+    /// Loads (q, v), then the kinematics and momentum passes: what
+    /// [`Engine::momentum_of`] and [`Engine::terms`] read their outputs from.
+    fn momentum_pass(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        self.load(q, v, ws)?;
+        self.kinematics(ws);
+        self.momentum(ws);
         Ok(())
     }
 
@@ -726,9 +738,7 @@ impl<T: Tree> Engine<T> {
         check_len("p", p.len(), n)?;
         check_len("dtdq", dtdq.len(), n)?;
         check_len("dvdq", dvdq.len(), n)?;
-        self.load(q, v, ws)?;
-        self.kinematics(ws);
-        self.momentum(ws);
+        self.momentum_pass(q, v, ws)?;
         for (i, w) in ws.iter().enumerate() {
             p[i] = w.pn;
             dtdq[i] = w.dtq;
