@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """LML + gradient evaluations per start: scipy's L-BFGS-B on scikit-learn's
 log marginal likelihood, from the **same start points** as vigp's
-`Gp::train` (SplitMix64 restarts of vigp-runtime/src/gp/model.rs, ported
+`Gp::train` (SplitMix64 restarts of vigp-gp/src/train.rs, ported
 below), on the data of benches/gp.rs, with the same bounds and stopping
 rules (ftol 2.220446049250313e-9, pgtol 1e-5, memory 10).
 

@@ -39,6 +39,7 @@ use crate::variational::{Integrator, Variational};
 use nalgebra::SVector;
 
 mod embedded;
+mod export;
 mod file;
 pub use embedded::{EmbeddedExport, ExportSize};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};

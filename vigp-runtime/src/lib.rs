@@ -8,8 +8,10 @@
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+/// The Gaussian-process engine (the crate `vigp-gp`): exact and sparse GPs,
+/// training, prediction, online updates, save/load and export.
 #[cfg(feature = "alloc")]
-pub mod gp;
+pub use vigp_gp as gp;
 
 #[cfg(feature = "alloc")]
 pub mod bound;

@@ -21,7 +21,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread::{self, JoinHandle};
 use std::time::{Duration, Instant};
 
-use super::tri;
+use crate::packed;
 
 /// How long the helper spins for the next request before it parks.
 pub(crate) const SPIN: Duration = Duration::from_micros(200);
@@ -38,7 +38,7 @@ pub(crate) struct Task {
     /// The result ‖L⁻¹k‖².
     pub quad: f64,
     /// Visit L⁻¹'s rows last to first next time (alternates, see
-    /// [`tri::lower_matvec_dir`]).
+    /// [`packed::lower_matvec_dir`]).
     reverse: bool,
 }
 
@@ -46,9 +46,9 @@ impl Task {
     fn run(&mut self) {
         if let Some(linv) = &self.linv {
             self.tmp.resize(self.k.len(), 0.0);
-            tri::lower_matvec_dir(linv, &self.k, &mut self.tmp, self.reverse);
+            packed::lower_matvec_dir(linv, &self.k, &mut self.tmp, self.reverse);
             self.reverse = !self.reverse;
-            self.quad = tri::norm2(&self.tmp);
+            self.quad = packed::norm2(&self.tmp);
         }
     }
 }
@@ -244,8 +244,8 @@ mod tests {
             let tasks = claim.wait(g);
             for (t, m) in tasks.iter().zip(&mats) {
                 let mut tmp = vec![0.0; n];
-                tri::lower_matvec_dir(m, &k, &mut tmp, false);
-                assert_eq!(t.quad.to_bits(), tri::norm2(&tmp).to_bits());
+                packed::lower_matvec_dir(m, &k, &mut tmp, false);
+                assert_eq!(t.quad.to_bits(), packed::norm2(&tmp).to_bits());
             }
             drop(tasks);
             drop(claim);

@@ -18,10 +18,10 @@
 
 use std::sync::Arc;
 
-use super::error::GpError;
-use super::lml::sqdist;
-use super::model::{Gp, OutputGp, Posterior, check_finite};
-use super::{sparse, tri};
+use crate::error::GpError;
+use crate::likelihood::sqdist;
+use crate::model::{Gp, OutputGp, Posterior, check_finite};
+use crate::{packed, sparse};
 
 impl Gp {
     /// Adds samples (row-major `inputs`, k × d, and `targets`, k × p, in
@@ -157,7 +157,7 @@ fn update_output(
         .map(|i| (targets[i * p + j] - prior[i * p + j]) / s)
         .collect();
     check_finite("residual y - m(x) of the new samples", &r_new)?;
-    let xs_new = super::lml::scale_inputs(xn, d, &o.hp.length_scales);
+    let xs_new = super::likelihood::scale_inputs(xn, d, &o.hp.length_scales);
     let sf2 = o.hp.signal_variance;
     let centres = o.alpha.len();
     match &mut o.post {
@@ -185,12 +185,12 @@ fn update_output(
                 c.clear();
                 c.resize(n, 0.0);
                 if let Some(li) = linv.as_mut() {
-                    tri::matvec_and_inverse_row(Arc::make_mut(li), &b, &mut c);
+                    packed::matvec_and_inverse_row(Arc::make_mut(li), &b, &mut c);
                 } else {
                     c.copy_from_slice(&b);
-                    tri::forward_rows(l, &mut c);
+                    packed::forward_rows(l, &mut c);
                 }
-                let delta2 = diag - tri::norm2(&c);
+                let delta2 = diag - packed::norm2(&c);
                 if !(delta2 > 0.0 && delta2.is_finite()) {
                     // the undo record truncates the appended row of L⁻¹
                     return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
@@ -200,32 +200,35 @@ fn update_output(
                 let ainv_b: Vec<f64> = match linv.as_mut() {
                     Some(li) => {
                         let li = Arc::make_mut(li);
-                        let start = tri::row_start(n);
+                        let start = packed::row_start(n);
                         let w: Vec<f64> = li[start..start + n].iter().map(|v| -v).collect();
-                        tri::finish_inverse_row(li, n, delta);
+                        packed::finish_inverse_row(li, n, delta);
                         w
                     }
                     None => {
                         let mut t = c.clone();
-                        tri::backward_rows(l, &mut t);
+                        packed::backward_rows(l, &mut t);
                         t
                     }
                 };
                 // Block inverse: α' = (α − A⁻¹b·β, β), β = (r − bᵀα)/δ².
-                let beta = (r_new[i] - tri::dot(&b, &alpha)) / delta2;
+                let beta = (r_new[i] - packed::dot(&b, &alpha)) / delta2;
                 for (a, q) in alpha.iter_mut().zip(&ainv_b) {
                     *a -= q * beta;
                 }
                 alpha.push(beta);
-                fwd.push((r_new[i] - tri::dot(&c, fwd)) / delta);
+                fwd.push((r_new[i] - packed::dot(&c, fwd)) / delta);
                 l.extend_from_slice(&c);
                 l.push(delta);
                 xs.extend_from_slice(xq);
                 n += 1;
             }
-            let fit = tri::norm2(fwd);
+            let fit = packed::norm2(fwd);
             let ln2pi = (2.0 * core::f64::consts::PI).ln();
-            let log_det: f64 = 2.0 * (0..n).map(|i| l[tri::row_start(i) + i].ln()).sum::<f64>();
+            let log_det: f64 = 2.0
+                * (0..n)
+                    .map(|i| l[packed::row_start(i) + i].ln())
+                    .sum::<f64>();
             o.lml = -0.5 * fit - 0.5 * log_det - 0.5 * n as f64 * ln2pi;
             if alpha.iter().any(|a| !a.is_finite()) || !o.lml.is_finite() {
                 return Err(GpError::NotPositiveDefinite { jitter: o.jitter });
@@ -248,7 +251,7 @@ fn update_output(
                         }
                     })
                     .collect();
-                tri::forward_rows(lu, &mut a);
+                packed::forward_rows(lu, &mut a);
                 a.iter_mut().for_each(|v| *v /= sigma);
                 for (y, v) in ay.iter_mut().zip(&a) {
                     *y += v * r_new[i];
@@ -282,11 +285,11 @@ fn sparse_bound<'a>(
 ) -> f64 {
     let m = ay.len();
     let mut c = ay.to_vec();
-    tri::forward_rows(lb, &mut c);
-    let ctc = tri::norm2(&c) / s2;
+    packed::forward_rows(lb, &mut c);
+    let ctc = packed::norm2(&c) / s2;
     let yty: f64 = y.map(|v| v * v).sum();
-    let tr_aat = tri::norm2(lb) - m as f64;
-    let logdet_b: f64 = (0..m).map(|i| lb[tri::row_start(i) + i].ln()).sum();
+    let tr_aat = packed::norm2(lb) - m as f64;
+    let logdet_b: f64 = (0..m).map(|i| lb[packed::row_start(i) + i].ln()).sum();
     let nf = n as f64;
     -0.5 * nf * (2.0 * core::f64::consts::PI).ln() - logdet_b - 0.5 * nf * s2.ln() - 0.5 * yty / s2
         + 0.5 * ctc

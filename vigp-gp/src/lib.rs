@@ -15,7 +15,7 @@
 //!   [`sparse_bound`] likewise for the sparse GP.
 //! * [`TrainOptions::method`]: the exact GP or Titsias' sparse variational
 //!   GP (SGPR) with M inducing points, behind the same [`Gp`] type (train,
-//!   predict, save/load, export of the mean, use in `Learned`).
+//!   predict, save/load, export of the mean).
 //! * [`Gp::add_samples`]: online updates at fixed hyperparameters
 //!   (exact: O(N²) per sample; sparse: O(M²)); [`Gp::warm_start`] and
 //!   [`TrainOptions::warm_start`] restart the optimiser from a previous model.
@@ -35,32 +35,35 @@
 
 mod error;
 mod export;
-mod helper;
 mod kernel;
 mod lbfgs;
-mod lml;
+mod likelihood;
 mod mean;
 mod model;
 mod normalise;
 mod options;
+mod packed;
+mod predict;
+mod restarts;
 mod rng;
 mod save;
 mod sparse;
 mod train;
-mod tri;
 mod update;
+mod variance_thread;
 
 pub use error::GpError;
 pub use export::{ExportOptions, ExportedArrays};
 pub use kernel::Hyperparameters;
 pub use mean::{MeanFn, PriorMean};
-pub use model::{Gp, OutputGp, PARALLEL_VARIANCE_MIN_N, Prediction, VarianceMode, Workspace};
+pub use model::{Gp, OutputGp, VarianceMode};
 pub use normalise::InputNormaliser;
 pub use options::{
     Bounds, Curvature, InducingInit, InducingReport, MAX_MEMORY, MAX_RESTARTS, Method,
     OutputReport, SCREEN_FROM, SPARSE_MIN_NOISE_VARIANCE, Screening, ScreeningReport,
     SparseOptions, TrainOptions, TrainReport,
 };
+pub use predict::{PARALLEL_VARIANCE_MIN_N, Prediction, Workspace};
 pub use save::{SavedGp, SavedMean, SavedOutput};
 
 /// Log marginal likelihood and its gradient on data as given (no
@@ -73,10 +76,10 @@ pub use save::{SavedGp, SavedMean, SavedOutput};
 /// (see the module docs) and the value is that of the jittered matrix.
 ///
 /// ```
-/// use vigp_runtime::gp::log_marginal_likelihood;
+/// use vigp_gp::log_marginal_likelihood;
 /// let (v, g) = log_marginal_likelihood(&[0.0, 1.0], 1, &[0.0, 0.5], &[0.0, 0.0, -2.0], false)?;
 /// assert!(v.is_finite() && g.len() == 3);
-/// # Ok::<(), vigp_runtime::gp::GpError>(())
+/// # Ok::<(), vigp_gp::GpError>(())
 /// ```
 pub fn log_marginal_likelihood(
     inputs: &[f64],
@@ -99,7 +102,7 @@ pub fn log_marginal_likelihood(
     } else {
         faer::Par::Seq
     };
-    let e = lml::lml(inputs, n, input_dim, targets, log_params, true, par)?;
+    let e = likelihood::lml(inputs, n, input_dim, targets, log_params, true, par)?;
     Ok((e.value, e.gradient))
 }
 
@@ -114,11 +117,11 @@ pub fn log_marginal_likelihood(
 /// that jitter. `parallel` lets faer and rayon use all threads.
 ///
 /// ```
-/// use vigp_runtime::gp::sparse_bound;
+/// use vigp_gp::sparse_bound;
 /// let x = [0.0, 0.5, 1.0, 1.5];
 /// let (v, g) = sparse_bound(&x, 1, &[0.0, 0.4, 0.8, 1.0], &[0.2, 1.2], &[0.0, 0.0, -2.0], false)?;
 /// assert!(v.is_finite() && g.len() == 3);
-/// # Ok::<(), vigp_runtime::gp::GpError>(())
+/// # Ok::<(), vigp_gp::GpError>(())
 /// ```
 pub fn sparse_bound(
     inputs: &[f64],

@@ -8,7 +8,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::error::GpError;
+use crate::error::GpError;
 
 /// Hyperparameters of one output's GP: ARD length scales ℓ_j, signal
 /// variance σ_f² and noise variance σ_n².

@@ -28,12 +28,12 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use faer::Par;
 use rayon::prelude::*;
 
-use super::error::GpError;
-use super::lbfgs::{self, LbfgsOptions, LbfgsResult};
-use super::lml;
-use super::options::ScreeningReport;
-use super::rng::SplitMix64;
-use super::sparse;
+use crate::error::GpError;
+use crate::lbfgs::{self, LbfgsOptions, LbfgsResult};
+use crate::likelihood;
+use crate::options::ScreeningReport;
+use crate::rng::SplitMix64;
+use crate::sparse;
 
 /// One optimiser run.
 #[derive(Clone)]
@@ -135,7 +135,7 @@ pub(crate) fn run_jobs(
     // them), and when the last runs are left (the slowest start alone
     // at the end) the idle threads take their share. faer splits these
     // kernels by output blocks, so the bits do not depend on the split
-    // (`tests/gp_robustness.rs`). Below that size the same happens once
+    // (`tests/gp/gp_robustness.rs`). Below that size the same happens once
     // fewer runs than threads are left: at N = 512, d = 4, 1 + 10 starts
     // this took the busy share of two threads from 1.76 to 1.93 and the
     // wall time from 1.33 to 1.25 s.
@@ -154,7 +154,7 @@ pub(crate) fn run_jobs(
             let res = match set.inducing {
                 None => {
                     // One workspace per run: no N×N allocation per evaluation.
-                    let mut ws = lml::LmlWorkspace::new(n);
+                    let mut ws = likelihood::LmlWorkspace::new(n);
                     lbfgs::minimise_seeded(
                         |t| {
                             let par = if unfinished.load(Ordering::Relaxed) < threads {
@@ -162,7 +162,7 @@ pub(crate) fn run_jobs(
                             } else {
                                 inner_exact
                             };
-                            let e = lml::lml_ws(&mut ws, data.xn, d, y, t, true, par)?;
+                            let e = likelihood::lml_ws(&mut ws, data.xn, d, y, t, true, par)?;
                             Ok((-e.value, e.gradient.into_iter().map(|g| -g).collect()))
                         },
                         t0,

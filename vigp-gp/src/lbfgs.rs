@@ -87,7 +87,7 @@ use std::collections::VecDeque;
 
 use faer::Mat;
 
-use super::error::GpError;
+use crate::error::GpError;
 
 /// Options of [`minimise`].
 #[derive(Clone, Copy, Debug)]

@@ -66,11 +66,11 @@ use faer::linalg::triangular_solve::{
 use faer::reborrow::{Reborrow, ReborrowMut};
 use faer::{Accum, Mat, Par, Side};
 
-use super::error::GpError;
-use super::kernel::Hyperparameters;
-use super::lml::{LmlEval, sqdist};
-use super::rng::SplitMix64;
-use super::tri;
+use crate::error::GpError;
+use crate::kernel::Hyperparameters;
+use crate::likelihood::{LmlEval, sqdist};
+use crate::packed;
+use crate::rng::SplitMix64;
 use vigp_core::gp as core_gp;
 
 /// Relative jitter on the diagonal of K_uu (times σ_f²), the first rung of
@@ -283,7 +283,7 @@ impl Core {
         // yᵀ(Q + σ²I)⁻¹y = (‖r‖² + ‖v1‖²)/σ², a sum of positive terms
         // (from AAᵀ = B − I), where yᵀy/σ² − ‖L_B⁻¹Ay‖²/σ² would cancel
         // terms of size N/σ².
-        let fit = (rr + tri::norm2(&self.v1)) / s2;
+        let fit = (rr + packed::norm2(&self.v1)) / s2;
         let logdet_b: f64 = (0..m).map(|i| self.lb[(i, i)].ln()).sum();
         let nf = n as f64;
         let elbo = -0.5 * nf * (2.0 * core::f64::consts::PI).ln()
@@ -307,7 +307,7 @@ impl Core {
 /// same order, so either gives the same bits).
 #[inline]
 fn residual(y: f64, a: &[f64], v1: &[f64]) -> f64 {
-    y - tri::dot(a, v1)
+    y - packed::dot(a, v1)
 }
 
 /// The bound's first pass: K_uf, A = L_u⁻¹K_uf/σ, AAᵀ and Ay, column
@@ -394,7 +394,7 @@ fn core(
                 for (o, a) in ay.iter_mut().zip(ac) {
                     *o += a * yj;
                 }
-                trace += sf2 - s2 * tri::norm2(ac);
+                trace += sf2 - s2 * packed::norm2(ac);
             }
             p0 += pw;
         }
@@ -672,7 +672,7 @@ fn elbo_blocks(
     // terms of size N·σ_f²/σ²).
     let nf = n as f64;
     let tr_binv: f64 = (0..m).map(|i| binv[(i, i)]).sum();
-    let gsf = 0.5 * (tri::norm2(&c.v1) / s2 - m as f64 + tr_binv) - 0.5 * c.trace / s2;
+    let gsf = 0.5 * (packed::norm2(&c.v1) / s2 - m as f64 + tr_binv) - 0.5 * c.trace / s2;
     // ∂F/∂σ² with σ²‖α‖² = ‖r‖²/σ² and N σ_f² − σ² tr AAᵀ = tr(K_ff − Q).
     let ds2 = 0.5 * (c.rr / s2 - (nf - m as f64 + tr_binv)) / s2 + c.trace / (2.0 * s2 * s2);
     let mut gradient = gl;
@@ -713,8 +713,8 @@ pub(crate) fn factorise(
     let c = core(
         &mut ws, &xs, &zs, &zc, d, y, hp, eps_start, par, BLOCKS, true,
     )?;
-    let lu = tri::pack_rows(&c.lu);
-    let lb = tri::pack_rows(&c.lb);
+    let lu = packed::pack_rows(&c.lu);
+    let lb = packed::pack_rows(&c.lb);
     let u = weights(&lu, &lb, &c.ay, c.sigma);
     Ok(SparseFactor {
         lu,
@@ -729,10 +729,10 @@ pub(crate) fn factorise(
 /// u = σ⁻¹ L_u⁻ᵀ L_B⁻ᵀ L_B⁻¹ (A y).
 pub(crate) fn weights(lu: &[f64], lb: &[f64], ay: &[f64], sigma: f64) -> Vec<f64> {
     let mut v = ay.to_vec();
-    tri::forward_rows(lb, &mut v);
-    tri::backward_rows(lb, &mut v);
+    packed::forward_rows(lb, &mut v);
+    packed::backward_rows(lb, &mut v);
     v.iter_mut().for_each(|x| *x /= sigma);
-    tri::backward_rows(lu, &mut v);
+    packed::backward_rows(lu, &mut v);
     v
 }
 
@@ -741,13 +741,13 @@ pub(crate) fn weights(lu: &[f64], lb: &[f64], ay: &[f64], sigma: f64) -> Vec<f64
 pub(crate) fn chol_update(l: &mut [f64], x: &mut [f64]) {
     let m = x.len();
     for k in 0..m {
-        let lkk = l[tri::row_start(k) + k];
+        let lkk = l[packed::row_start(k) + k];
         let r = lkk.hypot(x[k]);
         let c = r / lkk;
         let s = x[k] / lkk;
-        l[tri::row_start(k) + k] = r;
+        l[packed::row_start(k) + k] = r;
         for (i, xi) in x.iter_mut().enumerate().take(m).skip(k + 1) {
-            let at = tri::row_start(i) + k;
+            let at = packed::row_start(i) + k;
             let lik = (l[at] + s * *xi) / c;
             *xi = c * *xi - s * lik;
             l[at] = lik;
@@ -935,7 +935,7 @@ mod tests {
 
     #[test]
     fn column_partition_does_not_change_the_result() {
-        // One task (as the numpy fixtures of tests/gp_sparse.rs check)
+        // One task (as the numpy fixtures of tests/gp/gp_sparse.rs check)
         // against many small tasks with a partial last one and several
         // panels per task: the same bound and gradient up to the order of
         // the sums (relative 1e-12: ≈ N·ε over N = 120 terms, with margin).
@@ -967,12 +967,12 @@ mod tests {
             }
         });
         let l = a.llt(Side::Lower).unwrap().L().to_owned();
-        let mut lp = tri::pack_rows(&l);
+        let mut lp = packed::pack_rows(&l);
         let x: Vec<f64> = (0..m).map(|i| (i as f64 * 0.7).cos()).collect();
         let mut xx = x.clone();
         chol_update(&mut lp, &mut xx);
         let b = Mat::<f64>::from_fn(m, m, |i, j| a[(i, j)] + x[i] * x[j]);
-        let lb = tri::pack_rows(&b.llt(Side::Lower).unwrap().L().to_owned());
+        let lb = packed::pack_rows(&b.llt(Side::Lower).unwrap().L().to_owned());
         for (p, q) in lp.iter().zip(&lb) {
             assert!((p - q).abs() < 1e-13, "{p} vs {q}");
         }

@@ -2,9 +2,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::error::GpError;
-use super::kernel::{Hyperparameters, check_positive};
-use super::mean::PriorMean;
+use crate::error::GpError;
+use crate::kernel::{Hyperparameters, check_positive};
+use crate::mean::PriorMean;
 
 /// Box bounds on the hyperparameters, in *normalised* units (i.e. after
 /// input standardisation and output scaling, when those are on).

@@ -2,11 +2,12 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::error::GpError;
-use super::kernel::Hyperparameters;
-use super::mean::{MeanFn, Resolved};
-use super::model::{Gp, Prepared, check_dims, check_finite};
-use super::normalise::InputNormaliser;
+use crate::error::GpError;
+use crate::kernel::Hyperparameters;
+use crate::mean::{MeanFn, Resolved};
+use crate::model::{Gp, check_dims, check_finite};
+use crate::normalise::InputNormaliser;
+use crate::train::Prepared;
 
 /// Format version written by [`Gp::to_saved`]: 2 added the inducing
 /// points of sparse GPs; version 1 files (exact GPs) still load.
@@ -32,7 +33,7 @@ const MEAN_TOL: f64 = 1e-9;
 /// an f64, which moves predictions of a nearly noise-free model by more).
 ///
 /// ```
-/// use vigp_runtime::gp::{Gp, PriorMean, SavedGp, TrainOptions};
+/// use vigp_gp::{Gp, PriorMean, SavedGp, TrainOptions};
 /// let x = [0.0, 0.5, 1.0, 1.5];
 /// let y = [0.1, 0.4, 0.8, 1.6];
 /// let nominal = |x: &[f64], m: &mut [f64]| m[0] = x[0];
@@ -41,7 +42,7 @@ const MEAN_TOL: f64 = 1e-9;
 /// let saved: SavedGp = gp.to_saved();              // serialise with serde_json, bincode, …
 /// let back = Gp::from_saved(&saved, Some(PriorMean::function(nominal)))?;
 /// assert_eq!(back.predict(&[0.7])?, gp.predict(&[0.7])?);
-/// # Ok::<(), vigp_runtime::gp::GpError>(())
+/// # Ok::<(), vigp_gp::GpError>(())
 /// ```
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SavedGp {
@@ -170,13 +171,13 @@ impl Gp {
             let max = if sparse {
                 super::sparse::KUU_JITTER_MAX * h.signal_variance
             } else {
-                super::lml::JITTER_MAX * diag
+                super::likelihood::JITTER_MAX * diag
             };
             if o.jitter > max * (1.0 + 1e-9) {
                 return Err(bad(format!(
                     "jitter {:e} exceeds the largest jitter training adds ({:e} of σ_f² + σ_n²)",
                     o.jitter,
-                    super::lml::JITTER_MAX
+                    super::likelihood::JITTER_MAX
                 )));
             }
         }

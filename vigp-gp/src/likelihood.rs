@@ -33,8 +33,8 @@ use faer::{Accum, Mat, MatMut, Par};
 
 use vigp_core::gp as core_gp;
 
-use super::error::GpError;
-use super::kernel::Hyperparameters;
+use crate::error::GpError;
+use crate::kernel::Hyperparameters;
 
 /// Jitter ladder: first try relative jitter `JITTER_START` (times the
 /// diagonal σ_f² + σ_n²), multiply by 10 until `JITTER_MAX`.

@@ -15,12 +15,10 @@ use core::fmt::Write;
 
 use vigp_core::gp::ExportedGp;
 
-use super::error::GpError;
-use super::mean::Resolved;
-use super::model::{Gp, Posterior};
-use super::tri;
-use crate::learned::{Encoding, Learned, Prior};
-use crate::mechanism::{CoordinateKind, Mechanism};
+use crate::error::GpError;
+use crate::mean::Resolved;
+use crate::model::{Gp, Posterior};
+use crate::packed;
 
 /// One output of a trained [`Gp`] in the layout of
 /// [`ExportedGp`](vigp_core::gp::ExportedGp), owning its arrays (what
@@ -75,7 +73,8 @@ impl ExportedArrays {
     }
 }
 
-/// Options of [`Gp::to_rust_source`] and [`Learned::to_rust_source`].
+/// Options of [`Gp::to_rust_source`] (and of the learned model's export in
+/// `vigp`, which adds the integrator's constants).
 #[derive(Clone, Debug, PartialEq)]
 pub struct ExportOptions {
     /// Prefix of every generated item (an upper-case identifier, default
@@ -193,7 +192,7 @@ impl Gp {
     /// Errors: `j` out of range, or a model with a function prior mean
     /// (the exported predictor has only a constant mean: export the GP of
     /// the residual, trained with a zero mean, and add the function in the
-    /// embedded code, as [`Learned`] with [`Prior::Nominal`] does).
+    /// embedded code, as vigp's learned model with its nominal prior does).
     pub fn export_output(&self, j: usize, cholesky: bool) -> Result<ExportedArrays, GpError> {
         let o = self.outputs.get(j).ok_or(GpError::DimensionMismatch {
             what: "output index (< output dimension)",
@@ -212,7 +211,7 @@ impl Gp {
         let n = o.alpha.len();
         let cholesky = match (&o.post, cholesky) {
             (_, false) => None,
-            (Posterior::Exact { l, .. }, true) => Some(tri::to_column_packed(l, n)),
+            (Posterior::Exact { l, .. }, true) => Some(packed::to_column_packed(l, n)),
             (Posterior::Sparse { .. }, true) => {
                 return Err(export_error(
                     "a sparse GP exports its mean only (its variance needs two M × M factors, \
@@ -246,13 +245,13 @@ impl Gp {
     /// Size: p·N·(d + 1) numbers, plus p·N(N+1)/2 with the factor.
     ///
     /// ```
-    /// use vigp_runtime::gp::{ExportOptions, Gp, TrainOptions};
+    /// use vigp_gp::{ExportOptions, Gp, TrainOptions};
     /// let x: Vec<f64> = (0..10).map(|i| i as f64 * 0.3).collect();
     /// let y: Vec<f64> = x.iter().map(|v| v.sin()).collect();
     /// let (gp, _) = Gp::train(&x, 1, &y, 1, &TrainOptions::default())?;
     /// let src = gp.to_rust_source(&ExportOptions::default())?;
     /// assert!(src.contains("pub static GP: [vigp::embedded::gp::ExportedGp<'static, 1>; 1]"));
-    /// # Ok::<(), vigp_runtime::gp::GpError>(())
+    /// # Ok::<(), vigp_gp::GpError>(())
     /// ```
     pub fn to_rust_source(&self, opts: &ExportOptions) -> Result<String, GpError> {
         let (d, p) = (self.d, self.p);
@@ -410,51 +409,6 @@ impl Gp {
                 let _ = writeln!(s, "];");
             }
         }
-        Ok(s)
-    }
-}
-
-impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
-    /// The learned velocity map's GP as Rust source ([`Gp::to_rust_source`]),
-    /// plus what embedded code needs to use it: `<NAME>_DT`, the input
-    /// encoding (`<NAME>_ENCODING`, documented component by component) and
-    /// the prior (`<NAME>_PRIOR`: with `"nominal"` the GP predicts
-    /// v_{k+1} − v̄(z_k), to be added to the nominal variational step
-    /// v̄(z_k); with `"constant"` the GP mean is the velocity itself).
-    /// The projection onto constraints (C > 0) is not exported.
-    pub fn to_rust_source(&self, opts: &ExportOptions) -> Result<String, GpError> {
-        let mut s = self.gp().to_rust_source(opts)?;
-        let name = &opts.name;
-        let mut components = Vec::new();
-        for (i, kind) in M::KINDS.iter().enumerate() {
-            if self.encoding() == Encoding::SinCos && *kind == CoordinateKind::Angle {
-                components.push(format!("sin q{i}"));
-                components.push(format!("cos q{i}"));
-            } else {
-                components.push(format!("q{i}"));
-            }
-        }
-        components.extend((0..N).map(|i| format!("v{i}")));
-        let (encoding, prior) = (
-            match self.encoding() {
-                Encoding::Raw => "raw",
-                Encoding::SinCos => "sincos",
-            },
-            match self.prior() {
-                Prior::Nominal => "nominal",
-                Prior::Constant => "constant",
-            },
-        );
-        let dt = crate::variational::Integrator::dt(self);
-        let _ = writeln!(
-            s,
-            "\n/// Time step of the learned integrator (s).\npub const {name}_DT: f64 = {};\n\
-             /// GP input encoding of a state z = (q, v): [{}].\npub const {name}_ENCODING: &str = \"{encoding}\";\n\
-             /// Prior of the velocity map: \"nominal\" (GP = v_next - nominal VI step) or \"constant\" (GP = v_next).\n\
-             pub const {name}_PRIOR: &str = \"{prior}\";",
-            lit(dt),
-            components.join(", ")
-        );
         Ok(s)
     }
 }
