@@ -173,7 +173,7 @@ fn bench(g: &mut BenchmarkGroup<'_, WallTime>) {
         b.iter(|| vi.rollout_into(black_box(&z), &mut out_std).unwrap())
     });
     // The same rollout by both: a check that they stay together (they
-    // solve the same equations by the same iteration; tests/handwritten.rs).
+    // solve the same equations by the same iteration; tests/step/handwritten.rs).
     let gap = out_h
         .iter()
         .zip(&out)

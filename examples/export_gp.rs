@@ -152,7 +152,7 @@ pub fn generate(n: usize) -> Result<Exported, Box<dyn Error>> {
     })
 }
 
-#[allow(dead_code)] // when included by tests/gp_export.rs
+#[allow(dead_code)] // when included by tests/gp/gp_export.rs
 fn main() -> Result<(), Box<dyn Error>> {
     let mut n = 64;
     // The example's package sits in `examples/`; the demo is beside it.

@@ -1,4 +1,4 @@
-//! Writes the forced learned-model fixture of `tests/embedded_learned.rs`
+//! Writes the forced learned-model fixture of `tests/learn/embedded_learned.rs`
 //! the way a user of an actuated mechanism would: train a learned model
 //! with inputs in Rust (`Learned::train_forced`; `vigp fit` does the same
 //! from a CSV with `u_<joint>` columns), save it as JSON, and export it with `vigp export`

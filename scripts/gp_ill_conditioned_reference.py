@@ -1,4 +1,4 @@
-"""Reference LMLs for tests/gp_robustness.rs
+"""Reference LMLs for tests/gp/gp_robustness.rs
 `the_optimiser_does_not_stop_on_a_spoiled_curvature_pair`.
 
 Twelve points in [-2, 2]^2, each three times (N = 36), noise-free targets

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Generate tests/fixtures/gp_sklearn.json: reference values from scikit-learn's
-GaussianProcessRegressor for tests/gp_sklearn.rs.
+GaussianProcessRegressor for tests/gp/gp_sklearn.rs.
 
 Kernel: ConstantKernel(sf2) * RBF(length_scale=[...]) + WhiteKernel(sn2), i.e.
 the ARD squared-exponential kernel with signal and noise variance of vigp.

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Generate tests/fixtures/gp_sparse.json: reference values of Titsias' (2009)
-sparse variational GP bound (SGPR / VFE) for tests/gp_sparse.rs, computed
+sparse variational GP bound (SGPR / VFE) for tests/gp/gp_sparse.rs, computed
 independently of vigp with dense numpy linear algebra (N x N matrices, no
 Cholesky tricks):
 

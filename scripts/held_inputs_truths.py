@@ -2,12 +2,12 @@
 two truths that are not vigp: SciPy's RK45 on MuJoCo's continuous dynamics
 (tight tolerances: the continuous motion), and MuJoCo's own `implicitfast`
 integrator at 1 ms (what a user's simulated robot log looks like). They are
-the fixtures of tests/held_inputs.rs (`peer_truths`).
+the fixtures of tests/learn/held_inputs.rs (`peer_truths`).
 
     pip install mujoco scipy numpy
     python3 scripts/held_inputs_truths.py    # writes tests/fixtures/held_inputs/
 
-The mechanisms are tests/held_inputs.rs's `HeldPendulum`, `HeldAcrobot` and
+The mechanisms are tests/learn/held_inputs.rs's `HeldPendulum`, `HeldAcrobot` and
 `HeldCartpole`, in MuJoCo's x-z plane as in scripts/mujoco_models.py: every
 hinge turns about -y so that qpos equals vigp's minimal coordinates
 (relative angles, 0 hanging straight down); thin rods with inertia m*l^2/12
@@ -80,7 +80,7 @@ def cartpole():
     return model("cartpole", cart, ["rail"])
 
 
-# name, model, input scale, start range, seed (as tests/held_inputs.rs)
+# name, model, input scale, start range, seed (as tests/learn/held_inputs.rs)
 SYSTEMS = [
     ("pendulum", pendulum, 4.0, [1.5], 1),
     ("acrobot", acrobot, 4.0, [0.8, 0.8], 3),

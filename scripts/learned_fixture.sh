@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Regenerates the exported-learned-model fixture of tests/embedded_learned.rs:
+# Regenerates the exported-learned-model fixture of tests/learn/embedded_learned.rs:
 # a small cart-pole model fitted by `vigp fit` on smooth synthetic
 # trajectories (written here by Python's standard library), saved as JSON and
 # exported by `vigp export` as Rust source. The test includes the source and

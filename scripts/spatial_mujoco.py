@@ -9,7 +9,7 @@ inertias as in src/systems/spatial.rs), and
    model the reference-pose centres of mass (qpos0), the initial state of
    every link (centre of mass, orientation, centre-of-mass velocity in world
    coordinates, angular velocity in the link frame) and the centres of mass
-   and orientations every 0.05 s. tests/spatial_mujoco.rs integrates the
+   and orientations every 0.05 s. tests/step/spatial_mujoco.rs integrates the
    same initial states with vigp and compares.
 
 2. `bench`: the cost per step of mujoco.rollout at dt = 0.01 s (Euler, the

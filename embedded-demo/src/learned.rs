@@ -11,7 +11,7 @@
 //!
 //! The GP was trained with the std runtime's dual-number step as prior; the
 //! [`Stepper`] used here solves the same equations to the same tolerance
-//! (the two agree to 1e-10 rad/s, `tests/embedded.rs` in the main crate),
+//! (the two agree to 1e-10 rad/s, `tests/step/embedded.rs` in the main crate),
 //! so the learned velocities agree to that level.
 
 use vigp::embedded::gp::{ExportedGp, GpError};

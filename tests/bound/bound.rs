@@ -2,10 +2,9 @@
 //! against a second implementation, `predict`'s bookkeeping, and a
 //! property test that no setting yields a NaN, infinite or negative bound
 //! without a typed error. Coverage on the four systems is in
-//! `tests/bound_coverage.rs`.
+//! `tests/bound/bound_coverage.rs`.
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use nalgebra::{DMatrix, DVector, SVector};
 use proptest::prelude::*;
@@ -1441,7 +1440,7 @@ fn forced_windows_from_trajectories_follow_the_data_convention() {
 /// one-step velocity error from the start and of the 10-step position
 /// error ≥ 1 − δ − 0.02 at δ = 0.05 (0.02: two standard deviations of the
 /// coverage of 1000 cases under a quantile of 800, as in
-/// `tests/bound_coverage.rs`).
+/// `tests/bound/bound_coverage.rs`).
 #[test]
 fn a_conformal_bound_under_inputs_covers_exchangeable_windows() {
     let l = driven_model();

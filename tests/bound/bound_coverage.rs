@@ -21,8 +21,7 @@
 //! asserted; the default conformal bound falls back to the RKHS bound
 //! there). The RKHS bound on its own is measured by the paper example.
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use nalgebra::SVector;
 use vigp::bound::{BoundKind, Calibration, ConformalSettings, Fallback, Window};

@@ -1,4 +1,4 @@
-//! An actuated cart-pole shared by tests/embedded_learned.rs and the
+//! An actuated cart-pole shared by tests/learn/embedded_learned.rs and the
 //! fixture generator examples/learned_forced_fixture.rs (the exported
 //! fixture names this mechanism, so both must declare the same one).
 

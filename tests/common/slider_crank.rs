@@ -1,4 +1,4 @@
-//! The slider-crank shared by tests/core.rs and tests/embedded.rs (included
+//! The slider-crank shared by tests/step/nominal.rs and tests/step/embedded.rs (included
 //! with `#[path]` by the tests that use it, so the others do not compile it).
 
 vigp::mechanism! {

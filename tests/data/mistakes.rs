@@ -200,7 +200,7 @@ fn resolved_motions_pass_the_continuation_check() {
 /// one correct step while its energy barely changes (719.35 J → 722.87 J):
 /// the check refuses a large bend only with an energy jump, and accepts
 /// this step (a bend-only check refused it). The case is the one the property test
-/// of random double pendulums found (tests/properties.rs): a 0.25 m,
+/// of random double pendulums found (tests/step/properties.rs): a 0.25 m,
 /// 0.25 kg lower link with elbow damping 1.1 at Δt = 0.047 s.
 #[test]
 fn a_stiff_damped_step_that_bends_far_is_accepted() {

@@ -12,7 +12,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 /// The mechanism descriptions of `src/systems.rs` (the text inside each
 /// `crate::mechanism! { … }`).
 fn descriptions() -> Vec<String> {
-    let src = include_str!("../src/systems.rs");
+    let src = include_str!("../../src/systems.rs");
     let mut out = Vec::new();
     let mut rest = src;
     while let Some(i) = rest.find("crate::mechanism! {") {

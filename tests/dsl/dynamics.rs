@@ -9,8 +9,7 @@
 //! floating-point operations), so they must agree to 1e-12 relative to the
 //! size of the compared quantity.
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use nalgebra::{SMatrix, SVector};
 use num_dual::{Dual2Vec, DualVec};
@@ -18,7 +17,7 @@ use vigp::Mechanism;
 use vigp::embedded::{Dynamics, Terms};
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 
-#[path = "common/slider_crank.rs"]
+#[path = "../common/slider_crank.rs"]
 mod slider_crank;
 use slider_crank::SliderCrank;
 

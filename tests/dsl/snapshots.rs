@@ -56,7 +56,7 @@ fn minimal_impl(code: &str) -> &str {
 
 #[test]
 fn generated_code_of_the_paper_systems() {
-    let src = include_str!("../src/systems.rs");
+    let src = include_str!("../../src/systems.rs");
     let bodies = mechanism_bodies(src);
     let names: Vec<_> = bodies.iter().map(|(n, _)| n.as_str()).collect();
     assert_eq!(names, ["Pendulum", "Cartpole", "DoublePendulum", "Fourbar"]);
@@ -100,9 +100,10 @@ fn generated_code_contains_only_what_the_scene_needs() {
     assert!(!minimal_impl(&dp).contains("fn constraints"));
     assert!(minimal_impl(&dp).contains("fn dissipation"));
 
-    let fourbar =
-        vigp_codegen::expand_to_string(&mechanism_bodies(include_str!("../src/systems.rs"))[3].1)
-            .unwrap();
+    let fourbar = vigp_codegen::expand_to_string(
+        &mechanism_bodies(include_str!("../../src/systems.rs"))[3].1,
+    )
+    .unwrap();
     assert!(minimal_impl(&fourbar).contains("fn constraints"));
     // the same for the no_std model: dampers and constraints only if needed
     let embedded = |code: &str| {
@@ -143,7 +144,7 @@ fn generated_code_contains_only_what_the_scene_needs() {
 /// dual-number views.
 #[test]
 fn no_std_expansion_has_only_the_fixed_size_items() {
-    let body = &mechanism_bodies(include_str!("../src/systems.rs"))[2].1;
+    let body = &mechanism_bodies(include_str!("../../src/systems.rs"))[2].1;
     let code = vigp_codegen::expand_to_string_for(body, vigp_codegen::Target::NoStd).unwrap();
     assert!(code.contains("impl ::vigp::embedded::Model<2, 0> for DoublePendulum"));
     assert!(!code.contains("::vigp::Mechanism"));

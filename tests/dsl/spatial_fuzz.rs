@@ -1,6 +1,6 @@
 //! The spatial `mechanism!` path on mutated, random and extreme input: any
 //! token stream gives code or an error, never a panic (the spatial
-//! counterpart of tests/codegen_fuzz.rs).
+//! counterpart of tests/dsl/codegen_fuzz.rs).
 
 use proc_macro2::TokenStream;
 use proptest::prelude::*;
@@ -8,7 +8,7 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 
 /// The descriptions of `src/systems/spatial.rs`.
 fn descriptions() -> Vec<String> {
-    let src = include_str!("../src/systems/spatial.rs");
+    let src = include_str!("../../src/systems/spatial.rs");
     let mut out = Vec::new();
     let mut rest = src;
     while let Some(i) = rest.find("crate::mechanism! {") {

@@ -1,6 +1,6 @@
 //! Snapshots of the generated code of the spatial examples (reviewed as
 //! diffs; accept intended changes with
-//! `INSTA_UPDATE=always cargo test --test spatial_snapshot`), and what a
+//! `INSTA_UPDATE=always cargo test --test dsl spatial_snapshot::`), and what a
 //! spatial scene does not need is not emitted.
 
 /// The bodies of every `crate::mechanism! { … }` in `src`, with names.
@@ -40,7 +40,7 @@ fn mechanism_bodies(src: &str) -> Vec<(String, String)> {
 
 #[test]
 fn generated_code_of_the_spatial_examples() {
-    let bodies = mechanism_bodies(include_str!("../src/systems/spatial.rs"));
+    let bodies = mechanism_bodies(include_str!("../../src/systems/spatial.rs"));
     let names: Vec<_> = bodies.iter().map(|(n, _)| n.as_str()).collect();
     assert_eq!(
         names,
@@ -104,7 +104,7 @@ fn spatial_code_contains_only_what_the_scene_needs() {
     assert!(ball.contains("fn dissipation"));
     assert!(ball.contains("Maximal<Self, 1, 1, 6, 3>"));
     let no_std = vigp_codegen::expand_to_string_for(
-        &mechanism_bodies(include_str!("../src/systems/spatial.rs"))[1].1,
+        &mechanism_bodies(include_str!("../../src/systems/spatial.rs"))[1].1,
         vigp_codegen::Target::NoStd,
     )
     .unwrap();

@@ -17,15 +17,14 @@
 //! * the committed `embedded-demo/src/gp_model.rs` compiles here too and
 //!   reproduces the check values it carries.
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use nalgebra::{DMatrix, DVector};
 use vigp::gp::{ExportOptions, ExportedArrays, Gp, GpError, PriorMean, TrainOptions, VarianceMode};
 
 #[allow(dead_code, clippy::all)]
 mod demo_model {
-    include!("../embedded-demo/src/gp_model.rs");
+    include!("../../embedded-demo/src/gp_model.rs");
 }
 
 /// Smooth multi-output data on `d` inputs.
@@ -454,7 +453,7 @@ fn committed_demo_model_reproduces_its_check_values() {
 }
 
 #[allow(dead_code)]
-#[path = "../examples/export_gp.rs"]
+#[path = "../../examples/export_gp.rs"]
 mod export_example;
 
 /// The text of generated source with every floating-point literal (a
@@ -515,7 +514,7 @@ fn float_masking_keeps_integers_and_names() {
 #[test]
 fn committed_demo_model_is_what_the_example_generates() {
     let e = export_example::generate(64).unwrap();
-    let committed = include_str!("../embedded-demo/src/gp_model.rs");
+    let committed = include_str!("../../embedded-demo/src/gp_model.rs");
     if e.source != committed {
         let path = std::env::temp_dir().join("gp_model_regenerated.rs");
         std::fs::write(&path, &e.source).unwrap();

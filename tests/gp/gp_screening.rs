@@ -3,11 +3,10 @@
 //! from the optima of an earlier training on a subset
 //! (`TrainOptions::candidates`). Checked against the
 //! unscreened training (every start on all samples, scikit-learn's
-//! procedure, itself checked against scikit-learn in `tests/gp_sklearn.rs`)
+//! procedure, itself checked against scikit-learn in `tests/gp/gp_sklearn.rs`)
 //! and against the likelihood recomputed at the result's hyperparameters.
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use vigp::gp::{
     Curvature, Gp, GpError, Hyperparameters, Method, SCREEN_FROM, Screening, SparseOptions,

@@ -6,7 +6,7 @@ use serde_json::Value;
 use vigp::gp::{Bounds, Gp, Hyperparameters, PriorMean, TrainOptions, log_marginal_likelihood};
 
 fn fixture() -> Value {
-    serde_json::from_str(include_str!("fixtures/gp_sklearn.json")).expect("valid fixture JSON")
+    serde_json::from_str(include_str!("../fixtures/gp_sklearn.json")).expect("valid fixture JSON")
 }
 
 fn vec_of(v: &Value) -> Vec<f64> {

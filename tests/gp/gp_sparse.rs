@@ -14,8 +14,7 @@
 //!   warm starts;
 //! * a sparse run gives the same bits on one and on two threads.
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use vigp::gp::{
     ExportOptions, Gp, GpError, InducingInit, Method, SavedGp, SparseOptions, TrainOptions,

@@ -8,8 +8,7 @@
 //! cart-pole and an actuated four-bar (loop, projection), both encodings;
 //! refusal of models whose inputs do not fit the mechanism; NaN inputs.
 
-mod common;
-
+use crate::common;
 use common::positions;
 use nalgebra::SVector;
 use vigp::embedded::gp::ExportedGp;
@@ -388,7 +387,7 @@ fn export_writes_only_what_the_mean_needs() {
 /// `bash scripts/learned_fixture.sh`), compiled here.
 #[allow(dead_code)]
 mod exported {
-    include!("fixtures/learned_cartpole.rs");
+    include!("../fixtures/learned_cartpole.rs");
 }
 
 /// The exported source compiles, and its `LearnedStepper` equals the std
@@ -396,7 +395,7 @@ mod exported {
 /// without allocating.
 #[test]
 fn exported_source_matches_the_model_file() {
-    let json = include_str!("fixtures/learned_cartpole.json");
+    let json = include_str!("../fixtures/learned_cartpole.json");
     let l: Learned<_, 2, 0> = Learned::from_json(Cartpole::default().minimal(), json).unwrap();
     let stepper = LearnedStepper::new(Cartpole::default(), &exported::LEARNED).unwrap();
     let z0 = State::new([0.05, 0.4], [0.1, -0.3]);
@@ -410,7 +409,7 @@ fn exported_source_matches_the_model_file() {
     assert_eq!(info.count_total, 0);
 }
 
-#[path = "common/drive_cartpole.rs"]
+#[path = "../common/drive_cartpole.rs"]
 mod drive_cartpole;
 use drive_cartpole::DriveCartpole;
 
@@ -825,7 +824,7 @@ fn forced_models_that_do_not_fit_are_refused() {
 /// runs examples/learned_forced_fixture.rs), compiled here.
 #[allow(dead_code)]
 mod exported_forced {
-    include!("fixtures/learned_drive_cartpole.rs");
+    include!("../fixtures/learned_drive_cartpole.rs");
 }
 
 /// A model file and its export in the GP input layout (enc(z), u), without
@@ -833,7 +832,7 @@ mod exported_forced {
 /// every such file keeps loading as.
 #[allow(dead_code)]
 mod exported_forced_enc_u {
-    include!("fixtures/learned_drive_cartpole_enc_u.rs");
+    include!("../fixtures/learned_drive_cartpole_enc_u.rs");
 }
 
 /// 30 std and embedded forced steps of `l` and `stepper` from one state
@@ -875,7 +874,7 @@ fn fixture_rollouts<M: Mechanism<2, 0> + Clone, const D: usize>(
 /// allocating.
 #[test]
 fn exported_forced_source_matches_the_model_file() {
-    let json = include_str!("fixtures/learned_drive_cartpole.json");
+    let json = include_str!("../fixtures/learned_drive_cartpole.json");
     let l: Learned<_, 2, 0> = Learned::from_json(DriveCartpole::default().minimal(), json).unwrap();
     assert_eq!(l.inputs(), 1);
     assert!(l.takes_previous_input());
@@ -897,7 +896,7 @@ fn exported_forced_source_matches_the_model_file() {
 /// and std and embedded agree to 1e-12.
 #[test]
 fn forced_model_files_without_the_previous_input_load_as_their_layout() {
-    let json = include_str!("fixtures/learned_drive_cartpole_enc_u.json");
+    let json = include_str!("../fixtures/learned_drive_cartpole_enc_u.json");
     assert!(!json.contains("previous_input"));
     let l: Learned<_, 2, 0> = Learned::from_json(DriveCartpole::default().minimal(), json).unwrap();
     assert_eq!(l.inputs(), 1);

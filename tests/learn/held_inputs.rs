@@ -22,8 +22,7 @@
 //! B_prev = ∂z₁/∂u_prev are checked against five-point central
 //! differences.
 
-mod common;
-
+use crate::common;
 use common::{Rng, stencil};
 use nalgebra::SVector;
 use vigp::gp::TrainOptions;
@@ -477,12 +476,12 @@ fn peer_truth(truth: &str) {
 /// σ = 1e-4) against five-point central differences with ε = 1e-3.
 ///
 /// Tolerance 1e-6 relative to the largest entry of each matrix (the
-/// tolerance of tests/control.rs for the same step): the five-point
+/// tolerance of tests/step/control.rs for the same step): the five-point
 /// stencil's truncation error is O(ε⁴) and its rounding error is the GP
 /// mean's rounding (~1e-16·Σ|α_i k_i|) divided by ε; measured worst 3.9e-7
 /// over the six states (A ≤ 3.2e-8, B ≤ 3.4e-7, B_prev ≤ 3.9e-7). The
 /// noise on the targets keeps the GP's noise variance off its floor, as in
-/// tests/control.rs (noise-free data drives α up and the mean's rounding
+/// tests/step/control.rs (noise-free data drives α up and the mean's rounding
 /// noise up to ~1e-7, which no stencil resolves to 1e-6).
 #[test]
 fn learned_step_derivatives_with_previous_input() {

@@ -6,8 +6,7 @@
 //!
 //! Numbers quoted in the report are printed with `-- --nocapture`.
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use nalgebra::SVector;
 use vigp::identify::consistency::{Metric, inconsistent_bodies, project, pseudo_inertia};

@@ -2,8 +2,7 @@
 //! consistency with the nominal model, bounded energy without a prior
 //! model (Fig. 1a), and empirical coverage of the error bound.
 
-mod common;
-
+use crate::common;
 use common::{Rng, positions};
 use nalgebra::SVector;
 use vigp::bound::{BoundKind, BoundParts, Calibration};

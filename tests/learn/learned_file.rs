@@ -3,8 +3,7 @@
 //! loaded into is a typed error naming the field; no byte flip and no
 //! truncation of a model file makes loading (or the first step) panic.
 
-mod common;
-
+use crate::common;
 use common::positions;
 use nalgebra::SVector;
 use vigp::gp::TrainOptions;

@@ -8,10 +8,8 @@
 //! B = ∂z₁/∂u against central finite differences; and the physics against
 //! closed forms (a constant torque's equilibrium, a spring's period).
 
-mod common;
-
-#[path = "common/slider_crank.rs"]
-mod slider_crank;
+use crate::common;
+use crate::slider_crank;
 
 use common::{Rng, ab_errors, stencil};
 use nalgebra::{SMatrix, SVector};
@@ -291,7 +289,7 @@ where
 /// The engine's forced step against the dual-number reference step
 /// (`vigp::reference::step_forced`: the input force by differentiating the
 /// virtual work on dual numbers), both rules, both solved to 1e-14: the
-/// velocities agree to 1e-11 (as for the unforced step, tests/dynamics.rs).
+/// velocities agree to 1e-11 (as for the unforced step, tests/dsl/dynamics.rs).
 fn forced_matches_reference<M, const N: usize, const C: usize, const U: usize>(
     name: &str,
     m: M,

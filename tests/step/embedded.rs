@@ -6,16 +6,14 @@
 //! computations (the std runtime's dual-number mass matrix, central
 //! differences).
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use nalgebra::SVector;
 use vigp::embedded::{Dynamics, Model, StepError, StepOptions, Stepper, model};
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 use vigp::{Mechanism, NewtonOptions, State};
 
-#[path = "common/slider_crank.rs"]
-mod slider_crank;
+use crate::slider_crank;
 use slider_crank::SliderCrank;
 
 /// A random state; for loops, made consistent by the std projection.
@@ -163,7 +161,7 @@ fn rollouts_carry_momentum_and_keep_structure() {
         .map(|z| (model::energy(&dp, &z.q, &z.v) - e0).abs())
         .fold(0.0, f64::max);
     println!("double pendulum, 2000 steps of 0.01 s: max |ΔE| = {drift:.3}");
-    // The std integrator's own bound for this state and dt (tests/core.rs
+    // The std integrator's own bound for this state and dt (tests/step/nominal.rs
     // measures ~2 J at higher energy); an unbounded drift would exceed it.
     assert!(drift < 1.0, "{drift}");
 

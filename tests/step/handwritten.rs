@@ -10,11 +10,10 @@
 //! form (a factor in ∂M/∂q₂, a sign in ∇V, the damping) shows as a
 //! difference of order Δt·|term| ≳ 1e-4.
 
-#[path = "../benches/handwritten/dp.rs"]
+#[path = "../../benches/handwritten/dp.rs"]
 mod dp;
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use dp::{ClosedForm, Error, Params};
 use nalgebra::{Matrix2, SVector, Vector2};

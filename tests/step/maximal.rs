@@ -3,8 +3,7 @@
 //! together, the VIs keep constraints and energy where explicit Euler
 //! drifts, and every integrator shows its order.
 
-mod common;
-
+use crate::common;
 use common::{Rng, pendulum_reference};
 use nalgebra::SVector;
 use vigp::dynamics::{acceleration, discrete_velocity, mass_matrix};

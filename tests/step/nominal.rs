@@ -2,8 +2,7 @@
 //! planar mechanisms: exact Jacobians, closed forms, long-run energy and
 //! constraint behaviour, convergence order, error reporting.
 
-mod common;
-
+use crate::common;
 use common::{Rng, pendulum_reference};
 use nalgebra::{SMatrix, SVector};
 use vigp::del;
@@ -11,8 +10,7 @@ use vigp::prelude::*;
 use vigp::projection::consistent_state;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 
-#[path = "common/slider_crank.rs"]
-mod slider_crank;
+use crate::slider_crank;
 use slider_crank::SliderCrank;
 
 vigp::mechanism! {

@@ -5,8 +5,7 @@
 //!
 //! Numbers quoted in docs/spatial.md are printed with `-- --nocapture`.
 
-mod common;
-
+use crate::common;
 use common::Rng;
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp::prelude::*;

@@ -9,11 +9,10 @@
 //! differences; a constant torque's static equilibrium (closed form); the
 //! two views converge to each other at first order under the same inputs;
 //! no allocation. (The parallel-axes comparison with the planar actuated
-//! and sprung mechanisms is in `tests/spatial.rs`.) Numbers print with
+//! and sprung mechanisms is in `tests/step/spatial.rs`.) Numbers print with
 //! `-- --nocapture`.
 
-mod common;
-
+use crate::common;
 use common::{Rng, ab_errors};
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp::embedded::Dynamics;
@@ -562,7 +561,7 @@ fn constant_torque_settles_at_the_static_equilibrium_in_space() {
 /// start of each step) the maximal trajectory approaches the minimal one
 /// as Δt shrinks. Centres of mass after 0.4 s at Δt = 4 and 1 ms: the gap
 /// must fall by more than 2.5 (first order: 4), as in the unforced
-/// comparison of `tests/spatial.rs`.
+/// comparison of `tests/step/spatial.rs`.
 #[test]
 fn forced_maximal_converges_to_the_minimal_view() {
     fn gaps<
@@ -664,7 +663,7 @@ fn forced_spatial_steps_do_not_allocate() {
     let vi = Variational::new(sys.minimal(), dt);
     let embedded = vigp::embedded::Stepper::new(sys.minimal(), dt).unwrap();
     // the std forced step keeps a workspace of this size per thread, which
-    // the thread's first such step allocates (tests/control.rs counts it)
+    // the thread's first such step allocates (tests/step/control.rs counts it)
     vi.step_forced(&z, &inputs[0]).unwrap();
     let info = allocation_counter::measure(|| {
         let mut x = x0;

@@ -7,6 +7,7 @@
 //! heavy sizes (10^6 steps) and prints the README's table; here they run at
 //! test size (run with `-- --nocapture` to see the rows).
 
+#[path = "../stress_cases/mod.rs"]
 mod stress_cases;
 
 use stress_cases::{Row, Size};

@@ -1,4 +1,4 @@
-//! Stress cases shared by `tests/stress.rs` (small sizes, asserted) and
+//! Stress cases shared by `tests/step/stress.rs` (small sizes, asserted) and
 //! `examples/stress.rs` (heavy sizes, printed as the README's table).
 //!
 //! Each case runs, measures what happened and returns [`Row`]s whose

@@ -392,7 +392,7 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
     assert!(e.to_string().contains("Crane"), "{e}");
 
     // an actuated mechanism's model trained with inputs exports with them:
-    // the source is exactly the fixture that tests/embedded_learned.rs
+    // the source is exactly the fixture that tests/learn/embedded_learned.rs
     // compiles and steps under inputs (against the std model, 1e-12)
     let forced = dir.join("learned_drive_cartpole.json");
     std::fs::write(
@@ -629,7 +629,7 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     assert!(worst < 1e-6, "{worst:e}");
     // the conformal bound, calibrated on held-out runs under their inputs
     // (only the tool's path is checked here; coverage is
-    // `tests/bound.rs`'s); calibrating on the training runs is refused
+    // `tests/bound/bound.rs`'s); calibrating on the training runs is refused
     let mut args = predict_args(s(&floored), s(&test), "5", s(&pred));
     args.extend(["--calibration", s(&train)]);
     let e = run(&args).unwrap_err().to_string();
@@ -731,7 +731,7 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
     // reports it; the model still beats the nominal one. (Here the fits
     // are nearly linear, length scales 4–1000, σ_n² ≈ 0.8–0.96 of the
     // normalised variance, so the bound hardly depends on Z and the run
-    // stops at its first gradient test; tests/gp_sparse.rs shows the
+    // stops at its first gradient test; tests/gp/gp_sparse.rs shows the
     // refinement raising a bound.)
     let model_z = dir.join("model_z.json");
     let mut args = fit_args("16").to_vec();

@@ -26,7 +26,7 @@
 //! same operations, in the same order, as the std GP's prediction, and both
 //! use the kernel functions of this module ([`kernel_dot`], [`kernel_row`],
 //! [`dot`]), so an exported model reproduces the std model's mean **bit for
-//! bit** (tested in `tests/gp_export.rs`).
+//! bit** (tested in `tests/gp/gp_export.rs`).
 //!
 //! # Cost
 //!

@@ -34,7 +34,7 @@
 //! map since the step keeps every quaternion on the unit sphere. Ã and B̃
 //! are the derivatives of δ₁ = local(z₁, step(retract(z₀, δ₀), u)) with
 //! respect to δ₀ and u: they agree with central finite differences
-//! through the retraction (tests/tangent.rs).
+//! through the retraction (tests/step/tangent.rs).
 //!
 //! Loop constraints are not charted: with loops, δ ranges over the chart
 //! of the quaternion manifold, of which the loop manifold is a submanifold.

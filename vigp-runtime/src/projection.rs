@@ -321,7 +321,7 @@ pub fn consistent_state<M: Mechanism<N, C>, const N: usize, const C: usize>(
 /// values (e.g. a crank angle the linkage cannot reach).
 ///
 /// Example: a fourbar with its first top angle held at 0.7 rad while the
-/// other three are solved (`tests/workflow.rs`):
+/// other three are solved (`tests/step/workflow.rs`):
 /// `consistent_state_holding(&fourbar, &q_guess, &v_guess, dt, &[0])`.
 pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,

@@ -21,7 +21,7 @@
 //! once about an axis comes back as −q. A GP trained on q then knows
 //! nothing at −q and falls back to its prior there; canonicalising the
 //! sign (w ≥ 0) instead makes the input jump at half turns.
-//! `tests/spatial_learned.rs` measures the difference.
+//! `tests/learn/spatial_learned.rs` measures the difference.
 //!
 //! # Under inputs
 //!

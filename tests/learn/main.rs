@@ -1,0 +1,15 @@
+//! Learning: learned integrators (planar and spatial), model files, held
+//! inputs, the embedded learned stepper, parameter identification.
+//!
+//! One test binary per concept (the map: tests/README.md); each module
+//! below is one file of it.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod embedded_learned;
+mod held_inputs;
+mod identify;
+mod learned;
+mod learned_file;
+mod spatial_learned;

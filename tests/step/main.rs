@@ -1,0 +1,26 @@
+//! Stepping: the variational integrators (planar and spatial, minimal and
+//! maximal views), their derivatives, conservation laws, peers (MuJoCo),
+//! robots and stress cases.
+//!
+//! One test binary per concept (the map: tests/README.md); each module
+//! below is one file of it.
+
+#[path = "../common/mod.rs"]
+mod common;
+#[path = "../common/slider_crank.rs"]
+mod slider_crank;
+
+mod control;
+mod embedded;
+mod fourth_order;
+mod handwritten;
+mod maximal;
+mod nominal;
+mod properties;
+mod robot;
+mod spatial;
+mod spatial_control;
+mod spatial_mujoco;
+mod stress;
+mod tangent;
+mod workflow;
