@@ -1,10 +1,12 @@
 #!/usr/bin/env python3
-"""Fixtures of tests/robot.rs: two robots of example-robot-data (PyPI) with
+"""Fixtures of vigp-runtime/tests/robot.rs: two robots of example-robot-data (PyPI) with
 visuals and collisions stripped, and Pinocchio's dynamics of them.
 
-Writes tests/fixtures/robots/{panda,ur5}.urdf and pin.json. The Panda's
-finger joints are made fixed (a 7-DoF arm carrying its hand and fingers):
-the second finger is a mimic joint, which vigp refuses.
+Writes tests/fixtures/robots/{panda,ur5,solo12,g1}.urdf and pin.json: the
+Panda arm, the UR5, the Solo-12 quadruped and the Unitree G1 humanoid (29
+joints), both legged robots on a fixed base (the URDF's root link). The
+Panda's finger joints are made fixed (a 7-DoF arm carrying its hand and
+fingers): the second finger is a mimic joint, which vigp refuses.
 
 pin.json holds, per robot and per configuration, Pinocchio's
   mass   M(q) (crba, symmetrised),
@@ -98,10 +100,16 @@ def main():
     strip(os.path.join(robots, "panda_description", "urdf", "panda.urdf"), panda,
           fixed=("panda_finger_joint1", "panda_finger_joint2"))
     strip(os.path.join(robots, "ur_description", "urdf", "ur5_robot.urdf"), ur5)
+    solo = os.path.join(OUT, "solo12.urdf")
+    g1 = os.path.join(OUT, "g1.urdf")
+    strip(os.path.join(robots, "solo_description", "robots", "solo12.urdf"), solo)
+    strip(os.path.join(robots, "g1_description", "urdf", "g1_29dof_rev_1_0.urdf"), g1)
     out = {
         "pinocchio": pin.__version__,
         "panda": dynamics(panda, 1),
         "ur5": dynamics(ur5, 2),
+        "solo12": dynamics(solo, 3),
+        "g1": dynamics(g1, 4),
     }
     with open(os.path.join(OUT, "pin.json"), "w") as f:
         json.dump(out, f, indent=1)

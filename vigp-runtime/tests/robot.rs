@@ -1,10 +1,11 @@
 //! Robots loaded from URDF at run time (`Robot`, the linear-time tree
-//! engine) against independent references: Pinocchio on the Panda and the
-//! UR5 (fixtures by scripts/robot_pin_fixtures.py: mass matrix, nonlinear
+//! engine) against independent references: Pinocchio on the Panda, the
+//! UR5, the Solo-12 legs and the 29-joint G1 humanoid, both on a fixed base
+//! (fixtures by scripts/robot_pin_fixtures.py: mass matrix, nonlinear
 //! effects, gravity, energies), energy behaviour of long rollouts, the
 //! self-subdividing step on fast chains, inputs, and typed errors for bad
 //! URDF. The same engine against the generated `mechanism!` code of an
-//! arm: tests/robot.rs of the `vigp` package.
+//! arm: tests/step/robot.rs of the `vigp` package.
 
 use vigp_core::tree::{EngineError, EngineOptions};
 use vigp_runtime::robot::{Robot, RobotError, RobotState};
@@ -30,7 +31,12 @@ fn floats(v: &serde_json::Value) -> Vec<f64> {
 #[test]
 fn urdf_robots_match_pinocchio() {
     let pin = read_json(&fixture("pin.json"));
-    for (name, file) in [("panda", "panda.urdf"), ("ur5", "ur5.urdf")] {
+    for (name, file) in [
+        ("panda", "panda.urdf"),
+        ("ur5", "ur5.urdf"),
+        ("solo12", "solo12.urdf"),
+        ("g1", "g1.urdf"),
+    ] {
         let robot = Robot::from_urdf(fixture(file)).unwrap();
         let r = &pin[name];
         let names: Vec<&str> = r["joints"]
@@ -117,6 +123,8 @@ fn long_rollouts_keep_their_energy() {
     for (file, q) in [
         ("ur5.urdf", vec![0.3, -1.2, 1.0, -0.5, 0.8, 0.2]),
         ("panda.urdf", vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]),
+        ("solo12.urdf", vec![0.0; 12]),
+        ("g1.urdf", vec![0.0; 29]),
     ] {
         let robot = Robot::from_urdf(fixture(file)).unwrap();
         let damped = robot.tree().bodies.iter().any(|b| b.damping > 0.0);
