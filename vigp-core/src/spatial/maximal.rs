@@ -50,6 +50,8 @@ use super::model::{
 use super::so3;
 use crate::linalg::{FullPivLu, solve_kkt};
 
+mod derivatives;
+
 use crate::params::Spring;
 use crate::real::Jet1;
 use crate::step::{RolloutError, StepError, StepOptions};
