@@ -72,6 +72,8 @@ const VOCAB: &[&str] = &[
     "spherical",
     "fixed",
     "free",
+    "universal",
+    "axes",
     "world",
     "start",
     "end",
@@ -101,6 +103,8 @@ const VOCAB: &[&str] = &[
     "[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]",
     "[[1e308, 0.0, 0.0], [0.0, 1e308, 0.0], [0.0, 0.0, 1e308]]",
     "[0.0, 0.0, -9.81]",
+    "[[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]",
+    "[[1e308, 0.0, 0.0], [1e308, 1e-320, 0.0]]",
 ];
 
 fn expand_no_panic(src: &str) -> Result<(), String> {
@@ -137,6 +141,10 @@ fn extreme_spatial_values_do_not_panic() {
         "X { gravity: [0.0, 0.0, 0.0], links { } joints { } }",
         "X { gravity: [0.0, 0.0, 0.0,], links { a: { mass: 1.0, inertia: [1.0, 1.0, 1.0] } } joints { j: free(a.com, a.com) } }",
         "X { gravity: [0.0, 0.0, 0.0] }",
+        "X { gravity: [0.0, 0.0, 0.0], links { a: { mass: 1.0, inertia: [1.0, 1.0, 1.0] } } joints { j: universal(world, a.com) { axes: [[1e308, 1e308, 0.0], [1e-320, 0.0, 1e308]] } } }",
+        "X { gravity: [0.0, 0.0, 0.0], links { a: { mass: 1.0, inertia: [1.0, 1.0, 1.0] } } joints { j: universal(world, a.com) { axes: [[1.0, 0.0, 0.0], [1.0, 1e-320, 0.0]] } } }",
+        "X { gravity: [0.0, 0.0, 0.0], links { a: { mass: 1.0, inertia: [1.0, 1.0, 1.0] } } joints { j: universal(world, a.com) { axes: [[[1.0]], [0.0, 1.0]] } } }",
+        "X { gravity: [0.0, 0.0, 0.0], links { a: { mass: 1.0, inertia: [1.0, 1.0, 1.0] } } joints { j: universal(world, a.com) { axes: [] } } }",
     ];
     for c in cases {
         expand_no_panic(c).unwrap_or_else(|p| panic!("panic on {c:?}: {p}"));

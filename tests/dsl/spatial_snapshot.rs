@@ -117,3 +117,29 @@ fn spatial_code_contains_only_what_the_scene_needs() {
     .unwrap();
     assert!(planar.contains("::vigp::Pose2") && !planar.contains("::vigp::spatial"));
 }
+
+/// The code of a universal (Hooke) joint, reviewed as a diff: two angle
+/// coordinates in the minimal view, no constraint there for a tree joint,
+/// 4 constraint rows in the maximal view, the second axis in the joint's
+/// type.
+#[test]
+fn generated_code_of_a_universal_joint() {
+    let code = vigp_codegen::expand_to_string(
+        "/// A rod on a Hooke joint.
+         pub HookePendulum {
+             gravity: [0.0, 0.0, -9.81],
+             links {
+                 rod: { mass: 1.0, length: 1.0, inertia: [0.0002, 0.0834333, 0.0834333],
+                        frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]] },
+             }
+             joints {
+                 cardan: universal(world, rod.start) { axes: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], damping: 0.0 },
+             }
+         }",
+    )
+    .unwrap();
+    assert!(code.contains("impl ::vigp::Mechanism<2, 0> for HookePendulumMinimal"));
+    assert!(code.contains("Maximal<Self, 1, 1, 6, 4>"));
+    assert!(code.contains("JointType::Universal") && code.contains("second: [0.0, 1.0, 0.0]"));
+    insta::assert_snapshot!("HookePendulum", code);
+}

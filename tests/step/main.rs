@@ -24,3 +24,4 @@ mod spatial_mujoco;
 mod stress;
 mod tangent;
 mod workflow;
+mod universal;

@@ -186,6 +186,24 @@ pub enum StepError {
         /// The step count asked for.
         steps: usize,
     },
+    /// A link whose mass or rotational inertia is negligible against the
+    /// mechanism's (below [`crate::spatial::maximal::NEGLIGIBLE_INERTIA`]
+    /// of its scale): the maximal view's Newton matrix cannot resolve its
+    /// motion, so [`crate::spatial::LieStepper`] refuses it at
+    /// construction. A massless connector (a cross link between two
+    /// revolute joints) is a joint: `universal`, or fold the link into
+    /// its neighbour. The minimal view takes such links.
+    NegligibleInertia {
+        /// The link's name.
+        link: &'static str,
+        /// Which inertia: `"mass"` (kg) or `"smallest principal moment of
+        /// inertia"` (kg·m²).
+        what: &'static str,
+        /// Its value.
+        value: f64,
+        /// The smallest value accepted for this mechanism.
+        bound: f64,
+    },
 }
 
 impl core::fmt::Display for StepError {
@@ -228,11 +246,27 @@ impl core::fmt::Display for StepError {
                 "{NOT_CONTINUATION_TEXT}: it bends the path by {ratio:.3e} rad > bound {bound:e}; {NOT_CONTINUATION_REMEDY}"
             ),
             Self::TooManySteps { steps } => write!(f, "{TOO_MANY_STEPS_TEXT} ({steps} steps)"),
+            Self::NegligibleInertia {
+                link,
+                what,
+                value,
+                bound,
+            } => write!(
+                f,
+                "link `{link}`: {what} {value:.3e} {NEGLIGIBLE_INERTIA_TEXT} {bound:.3e}); {NEGLIGIBLE_INERTIA_REMEDY}"
+            ),
         }
     }
 }
 
 impl core::error::Error for StepError {}
+
+/// The middle of the message of [`StepError::NegligibleInertia`] (shared
+/// with the std runtime's error).
+pub const NEGLIGIBLE_INERTIA_TEXT: &str = "is negligible against the mechanism's inertia (the maximal view's Newton matrix cannot resolve the link's motion below";
+
+/// The remedy of [`StepError::NegligibleInertia`].
+pub const NEGLIGIBLE_INERTIA_REMEDY: &str = "a massless connector such as the cross of a Hooke joint is a joint, not a link: use `universal(parent, child) { axes: [..] }`, or merge the link into its neighbour; the minimal view integrates such links";
 
 /// The message of [`StepError::NotContinuation`] (shared with the std
 /// runtime's error).

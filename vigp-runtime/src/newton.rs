@@ -164,6 +164,24 @@ pub enum StepError {
         /// The step count asked for.
         steps: usize,
     },
+    /// A link whose mass or rotational inertia is negligible against the
+    /// mechanism's: `LieStepper` refuses it at construction (the core's
+    /// [`vigp_core::StepError::NegligibleInertia`]).
+    #[error(
+        "link `{link}`: {what} {value:.3e} {} {bound:.3e}); {}",
+        vigp_core::step::NEGLIGIBLE_INERTIA_TEXT,
+        vigp_core::step::NEGLIGIBLE_INERTIA_REMEDY
+    )]
+    NegligibleInertia {
+        /// The link's name.
+        link: &'static str,
+        /// `"mass"` (kg) or `"smallest principal moment of inertia"` (kg·m²).
+        what: &'static str,
+        /// Its value.
+        value: f64,
+        /// The smallest value accepted for this mechanism.
+        bound: f64,
+    },
     /// A mechanism whose loop equations g(q) = 0 have no solution that
     /// Gauss–Newton finds from several starts (links too short or too long
     /// to close the loop): refused when the integrator is built, with the
@@ -222,6 +240,7 @@ impl StepError {
             | StepError::Prediction { step } => *step = Some(k),
             StepError::InvalidTimeStep { .. }
             | StepError::TooManySteps { .. }
+            | StepError::NegligibleInertia { .. }
             | StepError::LoopCannotClose { .. }
             | StepError::InputsNotSupported
             | StepError::InvalidOptions(_)
@@ -279,6 +298,17 @@ impl From<vigp_core::StepError> for StepError {
                 step: None,
             },
             E::TooManySteps { steps } => StepError::TooManySteps { steps },
+            E::NegligibleInertia {
+                link,
+                what,
+                value,
+                bound,
+            } => StepError::NegligibleInertia {
+                link,
+                what,
+                value,
+                bound,
+            },
         }
     }
 }

@@ -236,6 +236,13 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
     });
     let joint_values = m.joints.iter().map(|jt| {
         let kind = format_ident!("{}", jt.kind.variant());
+        let kind = match jt.kind {
+            JointKind::Universal { axes } => {
+                let second = triple(axes[1]);
+                quote!(#kind { second: #second })
+            }
+            _ => quote!(#kind),
+        };
         let parent = match jt.parent.link() {
             Some(p) => {
                 let p = usize_lit(p);
@@ -310,6 +317,12 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
                 for c in ["qw", "qx", "qy", "qz"] {
                     coord_names.push(format!("{jn}.{c}"));
                     kinds.push(quat.clone());
+                }
+            }
+            JointKind::Universal { .. } => {
+                for c in ["1", "2"] {
+                    coord_names.push(format!("{jn}.{c}"));
+                    kinds.push(angle.clone());
                 }
             }
             JointKind::Fixed => {}
@@ -452,6 +465,15 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
     };
 
     let links_doc = format!(" Link parameters of [`{name_str}`].");
+    let coordinates_doc = if m
+        .joints
+        .iter()
+        .any(|j| matches!(j.kind, JointKind::Universal { .. }))
+    {
+        " Number of minimal coordinates (one per revolute or prismatic tree joint, two per universal, four per spherical, seven per free)."
+    } else {
+        " Number of minimal coordinates (one per revolute or prismatic tree joint, four per spherical, seven per free)."
+    };
     quote! {
         #(#attrs)*
         #[derive(Clone, Copy, Debug, PartialEq)]
@@ -483,7 +505,7 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
         }
 
         impl #name {
-            #[doc = " Number of minimal coordinates (one per revolute or prismatic tree joint, four per spherical, seven per free)."]
+            #[doc = #coordinates_doc]
             pub const COORDINATES: usize = #nm;
             #[doc = " Number of constraint equations in minimal coordinates (loop closures, then one unit-norm row per quaternion)."]
             pub const MINIMAL_CONSTRAINTS: usize = #cm;

@@ -21,6 +21,10 @@
 //!   s·a (in the parent frame); a spherical joint with unit quaternion u has
 //!   R_c = R_p·R(u)·Q; a free joint adds a translation d (parent frame) of
 //!   the child point to that.
+//! * A universal (Hooke, cardan) joint at angles (θ₁, θ₂) has
+//!   R_c = R_p·Rot(a₁, θ₁)·Rot(a₂, θ₂)·Q: the first axis a₁ is fixed in the
+//!   parent, the second a₂ (given in the parent frame at θ₁ = 0) is carried
+//!   by the first rotation, so it is fixed in the child.
 
 use super::geometry::{
     Mat3, Motion3, Pose3, Vec3, add, complement, cross, dot, dot_f, mul_mm, mul_mm_f, mul_mtm,
@@ -65,7 +69,7 @@ pub fn center(length: f64) -> [f64; 3] {
 }
 
 /// What a joint allows.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum JointType {
     /// Rotation about the axis; the points coincide. Coordinate: the angle
     /// (rad). 5 constraint equations in maximal coordinates.
@@ -81,6 +85,18 @@ pub enum JointType {
     /// No constraint: the child point's position in the parent frame (m)
     /// and a unit quaternion, 7 coordinates. 0 constraint equations.
     Free,
+    /// A universal (Hooke, cardan) joint: rotation about the joint's `axis`
+    /// a₁ (fixed in the parent) and then about `second` a₂ (carried by the
+    /// first rotation, fixed in the child); the points coincide.
+    /// Coordinates: the two angles (θ₁, θ₂) (rad). 4 constraint equations:
+    /// the points coincide (3) and the angle between a₁ and a₂ keeps its
+    /// reference value (1; for the usual perpendicular axes they stay
+    /// perpendicular).
+    Universal {
+        /// Unit second axis a₂ in the parent frame at θ₁ = 0 (equivalently
+        /// Qᵀa₂ in the child frame), not parallel to the first.
+        second: [f64; 3],
+    },
 }
 
 impl JointType {
@@ -92,6 +108,7 @@ impl JointType {
             JointType::Spherical => 3,
             JointType::Fixed => 6,
             JointType::Free => 0,
+            JointType::Universal { .. } => 4,
         }
     }
 
@@ -102,16 +119,17 @@ impl JointType {
             JointType::Spherical => 4,
             JointType::Fixed => 0,
             JointType::Free => 7,
+            JointType::Universal { .. } => 2,
         }
     }
 
     /// Rates a damper acts on (joint velocities): 1 for revolute and
     /// prismatic joints, 3 (the relative angular velocity) for spherical
-    /// joints, none for fixed and free joints.
+    /// and universal joints, none for fixed and free joints.
     pub const fn rates(self) -> usize {
         match self {
             JointType::Revolute | JointType::Prismatic => 1,
-            JointType::Spherical => 3,
+            JointType::Spherical | JointType::Universal { .. } => 3,
             JointType::Fixed | JointType::Free => 0,
         }
     }
@@ -130,7 +148,8 @@ pub struct Joint3 {
     pub parent_anchor: [f64; 3],
     /// Child point in the child link frame.
     pub child_anchor: [f64; 3],
-    /// Unit axis in the parent frame (revolute, prismatic; ignored otherwise).
+    /// Unit axis in the parent frame (revolute, prismatic; the first axis of
+    /// a universal joint; ignored otherwise).
     pub axis: [f64; 3],
     /// Reference relative orientation Q = R_p⁰ᵀ·R_c⁰ as a unit quaternion
     /// (w, x, y, z).
@@ -205,6 +224,13 @@ fn finite3(a: &[f64; 3]) -> bool {
     a.iter().all(|x| x.is_finite())
 }
 
+/// The smallest sine of the angle between the two axes of a universal
+/// joint: below it the axes count as parallel (the joint would lose a
+/// degree of freedom, and its angle constraint's gradient, proportional to
+/// that sine, would vanish). `mechanism!` applies the same bound at
+/// compile time.
+pub const UNIVERSAL_MIN_SINE: f64 = 1e-6;
+
 /// `true` when the symmetric 3×3 `m` is positive definite (Cholesky pivots
 /// positive).
 pub fn positive_definite(m: &[[f64; 3]; 3]) -> bool {
@@ -226,7 +252,8 @@ pub fn positive_definite(m: &[[f64; 3]; 3]) -> bool {
 
 /// Checks a description: gravity finite; masses finite and > 0; inertias
 /// finite, symmetric and positive definite; centres of mass and anchors
-/// finite; indices in range; axes and `rel` unit (to 1e-9); damping finite
+/// finite; indices in range; axes and `rel` unit (to 1e-9), the two axes
+/// of a universal joint not parallel ([`UNIVERSAL_MIN_SINE`]); damping finite
 /// and ≥ 0; spring stiffnesses finite and ≥ 0 with finite rests, on
 /// revolute and prismatic joints only; inputs on distinct revolute or
 /// prismatic joints; [`Spatial::TREE`] a valid placement order (each link placed
@@ -273,10 +300,25 @@ pub fn validate<S: Spatial<B, J>, const B: usize, const J: usize>(
         if !(finite3(&j.parent_anchor) && finite3(&j.child_anchor)) {
             return Err(ModelError::Invalid("a joint anchor is not finite"));
         }
-        if matches!(j.kind, JointType::Revolute | JointType::Prismatic)
-            && (dot(j.axis, j.axis) - 1.0).abs() > 1e-9
+        if matches!(
+            j.kind,
+            JointType::Revolute | JointType::Prismatic | JointType::Universal { .. }
+        ) && !(finite3(&j.axis) && (dot(j.axis, j.axis) - 1.0).abs() <= 1e-9)
         {
             return Err(ModelError::Invalid("a joint axis is not a unit vector"));
+        }
+        if let JointType::Universal { second } = j.kind {
+            if !(finite3(&second) && (dot(second, second) - 1.0).abs() <= 1e-9) {
+                return Err(ModelError::Invalid(
+                    "a universal joint's second axis is not a unit vector",
+                ));
+            }
+            let c = cross(j.axis, second);
+            if dot(c, c) < UNIVERSAL_MIN_SINE * UNIVERSAL_MIN_SINE {
+                return Err(ModelError::Invalid(
+                    "a universal joint's two axes are parallel",
+                ));
+            }
         }
         let r = j.rel;
         if ((r[0] * r[0] + r[1] * r[1] + r[2] * r[2] + r[3] * r[3]) - 1.0).abs() > 1e-9 {
@@ -413,7 +455,10 @@ pub fn rel_matrix(q: [f64; 4]) -> [[f64; 3]; 3] {
 /// * prismatic: b₁·(R_pᵀd), b₂·(R_pᵀd) (2), vee((E − Eᵀ)/2) (3);
 /// * spherical: d (3);
 /// * fixed: d (3), vee((E − Eᵀ)/2) (3);
-/// * free: none.
+/// * free: none;
+/// * universal: d (3), a₁·(E a₂) − a₁·a₂ (1): the second axis, carried by
+///   the child, keeps its angle to the first, fixed in the parent
+///   (E a₂ = Rot(a₁, θ₁)·a₂ exactly on the joint's configurations).
 ///
 /// Generic over [`Real`]: the maximal view differentiates it with jets, the
 /// minimal view evaluates it on dual numbers.
@@ -460,6 +505,18 @@ pub fn joint_residual<R: Real>(
             6
         }
         JointType::Free => 0,
+        JointType::Universal { second } => {
+            // E a₂ = R_pᵀ R_c (Qᵀ a₂)
+            let qa = [
+                q[0][0] * second[0] + q[1][0] * second[1] + q[2][0] * second[2],
+                q[0][1] * second[0] + q[1][1] * second[1] + q[2][1] * second[2],
+                q[0][2] * second[0] + q[1][2] * second[1] + q[2][2] * second[2],
+            ];
+            let ea = mul_mtv(&parent.rot, mul_mv_f(&child.rot, qa));
+            out[..3].copy_from_slice(&d);
+            out[3] = dot_f(ea, j.axis) - dot(j.axis, second);
+            4
+        }
     }
 }
 
@@ -514,7 +571,9 @@ fn relative<R: Real>(parent: &Pose3<R>, child: &Pose3<R>, q: &[[f64; 3]; 3]) -> 
 /// * revolute: (R_p a)·(ω_c − ω_p), the rate of the joint angle;
 /// * prismatic: d/dt[(R_p a)·(C − P)] = (ω_p × R_p a)·d + (R_p a)·(Ċ − Ṗ),
 ///   the rate of the slide;
-/// * spherical: ω_c − ω_p (world), the relative angular velocity;
+/// * spherical, universal: ω_c − ω_p (world), the relative angular
+///   velocity (for a universal joint θ̇₁·R_p a₁ + θ̇₂·R_c Qᵀa₂, so with
+///   perpendicular axes the dissipation is ½c(θ̇₁² + θ̇₂²));
 /// * fixed, free: none.
 ///
 /// The dissipation function of the joint is ½·c·Σ rate².
@@ -542,7 +601,7 @@ pub fn joint_rates<R: Real>(
             out[0] = dot(cross(pm.omega, a), d) + dot(a, dd);
             1
         }
-        JointType::Spherical => {
+        JointType::Spherical | JointType::Universal { .. } => {
             out.copy_from_slice(&sub(cm.omega, pm.omega));
             3
         }
@@ -585,6 +644,23 @@ pub fn place_child<R: Real>(
                 (rot, anchor, w, None)
             }
             JointType::Fixed => (mul_mm_f(&parent.rot, &q), anchor, None, None),
+            JointType::Universal { second } => {
+                let first = axis_angle(j.axis, c[0]);
+                let rot = mul_mm_f(
+                    &mul_mm(&mul_mm(&parent.rot, &first), &axis_angle(second, c[1])),
+                    &q,
+                );
+                // ω_rel = R_p (a₁ θ̇₁ + Rot(a₁, θ₁) a₂ θ̇₂)
+                let w = rates.map(|r| {
+                    let carried = mul_mv(&first, super::geometry::lift(second));
+                    let local = add(
+                        scale(super::geometry::lift(j.axis), r[0]),
+                        scale(carried, r[1]),
+                    );
+                    mul_mv(&parent.rot, local)
+                });
+                (rot, anchor, w, None)
+            }
             JointType::Free => {
                 let u = [c[3], c[4], c[5], c[6]];
                 let rot = mul_mm_f(&mul_mm(&parent.rot, &quat_matrix(u)), &q);

@@ -72,6 +72,23 @@ fn wrap_near(theta: f64, near: f64) -> f64 {
     theta + two_pi * libm::round((near - theta) / two_pi)
 }
 
+/// The angles (θ₁, θ₂) in (−π, π] of a universal joint with axes `a1`,
+/// `a2` (unit, not parallel) from its relative rotation
+/// E = Rot(a₁, θ₁)·Rot(a₂, θ₂) (exact when E is of that form): θ₁ turns a₂
+/// into E a₂ about a₁ (both projected on the plane normal to a₁), θ₂ is
+/// the angle of Rot(a₁, −θ₁)·E about a₂.
+pub fn universal_angles(e: &Mat3<f64>, a1: [f64; 3], a2: [f64; 3]) -> (f64, f64) {
+    use super::geometry::{axis_angle, cross, mul_mm, mul_mv_f, scale_f};
+    let ea2 = mul_mv_f(e, a2);
+    let p = sub(a2, scale_f(a1, dot(a1, a2)));
+    let pe = sub(ea2, scale_f(a1, dot(a1, ea2)));
+    let t1 = libm::atan2(dot(a1, cross(p, pe)), dot(p, pe));
+    let f = mul_mm(&axis_angle(a1, -t1), e);
+    let s = dot(vee_skew(&f), a2);
+    let c = 0.5 * (f[0][0] + f[1][1] + f[2][2] - 1.0);
+    (t1, libm::atan2(s, c))
+}
+
 /// The joint coordinates of the tree joints read off a maximal
 /// configuration (exact on consistent configurations). With `near`,
 /// angles are unwrapped to the nearest multiple of 2π and quaternion signs
@@ -137,6 +154,11 @@ pub fn minimal_coordinates<S: Spatial<B, J>, const B: usize, const J: usize, con
                 quat(o + 3, &mut out);
             }
             JointType::Fixed => {}
+            JointType::Universal { second } => {
+                let (t1, t2) = universal_angles(&e, j.axis, second);
+                out[o] = near.map_or(t1, |n| wrap_near(t1, n[o]));
+                out[o + 1] = near.map_or(t2, |n| wrap_near(t2, n[o + 1]));
+            }
         }
     }
     out

@@ -1,5 +1,6 @@
 //! Spatial descriptions: rigid links with a mass, an inertia tensor and a
-//! frame; revolute, prismatic, spherical, fixed and free joints with axes;
+//! frame; revolute, prismatic, spherical, universal, fixed and free joints
+//! with axes;
 //! points `[x, y, z]` and `link.com`; gravity `[gx, gy, gz]`. What a
 //! spatial description means beyond the checks every description shares.
 
@@ -72,6 +73,13 @@ pub enum JointKind {
     Fixed,
     /// No constraint (a floating link).
     Free,
+    /// Hooke (cardan) joint: rotation about the first unit axis (fixed in
+    /// the parent), then about the second (given in the parent frame at the
+    /// reference configuration, carried by the first rotation).
+    Universal {
+        /// The two unit axes, not parallel.
+        axes: [[f64; 3]; 2],
+    },
 }
 
 impl JointKind {
@@ -83,6 +91,7 @@ impl JointKind {
             JointKind::Spherical => "Spherical",
             JointKind::Fixed => "Fixed",
             JointKind::Free => "Free",
+            JointKind::Universal { .. } => "Universal",
         }
     }
 
@@ -90,6 +99,7 @@ impl JointKind {
     pub fn axis(&self) -> [f64; 3] {
         match self {
             JointKind::Revolute { axis } | JointKind::Prismatic { axis } => *axis,
+            JointKind::Universal { axes } => axes[0],
             _ => [0.0, 0.0, 1.0],
         }
     }
@@ -101,6 +111,7 @@ impl JointKind {
             JointKind::Spherical => 4,
             JointKind::Fixed => 0,
             JointKind::Free => 7,
+            JointKind::Universal { .. } => 2,
         }
     }
 
@@ -111,6 +122,7 @@ impl JointKind {
             JointKind::Spherical => 3,
             JointKind::Fixed => 6,
             JointKind::Free => 0,
+            JointKind::Universal { .. } => 4,
         }
     }
 }
@@ -174,6 +186,7 @@ impl Rules<3> for Spatial {
         JointType::new("revolute", AXIAL_KEYS, true),
         JointType::new("prismatic", AXIAL_KEYS, true),
         JointType::new("spherical", &["damping"], false),
+        JointType::new("universal", &["axes", "damping"], false),
         JointType::new("fixed", &[], false),
         JointType::new("free", &[], false),
     ];
@@ -248,6 +261,9 @@ impl Rules<3> for Spatial {
             "revolute" => JointKind::Revolute { axis: axis() },
             "prismatic" => JointKind::Prismatic { axis: axis() },
             "spherical" => JointKind::Spherical,
+            "universal" => JointKind::Universal {
+                axes: universal_axes(cx, decl, name, f),
+            },
             "fixed" => JointKind::Fixed,
             _ => JointKind::Free,
         }
@@ -310,6 +326,70 @@ impl Rules<3> for Spatial {
             );
         }
     }
+}
+
+/// The smallest sine of the angle between a universal joint's axes (the
+/// run-time `vigp::spatial::model::UNIVERSAL_MIN_SINE`).
+const UNIVERSAL_MIN_SINE: f64 = 1e-6;
+
+/// `axes: [[ax, ay, az], [bx, by, bz]]` of a universal joint: two non-zero,
+/// non-parallel axes, normalised. Errors point at the offending axis.
+fn universal_axes(cx: &mut Ctxt, decl: &JointDecl, name: &str, f: &Fields) -> [[f64; 3]; 2] {
+    const FALLBACK: [[f64; 3]; 2] = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+    let shape = "`axes` of a universal joint takes two axes `[[ax, ay, az], [bx, by, bz]]` (the first fixed in the parent's frame, the second given in the parent's frame at the reference configuration and carried by the first rotation)";
+    let Some(field) = f.get("axes") else {
+        cx.push(
+            decl.kind.span(),
+            format!(
+                "universal joint `{name}` needs `axes: [[ax, ay, az], [bx, by, bz]]` (the first axis fixed in the parent's frame, the second given in the parent's frame at the reference configuration and carried by the first rotation)"
+            ),
+        );
+        return FALLBACK;
+    };
+    let Value::Array(_, items) = &field.value else {
+        cx.push(field.value.span(), shape);
+        return FALLBACK;
+    };
+    if items.len() != 2 {
+        cx.push(field.value.span(), shape);
+        return FALLBACK;
+    }
+    let mut out = FALLBACK;
+    let mut ok = true;
+    for (k, (o, v)) in out.iter_mut().zip(items).enumerate() {
+        let which = if k == 0 { "first" } else { "second" };
+        match triple(cx, v, &format!("the {which} axis of `axes`")) {
+            None => ok = false,
+            Some(a) => match unit(a) {
+                Some(u) => *o = u,
+                None => {
+                    cx.push(
+                        v.span(),
+                        format!("the {which} axis of universal joint `{name}` must not be zero"),
+                    );
+                    ok = false;
+                }
+            },
+        }
+    }
+    if ok {
+        let [a, b] = out;
+        let c = [
+            a[1] * b[2] - a[2] * b[1],
+            a[2] * b[0] - a[0] * b[2],
+            a[0] * b[1] - a[1] * b[0],
+        ];
+        if (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt() < UNIVERSAL_MIN_SINE {
+            cx.push(
+                items[1].span(),
+                format!(
+                    "the two axes of universal joint `{name}` are parallel: a universal joint needs two different rotation axes (usually perpendicular); for a single axis use `revolute`"
+                ),
+            );
+            return FALLBACK;
+        }
+    }
+    out
 }
 
 /// Three run-time parameters.
