@@ -27,6 +27,8 @@ pub(super) enum Command {
     Predict(PredictArgs),
     /// Rust source of the learned model for no_std firmware.
     Export(ExportArgs),
+    /// A log CSV of the nominal model from a start state under planned inputs.
+    Simulate(SimulateArgs),
 }
 
 /// How data files are read.
@@ -99,7 +101,9 @@ pub(super) struct FitArgs {
     /// The mechanism (with several registered; case and `_` do not matter).
     #[arg(long)]
     pub(super) system: Option<String>,
-    /// Training data (CSV: run,t,<coordinates>).
+    /// Training data (CSV: run,t,<coordinates>[,u_<joint>…]; row k's input is
+    /// held from t_k to t_{k+1}, so the step from row k to row k + 1 is
+    /// driven by row k + 1's input).
     #[arg(long)]
     pub(super) data: PathBuf,
     /// Where to save the model (JSON).
@@ -190,14 +194,34 @@ pub(super) struct PredictArgs {
     /// A model saved by `vigp fit`.
     #[arg(long)]
     pub(super) model: PathBuf,
-    /// Start states: the first two rows of every run (an actuated mechanism's
-    /// runs also give the inputs of the predicted steps: rows 1 to `--steps`).
+    /// Start states: the first two rows of every run, or with `--stride`
+    /// rows s and s + 1 for s = 0, k, 2k, …. An actuated mechanism's runs
+    /// also give the inputs of the predicted steps (rows s + 1 to
+    /// s + `--steps`; row k's input is held from t_k to t_{k+1}, so the step
+    /// from row k to row k + 1 is driven by row k + 1's input), unless
+    /// `--inputs` gives them.
     #[arg(long)]
     pub(super) data: PathBuf,
+    /// Start a prediction every k samples of every run (each needs its two
+    /// start rows, and without `--inputs` the inputs of the `--steps` rows
+    /// after its first); the output then has a `start` column, the start's
+    /// sample. Default: one prediction from each run's first two rows.
+    #[arg(long, value_name = "K")]
+    pub(super) stride: Option<usize>,
+    /// Planned inputs instead of the logged ones: a CSV with one column
+    /// `u_<joint>` per input (any order; an optional `run` column gives each
+    /// run of `--data` its own plan; a `t` column is ignored), no
+    /// positions. Its row j drives the predicted step j + 1, from output row
+    /// j to j + 1 (held from t_{s+j+1} to t_{s+j+2}); the start row's own
+    /// input in `--data` is the one held over the start's velocity. It
+    /// needs `--steps` rows.
+    #[arg(long, value_name = "PLAN")]
+    pub(super) inputs: Option<PathBuf>,
     /// Steps to predict.
     #[arg(long)]
     pub(super) steps: usize,
-    /// Output CSV: run,t,<coordinates>,v_<coordinate>…,[u_<joint>…,]bound,position_bound.
+    /// Output CSV: run,[start,]t,<coordinates>,v_<coordinate>…,[u_<joint>…,]bound,position_bound
+    /// (conformal: then `fallback`, the rigorous kind a row's bounds fell back to, or empty).
     #[arg(long)]
     pub(super) out: PathBuf,
     /// Failure probability δ of the bounds.
@@ -232,4 +256,52 @@ pub(super) struct ExportArgs {
     /// Path of vigp's no_std core in the generated code.
     #[arg(long, default_value = "vigp::embedded")]
     pub(super) core_path: String,
+}
+
+#[derive(Args, Debug, Clone)]
+pub(super) struct SimulateArgs {
+    /// The mechanism (with several registered; case and `_` do not matter).
+    #[arg(long)]
+    pub(super) system: Option<String>,
+    /// Start positions, one per coordinate in the log's column order
+    /// (comma-separated).
+    #[arg(
+        long,
+        value_name = "Q",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub(super) q: Vec<f64>,
+    /// Start discrete velocities (x_1 − x_0)/Δt [default: zeros].
+    #[arg(
+        long,
+        value_name = "V",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub(super) v: Vec<f64>,
+    /// Time step (s).
+    #[arg(long, allow_negative_numbers = true)]
+    pub(super) dt: f64,
+    /// Steps to simulate; the log has `--steps` + 2 rows.
+    #[arg(long)]
+    pub(super) steps: usize,
+    /// Planned inputs (the input-only CSV of `predict --inputs`, without a
+    /// `run` column): row j drives step j, written on log row j + 1;
+    /// default zero inputs. Log row 0 holds zero (the start is taken as
+    /// reached under no input).
+    #[arg(long, value_name = "PLAN")]
+    pub(super) inputs: Option<PathBuf>,
+    /// Label of the run in the log.
+    #[arg(long, default_value = "sim")]
+    pub(super) run: String,
+    /// Time of the first row (s).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub(super) t0: f64,
+    /// Change a nominal parameter, e.g. `--set links.pole.mass=1.1` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub(super) set: Vec<String>,
+    /// The log to write (CSV: run,t,<coordinates>[,u_<joint>…]).
+    #[arg(long)]
+    pub(super) out: PathBuf,
 }

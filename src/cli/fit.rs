@@ -5,12 +5,13 @@ use std::time::Instant;
 
 use super::args::{EncodingArg, FitArgs, PriorArg};
 use super::{CliError, check_out_dir, data_error, read_data, spinner, w};
+use crate::data::Dataset;
 use crate::gp::{Method, Screening, SparseOptions, TrainOptions, TrainReport};
 use crate::learned::{
     Encoding, ForcedTransition, LearnError, Learned, Prior, Transition, forced_transitions,
     transitions,
 };
-use crate::{Coordinates, Mechanism, Parameters, SVector};
+use crate::{Coordinates, Mechanism, Parameters, SVector, State, Variational};
 
 pub(super) fn set_parameter<P: Parameters>(p: &mut P, assignment: &str) -> Result<(), CliError> {
     let bad = |why: String| CliError::Usage(format!("--set {assignment}: {why}"));
@@ -158,6 +159,9 @@ where
                 short.join(", ")
             ),
         )?;
+    }
+    if U > 0 {
+        input_shift_check::<Mn, N, C, U>(minimal, dt, &data, &a.data, out)?;
     }
     match a.encoding {
         EncodingArg::Sincos | EncodingArg::Minimal => {
@@ -368,4 +372,86 @@ where
         out,
         format_args!("wrote {} ({bytes} bytes)", a.out.display()),
     )
+}
+
+/// How much better a one-row shift of the inputs must fit the data than
+/// the inputs as logged before `fit` warns ([`input_shift_check`]).
+const SHIFT_FACTOR: f64 = 10.0;
+
+/// Transitions the shift check steps at most (evenly spaced).
+const SHIFT_SAMPLES: usize = 400;
+
+/// Warns when the inputs fit the data markedly better shifted by one row:
+/// the nominal (first-order) model's one-step position error
+/// |x_{k+2} − (x_{k+1} + Δt·v_{k+1})|², averaged over up to 400
+/// transitions, with each step driven by row k + 1's input as logged
+/// (the reader's convention) and by row k's or row k + 2's instead. A
+/// shift whose error is below 1/10 of the logged one (and the logged
+/// one above 1e-20, rounding) gets a warning naming the direction. A
+/// model far from the truth fits every alignment about equally badly and
+/// is not flagged.
+fn input_shift_check<Mn, const N: usize, const C: usize, const U: usize>(
+    nominal: Mn,
+    dt: f64,
+    data: &Dataset<N>,
+    path: &std::path::Path,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Copy,
+{
+    let inputs = data.input_vectors::<U>().map_err(data_error(path))?;
+    // transitions k of each run with rows k .. k + 2 for every shift
+    let mut cases: Vec<(usize, usize)> = Vec::new();
+    for (r, run) in data.runs.iter().enumerate() {
+        if run.dt.is_some() && run.positions.len() >= 4 {
+            cases.extend((1..run.positions.len() - 2).map(|k| (r, k)));
+        }
+    }
+    let cases = spread(&cases, SHIFT_SAMPLES);
+    let vi = Variational::new(nominal, dt);
+    let mut sums = [0.0f64; 3];
+    let mut used = 0usize;
+    for (r, k) in cases {
+        let run = &data.runs[r];
+        let Some(z) = run.state(k) else { continue };
+        let errors: Option<Vec<f64>> = [k, k + 1, k + 2]
+            .iter()
+            .map(|&row| {
+                let z1: State<N> = vi.step_forced(&z, &inputs[r][row]).ok()?;
+                let x2 = z1.q + z1.v * dt;
+                Some((x2 - run.positions[k + 2]).norm_squared() / N as f64)
+            })
+            .collect();
+        if let Some(e) = errors {
+            for (sum, e) in sums.iter_mut().zip(e) {
+                *sum += e;
+            }
+            used += 1;
+        }
+    }
+    if used == 0 {
+        return Ok(());
+    }
+    let [early, logged, late] = sums.map(|s| s / used as f64);
+    let (best, which) = if early <= late {
+        (early, "early")
+    } else {
+        (late, "late")
+    };
+    if logged > 1e-20 && best * SHIFT_FACTOR < logged {
+        w(
+            out,
+            format_args!(
+                "warning: {}: the inputs look logged one row {which}: the nominal model's one-step \
+                 position error (mean square over {used} transitions) is {logged:.2e} with the \
+                 inputs as logged and {best:.2e} with each taken from the row {} (≥ {SHIFT_FACTOR}× \
+                 better). The reader holds row k's input from t_k to t_(k+1): the step from row k \
+                 to row k + 1 is driven by row k + 1's input",
+                path.display(),
+                if which == "early" { "before" } else { "after" }
+            ),
+        )?;
+    }
+    Ok(())
 }

@@ -9,7 +9,10 @@
 //!              [--noise-floor VAR] [--memory K]
 //! vigp score   --model model.json --data test.csv --steps 20
 //! vigp predict --model model.json --data starts.csv --steps K --out pred.csv
+//!              [--stride K] [--inputs plan.csv] [--calibration held_out.csv]
 //! vigp export  --model model.json --out model.rs [--variance]
+//! vigp simulate --system NAME --q Q,… [--v V,…] --dt DT --steps K
+//!              [--inputs plan.csv] --out log.csv
 //! ```
 //!
 //! * `fit` reads measured positions ([`crate::data`] format), builds the
@@ -26,16 +29,25 @@
 //!   `sincos` replaces every angle by its sine and cosine, `maximal` learns
 //!   in maximal coordinates (each link's x, y, θ; projected onto the joint
 //!   constraints).
-//! * `score` is the paper's k-step prediction error: from every sample of
-//!   every run with k more samples after it, k steps of the learned model
-//!   and of the nominal variational integrator, position MSE in minimal
-//!   coordinates averaged over the steps and the windows. Its last line is
+//! * `score` is the paper's k-step prediction error: from every sample s of
+//!   every run with k + 1 more samples after it, k steps of the learned
+//!   model and of the nominal variational integrator, position MSE in
+//!   minimal coordinates averaged over the positions the steps produce
+//!   (x_{s+2} … x_{s+k+1}: x_{s+1} = x_s + Δt·v_s is the logged sample
+//!   itself) and over the windows. Its last line is
 //!   `nominal_mse=<x> learned_mse=<y>`.
 //! * `predict` rolls the learned model out from the first two rows of every
-//!   run (position and discrete velocity) and writes the trajectories with
+//!   run (position and discrete velocity; `--stride k`: from every k-th
+//!   sample) and writes the trajectories with
 //!   each predicted velocity's one-step error bound and each position's
 //!   bound along the prediction (`--bound conformal|rkhs|theorem1`;
-//!   conformal with `--calibration`, RKHS without; δ = `--delta`).
+//!   conformal with `--calibration`, RKHS without; δ = `--delta`); a
+//!   conformal prediction's `fallback` column marks the rows whose bounds
+//!   fell back to the RKHS bound, and its summary states what the
+//!   guarantee covers (marginal over start states, per step, at 1 − δ).
+//! * `simulate` rolls the nominal model out from `--q`/`--v` under planned
+//!   (`--inputs`) or zero inputs and writes a log in the data format,
+//!   each input on the row the reader expects.
 //! * `export` writes the Rust source of a `no_std` learned model for
 //!   [`crate::embedded::LearnedStepper`] and states its size.
 //!
@@ -45,11 +57,15 @@
 //! the forced nominal step),
 //! `score` rolls both models out under the logged inputs, `export` writes
 //! a model that steps under u, and `predict` predicts under the inputs
-//! logged in each run (the run needs `--steps` + 1 rows; the input in row
-//! k + 1 drives the step from row k, after row k's, as in the data) with
-//! the bound of
+//! logged in each run (the run needs `--steps` + 1 rows) or planned in an
+//! input-only CSV (`--inputs`, columns `u_<joint>`) with the bound of
 //! [`crate::learned::Learned::predict_forced`] (conformal: the held-out
 //! runs of `--calibration` carry their inputs too).
+//!
+//! The row convention of inputs, everywhere: row k's input is held from
+//! t_k to t_{k+1}, so the step from row k to row k + 1 is driven by row
+//! k + 1's input (`fit` warns when the inputs fit the data markedly better
+//! shifted by one row).
 //!
 //! Your own mechanism gets the same tool from one line:
 //!
@@ -73,6 +89,7 @@ mod fit;
 mod predict;
 mod registry;
 mod score;
+mod simulate;
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -86,7 +103,7 @@ use crate::bound::BoundError;
 use crate::data::{DataError, Dataset};
 use crate::gp::GpError;
 use crate::learned::{LearnError, Learned, LoadError, SavedLearned};
-use crate::{Mechanism, Parameters, StepError, System};
+use crate::{Mechanism, Parameters, SVector, StepError, System};
 
 use args::{Cli, Command, ExportArgs, PredictArgs, ReadArgs, ScoreArgs};
 pub use registry::{SystemEntry, paper_systems, system};
@@ -226,7 +243,8 @@ where
 {
     let cli = Cli::try_parse_from(args)?;
     let entry = match &cli.command {
-        Command::Fit(a) => match &a.system {
+        Command::Fit(args::FitArgs { system, .. })
+        | Command::Simulate(args::SimulateArgs { system, .. }) => match system {
             Some(name) => find(systems, name)?,
             None if systems.len() == 1 => systems[0],
             None => {
@@ -411,4 +429,103 @@ fn window_place<const N: usize>(run: &crate::data::Run<N>, s: usize, resampled: 
             run.line + s as u64
         )
     }
+}
+
+/// A model of `found` inputs for a mechanism of `U`: a usage error naming
+/// the model file (`score` and `predict`).
+fn check_model_inputs<const U: usize>(model: &Path, found: usize) -> Result<(), CliError> {
+    if found == U {
+        return Ok(());
+    }
+    Err(CliError::Usage(format!(
+        "{}: the model takes {found} input(s), the mechanism has {U}{}",
+        model.display(),
+        if U > 0 {
+            " (fit it with the input columns: `vigp fit` on data with `u_<joint>`)"
+        } else {
+            ""
+        }
+    )))
+}
+
+/// An input-only CSV of planned inputs (`predict --inputs`, `simulate
+/// --inputs`): one column `u_<joint>` per input, an optional `run` column
+/// (rows of one run contiguous), an ignored `t` column. Each plan in file
+/// order, with its run label (`None` without a `run` column).
+type Plans<const U: usize> = Vec<(Option<String>, Vec<SVector<f64, U>>)>;
+
+fn read_plan<const U: usize>(path: &Path, inputs: &[&str]) -> Result<Plans<U>, CliError> {
+    let bad = |why: String| CliError::Usage(format!("{}: {why}", path.display()));
+    if U == 0 {
+        return Err(bad(
+            "the mechanism has no inputs (no `actuated` joint): nothing to plan".into(),
+        ));
+    }
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|e| bad(e.to_string()))?;
+    let header = rdr.headers().map_err(|e| bad(e.to_string()))?.clone();
+    let (mut run_col, mut cols) = (None, vec![None; U]);
+    for (i, name) in header.iter().enumerate() {
+        if name == "t" {
+            // times are implied: row j drives step j
+            continue;
+        }
+        if name == "run" {
+            run_col = Some(i);
+        } else if let Some(j) = inputs.iter().position(|n| format!("u_{n}") == name) {
+            if cols[j].replace(i).is_some() {
+                return Err(bad(format!("line 1: column `{name}` appears twice")));
+            }
+        } else {
+            return Err(bad(format!(
+                "line 1: unknown column `{name}`: a plan has the input columns {} (and may have                  `run` and `t`), no positions",
+                inputs
+                    .iter()
+                    .map(|n| format!("`u_{n}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
+    if let Some(j) = cols.iter().position(Option::is_none) {
+        return Err(bad(format!("line 1: missing column `u_{}`", inputs[j])));
+    }
+    let mut plans: Plans<U> = Vec::new();
+    for (n, record) in rdr.records().enumerate() {
+        let line = n + 2;
+        let record = record.map_err(|e| bad(format!("line {line}: {e}")))?;
+        let mut u = SVector::<f64, U>::zeros();
+        for (j, col) in cols.iter().enumerate() {
+            let col = col.unwrap_or_default();
+            let text = record.get(col).unwrap_or("");
+            u[j] = match text.parse::<f64>() {
+                Ok(x) if x.is_finite() => x,
+                _ => {
+                    return Err(bad(format!(
+                        "line {line}, column `u_{}`: {text:?} is not a finite number",
+                        inputs[j]
+                    )));
+                }
+            };
+        }
+        let run = run_col.map(|c| record.get(c).unwrap_or("").to_string());
+        match plans.last_mut() {
+            Some((r, us)) if *r == run => us.push(u),
+            _ => {
+                if plans.iter().any(|(r, _)| *r == run) {
+                    return Err(bad(format!(
+                        "line {line}: run `{}` reappears after another run",
+                        run.unwrap_or_default()
+                    )));
+                }
+                plans.push((run, vec![u]));
+            }
+        }
+    }
+    if plans.is_empty() {
+        return Err(bad("no input rows".into()));
+    }
+    Ok(plans)
 }

@@ -84,8 +84,9 @@ pub(super) fn find(systems: &[SystemEntry], name: &str) -> Result<SystemEntry, C
 fn run_system<S: System>(cmd: &Command, out: &mut dyn Write) -> Result<(), CliError> {
     let mut sys = S::default();
     match cmd {
-        Command::Fit(a) => {
-            for s in &a.set {
+        Command::Fit(super::args::FitArgs { set, .. })
+        | Command::Simulate(super::args::SimulateArgs { set, .. }) => {
+            for s in set {
                 set_parameter(&mut sys, s)?;
             }
             sys.visit(Visit { cmd, out })
@@ -161,6 +162,7 @@ impl ViewVisitor for Visit<'_> {
                     )
                 }
             }
+            Command::Simulate(a) => super::simulate::simulate::<Mn, N, C, U>(a, minimal, out),
             Command::Export(a) => {
                 let saved = read_saved(&a.model)?;
                 if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {

@@ -6,10 +6,27 @@ use std::io::Write;
 use rayon::prelude::*;
 
 use super::args::ScoreArgs;
-use super::{CliError, bar, data_error, sparse_note, w, window_place};
+use super::{CliError, bar, check_model_inputs, data_error, sparse_note, w, window_place};
 use crate::data::Dataset;
 use crate::learned::Learned;
 use crate::{Integrator, Mechanism, SVector, State, StepError, Variational};
+
+/// The k positions a rollout's k steps produced, in minimal coordinates:
+/// those of states 2 … k (state j's position is state j − 1's plus Δt times
+/// its velocity, so state 1's is the start's x₁, produced by no step) and
+/// q_k + Δt·v_k, the end of the last step's velocity. `states`: the states
+/// after steps 1 … k.
+fn produced<const K: usize, const N: usize>(
+    states: &[State<K>],
+    dt: f64,
+    to_minimal: impl Fn(&SVector<f64, K>) -> SVector<f64, N>,
+) -> Vec<SVector<f64, N>> {
+    let mut p: Vec<_> = states[1..].iter().map(|z| to_minimal(&z.q)).collect();
+    if let Some(last) = states.last() {
+        p.push(to_minimal(&(last.q + last.v * dt)));
+    }
+    p
+}
 
 /// Mean over steps 1..=k of |p − t|²/n.
 fn window_mse<const N: usize>(pred: &[SVector<f64, N>], truth: &[SVector<f64, N>]) -> f64 {
@@ -48,18 +65,7 @@ where
     if k == 0 {
         return Err(CliError::Usage("--steps must be at least 1".into()));
     }
-    if learned.inputs() != U {
-        return Err(CliError::Usage(format!(
-            "{}: the model takes {} input(s), the mechanism has {U}{}",
-            a.model.display(),
-            learned.inputs(),
-            if U > 0 {
-                " (fit it with the input columns: `vigp fit` on data with `u_<joint>`)"
-            } else {
-                ""
-            }
-        )));
-    }
+    check_model_inputs::<U>(&a.model, learned.inputs())?;
     let dt = learned.dt();
     data.check_dt(dt, a.read.time_tolerance)
         .map_err(data_error(&a.data))?;
@@ -113,7 +119,9 @@ where
         .par_iter()
         .map(|&(r, s)| {
             let run = &data.runs[r];
-            let truth = &run.positions[s + 1..=s + k];
+            // the positions the k steps produce: x_{s+2} … x_{s+k+1} (x_{s+1}
+            // = x_s + Δt·v_s is the logged one, reached by no step)
+            let truth = &run.positions[s + 2..=s + k + 1];
             let z0 = State {
                 q: run.positions[s],
                 v: (run.positions[s + 1] - run.positions[s]) / dt,
@@ -132,10 +140,7 @@ where
             } else {
                 vi.rollout_forced_into(&z0, us, &mut buf)
             };
-            let nom = nom.map(|()| {
-                let p: Vec<_> = buf.iter().map(|z| z.q).collect();
-                window_mse(&p, truth)
-            });
+            let nom = nom.map(|()| window_mse(&produced(&buf, dt, |q| *q), truth));
             let zv = to_view(&z0);
             let mut buf = vec![zv; k];
             let lrn = if U == 0 {
@@ -143,10 +148,7 @@ where
             } else {
                 learned.rollout_mean_forced_into(&zv, &inputs[r][s], us, &mut buf)
             };
-            let lrn = lrn.map(|()| {
-                let p: Vec<_> = buf.iter().map(|z| to_minimal(&z.q)).collect();
-                window_mse(&p, truth)
-            });
+            let lrn = lrn.map(|()| window_mse(&produced(&buf, dt, &to_minimal), truth));
             pb.inc(1);
             (nom, lrn)
         })
@@ -192,6 +194,14 @@ where
             "every window failed for the nominal or the learned model".into(),
         ));
     }
+    w(
+        out,
+        format_args!(
+            "averaged over the positions the steps produce: x_(s+2) … x_(s+{}) of a window from \
+             sample s (x_(s+1) = x_s + dt·v_s is logged, not predicted), and over the windows",
+            k + 1
+        ),
+    )?;
     let n = both.len() as f64;
     let nominal_mse = both.iter().map(|p| p.0).sum::<f64>() / n;
     let learned_mse = both.iter().map(|p| p.1).sum::<f64>() / n;
