@@ -243,7 +243,19 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     let out = vigp(&args);
     assert!(out.contains("conformal"), "{out}");
     let text = std::fs::read_to_string(&pred_c).unwrap();
-    let rows: Vec<&str> = text.lines().skip(1).collect();
+    // a conformal prediction ends with the `fallback` column: the bounds
+    // are the two columns before it
+    assert!(
+        text.lines()
+            .next()
+            .is_some_and(|h| h.ends_with(",bound,position_bound,fallback")),
+        "{text}"
+    );
+    let rows: Vec<&str> = text
+        .lines()
+        .skip(1)
+        .map(|r| r.rsplit_once(',').unwrap().0)
+        .collect();
     assert_eq!(rows.len(), 4 * 6);
     let (v1, _) = bounds(rows[1]);
     let (_, q2) = bounds(rows[2]);
@@ -784,7 +796,8 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
     let text = std::fs::read_to_string(&pred).unwrap();
     let rows: Vec<&str> = text.lines().skip(1).collect();
     assert_eq!(rows.len(), 2 * 6);
-    let v1: f64 = rows[1].rsplit(',').nth(1).unwrap().parse().unwrap();
+    // `bound`: before `position_bound` and the conformal `fallback` column
+    let v1: f64 = rows[1].rsplit(',').nth(2).unwrap().parse().unwrap();
     assert!(v1.is_finite() && v1 > 0.0, "{}", rows[1]);
     // export: the M inducing points, not the N training samples
     let rs = dir.join("model.rs");

@@ -72,6 +72,8 @@
 //!   the input acts over the interval of the new discrete velocity
 //!   v_{k+1} = (x_{k+2} − x_{k+1})/Δt (`vigp_core::forced`), so that step is
 //!   driven by row k+1's input: [`Run::step_input`].
+//!   [`Dataset::from_rollout`] writes a simulated rollout this way (and
+//!   [`Dataset::write_csv`] writes any dataset in this format).
 
 use std::collections::HashSet;
 use std::io;
@@ -396,6 +398,10 @@ pub enum DataError {
         /// Its value.
         value: f64,
     },
+    /// [`Dataset::from_rollout`] was given states, inputs or names that do
+    /// not make a log (the message says which).
+    #[error("not a rollout to log: {0}")]
+    Rollout(String),
     /// Transitions with `expected` inputs asked of a dataset read with
     /// `found` input columns.
     #[error("the data has {found} input column(s), {expected} expected")]
@@ -1421,4 +1427,133 @@ impl<const N: usize> Dataset<N> {
     pub fn samples(&self) -> usize {
         self.runs.iter().map(|r| r.positions.len()).sum()
     }
+
+    /// A one-run log of a forced rollout, with every input on the row the
+    /// reader expects (module docs, **Inputs**): `states` are z_0, …, z_K
+    /// (K ≥ 0) of a rollout at step `dt` where step k (z_k → z_{k+1}) was
+    /// driven by `inputs[k]` (as [`crate::Variational::rollout_forced`]
+    /// takes them), and `previous` is the input held over the start's
+    /// velocity interval [t_0, t_1] (zero for a start at rest).
+    ///
+    /// The log has K + 2 rows at t_0 + j·dt: the positions x_j = q of z_j
+    /// for j ≤ K and x_{K+1} = q_K + dt·v_K, the end of the last discrete
+    /// velocity. Row 0 holds `previous`, row k + 1 holds `inputs[k]` (held
+    /// from t_{k+1} to t_{k+2}, the interval of the velocity step k
+    /// produces), so that reading the log back gives transition k driven by
+    /// [`Run::step_input`]`(k)` = `inputs[k]`. The last row's input drives
+    /// no step of the log; it repeats the row before (the hold goes on).
+    /// `U = 0` writes no input columns. Errors: K + 1 states but not K
+    /// inputs, names of the wrong count, a non-finite number, or a `dt`
+    /// that is not finite and > 0 ([`DataError::Rollout`]).
+    pub fn from_rollout<const U: usize>(
+        coordinates: &[&str; N],
+        input_names: &[&str],
+        run: &str,
+        (t0, dt): (f64, f64),
+        states: &[State<N>],
+        (previous, inputs): (SVector<f64, U>, &[SVector<f64, U>]),
+    ) -> Result<Self, DataError> {
+        let bad = |why: String| Err(DataError::Rollout(why));
+        if !(dt.is_finite() && dt > 0.0 && t0.is_finite()) {
+            return bad(format!("dt = {dt} and t0 = {t0} must be finite, dt > 0"));
+        }
+        if input_names.len() != U {
+            return bad(format!(
+                "{} input name(s) for {U} input(s)",
+                input_names.len()
+            ));
+        }
+        if states.is_empty() || inputs.len() + 1 != states.len() {
+            return bad(format!(
+                "{} states and {} inputs: a rollout of K steps has K + 1 states and K inputs",
+                states.len(),
+                inputs.len()
+            ));
+        }
+        let finite = states
+            .iter()
+            .all(|z| z.q.iter().chain(z.v.iter()).all(|x| x.is_finite()))
+            && inputs
+                .iter()
+                .chain(core::iter::once(&previous))
+                .all(|u| u.iter().all(|x| x.is_finite()));
+        if !finite {
+            return bad("a state or an input holds NaN or ±∞".into());
+        }
+        let last = states[states.len() - 1];
+        let mut positions: Vec<SVector<f64, N>> = states.iter().map(|z| z.q).collect();
+        positions.push(last.q + last.v * dt);
+        let run_inputs = if U == 0 {
+            Vec::new()
+        } else {
+            let mut rows = Vec::with_capacity(positions.len());
+            rows.push(previous.as_slice().to_vec());
+            rows.extend(inputs.iter().map(|u| u.as_slice().to_vec()));
+            let hold = rows[rows.len() - 1].clone();
+            rows.push(hold);
+            rows
+        };
+        Ok(Self {
+            coordinates: coordinates.iter().map(|c| c.to_string()).collect(),
+            inputs: input_names.iter().map(|c| c.to_string()).collect(),
+            runs: vec![Run {
+                name: run.to_string(),
+                t0,
+                dt: Some(dt),
+                positions,
+                inputs: run_inputs,
+                line: 2,
+            }],
+            dropped: Vec::new(),
+            warnings: Vec::new(),
+        })
+    }
+
+    /// Writes the data in the file format the reader takes (module docs):
+    /// `run,t,<coordinates>[,u_<input>…]`, one row per sample, numbers in
+    /// Rust's shortest round-trip form (read back bit for bit) and each
+    /// time written as t_0 + j·Δt at the decimals of t_0 and Δt
+    /// ([`format_time`]: 0.06, not 0.060000000000000005).
+    pub fn write_csv<W: io::Write>(&self, writer: W) -> Result<(), io::Error> {
+        let mut w = csv::Writer::from_writer(writer);
+        let mut header = vec!["run".to_string(), "t".to_string()];
+        header.extend(self.coordinates.iter().cloned());
+        header.extend(self.inputs.iter().map(|u| format!("u_{u}")));
+        w.write_record(&header).map_err(io::Error::other)?;
+        for run in &self.runs {
+            let dt = run.dt.unwrap_or(0.0);
+            for (j, q) in run.positions.iter().enumerate() {
+                let mut row = vec![run.name.clone(), format_time(run.t0, dt, j)];
+                row.extend(q.iter().map(|x| format!("{x:?}")));
+                if let Some(u) = run.inputs.get(j) {
+                    row.extend(u.iter().map(|x| format!("{x:?}")));
+                }
+                w.write_record(&row).map_err(io::Error::other)?;
+            }
+        }
+        w.flush()
+    }
+}
+
+/// The decimals that print `x` to within 1e-9 of its size (at most 12):
+/// 2 for 0.01 even when it was computed as 0.010000000000000002.
+fn decimals(x: f64) -> usize {
+    let scale = x.abs().max(f64::MIN_POSITIVE);
+    (0..=12)
+        .find(|&d| {
+            let p = 10f64.powi(d as i32);
+            ((x * p).round() / p - x).abs() <= 1e-9 * scale
+        })
+        .unwrap_or(12)
+}
+
+/// The time of sample `k` of a run from `t0` at step `dt`, t_0 + k·Δt
+/// computed from the integer index and printed at the decimals of t_0 and
+/// Δt, without float noise: `format_time(0.0, 0.02, 3)` is `"0.06"`, not
+/// `0.060000000000000005`. A one-row run (Δt = 0) prints t_0.
+pub fn format_time(t0: f64, dt: f64, k: usize) -> String {
+    let d = decimals(t0).max(if dt > 0.0 { decimals(dt) } else { 0 });
+    let t = t0 + k as f64 * dt;
+    let s = format!("{t:.d$}");
+    if d == 0 { format!("{s}.0") } else { s }
 }

@@ -1,0 +1,457 @@
+//! `vigp fit`: train a learned model on measured trajectories and save it.
+
+use std::io::Write;
+use std::time::Instant;
+
+use super::args::{EncodingArg, FitArgs, PriorArg};
+use super::{CliError, check_out_dir, data_error, read_data, spinner, w};
+use crate::data::Dataset;
+use crate::gp::{Method, Screening, SparseOptions, TrainOptions, TrainReport};
+use crate::learned::{
+    Encoding, ForcedTransition, LearnError, Learned, Prior, Transition, forced_transitions,
+    transitions,
+};
+use crate::{Coordinates, Mechanism, Parameters, SVector, State, Variational};
+
+pub(super) fn set_parameter<P: Parameters>(p: &mut P, assignment: &str) -> Result<(), CliError> {
+    let bad = |why: String| CliError::Usage(format!("--set {assignment}: {why}"));
+    let (name, value) = assignment
+        .split_once('=')
+        .ok_or_else(|| bad("expected NAME=VALUE".into()))?;
+    let value: f64 = value
+        .trim()
+        .parse()
+        .map_err(|_| bad(format!("{value:?} is not a number")))?;
+    if !value.is_finite() {
+        return Err(bad("the value must be finite".into()));
+    }
+    let i = P::parameter_index(name.trim()).ok_or_else(|| {
+        bad(format!(
+            "no parameter `{name}`; the parameters are {}",
+            P::PARAMETER_NAMES.join(", ")
+        ))
+    })?;
+    if let Some(slot) = p.parameter_mut(i) {
+        *slot = value;
+    }
+    Ok(())
+}
+
+/// `--max-samples` of the exact GP when none is given (training is O(N³)).
+const DEFAULT_MAX_SAMPLES: usize = 512;
+
+/// Evenly spaced selection of at most `max` items.
+fn spread<T: Copy>(all: &[T], max: usize) -> Vec<T> {
+    if all.len() <= max {
+        return all.to_vec();
+    }
+    (0..max).map(|i| all[i * all.len() / max]).collect()
+}
+
+/// `U`: the mechanism's inputs; with inputs the data carries `u_<joint>`
+/// columns and the model learns on state and input (GP input: the encoded
+/// state, then the previous and the current input; prior: the forced
+/// nominal step).
+pub(super) fn fit<
+    Mn,
+    Mx,
+    const N: usize,
+    const C: usize,
+    const NM: usize,
+    const CM: usize,
+    const U: usize,
+>(
+    a: &FitArgs,
+    minimal: Mn,
+    maximal: Mx,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
+    Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+{
+    // usage errors before the data are read (a long log takes a while),
+    // the nominal parameters first (`--set` may have made a mass negative)
+    if let Err(e) = minimal.constants().and_then(|_| maximal.constants()) {
+        return Err(CliError::Usage(format!(
+            "the nominal model (with --set): {e}"
+        )));
+    }
+    if a.max_samples == Some(0) {
+        return Err(CliError::Usage("--max-samples must be at least 1".into()));
+    }
+    if a.sparse == Some(0) {
+        return Err(CliError::Usage(
+            "--sparse needs at least 1 inducing point".into(),
+        ));
+    }
+    if a.restarts > vigp_runtime::gp::MAX_RESTARTS {
+        return Err(CliError::Usage(format!(
+            "--restarts must be at most {}",
+            vigp_runtime::gp::MAX_RESTARTS
+        )));
+    }
+    if !(1..=vigp_runtime::gp::MAX_MEMORY).contains(&a.memory) {
+        return Err(CliError::Usage(format!(
+            "--memory must be from 1 to {}",
+            vigp_runtime::gp::MAX_MEMORY
+        )));
+    }
+    let prior = match a.prior {
+        PriorArg::Nominal => Prior::Nominal,
+        PriorArg::Constant => Prior::Constant,
+    };
+    let mut opts = TrainOptions {
+        restarts: a.restarts,
+        seed: a.seed,
+        memory: a.memory,
+        method: match a.sparse {
+            Some(m) => Method::Sparse(SparseOptions {
+                optimise_inducing: a.optimise_inducing,
+                ..SparseOptions::kmeans(m)
+            }),
+            None => Method::Exact,
+        },
+        screening: if a.no_screen {
+            Screening::Off
+        } else {
+            Screening::Auto
+        },
+        ..TrainOptions::default()
+    };
+    if let Some(floor) = a.noise_floor {
+        let upper = opts.bounds.noise_variance.1;
+        if !(floor.is_finite() && floor > 0.0 && floor < upper) {
+            return Err(CliError::Usage(format!(
+                "--noise-floor must be finite and in (0, {upper}): {floor}"
+            )));
+        }
+        opts.bounds.noise_variance.0 = floor;
+    }
+    // before the training, which the write would otherwise waste
+    check_out_dir(&a.out)?;
+    let data = read_data(
+        &a.data,
+        &Mn::COORDINATES,
+        &Mn::KINDS,
+        Mn::INPUT_NAMES,
+        &a.read,
+    )?;
+    let dt = data
+        .dt(a.read.time_tolerance)
+        .map_err(data_error(&a.data))?;
+    let short: Vec<&str> = data.short_runs().map(|r| r.name.as_str()).collect();
+    w(
+        out,
+        format_args!(
+            "data: {}: {} runs, {} samples, dt = {dt} s",
+            a.data.display(),
+            data.runs.len(),
+            data.samples()
+        ),
+    )?;
+    if !short.is_empty() {
+        w(
+            out,
+            format_args!(
+                "note: {} run(s) with fewer than 3 samples give no transitions: {}",
+                short.len(),
+                short.join(", ")
+            ),
+        )?;
+    }
+    if U > 0 {
+        input_shift_check::<Mn, N, C, U>(minimal, dt, &data, &a.data, out)?;
+    }
+    match a.encoding {
+        EncodingArg::Sincos | EncodingArg::Minimal => {
+            let enc = if a.encoding == EncodingArg::Sincos {
+                Encoding::SinCos
+            } else {
+                Encoding::Raw
+            };
+            if U == 0 {
+                let all = data.transitions();
+                let train = |chosen: &[Transition<N>]| {
+                    Learned::train(minimal, dt, chosen, enc, prior, &opts)
+                };
+                fit_view(a, &all, (enc, prior), 0, &opts, train, out)
+            } else {
+                let all = data
+                    .forced_transitions::<U>()
+                    .map_err(data_error(&a.data))?;
+                let train = |chosen: &[ForcedTransition<N, U>]| {
+                    Learned::train_forced(minimal, dt, chosen, enc, prior, &opts)
+                };
+                fit_view(a, &all, (enc, prior), 2 * U, &opts, train, out)
+            }
+        }
+        EncodingArg::Maximal => {
+            // each run's transitions in the maximal coordinates, with its
+            // inputs when the mechanism has some
+            let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
+            let (mut plain, mut forced) = (Vec::new(), Vec::new());
+            for (run, us) in data.runs.iter().zip(&inputs) {
+                let Some(run_dt) = run.dt else { continue };
+                let xs: Vec<SVector<f64, NM>> = run
+                    .positions
+                    .iter()
+                    .map(|q| minimal.maximal_positions(q))
+                    .collect();
+                if U == 0 {
+                    plain.extend(transitions(&xs, run_dt));
+                } else {
+                    forced.extend(forced_transitions(&xs, us, run_dt));
+                }
+            }
+            if U == 0 {
+                let train = |chosen: &[Transition<NM>]| {
+                    Learned::train(maximal, dt, chosen, Encoding::Raw, prior, &opts)
+                };
+                fit_view(a, &plain, (Encoding::Raw, prior), 0, &opts, train, out)
+            } else {
+                let train = |chosen: &[ForcedTransition<NM, U>]| {
+                    Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior, &opts)
+                };
+                fit_view(a, &forced, (Encoding::Raw, prior), 2 * U, &opts, train, out)
+            }
+        }
+    }
+}
+
+/// A fitted noise variance below this fraction of the signal variance
+/// leaves the posterior variance σ_f² − kᵀ(K + σ_n²I)⁻¹k at the level of
+/// its rounding error near the data (≈ N·ε·σ_f² ≈ 1e-13·σ_f² at N = 512,
+/// with a margin of 10³): `fit` then says so and names a floor.
+const VARIANCE_RESOLVED: f64 = 1e-10;
+
+/// Trains on at most `--max-samples` of `all` (`train`: the plain or the
+/// forced training of one view, with `encoding` and `prior`), reports and
+/// saves. `u_dim`: the GP inputs that are control inputs, after the
+/// `encoding`'s state inputs (2·U for a forced model: the previous and the
+/// current input).
+fn fit_view<M, T, const N: usize, const C: usize>(
+    a: &FitArgs,
+    all: &[T],
+    (encoding, prior): (Encoding, Prior),
+    u_dim: usize,
+    opts: &TrainOptions,
+    train: impl FnOnce(&[T]) -> Result<(Learned<M, N, C>, TrainReport), LearnError>,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    M: Mechanism<N, C> + Parameters + Clone,
+    T: Copy,
+{
+    let max = match (a.max_samples, a.sparse) {
+        (Some(max), _) => max,
+        (None, Some(_)) => usize::MAX,
+        (None, None) => DEFAULT_MAX_SAMPLES,
+    };
+    let chosen = spread(all, max);
+    if let Some(m) = a.sparse.filter(|&m| m > chosen.len()) {
+        return Err(CliError::Usage(format!(
+            "--sparse {m}: more inducing points than the {} training transitions",
+            chosen.len()
+        )));
+    }
+    let d = encoding.dim(&M::KINDS) + u_dim;
+    w(
+        out,
+        format_args!(
+            "fit: {} in coordinates [{}]{}, {encoding:?} encoding ({d} inputs), {prior:?} prior: \
+             N = {} of {} transitions, {} restarts{}",
+            M::NAME,
+            M::COORDINATES.join(", "),
+            if u_dim > 0 {
+                format!(" with inputs [{}]", M::INPUT_NAMES.join(", "))
+            } else {
+                String::new()
+            },
+            chosen.len(),
+            all.len(),
+            opts.restarts,
+            match a.sparse {
+                Some(m) => format!(
+                    ", sparse GP with {m} inducing points{}",
+                    if a.optimise_inducing {
+                        " (optimised)"
+                    } else {
+                        ""
+                    }
+                ),
+                None => String::new(),
+            }
+        ),
+    )?;
+    let pb = spinner(format!(
+        "training {N} GPs on N = {} ({} starts each)",
+        chosen.len(),
+        1 + opts.restarts
+    ));
+    let start = Instant::now();
+    let result = train(&chosen);
+    pb.finish_and_clear();
+    let (learned, report) = result?;
+    w(
+        out,
+        format_args!("trained in {:.1} s", start.elapsed().as_secs_f64()),
+    )?;
+    for (j, o) in report.outputs.iter().enumerate() {
+        w(
+            out,
+            format_args!(
+                "  v_{}: log marginal likelihood {:.4e}, best start {}, jitter {:.1e}{}{}",
+                M::COORDINATES[j],
+                o.log_marginal_likelihood,
+                o.best_start,
+                o.jitter,
+                if o.converged { "" } else { " (iteration cap)" },
+                match &o.screening {
+                    Some(s) if s.fell_back => format!(
+                        " (screened on {} transitions; refit on all as white noise won)",
+                        s.subset
+                    ),
+                    Some(s) => format!(
+                        " (screened on {} transitions, {} {} refined on all)",
+                        s.subset,
+                        s.refined.len(),
+                        if s.refined.len() == 1 {
+                            "optimum"
+                        } else {
+                            "optima"
+                        }
+                    ),
+                    None => String::new(),
+                }
+            ),
+        )?;
+    }
+    if let Some(z) = &report.inducing {
+        w(
+            out,
+            format_args!(
+                "  inducing points optimised: summed bound {:.4e} -> {:.4e} in {} iterations{}",
+                z.bound_before,
+                z.bound_after,
+                z.iterations,
+                if z.converged { "" } else { " (iteration cap)" }
+            ),
+        )?;
+    }
+    if a.sparse.is_none() {
+        for (j, o) in learned.gp().outputs().iter().enumerate() {
+            let hp = o.hyperparameters();
+            let ratio = hp.noise_variance / hp.signal_variance;
+            // the smallest power of ten at or above the resolvable floor
+            // (the 1e-9 keeps an exact power of ten from rounding up)
+            let floor =
+                10f64.powf(((VARIANCE_RESOLVED * hp.signal_variance).log10() - 1e-9).ceil());
+            if hp.noise_variance < 0.5 * floor {
+                w(
+                    out,
+                    format_args!(
+                        "note: v_{}: noise variance {:.1e} is {ratio:.0e} of the signal variance \
+                         {:.1e} (normalised units): the posterior variance can be lost to rounding \
+                         and `predict --bound rkhs|theorem1` refuse such states; refit with \
+                         --noise-floor {floor:e} or bound with --calibration",
+                        M::COORDINATES[j],
+                        hp.noise_variance,
+                        hp.signal_variance,
+                    ),
+                )?;
+            }
+        }
+    }
+    learned.save(&a.out).map_err(|source| CliError::Model {
+        path: a.out.clone(),
+        source,
+    })?;
+    let bytes = std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0);
+    w(
+        out,
+        format_args!("wrote {} ({bytes} bytes)", a.out.display()),
+    )
+}
+
+/// How much better a one-row shift of the inputs must fit the data than
+/// the inputs as logged before `fit` warns ([`input_shift_check`]).
+const SHIFT_FACTOR: f64 = 10.0;
+
+/// Transitions the shift check steps at most (evenly spaced).
+const SHIFT_SAMPLES: usize = 400;
+
+/// Warns when the inputs fit the data markedly better shifted by one row:
+/// the nominal (first-order) model's one-step position error
+/// |x_{k+2} − (x_{k+1} + Δt·v_{k+1})|², averaged over up to 400
+/// transitions, with each step driven by row k + 1's input as logged
+/// (the reader's convention) and by row k's or row k + 2's instead. A
+/// shift whose error is below 1/10 of the logged one (and the logged
+/// one above 1e-20, rounding) gets a warning naming the direction. A
+/// model far from the truth fits every alignment about equally badly and
+/// is not flagged.
+fn input_shift_check<Mn, const N: usize, const C: usize, const U: usize>(
+    nominal: Mn,
+    dt: f64,
+    data: &Dataset<N>,
+    path: &std::path::Path,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Copy,
+{
+    let inputs = data.input_vectors::<U>().map_err(data_error(path))?;
+    // transitions k of each run with rows k .. k + 2 for every shift
+    let mut cases: Vec<(usize, usize)> = Vec::new();
+    for (r, run) in data.runs.iter().enumerate() {
+        if run.dt.is_some() && run.positions.len() >= 4 {
+            cases.extend((1..run.positions.len() - 2).map(|k| (r, k)));
+        }
+    }
+    let cases = spread(&cases, SHIFT_SAMPLES);
+    let vi = Variational::new(nominal, dt);
+    let mut sums = [0.0f64; 3];
+    let mut used = 0usize;
+    for (r, k) in cases {
+        let run = &data.runs[r];
+        let Some(z) = run.state(k) else { continue };
+        let errors: Option<Vec<f64>> = [k, k + 1, k + 2]
+            .iter()
+            .map(|&row| {
+                let z1: State<N> = vi.step_forced(&z, &inputs[r][row]).ok()?;
+                let x2 = z1.q + z1.v * dt;
+                Some((x2 - run.positions[k + 2]).norm_squared() / N as f64)
+            })
+            .collect();
+        if let Some(e) = errors {
+            for (sum, e) in sums.iter_mut().zip(e) {
+                *sum += e;
+            }
+            used += 1;
+        }
+    }
+    if used == 0 {
+        return Ok(());
+    }
+    let [early, logged, late] = sums.map(|s| s / used as f64);
+    let (best, which) = if early <= late {
+        (early, "early")
+    } else {
+        (late, "late")
+    };
+    if logged > 1e-20 && best * SHIFT_FACTOR < logged {
+        w(
+            out,
+            format_args!(
+                "warning: {}: the inputs look logged one row {which}: the nominal model's one-step \
+                 position error (mean square over {used} transitions) is {logged:.2e} with the \
+                 inputs as logged and {best:.2e} with each taken from the row {} (≥ {SHIFT_FACTOR}× \
+                 better). The reader holds row k's input from t_k to t_(k+1): the step from row k \
+                 to row k + 1 is driven by row k + 1's input",
+                path.display(),
+                if which == "early" { "before" } else { "after" }
+            ),
+        )?;
+    }
+    Ok(())
+}

@@ -1,0 +1,531 @@
+//! The `vigp` command-line tool, for the paper's systems and for your own
+//! planar mechanism (feature `cli`; 3-D mechanisms are learned in Rust with
+//! `vigp::spatial::learned::LearnedSpatial`).
+//!
+//! ```text
+//! vigp fit     --system NAME --data train.csv --out model.json
+//!              [--encoding sincos|minimal|maximal] [--prior nominal|constant] [--restarts K]
+//!              [--max-samples N] [--no-screen | --sparse M [--optimise-inducing]]
+//!              [--noise-floor VAR] [--memory K]
+//! vigp score   --model model.json --data test.csv --steps 20
+//! vigp predict --model model.json --data starts.csv --steps K --out pred.csv
+//!              [--stride K] [--inputs plan.csv] [--calibration held_out.csv]
+//! vigp export  --model model.json --out model.rs [--variance]
+//! vigp simulate --system NAME --q Q,… [--v V,…] --dt DT --steps K
+//!              [--inputs plan.csv] --out log.csv
+//! ```
+//!
+//! * `fit` reads measured positions ([`crate::data`] format), builds the
+//!   transitions, trains a [`Learned`] model on at most `--max-samples`
+//!   of them (evenly spaced; default 512, as exact GP training is O(N³);
+//!   `--sparse M` trains the sparse variational GP with M inducing points
+//!   on all of them, O(N·M²); `--optimise-inducing` also moves its
+//!   inducing points; from 512 transitions the exact GP's starts are
+//!   screened on a subset first, `--no-screen` runs them all on every
+//!   transition) with the mechanism's
+//!   DSL parameters as nominal prior (change them with
+//!   `--set links.pole.mass=1.1`), and saves it as one JSON file.
+//!   `--encoding minimal` learns on the minimal coordinates as they are,
+//!   `sincos` replaces every angle by its sine and cosine, `maximal` learns
+//!   in maximal coordinates (each link's x, y, θ; projected onto the joint
+//!   constraints).
+//! * `score` is the paper's k-step prediction error: from every sample s of
+//!   every run with k + 1 more samples after it, k steps of the learned
+//!   model and of the nominal variational integrator, position MSE in
+//!   minimal coordinates averaged over the positions the steps produce
+//!   (x_{s+2} … x_{s+k+1}: x_{s+1} = x_s + Δt·v_s is the logged sample
+//!   itself) and over the windows. Its last line is
+//!   `nominal_mse=<x> learned_mse=<y>`.
+//! * `predict` rolls the learned model out from the first two rows of every
+//!   run (position and discrete velocity; `--stride k`: from every k-th
+//!   sample) and writes the trajectories with
+//!   each predicted velocity's one-step error bound and each position's
+//!   bound along the prediction (`--bound conformal|rkhs|theorem1`;
+//!   conformal with `--calibration`, RKHS without; δ = `--delta`); a
+//!   conformal prediction's `fallback` column marks the rows whose bounds
+//!   fell back to the RKHS bound, and its summary states what the
+//!   guarantee covers (marginal over start states, per step, at 1 − δ).
+//! * `simulate` rolls the nominal model out from `--q`/`--v` under planned
+//!   (`--inputs`) or zero inputs and writes a log in the data format,
+//!   each input on the row the reader expects.
+//! * `export` writes the Rust source of a `no_std` learned model for
+//!   [`crate::embedded::LearnedStepper`] and states its size.
+//!
+//! An actuated mechanism's data carry one `u_<joint>` column per input
+//! ([`crate::data`]): `fit` learns on state and input (the GP's inputs are
+//! the encoded state, then the previous and the current input; the prior is
+//! the forced nominal step),
+//! `score` rolls both models out under the logged inputs, `export` writes
+//! a model that steps under u, and `predict` predicts under the inputs
+//! logged in each run (the run needs `--steps` + 1 rows) or planned in an
+//! input-only CSV (`--inputs`, columns `u_<joint>`) with the bound of
+//! [`crate::learned::Learned::predict_forced`] (conformal: the held-out
+//! runs of `--calibration` carry their inputs too).
+//!
+//! The row convention of inputs, everywhere: row k's input is held from
+//! t_k to t_{k+1}, so the step from row k to row k + 1 is driven by row
+//! k + 1's input (`fit` warns when the inputs fit the data markedly better
+//! shifted by one row).
+//!
+//! Your own mechanism gets the same tool from one line:
+//!
+//! ```no_run
+//! vigp::mechanism! {
+//!     /// My robot.
+//!     pub Arm {
+//!         links { upper: { mass: 1.0, length: 0.5 } }
+//!         joints { shoulder: revolute(world, upper.start) { damping: 0.1 } }
+//!     }
+//! }
+//!
+//! fn main() -> std::process::ExitCode {
+//!     vigp::cli::main::<Arm>()
+//! }
+//! ```
+
+mod args;
+mod export;
+mod fit;
+mod predict;
+mod registry;
+mod score;
+mod simulate;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use std::time::Duration;
+
+use clap::Parser;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::bound::BoundError;
+use crate::data::{DataError, Dataset};
+use crate::gp::GpError;
+use crate::learned::{LearnError, Learned, LoadError, SavedLearned};
+use crate::{Mechanism, Parameters, SVector, StepError, System};
+
+use args::{Cli, Command, ExportArgs, PredictArgs, ReadArgs, ScoreArgs};
+pub use registry::{SystemEntry, paper_systems, system};
+use registry::{find, names};
+
+/// Everything that can stop a command.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CliError {
+    /// Bad command-line arguments (clap's message, or help and version
+    /// output, which [`main_with`] prints and exits 0 on).
+    #[error("{0}")]
+    Args(#[from] clap::Error),
+    /// Arguments that parse but do not make sense.
+    #[error("{0}")]
+    Usage(String),
+    /// A data file could not be read.
+    #[error("{}", with_path(path, source, matches!(**source, DataError::Io { .. })))]
+    Data {
+        /// The file.
+        path: PathBuf,
+        /// Why (boxed: the data errors carry run names and values, and
+        /// every command returns this type).
+        source: Box<DataError>,
+    },
+    /// A model file could not be loaded or saved.
+    #[error("{}", with_path(path, source, matches!(source, LoadError::Io { .. })))]
+    Model {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: LoadError,
+    },
+    /// Training failed.
+    #[error("training failed: {0}")]
+    Learn(#[from] LearnError),
+    /// A prediction failed.
+    #[error("prediction failed: {0}")]
+    Step(#[from] StepError),
+    /// The error bound could not be made or attached.
+    #[error("error bound: {0}")]
+    Bound(#[from] BoundError),
+    /// The GP could not be exported.
+    #[error("export failed: {0}")]
+    Export(#[from] GpError),
+    /// An output file could not be written.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+}
+
+/// "path: why", or "why" alone when it names the path already (the
+/// library's I/O errors do).
+fn with_path(path: &Path, why: &dyn std::fmt::Display, names_path: bool) -> String {
+    if names_path {
+        why.to_string()
+    } else {
+        format!("{}: {why}", path.display())
+    }
+}
+
+/// An output file's directory must exist, and the path must not be a
+/// directory itself (checked before any work).
+fn check_out_dir(path: &Path) -> Result<(), CliError> {
+    if path.is_dir() {
+        return Err(CliError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::IsADirectory,
+                "is a directory: give a file name",
+            ),
+        });
+    }
+    match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() && !dir.is_dir() => Err(CliError::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::NotFound,
+                format!("directory {} does not exist", dir.display()),
+            ),
+        }),
+        _ => Ok(()),
+    }
+}
+
+fn io_error(path: &Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
+    move |source| CliError::Io {
+        path: path.to_path_buf(),
+        source,
+    }
+}
+
+fn data_error(path: &Path) -> impl FnOnce(DataError) -> CliError + '_ {
+    move |source| CliError::Data {
+        path: path.to_path_buf(),
+        source: Box::new(source),
+    }
+}
+
+/// The whole tool for one mechanism: `fn main() -> ExitCode { vigp::cli::main::<MyMechanism>() }`.
+pub fn main<S: System>() -> ExitCode {
+    main_with(&[system::<S>()])
+}
+
+/// The tool for several mechanisms, with the process's arguments; prints
+/// errors to stderr and returns the exit code.
+pub fn main_with(systems: &[SystemEntry]) -> ExitCode {
+    let mut stdout = std::io::stdout().lock();
+    match run(systems, std::env::args_os(), &mut stdout) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(CliError::Args(e)) => {
+            let _ = e.print();
+            if e.use_stderr() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::SUCCESS
+            }
+        }
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Runs one command line (`args` including the program name) for the given
+/// mechanisms, writing the report to `out`. Progress bars go to stderr
+/// (only on a terminal).
+pub fn run<I, T>(systems: &[SystemEntry], args: I, out: &mut dyn Write) -> Result<(), CliError>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<std::ffi::OsString> + Clone,
+{
+    let cli = Cli::try_parse_from(args)?;
+    let entry = match &cli.command {
+        Command::Fit(args::FitArgs { system, .. })
+        | Command::Simulate(args::SimulateArgs { system, .. }) => match system {
+            Some(name) => find(systems, name)?,
+            None if systems.len() == 1 => systems[0],
+            None => {
+                return Err(CliError::Usage(format!(
+                    "--system is needed: one of {}",
+                    names(systems)
+                )));
+            }
+        },
+        Command::Score(ScoreArgs { model, .. })
+        | Command::Predict(PredictArgs { model, .. })
+        | Command::Export(ExportArgs { model, .. }) => {
+            let saved = read_saved(model)?;
+            find(systems, &saved.mechanism)?
+        }
+    };
+    (entry.run)(&cli.command, out)
+}
+
+fn read_saved(path: &Path) -> Result<SavedLearned, CliError> {
+    SavedLearned::read(path).map_err(|source| CliError::Model {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Sets `p`'s parameters from a saved model's.
+fn restore_parameters<P: Parameters>(
+    p: &mut P,
+    saved: &SavedLearned,
+    path: &Path,
+) -> Result<(), CliError> {
+    for (i, name) in P::PARAMETER_NAMES.iter().enumerate() {
+        let value = saved
+            .parameters
+            .get(*name)
+            .copied()
+            .ok_or_else(|| CliError::Model {
+                path: path.to_path_buf(),
+                source: LoadError::MissingParameter(name.to_string()),
+            })?;
+        if let Some(slot) = p.parameter_mut(i) {
+            *slot = value;
+        }
+    }
+    Ok(())
+}
+
+fn spinner(message: String) -> ProgressBar {
+    let pb = ProgressBar::new_spinner();
+    pb.set_style(
+        ProgressStyle::with_template("{spinner} {msg} [{elapsed}]")
+            .unwrap_or_else(|_| ProgressStyle::default_spinner()),
+    );
+    pb.set_message(message);
+    pb.enable_steady_tick(Duration::from_millis(120));
+    pb
+}
+
+fn bar(len: usize, message: &'static str) -> ProgressBar {
+    let pb = ProgressBar::new(len as u64);
+    pb.set_style(
+        ProgressStyle::with_template("{msg} {bar:30} {pos}/{len} [{elapsed} < {eta}]")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    pb.set_message(message);
+    pb
+}
+
+fn w(out: &mut dyn Write, text: std::fmt::Arguments<'_>) -> Result<(), CliError> {
+    out.write_fmt(text)
+        .and_then(|_| out.write_all(b"\n"))
+        .map_err(io_error(Path::new("<stdout>")))
+}
+
+/// Reads a data file with the mechanism's coordinates and, for an actuated
+/// mechanism, its input columns `u_<joint>`.
+fn read_data<const N: usize>(
+    path: &Path,
+    names: &[&'static str; N],
+    kinds: &[crate::CoordinateKind; N],
+    inputs: &[&str],
+    read: &ReadArgs,
+) -> Result<Dataset<N>, CliError> {
+    let data = Dataset::read_path_with_inputs(path, names, kinds, inputs, &read.options())
+        .map_err(data_error(path))?;
+    // unit heuristics and dropped outliers: on stderr, the results stay
+    // on stdout
+    for warning in &data.warnings {
+        eprintln!("warning: {}: {warning}", path.display());
+    }
+    if !data.dropped.is_empty() {
+        let first = &data.dropped[0];
+        eprintln!(
+            "note: {}: dropped {} outlier reading(s) (--drop-outliers), the first at run `{}`, line {}, column `{}`",
+            path.display(),
+            data.dropped.len(),
+            first.run,
+            first.line,
+            first.column
+        );
+    }
+    Ok(data)
+}
+
+/// ", sparse GP, M = …" for a sparse model, "" for an exact one.
+fn sparse_note(gp: &crate::gp::Gp) -> String {
+    if gp.is_sparse() {
+        format!(", sparse GP, M = {}", gp.posterior_points())
+    } else {
+        String::new()
+    }
+}
+
+/// A saved model, the nominal minimal model with the file's parameters, and
+/// the data (with the mechanism's input columns): what `score` and
+/// `predict` start from.
+fn model_and_data<Mn, const N: usize, const C: usize>(
+    model: &Path,
+    data: &Path,
+    read: &ReadArgs,
+    minimal: Mn,
+) -> Result<(SavedLearned, Mn, Dataset<N>), CliError>
+where
+    Mn: Mechanism<N, C> + Parameters,
+{
+    let saved = read_saved(model)?;
+    let mut nominal = minimal;
+    restore_parameters(&mut nominal, &saved, model)?;
+    let data = read_data(data, &Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES, read)?;
+    Ok((saved, nominal, data))
+}
+
+/// `true` when a model file is in the minimal coordinates, `false` when in
+/// the maximal ones; an error naming both when in neither (an edited or
+/// corrupted file), rather than a complaint against one of them.
+fn in_minimal<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+    path: &Path,
+    saved: &SavedLearned,
+) -> Result<bool, CliError>
+where
+    Mn: Mechanism<N, C>,
+    Mx: Mechanism<NM, CM>,
+{
+    if saved.coordinates == Mn::COORDINATES {
+        Ok(true)
+    } else if saved.coordinates == Mx::COORDINATES {
+        Ok(false)
+    } else {
+        Err(CliError::Usage(format!(
+            "{}: field `coordinates`: [{}] are neither the minimal coordinates [{}] nor the \
+             maximal ones [{}] of {}",
+            path.display(),
+            saved.coordinates.join(", "),
+            Mn::COORDINATES.join(", "),
+            Mx::COORDINATES.join(", "),
+            saved.mechanism
+        )))
+    }
+}
+
+fn load<M: Mechanism<N, C> + Parameters + Clone, const N: usize, const C: usize>(
+    path: &Path,
+    saved: &SavedLearned,
+    model: M,
+) -> Result<Learned<M, N, C>, CliError> {
+    Learned::from_saved(model, saved).map_err(|source| CliError::Model {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Where a window from sample `s` of `run` starts: the run, the sample and
+/// its file line (not for a resampled run, whose samples have none).
+fn window_place<const N: usize>(run: &crate::data::Run<N>, s: usize, resampled: bool) -> String {
+    if resampled {
+        format!("run `{}`, window from sample {s} (resampled)", run.name)
+    } else {
+        format!(
+            "run `{}`, window from line {} (sample {s})",
+            run.name,
+            run.line + s as u64
+        )
+    }
+}
+
+/// A model of `found` inputs for a mechanism of `U`: a usage error naming
+/// the model file (`score` and `predict`).
+fn check_model_inputs<const U: usize>(model: &Path, found: usize) -> Result<(), CliError> {
+    if found == U {
+        return Ok(());
+    }
+    Err(CliError::Usage(format!(
+        "{}: the model takes {found} input(s), the mechanism has {U}{}",
+        model.display(),
+        if U > 0 {
+            " (fit it with the input columns: `vigp fit` on data with `u_<joint>`)"
+        } else {
+            ""
+        }
+    )))
+}
+
+/// An input-only CSV of planned inputs (`predict --inputs`, `simulate
+/// --inputs`): one column `u_<joint>` per input, an optional `run` column
+/// (rows of one run contiguous), an ignored `t` column. Each plan in file
+/// order, with its run label (`None` without a `run` column).
+type Plans<const U: usize> = Vec<(Option<String>, Vec<SVector<f64, U>>)>;
+
+fn read_plan<const U: usize>(path: &Path, inputs: &[&str]) -> Result<Plans<U>, CliError> {
+    let bad = |why: String| CliError::Usage(format!("{}: {why}", path.display()));
+    if U == 0 {
+        return Err(bad(
+            "the mechanism has no inputs (no `actuated` joint): nothing to plan".into(),
+        ));
+    }
+    let mut rdr = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .from_path(path)
+        .map_err(|e| bad(e.to_string()))?;
+    let header = rdr.headers().map_err(|e| bad(e.to_string()))?.clone();
+    let (mut run_col, mut cols) = (None, vec![None; U]);
+    for (i, name) in header.iter().enumerate() {
+        if name == "t" {
+            // times are implied: row j drives step j
+            continue;
+        }
+        if name == "run" {
+            run_col = Some(i);
+        } else if let Some(j) = inputs.iter().position(|n| format!("u_{n}") == name) {
+            if cols[j].replace(i).is_some() {
+                return Err(bad(format!("line 1: column `{name}` appears twice")));
+            }
+        } else {
+            return Err(bad(format!(
+                "line 1: unknown column `{name}`: a plan has the input columns {} (and may have                  `run` and `t`), no positions",
+                inputs
+                    .iter()
+                    .map(|n| format!("`u_{n}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
+    if let Some(j) = cols.iter().position(Option::is_none) {
+        return Err(bad(format!("line 1: missing column `u_{}`", inputs[j])));
+    }
+    let mut plans: Plans<U> = Vec::new();
+    for (n, record) in rdr.records().enumerate() {
+        let line = n + 2;
+        let record = record.map_err(|e| bad(format!("line {line}: {e}")))?;
+        let mut u = SVector::<f64, U>::zeros();
+        for (j, col) in cols.iter().enumerate() {
+            let col = col.unwrap_or_default();
+            let text = record.get(col).unwrap_or("");
+            u[j] = match text.parse::<f64>() {
+                Ok(x) if x.is_finite() => x,
+                _ => {
+                    return Err(bad(format!(
+                        "line {line}, column `u_{}`: {text:?} is not a finite number",
+                        inputs[j]
+                    )));
+                }
+            };
+        }
+        let run = run_col.map(|c| record.get(c).unwrap_or("").to_string());
+        match plans.last_mut() {
+            Some((r, us)) if *r == run => us.push(u),
+            _ => {
+                if plans.iter().any(|(r, _)| *r == run) {
+                    return Err(bad(format!(
+                        "line {line}: run `{}` reappears after another run",
+                        run.unwrap_or_default()
+                    )));
+                }
+                plans.push((run, vec![u]));
+            }
+        }
+    }
+    if plans.is_empty() {
+        return Err(bad("no input rows".into()));
+    }
+    Ok(plans)
+}

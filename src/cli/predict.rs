@@ -1,0 +1,445 @@
+//! `vigp predict`: learned trajectories with error bounds.
+
+use std::io::Write;
+
+use super::args::{BoundArg, PredictArgs};
+use super::{
+    CliError, bar, check_model_inputs, check_out_dir, data_error, io_error, read_data, read_plan,
+    w, window_place,
+};
+use crate::bound::{BoundKind, BoundParts, Calibration, ErrorBound, Tube};
+use crate::data::Dataset;
+use crate::learned::Learned;
+use crate::{Integrator, Mechanism, SVector, State};
+
+/// `U`: the mechanism's inputs (0 for none; with inputs each run's logged
+/// inputs drive its prediction).
+pub(super) fn predict<L, const N: usize, const K: usize, const CK: usize, const U: usize>(
+    a: &PredictArgs,
+    learned: &Learned<L, K, CK>,
+    data: &Dataset<N>,
+    (names, kinds, inputs): (
+        &[&'static str; N],
+        &[crate::CoordinateKind; N],
+        &[&'static str],
+    ),
+    to_view: impl Fn(&State<N>) -> State<K>,
+    to_minimal: impl Fn(&State<K>) -> State<N>,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    L: Mechanism<K, CK> + Clone,
+{
+    if a.steps == 0 {
+        return Err(CliError::Usage("--steps must be at least 1".into()));
+    }
+    if a.stride == Some(0) {
+        return Err(CliError::Usage("--stride must be at least 1".into()));
+    }
+    check_model_inputs::<U>(&a.model, learned.inputs())?;
+    check_out_dir(&a.out)?;
+    let dt = learned.dt();
+    data.check_dt(dt, a.read.time_tolerance)
+        .map_err(data_error(&a.data))?;
+    // each run's logged inputs (none without inputs)
+    let logged = data.input_vectors::<U>().map_err(data_error(&a.data))?;
+    // planned inputs, when given (refused for a mechanism without inputs)
+    let plans = match &a.inputs {
+        Some(path) => Some((path, read_plan::<U>(path, inputs)?)),
+        None => None,
+    };
+    // a start state needs two rows (position and discrete velocity), and a
+    // forced prediction of k steps from row s the inputs of rows
+    // s+1..=s+k unless planned: shorter runs are skipped with a note, as
+    // `fit` notes its short runs
+    let rows = if U > 0 && plans.is_none() {
+        a.steps + 1
+    } else {
+        2
+    };
+    let mut starts = Vec::with_capacity(data.runs.len());
+    let mut short = Vec::new();
+    for (r, run) in data.runs.iter().enumerate() {
+        let plan = match &plans {
+            None => None,
+            Some((path, plans)) => {
+                let found = plans
+                    .iter()
+                    .find(|(name, _)| name.as_deref().is_none_or(|n| n == run.name));
+                let Some((_, plan)) = found else {
+                    return Err(CliError::Usage(format!(
+                        "{}: no inputs for run `{}` of {}",
+                        path.display(),
+                        run.name,
+                        a.data.display()
+                    )));
+                };
+                if plan.len() < a.steps {
+                    return Err(CliError::Usage(format!(
+                        "{}: {} input row(s){}, --steps {} needs {}",
+                        path.display(),
+                        plan.len(),
+                        if plans[0].0.is_some() {
+                            format!(" for run `{}`", run.name)
+                        } else {
+                            String::new()
+                        },
+                        a.steps,
+                        a.steps
+                    )));
+                }
+                Some(&plan[..a.steps])
+            }
+        };
+        let before = starts.len();
+        let mut s = 0usize;
+        while s
+            .checked_add(rows)
+            .is_some_and(|end| end <= run.positions.len())
+        {
+            let Some(z) = run.state(s) else { break };
+            // the inputs of rows s+1..=s+k (or the plan's), after row s's
+            // (which produced the start's velocity)
+            let (up, us): (SVector<f64, U>, Vec<SVector<f64, U>>) = if U > 0 {
+                let us = match plan {
+                    Some(p) => p.to_vec(),
+                    None => logged[r][s + 1..=s + a.steps].to_vec(),
+                };
+                (logged[r][s], us)
+            } else {
+                (SVector::zeros(), Vec::new())
+            };
+            starts.push((run, s, z, up, us));
+            // one start per run without --stride
+            match a.stride.and_then(|k| s.checked_add(k)) {
+                Some(next) => s = next,
+                None => break,
+            }
+        }
+        if starts.len() == before {
+            short.push(run.name.as_str());
+        }
+    }
+    // what a skipped run lacks, for the note and the error
+    let (too_few, why) = if rows > 2 {
+        (
+            format!("fewer than {rows} rows"),
+            format!(
+                "a start state needs two, and the prediction the inputs logged in rows 1 to {}",
+                a.steps
+            ),
+        )
+    } else {
+        ("one row".to_string(), "a start state needs two".to_string())
+    };
+    if starts.is_empty() {
+        return Err(CliError::Usage(format!(
+            "{}: every run has {too_few} ({why})",
+            a.data.display()
+        )));
+    }
+    if !short.is_empty() {
+        w(
+            out,
+            format_args!(
+                "note: skipped {} run(s) of {too_few} ({why}): {}",
+                short.len(),
+                short.join(", ")
+            ),
+        )?;
+    }
+    let view_starts: Vec<State<K>> = starts.iter().map(|(_, _, z, _, _)| to_view(z)).collect();
+    let kind_arg = a.bound.unwrap_or(if a.calibration.is_some() {
+        BoundArg::Conformal
+    } else {
+        BoundArg::Rkhs
+    });
+    let calibration = match &a.calibration {
+        Some(path) => {
+            let held_out = read_data(path, names, kinds, inputs, &a.read)?;
+            held_out
+                .check_dt(dt, a.read.time_tolerance)
+                .map_err(data_error(path))?;
+            // a window of h steps needs h + 1 samples of one run
+            let horizon = a.steps.max(2);
+            let longest = held_out
+                .runs
+                .iter()
+                .map(|r| r.positions.len())
+                .max()
+                .unwrap_or(0);
+            if longest <= horizon {
+                let mut lengths: Vec<String> = held_out
+                    .runs
+                    .iter()
+                    .take(8)
+                    .map(|r| format!("`{}` {}", r.name, r.positions.len()))
+                    .collect();
+                if held_out.runs.len() > 8 {
+                    lengths.push(format!("… ({} runs)", held_out.runs.len()));
+                }
+                return Err(CliError::Usage(format!(
+                    "{}: --steps {} is calibrated on windows of {horizon} steps, which need runs \
+                     of at least {} samples; the longest run has {longest} (samples per run: {}). \
+                     Give longer held-out runs or fewer --steps",
+                    path.display(),
+                    a.steps,
+                    horizon + 1,
+                    lengths.join(", ")
+                )));
+            }
+            // windows in the model's coordinates: positions of the view
+            // (and, with inputs, each sample's logged input)
+            let trajectories: Vec<Vec<SVector<f64, K>>> = held_out
+                .runs
+                .iter()
+                .map(|run| {
+                    run.positions
+                        .iter()
+                        .map(|q| {
+                            to_view(&State {
+                                q: *q,
+                                v: SVector::zeros(),
+                            })
+                            .q
+                        })
+                        .collect()
+                })
+                .collect();
+            if U > 0 {
+                let logged = held_out.input_vectors::<U>().map_err(data_error(path))?;
+                Calibration::from_trajectories_forced(
+                    &trajectories,
+                    &logged,
+                    dt,
+                    a.steps.max(2),
+                    1,
+                )?
+            } else {
+                Calibration::from_trajectories(&trajectories, dt, a.steps.max(2), 1)?
+            }
+        }
+        None if kind_arg == BoundArg::Conformal => {
+            return Err(CliError::Usage(
+                "--bound conformal needs held-out runs: pass --calibration FILE".into(),
+            ));
+        }
+        None => Calibration::empty(dt),
+    };
+    let kind = match kind_arg {
+        BoundArg::Conformal => BoundKind::conformal(a.delta),
+        BoundArg::Theorem1 => BoundKind::theorem1(a.delta),
+        BoundArg::Rkhs => BoundKind::rkhs(a.delta),
+    };
+    // (U = 0 is `error_bound`; the model's input count is checked above)
+    let bound = learned.error_bound_forced::<U>(&kind, &calibration)?;
+    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
+    let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
+    let coords: Vec<String> = data.coordinates.clone();
+    let mut header = vec!["run".to_string()];
+    if a.stride.is_some() {
+        header.push("start".into());
+    }
+    header.push("t".into());
+    header.extend(coords.iter().cloned());
+    header.extend(coords.iter().map(|c| format!("v_{c}")));
+    // the input that drove the step into each row (the data's convention)
+    header.extend(inputs.iter().map(|j| format!("u_{j}")));
+    header.push("bound".into());
+    header.push("position_bound".into());
+    // which rows' bounds are the conformal bound's fallback (see below)
+    let conformal = bound.kind_name() == "conformal";
+    if conformal {
+        header.push("fallback".into());
+    }
+    let csv_err = |e: csv::Error| CliError::Io {
+        path: a.out.clone(),
+        source: std::io::Error::other(e),
+    };
+    wtr.write_record(&header).map_err(csv_err)?;
+    let pb = bar(starts.len(), "predicting");
+    let mut failed = 0usize;
+    let mut first_error = None;
+    // states outside what the bound covers, and the runs holding them
+    let (mut outside, mut outside_runs) = (0usize, 0usize);
+    for ((run, s, z0, up, us), zv) in starts.iter().zip(&view_starts) {
+        let pred = if U > 0 {
+            learned.predict_forced(zv, up, us, &bound)
+        } else {
+            learned.predict(zv, a.steps, &bound)
+        };
+        let pred = match pred {
+            Ok(p) => p,
+            Err(e) => {
+                failed += 1;
+                w(
+                    out,
+                    format_args!("{}: {e}", window_place(run, *s, a.read.resample.is_some())),
+                )?;
+                first_error.get_or_insert(e);
+                continue;
+            }
+        };
+        let n_out = pred.outside.iter().filter(|&&o| o).count();
+        outside += n_out;
+        outside_runs += usize::from(n_out > 0);
+        for (k, z) in pred.states.iter().enumerate() {
+            let zm = if k == 0 { *z0 } else { to_minimal(z) };
+            let mut row = vec![run.name.clone()];
+            if a.stride.is_some() {
+                row.push(s.to_string());
+            }
+            // t_0 + (s + k)·Δt from the integer index, without float noise
+            row.push(crate::data::format_time(
+                run.t0,
+                run.dt.unwrap_or(dt),
+                s + k,
+            ));
+            row.extend(zm.q.iter().map(|x| format!("{x:?}")));
+            row.extend(zm.v.iter().map(|x| format!("{x:?}")));
+            match us.get(k.wrapping_sub(1)) {
+                Some(u) => row.extend(u.iter().map(|x| format!("{x:?}"))),
+                None => row.extend(inputs.iter().map(|_| String::new())),
+            }
+            row.push(if k == 0 {
+                String::new()
+            } else {
+                format!("{:?}", pred.one_step_bounds[k - 1])
+            });
+            row.push(format!("{:?}", pred.position_bounds[k]));
+            if conformal {
+                // row k's `bound` is predicted from state k − 1, and every
+                // position bound falls back when the start is outside
+                let flagged = k > 0 && (pred.outside[k - 1] || pred.outside[0]);
+                row.push(match (&bound.fallback, flagged) {
+                    (Some(f), true) => f.kind_name().to_string(),
+                    (None, true) => "outside".to_string(),
+                    (_, false) => String::new(),
+                });
+            }
+            wtr.write_record(&row).map_err(csv_err)?;
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    wtr.flush().map_err(io_error(&a.out))?;
+    if failed == starts.len()
+        && let Some(e) = first_error
+    {
+        // a file with the header alone is no result: fail (exit code 1)
+        w(
+            out,
+            format_args!(
+                "every run failed ({failed}); {} holds no predictions",
+                a.out.display()
+            ),
+        )?;
+        return Err(e.into());
+    }
+    if outside > 0 {
+        let what = match (&bound.fallback, bound.kind_name()) {
+            (Some(f), _) => format!(
+                "outside the calibrated region: their bounds (and, where the start is \
+                 outside, the whole run's position bounds) are the larger of the conformal \
+                 and the {} bound",
+                f.kind_name()
+            ),
+            (None, "conformal") => format!(
+                "outside the calibrated region: the conformal guarantee does not cover them{}",
+                if learned.gp().is_sparse() {
+                    " (a sparse GP has no rigorous bound to fall back to)"
+                } else {
+                    ""
+                }
+            ),
+            _ => {
+                "outside the box of the training inputs, where the bound's constants were estimated"
+                    .into()
+            }
+        };
+        w(
+            out,
+            format_args!("note: {outside} predicted states in {outside_runs} run(s) lie {what}"),
+        )?;
+    }
+    let what = if a.stride.is_some() {
+        format!(
+            "{} predictions (every {} samples of {} run(s))",
+            starts.len() - failed,
+            a.stride.unwrap_or(1),
+            data.runs.len() - short.len()
+        )
+    } else {
+        format!("{} runs", starts.len() - failed)
+    };
+    w(
+        out,
+        format_args!(
+            "wrote {}: {what} × {} steps ({failed} failed); {}: `bound` bounds ‖v − v_true‖ of \
+             each predicted velocity (one step from the predicted state), `position_bound` \
+             ‖q_k − q_true,k‖ along the prediction",
+            a.out.display(),
+            a.steps,
+            guarantee(&bound, a.delta)
+        ),
+    )
+}
+
+/// What the bound's probability covers, for `predict`'s summary: the
+/// conformal guarantee is marginal over start states exchangeable with
+/// the calibration windows' starts and holds per step (or for the whole
+/// tube at once), at level 1 − δ; the rigorous kinds hold for every state
+/// at once with probability 1 − δ over the data.
+fn guarantee(bound: &ErrorBound, delta: f64) -> String {
+    let level = 1.0 - delta;
+    match &bound.parts {
+        BoundParts::Conformal(c) => format!(
+            "conformal bound ({:?} score{}, {} tube, {} calibration windows{}): coverage ≥ {level} \
+             marginal over start states exchangeable with the calibration windows' starts (not \
+             conditional on one start), {}{}",
+            c.score,
+            if c.selection_size > 0 {
+                format!(" chosen on {} other windows", c.selection_size)
+            } else {
+                String::new()
+            },
+            match c.tube {
+                Tube::PerStep => "per-step",
+                Tube::Simultaneous => "simultaneous",
+            },
+            c.calibration_size,
+            if c.failed > 0 {
+                format!(", {} of them failed and count as misses", c.failed)
+            } else {
+                String::new()
+            },
+            match c.tube {
+                Tube::PerStep => {
+                    "per step: each row's bounds hold at that level on their own, not all rows \
+                     of a prediction at once"
+                }
+                Tube::Simultaneous => {
+                    "per step for `bound`; the `position_bound`s of a prediction hold all at once"
+                }
+            },
+            match &bound.fallback {
+                Some(f) => format!(
+                    "; rows outside the calibrated region fall back to the larger of it and the \
+                     {} bound (column `fallback`)",
+                    f.kind_name()
+                ),
+                None => "; rows outside the calibrated region are marked `outside` in column \
+                         `fallback`, where the guarantee does not apply"
+                    .to_string(),
+            }
+        ),
+        BoundParts::Rkhs { .. } => format!(
+            "rkhs bound: probability ≥ {level} over the data's noise, for every state at once \
+             (uniform over the GP's inputs, if the velocity map's RKHS norm is within the bound's)"
+        ),
+        BoundParts::Theorem1 { .. } => format!(
+            "theorem1 bound: probability ≥ {level}, for every state in the box of the training \
+             inputs at once (if the velocity map is a sample of the fitted GP)"
+        ),
+    }
+}

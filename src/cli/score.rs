@@ -1,0 +1,212 @@
+//! `vigp score`: k-step position error of the learned and the nominal
+//! model on held-out runs.
+
+use std::io::Write;
+
+use rayon::prelude::*;
+
+use super::args::ScoreArgs;
+use super::{CliError, bar, check_model_inputs, data_error, sparse_note, w, window_place};
+use crate::data::Dataset;
+use crate::learned::Learned;
+use crate::{Integrator, Mechanism, SVector, State, StepError, Variational};
+
+/// The k positions a rollout's k steps produced, in minimal coordinates:
+/// those of states 2 … k (state j's position is state j − 1's plus Δt times
+/// its velocity, so state 1's is the start's x₁, produced by no step) and
+/// q_k + Δt·v_k, the end of the last step's velocity. `states`: the states
+/// after steps 1 … k.
+fn produced<const K: usize, const N: usize>(
+    states: &[State<K>],
+    dt: f64,
+    to_minimal: impl Fn(&SVector<f64, K>) -> SVector<f64, N>,
+) -> Vec<SVector<f64, N>> {
+    let mut p: Vec<_> = states[1..].iter().map(|z| to_minimal(&z.q)).collect();
+    if let Some(last) = states.last() {
+        p.push(to_minimal(&(last.q + last.v * dt)));
+    }
+    p
+}
+
+/// Mean over steps 1..=k of |p − t|²/n.
+fn window_mse<const N: usize>(pred: &[SVector<f64, N>], truth: &[SVector<f64, N>]) -> f64 {
+    let s: f64 = pred
+        .iter()
+        .zip(truth)
+        .map(|(p, t)| (p - t).norm_squared() / N as f64)
+        .sum();
+    s / pred.len() as f64
+}
+
+/// `U`: the mechanism's inputs (0 for none; then the data has no input
+/// columns and both models step unforced).
+pub(super) fn score<
+    L,
+    Mn,
+    const N: usize,
+    const C: usize,
+    const K: usize,
+    const CK: usize,
+    const U: usize,
+>(
+    a: &ScoreArgs,
+    learned: &Learned<L, K, CK>,
+    nominal: Mn,
+    data: &Dataset<N>,
+    to_view: impl Fn(&State<N>) -> State<K> + Sync,
+    to_minimal: impl Fn(&SVector<f64, K>) -> SVector<f64, N> + Sync,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    L: Mechanism<K, CK> + Clone + Sync,
+    Mn: Mechanism<N, C> + Copy + Sync,
+{
+    let k = a.steps;
+    if k == 0 {
+        return Err(CliError::Usage("--steps must be at least 1".into()));
+    }
+    check_model_inputs::<U>(&a.model, learned.inputs())?;
+    let dt = learned.dt();
+    data.check_dt(dt, a.read.time_tolerance)
+        .map_err(data_error(&a.data))?;
+    // windows: every sample with k more after it (and one more for v₀)
+    let mut windows: Vec<(usize, usize)> = Vec::new();
+    for (r, run) in data.runs.iter().enumerate() {
+        let len = run.positions.len();
+        if len >= k + 2 {
+            windows.extend((0..len - k - 1).map(|s| (r, s)));
+        }
+    }
+    let too_short = data
+        .runs
+        .iter()
+        .filter(|r| r.positions.len() < k + 2)
+        .count();
+    w(
+        out,
+        format_args!(
+            "model: {} ({} coordinates, {:?} encoding, {:?} prior, N = {}{}, dt = {dt} s)",
+            a.model.display(),
+            K,
+            learned.encoding(),
+            learned.prior(),
+            learned.gp().n(),
+            sparse_note(learned.gp())
+        ),
+    )?;
+    w(
+        out,
+        format_args!(
+            "data: {}: {} runs ({too_short} shorter than {} samples), {} windows of {k} steps",
+            a.data.display(),
+            data.runs.len(),
+            k + 2,
+            windows.len()
+        ),
+    )?;
+    if windows.is_empty() {
+        return Err(CliError::Usage(format!(
+            "no run has {} samples: nothing to score with --steps {k}",
+            k + 2
+        )));
+    }
+    // each run's logged inputs, once (none without inputs)
+    let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
+    let vi = Variational::new(nominal, dt);
+    let pb = bar(windows.len(), "scoring");
+    type Scored = Result<f64, StepError>;
+    let results: Vec<(Scored, Scored)> = windows
+        .par_iter()
+        .map(|&(r, s)| {
+            let run = &data.runs[r];
+            // the positions the k steps produce: x_{s+2} … x_{s+k+1} (x_{s+1}
+            // = x_s + Δt·v_s is the logged one, reached by no step)
+            let truth = &run.positions[s + 2..=s + k + 1];
+            let z0 = State {
+                q: run.positions[s],
+                v: (run.positions[s + 1] - run.positions[s]) / dt,
+            };
+            // step j of the window (from sample s + j) under the input
+            // logged over its new velocity's interval, row s + j + 1's,
+            // after row s + j's (the learned step takes both)
+            let us = if U == 0 {
+                &[][..]
+            } else {
+                &inputs[r][s + 1..=s + k]
+            };
+            let mut buf = vec![z0; k];
+            let nom = if U == 0 {
+                vi.rollout_into(&z0, &mut buf)
+            } else {
+                vi.rollout_forced_into(&z0, us, &mut buf)
+            };
+            let nom = nom.map(|()| window_mse(&produced(&buf, dt, |q| *q), truth));
+            let zv = to_view(&z0);
+            let mut buf = vec![zv; k];
+            let lrn = if U == 0 {
+                learned.rollout_into(&zv, &mut buf)
+            } else {
+                learned.rollout_mean_forced_into(&zv, &inputs[r][s], us, &mut buf)
+            };
+            let lrn = lrn.map(|()| window_mse(&produced(&buf, dt, &to_minimal), truth));
+            pb.inc(1);
+            (nom, lrn)
+        })
+        .collect();
+    pb.finish_and_clear();
+    let nominal_failed = results.iter().filter(|r| r.0.is_err()).count();
+    let learned_failed = results.iter().filter(|r| r.1.is_err()).count();
+    let both: Vec<(f64, f64)> = results
+        .iter()
+        .filter_map(|(a, b)| Some(((*a).ok()?, (*b).ok()?)))
+        .collect();
+    // the first failure of each model, with the run and the line its
+    // window starts at
+    for (what, pick) in [("nominal", 0usize), ("learned", 1usize)] {
+        let first = windows.iter().zip(&results).find_map(|(&(r, s), res)| {
+            let e = if pick == 0 {
+                res.0.as_ref()
+            } else {
+                res.1.as_ref()
+            };
+            e.err().map(|e| (r, s, *e))
+        });
+        if let Some((r, s, e)) = first {
+            let run = &data.runs[r];
+            w(
+                out,
+                format_args!(
+                    "first {what} failure: {}: {e}",
+                    window_place(run, s, a.read.resample.is_some())
+                ),
+            )?;
+        }
+    }
+    w(
+        out,
+        format_args!(
+            "failed windows: nominal {nominal_failed}, learned {learned_failed} (scored: {} windows where both succeed)",
+            both.len()
+        ),
+    )?;
+    if both.is_empty() {
+        return Err(CliError::Usage(
+            "every window failed for the nominal or the learned model".into(),
+        ));
+    }
+    w(
+        out,
+        format_args!(
+            "averaged over the positions the steps produce: x_(s+2) … x_(s+{}) of a window from \
+             sample s (x_(s+1) = x_s + dt·v_s is logged, not predicted), and over the windows",
+            k + 1
+        ),
+    )?;
+    let n = both.len() as f64;
+    let nominal_mse = both.iter().map(|p| p.0).sum::<f64>() / n;
+    let learned_mse = both.iter().map(|p| p.1).sum::<f64>() / n;
+    w(
+        out,
+        format_args!("nominal_mse={nominal_mse:e} learned_mse={learned_mse:e}"),
+    )
+}

@@ -1,0 +1,133 @@
+//! `vigp simulate`: a log of the nominal model, with the inputs on the
+//! rows the data reader expects.
+
+use std::io::Write;
+
+use super::args::SimulateArgs;
+use super::{CliError, check_out_dir, io_error, read_plan, w};
+use crate::data::Dataset;
+use crate::{Integrator, Mechanism, Parameters, SVector, State, Variational};
+
+/// Rolls the nominal (minimal) model out from `--q`, `--v` under the
+/// planned or zero inputs and writes the log with
+/// [`Dataset::from_rollout`]: row k's input is held from t_k to t_{k+1},
+/// so step k (from row k to row k + 1) is driven by row k + 1's input.
+pub(super) fn simulate<Mn, const N: usize, const C: usize, const U: usize>(
+    a: &SimulateArgs,
+    minimal: Mn,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Parameters + Copy,
+{
+    let usage = |why: String| Err(CliError::Usage(why));
+    if let Err(e) = minimal.constants() {
+        return usage(format!("the nominal model (with --set): {e}"));
+    }
+    if a.q.len() != N {
+        return usage(format!(
+            "--q has {} value(s); {} has {N} coordinates: {}",
+            a.q.len(),
+            Mn::NAME,
+            Mn::COORDINATES.join(", ")
+        ));
+    }
+    if !a.v.is_empty() && a.v.len() != N {
+        return usage(format!(
+            "--v has {} value(s), expected {N} (or none for a start at rest)",
+            a.v.len()
+        ));
+    }
+    if a.q.iter().chain(&a.v).any(|x| !x.is_finite()) {
+        return usage("--q and --v must be finite".into());
+    }
+    if !(a.dt.is_finite() && a.dt > 0.0) {
+        return usage(format!("--dt must be finite and > 0: {}", a.dt));
+    }
+    if !a.t0.is_finite() {
+        return usage(format!("--t0 must be finite: {}", a.t0));
+    }
+    if a.steps == 0 {
+        return usage("--steps must be at least 1".into());
+    }
+    check_out_dir(&a.out)?;
+    let z0 = State {
+        q: SVector::<f64, N>::from_column_slice(&a.q),
+        v: if a.v.is_empty() {
+            SVector::zeros()
+        } else {
+            SVector::from_column_slice(&a.v)
+        },
+    };
+    // the inputs of steps 0..K: the plan's first K rows, or zeros
+    let mut us: Vec<SVector<f64, U>> = Vec::new();
+    if U > 0 {
+        if us.try_reserve_exact(a.steps).is_err() {
+            return usage(format!("--steps {}: too many steps to store", a.steps));
+        }
+        match &a.inputs {
+            Some(path) => {
+                let plans = read_plan::<U>(path, Mn::INPUT_NAMES)?;
+                if plans.len() > 1 {
+                    return usage(format!(
+                        "{}: {} runs of inputs; simulate takes one plan",
+                        path.display(),
+                        plans.len()
+                    ));
+                }
+                let plan = &plans[0].1;
+                if plan.len() < a.steps {
+                    return usage(format!(
+                        "{}: {} input row(s), --steps {} needs {}",
+                        path.display(),
+                        plan.len(),
+                        a.steps,
+                        a.steps
+                    ));
+                }
+                us.extend_from_slice(&plan[..a.steps]);
+            }
+            None => us.resize(a.steps, SVector::zeros()),
+        }
+    } else if let Some(path) = &a.inputs {
+        // refused with the reason
+        read_plan::<U>(path, Mn::INPUT_NAMES)?;
+    }
+    let vi = Variational::new(minimal, a.dt);
+    let states = if U > 0 {
+        vi.rollout_forced(&z0, &us)?
+    } else {
+        vi.rollout(&z0, a.steps)?
+    };
+    let log = Dataset::from_rollout(
+        &Mn::COORDINATES,
+        Mn::INPUT_NAMES,
+        &a.run,
+        (a.t0, a.dt),
+        &states,
+        (SVector::<f64, U>::zeros(), &us),
+    )
+    .map_err(|e| CliError::Usage(e.to_string()))?;
+    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
+    log.write_csv(std::io::BufWriter::new(file))
+        .map_err(io_error(&a.out))?;
+    w(
+        out,
+        format_args!(
+            "wrote {}: run `{}`, {} rows at dt = {} s ({} steps of {}){}",
+            a.out.display(),
+            a.run,
+            a.steps + 2,
+            a.dt,
+            a.steps,
+            Mn::NAME,
+            if U > 0 {
+                "; row k's input is held from t_k to t_{k+1}, so the step from row k to row k + 1 \
+                 is driven by row k + 1's input (row 0's, zero, is held over the start velocity; \
+                 the last row's repeats the one before)"
+            } else {
+                ""
+            }
+        ),
+    )
+}

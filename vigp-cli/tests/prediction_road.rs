@@ -1,0 +1,397 @@
+//! The tool's prediction road on an actuated cart-pole: `simulate` writes
+//! a log with the inputs on the rows the reader expects (the nominal
+//! model then reproduces it to rounding, and a log whose inputs are
+//! shifted by one row does not, and `fit` warns about it); `score`
+//! averages only the positions a model step produced (checked against a
+//! direct computation); `predict --stride`, `--inputs PLAN`, the
+//! conformal output's `fallback` column and guarantee, and the error for
+//! calibration runs too short for the horizon.
+
+use std::path::{Path, PathBuf};
+
+use vigp::SVector;
+use vigp::prelude::*;
+
+#[path = "../../tests/common/drive_cartpole.rs"]
+mod drive_cartpole;
+use drive_cartpole::DriveCartpole;
+
+const DT: f64 = 0.01;
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("vigp-road-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn run(args: &[&str]) -> Result<String, vigp::cli::CliError> {
+    let mut out = Vec::new();
+    let mut argv = vec!["drive"];
+    argv.extend_from_slice(args);
+    let r = vigp::cli::run(&[vigp::cli::system::<DriveCartpole>()], argv, &mut out);
+    let text = String::from_utf8(out).unwrap();
+    eprintln!("$ drive {}\n{text}", args.join(" "));
+    r.map(|()| text)
+}
+
+/// The rows of a CSV file, split at commas (header first).
+fn table(path: &Path) -> Vec<Vec<String>> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect()
+}
+
+/// The two numbers of `score`'s last line.
+fn mse_line(report: &str) -> (f64, f64) {
+    let last = report.lines().last().expect("a report");
+    let (n, l) = last
+        .strip_prefix("nominal_mse=")
+        .and_then(|r| r.split_once(" learned_mse="))
+        .unwrap_or_else(|| panic!("last line {last:?}"));
+    (n.parse().unwrap(), l.parse().unwrap())
+}
+
+/// A plan of `n` inputs held for 10 rows each.
+fn plan(n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|j| 2.5 * (0.9 * (j / 10) as f64 + 0.3).sin())
+        .collect()
+}
+
+fn write_plan(path: &Path, us: &[f64]) {
+    let mut text = String::from("u_rail\n");
+    for u in us {
+        text.push_str(&format!("{u:?}\n"));
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn time_column_has_no_float_noise() {
+    // 3 · 0.1 is 0.30000000000000004 in f64 and 6 · 0.010000000000000002
+    // (a run's mean step from printed times) 0.06000000000000001: each
+    // prints as the decimal the index means
+    assert_eq!(vigp::data::format_time(0.0, 0.1, 3), "0.3");
+    assert_eq!(vigp::data::format_time(0.0, 0.02, 3), "0.06");
+    assert_eq!(
+        vigp::data::format_time(0.0, 0.010000000000000002, 6),
+        "0.06"
+    );
+    assert_eq!(vigp::data::format_time(1.5, 0.1, 3), "1.8");
+    assert_eq!(vigp::data::format_time(2.0, 1.0, 3), "5.0");
+}
+
+#[test]
+fn simulate_fit_score_predict() {
+    let dir = temp_dir("sim");
+    let steps = 200;
+    let us = plan(steps);
+    let plan_path = dir.join("plan.csv");
+    write_plan(&plan_path, &us);
+    let log = dir.join("log.csv");
+    let said = run(&[
+        "simulate",
+        "--q",
+        "0.1,0.5",
+        "--dt",
+        "0.01",
+        "--steps",
+        "200",
+        "--inputs",
+        s(&plan_path),
+        "--out",
+        s(&log),
+        "--run",
+        "a",
+    ])
+    .unwrap();
+    assert!(said.contains("202 rows"), "{said}");
+    let rows = table(&log);
+    assert_eq!(rows[0].join(","), "run,t,rail,hinge,u_rail");
+    assert_eq!(rows.len(), 1 + steps + 2);
+    // t without float noise
+    assert_eq!(rows[1 + 6][1], "0.06");
+    assert_eq!(rows[1 + 7][1], "0.07");
+    // the log is the rollout z_0 … z_K under the plan (written in
+    // round-trip form: bit for bit), one more row q_K + Δt·v_K, and log row
+    // k + 1 holds the input of step k (row 0: zero; the last row repeats)
+    let vi = Variational::new(DriveCartpole::default().minimal(), DT);
+    let plan_u: Vec<SVector<f64, 1>> = us.iter().map(|u| SVector::from([*u])).collect();
+    let states = vi
+        .rollout_forced(&State::new([0.1, 0.5], [0.0, 0.0]), &plan_u)
+        .unwrap();
+    let x = |r: &[String], i: usize| r[i].parse::<f64>().unwrap();
+    let last = states[steps].q + states[steps].v * DT;
+    for (k, row) in rows[1..].iter().enumerate() {
+        let q = states.get(k).map_or(last, |z| z.q);
+        assert_eq!((x(row, 2), x(row, 3)), (q[0], q[1]), "row {k}");
+        let u = match k {
+            0 => 0.0,
+            k if k <= steps => us[k - 1],
+            _ => us[steps - 1],
+        };
+        assert_eq!(x(row, 4), u, "row {k}");
+    }
+
+    // a truth with a heavier cart (simulate --set) to learn from
+    let heavy = dir.join("heavy.csv");
+    run(&[
+        "simulate",
+        "--q",
+        "0.1,0.5",
+        "--dt",
+        "0.01",
+        "--steps",
+        "200",
+        "--inputs",
+        s(&plan_path),
+        "--out",
+        s(&heavy),
+        "--set",
+        "links.cart.mass=1.5",
+    ])
+    .unwrap();
+    // fit on it (no warning about the inputs), and score on the log: the
+    // nominal model (the file's parameters, the defaults) reproduces it to
+    // rounding (the numbers are written in round-trip form)
+    let model = dir.join("m.json");
+    let fit = run(&[
+        "fit",
+        "--data",
+        s(&heavy),
+        "--out",
+        s(&model),
+        "--restarts",
+        "0",
+        "--max-samples",
+        "60",
+        "--noise-floor",
+        "1e-6",
+    ])
+    .unwrap();
+    assert!(!fit.contains("warning"), "{fit}");
+    let score = |data: &Path, steps: &str| {
+        run(&[
+            "score",
+            "--model",
+            s(&model),
+            "--data",
+            s(data),
+            "--steps",
+            steps,
+        ])
+        .unwrap()
+    };
+    let report = score(&log, "5");
+    assert!(
+        report.contains("averaged over the positions the steps produce: x_(s+2) … x_(s+6)"),
+        "{report}"
+    );
+    let (nominal, _) = mse_line(&report);
+    assert!(nominal < 1e-24, "{nominal:e}");
+
+    // the same log with every input one row early: fit warns, and the
+    // nominal model no longer reproduces it
+    let early = dir.join("early.csv");
+    let mut text = String::from("run,t,rail,hinge,u_rail\n");
+    for k in 1..rows.len() {
+        let u = rows
+            .get(k + 1)
+            .map_or(rows[k][4].as_str(), |r| r[4].as_str());
+        text.push_str(&format!(
+            "{},{},{},{},{u}\n",
+            rows[k][0], rows[k][1], rows[k][2], rows[k][3]
+        ));
+    }
+    std::fs::write(&early, text).unwrap();
+    let fit_early = run(&[
+        "fit",
+        "--data",
+        s(&early),
+        "--out",
+        s(&dir.join("early.json")),
+        "--restarts",
+        "0",
+        "--max-samples",
+        "60",
+        "--noise-floor",
+        "1e-6",
+    ])
+    .unwrap();
+    assert!(
+        fit_early.contains("the inputs look logged one row early"),
+        "{fit_early}"
+    );
+    let (nominal_early, _) = mse_line(&score(&early, "5"));
+    assert!(nominal_early > 1e-12, "{nominal_early:e}");
+
+    // `--steps 1` scores x_(s+2), produced by one step: against the truth
+    // with the heavier cart, the nominal score is the mean of
+    // |x̂_(s+2) − x_(s+2)|²/2 over the windows, computed here directly
+    let (nominal_1, _) = mse_line(&score(&heavy, "1"));
+    let h = table(&heavy);
+    let q = |r: usize| SVector::<f64, 2>::new(x(&h[1 + r], 2), x(&h[1 + r], 3));
+    let (mut sum, mut n) = (0.0, 0);
+    for w in 0..h.len() - 3 {
+        let z0 = State {
+            q: q(w),
+            v: (q(w + 1) - q(w)) / DT,
+        };
+        let z1 = vi
+            .step_forced(&z0, &SVector::from([x(&h[1 + w + 1], 4)]))
+            .unwrap();
+        sum += (z1.q + z1.v * DT - q(w + 2)).norm_squared() / 2.0;
+        n += 1;
+    }
+    let want = sum / n as f64;
+    // the same sums in another order: agreement to 1e-9 relative
+    assert!(want > 1e-12, "{want:e}");
+    assert!(
+        (nominal_1 - want).abs() <= 1e-9 * want,
+        "{nominal_1:e} vs {want:e}"
+    );
+
+    // held-out runs for the conformal bound, from another start
+    let held = dir.join("held.csv");
+    run(&[
+        "simulate",
+        "--q",
+        "-0.15,-0.4",
+        "--dt",
+        "0.01",
+        "--steps",
+        "200",
+        "--inputs",
+        s(&plan_path),
+        "--out",
+        s(&held),
+        "--run",
+        "h",
+    ])
+    .unwrap();
+    let pred = dir.join("pred.csv");
+    let predict = |extra: &[&str]| {
+        let mut args = vec![
+            "predict",
+            "--model",
+            s(&model),
+            "--steps",
+            "5",
+            "--out",
+            s(&pred),
+            "--calibration",
+            s(&held),
+        ];
+        args.extend_from_slice(extra);
+        run(&args)
+    };
+    // --stride 50 on the 202-row log: starts 0, 50, 100, 150 (a start s
+    // needs rows s … s + 5 for its inputs)
+    let said = predict(&["--data", s(&log), "--stride", "50"]).unwrap();
+    assert!(
+        said.contains("4 predictions (every 50 samples of 1 run(s)) × 5 steps (0 failed)"),
+        "{said}"
+    );
+    assert!(
+        said.contains("calibration windows")
+            && said.contains("marginal over start states")
+            && said.contains("per step"),
+        "{said}"
+    );
+    let p = table(&pred);
+    assert_eq!(
+        p[0].join(","),
+        "run,start,t,rail,hinge,v_rail,v_hinge,u_rail,bound,position_bound,fallback"
+    );
+    assert_eq!(p.len(), 1 + 4 * 6);
+    let starts: Vec<&str> = p[1..].iter().step_by(6).map(|r| r[1].as_str()).collect();
+    assert_eq!(starts, ["0", "50", "100", "150"]);
+    // the row 2 steps after start 50 is at t = 0.52, and its input is the
+    // log's row 52
+    assert_eq!(p[1 + 6 + 2][2], "0.52");
+    assert_eq!(p[1 + 6 + 2][7], rows[1 + 52][4]);
+    assert!(
+        p[1..]
+            .iter()
+            .all(|r| r[10].is_empty() || r[10] == "rkhs" || r[10] == "outside")
+    );
+    let strided = p.clone();
+
+    // the same prediction from start 50 with the inputs from a plan: the
+    // start's two rows alone, no position rows for the inputs
+    let start = dir.join("start.csv");
+    std::fs::write(
+        &start,
+        format!(
+            "run,t,rail,hinge,u_rail\n{}\n{}\n",
+            rows[1 + 50].join(","),
+            rows[1 + 51].join(",")
+        ),
+    )
+    .unwrap();
+    let part = dir.join("part.csv");
+    write_plan(&part, &us[50..55]);
+    let said = predict(&["--data", s(&start), "--inputs", s(&part)]).unwrap();
+    assert!(said.contains("1 runs × 5 steps (0 failed)"), "{said}");
+    let p = table(&pred);
+    assert_eq!(p.len(), 1 + 6);
+    for k in 0..6 {
+        // the strided output's columns without `start`
+        let mut want = strided[1 + 6 + k].clone();
+        want.remove(1);
+        assert_eq!(p[1 + k], want, "row {k}");
+    }
+    // too short a plan
+    write_plan(&part, &us[50..53]);
+    let e = predict(&["--data", s(&start), "--inputs", s(&part)])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("3 input row(s), --steps 5 needs 5"), "{e}");
+    // a plan with position columns is refused
+    std::fs::write(&part, "rail,u_rail\n0,1\n").unwrap();
+    let e = predict(&["--data", s(&start), "--inputs", s(&part)])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("unknown column `rail`"), "{e}");
+
+    // calibration runs too short for the horizon: the lengths needed and had
+    let short = dir.join("short.csv");
+    std::fs::write(
+        &short,
+        format!(
+            "run,t,rail,hinge,u_rail\n{}\n",
+            rows[1..5]
+                .iter()
+                .map(|r| r.join(","))
+                .collect::<Vec<_>>()
+                .join("\n")
+        ),
+    )
+    .unwrap();
+    let e = run(&[
+        "predict",
+        "--model",
+        s(&model),
+        "--data",
+        s(&log),
+        "--steps",
+        "5",
+        "--out",
+        s(&pred),
+        "--calibration",
+        s(&short),
+    ])
+    .unwrap_err()
+    .to_string();
+    assert!(
+        e.contains("need runs of at least 6 samples; the longest run has 4") && e.contains("`a` 4"),
+        "{e}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
