@@ -8,7 +8,7 @@ use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp::bound::{BoundError, BoundKind, Calibration, Window};
 use vigp::data::{DataError, DataWarning, check_transitions_dt};
 use vigp::gp::TrainOptions;
-use vigp::learned::{Encoding, Learned, Prior, Transition};
+use vigp::learned::{Encoding, LearnError, Learned, Prior, Transition};
 use vigp::prelude::*;
 use vigp::spatial::{LieStepper, SpatialError, SpatialIntegrator, SpatialState};
 use vigp::systems::{DoublePendulum, Fourbar, Pendulum, PendulumMinimal};
@@ -453,6 +453,69 @@ fn a_dt_that_contradicts_the_data_is_a_typed_error() {
         d.check_dt(0.02, 1e-6),
         Err(DataError::TimeStepMismatch { .. })
     ));
+    // training itself refuses the contradicting Δt before fitting anything
+    // (and takes the right one)
+    let model = Pendulum::default().minimal();
+    let options = TrainOptions {
+        restarts: 0,
+        ..TrainOptions::default()
+    };
+    let train = |dt: f64| {
+        Learned::train(model, dt, &tr, Encoding::SinCos, Prior::Nominal, &options).map(|_| ())
+    };
+    for (dt, factor) in [(0.02, "factor of 2"), (10.0, "factor of 1000")] {
+        let e = train(dt).unwrap_err();
+        println!("{e}");
+        match &e {
+            LearnError::DtContradictsData { given, found, .. } => {
+                assert_eq!(*given, dt);
+                assert!((found - 0.01).abs() < 1e-12, "{found}");
+            }
+            other => panic!("expected DtContradictsData, got {other:?}"),
+        }
+        assert!(e.to_string().contains(factor), "{e}");
+    }
+    train(0.01).unwrap();
+}
+
+/// The training check does not refuse transitions whose velocities were
+/// measured rather than differenced: states of a double pendulum from
+/// RK4 at Δt/50 with their true velocities, v_next the true velocity one
+/// Δt later (x₁ = x₀ + Δt·v₀ then holds only to O(Δt·|a|/|v|)).
+#[test]
+fn training_accepts_measured_velocities_at_the_right_dt() {
+    let model = DoublePendulum::default().minimal();
+    let rk = vigp::Rk4::new(model, DT / 50.0);
+    let mut z = State::new([1.0, -0.5], [0.0, 0.0]);
+    let mut states = vec![z];
+    for _ in 0..60 {
+        for _ in 0..50 {
+            z = rk.step(&z).unwrap();
+        }
+        states.push(z);
+    }
+    let tr: Vec<Transition<2>> = states
+        .windows(2)
+        .map(|w| Transition {
+            z: w[0],
+            v_next: w[1].v,
+        })
+        .collect();
+    let options = TrainOptions {
+        restarts: 0,
+        ..TrainOptions::default()
+    };
+    Learned::train(model, DT, &tr, Encoding::SinCos, Prior::Nominal, &options).unwrap();
+    let e = Learned::train(
+        model,
+        2.0 * DT,
+        &tr,
+        Encoding::SinCos,
+        Prior::Nominal,
+        &options,
+    )
+    .unwrap_err();
+    assert!(matches!(e, LearnError::DtContradictsData { .. }), "{e:?}");
 }
 
 const DT: f64 = 0.01;

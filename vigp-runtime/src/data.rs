@@ -81,7 +81,7 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::SVector;
 
-use crate::learned::{ForcedTransition, Transition};
+use crate::learned::{ForcedTransition, Transition, time_step};
 use crate::mechanism::{CoordinateKind, Mechanism, State};
 
 /// How [`Dataset::read_csv`] reads a file.
@@ -1029,38 +1029,12 @@ fn check_pairs_dt<const N: usize>(
             value: dt,
         });
     }
-    let mut estimates: Vec<(f64, usize)> = Vec::new();
-    for (i, w) in pairs.windows(2).enumerate() {
-        let ((z0, v_next), (z1, _)) = (&w[0], &w[1]);
-        let same_run =
-            z1.v.iter()
-                .zip(v_next.iter())
-                .all(|(a, b)| a.to_bits() == b.to_bits());
-        let vv = z0.v.dot(&z0.v);
-        if !same_run || vv.is_nan() || vv <= 0.0 {
-            continue;
-        }
-        let est = (z1.q - z0.q).dot(&z0.v) / vv;
-        if est.is_finite() && est > 0.0 {
-            estimates.push((est, i));
-        }
-    }
-    if estimates.is_empty() {
+    let Some((found, i)) = time_step::estimate(pairs.iter().map(|(z, v)| (z, v))) else {
         return Ok(());
-    }
-    estimates.sort_by(|a, b| a.0.total_cmp(&b.0));
-    let (found, i) = estimates[estimates.len() / 2];
+    };
     // printed data carries ~1e-12 relative rounding in Δt·v
     if (found - dt).abs() > tolerance.max(1e-9) * dt {
-        let ratio = dt / found;
-        let near = |r: f64| (ratio / r - 1.0).abs() < 1e-3;
-        let hint = if near(1000.0) || near(1e-3) {
-            " (a factor of 1000: milliseconds against seconds?)"
-        } else if near(2.0) || near(0.5) {
-            " (a factor of 2)"
-        } else {
-            ""
-        };
+        let hint = time_step::factor_hint(dt, found);
         return Err(DataError::DtContradictsData {
             given: dt,
             source_of: format!("the run of transitions {i} and {}", i + 1),

@@ -41,6 +41,7 @@ use nalgebra::SVector;
 mod embedded;
 mod export;
 mod file;
+pub(crate) mod time_step;
 pub use embedded::{EmbeddedExport, ExportSize};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
 
@@ -224,7 +225,34 @@ pub enum LearnError {
         "training transition {0} is not finite (NaN or ∞ in the data, or velocities from dt = 0)"
     )]
     NonFinite(usize),
+    /// The Δt given to training is more than [`TRAIN_DT_TOLERANCE`] away
+    /// (relative) from the one the transitions were formed with, estimated
+    /// from consecutive transitions of one run (x_{k+1} = x_k + Δt·v_k).
+    #[error(
+        "dt = {given} contradicts the training transitions: transitions {first} and {} were \
+         formed with dt ≈ {found:.6e}{hint}; train with the data's time step",
+        first + 1
+    )]
+    DtContradictsData {
+        /// The Δt given.
+        given: f64,
+        /// The median estimate from the transitions.
+        found: f64,
+        /// The first transition of the pair the median came from.
+        first: usize,
+        /// A hint when the two differ by a round factor.
+        hint: &'static str,
+    },
 }
+
+/// Relative distance between the Δt given to [`Learned::train`] (and
+/// `train_forced`) and the one its transitions were formed with beyond
+/// which training refuses them ([`LearnError::DtContradictsData`]). Loose on
+/// purpose: transitions whose velocities were measured rather than
+/// differenced satisfy x_{k+1} = x_k + Δt·v_k only to O(Δt·|a|/|v|), while
+/// the mistakes this catches (a factor of 2, milliseconds for seconds) are
+/// 50 % or more. `vigp::data::check_transitions_dt` checks to any tolerance.
+pub const TRAIN_DT_TOLERANCE: f64 = 0.25;
 
 /// Diagnostics of one learned step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -338,6 +366,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             return Err(LearnError::Empty);
         }
         vigp_core::step::check_time_step(dt).map_err(StepError::from)?;
+        if let Some((found, first)) = time_step::estimate(data.iter().map(|t| (&t.z, &t.v_next)))
+            && (found - dt).abs() > TRAIN_DT_TOLERANCE * dt
+        {
+            return Err(LearnError::DtContradictsData {
+                given: dt,
+                found,
+                first,
+                hint: time_step::factor_hint(dt, found),
+            });
+        }
         let u_dim = if forced { U } else { 0 };
         let e = encoding.dim(&M::KINDS);
         let d = e + 2 * u_dim;

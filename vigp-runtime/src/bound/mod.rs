@@ -215,6 +215,10 @@ impl From<LearnError> for BoundError {
                 what: "training transition",
                 value: f64::NAN,
             },
+            LearnError::DtContradictsData { given, .. } => BoundError::InvalidSetting {
+                what: "dt (contradicts the training transitions)",
+                value: given,
+            },
         }
     }
 }
