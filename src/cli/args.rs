@@ -185,6 +185,11 @@ pub(super) struct ScoreArgs {
     /// Prediction horizon k.
     #[arg(long, default_value_t = 20)]
     pub(super) steps: usize,
+    /// Sub-steps of every nominal step (h = dt / K): a more accurate
+    /// nominal model; a step that fails still halves its sub-step on its
+    /// own, up to 8 times, whatever K is.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub(super) substeps: usize,
     #[command(flatten)]
     pub(super) read: ReadArgs,
 }
@@ -286,6 +291,11 @@ pub(super) struct SimulateArgs {
     /// Steps to simulate; the log has `--steps` + 2 rows.
     #[arg(long)]
     pub(super) steps: usize,
+    /// Sub-steps of every nominal step (h = dt / K): a more accurate
+    /// nominal model; a step that fails still halves its sub-step on its
+    /// own, up to 8 times, whatever K is.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub(super) substeps: usize,
     /// Planned inputs (the input-only CSV of `predict --inputs`, without a
     /// `run` column): row j drives step j, written on log row j + 1;
     /// default zero inputs. Log row 0 holds zero (the start is taken as

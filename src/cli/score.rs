@@ -112,7 +112,8 @@ where
     }
     // each run's logged inputs, once (none without inputs)
     let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
-    let vi = Variational::new(nominal, dt);
+    let vi = Variational::new(nominal, dt).substeps(a.substeps);
+    vi.check()?;
     let pb = bar(windows.len(), "scoring");
     type Scored = Result<f64, StepError>;
     let results: Vec<(Scored, Scored)> = windows

@@ -93,7 +93,8 @@ where
         // refused with the reason
         read_plan::<U>(path, Mn::INPUT_NAMES)?;
     }
-    let vi = Variational::new(minimal, a.dt);
+    let vi = Variational::new(minimal, a.dt).substeps(a.substeps);
+    vi.check()?;
     let states = if U > 0 {
         vi.rollout_forced(&z0, &us)?
     } else {

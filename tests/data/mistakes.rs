@@ -106,7 +106,9 @@ fn rollouts_of_impossible_lengths_are_typed_errors() {
 
 /// The double pendulum at Δt = 2 s: Newton converges, but to a root no
 /// motion has (with the check off the energy goes from −17 J to thousands
-/// of joules). By default the step is `NotContinuation`, with the ratio.
+/// of joules). By default the step is `NotContinuation`, with the ratio;
+/// with `max_subdivision(8)` it subdivides itself until it resolves the
+/// motion.
 #[test]
 fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
     let m = DoublePendulum::default().minimal();
@@ -150,6 +152,34 @@ fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
         "{text}"
     );
     assert!(text.contains("substeps"), "{text}");
+    // a step that subdivides itself (`max_subdivision(8)`) takes sub-steps
+    // until they resolve the motion: 20 steps of 2 s complete, and the
+    // energy stays within the
+    // first-order bound of the finest sub-step used (Δt·max|v|·scale, the
+    // scale Σ m·|g|·l = 29.4 J plus the largest kinetic energy)
+    let (traj, report) = Variational::new(m, 2.0)
+        .max_subdivision(8)
+        .rollout_with_report(&z0, 20)
+        .unwrap();
+    let h = 2.0 / f64::from(1u32 << report.deepest);
+    let vmax = traj
+        .iter()
+        .flat_map(|z| z.v.iter())
+        .fold(0.0f64, |a, x| a.max(x.abs()));
+    let drift = traj
+        .iter()
+        .map(|z| (m.energy(z) - e0).abs())
+        .fold(0.0f64, f64::max);
+    let scale = 29.4
+        + traj
+            .iter()
+            .map(|z| m.energy(z) - m.potential_energy(&z.q))
+            .fold(0.0f64, f64::max);
+    println!(
+        "max_subdivision(8): {report:?}, finest sub-step {h} s, max |E − E0| {drift:.3e} J (scale {scale:.1} J, max |v| {vmax:.2})"
+    );
+    assert_eq!((report.steps, report.subdivided), (20, 20), "{report:?}");
+    assert!(drift <= h * vmax * scale, "{drift} > {}", h * vmax * scale);
     // a bound ≤ 0 or NaN is refused
     for bad in [0.0, -1.0, f64::NAN] {
         let e = Variational::new(m, 0.01)

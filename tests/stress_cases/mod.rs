@@ -176,6 +176,12 @@ fn check_typed_failure(row: &mut Row, e: &StepError) {
             row.check(residual.is_finite(), || format!("bad diagnostics: {e:?}"))
         }
         StepError::SingularJacobian { .. } | StepError::NonFiniteResidual { .. } => {}
+        // the step failed at every sub-step down to Δt/2^depth
+        StepError::NotResolved {
+            depth, residual, ..
+        } => row.check(*depth > 0 && !residual.is_nan(), || {
+            format!("bad diagnostics: {e:?}")
+        }),
         // a converged root that does not resolve the motion (the bend of
         // the step above the continuation bound)
         StepError::NotContinuation { ratio, bound, .. } => row
@@ -338,7 +344,8 @@ pub fn long_horizon(size: Size) -> Vec<Row> {
 
 /// Large steps and fast motion: Δt ∈ {0.02, 0.05, 0.1} s, joint speeds of
 /// 1 and 3 rev/s in opposite directions (chaotic), on the double pendulum
-/// and the fourbar. Without sub-steps a step either succeeds or fails with
+/// and the fourbar. Without sub-steps (and without the step's own
+/// subdivision, `max_subdivision(0)`) a step either succeeds or fails with
 /// `NotConverged` (the DEL equations, quadratic in v₁, have no root near
 /// v₀); with sub-steps h = 2 ms every run completes with bounded energy:
 /// max |ΔE| ≤ 5 % of the motion's energy scale, E_kin + the potential's
@@ -356,7 +363,7 @@ pub fn large_steps(size: Size) -> Vec<Row> {
             let dp = DoublePendulum::default().minimal();
             let q0 = SVector::from([2.0, -1.0]);
             let qd = SVector::from([w, -w]);
-            let plain = Variational::new(dp, dt);
+            let plain = Variational::new(dp, dt).max_subdivision(0);
             let z_plain = State {
                 q: q0,
                 v: vigp::dynamics::discrete_velocity(&dp, &q0, &qd, dt).unwrap(),
@@ -382,7 +389,7 @@ pub fn large_steps(size: Size) -> Vec<Row> {
             let z_plain = consistent_state(&fb, &q, &v, dt).unwrap();
             let z_sub = consistent_state(&fb, &q, &v, dt / k as f64).unwrap();
             let kinetic = fb.kinetic_energy(&z_sub.q, &z_sub.v);
-            let plain = Variational::new(fb, dt);
+            let plain = Variational::new(fb, dt).max_subdivision(0);
             rows.push(large_step_row(
                 &format!("Δt = {dt}, {rev} rev/s: fourbar"),
                 &plain,
@@ -410,11 +417,14 @@ fn large_step_row<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     let a = run_vi(plain, z_plain, steps);
     let b = run_vi(sub, z_sub, steps);
     let plain_note = match &a.error {
-        None => format!("default: all {steps} steps, max |ΔE| {:.2} J", a.max_de),
+        None => format!(
+            "without subdivision: all {steps} steps, max |ΔE| {:.2} J",
+            a.max_de
+        ),
         Some(e) => {
             check_typed_failure(&mut row, e);
             row.error = describe(e);
-            format!("default: fails at step {}", a.steps)
+            format!("without subdivision: fails at step {}", a.steps)
         }
     };
     row.remedy = format!("`substeps({})` (h = 2 ms)", sub.substep_count());
@@ -802,7 +812,7 @@ fn with_substep_remedy<M: Mechanism<N, C> + Copy, const N: usize, const C: usize
     let max_de = max_rel * e_scale;
     let mut first_error = None;
     for k in [1usize, 10, 100] {
-        let vi = Variational::new(m, dt).substeps(k);
+        let vi = Variational::new(m, dt).substeps(k).max_subdivision(0);
         let z = if k == 1 {
             *z0
         } else {
@@ -825,7 +835,10 @@ fn with_substep_remedy<M: Mechanism<N, C> + Copy, const N: usize, const C: usize
                     if k == 1 {
                         String::new()
                     } else {
-                        format!("default fails at step {}; ", first_error.unwrap_or(0))
+                        format!(
+                            "without subdivision fails at step {}; ",
+                            first_error.unwrap_or(0)
+                        )
                     },
                     r.max_de,
                     r.max_de / e_scale,

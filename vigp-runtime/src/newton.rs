@@ -30,6 +30,9 @@ pub struct StepInfo {
     /// The bend |Δt·(v₁ − v₀)|∞ of the step's discrete path (the core's
     /// [`vigp_core::StepReport::continuation`]; 0 where not measured).
     pub continuation: f64,
+    /// How often the step halved its sub-step before it converged (0: at
+    /// once; see [`crate::Variational::max_subdivision`]).
+    pub subdivisions: u32,
 }
 
 pub use vigp_core::linalg::solve_kkt_regularised;
@@ -157,6 +160,25 @@ pub enum StepError {
         /// Rollout step index, if in a rollout.
         step: Option<usize>,
     },
+    /// A step that failed (no root near the start, or a root that is not
+    /// the continuation of the motion) and still failed after halving its
+    /// sub-step `depth` times ([`crate::Variational::max_subdivision`]).
+    #[error(
+        "no sub-step converged: halved {depth} times down to dt = {substep_dt:e}, the step still \
+         failed (residual {residual:e}){}; the motion is too fast for this dt, or the model \
+         has no solution here",
+        at(step)
+    )]
+    NotResolved {
+        /// Halvings tried.
+        depth: u32,
+        /// The smallest sub-step tried (s).
+        substep_dt: f64,
+        /// The residual (or bend) of the last failure.
+        residual: f64,
+        /// Rollout step index, if in a rollout.
+        step: Option<usize>,
+    },
     /// A rollout of `steps` steps whose states cannot be stored (checked
     /// before anything is allocated: [`trajectory_buffer`]).
     #[error("{} ({steps} steps)", vigp_core::step::TOO_MANY_STEPS_TEXT)]
@@ -237,6 +259,7 @@ impl StepError {
             | StepError::LineSearchFailed { step, .. }
             | StepError::OffConstraints { step, .. }
             | StepError::NotContinuation { step, .. }
+            | StepError::NotResolved { step, .. }
             | StepError::Prediction { step } => *step = Some(k),
             StepError::InvalidTimeStep { .. }
             | StepError::TooManySteps { .. }
@@ -348,6 +371,7 @@ impl StepInfo {
             regularised: r.regularised,
             restarted: false,
             continuation: r.continuation,
+            subdivisions: 0,
         }
     }
 }

@@ -97,6 +97,7 @@ fn gauss_newton<const N: usize, const C: usize>(
                 }
             }
             let info = StepInfo {
+                subdivisions: 0,
                 iterations: iter,
                 residual: res,
                 stalled: false,
@@ -170,6 +171,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
         return Ok((
             *v_u,
             StepInfo {
+                subdivisions: 0,
                 iterations: 0,
                 residual: 0.0,
                 stalled: false,
@@ -245,6 +247,7 @@ fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
             return Ok((
                 v,
                 StepInfo {
+                    subdivisions: 0,
                     iterations: iter,
                     residual: res_r.max(res_c),
                     stalled: !converged,

@@ -117,6 +117,7 @@ pub fn step_forced<M: Mechanism<N, C>, const N: usize, const C: usize>(
             return Ok((
                 next,
                 StepInfo {
+                    subdivisions: 0,
                     iterations: iter,
                     residual: res_r.max(res_c),
                     stalled: !converged,

@@ -117,8 +117,21 @@ pub trait Integrator<const N: usize> {
 /// D_xL); when Δt·|v| is large against the configuration's curvature they
 /// can have no root near v₀, and the step fails with a typed error
 /// ([`StepError::NotConverged`] or [`StepError::LineSearchFailed`]; e.g. the
-/// double pendulum at Δt = 0.1 s and 3 rev/s). [`Variational::substeps`] is
-/// the opt-in remedy.
+/// double pendulum at Δt = 0.1 s and 3 rev/s), or Newton converges to a
+/// root that is not the continuation of the motion
+/// ([`StepError::NotContinuation`]). [`Variational::substeps`] takes every
+/// step in smaller sub-steps. [`Variational::max_subdivision`]`(d)` makes
+/// a failing step **subdivide itself**: it is taken again with its
+/// sub-step halved, up to d times, until one converges, and only then is
+/// it an error ([`StepError::NotResolved`]); [`StepInfo::subdivisions`] and
+/// [`Variational::rollout_with_report`] say how often it happened. Steps
+/// that converge at once are unchanged, bit for bit, and cost the same. A
+/// subdivided step restarts from the state (the momentum a rollout carries
+/// is rebuilt from it: for the midpoint rule under inputs, the previous
+/// input's share in it is not). It is off by default: a smaller sub-step
+/// also shrinks the residual a singular configuration leaves (a chain
+/// pinned at full stretch, where no motion is admissible, has a sub-step
+/// that is accepted), so it is for motions known to be well posed.
 #[derive(Clone, Copy, Debug)]
 pub struct Variational<M: Mechanism<N, C>, const N: usize, const C: usize> {
     model: M,
@@ -127,11 +140,47 @@ pub struct Variational<M: Mechanism<N, C>, const N: usize, const C: usize> {
     options: NewtonOptions,
     substeps: usize,
     continuation: f64,
+    subdivision: u32,
     stepper: Result<Stepper<M, N, C>, StepError>,
 }
 
 /// The default continuation bound of [`Variational`].
 const DEFAULT_CONTINUATION: f64 = vigp_core::step::DEFAULT_CONTINUATION_BOUND;
+
+/// How a rollout of [`Variational`] went ([`Variational::rollout_with_report`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RolloutReport {
+    /// Steps taken.
+    pub steps: usize,
+    /// Steps that subdivided themselves to converge.
+    pub subdivided: usize,
+    /// The most halvings one step needed.
+    pub deepest: u32,
+}
+
+/// Core errors after which a smaller sub-step may succeed: no root found
+/// near the start, or a root that is not the continuation of the motion.
+fn resolvable(e: &CoreError) -> bool {
+    matches!(
+        e,
+        CoreError::NotConverged { .. }
+            | CoreError::LineSearchFailed { .. }
+            | CoreError::SingularJacobian { .. }
+            | CoreError::NonFiniteResidual { .. }
+            | CoreError::NotContinuation { .. }
+    )
+}
+
+/// The residual (or bend) a resolvable core error reports.
+fn failure_size(e: &CoreError) -> f64 {
+    match *e {
+        CoreError::NotConverged { residual, .. } | CoreError::LineSearchFailed { residual, .. } => {
+            residual
+        }
+        CoreError::NotContinuation { ratio, .. } => ratio,
+        _ => f64::NAN,
+    }
+}
 
 /// Refuses a mechanism whose loop equations cannot be satisfied: for
 /// `C > 0`, Gauss–Newton ([`crate::projection::project_configuration`], up
@@ -244,6 +293,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             options,
             substeps,
             continuation,
+            subdivision: 0,
             stepper,
         }
     }
@@ -256,9 +306,77 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             options,
             substeps,
             continuation,
+            subdivision,
             ..
         } = self;
-        Self::build(model, dt, alpha, options, substeps, continuation)
+        let mut s = Self::build(model, dt, alpha, options, substeps, continuation);
+        s.subdivision = subdivision;
+        s
+    }
+
+    /// How often a failing step may halve its sub-step before it is an
+    /// error (default 0: never, a failing step is an error at once; 8 goes
+    /// down to Δt/256). See "Large steps" above.
+    pub fn max_subdivision(mut self, depth: u32) -> Self {
+        self.subdivision = depth;
+        self
+    }
+
+    /// The halvings a failing step may take ([`Variational::max_subdivision`]).
+    pub fn subdivision_depth(&self) -> u32 {
+        self.subdivision
+    }
+
+    /// Retakes a step that failed with `first` with its sub-step halved,
+    /// 1, 2, … up to `self.subdivision` times: `attempt(stepper)` runs the
+    /// step on a stepper with that many more sub-steps. Returns the result
+    /// and the halvings it took, or [`StepError::NotResolved`] (or the
+    /// first error, when it is not one a smaller sub-step can resolve).
+    fn subdivide<R>(
+        &self,
+        z: &State<N>,
+        first: CoreError,
+        mut attempt: impl FnMut(&Stepper<M, N, C>) -> Result<R, CoreError>,
+    ) -> Result<(R, u32), StepError> {
+        if !resolvable(&first) || self.subdivision == 0 {
+            return Err(self.explain(StepError::from(first), z));
+        }
+        let base = self.stepper()?;
+        let mut last = first;
+        let mut depth = 0;
+        let mut substep_dt = base.substep_dt();
+        while depth < self.subdivision {
+            let Some(k) = self
+                .substeps
+                .max(1)
+                .checked_mul(1 << (depth + 1))
+                .filter(|k| *k <= vigp_core::step::MAX_SUBSTEPS)
+            else {
+                break;
+            };
+            depth += 1;
+            let finer = base.clone().substeps(k).map_err(StepError::from)?;
+            substep_dt = finer.substep_dt();
+            match attempt(&finer) {
+                Ok(r) => return Ok((r, depth)),
+                Err(e) if resolvable(&e) => last = e,
+                Err(e) => return Err(self.explain(StepError::from(e), z)),
+            }
+        }
+        if let Some(e) = Some(self.explain(StepError::from(last), z)).filter(|e| {
+            matches!(
+                e,
+                StepError::NonUnitQuaternion { .. } | StepError::OffConstraints { .. }
+            )
+        }) {
+            return Err(e);
+        }
+        Err(StepError::NotResolved {
+            depth,
+            substep_dt,
+            residual: failure_size(&last),
+            step: None,
+        })
     }
 
     /// The bound of the continuation check (default
@@ -348,12 +466,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// the largest residual, and any sub-step's flags). The solver's
     /// scratch is kept as in [`Variational::step`].
     pub fn step_with_info(&self, z: &State<N>) -> Result<(State<N>, StepInfo), StepError> {
-        let (z1, report) = self.step_from(
+        let ((z1, report), depth) = self.step_from(
             z,
             |s, ws| s.step_with_report_in(z, ws),
             |s| s.step_with_report(z),
         )?;
-        Ok((z1, StepInfo::from_report(&report)))
+        let mut info = StepInfo::from_report(&report);
+        info.subdivisions = depth;
+        Ok((z1, info))
     }
 
     /// A step from the state `z`: `kept` on this thread's kept workspace
@@ -361,20 +481,25 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// (`scratch::with_workspace` decides), else `fresh` in a workspace
     /// zeroed for the call; the two give the same bits. Errors are
     /// explained at `z`. The one path of every std step from a state.
+    /// A step that fails is retaken with smaller sub-steps
+    /// ([`Variational::max_subdivision`]) by `fresh`; the result comes with
+    /// the halvings it took.
     #[inline(always)]
     fn step_from<R>(
         &self,
         z: &State<N>,
         kept: impl FnOnce(&Stepper<M, N, C>, &mut StepWorkspace<N, C>) -> Result<R, CoreError>,
-        fresh: impl FnOnce(&Stepper<M, N, C>) -> Result<R, CoreError>,
-    ) -> Result<R, StepError> {
+        fresh: impl Fn(&Stepper<M, N, C>) -> Result<R, CoreError>,
+    ) -> Result<(R, u32), StepError> {
         let stepper = self.stepper()?;
         check_quaternions::<M, N, C>(z)?;
-        crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
+        match crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
             Some(ws) => kept(stepper, ws),
             None => fresh(stepper),
-        })
-        .map_err(|e| self.explain(StepError::from(e), z))
+        }) {
+            Ok(r) => Ok((r, 0)),
+            Err(e) => self.subdivide(z, e, fresh),
+        }
     }
 
     /// The tolerance into a `NotConverged`; a Newton failure from a
@@ -453,6 +578,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         // the fixed-size step directly (no diagnostics to carry back); it
         // refuses a non-finite state itself
         self.step_from(z, |s, ws| s.step_in(z, ws), |s| s.step(z))
+            .map(|(z1, _)| z1)
     }
 
     /// [`Variational::step`] in a workspace the caller keeps across steps
@@ -465,9 +591,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         z: &State<N>,
         ws: &mut StepWorkspace<N, C>,
     ) -> Result<State<N>, StepError> {
-        self.stepper()?
-            .step_in(z, ws)
-            .map_err(|e| self.explain(StepError::from(e), z))
+        let stepper = self.stepper()?;
+        match stepper.step_in(z, ws) {
+            Ok(z1) => Ok(z1),
+            Err(e) => self.subdivide(z, e, |s| s.step(z)).map(|(z1, _)| z1),
+        }
     }
 }
 
@@ -575,6 +703,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             |s, ws| s.step_forced_in(z, u, ws),
             |s| s.step_forced(z, u),
         )
+        .map(|(z1, _)| z1)
     }
 
     /// Fill `out` with the states after 1, …, `out.len()` forced steps from
@@ -586,17 +715,75 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         inputs: &[nalgebra::SVector<f64, U>],
         out: &mut [State<N>],
     ) -> Result<(), StepError> {
+        self.resuming(z0, Some(inputs), out).map(|_| ())
+    }
+
+    /// The engine's momentum-carrying rollout from `z0` into `out` (forced
+    /// under `inputs` when given): a step that fails is retaken with
+    /// smaller sub-steps from the state before it
+    /// ([`Variational::max_subdivision`]), and the rollout resumes after
+    /// it. No allocation.
+    fn resuming<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: Option<&[nalgebra::SVector<f64, U>]>,
+        out: &mut [State<N>],
+    ) -> Result<RolloutReport, StepError> {
         check_quaternions::<M, N, C>(z0)?;
-        self.stepper()?
-            .steps_forced_into(z0, inputs, out)
-            .map_err(|e| {
-                let from = if e.step == 0 || e.step > out.len() {
-                    z0
-                } else {
-                    &out[e.step - 1]
-                };
-                self.explain(StepError::from(e.error), from).at_step(e.step)
-            })
+        let stepper = self.stepper()?;
+        let mut report = RolloutReport {
+            steps: out.len(),
+            ..RolloutReport::default()
+        };
+        let (mut start, mut from) = (0, *z0);
+        while start < out.len() {
+            let tail = &mut out[start..];
+            let run = match inputs {
+                Some(us) => stepper.steps_forced_into(&from, us.get(start..).unwrap_or(&[]), tail),
+                None => stepper.steps_into(&from, tail),
+            };
+            let Err(e) = run else { break };
+            let k = start + e.step;
+            if e.step >= tail.len() {
+                return Err(self.explain(StepError::from(e.error), &from).at_step(k));
+            }
+            let at = if e.step == 0 { from } else { out[k - 1] };
+            let (z1, depth) = match inputs {
+                Some(us) => self.subdivide(&at, e.error, |s| s.step_forced(&at, &us[k])),
+                None => self.subdivide(&at, e.error, |s| s.step(&at)),
+            }
+            .map_err(|err| err.at_step(k))?;
+            out[k] = z1;
+            report.subdivided += 1;
+            report.deepest = report.deepest.max(depth);
+            (start, from) = (k + 1, z1);
+        }
+        Ok(report)
+    }
+
+    /// The trajectory z_0, …, z_K of K = `steps` steps with its
+    /// [`RolloutReport`] (how many steps subdivided themselves).
+    #[cfg(feature = "alloc")]
+    pub fn rollout_with_report(
+        &self,
+        z0: &State<N>,
+        steps: usize,
+    ) -> Result<(Vec<State<N>>, RolloutReport), StepError> {
+        let mut traj = crate::newton::trajectory_buffer(*z0, steps)?;
+        let report = self.resuming::<0>(z0, None, &mut traj[1..])?;
+        Ok((traj, report))
+    }
+
+    /// [`Variational::rollout_forced`] with its [`RolloutReport`].
+    #[cfg(feature = "alloc")]
+    pub fn rollout_forced_with_report<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[nalgebra::SVector<f64, U>],
+    ) -> Result<(Vec<State<N>>, RolloutReport), StepError> {
+        let mut traj = crate::newton::trajectory_buffer(*z0, inputs.len())?;
+        let report = self.resuming(z0, Some(inputs), &mut traj[1..])?;
+        Ok((traj, report))
     }
 
     /// The forced trajectory z_0, …, z_K under `inputs` (K = `inputs.len()`).
@@ -626,6 +813,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             |s, ws| s.step_with_derivatives_in(z, u, ws),
             |s| s.step_with_derivatives(z, u),
         )
+        .map(|(r, _)| r)
     }
 
     /// A forced rollout (as [`Variational::rollout_forced`]) with the exact
@@ -739,10 +927,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     /// converged steps are those of repeated `step` calls to the solver
     /// tolerance). No allocation.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
-        check_quaternions::<M, N, C>(z0)?;
-        self.stepper()?.steps_into(z0, out).map_err(|e| {
-            let from = if e.step == 0 { z0 } else { &out[e.step - 1] };
-            self.explain(StepError::from(e.error), from).at_step(e.step)
-        })
+        self.resuming::<0>(z0, None, out).map(|_| ())
     }
 }
