@@ -443,7 +443,10 @@ fn forced_data<M: Mechanism<N, C> + Copy, const N: usize, const C: usize, const 
     runs: usize,
     steps: usize,
     rng: &mut common::Rng,
-) -> Vec<vigp::learned::ForcedTransition<N, U>> {
+) -> Vec<vigp::learned::ForcedTransition<N, U>>
+where
+    M: vigp::Inputs<U>,
+{
     use vigp::learned::forced_transitions;
     let vi = Variational::new(truth, DT);
     let mut data = Vec::new();
@@ -482,7 +485,8 @@ fn compare_forced<E, M, const N: usize, const C: usize, const D: usize, const U:
     rng: &mut common::Rng,
 ) -> f64
 where
-    M: Mechanism<N, C> + Clone,
+    E: vigp::Inputs<U>,
+    M: Mechanism<N, C> + Clone + vigp::Inputs<U>,
     E: vigp::embedded::Dynamics<N, C> + Parameters,
 {
     let mut ws = l.workspace();
@@ -525,7 +529,7 @@ where
         assert_eq!(free, embedded.step_forced(z, &zero, &zero).unwrap());
         // U = 0 is "no input" (u = 0), as for the nominal `Stepper`
         let none = SVector::<f64, 0>::zeros();
-        assert_eq!(free, embedded.step_forced(z, &none, &none).unwrap());
+        assert_eq!(free, embedded.step_forced::<0>(z, &none, &none).unwrap());
         let std_free = l.step_mean_with(z, &mut ws).unwrap();
         assert_eq!(
             std_free,
@@ -533,7 +537,8 @@ where
         );
         assert_eq!(
             std_free,
-            l.step_mean_forced_with(z, &none, &none, &mut ws).unwrap()
+            l.step_mean_forced_with::<0>(z, &none, &none, &mut ws)
+                .unwrap()
         );
         worst = worst.max(diff(&std_free, &free));
     }
@@ -838,7 +843,7 @@ mod exported_forced_enc_u {
 /// 30 std and embedded forced steps of `l` and `stepper` from one state
 /// after `u_prev`: max |difference| (and the embedded rollout does not
 /// allocate).
-fn fixture_rollouts<M: Mechanism<2, 0> + Clone, const D: usize>(
+fn fixture_rollouts<M: Mechanism<2, 0> + Clone + vigp::Inputs<1>, const D: usize>(
     l: &Learned<M, 2, 0>,
     stepper: &LearnedStepper<'_, DriveCartpole, 2, 0, D>,
     u_prev: &SVector<f64, 1>,

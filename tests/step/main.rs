@@ -23,5 +23,5 @@ mod spatial_control;
 mod spatial_mujoco;
 mod stress;
 mod tangent;
-mod workflow;
 mod universal;
+mod workflow;

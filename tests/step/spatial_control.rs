@@ -400,7 +400,10 @@ fn check_ab<M: Mechanism<N, C> + Copy, const N: usize, const C: usize, const U: 
     m: M,
     states: &[State<N>],
     fd: f64,
-) -> f64 {
+) -> f64
+where
+    M: vigp::Inputs<U>,
+{
     let dt = 0.01;
     let mut rng = Rng(17);
     let mut worst = 0.0f64;
@@ -581,8 +584,8 @@ fn forced_maximal_converges_to_the_minimal_view() {
         start: impl Fn(f64) -> State<N>,
         u: impl Fn(f64) -> SVector<f64, 2>,
     ) where
-        S: vigp::spatial::Spatial<B, J> + Copy,
-        M: Mechanism<N, C> + Copy,
+        S: vigp::spatial::Spatial<B, J> + Copy + vigp::Inputs<2>,
+        M: Mechanism<N, C> + Copy + vigp::Inputs<2>,
     {
         let mut out = Vec::new();
         for dt in [0.004, 0.001] {

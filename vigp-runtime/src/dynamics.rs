@@ -112,7 +112,10 @@ pub fn acceleration_forced_with<
     q: &SVector<f64, N>,
     qdot: &SVector<f64, N>,
     u: &SVector<f64, U>,
-) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
+) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError>
+where
+    M: vigp_core::Inputs<U>,
+{
     const {
         assert!(
             U == <M as vigp_core::Dynamics<N, C>>::INPUTS || U == 0,

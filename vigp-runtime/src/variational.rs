@@ -4,12 +4,17 @@
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError, StepInfo};
 use nalgebra::SVector;
-use vigp_core::{StepError as CoreError, StepWorkspace, Stepper};
+use vigp_core::{Inputs, StepError as CoreError, StepWorkspace, Stepper};
 
 /// A one-step map z_k ↦ z_{k+1} with a fixed time step.
 ///
 /// Implemented by every integrator, so a user swaps integrators in one line.
 pub trait Integrator<const N: usize> {
+    /// The mechanism this integrator steps: its forced steps take the input
+    /// vectors it takes ([`vigp_core::Inputs`]), so a wrong input length is
+    /// a compile error at the call.
+    type Mechanism: ?Sized;
+
     /// The time step Δt in seconds.
     fn dt(&self) -> f64;
 
@@ -28,6 +33,7 @@ pub trait Integrator<const N: usize> {
     ) -> Result<State<N>, StepError>
     where
         Self: Sized,
+        Self::Mechanism: Inputs<U>,
     {
         if u.iter().all(|x| *x == 0.0) {
             self.step(z)
@@ -47,6 +53,7 @@ pub trait Integrator<const N: usize> {
     ) -> Result<(), StepError>
     where
         Self: Sized,
+        Self::Mechanism: Inputs<U>,
     {
         if inputs.len() < out.len() {
             return Err(StepError::NonFiniteInput {
@@ -569,7 +576,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: Inputs<U>,
+    {
         self.step_from(
             z,
             |s, ws| s.step_forced_in(z, u, ws),
@@ -585,7 +595,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
         out: &mut [State<N>],
-    ) -> Result<(), StepError> {
+    ) -> Result<(), StepError>
+    where
+        M: Inputs<U>,
+    {
         check_quaternions::<M, N, C>(z0)?;
         self.stepper()?
             .steps_forced_into(z0, inputs, out)
@@ -605,7 +618,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
-    ) -> Result<Vec<State<N>>, StepError> {
+    ) -> Result<Vec<State<N>>, StepError>
+    where
+        M: Inputs<U>,
+    {
         let mut traj = crate::newton::trajectory_buffer(*z0, inputs.len())?;
         self.rollout_forced_into(z0, inputs, &mut traj[1..])?;
         Ok(traj)
@@ -620,7 +636,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
-    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
+    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError>
+    where
+        M: Inputs<U>,
+    {
         self.step_from(
             z,
             |s, ws| s.step_with_derivatives_in(z, u, ws),
@@ -646,7 +665,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
-    ) -> Result<RolloutDerivatives<N, U>, StepError> {
+    ) -> Result<RolloutDerivatives<N, U>, StepError>
+    where
+        M: Inputs<U>,
+    {
         use nalgebra::SMatrix;
         use vigp_core::{InputJacobian, StateJacobian};
         let stepper = self.stepper()?;
@@ -704,6 +726,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     for Variational<M, N, C>
 {
+    type Mechanism = M;
+
     fn dt(&self) -> f64 {
         self.dt
     }
@@ -719,7 +743,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: Inputs<U>,
+    {
         Variational::step_forced(self, z, u)
     }
 
@@ -730,7 +757,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
         out: &mut [State<N>],
-    ) -> Result<(), StepError> {
+    ) -> Result<(), StepError>
+    where
+        M: Inputs<U>,
+    {
         Variational::rollout_forced_into(self, z0, inputs, out)
     }
 

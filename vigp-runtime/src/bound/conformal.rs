@@ -687,7 +687,10 @@ pub(super) fn calibrate<
     settings: &ConformalSettings,
     cal: &Calibration<N>,
     noise: &[f64],
-) -> Result<ConformalParts, BoundError> {
+) -> Result<ConformalParts, BoundError>
+where
+    M: vigp_core::Inputs<U>,
+{
     check_delta(settings.delta)?;
     let n = cal.len();
     // fail early, before the predictions
