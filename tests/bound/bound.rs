@@ -887,17 +887,19 @@ fn step_jacobian_norms_match_central_differences() {
 /// Transitions of `truth` (the VI at Δt) along `steps` steps from `z0`,
 /// each under an input drawn uniformly from [−amplitude, amplitude] per
 /// component, with uniform velocity noise of half-width `noise`.
-fn forced_data<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize, const U: usize>(
+fn forced_data<
+    M: vigp::Mechanism<N, C> + Copy + vigp::Inputs<U>,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
     truth: M,
     z0: &State<N>,
     steps: usize,
     amplitude: f64,
     noise: f64,
     rng: &mut Rng,
-) -> Vec<vigp::learned::ForcedTransition<N, U>>
-where
-    M: vigp::Inputs<U>,
-{
+) -> Vec<vigp::learned::ForcedTransition<N, U>> {
     let vi = Variational::new(truth, DT);
     let mut z = *z0;
     let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, U>::zeros()]);
@@ -920,14 +922,17 @@ where
 /// central differences of `step_mean_forced_with` under the same input;
 /// `predict_forced` along the same inputs, and under zero inputs against
 /// `predict`.
-fn check_forced<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize, const U: usize>(
+fn check_forced<
+    M: vigp::Mechanism<N, C> + Clone + vigp::Inputs<U>,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
     name: &str,
     l: &Learned<M, N, C>,
     z0: &State<N>,
     rng: &mut Rng,
-) where
-    M: vigp::Inputs<U>,
-{
+) {
     let mut ws = l.workspace();
     let us: Vec<SVector<f64, U>> = (0..12)
         .map(|_| SVector::from_fn(|_, _| rng.uniform(-1.5, 1.5)))

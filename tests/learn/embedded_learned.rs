@@ -436,17 +436,19 @@ vigp::mechanism! {
 /// Transitions of `runs` forced trajectories of `truth` (first-order VI at
 /// DT) from consistent states at rest near `q0`, under random
 /// piecewise-constant inputs U[−amp, amp] held 10 steps.
-fn forced_data<M: Mechanism<N, C> + Copy, const N: usize, const C: usize, const U: usize>(
+fn forced_data<
+    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
     truth: M,
     q0: SVector<f64, N>,
     amp: f64,
     runs: usize,
     steps: usize,
     rng: &mut common::Rng,
-) -> Vec<vigp::learned::ForcedTransition<N, U>>
-where
-    M: vigp::Inputs<U>,
-{
+) -> Vec<vigp::learned::ForcedTransition<N, U>> {
     use vigp::learned::forced_transitions;
     let vi = Variational::new(truth, DT);
     let mut data = Vec::new();

@@ -395,15 +395,17 @@ fn spatial_input_terms_match_dual_numbers() {
 /// ~3e3 (the unit-norm rows act within one Δt) and ε = 1e-4 leaves a
 /// truncation error of ~2e-4 absolute; at 1e-6 truncation is negligible
 /// and rounding ~1e-14·|v|/ε ~ 1e-7 absolute, 1e-10 relative).
-fn check_ab<M: Mechanism<N, C> + Copy, const N: usize, const C: usize, const U: usize>(
+fn check_ab<
+    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
     name: &str,
     m: M,
     states: &[State<N>],
     fd: f64,
-) -> f64
-where
-    M: vigp::Inputs<U>,
-{
+) -> f64 {
     let dt = 0.01;
     let mut rng = Rng(17);
     let mut worst = 0.0f64;

@@ -102,7 +102,7 @@ pub fn acceleration_with<M: Mechanism<N, C>, const N: usize, const C: usize>(
 /// the generalized force B(q)u joins the right-hand side. u = 0 is
 /// [`acceleration_with`].
 pub fn acceleration_forced_with<
-    M: Mechanism<N, C>,
+    M: Mechanism<N, C> + vigp_core::Inputs<U>,
     const N: usize,
     const C: usize,
     const U: usize,
@@ -112,10 +112,7 @@ pub fn acceleration_forced_with<
     q: &SVector<f64, N>,
     qdot: &SVector<f64, N>,
     u: &SVector<f64, U>,
-) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError>
-where
-    M: vigp_core::Inputs<U>,
-{
+) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
     const {
         assert!(
             U == <M as vigp_core::Dynamics<N, C>>::INPUTS || U == 0,

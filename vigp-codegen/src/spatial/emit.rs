@@ -546,9 +546,9 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
             }
         }
 
-        #[allow(clippy::approx_constant)]
         #name_inputs_impl
 
+        #[allow(clippy::approx_constant)]
         impl #sp::Spatial<#b, #j> for #name {
             const LINKS: [&'static str; #b] = [#(#link_names),*];
             const JOINTS: [&'static str; #j] = [#(#joint_names),*];

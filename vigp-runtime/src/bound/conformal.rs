@@ -678,7 +678,7 @@ fn select_score(
 }
 
 pub(super) fn calibrate<
-    M: Mechanism<N, C> + Clone,
+    M: Mechanism<N, C> + Clone + vigp_core::Inputs<U>,
     const N: usize,
     const C: usize,
     const U: usize,
@@ -687,10 +687,7 @@ pub(super) fn calibrate<
     settings: &ConformalSettings,
     cal: &Calibration<N>,
     noise: &[f64],
-) -> Result<ConformalParts, BoundError>
-where
-    M: vigp_core::Inputs<U>,
-{
+) -> Result<ConformalParts, BoundError> {
     check_delta(settings.delta)?;
     let n = cal.len();
     // fail early, before the predictions
