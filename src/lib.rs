@@ -96,8 +96,9 @@
 //!   coordinate). Inputs are numbered in joint declaration order
 //!   (`Name::INPUT_NAMES`); their count is `Dynamics::INPUTS`, and input
 //!   vectors are `SVector<f64, U>` with `U` checked against it at compile
-//!   time (a `const` assertion, evaluated when the code is generated:
-//!   `cargo build` reports a wrong `U`, `cargo check` does not). Steps: `Variational::step_forced`, `rollout_forced`, every
+//!   time by the bound `M: Inputs<U>` on every forced call (`U` = the count,
+//!   or 0 for the input-free step): a wrong `U` is an error at the call,
+//!   `cargo check` included. Steps: `Variational::step_forced`, `rollout_forced`, every
 //!   [`Integrator`]'s `step_forced`, the embedded `Stepper::step_forced`;
 //!   exact derivatives A = ∂z₁/∂z₀, B = ∂z₁/∂u: `Variational::step_derivatives`,
 //!   `rollout_derivatives`, `Stepper::step_with_derivatives` (docs/control.md).

@@ -147,6 +147,8 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> AnyIntegrator<M,
 impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Integrator<N>
     for AnyIntegrator<M, N, C>
 {
+    type Mechanism = M;
+
     fn dt(&self) -> f64 {
         match self {
             Self::ExplicitEuler(i) => i.dt(),

@@ -69,6 +69,8 @@ pub(super) fn fit<
 where
     Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
     Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+    Mn: crate::Inputs<U>,
+    Mx: crate::Inputs<U>,
 {
     // usage errors before the data are read (a long log takes a while),
     // the nominal parameters first (`--set` may have made a mass negative)
@@ -399,6 +401,7 @@ fn input_shift_check<Mn, const N: usize, const C: usize, const U: usize>(
 ) -> Result<(), CliError>
 where
     Mn: Mechanism<N, C> + Copy,
+    Mn: crate::Inputs<U>,
 {
     let inputs = data.input_vectors::<U>().map_err(data_error(path))?;
     // transitions k of each run with rows k .. k + 2 for every shift

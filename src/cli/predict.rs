@@ -29,6 +29,7 @@ pub(super) fn predict<L, const N: usize, const K: usize, const CK: usize, const 
 ) -> Result<(), CliError>
 where
     L: Mechanism<K, CK> + Clone,
+    L: crate::Inputs<U>,
 {
     if a.steps == 0 {
         return Err(CliError::Usage("--steps must be at least 1".into()));

@@ -119,6 +119,8 @@ impl ViewVisitor for Visit<'_> {
     where
         Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
         Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+        Mn: crate::Inputs<U>,
+        Mx: crate::Inputs<U>,
     {
         let Visit { cmd, out } = self;
         match cmd {

@@ -60,6 +60,8 @@ pub(super) fn score<
 where
     L: Mechanism<K, CK> + Clone + Sync,
     Mn: Mechanism<N, C> + Copy + Sync,
+    L: crate::Inputs<U>,
+    Mn: crate::Inputs<U>,
 {
     let k = a.steps;
     if k == 0 {

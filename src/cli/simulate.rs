@@ -19,6 +19,7 @@ pub(super) fn simulate<Mn, const N: usize, const C: usize, const U: usize>(
 ) -> Result<(), CliError>
 where
     Mn: Mechanism<N, C> + Parameters + Copy,
+    Mn: crate::Inputs<U>,
 {
     let usage = |why: String| Err(CliError::Usage(why));
     if let Err(e) = minimal.constants() {

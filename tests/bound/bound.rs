@@ -887,7 +887,12 @@ fn step_jacobian_norms_match_central_differences() {
 /// Transitions of `truth` (the VI at Δt) along `steps` steps from `z0`,
 /// each under an input drawn uniformly from [−amplitude, amplitude] per
 /// component, with uniform velocity noise of half-width `noise`.
-fn forced_data<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize, const U: usize>(
+fn forced_data<
+    M: vigp::Mechanism<N, C> + Copy + vigp::Inputs<U>,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
     truth: M,
     z0: &State<N>,
     steps: usize,
@@ -918,7 +923,7 @@ fn forced_data<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize, 
 /// `predict_forced` along the same inputs, and under zero inputs against
 /// `predict`.
 fn check_forced<
-    M: vigp::Mechanism<N, C> + Clone,
+    M: vigp::Mechanism<N, C> + Clone + vigp::Inputs<U>,
     const N: usize,
     const C: usize,
     const U: usize,

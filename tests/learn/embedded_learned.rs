@@ -436,7 +436,12 @@ vigp::mechanism! {
 /// Transitions of `runs` forced trajectories of `truth` (first-order VI at
 /// DT) from consistent states at rest near `q0`, under random
 /// piecewise-constant inputs U[−amp, amp] held 10 steps.
-fn forced_data<M: Mechanism<N, C> + Copy, const N: usize, const C: usize, const U: usize>(
+fn forced_data<
+    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
     truth: M,
     q0: SVector<f64, N>,
     amp: f64,
@@ -482,7 +487,8 @@ fn compare_forced<E, M, const N: usize, const C: usize, const D: usize, const U:
     rng: &mut common::Rng,
 ) -> f64
 where
-    M: Mechanism<N, C> + Clone,
+    E: vigp::Inputs<U>,
+    M: Mechanism<N, C> + Clone + vigp::Inputs<U>,
     E: vigp::embedded::Dynamics<N, C> + Parameters,
 {
     let mut ws = l.workspace();
@@ -525,7 +531,7 @@ where
         assert_eq!(free, embedded.step_forced(z, &zero, &zero).unwrap());
         // U = 0 is "no input" (u = 0), as for the nominal `Stepper`
         let none = SVector::<f64, 0>::zeros();
-        assert_eq!(free, embedded.step_forced(z, &none, &none).unwrap());
+        assert_eq!(free, embedded.step_forced::<0>(z, &none, &none).unwrap());
         let std_free = l.step_mean_with(z, &mut ws).unwrap();
         assert_eq!(
             std_free,
@@ -533,7 +539,8 @@ where
         );
         assert_eq!(
             std_free,
-            l.step_mean_forced_with(z, &none, &none, &mut ws).unwrap()
+            l.step_mean_forced_with::<0>(z, &none, &none, &mut ws)
+                .unwrap()
         );
         worst = worst.max(diff(&std_free, &free));
     }
@@ -838,7 +845,7 @@ mod exported_forced_enc_u {
 /// 30 std and embedded forced steps of `l` and `stepper` from one state
 /// after `u_prev`: max |difference| (and the embedded rollout does not
 /// allocate).
-fn fixture_rollouts<M: Mechanism<2, 0> + Clone, const D: usize>(
+fn fixture_rollouts<M: Mechanism<2, 0> + Clone + vigp::Inputs<1>, const D: usize>(
     l: &Learned<M, 2, 0>,
     stepper: &LearnedStepper<'_, DriveCartpole, 2, 0, D>,
     u_prev: &SVector<f64, 1>,

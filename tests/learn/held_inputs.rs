@@ -118,7 +118,7 @@ fn log<M, const N: usize, const U: usize>(
     logged: &[SVector<f64, U>],
 ) -> Vec<SVector<f64, N>>
 where
-    M: Mechanism<N, 0> + Clone,
+    M: Mechanism<N, 0> + Clone + vigp::Inputs<U>,
 {
     match truth {
         Truth::Midpoint => {
@@ -181,7 +181,7 @@ fn held_input_errors<M, const N: usize, const U: usize>(
     seed: u64,
 ) -> Vec<Errors>
 where
-    M: Mechanism<N, 0> + Clone,
+    M: Mechanism<N, 0> + Clone + vigp::Inputs<U>,
 {
     let mut rng = Rng(seed);
     let start =
@@ -217,7 +217,7 @@ fn errors<M, const N: usize, const U: usize>(
     seed: u64,
 ) -> Vec<Errors>
 where
-    M: Mechanism<N, 0> + Clone,
+    M: Mechanism<N, 0> + Clone + vigp::Inputs<U>,
 {
     let mut data: Vec<ForcedTransition<N, U>> = Vec::new();
     for l in logs.iter().filter(|l| l.length == 0) {
@@ -417,7 +417,7 @@ fn peer_logs<const N: usize, const U: usize>(system: &str, truth: &str) -> Vec<L
 /// inertia, damping or sign shows at 1e-4 or more within a few steps.
 fn assert_same_mechanism<M, const N: usize, const U: usize>(model: M, logs: &[Log<N, U>])
 where
-    M: Mechanism<N, 0> + Clone,
+    M: Mechanism<N, 0> + Clone + vigp::Inputs<U>,
 {
     let mut worst = 0.0f64;
     for l in logs {

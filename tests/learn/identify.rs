@@ -143,7 +143,7 @@ fn vi_log<M, const N: usize, const C: usize, const U: usize>(
     u: impl Fn(usize) -> SVector<f64, U>,
 ) -> Log
 where
-    M: Mechanism<N, C> + Copy,
+    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
 {
     let z0 = vigp::projection::consistent_state(&m, &q0, &SVector::zeros(), DT).unwrap();
     let vi = if alpha == 0.0 {

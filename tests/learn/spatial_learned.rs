@@ -117,7 +117,7 @@ fn rotation_matrix_inputs_are_sign_invariant_quaternion_inputs_are_not() {
     .unwrap();
 
     let horizon = 30;
-    let run = |m: &dyn SpatialIntegrator<2>, z: &SpatialState<2>| {
+    let run = |m: &dyn SpatialIntegrator<2, Mechanism = Furuta>, z: &SpatialState<2>| {
         let p = m.rollout(z, horizon).unwrap();
         for z in &p[1..] {
             assert!(t_step.constraint_violation(z) <= 1e-10);
@@ -384,11 +384,14 @@ fn arm_inputs(rng: &mut Rng, samples: usize) -> Vec<SVector<f64, 2>> {
 /// The configurations of a driven run logged as a user's data are: sample
 /// k's input held from t_k, so the step from z_k (which sets the velocity
 /// over [t_{k+1}, t_{k+2}]) runs under `logged[k + 1]`.
-fn logged_run(
-    stepper: &impl SpatialIntegrator<2>,
+fn logged_run<I: SpatialIntegrator<2>>(
+    stepper: &I,
     z0: &SpatialState<2>,
     logged: &[SVector<f64, 2>],
-) -> Vec<Configuration<2>> {
+) -> Vec<Configuration<2>>
+where
+    I::Mechanism: vigp::Inputs<2>,
+{
     let mut z = *z0;
     let mut configs = vec![(z.x, z.q)];
     for u in &logged[1..] {
@@ -401,7 +404,7 @@ fn logged_run(
 /// The driven arm's training data: 6 logged runs of 25 samples under
 /// piecewise-constant random torques.
 fn driven_data(
-    truth: &impl SpatialIntegrator<2>,
+    truth: &impl SpatialIntegrator<2, Mechanism: vigp::Inputs<2>>,
     rng: &mut Rng,
     dt: f64,
 ) -> Vec<SpatialForcedTransition<2, 2>> {

@@ -170,7 +170,7 @@ fn rel(a: f64, scale: f64) -> f64 {
 /// Jacobian of ∇_q W). Exact on both sides up to rounding: 1e-12 relative.
 fn check_terms<M, const N: usize, const C: usize, const U: usize>(name: &str, m: M)
 where
-    M: Mechanism<N, C>,
+    M: Mechanism<N, C> + vigp::Inputs<U>,
 {
     let k = Dynamics::constants(&m).expect("valid parameters");
     let mut rng = Rng(3);
@@ -296,6 +296,7 @@ fn forced_matches_reference<M, const N: usize, const C: usize, const U: usize>(
     states: &[State<N>],
 ) where
     M: Mechanism<N, C> + Copy,
+    M: vigp::Inputs<U>,
 {
     let dt = 0.01;
     let opts = vigp::NewtonOptions {
@@ -363,6 +364,7 @@ fn bitwise<A, B, const N: usize, const C: usize, const U: usize>(
 ) where
     A: Dynamics<N, C> + Copy,
     B: Dynamics<N, C> + Copy,
+    A: vigp::Inputs<U>,
 {
     let dt = 0.01;
     let zero = SVector::<f64, U>::zeros();
@@ -589,7 +591,7 @@ fn check_derivatives<M, const N: usize, const C: usize, const U: usize>(
     substeps: usize,
 ) -> f64
 where
-    M: Mechanism<N, C> + Copy,
+    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
 {
     let dt = 0.01;
     let mut rng = Rng(23);
@@ -662,7 +664,7 @@ fn step_derivatives_match_central_differences() {
 /// rollout, both rules, a tree and a loop.
 fn check_rollout<M, const N: usize, const C: usize, const U: usize>(name: &str, m: M, z0: &State<N>)
 where
-    M: Mechanism<N, C> + Copy,
+    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
 {
     let dt = 0.01;
     let k_steps = 6;
@@ -847,13 +849,10 @@ fn every_integrator_takes_inputs() {
     let u = SVector::<f64, 1>::new(2.0);
     let target = 2.0 / (9.81 * 0.5);
     let z0 = State::new([0.0], [0.0]);
-    fn settle<I: Integrator<1>>(
-        name: &str,
-        i: &I,
-        z0: &State<1>,
-        u: &SVector<f64, 1>,
-        target: f64,
-    ) {
+    fn settle<I: Integrator<1>>(name: &str, i: &I, z0: &State<1>, u: &SVector<f64, 1>, target: f64)
+    where
+        I::Mechanism: vigp::Inputs<1>,
+    {
         let mut out = vec![*z0; 3000];
         i.rollout_forced_into(z0, &vec![*u; 3000], &mut out)
             .unwrap();

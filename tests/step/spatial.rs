@@ -386,6 +386,10 @@ fn compare_forced<
     PM: Mechanism<M, CM> + Copy,
     LM: Mechanism<N, CL> + Copy,
     L: vigp::spatial::Spatial<B, J> + Copy + MaximalOf<B, J, NB, CB>,
+    P: vigp::Inputs<U>,
+    PM: vigp::Inputs<U>,
+    LM: vigp::Inputs<U>,
+    L: vigp::Inputs<U>,
 {
     let steps = inputs.len();
     let min = |m: P, z: &State<N>| {

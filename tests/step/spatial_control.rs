@@ -395,7 +395,12 @@ fn spatial_input_terms_match_dual_numbers() {
 /// ~3e3 (the unit-norm rows act within one Δt) and ε = 1e-4 leaves a
 /// truncation error of ~2e-4 absolute; at 1e-6 truncation is negligible
 /// and rounding ~1e-14·|v|/ε ~ 1e-7 absolute, 1e-10 relative).
-fn check_ab<M: Mechanism<N, C> + Copy, const N: usize, const C: usize, const U: usize>(
+fn check_ab<
+    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
     name: &str,
     m: M,
     states: &[State<N>],
@@ -581,8 +586,8 @@ fn forced_maximal_converges_to_the_minimal_view() {
         start: impl Fn(f64) -> State<N>,
         u: impl Fn(f64) -> SVector<f64, 2>,
     ) where
-        S: vigp::spatial::Spatial<B, J> + Copy,
-        M: Mechanism<N, C> + Copy,
+        S: vigp::spatial::Spatial<B, J> + Copy + vigp::Inputs<2>,
+        M: Mechanism<N, C> + Copy + vigp::Inputs<2>,
     {
         let mut out = Vec::new();
         for dt in [0.004, 0.001] {

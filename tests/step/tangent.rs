@@ -53,7 +53,7 @@ fn worst<M, const N: usize, const C: usize, const T: usize, const U: usize>(
     h: f64,
 ) -> f64
 where
-    M: Mechanism<N, C> + vigp::embedded::Dynamics<N, C> + Copy,
+    M: Mechanism<N, C> + vigp::embedded::Dynamics<N, C> + Copy + vigp::Inputs<U>,
 {
     let vi = Variational::new(model, dt);
     let chart = Tangent::new(<M as vigp::embedded::Dynamics<N, C>>::KINDS, dt).unwrap();
@@ -309,7 +309,7 @@ fn lie_worst<S, const B: usize, const J: usize, const N: usize, const C: usize, 
     h: f64,
 ) -> (f64, f64)
 where
-    S: vigp::spatial::Spatial<B, J>,
+    S: vigp::spatial::Spatial<B, J> + vigp::Inputs<U>,
 {
     let (z1, a, b) = st.step_derivatives(z0, u).unwrap();
     let plain = st.step_forced(z0, u).unwrap();

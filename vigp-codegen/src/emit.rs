@@ -735,6 +735,15 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
     };
 
     let input_joints = m.inputs();
+    let name_inputs_impl = if input_joints.is_empty() {
+        quote!()
+    } else {
+        let u = Literal::usize_unsuffixed(input_joints.len());
+        quote! {
+            #[doc = " Forced steps take input vectors of its number of inputs (and of length 0)."]
+            impl ::vigp::embedded::Inputs<#u> for #name {}
+        }
+    };
     let (inputs_delegate_const, inputs_delegate_fns, input_names) = if input_joints.is_empty() {
         (quote!(), quote!(), quote!())
     } else {
@@ -925,6 +934,8 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
         }
 
         #minimal_dynamics
+
+        #name_inputs_impl
 
         #[doc = " The parameter struct is its minimal-coordinate model: `Stepper::new(sys, dt)` steps `sys.minimal()`."]
         impl ::vigp::embedded::Dynamics<#n, #c> for #name {

@@ -826,8 +826,8 @@ pub fn emit_dynamics(
     // inputs (emitted last: the constants of the other functions keep
     // their indices, so an actuated mechanism's terms are those of the
     // same mechanism without `actuated`)
-    let (inputs_const, input_fns) = if mech.inputs.is_empty() {
-        (quote!(), quote!())
+    let (inputs_const, input_fns, inputs_impl) = if mech.inputs.is_empty() {
+        (quote!(), quote!(), quote!())
     } else {
         let u = mech.inputs.len();
         let uu = index(u);
@@ -891,6 +891,10 @@ pub fn emit_dynamics(
                 const INPUT_NAMES: &'static [&'static str] = &[#(#names),*];
             },
             quote!(#b_fn #h_fn),
+            quote! {
+                #[doc = " Forced steps take input vectors of its number of inputs (and of length 0)."]
+                impl ::vigp::embedded::Inputs<#uu> for #ty {}
+            },
         )
     };
 
@@ -935,6 +939,7 @@ pub fn emit_dynamics(
             #constraint_fns
             #input_fns
         }
+        #inputs_impl
     }
 }
 

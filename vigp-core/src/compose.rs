@@ -356,7 +356,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         p: &SVector<f64, N>,
         guess: &SVector<f64, N>,
         u: &SVector<f64, U>,
-    ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError>
+    where
+        M: crate::Inputs<U>,
+    {
         // the midpoint stages check u themselves; the explicit ones here
         if self.explicit.is_some() && u.iter().any(|x| !x.is_finite()) {
             return Err(StepError::NonFiniteInput);
@@ -379,7 +382,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         &self,
         z: &State<N>,
         u: &SVector<f64, U>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: crate::Inputs<U>,
+    {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }

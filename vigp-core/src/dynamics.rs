@@ -56,6 +56,23 @@ impl<const N: usize> Default for Terms<N> {
     }
 }
 
+/// The mechanism takes input vectors of length `U`: `U` is its number of
+/// actuated joints ([`Dynamics::INPUTS`]), or 0 (the input-free step, which
+/// every mechanism takes).
+///
+/// The forced steps are bounded by it (`where M: Inputs<U>`), so an input
+/// vector of the wrong length is a compile error at the call that passes
+/// it. `mechanism!` implements `Inputs<INPUTS>` for an actuated mechanism
+/// and for its views; `Inputs<0>` holds for every type.
+#[diagnostic::on_unimplemented(
+    message = "`{Self}` does not take input vectors of length {U}",
+    label = "an input vector of length {U}",
+    note = "pass one input per actuated joint (`Dynamics::INPUTS`, named by `INPUT_NAMES`), or a vector of length 0 for the input-free step"
+)]
+pub trait Inputs<const U: usize> {}
+
+impl<T: ?Sized> Inputs<0> for T {}
+
 /// A mechanical model in `N` generalized coordinates with `C` holonomic
 /// constraints, described by closed-form terms: what
 /// [`Stepper`](crate::Stepper) (and every std integrator) evaluates.

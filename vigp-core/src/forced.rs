@@ -50,7 +50,7 @@
 //! factorisation of J (and of the Schur complement for constraints) serves
 //! every direction. Nothing here allocates.
 
-use crate::dynamics::{Dynamics, Terms};
+use crate::dynamics::{Dynamics, Inputs, Terms};
 use crate::linalg::{FullPivLu, KKT_SUSPECT_PIVOT_RATIO, PartialLu, solve_kkt_regularised};
 use crate::state::State;
 use crate::step::{
@@ -237,8 +237,10 @@ struct Groups<const N: usize, const U: usize> {
 
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// Refuses an input vector with NaN or ±∞; `U` must equal
-    /// [`Dynamics::INPUTS`], or be 0 for the input-free step (a
-    /// compile-time check).
+    /// [`Dynamics::INPUTS`], or be 0 for the input-free step: the public
+    /// forced steps are bounded by `M: Inputs<U>`; this `const` assertion is
+    /// the backstop against an `Inputs` implementation that contradicts
+    /// [`Dynamics::INPUTS`].
     fn check_input<const U: usize>(u: &SVector<f64, U>) -> Result<(), StepError> {
         const {
             assert!(
@@ -287,7 +289,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
         u: &SVector<f64, U>,
-    ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError> {
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>, StepReport), StepError>
+    where
+        M: Inputs<U>,
+    {
         Self::check_input(u)?;
         self.solve_forced_any(x1, p0, h, guess, u, &mut Workspace::new())
             .map(|(v, p, r, _)| (v, p, r))
@@ -329,7 +334,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         &self,
         z: &State<N>,
         u: &SVector<f64, U>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: Inputs<U>,
+    {
         self.step_forced_with_report(z, u).map(|(z, _)| z)
     }
 
@@ -338,7 +346,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         &self,
         z: &State<N>,
         u: &SVector<f64, U>,
-    ) -> Result<(State<N>, StepReport), StepError> {
+    ) -> Result<(State<N>, StepReport), StepError>
+    where
+        M: Inputs<U>,
+    {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
@@ -357,7 +368,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         z: &State<N>,
         u: &SVector<f64, U>,
         ws: &mut StepWorkspace<N, C>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: Inputs<U>,
+    {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
@@ -375,7 +389,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         z: &State<N>,
         p0: &SVector<f64, N>,
         u: &SVector<f64, U>,
-    ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
+    ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError>
+    where
+        M: Inputs<U>,
+    {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState);
         }
@@ -392,7 +409,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         z0: &State<N>,
         inputs: &[SVector<f64, U>],
         out: &mut [State<N>],
-    ) -> Result<(), RolloutError> {
+    ) -> Result<(), RolloutError>
+    where
+        M: Inputs<U>,
+    {
         let fail = |step, error| RolloutError { step, error };
         if !z0.is_finite() {
             return Err(fail(0, StepError::NonFiniteState));
@@ -594,7 +614,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         &self,
         z: &State<N>,
         u: &SVector<f64, U>,
-    ) -> Result<(State<N>, StepDerivatives<N, U>), StepError> {
+    ) -> Result<(State<N>, StepDerivatives<N, U>), StepError>
+    where
+        M: Inputs<U>,
+    {
         self.derivatives_from_state(z, u, &mut Workspace::new())
     }
 
@@ -606,7 +629,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         z: &State<N>,
         u: &SVector<f64, U>,
         ws: &mut StepWorkspace<N, C>,
-    ) -> Result<(State<N>, StepDerivatives<N, U>), StepError> {
+    ) -> Result<(State<N>, StepDerivatives<N, U>), StepError>
+    where
+        M: Inputs<U>,
+    {
         self.derivatives_from_state(z, u, ws.reset::<M>())
     }
 
@@ -664,7 +690,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         z: &State<N>,
         p0: &SVector<f64, N>,
         u: &SVector<f64, U>,
-    ) -> Result<(State<N>, SVector<f64, N>, MomentumDerivatives<N, U>), StepError> {
+    ) -> Result<(State<N>, SVector<f64, N>, MomentumDerivatives<N, U>), StepError>
+    where
+        M: Inputs<U>,
+    {
         if !z.is_finite() || max_abs(p0).is_nan() {
             return Err(StepError::NonFiniteState);
         }

@@ -43,9 +43,9 @@
 //!
 //! The input count is a type-level fact: `U` must equal
 //! [`Dynamics::INPUTS`], or be 0 for no input (u = 0, as
-//! [`Stepper::step_forced`] takes it) — a `const` assertion, evaluated when
-//! the code is generated: `cargo build` reports a wrong `U`, `cargo check`
-//! does not — so a wrong-length input does not build; NaN or ±∞ in u is [`StepError::NonFiniteInput`].
+//! [`Stepper::step_forced`] takes it) — the bound `M: Inputs<U>`
+//! ([`crate::Inputs`]), so a wrong-length input is a compile error at the
+//! call; NaN or ±∞ in u is [`StepError::NonFiniteInput`].
 //! [`LearnedStepper::step`] (no input) of a model with inputs is the forced
 //! step under u = 0, as the std runtime's unforced step of such a model. A
 //! model trained without inputs takes only u = 0 in `step_forced` (which is
@@ -350,14 +350,18 @@ where
     /// the next velocity under inputs `u` after `u_prev`, the input that
     /// produced z's velocity (module docs, "Inputs"). `U` must equal
     /// [`Dynamics::INPUTS`], or be 0 for no input (then this is
-    /// [`predict_velocity`](Self::predict_velocity)); a `const` assertion:
-    /// `cargo build` reports a wrong `U`.
+    /// [`predict_velocity`](Self::predict_velocity)): the bound
+    /// `M: Inputs<U>`, with a `const` assertion as a backstop against an
+    /// `Inputs` implementation that contradicts [`Dynamics::INPUTS`].
     pub fn predict_velocity_forced<const U: usize>(
         &self,
         z: &State<N>,
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
-    ) -> Result<SVector<f64, N>, LearnedError> {
+    ) -> Result<SVector<f64, N>, LearnedError>
+    where
+        M: crate::Inputs<U>,
+    {
         const {
             assert!(
                 U == M::INPUTS || U == 0,
@@ -460,7 +464,10 @@ where
         z: &State<N>,
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
-    ) -> Result<State<N>, LearnedError> {
+    ) -> Result<State<N>, LearnedError>
+    where
+        M: crate::Inputs<U>,
+    {
         let vu = self.predict_velocity_forced(z, u_prev, u)?;
         self.finish(z, vu)
     }
@@ -499,7 +506,10 @@ where
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         out: &mut [State<N>],
-    ) -> Result<(), (usize, LearnedError)> {
+    ) -> Result<(), (usize, LearnedError)>
+    where
+        M: crate::Inputs<U>,
+    {
         if inputs.len() < out.len() {
             return Err((inputs.len(), StepError::NonFiniteInput.into()));
         }

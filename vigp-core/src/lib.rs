@@ -43,7 +43,7 @@ pub mod tangent;
 pub mod tree;
 
 pub use compose::Composition;
-pub use dynamics::{Dynamics, Terms};
+pub use dynamics::{Dynamics, Inputs, Terms};
 pub use forced::{InputJacobian, MomentumDerivatives, StateJacobian, StepDerivatives};
 pub use kinematics::{Point2, Pose2};
 pub use learned::{LearnedError, LearnedModel, LearnedStepper};

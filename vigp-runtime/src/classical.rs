@@ -146,6 +146,8 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Update<N> for Rk4<M, N,
 macro_rules! integrator {
     ($name:ident) => {
         impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for $name<M, N, C> {
+            type Mechanism = M;
+
             fn dt(&self) -> f64 {
                 self.dt
             }
@@ -158,7 +160,10 @@ macro_rules! integrator {
                 &self,
                 z: &State<N>,
                 u: &SVector<f64, U>,
-            ) -> Result<State<N>, StepError> {
+            ) -> Result<State<N>, StepError>
+            where
+                M: vigp_core::Inputs<U>,
+            {
                 let k = self.k.as_ref().map_err(|e| *e)?;
                 self.update(z, |q, v| {
                     acceleration_forced_with(&self.model, k, q, v, u).map(|(a, _)| a)

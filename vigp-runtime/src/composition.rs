@@ -66,6 +66,8 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational4<M, N, C> {
 }
 
 impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Variational4<M, N, C> {
+    type Mechanism = M;
+
     fn dt(&self) -> f64 {
         self.dt
     }
@@ -85,7 +87,10 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Varia
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         self.composition()?
             .step_forced(z, u)
             .map_err(|e| StepError::from(e).with_tolerance(self.tolerance))

@@ -102,7 +102,7 @@ pub fn acceleration_with<M: Mechanism<N, C>, const N: usize, const C: usize>(
 /// the generalized force B(q)u joins the right-hand side. u = 0 is
 /// [`acceleration_with`].
 pub fn acceleration_forced_with<
-    M: Mechanism<N, C>,
+    M: Mechanism<N, C> + vigp_core::Inputs<U>,
     const N: usize,
     const C: usize,
     const U: usize,

@@ -336,7 +336,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         encoding: Encoding,
         prior: Prior,
         options: &TrainOptions,
-    ) -> Result<(Self, TrainReport), LearnError> {
+    ) -> Result<(Self, TrainReport), LearnError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let nominal = |vi: &Variational<M, N, C>, z: &State<N>, u: &SVector<f64, U>| {
             Ok(vi.step_forced(z, u)?.v)
         };
@@ -361,7 +364,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             &State<N>,
             &SVector<f64, U>,
         ) -> Result<SVector<f64, N>, StepError>,
-    ) -> Result<(Self, TrainReport), LearnError> {
+    ) -> Result<(Self, TrainReport), LearnError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         if data.is_empty() {
             return Err(LearnError::Empty);
         }
@@ -488,7 +494,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<SVector<f64, N>, StepError> {
+    ) -> Result<SVector<f64, N>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         self.forced_velocity(z, u_prev, u, ws, None)
     }
 
@@ -501,7 +510,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u: &SVector<f64, U>,
         ws: &mut Workspace,
         var: Option<&mut SVector<f64, N>>,
-    ) -> Result<SVector<f64, N>, StepError> {
+    ) -> Result<SVector<f64, N>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         self.check_input_count::<U>()?;
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
@@ -571,7 +583,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             vigp_core::InputJacobian<N, U>,
         ),
         StepError,
-    > {
+    >
+    where
+        M: vigp_core::Inputs<U>,
+    {
         self.check_input_count::<U>()?;
         self.step_derivatives_at(z, u_prev, u, ws)
     }
@@ -579,7 +594,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// The forced calls take `U` equal to the inputs the model was trained
     /// with, or `U = 0` (no input: u = 0, as every [`Integrator`] takes
     /// it). A `U` other than 0 and the mechanism's input count does not
-    /// compile (the nominal forced step's `const` assertion), so the only
+    /// compile (the `Inputs<U>` bound on every forced call), so the only
     /// run-time refusal is the mechanism's input count on a model trained
     /// without inputs.
     fn check_input_count<const U: usize>(&self) -> Result<(), StepError> {
@@ -608,7 +623,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             vigp_core::InputJacobian<N, U>,
         ),
         StepError,
-    > {
+    >
+    where
+        M: vigp_core::Inputs<U>,
+    {
         use nalgebra::SMatrix;
         debug_assert!(U == self.inputs || U == 0);
         self.check_step(z)?;
@@ -755,7 +773,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         Ok(self.mean_step_forced_parts(z, u_prev, u, ws)?.0)
     }
 
@@ -767,7 +788,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<(State<N>, SVector<f64, N>), StepError> {
+    ) -> Result<(State<N>, SVector<f64, N>), StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         self.check_step(z)?;
         let vu = self.predict_mean_velocity_forced(z, u_prev, u, ws)?;
         Ok((self.next_state(z, &vu)?, vu))
@@ -803,7 +827,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let mut var = SVector::<f64, N>::zeros();
         let v = self.forced_velocity(z, u_prev, u, ws, Some(&mut var))?;
         Ok((v, var.map(|s| s.max(0.0).sqrt())))
@@ -829,7 +856,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         ws: &mut Workspace,
-    ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
+    ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         self.check_input_count::<U>()?;
         self.rollout_info(z0, inputs.len(), u_prev, inputs, ws)
     }
@@ -849,7 +879,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         out: &mut [State<N>],
-    ) -> Result<(), StepError> {
+    ) -> Result<(), StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         if inputs.len() < out.len() {
             return Err(StepError::NonFiniteInput {
                 step: Some(inputs.len()),
@@ -1067,7 +1100,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         ws: &mut Workspace,
-    ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError> {
+    ) -> Result<Vec<(State<N>, LearnedStepInfo<N>)>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let d = self.gp.input_dim();
         if self.gp.output_dim() != N || d == 0 || (U > 0 && inputs.len() != steps) {
             return Err(StepError::Prediction { step: None });
@@ -1163,6 +1199,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     for Learned<M, N, C>
 {
+    type Mechanism = M;
+
     fn dt(&self) -> f64 {
         self.dt
     }
@@ -1184,7 +1222,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         &self,
         z: &State<N>,
         u: &SVector<f64, U>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         if self.inputs == 0 {
             return if u.iter().all(|x| *x == 0.0) {
                 self.step(z)
@@ -1205,7 +1246,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         z0: &State<N>,
         inputs: &[SVector<f64, U>],
         out: &mut [State<N>],
-    ) -> Result<(), StepError> {
+    ) -> Result<(), StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         match inputs.first() {
             Some(u0) => self.rollout_mean_forced_into(z0, u0, inputs, out),
             None if out.is_empty() => Ok(()),

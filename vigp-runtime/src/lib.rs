@@ -59,6 +59,7 @@ pub use system::{Parameters, System, ViewVisitor};
 pub use variational::RolloutDerivatives;
 pub use variational::{Integrator, Variational};
 pub use vigp_core as embedded;
+pub use vigp_core::Inputs;
 pub use vigp_core::Real;
 
 /// Solver internals, grouped: the discrete Euler–Lagrange residual and its

@@ -41,7 +41,8 @@ pub trait ViewVisitor {
     /// Runs on the minimal view (`N` coordinates, `C` loop equations) and
     /// the maximal view (`NM` = 3 per link, `CM` joint equations) of a
     /// mechanism with `U` inputs (`Dynamics::INPUTS`, the actuated joints:
-    /// the length of the input vectors of its forced steps).
+    /// the length of the input vectors of its forced steps, which both
+    /// views take: [`vigp_core::Inputs`]).
     fn visit<
         Mn,
         Mx,
@@ -57,5 +58,7 @@ pub trait ViewVisitor {
     ) -> Self::Output
     where
         Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
-        Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static;
+        Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+        Mn: vigp_core::Inputs<U>,
+        Mx: vigp_core::Inputs<U>;
 }

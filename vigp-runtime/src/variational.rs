@@ -4,12 +4,17 @@
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError, StepInfo};
 use nalgebra::SVector;
-use vigp_core::{StepError as CoreError, StepWorkspace, Stepper};
+use vigp_core::{Inputs, StepError as CoreError, StepWorkspace, Stepper};
 
 /// A one-step map z_k ↦ z_{k+1} with a fixed time step.
 ///
 /// Implemented by every integrator, so a user swaps integrators in one line.
 pub trait Integrator<const N: usize> {
+    /// The mechanism this integrator steps: its forced steps take the input
+    /// vectors it takes ([`vigp_core::Inputs`]), so a wrong input length is
+    /// a compile error at the call.
+    type Mechanism: ?Sized;
+
     /// The time step Δt in seconds.
     fn dt(&self) -> f64;
 
@@ -28,6 +33,7 @@ pub trait Integrator<const N: usize> {
     ) -> Result<State<N>, StepError>
     where
         Self: Sized,
+        Self::Mechanism: Inputs<U>,
     {
         if u.iter().all(|x| *x == 0.0) {
             self.step(z)
@@ -47,6 +53,7 @@ pub trait Integrator<const N: usize> {
     ) -> Result<(), StepError>
     where
         Self: Sized,
+        Self::Mechanism: Inputs<U>,
     {
         if inputs.len() < out.len() {
             return Err(StepError::NonFiniteInput {
@@ -697,7 +704,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: Inputs<U>,
+    {
         self.step_from(
             z,
             |s, ws| s.step_forced_in(z, u, ws),
@@ -714,7 +724,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
         out: &mut [State<N>],
-    ) -> Result<(), StepError> {
+    ) -> Result<(), StepError>
+    where
+        M: Inputs<U>,
+    {
         self.resuming(z0, Some(inputs), out).map(|_| ())
     }
 
@@ -728,7 +741,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         z0: &State<N>,
         inputs: Option<&[nalgebra::SVector<f64, U>]>,
         out: &mut [State<N>],
-    ) -> Result<RolloutReport, StepError> {
+    ) -> Result<RolloutReport, StepError>
+    where
+        M: Inputs<U>,
+    {
         check_quaternions::<M, N, C>(z0)?;
         let stepper = self.stepper()?;
         let mut report = RolloutReport {
@@ -780,7 +796,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
-    ) -> Result<(Vec<State<N>>, RolloutReport), StepError> {
+    ) -> Result<(Vec<State<N>>, RolloutReport), StepError>
+    where
+        M: Inputs<U>,
+    {
         let mut traj = crate::newton::trajectory_buffer(*z0, inputs.len())?;
         let report = self.resuming(z0, Some(inputs), &mut traj[1..])?;
         Ok((traj, report))
@@ -792,7 +811,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
-    ) -> Result<Vec<State<N>>, StepError> {
+    ) -> Result<Vec<State<N>>, StepError>
+    where
+        M: Inputs<U>,
+    {
         let mut traj = crate::newton::trajectory_buffer(*z0, inputs.len())?;
         self.rollout_forced_into(z0, inputs, &mut traj[1..])?;
         Ok(traj)
@@ -807,7 +829,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
-    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError> {
+    ) -> Result<(State<N>, vigp_core::StepDerivatives<N, U>), StepError>
+    where
+        M: Inputs<U>,
+    {
         self.step_from(
             z,
             |s, ws| s.step_with_derivatives_in(z, u, ws),
@@ -834,7 +859,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         &self,
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
-    ) -> Result<RolloutDerivatives<N, U>, StepError> {
+    ) -> Result<RolloutDerivatives<N, U>, StepError>
+    where
+        M: Inputs<U>,
+    {
         use nalgebra::SMatrix;
         use vigp_core::{InputJacobian, StateJacobian};
         let stepper = self.stepper()?;
@@ -892,6 +920,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     for Variational<M, N, C>
 {
+    type Mechanism = M;
+
     fn dt(&self) -> f64 {
         self.dt
     }
@@ -907,7 +937,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         &self,
         z: &State<N>,
         u: &nalgebra::SVector<f64, U>,
-    ) -> Result<State<N>, StepError> {
+    ) -> Result<State<N>, StepError>
+    where
+        M: Inputs<U>,
+    {
         Variational::step_forced(self, z, u)
     }
 
@@ -918,7 +951,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         z0: &State<N>,
         inputs: &[nalgebra::SVector<f64, U>],
         out: &mut [State<N>],
-    ) -> Result<(), StepError> {
+    ) -> Result<(), StepError>
+    where
+        M: Inputs<U>,
+    {
         Variational::rollout_forced_into(self, z0, inputs, out)
     }
 

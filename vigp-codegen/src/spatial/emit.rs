@@ -170,6 +170,19 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
     } else {
         quote!()
     };
+    let inputs_impl = |ty: &dyn quote::ToTokens| {
+        if input_joints.is_empty() {
+            quote!()
+        } else {
+            let u = usize_lit(input_joints.len());
+            quote! {
+                #[doc = " Forced steps take input vectors of its number of inputs (and of length 0)."]
+                impl ::vigp::embedded::Inputs<#u> for #ty {}
+            }
+        }
+    };
+    let name_inputs_impl = inputs_impl(&name);
+    let minimal_inputs_impl = inputs_impl(&minimal_ty);
     let (spatial_inputs, input_names, inputs_const, inputs_fns, mechanism_inputs) = if input_joints
         .is_empty()
     {
@@ -444,6 +457,8 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
                 #inputs_fns
             }
 
+            #minimal_inputs_impl
+
             impl ::vigp::Mechanism<#nm, #cm> for #minimal_ty {
                 const COORDINATES: [&'static str; #nm] = [#(#coord_names),*];
                 #mechanism_inputs
@@ -530,6 +545,8 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
                 #sp::minimal::poses::<Self, R, #b, #j, #nm>(self, q)
             }
         }
+
+        #name_inputs_impl
 
         #[allow(clippy::approx_constant)]
         impl #sp::Spatial<#b, #j> for #name {

@@ -742,7 +742,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z: &SpatialState<B>,
         u: &SVector<f64, U>,
-    ) -> Result<SpatialState<B>, StepError> {
+    ) -> Result<SpatialState<B>, StepError>
+    where
+        S: crate::Inputs<U>,
+    {
         self.step_forced_with_report(z, u).map(|(z, _)| z)
     }
 
@@ -751,7 +754,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z: &SpatialState<B>,
         u: &SVector<f64, U>,
-    ) -> Result<(SpatialState<B>, LieStepReport), StepError> {
+    ) -> Result<(SpatialState<B>, LieStepReport), StepError>
+    where
+        S: crate::Inputs<U>,
+    {
         const {
             assert!(
                 U == S::INPUT_JOINTS.len() || U == 0,
@@ -776,7 +782,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z0: &SpatialState<B>,
         inputs: &[SVector<f64, U>],
         out: &mut [SpatialState<B>],
-    ) -> Result<(), RolloutError> {
+    ) -> Result<(), RolloutError>
+    where
+        S: crate::Inputs<U>,
+    {
         const {
             assert!(
                 U == S::INPUT_JOINTS.len() || U == 0,

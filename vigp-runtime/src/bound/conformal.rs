@@ -678,7 +678,7 @@ fn select_score(
 }
 
 pub(super) fn calibrate<
-    M: Mechanism<N, C> + Clone,
+    M: Mechanism<N, C> + Clone + vigp_core::Inputs<U>,
     const N: usize,
     const C: usize,
     const U: usize,

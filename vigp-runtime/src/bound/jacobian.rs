@@ -129,7 +129,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut crate::gp::Workspace,
-    ) -> Result<(f64, f64), StepError> {
+    ) -> Result<(f64, f64), StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         if U != self.inputs() {
             return Err(StepError::InputsNotSupported);
         }
@@ -144,7 +147,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut crate::gp::Workspace,
-    ) -> Result<(f64, f64), StepError> {
+    ) -> Result<(f64, f64), StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let dt = Integrator::dt(self);
         let constrained = C > 0 && self.projects();
         let z = if constrained {

@@ -808,7 +808,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         inputs: &'a [SVector<f64, U>],
         ws: &mut Workspace,
-    ) -> Result<Trace<'a, N, U>, StepError> {
+    ) -> Result<Trace<'a, N, U>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         // the count checked before anything is allocated (the rollout's
         // GP input buffer holds steps × d numbers)
         let d = self.gp().input_dim().max(1);
@@ -915,7 +918,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     fn sample_forced<const U: usize>(
         &self,
         calibration: &Calibration<N>,
-    ) -> Vec<(State<N>, SVector<f64, U>, SVector<f64, U>)> {
+    ) -> Vec<(State<N>, SVector<f64, U>, SVector<f64, U>)>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let gp = self.gp();
         let d = gp.input_dim();
         let e = self.encoding().dim(&M::KINDS);
@@ -999,7 +1005,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         &self,
         kind: &BoundKind,
         calibration: &Calibration<N>,
-    ) -> Result<ErrorBound, BoundError> {
+    ) -> Result<ErrorBound, BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         if U != self.inputs() {
             return Err(BoundError::Mismatch(
                 "number of inputs (U must be the model's inputs)",
@@ -1013,7 +1022,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         &self,
         kind: &BoundKind,
         calibration: &Calibration<N>,
-    ) -> Result<ErrorBound, BoundError> {
+    ) -> Result<ErrorBound, BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let dt = Integrator::dt(self);
         if !calibration.is_empty() && (calibration.dt() - dt).abs() > 1e-12 * dt {
             return Err(BoundError::Mismatch(
@@ -1172,7 +1184,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bound: &ErrorBound,
-    ) -> Result<BoundedPrediction<N>, BoundError> {
+    ) -> Result<BoundedPrediction<N>, BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let mut all = self.predict_bounds_forced(z0, u_prev, inputs, &[bound])?;
         Ok(all.remove(0))
     }
@@ -1186,7 +1201,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bounds: &[&ErrorBound],
-    ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
+    ) -> Result<Vec<BoundedPrediction<N>>, BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         if U != self.inputs() {
             return Err(BoundError::Mismatch(
                 "number of inputs (U must be the model's inputs)",
@@ -1220,7 +1238,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bounds: &[&ErrorBound],
-    ) -> Result<Vec<BoundedPrediction<N>>, BoundError> {
+    ) -> Result<Vec<BoundedPrediction<N>>, BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         if bounds.is_empty() {
             return Err(BoundError::Empty("list of bounds"));
         }
@@ -1316,7 +1337,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         trace: &Trace<'_, N, U>,
         norms: &mut [Option<(f64, f64)>],
         ws: &mut Workspace,
-    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>, bool), BoundError> {
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>, bool), BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let (mut one_step, mut position, outside, _) =
             self.attach(bound, trace, norms, ws, true, false)?;
         let mut fell_back = false;
@@ -1361,7 +1385,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         ws: &mut Workspace,
         positions: bool,
         lenient: bool,
-    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>, Vec<bool>), BoundError> {
+    ) -> Result<(Vec<f64>, Vec<f64>, Vec<bool>, Vec<bool>), BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
         let dt = Integrator::dt(self);
         let steps = trace.std_devs.len();
         let mut input = vec![0.0; self.gp().input_dim()];

@@ -392,7 +392,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         calibration: &SpatialCalibration<B>,
         settings: &ConformalSettings,
-    ) -> Result<SpatialConformal, LearnSpatialError> {
+    ) -> Result<SpatialConformal, LearnSpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         self.check_inputs(U)?;
         if calibration.input_count() != U {
             return Err(BoundError::Mismatch("calibration windows carry other inputs").into());
@@ -437,7 +440,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bound: &SpatialConformal,
-    ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
+    ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         self.check_bound(bound, U, inputs.len())?;
         let trace = self.trace_forced(z0, u_prev, inputs, &mut self.workspace())?;
         // z_K is tested with the last step's inputs (u_prev and 0 without

@@ -333,7 +333,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         rotation: Rotation,
         prior: Prior,
         options: &TrainOptions,
-    ) -> Result<(Self, TrainReport), LearnSpatialError> {
+    ) -> Result<(Self, TrainReport), LearnSpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         Self::train_inputs(stepper, data, rotation, prior, options, |s, z, u| {
             s.step_forced(z, u)
         })
@@ -353,7 +356,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             &SpatialState<B>,
             &SVector<f64, U>,
         ) -> Result<SpatialState<B>, vigp_core::StepError>,
-    ) -> Result<(Self, TrainReport), LearnSpatialError> {
+    ) -> Result<(Self, TrainReport), LearnSpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         if data.is_empty() {
             return Err(LearnSpatialError::Empty);
         }
@@ -469,7 +475,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<SVector<f64, N>, LearnSpatialError> {
+    ) -> Result<SVector<f64, N>, LearnSpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         z.validate()?;
         self.check_inputs(U)?;
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
@@ -568,7 +577,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         ws: &mut Workspace,
-    ) -> Result<Trace<B, N>, LearnSpatialError> {
+    ) -> Result<Trace<B, N>, LearnSpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         self.check_inputs(U)?;
         if !inputs
             .iter()
@@ -636,7 +648,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<SpatialState<B>, LearnSpatialError> {
+    ) -> Result<SpatialState<B>, LearnSpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         let nu = self.predict_velocity_forced(z, u_prev, u, ws)?;
         self.advance(z, nu)
     }
@@ -662,6 +677,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
 impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
     SpatialIntegrator<B> for LearnedSpatial<S, B, J, N, C>
 {
+    type Mechanism = S;
+
     fn dt(&self) -> f64 {
         self.stepper.dt()
     }
@@ -702,7 +719,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z: &SpatialState<B>,
         u: &SVector<f64, U>,
-    ) -> Result<SpatialState<B>, SpatialError> {
+    ) -> Result<SpatialState<B>, SpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         self.forced_step_in(z, u, u, &mut self.gp.workspace(), None)
     }
 
@@ -713,7 +733,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z0: &SpatialState<B>,
         inputs: &[SVector<f64, U>],
-    ) -> Result<Vec<SpatialState<B>>, SpatialError> {
+    ) -> Result<Vec<SpatialState<B>>, SpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         let mut ws = self.gp.workspace();
         let mut out = Vec::with_capacity(inputs.len() + 1);
         out.push(*z0);
@@ -739,7 +762,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u: &SVector<f64, U>,
         ws: &mut Workspace,
         k: Option<usize>,
-    ) -> Result<SpatialState<B>, SpatialError> {
+    ) -> Result<SpatialState<B>, SpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         let step = if self.inputs == 0 {
             if !u.iter().all(|x| *x == 0.0) {
                 return Err(SpatialError::InputsNotSupported);

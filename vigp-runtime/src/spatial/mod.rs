@@ -56,6 +56,11 @@ impl From<learned::LearnSpatialError> for SpatialError {
 /// A one-step map of maximal spatial states with a fixed time step: the
 /// Lie-group variational integrator ([`LieStepper`]) or a learned one.
 pub trait SpatialIntegrator<const B: usize> {
+    /// The mechanism this integrator steps: its forced steps take the input
+    /// vectors it takes ([`vigp_core::Inputs`]), so a wrong input length is
+    /// a compile error at the call.
+    type Mechanism: ?Sized;
+
     /// Δt (s).
     fn dt(&self) -> f64;
 
@@ -76,6 +81,7 @@ pub trait SpatialIntegrator<const B: usize> {
     ) -> Result<SpatialState<B>, SpatialError>
     where
         Self: Sized,
+        Self::Mechanism: vigp_core::Inputs<U>,
     {
         if u.iter().all(|x| *x == 0.0) {
             self.step(z)
@@ -93,6 +99,7 @@ pub trait SpatialIntegrator<const B: usize> {
     ) -> Result<Vec<SpatialState<B>>, SpatialError>
     where
         Self: Sized,
+        Self::Mechanism: vigp_core::Inputs<U>,
     {
         let mut out = spatial_trajectory::<B>(inputs.len())?;
         out.push(*z0);
@@ -131,6 +138,8 @@ pub trait SpatialIntegrator<const B: usize> {
 impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
     SpatialIntegrator<B> for LieStepper<S, B, J, N, C>
 {
+    type Mechanism = S;
+
     fn dt(&self) -> f64 {
         LieStepper::dt(self)
     }
@@ -155,7 +164,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z: &SpatialState<B>,
         u: &nalgebra::SVector<f64, U>,
-    ) -> Result<SpatialState<B>, SpatialError> {
+    ) -> Result<SpatialState<B>, SpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         Ok(LieStepper::step_forced(self, z, u)?)
     }
 
@@ -164,7 +176,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z0: &SpatialState<B>,
         inputs: &[nalgebra::SVector<f64, U>],
-    ) -> Result<Vec<SpatialState<B>>, SpatialError> {
+    ) -> Result<Vec<SpatialState<B>>, SpatialError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
         let mut out = spatial_trajectory::<B>(inputs.len())?;
         out.resize(inputs.len() + 1, *z0);
         self.rollout_forced_into(z0, inputs, &mut out)?;

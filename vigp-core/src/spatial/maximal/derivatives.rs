@@ -212,7 +212,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         z: &SpatialState<B>,
         u: &SVector<f64, U>,
-    ) -> Result<(SpatialState<B>, StateJacobian<N>, InputJacobian<N, U>), StepError> {
+    ) -> Result<(SpatialState<B>, StateJacobian<N>, InputJacobian<N, U>), StepError>
+    where
+        S: crate::Inputs<U>,
+    {
         if self.dissipative || self.elastic {
             return Err(StepError::InvalidOptions(
                 "LieStepper::step_derivatives covers mechanisms without damping and springs",
