@@ -102,6 +102,37 @@ fn rollouts_of_impossible_lengths_are_typed_errors() {
         "{e:?}"
     );
     assert!(e.to_string().contains("do not fit in memory"), "{e}");
+    // the learned rollout checks the count before it allocates, too
+    let m = Pendulum::default().minimal();
+    let nominal = Variational::new(m, 0.01);
+    let mut zp = State::new([0.5], [0.0]);
+    let mut tr = Vec::new();
+    for _ in 0..20 {
+        let z1 = nominal.step(&zp).unwrap();
+        tr.push(Transition {
+            z: zp,
+            v_next: z1.v,
+        });
+        zp = z1;
+    }
+    let options = TrainOptions {
+        restarts: 0,
+        ..TrainOptions::default()
+    };
+    let (learned, _) =
+        Learned::train(m, 0.01, &tr, Encoding::SinCos, Prior::Nominal, &options).unwrap();
+    let mut ws = learned.workspace();
+    let start = State::new([0.5], [0.0]);
+    for steps in [usize::MAX, usize::MAX / 2, usize::MAX / 64] {
+        let e = learned
+            .rollout_with_info(&start, steps, &mut ws)
+            .unwrap_err();
+        assert!(matches!(e, StepError::TooManySteps { .. }), "{e:?}");
+    }
+    assert_eq!(
+        learned.rollout_with_info(&start, 3, &mut ws).unwrap().len(),
+        3
+    );
 }
 
 /// The double pendulum at Δt = 2 s: Newton converges, but to a root no

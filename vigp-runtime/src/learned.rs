@@ -1108,7 +1108,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         if self.gp.output_dim() != N || d == 0 || (U > 0 && inputs.len() != steps) {
             return Err(StepError::Prediction { step: None });
         }
-        let mut points = vec![0.0; steps * d];
+        // step counts are checked before anything is allocated
+        vigp_core::step::check_step_count::<(State<N>, LearnedStepInfo<N>)>(steps)
+            .map_err(StepError::from)?;
+        let len = steps
+            .checked_mul(d)
+            .ok_or(StepError::TooManySteps { steps })?;
+        vigp_core::step::check_step_count::<f64>(len).map_err(StepError::from)?;
+        let mut points = vec![0.0; len];
         let mut out = Vec::with_capacity(steps);
         let mut z = *z0;
         for (k, x) in points.chunks_exact_mut(d).enumerate() {

@@ -608,6 +608,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         nominal: impl Fn(&SpatialState<B>, usize) -> Result<SpatialState<B>, vigp_core::StepError>,
     ) -> Result<Trace<B, N>, LearnSpatialError> {
         z0.validate()?;
+        vigp_core::step::check_step_count::<SpatialState<B>>(steps)
+            .map_err(LearnSpatialError::Step)?;
         let mut states = Vec::with_capacity(steps + 1);
         let mut std_devs = Vec::with_capacity(steps);
         states.push(*z0);
@@ -696,6 +698,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z0: &SpatialState<B>,
         steps: usize,
     ) -> Result<Vec<SpatialState<B>>, SpatialError> {
+        vigp_core::step::check_step_count::<SpatialState<B>>(steps)?;
         let mut ws = self.gp.workspace();
         let mut out = Vec::with_capacity(steps + 1);
         out.push(*z0);
