@@ -5,6 +5,7 @@
 //! one to four mutations (delete, duplicate, swap, replace, extreme numbers)
 //! of the paper's four descriptions in `src/systems.rs`.
 
+use crate::sources::mechanism_bodies;
 use proc_macro2::TokenStream;
 use proptest::prelude::*;
 use std::panic::{AssertUnwindSafe, catch_unwind};
@@ -12,28 +13,10 @@ use std::panic::{AssertUnwindSafe, catch_unwind};
 /// The mechanism descriptions of `src/systems.rs` (the text inside each
 /// `crate::mechanism! { … }`).
 fn descriptions() -> Vec<String> {
-    let src = include_str!("../../src/systems.rs");
-    let mut out = Vec::new();
-    let mut rest = src;
-    while let Some(i) = rest.find("crate::mechanism! {") {
-        let body = &rest[i + "crate::mechanism! {".len()..];
-        let mut depth = 1;
-        let mut end = 0;
-        for (k, ch) in body.char_indices() {
-            match ch {
-                '{' => depth += 1,
-                '}' => depth -= 1,
-                _ => {}
-            }
-            if depth == 0 {
-                end = k;
-                break;
-            }
-        }
-        out.push(body[..end].to_string());
-        rest = &body[end..];
-    }
-    out
+    mechanism_bodies(include_str!("../../src/systems.rs"), "crate::mechanism! {")
+        .into_iter()
+        .map(String::from)
+        .collect()
 }
 
 /// The description as a flat list of token texts (delimiters separate).

@@ -11,5 +11,6 @@ mod codegen_fuzz;
 mod constants;
 mod dynamics;
 mod snapshots;
+mod sources;
 mod spatial_fuzz;
 mod spatial_snapshot;

@@ -6,42 +6,7 @@
 //! Accept intended changes with `INSTA_UPDATE=always cargo test --test snapshots`
 //! (or `cargo insta review`); with `CI` set, mismatches fail.
 
-/// The bodies of every `crate::mechanism! { … }` in `src`, with the name of
-/// the mechanism they declare.
-fn mechanism_bodies(src: &str) -> Vec<(String, String)> {
-    let mut out = Vec::new();
-    let mut rest = src;
-    while let Some(i) = rest.find("mechanism! {") {
-        let open = i + "mechanism! ".len();
-        let mut depth = 0usize;
-        let mut end = open;
-        for (k, ch) in rest[open..].char_indices() {
-            match ch {
-                '{' => depth += 1,
-                '}' => {
-                    depth -= 1;
-                    if depth == 0 {
-                        end = open + k;
-                        break;
-                    }
-                }
-                _ => {}
-            }
-        }
-        let body = &rest[open + 1..end];
-        let name = body
-            .lines()
-            .map(str::trim)
-            .find(|l| l.starts_with("pub "))
-            .and_then(|l| l.split_whitespace().nth(1))
-            .expect("a `pub Name {` line")
-            .to_string();
-        out.push((name, body.to_string()));
-        rest = &rest[end..];
-    }
-    out
-}
-
+use crate::sources::named_bodies;
 /// The text of the minimal view's `Mechanism` impl in a pretty-printed
 /// expansion (the maximal view always has joint constraints).
 fn minimal_impl(code: &str) -> &str {
@@ -57,7 +22,7 @@ fn minimal_impl(code: &str) -> &str {
 #[test]
 fn generated_code_of_the_paper_systems() {
     let src = include_str!("../../src/systems.rs");
-    let bodies = mechanism_bodies(src);
+    let bodies = named_bodies(src);
     let names: Vec<_> = bodies.iter().map(|(n, _)| n.as_str()).collect();
     assert_eq!(names, ["Pendulum", "Cartpole", "DoublePendulum", "Fourbar"]);
     for (name, body) in bodies {
@@ -100,10 +65,9 @@ fn generated_code_contains_only_what_the_scene_needs() {
     assert!(!minimal_impl(&dp).contains("fn constraints"));
     assert!(minimal_impl(&dp).contains("fn dissipation"));
 
-    let fourbar = vigp_codegen::expand_to_string(
-        &mechanism_bodies(include_str!("../../src/systems.rs"))[3].1,
-    )
-    .unwrap();
+    let fourbar =
+        vigp_codegen::expand_to_string(&named_bodies(include_str!("../../src/systems.rs"))[3].1)
+            .unwrap();
     assert!(minimal_impl(&fourbar).contains("fn constraints"));
     // the same for the no_std model: dampers and constraints only if needed
     let embedded = |code: &str| {
@@ -144,7 +108,7 @@ fn generated_code_contains_only_what_the_scene_needs() {
 /// dual-number views.
 #[test]
 fn no_std_expansion_has_only_the_fixed_size_items() {
-    let body = &mechanism_bodies(include_str!("../../src/systems.rs"))[2].1;
+    let body = &named_bodies(include_str!("../../src/systems.rs"))[2].1;
     let code = vigp_codegen::expand_to_string_for(body, vigp_codegen::Target::NoStd).unwrap();
     assert!(code.contains("impl ::vigp::embedded::Model<2, 0> for DoublePendulum"));
     assert!(!code.contains("::vigp::Mechanism"));

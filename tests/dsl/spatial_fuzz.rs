@@ -2,34 +2,20 @@
 //! token stream gives code or an error, never a panic (the spatial
 //! counterpart of tests/dsl/codegen_fuzz.rs).
 
+use crate::sources::mechanism_bodies;
 use proc_macro2::TokenStream;
 use proptest::prelude::*;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 
 /// The descriptions of `src/systems/spatial.rs`.
 fn descriptions() -> Vec<String> {
-    let src = include_str!("../../src/systems/spatial.rs");
-    let mut out = Vec::new();
-    let mut rest = src;
-    while let Some(i) = rest.find("crate::mechanism! {") {
-        let body = &rest[i + "crate::mechanism! {".len()..];
-        let mut depth = 1;
-        let mut end = 0;
-        for (k, ch) in body.char_indices() {
-            match ch {
-                '{' => depth += 1,
-                '}' => depth -= 1,
-                _ => {}
-            }
-            if depth == 0 {
-                end = k;
-                break;
-            }
-        }
-        out.push(body[..end].to_string());
-        rest = &body[end..];
-    }
-    out
+    mechanism_bodies(
+        include_str!("../../src/systems/spatial.rs"),
+        "crate::mechanism! {",
+    )
+    .into_iter()
+    .map(String::from)
+    .collect()
 }
 
 fn flat_tokens(src: &str) -> Vec<String> {

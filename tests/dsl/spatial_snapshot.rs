@@ -3,44 +3,10 @@
 //! `INSTA_UPDATE=always cargo test --test dsl spatial_snapshot::`), and what a
 //! spatial scene does not need is not emitted.
 
-/// The bodies of every `crate::mechanism! { … }` in `src`, with names.
-fn mechanism_bodies(src: &str) -> Vec<(String, String)> {
-    let mut out = Vec::new();
-    let mut rest = src;
-    while let Some(i) = rest.find("mechanism! {") {
-        let open = i + "mechanism! ".len();
-        let mut depth = 0usize;
-        let mut end = open;
-        for (k, ch) in rest[open..].char_indices() {
-            match ch {
-                '{' => depth += 1,
-                '}' => {
-                    depth -= 1;
-                    if depth == 0 {
-                        end = open + k;
-                        break;
-                    }
-                }
-                _ => {}
-            }
-        }
-        let body = &rest[open + 1..end];
-        let name = body
-            .lines()
-            .map(str::trim)
-            .find(|l| l.starts_with("pub "))
-            .and_then(|l| l.split_whitespace().nth(1))
-            .expect("a `pub Name {` line")
-            .to_string();
-        out.push((name, body.to_string()));
-        rest = &rest[end..];
-    }
-    out
-}
-
+use crate::sources::named_bodies;
 #[test]
 fn generated_code_of_the_spatial_examples() {
-    let bodies = mechanism_bodies(include_str!("../../src/systems/spatial.rs"));
+    let bodies = named_bodies(include_str!("../../src/systems/spatial.rs"));
     let names: Vec<_> = bodies.iter().map(|(n, _)| n.as_str()).collect();
     assert_eq!(
         names,
@@ -104,7 +70,7 @@ fn spatial_code_contains_only_what_the_scene_needs() {
     assert!(ball.contains("fn dissipation"));
     assert!(ball.contains("Maximal<Self, 1, 1, 6, 3>"));
     let no_std = vigp_codegen::expand_to_string_for(
-        &mechanism_bodies(include_str!("../../src/systems/spatial.rs"))[1].1,
+        &named_bodies(include_str!("../../src/systems/spatial.rs"))[1].1,
         vigp_codegen::Target::NoStd,
     )
     .unwrap();

@@ -1001,9 +1001,7 @@ pub fn check_transitions_dt<const N: usize>(
     dt: f64,
     tolerance: f64,
 ) -> Result<(), DataError> {
-    let pairs: Vec<(State<N>, SVector<f64, N>)> =
-        transitions.iter().map(|t| (t.z, t.v_next)).collect();
-    check_pairs_dt(&pairs, dt, tolerance)
+    check_pairs_dt(transitions.iter().map(|t| (&t.z, &t.v_next)), dt, tolerance)
 }
 
 /// [`check_transitions_dt`] for the transitions of an actuated mechanism.
@@ -1012,13 +1010,11 @@ pub fn check_forced_transitions_dt<const N: usize, const U: usize>(
     dt: f64,
     tolerance: f64,
 ) -> Result<(), DataError> {
-    let pairs: Vec<(State<N>, SVector<f64, N>)> =
-        transitions.iter().map(|t| (t.z, t.v_next)).collect();
-    check_pairs_dt(&pairs, dt, tolerance)
+    check_pairs_dt(transitions.iter().map(|t| (&t.z, &t.v_next)), dt, tolerance)
 }
 
-fn check_pairs_dt<const N: usize>(
-    pairs: &[(State<N>, SVector<f64, N>)],
+fn check_pairs_dt<'a, const N: usize>(
+    pairs: impl Iterator<Item = (&'a State<N>, &'a SVector<f64, N>)>,
     dt: f64,
     tolerance: f64,
 ) -> Result<(), DataError> {
@@ -1029,7 +1025,7 @@ fn check_pairs_dt<const N: usize>(
             value: dt,
         });
     }
-    let Some((found, i)) = time_step::estimate(pairs.iter().map(|(z, v)| (z, v))) else {
+    let Some((found, i)) = time_step::estimate(pairs) else {
         return Ok(());
     };
     // printed data carries ~1e-12 relative rounding in Δt·v

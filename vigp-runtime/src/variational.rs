@@ -370,13 +370,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
                 Err(e) => return Err(self.explain(StepError::from(e), z)),
             }
         }
-        if let Some(e) = Some(self.explain(StepError::from(last), z)).filter(|e| {
-            matches!(
-                e,
-                StepError::NonUnitQuaternion { .. } | StepError::OffConstraints { .. }
-            )
-        }) {
-            return Err(e);
+        // a start off its quaternions or constraints is named as such,
+        // whatever the sub-step
+        let explained = self.explain(StepError::from(last), z);
+        if matches!(
+            explained,
+            StepError::NonUnitQuaternion { .. } | StepError::OffConstraints { .. }
+        ) {
+            return Err(explained);
         }
         Err(StepError::NotResolved {
             depth,
