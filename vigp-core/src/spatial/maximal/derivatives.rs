@@ -34,26 +34,30 @@
 //! [ ∂r/∂ν  −G₁ᵀ ] [ dν ]     [ ∂r/∂θ ]
 //! [ ∂c/∂ν    0  ] [ dλ ] = − [ ∂c/∂θ ],   θ ∈ {δc₁, δν₀, u}
 //!
-//! ∂r/∂δc₁ = −∂(G₁ᵀλ)/∂δc₁ + Δt·Σ u_i·∂(∇_ν ṡ_i)/∂δc₁,   ∂r/∂δν₀ = blockdiag(m I, ∂μ⁻/∂ω₀)
-//! ∂c/∂δc₁ = G(x₂, q₂)·blockdiag(I, R(exp(Δt·ω₁))ᵀ),       ∂r/∂u_i = Δt·∇_ν ṡ_i
+//! ∂r/∂δc₁ = −∂(G₁ᵀλ)/∂δc₁ + Δt·Σ u_i·∂(∇_ν ṡ_i)/∂δc₁ − Δt·∂(D·ν)/∂δc₁ − Δt·∂(∇V)/∂δc₁
+//! ∂r/∂δν₀ = blockdiag(m I, ∂μ⁻/∂ω₀),   ∂r/∂u_i = Δt·∇_ν ṡ_i
+//! ∂c/∂δc₁ = G(x₂, q₂)·blockdiag(I, R(exp(Δt·ω₁))ᵀ)
 //! ```
+//!
+//! with D(c₁) = Σ_j d_j Σ_k ∇_ν ṡ_jk ∇_ν ṡ_jkᵀ the damping of the joints'
+//! rates and V(c₁) = Σ_j ½k_j(s_j − rest_j)² the springs' potential.
 //!
 //! The curvature terms are exact: forward-mode second-order jets ([`Jet2`])
 //! through each joint's residual with the orientation expanded to second
 //! order, R·(I + η̂ + ½η̂²), plus the ½∇g·(ε × η) that composing two right
 //! perturbations adds (exp(ε)·exp(η) = exp(ε + η + ½ε × η + …)); the
-//! input rates' mixed derivatives by jets in 12 configuration and 12
-//! velocity directions. Checked against central differences through the
+//! input and damped rates' mixed derivatives by jets in 12 configuration
+//! and 12 velocity directions; the springs' by the potential's jets as the
+//! constraints'. Checked against central differences through the
 //! retraction in tests/step/tangent.rs.
-//!
-//! Damped and sprung mechanisms are not covered (their forces' curvature
-//! terms are not formed): [`LieStepper::step_derivatives`] refuses them.
 
 use super::{LieStepper, SpatialState, constraints_and_jacobian, link_pose, pack, unpack};
 use crate::forced::{InputJacobian, StateJacobian};
 use crate::real::Jet2;
 use crate::spatial::geometry::{Motion3, Pose3, cross, mul_mv, mul_mv_f, sub};
-use crate::spatial::model::{Joint3, Link3, Spatial, joint_rates, joint_residual};
+use crate::spatial::model::{
+    Joint3, Link3, Spatial, joint_coordinate, joint_rates, joint_residual,
+};
 use crate::spatial::so3;
 use crate::step::StepError;
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
@@ -204,9 +208,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// [`StateJacobian`]'s blocks are ∂δc₁/∂δc₀ (`q_q`), ∂δc₁/∂δν₀ (`q_v`),
     /// ∂δν₁/∂δc₀ (`v_q`), ∂δν₁/∂δν₀ (`v_v`), each 6B × 6B, so
     /// A = `a.matrix::<{12B}>()`; the [`InputJacobian`] holds ∂δν₁/∂u
-    /// (`q_u` is zero: the inputs act from configuration k+1 on). Damped
-    /// or sprung mechanisms are refused with [`StepError::InvalidOptions`];
-    /// the step's errors as [`Self::step_forced`]'s.
+    /// (`q_u` is zero: the inputs act from configuration k+1 on). Errors:
+    /// the step's, as [`Self::step_forced`]'s.
     #[allow(clippy::type_complexity)]
     pub fn step_derivatives<const U: usize>(
         &self,
@@ -216,11 +219,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     where
         S: crate::Inputs<U>,
     {
-        if self.dissipative || self.elastic {
-            return Err(StepError::InvalidOptions(
-                "LieStepper::step_derivatives covers mechanisms without damping and springs",
-            ));
-        }
         let inputs = S::INPUT_JOINTS.len();
         if U != inputs && U != 0 {
             return Err(StepError::InvalidOptions(
@@ -268,17 +266,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let mut r_c = SMatrix::<f64, N, N>::zeros();
         let mut row = 0;
         for j in &self.joints {
-            let child = jet_pose2::<12>(
-                &self.links[j.child],
-                &poses[j.child],
-                &d.x1[j.child],
-                6,
-                0.5,
-            );
-            let parent = match j.parent {
-                Some(pp) => jet_pose2::<12>(&self.links[pp], &poses[pp], &d.x1[pp], 0, 0.5),
-                None => constant_pose2(),
-            };
+            let (parent, child) = self.pose_jets2(&poses, &d.x1, j);
             let mut out = [Jet2::constant(0.0); 6];
             let n = joint_residual(j, &parent, &child, &mut out);
             if n == 0 {
@@ -295,7 +283,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let mut r_u = SMatrix::<f64, N, U>::zeros();
         for (col, &k) in S::INPUT_JOINTS.iter().enumerate().take(U) {
             let j = &self.joints[k];
-            let (rate, _) = self.rate_jet2(&poses, &d.x1, j);
+            let rate = self.rate_jets2(&poses, &d.x1, j).0[0];
             let ui = u[col];
             let mut m = [[0.0; 12]; 12];
             let mut grad = [0.0; 12];
@@ -309,6 +297,55 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             let mut g = SVector::<f64, N>::zeros();
             super::scatter(&mut g, j, &grad, h);
             r_u.set_column(col, &g);
+        }
+
+        // damping, r −= Δt·D(c₁)·ν with D = Σ_j d_j Σ_k ∇_ν ṡ_k ∇_ν ṡ_kᵀ:
+        // −Δt·d_j Σ_k (∂(∇_ν ṡ_k)/∂δc₁·ṡ_k + ∇_ν ṡ_k ⊗ ∂ṡ_k/∂δc₁), ṡ_k
+        // being linear in ν
+        if self.dissipative {
+            for j in &self.joints {
+                if j.damping == 0.0 {
+                    continue;
+                }
+                let (rates, n) = self.rate_jets2(&poses, &d.x1, j);
+                let nu_local: [f64; 12] = core::array::from_fn(|a| {
+                    if a < 6 {
+                        j.parent.map_or(0.0, |p| nu[6 * p + a])
+                    } else {
+                        nu[6 * j.child + a - 6]
+                    }
+                });
+                let mut m = [[0.0; 12]; 12];
+                for rate in &rates[..n] {
+                    let grad: [f64; 12] = core::array::from_fn(|a| rate.g[12 + a]);
+                    let sdot: f64 = grad.iter().zip(&nu_local).map(|(g, v)| g * v).sum();
+                    let dsdot: [f64; 12] = core::array::from_fn(|b| {
+                        (0..12).map(|e| rate.hessian(12 + e, b) * nu_local[e]).sum()
+                    });
+                    for (a, row) in m.iter_mut().enumerate() {
+                        for (b, x) in row.iter_mut().enumerate() {
+                            *x -= h
+                                * j.damping
+                                * (rate.hessian(12 + a, b) * sdot + grad[a] * dsdot[b]);
+                        }
+                    }
+                }
+                scatter_block(&mut r_c, j, &m);
+            }
+        }
+        // springs, r −= Δt·∇V(c₁) with V = ½k(s − rest)²: the chart's
+        // second derivative of Δt·V, as for the constraints' λ·g
+        if self.elastic {
+            for (j, spring) in self.joints.iter().zip(&self.springs) {
+                if spring.stiffness == 0.0 {
+                    continue;
+                }
+                let (parent, child) = self.pose_jets2(&poses, &d.x1, j);
+                let e = joint_coordinate(j, &parent, &child, spring.rest) - spring.rest;
+                let potential = e * e * (0.5 * h * spring.stiffness);
+                let m = mixed_from_hessian(&potential).map(|r| r.map(|x| -x));
+                scatter_block(&mut r_c, j, &m);
+            }
         }
 
         // ∂c/∂δc₁ = G(x₂, q₂)·blockdiag(I, R(exp(Δt ω₁))ᵀ)
@@ -362,15 +399,31 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         ))
     }
 
-    /// The rate of joint `j` as a jet in the parent's and child's
-    /// configuration (directions 0..12, first order in the orientation)
-    /// and velocities (12..24).
-    fn rate_jet2(
+    /// The poses of joint `j`'s parent (directions 0..6) and child (6..12)
+    /// as jets to second order in their (δx, η) (module docs).
+    fn pose_jets2(
         &self,
         poses: &[Pose3<f64>; B],
         x: &[Vector3<f64>; B],
         j: &Joint3,
-    ) -> (Jet2<24>, usize) {
+    ) -> (Pose3<Jet2<12>>, Pose3<Jet2<12>>) {
+        let child = jet_pose2::<12>(&self.links[j.child], &poses[j.child], &x[j.child], 6, 0.5);
+        let parent = match j.parent {
+            Some(p) => jet_pose2::<12>(&self.links[p], &poses[p], &x[p], 0, 0.5),
+            None => constant_pose2(),
+        };
+        (parent, child)
+    }
+
+    /// The rates of joint `j` (and how many it has) as jets in the
+    /// parent's and child's configuration (directions 0..12, first order
+    /// in the orientation) and velocities (12..24).
+    fn rate_jets2(
+        &self,
+        poses: &[Pose3<f64>; B],
+        x: &[Vector3<f64>; B],
+        j: &Joint3,
+    ) -> ([Jet2<24>; 3], usize) {
         let pm = |i: usize, cbase: usize, vbase: usize| {
             let pose = jet_pose2::<24>(&self.links[i], &poses[i], &x[i], cbase, 0.0);
             let wb = [
@@ -395,6 +448,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         };
         let mut out = [Jet2::constant(0.0); 3];
         let n = joint_rates(j, (&pp, &pmo), (&cp, &cm), &mut out);
-        (out[0], n)
+        (out, n)
     }
 }
