@@ -29,6 +29,36 @@ pub(super) enum Command {
     Export(ExportArgs),
     /// A log CSV of the nominal model from a start state under planned inputs.
     Simulate(SimulateArgs),
+    /// Physical parameters (masses, inertias, damping, springs) from a log.
+    Identify(IdentifyArgs),
+}
+
+/// How the nominal model steps (`score`, `simulate`).
+#[derive(Args, Debug, Clone)]
+pub(super) struct StepArgs {
+    /// Sub-steps of every nominal step (h = dt / K): a more accurate
+    /// nominal model.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub(super) substeps: usize,
+    /// A nominal step whose Newton solve fails, or whose root is not the
+    /// continuation of the motion, is retaken with its sub-step halved, up
+    /// to D times, before it is an error; the output says how many steps
+    /// did. 0: every failure is an error at once.
+    #[arg(long, default_value_t = 8, value_name = "D")]
+    pub(super) max_subdivision: u32,
+}
+
+impl StepArgs {
+    /// The nominal integrator of `model` at `dt` with these settings.
+    pub(super) fn integrator<M: crate::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
+        &self,
+        model: M,
+        dt: f64,
+    ) -> crate::Variational<M, N, C> {
+        crate::Variational::new(model, dt)
+            .substeps(self.substeps)
+            .max_subdivision(self.max_subdivision)
+    }
 }
 
 /// How data files are read.
@@ -88,12 +118,84 @@ pub(super) enum BoundArg {
     Rkhs,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+/// The prior of `fit`: `nominal`, `constant` or `identified:FILE`.
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub(super) enum PriorArg {
     /// The nominal variational step (the GP learns the residual).
     Nominal,
     /// No model: a constant mean.
     Constant,
+    /// The nominal step with the parameters of a `vigp identify` file.
+    Identified(PathBuf),
+}
+
+impl std::str::FromStr for PriorArg {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "nominal" => Ok(PriorArg::Nominal),
+            "constant" => Ok(PriorArg::Constant),
+            _ => match s.strip_prefix("identified:") {
+                Some(path) if !path.is_empty() => Ok(PriorArg::Identified(path.into())),
+                _ => Err(format!(
+                    "`{s}`: expected nominal, constant or identified:FILE (a file of `vigp identify`)"
+                )),
+            },
+        }
+    }
+}
+
+/// The discrete Euler–Lagrange rule of `identify`'s regression.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(super) enum RuleArg {
+    /// The midpoint rule: on samples of a continuous motion its bias is
+    /// O(Δt²).
+    Midpoint,
+    /// The first-order rule of `fit`'s nominal model: exact on logs that
+    /// this rule wrote, biased by O(Δt) on others.
+    FirstOrder,
+}
+
+/// How `identify` treats the positions' noise.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub(super) enum NoiseArg {
+    /// Least squares: right for noise-free logs, biased under noise.
+    Ls,
+    /// Instrumental variables from local polynomial fits that leave each
+    /// transition's own samples out.
+    Iv,
+}
+
+#[derive(Args, Debug, Clone)]
+pub(super) struct IdentifyArgs {
+    /// The mechanism (with several registered; case and `_` do not matter).
+    #[arg(long)]
+    pub(super) system: Option<String>,
+    /// The log (CSV: run,t,<coordinates>[,u_<joint>…], as for `fit`).
+    #[arg(long)]
+    pub(super) data: PathBuf,
+    /// Where to write the identified parameters (JSON; `fit --prior
+    /// identified:FILE` reads it).
+    #[arg(long)]
+    pub(super) out: PathBuf,
+    /// The discrete Euler–Lagrange rule of the regression.
+    #[arg(long, value_enum, default_value = "midpoint")]
+    pub(super) rule: RuleArg,
+    /// The treatment of position noise.
+    #[arg(long, value_enum, default_value = "ls")]
+    pub(super) noise: NoiseArg,
+    /// The prior's standard deviation around the declared values, relative
+    /// to each parameter's scale (its weight against the data vanishes as
+    /// the log grows).
+    #[arg(long, default_value_t = 0.5, allow_negative_numbers = true)]
+    pub(super) prior_sd: f64,
+    /// Change a declared parameter (the prior's centre), e.g. `--set
+    /// links.pole.mass=1.1` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub(super) set: Vec<String>,
+    #[command(flatten)]
+    pub(super) read: ReadArgs,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -112,8 +214,10 @@ pub(super) struct FitArgs {
     /// GP input coordinates.
     #[arg(long, value_enum, default_value = "sincos")]
     pub(super) encoding: EncodingArg,
-    /// Prior of the velocity map.
-    #[arg(long, value_enum, default_value = "nominal")]
+    /// Prior of the velocity map: `nominal` (the declared parameters),
+    /// `constant`, or `identified:FILE` (the nominal step with the
+    /// parameters of a `vigp identify` file; `--set` still overrides).
+    #[arg(long, default_value = "nominal", value_name = "PRIOR")]
     pub(super) prior: PriorArg,
     /// Random restarts of the hyperparameter optimisation (besides the first start).
     #[arg(long, default_value_t = 5)]
@@ -185,11 +289,8 @@ pub(super) struct ScoreArgs {
     /// Prediction horizon k.
     #[arg(long, default_value_t = 20)]
     pub(super) steps: usize,
-    /// Sub-steps of every nominal step (h = dt / K): a more accurate
-    /// nominal model; a step that fails still halves its sub-step on its
-    /// own, up to 8 times, whatever K is.
-    #[arg(long, default_value_t = 1, value_name = "K")]
-    pub(super) substeps: usize,
+    #[command(flatten)]
+    pub(super) stepping: StepArgs,
     #[command(flatten)]
     pub(super) read: ReadArgs,
 }
@@ -291,11 +392,8 @@ pub(super) struct SimulateArgs {
     /// Steps to simulate; the log has `--steps` + 2 rows.
     #[arg(long)]
     pub(super) steps: usize,
-    /// Sub-steps of every nominal step (h = dt / K): a more accurate
-    /// nominal model; a step that fails still halves its sub-step on its
-    /// own, up to 8 times, whatever K is.
-    #[arg(long, default_value_t = 1, value_name = "K")]
-    pub(super) substeps: usize,
+    #[command(flatten)]
+    pub(super) stepping: StepArgs,
     /// Planned inputs (the input-only CSV of `predict --inputs`, without a
     /// `run` column): row j drives step j, written on log row j + 1;
     /// default zero inputs. Log row 0 holds zero (the start is taken as

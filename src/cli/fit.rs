@@ -4,7 +4,7 @@ use std::io::Write;
 use std::time::Instant;
 
 use super::args::{EncodingArg, FitArgs, PriorArg};
-use super::{CliError, check_out_dir, data_error, read_data, spinner, w};
+use super::{CliError, check_out_dir, data_error, read_log, spinner, w};
 use crate::data::Dataset;
 use crate::gp::{Method, Screening, SparseOptions, TrainOptions, TrainReport};
 use crate::learned::{
@@ -99,9 +99,19 @@ where
             vigp_runtime::gp::MAX_MEMORY
         )));
     }
-    let prior = match a.prior {
+    let prior = match &a.prior {
         PriorArg::Nominal => Prior::Nominal,
         PriorArg::Constant => Prior::Constant,
+        PriorArg::Identified(path) => {
+            w(
+                out,
+                format_args!(
+                    "prior: the nominal step with the parameters identified in {}",
+                    path.display()
+                ),
+            )?;
+            Prior::Nominal
+        }
     };
     let mut opts = TrainOptions {
         restarts: a.restarts,
@@ -132,16 +142,7 @@ where
     }
     // before the training, which the write would otherwise waste
     check_out_dir(&a.out)?;
-    let data = read_data(
-        &a.data,
-        &Mn::COORDINATES,
-        &Mn::KINDS,
-        Mn::INPUT_NAMES,
-        &a.read,
-    )?;
-    let dt = data
-        .dt(a.read.time_tolerance)
-        .map_err(data_error(&a.data))?;
+    let (data, dt) = read_log::<Mn, N, C>(&a.data, &a.read)?;
     let short: Vec<&str> = data.short_runs().map(|r| r.name.as_str()).collect();
     w(
         out,

@@ -7,12 +7,14 @@
 //!              [--encoding sincos|minimal|maximal] [--prior nominal|constant] [--restarts K]
 //!              [--max-samples N] [--no-screen | --sparse M [--optimise-inducing]]
 //!              [--noise-floor VAR] [--memory K]
-//! vigp score   --model model.json --data test.csv --steps 20
+//! vigp score   --model model.json --data test.csv --steps 20 [--substeps K] [--max-subdivision D]
 //! vigp predict --model model.json --data starts.csv --steps K --out pred.csv
 //!              [--stride K] [--inputs plan.csv] [--calibration held_out.csv]
 //! vigp export  --model model.json --out model.rs [--variance]
 //! vigp simulate --system NAME --q Q,… [--v V,…] --dt DT --steps K
-//!              [--inputs plan.csv] --out log.csv
+//!              [--inputs plan.csv] [--substeps K] [--max-subdivision D] --out log.csv
+//! vigp identify --system NAME --data log.csv --out params.json
+//!              [--rule midpoint|first-order] [--noise ls|iv] [--prior-sd S]
 //! ```
 //!
 //! * `fit` reads measured positions ([`crate::data`] format), builds the
@@ -48,6 +50,12 @@
 //! * `simulate` rolls the nominal model out from `--q`/`--v` under planned
 //!   (`--inputs`) or zero inputs and writes a log in the data format,
 //!   each input on the row the reader expects.
+//! * `identify` estimates the physical parameters (masses, centres of
+//!   mass, inertias, joint damping and springs) from a log by regression on
+//!   the discrete Euler–Lagrange residual ([`crate::identify`]), prints
+//!   the table of identifiable combinations with their 95 % intervals, and
+//!   writes a parameter file; `fit --prior identified:FILE` then trains the
+//!   GP on what the identified model leaves.
 //! * `export` writes the Rust source of a `no_std` learned model for
 //!   [`crate::embedded::LearnedStepper`] and states its size.
 //!
@@ -86,6 +94,7 @@
 mod args;
 mod export;
 mod fit;
+mod identify;
 mod predict;
 mod registry;
 mod score;
@@ -244,7 +253,8 @@ where
     let cli = Cli::try_parse_from(args)?;
     let entry = match &cli.command {
         Command::Fit(args::FitArgs { system, .. })
-        | Command::Simulate(args::SimulateArgs { system, .. }) => match system {
+        | Command::Simulate(args::SimulateArgs { system, .. })
+        | Command::Identify(args::IdentifyArgs { system, .. }) => match system {
             Some(name) => find(systems, name)?,
             None if systems.len() == 1 => systems[0],
             None => {
@@ -318,6 +328,17 @@ fn w(out: &mut dyn Write, text: std::fmt::Arguments<'_>) -> Result<(), CliError>
     out.write_fmt(text)
         .and_then(|_| out.write_all(b"\n"))
         .map_err(io_error(Path::new("<stdout>")))
+}
+
+/// Reads a log of mechanism `M` ([`read_data`]) and its runs' common time
+/// step.
+fn read_log<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    path: &Path,
+    read: &ReadArgs,
+) -> Result<(Dataset<N>, f64), CliError> {
+    let data = read_data(path, &M::COORDINATES, &M::KINDS, M::INPUT_NAMES, read)?;
+    let dt = data.dt(read.time_tolerance).map_err(data_error(path))?;
+    Ok((data, dt))
 }
 
 /// Reads a data file with the mechanism's coordinates and, for an actuated

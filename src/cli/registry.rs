@@ -3,9 +3,10 @@
 
 use std::io::Write;
 
-use super::args::Command;
+use super::args::{Command, PriorArg};
 use super::export::export;
 use super::fit::{fit, set_parameter};
+use super::identify::{apply_identified, identify};
 use super::predict::predict;
 use super::score::score;
 use super::{CliError, in_minimal, load, model_and_data, read_saved};
@@ -83,9 +84,17 @@ pub(super) fn find(systems: &[SystemEntry], name: &str) -> Result<SystemEntry, C
 
 fn run_system<S: System>(cmd: &Command, out: &mut dyn Write) -> Result<(), CliError> {
     let mut sys = S::default();
+    if let Command::Fit(super::args::FitArgs {
+        prior: PriorArg::Identified(path),
+        ..
+    }) = cmd
+    {
+        apply_identified(&mut sys, S::NAME, path)?;
+    }
     match cmd {
         Command::Fit(super::args::FitArgs { set, .. })
-        | Command::Simulate(super::args::SimulateArgs { set, .. }) => {
+        | Command::Simulate(super::args::SimulateArgs { set, .. })
+        | Command::Identify(super::args::IdentifyArgs { set, .. }) => {
             for s in set {
                 set_parameter(&mut sys, s)?;
             }
@@ -165,6 +174,7 @@ impl ViewVisitor for Visit<'_> {
                 }
             }
             Command::Simulate(a) => super::simulate::simulate::<Mn, N, C, U>(a, minimal, out),
+            Command::Identify(a) => identify::<Mn, N, C>(a, minimal, out),
             Command::Export(a) => {
                 let saved = read_saved(&a.model)?;
                 if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {

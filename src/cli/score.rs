@@ -9,7 +9,8 @@ use super::args::ScoreArgs;
 use super::{CliError, bar, check_model_inputs, data_error, sparse_note, w, window_place};
 use crate::data::Dataset;
 use crate::learned::Learned;
-use crate::{Integrator, Mechanism, SVector, State, StepError, Variational};
+use crate::variational::RolloutReport;
+use crate::{Integrator, Mechanism, SVector, State, StepError};
 
 /// The k positions a rollout's k steps produced, in minimal coordinates:
 /// those of states 2 … k (state j's position is state j − 1's plus Δt times
@@ -114,11 +115,11 @@ where
     }
     // each run's logged inputs, once (none without inputs)
     let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
-    let vi = Variational::new(nominal, dt).substeps(a.substeps);
+    let vi = a.stepping.integrator(nominal, dt);
     vi.check()?;
     let pb = bar(windows.len(), "scoring");
     type Scored = Result<f64, StepError>;
-    let results: Vec<(Scored, Scored)> = windows
+    let results: Vec<(Scored, Scored, RolloutReport)> = windows
         .par_iter()
         .map(|&(r, s)| {
             let run = &data.runs[r];
@@ -137,13 +138,18 @@ where
             } else {
                 &inputs[r][s + 1..=s + k]
             };
-            let mut buf = vec![z0; k];
             let nom = if U == 0 {
-                vi.rollout_into(&z0, &mut buf)
+                vi.rollout_with_report(&z0, k)
             } else {
-                vi.rollout_forced_into(&z0, us, &mut buf)
+                vi.rollout_forced_with_report(&z0, us)
             };
-            let nom = nom.map(|()| window_mse(&produced(&buf, dt, |q| *q), truth));
+            let (nom, report) = match nom {
+                Ok((traj, report)) => (
+                    Ok(window_mse(&produced(&traj[1..], dt, |q| *q), truth)),
+                    report,
+                ),
+                Err(e) => (Err(e), RolloutReport::default()),
+            };
             let zv = to_view(&z0);
             let mut buf = vec![zv; k];
             let lrn = if U == 0 {
@@ -153,7 +159,7 @@ where
             };
             let lrn = lrn.map(|()| window_mse(&produced(&buf, dt, &to_minimal), truth));
             pb.inc(1);
-            (nom, lrn)
+            (nom, lrn, report)
         })
         .collect();
     pb.finish_and_clear();
@@ -161,7 +167,7 @@ where
     let learned_failed = results.iter().filter(|r| r.1.is_err()).count();
     let both: Vec<(f64, f64)> = results
         .iter()
-        .filter_map(|(a, b)| Some(((*a).ok()?, (*b).ok()?)))
+        .filter_map(|(a, b, _)| Some(((*a).ok()?, (*b).ok()?)))
         .collect();
     // the first failure of each model, with the run and the line its
     // window starts at
@@ -184,6 +190,25 @@ where
                 ),
             )?;
         }
+    }
+    let subdivided: Vec<&RolloutReport> = results
+        .iter()
+        .map(|r| &r.2)
+        .filter(|r| r.subdivided > 0)
+        .collect();
+    if !subdivided.is_empty() {
+        w(
+            out,
+            format_args!(
+                "nominal steps that subdivided themselves: {} in {} of {} windows, the deepest {} \
+                 halvings (--max-subdivision {})",
+                subdivided.iter().map(|r| r.subdivided).sum::<usize>(),
+                subdivided.len(),
+                windows.len(),
+                subdivided.iter().map(|r| r.deepest).max().unwrap_or(0),
+                a.stepping.max_subdivision
+            ),
+        )?;
     }
     w(
         out,

@@ -6,7 +6,7 @@ use std::io::Write;
 use super::args::SimulateArgs;
 use super::{CliError, check_out_dir, io_error, read_plan, w};
 use crate::data::Dataset;
-use crate::{Integrator, Mechanism, Parameters, SVector, State, Variational};
+use crate::{Mechanism, Parameters, SVector, State};
 
 /// Rolls the nominal (minimal) model out from `--q`, `--v` under the
 /// planned or zero inputs and writes the log with
@@ -94,12 +94,12 @@ where
         // refused with the reason
         read_plan::<U>(path, Mn::INPUT_NAMES)?;
     }
-    let vi = Variational::new(minimal, a.dt).substeps(a.substeps);
+    let vi = a.stepping.integrator(minimal, a.dt);
     vi.check()?;
-    let states = if U > 0 {
-        vi.rollout_forced(&z0, &us)?
+    let (states, report) = if U > 0 {
+        vi.rollout_forced_with_report(&z0, &us)?
     } else {
-        vi.rollout(&z0, a.steps)?
+        vi.rollout_with_report(&z0, a.steps)?
     };
     let log = Dataset::from_rollout(
         &Mn::COORDINATES,
@@ -116,13 +116,14 @@ where
     w(
         out,
         format_args!(
-            "wrote {}: run `{}`, {} rows at dt = {} s ({} steps of {}){}",
+            "wrote {}: run `{}`, {} rows at dt = {} s ({} steps of {}; {}){}",
             a.out.display(),
             a.run,
             a.steps + 2,
             a.dt,
             a.steps,
             Mn::NAME,
+            subdivided(&report),
             if U > 0 {
                 "; row k's input is held from t_k to t_{k+1}, so the step from row k to row k + 1 \
                  is driven by row k + 1's input (row 0's, zero, is held over the start velocity; \
@@ -132,4 +133,24 @@ where
             }
         ),
     )
+}
+
+/// How many steps of a rollout subdivided themselves, in words.
+pub(super) fn subdivided(report: &crate::variational::RolloutReport) -> String {
+    if report.subdivided == 0 {
+        "no step subdivided itself".into()
+    } else {
+        format!(
+            "{} of {} steps subdivided {}, the deepest {} time{}",
+            report.subdivided,
+            report.steps,
+            if report.subdivided == 1 {
+                "itself"
+            } else {
+                "themselves"
+            },
+            report.deepest,
+            if report.deepest == 1 { "" } else { "s" }
+        )
+    }
 }

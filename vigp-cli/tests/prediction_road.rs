@@ -460,3 +460,231 @@ fn simulate_takes_substeps() {
     .unwrap_err();
     assert!(e.to_string().contains("substeps"), "{e}");
 }
+
+/// Where a plain rollout fails (a Newton failure or a root that is not the
+/// continuation of the motion, at a Δt far too large for the motion),
+/// `simulate` by default retakes the failing steps with halved sub-steps:
+/// the log is `Variational::max_subdivision(8)`'s rollout bit for bit, and
+/// the output says how many steps subdivided themselves.
+/// `--max-subdivision 0` makes the first failure an error that names its
+/// step.
+#[test]
+fn simulate_subdivides_failing_steps_by_default() {
+    let dir = temp_dir("subdivide");
+    let steps = 40;
+    let z0 = State::new([0.1, 2.5], [0.0, 0.0]);
+    let model = DriveCartpole::default().minimal();
+    let zero = vec![SVector::<f64, 1>::zeros(); steps];
+    // the smallest of these Δt at which the plain rollout fails
+    let dt = [0.05, 0.1, 0.2, 0.3, 0.5, 1.0]
+        .into_iter()
+        .find(|&dt| {
+            Variational::new(model, dt)
+                .rollout_forced(&z0, &zero)
+                .is_err()
+        })
+        .expect("a time step at which the plain rollout fails");
+    let resolved = Variational::new(model, dt)
+        .max_subdivision(8)
+        .rollout_forced_with_report(&z0, &zero)
+        .unwrap();
+    assert!(resolved.1.subdivided > 0);
+    let log = dir.join("log.csv");
+    let dts = dt.to_string();
+    let steps_s = steps.to_string();
+    let args = [
+        "simulate", "--q", "0.1,2.5", "--dt", &dts, "--steps", &steps_s, "--out",
+    ];
+    let text = run(&[&args[..], &[s(&log)]].concat()).unwrap();
+    let n = resolved.1.subdivided;
+    let said = format!(
+        "{n} of {steps} steps subdivided {}",
+        if n == 1 { "itself" } else { "themselves" }
+    );
+    assert!(text.contains(&said), "{text}");
+    let rows = table(&log);
+    let x = |r: &[String], i: usize| r[i].parse::<f64>().unwrap();
+    for k in 0..=steps {
+        let row = &rows[1 + k];
+        assert_eq!(
+            (x(row, 2), x(row, 3)),
+            (resolved.0[k].q[0], resolved.0[k].q[1]),
+            "row {k}"
+        );
+    }
+    let e = run(&[
+        &args[..],
+        &[s(&dir.join("plain.csv")), "--max-subdivision", "0"],
+    ]
+    .concat())
+    .unwrap_err();
+    assert!(e.to_string().contains("step"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `identify` on a log that the first-order integrator wrote under a
+/// persistently exciting plan, for a cart-pole whose pole is heavier and
+/// whose joints are more damped than declared: the damping of both joints
+/// is identified to rounding (the DEL residual is exactly linear in the
+/// parameters and zero at the truth; tolerance 1e-8 relative, far above
+/// the regression's rounding of about 1e-12), and `fit --prior
+/// identified:FILE` makes the model file's nominal model the truth's
+/// dynamics: its 20-step score on a held-out log is below 1e-6 of the
+/// declared model's. A file of another mechanism is refused.
+#[test]
+fn identify_then_fit_with_the_identified_prior() {
+    let dir = temp_dir("identify");
+    let truth = [
+        "--set",
+        "links.pole.mass=0.36",
+        "--set",
+        "joints.rail.damping=0.3",
+        "--set",
+        "joints.hinge.damping=0.08",
+    ];
+    let simulate = |name: &str, q: &str, phase: f64, steps: usize| -> PathBuf {
+        let us: Vec<f64> = (0..steps)
+            .map(|j| 3.0 * (0.7 * (j / 7) as f64 + phase).sin() + 1.5 * (0.13 * j as f64).cos())
+            .collect();
+        let plan_path = dir.join(format!("{name}-plan.csv"));
+        write_plan(&plan_path, &us);
+        let log = dir.join(format!("{name}.csv"));
+        let steps_s = steps.to_string();
+        let args = [
+            "simulate",
+            "--q",
+            q,
+            "--dt",
+            "0.01",
+            "--steps",
+            &steps_s,
+            "--inputs",
+            s(&plan_path),
+            "--run",
+            name,
+            "--out",
+            s(&log),
+        ];
+        run(&[&args[..], &truth[..]].concat()).unwrap();
+        log
+    };
+    let train = simulate("train", "0.1,0.5", 0.3, 400);
+    let test = simulate("test", "-0.2,2.0", 1.1, 120);
+
+    let params = dir.join("params.json");
+    let text = run(&[
+        "identify",
+        "--data",
+        s(&train),
+        "--rule",
+        "first-order",
+        "--out",
+        s(&params),
+    ])
+    .unwrap();
+    assert!(text.contains("base parameters"), "{text}");
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let row = |name: &str| {
+        file["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"] == name)
+            .unwrap_or_else(|| panic!("no row {name} in {file}"))
+            .clone()
+    };
+    for (name, declared, true_value) in [
+        ("joints.rail.damping", 0.1, 0.3),
+        ("joints.hinge.damping", 0.05, 0.08),
+    ] {
+        let r = row(name);
+        assert_eq!(r["status"], "identified", "{r}");
+        assert_eq!(r["declared"].as_f64().unwrap(), declared, "{r}");
+        let got = r["identified"].as_f64().unwrap();
+        assert!(
+            (got - true_value).abs() <= 1e-8 * true_value,
+            "{name}: {got} vs {true_value}"
+        );
+    }
+
+    let fit_score = |prior: &str, name: &str| -> (f64, f64) {
+        let model = dir.join(format!("{name}.json"));
+        let said = run(&[
+            "fit",
+            "--data",
+            s(&train),
+            "--out",
+            s(&model),
+            "--prior",
+            prior,
+            "--restarts",
+            "0",
+            "--max-samples",
+            "150",
+        ])
+        .unwrap();
+        if prior.starts_with("identified:") {
+            assert!(said.contains("parameters identified in"), "{said}");
+        }
+        mse_line(
+            &run(&[
+                "score",
+                "--model",
+                s(&model),
+                "--data",
+                s(&test),
+                "--steps",
+                "20",
+            ])
+            .unwrap(),
+        )
+    };
+    let (declared_nominal, _) = fit_score("nominal", "declared");
+    let identified = format!("identified:{}", s(&params));
+    let (identified_nominal, _) = fit_score(&identified, "identified");
+    println!(
+        "20-step nominal MSE: declared parameters {declared_nominal:.3e}, identified {identified_nominal:.3e}"
+    );
+    assert!(
+        identified_nominal < 1e-6 * declared_nominal,
+        "{identified_nominal:e} vs {declared_nominal:e}"
+    );
+
+    // a parameter file of another mechanism, or no parameter file, is refused
+    let other = dir.join("other.json");
+    std::fs::write(
+        &other,
+        std::fs::read_to_string(&params)
+            .unwrap()
+            .replace("\"DriveCartpole\"", "\"Acrobot\""),
+    )
+    .unwrap();
+    let model = dir.join("never.json");
+    for (file, says) in [(&other, "identified for `Acrobot`"), (&train, "not JSON")] {
+        let prior = format!("identified:{}", s(file));
+        let e = run(&[
+            "fit",
+            "--data",
+            s(&train),
+            "--out",
+            s(&model),
+            "--prior",
+            &prior,
+        ])
+        .unwrap_err();
+        assert!(e.to_string().contains(says), "{e}");
+    }
+    let e = run(&[
+        "fit",
+        "--data",
+        s(&train),
+        "--out",
+        s(&model),
+        "--prior",
+        "identified:",
+    ])
+    .unwrap_err();
+    assert!(e.to_string().contains("identified:FILE"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}

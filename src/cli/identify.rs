@@ -1,0 +1,172 @@
+//! `vigp identify`: physical parameters from a log ([`crate::identify`]),
+//! written as a parameter file that `vigp fit --prior identified:FILE`
+//! takes as its nominal model.
+
+use std::io::Write;
+use std::path::Path;
+
+use super::args::{IdentifyArgs, NoiseArg, RuleArg};
+use super::{CliError, check_out_dir, io_error, read_log, w};
+use crate::identify::{DelRegressor, Log, Noise, Options, Status, identify as run_identify};
+use crate::{Mechanism, Parameters};
+
+/// The `format` field of a parameter file.
+const FORMAT: &str = "vigp-identified-parameters";
+
+pub(super) fn identify<Mn, const N: usize, const C: usize>(
+    a: &IdentifyArgs,
+    minimal: Mn,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Parameters + Copy,
+{
+    if !(a.prior_sd > 0.0 && a.prior_sd.is_finite()) {
+        return Err(CliError::Usage(format!(
+            "--prior-sd {}: must be positive and finite",
+            a.prior_sd
+        )));
+    }
+    check_out_dir(&a.out)?;
+    let (data, dt) = read_log::<Mn, N, C>(&a.data, &a.read)?;
+    let fail = |e: crate::identify::IdentifyError| CliError::Usage(format!("identify: {e}"));
+    let regressor = match a.rule {
+        RuleArg::Midpoint => DelRegressor::midpoint(minimal, dt),
+        RuleArg::FirstOrder => DelRegressor::first_order(minimal, dt),
+    }
+    .map_err(fail)?;
+    let logs: Vec<Log> = data.runs.iter().map(Log::from_run).collect();
+    let mut options = Options::default();
+    options.prior.relative = a.prior_sd;
+    options.noise = match a.noise {
+        NoiseArg::Ls => Noise::LeastSquares,
+        NoiseArg::Iv => Noise::IV,
+    };
+    let id = run_identify(&regressor, &logs, &options).map_err(fail)?;
+    let report = id.report();
+    let identified = regressor.model_with(&id.estimate).map_err(fail)?;
+    w(
+        out,
+        format_args!(
+            "identify: {} from {} ({} runs, {} transitions, dt = {dt} s), {} rule, prior ±{} of the declared values",
+            Mn::NAME,
+            a.data.display(),
+            data.runs.len(),
+            id.transitions,
+            match a.rule {
+                RuleArg::Midpoint => "midpoint",
+                RuleArg::FirstOrder => "first-order",
+            },
+            a.prior_sd
+        ),
+    )?;
+    w(out, format_args!("{report}"))?;
+    // every parameter the identification sets, with the status of its
+    // DSL row
+    let status_of = |name: &str| {
+        report
+            .dsl
+            .iter()
+            .find(|r| r.parameter == name)
+            .map(|r| r.status)
+    };
+    let mut parameters = Vec::new();
+    for (i, name) in Mn::PARAMETER_NAMES.iter().enumerate() {
+        let Some(status) = status_of(name) else {
+            continue;
+        };
+        let (Some(declared), Some(value)) = (minimal.parameter(i), identified.parameter(i)) else {
+            continue;
+        };
+        parameters.push(serde_json::json!({
+            "name": name,
+            "declared": declared,
+            "identified": value,
+            "status": status_name(status),
+        }));
+    }
+    let base: Vec<_> = report
+        .base
+        .iter()
+        .map(|r| {
+            serde_json::json!({
+                "name": r.parameter,
+                "declared": r.declared,
+                "identified": r.identified,
+                "half_width_95": r.half_width,
+                "status": status_name(r.status),
+            })
+        })
+        .collect();
+    let file = serde_json::json!({
+        "format": FORMAT,
+        "mechanism": Mn::NAME,
+        "dt": dt,
+        "transitions": id.transitions,
+        "parameters": parameters,
+        "base": base,
+    });
+    let text = serde_json::to_string_pretty(&file)
+        .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
+    std::fs::write(&a.out, text + "\n").map_err(io_error(&a.out))?;
+    w(
+        out,
+        format_args!(
+            "wrote {}: {} parameters; `vigp fit --prior identified:{}` takes them as the nominal model",
+            a.out.display(),
+            parameters.len(),
+            a.out.display()
+        ),
+    )
+}
+
+fn status_name(s: Status) -> &'static str {
+    match s {
+        Status::Identified => "identified",
+        Status::Uninformed => "uninformed",
+        Status::NotIdentifiable => "not identifiable",
+    }
+}
+
+/// Sets `p`'s parameters from a parameter file of `vigp identify` for the
+/// mechanism `name`; returns how many were set.
+pub(super) fn apply_identified<P: Parameters>(
+    p: &mut P,
+    name: &str,
+    path: &Path,
+) -> Result<usize, CliError> {
+    let bad =
+        |why: String| CliError::Usage(format!("--prior identified:{}: {why}", path.display()));
+    let text = std::fs::read_to_string(path).map_err(io_error(path))?;
+    let file: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(format!("not JSON: {e}")))?;
+    if file["format"] != FORMAT {
+        return Err(bad(format!(
+            "not a parameter file of `vigp identify` (\"format\": \"{FORMAT}\")"
+        )));
+    }
+    if file["mechanism"] != name {
+        return Err(bad(format!(
+            "identified for `{}`, not `{name}`",
+            file["mechanism"].as_str().unwrap_or("?")
+        )));
+    }
+    let rows = file["parameters"]
+        .as_array()
+        .ok_or_else(|| bad("no \"parameters\" list".into()))?;
+    for row in rows {
+        let key = row["name"]
+            .as_str()
+            .ok_or_else(|| bad("a parameter without a name".into()))?;
+        let value = row["identified"]
+            .as_f64()
+            .filter(|v| v.is_finite())
+            .ok_or_else(|| bad(format!("`{key}`: no finite \"identified\" value")))?;
+        let i = P::parameter_index(key)
+            .ok_or_else(|| bad(format!("`{key}` is not a parameter of `{name}`")))?;
+        if let Some(slot) = p.parameter_mut(i) {
+            *slot = value;
+        }
+    }
+    Ok(rows.len())
+}
