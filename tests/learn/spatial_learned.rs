@@ -679,6 +679,20 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
             given: 2
         })
     ));
+    // a rollout whose states do not fit in memory is refused before it
+    // allocates (not a capacity-overflow panic)
+    for steps in [usize::MAX, usize::MAX / 2, usize::MAX / 64] {
+        assert!(
+            matches!(
+                unforced.rollout(&z0, steps),
+                Err(SpatialError::Step(
+                    vigp::embedded::StepError::TooManySteps { .. }
+                ))
+            ),
+            "{steps} steps"
+        );
+    }
+    assert_eq!(unforced.rollout(&z0, 3).unwrap().len(), 4);
 }
 
 /// The Furuta pendulum's random states of the first test (angles over a
