@@ -364,6 +364,40 @@ where
     (worst_a, worst_b)
 }
 
+/// [`lie_worst`] at three states 15, 30 and 45 forced steps from `z0`
+/// (so that neither rates nor multipliers vanish), printed under `name`
+/// and required to be at most 1e-6.
+fn along_a_motion<
+    S,
+    const B: usize,
+    const J: usize,
+    const N: usize,
+    const C: usize,
+    const U: usize,
+>(
+    st: &vigp::spatial::LieStepper<S, B, J, N, C>,
+    z0: vigp::spatial::SpatialState<B>,
+    u: &SVector<f64, U>,
+    name: &str,
+) where
+    S: vigp::spatial::Spatial<B, J> + vigp::Inputs<U>,
+{
+    let mut z = z0;
+    let mut worst = (0.0f64, 0.0f64);
+    for _ in 0..3 {
+        for _ in 0..15 {
+            z = st.step_forced(&z, u).unwrap();
+        }
+        let (a, b) = lie_worst(st, &z, u, 1e-6);
+        worst = (worst.0.max(a), worst.1.max(b));
+    }
+    println!(
+        "{name} maximal tangent A, B vs central differences: {:.2e}, {:.2e}",
+        worst.0, worst.1
+    );
+    assert!(worst.0 <= 1e-6 && worst.1 <= 1e-6, "{name}: {worst:?}");
+}
+
 /// The maximal view's A and B in the tangent chart (12·links × 12·links
 /// and 12·links × U) reproduce central differences through the
 /// retraction to 1e-6 of their largest entry, on a loop with ball and
@@ -390,20 +424,7 @@ fn lie_stepper_tangent_derivatives_match_finite_differences() {
     v[0] = 2.5;
     let z = consistent_state(&m, &m.reference(), &v, dt).unwrap();
     let st = LieStepper::with_options(sys.maximal(), dt, tight).unwrap();
-    let mut zmax = m.to_maximal(&z, dt);
-    let mut worst = (0.0f64, 0.0f64);
-    for _ in 0..3 {
-        for _ in 0..15 {
-            zmax = st.step_forced(&zmax, &u).unwrap();
-        }
-        let (a, b) = lie_worst(&st, &zmax, &u, 1e-6);
-        worst = (worst.0.max(a), worst.1.max(b));
-    }
-    println!(
-        "R-S-U-R maximal tangent A, B vs central differences: {:.2e}, {:.2e}",
-        worst.0, worst.1
-    );
-    assert!(worst.0 <= 1e-6 && worst.1 <= 1e-6, "{worst:?}");
+    along_a_motion(&st, m.to_maximal(&z, dt), &u, "R-S-U-R");
 
     // a strong elbow torque, so that the input's curvature term matters
     let u = SVector::<f64, 1>::from([3.0]);
@@ -421,20 +442,7 @@ fn lie_stepper_tangent_derivatives_match_finite_differences() {
     let v = SVector::<f64, 5>::from([0.0, 0.4, -0.2, 0.3, 1.5]);
     let z = consistent_state(&m, &qn, &v, dt).unwrap();
     let st = LieStepper::with_options(sys.maximal(), dt, tight).unwrap();
-    let mut zmax = m.to_maximal(&z, dt);
-    let mut worst = (0.0f64, 0.0f64);
-    for _ in 0..3 {
-        for _ in 0..15 {
-            zmax = st.step_forced(&zmax, &u).unwrap();
-        }
-        let (a, b) = lie_worst(&st, &zmax, &u, 1e-6);
-        worst = (worst.0.max(a), worst.1.max(b));
-    }
-    println!(
-        "ball arm maximal tangent A, B vs central differences: {:.2e}, {:.2e}",
-        worst.0, worst.1
-    );
-    assert!(worst.0 <= 1e-6 && worst.1 <= 1e-6, "{worst:?}");
+    along_a_motion(&st, m.to_maximal(&z, dt), &u, "ball arm");
 
     // damped (ball joint 0.1, elbow 0.2 N·m·s/rad) and sprung (elbow
     // k = 1.5 N·m/rad, rest 0.2 rad) as well
@@ -442,18 +450,5 @@ fn lie_stepper_tangent_derivatives_match_finite_differences() {
     let m = sys.minimal();
     let z = consistent_state(&m, &qn, &v, dt).unwrap();
     let st = LieStepper::with_options(sys.maximal(), dt, tight).unwrap();
-    let mut zmax = m.to_maximal(&z, dt);
-    let mut worst = (0.0f64, 0.0f64);
-    for _ in 0..3 {
-        for _ in 0..15 {
-            zmax = st.step_forced(&zmax, &u).unwrap();
-        }
-        let (a, b) = lie_worst(&st, &zmax, &u, 1e-6);
-        worst = (worst.0.max(a), worst.1.max(b));
-    }
-    println!(
-        "damped, sprung ball arm maximal tangent A, B vs central differences: {:.2e}, {:.2e}",
-        worst.0, worst.1
-    );
-    assert!(worst.0 <= 1e-6 && worst.1 <= 1e-6, "{worst:?}");
+    along_a_motion(&st, m.to_maximal(&z, dt), &u, "damped, sprung ball arm");
 }
