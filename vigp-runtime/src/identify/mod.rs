@@ -20,8 +20,8 @@
 //!    ([`Loss`]) ([`estimate`]);
 //! 3. keeps every body **physically consistent** (positive mass, positive
 //!    definite pseudo-inertia) by projecting an unrealisable estimate onto
-//!    the realisable set in a log-Cholesky parameterisation
-//!    ([`consistency`]);
+//!    the realisable set, a convex problem solved by an interior-point
+//!    method ([`consistency`]);
 //! 4. gives the **covariance** and the 95 % interval of each base
 //!    parameter ([`covariance`]) and a table ([`report`]).
 //!
