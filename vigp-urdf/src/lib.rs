@@ -249,8 +249,32 @@ fn pose(element: impl Fn() -> String, p: &urdf_rs::Pose) -> Result<(M3, V3), Urd
 
 /// Reads a URDF document (module docs).
 pub fn parse(urdf: &str) -> Result<UrdfTree, UrdfError> {
-    let r = urdf_rs::read_from_string(urdf).map_err(|e| UrdfError::Parse(e.to_string()))?;
+    let r = urdf_rs::read_from_string(urdf).map_err(|e| {
+        // urdf-rs's XML errors do not always say where (a badly nested
+        // element does not): a second reader finds the line
+        match xml_error_line(urdf) {
+            Some(line) => UrdfError::Parse(format!("line {line}: {e}")),
+            None => UrdfError::Parse(e.to_string()),
+        }
+    })?;
     from_robot(&r)
+}
+
+/// The 1-based line of the first XML error in `text` (mismatched or
+/// unclosed tags, bad syntax), if a plain XML reader finds one.
+pub fn xml_error_line(text: &str) -> Option<usize> {
+    let mut reader = quick_xml::Reader::from_str(text);
+    loop {
+        match reader.read_event() {
+            Ok(quick_xml::events::Event::Eof) => return None,
+            Ok(_) => {}
+            Err(_) => {
+                let at = usize::try_from(reader.error_position()).ok()?.min(text.len());
+                let at = (0..=at).rev().find(|&i| text.is_char_boundary(i))?;
+                return Some(text[..at].matches('\n').count() + 1);
+            }
+        }
+    }
 }
 
 /// Converts a parsed URDF robot (module docs).
@@ -543,5 +567,9 @@ mod tests {
         assert_eq!(e.element(), Some(("link", "a")));
         assert_eq!(e.line(&bad), Some(4));
         assert!(matches!(parse("<robot"), Err(UrdfError::Parse(_))));
+        // a badly nested element: the line of the mismatched end tag
+        let nested = ARM.replace("<parent link=\"a\"/>", "<parent link=\"a\">");
+        let e = parse(&nested).unwrap_err();
+        assert!(e.to_string().contains("line 15:"), "{e}");
     }
 }
