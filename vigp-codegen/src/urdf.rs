@@ -431,3 +431,56 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
     };
     Ok((input, track))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn urdf_names_become_rust_identifiers() {
+        assert_eq!(rust_name("panda_link0"), "panda_link0");
+        assert_eq!(rust_name("FL-HAA.joint"), "FL_HAA_joint");
+        assert_eq!(rust_name("3rd"), "_3rd");
+        assert_eq!(ident("type", Span::call_site()).to_string(), "r#type");
+        assert_eq!(ident("self", Span::call_site()).to_string(), "self_");
+    }
+
+    #[test]
+    fn a_urdf_key_selects_this_grammar() {
+        let t = |s: &str| is_urdf(&s.parse().unwrap());
+        assert!(t(r#"pub A { urdf: "a.urdf" }"#));
+        assert!(t(r#"A { gravity: [0.0, 0.0, -1.0], urdf: "a.urdf" }"#));
+        assert!(!t(
+            "A { gravity: [0.0, 0.0, -1.0], links { urdf: { mass: 1.0 } } }"
+        ));
+    }
+
+    /// The sizes of the expansion follow from the file (the tests run in
+    /// this crate's directory): the wrist has 3 coordinates (its weld
+    /// merged), one input per `actuated`; the Panda on a floating base has
+    /// 7 + 7 coordinates and one unit-quaternion constraint.
+    #[test]
+    fn expansions_have_the_files_sizes() {
+        let wrist = crate::expand_to_string(
+            r#"W { urdf: "../tests/fixtures/robots/wrist.urdf", joints { slide: { actuated } } }"#,
+        )
+        .unwrap();
+        assert!(wrist.contains("impl ::vigp::Mechanism<3, 0> for WMinimal"));
+        assert!(!wrist.contains("pub hand") && wrist.contains("pub fore"));
+        assert!(wrist.contains("include_bytes!"));
+        let panda = crate::expand_to_string(
+            r#"P { urdf: "../tests/fixtures/robots/panda.urdf", base: floating }"#,
+        )
+        .unwrap();
+        assert!(panda.contains("impl ::vigp::Mechanism<14, 1> for PMinimal"));
+        let e = crate::expand_to_string(r#"P { urdf: "../tests/fixtures/robots/none.urdf" }"#)
+            .unwrap_err();
+        assert!(e.contains("cannot read URDF file"), "{e}");
+        // the wrist's base link has no mass: it cannot float
+        let e = crate::expand_to_string(
+            r#"W { urdf: "../tests/fixtures/robots/wrist.urdf", base: floating }"#,
+        )
+        .unwrap_err();
+        assert!(e.contains("mass"), "{e}");
+    }
+}

@@ -269,7 +269,9 @@ pub fn xml_error_line(text: &str) -> Option<usize> {
             Ok(quick_xml::events::Event::Eof) => return None,
             Ok(_) => {}
             Err(_) => {
-                let at = usize::try_from(reader.error_position()).ok()?.min(text.len());
+                let at = usize::try_from(reader.error_position())
+                    .ok()?
+                    .min(text.len());
                 let at = (0..=at).rev().find(|&i| text.is_char_boundary(i))?;
                 return Some(text[..at].matches('\n').count() + 1);
             }
