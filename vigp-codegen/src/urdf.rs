@@ -37,6 +37,7 @@ use crate::number::Number;
 use crate::syntax::{self, Dim, Field, Input, JointDecl, LinkDecl, PointRef, Value};
 use proc_macro2::{Delimiter, Span, TokenStream, TokenTree};
 use quote::quote;
+use syn::ext::IdentExt;
 use syn::parse::{ParseStream, Parser};
 use syn::{Attribute, Ident, LitStr, Token, Visibility, braced};
 use vigp_core::tree::spatial::{M3, V3, mul_mm, mul_mv};
@@ -177,14 +178,15 @@ fn parse(input: ParseStream) -> syn::Result<UrdfInput> {
     })
 }
 
-/// A URDF name as a Rust identifier: characters other than letters,
-/// digits and `_` become `_`, a leading digit gets a `_`, keywords are raw.
+/// A URDF name as a Rust field name: ASCII letters lower-cased (fields are
+/// snake case), other characters than letters, digits and `_` become `_`,
+/// a leading digit gets a `_`; keywords become raw identifiers ([`ident`]).
 pub fn rust_name(name: &str) -> String {
     let mut s: String = name
         .chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '_' {
-                c
+                c.to_ascii_lowercase()
             } else {
                 '_'
             }
@@ -206,6 +208,11 @@ fn ident(name: &str, span: Span) -> Ident {
         }
         Err(_) => Ident::new(&format!("{s}_"), span),
     }
+}
+
+/// `#[doc = text]`.
+fn doc(text: &str) -> Vec<Attribute> {
+    vec![syn::parse_quote!(#[doc = #text])]
 }
 
 /// A number the macro knows, spanned at the `urdf:` path.
@@ -300,7 +307,10 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
     if u.floating {
         let b = &tree.base;
         links.push(LinkDecl {
-            attrs: Vec::new(),
+            attrs: doc(&format!(
+                " URDF link `{}` and the links fixed to it, on a free joint.",
+                tree.root
+            )),
             name: root.clone(),
             fields: mass_fields(
                 b.mass,
@@ -323,7 +333,10 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
     }
     for (k, b) in tree.bodies.iter().enumerate() {
         links.push(LinkDecl {
-            attrs: Vec::new(),
+            attrs: doc(&format!(
+                " URDF link `{}` (with the links fixed to it).",
+                tree.links[k]
+            )),
             name: names[k].clone(),
             fields: mass_fields(b.mass, b.com, &b.inertia, &rot[k]),
         });
@@ -354,7 +367,7 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
             fields.push(field("damping", number(b.damping, span), span));
         }
         joints.push(JointDecl {
-            attrs: Vec::new(),
+            attrs: doc(&format!(" URDF joint `{}`.", tree.joints[k])),
             name: ident(&tree.joints[k], span),
             kind: Ident::new(kind, span),
             parent,
@@ -373,7 +386,9 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
         None => errors = Some(e),
     };
     for o in u.joints {
-        let Some(decl) = joints.iter_mut().find(|j| j.name == o.name) else {
+        // the user may write the URDF spelling or the field name
+        let wanted = rust_name(&o.name.unraw().to_string());
+        let Some(decl) = joints.iter_mut().find(|j| j.name.unraw() == wanted) else {
             let known: Vec<String> = tree.joints.iter().map(|j| rust_name(j)).collect();
             let why = if vigp_urdf::line_of(&text, "joint", &o.name.to_string()).is_some() {
                 " (it is a fixed joint, merged into its parent link: it has no coordinate)"
@@ -439,7 +454,7 @@ mod tests {
     #[test]
     fn urdf_names_become_rust_identifiers() {
         assert_eq!(rust_name("panda_link0"), "panda_link0");
-        assert_eq!(rust_name("FL-HAA.joint"), "FL_HAA_joint");
+        assert_eq!(rust_name("FL-HAA.joint"), "fl_haa_joint");
         assert_eq!(rust_name("3rd"), "_3rd");
         assert_eq!(ident("type", Span::call_site()).to_string(), "r#type");
         assert_eq!(ident("self", Span::call_site()).to_string(), "self_");
@@ -473,6 +488,20 @@ mod tests {
         )
         .unwrap();
         assert!(panda.contains("impl ::vigp::Mechanism<14, 1> for PMinimal"));
+        // the other robots of the fixtures: the UR5 (6 joints), the Solo-12
+        // legs (12, upper-case names) and the G1 humanoid (29)
+        for (file, n) in [("ur5", 6), ("solo12", 12), ("g1", 29)] {
+            let code = crate::expand_to_string(&format!(
+                r#"R {{ urdf: "../tests/fixtures/robots/{file}.urdf" }}"#
+            ))
+            .unwrap_or_else(|e| panic!("{file}: {e}"));
+            assert!(code.contains(&format!("impl ::vigp::Mechanism<{n}, 0> for RMinimal")));
+        }
+        let solo = crate::expand_to_string(
+            r#"S { urdf: "../tests/fixtures/robots/solo12.urdf", joints { FL_HAA: { actuated }, fl_hfe: { actuated } } }"#,
+        )
+        .unwrap();
+        assert!(solo.contains("pub fl_") && !solo.contains("pub FL_"));
         let e = crate::expand_to_string(r#"P { urdf: "../tests/fixtures/robots/none.urdf" }"#)
             .unwrap_err();
         assert!(e.contains("cannot read URDF file"), "{e}");
