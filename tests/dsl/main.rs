@@ -14,3 +14,4 @@ mod snapshots;
 mod sources;
 mod spatial_fuzz;
 mod spatial_snapshot;
+mod urdf;

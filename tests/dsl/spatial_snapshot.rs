@@ -109,3 +109,15 @@ fn generated_code_of_a_universal_joint() {
     assert!(code.contains("JointType::Universal") && code.contains("second: [0.0, 1.0, 0.0]"));
     insta::assert_snapshot!("HookePendulum", code);
 }
+
+/// The generated code of a `urdf:` mechanism (tests/fixtures/robots/wrist.urdf,
+/// two joints actuated): the spatial code of its lowered description, plus
+/// the `include_bytes!` that makes the crate depend on the file.
+#[test]
+fn generated_code_of_a_urdf_mechanism() {
+    let code = vigp_codegen::expand_to_string(
+        r#"pub Wrist { urdf: "tests/fixtures/robots/wrist.urdf", joints { shoulder: { actuated }, slide: { actuated } } }"#,
+    )
+    .unwrap();
+    insta::assert_snapshot!("WristUrdf", code);
+}

@@ -13,7 +13,9 @@
 //! for the std runtime's views; [`Target`] selects which are emitted), plus
 //! [`describe`] (the mechanism's name and named parameters, and the
 //! `vigp::System` impl). A description with a 3-component gravity is
-//! spatial ([`syntax::Dim::of`]) and is emitted by [`spatial`] instead.
+//! spatial ([`syntax::Dim::of`]) and is emitted by [`spatial`] instead;
+//! one with `urdf: "robot.urdf"` is read from that file by [`urdf`] into
+//! the same spatial description.
 //!
 //! To add a source of descriptions (another syntax), produce a
 //! [`syntax::Input`] and hand it to [`desc::validate()`]; to add a joint
@@ -36,6 +38,7 @@ pub mod spatial;
 pub mod symbolic;
 pub mod syntax;
 pub mod target;
+pub mod urdf;
 
 pub use target::Target;
 
@@ -57,6 +60,14 @@ pub fn expand(input: TokenStream) -> syn::Result<TokenStream> {
 /// Expand a `mechanism!` body into the items of `target`, or a spanned
 /// error.
 pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream> {
+    // `urdf: "robot.urdf"` reads a file into a spatial description
+    if urdf::is_urdf(&input) {
+        let (parsed, track) = urdf::lower(input)?;
+        let model = desc::validate::<3, desc::spatial::Spatial>(parsed)?;
+        let mut out = spatial::emit::emit(&model, target);
+        out.extend(track);
+        return Ok(out);
+    }
     // `gravity: [gx, gy, gz]` selects the spatial rules; everything else is
     // planar (which reports any other shape of `gravity`).
     let dim = syntax::Dim::of(&input);

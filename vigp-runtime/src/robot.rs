@@ -50,12 +50,9 @@
 
 use std::path::Path;
 
-use vigp_core::tree::spatial::{
-    IDENTITY, M3, V3, add, congruence, dot, mul_mm, mul_mv, rpy, scale,
-};
-use vigp_core::tree::{
-    Body, BodyScratch, Engine, EngineError, EngineOptions, EngineReport, JointKind, Limits, Tree,
-};
+use vigp_core::tree::spatial::V3;
+use vigp_core::tree::{Body, BodyScratch, Engine, EngineError, EngineOptions, EngineReport, Tree};
+use vigp_urdf::UrdfError;
 
 /// The bodies of a robot as run-time data: what the engine reads.
 #[derive(Clone, Debug, PartialEq)]
@@ -242,62 +239,19 @@ pub struct Robot {
     inputs: Vec<usize>,
 }
 
-fn finite(element: impl Fn() -> String, xs: &[f64]) -> Result<(), RobotError> {
-    if xs.iter().all(|x| x.is_finite()) {
-        Ok(())
-    } else {
-        Err(RobotError::NonFinite { element: element() })
-    }
-}
-
-/// Mass, first moment and inertia about the body origin (body axes).
-#[derive(Clone, Copy, Default)]
-struct Accum {
-    mass: f64,
-    first: V3,
-    rot: M3,
-}
-
-impl Accum {
-    /// Adds a link with mass m, centre c and inertia ic about it (body axes).
-    fn add(&mut self, m: f64, c: V3, ic: &M3) {
-        let cc = dot(c, c);
-        self.mass += m;
-        self.first = add(self.first, scale(c, m));
-        for i in 0..3 {
-            for j in 0..3 {
-                self.rot[i][j] += ic[i][j] + m * (if i == j { cc } else { 0.0 } - c[i] * c[j]);
+impl From<UrdfError> for RobotError {
+    fn from(e: UrdfError) -> Self {
+        match e {
+            UrdfError::Parse(m) => RobotError::Parse(m),
+            UrdfError::NonFinite { element } => RobotError::NonFinite { element },
+            UrdfError::Invalid { element, why } => RobotError::Invalid { element, why },
+            UrdfError::UnsupportedJoint { joint, kind } => {
+                RobotError::UnsupportedJoint { joint, kind }
             }
+            UrdfError::Mimic { joint, mimics } => RobotError::Mimic { joint, mimics },
+            UrdfError::NotATree(m) => RobotError::NotATree(m),
         }
     }
-
-    /// (mass, centre of mass, inertia about it).
-    fn finish(&self) -> (f64, V3, M3) {
-        if self.mass <= 0.0 {
-            return (0.0, [0.0; 3], self.rot);
-        }
-        let c = scale(self.first, 1.0 / self.mass);
-        let cc = dot(c, c);
-        let mut ic = self.rot;
-        for i in 0..3 {
-            for j in 0..3 {
-                ic[i][j] -= self.mass * (if i == j { cc } else { 0.0 } - c[i] * c[j]);
-            }
-        }
-        // the parallel-axis shift leaves rounding asymmetry: symmetrise
-        for (i, j) in [(1, 0), (2, 0), (2, 1)] {
-            let s = 0.5 * (ic[i][j] + ic[j][i]);
-            ic[i][j] = s;
-            ic[j][i] = s;
-        }
-        (self.mass, c, ic)
-    }
-}
-
-fn pose(element: impl Fn() -> String, p: &urdf_rs::Pose) -> Result<(M3, V3), RobotError> {
-    finite(&element, &p.xyz.0)?;
-    finite(&element, &p.rpy.0)?;
-    Ok((rpy(p.rpy[0], p.rpy[1], p.rpy[2]), p.xyz.0))
 }
 
 impl Robot {
@@ -311,244 +265,15 @@ impl Robot {
         Self::from_urdf_str(&text)
     }
 
-    /// Loads a URDF document from a string (module docs).
+    /// Loads a URDF document from a string (module docs). The conversion
+    /// is `vigp_urdf::parse`, which `mechanism! { urdf: … }` shares.
     pub fn from_urdf_str(urdf: &str) -> Result<Self, RobotError> {
-        let r = urdf_rs::read_from_string(urdf).map_err(|e| RobotError::Parse(e.to_string()))?;
-        Self::from_urdf_robot(&r)
-    }
-
-    fn from_urdf_robot(r: &urdf_rs::Robot) -> Result<Self, RobotError> {
-        use std::collections::HashMap;
-        let mut link_index = HashMap::new();
-        for (i, l) in r.links.iter().enumerate() {
-            if link_index.insert(l.name.as_str(), i).is_some() {
-                return Err(RobotError::NotATree(format!(
-                    "link `{}` is declared twice",
-                    l.name
-                )));
-            }
-        }
-        // link inertias in their own frames
-        let mut link_inertia = Vec::with_capacity(r.links.len());
-        for l in &r.links {
-            let el = |what: &str| format!("link `{}` <inertial> {what}", l.name);
-            let (ro, c) = pose(|| el("<origin>"), &l.inertial.origin)?;
-            let m = l.inertial.mass.value;
-            finite(|| el("<mass>"), &[m])?;
-            if m < 0.0 {
-                return Err(RobotError::Invalid {
-                    element: el("<mass>"),
-                    why: "negative mass",
-                });
-            }
-            let i = &l.inertial.inertia;
-            let ii = [
-                [i.ixx, i.ixy, i.ixz],
-                [i.ixy, i.iyy, i.iyz],
-                [i.ixz, i.iyz, i.izz],
-            ];
-            finite(
-                || el("<inertia>"),
-                &[i.ixx, i.ixy, i.ixz, i.iyy, i.iyz, i.izz],
-            )?;
-            if i.ixx < 0.0 || i.iyy < 0.0 || i.izz < 0.0 {
-                return Err(RobotError::Invalid {
-                    element: el("<inertia>"),
-                    why: "a negative principal moment (ixx, iyy, izz)",
-                });
-            }
-            link_inertia.push((m, c, congruence(&ro, &ii)));
-        }
-        // the tree: children of each link, in file order
-        let mut children: Vec<Vec<usize>> = vec![Vec::new(); r.links.len()];
-        let mut has_parent = vec![None::<&str>; r.links.len()];
-        for j in &r.joints {
-            let find = |name: &str| {
-                link_index.get(name).copied().ok_or_else(|| {
-                    RobotError::NotATree(format!(
-                        "joint `{}` names an unknown link `{name}`",
-                        j.name
-                    ))
-                })
-            };
-            let (p, c) = (find(&j.parent.link)?, find(&j.child.link)?);
-            if let Some(other) = has_parent[c] {
-                return Err(RobotError::NotATree(format!(
-                    "link `{}` is the child of both `{other}` and `{}`",
-                    j.child.link, j.name
-                )));
-            }
-            has_parent[c] = Some(j.name.as_str());
-            children[p].push(c);
-        }
-        let roots: Vec<usize> = (0..r.links.len())
-            .filter(|&i| has_parent[i].is_none())
-            .collect();
-        let root = match roots.as_slice() {
-            [root] => *root,
-            [] => {
-                return Err(RobotError::NotATree(
-                    "no root link (a cycle of joints)".into(),
-                ));
-            }
-            [a, b, ..] => {
-                return Err(RobotError::NotATree(format!(
-                    "links `{}` and `{}` both have no parent joint",
-                    r.links[*a].name, r.links[*b].name
-                )));
-            }
-        };
-        let joint_of_child: HashMap<usize, &urdf_rs::Joint> = r
-            .joints
-            .iter()
-            .map(|j| (link_index[j.child.link.as_str()], j))
-            .collect();
-
-        let mut bodies = Vec::new();
-        let mut joints = Vec::new();
-        let mut links = Vec::new();
-        let mut accum: Vec<Accum> = Vec::new();
-        // (link, body it is fixed to, rotation and origin of the link frame
-        // in that body's frame); depth first, children in file order
-        let mut stack: Vec<(usize, Option<usize>, M3, V3)> = vec![(root, None, IDENTITY, [0.0; 3])];
-        let mut visited = 0usize;
-        while let Some((link, body, rot, pos)) = stack.pop() {
-            visited += 1;
-            if let Some(b) = body {
-                let (m, c, ic) = link_inertia[link];
-                accum[b].add(m, add(pos, mul_mv(&rot, c)), &congruence(&rot, &ic));
-            }
-            for &child in children[link].iter().rev() {
-                let j = joint_of_child[&child];
-                let el = |what: &str| format!("joint `{}` {what}", j.name);
-                if let Some(m) = &j.mimic {
-                    return Err(RobotError::Mimic {
-                        joint: j.name.clone(),
-                        mimics: m.joint.clone(),
-                    });
-                }
-                let (ro, xyz) = pose(|| el("<origin>"), &j.origin)?;
-                let jrot = mul_mm(&rot, &ro);
-                let jpos = add(pos, mul_mv(&rot, xyz));
-                let kind = match j.joint_type {
-                    urdf_rs::JointType::Fixed => {
-                        stack.push((child, body, jrot, jpos));
-                        continue;
-                    }
-                    urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
-                        JointKind::Revolute
-                    }
-                    urdf_rs::JointType::Prismatic => JointKind::Prismatic,
-                    urdf_rs::JointType::Floating => {
-                        return Err(RobotError::UnsupportedJoint {
-                            joint: j.name.clone(),
-                            kind: "floating",
-                        });
-                    }
-                    urdf_rs::JointType::Planar => {
-                        return Err(RobotError::UnsupportedJoint {
-                            joint: j.name.clone(),
-                            kind: "planar",
-                        });
-                    }
-                    urdf_rs::JointType::Spherical => {
-                        return Err(RobotError::UnsupportedJoint {
-                            joint: j.name.clone(),
-                            kind: "spherical",
-                        });
-                    }
-                };
-                let a = j.axis.xyz.0;
-                finite(|| el("<axis>"), &a)?;
-                let n = dot(a, a).sqrt();
-                if n < 1e-12 {
-                    return Err(RobotError::Invalid {
-                        element: el("<axis>"),
-                        why: "zero axis",
-                    });
-                }
-                let damping = match &j.dynamics {
-                    Some(d) => {
-                        finite(|| el("<dynamics>"), &[d.damping, d.friction])?;
-                        if d.damping < 0.0 {
-                            return Err(RobotError::Invalid {
-                                element: el("<dynamics>"),
-                                why: "negative damping",
-                            });
-                        }
-                        d.damping
-                    }
-                    None => 0.0,
-                };
-                let l = &j.limit;
-                let limits = if j.joint_type == urdf_rs::JointType::Continuous {
-                    Limits {
-                        lower: f64::NEG_INFINITY,
-                        upper: f64::INFINITY,
-                        ..limit_values(l)
-                    }
-                } else {
-                    limit_values(l)
-                };
-                if [limits.lower, limits.upper, limits.effort, limits.velocity]
-                    .iter()
-                    .any(|x| x.is_nan())
-                {
-                    return Err(RobotError::NonFinite {
-                        element: el("<limit>"),
-                    });
-                }
-                if limits.lower > limits.upper {
-                    return Err(RobotError::Invalid {
-                        element: el("<limit>"),
-                        why: "lower > upper",
-                    });
-                }
-                let k = bodies.len();
-                bodies.push(Body {
-                    parent: body,
-                    joint: kind,
-                    axis: scale(a, 1.0 / n),
-                    rotation: jrot,
-                    translation: jpos,
-                    mass: 0.0,
-                    com: [0.0; 3],
-                    inertia: [[0.0; 3]; 3],
-                    damping,
-                    stiffness: 0.0,
-                    rest: 0.0,
-                    limits,
-                });
-                accum.push(Accum::default());
-                joints.push(j.name.clone());
-                links.push(j.child.link.clone());
-                stack.push((child, Some(k), IDENTITY, [0.0; 3]));
-            }
-        }
-        if visited != r.links.len() {
-            return Err(RobotError::NotATree(
-                "some links are not reached from the root".into(),
-            ));
-        }
-        for (b, a) in bodies.iter_mut().zip(&accum) {
-            let (m, c, ic) = a.finish();
-            b.mass = m;
-            b.com = c;
-            b.inertia = ic;
-        }
+        let t = vigp_urdf::parse(urdf)?;
         let tree = RobotTree {
-            bodies,
+            bodies: t.bodies,
             gravity: [0.0, 0.0, -9.81],
         };
-        let robot = Robot {
-            name: r.name.clone(),
-            joints,
-            links,
-            engine: Engine::new(tree).map_err(RobotError::Engine)?,
-            inputs: Vec::new(),
-        };
-        robot.check_mass()?;
-        Ok(robot)
+        Self::from_tree(&t.name, tree, t.joints, t.links)
     }
 
     /// A robot from bodies built by hand (names per body: joint, link).
@@ -856,20 +581,5 @@ impl Robot {
             .terms(q, v, &mut p, &mut dt, &mut dv, &mut ws.bodies)
             .map_err(|e| self.engine_error(e))?;
         Ok((p, dt, dv))
-    }
-}
-
-/// The limits of a `<limit>` element. The parser gives an absent element
-/// as all zeros (lower = upper = effort = velocity = 0, which no moving
-/// joint can mean): that reads as no limits.
-fn limit_values(l: &urdf_rs::JointLimit) -> Limits {
-    if l.lower == 0.0 && l.upper == 0.0 && l.effort == 0.0 && l.velocity == 0.0 {
-        return Limits::NONE;
-    }
-    Limits {
-        lower: l.lower,
-        upper: l.upper,
-        effort: l.effort,
-        velocity: l.velocity,
     }
 }

@@ -21,6 +21,16 @@ use syn::parse::{ParseStream, Parser};
 use syn::{Attribute, Ident, Token, Visibility, braced, parenthesized};
 use value::parse_fields;
 
+/// A value (a number or a bracketed list), for grammars built on this one.
+pub fn parse_value(input: ParseStream) -> syn::Result<Value> {
+    Value::parse(input)
+}
+
+/// `{ key: value, flag, … }`, for grammars built on this one.
+pub fn parse_field_block(input: ParseStream) -> syn::Result<Vec<Field>> {
+    parse_fields(input)
+}
+
 /// `/// doc  name: { key: value, … }`
 #[derive(Clone)]
 pub struct LinkDecl {
