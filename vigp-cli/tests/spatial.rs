@@ -572,7 +572,16 @@ fn a_driven_3d_mechanism_declared_here_gets_the_same_tool() {
 #[test]
 fn quaternion_mechanisms_fit_and_score() {
     let dir = temp_dir("quaternion");
-    let cases: [(&str, &str, [&str; 2], [&str; 2], &str); 2] = [
+    // (system, log header, starts q and v of the two runs, the truth's
+    // parameter)
+    type Case = (
+        &'static str,
+        &'static str,
+        [&'static str; 2],
+        [&'static str; 2],
+        &'static str,
+    );
+    let cases: [Case; 2] = [
         (
             "spherical_pendulum",
             "run,t,ball.w,ball.x,ball.y,ball.z",
