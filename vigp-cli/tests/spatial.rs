@@ -390,6 +390,21 @@ fn furuta_fit_score_predict_export() {
         "{}",
         &src[..src.len().min(2000)]
     );
+    // the export of a small Furuta model is exactly the fixture that
+    // tests/learn/embedded_learned.rs compiles and steps against the std
+    // model (1e-12)
+    let small = dir.join("learned_furuta.json");
+    std::fs::write(
+        &small,
+        include_str!("../../tests/fixtures/learned_furuta.json"),
+    )
+    .unwrap();
+    let small_rs = dir.join("learned_furuta.rs");
+    vigp(&["export", "--model", s(&small), "--out", s(&small_rs)]);
+    assert_eq!(
+        std::fs::read_to_string(&small_rs).unwrap(),
+        include_str!("../../tests/fixtures/learned_furuta.rs")
+    );
     std::fs::remove_dir_all(&dir).ok();
 }
 
