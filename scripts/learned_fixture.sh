@@ -4,7 +4,9 @@
 # trajectories (written here by Python's standard library), saved as JSON and
 # exported by `vigp export` as Rust source. The test includes the source and
 # checks it against the JSON loaded by the std runtime. The same for a model
-# with inputs (learned_drive_cartpole.*, examples/learned_forced_fixture.rs).
+# with inputs (learned_drive_cartpole.*, examples/learned_forced_fixture.rs),
+# and for a 3-D mechanism (learned_furuta.*: the Furuta pendulum in its
+# minimal coordinates, logged by `vigp simulate` with pivot friction).
 #   bash scripts/learned_fixture.sh
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -27,3 +29,16 @@ cargo run --release --bin vigp -- export --model "$dir/learned_cartpole.json" \
 # The forced model (an actuated cart-pole trained with inputs): trained in
 # Rust (`vigp fit` reads no inputs), exported through `vigp export`.
 cargo run --release --features cli --example learned_forced_fixture -- "$dir"
+# The 3-D model: two runs of `vigp simulate --system furuta` with friction
+# on the pivot, fitted in minimal coordinates and exported.
+for run in "r0 0.3,1.2 1.0,-2.0" "r1 -0.5,-0.8 -1.5,3.0"; do
+    set -- $run
+    cargo run --release --bin vigp -- simulate --system furuta --q "$2" --v "$3" --dt 0.01 \
+        --steps 30 --run "$1" --out "$dir/furuta_$1.csv" --set joints.pivot.damping=0.002
+done
+{ cat "$dir/furuta_r0.csv"; tail -n +2 "$dir/furuta_r1.csv"; } > "$dir/learned_furuta_data.csv"
+rm "$dir/furuta_r0.csv" "$dir/furuta_r1.csv"
+cargo run --release --bin vigp -- fit --system furuta --data "$dir/learned_furuta_data.csv" \
+    --out "$dir/learned_furuta.json" --max-samples 24 --restarts 0
+cargo run --release --bin vigp -- export --model "$dir/learned_furuta.json" \
+    --out "$dir/learned_furuta.rs"

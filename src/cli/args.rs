@@ -103,7 +103,8 @@ pub(super) enum EncodingArg {
     Sincos,
     /// Minimal coordinates as they are.
     Minimal,
-    /// Maximal coordinates (x, y, θ of every link), projected onto the joints.
+    /// Maximal coordinates (x, y, θ of every link), projected onto the joints
+    /// (planar mechanisms only).
     Maximal,
 }
 

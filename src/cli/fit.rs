@@ -48,37 +48,37 @@ fn spread<T: Copy>(all: &[T], max: usize) -> Vec<T> {
     (0..max).map(|i| all[i * all.len() / max]).collect()
 }
 
+/// What every view's training starts from: the data read with the
+/// mechanism's columns, its time step, and the training options.
+pub(super) struct Prepared<const N: usize> {
+    data: Dataset<N>,
+    dt: f64,
+    prior: Prior,
+    opts: TrainOptions,
+}
+
+/// The checks, the data and the options of `fit`, before a view trains:
+/// usage errors before the data are read (a long log takes a while), the
+/// nominal parameters first (`--set` may have made a mass negative;
+/// `maximal`: the check of the maximal view, or why it cannot be used).
 /// `U`: the mechanism's inputs; with inputs the data carries `u_<joint>`
 /// columns and the model learns on state and input (GP input: the encoded
 /// state, then the previous and the current input; prior: the forced
 /// nominal step).
-pub(super) fn fit<
-    Mn,
-    Mx,
-    const N: usize,
-    const C: usize,
-    const NM: usize,
-    const CM: usize,
-    const U: usize,
->(
+pub(super) fn prepare<Mn, const N: usize, const C: usize, const U: usize>(
     a: &FitArgs,
     minimal: Mn,
-    maximal: Mx,
+    maximal: Result<(), CliError>,
     out: &mut dyn Write,
-) -> Result<(), CliError>
+) -> Result<Prepared<N>, CliError>
 where
-    Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
-    Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+    Mn: Mechanism<N, C> + Copy,
     Mn: crate::Inputs<U>,
-    Mx: crate::Inputs<U>,
 {
-    // usage errors before the data are read (a long log takes a while),
-    // the nominal parameters first (`--set` may have made a mass negative)
-    if let Err(e) = minimal.constants().and_then(|_| maximal.constants()) {
-        return Err(CliError::Usage(format!(
-            "the nominal model (with --set): {e}"
-        )));
+    if let Err(e) = minimal.constants() {
+        return Err(nominal_invalid(e));
     }
+    maximal?;
     if a.max_samples == Some(0) {
         return Err(CliError::Usage("--max-samples must be at least 1".into()));
     }
@@ -166,59 +166,115 @@ where
     if U > 0 {
         input_shift_check::<Mn, N, C, U>(minimal, dt, &data, &a.data, out)?;
     }
-    match a.encoding {
-        EncodingArg::Sincos | EncodingArg::Minimal => {
-            let enc = if a.encoding == EncodingArg::Sincos {
-                Encoding::SinCos
-            } else {
-                Encoding::Raw
-            };
-            if U == 0 {
-                let all = data.transitions();
-                let train = |chosen: &[Transition<N>]| {
-                    Learned::train(minimal, dt, chosen, enc, prior, &opts)
-                };
-                fit_view(a, &all, (enc, prior), 0, &opts, train, out)
-            } else {
-                let all = data
-                    .forced_transitions::<U>()
-                    .map_err(data_error(&a.data))?;
-                let train = |chosen: &[ForcedTransition<N, U>]| {
-                    Learned::train_forced(minimal, dt, chosen, enc, prior, &opts)
-                };
-                fit_view(a, &all, (enc, prior), 2 * U, &opts, train, out)
-            }
+    Ok(Prepared {
+        data,
+        dt,
+        prior,
+        opts,
+    })
+}
+
+/// The usage error of a nominal model whose parameters (with `--set`) no
+/// integrator takes.
+pub(super) fn nominal_invalid(e: impl std::fmt::Display) -> CliError {
+    CliError::Usage(format!("the nominal model (with --set): {e}"))
+}
+
+/// Trains and saves a model in the minimal coordinates (`--encoding sincos`
+/// or `minimal`).
+pub(super) fn fit_minimal<Mn, const N: usize, const C: usize, const U: usize>(
+    a: &FitArgs,
+    minimal: Mn,
+    p: &Prepared<N>,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Parameters + Copy + Send + Sync + 'static,
+    Mn: crate::Inputs<U>,
+{
+    let Prepared {
+        data,
+        dt,
+        prior,
+        opts,
+    } = p;
+    let (dt, prior) = (*dt, *prior);
+    let enc = if a.encoding == EncodingArg::Sincos {
+        Encoding::SinCos
+    } else {
+        Encoding::Raw
+    };
+    if U == 0 {
+        let all = data.transitions();
+        let train =
+            |chosen: &[Transition<N>]| Learned::train(minimal, dt, chosen, enc, prior, opts);
+        fit_view(a, &all, (enc, prior), 0, opts, train, out)
+    } else {
+        let all = data
+            .forced_transitions::<U>()
+            .map_err(data_error(&a.data))?;
+        let train = |chosen: &[ForcedTransition<N, U>]| {
+            Learned::train_forced(minimal, dt, chosen, enc, prior, opts)
+        };
+        fit_view(a, &all, (enc, prior), 2 * U, opts, train, out)
+    }
+}
+
+/// Trains and saves a model in a planar mechanism's maximal coordinates
+/// (`--encoding maximal`): each run's transitions in the maximal
+/// coordinates, with its inputs when the mechanism has some.
+pub(super) fn fit_maximal<
+    Mn,
+    Mx,
+    const N: usize,
+    const C: usize,
+    const NM: usize,
+    const CM: usize,
+    const U: usize,
+>(
+    a: &FitArgs,
+    minimal: Mn,
+    maximal: Mx,
+    p: &Prepared<N>,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Coordinates<N, NM>,
+    Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+    Mx: crate::Inputs<U>,
+{
+    let Prepared {
+        data,
+        dt,
+        prior,
+        opts,
+    } = p;
+    let (dt, prior) = (*dt, *prior);
+    let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
+    let (mut plain, mut forced) = (Vec::new(), Vec::new());
+    for (run, us) in data.runs.iter().zip(&inputs) {
+        let Some(run_dt) = run.dt else { continue };
+        let xs: Vec<SVector<f64, NM>> = run
+            .positions
+            .iter()
+            .map(|q| minimal.maximal_positions(q))
+            .collect();
+        if U == 0 {
+            plain.extend(transitions(&xs, run_dt));
+        } else {
+            forced.extend(forced_transitions(&xs, us, run_dt));
         }
-        EncodingArg::Maximal => {
-            // each run's transitions in the maximal coordinates, with its
-            // inputs when the mechanism has some
-            let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
-            let (mut plain, mut forced) = (Vec::new(), Vec::new());
-            for (run, us) in data.runs.iter().zip(&inputs) {
-                let Some(run_dt) = run.dt else { continue };
-                let xs: Vec<SVector<f64, NM>> = run
-                    .positions
-                    .iter()
-                    .map(|q| minimal.maximal_positions(q))
-                    .collect();
-                if U == 0 {
-                    plain.extend(transitions(&xs, run_dt));
-                } else {
-                    forced.extend(forced_transitions(&xs, us, run_dt));
-                }
-            }
-            if U == 0 {
-                let train = |chosen: &[Transition<NM>]| {
-                    Learned::train(maximal, dt, chosen, Encoding::Raw, prior, &opts)
-                };
-                fit_view(a, &plain, (Encoding::Raw, prior), 0, &opts, train, out)
-            } else {
-                let train = |chosen: &[ForcedTransition<NM, U>]| {
-                    Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior, &opts)
-                };
-                fit_view(a, &forced, (Encoding::Raw, prior), 2 * U, &opts, train, out)
-            }
-        }
+    }
+    if U == 0 {
+        let train = |chosen: &[Transition<NM>]| {
+            Learned::train(maximal, dt, chosen, Encoding::Raw, prior, opts)
+        };
+        fit_view(a, &plain, (Encoding::Raw, prior), 0, opts, train, out)
+    } else {
+        let train = |chosen: &[ForcedTransition<NM, U>]| {
+            Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior, opts)
+        };
+        fit_view(a, &forced, (Encoding::Raw, prior), 2 * U, opts, train, out)
     }
 }
 

@@ -1,6 +1,11 @@
-//! The `vigp` command-line tool, for the paper's systems and for your own
-//! planar mechanism (feature `cli`; 3-D mechanisms are learned in Rust with
-//! `vigp::spatial::learned::LearnedSpatial`).
+//! The `vigp` command-line tool, for the paper's systems, the 3-D examples
+//! of [`crate::systems::spatial`] and your own mechanism, planar or 3-D
+//! (feature `cli`). A 3-D mechanism is learned in its minimal coordinates
+//! (joint angles and slides; a ball joint's unit quaternion as four columns
+//! `<joint>.w`, `.x`, `.y`, `.z`; velocities differenced as for every
+//! coordinate, [`crate::data`]); its maximal view (each link's position and
+//! orientation) is learned in Rust with
+//! `vigp::spatial::learned::LearnedSpatial`.
 //!
 //! ```text
 //! vigp fit     --system NAME --data train.csv --out model.json
@@ -29,8 +34,9 @@
 //!   `--set links.pole.mass=1.1`), and saves it as one JSON file.
 //!   `--encoding minimal` learns on the minimal coordinates as they are,
 //!   `sincos` replaces every angle by its sine and cosine, `maximal` learns
-//!   in maximal coordinates (each link's x, y, θ; projected onto the joint
-//!   constraints).
+//!   a planar mechanism in maximal coordinates (each link's x, y, θ;
+//!   projected onto the joint constraints; refused for a 3-D mechanism,
+//!   [`CliError::SpatialMaximal`]).
 //! * `score` is the paper's k-step prediction error: from every sample s of
 //!   every run with k + 1 more samples after it, k steps of the learned
 //!   model and of the nominal variational integrator, position MSE in
@@ -75,7 +81,8 @@
 //! k + 1's input (`fit` warns when the inputs fit the data markedly better
 //! shifted by one row).
 //!
-//! Your own mechanism gets the same tool from one line:
+//! Your own mechanism, planar or 3-D (`gravity: [gx, gy, gz]`), gets the
+//! same tool from one line:
 //!
 //! ```no_run
 //! vigp::mechanism! {
@@ -115,7 +122,7 @@ use crate::learned::{LearnError, Learned, LoadError, SavedLearned};
 use crate::{Mechanism, Parameters, SVector, StepError, System};
 
 use args::{Cli, Command, ExportArgs, PredictArgs, ReadArgs, ScoreArgs};
-pub use registry::{SystemEntry, paper_systems, system};
+pub use registry::{SystemEntry, paper_systems, spatial_systems, system};
 use registry::{find, names};
 
 /// Everything that can stop a command.
@@ -158,6 +165,21 @@ pub enum CliError {
     /// The GP could not be exported.
     #[error("export failed: {0}")]
     Export(#[from] GpError),
+    /// A 3-D mechanism's maximal view was asked for (`fit --encoding
+    /// maximal`): the tool learns a 3-D mechanism in its minimal
+    /// coordinates only.
+    #[error(
+        "{mechanism} is a 3-D mechanism: {what} is not available; the tool learns a 3-D \
+         mechanism in its minimal coordinates (--encoding sincos or minimal), and its maximal \
+         view (each link's position and orientation) in Rust with \
+         vigp::spatial::learned::LearnedSpatial"
+    )]
+    SpatialMaximal {
+        /// The mechanism.
+        mechanism: &'static str,
+        /// What was asked for.
+        what: &'static str,
+    },
     /// An output file could not be written.
     #[error("{path}: {source}")]
     Io {
@@ -400,30 +422,37 @@ where
 }
 
 /// `true` when a model file is in the minimal coordinates, `false` when in
-/// the maximal ones; an error naming both when in neither (an edited or
-/// corrupted file), rather than a complaint against one of them.
-fn in_minimal<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+/// the maximal ones (`maximal`: their names; `None` for a 3-D mechanism,
+/// whose maximal view the tool does not take); an error naming both when
+/// in neither (an edited or corrupted file), rather than a complaint
+/// against one of them.
+fn in_minimal<Mn: Mechanism<N, C>, const N: usize, const C: usize>(
     path: &Path,
     saved: &SavedLearned,
-) -> Result<bool, CliError>
-where
-    Mn: Mechanism<N, C>,
-    Mx: Mechanism<NM, CM>,
-{
+    maximal: Option<&[&'static str]>,
+) -> Result<bool, CliError> {
     if saved.coordinates == Mn::COORDINATES {
-        Ok(true)
-    } else if saved.coordinates == Mx::COORDINATES {
-        Ok(false)
-    } else {
-        Err(CliError::Usage(format!(
-            "{}: field `coordinates`: [{}] are neither the minimal coordinates [{}] nor the \
-             maximal ones [{}] of {}",
-            path.display(),
-            saved.coordinates.join(", "),
+        return Ok(true);
+    }
+    let found = format!(
+        "{}: field `coordinates`: [{}] are",
+        path.display(),
+        saved.coordinates.join(", ")
+    );
+    match maximal {
+        Some(mx) if saved.coordinates == mx => Ok(false),
+        Some(mx) => Err(CliError::Usage(format!(
+            "{found} neither the minimal coordinates [{}] nor the maximal ones [{}] of {}",
             Mn::COORDINATES.join(", "),
-            Mx::COORDINATES.join(", "),
+            mx.join(", "),
             saved.mechanism
-        )))
+        ))),
+        None => Err(CliError::Usage(format!(
+            "{found} not the minimal coordinates [{}] of {}, a 3-D mechanism, whose models the \
+             tool takes in minimal coordinates only",
+            Mn::COORDINATES.join(", "),
+            saved.mechanism
+        ))),
     }
 }
 

@@ -1,16 +1,20 @@
 //! The mechanisms the tool knows, and how one of them runs a command in
-//! its minimal or maximal view.
+//! its minimal or maximal view: the commands are written once, generic over
+//! the minimal view and over what the mechanism has as maximal view
+//! ([`MaximalView`]: a planar mechanism's, or none for a 3-D mechanism).
 
 use std::io::Write;
 
-use super::args::{Command, PriorArg};
+use super::args::{Command, EncodingArg, ExportArgs, FitArgs, PredictArgs, PriorArg, ScoreArgs};
 use super::export::export;
-use super::fit::{fit, set_parameter};
+use super::fit::{Prepared, fit_maximal, fit_minimal, nominal_invalid, prepare, set_parameter};
 use super::identify::{apply_identified, identify};
 use super::predict::predict;
 use super::score::score;
 use super::{CliError, in_minimal, load, model_and_data, read_saved};
-use crate::{Coordinates, Mechanism, Parameters, System, ViewVisitor};
+use crate::data::Dataset;
+use crate::learned::SavedLearned;
+use crate::{Coordinates, Inputs, Mechanism, Parameters, System, ViewVisitor};
 
 /// One mechanism the tool knows (see [`system`]).
 #[derive(Clone, Copy)]
@@ -34,7 +38,9 @@ impl core::fmt::Debug for SystemEntry {
     }
 }
 
-/// The entry of mechanism `S` for [`main_with`] / [`run`].
+/// The entry of mechanism `S` for [`main_with`](super::main_with) /
+/// [`run`](super::run): any `mechanism!`, planar or 3-D (a 3-D one in its
+/// minimal coordinates).
 pub fn system<S: System>() -> SystemEntry {
     SystemEntry {
         name: S::NAME,
@@ -50,6 +56,24 @@ pub fn paper_systems() -> Vec<SystemEntry> {
         system::<Cartpole>(),
         system::<DoublePendulum>(),
         system::<Fourbar>(),
+    ]
+}
+
+/// The 3-D example systems (`vigp::systems::spatial`), as the `vigp` binary
+/// has them after the paper's four: the tool learns them in their minimal
+/// coordinates (joint angles and slides; a ball joint's quaternion as four
+/// columns `<joint>.w`, `.x`, `.y`, `.z`, a free joint's position and
+/// quaternion as seven, velocities differenced as for every coordinate).
+pub fn spatial_systems() -> Vec<SystemEntry> {
+    use crate::systems::spatial::{
+        DoublePendulum3d, Furuta, SpatialSliderCrank, SphericalPendulum, Tumbler,
+    };
+    vec![
+        system::<Furuta>(),
+        system::<SphericalPendulum>(),
+        system::<DoublePendulum3d>(),
+        system::<SpatialSliderCrank>(),
+        system::<Tumbler>(),
     ]
 }
 
@@ -92,7 +116,7 @@ fn run_system<S: System>(cmd: &Command, out: &mut dyn Write) -> Result<(), CliEr
         apply_identified(&mut sys, S::NAME, path)?;
     }
     match cmd {
-        Command::Fit(super::args::FitArgs { set, .. })
+        Command::Fit(FitArgs { set, .. })
         | Command::Simulate(super::args::SimulateArgs { set, .. })
         | Command::Identify(super::args::IdentifyArgs { set, .. }) => {
             for s in set {
@@ -128,63 +152,267 @@ impl ViewVisitor for Visit<'_> {
     where
         Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
         Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
-        Mn: crate::Inputs<U>,
-        Mx: crate::Inputs<U>,
+        Mn: Inputs<U>,
+        Mx: Inputs<U>,
     {
-        let Visit { cmd, out } = self;
-        match cmd {
-            Command::Fit(a) => fit::<Mn, Mx, N, C, NM, CM, U>(a, minimal, maximal, out),
-            Command::Score(a) => {
-                let (saved, nominal, data) = model_and_data(&a.model, &a.data, &a.read, minimal)?;
-                if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
-                    let l = load(&a.model, &saved, minimal)?;
-                    score::<_, _, N, C, N, C, U>(a, &l, nominal, &data, |z| *z, |q| *q, out)
-                } else {
-                    let l = load(&a.model, &saved, maximal)?;
-                    let dt = saved.dt;
-                    score::<_, _, N, C, NM, CM, U>(
-                        a,
-                        &l,
-                        nominal,
-                        &data,
-                        |z| nominal.to_maximal(z, dt),
-                        |x| nominal.minimal_positions(x),
-                        out,
-                    )
-                }
-            }
-            Command::Predict(a) => {
-                let (saved, nominal, data) = model_and_data(&a.model, &a.data, &a.read, minimal)?;
-                if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
-                    let l = load(&a.model, &saved, minimal)?;
-                    let coords = (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES);
-                    predict::<_, N, N, C, U>(a, &l, &data, coords, |z| *z, |z| *z, out)
-                } else {
-                    let l = load(&a.model, &saved, maximal)?;
-                    let dt = saved.dt;
-                    predict::<_, N, NM, CM, U>(
-                        a,
-                        &l,
-                        &data,
-                        (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES),
-                        |z| nominal.to_maximal(z, dt),
-                        |z| nominal.to_minimal(z, dt),
-                        out,
-                    )
-                }
-            }
-            Command::Simulate(a) => super::simulate::simulate::<Mn, N, C, U>(a, minimal, out),
-            Command::Identify(a) => identify::<Mn, N, C>(a, minimal, out),
-            Command::Export(a) => {
-                let saved = read_saved(&a.model)?;
-                if in_minimal::<Mn, Mx, N, C, NM, CM>(&a.model, &saved)? {
-                    let l = load(&a.model, &saved, minimal)?;
-                    export(a, &l, out)
-                } else {
-                    let l = load(&a.model, &saved, maximal)?;
-                    export(a, &l, out)
-                }
+        dispatch::<Mn, _, N, C, U>(self.cmd, minimal, Planar::<Mx, NM, CM>(maximal), self.out)
+    }
+
+    fn visit_minimal<Mn, const N: usize, const C: usize, const U: usize>(
+        self,
+        minimal: Mn,
+    ) -> Self::Output
+    where
+        Mn: Mechanism<N, C> + Parameters + Copy + Send + Sync + 'static,
+        Mn: Inputs<U>,
+    {
+        dispatch::<Mn, _, N, C, U>(self.cmd, minimal, NoMaximal, self.out)
+    }
+}
+
+/// Runs one command on a mechanism's minimal view `minimal` and its
+/// maximal view (if any), the same code for planar and 3-D mechanisms.
+fn dispatch<Mn, X, const N: usize, const C: usize, const U: usize>(
+    cmd: &Command,
+    minimal: Mn,
+    maximal: X,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Parameters + Copy + Send + Sync + 'static,
+    Mn: Inputs<U>,
+    X: MaximalView<Mn, N, C, U>,
+{
+    match cmd {
+        Command::Fit(a) => {
+            let p = prepare::<Mn, N, C, U>(a, minimal, maximal.check_fit(a), out)?;
+            if a.encoding == EncodingArg::Maximal {
+                maximal.fit(a, minimal, &p, out)
+            } else {
+                fit_minimal::<Mn, N, C, U>(a, minimal, &p, out)
             }
         }
+        Command::Score(a) => {
+            let (saved, nominal, data) = model_and_data(&a.model, &a.data, &a.read, minimal)?;
+            if in_minimal::<Mn, N, C>(&a.model, &saved, maximal.coordinates())? {
+                let l = load(&a.model, &saved, minimal)?;
+                score::<_, _, N, C, N, C, U>(a, &l, nominal, &data, |z| *z, |q| *q, out)
+            } else {
+                maximal.score(a, &saved, nominal, &data, out)
+            }
+        }
+        Command::Predict(a) => {
+            let (saved, nominal, data) = model_and_data(&a.model, &a.data, &a.read, minimal)?;
+            if in_minimal::<Mn, N, C>(&a.model, &saved, maximal.coordinates())? {
+                let l = load(&a.model, &saved, minimal)?;
+                let coords = (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES);
+                predict::<_, N, N, C, U>(a, &l, &data, coords, |z| *z, |z| *z, out)
+            } else {
+                maximal.predict(a, &saved, nominal, &data, out)
+            }
+        }
+        Command::Simulate(a) => super::simulate::simulate::<Mn, N, C, U>(a, minimal, out),
+        Command::Identify(a) => identify::<Mn, N, C>(a, minimal, out),
+        Command::Export(a) => {
+            let saved = read_saved(&a.model)?;
+            if in_minimal::<Mn, N, C>(&a.model, &saved, maximal.coordinates())? {
+                export(a, &load(&a.model, &saved, minimal)?, out)
+            } else {
+                maximal.export(a, &saved, out)
+            }
+        }
+    }
+}
+
+/// What the commands need of a mechanism's maximal view, besides its
+/// minimal view `Mn` (`N` coordinates, `C` constraints, `U` inputs): the
+/// parts of `fit`, `score`, `predict` and `export` that run in it.
+trait MaximalView<Mn, const N: usize, const C: usize, const U: usize> {
+    /// The view's coordinate names (a model file in them is in this view);
+    /// `None` when the tool takes no maximal view of the mechanism.
+    fn coordinates(&self) -> Option<&'static [&'static str]>;
+    /// Whether `fit` can run as asked: the view's parameters (after
+    /// `--set`) and, for `--encoding maximal`, the view itself.
+    fn check_fit(&self, a: &FitArgs) -> Result<(), CliError>;
+    /// `fit --encoding maximal`.
+    fn fit(
+        &self,
+        a: &FitArgs,
+        minimal: Mn,
+        p: &Prepared<N>,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError>;
+    /// `score` of a model in maximal coordinates (`nominal`: the minimal
+    /// view with the model's parameters).
+    fn score(
+        &self,
+        a: &ScoreArgs,
+        saved: &SavedLearned,
+        nominal: Mn,
+        data: &Dataset<N>,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError>;
+    /// `predict` with a model in maximal coordinates.
+    fn predict(
+        &self,
+        a: &PredictArgs,
+        saved: &SavedLearned,
+        nominal: Mn,
+        data: &Dataset<N>,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError>;
+    /// `export` of a model in maximal coordinates.
+    fn export(
+        &self,
+        a: &ExportArgs,
+        saved: &SavedLearned,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError>;
+}
+
+/// A planar mechanism's maximal view: a [`Mechanism`] in each link's x, y,
+/// θ (`NM` coordinates, `CM` joint equations).
+struct Planar<Mx, const NM: usize, const CM: usize>(Mx);
+
+impl<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize, const U: usize>
+    MaximalView<Mn, N, C, U> for Planar<Mx, NM, CM>
+where
+    Mn: Mechanism<N, C> + Coordinates<N, NM> + Parameters + Copy + Send + Sync + 'static,
+    Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
+    Mn: Inputs<U>,
+    Mx: Inputs<U>,
+{
+    fn coordinates(&self) -> Option<&'static [&'static str]> {
+        Some(&Mx::COORDINATES)
+    }
+
+    fn check_fit(&self, _a: &FitArgs) -> Result<(), CliError> {
+        self.0.constants().map(|_| ()).map_err(nominal_invalid)
+    }
+
+    fn fit(
+        &self,
+        a: &FitArgs,
+        minimal: Mn,
+        p: &Prepared<N>,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        fit_maximal::<Mn, Mx, N, C, NM, CM, U>(a, minimal, self.0, p, out)
+    }
+
+    fn score(
+        &self,
+        a: &ScoreArgs,
+        saved: &SavedLearned,
+        nominal: Mn,
+        data: &Dataset<N>,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        let l = load(&a.model, saved, self.0)?;
+        let dt = saved.dt;
+        score::<_, _, N, C, NM, CM, U>(
+            a,
+            &l,
+            nominal,
+            data,
+            |z| nominal.to_maximal(z, dt),
+            |x| nominal.minimal_positions(x),
+            out,
+        )
+    }
+
+    fn predict(
+        &self,
+        a: &PredictArgs,
+        saved: &SavedLearned,
+        nominal: Mn,
+        data: &Dataset<N>,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        let l = load(&a.model, saved, self.0)?;
+        let dt = saved.dt;
+        predict::<_, N, NM, CM, U>(
+            a,
+            &l,
+            data,
+            (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES),
+            |z| nominal.to_maximal(z, dt),
+            |z| nominal.to_minimal(z, dt),
+            out,
+        )
+    }
+
+    fn export(
+        &self,
+        a: &ExportArgs,
+        saved: &SavedLearned,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        export(a, &load(&a.model, saved, self.0)?, out)
+    }
+}
+
+/// A 3-D mechanism's maximal view, which the tool does not take (each
+/// link's position and orientation: a Lie group, not a [`Mechanism`]):
+/// `fit --encoding maximal` is refused before the data are read, and a
+/// model file in other than the minimal coordinates by
+/// [`in_minimal`], so the command parts below only say why.
+struct NoMaximal;
+
+impl NoMaximal {
+    fn refuse<Mn: Parameters>(what: &'static str) -> Result<(), CliError> {
+        Err(CliError::SpatialMaximal {
+            mechanism: Mn::NAME,
+            what,
+        })
+    }
+}
+
+/// What a model file in maximal coordinates asks for.
+const MAXIMAL_MODEL: &str = "a model in maximal coordinates";
+
+impl<Mn: Parameters, const N: usize, const C: usize, const U: usize> MaximalView<Mn, N, C, U>
+    for NoMaximal
+{
+    fn coordinates(&self) -> Option<&'static [&'static str]> {
+        None
+    }
+
+    fn check_fit(&self, a: &FitArgs) -> Result<(), CliError> {
+        if a.encoding == EncodingArg::Maximal {
+            Self::refuse::<Mn>("--encoding maximal")
+        } else {
+            Ok(())
+        }
+    }
+
+    fn fit(&self, _: &FitArgs, _: Mn, _: &Prepared<N>, _: &mut dyn Write) -> Result<(), CliError> {
+        Self::refuse::<Mn>("--encoding maximal")
+    }
+
+    fn score(
+        &self,
+        _: &ScoreArgs,
+        _: &SavedLearned,
+        _: Mn,
+        _: &Dataset<N>,
+        _: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        Self::refuse::<Mn>(MAXIMAL_MODEL)
+    }
+
+    fn predict(
+        &self,
+        _: &PredictArgs,
+        _: &SavedLearned,
+        _: Mn,
+        _: &Dataset<N>,
+        _: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        Self::refuse::<Mn>(MAXIMAL_MODEL)
+    }
+
+    fn export(&self, _: &ExportArgs, _: &SavedLearned, _: &mut dyn Write) -> Result<(), CliError> {
+        Self::refuse::<Mn>(MAXIMAL_MODEL)
     }
 }

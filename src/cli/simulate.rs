@@ -90,9 +90,13 @@ where
             }
             None => us.resize(a.steps, SVector::zeros()),
         }
-    } else if let Some(path) = &a.inputs {
-        // refused with the reason
-        read_plan::<U>(path, Mn::INPUT_NAMES)?;
+    } else {
+        if let Some(path) = &a.inputs {
+            // refused with the reason
+            read_plan::<U>(path, Mn::INPUT_NAMES)?;
+        }
+        // the log takes one (empty) input per step
+        us.resize(a.steps, SVector::zeros());
     }
     let vi = a.stepping.integrator(minimal, a.dt);
     vi.check()?;

@@ -239,6 +239,39 @@ fn every_mismatch_is_a_typed_error_naming_the_field() {
 /// every truncation: loading returns a model or a typed error, never
 /// panics; a model that loads takes one step without panicking, and a
 /// step that succeeds is finite.
+/// A length of 0 loads where the mechanism's own check takes it: a 3-D
+/// link declared without a length (the tumbler's body) saves and loads,
+/// predicting bit for bit; a planar link of length 0 is refused, naming
+/// the field.
+#[test]
+fn a_zero_length_loads_only_where_the_mechanism_takes_it() {
+    let json = cartpole_model(12, Encoding::SinCos).to_json();
+    let e = load_edited(&json, |v| v["parameters"]["links.pole.length"] = 0.0.into()).unwrap_err();
+    assert_eq!(field_of(&e), "parameters.links.pole.length");
+
+    let sys = vigp::systems::spatial::Tumbler::default();
+    assert_eq!(sys.links.body.length, 0.0);
+    let z0 = State {
+        q: SVector::from([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]),
+        v: SVector::from([0.1, 0.0, 0.0, 0.0, 0.05, 0.5, 0.01]),
+    };
+    let traj = Variational::new(sys.minimal(), DT)
+        .rollout(&z0, 20)
+        .unwrap();
+    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
+    let (l, _) = Learned::train(
+        sys.minimal(),
+        DT,
+        &transitions(&q, DT),
+        Encoding::Raw,
+        Prior::Nominal,
+        &options(),
+    )
+    .unwrap();
+    let back = Learned::from_json(sys.minimal(), &l.to_json()).unwrap();
+    assert_same_predictions(&l, &back, &z0);
+}
+
 #[test]
 fn byte_flips_and_truncations_never_panic() {
     let l = cartpole_model(8, Encoding::SinCos);

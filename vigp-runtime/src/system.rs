@@ -1,30 +1,32 @@
 //! Mechanisms as values that generic tools can take apart: [`System`] is
-//! implemented by every `mechanism!` parameter struct and hands its two
-//! coordinate views, with their sizes, to a [`ViewVisitor`].
+//! implemented by every `mechanism!` parameter struct and hands its
+//! coordinate views, with their sizes, to a [`ViewVisitor`]: a planar
+//! mechanism both its minimal and its maximal view
+//! ([`ViewVisitor::visit`]), a 3-D mechanism its minimal view
+//! ([`ViewVisitor::visit_minimal`]; its maximal view, each link's position
+//! and orientation, is a Lie-group integrator, not a [`Mechanism`]).
 //!
 //! The sizes N, C (minimal) and NM, CM (maximal), and the number U of
 //! inputs (actuated joints), are const generics of the views' methods,
 //! which a trait cannot derive from associated constants on stable Rust;
 //! the visitor receives them as const parameters instead. This is how
 //! `vigp::cli::main::<MyMechanism>()` runs the whole command-line tool on a
-//! user's mechanism from one line.
+//! user's mechanism, planar or 3-D, from one line.
 
 pub use vigp_core::Parameters;
 
 use crate::mechanism::{Coordinates, Mechanism};
 
-/// A planar mechanism declared with `mechanism!`: its run-time parameters
-/// ([`Parameters`], [`Default`] = the DSL's values) and both coordinate
-/// views.
-///
-/// Spatial mechanisms (`gravity: [gx, gy, gz]`) do not implement it: their
-/// maximal view is a Lie-group integrator, not a [`Mechanism`], so the
-/// command-line tool (`vigp::cli::main`) and other tools generic over
-/// `System` take planar mechanisms only. A 3-D mechanism is learned in
-/// Rust: `vigp::spatial::learned::LearnedSpatial` (see docs/spatial.md).
+/// A mechanism declared with `mechanism!`: its run-time parameters
+/// ([`Parameters`], [`Default`] = the DSL's values) and its coordinate
+/// views, handed to a [`ViewVisitor`]. Planar mechanisms hand over both
+/// views ([`ViewVisitor::visit`]); 3-D mechanisms (`gravity: [gx, gy, gz]`)
+/// their minimal view ([`ViewVisitor::visit_minimal`]): their maximal view
+/// is a Lie-group integrator (`vigp::spatial::LieStepper`, learned with
+/// `vigp::spatial::learned::LearnedSpatial`), not a [`Mechanism`].
 #[diagnostic::on_unimplemented(
-    message = "`{Self}` is not a planar `mechanism!`: tools generic over `System` (such as `vigp::cli::main`) take planar mechanisms only",
-    note = "a 3-D mechanism (`gravity: [gx, gy, gz]`) is learned in Rust with `vigp::spatial::learned::LearnedSpatial`; the command-line tool does not take it"
+    message = "`{Self}` is not a `mechanism!`: tools generic over `System` (such as `vigp::cli::main`) take the parameter structs that `mechanism!` declares",
+    note = "declare the mechanism with `vigp::mechanism!` (with vigp's `std` feature) and pass its parameter struct, not one of its views"
 )]
 pub trait System: Parameters + Default + Copy + Send + Sync + 'static {
     /// Calls `visitor` with the minimal and the maximal view of these
@@ -61,4 +63,17 @@ pub trait ViewVisitor {
         Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
         Mn: vigp_core::Inputs<U>,
         Mx: vigp_core::Inputs<U>;
+
+    /// Runs on the minimal view alone (`N` coordinates, `C` constraint
+    /// equations: loop closures, then one unit-norm row per quaternion) of a
+    /// 3-D mechanism with `U` inputs, whose maximal view is not a
+    /// [`Mechanism`] (each link's position and orientation: a Lie group,
+    /// integrated by `vigp::spatial::LieStepper`).
+    fn visit_minimal<Mn, const N: usize, const C: usize, const U: usize>(
+        self,
+        minimal: Mn,
+    ) -> Self::Output
+    where
+        Mn: Mechanism<N, C> + Parameters + Copy + Send + Sync + 'static,
+        Mn: vigp_core::Inputs<U>;
 }

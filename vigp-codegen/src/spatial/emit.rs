@@ -370,6 +370,7 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
         );
         quote!(#own #minimal)
     };
+    let n_inputs = usize_lit(input_joints.len());
     let mechanism_impl = if target == crate::target::Target::Std {
         let dissipation = if dissipative {
             quote! {
@@ -473,6 +474,14 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
                 }
                 #dissipation
                 #constraints
+            }
+
+            // tools generic over mechanisms (`vigp::cli::main`) take the
+            // minimal view; the maximal view is not a `Mechanism`
+            impl ::vigp::System for #name {
+                fn visit<V: ::vigp::ViewVisitor>(&self, visitor: V) -> V::Output {
+                    visitor.visit_minimal::<#minimal_ty, #nm, #cm, #n_inputs>(self.minimal())
+                }
             }
         }
     } else {

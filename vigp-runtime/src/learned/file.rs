@@ -409,15 +409,27 @@ where
                 found: saved.inputs.clone(),
             });
         }
+        // a length of 0: a 3-D link declared without one, if the
+        // mechanism's own check takes it (a planar link's must be > 0)
+        let mut zero_length = None;
         for (i, name) in M::PARAMETER_NAMES.iter().enumerate() {
             let Some(&value) = saved.parameters.get(*name) else {
                 return Err(LoadError::MissingParameter(name.to_string()));
             };
-            check_parameter(name, value)?;
+            if name.ends_with(".length") && value == 0.0 {
+                zero_length.get_or_insert(*name);
+            } else {
+                check_parameter(name, value)?;
+            }
             match model.parameter_mut(i) {
                 Some(slot) => *slot = value,
                 None => return Err(LoadError::MissingParameter(name.to_string())),
             }
+        }
+        if let Some(name) = zero_length
+            && vigp_core::Dynamics::constants(&model).is_err()
+        {
+            return Err(field(format!("parameters.{name}"), "0 must be > 0"));
         }
         if let Some(extra) = saved
             .parameters
