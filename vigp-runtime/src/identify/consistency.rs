@@ -238,7 +238,7 @@ pub fn project(
             let slope = grad.dot(&step);
             // converged at this μ: Newton's decrement λ² = −∇Φ·Δ below
             // the rounding of Φ
-            if !(slope < -1e-13 * (1.0 + phi.abs())) {
+            if slope.is_nan() || slope >= -1e-13 * (1.0 + phi.abs()) {
                 break;
             }
             let mut t = 1.0;
