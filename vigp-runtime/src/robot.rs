@@ -52,7 +52,7 @@ use std::path::Path;
 
 use vigp_core::tree::spatial::V3;
 use vigp_core::tree::{Body, BodyScratch, Engine, EngineError, EngineOptions, EngineReport, Tree};
-use vigp_urdf::UrdfError;
+pub use vigp_urdf::UrdfError;
 
 /// The bodies of a robot as run-time data: what the engine reads.
 #[derive(Clone, Debug, PartialEq)]
@@ -89,15 +89,11 @@ pub enum RobotError {
         /// The error.
         source: std::io::Error,
     },
-    /// The XML parser refused the file (its message names the place).
-    #[error("malformed URDF: {0}")]
-    Parse(String),
-    /// A number in the file is NaN or ±∞.
-    #[error("non-finite number in {element}")]
-    NonFinite {
-        /// The element, e.g. "joint `elbow` <origin>".
-        element: String,
-    },
+    /// The document is not a tree of bodies the engine takes: malformed
+    /// XML, a non-finite or out-of-domain number, an unsupported or mimic
+    /// joint, links that do not form one tree (the element is named).
+    #[error(transparent)]
+    Urdf(#[from] UrdfError),
     /// A value out of its domain.
     #[error("invalid {element}: {why}")]
     Invalid {
@@ -106,29 +102,6 @@ pub enum RobotError {
         /// What is wrong.
         why: &'static str,
     },
-    /// A joint type the tree engine does not take.
-    #[error(
-        "joint `{joint}`: type {kind} is not supported (revolute, continuous, prismatic and fixed are)"
-    )]
-    UnsupportedJoint {
-        /// The joint.
-        joint: String,
-        /// Its type.
-        kind: &'static str,
-    },
-    /// A mimic joint (a constraint between coordinates, not a tree joint).
-    #[error(
-        "joint `{joint}`: mimic joints are not supported (it mimics `{mimics}`); make it fixed or free it"
-    )]
-    Mimic {
-        /// The joint.
-        joint: String,
-        /// The joint it mimics.
-        mimics: String,
-    },
-    /// The links and joints do not form one tree.
-    #[error("not a tree: {0}")]
-    NotATree(String),
     /// A joint name not among the robot's coordinates.
     #[error("unknown joint `{name}` (joints with a coordinate: {known})")]
     UnknownJoint {
@@ -237,21 +210,6 @@ pub struct Robot {
     links: Vec<String>,
     engine: Engine<RobotTree>,
     inputs: Vec<usize>,
-}
-
-impl From<UrdfError> for RobotError {
-    fn from(e: UrdfError) -> Self {
-        match e {
-            UrdfError::Parse(m) => RobotError::Parse(m),
-            UrdfError::NonFinite { element } => RobotError::NonFinite { element },
-            UrdfError::Invalid { element, why } => RobotError::Invalid { element, why },
-            UrdfError::UnsupportedJoint { joint, kind } => {
-                RobotError::UnsupportedJoint { joint, kind }
-            }
-            UrdfError::Mimic { joint, mimics } => RobotError::Mimic { joint, mimics },
-            UrdfError::NotATree(m) => RobotError::NotATree(m),
-        }
-    }
 }
 
 impl Robot {

@@ -8,7 +8,7 @@
 //! arm: tests/step/robot.rs of the `vigp` package.
 
 use vigp_core::tree::{EngineError, EngineOptions};
-use vigp_runtime::robot::{Robot, RobotError, RobotState};
+use vigp_runtime::robot::{Robot, RobotError, RobotState, UrdfError};
 
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/robots");
 
@@ -256,7 +256,7 @@ fn bad_urdf_is_a_typed_error_naming_the_element() {
     let good = std::fs::read_to_string(fixture("arm3.urdf")).unwrap();
     // malformed XML
     let e = Robot::from_urdf_str(&good.replace("</robot>", "")).unwrap_err();
-    assert!(matches!(e, RobotError::Parse(_)), "{e}");
+    assert!(matches!(e, RobotError::Urdf(UrdfError::Parse(_))), "{e}");
     // NaN in a joint origin, ∞ in an inertia
     let e = err(&good.replace("xyz=\"0.3 0 0\"", "xyz=\"0.3 NaN 0\""));
     assert!(e.contains("joint `j3` <origin>"), "{e}");
@@ -269,7 +269,7 @@ fn bad_urdf_is_a_typed_error_naming_the_element() {
     ))
     .unwrap_err();
     assert!(
-        matches!(&e, RobotError::Mimic { joint, mimics } if joint == "j2" && mimics == "j1"),
+        matches!(&e, RobotError::Urdf(UrdfError::Mimic { joint, mimics }) if joint == "j2" && mimics == "j1"),
         "{e}"
     );
     // floating and planar joints
