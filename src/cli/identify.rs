@@ -63,11 +63,22 @@ where
     w(out, format_args!("{report}"))?;
     // every parameter the identification sets, with the status of its
     // DSL row
+    // a 3-D inertia's lower entries (`inertia.yx`, `.zx`, `.zy`) are
+    // parameters too: they take the identified value of their mirror, and
+    // its status, so that the tensor stays symmetric
     let status_of = |name: &str| {
+        let mirrored = ["yx", "zx", "zy"]
+            .iter()
+            .find_map(|lower| {
+                let stem = name.strip_suffix(&format!("inertia.{lower}"))?;
+                let upper: String = lower.chars().rev().collect();
+                Some(format!("{stem}inertia.{upper}"))
+            })
+            .unwrap_or_else(|| name.to_string());
         report
             .dsl
             .iter()
-            .find(|r| r.parameter == name)
+            .find(|r| r.parameter == mirrored)
             .map(|r| r.status)
     };
     let mut parameters = Vec::new();
