@@ -5,7 +5,10 @@
 
 use std::io::Write;
 
-use super::args::{Command, EncodingArg, ExportArgs, FitArgs, PredictArgs, PriorArg, ScoreArgs};
+use super::args::{
+    Command, EncodingArg, ExportArgs, FitArgs, IdentifyArgs, PredictArgs, PriorArg, ScoreArgs,
+    SimulateArgs,
+};
 use super::export::export;
 use super::fit::{Prepared, fit_maximal, fit_minimal, nominal_invalid, prepare, set_parameter};
 use super::identify::{apply_identified, identify};
@@ -107,25 +110,24 @@ pub(super) fn find(systems: &[SystemEntry], name: &str) -> Result<SystemEntry, C
 }
 
 fn run_system<S: System>(cmd: &Command, out: &mut dyn Write) -> Result<(), CliError> {
+    // the nominal parameters: declared, then an identified prior's, then
+    // each `--set`
     let mut sys = S::default();
-    if let Command::Fit(super::args::FitArgs {
-        prior: PriorArg::Identified(path),
-        ..
-    }) = cmd
-    {
-        apply_identified(&mut sys, S::NAME, path)?;
-    }
-    match cmd {
-        Command::Fit(FitArgs { set, .. })
-        | Command::Simulate(super::args::SimulateArgs { set, .. })
-        | Command::Identify(super::args::IdentifyArgs { set, .. }) => {
-            for s in set {
-                set_parameter(&mut sys, s)?;
+    let set: &[String] = match cmd {
+        Command::Fit(FitArgs { set, prior, .. }) => {
+            if let PriorArg::Identified(path) = prior {
+                apply_identified(&mut sys, S::NAME, path)?;
             }
-            sys.visit(Visit { cmd, out })
+            set
         }
-        _ => sys.visit(Visit { cmd, out }),
+        Command::Simulate(SimulateArgs { set, .. })
+        | Command::Identify(IdentifyArgs { set, .. }) => set,
+        _ => &[],
+    };
+    for s in set {
+        set_parameter(&mut sys, s)?;
     }
+    sys.visit(Visit { cmd, out })
 }
 
 struct Visit<'a> {
