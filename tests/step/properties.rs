@@ -43,13 +43,16 @@ fn angle() -> impl Strategy<Value = f64> {
     -std::f64::consts::PI..std::f64::consts::PI
 }
 
-/// A failure must be a Newton failure with finite diagnostics.
+/// A failure must be a Newton failure with finite diagnostics, or a
+/// converged root the continuation check refused (its bend finite and above
+/// the bound it names).
 fn typed_failure(e: &StepError) -> bool {
     match e {
         StepError::NotConverged { residual, .. } | StepError::LineSearchFailed { residual, .. } => {
             residual.is_finite()
         }
         StepError::SingularJacobian { .. } | StepError::NonFiniteResidual { .. } => true,
+        StepError::NotContinuation { ratio, bound, .. } => ratio.is_finite() && ratio > bound,
         _ => false,
     }
 }
@@ -61,7 +64,7 @@ proptest! {
     /// `Ok` means a finite state whose DEL residual, recomputed
     /// independently of the solver's loop, is within the accepted
     /// tolerance (1e-10 = the stall tolerance, relative to |p₀| + m̄ as the
-    /// solver scales it); otherwise a typed Newton failure.
+    /// solver scales it); otherwise a typed failure (see `typed_failure`).
     #[test]
     fn paper_step_solves_its_equations_or_fails_typed(
         sys in double_pendulum(),
