@@ -325,3 +325,96 @@ fn floating_base_carries_the_whole_robot() {
         }
     }
 }
+
+/// The exact A = ∂z₁/∂z₀ and B = ∂z₁/∂u of the generated code (jets
+/// through the closed-form terms, `Variational::step_derivatives`) against
+/// the run-time robot's (jets through the O(N) recursions,
+/// `Robot::step_derivatives`): two implementations of the implicit
+/// function theorem on the same DEL equations. Both steps converge to a
+/// 1e-12 scaled residual, so the derivatives, taken at slightly different
+/// roots, agree to about that: 1e-9 of the largest entry.
+#[test]
+fn urdf_step_derivatives_equal_the_run_time_robots() {
+    let dt = 0.002;
+    // the wrist, shoulder and slide driven
+    let wrist = WristUrdf::default().minimal();
+    let robot = Robot::from_urdf(format!("{FIXTURES}/wrist.urdf"))
+        .unwrap()
+        .with_actuated(&["shoulder", "slide"])
+        .unwrap();
+    let n = robot.dof();
+    assert_eq!(n, 3);
+    let (q0, v0, u) = ([0.3, -0.5, 0.02], [0.7, -0.4, 0.05], [1.5, -0.8]);
+    let (z, d) = Variational::new(wrist, dt)
+        .step_derivatives(&wrist.state(q0, v0), &SVector::from(u))
+        .unwrap();
+    let r = robot
+        .step_derivatives(&RobotState::new(q0.to_vec(), v0.to_vec()), &u, dt)
+        .unwrap();
+    let blocks = [
+        (0, 0, d.a.q_q),
+        (0, 3, d.a.q_v),
+        (3, 0, d.a.v_q),
+        (3, 3, d.a.v_v),
+    ];
+    let scale = r.a.amax();
+    let mut worst_a = 0.0f64;
+    for (r0, c0, block) in blocks {
+        for i in 0..3 {
+            for j in 0..3 {
+                worst_a = worst_a.max((r.a[(r0 + i, c0 + j)] - block[(i, j)]).abs() / scale);
+            }
+        }
+    }
+    let mut worst_b = 0.0f64;
+    for i in 0..3 {
+        for k in 0..2 {
+            worst_b = worst_b
+                .max((r.b[(i, k)] - d.b.q_u[(i, k)]).abs() / r.b.amax())
+                .max((r.b[(3 + i, k)] - d.b.v_u[(i, k)]).abs() / r.b.amax());
+        }
+    }
+    let worst_z = (0..3).fold(0.0f64, |a, i| {
+        a.max((z.q[i] - r.state.q[i]).abs())
+            .max((z.v[i] - r.state.v[i]).abs())
+    });
+    // the Panda, undriven, A only
+    let panda = Panda::default().minimal();
+    let arm = Robot::from_urdf(format!("{FIXTURES}/panda.urdf")).unwrap();
+    let (q0, v0) = (
+        [0.1, -0.4, 0.3, -1.8, 0.2, 1.4, 0.6],
+        [0.5, -0.3, 0.2, 0.4, -0.6, 0.1, 0.3],
+    );
+    let (_, dp) = Variational::new(panda, dt)
+        .step_derivatives(&panda.state(q0, v0), &SVector::<f64, 0>::zeros())
+        .unwrap();
+    let rp = arm
+        .step_derivatives(&RobotState::new(q0.to_vec(), v0.to_vec()), &[], dt)
+        .unwrap();
+    let blocks = [
+        (0, 0, dp.a.q_q),
+        (0, 7, dp.a.q_v),
+        (7, 0, dp.a.v_q),
+        (7, 7, dp.a.v_v),
+    ];
+    let scale = rp.a.amax();
+    let mut worst_panda = 0.0f64;
+    for (r0, c0, block) in blocks {
+        for i in 0..7 {
+            for j in 0..7 {
+                worst_panda =
+                    worst_panda.max((rp.a[(r0 + i, c0 + j)] - block[(i, j)]).abs() / scale);
+            }
+        }
+    }
+    println!(
+        "step derivatives, generated vs Robot: wrist A {worst_a:.1e}, B {worst_b:.1e} (state {worst_z:.1e}); \
+         Panda A {worst_panda:.1e} (of the largest entry)"
+    );
+    assert!(worst_z < 1e-10, "{worst_z:e}");
+    assert!(
+        worst_a < 1e-9 && worst_b < 1e-9,
+        "A {worst_a:e} B {worst_b:e}"
+    );
+    assert!(worst_panda < 1e-9, "{worst_panda:e}");
+}

@@ -34,6 +34,9 @@ pub trait Real:
     /// The angle atan2(self, x) ∈ (−π, π] of the point (x, self), with its
     /// derivatives (finite wherever x² + self² > 0).
     fn atan2(self, x: Self) -> Self;
+    /// The value without its derivatives (for tests of finiteness and
+    /// for reading results).
+    fn value(self) -> f64;
 }
 
 #[cfg(not(feature = "dual"))]
@@ -49,6 +52,10 @@ impl Real for f64 {
     #[inline]
     fn atan2(self, x: Self) -> Self {
         libm::atan2(self, x)
+    }
+    #[inline]
+    fn value(self) -> f64 {
+        self
     }
 }
 
@@ -75,6 +82,10 @@ where
         let n = self * T::from(c0) - x * T::from(s0);
         let d = x * T::from(c0) + self * T::from(s0);
         (n / d).atan() + T::from(t0)
+    }
+    #[inline]
+    fn value(self) -> f64 {
+        self.re()
     }
 }
 
@@ -200,6 +211,10 @@ impl<const N: usize> Real for Jet1<N> {
     #[inline]
     fn from_f64(x: f64) -> Self {
         Self::constant(x)
+    }
+    #[inline]
+    fn value(self) -> f64 {
+        self.v
     }
     #[inline]
     fn sincos(self) -> (Self, Self) {
@@ -378,6 +393,10 @@ impl<const N: usize> Real for Jet2<N> {
     #[inline]
     fn from_f64(x: f64) -> Self {
         Self::constant(x)
+    }
+    #[inline]
+    fn value(self) -> f64 {
+        self.v
     }
     #[inline]
     fn sincos(self) -> (Self, Self) {

@@ -50,6 +50,8 @@
 
 use std::path::Path;
 
+use nalgebra::DMatrix;
+use vigp_core::Jet1;
 use vigp_core::tree::spatial::V3;
 use vigp_core::tree::{Body, BodyScratch, Engine, EngineError, EngineOptions, EngineReport, Tree};
 pub use vigp_urdf::UrdfError;
@@ -129,6 +131,10 @@ pub enum RobotError {
     /// The engine failed (time step, state, convergence).
     #[error("{0}")]
     Engine(EngineError),
+    /// The Newton matrix ∂r/∂v₁ of a converged step is singular (or its
+    /// solve not finite), so the step has no derivatives there.
+    #[error("the Newton matrix of the step is singular: no derivatives at this state")]
+    SingularNewtonMatrix,
     /// A step of a rollout failed.
     #[error("rollout step {step}: {source}")]
     Rollout {
@@ -154,6 +160,55 @@ impl RobotState {
     pub fn new(q: Vec<f64>, v: Vec<f64>) -> Self {
         Self { q, v }
     }
+}
+
+/// Directions carried by one jet pass of [`Robot::step_derivatives`].
+const JET_WIDTH: usize = 8;
+
+/// The scalar of the derivative passes.
+type Jet = Jet1<JET_WIDTH>;
+
+/// The Jacobians of the engine's terms at one (q, v).
+struct TermJacobians {
+    /// ∂(M v)/∂q.
+    p_q: DMatrix<f64>,
+    /// ∂(M v)/∂v = M.
+    p_v: DMatrix<f64>,
+    /// ∂(∂T/∂q)/∂q.
+    t_q: DMatrix<f64>,
+    /// ∂(∂T/∂q)/∂v.
+    t_v: DMatrix<f64>,
+    /// ∂(∇V)/∂q.
+    v_q: DMatrix<f64>,
+}
+
+/// One step with its exact derivatives ([`Robot::step_derivatives`]).
+///
+/// Each converged sub-step of h solves
+/// r = P(q₀, v₀) − P(q₁, v₁) + h·(∂T/∂q(q₁, v₁) − ∇V(q₁) − D·v₁ + S·u) = 0
+/// with q₁ = q₀ + h·v₀, P(q, v) = M(q)v and S the input selection. With
+/// J = ∂r/∂v₁ and K = ∂r/∂q₁ (at fixed q₀, v₀):
+///
+/// ```text
+/// ∂q₁/∂q₀ = 1,  ∂q₁/∂v₀ = h,
+/// ∂v₁/∂q₀ = −J⁻¹(∂P/∂q(q₀, v₀) + K),  ∂v₁/∂v₀ = −J⁻¹(M(q₀) + h·K),
+/// ∂v₁/∂u = −h·J⁻¹S.
+/// ```
+///
+/// The terms' derivatives come from the engine's recursive pass evaluated
+/// on forward-mode jets (exact to rounding, O(N²) per sub-step); J is then
+/// factored densely (O(N³), a small share up to a few dozen joints).
+#[derive(Clone, Debug, PartialEq)]
+pub struct StepDerivatives {
+    /// The state after the step (that of [`Robot::step`]).
+    pub state: RobotState,
+    /// A = ∂z₁/∂z₀, 2N × 2N, z = (q, v).
+    pub a: DMatrix<f64>,
+    /// B = ∂z₁/∂u, 2N × U (inputs in [`Robot::input_names`] order).
+    pub b: DMatrix<f64>,
+    /// What the step took (as [`Robot::step`]'s report, except that a
+    /// sub-step refused for its energy jump adds no iterations).
+    pub report: EngineReport,
 }
 
 /// A rollout: the states (the initial one first) and what the steps took.
@@ -447,6 +502,203 @@ impl Robot {
         self.engine
             .step_guessed(&mut z.q, &mut z.v, p, &ws.tau, dt, guess, &mut ws.bodies)
             .map_err(|e| self.engine_error(e))
+    }
+
+    /// One step of `dt` from `z` with inputs `u`, with its exact
+    /// derivatives A = ∂z₁/∂z₀ (2N × 2N) and B = ∂z₁/∂u (2N × U), states
+    /// ordered (q, v), by the implicit function theorem on the converged
+    /// DEL residual of every sub-step (module docs of
+    /// [`StepDerivatives`]). The state is [`Robot::step`]'s, bit for bit:
+    /// the same sub-steps are taken, and when the step subdivides itself,
+    /// A and B are the products of the sub-steps' derivatives.
+    pub fn step_derivatives(
+        &self,
+        z: &RobotState,
+        u: &[f64],
+        dt: f64,
+    ) -> Result<StepDerivatives, RobotError> {
+        let n = self.dof();
+        self.check_state(z)?;
+        if u.len() != self.inputs.len() {
+            return Err(RobotError::WrongLength {
+                what: "inputs",
+                expected: self.inputs.len(),
+                got: u.len(),
+            });
+        }
+        let options = *self.engine.options();
+        // one sub-step at a time: the engine's own step without subdivision
+        let single = Engine::with_options(
+            self.engine.tree(),
+            EngineOptions {
+                max_depth: 0,
+                ..options
+            },
+        )
+        .map_err(RobotError::Engine)?;
+        let mut tau = vec![0.0; n];
+        for (&i, &x) in self.inputs.iter().zip(u) {
+            tau[i] = x;
+        }
+        let mut ws = vec![BodyScratch::default(); n];
+        let mut jets = vec![BodyScratch::<Jet>::zeroed(); n];
+        let mut p = self.momentum(z)?;
+        let (mut q, mut v) = (z.q.clone(), z.v.clone());
+        let mut a = DMatrix::<f64>::identity(2 * n, 2 * n);
+        let mut b = DMatrix::<f64>::zeros(2 * n, self.inputs.len());
+        let mut report = EngineReport::default();
+        let (mut depth, mut done, mut total) = (0u32, 0usize, 1usize);
+        while done < total {
+            let h = dt / total as f64;
+            let (q0, v0) = (q.clone(), v.clone());
+            let failed = match single.step(&mut q, &mut v, &mut p, &tau, h, &mut ws) {
+                Ok(r) => {
+                    report.iterations += r.iterations;
+                    report.substeps += 1;
+                    report.residual = report.residual.max(r.residual);
+                    done += 1;
+                    let (sa, sb) = self.substep_derivatives(&q0, &v0, &v, h, &mut jets)?;
+                    b = &sa * &b + sb;
+                    a = sa * a;
+                    continue;
+                }
+                Err(EngineError::NotConverged {
+                    iterations,
+                    residual,
+                    ..
+                }) => {
+                    report.iterations += iterations;
+                    EngineError::NotConverged {
+                        depth,
+                        substep_dt: h,
+                        iterations,
+                        residual,
+                    }
+                }
+                Err(EngineError::EnergyJump { jump, .. }) => EngineError::EnergyJump {
+                    depth,
+                    substep_dt: h,
+                    jump,
+                },
+                Err(e) => return Err(self.engine_error(e)),
+            };
+            if depth >= options.max_depth || !(h * 0.5 * h * 0.5).is_normal() {
+                return Err(self.engine_error(failed));
+            }
+            (q, v) = (q0, v0);
+            depth += 1;
+            done *= 2;
+            total *= 2;
+        }
+        report.depth = depth;
+        Ok(StepDerivatives {
+            state: RobotState { q, v },
+            a,
+            b,
+            report,
+        })
+    }
+
+    /// The derivatives of one converged sub-step of h from (q₀, v₀) to
+    /// v₁: A_s = ∂(q₁, v₁)/∂(q₀, v₀) and B_s = ∂(q₁, v₁)/∂u.
+    fn substep_derivatives(
+        &self,
+        q0: &[f64],
+        v0: &[f64],
+        v1: &[f64],
+        h: f64,
+        jets: &mut [BodyScratch<Jet>],
+    ) -> Result<(DMatrix<f64>, DMatrix<f64>), RobotError> {
+        let n = self.dof();
+        let q1: Vec<f64> = q0.iter().zip(v0).map(|(q, v)| q + h * v).collect();
+        let start = self.term_jacobians(q0, v0, jets)?;
+        let end = self.term_jacobians(&q1, v1, jets)?;
+        // r = P(q₀, v₀) + F(q₁, v₁) + h·τ,
+        // F = −P(q₁, v₁) + h·(∂T/∂q(q₁, v₁) − ∇V(q₁) − D·v₁)
+        let mut fv = -&end.p_v + (&end.t_v * h);
+        for (i, body) in self.engine.tree().bodies.iter().enumerate() {
+            fv[(i, i)] -= h * body.damping;
+        }
+        let fq = -&end.p_q + (&end.t_q - &end.v_q) * h;
+        let lu = fv.lu();
+        let mut rhs = DMatrix::<f64>::zeros(n, 2 * n + self.inputs.len());
+        rhs.view_mut((0, 0), (n, n)).copy_from(&(&start.p_q + &fq));
+        rhs.view_mut((0, n), (n, n))
+            .copy_from(&(&start.p_v + &fq * h));
+        for (k, &i) in self.inputs.iter().enumerate() {
+            rhs[(i, 2 * n + k)] = h;
+        }
+        let Some(x) = lu.solve(&rhs) else {
+            return Err(RobotError::SingularNewtonMatrix);
+        };
+        let mut a = DMatrix::<f64>::zeros(2 * n, 2 * n);
+        let mut b = DMatrix::<f64>::zeros(2 * n, self.inputs.len());
+        for i in 0..n {
+            a[(i, i)] = 1.0;
+            a[(i, n + i)] = h;
+        }
+        a.view_mut((n, 0), (n, 2 * n))
+            .copy_from(&-x.columns(0, 2 * n));
+        b.view_mut((n, 0), (n, self.inputs.len()))
+            .copy_from(&-x.columns(2 * n, self.inputs.len()));
+        if !(a.iter().chain(b.iter()).all(|x| x.is_finite())) {
+            return Err(RobotError::SingularNewtonMatrix);
+        }
+        Ok((a, b))
+    }
+
+    /// ∂/∂q and ∂/∂v of the momentum P = M(q)v, of ∂T/∂q and of ∇V at
+    /// (q, v): the engine's O(N) pass on jets of [`JET_WIDTH`] directions,
+    /// ⌈2N / JET_WIDTH⌉ passes (O(N²) in all).
+    fn term_jacobians(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        jets: &mut [BodyScratch<Jet>],
+    ) -> Result<TermJacobians, RobotError> {
+        let n = self.dof();
+        let mut out = TermJacobians {
+            p_q: DMatrix::zeros(n, n),
+            p_v: DMatrix::zeros(n, n),
+            t_q: DMatrix::zeros(n, n),
+            t_v: DMatrix::zeros(n, n),
+            v_q: DMatrix::zeros(n, n),
+        };
+        let zero = Jet::constant(0.0);
+        let (mut qj, mut vj) = (vec![zero; n], vec![zero; n]);
+        let (mut p, mut t, mut g) = (vec![zero; n], vec![zero; n], vec![zero; n]);
+        // direction d < n seeds q_d, d ≥ n seeds v_(d − n)
+        for first in (0..2 * n).step_by(JET_WIDTH) {
+            for i in 0..n {
+                qj[i] = Jet::constant(q[i]);
+                vj[i] = Jet::constant(v[i]);
+            }
+            for k in 0..JET_WIDTH.min(2 * n - first) {
+                let d = first + k;
+                if d < n {
+                    qj[d].g[k] = 1.0;
+                } else {
+                    vj[d - n].g[k] = 1.0;
+                }
+            }
+            self.engine
+                .terms(&qj, &vj, &mut p, &mut t, &mut g, jets)
+                .map_err(|e| self.engine_error(e))?;
+            for k in 0..JET_WIDTH.min(2 * n - first) {
+                let d = first + k;
+                for i in 0..n {
+                    if d < n {
+                        out.p_q[(i, d)] = p[i].g[k];
+                        out.t_q[(i, d)] = t[i].g[k];
+                        out.v_q[(i, d)] = g[i].g[k];
+                    } else {
+                        out.p_v[(i, d - n)] = p[i].g[k];
+                        out.t_v[(i, d - n)] = t[i].g[k];
+                    }
+                }
+            }
+        }
+        Ok(out)
     }
 
     /// `steps` unforced steps of `dt` from `z0` (inputs zero).

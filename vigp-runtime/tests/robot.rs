@@ -359,3 +359,137 @@ fn an_input_is_a_generalized_force_on_its_joint() {
     );
     assert!((pb[0] - pa[0]).abs() < 1e-6);
 }
+
+/// max |A − A_fd| and max |B − B_fd| relative to the largest entry of A
+/// and of B, with A_fd, B_fd central differences of `Robot::step` at
+/// ε = 1e-5 on a robot whose solver tolerance is 1e-13 (the solver's noise
+/// is then ~1e-13/ε = 1e-8 of the entries, the truncation error ~ε² =
+/// 1e-10): a wrong or missing term (damping, an input, the momentum's
+/// configuration derivative) shows at 1e-3 or more.
+fn against_differences(robot: &Robot, z: &RobotState, u: &[f64], dt: f64) -> (f64, f64) {
+    let d = robot.step_derivatives(z, u, dt).unwrap();
+    let n = robot.dof();
+    let fine = robot
+        .clone()
+        .with_options(EngineOptions {
+            tolerance: 1e-13,
+            ..*robot.engine().options()
+        })
+        .unwrap();
+    // the differences must see the same sub-steps as the derivatives
+    let (_, fine_report) = fine.step(z, u, dt).unwrap();
+    assert_eq!(
+        (fine_report.substeps, fine_report.depth),
+        (d.report.substeps, d.report.depth),
+        "the finer tolerance changed the sub-steps: the differences would not be of the same map"
+    );
+    let eps = 1e-5;
+    let state = |z: &RobotState, u: &[f64]| {
+        let (z1, _) = fine.step(z, u, dt).unwrap();
+        [z1.q, z1.v].concat()
+    };
+    let mut worst_a = 0.0f64;
+    for j in 0..2 * n {
+        let (mut zp, mut zm) = (z.clone(), z.clone());
+        if j < n {
+            zp.q[j] += eps;
+            zm.q[j] -= eps;
+        } else {
+            zp.v[j - n] += eps;
+            zm.v[j - n] -= eps;
+        }
+        let (sp, sm) = (state(&zp, u), state(&zm, u));
+        for i in 0..2 * n {
+            worst_a = worst_a.max((d.a[(i, j)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
+        }
+    }
+    let mut worst_b = 0.0f64;
+    for k in 0..u.len() {
+        let (mut up, mut um) = (u.to_vec(), u.to_vec());
+        up[k] += eps;
+        um[k] -= eps;
+        let (sp, sm) = (state(z, &up), state(z, &um));
+        for i in 0..2 * n {
+            worst_b = worst_b.max((d.b[(i, k)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
+        }
+    }
+    let scale_b = d.b.amax().max(f64::MIN_POSITIVE);
+    (worst_a / d.a.amax(), worst_b / scale_b)
+}
+
+#[test]
+fn step_derivatives_match_central_differences() {
+    // the damped Panda, two joints driven, from a moving state; the arm3
+    // (a prismatic joint, a yawed frame, a welded tool) driven on its slide
+    let panda = Robot::from_urdf(fixture("panda.urdf"))
+        .unwrap()
+        .with_actuated(&["panda_joint2", "panda_joint6"])
+        .unwrap();
+    let z = RobotState::new(
+        vec![0.1, -0.4, 0.3, -1.8, 0.2, 1.4, 0.6],
+        vec![0.5, -0.3, 0.2, 0.4, -0.6, 0.1, 0.3],
+    );
+    let arm = Robot::from_urdf(fixture("arm3.urdf"))
+        .unwrap()
+        .with_actuated(&["j1", "j3"])
+        .unwrap();
+    let za = RobotState::new(vec![0.3, -0.7, 0.05], vec![1.2, -0.8, 0.3]);
+    for (name, robot, z, u, dt) in [
+        ("panda", &panda, &z, vec![2.0, -1.0], 0.002),
+        ("panda", &panda, &z, vec![2.0, -1.0], 0.02),
+        ("arm3", &arm, &za, vec![0.4, 1.5], 0.005),
+    ] {
+        let d = robot.step_derivatives(z, &u, dt).unwrap();
+        let (z1, report) = robot.step(z, &u, dt).unwrap();
+        // the same sub-steps as the step itself, bit for bit
+        assert_eq!(d.state, z1);
+        assert_eq!(
+            (d.report.substeps, d.report.depth),
+            (report.substeps, report.depth)
+        );
+        let (ea, eb) = against_differences(robot, z, &u, dt);
+        println!(
+            "{name}, dt {} ms: A {ea:.1e}, B {eb:.1e} (vs central differences, of the largest entry)",
+            dt * 1e3
+        );
+        assert!(ea < 1e-6 && eb < 1e-6, "{name}: A {ea:e}, B {eb:e}");
+    }
+}
+
+#[test]
+fn step_derivatives_chain_the_sub_steps_of_a_subdivided_step() {
+    // the 8-rod chain at dt = 10 ms: the first step along its rollout that
+    // subdivides itself; its A is the product of the sub-steps' and must
+    // match differences of the whole (subdivided) step
+    let robot = Robot::from_urdf_str(&chain_urdf(8))
+        .unwrap()
+        .with_actuated(&["j1"])
+        .unwrap();
+    let mut q = vec![0.0; 8];
+    q[0] = 1.0;
+    q[1] = -0.5;
+    let mut z = RobotState::new(q, vec![0.0; 8]);
+    let dt = 0.01;
+    let mut found = None;
+    for _ in 0..2000 {
+        let (z1, report) = robot.step(&z, &[0.0], dt).unwrap();
+        if report.depth > 0 {
+            found = Some((z.clone(), report));
+            break;
+        }
+        z = z1;
+    }
+    let (z, report) = found.expect("no step of the 8-rod chain subdivided in 2000 steps");
+    let d = robot.step_derivatives(&z, &[0.0], dt).unwrap();
+    assert_eq!(d.state, robot.step(&z, &[0.0], dt).unwrap().0);
+    assert_eq!(
+        (d.report.substeps, d.report.depth),
+        (report.substeps, report.depth)
+    );
+    let (ea, eb) = against_differences(&robot, &z, &[0.0], dt);
+    println!(
+        "chain 8, dt 10 ms, {} sub-steps (depth {}): A {ea:.1e}, B {eb:.1e}",
+        report.substeps, report.depth
+    );
+    assert!(ea < 1e-6 && eb < 1e-6, "A {ea:e}, B {eb:e}");
+}

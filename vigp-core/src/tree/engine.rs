@@ -9,8 +9,9 @@
 use super::model::{InvalidTree, JointKind, Tree, validate};
 use super::spatial::{
     IDENTITY, Inertia6, M3, M6, V3, V6, add, axis_angle, congruence, cross, cross_force,
-    cross_motion, dot6, mul_mm, mul_mv, mul6, scale,
+    cross_motion, dot6, lift3, lift33, mul_mm, mul_mv, mul6, scale, zero,
 };
+use crate::Real;
 
 /// The workspace of one body: its pose, world axis and inertias at the
 /// configuration being evaluated, its articulated-body factors, twists,
@@ -18,22 +19,26 @@ use super::spatial::{
 /// `tree.len()` of them (`core::mem::size_of::<BodyScratch>()` bytes each,
 /// about 0.9 KB); they are overwritten by every call, so one slice serves
 /// any number of steps and trees.
+///
+/// The kinematic and momentum fields are of the scalar `R`: `f64` for the
+/// step, a jet ([`crate::Jet1`]) for [`Engine::terms`] with exact
+/// derivatives; the solver's fields are always `f64`.
 #[derive(Clone, Copy, Debug, Default)]
-pub struct BodyScratch {
-    rot: M3,
-    pos: V3,
-    s: V6,
-    inertia: Inertia6,
-    composite: Inertia6,
+pub struct BodyScratch<R = f64> {
+    rot: M3<R>,
+    pos: V3<R>,
+    s: V6<R>,
+    inertia: Inertia6<R>,
+    composite: Inertia6<R>,
     ia: M6,
     u6: V6,
     d: f64,
-    vel: V6,
-    hc: V6,
+    vel: V6<R>,
+    hc: V6<R>,
     pa: V6,
     acc: V6,
     /// ∂V/∂q at `at` (gravity and spring).
-    dv: f64,
+    dv: R,
     // per coordinate: the committed state (q, v) and its momentum p, the
     // configuration `at` evaluated, the iterate `vn`, its momentum `pn`
     // and ∂T/∂q `dtq`, the residual `r`, the solve's `x` and the
@@ -41,10 +46,10 @@ pub struct BodyScratch {
     q: f64,
     v: f64,
     p: f64,
-    at: f64,
-    vn: f64,
-    pn: f64,
-    dtq: f64,
+    at: R,
+    vn: R,
+    pn: R,
+    dtq: R,
     r: f64,
     x: f64,
     tau: f64,
@@ -94,10 +99,45 @@ fn solve_small(g: &mut [[f64; ANDERSON + 1]; ANDERSON], m: usize) -> Option<[f64
     Some(x)
 }
 
-impl BodyScratch {
+impl<R: Real> BodyScratch<R> {
+    /// A workspace of the scalar `R` (all zero).
+    pub fn zeroed() -> Self {
+        let z6 = [zero(); 6];
+        Self {
+            rot: [[zero(); 3]; 3],
+            pos: [zero(); 3],
+            s: z6,
+            inertia: Inertia6::zero(),
+            composite: Inertia6::zero(),
+            ia: [[0.0; 6]; 6],
+            u6: [0.0; 6],
+            d: 0.0,
+            vel: z6,
+            hc: z6,
+            pa: [0.0; 6],
+            acc: [0.0; 6],
+            dv: zero(),
+            q: 0.0,
+            v: 0.0,
+            p: 0.0,
+            at: zero(),
+            vn: zero(),
+            pn: zero(),
+            dtq: zero(),
+            r: 0.0,
+            x: 0.0,
+            tau: 0.0,
+            guess: 0.0,
+            vprev: 0.0,
+            fprev: 0.0,
+            dvs: [0.0; ANDERSON],
+            dfs: [0.0; ANDERSON],
+        }
+    }
+
     /// The body's world pose (rotation, origin) at the last evaluated
     /// configuration.
-    pub fn pose(&self) -> (M3, V3) {
+    pub fn pose(&self) -> (M3<R>, V3<R>) {
         (self.rot, self.pos)
     }
 }
@@ -399,7 +439,10 @@ impl<T: Tree> Engine<T> {
         self.tree.len()
     }
 
-    fn scratch<'w>(&self, ws: &'w mut [BodyScratch]) -> Result<&'w mut [BodyScratch], EngineError> {
+    fn scratch<'w, R>(
+        &self,
+        ws: &'w mut [BodyScratch<R>],
+    ) -> Result<&'w mut [BodyScratch<R>], EngineError> {
         let n = self.tree.len();
         if ws.len() < n {
             return Err(EngineError::WrongLength {
@@ -414,19 +457,19 @@ impl<T: Tree> Engine<T> {
     /// Poses, axes, inertias, composite inertias and ∇V at the
     /// configuration `ws[i].at`; also the articulated inertias' start
     /// values.
-    fn kinematics(&self, ws: &mut [BodyScratch]) {
+    fn kinematics<R: Real>(&self, ws: &mut [BodyScratch<R>]) {
         let t = &self.tree;
         let g = t.gravity();
         for i in 0..ws.len() {
             let b = t.body(i);
             let (rp, pp) = match b.parent {
                 Some(p) => (ws[p].rot, ws[p].pos),
-                None => (IDENTITY, [0.0; 3]),
+                None => (lift33(&IDENTITY), [zero(); 3]),
             };
             let w = &mut ws[i];
-            let rj = mul_mm(&rp, &b.rotation);
-            let pj = add(pp, mul_mv(&rp, b.translation));
-            let axis = mul_mv(&rj, b.axis);
+            let rj = mul_mm(&rp, &lift33(&b.rotation));
+            let pj = add(pp, mul_mv(&rp, lift3(b.translation)));
+            let axis = mul_mv(&rj, lift3(b.axis));
             match b.joint {
                 JointKind::Revolute => {
                     w.rot = mul_mm(&rj, &axis_angle(b.axis, w.at));
@@ -437,18 +480,18 @@ impl<T: Tree> Engine<T> {
                 JointKind::Prismatic => {
                     w.rot = rj;
                     w.pos = add(pj, scale(axis, w.at));
-                    w.s = [0.0, 0.0, 0.0, axis[0], axis[1], axis[2]];
+                    w.s = [zero(), zero(), zero(), axis[0], axis[1], axis[2]];
                 }
             }
-            let c = add(w.pos, mul_mv(&w.rot, b.com));
-            w.inertia = Inertia6::from_com(b.mass, c, &congruence(&w.rot, &b.inertia));
+            let c = add(w.pos, mul_mv(&w.rot, lift3(b.com)));
+            let ic = congruence(&w.rot, &lift33(&b.inertia));
+            w.inertia = Inertia6::from_com(R::from_f64(b.mass), c, &ic);
             w.composite = w.inertia;
-            w.ia = w.inertia.matrix();
         }
         for i in (0..ws.len()).rev() {
             let b = t.body(i);
             let w = &mut ws[i];
-            w.dv = -dot6(&w.s, &w.composite.gravity_wrench(g)) + b.stiffness * (w.at - b.rest);
+            w.dv = -dot6(&w.s, &w.composite.gravity_wrench(g)) + (w.at - b.rest) * b.stiffness;
             if let Some(p) = b.parent {
                 let c = ws[i].composite;
                 ws[p].composite = ws[p].composite.add(&c);
@@ -466,6 +509,9 @@ impl<T: Tree> Engine<T> {
     /// Articulated-body factorisation of M + h·D (after kinematics).
     fn factor(&self, h: f64, mbar: f64, ws: &mut [BodyScratch]) -> Result<(), usize> {
         let t = &self.tree;
+        for w in ws.iter_mut() {
+            w.ia = w.inertia.matrix();
+        }
         for i in (0..ws.len()).rev() {
             let b = t.body(i);
             let w = &mut ws[i];
@@ -527,12 +573,12 @@ impl<T: Tree> Engine<T> {
 
     /// Twists, composite momenta, p = M v and ∂T/∂q for v = `ws[i].vn`
     /// (after kinematics).
-    fn momentum(&self, ws: &mut [BodyScratch]) {
+    fn momentum<R: Real>(&self, ws: &mut [BodyScratch<R>]) {
         let t = &self.tree;
         for i in 0..ws.len() {
             let vp = match t.body(i).parent {
                 Some(p) => ws[p].vel,
-                None => [0.0; 6],
+                None => [zero(); 6],
             };
             let w = &mut ws[i];
             for c in 0..6 {
@@ -548,7 +594,7 @@ impl<T: Tree> Engine<T> {
                 let h = w.hc;
                 let hp = &mut ws[p].hc;
                 for c in 0..6 {
-                    hp[c] += h[c];
+                    hp[c] = hp[c] + h[c];
                 }
             }
         }
@@ -675,16 +721,21 @@ impl<T: Tree> Engine<T> {
         }
     }
 
-    fn load(&self, q: &[f64], v: &[f64], ws: &mut [BodyScratch]) -> Result<(), EngineError> {
+    fn load<R: Real>(
+        &self,
+        q: &[R],
+        v: &[R],
+        ws: &mut [BodyScratch<R>],
+    ) -> Result<(), EngineError> {
         let n = self.tree.len();
         check_len("q", q.len(), n)?;
         check_len("v", v.len(), n)?;
-        if !q.iter().chain(v).all(|x| x.is_finite()) {
+        if !q.iter().chain(v).all(|x| x.value().is_finite()) {
             return Err(EngineError::NonFiniteState);
         }
         for (w, (&a, &b)) in ws.iter_mut().zip(q.iter().zip(v)) {
-            w.q = a;
-            w.v = b;
+            w.q = a.value();
+            w.v = b.value();
             w.at = a;
             w.vn = b;
         }
@@ -710,11 +761,11 @@ impl<T: Tree> Engine<T> {
 
     /// Loads (q, v), then the kinematics and momentum passes: what
     /// [`Engine::momentum_of`] and [`Engine::terms`] read their outputs from.
-    fn momentum_pass(
+    fn momentum_pass<R: Real>(
         &self,
-        q: &[f64],
-        v: &[f64],
-        ws: &mut [BodyScratch],
+        q: &[R],
+        v: &[R],
+        ws: &mut [BodyScratch<R>],
     ) -> Result<(), EngineError> {
         self.load(q, v, ws)?;
         self.kinematics(ws);
@@ -723,15 +774,18 @@ impl<T: Tree> Engine<T> {
     }
 
     /// At (q, v): the momentum M(q)v, ∂T/∂q and ∇V(q) (gravity and
-    /// springs), each O(N).
-    pub fn terms(
+    /// springs), each O(N). Generic over the scalar: with jets
+    /// ([`crate::Jet1`]) in q and v, the outputs carry their exact
+    /// derivatives (the step derivatives of `vigp::Robot` are built on
+    /// this).
+    pub fn terms<R: Real>(
         &self,
-        q: &[f64],
-        v: &[f64],
-        p: &mut [f64],
-        dtdq: &mut [f64],
-        dvdq: &mut [f64],
-        ws: &mut [BodyScratch],
+        q: &[R],
+        v: &[R],
+        p: &mut [R],
+        dtdq: &mut [R],
+        dvdq: &mut [R],
+        ws: &mut [BodyScratch<R>],
     ) -> Result<(), EngineError> {
         let ws = self.scratch(ws)?;
         let n = ws.len();

@@ -93,6 +93,21 @@ pub trait Tree {
     fn gravity(&self) -> V3;
 }
 
+impl<T: Tree + ?Sized> Tree for &T {
+    #[inline(always)]
+    fn len(&self) -> usize {
+        (**self).len()
+    }
+    #[inline(always)]
+    fn body(&self, i: usize) -> &Body {
+        (**self).body(i)
+    }
+    #[inline(always)]
+    fn gravity(&self) -> V3 {
+        (**self).gravity()
+    }
+}
+
 /// A tree over borrowed bodies: no allocation.
 #[derive(Clone, Copy, Debug)]
 pub struct TreeRef<'a> {

@@ -1,6 +1,7 @@
-//! 3-vectors, rotations and 6-D spatial vectors in `f64` for the tree
-//! engine. Matrices are row-major (`m[row][column]`); rotations map
-//! body-frame vectors to world vectors.
+//! 3-vectors, rotations and 6-D spatial vectors for the tree engine,
+//! generic over the scalar ([`Real`]: `f64` for the step, jets for its
+//! exact derivatives). Matrices are row-major (`m[row][column]`); rotations
+//! map body-frame vectors to world vectors.
 //!
 //! A **motion** (twist) is (ω, v_O): the angular velocity and the velocity
 //! of the body point at the world origin. A **force** (wrench) is (n_O, f):
@@ -9,39 +10,59 @@
 //! in world coordinates at the world origin, so no transform is needed
 //! between bodies.
 
+use crate::Real;
+
 /// A 3-vector.
-pub type V3 = [f64; 3];
+pub type V3<R = f64> = [R; 3];
 /// A 3×3 matrix, row-major.
-pub type M3 = [[f64; 3]; 3];
+pub type M3<R = f64> = [[R; 3]; 3];
 /// A spatial motion (ω, v_O) or force (n_O, f).
-pub type V6 = [f64; 6];
+pub type V6<R = f64> = [R; 6];
 /// A 6×6 matrix, row-major.
-pub type M6 = [[f64; 6]; 6];
+pub type M6<R = f64> = [[R; 6]; 6];
 
 /// The 3×3 identity.
 pub const IDENTITY: M3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
+/// The zero of the scalar.
+#[inline(always)]
+pub fn zero<R: Real>() -> R {
+    R::from_f64(0.0)
+}
+
+/// An `f64` vector as constants of the scalar.
+#[inline(always)]
+pub fn lift3<R: Real>(a: V3) -> V3<R> {
+    a.map(R::from_f64)
+}
+
+/// An `f64` matrix as constants of the scalar.
+#[inline(always)]
+pub fn lift33<R: Real>(m: &M3) -> M3<R> {
+    m.map(|row| row.map(R::from_f64))
+}
+
 /// a + b.
 #[inline(always)]
-pub fn add(a: V3, b: V3) -> V3 {
+pub fn add<R: Real>(a: V3<R>, b: V3<R>) -> V3<R> {
     [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
 }
 
 /// a·s.
 #[inline(always)]
-pub fn scale(a: V3, s: f64) -> V3 {
+pub fn scale<R: Real>(a: V3<R>, s: R) -> V3<R> {
     [a[0] * s, a[1] * s, a[2] * s]
 }
 
 /// a·b.
 #[inline(always)]
-pub fn dot(a: V3, b: V3) -> f64 {
+pub fn dot<R: Real>(a: V3<R>, b: V3<R>) -> R {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
 /// a × b.
 #[inline(always)]
-pub fn cross(a: V3, b: V3) -> V3 {
+pub fn cross<R: Real>(a: V3<R>, b: V3<R>) -> V3<R> {
     [
         a[1] * b[2] - a[2] * b[1],
         a[2] * b[0] - a[0] * b[2],
@@ -51,44 +72,34 @@ pub fn cross(a: V3, b: V3) -> V3 {
 
 /// m·a.
 #[inline(always)]
-pub fn mul_mv(m: &M3, a: V3) -> V3 {
+pub fn mul_mv<R: Real>(m: &M3<R>, a: V3<R>) -> V3<R> {
     [dot(m[0], a), dot(m[1], a), dot(m[2], a)]
 }
 
 /// a·b for matrices.
 #[inline(always)]
-pub fn mul_mm(a: &M3, b: &M3) -> M3 {
-    let mut out = [[0.0; 3]; 3];
-    for (i, row) in out.iter_mut().enumerate() {
-        for (j, x) in row.iter_mut().enumerate() {
-            *x = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
-        }
-    }
-    out
+pub fn mul_mm<R: Real>(a: &M3<R>, b: &M3<R>) -> M3<R> {
+    core::array::from_fn(|i| {
+        core::array::from_fn(|j| a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j])
+    })
 }
 
 /// a·bᵀ for matrices.
 #[inline(always)]
-pub fn mul_mmt(a: &M3, b: &M3) -> M3 {
-    let mut out = [[0.0; 3]; 3];
-    for (i, row) in out.iter_mut().enumerate() {
-        for (j, x) in row.iter_mut().enumerate() {
-            *x = dot(a[i], b[j]);
-        }
-    }
-    out
+pub fn mul_mmt<R: Real>(a: &M3<R>, b: &M3<R>) -> M3<R> {
+    core::array::from_fn(|i| core::array::from_fn(|j| dot(a[i], b[j])))
 }
 
 /// r·m·rᵀ: a tensor given in a frame rotated by r, in the outer frame.
 #[inline(always)]
-pub fn congruence(r: &M3, m: &M3) -> M3 {
+pub fn congruence<R: Real>(r: &M3<R>, m: &M3<R>) -> M3<R> {
     mul_mmt(&mul_mm(r, m), r)
 }
 
 /// The rotation by `angle` about the unit `axis` (right-handed, Rodrigues).
-pub fn axis_angle(axis: V3, angle: f64) -> M3 {
-    let (s, c) = libm::sincos(angle);
-    let t = 1.0 - c;
+pub fn axis_angle<R: Real>(axis: V3, angle: R) -> M3<R> {
+    let (s, c) = angle.sincos();
+    let t = -c + 1.0;
     let [x, y, z] = axis;
     [
         [t * x * x + c, t * x * y - s * z, t * x * z + s * y],
@@ -112,14 +123,14 @@ pub fn rpy(roll: f64, pitch: f64, yaw: f64) -> M3 {
 
 /// a·b for spatial vectors (a motion against a force: power).
 #[inline(always)]
-pub fn dot6(a: &V6, b: &V6) -> f64 {
+pub fn dot6<R: Real>(a: &V6<R>, b: &V6<R>) -> R {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3] + a[4] * b[4] + a[5] * b[5]
 }
 
 /// The motion cross product a ×ₘ b = (ωa × ωb, ωa × vb + va × ωb): the rate
 /// of change of the world-fixed twist b carried by the motion a.
 #[inline(always)]
-pub fn cross_motion(a: &V6, b: &V6) -> V6 {
+pub fn cross_motion<R: Real>(a: &V6<R>, b: &V6<R>) -> V6<R> {
     let (wa, va) = ([a[0], a[1], a[2]], [a[3], a[4], a[5]]);
     let (wb, vb) = ([b[0], b[1], b[2]], [b[3], b[4], b[5]]);
     let w = cross(wa, wb);
@@ -130,7 +141,7 @@ pub fn cross_motion(a: &V6, b: &V6) -> V6 {
 /// The force cross product a ×f f = (ωa × n + va × f_lin, ωa × f_lin): the
 /// rate of change of the world-fixed wrench f carried by the motion a.
 #[inline(always)]
-pub fn cross_force(a: &V6, f: &V6) -> V6 {
+pub fn cross_force<R: Real>(a: &V6<R>, f: &V6<R>) -> V6<R> {
     let (wa, va) = ([a[0], a[1], a[2]], [a[3], a[4], a[5]]);
     let (n, fl) = ([f[0], f[1], f[2]], [f[3], f[4], f[5]]);
     let m = add(cross(wa, n), cross(va, fl));
@@ -143,24 +154,33 @@ pub fn cross_force(a: &V6, f: &V6) -> V6 {
 /// and the rotational inertia about the origin I_O = I_c + m(|c|²1 − ccᵀ).
 /// As a 6×6 matrix [[I_O, [mc]×], [[mc]×ᵀ, m·1]].
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
-pub struct Inertia6 {
+pub struct Inertia6<R = f64> {
     /// Mass (kg).
-    pub mass: f64,
+    pub mass: R,
     /// First moment m·c about the origin (kg·m).
-    pub first: V3,
+    pub first: V3<R>,
     /// Rotational inertia about the origin (kg·m²).
-    pub rot: M3,
+    pub rot: M3<R>,
 }
 
-impl Inertia6 {
+impl<R: Real> Inertia6<R> {
+    /// No mass.
+    pub fn zero() -> Self {
+        Self {
+            mass: zero(),
+            first: [zero(); 3],
+            rot: [[zero(); 3]; 3],
+        }
+    }
+
     /// The inertia of a body of mass `m` whose centre of mass is at `c`
     /// with rotational inertia `ic` about it (world axes).
-    pub fn from_com(m: f64, c: V3, ic: &M3) -> Self {
+    pub fn from_com(m: R, c: V3<R>, ic: &M3<R>) -> Self {
         let cc = dot(c, c);
         let mut rot = *ic;
         for (i, row) in rot.iter_mut().enumerate() {
             for (j, x) in row.iter_mut().enumerate() {
-                *x += m * (if i == j { cc } else { 0.0 } - c[i] * c[j]);
+                *x = *x + m * (if i == j { cc } else { zero() } - c[i] * c[j]);
             }
         }
         Self {
@@ -172,11 +192,11 @@ impl Inertia6 {
 
     /// Sum of two inertias (about the same origin).
     #[inline(always)]
-    pub fn add(&self, o: &Inertia6) -> Self {
+    pub fn add(&self, o: &Inertia6<R>) -> Self {
         let mut rot = self.rot;
         for (r, ro) in rot.iter_mut().zip(&o.rot) {
             for (x, y) in r.iter_mut().zip(ro) {
-                *x += y;
+                *x = *x + *y;
             }
         }
         Self {
@@ -188,7 +208,7 @@ impl Inertia6 {
 
     /// The momentum I·V of a motion V = (ω, v): (I_O ω + mc × v, m v − mc × ω).
     #[inline(always)]
-    pub fn mul(&self, v: &V6) -> V6 {
+    pub fn mul(&self, v: &V6<R>) -> V6<R> {
         let (w, lin) = ([v[0], v[1], v[2]], [v[3], v[4], v[5]]);
         let n = add(mul_mv(&self.rot, w), cross(self.first, lin));
         let mw = cross(self.first, w);
@@ -200,6 +220,23 @@ impl Inertia6 {
         [n[0], n[1], n[2], f[0], f[1], f[2]]
     }
 
+    /// The gravity wrench of this mass distribution under gravity `g`
+    /// about the origin: (mc × g, m·g).
+    #[inline(always)]
+    pub fn gravity_wrench(&self, g: V3) -> V6<R> {
+        let n = cross(self.first, lift3(g));
+        [
+            n[0],
+            n[1],
+            n[2],
+            self.mass * g[0],
+            self.mass * g[1],
+            self.mass * g[2],
+        ]
+    }
+}
+
+impl Inertia6 {
     /// The 6×6 matrix.
     pub fn matrix(&self) -> M6 {
         let h = self.first;
@@ -215,21 +252,6 @@ impl Inertia6 {
             m[i + 3][i + 3] = self.mass;
         }
         m
-    }
-
-    /// The gravity wrench of this mass distribution under gravity `g`
-    /// about the origin: (mc × g, m·g).
-    #[inline(always)]
-    pub fn gravity_wrench(&self, g: V3) -> V6 {
-        let n = cross(self.first, g);
-        [
-            n[0],
-            n[1],
-            n[2],
-            self.mass * g[0],
-            self.mass * g[1],
-            self.mass * g[2],
-        ]
     }
 }
 
