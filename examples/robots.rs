@@ -2,7 +2,9 @@
 //! of N = 2 … 32 rods and on URDF robots (Panda, UR5 from
 //! tests/fixtures/robots): median time per step of a 2 ms rollout,
 //! iterations per step, subdivided steps, and the fitted slope of
-//! log(time) against log(N) from N = 8 on.
+//! log(time) against log(N) from N = 8 on. Then one step against one step
+//! with its exact A and B (`Robot::step_derivatives`) on the robots of
+//! tests/fixtures/robots and on chains, timed side by side.
 //!
 //! ```text
 //! cargo run --release --example robots [-- --steps 2000]
@@ -126,6 +128,70 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let z0 = RobotState::new(q, vec![0.3; n]);
         let (ns, it, sub) = time(&robot, &z0, dt, steps, 5);
         println!("| {name} | {n} | {ns:.0} | {it:.2} | {sub} |");
+    }
+    derivatives(dir, dt)
+}
+
+/// Median ns of `f` over `reps` calls, after one warm-up call.
+fn median_ns(reps: usize, mut f: impl FnMut()) -> f64 {
+    f();
+    let mut times: Vec<f64> = (0..reps)
+        .map(|_| {
+            let t = Instant::now();
+            f();
+            t.elapsed().as_secs_f64() * 1e9
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times[times.len() / 2]
+}
+
+/// One step (`Robot::step`, from a moving state, every joint driven)
+/// against the same step with its exact A and B, timed one after the other
+/// in the same run.
+fn derivatives(dir: &str, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
+    println!();
+    println!(
+        "one step of dt = 2 ms with every joint driven, and with exact A (2N × 2N) and B (2N × N); median of 301 calls"
+    );
+    println!("| mechanism | N | step (µs) | step with A, B (µs) | ratio |");
+    println!("|---|---|---|---|---|");
+    let mut cases: Vec<(String, Robot)> = Vec::new();
+    for (name, file) in [
+        ("Panda", "panda.urdf"),
+        ("UR5", "ur5.urdf"),
+        ("Solo-12 (fixed base)", "solo12.urdf"),
+        ("G1 humanoid (fixed base)", "g1.urdf"),
+    ] {
+        cases.push((name.to_string(), Robot::from_urdf(format!("{dir}/{file}"))?));
+    }
+    for n in [8, 16, 32] {
+        cases.push((
+            format!("spatial chain (z/y), {n} rods"),
+            Robot::from_urdf_str(&chain(n, true))?,
+        ));
+    }
+    for (name, robot) in cases {
+        let n = robot.dof();
+        let joints: Vec<String> = robot.joint_names().to_vec();
+        let names: Vec<&str> = joints.iter().map(String::as_str).collect();
+        let robot = robot.with_actuated(&names)?;
+        let q: Vec<f64> = (0..n).map(|i| 0.3 * ((i as f64) * 1.7).sin()).collect();
+        let v: Vec<f64> = (0..n).map(|i| 0.4 * ((i as f64) * 0.9).cos()).collect();
+        let u: Vec<f64> = (0..n).map(|i| 0.2 * ((i as f64) * 1.3).sin()).collect();
+        let z = RobotState::new(q, v);
+        let step = median_ns(301, || {
+            std::hint::black_box(robot.step(&z, &u, dt).expect("step"));
+        });
+        let with = median_ns(301, || {
+            std::hint::black_box(robot.step_derivatives(&z, &u, dt).expect("derivatives"));
+        });
+        println!(
+            "| {name} | {n} | {:.1} | {:.1} | {:.2} |",
+            step * 1e-3,
+            with * 1e-3,
+            with / step
+        );
     }
     Ok(())
 }

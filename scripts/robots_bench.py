@@ -5,6 +5,10 @@ URDF as the example) and the Panda and UR5 of tests/fixtures/robots, loaded
 from the same URDF files. Euler integrator, dt = 2 ms, no contacts, no
 joint limits; median ns per step of `mujoco.rollout` over 5 runs of 2000
 steps (a C loop), and the fitted slope of log time against log N from N = 8.
+Then, for the second table of the example, the same robots with a motor on
+every joint: one `mj_step` against one centred `mjd_transitionFD` (A and B
+by centred differences of `mj_step`, eps = 1e-6), median ns per call over
+301 calls with preallocated matrices.
 
     pip install mujoco
     python3 scripts/robots_bench.py
@@ -60,6 +64,71 @@ def time_rollout(model, q0, steps=2000, reps=5):
     return float(np.median(times))
 
 
+def with_motors(urdf_text):
+    """The robot with a unit-gear motor on every hinge or slide joint."""
+    spec = mujoco.MjSpec.from_string(urdf_text)
+    for j in spec.joints:
+        if j.type in (mujoco.mjtJoint.mjJNT_HINGE, mujoco.mjtJoint.mjJNT_SLIDE):
+            a = spec.add_actuator()
+            a.name = "motor_" + j.name
+            a.target = j.name
+            a.trntype = mujoco.mjtTrn.mjTRN_JOINT
+            a.gainprm[0] = 1.0
+            a.biastype = mujoco.mjtBias.mjBIAS_NONE
+    model = spec.compile()
+    model.opt.timestep = 0.002
+    model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+    model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_CONTACT
+    model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_LIMIT
+    return model
+
+
+def median_call_ns(f, calls=301):
+    f()
+    times = []
+    for _ in range(calls):
+        t = time.perf_counter_ns()
+        f()
+        times.append(time.perf_counter_ns() - t)
+    return float(np.median(times))
+
+
+def derivatives_table():
+    print()
+    print("MuJoCo", mujoco.__version__, "Euler, dt = 2 ms, a motor on every joint; median ns per call of 301")
+    print("| mechanism | N | mj_step (µs) | centred mjd_transitionFD (µs) |")
+    print("|---|---|---|---|")
+    cases = [(name, open(os.path.join(FIX, f)).read()) for name, f in (
+        ("Panda", "panda.urdf"), ("UR5", "ur5.urdf"),
+        ("Solo-12 (fixed base)", "solo12.urdf"), ("G1 humanoid (fixed base)", "g1.urdf"))]
+    cases += [(f"spatial chain (z/y), {n} rods", chain(n, True)) for n in (8, 16, 32)]
+    for name, text in cases:
+        model = with_motors(text)
+        data = mujoco.MjData(model)
+        n = model.nv
+        # the example's state: q_i = 0.3 sin(1.7 i), v_i = 0.4 cos(0.9 i), u_i = 0.2 sin(1.3 i)
+        i = np.arange(n)
+        q, v, u = 0.3 * np.sin(1.7 * i), 0.4 * np.cos(0.9 * i), 0.2 * np.sin(1.3 * i)
+
+        def reset():
+            data.qpos[:] = q
+            data.qvel[:] = v
+            data.ctrl[:] = u
+
+        def step():
+            reset()
+            mujoco.mj_step(model, data)
+
+        A = np.zeros((2 * n, 2 * n))
+        B = np.zeros((2 * n, model.nu))
+
+        def fd():
+            reset()
+            mujoco.mjd_transitionFD(model, data, 1e-6, 1, A, B, None, None)
+
+        print(f"| {name} | {n} | {median_call_ns(step) * 1e-3:.1f} | {median_call_ns(fd) * 1e-3:.1f} |")
+
+
 def main():
     print("MuJoCo", mujoco.__version__, "Euler, dt = 2 ms, 2000-step rollouts, median of 5")
     print("| mechanism | N | ns/step |")
@@ -81,6 +150,7 @@ def main():
                        ("UR5", "ur5.urdf", [0.3, -1.2, 1.0, -0.5, 0.8, 0.2])):
         model = load(open(os.path.join(FIX, f)).read())
         print(f"| {name} | {model.nq} | {time_rollout(model, np.array(q)):.0f} |")
+    derivatives_table()
 
 
 if __name__ == "__main__":
