@@ -326,6 +326,25 @@ fn floating_base_carries_the_whole_robot() {
     }
 }
 
+/// max |A_robot − A_generated| over the four N × N blocks of the generated
+/// `StateJacobian`, relative to the largest entry of the robot's A.
+fn worst_a<const N: usize>(
+    robot: &vigp::nalgebra::DMatrix<f64>,
+    a: &vigp::embedded::StateJacobian<N>,
+) -> f64 {
+    let blocks = [(0, 0, a.q_q), (0, N, a.q_v), (N, 0, a.v_q), (N, N, a.v_v)];
+    let scale = robot.amax();
+    let mut worst = 0.0f64;
+    for (r0, c0, block) in blocks {
+        for i in 0..N {
+            for j in 0..N {
+                worst = worst.max((robot[(r0 + i, c0 + j)] - block[(i, j)]).abs() / scale);
+            }
+        }
+    }
+    worst
+}
+
 /// The exact A = ∂z₁/∂z₀ and B = ∂z₁/∂u of the generated code (jets
 /// through the closed-form terms, `Variational::step_derivatives`) against
 /// the run-time robot's (jets through the O(N) recursions,
@@ -351,21 +370,7 @@ fn urdf_step_derivatives_equal_the_run_time_robots() {
     let r = robot
         .step_derivatives(&RobotState::new(q0.to_vec(), v0.to_vec()), &u, dt)
         .unwrap();
-    let blocks = [
-        (0, 0, d.a.q_q),
-        (0, 3, d.a.q_v),
-        (3, 0, d.a.v_q),
-        (3, 3, d.a.v_v),
-    ];
-    let scale = r.a.amax();
-    let mut worst_a = 0.0f64;
-    for (r0, c0, block) in blocks {
-        for i in 0..3 {
-            for j in 0..3 {
-                worst_a = worst_a.max((r.a[(r0 + i, c0 + j)] - block[(i, j)]).abs() / scale);
-            }
-        }
-    }
+    let worst_a = worst_a(&r.a, &d.a);
     let mut worst_b = 0.0f64;
     for i in 0..3 {
         for k in 0..2 {
@@ -391,22 +396,7 @@ fn urdf_step_derivatives_equal_the_run_time_robots() {
     let rp = arm
         .step_derivatives(&RobotState::new(q0.to_vec(), v0.to_vec()), &[], dt)
         .unwrap();
-    let blocks = [
-        (0, 0, dp.a.q_q),
-        (0, 7, dp.a.q_v),
-        (7, 0, dp.a.v_q),
-        (7, 7, dp.a.v_v),
-    ];
-    let scale = rp.a.amax();
-    let mut worst_panda = 0.0f64;
-    for (r0, c0, block) in blocks {
-        for i in 0..7 {
-            for j in 0..7 {
-                worst_panda =
-                    worst_panda.max((rp.a[(r0 + i, c0 + j)] - block[(i, j)]).abs() / scale);
-            }
-        }
-    }
+    let worst_panda = worst_a(&rp.a, &dp.a);
     println!(
         "step derivatives, generated vs Robot: wrist A {worst_a:.1e}, B {worst_b:.1e} (state {worst_z:.1e}); \
          Panda A {worst_panda:.1e} (of the largest entry)"

@@ -51,9 +51,10 @@
 use std::path::Path;
 
 use nalgebra::DMatrix;
-use vigp_core::Jet1;
 use vigp_core::tree::spatial::V3;
-use vigp_core::tree::{Body, BodyScratch, Engine, EngineError, EngineOptions, EngineReport, Tree};
+use vigp_core::tree::{
+    Body, BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives, Tree,
+};
 pub use vigp_urdf::UrdfError;
 
 /// The bodies of a robot as run-time data: what the engine reads.
@@ -162,12 +163,6 @@ impl RobotState {
     }
 }
 
-/// Directions carried by one jet pass of [`Robot::step_derivatives`].
-const JET_WIDTH: usize = 8;
-
-/// The scalar of the derivative passes.
-type Jet = Jet1<JET_WIDTH>;
-
 /// The Jacobians of the engine's terms at one (q, v).
 struct TermJacobians {
     /// ∂(M v)/∂q.
@@ -195,9 +190,10 @@ struct TermJacobians {
 /// ∂v₁/∂u = −h·J⁻¹S.
 /// ```
 ///
-/// The terms' derivatives come from the engine's recursive pass evaluated
-/// on forward-mode jets (exact to rounding, O(N²) per sub-step); J is then
-/// factored densely (O(N³), a small share up to a few dozen joints).
+/// The terms' derivatives are the engine's closed forms
+/// ([`Engine::term_derivatives`], O(N²) per sub-step, exact to rounding);
+/// J is then factored densely (O(N³), a small share up to a few dozen
+/// joints).
 #[derive(Clone, Debug, PartialEq)]
 pub struct StepDerivatives {
     /// The state after the step (that of [`Robot::step`]).
@@ -435,6 +431,18 @@ impl Robot {
         Ok(())
     }
 
+    fn check_inputs(&self, u: &[f64]) -> Result<(), RobotError> {
+        if u.len() == self.inputs.len() {
+            Ok(())
+        } else {
+            Err(RobotError::WrongLength {
+                what: "inputs",
+                expected: self.inputs.len(),
+                got: u.len(),
+            })
+        }
+    }
+
     /// The discrete momentum p = M(q)v of a state (what a rollout carries).
     pub fn momentum(&self, z: &RobotState) -> Result<Vec<f64>, RobotError> {
         self.check_state(z)?;
@@ -485,13 +493,7 @@ impl Robot {
         ws: &mut RobotWorkspace,
     ) -> Result<EngineReport, RobotError> {
         self.check_state(z)?;
-        if u.len() != self.inputs.len() {
-            return Err(RobotError::WrongLength {
-                what: "inputs",
-                expected: self.inputs.len(),
-                got: u.len(),
-            });
-        }
+        self.check_inputs(u)?;
         if ws.tau.len() != self.dof() || ws.bodies.len() < self.dof() {
             *ws = self.workspace();
         }
@@ -519,13 +521,7 @@ impl Robot {
     ) -> Result<StepDerivatives, RobotError> {
         let n = self.dof();
         self.check_state(z)?;
-        if u.len() != self.inputs.len() {
-            return Err(RobotError::WrongLength {
-                what: "inputs",
-                expected: self.inputs.len(),
-                got: u.len(),
-            });
-        }
+        self.check_inputs(u)?;
         let options = *self.engine.options();
         // one sub-step at a time: the engine's own step without subdivision
         let single = Engine::with_options(
@@ -541,7 +537,6 @@ impl Robot {
             tau[i] = x;
         }
         let mut ws = vec![BodyScratch::default(); n];
-        let mut jets = vec![BodyScratch::<Jet>::zeroed(); n];
         let mut p = self.momentum(z)?;
         let (mut q, mut v) = (z.q.clone(), z.v.clone());
         let mut a = DMatrix::<f64>::identity(2 * n, 2 * n);
@@ -557,9 +552,14 @@ impl Robot {
                     report.substeps += 1;
                     report.residual = report.residual.max(r.residual);
                     done += 1;
-                    let (sa, sb) = self.substep_derivatives(&q0, &v0, &v, h, &mut jets)?;
-                    b = &sa * &b + sb;
-                    a = sa * a;
+                    let (sa, sb) = self.substep_derivatives(&q0, &v0, &v, h, &mut ws)?;
+                    // the first sub-step's derivatives are the product so far
+                    if report.substeps == 1 {
+                        (a, b) = (sa, sb);
+                    } else {
+                        b = &sa * &b + sb;
+                        a = sa * a;
+                    }
                     continue;
                 }
                 Err(EngineError::NotConverged {
@@ -607,12 +607,12 @@ impl Robot {
         v0: &[f64],
         v1: &[f64],
         h: f64,
-        jets: &mut [BodyScratch<Jet>],
+        ws: &mut [BodyScratch],
     ) -> Result<(DMatrix<f64>, DMatrix<f64>), RobotError> {
         let n = self.dof();
         let q1: Vec<f64> = q0.iter().zip(v0).map(|(q, v)| q + h * v).collect();
-        let start = self.term_jacobians(q0, v0, jets)?;
-        let end = self.term_jacobians(&q1, v1, jets)?;
+        let start = self.term_jacobians(q0, v0, ws)?;
+        let end = self.term_jacobians(&q1, v1, ws)?;
         // r = P(q₀, v₀) + F(q₁, v₁) + h·τ,
         // F = −P(q₁, v₁) + h·(∂T/∂q(q₁, v₁) − ∇V(q₁) − D·v₁)
         let mut fv = -&end.p_v + (&end.t_v * h);
@@ -648,57 +648,41 @@ impl Robot {
     }
 
     /// ∂/∂q and ∂/∂v of the momentum P = M(q)v, of ∂T/∂q and of ∇V at
-    /// (q, v): the engine's O(N) pass on jets of [`JET_WIDTH`] directions,
-    /// ⌈2N / JET_WIDTH⌉ passes (O(N²) in all).
+    /// (q, v): [`Engine::term_derivatives`], O(N²).
     fn term_jacobians(
         &self,
         q: &[f64],
         v: &[f64],
-        jets: &mut [BodyScratch<Jet>],
+        ws: &mut [BodyScratch],
     ) -> Result<TermJacobians, RobotError> {
         let n = self.dof();
-        let mut out = TermJacobians {
-            p_q: DMatrix::zeros(n, n),
-            p_v: DMatrix::zeros(n, n),
-            t_q: DMatrix::zeros(n, n),
-            t_v: DMatrix::zeros(n, n),
-            v_q: DMatrix::zeros(n, n),
-        };
-        let zero = Jet::constant(0.0);
-        let (mut qj, mut vj) = (vec![zero; n], vec![zero; n]);
-        let (mut p, mut t, mut g) = (vec![zero; n], vec![zero; n], vec![zero; n]);
-        // direction d < n seeds q_d, d ≥ n seeds v_(d − n)
-        for first in (0..2 * n).step_by(JET_WIDTH) {
-            for i in 0..n {
-                qj[i] = Jet::constant(q[i]);
-                vj[i] = Jet::constant(v[i]);
-            }
-            for k in 0..JET_WIDTH.min(2 * n - first) {
-                let d = first + k;
-                if d < n {
-                    qj[d].g[k] = 1.0;
-                } else {
-                    vj[d - n].g[k] = 1.0;
-                }
-            }
-            self.engine
-                .terms(&qj, &vj, &mut p, &mut t, &mut g, jets)
-                .map_err(|e| self.engine_error(e))?;
-            for k in 0..JET_WIDTH.min(2 * n - first) {
-                let d = first + k;
-                for i in 0..n {
-                    if d < n {
-                        out.p_q[(i, d)] = p[i].g[k];
-                        out.t_q[(i, d)] = t[i].g[k];
-                        out.v_q[(i, d)] = g[i].g[k];
-                    } else {
-                        out.p_v[(i, d - n)] = p[i].g[k];
-                        out.t_v[(i, d - n)] = t[i].g[k];
-                    }
-                }
-            }
-        }
-        Ok(out)
+        let mut buf = vec![0.0; 5 * n * n];
+        let (p_q, rest) = buf.split_at_mut(n * n);
+        let (p_v, rest) = rest.split_at_mut(n * n);
+        let (t_q, rest) = rest.split_at_mut(n * n);
+        let (t_v, v_q) = rest.split_at_mut(n * n);
+        self.engine
+            .term_derivatives(
+                q,
+                v,
+                TermDerivatives {
+                    p_q,
+                    p_v,
+                    t_q,
+                    t_v,
+                    v_q,
+                },
+                ws,
+            )
+            .map_err(|e| self.engine_error(e))?;
+        let m = |k: usize| DMatrix::from_row_slice(n, n, &buf[k * n * n..(k + 1) * n * n]);
+        Ok(TermJacobians {
+            p_q: m(0),
+            p_v: m(1),
+            t_q: m(2),
+            t_v: m(3),
+            v_q: m(4),
+        })
     }
 
     /// `steps` unforced steps of `dt` from `z0` (inputs zero).

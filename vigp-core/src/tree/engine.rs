@@ -381,6 +381,28 @@ fn check_len(what: &'static str, got: usize, expected: usize) -> Result<(), Engi
     }
 }
 
+/// The outputs of [`Engine::term_derivatives`]: five row-major N × N
+/// matrices (N² entries each).
+#[derive(Debug)]
+pub struct TermDerivatives<'a> {
+    /// ∂p/∂q, p = M(q)v the momentum.
+    pub p_q: &'a mut [f64],
+    /// ∂p/∂v = M(q).
+    pub p_v: &'a mut [f64],
+    /// ∂(∂T/∂q)/∂q.
+    pub t_q: &'a mut [f64],
+    /// ∂(∂T/∂q)/∂v.
+    pub t_v: &'a mut [f64],
+    /// ∂(∇V)/∂q (gravity and springs).
+    pub v_q: &'a mut [f64],
+}
+
+/// a − b for spatial vectors.
+#[inline(always)]
+fn sub6(a: &V6, b: &V6) -> V6 {
+    core::array::from_fn(|c| a[c] - b[c])
+}
+
 /// max |x_i| over the bodies' `field`, NaN when any is NaN or ±∞.
 #[inline(always)]
 fn max_abs(ws: &[BodyScratch], field: impl Fn(&BodyScratch) -> f64) -> f64 {
@@ -797,6 +819,102 @@ impl<T: Tree> Engine<T> {
             p[i] = w.pn;
             dtdq[i] = w.dtq;
             dvdq[i] = w.dv;
+        }
+        Ok(())
+    }
+
+    /// The first derivatives of the terms of [`Engine::terms`] at (q, v),
+    /// row-major N × N into `out` (row i: the term of coordinate i; column
+    /// j: the derivative by q_j or v_j), in closed form over pairs of
+    /// bodies on one path from the root: O(N) passes, then O(1) per pair,
+    /// O(N²) in all (O(N·depth) for a branching tree).
+    ///
+    /// With S the world axes, V the twists, Iᶜ the composite inertias, hᶜ
+    /// the composite momenta, Gᶜ = Iᶜ·(0, g) the subtrees' gravity wrenches,
+    /// a_j = S_j ×ₘ V_j, w_i = V_i ×ₘ S_i, and ×* the force cross product
+    /// (∂S_i/∂q_j = S_j ×ₘ S_i and ∂I_k/∂q_j = S_j ×* I_k − I_k S_j ×ₘ for j
+    /// on the path to i or k), for j on the path from the root to i:
+    ///
+    /// ```text
+    /// ∂p_i/∂q_j = −S_i·Iᶜ_i a_j        ∂p_i/∂v_j = S_i·Iᶜ_i S_j
+    /// ∂(∂T/∂q)_i/∂q_j = −(a_j ×ₘ S_i)·hᶜ_i − w_i·Iᶜ_i a_j
+    /// ∂(∂T/∂q)_i/∂v_j = (S_j ×ₘ S_i)·hᶜ_i + w_i·Iᶜ_i S_j
+    /// ∂(∇V)_i/∂q_j = S_i·Iᶜ_i (S_j ×ₘ (0, g)) (+ k_i when j = i)
+    /// ```
+    ///
+    /// and for i strictly above j, with F_j = S_j ×* hᶜ_j − Iᶜ_j a_j and
+    /// E_j = S_j ×* Gᶜ_j − Iᶜ_j (S_j ×ₘ (0, g)):
+    ///
+    /// ```text
+    /// ∂p_i/∂q_j = S_i·F_j     ∂(∂T/∂q)_i/∂q_j = w_i·F_j     ∂(∇V)_i/∂q_j = −S_i·E_j
+    /// ∂p_i/∂v_j = S_i·Iᶜ_j S_j     ∂(∂T/∂q)_i/∂v_j = w_i·Iᶜ_j S_j
+    /// ```
+    ///
+    /// Every other entry is zero. Checked against the same terms on jets
+    /// (unit tests of this module).
+    pub fn term_derivatives(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        out: TermDerivatives<'_>,
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        let ws = self.scratch(ws)?;
+        let n = ws.len();
+        let TermDerivatives {
+            p_q,
+            p_v,
+            t_q,
+            t_v,
+            v_q,
+        } = out;
+        check_len("p_q", p_q.len(), n * n)?;
+        check_len("p_v", p_v.len(), n * n)?;
+        check_len("t_q", t_q.len(), n * n)?;
+        check_len("t_v", t_v.len(), n * n)?;
+        check_len("v_q", v_q.len(), n * n)?;
+        self.momentum_pass(q, v, ws)?;
+        for m in [&mut *p_q, &mut *p_v, &mut *t_q, &mut *t_v, &mut *v_q] {
+            m.fill(0.0);
+        }
+        let g = self.tree.gravity();
+        let ag = [0.0, 0.0, 0.0, g[0], g[1], g[2]];
+        for b in 0..n {
+            let wb = &ws[b];
+            let (sb, hb, ib) = (wb.s, wb.hc, wb.composite);
+            let w_b = cross_motion(&wb.vel, &sb);
+            let a_b = cross_motion(&sb, &wb.vel);
+            let sg_b = cross_motion(&sb, &ag);
+            let u_b = ib.mul(&sb);
+            let f_b = sub6(&cross_force(&sb, &hb), &ib.mul(&a_b));
+            let e_b = sub6(&cross_force(&sb, &ib.mul(&ag)), &ib.mul(&sg_b));
+            // j runs over b and its ancestors: (row b, column j) with j on
+            // b's path; (row j, column b) with j strictly above b
+            let mut at = Some(b);
+            while let Some(j) = at {
+                let wj = &ws[j];
+                let sj = wj.s;
+                let a_j = cross_motion(&sj, &wj.vel);
+                let ia = ib.mul(&a_j);
+                let is = ib.mul(&sj);
+                let bj = b * n + j;
+                p_q[bj] = -dot6(&sb, &ia);
+                t_q[bj] = -dot6(&cross_motion(&a_j, &sb), &hb) - dot6(&w_b, &ia);
+                v_q[bj] = dot6(&sb, &ib.mul(&cross_motion(&sj, &ag)));
+                p_v[bj] = dot6(&sb, &is);
+                t_v[bj] = dot6(&cross_motion(&sj, &sb), &hb) + dot6(&w_b, &is);
+                if j != b {
+                    let w_j = cross_motion(&wj.vel, &sj);
+                    let jb = j * n + b;
+                    p_q[jb] = dot6(&sj, &f_b);
+                    t_q[jb] = dot6(&w_j, &f_b);
+                    v_q[jb] = -dot6(&sj, &e_b);
+                    p_v[jb] = dot6(&sj, &u_b);
+                    t_v[jb] = dot6(&w_j, &u_b);
+                }
+                at = self.tree.body(j).parent;
+            }
+            v_q[b * n + b] += self.tree.body(b).stiffness;
         }
         Ok(())
     }

@@ -19,7 +19,7 @@ pub mod engine;
 pub mod model;
 pub mod spatial;
 
-pub use engine::{BodyScratch, Engine, EngineError, EngineOptions, EngineReport};
+pub use engine::{BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives};
 pub use model::{Body, InvalidTree, JointKind, Limits, Tree, TreeRef, validate};
 
 #[cfg(test)]

@@ -219,3 +219,62 @@ fn bias_forces_match_the_euler_lagrange_terms() {
         );
     }
 }
+
+/// The closed-form pair sums of `Engine::term_derivatives` against the
+/// terms evaluated on jets of the 2N directions (q then v) through the
+/// generic passes: two derivations of the same derivatives, exact but for
+/// rounding (1e-12 of each matrix's largest entry), on the branched tree
+/// with its spring and prismatic joint, at two states.
+#[test]
+fn term_derivatives_match_the_terms_on_jets() {
+    use crate::Jet1;
+    let b = bodies(true);
+    let e = engine(&b);
+    for (q, v) in [
+        (Q, V),
+        ([-1.2, 0.4, -0.3, 0.2, 2.5], [0.1, 0.9, -1.5, -0.6, 1.7]),
+    ] {
+        let mut ws = [BodyScratch::default(); 5];
+        let (mut p_q, mut p_v, mut t_q, mut t_v, mut v_q) =
+            ([0.0; 25], [0.0; 25], [0.0; 25], [0.0; 25], [0.0; 25]);
+        e.term_derivatives(
+            &q,
+            &v,
+            TermDerivatives {
+                p_q: &mut p_q,
+                p_v: &mut p_v,
+                t_q: &mut t_q,
+                t_v: &mut t_v,
+                v_q: &mut v_q,
+            },
+            &mut ws,
+        )
+        .unwrap();
+        let qj: [Jet1<10>; 5] = core::array::from_fn(|i| Jet1::variable(q[i], i));
+        let vj: [Jet1<10>; 5] = core::array::from_fn(|i| Jet1::variable(v[i], 5 + i));
+        let zero = Jet1::constant(0.0);
+        let (mut p, mut t, mut g) = ([zero; 5], [zero; 5], [zero; 5]);
+        let mut jw = [BodyScratch::<Jet1<10>>::zeroed(); 5];
+        e.terms(&qj, &vj, &mut p, &mut t, &mut g, &mut jw).unwrap();
+        let check = |name: &str, m: &[f64; 25], f: &dyn Fn(usize, usize) -> f64| {
+            let big = m.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+            assert!(big > 0.0, "{name} vanishes");
+            for i in 0..5 {
+                for j in 0..5 {
+                    let (got, want) = (m[i * 5 + j], f(i, j));
+                    assert!(
+                        (got - want).abs() <= 1e-12 * big,
+                        "{name}[{i}][{j}]: {got} vs jets {want}"
+                    );
+                }
+            }
+        };
+        check("p_q", &p_q, &|i, j| p[i].g[j]);
+        check("p_v", &p_v, &|i, j| p[i].g[5 + j]);
+        check("t_q", &t_q, &|i, j| t[i].g[j]);
+        check("t_v", &t_v, &|i, j| t[i].g[5 + j]);
+        check("v_q", &v_q, &|i, j| g[i].g[j]);
+        // ∇V does not depend on v
+        assert!(g.iter().all(|x| x.g[5..].iter().all(|d| *d == 0.0)));
+    }
+}
