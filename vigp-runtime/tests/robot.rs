@@ -47,11 +47,18 @@ fn urdf_robots_match_pinocchio() {
             .collect();
         let n = robot.dof();
         assert_eq!(names.len(), n, "{name}: coordinates");
-        // perm[k]: our coordinate of Pinocchio's k-th joint
+        // perm[k]: our coordinate of Pinocchio's k-th joint; the order is
+        // Pinocchio's (depth first, children in file order), so the
+        // identity
         let perm: Vec<usize> = names
             .iter()
             .map(|j| robot.joint_names().iter().position(|x| x == j).unwrap())
             .collect();
+        assert!(
+            perm.iter().enumerate().all(|(k, &p)| k == p),
+            "{name}: coordinates {:?}, Pinocchio's {names:?}",
+            robot.joint_names()
+        );
         for case in r["cases"].as_array().unwrap() {
             let (qp, vp) = (floats(&case["q"]), floats(&case["v"]));
             let mut q = vec![0.0; n];
@@ -492,4 +499,68 @@ fn step_derivatives_chain_the_sub_steps_of_a_subdivided_step() {
         report.substeps, report.depth
     );
     assert!(ea < 1e-6 && eb < 1e-6, "A {ea:e}, B {eb:e}");
+}
+
+/// The engine's trajectories converge to MuJoCo's at the integrator's
+/// order: MuJoCo 4.0 (its own URDF importer) with RK4 at dt = 1e-5 s over
+/// T = 0.5 s is the reference (scripts/robot_mujoco.py writes
+/// tests/fixtures/robots/mujoco_rk4.json); the engine's first-order rule
+/// at dt = 4, 2, 1, 0.5 ms must approach it with a fitted order of
+/// log(error) against log(dt) within 1 ± 0.15 (the error halving with dt),
+/// and the Richardson extrapolation 2q(dt/2) − q(dt) of the two finest
+/// runs ten times closer to MuJoCo than the finest run (so the limit is
+/// MuJoCo's trajectory, not merely some trajectory). Panda (damped,
+/// falling under gravity through 3 rad) and the Solo-12 legs.
+#[test]
+fn trajectories_converge_to_mujoco_rk4_at_first_order() {
+    let reference = read_json(&fixture("mujoco_rk4.json"));
+    for (name, file) in [("panda", "panda.urdf"), ("solo12", "solo12.urdf")] {
+        let r = &reference[name];
+        let robot = Robot::from_urdf(fixture(file)).unwrap();
+        let joints: Vec<String> = r["joints"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|j| j.as_str().unwrap().to_string())
+            .collect();
+        assert_eq!(joints, robot.joint_names(), "{name}: coordinate order");
+        let z0 = RobotState::new(floats(&r["q0"]), floats(&r["v0"]));
+        let (t, q_ref) = (r["t"].as_f64().unwrap(), floats(&r["q"]));
+        let gap = |a: &[f64], b: &[f64]| {
+            a.iter()
+                .zip(b)
+                .fold(0.0f64, |m, (x, y)| m.max((x - y).abs()))
+        };
+        let (mut points, mut finals) = (Vec::new(), Vec::new());
+        for dt in [0.004, 0.002, 0.001, 0.0005] {
+            let steps = (t / dt).round() as usize;
+            let run = robot.rollout(&z0, dt, steps).unwrap();
+            let q = run.states.last().unwrap().q.clone();
+            let e = gap(&q, &q_ref);
+            finals.push(q);
+            println!(
+                "{name}: dt {:.1} ms, max |q(T) − q_MuJoCo RK4(T)| = {e:.3e}",
+                dt * 1e3
+            );
+            points.push((dt, e));
+        }
+        let n = points.len() as f64;
+        let (lx, ly): (Vec<f64>, Vec<f64>) = points.iter().map(|(x, y)| (x.ln(), y.ln())).unzip();
+        let (mx, my) = (lx.iter().sum::<f64>() / n, ly.iter().sum::<f64>() / n);
+        let order = lx
+            .iter()
+            .zip(&ly)
+            .map(|(x, y)| (x - mx) * (y - my))
+            .sum::<f64>()
+            / lx.iter().map(|x| (x - mx) * (x - mx)).sum::<f64>();
+        let extrapolated: Vec<f64> = finals[3]
+            .iter()
+            .zip(&finals[2])
+            .map(|(fine, coarse)| 2.0 * fine - coarse)
+            .collect();
+        let richardson = gap(&extrapolated, &q_ref);
+        println!("{name}: fitted order {order:.3}, Richardson extrapolation {richardson:.3e}");
+        assert!((order - 1.0).abs() < 0.15, "{name}: order {order}");
+        assert!(richardson < 0.1 * points[3].1, "{name}: {richardson:e}");
+    }
 }

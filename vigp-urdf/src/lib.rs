@@ -369,12 +369,22 @@ pub fn from_robot(r: &urdf_rs::Robot) -> Result<UrdfTree, UrdfError> {
     let mut accum: Vec<Accum> = Vec::new();
     let mut base = Accum::default();
     // (link, body it is fixed to (None: the base), rotation and origin of
-    // the link frame in that body's frame); depth first, children in file
-    // order
-    let mut stack: Vec<(usize, Option<usize>, M3, V3)> = vec![(root, None, IDENTITY, [0.0; 3])];
+    // the link frame in that body's frame, and the body its movable joint
+    // opens, numbered when the link is taken off the stack); depth first,
+    // children in file order (pushed in reverse, so popped in order)
+    type Entry = (usize, Option<usize>, M3, V3, Option<(Body, String)>);
+    let mut stack: Vec<Entry> = vec![(root, None, IDENTITY, [0.0; 3], None)];
     let mut visited = 0usize;
-    while let Some((link, body, rot, pos)) = stack.pop() {
+    while let Some((link, mut body, mut rot, mut pos, opens)) = stack.pop() {
         visited += 1;
+        if let Some((b, joint)) = opens {
+            body = Some(bodies.len());
+            (rot, pos) = (IDENTITY, [0.0; 3]);
+            bodies.push(b);
+            accum.push(Accum::default());
+            joints.push(joint);
+            links.push(r.links[link].name.clone());
+        }
         let (m, c, ic) = link_inertia[link];
         let at = match body {
             Some(b) => &mut accum[b],
@@ -399,7 +409,7 @@ pub fn from_robot(r: &urdf_rs::Robot) -> Result<UrdfTree, UrdfError> {
             };
             let kind = match j.joint_type {
                 urdf_rs::JointType::Fixed => {
-                    stack.push((child, body, jrot, jpos));
+                    stack.push((child, body, jrot, jpos, None));
                     continue;
                 }
                 urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
@@ -456,8 +466,7 @@ pub fn from_robot(r: &urdf_rs::Robot) -> Result<UrdfTree, UrdfError> {
                     why: "lower > upper",
                 });
             }
-            let k = bodies.len();
-            bodies.push(Body {
+            let opens = Body {
                 parent: body,
                 joint: kind,
                 axis: scale(a, 1.0 / n),
@@ -470,11 +479,8 @@ pub fn from_robot(r: &urdf_rs::Robot) -> Result<UrdfTree, UrdfError> {
                 stiffness: 0.0,
                 rest: 0.0,
                 limits,
-            });
-            accum.push(Accum::default());
-            joints.push(j.name.clone());
-            links.push(j.child.link.clone());
-            stack.push((child, Some(k), IDENTITY, [0.0; 3]));
+            };
+            stack.push((child, body, jrot, jpos, Some((opens, j.name.clone()))));
         }
     }
     if visited != r.links.len() {
