@@ -599,6 +599,35 @@ impl Robot {
         })
     }
 
+    /// A driven rollout with every step's exact derivatives: entry k is
+    /// [`Robot::step_derivatives`] from z_k with inputs `inputs[k]`, so its
+    /// `state` is z_{k+1} and its `a`, `b` are A_k = ∂z_{k+1}/∂z_k and
+    /// B_k = ∂z_{k+1}/∂u_k: the linearisation along the trajectory that
+    /// iLQR and linear MPC take. Derivatives across steps are the products:
+    /// ∂z_K/∂z_0 = A_{K−1}⋯A_0 and ∂z_K/∂u_j = A_{K−1}⋯A_{j+1}B_j. Each step
+    /// starts its iteration from the state's own velocity (not the
+    /// extrapolation of [`Robot::rollout_with`]), so the states agree with
+    /// that rollout's to the solver's tolerance. A failure names the step.
+    pub fn rollout_derivatives(
+        &self,
+        z0: &RobotState,
+        inputs: &[Vec<f64>],
+        dt: f64,
+    ) -> Result<Vec<StepDerivatives>, RobotError> {
+        let mut out: Vec<StepDerivatives> = Vec::with_capacity(inputs.len());
+        for (k, u) in inputs.iter().enumerate() {
+            let z = out.last().map_or(z0, |d| &d.state);
+            let d = self
+                .step_derivatives(z, u, dt)
+                .map_err(|e| RobotError::Rollout {
+                    step: k,
+                    source: Box::new(e),
+                })?;
+            out.push(d);
+        }
+        Ok(out)
+    }
+
     /// The derivatives of one converged sub-step of h from (q₀, v₀) to
     /// v₁: A_s = ∂(q₁, v₁)/∂(q₀, v₀) and B_s = ∂(q₁, v₁)/∂u.
     fn substep_derivatives(

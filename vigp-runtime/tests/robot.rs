@@ -564,3 +564,84 @@ fn trajectories_converge_to_mujoco_rk4_at_first_order() {
         assert!(richardson < 0.1 * points[3].1, "{name}: {richardson:e}");
     }
 }
+
+#[test]
+fn rollout_derivatives_chain_to_the_differences_of_the_whole_rollout() {
+    // arm3 driven on two joints, 6 steps of 5 ms: the products of the
+    // per-step A_k, B_k against central differences of the final state
+    // (ε = 1e-5, solver tolerance 1e-13: 1e-6 of the largest entry, as
+    // for one step)
+    let robot = Robot::from_urdf(fixture("arm3.urdf"))
+        .unwrap()
+        .with_actuated(&["j1", "j3"])
+        .unwrap();
+    let fine = robot
+        .clone()
+        .with_options(EngineOptions {
+            tolerance: 1e-13,
+            ..EngineOptions::default()
+        })
+        .unwrap();
+    let (n, dt) = (robot.dof(), 0.005);
+    let z0 = RobotState::new(vec![0.3, -0.7, 0.05], vec![1.2, -0.8, 0.3]);
+    let inputs: Vec<Vec<f64>> = (0..6)
+        .map(|k| vec![0.5 * (k as f64).sin(), 1.0 - 0.2 * k as f64])
+        .collect();
+    let steps = robot.rollout_derivatives(&z0, &inputs, dt).unwrap();
+    assert_eq!(steps.len(), 6);
+    // ∂z_6/∂z_0 and ∂z_6/∂u_2
+    let mut a = nalgebra::DMatrix::<f64>::identity(2 * n, 2 * n);
+    for d in &steps {
+        a = &d.a * a;
+    }
+    let mut b2 = steps[2].b.clone();
+    for d in &steps[3..] {
+        b2 = &d.a * b2;
+    }
+    let last = |z: &RobotState, us: &[Vec<f64>]| {
+        let mut z = z.clone();
+        for u in us {
+            z = fine.step(&z, u, dt).unwrap().0;
+        }
+        [z.q, z.v].concat()
+    };
+    let eps = 1e-5;
+    let mut worst_a = 0.0f64;
+    for j in 0..2 * n {
+        let (mut zp, mut zm) = (z0.clone(), z0.clone());
+        if j < n {
+            zp.q[j] += eps;
+            zm.q[j] -= eps;
+        } else {
+            zp.v[j - n] += eps;
+            zm.v[j - n] -= eps;
+        }
+        let (sp, sm) = (last(&zp, &inputs), last(&zm, &inputs));
+        for i in 0..2 * n {
+            worst_a = worst_a.max((a[(i, j)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
+        }
+    }
+    let mut worst_b = 0.0f64;
+    for k in 0..2 {
+        let (mut up, mut um) = (inputs.clone(), inputs.clone());
+        up[2][k] += eps;
+        um[2][k] -= eps;
+        let (sp, sm) = (last(&z0, &up), last(&z0, &um));
+        for i in 0..2 * n {
+            worst_b = worst_b.max((b2[(i, k)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
+        }
+    }
+    let (ea, eb) = (worst_a / a.amax(), worst_b / b2.amax());
+    println!("arm3, 6 steps of 5 ms: dz6/dz0 {ea:.1e}, dz6/du2 {eb:.1e} (of the largest entry)");
+    assert!(ea < 1e-6 && eb < 1e-6, "{ea:e} {eb:e}");
+    // the states are the rollout's, to the solver's tolerance
+    let run = robot
+        .rollout_with(&z0, dt, 6, |k, _| inputs[k].clone())
+        .unwrap();
+    let gap = steps
+        .iter()
+        .zip(&run.states[1..])
+        .flat_map(|(d, z)| d.state.q.iter().zip(&z.q).map(|(x, y)| (x - y).abs()))
+        .fold(0.0f64, f64::max);
+    assert!(gap < 1e-10, "{gap:e}");
+}
