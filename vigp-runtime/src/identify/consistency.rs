@@ -19,7 +19,7 @@
 //! A joint's viscous damping c and spring stiffness k must be ≥ 0 (the
 //! mechanism refuses negative ones); k·s₀ is free. These are simple
 //! bounds, treated by the same barrier as the bodies: −ln c and −ln k, the
-//! barrier of the 1 × 1 "matrix" [c]. The interior-point method returns a
+//! barrier of the 1 × 1 matrix (c). The interior-point method returns a
 //! strictly positive value, so where the best feasible value is 0 (a joint
 //! without friction, identified on a clean log) it returns a value of the
 //! order of the final barrier weight, 1e-13 of the objective's scale, not
