@@ -61,40 +61,29 @@ where
         ),
     )?;
     w(out, format_args!("{report}"))?;
-    // every parameter the identification sets, with the status of its
-    // DSL row
-    // a 3-D inertia's lower entries (`inertia.yx`, `.zx`, `.zy`) are
-    // parameters too: they take the identified value of their mirror, and
-    // its status, so that the tensor stays symmetric
-    let status_of = |name: &str| {
-        let mirrored = ["yx", "zx", "zy"]
-            .iter()
-            .find_map(|lower| {
-                let stem = name.strip_suffix(&format!("inertia.{lower}"))?;
-                let upper: String = lower.chars().rev().collect();
-                Some(format!("{stem}inertia.{upper}"))
-            })
-            .unwrap_or_else(|| name.to_string());
-        report
-            .dsl
-            .iter()
-            .find(|r| r.parameter == mirrored)
-            .map(|r| r.status)
-    };
+    // every parameter the identification sets, as the report's DSL rows
+    // say (a 3-D inertia's lower entries name the upper entry they
+    // mirror); the values are the declared and the identified model's
     let mut parameters = Vec::new();
-    for (i, name) in Mn::PARAMETER_NAMES.iter().enumerate() {
-        let Some(status) = status_of(name) else {
-            continue;
+    for row in &report.dsl {
+        let name = row.parameter.as_str();
+        let value = |m: &Mn| Mn::parameter_index(name).and_then(|i| m.parameter(i));
+        let (Some(declared), Some(value)) = (value(&minimal), value(&identified)) else {
+            return Err(CliError::Usage(format!(
+                "identify: `{name}` in the report is not a parameter of `{}`",
+                Mn::NAME
+            )));
         };
-        let (Some(declared), Some(value)) = (minimal.parameter(i), identified.parameter(i)) else {
-            continue;
-        };
-        parameters.push(serde_json::json!({
+        let mut entry = serde_json::json!({
             "name": name,
             "declared": declared,
             "identified": value,
-            "status": status_name(status),
-        }));
+            "status": status_name(row.status),
+        });
+        if let Some(upper) = &row.mirror_of {
+            entry["mirror_of"] = serde_json::json!(upper);
+        }
+        parameters.push(entry);
     }
     let base: Vec<_> = report
         .base

@@ -6,7 +6,8 @@
 //! the nominal score checked against a direct computation), `predict`
 //! (conformal, calibrated on held-out runs) and `export`; a 3-D mechanism
 //! declared here, actuated, through `vigp::cli::system::<M>()` with its
-//! input columns; and the maximal view refused with a typed error.
+//! input columns, and `identify` with `fit --prior identified:FILE` on
+//! it; and the maximal view refused with a typed error.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -548,6 +549,92 @@ fn a_driven_3d_mechanism_declared_here_gets_the_same_tool() {
     assert!(
         learned < 0.1 * nominal,
         "learned {learned:e} not 10× below nominal {nominal:e}"
+    );
+    // identify on the same log (written by the first-order integrator):
+    // the pivot's friction to 1e-8 relative (the regression is exact on
+    // such logs to about 1e-11), and the identified parameters as the
+    // nominal model make the nominal score that of the truth itself
+    let params = dir.join("params.json");
+    let said = run(&[
+        "identify",
+        "--data",
+        s(&train_path),
+        "--rule",
+        "first-order",
+        "--out",
+        s(&params),
+    ])
+    .unwrap();
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let pivot = file["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["name"] == "joints.pivot.damping")
+        .unwrap_or_else(|| panic!("{said}"))
+        .clone();
+    assert_eq!(pivot["status"], "identified", "{said}");
+    let got = pivot["identified"].as_f64().unwrap();
+    assert!((got - 0.002).abs() <= 1e-8 * 0.002, "{got}");
+    let row = |name: &str| {
+        file["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"] == name)
+            .unwrap_or_else(|| panic!("no {name}: {said}"))
+            .clone()
+    };
+    // the frictionless base joint: its damping is 0 in truth, and fit
+    // refuses a negative one, so identify must not return one
+    let base = row("joints.base.damping")["identified"].as_f64().unwrap();
+    assert!((0.0..=1e-8).contains(&base), "{base:e}");
+    // a 3-D inertia's lower entries carry their upper mirror's value and
+    // status, and name it
+    for (lower, upper) in [("yx", "xy"), ("zx", "xz"), ("zy", "yz")] {
+        for link in ["arm", "pendulum"] {
+            let (l, u) = (
+                row(&format!("links.{link}.inertia.{lower}")),
+                row(&format!("links.{link}.inertia.{upper}")),
+            );
+            assert_eq!(l["identified"], u["identified"], "{l} {u}");
+            assert_eq!(l["status"], u["status"], "{l} {u}");
+            assert_eq!(l["mirror_of"], u["name"], "{l} {u}");
+        }
+    }
+    let identified_model = dir.join("identified.json");
+    let prior = format!("identified:{}", s(&params));
+    run(&[
+        "fit",
+        "--data",
+        s(&train_path),
+        "--out",
+        s(&identified_model),
+        "--prior",
+        &prior,
+        "--restarts",
+        "0",
+        "--max-samples",
+        "100",
+    ])
+    .unwrap();
+    let (identified_nominal, _) = mse_line(
+        &run(&[
+            "score",
+            "--model",
+            s(&identified_model),
+            "--data",
+            s(&test_path),
+            "--steps",
+            "20",
+        ])
+        .unwrap(),
+    );
+    println!("20-step nominal MSE: declared {nominal:.3e}, identified {identified_nominal:.3e}");
+    assert!(
+        identified_nominal < 1e-6 * nominal,
+        "{identified_nominal:e} vs {nominal:e}"
     );
     // the maximal view is a typed error
     let e = run(&[

@@ -18,10 +18,13 @@
 //!    [`Prior`]), treating the **position noise** by instrumental
 //!    variables ([`Noise`]) and outliers by an optional **robust loss**
 //!    ([`Loss`]) ([`estimate`]);
-//! 3. keeps every body **physically consistent** (positive mass, positive
-//!    definite pseudo-inertia) by projecting an unrealisable estimate onto
-//!    the realisable set, a convex problem solved by an interior-point
-//!    method ([`consistency`]);
+//! 3. keeps the estimate **physically consistent** (every body a positive
+//!    mass and a positive definite pseudo-inertia, every joint a damping
+//!    and a stiffness ≥ 0, so that the mechanism accepts it) by projecting
+//!    an infeasible estimate onto the feasible set, a convex problem solved
+//!    by an interior-point method in the estimate's metric with the data's
+//!    weight capped, so that the directions the data do not see stay where
+//!    the prior puts them ([`consistency`]);
 //! 4. gives the **covariance** and the 95 % interval of each base
 //!    parameter ([`covariance`]) and a table ([`report`]).
 //!
@@ -222,8 +225,8 @@ pub struct Options {
     /// Rank tolerance of the base-parameter decomposition, relative to the
     /// largest pivot of the unit-norm columns (default 1e-8).
     pub rank_tolerance: f64,
-    /// Project an unrealisable estimate onto the realisable set (default
-    /// true).
+    /// Project an infeasible estimate (an unrealisable body, a negative
+    /// joint damping or stiffness) onto the feasible set (default true).
     pub consistent: bool,
     /// The covariance model of the intervals (default: position noise).
     pub intervals: Intervals,
@@ -263,13 +266,18 @@ pub struct Identification {
     pub declared: Vec<f64>,
     /// The prior's standard deviations.
     pub prior_sd: Vec<f64>,
-    /// The identified π (physically consistent).
+    /// The identified π: physically consistent (realisable bodies, joint
+    /// dampings and stiffnesses ≥ 0) unless [`Options::consistent`] is off.
     pub estimate: Vec<f64>,
     /// The estimate before the consistency projection.
     pub unconstrained: Vec<f64>,
-    /// Whether the consistency projection moved the estimate, and the
-    /// links it found unrealisable.
+    /// The links whose unconstrained estimate was not realisable (indices
+    /// into `structure.bodies`); with [`Self::projected_joints`], empty
+    /// exactly when the consistency projection did not run.
     pub projected: Vec<usize>,
+    /// The joint dampings and stiffnesses whose unconstrained estimate was
+    /// negative (indices into π).
+    pub projected_joints: Vec<usize>,
     /// Posterior covariance of π (independent rows).
     pub covariance: DMatrix<f64>,
     /// The base parameters.
@@ -477,21 +485,15 @@ pub fn identify<R: Regressor>(
     let fit = estimate::solve(&stack, &base, &declared, &prior_sd, options.loss)?;
     let unconstrained: Vec<f64> = fit.pi.iter().cloned().collect();
     let bad = consistency::inconsistent_bodies(&structure, &unconstrained);
-    let estimate = if options.consistent && !bad.is_empty() {
-        // The objective |R(Kπ − θ_data)|² + |S⁻¹(π − π₀)|².
+    let negative = consistency::negative_joint_parameters(&structure, &unconstrained);
+    let estimate = if options.consistent && !(bad.is_empty() && negative.is_empty()) {
+        // The objective |R(Kπ − θ_data)|² + |S⁻¹(π − π₀)|², the data's
+        // information capped (consistency::DATA_CAP).
         let (theta_data, r) = &fit.data;
-        let p = structure.len();
-        let rk = r * &base.k;
-        let mut f = DMatrix::zeros(rk.nrows() + p, p);
-        f.rows_mut(0, rk.nrows()).copy_from(&rk);
-        let mut rhs = DVector::zeros(rk.nrows() + p);
-        rhs.rows_mut(0, rk.nrows()).copy_from(&(r * theta_data));
-        for j in 0..p {
-            f[(rk.nrows() + j, j)] = 1.0 / prior_sd[j];
-            rhs[rk.nrows() + j] = declared[j] / prior_sd[j];
-        }
-        let metric = consistency::Metric { f, rhs };
-        consistency::project(&structure, &metric, &declared)?.0
+        let metric =
+            consistency::Metric::of_estimate(&base.k, r, theta_data, &declared, &prior_sd)?;
+        let start = consistency::interior_start(&structure, &declared, &prior_sd);
+        consistency::project(&structure, &metric, &start)?.0
     } else {
         unconstrained.clone()
     };
@@ -567,6 +569,11 @@ pub fn identify<R: Regressor>(
         estimate,
         unconstrained,
         projected: if options.consistent { bad } else { Vec::new() },
+        projected_joints: if options.consistent {
+            negative
+        } else {
+            Vec::new()
+        },
         covariance: fit.covariance,
         base,
         base_names,

@@ -9,6 +9,13 @@
 //! the parameters in the DSL's own names (mass, centre of mass, inertia
 //! about the centre of mass, damping, stiffness, rest), identifiable when
 //! every standard parameter they derive from is.
+//!
+//! The DSL section has one row for every parameter that the
+//! identification sets, under the mechanism's own parameter name: a 3-D
+//! inertia's nine entries included. Its lower entries (`inertia.yx`,
+//! `.zx`, `.zy`) are the upper ones again (the tensor is symmetric): their
+//! rows carry the value and status of the upper entry and name it in
+//! [`Row::mirror_of`]. A tool writes the DSL section as it is.
 
 use super::Identification;
 use super::regressor::{BodySlots, SYM};
@@ -50,6 +57,10 @@ pub struct Row {
     pub half_width: Option<f64>,
     /// Whether the data determine it.
     pub status: Status,
+    /// For a 3-D inertia's lower entry (`links.<l>.inertia.yx`, `.zx`,
+    /// `.zy`): the upper entry it mirrors, whose value and status it
+    /// carries.
+    pub mirror_of: Option<String>,
 }
 
 /// The table of an [`Identification`] (printable).
@@ -59,10 +70,12 @@ pub struct Report {
     pub base: Vec<Row>,
     /// Standard parameters not identifiable by themselves.
     pub unidentifiable: Vec<Row>,
-    /// The DSL's parameters.
+    /// The DSL's parameters: one row per parameter of the mechanism that
+    /// the identification sets, in the layout's order (module docs).
     pub dsl: Vec<Row>,
-    /// Links whose unconstrained estimate was not physically realisable
-    /// (projected).
+    /// Links whose unconstrained estimate was not physically realisable,
+    /// and joint dampings and stiffnesses (standard names) whose
+    /// unconstrained estimate was negative: the estimate was projected.
     pub projected: Vec<String>,
 }
 
@@ -80,6 +93,9 @@ impl Report {
     }
 }
 
+/// The axis letters of a 3-D inertia's entries.
+const AXES: [char; 3] = ['x', 'y', 'z'];
+
 pub(crate) fn build(id: &Identification) -> Report {
     let s = &id.structure;
     let base = (0..id.base.rank())
@@ -93,6 +109,7 @@ pub(crate) fn build(id: &Identification) -> Report {
             } else {
                 Status::Uninformed
             },
+            mirror_of: None,
         })
         .collect();
     let ident = id.standard_identifiable();
@@ -104,6 +121,7 @@ pub(crate) fn build(id: &Identification) -> Report {
             identified: id.estimate[i],
             half_width: None,
             status: Status::NotIdentifiable,
+            mirror_of: None,
         })
         .collect();
     // A standard parameter counts as identified when identifiable and
@@ -143,12 +161,17 @@ pub(crate) fn build(id: &Identification) -> Report {
                         out.push((format!("links.{l}.com.{a}"), v));
                     }
                     let cc = c[0] * c[0] + c[1] * c[1] + c[2] * c[2];
-                    for (k, (r, t)) in SYM.iter().enumerate() {
+                    // the nine entries row by row, each lower one the
+                    // value of its upper mirror
+                    for (r, t) in (0..3).flat_map(|r| (0..3).map(move |t| (r, t))) {
+                        let k = SYM
+                            .iter()
+                            .position(|x| *x == (r.min(t), r.max(t)))
+                            .unwrap_or(0);
                         let d = if r == t { cc } else { 0.0 };
-                        let name = ["xx", "xy", "xz", "yy", "yz", "zz"][k];
                         out.push((
-                            format!("links.{l}.inertia.{name}"),
-                            pi[o + 4 + k] - m * (d - c[*r] * c[*t]),
+                            format!("links.{l}.inertia.{}{}", AXES[r], AXES[t]),
+                            pi[o + 4 + k] - m * (d - c[r] * c[t]),
                         ));
                     }
                 }
@@ -173,15 +196,27 @@ pub(crate) fn build(id: &Identification) -> Report {
     };
     // Which standard entries each DSL value derives from.
     let mut deps: Vec<Vec<usize>> = Vec::new();
+    let mut mirrors: Vec<Option<String>> = Vec::new();
     let offsets = s.body_offsets();
     for (b, o) in s.bodies.iter().zip(&offsets) {
         deps.push(vec![*o]);
-        let h = if b.len() == 4 { 2 } else { 3 };
+        mirrors.push(None);
+        let (h, inertia) = match b {
+            BodySlots::Planar { .. } => (2, 1),
+            BodySlots::Spatial { .. } => (3, 9),
+        };
         for a in 0..h {
             deps.push(vec![*o, o + 1 + a]);
+            mirrors.push(None);
         }
-        for _ in 0..b.len() - 1 - h {
+        for e in 0..inertia {
             deps.push((*o..o + b.len()).collect());
+            // a lower entry (row r > column t) mirrors (t, r)
+            let (r, t) = (e / 3, e % 3);
+            mirrors.push(
+                (inertia == 9 && r > t)
+                    .then(|| format!("links.{}.inertia.{}{}", b.name(), AXES[t], AXES[r])),
+            );
         }
     }
     let mut at = offsets
@@ -191,11 +226,13 @@ pub(crate) fn build(id: &Identification) -> Report {
     for j in &s.joints {
         if j.damping.is_some() {
             deps.push(vec![at]);
+            mirrors.push(None);
             at += 1;
         }
         if j.spring.is_some() {
             deps.push(vec![at]);
             deps.push(vec![at, at + 1]);
+            mirrors.extend([None, None]);
             at += 2;
         }
     }
@@ -204,13 +241,14 @@ pub(crate) fn build(id: &Identification) -> Report {
     let dsl = declared
         .into_iter()
         .zip(identified)
-        .zip(&deps)
-        .map(|(((name, d), (_, v)), dep)| Row {
+        .zip(deps.iter().zip(mirrors))
+        .map(|(((name, d), (_, v)), (dep, mirror_of))| Row {
             parameter: name,
             declared: d,
             identified: v,
             half_width: None,
             status: status(dep),
+            mirror_of,
         })
         .collect();
     Report {
@@ -221,6 +259,7 @@ pub(crate) fn build(id: &Identification) -> Report {
             .projected
             .iter()
             .map(|b| s.bodies[*b].name().to_string())
+            .chain(id.projected_joints.iter().map(|i| s.names[*i].clone()))
             .collect(),
     }
 }
@@ -240,10 +279,14 @@ impl fmt::Display for Report {
             let hw = r
                 .half_width
                 .map_or_else(|| "—".to_string(), |h| format!("{h:.3e}"));
+            let status = match &r.mirror_of {
+                Some(m) => format!("{} (mirror of {m})", r.status),
+                None => r.status.to_string(),
+            };
             writeln!(
                 f,
-                "{:<width$}  {:>13.6e}  {:>13.6e}  {:>10}  {}",
-                r.parameter, r.declared, r.identified, hw, r.status
+                "{:<width$}  {:>13.6e}  {:>13.6e}  {:>10}  {status}",
+                r.parameter, r.declared, r.identified, hw
             )
         };
         let header = |f: &mut fmt::Formatter<'_>, title: &str| {
@@ -276,7 +319,7 @@ impl fmt::Display for Report {
         if !self.projected.is_empty() {
             writeln!(
                 f,
-                "\nprojected onto physically realisable parameters: {}",
+                "\nprojected onto physically consistent parameters: {}",
                 self.projected.join(", ")
             )?;
         }
