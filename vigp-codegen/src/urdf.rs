@@ -180,7 +180,7 @@ fn parse(input: ParseStream) -> syn::Result<UrdfInput> {
 
 /// A URDF name as a Rust field name: ASCII letters lower-cased (fields are
 /// snake case), other characters than letters, digits and `_` become `_`,
-/// a leading digit gets a `_`; keywords become raw identifiers ([`ident`]).
+/// a leading digit gets a `_`; keywords become raw identifiers (`ident`).
 pub fn rust_name(name: &str) -> String {
     let mut s: String = name
         .chars()

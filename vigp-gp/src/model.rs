@@ -50,8 +50,8 @@ pub(crate) enum Posterior {
 /// A trained exact Gaussian process with p independent outputs on d inputs.
 ///
 /// Each output has its own ARD squared-exponential kernel, signal and noise
-/// variance, fitted to the residual y − m(x) of a shared [`PriorMean`] m.
-/// Inputs may be standardised and residuals scaled (see [`TrainOptions`]);
+/// variance, fitted to the residual y − m(x) of a shared [`PriorMean`](crate::PriorMean) m.
+/// Inputs may be standardised and residuals scaled (see [`TrainOptions`](crate::TrainOptions));
 /// all methods take and return *original* units unless their name says
 /// otherwise.
 ///
@@ -276,7 +276,7 @@ impl Gp {
     /// step with its bound) computes some outputs' variances on a helper
     /// thread (default `false`). It applies to an exact GP with
     /// [`VarianceMode::Inverse`], p ≥ 2 outputs and N ≥
-    /// [`PARALLEL_VARIANCE_MIN_N`]: the variance streams each output's N²/2
+    /// [`PARALLEL_VARIANCE_MIN_N`](crate::PARALLEL_VARIANCE_MIN_N): the variance streams each output's N²/2
     /// stored numbers, and on two cores two outputs stream at once.
     ///
     /// Switching it on starts one thread for this model (shared by its
@@ -341,7 +341,7 @@ impl Gp {
     }
 
     /// Hyperparameters of every output in original units, for
-    /// [`TrainOptions::warm_start`] of the next training run (e.g. after
+    /// [`TrainOptions::warm_start`](crate::TrainOptions::warm_start) of the next training run (e.g. after
     /// more samples arrived).
     pub fn warm_start(&self) -> Vec<Hyperparameters> {
         self.outputs

@@ -93,7 +93,7 @@ pub enum UrdfError {
     /// A number in the file is NaN or ±∞.
     #[error("non-finite number in {element}")]
     NonFinite {
-        /// The element, e.g. "joint `elbow` <origin>".
+        /// The element, e.g. "joint `elbow` `<origin>`".
         element: String,
     },
     /// A value out of its domain.

@@ -152,7 +152,7 @@ pub fn cross_force<R: Real>(a: &V6<R>, f: &V6<R>) -> V6<R> {
 /// The spatial inertia of a body (or a set of bodies) about the world
 /// origin in world axes: mass m, first moment m·c (c the centre of mass)
 /// and the rotational inertia about the origin I_O = I_c + m(|c|²1 − ccᵀ).
-/// As a 6×6 matrix [[I_O, [mc]×], [[mc]×ᵀ, m·1]].
+/// As a 6×6 matrix `[[I_O, [mc]×], [[mc]×ᵀ, m·1]]`.
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct Inertia6<R = f64> {
     /// Mass (kg).

@@ -13,7 +13,7 @@
 //! ε = J·n, n independent noise of variance σ_q² on every logged
 //! coordinate and J the exact dependence of each residual on its three
 //! samples ([`super::Regressor::noise_jacobian`]); σ_q² is estimated from
-//! the residuals, E[e_i²] = σ_q²·|J_i|² (times (n − r)/n for the fitted
+//! the residuals, E(e_i²) = σ_q²·|J_i|² (times (n − r)/n for the fitted
 //! parameters), and the estimate θ̂ = H⁻¹(Ŵᵀ D b + P θ₀) with
 //! H = ŴᵀŴ + P then has covariance H⁻¹(σ_q² Σ_s g_s g_sᵀ + P)H⁻¹,
 //! g_s = Σ_i Ŵ_iᵀ D_i J_{i,s} over the rows i that sample s enters.

@@ -23,7 +23,7 @@
 //!
 //! Position noise enters W and b together (the rows hold discrete
 //! velocities and their differences, 1/Δt and 1/Δt² times the noise), so
-//! least squares is biased (errors in variables): E[WᵀW] ≠ W̄ᵀW̄. With
+//! least squares is biased (errors in variables): E(WᵀW) ≠ W̄ᵀW̄. With
 //! [`Noise::InstrumentalVariables`] every transition k also gets
 //! instrument rows Z_k: the regressor at positions x̃_{k−1}, x̃_k, x̃_{k+1}
 //! from a local polynomial fitted to the samples around k *leaving out*

@@ -10,7 +10,7 @@ use crate::mechanism::{CoordinateKind, Mechanism};
 use crate::variational::Integrator;
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
-    /// The learned velocity map's GP as Rust source ([`Gp::to_rust_source`]),
+    /// The learned velocity map's GP as Rust source ([`Gp::to_rust_source`](crate::gp::Gp::to_rust_source)),
     /// plus what embedded code needs to use it: `<NAME>_DT`, the input
     /// encoding (`<NAME>_ENCODING`, documented component by component) and
     /// the prior (`<NAME>_PRIOR`: with `"nominal"` the GP predicts
