@@ -328,7 +328,7 @@ fn floating_base_carries_the_whole_robot() {
 
 /// max |A_robot − A_generated| over the four N × N blocks of the generated
 /// `StateJacobian`, relative to the largest entry of the robot's A.
-fn worst_a<const N: usize>(
+fn a_gap<const N: usize>(
     robot: &vigp::nalgebra::DMatrix<f64>,
     a: &vigp::embedded::StateJacobian<N>,
 ) -> f64 {
@@ -370,7 +370,7 @@ fn urdf_step_derivatives_equal_the_run_time_robots() {
     let r = robot
         .step_derivatives(&RobotState::new(q0.to_vec(), v0.to_vec()), &u, dt)
         .unwrap();
-    let worst_a = worst_a(&r.a, &d.a);
+    let worst_a = a_gap(&r.a, &d.a);
     let mut worst_b = 0.0f64;
     for i in 0..3 {
         for k in 0..2 {
@@ -396,7 +396,7 @@ fn urdf_step_derivatives_equal_the_run_time_robots() {
     let rp = arm
         .step_derivatives(&RobotState::new(q0.to_vec(), v0.to_vec()), &[], dt)
         .unwrap();
-    let worst_panda = worst_a(&rp.a, &dp.a);
+    let worst_panda = a_gap(&rp.a, &dp.a);
     println!(
         "step derivatives, generated vs Robot: wrist A {worst_a:.1e}, B {worst_b:.1e} (state {worst_z:.1e}); \
          Panda A {worst_panda:.1e} (of the largest entry)"
