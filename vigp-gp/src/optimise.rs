@@ -9,19 +9,16 @@
 //!
 //! ```
 //! use vigp_gp::optimise::{Options, minimise};
-//! // Rosenbrock's function in the box [-2, 2] × [-2, 0.5]: the minimum
-//! // on the boundary y = 0.5 is near x = 0.7.
-//! let f = |x: &[f64]| {
-//!     let (a, b) = (x[0], x[1]);
-//!     let v = (1.0 - a).powi(2) + 100.0 * (b - a * a).powi(2);
-//!     let g = vec![
-//!         -2.0 * (1.0 - a) - 400.0 * a * (b - a * a),
-//!         200.0 * (b - a * a),
-//!     ];
-//!     Some((v, g))
+//! // (x − 3)² + 10(y + 1)² in the box [0, 2] × [−5, 5]: the minimum is
+//! // on the bound x = 2, at y = −1.
+//! let f = |p: &[f64]| {
+//!     let (x, y) = (p[0], p[1]);
+//!     let v = (x - 3.0).powi(2) + 10.0 * (y + 1.0).powi(2);
+//!     Some((v, vec![2.0 * (x - 3.0), 20.0 * (y + 1.0)]))
 //! };
-//! let m = minimise(f, &[-1.5, 0.0], &[-2.0, -2.0], &[2.0, 0.5], &Options::default())?;
-//! assert!((m.x[1] - 0.5).abs() < 1e-9 && m.x[0] > 0.6 && m.x[0] < 0.8);
+//! let m = minimise(f, &[0.5, 2.0], &[0.0, -5.0], &[2.0, 5.0], &Options::default())?;
+//! // x sits on its bound; y to the stopping tests (pgtol 1e-5 on 20(y + 1)).
+//! assert!((m.x[0] - 2.0).abs() < 1e-12 && (m.x[1] + 1.0).abs() < 1e-4);
 //! # Ok::<(), vigp_gp::optimise::OptimiseError>(())
 //! ```
 

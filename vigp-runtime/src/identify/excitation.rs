@@ -75,17 +75,24 @@ impl Fourier {
         self.coefficients.len() / (2 * self.harmonics).max(1)
     }
 
-    /// u_i(t).
-    pub fn value(&self, i: usize, t: f64) -> f64 {
+    /// u_i(t); `None` for an input i ≥ [`Fourier::inputs`].
+    pub fn value(&self, i: usize, t: f64) -> Option<f64> {
         let l_count = self.harmonics;
-        let c = &self.coefficients[2 * l_count * i..2 * l_count * (i + 1)];
+        let c = self
+            .coefficients
+            .get(2 * l_count * i..2 * l_count * (i + 1))?;
+        if c.is_empty() {
+            return None;
+        }
         let w = 2.0 * std::f64::consts::PI / self.period;
-        (0..l_count)
-            .map(|l| {
-                let x = (l + 1) as f64 * w * t;
-                c[l] * x.sin() + c[l_count + l] * x.cos()
-            })
-            .sum()
+        Some(
+            (0..l_count)
+                .map(|l| {
+                    let x = (l + 1) as f64 * w * t;
+                    c[l] * x.sin() + c[l_count + l] * x.cos()
+                })
+                .sum(),
+        )
     }
 
     /// The samples u(j·Δt), j = 0, …, `steps` − 1 (one vector of the inputs
@@ -94,7 +101,7 @@ impl Fourier {
         (0..steps)
             .map(|j| {
                 (0..self.inputs())
-                    .map(|i| self.value(i, j as f64 * dt))
+                    .filter_map(|i| self.value(i, j as f64 * dt))
                     .collect()
             })
             .collect()
@@ -111,12 +118,13 @@ impl Fourier {
         peak
     }
 
-    /// Input i's coefficients multiplied by `factor[i]`.
+    /// Input i's coefficients multiplied by `factor[i]` (by 1 where
+    /// `factor` has no entry).
     pub fn scaled(&self, factor: &[f64]) -> Fourier {
-        let two_l = 2 * self.harmonics;
+        let two_l = (2 * self.harmonics).max(1);
         let mut out = self.clone();
         for (k, c) in out.coefficients.iter_mut().enumerate() {
-            *c *= factor[k / two_l];
+            *c *= factor.get(k / two_l).copied().unwrap_or(1.0);
         }
         out
     }
