@@ -137,11 +137,7 @@ fn compare<M, const N: usize, const C: usize, const U: usize>(
 fn designed_input_beats_random_inputs_on_the_cartpole() {
     let mut problem = Problem::new(vec![0.0, 0.3], 300, 4, vec![5.0]);
     problem.position_limits = vec![(-2.0, 2.0), (f64::NEG_INFINITY, f64::INFINITY)];
-    compare::<_, 2, 0, 1>(
-        "cartpole",
-        DrivenCartpole::default().minimal(),
-        &problem,
-    );
+    compare::<_, 2, 0, 1>("cartpole", DrivenCartpole::default().minimal(), &problem);
 }
 
 /// The double pendulum with its shoulder actuated (±4 N·m, 3 s, 4
@@ -186,7 +182,8 @@ fn bad_problems_are_errors() {
         Some(IdentifyError::TooFewTransitions { .. })
     ));
     // A mechanism without inputs.
-    let unforced = DelRegressor::midpoint(vigp::systems::Cartpole::default().minimal(), DT).unwrap();
+    let unforced =
+        DelRegressor::midpoint(vigp::systems::Cartpole::default().minimal(), DT).unwrap();
     assert!(matches!(
         Excitation::<_, 2, 0, 0>::new(&unforced, &Problem::new(vec![0.0, 0.3], 100, 2, vec![])),
         Err(IdentifyError::NoInputs)

@@ -209,7 +209,14 @@ mod tests {
             pgtol: 1e-10,
             ..Options::default()
         };
-        let m = minimise(f, &[0.0; 3], &[-1.0; 3], &[1.0, 1.0, f64::INFINITY], &options).unwrap();
+        let m = minimise(
+            f,
+            &[0.0; 3],
+            &[-1.0; 3],
+            &[1.0, 1.0, f64::INFINITY],
+            &options,
+        )
+        .unwrap();
         for (x, want) in m.x.iter().zip([1.0, -0.2, -1.0]) {
             assert!((x - want).abs() < 1e-8, "{:?}", m.x);
         }

@@ -336,7 +336,11 @@ where
                     found: problem.velocity_limits.len(),
                 });
             }
-            if let Some(v) = problem.velocity_limits.iter().find(|v| v.is_nan() || **v <= 0.0) {
+            if let Some(v) = problem
+                .velocity_limits
+                .iter()
+                .find(|v| v.is_nan() || **v <= 0.0)
+            {
                 return Err(options_error(format!("velocity limit {v}: must be > 0")));
             }
         }
@@ -488,12 +492,12 @@ where
             .iter()
             .map(|u| SVector::from_column_slice(u))
             .collect();
-        let traj = self
-            .vi
-            .rollout_forced(&self.z0, &plan)
-            .map_err(|e| IdentifyError::Simulation {
-                message: e.to_string(),
-            })?;
+        let traj =
+            self.vi
+                .rollout_forced(&self.z0, &plan)
+                .map_err(|e| IdentifyError::Simulation {
+                    message: e.to_string(),
+                })?;
         let mut positions: Vec<Vec<f64>> = traj.iter().map(|z| z.q.as_slice().to_vec()).collect();
         // The last state's discrete velocity gives one more sample.
         if let Some(last) = traj.last() {
@@ -504,7 +508,11 @@ where
         inputs.extend(plan.iter().map(|u| u.as_slice().to_vec()));
         inputs.push(vec![0.0; U]);
         let log = Log { positions, inputs };
-        let (st, _) = stack(self.regressor, std::slice::from_ref(&log), Noise::LeastSquares)?;
+        let (st, _) = stack(
+            self.regressor,
+            std::slice::from_ref(&log),
+            Noise::LeastSquares,
+        )?;
         Ok((st.w, log))
     }
 
@@ -532,15 +540,16 @@ where
             }
         };
         for (k, x) in log.positions.iter().enumerate() {
-            for c in 0..N {
+            for (c, &xc) in x.iter().enumerate() {
                 if let Some((lo, hi)) = self.problem.position_limits.get(c) {
-                    add(lo - x[c]);
-                    add(x[c] - hi);
+                    add(lo - xc);
+                    add(xc - hi);
                 }
-                if let (Some(vmax), Some(next)) =
-                    (self.problem.velocity_limits.get(c), log.positions.get(k + 1))
-                {
-                    add(((next[c] - x[c]) / dt).abs() - vmax);
+                if let (Some(vmax), Some(next)) = (
+                    self.problem.velocity_limits.get(c),
+                    log.positions.get(k + 1),
+                ) {
+                    add(((next[c] - xc) / dt).abs() - vmax);
                 }
             }
         }
@@ -618,8 +627,7 @@ where
                 let v = self.objective(c, weight)?;
                 let mut g = vec![0.0; c.len()];
                 let mut cp = c.to_vec();
-                for k in 0..c.len() {
-                    let h = steps[k];
+                for (k, &h) in steps.iter().enumerate() {
                     cp[k] = c[k] + h;
                     let fp = self.objective(&cp, weight)?;
                     cp[k] = c[k] - h;
