@@ -141,9 +141,8 @@ where
     if options.memory == 0 {
         return Err(OptimiseError::Options("memory must be at least 1"));
     }
-    if !(options.pgtol >= 0.0 && options.pgtol.is_finite())
-        || !(options.ftol >= 0.0 && options.ftol.is_finite())
-    {
+    let tolerance = |t: f64| t >= 0.0 && t.is_finite();
+    if !(tolerance(options.pgtol) && tolerance(options.ftol)) {
         return Err(OptimiseError::Options(
             "tolerances must be finite and non-negative",
         ));
