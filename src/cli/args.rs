@@ -31,6 +31,8 @@ pub(super) enum Command {
     Simulate(SimulateArgs),
     /// Physical parameters (masses, inertias, damping, springs) from a log.
     Identify(IdentifyArgs),
+    /// An input plan (a Fourier series per input) that excites the mechanism for `identify`.
+    Excite(ExciteArgs),
 }
 
 /// How the nominal model steps (`score`, `simulate`).
@@ -413,4 +415,55 @@ pub(super) struct SimulateArgs {
     /// The log to write (CSV: run,t,<coordinates>[,u_<joint>…]).
     #[arg(long)]
     pub(super) out: PathBuf,
+}
+
+#[derive(Args, Debug, Clone)]
+pub(super) struct ExciteArgs {
+    /// The mechanism (with several registered; case and `_` do not matter).
+    #[arg(long)]
+    pub(super) system: Option<String>,
+    /// Length of the experiment (s); also the period of the inputs.
+    #[arg(long, allow_negative_numbers = true)]
+    pub(super) duration: f64,
+    /// Time step (s) of the log to identify from.
+    #[arg(long, allow_negative_numbers = true)]
+    pub(super) dt: f64,
+    /// Harmonics L of each input's Fourier series.
+    #[arg(long, default_value_t = 4)]
+    pub(super) harmonics: usize,
+    /// The largest |u| per input (one value for all, or one per input,
+    /// comma-separated).
+    #[arg(
+        long,
+        value_name = "U",
+        value_delimiter = ',',
+        allow_hyphen_values = true,
+        required = true
+    )]
+    pub(super) amplitude: Vec<f64>,
+    /// Start positions, at rest (comma-separated) [default: zeros].
+    #[arg(
+        long,
+        value_name = "Q",
+        value_delimiter = ',',
+        allow_hyphen_values = true
+    )]
+    pub(super) q: Vec<f64>,
+    /// The discrete Euler–Lagrange rule of the regression (and of the
+    /// design's simulation).
+    #[arg(long, value_enum, default_value = "midpoint")]
+    pub(super) rule: RuleArg,
+    /// Random inputs tried before the optimisation starts from the best.
+    #[arg(long, default_value_t = 8)]
+    pub(super) starts: usize,
+    /// Seed of the random inputs.
+    #[arg(long, default_value_t = 0)]
+    pub(super) seed: u64,
+    /// Change a declared parameter, e.g. `--set links.pole.mass=1.1` (repeatable).
+    #[arg(long = "set", value_name = "NAME=VALUE")]
+    pub(super) set: Vec<String>,
+    /// Where to write the plan (CSV: t,u_<joint>…; the format of
+    /// `simulate --inputs`).
+    #[arg(long)]
+    pub(super) out: Option<PathBuf>,
 }

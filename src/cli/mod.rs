@@ -20,6 +20,8 @@
 //!              [--inputs plan.csv] [--substeps K] [--max-subdivision D] --out log.csv
 //! vigp identify --system NAME --data log.csv --out params.json
 //!              [--rule midpoint|first-order] [--noise ls|iv] [--prior-sd S]
+//! vigp excite  --system NAME --duration T --dt DT --amplitude U[,…] [--harmonics L]
+//!              [--q Q,…] [--out plan.csv]
 //! ```
 //!
 //! * `fit` reads measured positions ([`crate::data`] format), builds the
@@ -62,6 +64,11 @@
 //!   the table of identifiable combinations with their 95 % intervals, and
 //!   writes a parameter file; `fit --prior identified:FILE` then trains the
 //!   GP on what the identified model leaves.
+//! * `excite` designs an input plan for `identify`: a Fourier series per
+//!   input that maximises the regressor's information about the base
+//!   parameters within the amplitude ([`crate::identify::excitation`]),
+//!   prints its log det against a random input's, and writes it in the
+//!   format of `simulate --inputs`.
 //! * `export` writes the Rust source of a `no_std` learned model for
 //!   [`crate::embedded::LearnedStepper`] and states its size.
 //!
@@ -99,6 +106,7 @@
 //! ```
 
 mod args;
+mod excite;
 mod export;
 mod fit;
 mod identify;
@@ -276,7 +284,8 @@ where
     let entry = match &cli.command {
         Command::Fit(args::FitArgs { system, .. })
         | Command::Simulate(args::SimulateArgs { system, .. })
-        | Command::Identify(args::IdentifyArgs { system, .. }) => match system {
+        | Command::Identify(args::IdentifyArgs { system, .. })
+        | Command::Excite(args::ExciteArgs { system, .. }) => match system {
             Some(name) => find(systems, name)?,
             None if systems.len() == 1 => systems[0],
             None => {

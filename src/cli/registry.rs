@@ -121,7 +121,8 @@ fn run_system<S: System>(cmd: &Command, out: &mut dyn Write) -> Result<(), CliEr
             set
         }
         Command::Simulate(SimulateArgs { set, .. })
-        | Command::Identify(IdentifyArgs { set, .. }) => set,
+        | Command::Identify(IdentifyArgs { set, .. })
+        | Command::Excite(super::args::ExciteArgs { set, .. }) => set,
         _ => &[],
     };
     for s in set {
@@ -215,6 +216,7 @@ where
         }
         Command::Simulate(a) => super::simulate::simulate::<Mn, N, C, U>(a, minimal, out),
         Command::Identify(a) => identify::<Mn, N, C>(a, minimal, out),
+        Command::Excite(a) => super::excite::excite::<Mn, N, C, U>(a, minimal, out),
         Command::Export(a) => {
             let saved = read_saved(&a.model)?;
             if in_minimal::<Mn, N, C>(&a.model, &saved, maximal.coordinates())? {

@@ -63,7 +63,7 @@ vigp::mechanism! {
     }
 }
 vigp::mechanism! {
-    DrivenCartpole {
+    pub DrivenCartpole {
         gravity: [0.0, -9.81],
         links {
             cart: { mass: 1.0, length: 1.0 },
@@ -76,7 +76,7 @@ vigp::mechanism! {
     }
 }
 vigp::mechanism! {
-    DrivenDoublePendulum {
+    pub DrivenDoublePendulum {
         gravity: [0.0, -9.81],
         links {
             upper: { mass: 1.0, length: 1.0 },
@@ -94,7 +94,7 @@ fn drive(k: usize) -> f64 {
     2.0 * (1.7 * t).sin() + 1.0 * (4.3 * t + 0.5).cos()
 }
 
-const DT: f64 = 0.01;
+pub(crate) const DT: f64 = 0.01;
 
 /// Perturb every inertial parameter (masses and inertias ×U[0.8, 1.2],
 /// centres of mass moved by up to 5 cm in every direction) and set every
@@ -613,7 +613,7 @@ fn gauss(rng: &mut Rng) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
 }
 
-fn noisy(log: &Log, sigma: f64, rng: &mut Rng) -> Log {
+pub(crate) fn noisy(log: &Log, sigma: f64, rng: &mut Rng) -> Log {
     Log {
         positions: log
             .positions

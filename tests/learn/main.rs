@@ -1,5 +1,6 @@
 //! Learning: learned integrators (planar and spatial), model files, held
-//! inputs, the embedded learned stepper, parameter identification.
+//! inputs, the embedded learned stepper, parameter identification and
+//! exciting trajectories.
 //!
 //! One test binary per concept (the map: tests/README.md); each module
 //! below is one file of it.
@@ -8,6 +9,7 @@
 mod common;
 
 mod embedded_learned;
+mod excitation;
 mod held_inputs;
 mod identify;
 mod learned;

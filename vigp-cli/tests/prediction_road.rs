@@ -688,3 +688,75 @@ fn identify_then_fit_with_the_identified_prior() {
     assert!(e.to_string().contains("identified:FILE"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `excite` designs a plan (one Fourier series for the rail force, peak
+/// ≤ 2 N) whose log det information beats a random input's of the same
+/// amplitude (the line it prints), writes it in the format `simulate
+/// --inputs` reads (which then runs on it), and refuses a zero amplitude.
+#[test]
+fn excite_writes_a_plan_that_simulate_reads() {
+    let dir = temp_dir("excite");
+    let plan_path = dir.join("plan.csv");
+    let text = run(&[
+        "excite",
+        "--duration",
+        "1.5",
+        "--dt",
+        "0.01",
+        "--harmonics",
+        "3",
+        "--amplitude",
+        "2",
+        "--q",
+        "0,0.3",
+        "--out",
+        s(&plan_path),
+    ])
+    .unwrap();
+    let line = text
+        .lines()
+        .find(|l| l.starts_with("log det information: design "))
+        .unwrap_or_else(|| panic!("{text}"));
+    let number = |after: &str| -> f64 {
+        let rest = &line[line.find(after).unwrap() + after.len()..];
+        let end = rest.find([',', ' ']).unwrap_or(rest.len());
+        rest[..end].parse().unwrap()
+    };
+    let design = number("design ");
+    let random = number("same amplitude ");
+    assert!(design > random, "{line}");
+    let rows = table(&plan_path);
+    assert_eq!(rows[0].join(","), "t,u_rail");
+    assert_eq!(rows.len(), 1 + 150);
+    for r in &rows[1..] {
+        let u: f64 = r[1].parse().unwrap();
+        assert!(u.abs() <= 2.0 * (1.0 + 1e-12), "{u}");
+    }
+    let log = dir.join("log.csv");
+    run(&[
+        "simulate",
+        "--q",
+        "0,0.3",
+        "--dt",
+        "0.01",
+        "--steps",
+        "150",
+        "--inputs",
+        s(&plan_path),
+        "--out",
+        s(&log),
+    ])
+    .unwrap();
+    let e = run(&[
+        "excite",
+        "--duration",
+        "1",
+        "--dt",
+        "0.01",
+        "--amplitude",
+        "0",
+    ])
+    .unwrap_err();
+    assert!(e.to_string().contains("amplitude"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}

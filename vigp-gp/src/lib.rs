@@ -19,6 +19,8 @@
 //! * [`Gp::add_samples`]: online updates at fixed hyperparameters
 //!   (exact: O(N²) per sample; sparse: O(M²)); [`Gp::warm_start`] and
 //!   [`TrainOptions::warm_start`] restart the optimiser from a previous model.
+//! * [`optimise::minimise`]: the L-BFGS-B of the training, for any
+//!   box-constrained objective with a gradient.
 //!
 //! Complexity: one likelihood evaluation costs O(N²d + N³) time and O(N²)
 //! memory (N³/3 for the Cholesky, 2N³/3 for the inverse the gradient
@@ -41,6 +43,7 @@ mod likelihood;
 mod mean;
 mod model;
 mod normalise;
+pub mod optimise;
 mod options;
 mod packed;
 mod predict;

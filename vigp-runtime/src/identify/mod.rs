@@ -28,6 +28,10 @@
 //! 4. gives the **covariance** and the 95 % interval of each base
 //!    parameter ([`covariance`]) and a table ([`report`]).
 //!
+//! [`excitation`] designs the input to log: a Fourier series per actuated
+//! joint that maximises the regressor's information about the base
+//! parameters within input, position and velocity limits.
+//!
 //! **Loops** are handled by projecting each transition's rows onto the
 //! null space of the constraint Jacobian G(x_k), which removes the term
 //! −G(x_k)ᵀλ with the unknown multipliers (the multipliers are not
@@ -51,11 +55,13 @@ pub mod base;
 pub mod consistency;
 pub mod covariance;
 pub mod estimate;
+pub mod excitation;
 pub mod regressor;
 pub mod report;
 
 pub use base::Base;
 pub use estimate::{Loss, Noise};
+pub use excitation::{Designed, Evaluation, Excitation, Fourier, Problem};
 pub use regressor::{
     BodySlots, DelRegressor, JointSlots, ParameterKind, Regressor, Structure, Transition,
 };
@@ -116,6 +122,21 @@ pub enum IdentifyError {
     #[error("physical consistency: {message}")]
     Inconsistent {
         /// What is wrong.
+        message: String,
+    },
+    /// An excitation design for a mechanism without inputs.
+    #[error("the mechanism has no inputs (no `actuated` joint): nothing to excite")]
+    NoInputs,
+    /// A simulation of the nominal mechanism failed.
+    #[error("simulation: {message}")]
+    Simulation {
+        /// Why.
+        message: String,
+    },
+    /// The optimiser refused the problem.
+    #[error("optimiser: {message}")]
+    Optimiser {
+        /// Why.
         message: String,
     },
 }
