@@ -48,6 +48,9 @@
 
 #[path = "common/font.rs"]
 mod font;
+#[path = "common/windows.rs"]
+mod windows;
+use windows::test_windows;
 #[path = "common/shard.rs"]
 mod shard;
 
@@ -252,19 +255,7 @@ where
     for i in (1..pool.len()).rev() {
         pool.swap(i, rng.below(i + 1));
     }
-    let mut windows = Vec::new();
-    for traj in test {
-        for _ in 0..cli.windows {
-            let k = rng.below(TRAJ_SAMPLES - HORIZON - 1);
-            windows.push((
-                State {
-                    q: traj[k],
-                    v: (traj[k + 1] - traj[k]) / DT,
-                },
-                traj[k..=k + HORIZON].to_vec(),
-            ));
-        }
-    }
+    let windows = test_windows(test, cli.windows, TRAJ_SAMPLES, HORIZON, DT, &mut rng);
     let mse = |roll: &(dyn Fn(&State<N>) -> Result<Vec<State<N>>, StepError> + Sync)| -> f64 {
         let v: Vec<f64> = windows
             .par_iter()
