@@ -28,6 +28,9 @@ use vigp::systems::{DoublePendulum, DoublePendulumMinimal};
 /// Time step of the learned model (s), = the demo's `DT`.
 pub const DT: f64 = 0.01;
 
+// tests/gp/gp_export.rs includes this file into a crate that loads rng.rs
+// through tests/common as well
+#[allow(clippy::duplicate_mod)]
 #[path = "../tests/common/rng.rs"]
 mod rng;
 use rng::Rng;
