@@ -156,21 +156,9 @@ fn bench_embedded_steps(c: &mut Criterion) {
     g.finish();
 }
 
-vigp::mechanism! {
-    /// The paper's double pendulum with a motor on each joint (as
-    /// scripts/mujoco_models.py's actuated double pendulum).
-    pub DrivenDoublePendulum {
-        gravity: [0.0, -9.81],
-        links {
-            upper: { mass: 1.0, length: 1.0 },
-            lower: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            shoulder: revolute(world, upper.start) { actuated },
-            elbow: revolute(upper.end, lower.start) { actuated },
-        }
-    }
-}
+#[path = "common/driven_double_pendulum.rs"]
+mod driven_double_pendulum;
+use driven_double_pendulum::DrivenDoublePendulum;
 
 /// The embedded double-pendulum step against the same step with its exact
 /// derivatives A = ∂z₁/∂z₀ and B = ∂z₁/∂u (implicit function theorem), both

@@ -1,23 +1,13 @@
-//! A cartpole declared with the DSL (prismatic rail + revolute pole).
+//! A cartpole (`vigp::systems::Cartpole`, declared with the DSL in src/systems.rs:
+//! prismatic rail + revolute pole), conservative and damped.
 //!
 //! Run: `cargo run --release --example cartpole`
 
 use vigp::prelude::*;
 
-vigp::mechanism! {
-    /// A cart on a horizontal rail with a pole pinned at its centre.
-    pub Cartpole {
-        gravity: [0.0, -9.81],
-        links {
-            cart: { mass: 1.0, length: 1.0 },
-            pole: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            rail: prismatic(world, cart.center) { axis: [1.0, 0.0], damping: 0.0 },
-            hinge: revolute(cart.center, pole.start) { damping: 0.0 },
-        }
-    }
-}
+// the cart on a horizontal rail with a pole pinned at its centre, as declared
+// in `vigp::systems` (src/systems.rs)
+use vigp::systems::Cartpole;
 
 fn main() -> Result<(), StepError> {
     let dt = 0.01;

@@ -28,26 +28,12 @@ use vigp::systems::{DoublePendulum, DoublePendulumMinimal};
 /// Time step of the learned model (s), = the demo's `DT`.
 pub const DT: f64 = 0.01;
 
-/// SplitMix64 with a Box–Muller normal (no RNG crate needed).
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn normal(&mut self) -> f64 {
-        let u = self.uniform(f64::MIN_POSITIVE, 1.0);
-        let v = self.uniform(0.0, 1.0);
-        (-2.0 * u.ln()).sqrt() * (2.0 * PI * v).cos()
-    }
-}
+// tests/gp/gp_export.rs includes this file into a crate that loads rng.rs
+// through tests/common as well
+#[allow(clippy::duplicate_mod)]
+#[path = "../tests/common/rng.rs"]
+mod rng;
+use rng::Rng;
 
 /// The demo's nominal double pendulum.
 pub fn nominal() -> DoublePendulum {

@@ -7,25 +7,9 @@ use nalgebra::SVector;
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
 
-vigp::mechanism! {
-    /// A rhombus of four links hanging from one pivot, closed at the bottom.
-    pub Fourbar {
-        gravity: [0.0, -9.81],
-        links {
-            link1: { mass: 1.0, length: 1.0 },
-            link2: { mass: 1.0, length: 1.0 },
-            link3: { mass: 1.0, length: 1.0 },
-            link4: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            top1: revolute(world, link1.start) { damping: 0.0 },
-            middle1: revolute(link1.end, link2.start) { damping: 0.0 },
-            top2: revolute(world, link3.start) { damping: 0.0 },
-            middle2: revolute(link3.end, link4.start) { damping: 0.0 },
-            bottom: revolute(link2.end, link4.end) { damping: 0.0 },
-        }
-    }
-}
+// the rhombus of four links hanging from one pivot, closed at the bottom, as
+// declared in `vigp::systems` (src/systems.rs)
+use vigp::systems::Fourbar;
 
 fn main() -> Result<(), StepError> {
     let dt = 0.01;

@@ -45,14 +45,9 @@ use vigp::gp::{
     Bounds, Gp, Hyperparameters, PriorMean, Screening, TrainOptions, log_marginal_likelihood,
 };
 
-/// The command-line word after `name`, if any.
-fn str_arg(name: &str) -> Option<String> {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .cloned()
-}
+#[path = "common/args.rs"]
+mod args;
+use args::str_arg;
 
 /// The two command-line words after `name`, if any.
 fn pair_arg(name: &str) -> Option<(String, String)> {

@@ -45,36 +45,9 @@ use std::time::Instant;
 
 use vigp::gp::{Gp, Method, Screening, SparseOptions, TrainOptions, sparse_bound};
 
-/// Fractional parts of √p for the first primes: Weyl-sequence directions
-/// (the same as `benches/gp.rs` and `scripts/gp_sklearn_bench.py`).
-const DIRS: [f64; 8] = [
-    0.414_213_562_373_095_1,
-    0.732_050_807_568_877_2,
-    0.236_067_977_499_789_7,
-    0.645_751_311_064_590_6,
-    0.316_624_790_355_399_85,
-    0.605_551_275_463_989_3,
-    0.123_105_625_617_660_55,
-    0.358_898_943_540_673_6,
-];
-
-fn bench_data(n: usize, d: usize) -> (Vec<f64>, Vec<f64>) {
-    let mut x = vec![0.0; n * d];
-    let mut y = vec![0.0; n];
-    for i in 0..n {
-        let r = &mut x[i * d..(i + 1) * d];
-        for (j, v) in r.iter_mut().enumerate() {
-            *v = 4.0 * (((i + 1) as f64) * DIRS[j]).fract() - 2.0;
-        }
-        let mut t = (3.0 * r[0]).sin() + (2.0 * r[1]).cos();
-        if d >= 4 {
-            t += 0.5 * r[2] * r[3];
-        }
-        t += 0.01 * ((((i + 1) as f64) * 0.754_877_666_246_692_8).fract() - 0.5);
-        y[i] = t;
-    }
-    (x, y)
-}
+#[path = "../benches/common/gp_data.rs"]
+mod gp_data;
+use gp_data::bench_data;
 
 fn load() -> String {
     std::fs::read_to_string("/proc/loadavg")
@@ -105,14 +78,9 @@ fn arg(name: &str, default: usize) -> usize {
         .unwrap_or(default)
 }
 
-/// The command-line word after `name`, if any.
-fn str_arg(name: &str) -> Option<String> {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .cloned()
-}
+#[path = "common/args.rs"]
+mod args;
+use args::str_arg;
 
 /// Rows (row-major, `d` wide) through the model's input standardisation.
 fn normalised(gp: &Gp, rows: &[f64]) -> Vec<f64> {

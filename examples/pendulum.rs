@@ -1,23 +1,15 @@
-//! A pendulum declared with the DSL: the nominal variational integrator
-//! against the closed form of its first step, and a 10^4-step summary.
+//! The pendulum of `vigp::systems` (declared with the DSL in src/systems.rs):
+//! the nominal variational integrator against the closed form of its first
+//! step, and a 10^4-step summary.
 //!
 //! Run: `cargo run --release --example pendulum`
 
 use std::f64::consts::FRAC_PI_2;
 use vigp::prelude::*;
 
-vigp::mechanism! {
-    /// A 1 m, 1 kg rod on a pivot at the origin.
-    pub Pendulum {
-        gravity: [0.0, -9.81],
-        links {
-            rod: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            pivot: revolute(world, rod.start) { damping: 0.0 },
-        }
-    }
-}
+// the 1 m, 1 kg rod on a pivot at the origin, as declared in
+// `vigp::systems` (src/systems.rs)
+use vigp::systems::Pendulum;
 
 fn main() -> Result<(), StepError> {
     let dt = 0.01;

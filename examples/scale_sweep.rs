@@ -48,6 +48,9 @@
 
 #[path = "common/font.rs"]
 mod font;
+#[path = "common/windows.rs"]
+mod windows;
+use windows::test_windows;
 #[path = "common/shard.rs"]
 mod shard;
 
@@ -70,26 +73,9 @@ const DT: f64 = 0.01;
 const HORIZON: usize = 20;
 const TRAJ_SAMPLES: usize = 201;
 
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn normal(&mut self) -> f64 {
-        let (u1, u2) = (self.uniform(f64::MIN_POSITIVE, 1.0), self.uniform(0.0, 1.0));
-        (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
+#[path = "../tests/common/rng.rs"]
+mod rng;
+use rng::Rng;
 
 /// Settings of a run. All but `out` and `shard` are written into every
 /// shard's file, and `merge` requires them equal.
@@ -269,19 +255,7 @@ where
     for i in (1..pool.len()).rev() {
         pool.swap(i, rng.below(i + 1));
     }
-    let mut windows = Vec::new();
-    for traj in test {
-        for _ in 0..cli.windows {
-            let k = rng.below(TRAJ_SAMPLES - HORIZON - 1);
-            windows.push((
-                State {
-                    q: traj[k],
-                    v: (traj[k + 1] - traj[k]) / DT,
-                },
-                traj[k..=k + HORIZON].to_vec(),
-            ));
-        }
-    }
+    let windows = test_windows(test, cli.windows, TRAJ_SAMPLES, HORIZON, DT, &mut rng);
     let mse = |roll: &(dyn Fn(&State<N>) -> Result<Vec<State<N>>, StepError> + Sync)| -> f64 {
         let v: Vec<f64> = windows
             .par_iter()

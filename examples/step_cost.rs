@@ -176,21 +176,9 @@ fn table_row<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     Ok(())
 }
 
-vigp::mechanism! {
-    /// The paper's double pendulum with a motor on each joint (as in
-    /// `benches/step.rs`).
-    pub DrivenDoublePendulum {
-        gravity: [0.0, -9.81],
-        links {
-            upper: { mass: 1.0, length: 1.0 },
-            lower: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            shoulder: revolute(world, upper.start) { actuated },
-            elbow: revolute(upper.end, lower.start) { actuated },
-        }
-    }
-}
+#[path = "../benches/common/driven_double_pendulum.rs"]
+mod driven_double_pendulum;
+use driven_double_pendulum::DrivenDoublePendulum;
 
 /// `steps` forced steps of the driven double pendulum from the states of
 /// a trajectory, with (`ab`) or without their exact A and B: the

@@ -12,26 +12,9 @@ use vigp::systems::DoublePendulum;
 /// The time step of the data and of the learned model.
 pub const DT: f64 = 0.01;
 
-/// SplitMix64 with a Box–Muller normal.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    pub fn normal(&mut self) -> f64 {
-        let u = self.uniform(f64::MIN_POSITIVE, 1.0);
-        let v = self.uniform(0.0, 1.0);
-        (-2.0 * u.ln()).sqrt() * (2.0 * PI * v).cos()
-    }
-}
+#[path = "../../tests/common/rng.rs"]
+mod rng;
+pub use rng::Rng;
 
 /// The paper's double-pendulum data: a damped, mass-perturbed "truth",
 /// trajectories of 2 s from random configurations at rest, noise σ = 1e-3

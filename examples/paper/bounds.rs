@@ -312,14 +312,7 @@ where
 {
     let seed = cli.seed ^ 0xB0D5_0000 ^ spec.name.len() as u64;
     let mut rng = Rng(seed);
-    let nominal = S::default();
-    let mut truth = S::default();
-    (spec.perturb)(&mut truth, &mut rng);
-    let (tmin, nmin, nmax) = (
-        (spec.minimal)(&truth),
-        (spec.minimal)(&nominal),
-        (spec.maximal)(&nominal),
-    );
+    let (tmin, nmin, nmax) = spec.models(&mut rng);
     let at_rest = |seed: u64, count: usize| -> Result<Vec<Vec<SVector<f64, N>>>, StepError> {
         let mut r = Rng(seed);
         let starts: Vec<SVector<f64, N>> = (0..count).map(|_| sample_q0(&mut r)).collect();

@@ -45,15 +45,22 @@
 //! truth); `--no-bounds` skips them.
 
 mod bounds;
+#[path = "../common/figure.rs"]
+mod figure;
 #[path = "../common/font.rs"]
 mod font;
+#[path = "../common/median.rs"]
+mod median;
 mod output;
 #[path = "../common/shard.rs"]
 mod shard;
+#[path = "../common/windows.rs"]
+mod windows;
 
 use clap::parser::ValueSource;
 use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser};
 use indicatif::{ProgressBar, ProgressStyle};
+use median::median;
 use nalgebra::SVector;
 use output::{Fig1, Fig2Point, Series};
 use rayon::prelude::*;
@@ -69,6 +76,7 @@ use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
+use windows::test_windows;
 
 impl Cli {
     /// The ground truth's integrator and step.
@@ -367,27 +375,9 @@ const HORIZON: usize = 20;
 const TRAJ_SAMPLES: usize = 201; // 2 s at 10 ms
 const NOISE: f64 = 1e-3;
 
-/// SplitMix64 with Box–Muller normals (a few lines; no RNG crate needed).
-struct Rng(u64);
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-    fn normal(&mut self) -> f64 {
-        let (u1, u2) = (self.uniform(f64::MIN_POSITIVE, 1.0), self.uniform(0.0, 1.0));
-        (-2.0 * u1.ln()).sqrt() * (2.0 * PI * u2).cos()
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
+#[path = "../../tests/common/rng.rs"]
+mod rng;
+use rng::Rng;
 
 /// Positions every DT for 2 s from `q0` at rest, by the ground truth's
 /// integrator at its step.
@@ -499,6 +489,21 @@ struct SystemSpec<S, Mn, Mx> {
     maximal: fn(&S) -> Mx,
 }
 
+impl<S: Default, Mn, Mx> SystemSpec<S, Mn, Mx> {
+    /// A perturbed truth drawn from `rng` in minimal coordinates, and the
+    /// nominal system in minimal and maximal coordinates.
+    fn models(&self, rng: &mut Rng) -> (Mn, Mn, Mx) {
+        let nominal = S::default();
+        let mut truth = S::default();
+        (self.perturb)(&mut truth, rng);
+        (
+            (self.minimal)(&truth),
+            (self.minimal)(&nominal),
+            (self.maximal)(&nominal),
+        )
+    }
+}
+
 #[allow(clippy::too_many_arguments)]
 fn evaluate_system<S, Mn, Mx, const N: usize, const C: usize, const M: usize, const K: usize>(
     spec: &SystemSpec<S, Mn, Mx>,
@@ -521,14 +526,7 @@ where
         let mut rng = Rng(cli.seed
             ^ (run as u64 + 1).wrapping_mul(0x2545_F491_4F6C_DD1D)
             ^ spec.name.len() as u64);
-        let nominal = S::default();
-        let mut truth = S::default();
-        (spec.perturb)(&mut truth, &mut rng);
-        let (tmin, nmin, nmax) = (
-            (spec.minimal)(&truth),
-            (spec.minimal)(&nominal),
-            (spec.maximal)(&nominal),
-        );
+        let (tmin, nmin, nmax) = spec.models(&mut rng);
         let starts: Vec<SVector<f64, N>> = (0..cli.train_trajectories + cli.test_trajectories)
             .map(|_| sample_q0(&mut rng))
             .collect();
@@ -557,19 +555,7 @@ where
             }
         }
         // test windows: noise-free starts z_k and the next HORIZON positions
-        let mut windows = Vec::new();
-        for traj in test {
-            for _ in 0..cli.windows {
-                let k = rng.below(TRAJ_SAMPLES - HORIZON - 1);
-                windows.push((
-                    State {
-                        q: traj[k],
-                        v: (traj[k + 1] - traj[k]) / DT,
-                    },
-                    traj[k..=k + HORIZON].to_vec(),
-                ));
-            }
-        }
+        let windows = test_windows(test, cli.windows, TRAJ_SAMPLES, HORIZON, DT, &mut rng);
         let nominal_vi = Variational::new(nmin, DT);
         let nominal_mse = mean_mse(&windows, &counts, |z| {
             Ok(nominal_vi
@@ -884,18 +870,6 @@ fn figure1(cli: &Cli) -> Result<(Fig1, String), Box<dyn std::error::Error>> {
         drift[1].y.iter().cloned().fold(0.0, f64::max)
     );
     Ok((Fig1 { energy, drift }, notes))
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// Median MSE of a (system, method, n) over runs (NaN runs excluded).

@@ -28,6 +28,7 @@
 //! registered with `plotters::style::register_font` (plotters' `ttf` feature
 //! would need fontconfig).
 
+use crate::figure::{Draw, positive_extent, write_svg_png};
 use crate::font::{FONT, register_embedded_font};
 use std::collections::{BTreeMap, BTreeSet};
 use std::error::Error;
@@ -419,13 +420,7 @@ fn lin_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 
 /// Log2 range for N values: one half power of two padding each side.
 fn log2_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
-    let (lo, hi) =
-        values
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .fold(None, |acc: Option<(f64, f64)>, v| match acc {
-                None => Some((v, v)),
-                Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
-            })?;
+    let (lo, hi) = positive_extent(values)?;
     let pad = if hi > lo { 2f64.sqrt() } else { 2.0 };
     Some((lo / pad, hi * pad))
 }
@@ -453,82 +448,7 @@ fn finite_runs(points: &[(f64, f64)], x_log: bool, floor: f64) -> Vec<Vec<(f64, 
 impl Plot {
     /// Writes `<stem>.svg` and `<stem>.png` into `dir`.
     fn write(&self, dir: &Path, stem: &str) -> Result<Vec<PathBuf>, Box<dyn Error>> {
-        let svg = dir.join(format!("{stem}.svg"));
-        let png = dir.join(format!("{stem}.png"));
-        {
-            let root = SVGBackend::new(&svg, FIG_SIZE).into_drawing_area();
-            self.draw(&root)?;
-            root.present()?;
-        }
-        {
-            let root = BitMapBackend::new(&png, FIG_SIZE).into_drawing_area();
-            self.draw(&root)?;
-            root.present()?;
-        }
-        Ok(vec![svg, png])
-    }
-
-    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), Box<dyn Error>>
-    where
-        DB::ErrorType: 'static,
-    {
-        root.fill(&WHITE)?;
-        let xs = || self.lines.iter().flat_map(|l| l.points.iter().map(|p| p.0));
-        // Only points that can be drawn: finite x (and x > 0 on the log2 axis).
-        let drawable = |x: f64| x.is_finite() && (!self.x_log2 || x > 0.0);
-        let ys = || {
-            self.lines.iter().flat_map(move |l| {
-                l.points
-                    .iter()
-                    .filter(move |p| drawable(p.0))
-                    .map(|p| p.1)
-                    .chain(
-                        l.band
-                            .iter()
-                            .filter(move |b| drawable(b.0))
-                            .flat_map(|b| [b.1, b.2]),
-                    )
-                    .filter(|v| v.is_finite())
-            })
-        };
-        let empty = ys().next().is_none();
-        let (y0, y1) = log_axis(ys(), self.lines.len());
-        let mut builder = ChartBuilder::on(root);
-        builder
-            .caption(&self.title, (FONT, 24))
-            .margin(16)
-            .x_label_area_size(56)
-            .y_label_area_size(84);
-        if self.x_log2 {
-            let (x0, x1) = log2_range(xs()).unwrap_or((1.0, 4.0));
-            let mut chart =
-                builder.build_cartesian_2d((x0..x1).log_scale().base(2.0), (y0..y1).log_scale())?;
-            chart
-                .configure_mesh()
-                .x_desc(&self.x_label)
-                .y_desc(&self.y_label)
-                .x_label_formatter(&|v| format!("{v:.0}"))
-                .y_label_formatter(&|v| log_tick(*v))
-                .label_style((FONT, 15))
-                .axis_desc_style((FONT, 18))
-                .light_line_style(RGBColor(242, 242, 242))
-                .draw()?;
-            self.draw_lines(&mut chart, empty, y0)?;
-        } else {
-            let (x0, x1) = lin_range(xs()).unwrap_or((0.0, 1.0));
-            let mut chart = builder.build_cartesian_2d(x0..x1, (y0..y1).log_scale())?;
-            chart
-                .configure_mesh()
-                .x_desc(&self.x_label)
-                .y_desc(&self.y_label)
-                .y_label_formatter(&|v| log_tick(*v))
-                .label_style((FONT, 15))
-                .axis_desc_style((FONT, 18))
-                .light_line_style(RGBColor(242, 242, 242))
-                .draw()?;
-            self.draw_lines(&mut chart, empty, y0)?;
-        }
-        Ok(())
+        write_svg_png(self, FIG_SIZE, dir, stem)
     }
 
     fn draw_lines<'a, DB: DrawingBackend + 'a, X, Y>(
@@ -616,6 +536,71 @@ impl Plot {
                 .background_style(WHITE.mix(0.85))
                 .border_style(RGBColor(160, 160, 160))
                 .draw()?;
+        }
+        Ok(())
+    }
+}
+
+impl Draw for Plot {
+    fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), Box<dyn Error>>
+    where
+        DB::ErrorType: 'static,
+    {
+        root.fill(&WHITE)?;
+        let xs = || self.lines.iter().flat_map(|l| l.points.iter().map(|p| p.0));
+        // Only points that can be drawn: finite x (and x > 0 on the log2 axis).
+        let drawable = |x: f64| x.is_finite() && (!self.x_log2 || x > 0.0);
+        let ys = || {
+            self.lines.iter().flat_map(move |l| {
+                l.points
+                    .iter()
+                    .filter(move |p| drawable(p.0))
+                    .map(|p| p.1)
+                    .chain(
+                        l.band
+                            .iter()
+                            .filter(move |b| drawable(b.0))
+                            .flat_map(|b| [b.1, b.2]),
+                    )
+                    .filter(|v| v.is_finite())
+            })
+        };
+        let empty = ys().next().is_none();
+        let (y0, y1) = log_axis(ys(), self.lines.len());
+        let mut builder = ChartBuilder::on(root);
+        builder
+            .caption(&self.title, (FONT, 24))
+            .margin(16)
+            .x_label_area_size(56)
+            .y_label_area_size(84);
+        if self.x_log2 {
+            let (x0, x1) = log2_range(xs()).unwrap_or((1.0, 4.0));
+            let mut chart =
+                builder.build_cartesian_2d((x0..x1).log_scale().base(2.0), (y0..y1).log_scale())?;
+            chart
+                .configure_mesh()
+                .x_desc(&self.x_label)
+                .y_desc(&self.y_label)
+                .x_label_formatter(&|v| format!("{v:.0}"))
+                .y_label_formatter(&|v| log_tick(*v))
+                .label_style((FONT, 15))
+                .axis_desc_style((FONT, 18))
+                .light_line_style(RGBColor(242, 242, 242))
+                .draw()?;
+            self.draw_lines(&mut chart, empty, y0)?;
+        } else {
+            let (x0, x1) = lin_range(xs()).unwrap_or((0.0, 1.0));
+            let mut chart = builder.build_cartesian_2d(x0..x1, (y0..y1).log_scale())?;
+            chart
+                .configure_mesh()
+                .x_desc(&self.x_label)
+                .y_desc(&self.y_label)
+                .y_label_formatter(&|v| log_tick(*v))
+                .label_style((FONT, 15))
+                .axis_desc_style((FONT, 18))
+                .light_line_style(RGBColor(242, 242, 242))
+                .draw()?;
+            self.draw_lines(&mut chart, empty, y0)?;
         }
         Ok(())
     }

@@ -126,6 +126,18 @@ fn run_shard(o: &Options, shard: Shard, dir: &Path) -> PathBuf {
     shard::write(dir, FORMAT, shard, o, &units).expect("write shard")
 }
 
+/// Runs all `count` shards of the sweep, each into its own folder below
+/// `root`; returns the folders in shard order.
+fn run_shards(o: &Options, count: usize, root: &Path) -> Vec<PathBuf> {
+    (0..count)
+        .map(|index| {
+            let dir = root.join(Shard { index, count }.dir_name());
+            run_shard(o, Shard { index, count }, &dir);
+            dir
+        })
+        .collect()
+}
+
 fn merge_dirs(dirs: &[PathBuf]) -> Result<(Options, Vec<Out>), ShardError> {
     let files = dirs
         .iter()
@@ -281,13 +293,7 @@ fn merged_shards_equal_the_unsharded_sweep() {
     let (_, merged_one) = merge_dirs(&[one]).unwrap();
     assert_eq!(bits(&merged_one), bits(&whole));
     for count in [2, 4, 16, 17, 20] {
-        let dirs: Vec<PathBuf> = (0..count)
-            .map(|index| {
-                let dir = root.join(Shard { index, count }.dir_name());
-                run_shard(&o, Shard { index, count }, &dir);
-                dir
-            })
-            .collect();
+        let dirs = run_shards(&o, count, &root);
         // any order of the folders
         let mut shuffled = dirs.clone();
         shuffled.reverse();
@@ -304,13 +310,7 @@ fn broken_shard_sets_are_typed_errors() {
     let o = options();
     let root = scratch("broken");
     let count = 4;
-    let dirs: Vec<PathBuf> = (0..count)
-        .map(|index| {
-            let dir = root.join(Shard { index, count }.dir_name());
-            run_shard(&o, Shard { index, count }, &dir);
-            dir
-        })
-        .collect();
+    let dirs = run_shards(&o, count, &root);
     assert!(merge_dirs(&dirs).is_ok());
 
     assert!(matches!(merge_dirs(&[]), Err(ShardError::NoShards)));

@@ -28,8 +28,12 @@
 //!   failures are recorded as `diverged` / `failed`, never plotted.
 
 mod analysis;
+#[path = "../common/figure.rs"]
+mod figure;
 #[path = "../common/font.rs"]
 mod font;
+#[path = "../common/median.rs"]
+mod median;
 mod output;
 mod run;
 

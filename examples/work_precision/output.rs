@@ -18,6 +18,7 @@
 //! Text is rendered with DejaVu Sans, embedded from `assets/fonts/` and
 //! registered with `plotters::style::register_font` (as in the paper example).
 
+use crate::figure::{Draw, positive_extent, write_svg_png};
 use crate::font::{FONT, register_embedded_font};
 use std::error::Error;
 use std::fmt::Write as _;
@@ -401,13 +402,7 @@ struct Figure {
 
 /// Decade-aligned log range of the finite positive `values`, at least one decade.
 fn decades(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
-    let (lo, hi) =
-        values
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .fold(None, |acc: Option<(f64, f64)>, v| match acc {
-                None => Some((v, v)),
-                Some((lo, hi)) => Some((lo.min(v), hi.max(v))),
-            })?;
+    let (lo, hi) = positive_extent(values)?;
     let mut lo_e = (lo.log10() - 0.05).floor();
     let mut hi_e = (hi.log10() + 0.05).ceil();
     if hi_e <= lo_e {
@@ -420,21 +415,11 @@ fn decades(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 impl Figure {
     /// Writes `<stem>.svg` and `<stem>.png` into `dir`.
     fn write(&self, dir: &Path, stem: &str) -> Result<Vec<PathBuf>, Box<dyn Error>> {
-        let svg = dir.join(format!("{stem}.svg"));
-        let png = dir.join(format!("{stem}.png"));
-        {
-            let root = SVGBackend::new(&svg, FIG_SIZE).into_drawing_area();
-            self.draw(&root)?;
-            root.present()?;
-        }
-        {
-            let root = BitMapBackend::new(&png, FIG_SIZE).into_drawing_area();
-            self.draw(&root)?;
-            root.present()?;
-        }
-        Ok(vec![svg, png])
+        write_svg_png(self, FIG_SIZE, dir, stem)
     }
+}
 
+impl Draw for Figure {
     fn draw<DB: DrawingBackend>(&self, root: &DrawingArea<DB, Shift>) -> Result<(), Box<dyn Error>>
     where
         DB::ErrorType: 'static,

@@ -4,6 +4,7 @@
 //! Everything here is generic over the mechanism; the results it returns are
 //! plain numbers, so that the analysis and the output need no generics.
 
+use crate::median::median;
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -300,19 +301,6 @@ pub struct SweepPoint {
     pub steps: usize,
     /// The measurement, or why there is none.
     pub outcome: Result<Measured, Failure>,
-}
-
-/// Median of a non-empty slice (sorted in place).
-pub fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n == 0 {
-        f64::NAN
-    } else if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
 }
 
 /// Runs `method` to t = `steps · dt` from the problem's initial state,

@@ -626,25 +626,9 @@ vigp::mechanism! {
     }
 }
 
-vigp::mechanism! {
-    /// The paper's four-bar rhombus, driven at the top pivot and at the
-    /// loop-closing joint.
-    pub DrivenFourbar {
-        links {
-            link1: { mass: 1.0, length: 1.0 },
-            link2: { mass: 1.0, length: 1.0 },
-            link3: { mass: 1.0, length: 1.0 },
-            link4: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            top1: revolute(world, link1.start) { damping: 0.1, actuated },
-            middle1: revolute(link1.end, link2.start) { damping: 0.0 },
-            top2: revolute(world, link3.start) { damping: 0.0 },
-            middle2: revolute(link3.end, link4.start) { damping: 0.0 },
-            bottom: revolute(link2.end, link4.end) { damping: 0.05, actuated },
-        }
-    }
-}
+#[path = "../common/drive_fourbar.rs"]
+mod drive_fourbar;
+use drive_fourbar::DriveFourbar;
 
 /// Spectral norm by nalgebra's SVD (the library's own is a power iteration).
 fn norm2<const N: usize>(a: &nalgebra::SMatrix<f64, N, N>) -> f64 {
@@ -859,7 +843,7 @@ fn step_jacobian_norms_match_central_differences() {
 
     // a driven loop (two inputs, one of them on the loop-closing joint):
     // the forced step projects, and so do the differences
-    let truth = DrivenFourbar::default().minimal();
+    let truth = DriveFourbar::default().minimal();
     let z = vigp::projection::consistent_state(
         &truth,
         &SVector::from([0.9, -1.3, -0.4, 1.3]),
@@ -875,7 +859,7 @@ fn step_jacobian_norms_match_central_differences() {
 
     // the same loop in maximal coordinates (12 coordinates, 10 joint
     // constraints), the view `vigp fit --encoding maximal` trains
-    let maximal = DrivenFourbar::default().maximal();
+    let maximal = DriveFourbar::default().maximal();
     let zm = truth.to_maximal(&z, DT);
     let data = forced_data::<_, 12, 10, 2>(maximal, &zm, 40, 1.0, 5e-3, &mut rng);
     let (l, _) =

@@ -1,22 +1,10 @@
 //! Shared helpers for the integration tests.
 #![allow(dead_code)]
 
-/// SplitMix64: a tiny deterministic generator so tests need no RNG crate.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [lo, hi).
-    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * ((self.next_u64() >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
+#[path = "rng.rs"]
+mod rng;
+#[allow(unused_imports)] // not every test binary draws random numbers
+pub use rng::Rng;
 
 use nalgebra::SVector;
 use vigp::{Mechanism, Variational};

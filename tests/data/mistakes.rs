@@ -13,43 +13,21 @@ use vigp::prelude::*;
 use vigp::spatial::{LieStepper, SpatialError, SpatialIntegrator, SpatialState};
 use vigp::systems::{DoublePendulum, Fourbar, Pendulum, PendulumMinimal};
 
-vigp::mechanism! {
-    /// Three 1 m links pinned at the origin and at (5, 0): the chain
-    /// reaches 3 m, the loop cannot close.
-    pub ShortChain {
-        gravity: [0.0, -9.81],
-        links {
-            a: { mass: 1.0, length: 1.0 },
-            b: { mass: 1.0, length: 1.0 },
-            c: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            p: revolute(world, a.start),
-            q: revolute(a.end, b.start),
-            r: revolute(b.end, c.start),
-            s: revolute(c.end, world @ [5.0, 0.0]),
-        }
-    }
-}
+#[macro_use]
+#[path = "../common/pinned_chain.rs"]
+mod pinned_chain;
 
-vigp::mechanism! {
-    /// The same chain pinned exactly 3 m apart: it closes, but only at
-    /// full stretch (the loop Jacobian loses rank there).
-    pub TautChain3 {
-        gravity: [0.0, -9.81],
-        links {
-            a: { mass: 1.0, length: 1.0 },
-            b: { mass: 1.0, length: 1.0 },
-            c: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            p: revolute(world, a.start),
-            q: revolute(a.end, b.start),
-            r: revolute(b.end, c.start),
-            s: revolute(c.end, world @ [3.0, 0.0]),
-        }
-    }
-}
+pinned_chain!(
+    ShortChain,
+    5.0,
+    "Three 1 m links pinned at the origin and at (5, 0): the chain reaches 3 m, the loop cannot close."
+);
+
+pinned_chain!(
+    TautChain3,
+    3.0,
+    "The same chain pinned exactly 3 m apart: it closes, but only at full stretch (the loop Jacobian loses rank there)."
+);
 
 vigp::mechanism! {
     /// A rod on a ball joint (minimal coordinates: one quaternion).

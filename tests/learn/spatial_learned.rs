@@ -28,35 +28,10 @@ fn options() -> TrainOptions {
     }
 }
 
-/// Largest centre-of-mass distance between two trajectories.
-fn distance<const B: usize>(a: &[SpatialState<B>], b: &[SpatialState<B>]) -> f64 {
-    a.iter()
-        .zip(b)
-        .flat_map(|(x, y)| (0..B).map(move |i| (x.x[i] - y.x[i]).norm()))
-        .fold(0.0, f64::max)
-}
-
-/// The same physical state with every quaternion negated (q and −q are the
-/// same orientation).
-fn twin<const B: usize>(z: &SpatialState<B>) -> SpatialState<B> {
-    let mut t = *z;
-    for q in &mut t.q {
-        *q = nalgebra::UnitQuaternion::new_unchecked(-q.into_inner());
-    }
-    t
-}
-
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        lo + (hi - lo) * ((z >> 11) as f64 / (1u64 << 53) as f64)
-    }
-}
+#[path = "../common/spatial_states.rs"]
+mod spatial_states;
+use crate::common::Rng;
+use spatial_states::{distance, twin};
 
 /// The Furuta pendulum with unmodelled joint friction (base 0.02, pivot
 /// 0.001 N·m·s/rad), learned on top of the frictionless model from 5

@@ -7,6 +7,10 @@
 //! where they are checked.
 #![allow(dead_code)]
 
+#[macro_use]
+#[path = "../common/pinned_chain.rs"]
+mod pinned_chain;
+
 use nalgebra::{SMatrix, SVector};
 use vigp::gp::{Bounds, Gp, GpError, Hyperparameters, SavedGp, TrainOptions};
 use vigp::learned::{Encoding, Learned, Prior, transitions};
@@ -192,44 +196,17 @@ fn check_typed_failure(row: &mut Row, e: &StepError) {
     }
 }
 
-vigp::mechanism! {
-    /// Three links pinned at both ends, exactly as far apart as the chain is
-    /// long: the only configuration is the straight one, where the loop
-    /// Jacobian loses rank (a fully stretched chain).
-    pub TautChain {
-        gravity: [0.0, -9.81],
-        links {
-            a: { mass: 1.0, length: 1.0 },
-            b: { mass: 1.0, length: 1.0 },
-            c: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            p: revolute(world, a.start),
-            q: revolute(a.end, b.start),
-            r: revolute(b.end, c.start),
-            s: revolute(c.end, world @ [3.0, 0.0]),
-        }
-    }
-}
+pinned_chain!(
+    TautChain,
+    3.0,
+    "Three links pinned at both ends, exactly as far apart as the chain is long: the only configuration is the straight one, where the loop Jacobian loses rank (a fully stretched chain)."
+);
 
-vigp::mechanism! {
-    /// The same chain with its ends 2.9 m apart: one degree of freedom that
-    /// swings through nearly stretched poses.
-    pub SlackChain {
-        gravity: [0.0, -9.81],
-        links {
-            a: { mass: 1.0, length: 1.0 },
-            b: { mass: 1.0, length: 1.0 },
-            c: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            p: revolute(world, a.start),
-            q: revolute(a.end, b.start),
-            r: revolute(b.end, c.start),
-            s: revolute(c.end, world @ [2.9, 0.0]),
-        }
-    }
-}
+pinned_chain!(
+    SlackChain,
+    2.9,
+    "The same chain with its ends 2.9 m apart: one degree of freedom that swings through nearly stretched poses."
+);
 
 vigp::mechanism! {
     /// A five-link open chain, released fully stretched (horizontal).
