@@ -645,3 +645,45 @@ fn rollout_derivatives_chain_to_the_differences_of_the_whole_rollout() {
         .fold(0.0f64, f64::max);
     assert!(gap < 1e-10, "{gap:e}");
 }
+
+#[test]
+fn step_derivatives_refuse_bad_input_with_typed_errors() {
+    let robot = Robot::from_urdf(fixture("arm3.urdf"))
+        .unwrap()
+        .with_actuated(&["j3"])
+        .unwrap();
+    let z = RobotState::new(vec![0.1, 0.2, 0.0], vec![0.0; 3]);
+    let nan = RobotState::new(vec![0.1, f64::NAN, 0.0], vec![0.0; 3]);
+    let short = RobotState::new(vec![0.1, 0.2], vec![0.0; 2]);
+    assert!(matches!(
+        robot.step_derivatives(&nan, &[0.0], 1e-3),
+        Err(RobotError::Engine(EngineError::NonFiniteState))
+    ));
+    assert!(matches!(
+        robot.step_derivatives(&short, &[0.0], 1e-3),
+        Err(RobotError::WrongLength { what: "q", .. })
+    ));
+    assert!(matches!(
+        robot.step_derivatives(&z, &[0.0, 1.0], 1e-3),
+        Err(RobotError::WrongLength { what: "inputs", .. })
+    ));
+    assert!(matches!(
+        robot.step_derivatives(&z, &[f64::INFINITY], 1e-3),
+        Err(RobotError::Engine(EngineError::NonFiniteInput))
+    ));
+    for dt in [0.0, -1e-3, f64::NAN, f64::INFINITY] {
+        assert!(
+            matches!(
+                robot.step_derivatives(&z, &[0.0], dt),
+                Err(RobotError::Engine(EngineError::InvalidTimeStep { .. }))
+            ),
+            "dt {dt}"
+        );
+    }
+    // a failing step inside a rollout names the step
+    let inputs = vec![vec![0.0], vec![f64::NAN], vec![0.0]];
+    match robot.rollout_derivatives(&z, &inputs, 1e-3) {
+        Err(RobotError::Rollout { step: 1, .. }) => {}
+        other => panic!("expected a failure at step 1, got {other:?}"),
+    }
+}
