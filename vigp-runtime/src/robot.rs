@@ -519,9 +519,28 @@ impl Robot {
         u: &[f64],
         dt: f64,
     ) -> Result<StepDerivatives, RobotError> {
-        let n = self.dof();
         self.check_state(z)?;
         self.check_inputs(u)?;
+        let mut ws = vec![BodyScratch::default(); self.dof()];
+        let p = self.momentum(z)?;
+        let start = self.term_jacobians(&z.q, &z.v, &mut ws)?;
+        self.derivatives_from(z, p, start, u, dt, &mut ws)
+            .map(|(d, _, _)| d)
+    }
+
+    /// [`Robot::step_derivatives`] from z with its momentum p and its term
+    /// derivatives `start` known (a rollout carries both from the step
+    /// before); also returns them at the new state.
+    fn derivatives_from(
+        &self,
+        z: &RobotState,
+        mut p: Vec<f64>,
+        mut start: TermJacobians,
+        u: &[f64],
+        dt: f64,
+        ws: &mut [BodyScratch],
+    ) -> Result<(StepDerivatives, Vec<f64>, TermJacobians), RobotError> {
+        let n = self.dof();
         let options = *self.engine.options();
         // one sub-step at a time: the engine's own step without subdivision
         let single = Engine::with_options(
@@ -536,30 +555,26 @@ impl Robot {
         for (&i, &x) in self.inputs.iter().zip(u) {
             tau[i] = x;
         }
-        let mut ws = vec![BodyScratch::default(); n];
-        let mut p = self.momentum(z)?;
         let (mut q, mut v) = (z.q.clone(), z.v.clone());
-        let mut a = DMatrix::<f64>::identity(2 * n, 2 * n);
-        let mut b = DMatrix::<f64>::zeros(2 * n, self.inputs.len());
+        // the product of the converged sub-steps' derivatives so far
+        let mut ab: Option<(DMatrix<f64>, DMatrix<f64>)> = None;
         let mut report = EngineReport::default();
         let (mut depth, mut done, mut total) = (0u32, 0usize, 1usize);
         while done < total {
             let h = dt / total as f64;
             let (q0, v0) = (q.clone(), v.clone());
-            let failed = match single.step(&mut q, &mut v, &mut p, &tau, h, &mut ws) {
+            let failed = match single.step(&mut q, &mut v, &mut p, &tau, h, ws) {
                 Ok(r) => {
                     report.iterations += r.iterations;
                     report.substeps += 1;
                     report.residual = report.residual.max(r.residual);
                     done += 1;
-                    let (sa, sb) = self.substep_derivatives(&q0, &v0, &v, h, &mut ws)?;
-                    // the first sub-step's derivatives are the product so far
-                    if report.substeps == 1 {
-                        (a, b) = (sa, sb);
-                    } else {
-                        b = &sa * &b + sb;
-                        a = sa * a;
-                    }
+                    let (sa, sb, end) = self.substep_derivatives(&start, &q0, &v0, &v, h, ws)?;
+                    start = end;
+                    ab = Some(match ab {
+                        None => (sa, sb),
+                        Some((a, b)) => (&sa * a, &sa * b + sb),
+                    });
                     continue;
                 }
                 Err(EngineError::NotConverged {
@@ -591,12 +606,15 @@ impl Robot {
             total *= 2;
         }
         report.depth = depth;
-        Ok(StepDerivatives {
+        // the loop ends only after a converged sub-step
+        let (a, b) = ab.ok_or(RobotError::SingularNewtonMatrix)?;
+        let d = StepDerivatives {
             state: RobotState { q, v },
             a,
             b,
             report,
-        })
+        };
+        Ok((d, p, start))
     }
 
     /// A driven rollout with every step's exact derivatives: entry k is
@@ -607,40 +625,56 @@ impl Robot {
     /// ∂z_K/∂z_0 = A_{K−1}⋯A_0 and ∂z_K/∂u_j = A_{K−1}⋯A_{j+1}B_j. Each step
     /// starts its iteration from the state's own velocity (not the
     /// extrapolation of [`Robot::rollout_with`]), so the states agree with
-    /// that rollout's to the solver's tolerance. A failure names the step.
+    /// that rollout's to the solver's tolerance; the momentum and the term
+    /// derivatives at each state are carried from the step before, not
+    /// recomputed. A failure names the step.
     pub fn rollout_derivatives(
         &self,
         z0: &RobotState,
         inputs: &[Vec<f64>],
         dt: f64,
     ) -> Result<Vec<StepDerivatives>, RobotError> {
+        let fail = |step, e| RobotError::Rollout {
+            step,
+            source: Box::new(e),
+        };
+        if inputs.is_empty() {
+            return Ok(Vec::new());
+        }
+        self.check_state(z0).map_err(|e| fail(0, e))?;
+        let mut ws = vec![BodyScratch::default(); self.dof()];
+        let mut p = self.momentum(z0).map_err(|e| fail(0, e))?;
+        let mut terms = self
+            .term_jacobians(&z0.q, &z0.v, &mut ws)
+            .map_err(|e| fail(0, e))?;
         let mut out: Vec<StepDerivatives> = Vec::with_capacity(inputs.len());
         for (k, u) in inputs.iter().enumerate() {
+            self.check_inputs(u).map_err(|e| fail(k, e))?;
             let z = out.last().map_or(z0, |d| &d.state);
-            let d = self
-                .step_derivatives(z, u, dt)
-                .map_err(|e| RobotError::Rollout {
-                    step: k,
-                    source: Box::new(e),
-                })?;
+            let (d, p1, t1) = self
+                .derivatives_from(z, p, terms, u, dt, &mut ws)
+                .map_err(|e| fail(k, e))?;
+            (p, terms) = (p1, t1);
             out.push(d);
         }
         Ok(out)
     }
 
     /// The derivatives of one converged sub-step of h from (q₀, v₀) to
-    /// v₁: A_s = ∂(q₁, v₁)/∂(q₀, v₀) and B_s = ∂(q₁, v₁)/∂u.
+    /// v₁, given the term derivatives `start` at (q₀, v₀):
+    /// A_s = ∂(q₁, v₁)/∂(q₀, v₀), B_s = ∂(q₁, v₁)/∂u, and the term
+    /// derivatives at (q₁, v₁) (the next sub-step's start).
     fn substep_derivatives(
         &self,
+        start: &TermJacobians,
         q0: &[f64],
         v0: &[f64],
         v1: &[f64],
         h: f64,
         ws: &mut [BodyScratch],
-    ) -> Result<(DMatrix<f64>, DMatrix<f64>), RobotError> {
+    ) -> Result<(DMatrix<f64>, DMatrix<f64>, TermJacobians), RobotError> {
         let n = self.dof();
         let q1: Vec<f64> = q0.iter().zip(v0).map(|(q, v)| q + h * v).collect();
-        let start = self.term_jacobians(q0, v0, ws)?;
         let end = self.term_jacobians(&q1, v1, ws)?;
         // r = P(q₀, v₀) + F(q₁, v₁) + h·τ,
         // F = −P(q₁, v₁) + h·(∂T/∂q(q₁, v₁) − ∇V(q₁) − D·v₁)
@@ -673,7 +707,7 @@ impl Robot {
         if !(a.iter().chain(b.iter()).all(|x| x.is_finite())) {
             return Err(RobotError::SingularNewtonMatrix);
         }
-        Ok((a, b))
+        Ok((a, b, end))
     }
 
     /// ∂/∂q and ∂/∂v of the momentum P = M(q)v, of ∂T/∂q and of ∇V at
