@@ -10,11 +10,13 @@
 //! `u_<joint>` columns).
 
 use std::f64::consts::PI;
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
 use vigp::prelude::*;
 use vigp::systems::Cartpole;
+
+mod common;
+use common::{mse_line, run_tool, s, temp_dir, vigp};
 
 #[path = "../../tests/common/drive_cartpole.rs"]
 mod drive_cartpole;
@@ -104,57 +106,6 @@ fn measured_csv<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
         }
     }
     text
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vigp-e2e-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// The two numbers of `score`'s last line.
-fn mse_line(report: &str) -> (f64, f64) {
-    let last = report.lines().last().expect("a report");
-    let (n, l) = last
-        .strip_prefix("nominal_mse=")
-        .and_then(|r| r.split_once(" learned_mse="))
-        .unwrap_or_else(|| panic!("last line {last:?}"));
-    (n.parse().unwrap(), l.parse().unwrap())
-}
-
-fn vigp(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_vigp"))
-        .args(args)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "vigp {args:?} failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    eprintln!("$ vigp {}\n{stdout}", args.join(" "));
-    stdout
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// The tool of `systems` run in-process as the program `name`, its report
-/// echoed to stderr.
-fn run_tool(
-    systems: &[vigp::cli::SystemEntry],
-    name: &str,
-    args: &[&str],
-) -> Result<String, vigp::cli::CliError> {
-    let mut out = Vec::new();
-    let mut argv = vec![name];
-    argv.extend_from_slice(args);
-    let r = vigp::cli::run(systems, argv, &mut out);
-    let text = String::from_utf8(out).unwrap();
-    eprintln!("$ {name} {}\n{text}", args.join(" "));
-    r.map(|()| text)
 }
 
 /// `predict --model MODEL --data DATA --steps STEPS --out OUT` (without the

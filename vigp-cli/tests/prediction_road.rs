@@ -12,49 +12,18 @@ use std::path::{Path, PathBuf};
 use vigp::SVector;
 use vigp::prelude::*;
 
+mod common;
+use common::{mse_line, run_tool, s, table, temp_dir};
+
 #[path = "../../tests/common/drive_cartpole.rs"]
 mod drive_cartpole;
 use drive_cartpole::DriveCartpole;
 
 const DT: f64 = 0.01;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vigp-road-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
+/// The tool of the driven cart-pole, in-process, as the program `drive`.
 fn run(args: &[&str]) -> Result<String, vigp::cli::CliError> {
-    let mut out = Vec::new();
-    let mut argv = vec!["drive"];
-    argv.extend_from_slice(args);
-    let r = vigp::cli::run(&[vigp::cli::system::<DriveCartpole>()], argv, &mut out);
-    let text = String::from_utf8(out).unwrap();
-    eprintln!("$ drive {}\n{text}", args.join(" "));
-    r.map(|()| text)
-}
-
-/// The rows of a CSV file, split at commas (header first).
-fn table(path: &Path) -> Vec<Vec<String>> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .map(|l| l.split(',').map(str::to_string).collect())
-        .collect()
-}
-
-/// The two numbers of `score`'s last line.
-fn mse_line(report: &str) -> (f64, f64) {
-    let last = report.lines().last().expect("a report");
-    let (n, l) = last
-        .strip_prefix("nominal_mse=")
-        .and_then(|r| r.split_once(" learned_mse="))
-        .unwrap_or_else(|| panic!("last line {last:?}"));
-    (n.parse().unwrap(), l.parse().unwrap())
+    run_tool(&[vigp::cli::system::<DriveCartpole>()], "drive", args)
 }
 
 /// A plan of `n` inputs held for 10 rows each.

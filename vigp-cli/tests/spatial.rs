@@ -9,8 +9,10 @@
 //! input columns, and `identify` with `fit --prior identified:FILE` on
 //! it; and the maximal view refused with a typed error.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
+
+mod common;
+use common::{mse_line, run_tool, s, table, temp_dir, vigp, vigp_fails};
 
 use vigp::SVector;
 use vigp::data::{Dataset, ReadOptions};
@@ -49,61 +51,6 @@ vigp::mechanism! {
             pivot: revolute(arm.end, pendulum.start) { axis: [1.0, 0.0, 0.0], damping: 0.0 },
         }
     }
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("vigp-spatial-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// The `vigp` binary with `args`; its report (stdout), echoed to stderr.
-fn vigp(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_vigp"))
-        .args(args)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "vigp {args:?} failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    eprintln!("$ vigp {}\n{stdout}", args.join(" "));
-    stdout
-}
-
-/// The `vigp` binary with `args`, expected to fail: its stderr.
-fn vigp_fails(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_vigp"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(!out.status.success(), "vigp {args:?} succeeded");
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-/// The two numbers of `score`'s last line.
-fn mse_line(report: &str) -> (f64, f64) {
-    let last = report.lines().last().expect("a report");
-    let (n, l) = last
-        .strip_prefix("nominal_mse=")
-        .and_then(|r| r.split_once(" learned_mse="))
-        .unwrap_or_else(|| panic!("last line {last:?}"));
-    (n.parse().unwrap(), l.parse().unwrap())
-}
-
-/// The rows of a CSV file, split at commas (header first).
-fn table(path: &Path) -> Vec<Vec<String>> {
-    std::fs::read_to_string(path)
-        .unwrap()
-        .lines()
-        .map(|l| l.split(',').map(str::to_string).collect())
-        .collect()
 }
 
 /// Start states (base, pivot, their rates), one per run index from
@@ -453,15 +400,7 @@ fn a_furuta_log_of_the_nominal_model_is_reproduced() {
 fn a_driven_3d_mechanism_declared_here_gets_the_same_tool() {
     let dir = temp_dir("driven");
     let tool = [vigp::cli::system::<DrivenFuruta>()];
-    let run = |args: &[&str]| {
-        let mut out = Vec::new();
-        let mut argv = vec!["driven"];
-        argv.extend_from_slice(args);
-        let r = vigp::cli::run(&tool, argv, &mut out);
-        let text = String::from_utf8(out).unwrap();
-        eprintln!("$ driven {}\n{text}", args.join(" "));
-        r.map(|()| text)
-    };
+    let run = |args: &[&str]| run_tool(&tool, "driven", args);
     let mut train = String::new();
     let mut test = String::new();
     for i in 0..6 {
