@@ -21,7 +21,7 @@ use vigp::{Parameters, State, Variational};
 vigp::mechanism! {
     /// A spatial arm: a yawing base, a shoulder and an elbow about
     /// horizontal axes, damped joints, 3-D gravity.
-    Arm {
+    pub Arm {
         gravity: [0.0, 0.0, -9.81],
         links {
             base: { mass: 2.0, length: 0.3, inertia: [0.02, 0.03, 0.025] },
@@ -38,7 +38,7 @@ vigp::mechanism! {
 
 vigp::mechanism! {
     /// A driven double pendulum with springs (inputs and stiffness·rest).
-    DrivenSprung {
+    pub DrivenSprung {
         gravity: [0.0, -9.81],
         links {
             upper: { mass: 1.0, length: 1.0 },
@@ -89,7 +89,7 @@ vigp::mechanism! {
     }
 }
 /// A torque or force input: a sum of two sines.
-fn drive(k: usize) -> f64 {
+pub(crate) fn drive(k: usize) -> f64 {
     let t = k as f64 * DT;
     2.0 * (1.7 * t).sin() + 1.0 * (4.3 * t + 0.5).cos()
 }
@@ -100,7 +100,7 @@ pub(crate) const DT: f64 = 0.01;
 /// centres of mass moved by up to 5 cm in every direction) and set every
 /// damping to U[0.05, 0.3] (stiffness ×U[0.8, 1.2], rest ±0.1): a "true"
 /// mechanism unlike the declared one.
-fn perturbed<M: Parameters + Copy>(m: M, rng: &mut Rng) -> M {
+pub(crate) fn perturbed<M: Parameters + Copy>(m: M, rng: &mut Rng) -> M {
     let mut t = m;
     let mut factor = 1.0;
     for (i, name) in M::PARAMETER_NAMES.iter().enumerate() {
@@ -135,7 +135,7 @@ fn perturbed<M: Parameters + Copy>(m: M, rng: &mut Rng) -> M {
 /// A log written by the VI (first order: α = 0, midpoint: α = ½) of the
 /// mechanism `m` from `q0` at rest (projected onto the constraints), with
 /// the inputs `u(k)` applied by the forced rollout.
-fn vi_log<M, const N: usize, const C: usize, const U: usize>(
+pub(crate) fn vi_log<M, const N: usize, const C: usize, const U: usize>(
     m: M,
     alpha: f64,
     q0: SVector<f64, N>,
@@ -211,7 +211,7 @@ fn affine_defect<R: Regressor>(r: &R, log: &Log, pi: &[f64]) -> f64 {
 
 /// The largest relative error of the base parameters: |K(π̂ − π*)|_i over
 /// Σ_j |K_ij π*_j| (the size of the combination's terms).
-fn base_error(id: &Identification, truth: &[f64]) -> f64 {
+pub(crate) fn base_error(id: &Identification, truth: &[f64]) -> f64 {
     let k = &id.base.k;
     (0..k.nrows())
         .map(|i| {
@@ -224,7 +224,7 @@ fn base_error(id: &Identification, truth: &[f64]) -> f64 {
         .fold(0.0, f64::max)
 }
 
-fn standard<M: Parameters>(m: &M) -> Vec<f64> {
+pub(crate) fn standard<M: Parameters>(m: &M) -> Vec<f64> {
     Structure::of::<M>()
         .unwrap()
         .standard(|i| m.parameter(i).unwrap())

@@ -14,4 +14,5 @@ mod held_inputs;
 mod identify;
 mod learned;
 mod learned_file;
+mod output_error;
 mod spatial_learned;

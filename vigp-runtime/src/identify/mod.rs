@@ -26,7 +26,12 @@
 //!    weight capped, so that the directions the data do not see stay where
 //!    the prior puts them ([`consistency`]);
 //! 4. gives the **covariance** and the 95 % interval of each base
-//!    parameter ([`covariance`]) and a table ([`report`]).
+//!    parameter ([`covariance`]) and a table ([`report`]);
+//! 5. optionally ([`Options::output_error`]) **refines** the estimate by
+//!    output error: segments of the logs simulated with the parameters,
+//!    their initial states estimated with them, exact sensitivities by the
+//!    implicit function theorem, Levenberg–Marquardt under the same prior
+//!    and consistency ([`output_error`]).
 //!
 //! [`excitation`] designs the input to log: a Fourier series per actuated
 //! joint that maximises the regressor's information about the base
@@ -56,12 +61,14 @@ pub mod consistency;
 pub mod covariance;
 pub mod estimate;
 pub mod excitation;
+pub mod output_error;
 pub mod regressor;
 pub mod report;
 
 pub use base::Base;
 pub use estimate::{Loss, Noise};
 pub use excitation::{Designed, Evaluation, Excitation, Fourier, Problem};
+pub use output_error::{OutputError, Refinement};
 pub use regressor::{
     BodySlots, DelRegressor, JointSlots, ParameterKind, Regressor, Structure, Transition,
 };
@@ -251,6 +258,12 @@ pub struct Options {
     pub consistent: bool,
     /// The covariance model of the intervals (default: position noise).
     pub intervals: Intervals,
+    /// The second stage: refine the estimate by output error
+    /// ([`output_error`]; default off). Unbiased under position noise and
+    /// free of the regression's pull on the overall scale of unforced
+    /// logs; costs a simulation of every log with exact sensitivities per
+    /// iteration. Mechanisms without loops.
+    pub output_error: Option<OutputError>,
 }
 
 /// How the covariance of the estimate is computed ([`covariance`]).
@@ -274,6 +287,7 @@ impl Default for Options {
             rank_tolerance: 1e-8,
             consistent: true,
             intervals: Intervals::PositionNoise,
+            output_error: None,
         }
     }
 }
@@ -323,6 +337,10 @@ pub struct Identification {
     pub base_covariance: DMatrix<f64>,
     /// Transitions used.
     pub transitions: usize,
+    /// What the output-error stage did, when it ran
+    /// ([`Options::output_error`]); the estimate, covariances and
+    /// intervals are then its own.
+    pub refinement: Option<Refinement>,
 }
 
 impl Identification {
@@ -584,7 +602,7 @@ pub fn identify<R: Regressor>(
         .map(|i| base_covariance[(i, i)] < 0.5 * prior_base[(i, i)])
         .collect();
     let base_names = base.names(&structure.names);
-    Ok(Identification {
+    let first = Identification {
         declared,
         prior_sd,
         estimate,
@@ -607,5 +625,10 @@ pub fn identify<R: Regressor>(
         base_covariance,
         transitions,
         structure,
-    })
+        refinement: None,
+    };
+    match &options.output_error {
+        Some(oe) => output_error::refine(regressor, logs, &first, oe, options.consistent),
+        None => Ok(first),
+    }
 }

@@ -40,8 +40,9 @@
 
 use super::IdentifyError;
 use crate::del;
-use crate::mechanism::Mechanism;
-use nalgebra::{DMatrix, DVector, SVector};
+use crate::mechanism::{Mechanism, Scalar};
+use nalgebra::{Const, DMatrix, DVector, SVector};
+use num_dual::DualVec;
 use vigp_core::Parameters;
 
 /// Where one body's parameters live among the DSL's named parameters
@@ -488,6 +489,19 @@ pub trait Regressor {
     /// x_k's: d(Zᵀr) = Zᵀ(dr − dGᵀλ) there, since ZᵀGᵀ = 0.
     fn noise_jacobian(&self, t: &Transition<'_>, pi: &[f64])
     -> Result<DMatrix<f64>, IdentifyError>;
+
+    /// The residual of a mechanism without loops at parameters π, and its
+    /// exact Jacobians with respect to x_{k−1}, x_k and x_{k+1} (each
+    /// N × N): what a simulation with the parameters π needs (x_{k+1}
+    /// solves residual = 0) and its derivatives by the implicit function
+    /// theorem ([`super::output_error`]). A mechanism with loops gets
+    /// [`IdentifyError::Layout`]: its step also solves for multipliers.
+    #[allow(clippy::type_complexity)]
+    fn position_jacobians(
+        &self,
+        t: &Transition<'_>,
+        pi: &[f64],
+    ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError>;
 }
 
 /// The regressor of the DEL residual of a mechanism (module docs), for the
@@ -628,6 +642,27 @@ where
         r + del::del_terms_forced::<M, f64, N, C>(m, dt, alpha, &x[1], &v1, u[1])
     }
 
+    /// [`Self::raw`] on any scalar: the residual through jets, for its
+    /// exact Jacobians.
+    fn raw_jet<D: Scalar>(&self, m: &M, x: &[SVector<D, N>; 3], u: [&[f64]; 2]) -> SVector<D, N> {
+        let (dt, alpha) = (D::from(self.dt), self.alpha);
+        let v0 = (x[1] - x[0]) / dt;
+        let v1 = (x[2] - x[1]) / dt;
+        let p0 = if alpha == 0.0 {
+            del::momentum::<M, D, N, C>(m, &x[0], &v0)
+        } else {
+            let h = D::from(alpha * self.dt);
+            let m0 = x[0] + v0 * h;
+            let mut p = del::momentum::<M, D, N, C>(m, &m0, &v0)
+                + del::force_terms::<M, D, N, C>(m, &m0, &v0) * h;
+            if u[0].iter().any(|v| *v != 0.0) {
+                p += m.input_force::<D>(&m0, u[0]) * h;
+            }
+            p
+        };
+        p0 + del::del_terms_forced::<M, D, N, C>(m, self.dt, alpha, &x[1], &v1, u[1])
+    }
+
     /// An orthonormal basis (N × (N − C), as rows of the returned matrix)
     /// of the null space of G(x_k): the eigenvectors of GᵀG with the N − C
     /// smallest eigenvalues, which are exactly zero since rank G ≤ C.
@@ -726,6 +761,44 @@ where
             }
         }
         Ok(jac)
+    }
+
+    fn position_jacobians(
+        &self,
+        t: &Transition<'_>,
+        pi: &[f64],
+    ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError> {
+        if C > 0 {
+            return Err(IdentifyError::Layout {
+                message: format!(
+                    "{C} loop constraint(s): a simulation would also solve for their multipliers"
+                ),
+            });
+        }
+        let x = self.vectors(t)?;
+        let m = self.model_with(pi)?;
+        let mut r = DVector::zeros(N);
+        let jacs = [0, 1, 2].map(|s| {
+            let (value, jac) = num_dual::jacobian(
+                |xs: SVector<DualVec<f64, Const<N>>, N>| {
+                    let mut xx = x.map(|v| v.map(DualVec::from_re));
+                    xx[s] = xs;
+                    self.raw_jet(&m, &xx, t.inputs)
+                },
+                &x[s],
+            );
+            r = DVector::from_column_slice(value.as_slice());
+            DMatrix::from_column_slice(N, N, jac.as_slice())
+        });
+        if r.iter()
+            .chain(jacs.iter().flat_map(|j| j.iter()))
+            .any(|v| !v.is_finite())
+        {
+            return Err(IdentifyError::NonFinite {
+                what: "residual or its Jacobian".into(),
+            });
+        }
+        Ok((r, jacs))
     }
 
     fn transition(
