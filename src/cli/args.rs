@@ -188,6 +188,12 @@ pub(super) struct IdentifyArgs {
     /// The treatment of position noise.
     #[arg(long, value_enum, default_value = "ls")]
     pub(super) noise: NoiseArg,
+    /// Refine the regression by output error: the log simulated in
+    /// segments of SAMPLES samples (default 50), their initial positions
+    /// estimated with the parameters. Unbiased under position noise;
+    /// mechanisms without loops.
+    #[arg(long, value_name = "SAMPLES", num_args = 0..=1, default_missing_value = "50")]
+    pub(super) output_error: Option<usize>,
     /// The prior's standard deviation around the declared values, relative
     /// to each parameter's scale (its weight against the data vanishes as
     /// the log grows).

@@ -7,7 +7,9 @@ use std::path::Path;
 
 use super::args::{IdentifyArgs, NoiseArg, RuleArg};
 use super::{CliError, check_out_dir, io_error, read_log, w};
-use crate::identify::{DelRegressor, Log, Noise, Options, Status, identify as run_identify};
+use crate::identify::{
+    DelRegressor, Log, Noise, Options, OutputError, Status, identify as run_identify,
+};
 use crate::{Mechanism, Parameters};
 
 /// The `format` field of a parameter file.
@@ -42,6 +44,10 @@ where
         NoiseArg::Ls => Noise::LeastSquares,
         NoiseArg::Iv => Noise::IV,
     };
+    options.output_error = a.output_error.map(|segment| OutputError {
+        segment,
+        ..OutputError::default()
+    });
     let id = run_identify(&regressor, &logs, &options).map_err(fail)?;
     let report = id.report();
     let identified = regressor.model_with(&id.estimate).map_err(fail)?;
@@ -60,6 +66,25 @@ where
             a.prior_sd
         ),
     )?;
+    if let Some(r) = &id.refinement {
+        w(
+            out,
+            format_args!(
+                "output error: {} segments, {} samples, {} iterations{}; rms simulation error {:.3e} → {:.3e}, position noise σ ≈ {:.3e}",
+                r.segments,
+                r.samples,
+                r.iterations,
+                if r.converged {
+                    ""
+                } else {
+                    " (iteration limit)"
+                },
+                r.rms_start,
+                r.rms,
+                r.position_sigma
+            ),
+        )?;
+    }
     w(out, format_args!("{report}"))?;
     // every parameter the identification sets, as the report's DSL rows
     // say (a 3-D inertia's lower entries name the upper entry they

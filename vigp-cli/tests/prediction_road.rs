@@ -496,7 +496,9 @@ fn simulate_subdivides_failing_steps_by_default() {
 /// whose joints are more damped than declared: the damping of both joints
 /// is identified to rounding (the DEL residual is exactly linear in the
 /// parameters and zero at the truth; tolerance 1e-8 relative, far above
-/// the regression's rounding of about 1e-12), and `fit --prior
+/// the regression's rounding of about 1e-12), also with `--output-error`
+/// (the log is the rule's own, so its simulation reproduces it at the
+/// truth), and `fit --prior
 /// identified:FILE` makes the model file's nominal model the truth's
 /// dynamics: its 20-step score on a held-out log is below 1e-6 of the
 /// declared model's. A file of another mechanism is refused.
@@ -574,6 +576,36 @@ fn identify_then_fit_with_the_identified_prior() {
         assert!(
             (got - true_value).abs() <= 1e-8 * true_value,
             "{name}: {got} vs {true_value}"
+        );
+    }
+    // the output-error stage keeps the recovery (the log is the rule's
+    // own: the simulation reproduces it at the truth)
+    let refined = dir.join("refined.json");
+    let text = run(&[
+        "identify",
+        "--data",
+        s(&train),
+        "--rule",
+        "first-order",
+        "--output-error",
+        "--out",
+        s(&refined),
+    ])
+    .unwrap();
+    assert!(text.contains("output error: 8 segments"), "{text}");
+    let file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&refined).unwrap()).unwrap();
+    for (name, true_value) in [("joints.rail.damping", 0.3), ("joints.hinge.damping", 0.08)] {
+        let r = file["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["name"] == name)
+            .unwrap();
+        let got = r["identified"].as_f64().unwrap();
+        assert!(
+            (got - true_value).abs() <= 1e-8 * true_value,
+            "output error, {name}: {got} vs {true_value}"
         );
     }
 
