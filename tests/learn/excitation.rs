@@ -6,7 +6,8 @@
 //! Numbers are printed with `-- --nocapture`.
 
 use crate::common::Rng;
-use crate::identify::{DT, DrivenCartpole, DrivenDoublePendulum, noisy};
+use crate::fixtures::{DT, noisy};
+use crate::identify::{DrivenCartpole, DrivenDoublePendulum};
 use nalgebra::DMatrix;
 use vigp::identify::excitation::{Excitation, Fourier, Problem};
 use vigp::identify::{DelRegressor, Identification, IdentifyError, Noise, Options, identify};

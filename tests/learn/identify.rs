@@ -7,6 +7,7 @@
 //! Numbers quoted in the report are printed with `-- --nocapture`.
 
 use crate::common;
+use crate::fixtures::{DT, DrivenSprung, base_error, drive, noisy, perturbed, standard, vi_log};
 use common::Rng;
 use nalgebra::SVector;
 use vigp::identify::consistency::{Metric, inconsistent_bodies, project, pseudo_inertia};
@@ -16,7 +17,7 @@ use vigp::identify::{
 };
 use vigp::prelude::*;
 use vigp::systems::{DoublePendulum, Fourbar, Pendulum};
-use vigp::{Parameters, State, Variational};
+use vigp::{Parameters, Variational};
 
 vigp::mechanism! {
     /// A spatial arm: a yawing base, a shoulder and an elbow about
@@ -32,21 +33,6 @@ vigp::mechanism! {
             yaw: revolute(world, base.start) { axis: [0.0, 0.0, 1.0], damping: 0.1, actuated },
             shoulder: revolute(base.end, upper.start) { axis: [0.0, 1.0, 0.0], damping: 0.1 },
             elbow: revolute(upper.end, fore.start) { axis: [0.3, 1.0, 0.0], damping: 0.1, actuated },
-        }
-    }
-}
-
-vigp::mechanism! {
-    /// A driven double pendulum with springs (inputs and stiffness·rest).
-    pub DrivenSprung {
-        gravity: [0.0, -9.81],
-        links {
-            upper: { mass: 1.0, length: 1.0 },
-            lower: { mass: 0.8, length: 0.7 },
-        }
-        joints {
-            shoulder: revolute(world, upper.start) { damping: 0.1, actuated, stiffness: 3.0, rest: 0.4 },
-            elbow: revolute(upper.end, lower.start) { damping: 0.2, actuated, stiffness: 2.0, rest: -0.3 },
         }
     }
 }
@@ -88,90 +74,6 @@ vigp::mechanism! {
         }
     }
 }
-/// A torque or force input: a sum of two sines.
-pub(crate) fn drive(k: usize) -> f64 {
-    let t = k as f64 * DT;
-    2.0 * (1.7 * t).sin() + 1.0 * (4.3 * t + 0.5).cos()
-}
-
-pub(crate) const DT: f64 = 0.01;
-
-/// Perturb every inertial parameter (masses and inertias ×U[0.8, 1.2],
-/// centres of mass moved by up to 5 cm in every direction) and set every
-/// damping to U[0.05, 0.3] (stiffness ×U[0.8, 1.2], rest ±0.1): a "true"
-/// mechanism unlike the declared one.
-pub(crate) fn perturbed<M: Parameters + Copy>(m: M, rng: &mut Rng) -> M {
-    let mut t = m;
-    let mut factor = 1.0;
-    for (i, name) in M::PARAMETER_NAMES.iter().enumerate() {
-        let p = t.parameter_mut(i).unwrap();
-        if name.ends_with(".mass") || name.ends_with(".stiffness") {
-            *p *= rng.uniform(0.8, 1.2);
-        } else if name.contains(".inertia") {
-            // One factor per link on its principal moments (drawn at the
-            // first entry, `inertia` or `inertia.xx`); off-diagonal entries
-            // stay (zero): the tensor stays symmetric and realisable.
-            if name.ends_with(".inertia") || name.ends_with(".xx") {
-                factor = rng.uniform(0.8, 1.2);
-            }
-            let diag = name.ends_with(".inertia")
-                || name.ends_with(".xx")
-                || name.ends_with(".yy")
-                || name.ends_with(".zz");
-            if diag {
-                *p *= factor;
-            }
-        } else if name.contains(".com.") {
-            *p += rng.uniform(-0.05, 0.05);
-        } else if name.ends_with(".damping") {
-            *p = rng.uniform(0.05, 0.3);
-        } else if name.ends_with(".rest") {
-            *p += rng.uniform(-0.1, 0.1);
-        }
-    }
-    t
-}
-
-/// A log written by the VI (first order: α = 0, midpoint: α = ½) of the
-/// mechanism `m` from `q0` at rest (projected onto the constraints), with
-/// the inputs `u(k)` applied by the forced rollout.
-pub(crate) fn vi_log<M, const N: usize, const C: usize, const U: usize>(
-    m: M,
-    alpha: f64,
-    q0: SVector<f64, N>,
-    steps: usize,
-    u: impl Fn(usize) -> SVector<f64, U>,
-) -> Log
-where
-    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
-{
-    let z0 = vigp::projection::consistent_state(&m, &q0, &SVector::zeros(), DT).unwrap();
-    let vi = if alpha == 0.0 {
-        Variational::new(m, DT)
-    } else {
-        Variational::midpoint(m, DT)
-    };
-    let inputs: Vec<SVector<f64, U>> = (0..steps).map(&u).collect();
-    let traj: Vec<State<N>> = vi.rollout_forced(&z0, &inputs).unwrap();
-    let mut positions: Vec<Vec<f64>> = traj.iter().map(|z| z.q.as_slice().to_vec()).collect();
-    // The last state's discrete velocity gives one more sample.
-    let last = traj.last().unwrap();
-    positions.push((last.q + last.v * DT).as_slice().to_vec());
-    let log_inputs = if U == 0 {
-        Vec::new()
-    } else {
-        // Input j of the rollout acts over [t_{j+1}, t_{j+2}] (log row j + 1).
-        // (The last sample's own input acts after the log ends.)
-        let mut v = vec![vec![0.0; U]];
-        v.extend(inputs.iter().map(|x| x.as_slice().to_vec()));
-        v.push(vec![0.0; U]);
-        v
-    };
-    Log {
-        positions,
-        inputs: log_inputs,
-    }
-}
 
 /// The largest deviation |residual(π) − (Y·π − b)| over the transitions
 /// of `log`, relative to Σ|Y_ij π_j| + |b_i| (the size of the terms that
@@ -207,27 +109,6 @@ fn affine_defect<R: Regressor>(r: &R, log: &Log, pi: &[f64]) -> f64 {
         }
     }
     worst
-}
-
-/// The largest relative error of the base parameters: |K(π̂ − π*)|_i over
-/// Σ_j |K_ij π*_j| (the size of the combination's terms).
-pub(crate) fn base_error(id: &Identification, truth: &[f64]) -> f64 {
-    let k = &id.base.k;
-    (0..k.nrows())
-        .map(|i| {
-            let err: f64 = (0..k.ncols())
-                .map(|j| k[(i, j)] * (id.estimate[j] - truth[j]))
-                .sum();
-            let size: f64 = (0..k.ncols()).map(|j| (k[(i, j)] * truth[j]).abs()).sum();
-            err.abs() / size
-        })
-        .fold(0.0, f64::max)
-}
-
-pub(crate) fn standard<M: Parameters>(m: &M) -> Vec<f64> {
-    Structure::of::<M>()
-        .unwrap()
-        .standard(|i| m.parameter(i).unwrap())
 }
 
 fn not_identifiable(id: &Identification) -> Vec<String> {
@@ -606,24 +487,6 @@ fn projection_onto_realisable_parameters() {
     );
 }
 
-/// Gaussian noise by Box–Muller.
-fn gauss(rng: &mut Rng) -> f64 {
-    let u1 = rng.uniform(1e-300, 1.0);
-    let u2 = rng.uniform(0.0, 1.0);
-    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
-}
-
-pub(crate) fn noisy(log: &Log, sigma: f64, rng: &mut Rng) -> Log {
-    Log {
-        positions: log
-            .positions
-            .iter()
-            .map(|x| x.iter().map(|v| v + sigma * gauss(rng)).collect())
-            .collect(),
-        inputs: log.inputs.clone(),
-    }
-}
-
 /// Poor data: one short swing (0.2 s from rest at 0.1 rad) with position
 /// noise 1e-4. The estimate stays realisable and within three prior
 /// standard deviations of the declared values, and the report names the
@@ -833,7 +696,7 @@ fn bad_input_is_an_error() {
 /// parameter) pairs whose interval holds the truth. With 16 × 12 = 192
 /// pairs the binomial standard error at 95 % is 1.6 %: the test asks for
 /// 0.88–1.0 (more than four standard errors below 95 %). The large sweep
-/// is `cargo run --release --example identify_coverage`.
+/// is `cargo run --release --example identify_coverage` (both stages).
 #[test]
 fn noisy_intervals_cover_the_truth() {
     let declared = DrivenSprung::default().minimal();

@@ -7,9 +7,11 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+use common::Rng;
 
 mod embedded_learned;
 mod excitation;
+mod fixtures;
 mod held_inputs;
 mod identify;
 mod learned;

@@ -6,9 +6,8 @@
 //! Numbers are printed with `-- --nocapture`.
 
 use crate::common::Rng;
-use crate::identify::{
-    Arm, DT, DrivenSprung, base_error, drive, noisy, perturbed, standard, vi_log,
-};
+use crate::fixtures::{DT, DrivenSprung, base_error, drive, noisy, perturbed, standard, vi_log};
+use crate::identify::Arm;
 use nalgebra::SVector;
 use vigp::identify::output_error::simulate;
 use vigp::identify::{
