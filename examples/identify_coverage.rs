@@ -20,8 +20,7 @@ mod fixtures;
 mod rng;
 
 use clap::Parser;
-use fixtures::{DT, DrivenSprung, base_error, noisy, perturbed, standard, vi_log};
-use nalgebra::SVector;
+use fixtures::{DT, base_error, coverage_case, covers, noisy};
 use rayon::prelude::*;
 use rng::Rng;
 use vigp::identify::{DelRegressor, Identification, Noise, Options, OutputError, identify};
@@ -43,26 +42,14 @@ struct Args {
 /// Per seed: for each base parameter whether the interval holds the
 /// truth, and the largest relative error.
 fn score(id: &Identification, truth: &[f64]) -> (Vec<bool>, f64) {
-    let k = &id.base.k;
-    let hit = (0..k.nrows())
-        .map(|i| {
-            let t: f64 = (0..k.ncols()).map(|j| k[(i, j)] * truth[j]).sum();
-            (id.base_estimate[i] - t).abs() <= id.base_half_width[i]
-        })
-        .collect();
-    (hit, base_error(id, truth))
+    (covers(id, truth), base_error(id, truth))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args = Args::parse();
-    let declared = DrivenSprung::default().minimal();
-    let truth = perturbed(declared, &mut Rng(9));
-    let clean = vi_log::<_, 2, 0, 2>(truth, 0.5, SVector::from([0.5, 0.2]), args.steps, |k| {
-        let t = k as f64 * DT;
-        SVector::from([3.0 * (1.3 * t).sin() + 1.0, 2.0 * (2.1 * t + 0.4).cos()])
-    });
-    let r = DelRegressor::midpoint(declared, DT)?;
-    let t = standard(&truth);
+    let case = coverage_case(args.steps);
+    let (clean, t) = (&case.clean, &case.truth);
+    let r = DelRegressor::midpoint(case.declared, DT)?;
     let first = Options {
         noise: Noise::IV,
         ..Options::default()
@@ -74,10 +61,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let runs: Vec<_> = (0..args.seeds)
         .into_par_iter()
         .map(|seed| {
-            let log = noisy(&clean, args.sigma, &mut Rng(1000 + seed));
+            let log = noisy(clean, args.sigma, &mut Rng(1000 + seed));
             let a = identify(&r, std::slice::from_ref(&log), &first)?;
             let b = identify(&r, &[log], &second)?;
-            Ok((score(&a, &t), score(&b, &t), a.base_names))
+            Ok((score(&a, t), score(&b, t), a.base_names))
         })
         .collect::<Result<_, vigp::identify::IdentifyError>>()?;
     let names = &runs[0].2;

@@ -150,3 +150,42 @@ pub fn noisy(log: &Log, sigma: f64, rng: &mut Rng) -> Log {
         inputs: log.inputs.clone(),
     }
 }
+
+/// The coverage case: the driven, sprung double pendulum, its truth
+/// perturbed with seed 9, logged by the midpoint rule for `steps` steps
+/// from (0.5, 0.2) under two sums of sines.
+pub struct Coverage {
+    /// The declared mechanism.
+    pub declared: DrivenSprungMinimal,
+    /// The truth's standard parameters.
+    pub truth: Vec<f64>,
+    /// The noise-free log.
+    pub clean: Log,
+}
+
+/// [`Coverage`] with a log of `steps` steps.
+pub fn coverage_case(steps: usize) -> Coverage {
+    let declared = DrivenSprung::default().minimal();
+    let truth = perturbed(declared, &mut Rng(9));
+    let clean = vi_log::<_, 2, 0, 2>(truth, 0.5, SVector::from([0.5, 0.2]), steps, |k| {
+        let t = k as f64 * DT;
+        SVector::from([3.0 * (1.3 * t).sin() + 1.0, 2.0 * (2.1 * t + 0.4).cos()])
+    });
+    Coverage {
+        declared,
+        truth: standard(&truth),
+        clean,
+    }
+}
+
+/// For each base parameter of `id`, whether its 95 % interval holds the
+/// truth's value.
+pub fn covers(id: &Identification, truth: &[f64]) -> Vec<bool> {
+    let k = &id.base.k;
+    (0..k.nrows())
+        .map(|i| {
+            let t: f64 = (0..k.ncols()).map(|j| k[(i, j)] * truth[j]).sum();
+            (id.base_estimate[i] - t).abs() <= id.base_half_width[i]
+        })
+        .collect()
+}

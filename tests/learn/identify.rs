@@ -7,7 +7,9 @@
 //! Numbers quoted in the report are printed with `-- --nocapture`.
 
 use crate::common;
-use crate::fixtures::{DT, DrivenSprung, base_error, drive, noisy, perturbed, standard, vi_log};
+use crate::fixtures::{
+    DT, DrivenSprung, base_error, coverage_case, covers, drive, noisy, perturbed, standard, vi_log,
+};
 use common::Rng;
 use nalgebra::SVector;
 use vigp::identify::consistency::{Metric, inconsistent_bodies, project, pseudo_inertia};
@@ -699,30 +701,19 @@ fn bad_input_is_an_error() {
 /// is `cargo run --release --example identify_coverage` (both stages).
 #[test]
 fn noisy_intervals_cover_the_truth() {
-    let declared = DrivenSprung::default().minimal();
-    let truth = perturbed(declared, &mut Rng(9));
-    let clean = vi_log::<_, 2, 0, 2>(truth, 0.5, SVector::from([0.5, 0.2]), 1500, |k| {
-        let t = k as f64 * DT;
-        SVector::from([3.0 * (1.3 * t).sin() + 1.0, 2.0 * (2.1 * t + 0.4).cos()])
-    });
-    let r = DelRegressor::midpoint(declared, DT).unwrap();
-    let t = standard(&truth);
+    let case = coverage_case(1500);
+    let r = DelRegressor::midpoint(case.declared, DT).unwrap();
     let options = Options {
         noise: Noise::IV,
         ..Options::default()
     };
     let (mut covered, mut total) = (0, 0);
     for seed in 0..16 {
-        let log = noisy(&clean, 1e-4, &mut Rng(1000 + seed));
+        let log = noisy(&case.clean, 1e-4, &mut Rng(1000 + seed));
         let id = identify(&r, &[log], &options).unwrap();
-        let k = &id.base.k;
-        for i in 0..k.nrows() {
-            let true_i: f64 = (0..k.ncols()).map(|j| k[(i, j)] * t[j]).sum();
-            total += 1;
-            if (id.base_estimate[i] - true_i).abs() <= id.base_half_width[i] {
-                covered += 1;
-            }
-        }
+        let hits = covers(&id, &case.truth);
+        total += hits.len();
+        covered += hits.iter().filter(|h| **h).count();
         if seed == 0 {
             println!("position σ estimated {:?} (true 1e-4)", id.position_sigma);
         }

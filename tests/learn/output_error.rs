@@ -6,7 +6,9 @@
 //! Numbers are printed with `-- --nocapture`.
 
 use crate::common::Rng;
-use crate::fixtures::{DT, DrivenSprung, base_error, drive, noisy, perturbed, standard, vi_log};
+use crate::fixtures::{
+    DT, DrivenSprung, base_error, coverage_case, covers, drive, noisy, perturbed, standard, vi_log,
+};
 use crate::identify::Arm;
 use nalgebra::SVector;
 use vigp::identify::output_error::simulate;
@@ -130,20 +132,15 @@ fn noise_free_logs_stay_recovered() {
 /// seeds. Accuracy is the largest relative base-parameter error of a
 /// seed. The refinement must be more accurate on every seed and at least
 /// 3× more accurate in the root mean square over the seeds ("several
-/// times better"; measured: 2.3× to 23× per seed), its intervals must hold the truth in at least 85 % of the (seed, base
-/// parameter) pairs (48 pairs: 95 % coverage gives ≥ 85 % with
+/// times better"; measured: 2.3× to 30× per seed), its intervals must
+/// hold the truth in at least 85 % of the (seed, base parameter) pairs (48 pairs: 95 % coverage gives ≥ 85 % with
 /// probability > 0.99), and its estimate of σ must be within 10 % of the
 /// true one (≈ 6000 residuals: the standard error of σ̂ is 1 %).
 #[test]
 fn output_error_beats_the_regression_under_noise() {
-    let declared = DrivenSprung::default().minimal();
-    let truth = perturbed(declared, &mut Rng(9));
-    let clean = vi_log::<_, 2, 0, 2>(truth, 0.5, SVector::from([0.5, 0.2]), 1500, |k| {
-        let t = k as f64 * DT;
-        SVector::from([3.0 * (1.3 * t).sin() + 1.0, 2.0 * (2.1 * t + 0.4).cos()])
-    });
-    let r = DelRegressor::midpoint(declared, DT).unwrap();
-    let t = standard(&truth);
+    let case = coverage_case(1500);
+    let r = DelRegressor::midpoint(case.declared, DT).unwrap();
+    let t = &case.truth;
     let first = Options {
         noise: Noise::IV,
         ..Options::default()
@@ -155,10 +152,10 @@ fn output_error_beats_the_regression_under_noise() {
     let (mut covered, mut total) = (0, 0);
     let (mut sa, mut sb) = (0.0, 0.0);
     for seed in 0..4 {
-        let log = noisy(&clean, 1e-3, &mut Rng(2000 + seed));
+        let log = noisy(&case.clean, 1e-3, &mut Rng(2000 + seed));
         let a = identify(&r, std::slice::from_ref(&log), &first).unwrap();
         let b = identify(&r, &[log], &second).unwrap();
-        let (ea, eb) = (base_error(&a, &t), base_error(&b, &t));
+        let (ea, eb) = (base_error(&a, t), base_error(&b, t));
         let refinement = b.refinement.as_ref().unwrap();
         println!(
             "seed {seed}: regression {ea:.2e}, output error {eb:.2e} ({:.1}×); σ̂ {:.3e}, \
@@ -177,14 +174,9 @@ fn output_error_beats_the_regression_under_noise() {
             "{}",
             refinement.position_sigma
         );
-        let k = &b.base.k;
-        for i in 0..k.nrows() {
-            let true_i: f64 = (0..k.ncols()).map(|j| k[(i, j)] * t[j]).sum();
-            total += 1;
-            if (b.base_estimate[i] - true_i).abs() <= b.base_half_width[i] {
-                covered += 1;
-            }
-        }
+        let hits = covers(&b, t);
+        total += hits.len();
+        covered += hits.iter().filter(|h| **h).count();
     }
     let gain = (sa / sb).sqrt();
     let frac = covered as f64 / total as f64;

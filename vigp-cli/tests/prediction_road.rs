@@ -491,6 +491,17 @@ fn simulate_subdivides_failing_steps_by_default() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// The row of parameter `name` in a parameter file of `vigp identify`.
+fn parameter_row(file: &serde_json::Value, name: &str) -> serde_json::Value {
+    file["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["name"] == name)
+        .unwrap_or_else(|| panic!("no row {name} in {file}"))
+        .clone()
+}
+
 /// `identify` on a log that the first-order integrator wrote under a
 /// persistently exciting plan, for a cart-pole whose pole is heavier and
 /// whose joints are more damped than declared: the damping of both joints
@@ -556,15 +567,7 @@ fn identify_then_fit_with_the_identified_prior() {
     assert!(text.contains("base parameters"), "{text}");
     let file: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
-    let row = |name: &str| {
-        file["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["name"] == name)
-            .unwrap_or_else(|| panic!("no row {name} in {file}"))
-            .clone()
-    };
+    let row = |name: &str| parameter_row(&file, name);
     for (name, declared, true_value) in [
         ("joints.rail.damping", 0.1, 0.3),
         ("joints.hinge.damping", 0.05, 0.08),
@@ -596,13 +599,7 @@ fn identify_then_fit_with_the_identified_prior() {
     let file: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&refined).unwrap()).unwrap();
     for (name, true_value) in [("joints.rail.damping", 0.3), ("joints.hinge.damping", 0.08)] {
-        let r = file["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["name"] == name)
-            .unwrap();
-        let got = r["identified"].as_f64().unwrap();
+        let got = parameter_row(&file, name)["identified"].as_f64().unwrap();
         assert!(
             (got - true_value).abs() <= 1e-8 * true_value,
             "output error, {name}: {got} vs {true_value}"
