@@ -259,10 +259,17 @@ pub struct Options {
     /// The covariance model of the intervals (default: position noise).
     pub intervals: Intervals,
     /// The second stage: refine the estimate by output error
-    /// ([`output_error`]; default off). Unbiased under position noise and
-    /// free of the regression's pull on the overall scale of unforced
-    /// logs; costs a simulation of every log with exact sensitivities per
-    /// iteration. Mechanisms without loops.
+    /// ([`output_error`]). Unbiased under position noise; costs a
+    /// simulation of every log with exact sensitivities per iteration.
+    /// Mechanisms without loops.
+    ///
+    /// `None` (the default) runs the regression alone, except on logs where
+    /// no input acts: their rows are homogeneous in π, and the regression
+    /// on noisy rows pulls the overall scale of π towards zero (its data
+    /// term shrinks with π). There output error runs with its default
+    /// options from the declared values: the simulation does not change
+    /// with the scale, so the data fix the ratios and the prior the scale
+    /// ([`Refinement::homogeneous`]).
     pub output_error: Option<OutputError>,
 }
 
@@ -520,6 +527,7 @@ pub fn identify<R: Regressor>(
         });
     }
     let (stack, transitions) = stack(regressor, logs, options.noise)?;
+    let homogeneous = homogeneous(&stack, &declared);
     let base = Base::new(&stack.w, options.rank_tolerance);
     let fit = estimate::solve(&stack, &base, &declared, &prior_sd, options.loss)?;
     let unconstrained: Vec<f64> = fit.pi.iter().cloned().collect();
@@ -627,8 +635,35 @@ pub fn identify<R: Regressor>(
         structure,
         refinement: None,
     };
-    match &options.output_error {
-        Some(oe) => output_error::refine(regressor, logs, &first, oe, options.consistent),
-        None => Ok(first),
+    // Homogeneous rows: the regression pulls the scale towards zero (its
+    // data term shrinks with π), so output error runs, from the declared
+    // values.
+    match (&options.output_error, homogeneous) {
+        (Some(oe), _) => {
+            output_error::refine(regressor, logs, &first, oe, options.consistent, homogeneous)
+        }
+        (None, true) => output_error::refine(
+            regressor,
+            logs,
+            &first,
+            &OutputError::default(),
+            options.consistent,
+            true,
+        ),
+        (None, false) => Ok(first),
     }
+}
+
+/// Whether every stacked row is homogeneous in π (b = 0 to rounding: no
+/// input acts on the logs). The DEL residual of free motion does not change
+/// when π is scaled, so such logs fix every ratio of π but not its scale.
+fn homogeneous(stack: &estimate::Stack, declared: &[f64]) -> bool {
+    let size = (0..stack.w.nrows())
+        .map(|i| {
+            (0..stack.w.ncols())
+                .map(|j| (stack.w[(i, j)] * declared[j]).abs())
+                .sum::<f64>()
+        })
+        .fold(0.0, f64::max);
+    stack.b.amax() <= 1e-10 * size
 }

@@ -113,6 +113,10 @@ pub struct Refinement {
     /// Whether the relative decrease fell below the tolerance before the
     /// iteration limit.
     pub converged: bool,
+    /// Whether the logs were homogeneous in π (no input acts), so that
+    /// the refinement started from the declared values, not from the
+    /// regression's estimate ([`super::Options::output_error`]).
+    pub homogeneous: bool,
 }
 
 /// One segment of one log: samples `start .. start + len` of log `log`.
@@ -487,8 +491,10 @@ fn reduced_precision(sys: &Normal, prior_precision: &DVector<f64>) -> DMatrix<f6
     h
 }
 
-/// Refine the first stage's estimate `first` by output error (module
-/// docs). Returns the identification with the refined estimate, its
+/// Refine the first stage's result `first` by output error (module
+/// docs), starting from its estimate, or from the declared values when
+/// the logs are `homogeneous` in π (no input acts: the regression's scale
+/// cannot be trusted, [`super::Options::output_error`]). Returns the identification with the refined estimate, its
 /// covariance and intervals, and [`Identification::refinement`] set.
 pub fn refine<R: Regressor>(
     regressor: &R,
@@ -496,6 +502,7 @@ pub fn refine<R: Regressor>(
     first: &Identification,
     options: &OutputError,
     consistent: bool,
+    homogeneous: bool,
 ) -> Result<Identification, IdentifyError> {
     if options.segment < 3
         || options.max_iterations == 0
@@ -525,8 +532,13 @@ pub fn refine<R: Regressor>(
         first.prior_sd.iter().map(|s| 1.0 / (s * s)),
     );
     let declared = DVector::from_column_slice(&first.declared);
+    let start = if homogeneous {
+        &first.declared
+    } else {
+        &first.estimate
+    };
     let mut at = Point {
-        pi: DVector::from_column_slice(&first.estimate),
+        pi: DVector::from_column_slice(start),
         starts: segs
             .iter()
             .map(|s| {
@@ -541,9 +553,9 @@ pub fn refine<R: Regressor>(
             })
             .collect(),
     };
-    if consistent && !consistency::feasible(&first.structure, &first.estimate) {
+    if consistent && !consistency::feasible(&first.structure, start) {
         return Err(IdentifyError::Inconsistent {
-            message: "output error starts from a physically consistent first stage".into(),
+            message: "output error starts from physically consistent parameters".into(),
         });
     }
     let samples: usize = segs.iter().map(|s| s.len).sum();
@@ -640,11 +652,21 @@ pub fn refine<R: Regressor>(
     }
     let sys = normal(regressor, logs, &segs, &at, sigma2)?;
     let precision = reduced_precision(&sys, &prior_precision);
-    let cov = precision
-        .clone()
-        .cholesky()
-        .map(|c| c.inverse())
-        .ok_or(IdentifyError::Singular)?;
+    let cov = match precision.clone().cholesky() {
+        Some(c) => c.inverse(),
+        None => {
+            // A noise-free log weighs the data some 10²⁵ above the prior:
+            // in the directions only the prior sees, the Schur complement
+            // is then lost to rounding and may not be positive definite.
+            // Their variance is at most the prior's: eigenvalues below the
+            // smallest prior precision are raised to it.
+            let floor = prior_precision.min();
+            let sym = (&precision + precision.transpose()) * 0.5;
+            let eig = sym.symmetric_eigen();
+            let inv = eig.eigenvalues.map(|l| 1.0 / l.max(floor));
+            &eig.eigenvectors * DMatrix::from_diagonal(&inv) * eig.eigenvectors.transpose()
+        }
+    };
     let k = &first.base.k;
     let base_covariance = k * &cov * k.transpose();
     let prior_cov = DMatrix::from_diagonal(&prior_precision.map(|w| 1.0 / w));
@@ -671,6 +693,7 @@ pub fn refine<R: Regressor>(
         rms: (sys.sum / residual_count).sqrt(),
         position_sigma: sigma2.sqrt(),
         converged,
+        homogeneous,
     });
     Ok(out)
 }
