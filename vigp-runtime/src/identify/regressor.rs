@@ -496,12 +496,20 @@ pub trait Regressor {
     /// solves residual = 0) and its derivatives by the implicit function
     /// theorem ([`super::output_error`]). A mechanism with loops gets
     /// [`IdentifyError::Layout`]: its step also solves for multipliers.
+    /// The default, for a source of rows that cannot simulate, says so
+    /// with [`IdentifyError::Layout`] (the regression needs none of it).
     #[allow(clippy::type_complexity)]
     fn position_jacobians(
         &self,
         t: &Transition<'_>,
         pi: &[f64],
-    ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError>;
+    ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError> {
+        let _ = (t, pi);
+        Err(IdentifyError::Layout {
+            message: "this regressor gives no position Jacobians, which output error needs"
+                .into(),
+        })
+    }
 }
 
 /// The regressor of the DEL residual of a mechanism (module docs), for the
