@@ -52,6 +52,8 @@ mod font;
 #[path = "../common/median.rs"]
 mod median;
 mod output;
+#[path = "../common/protocol.rs"]
+mod protocol;
 #[path = "../common/shard.rs"]
 mod shard;
 #[path = "../common/windows.rs"]
@@ -63,18 +65,22 @@ use indicatif::{ProgressBar, ProgressStyle};
 use median::median;
 use nalgebra::SVector;
 use output::{Fig1, Fig2Point, Series};
+use protocol::{
+    Counts, DT, GT_SOLVER, Gt, GtMethod, HORIZON, TRAJ_SAMPLES, add_noise, cartpole_start,
+    double_pendulum_start, fourbar_start, ground_truth, mean_mse, pendulum_start, perturb_cartpole,
+    perturb_double_pendulum, perturb_fourbar, perturb_pendulum,
+};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use shard::{Shard, ShardFile};
 use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 use vigp::gp::{Curvature, Hyperparameters, Screening, TrainOptions};
-use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
+use vigp::learned::{Encoding, Learned, Prior, transitions};
 use vigp::prelude::*;
-use vigp::projection::consistent_state;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 use windows::test_windows;
 
@@ -321,108 +327,9 @@ struct RunOutput {
     windows: usize,
 }
 
-const DT: f64 = 0.01;
-
-/// The ground truth's integrator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
-enum GtMethod {
-    /// Fourth-order variational integrator (Suzuki's composition).
-    Vi4,
-    /// Second-order (midpoint) variational integrator, as the paper.
-    Midpoint,
-}
-
-impl GtMethod {
-    /// The default step. For the fourth-order VI, 2.5 ms: over 2 s its
-    /// error, estimated against half the step, is ≤ 1.1e-8 on the tree
-    /// systems (nine trajectories each), below the paper's reference's; on
-    /// the fourbar the smaller steps' rounding near the folded pose
-    /// dominates (docs/paper-evaluation.md); at 5 ms the double pendulum's
-    /// estimate reaches 1.7e-7.
-    fn default_dt(self) -> f64 {
-        match self {
-            GtMethod::Vi4 => 2.5e-3,
-            GtMethod::Midpoint => 1e-4,
-        }
-    }
-    fn describe(self) -> &'static str {
-        match self {
-            GtMethod::Vi4 => {
-                "fourth-order variational integrator (Suzuki composition of the midpoint VI)"
-            }
-            GtMethod::Midpoint => "midpoint variational integrator",
-        }
-    }
-}
-
-/// The fourth-order ground truth's Newton options: at the default 1e-12
-/// the solver's residual, not the discretisation, dominates its error over
-/// 2 s (the difference to half the step does not shrink with the step).
-const GT_SOLVER: NewtonOptions = NewtonOptions {
-    tolerance: 1e-14,
-    max_iterations: 50,
-    min_step: 1.0 / 256.0,
-    stall_tolerance: 1e-10,
-};
-
-/// The ground truth: an integrator and its step.
-#[derive(Clone, Copy, Debug)]
-struct Gt {
-    method: GtMethod,
-    dt: f64,
-}
-const HORIZON: usize = 20;
-const TRAJ_SAMPLES: usize = 201; // 2 s at 10 ms
-const NOISE: f64 = 1e-3;
-
 #[path = "../../tests/common/rng.rs"]
 mod rng;
 use rng::Rng;
-
-/// Positions every DT for 2 s from `q0` at rest, by the ground truth's
-/// integrator at its step.
-fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
-    m: M,
-    q0: &SVector<f64, N>,
-    gt: Gt,
-) -> Result<Vec<SVector<f64, N>>, StepError> {
-    let sub = (DT / gt.dt).round().max(1.0) as usize;
-    let h = DT / sub as f64;
-    if gt.method == GtMethod::Vi4 {
-        // the composition carries the continuous velocity: at rest q̇ = 0
-        // (consistent with the loop constraints)
-        let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
-        let mut z = State {
-            q,
-            v: SVector::zeros(),
-        };
-        let vi = Variational4::new(m, h).with_options(GT_SOLVER);
-        let mut out = Vec::with_capacity(TRAJ_SAMPLES);
-        out.push(z.q);
-        for _ in 1..TRAJ_SAMPLES {
-            for _ in 0..sub {
-                z = vi.step(&z)?;
-            }
-            out.push(z.q);
-        }
-        return Ok(out);
-    }
-    // at rest: the midpoint rule's discrete velocity belongs to t = h/2, so
-    // start from v₀ = ½h·q̈ (projected), not 0, which would cost an order
-    let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
-    let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h)?;
-    let mut z = State { q, v };
-    let vi = Variational::midpoint(m, h);
-    let mut out = Vec::with_capacity(TRAJ_SAMPLES);
-    out.push(z.q);
-    for _ in 1..TRAJ_SAMPLES {
-        for _ in 0..sub {
-            z = vi.step(&z)?;
-        }
-        out.push(z.q);
-    }
-    Ok(out)
-}
 
 /// The ground truth's accuracy over one trajectory: the max position
 /// difference against its own integrator at half the step (a Richardson-
@@ -458,26 +365,6 @@ fn ground_truth_error<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>
         },
     )?;
     Ok((diff(&a, &half), diff(&a, &paper)))
-}
-
-fn add_noise<const N: usize>(t: &Transition<N>, rng: &mut Rng) -> Transition<N> {
-    let mut noisy = *t;
-    noisy.z.q += SVector::from_fn(|_, _| NOISE * rng.normal());
-    noisy.z.v += SVector::from_fn(|_, _| NOISE * rng.normal());
-    noisy.v_next += SVector::from_fn(|_, _| NOISE * rng.normal());
-    noisy
-}
-
-/// Mean over windows of the mean squared position error of a 20-step
-/// prediction, in minimal coordinates.
-fn window_mse<const N: usize>(pred: &[SVector<f64, N>], truth: &[SVector<f64, N>]) -> f64 {
-    let s: f64 = pred
-        .iter()
-        .zip(truth)
-        .skip(1)
-        .map(|(p, t)| (p - t).norm_squared() / N as f64)
-        .sum();
-    s / (pred.len() - 1) as f64
 }
 
 /// What one system contributes to Fig. 2.
@@ -730,53 +617,6 @@ where
 fn spin(r: &mut Rng, lo: f64, hi: f64) -> f64 {
     let s = if r.uniform(0.0, 1.0) < 0.5 { -1.0 } else { 1.0 };
     s * r.uniform(lo, hi)
-}
-
-/// Mean window MSE over the windows whose prediction succeeded; failed
-/// windows (a step that did not converge or was not finite) are counted in
-/// `counts` and reported. A run whose windows all fail gives NaN.
-fn mean_mse<const N: usize>(
-    windows: &[(State<N>, Vec<SVector<f64, N>>)],
-    counts: &Counts,
-    predict: impl Fn(&State<N>) -> Result<Vec<SVector<f64, N>>, StepError> + Sync,
-) -> f64 {
-    let results: Vec<Option<f64>> = windows
-        .par_iter()
-        .map(|(z, truth)| match predict(z) {
-            Ok(pred) => Some(window_mse(&pred, truth)),
-            Err(e) => {
-                if std::env::var_os("VIGP_PAPER_DEBUG").is_some() {
-                    eprintln!("prediction failed: {e}");
-                }
-                None
-            }
-        })
-        .collect();
-    let ok: Vec<f64> = results.iter().flatten().copied().collect();
-    counts
-        .failed
-        .fetch_add(results.len() - ok.len(), Ordering::Relaxed);
-    counts.windows.fetch_add(results.len(), Ordering::Relaxed);
-    if ok.is_empty() {
-        f64::NAN
-    } else {
-        ok.iter().sum::<f64>() / ok.len() as f64
-    }
-}
-
-/// Prediction windows of one run that failed / were attempted (reported in
-/// the findings).
-#[derive(Default)]
-struct Counts {
-    failed: AtomicUsize,
-    windows: AtomicUsize,
-}
-
-fn perturb_links<const L: usize>(links: [&mut vigp::Link; L], rng: &mut Rng) {
-    for l in links {
-        l.mass *= rng.uniform(0.9, 1.1);
-        l.inertia *= rng.uniform(0.9, 1.1);
-    }
 }
 
 /// Fig. 1: (a) energy error over 100 s, explicit Euler vs the GP-only
@@ -1129,14 +969,11 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 &SystemSpec {
                     name: "pendulum",
                     prior: Prior::Nominal,
-                    perturb: |s: &mut Pendulum, r| {
-                        perturb_links([&mut s.links.rod], r);
-                        s.joints.pivot.damping = r.uniform(0.0, 1.0);
-                    },
+                    perturb: perturb_pendulum,
                     minimal: Pendulum::minimal,
                     maximal: Pendulum::maximal,
                 },
-                &|r| SVector::from([angle(r)]),
+                &pendulum_start,
                 &|r| {
                     (
                         SVector::from([angle(r)]),
@@ -1151,15 +988,11 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 &SystemSpec {
                     name: "cartpole",
                     prior: Prior::Nominal,
-                    perturb: |s: &mut Cartpole, r| {
-                        perturb_links([&mut s.links.cart, &mut s.links.pole], r);
-                        s.joints.rail.damping = r.uniform(0.0, 0.5);
-                        s.joints.hinge.damping = r.uniform(0.0, 1.0);
-                    },
+                    perturb: perturb_cartpole,
                     minimal: Cartpole::minimal,
                     maximal: Cartpole::maximal,
                 },
-                &|r| SVector::from([r.uniform(-1.0, 1.0), angle(r)]),
+                &cartpole_start,
                 &|r| {
                     (
                         SVector::from([r.uniform(-1.0, 1.0), angle(r)]),
@@ -1174,15 +1007,11 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 &SystemSpec {
                     name: "double_pendulum",
                     prior: Prior::Constant,
-                    perturb: |s: &mut DoublePendulum, r| {
-                        perturb_links([&mut s.links.upper, &mut s.links.lower], r);
-                        s.joints.shoulder.damping = r.uniform(0.0, 2.0);
-                        s.joints.elbow.damping = r.uniform(0.0, 0.5);
-                    },
+                    perturb: perturb_double_pendulum,
                     minimal: DoublePendulum::minimal,
                     maximal: DoublePendulum::maximal,
                 },
-                &|r| SVector::from([angle(r), angle(r)]),
+                &double_pendulum_start,
                 &|r| {
                     (
                         SVector::from([angle(r), angle(r)]),
@@ -1197,27 +1026,11 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 &SystemSpec {
                     name: "fourbar",
                     prior: Prior::Constant,
-                    perturb: |s: &mut Fourbar, r| {
-                        let l = &mut s.links;
-                        perturb_links([&mut l.link1, &mut l.link2, &mut l.link3, &mut l.link4], r);
-                        let (c1, c2) = (r.uniform(0.0, 2.0), r.uniform(0.0, 0.5));
-                        s.joints.top1.damping = c1;
-                        s.joints.top2.damping = c1;
-                        s.joints.middle1.damping = c2;
-                        s.joints.middle2.damping = c2;
-                        s.joints.bottom.damping = 0.0;
-                    },
+                    perturb: perturb_fourbar,
                     minimal: Fourbar::minimal,
                     maximal: Fourbar::maximal,
                 },
-                // a random rhombus: arm angles θ1, θ3; the loop closes exactly
-                &|r| {
-                    let (t1, t3) = (
-                        r.uniform(-FRAC_PI_2, FRAC_PI_2),
-                        r.uniform(-FRAC_PI_2, FRAC_PI_2),
-                    );
-                    SVector::from([t1, t3 - t1, t3, t1 - t3])
-                },
+                &fourbar_start,
                 &|r| {
                     let (t1, t3) = (
                         r.uniform(-FRAC_PI_2, FRAC_PI_2),
