@@ -4,6 +4,7 @@
 //! noise and the 20-step prediction error.
 
 use crate::rng::Rng;
+use crate::windows::{TestWindow, test_windows};
 use nalgebra::SVector;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -76,6 +77,158 @@ pub const TRAJ_SAMPLES: usize = 201;
 /// Observation noise (standard deviation) on the training q, v and v_next.
 pub const NOISE: f64 = 1e-3;
 
+/// The settings of the protocol that every example running it takes on
+/// its command line (flattened into its own), with the `paper` example's
+/// defaults.
+#[derive(clap::Args, Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Protocol {
+    /// Systems to evaluate (comma separated).
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "pendulum,cartpole,double_pendulum,fourbar"
+    )]
+    pub systems: Vec<String>,
+    /// Training sample counts N (comma separated).
+    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32,64,128")]
+    pub n: Vec<usize>,
+    /// Runs (perturbed systems) per system.
+    #[arg(long, default_value_t = 3)]
+    pub runs: usize,
+    /// Training trajectories per run.
+    #[arg(long, default_value_t = 12)]
+    pub train_trajectories: usize,
+    /// Test trajectories per run.
+    #[arg(long, default_value_t = 6)]
+    pub test_trajectories: usize,
+    /// 20-step prediction windows per test trajectory.
+    #[arg(long, default_value_t = 5)]
+    pub windows: usize,
+    /// Extra random restarts of the GP hyperparameter optimisation.
+    #[arg(long, default_value_t = 2)]
+    pub restarts: usize,
+    /// Curvature pairs of the L-BFGS-B optimiser (`TrainOptions::memory`;
+    /// scipy's `maxcor` is 10). 30 covers every model's d + 2
+    /// hyperparameters (the fourbar in maximal coordinates has 26) and
+    /// needs 30 % fewer likelihood evaluations on all 512 samples at
+    /// N = 512 (docs/gp.md, "Optimiser memory").
+    #[arg(long, default_value_t = 30)]
+    pub memory: usize,
+    /// Ground-truth integrator.
+    #[arg(long, value_enum, default_value_t = GtMethod::Vi4)]
+    pub gt_method: GtMethod,
+    /// Ground-truth time step (s) [default: 2.5e-3 for vi4, 1e-4 for midpoint].
+    #[arg(long)]
+    #[serde(with = "crate::shard::exact")]
+    pub gt_dt: Option<f64>,
+    /// Seed of everything random.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// The systems the protocol knows.
+pub const SYSTEMS: [&str; 4] = ["pendulum", "cartpole", "double_pendulum", "fourbar"];
+
+impl Protocol {
+    /// The ground truth's integrator and step.
+    pub fn gt(&self) -> Gt {
+        Gt {
+            method: self.gt_method,
+            dt: self.gt_dt.unwrap_or(self.gt_method.default_dt()),
+        }
+    }
+
+    /// The paper's settings (`--full`: 100 runs, 200 + 100 trajectories,
+    /// 10 restarts, N from 2 to 512), except where `given` on the command
+    /// line (`--full --runs 1`: one run of the full protocol).
+    pub fn full(&mut self, given: impl Fn(&str) -> bool) {
+        if !given("runs") {
+            self.runs = 100;
+        }
+        if !given("train_trajectories") {
+            self.train_trajectories = 200;
+        }
+        if !given("test_trajectories") {
+            self.test_trajectories = 100;
+        }
+        if !given("restarts") {
+            self.restarts = 10;
+        }
+        if !given("n") {
+            self.n = (1..=9).map(|k| 1usize << k).collect();
+        }
+    }
+
+    /// The nested training sets' one draw (each N's set is the first N):
+    /// indices into a pool of `pool` transitions, as many as the largest N
+    /// (at most `pool`).
+    pub fn draw(&self, pool: usize, rng: &mut Rng) -> Vec<usize> {
+        let n_max = self.n.iter().copied().max().unwrap_or(0).min(pool);
+        (0..n_max).map(|_| rng.below(pool)).collect()
+    }
+
+    /// The test windows: `windows` per test trajectory, each a
+    /// noise-free start and the next [`HORIZON`] positions.
+    pub fn test_windows<const N: usize>(
+        &self,
+        test: &[Vec<SVector<f64, N>>],
+        rng: &mut Rng,
+    ) -> Vec<TestWindow<N>> {
+        test_windows(test, self.windows, TRAJ_SAMPLES, HORIZON, DT, rng)
+    }
+
+    /// The settings in one line.
+    pub fn describe(&self) -> String {
+        format!(
+            "systems {:?}, N {:?}, {} runs, {}+{} trajectories, {} windows each, {} restarts, L-BFGS memory {}, ground truth {} at {:e} s, seed {}",
+            self.systems,
+            self.n,
+            self.runs,
+            self.train_trajectories,
+            self.test_trajectories,
+            self.windows,
+            self.restarts,
+            self.memory,
+            self.gt_method.describe(),
+            self.gt().dt,
+            self.seed
+        )
+    }
+
+    /// Refuses settings the protocol cannot run.
+    pub fn check(&self) -> Result<(), String> {
+        if !(1..=vigp::gp::MAX_MEMORY).contains(&self.memory) {
+            return Err(format!(
+                "--memory must be from 1 to {}",
+                vigp::gp::MAX_MEMORY
+            ));
+        }
+        if self.n.is_empty()
+            || self.runs == 0
+            || self.train_trajectories == 0
+            || self.test_trajectories == 0
+            || !(self.gt().dt > 0.0 && self.gt().dt <= DT)
+        {
+            return Err("need at least one N, run and trajectory, and 0 < gt_dt <= 0.01".into());
+        }
+        if let Some(bad) = self.systems.iter().find(|s| !SYSTEMS.contains(&s.as_str())) {
+            return Err(format!(
+                "unknown system `{bad}` (expected one of {})",
+                SYSTEMS.join(", ")
+            ));
+        }
+        if let Some(twice) = self
+            .systems
+            .iter()
+            .enumerate()
+            .find(|(i, s)| self.systems[..*i].contains(s))
+        {
+            return Err(format!("system `{}` given twice", twice.1));
+        }
+        Ok(())
+    }
+}
+
 /// Positions every DT for 2 s from `q0` at rest, by the ground truth's
 /// integrator at its step.
 pub fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
@@ -85,40 +238,36 @@ pub fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
 ) -> Result<Vec<SVector<f64, N>>, StepError> {
     let sub = (DT / gt.dt).round().max(1.0) as usize;
     let h = DT / sub as f64;
-    if gt.method == GtMethod::Vi4 {
-        // the composition carries the continuous velocity: at rest q̇ = 0
-        // (consistent with the loop constraints)
-        let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
-        let mut z = State {
-            q,
-            v: SVector::zeros(),
-        };
-        let vi = Variational4::new(m, h).with_options(GT_SOLVER);
+    // TRAJ_SAMPLES positions, `sub` steps apart, from z
+    let sample = |mut z: State<N>,
+                  step: &dyn Fn(&State<N>) -> Result<State<N>, StepError>|
+     -> Result<Vec<SVector<f64, N>>, StepError> {
         let mut out = Vec::with_capacity(TRAJ_SAMPLES);
         out.push(z.q);
         for _ in 1..TRAJ_SAMPLES {
             for _ in 0..sub {
-                z = vi.step(&z)?;
+                z = step(&z)?;
             }
             out.push(z.q);
         }
-        return Ok(out);
+        Ok(out)
+    };
+    let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
+    if gt.method == GtMethod::Vi4 {
+        // the composition carries the continuous velocity: at rest q̇ = 0
+        // (consistent with the loop constraints)
+        let vi = Variational4::new(m, h).with_options(GT_SOLVER);
+        let z = State {
+            q,
+            v: SVector::zeros(),
+        };
+        return sample(z, &|z| vi.step(z));
     }
     // at rest: the midpoint rule's discrete velocity belongs to t = h/2, so
     // start from v₀ = ½h·q̈ (projected), not 0, which would cost an order
-    let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
     let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h)?;
-    let mut z = State { q, v };
     let vi = Variational::midpoint(m, h);
-    let mut out = Vec::with_capacity(TRAJ_SAMPLES);
-    out.push(z.q);
-    for _ in 1..TRAJ_SAMPLES {
-        for _ in 0..sub {
-            z = vi.step(&z)?;
-        }
-        out.push(z.q);
-    }
-    Ok(out)
+    sample(State { q, v }, &|z| vi.step(z))
 }
 
 /// The training transition `t` with independent Gaussian noise σ =

@@ -65,13 +65,12 @@ mod windows;
 use clap::parser::ValueSource;
 use clap::{CommandFactory, FromArgMatches, Parser};
 use indicatif::{ProgressBar, ProgressStyle};
-use median::median;
 use nalgebra::{DVector, SVector};
-use output::Fig2Point;
+use output::{Fig2Point, med};
 use protocol::{
-    Counts, DT, Gt, GtMethod, HORIZON, TRAJ_SAMPLES, add_noise, cartpole_start,
-    double_pendulum_start, fourbar_start, ground_truth, mean_mse, pendulum_start, perturb_cartpole,
-    perturb_double_pendulum, perturb_fourbar, perturb_pendulum,
+    Counts, DT, HORIZON, Protocol, add_noise, cartpole_start, double_pendulum_start, fourbar_start,
+    ground_truth, mean_mse, pendulum_start, perturb_cartpole, perturb_double_pendulum,
+    perturb_fourbar, perturb_pendulum,
 };
 use rayon::prelude::*;
 use rng::Rng;
@@ -87,73 +86,25 @@ use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
 use vigp::prelude::*;
 use vigp::projection::project_configuration;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
-use windows::test_windows;
 
 /// The command line.
 #[derive(Parser, Debug, Clone)]
 #[command(about = "The paper's protocol with an identified prior (Fig. 2 axis, three models)")]
 struct Cli {
-    /// Systems to evaluate (comma separated).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "pendulum,cartpole,double_pendulum,fourbar"
-    )]
-    systems: Vec<String>,
-    /// Training sample counts N (comma separated).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "2,4,8,16,32,64,128,256,512"
-    )]
-    n: Vec<usize>,
-    /// Runs (perturbed systems) per system.
-    #[arg(long, default_value_t = 4)]
-    runs: usize,
-    /// Training trajectories per run.
-    #[arg(long, default_value_t = 12)]
-    train_trajectories: usize,
-    /// Test trajectories per run.
-    #[arg(long, default_value_t = 6)]
-    test_trajectories: usize,
-    /// 20-step prediction windows per test trajectory.
-    #[arg(long, default_value_t = 5)]
-    windows: usize,
-    /// Extra random restarts of the GP hyperparameter optimisation.
-    #[arg(long, default_value_t = 2)]
-    restarts: usize,
-    /// Curvature pairs of the L-BFGS-B optimiser (as the `paper` example).
-    #[arg(long, default_value_t = 30)]
-    memory: usize,
+    /// The protocol's settings (defaults here: 4 runs, N from 2 to 512).
+    #[command(flatten)]
+    protocol: Protocol,
     /// Relative standard deviation of the identification's prior on the
     /// declared parameters (`vigp::identify::Prior::relative`).
     #[arg(long, default_value_t = 0.5)]
     prior_sd: f64,
-    /// Ground-truth integrator.
-    #[arg(long, value_enum, default_value_t = GtMethod::Vi4)]
-    gt_method: GtMethod,
-    /// Ground-truth time step (s) [default: 2.5e-3 for vi4, 1e-4 for midpoint].
-    #[arg(long)]
-    gt_dt: Option<f64>,
-    /// Seed of everything random.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
     /// Output directory (figures, CSV, report.md).
     #[arg(long, default_value = "docs/identify")]
     out: PathBuf,
-    /// The paper's settings: 100 runs, 200/100 trajectories, 10 restarts
-    /// (each unless given explicitly).
+    /// The paper's settings: 100 runs, 200/100 trajectories, 10 restarts,
+    /// N from 2 to 512 (each unless given explicitly).
     #[arg(long)]
     full: bool,
-}
-
-impl Cli {
-    fn gt(&self) -> Gt {
-        Gt {
-            method: self.gt_method,
-            dt: self.gt_dt.unwrap_or(self.gt_method.default_dt()),
-        }
-    }
 }
 
 /// The methods, as named in the CSV files and the figures' legends.
@@ -277,26 +228,27 @@ where
 {
     let one_run = |run: usize| -> Result<RunOutput, Box<dyn std::error::Error + Send + Sync>> {
         // the `paper` example's seed of this system's run
-        let mut rng = Rng(cli.seed
+        let mut rng = Rng(cli.protocol.seed
             ^ (run as u64 + 1).wrapping_mul(0x2545_F491_4F6C_DD1D)
             ^ sys.name.len() as u64);
         let mut t = S::default();
         (sys.perturb)(&mut t, &mut rng);
         let (truth, nominal) = ((sys.minimal)(&t), (sys.minimal)(&S::default()));
-        let starts: Vec<SVector<f64, N>> = (0..cli.train_trajectories + cli.test_trajectories)
+        let starts: Vec<SVector<f64, N>> = (0..cli.protocol.train_trajectories
+            + cli.protocol.test_trajectories)
             .map(|_| (sys.start)(&mut rng))
             .collect();
         let trajs: Vec<Vec<SVector<f64, N>>> = starts
             .par_iter()
-            .map(|q0| ground_truth(truth, q0, cli.gt()))
+            .map(|q0| ground_truth(truth, q0, cli.protocol.gt()))
             .collect::<Result<_, _>>()?;
-        let (train, test) = trajs.split_at(cli.train_trajectories);
+        let (train, test) = trajs.split_at(cli.protocol.train_trajectories);
         let pool: Vec<Transition<N>> = train
             .iter()
             .flat_map(|traj| transitions(traj, DT))
             .map(|a| add_noise(&a, &mut rng))
             .collect();
-        let windows = test_windows(test, cli.windows, TRAJ_SAMPLES, HORIZON, DT, &mut rng);
+        let windows = cli.protocol.test_windows(test, &mut rng);
         let counts = Counts::default();
         let vi_mse = |m: M| {
             let vi = Variational::new(m, DT);
@@ -306,10 +258,10 @@ where
         };
         let gp_mse = |m: M, data: &[Transition<N>], n: usize, what: &str| {
             let options = TrainOptions {
-                restarts: cli.restarts,
-                seed: cli.seed ^ n as u64,
+                restarts: cli.protocol.restarts,
+                seed: cli.protocol.seed ^ n as u64,
                 screening: Screening::Auto,
-                memory: cli.memory,
+                memory: cli.protocol.memory,
                 ..TrainOptions::default()
             };
             match Learned::train(m, DT, data, Encoding::Raw, Prior::Nominal, &options) {
@@ -327,7 +279,7 @@ where
         // the parameter that fixes the scale (scale.rs), from arbitrary
         // position triples of the declared mechanism: random starts and
         // velocities in [−1, 1], on their own seed
-        let mut triples_rng = Rng(cli.seed ^ 0x5CA1_E5CA_1E5C_A1E5);
+        let mut triples_rng = Rng(cli.protocol.seed ^ 0x5CA1_E5CA_1E5C_A1E5);
         let triples = (0..64)
             .map(|_| {
                 let q = (sys.start)(&mut triples_rng);
@@ -344,11 +296,10 @@ where
             .collect::<Result<Vec<Log>, StepError>>()?;
         let direction = scale::scale_direction(&regressor, &triples, &id_prior(cli.prior_sd))?;
         // nested training sets: each N's samples are the first N of one draw
-        let n_max = cli.n.iter().copied().max().unwrap_or(0).min(pool.len());
-        let draw: Vec<usize> = (0..n_max).map(|_| rng.below(pool.len())).collect();
+        let draw = cli.protocol.draw(pool.len(), &mut rng);
         let mut points = Vec::new();
         let mut status = Vec::new();
-        for &n in &cli.n {
+        for &n in &cli.protocol.n {
             let data: Vec<Transition<N>> =
                 draw[..n.min(pool.len())].iter().map(|&i| pool[i]).collect();
             let mut point = |method: &str, mse: f64| {
@@ -385,17 +336,10 @@ where
             windows: counts.windows.load(Ordering::Relaxed),
         })
     };
-    (0..cli.runs).into_par_iter().map(one_run).collect()
-}
-
-/// Median over runs of a (system, method, N), NaN runs left out.
-fn med(points: &[Fig2Point], system: &str, method: &str, n: usize) -> f64 {
-    let mut v: Vec<f64> = points
-        .iter()
-        .filter(|p| p.system == system && p.method == method && p.n == n && p.mse.is_finite())
-        .map(|p| p.mse)
-        .collect();
-    median(&mut v)
+    (0..cli.protocol.runs)
+        .into_par_iter()
+        .map(one_run)
+        .collect()
 }
 
 /// Runs of a (system, N) where `a`'s error is at most `b`'s, and runs
@@ -486,65 +430,34 @@ fn table(points: &[Fig2Point], status: &[(usize, IdStatus)], system: &str, ns: &
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
-    let matches = Cli::command().get_matches();
+    let matches = Cli::command()
+        .mut_arg("runs", |a| a.default_value("4"))
+        .mut_arg("n", |a| a.default_value("2,4,8,16,32,64,128,256,512"))
+        .get_matches();
     let mut cli = Cli::from_arg_matches(&matches)?;
     let given = |id: &str| matches.value_source(id) == Some(ValueSource::CommandLine);
     if cli.full {
-        if !given("runs") {
-            cli.runs = 100;
-        }
-        if !given("train_trajectories") {
-            cli.train_trajectories = 200;
-        }
-        if !given("test_trajectories") {
-            cli.test_trajectories = 100;
-        }
-        if !given("restarts") {
-            cli.restarts = 10;
-        }
+        cli.protocol.full(given);
     }
-    if !(1..=vigp::gp::MAX_MEMORY).contains(&cli.memory) {
-        return Err(format!("--memory must be from 1 to {}", vigp::gp::MAX_MEMORY).into());
-    }
-    if cli.n.is_empty()
-        || cli.n.contains(&0)
-        || cli.runs == 0
-        || cli.train_trajectories == 0
-        || cli.test_trajectories == 0
-        || cli.windows == 0
-        || !(cli.gt().dt > 0.0 && cli.gt().dt <= DT)
-        || !(cli.prior_sd > 0.0 && cli.prior_sd.is_finite())
-    {
-        return Err("need N ≥ 1, at least one run, trajectory and window, 0 < gt_dt ≤ 0.01 and a positive prior sd".into());
-    }
-    const SYSTEMS: [&str; 4] = ["pendulum", "cartpole", "double_pendulum", "fourbar"];
-    if let Some(bad) = cli.systems.iter().find(|s| !SYSTEMS.contains(&s.as_str())) {
-        return Err(format!("unknown system `{bad}` (one of {})", SYSTEMS.join(", ")).into());
+    cli.protocol.check()?;
+    if !(cli.prior_sd > 0.0 && cli.prior_sd.is_finite()) {
+        return Err("--prior-sd must be positive and finite".into());
     }
     let t0 = Instant::now();
     let settings = format!(
-        "systems {:?}, N {:?}, {} runs, {}+{} trajectories, {} windows each, {} restarts, L-BFGS memory {}, ground truth {} at {:e} s, identification prior {} × declared, seed {}",
-        cli.systems,
-        cli.n,
-        cli.runs,
-        cli.train_trajectories,
-        cli.test_trajectories,
-        cli.windows,
-        cli.restarts,
-        cli.memory,
-        cli.gt_method.describe(),
-        cli.gt().dt,
-        cli.prior_sd,
-        cli.seed
+        "{}, identification prior {} × declared",
+        cli.protocol.describe(),
+        cli.prior_sd
     );
     println!("vigp identify example: {settings}");
-    let bar = ProgressBar::new((cli.systems.len() * cli.runs * cli.n.len()) as u64).with_style(
-        ProgressStyle::with_template(
-            "{bar:40} {pos}/{len} (system, run, N) {msg} [{elapsed_precise}, eta {eta}]",
-        )?,
-    );
+    let bar = ProgressBar::new(
+        (cli.protocol.systems.len() * cli.protocol.runs * cli.protocol.n.len()) as u64,
+    )
+    .with_style(ProgressStyle::with_template(
+        "{bar:40} {pos}/{len} (system, run, N) {msg} [{elapsed_precise}, eta {eta}]",
+    )?);
     let mut runs = Vec::new();
-    for system in &cli.systems {
+    for system in &cli.protocol.systems {
         bar.set_message(system.clone());
         let out = match system.as_str() {
             "pendulum" => evaluate(
@@ -599,7 +512,7 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
         let p: Vec<Fig2Point> = out.iter().flat_map(|r| r.points.clone()).collect();
         failed += out.iter().map(|r| r.failed).sum::<usize>();
         windows += out.iter().map(|r| r.windows).sum::<usize>();
-        tables += &table(&p, &status, &system, &cli.n);
+        tables += &table(&p, &status, &system, &cli.protocol.n);
         points.extend(p);
     }
     let report = format!(

@@ -216,6 +216,16 @@ pub fn summarize_fig2(points: &[Fig2Point]) -> Vec<Fig2Summary> {
         .collect()
 }
 
+/// Median MSE of a (system, method, n) over runs (NaN runs excluded).
+pub fn med(points: &[Fig2Point], system: &str, method: &str, n: usize) -> f64 {
+    let mut v: Vec<f64> = points
+        .iter()
+        .filter(|p| p.system == system && p.method == method && p.n == n && p.mse.is_finite())
+        .map(|p| p.mse)
+        .collect();
+    crate::median::median(&mut v)
+}
+
 /// Writes everything into `dir` (created if missing) and returns the list of files written.
 ///
 /// Files: `fig1a_energy.{svg,png}`, `fig1b_constraint_drift.{svg,png}`,
