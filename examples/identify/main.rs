@@ -14,7 +14,7 @@
 //! step's discretisation error).
 //!
 //! ```text
-//! cargo run --release --example identify              # small default, minutes on 2 cores
+//! cargo run --release --example identify              # 4 runs, N = 2 … 512: ~2 min on 2 cores
 //! cargo run --release --example identify -- --full    # the paper's settings
 //! cargo run --release --example identify -- --help
 //! ```
@@ -30,12 +30,16 @@
 //! variational step that both models predict with (`Variational::new`).
 //! Position noise in these positions is 1e-3 common to all three (it moves
 //! the configuration, not the second difference) and 1e-5 on the
-//! differences (Δt·σ of the velocities).
+//! differences (Δt·σ of the velocities). On a mechanism with loops (the
+//! fourbar) the three positions are projected onto the loop constraints
+//! first: the noise moves them off the loop, where the rows see
+//! combinations that positions on the loop never show.
 //!
 //! **The scale.** The paper's systems move freely (no inputs): the DEL
 //! residual is homogeneous in π, so the data fix π only up to a common
 //! factor, and every factor predicts the same motion. The factor comes
-//! from the prior through a scale row (`scale.rs`).
+//! from the prior: one combination of π is held at its declared value
+//! (`scale.rs`).
 //!
 //! **Too few transitions.** `identify` estimates the rows' noise from their
 //! residuals and refuses fewer rows than base parameters plus one
