@@ -310,7 +310,7 @@ where
     Mn: Mechanism<N, C> + Coordinates<N, M> + Copy + Send + Sync,
     Mx: Mechanism<M, K> + Copy + Send + Sync,
 {
-    let seed = cli.seed ^ 0xB0D5_0000 ^ spec.name.len() as u64;
+    let seed = cli.protocol.seed ^ 0xB0D5_0000 ^ spec.name.len() as u64;
     let mut rng = Rng(seed);
     let (tmin, nmin, nmax) = spec.models(&mut rng);
     let at_rest = |seed: u64, count: usize| -> Result<Vec<Vec<SVector<f64, N>>>, StepError> {
@@ -318,10 +318,10 @@ where
         let starts: Vec<SVector<f64, N>> = (0..count).map(|_| sample_q0(&mut r)).collect();
         starts
             .par_iter()
-            .map(|q0| ground_truth(tmin, q0, cli.gt()))
+            .map(|q0| ground_truth(tmin, q0, cli.protocol.gt()))
             .collect()
     };
-    let train = at_rest(seed ^ 1, cli.train_trajectories)?;
+    let train = at_rest(seed ^ 1, cli.protocol.train_trajectories)?;
     let cal = at_rest(seed ^ 2, cli.bound_trajectories)?;
     let test = at_rest(seed ^ 3, cli.bound_trajectories)?;
     let shifted: Vec<Vec<SVector<f64, N>>> = {
@@ -331,7 +331,7 @@ where
             .collect();
         starts
             .par_iter()
-            .map(|(q0, qd0)| ground_truth_moving(tmin, q0, qd0, cli.gt()))
+            .map(|(q0, qd0)| ground_truth_moving(tmin, q0, qd0, cli.protocol.gt()))
             .collect::<Result<_, _>>()?
     };
     let to_max = |trajs: &[Vec<SVector<f64, N>>]| -> Vec<Vec<SVector<f64, M>>> {
@@ -349,6 +349,7 @@ where
         }
     }
     let n = cli
+        .protocol
         .n
         .iter()
         .copied()
@@ -359,10 +360,10 @@ where
     let dmin: Vec<_> = idx.iter().map(|&i| pool_min[i]).collect();
     let dmax: Vec<_> = idx.iter().map(|&i| pool_max[i]).collect();
     let opts = TrainOptions {
-        restarts: cli.restarts,
-        seed: cli.seed ^ n as u64,
+        restarts: cli.protocol.restarts,
+        seed: cli.protocol.seed ^ n as u64,
         screening: cli.screening(),
-        memory: cli.memory,
+        memory: cli.protocol.memory,
         ..TrainOptions::default()
     };
     let (cal_min, test_min, shift_min) =
@@ -408,7 +409,7 @@ pub fn report(rows: &[BoundRow], cli: &Cli) -> String {
     let _ = writeln!(
         md,
         "# Error bounds\n\nδ = {DELTA}; per system one perturbed truth, N = {} noisy training samples (σ = 1e-3), {} calibration and {} test trajectories (2 s, random configurations at rest, as the training ones, from two further seeds) cut into 20-step windows every {STRIDE} samples, and {} trajectories started with more energy than any training start (\"shifted\"). Coverage: fraction of cases whose error is within the bound; tightness: median bound ÷ median error. One step: the velocity error ‖v₁ − v₁,true‖; 20 steps: the position error ‖q₂₀ − q₂₀,true‖ in the model's coordinates. Flagged: starts the bound marks as outside its region (for the conformal bound, those get the RKHS fallback). `conformal` is the default (scores normalised by the GP's predictive σ, for noisy targets); `conformal-latent` normalises by the latent σ (`Score::LatentStd`), the choice for noise-free targets such as these.\n",
-        cli.n.iter().copied().max().unwrap_or(0),
+        cli.protocol.n.iter().copied().max().unwrap_or(0),
         cli.bound_trajectories,
         cli.bound_trajectories,
         cli.bound_trajectories / 3 + 1

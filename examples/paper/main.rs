@@ -52,6 +52,8 @@ mod font;
 #[path = "../common/median.rs"]
 mod median;
 mod output;
+#[path = "../common/protocol.rs"]
+mod protocol;
 #[path = "../common/shard.rs"]
 mod shard;
 #[path = "../common/windows.rs"]
@@ -62,31 +64,24 @@ use clap::{ArgMatches, CommandFactory, FromArgMatches, Parser};
 use indicatif::{ProgressBar, ProgressStyle};
 use median::median;
 use nalgebra::SVector;
-use output::{Fig1, Fig2Point, Series};
+use output::{Fig1, Fig2Point, Series, med};
+use protocol::{
+    Counts, DT, GT_SOLVER, Gt, GtMethod, HORIZON, Protocol, TRAJ_SAMPLES, add_noise,
+    cartpole_start, double_pendulum_start, fourbar_start, ground_truth, mean_mse, pendulum_start,
+    perturb_cartpole, perturb_double_pendulum, perturb_fourbar, perturb_pendulum,
+};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use shard::{Shard, ShardFile};
 use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::Instant;
 use vigp::gp::{Curvature, Hyperparameters, Screening, TrainOptions};
-use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
+use vigp::learned::{Encoding, Learned, Prior, transitions};
 use vigp::prelude::*;
-use vigp::projection::consistent_state;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
-use windows::test_windows;
-
-impl Cli {
-    /// The ground truth's integrator and step.
-    fn gt(&self) -> Gt {
-        Gt {
-            method: self.gt_method,
-            dt: self.gt_dt.unwrap_or(self.gt_method.default_dt()),
-        }
-    }
-}
 
 /// The command line: a run (or one shard of it), or `merge`.
 #[derive(Parser, Debug)]
@@ -121,38 +116,10 @@ enum Command {
 /// requires them equal.
 #[derive(clap::Args, Debug, Clone, PartialEq, Serialize, Deserialize)]
 struct Cli {
-    /// Systems to evaluate (comma separated).
-    #[arg(
-        long,
-        value_delimiter = ',',
-        default_value = "pendulum,cartpole,double_pendulum,fourbar"
-    )]
-    systems: Vec<String>,
-    /// Training sample counts N (comma separated).
-    #[arg(long, value_delimiter = ',', default_value = "2,4,8,16,32,64,128")]
-    n: Vec<usize>,
-    /// Runs (perturbed systems) per system.
-    #[arg(long, default_value_t = 3)]
-    runs: usize,
-    /// Training trajectories per run.
-    #[arg(long, default_value_t = 12)]
-    train_trajectories: usize,
-    /// Test trajectories per run.
-    #[arg(long, default_value_t = 6)]
-    test_trajectories: usize,
-    /// 20-step prediction windows per test trajectory.
-    #[arg(long, default_value_t = 5)]
-    windows: usize,
-    /// Extra random restarts of the GP hyperparameter optimisation.
-    #[arg(long, default_value_t = 2)]
-    restarts: usize,
-    /// Curvature pairs of the L-BFGS-B optimiser (`TrainOptions::memory`;
-    /// scipy's `maxcor` is 10). 30 covers every model's d + 2
-    /// hyperparameters (the fourbar in maximal coordinates has 26) and
-    /// needs 30 % fewer likelihood evaluations on all 512 samples at
-    /// N = 512 (docs/gp.md, "Optimiser memory").
-    #[arg(long, default_value_t = 30)]
-    memory: usize,
+    /// The protocol's settings.
+    #[command(flatten)]
+    #[serde(flatten)]
+    protocol: Protocol,
     /// Warm starts along the N sweep: within a run, each model after the
     /// first N starts from the optimum of the same model at the previous N
     /// (`TrainOptions::warm_start`) with `--warm-restarts` random restarts
@@ -164,16 +131,6 @@ struct Cli {
     /// Random restarts beside the warm start (with `--warm`).
     #[arg(long, default_value_t = 0)]
     warm_restarts: usize,
-    /// Ground-truth integrator.
-    #[arg(long, value_enum, default_value_t = GtMethod::Vi4)]
-    gt_method: GtMethod,
-    /// Ground-truth time step (s) [default: 2.5e-3 for vi4, 1e-4 for midpoint].
-    #[arg(long)]
-    #[serde(with = "shard::exact")]
-    gt_dt: Option<f64>,
-    /// Seed of everything random.
-    #[arg(long, default_value_t = 1)]
-    seed: u64,
     /// Output directory [default: target/paper; with --shard i/N:
     /// target/paper-shards/shard-i-of-N].
     #[arg(long, default_value = "target/paper")]
@@ -274,10 +231,10 @@ enum Unit {
 fn units(cli: &Cli) -> Vec<Unit> {
     let mut units = vec![Unit::Fig1];
     if !cli.no_bounds {
-        units.extend(cli.systems.iter().map(|s| Unit::Bounds(s.clone())));
+        units.extend(cli.protocol.systems.iter().map(|s| Unit::Bounds(s.clone())));
     }
-    for s in &cli.systems {
-        units.extend((0..cli.runs).map(|r| Unit::Run(s.clone(), r)));
+    for s in &cli.protocol.systems {
+        units.extend((0..cli.protocol.runs).map(|r| Unit::Run(s.clone(), r)));
     }
     units
 }
@@ -321,108 +278,9 @@ struct RunOutput {
     windows: usize,
 }
 
-const DT: f64 = 0.01;
-
-/// The ground truth's integrator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
-enum GtMethod {
-    /// Fourth-order variational integrator (Suzuki's composition).
-    Vi4,
-    /// Second-order (midpoint) variational integrator, as the paper.
-    Midpoint,
-}
-
-impl GtMethod {
-    /// The default step. For the fourth-order VI, 2.5 ms: over 2 s its
-    /// error, estimated against half the step, is ≤ 1.1e-8 on the tree
-    /// systems (nine trajectories each), below the paper's reference's; on
-    /// the fourbar the smaller steps' rounding near the folded pose
-    /// dominates (docs/paper-evaluation.md); at 5 ms the double pendulum's
-    /// estimate reaches 1.7e-7.
-    fn default_dt(self) -> f64 {
-        match self {
-            GtMethod::Vi4 => 2.5e-3,
-            GtMethod::Midpoint => 1e-4,
-        }
-    }
-    fn describe(self) -> &'static str {
-        match self {
-            GtMethod::Vi4 => {
-                "fourth-order variational integrator (Suzuki composition of the midpoint VI)"
-            }
-            GtMethod::Midpoint => "midpoint variational integrator",
-        }
-    }
-}
-
-/// The fourth-order ground truth's Newton options: at the default 1e-12
-/// the solver's residual, not the discretisation, dominates its error over
-/// 2 s (the difference to half the step does not shrink with the step).
-const GT_SOLVER: NewtonOptions = NewtonOptions {
-    tolerance: 1e-14,
-    max_iterations: 50,
-    min_step: 1.0 / 256.0,
-    stall_tolerance: 1e-10,
-};
-
-/// The ground truth: an integrator and its step.
-#[derive(Clone, Copy, Debug)]
-struct Gt {
-    method: GtMethod,
-    dt: f64,
-}
-const HORIZON: usize = 20;
-const TRAJ_SAMPLES: usize = 201; // 2 s at 10 ms
-const NOISE: f64 = 1e-3;
-
 #[path = "../../tests/common/rng.rs"]
 mod rng;
 use rng::Rng;
-
-/// Positions every DT for 2 s from `q0` at rest, by the ground truth's
-/// integrator at its step.
-fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
-    m: M,
-    q0: &SVector<f64, N>,
-    gt: Gt,
-) -> Result<Vec<SVector<f64, N>>, StepError> {
-    let sub = (DT / gt.dt).round().max(1.0) as usize;
-    let h = DT / sub as f64;
-    if gt.method == GtMethod::Vi4 {
-        // the composition carries the continuous velocity: at rest q̇ = 0
-        // (consistent with the loop constraints)
-        let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
-        let mut z = State {
-            q,
-            v: SVector::zeros(),
-        };
-        let vi = Variational4::new(m, h).with_options(GT_SOLVER);
-        let mut out = Vec::with_capacity(TRAJ_SAMPLES);
-        out.push(z.q);
-        for _ in 1..TRAJ_SAMPLES {
-            for _ in 0..sub {
-                z = vi.step(&z)?;
-            }
-            out.push(z.q);
-        }
-        return Ok(out);
-    }
-    // at rest: the midpoint rule's discrete velocity belongs to t = h/2, so
-    // start from v₀ = ½h·q̈ (projected), not 0, which would cost an order
-    let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
-    let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h)?;
-    let mut z = State { q, v };
-    let vi = Variational::midpoint(m, h);
-    let mut out = Vec::with_capacity(TRAJ_SAMPLES);
-    out.push(z.q);
-    for _ in 1..TRAJ_SAMPLES {
-        for _ in 0..sub {
-            z = vi.step(&z)?;
-        }
-        out.push(z.q);
-    }
-    Ok(out)
-}
 
 /// The ground truth's accuracy over one trajectory: the max position
 /// difference against its own integrator at half the step (a Richardson-
@@ -458,26 +316,6 @@ fn ground_truth_error<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>
         },
     )?;
     Ok((diff(&a, &half), diff(&a, &paper)))
-}
-
-fn add_noise<const N: usize>(t: &Transition<N>, rng: &mut Rng) -> Transition<N> {
-    let mut noisy = *t;
-    noisy.z.q += SVector::from_fn(|_, _| NOISE * rng.normal());
-    noisy.z.v += SVector::from_fn(|_, _| NOISE * rng.normal());
-    noisy.v_next += SVector::from_fn(|_, _| NOISE * rng.normal());
-    noisy
-}
-
-/// Mean over windows of the mean squared position error of a 20-step
-/// prediction, in minimal coordinates.
-fn window_mse<const N: usize>(pred: &[SVector<f64, N>], truth: &[SVector<f64, N>]) -> f64 {
-    let s: f64 = pred
-        .iter()
-        .zip(truth)
-        .skip(1)
-        .map(|(p, t)| (p - t).norm_squared() / N as f64)
-        .sum();
-    s / (pred.len() - 1) as f64
 }
 
 /// What one system contributes to Fig. 2.
@@ -523,23 +361,24 @@ where
     let one_run = |run: usize| -> Result<RunOutput, StepError> {
         let mut points = Vec::new();
         let counts = Counts::default();
-        let mut rng = Rng(cli.seed
+        let mut rng = Rng(cli.protocol.seed
             ^ (run as u64 + 1).wrapping_mul(0x2545_F491_4F6C_DD1D)
             ^ spec.name.len() as u64);
         let (tmin, nmin, nmax) = spec.models(&mut rng);
-        let starts: Vec<SVector<f64, N>> = (0..cli.train_trajectories + cli.test_trajectories)
+        let starts: Vec<SVector<f64, N>> = (0..cli.protocol.train_trajectories
+            + cli.protocol.test_trajectories)
             .map(|_| sample_q0(&mut rng))
             .collect();
         let trajs: Vec<Vec<SVector<f64, N>>> = starts
             .par_iter()
-            .map(|q0| ground_truth(tmin, q0, cli.gt()))
+            .map(|q0| ground_truth(tmin, q0, cli.protocol.gt()))
             .collect::<Result<_, _>>()?;
         let gt_err = if run == 0 {
-            Some(ground_truth_error(tmin, &starts[0], cli.gt())?)
+            Some(ground_truth_error(tmin, &starts[0], cli.protocol.gt())?)
         } else {
             None
         };
-        let (train, test) = trajs.split_at(cli.train_trajectories);
+        let (train, test) = trajs.split_at(cli.protocol.train_trajectories);
         // training pool (noisy), in minimal and maximal coordinates
         let mut pool_min = Vec::new();
         let mut pool_max = Vec::new();
@@ -555,7 +394,7 @@ where
             }
         }
         // test windows: noise-free starts z_k and the next HORIZON positions
-        let windows = test_windows(test, cli.windows, TRAJ_SAMPLES, HORIZON, DT, &mut rng);
+        let windows = cli.protocol.test_windows(test, &mut rng);
         let nominal_vi = Variational::new(nmin, DT);
         let nominal_mse = mean_mse(&windows, &counts, |z| {
             Ok(nominal_vi
@@ -569,11 +408,10 @@ where
         // keeps the one before
         let mut warm: [Option<Vec<Hyperparameters>>; 3] = [None, None, None];
         // nested training sets: each N's samples are the first N of one draw
-        let n_max = cli.n.iter().copied().max().unwrap_or(0).min(pool_min.len());
-        let draw: Vec<usize> = (0..n_max).map(|_| rng.below(pool_min.len())).collect();
+        let draw = cli.protocol.draw(pool_min.len(), &mut rng);
         // per model: the previous N's sample count and distinct optima
         let mut previous: [Option<(usize, Optima)>; 3] = [None, None, None];
-        for &n in &cli.n {
+        for &n in &cli.protocol.n {
             let n_eff = n.min(pool_min.len());
             let idx = &draw[..n_eff];
             let dmin: Vec<_> = idx.iter().map(|&i| pool_min[i]).collect();
@@ -590,12 +428,12 @@ where
                     restarts: if warm_start.is_some() {
                         cli.warm_restarts
                     } else {
-                        cli.restarts
+                        cli.protocol.restarts
                     },
-                    seed: cli.seed ^ n as u64,
+                    seed: cli.protocol.seed ^ n as u64,
                     warm_start,
                     screening: cli.screening(),
-                    memory: cli.memory,
+                    memory: cli.protocol.memory,
                     candidates,
                     candidate_curvature,
                     ..TrainOptions::default()
@@ -732,53 +570,6 @@ fn spin(r: &mut Rng, lo: f64, hi: f64) -> f64 {
     s * r.uniform(lo, hi)
 }
 
-/// Mean window MSE over the windows whose prediction succeeded; failed
-/// windows (a step that did not converge or was not finite) are counted in
-/// `counts` and reported. A run whose windows all fail gives NaN.
-fn mean_mse<const N: usize>(
-    windows: &[(State<N>, Vec<SVector<f64, N>>)],
-    counts: &Counts,
-    predict: impl Fn(&State<N>) -> Result<Vec<SVector<f64, N>>, StepError> + Sync,
-) -> f64 {
-    let results: Vec<Option<f64>> = windows
-        .par_iter()
-        .map(|(z, truth)| match predict(z) {
-            Ok(pred) => Some(window_mse(&pred, truth)),
-            Err(e) => {
-                if std::env::var_os("VIGP_PAPER_DEBUG").is_some() {
-                    eprintln!("prediction failed: {e}");
-                }
-                None
-            }
-        })
-        .collect();
-    let ok: Vec<f64> = results.iter().flatten().copied().collect();
-    counts
-        .failed
-        .fetch_add(results.len() - ok.len(), Ordering::Relaxed);
-    counts.windows.fetch_add(results.len(), Ordering::Relaxed);
-    if ok.is_empty() {
-        f64::NAN
-    } else {
-        ok.iter().sum::<f64>() / ok.len() as f64
-    }
-}
-
-/// Prediction windows of one run that failed / were attempted (reported in
-/// the findings).
-#[derive(Default)]
-struct Counts {
-    failed: AtomicUsize,
-    windows: AtomicUsize,
-}
-
-fn perturb_links<const L: usize>(links: [&mut vigp::Link; L], rng: &mut Rng) {
-    for l in links {
-        l.mass *= rng.uniform(0.9, 1.1);
-        l.inertia *= rng.uniform(0.9, 1.1);
-    }
-}
-
 /// Fig. 1: (a) energy error over 100 s, explicit Euler vs the GP-only
 /// learned integrator with 10 and 20 samples of one pendulum trajectory from
 /// θ = π/2 (maximal coordinates); (b) constraint drift, explicit Euler vs the
@@ -787,9 +578,9 @@ fn figure1(cli: &Cli) -> Result<(Fig1, String), Box<dyn std::error::Error>> {
     let steps = 10_000;
     let every = 10;
     let opts = TrainOptions {
-        restarts: cli.restarts,
-        seed: cli.seed,
-        memory: cli.memory,
+        restarts: cli.protocol.restarts,
+        seed: cli.protocol.seed,
+        memory: cli.protocol.memory,
         ..TrainOptions::default()
     };
     let series = |label: &str, values: Vec<f64>| Series {
@@ -803,7 +594,7 @@ fn figure1(cli: &Cli) -> Result<(Fig1, String), Box<dyn std::error::Error>> {
 
     let p = Pendulum::default();
     let (pmin, pmax) = (p.minimal(), p.maximal());
-    let traj = ground_truth(pmin, &SVector::from([FRAC_PI_2]), cli.gt())?;
+    let traj = ground_truth(pmin, &SVector::from([FRAC_PI_2]), cli.protocol.gt())?;
     let tmax: Vec<SVector<f64, 3>> = traj.iter().map(|q| pmin.maximal_positions(q)).collect();
     let data = transitions(&tmax, DT);
     let z0 = data[0].z;
@@ -839,7 +630,7 @@ fn figure1(cli: &Cli) -> Result<(Fig1, String), Box<dyn std::error::Error>> {
 
     let dp = DoublePendulum::default();
     let (dmin, dmax) = (dp.minimal(), dp.maximal());
-    let traj = ground_truth(dmin, &SVector::from([FRAC_PI_2, 0.0]), cli.gt())?;
+    let traj = ground_truth(dmin, &SVector::from([FRAC_PI_2, 0.0]), cli.protocol.gt())?;
     let tmax: Vec<SVector<f64, 6>> = traj.iter().map(|q| dmin.maximal_positions(q)).collect();
     let data = transitions(&tmax, DT);
     let z0 = data[0].z;
@@ -872,20 +663,10 @@ fn figure1(cli: &Cli) -> Result<(Fig1, String), Box<dyn std::error::Error>> {
     Ok((Fig1 { energy, drift }, notes))
 }
 
-/// Median MSE of a (system, method, n) over runs (NaN runs excluded).
-fn med(points: &[Fig2Point], system: &str, method: &str, n: usize) -> f64 {
-    let mut v: Vec<f64> = points
-        .iter()
-        .filter(|p| p.system == system && p.method == method && p.n == n && p.mse.is_finite())
-        .map(|p| p.mse)
-        .collect();
-    median(&mut v)
-}
-
 /// The paper's claims, checked on the numbers.
 fn findings(points: &[Fig2Point], cli: &Cli) -> String {
     let mut out = String::new();
-    let ns = &cli.n;
+    let ns = &cli.protocol.n;
     let has = |s: &str| points.iter().any(|p| p.system == s);
     for sys in ["pendulum", "cartpole"].into_iter().filter(|s| has(s)) {
         for method in ["minimal", "sincos", "maximal"] {
@@ -1016,10 +797,10 @@ fn merge(dirs: &[PathBuf], out: PathBuf) -> Result<(), Box<dyn std::error::Error
         "merged {} shards: {} units of systems {:?}, N {:?}, {} runs, seed {}",
         dirs.len(),
         outputs.len(),
-        cli.systems,
-        cli.n,
-        cli.runs,
-        cli.seed
+        cli.protocol.systems,
+        cli.protocol.n,
+        cli.protocol.runs,
+        cli.protocol.seed
     );
     report(&cli, outputs, t0)
 }
@@ -1028,51 +809,9 @@ fn merge(dirs: &[PathBuf], out: PathBuf) -> Result<(), Box<dyn std::error::Error
 fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Error>> {
     let given = |id: &str| matches.value_source(id) == Some(ValueSource::CommandLine);
     if cli.full {
-        // the paper's settings, except where given on the command line
-        // (`--full --runs 1`: one run of the full protocol)
-        if !given("runs") {
-            cli.runs = 100;
-        }
-        if !given("train_trajectories") {
-            cli.train_trajectories = 200;
-        }
-        if !given("test_trajectories") {
-            cli.test_trajectories = 100;
-        }
-        if !given("restarts") {
-            cli.restarts = 10;
-        }
-        if !given("n") {
-            cli.n = (1..=9).map(|k| 1usize << k).collect();
-        }
+        cli.protocol.full(given);
     }
-    if !(1..=vigp::gp::MAX_MEMORY).contains(&cli.memory) {
-        return Err(format!("--memory must be from 1 to {}", vigp::gp::MAX_MEMORY).into());
-    }
-    if cli.n.is_empty()
-        || cli.runs == 0
-        || cli.train_trajectories == 0
-        || cli.test_trajectories == 0
-        || !(cli.gt().dt > 0.0 && cli.gt().dt <= DT)
-    {
-        return Err("need at least one N, run and trajectory, and 0 < gt_dt <= 0.01".into());
-    }
-    const SYSTEMS: [&str; 4] = ["pendulum", "cartpole", "double_pendulum", "fourbar"];
-    if let Some(bad) = cli.systems.iter().find(|s| !SYSTEMS.contains(&s.as_str())) {
-        return Err(format!(
-            "unknown system `{bad}` (expected one of {})",
-            SYSTEMS.join(", ")
-        )
-        .into());
-    }
-    if let Some(twice) = cli
-        .systems
-        .iter()
-        .enumerate()
-        .find(|(i, s)| cli.systems[..*i].contains(s))
-    {
-        return Err(format!("system `{}` given twice", twice.1).into());
-    }
+    cli.protocol.check()?;
     if let Some(shard) = cli.shard.filter(|_| !given("out")) {
         cli.out = Path::new("target/paper-shards").join(shard.dir_name());
     }
@@ -1084,18 +823,7 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
         .map(|(_, u)| u)
         .collect();
     let t0 = Instant::now();
-    println!(
-        "vigp paper reproduction: systems {:?}, N {:?}, {} runs, {}+{} trajectories, {} restarts, L-BFGS memory {}, gt dt {:e} s, seed {}",
-        cli.systems,
-        cli.n,
-        cli.runs,
-        cli.train_trajectories,
-        cli.test_trajectories,
-        cli.restarts,
-        cli.memory,
-        cli.gt().dt,
-        cli.seed
-    );
+    println!("vigp paper reproduction: {}", cli.protocol.describe());
     if let Some(shard) = cli.shard {
         println!(
             "shard {shard}: {} of {} units",
@@ -1115,12 +843,12 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
     }
 
     let runs = todo.iter().filter(|u| matches!(u, Unit::Run(..))).count();
-    let total = (runs * cli.n.len()) as u64;
+    let total = (runs * cli.protocol.n.len()) as u64;
     let bar = ProgressBar::new(total).with_style(ProgressStyle::with_template(
         "Fig. 2 {bar:40} {pos}/{len} (system, run, N) {msg} [{elapsed_precise}, eta {eta}]",
     )?);
     let angle = |rng: &mut Rng| rng.uniform(-PI, PI);
-    for system in &cli.systems {
+    for system in &cli.protocol.systems {
         bar.set_message(system.clone());
         outputs.extend(match system.as_str() {
             // shifted starts (error bounds): more energy than any training
@@ -1129,14 +857,11 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 &SystemSpec {
                     name: "pendulum",
                     prior: Prior::Nominal,
-                    perturb: |s: &mut Pendulum, r| {
-                        perturb_links([&mut s.links.rod], r);
-                        s.joints.pivot.damping = r.uniform(0.0, 1.0);
-                    },
+                    perturb: perturb_pendulum,
                     minimal: Pendulum::minimal,
                     maximal: Pendulum::maximal,
                 },
-                &|r| SVector::from([angle(r)]),
+                &pendulum_start,
                 &|r| {
                     (
                         SVector::from([angle(r)]),
@@ -1151,15 +876,11 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 &SystemSpec {
                     name: "cartpole",
                     prior: Prior::Nominal,
-                    perturb: |s: &mut Cartpole, r| {
-                        perturb_links([&mut s.links.cart, &mut s.links.pole], r);
-                        s.joints.rail.damping = r.uniform(0.0, 0.5);
-                        s.joints.hinge.damping = r.uniform(0.0, 1.0);
-                    },
+                    perturb: perturb_cartpole,
                     minimal: Cartpole::minimal,
                     maximal: Cartpole::maximal,
                 },
-                &|r| SVector::from([r.uniform(-1.0, 1.0), angle(r)]),
+                &cartpole_start,
                 &|r| {
                     (
                         SVector::from([r.uniform(-1.0, 1.0), angle(r)]),
@@ -1174,15 +895,11 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 &SystemSpec {
                     name: "double_pendulum",
                     prior: Prior::Constant,
-                    perturb: |s: &mut DoublePendulum, r| {
-                        perturb_links([&mut s.links.upper, &mut s.links.lower], r);
-                        s.joints.shoulder.damping = r.uniform(0.0, 2.0);
-                        s.joints.elbow.damping = r.uniform(0.0, 0.5);
-                    },
+                    perturb: perturb_double_pendulum,
                     minimal: DoublePendulum::minimal,
                     maximal: DoublePendulum::maximal,
                 },
-                &|r| SVector::from([angle(r), angle(r)]),
+                &double_pendulum_start,
                 &|r| {
                     (
                         SVector::from([angle(r), angle(r)]),
@@ -1197,27 +914,11 @@ fn run(mut cli: Cli, matches: &ArgMatches) -> Result<(), Box<dyn std::error::Err
                 &SystemSpec {
                     name: "fourbar",
                     prior: Prior::Constant,
-                    perturb: |s: &mut Fourbar, r| {
-                        let l = &mut s.links;
-                        perturb_links([&mut l.link1, &mut l.link2, &mut l.link3, &mut l.link4], r);
-                        let (c1, c2) = (r.uniform(0.0, 2.0), r.uniform(0.0, 0.5));
-                        s.joints.top1.damping = c1;
-                        s.joints.top2.damping = c1;
-                        s.joints.middle1.damping = c2;
-                        s.joints.middle2.damping = c2;
-                        s.joints.bottom.damping = 0.0;
-                    },
+                    perturb: perturb_fourbar,
                     minimal: Fourbar::minimal,
                     maximal: Fourbar::maximal,
                 },
-                // a random rhombus: arm angles θ1, θ3; the loop closes exactly
-                &|r| {
-                    let (t1, t3) = (
-                        r.uniform(-FRAC_PI_2, FRAC_PI_2),
-                        r.uniform(-FRAC_PI_2, FRAC_PI_2),
-                    );
-                    SVector::from([t1, t3 - t1, t3, t1 - t3])
-                },
+                &fourbar_start,
                 &|r| {
                     let (t1, t3) = (
                         r.uniform(-FRAC_PI_2, FRAC_PI_2),
@@ -1298,32 +999,32 @@ fn report(cli: &Cli, outputs: Vec<Output>, t0: Instant) -> Result<(), Box<dyn st
         }
     }
     let mut gt_notes = String::new();
-    for system in &cli.systems {
+    for system in &cli.protocol.systems {
         let err = gt_err.get(system).copied().unwrap_or((0.0, 0.0));
         gt_notes += &format!("| {system} | {:.2e} | {:.2e} |\n", err.0, err.1);
     }
 
     let settings = format!(
         "| setting | value |\n|---|---|\n| systems | {} |\n| training samples N | {:?} (nested: the first N of one draw per run) |\n| runs per system | {} |\n| trajectories (train + test) | {} + {} (2 s each, random configurations at rest) |\n| 20-step windows per test trajectory | {} |\n| model Δt | 10 ms |\n| ground truth | {}, Δt = {:e} s |\n| observation noise | σ = 1e-3 on training q, v and targets |\n| perturbations | masses, inertias ×U[0.9, 1.1]; damping as in the paper |\n| GP | ARD SE per velocity component, {} |\n| priors | pendulum, cartpole: nominal VI step; double pendulum, fourbar: constant mean |\n\nGround-truth accuracy over one 2 s trajectory of the first run (max position difference against the same integrator at Δt/2, and against the paper's reference, the midpoint VI at 0.1 ms, whose own error is ≈ 4/3 of its difference to 0.05 ms):\n\n| system | max \\|q(Δt) − q(Δt/2)\\| | max \\|q − q_midpoint(0.1 ms)\\| |\n|---|---|---|\n{}",
-        cli.systems.join(", "),
-        cli.n,
-        cli.runs,
-        cli.train_trajectories,
-        cli.test_trajectories,
-        cli.windows,
-        cli.gt_method.describe(),
-        cli.gt().dt,
+        cli.protocol.systems.join(", "),
+        cli.protocol.n,
+        cli.protocol.runs,
+        cli.protocol.train_trajectories,
+        cli.protocol.test_trajectories,
+        cli.protocol.windows,
+        cli.protocol.gt_method.describe(),
+        cli.protocol.gt().dt,
         if cli.warm {
             format!(
                 "{} extra restarts at the first N, then warm starts from the previous N's optimum with {} extra restarts, L-BFGS memory {}, seed {}",
-                cli.restarts, cli.warm_restarts, cli.memory, cli.seed
+                cli.protocol.restarts, cli.warm_restarts, cli.protocol.memory, cli.protocol.seed
             )
         } else {
             format!(
                 "{} extra restarts, L-BFGS memory {}, seed {}; {}",
-                cli.restarts,
-                cli.memory,
-                cli.seed,
+                cli.protocol.restarts,
+                cli.protocol.memory,
+                cli.protocol.seed,
                 cli.describe_screening()
             )
         },

@@ -216,6 +216,16 @@ pub fn summarize_fig2(points: &[Fig2Point]) -> Vec<Fig2Summary> {
         .collect()
 }
 
+/// Median MSE of a (system, method, n) over runs (NaN runs excluded).
+pub fn med(points: &[Fig2Point], system: &str, method: &str, n: usize) -> f64 {
+    let mut v: Vec<f64> = points
+        .iter()
+        .filter(|p| p.system == system && p.method == method && p.n == n && p.mse.is_finite())
+        .map(|p| p.mse)
+        .collect();
+    crate::median::median(&mut v)
+}
+
 /// Writes everything into `dir` (created if missing) and returns the list of files written.
 ///
 /// Files: `fig1a_energy.{svg,png}`, `fig1b_constraint_drift.{svg,png}`,
@@ -246,12 +256,8 @@ pub fn write_all(
             .into());
         }
     }
-    let summary = summarize_fig2(fig2);
-    let systems = systems_with_files(&summary)?;
-
-    std::fs::create_dir_all(dir)?;
-    register_embedded_font()?;
-    let mut written = Vec::new();
+    let systems = systems_with_files(&summarize_fig2(fig2))?;
+    let (mut written, summary) = write_fig2(dir, fig2)?;
 
     let panels = [
         (
@@ -291,20 +297,35 @@ pub fn write_all(
         written.extend(plot.write(dir, stem)?);
     }
 
-    for (system, stem) in &systems {
-        let plot = fig2_plot(system, &summary);
-        written.extend(plot.write(dir, stem)?);
-    }
-
     written.push(write_fig1_csv(dir, fig1)?);
-    written.push(write_csv(&dir.join("fig2.csv"), fig2)?);
-    written.push(write_csv(&dir.join("fig2_summary.csv"), &summary)?);
 
     let report = report_md(settings_md, fig1, fig2, &summary, &systems, findings_md);
     let report_path = dir.join("report.md");
     std::fs::write(&report_path, report)?;
     written.push(report_path);
     Ok(written)
+}
+
+/// Writes Fig. 2 alone into `dir` (created if missing): `fig2_<system>.{svg,png}`
+/// per system, `fig2.csv` and `fig2_summary.csv`, as [`write_all`] does, for
+/// any method names (unknown ones are plotted with their raw name). Returns
+/// the files written and the summary.
+pub fn write_fig2(
+    dir: &Path,
+    fig2: &[Fig2Point],
+) -> Result<(Vec<PathBuf>, Vec<Fig2Summary>), Box<dyn Error>> {
+    let summary = summarize_fig2(fig2);
+    let systems = systems_with_files(&summary)?;
+    std::fs::create_dir_all(dir)?;
+    register_embedded_font()?;
+    let mut written = Vec::new();
+    for (system, stem) in &systems {
+        let plot = fig2_plot(system, &summary);
+        written.extend(plot.write(dir, stem)?);
+    }
+    written.push(write_csv(&dir.join("fig2.csv"), fig2)?);
+    written.push(write_csv(&dir.join("fig2_summary.csv"), &summary)?);
+    Ok((written, summary))
 }
 
 /// The systems present, in the paper's order, with their file stems
