@@ -506,8 +506,7 @@ pub trait Regressor {
     ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError> {
         let _ = (t, pi);
         Err(IdentifyError::Layout {
-            message: "this regressor gives no position Jacobians, which output error needs"
-                .into(),
+            message: "this regressor gives no position Jacobians, which output error needs".into(),
         })
     }
 }
