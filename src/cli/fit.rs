@@ -207,8 +207,9 @@ where
     };
     if U == 0 {
         let all = data.transitions();
-        let train =
-            |chosen: &[Transition<N>]| Learned::train(minimal, dt, chosen, enc, prior.clone(), opts);
+        let train = |chosen: &[Transition<N>]| {
+            Learned::train(minimal, dt, chosen, enc, prior.clone(), opts)
+        };
         fit_view(a, &all, (enc, prior), 0, opts, train, out)
     } else {
         let all = data

@@ -155,9 +155,11 @@ pub(super) fn read_identified(path: &Path, name: &str) -> Result<IdentifiedParam
         )));
     }
     let section = file.get("identified").ok_or_else(|| {
-        bad("no \"identified\" section (the standard parameters and their covariance): \
+        bad(
+            "no \"identified\" section (the standard parameters and their covariance): \
              write the file again with `vigp identify`"
-            .into())
+                .into(),
+        )
     })?;
     let identified = serde_json::from_value::<IdentifiedParameters>(section.clone())
         .map_err(|e| bad(format!("\"identified\": {e}")))?;
@@ -175,8 +177,8 @@ pub(super) fn apply_identified<P: Parameters>(
     path: &Path,
 ) -> Result<IdentifiedParameters, CliError> {
     let identified = read_identified(path, name)?;
-    identified.write_to(p).map_err(|e| {
-        CliError::Usage(format!("--prior identified:{}: {e}", path.display()))
-    })?;
+    identified
+        .write_to(p)
+        .map_err(|e| CliError::Usage(format!("--prior identified:{}: {e}", path.display())))?;
     Ok(identified)
 }

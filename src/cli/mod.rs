@@ -9,7 +9,7 @@
 //!
 //! ```text
 //! vigp fit     --system NAME --data train.csv --out model.json
-//!              [--encoding sincos|minimal|maximal] [--prior nominal|constant] [--restarts K]
+//!              [--encoding sincos|minimal|maximal] [--prior nominal|constant|identified:FILE] [--restarts K]
 //!              [--max-samples N] [--no-screen | --sparse M [--optimise-inducing]]
 //!              [--noise-floor VAR] [--memory K]
 //! vigp score   --model model.json --data test.csv --steps 20 [--substeps K] [--max-subdivision D]

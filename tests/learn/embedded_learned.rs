@@ -598,9 +598,15 @@ fn forced_learned_stepper_equals_the_std_forced_step() {
         (Encoding::Raw, Prior::Nominal),
         (Encoding::Raw, Prior::Constant),
     ] {
-        let (l, _) =
-            Learned::train_forced(nominal.minimal(), DT, &data, encoding, prior.clone(), &options())
-                .unwrap();
+        let (l, _) = Learned::train_forced(
+            nominal.minimal(),
+            DT,
+            &data,
+            encoding,
+            prior.clone(),
+            &options(),
+        )
+        .unwrap();
         assert_eq!(l.inputs(), 1);
         let o = owned(&l);
         let worst = match encoding {

@@ -11,6 +11,7 @@ mod common;
 mod embedded_learned;
 mod excitation;
 mod held_inputs;
+mod identified_prior;
 mod identify;
 mod learned;
 mod learned_file;

@@ -351,9 +351,7 @@ where
         if (a - b).abs() > 1e-12 * a.abs().max(b.abs()) {
             return Err(field(
                 at,
-                format!(
-                    "the identified values give {name} = {a}, but `parameters.{name}` is {b}"
-                ),
+                format!("the identified values give {name} = {a}, but `parameters.{name}` is {b}"),
             ));
         }
     }

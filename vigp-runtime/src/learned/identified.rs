@@ -144,7 +144,9 @@ impl IdentifiedParameters {
     /// ([`Identification::covariance`]).
     ///
     /// Errors: an identification of another layout than `M`'s, NaN or ∞.
-    pub fn from_identification<M: Parameters>(id: &Identification) -> Result<Self, IdentifiedError> {
+    pub fn from_identification<M: Parameters>(
+        id: &Identification,
+    ) -> Result<Self, IdentifiedError> {
         let structure = structure_of::<M>()?;
         if structure.names != id.structure.names {
             return Err(IdentifiedError::Layout(format!(
@@ -154,12 +156,7 @@ impl IdentifiedParameters {
                 structure.names
             )));
         }
-        Self::new(
-            M::NAME,
-            &id.structure.names,
-            &id.estimate,
-            &id.covariance,
-        )
+        Self::new(M::NAME, &id.structure.names, &id.estimate, &id.covariance)
     }
 
     /// The mechanism's name ([`Parameters::NAME`]).
