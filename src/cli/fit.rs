@@ -329,11 +329,7 @@ where
             } else {
                 String::new()
             },
-            match prior {
-                Prior::Nominal => "Nominal",
-                Prior::Constant => "Constant",
-                Prior::Identified(_) => "Identified",
-            },
+            super::prior_name(prior),
             chosen.len(),
             all.len(),
             opts.restarts,

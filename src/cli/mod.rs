@@ -588,3 +588,14 @@ fn read_plan<const U: usize>(path: &Path, inputs: &[&str]) -> Result<Plans<U>, C
     }
     Ok(plans)
 }
+
+/// The prior's name in the tool's messages: `Nominal`, `Constant` or
+/// `Identified` (the identified values are in the model file).
+pub(crate) fn prior_name(prior: &crate::learned::Prior) -> &'static str {
+    use crate::learned::Prior;
+    match prior {
+        Prior::Nominal => "Nominal",
+        Prior::Constant => "Constant",
+        Prior::Identified(_) => "Identified",
+    }
+}

@@ -644,8 +644,15 @@ fn identify_then_fit_with_the_identified_prior() {
         .iter()
         .find(|r| r["name"] == "joints.rail.damping")
         .unwrap();
-    assert!((rail["value"].as_f64().unwrap() - 0.3).abs() <= 1e-8 * 0.3, "{rail}");
-    for name in ["joints.rail.damping", "joints.hinge.damping", "links.pole.mass"] {
+    assert!(
+        (rail["value"].as_f64().unwrap() - 0.3).abs() <= 1e-8 * 0.3,
+        "{rail}"
+    );
+    for name in [
+        "joints.rail.damping",
+        "joints.hinge.damping",
+        "links.pole.mass",
+    ] {
         assert_eq!(model["parameters"][name], row(name)["identified"], "{name}");
     }
     // predict and export run on it (score did above); export writes the
