@@ -478,3 +478,43 @@ fn identified_prior_errors() {
         Err(IdentifiedError::Covariance(_))
     ));
 }
+
+/// The Lie-group learned models take their parameters from their stepper's
+/// mechanism: an identified prior is refused with a typed error (build the
+/// stepper from the mechanism with the identified parameters instead).
+#[test]
+fn spatial_learned_refuses_an_identified_prior() {
+    use vigp::spatial::learned::{
+        Configuration, LearnSpatialError, LearnedSpatial, Rotation, transitions as spatial,
+    };
+    use vigp::spatial::{LieStepper, SpatialIntegrator};
+    let dt = 0.01;
+    let sys = vigp::systems::spatial::Furuta::default();
+    let stepper = LieStepper::new(sys.maximal(), dt).unwrap();
+    let zmin = vigp::projection::consistent_state(
+        &sys.minimal(),
+        &SVector::from([0.3, 2.5]),
+        &SVector::from([2.0, 0.5]),
+        dt,
+    )
+    .unwrap();
+    let z0 = sys.minimal().to_maximal(&zmin, dt);
+    let traj = stepper.rollout(&z0, 6).unwrap();
+    let configs: Vec<Configuration<2>> = traj.iter().map(|z| (z.x, z.q)).collect();
+    let params = IdentifiedParameters::new(
+        "Furuta",
+        &["links.arm.mass".to_string()],
+        &[1.0],
+        &nalgebra::DMatrix::zeros(1, 1),
+    )
+    .unwrap();
+    let e = LearnedSpatial::train(
+        stepper,
+        &spatial(&configs, dt),
+        Rotation::Matrix,
+        Prior::Identified(params),
+        &options(),
+    )
+    .unwrap_err();
+    assert!(matches!(e, LearnSpatialError::IdentifiedPrior), "{e}");
+}
