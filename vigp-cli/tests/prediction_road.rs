@@ -629,8 +629,10 @@ fn identify_then_fit_with_the_identified_prior() {
     let model_path = dir.join("identified.json");
     let model: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&model_path).unwrap()).unwrap();
+    let params_file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
     let recorded = &model["prior"]["identified"];
-    assert_eq!(recorded, &file["identified"], "{recorded}");
+    assert_eq!(recorded, &params_file["identified"], "{recorded}");
     assert_eq!(recorded["mechanism"], "DriveCartpole");
     let standard = recorded["parameters"].as_array().unwrap();
     let covariance = recorded["covariance"].as_array().unwrap();
@@ -697,7 +699,7 @@ fn identify_then_fit_with_the_identified_prior() {
     assert!(e.to_string().contains("sets this parameter"), "{e}");
     // a parameter file without the standard parameters and covariance
     let bare = dir.join("bare.json");
-    let mut without = file.clone();
+    let mut without = params_file.clone();
     without.as_object_mut().unwrap().remove("identified");
     std::fs::write(&bare, without.to_string()).unwrap();
     let e = run(&[
