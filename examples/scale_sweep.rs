@@ -218,7 +218,7 @@ fn sweep<S, Mn, const N: usize>(
 ) -> Result<(), Box<dyn std::error::Error>>
 where
     S: Default,
-    Mn: Mechanism<N, 0> + Copy + Send + Sync,
+    Mn: Mechanism<N, 0> + vigp::Parameters + Copy + Send + Sync,
 {
     let mut rng = Rng(cli.seed ^ name.len() as u64);
     let mut truth = S::default();

@@ -307,8 +307,8 @@ pub fn evaluate<S, Mn, Mx, const N: usize, const C: usize, const M: usize, const
 ) -> Result<(Vec<BoundRow>, Vec<Tube>), Box<dyn Error>>
 where
     S: Default + Copy + Send + Sync,
-    Mn: Mechanism<N, C> + Coordinates<N, M> + Copy + Send + Sync,
-    Mx: Mechanism<M, K> + Copy + Send + Sync,
+    Mn: Mechanism<N, C> + Coordinates<N, M> + vigp::Parameters + Copy + Send + Sync,
+    Mx: Mechanism<M, K> + vigp::Parameters + Copy + Send + Sync,
 {
     let seed = cli.protocol.seed ^ 0xB0D5_0000 ^ spec.name.len() as u64;
     let mut rng = Rng(seed);
@@ -378,7 +378,7 @@ where
     let mut rows = Vec::new();
     let mut tubes = Vec::new();
     for (coords, enc) in [("minimal", Encoding::Raw), ("sincos", Encoding::SinCos)] {
-        let (l, _) = Learned::train(nmin, DT, &dmin, enc, spec.prior, &opts)?;
+        let (l, _) = Learned::train(nmin, DT, &dmin, enc, spec.prior.clone(), &opts)?;
         let (r, t) = evaluate_model(
             spec.name,
             coords,
@@ -389,7 +389,7 @@ where
         rows.extend(r);
         tubes.push(t);
     }
-    let (l, _) = Learned::train(nmax, DT, &dmax, Encoding::Raw, spec.prior, &opts)?;
+    let (l, _) = Learned::train(nmax, DT, &dmax, Encoding::Raw, spec.prior.clone(), &opts)?;
     let (r, t) = evaluate_model(
         spec.name,
         "maximal",

@@ -352,8 +352,8 @@ fn evaluate_system<S, Mn, Mx, const N: usize, const C: usize, const M: usize, co
 ) -> Result<Vec<RunOutput>, Box<dyn std::error::Error>>
 where
     S: Default + Copy + Send + Sync,
-    Mn: Mechanism<N, C> + Coordinates<N, M> + Copy + Send + Sync,
-    Mx: Mechanism<M, K> + Copy + Send + Sync,
+    Mn: Mechanism<N, C> + Coordinates<N, M> + vigp::Parameters + Copy + Send + Sync,
+    Mx: Mechanism<M, K> + vigp::Parameters + Copy + Send + Sync,
 {
     // The runs are independent (each its own seeded RNG, its own training
     // sets and fits), so they run side by side: the idle ends of one run's
@@ -456,22 +456,24 @@ where
                 .into_iter()
                 .enumerate()
             {
-                let mse = match Learned::train(nmin, DT, &dmin, enc, spec.prior, &options[model]) {
-                    Ok((l, report)) => {
-                        warm[model] = Some(l.gp().warm_start());
-                        previous[model] = Some((n_eff, optima(&report)));
-                        mean_mse(&windows, &counts, |z| {
-                            Ok(l.rollout(z, HORIZON)?.into_iter().map(|z| z.q).collect())
-                        })
-                    }
-                    Err(e) => {
-                        eprintln!(
-                            "{} run {run} N {n} {method}: training failed: {e}",
-                            spec.name
-                        );
-                        f64::NAN
-                    }
-                };
+                let mse =
+                    match Learned::train(nmin, DT, &dmin, enc, spec.prior.clone(), &options[model])
+                    {
+                        Ok((l, report)) => {
+                            warm[model] = Some(l.gp().warm_start());
+                            previous[model] = Some((n_eff, optima(&report)));
+                            mean_mse(&windows, &counts, |z| {
+                                Ok(l.rollout(z, HORIZON)?.into_iter().map(|z| z.q).collect())
+                            })
+                        }
+                        Err(e) => {
+                            eprintln!(
+                                "{} run {run} N {n} {method}: training failed: {e}",
+                                spec.name
+                            );
+                            f64::NAN
+                        }
+                    };
                 points.push(Fig2Point {
                     system: spec.name.into(),
                     method: method.into(),
@@ -480,8 +482,14 @@ where
                     mse,
                 });
             }
-            let mse = match Learned::train(nmax, DT, &dmax, Encoding::Raw, spec.prior, &options[2])
-            {
+            let mse = match Learned::train(
+                nmax,
+                DT,
+                &dmax,
+                Encoding::Raw,
+                spec.prior.clone(),
+                &options[2],
+            ) {
                 Ok((l, report)) => {
                     warm[2] = Some(l.gp().warm_start());
                     previous[2] = Some((n_eff, optima(&report)));
@@ -538,8 +546,8 @@ fn run_system<S, Mn, Mx, const N: usize, const C: usize, const M: usize, const K
 ) -> Result<Vec<Output>, Box<dyn std::error::Error>>
 where
     S: Default + Copy + Send + Sync,
-    Mn: Mechanism<N, C> + Coordinates<N, M> + Copy + Send + Sync,
-    Mx: Mechanism<M, K> + Copy + Send + Sync,
+    Mn: Mechanism<N, C> + Coordinates<N, M> + vigp::Parameters + Copy + Send + Sync,
+    Mx: Mechanism<M, K> + vigp::Parameters + Copy + Send + Sync,
 {
     let runs: Vec<usize> = todo
         .iter()

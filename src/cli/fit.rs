@@ -4,6 +4,7 @@ use std::io::Write;
 use std::time::Instant;
 
 use super::args::{EncodingArg, FitArgs, PriorArg};
+use super::identify::read_identified;
 use super::{CliError, check_out_dir, data_error, read_log, spinner, w};
 use crate::data::Dataset;
 use crate::gp::{Method, Screening, SparseOptions, TrainOptions, TrainReport};
@@ -72,7 +73,7 @@ pub(super) fn prepare<Mn, const N: usize, const C: usize, const U: usize>(
     out: &mut dyn Write,
 ) -> Result<Prepared<N>, CliError>
 where
-    Mn: Mechanism<N, C> + Copy,
+    Mn: Mechanism<N, C> + Parameters + Copy,
     Mn: crate::Inputs<U>,
 {
     if let Err(e) = minimal.constants() {
@@ -110,7 +111,7 @@ where
                     path.display()
                 ),
             )?;
-            Prior::Nominal
+            Prior::Identified(read_identified(path, Mn::NAME)?)
         }
     };
     let mut opts = TrainOptions {
@@ -198,7 +199,7 @@ where
         prior,
         opts,
     } = p;
-    let (dt, prior) = (*dt, *prior);
+    let dt = *dt;
     let enc = if a.encoding == EncodingArg::Sincos {
         Encoding::SinCos
     } else {
@@ -206,15 +207,16 @@ where
     };
     if U == 0 {
         let all = data.transitions();
-        let train =
-            |chosen: &[Transition<N>]| Learned::train(minimal, dt, chosen, enc, prior, opts);
+        let train = |chosen: &[Transition<N>]| {
+            Learned::train(minimal, dt, chosen, enc, prior.clone(), opts)
+        };
         fit_view(a, &all, (enc, prior), 0, opts, train, out)
     } else {
         let all = data
             .forced_transitions::<U>()
             .map_err(data_error(&a.data))?;
         let train = |chosen: &[ForcedTransition<N, U>]| {
-            Learned::train_forced(minimal, dt, chosen, enc, prior, opts)
+            Learned::train_forced(minimal, dt, chosen, enc, prior.clone(), opts)
         };
         fit_view(a, &all, (enc, prior), 2 * U, opts, train, out)
     }
@@ -249,7 +251,7 @@ where
         prior,
         opts,
     } = p;
-    let (dt, prior) = (*dt, *prior);
+    let dt = *dt;
     let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
     let (mut plain, mut forced) = (Vec::new(), Vec::new());
     for (run, us) in data.runs.iter().zip(&inputs) {
@@ -267,12 +269,12 @@ where
     }
     if U == 0 {
         let train = |chosen: &[Transition<NM>]| {
-            Learned::train(maximal, dt, chosen, Encoding::Raw, prior, opts)
+            Learned::train(maximal, dt, chosen, Encoding::Raw, prior.clone(), opts)
         };
         fit_view(a, &plain, (Encoding::Raw, prior), 0, opts, train, out)
     } else {
         let train = |chosen: &[ForcedTransition<NM, U>]| {
-            Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior, opts)
+            Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior.clone(), opts)
         };
         fit_view(a, &forced, (Encoding::Raw, prior), 2 * U, opts, train, out)
     }
@@ -292,7 +294,7 @@ const VARIANCE_RESOLVED: f64 = 1e-10;
 fn fit_view<M, T, const N: usize, const C: usize>(
     a: &FitArgs,
     all: &[T],
-    (encoding, prior): (Encoding, Prior),
+    (encoding, prior): (Encoding, &Prior),
     u_dim: usize,
     opts: &TrainOptions,
     train: impl FnOnce(&[T]) -> Result<(Learned<M, N, C>, TrainReport), LearnError>,
@@ -318,7 +320,7 @@ where
     w(
         out,
         format_args!(
-            "fit: {} in coordinates [{}]{}, {encoding:?} encoding ({d} inputs), {prior:?} prior: \
+            "fit: {} in coordinates [{}]{}, {encoding:?} encoding ({d} inputs), {} prior: \
              N = {} of {} transitions, {} restarts{}",
             M::NAME,
             M::COORDINATES.join(", "),
@@ -327,6 +329,7 @@ where
             } else {
                 String::new()
             },
+            super::prior_name(prior),
             chosen.len(),
             all.len(),
             opts.restarts,

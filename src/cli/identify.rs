@@ -10,6 +10,7 @@ use super::{CliError, check_out_dir, io_error, read_log, w};
 use crate::identify::{
     DelRegressor, Log, Noise, Options, OutputError, Status, identify as run_identify,
 };
+use crate::learned::IdentifiedParameters;
 use crate::{Mechanism, Parameters};
 
 /// The `format` field of a parameter file.
@@ -123,6 +124,10 @@ where
             })
         })
         .collect();
+    // the standard parameters and their covariance, as a model file's
+    // identified prior records them
+    let standard = IdentifiedParameters::from_identification::<Mn>(&id)
+        .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
     let file = serde_json::json!({
         "format": FORMAT,
         "mechanism": Mn::NAME,
@@ -130,6 +135,7 @@ where
         "transitions": id.transitions,
         "parameters": parameters,
         "base": base,
+        "identified": standard,
     });
     let text = serde_json::to_string_pretty(&file)
         .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
@@ -153,13 +159,10 @@ fn status_name(s: Status) -> &'static str {
     }
 }
 
-/// Sets `p`'s parameters from a parameter file of `vigp identify` for the
-/// mechanism `name`; returns how many were set.
-pub(super) fn apply_identified<P: Parameters>(
-    p: &mut P,
-    name: &str,
-    path: &Path,
-) -> Result<usize, CliError> {
+/// The identified standard parameters and their covariance (the file's
+/// `identified` section) of a parameter file of `vigp identify` for the
+/// mechanism `name`.
+pub(super) fn read_identified(path: &Path, name: &str) -> Result<IdentifiedParameters, CliError> {
     let bad =
         |why: String| CliError::Usage(format!("--prior identified:{}: {why}", path.display()));
     let text = std::fs::read_to_string(path).map_err(io_error(path))?;
@@ -176,22 +179,31 @@ pub(super) fn apply_identified<P: Parameters>(
             file["mechanism"].as_str().unwrap_or("?")
         )));
     }
-    let rows = file["parameters"]
-        .as_array()
-        .ok_or_else(|| bad("no \"parameters\" list".into()))?;
-    for row in rows {
-        let key = row["name"]
-            .as_str()
-            .ok_or_else(|| bad("a parameter without a name".into()))?;
-        let value = row["identified"]
-            .as_f64()
-            .filter(|v| v.is_finite())
-            .ok_or_else(|| bad(format!("`{key}`: no finite \"identified\" value")))?;
-        let i = P::parameter_index(key)
-            .ok_or_else(|| bad(format!("`{key}` is not a parameter of `{name}`")))?;
-        if let Some(slot) = p.parameter_mut(i) {
-            *slot = value;
-        }
-    }
-    Ok(rows.len())
+    let section = file.get("identified").ok_or_else(|| {
+        bad(
+            "no \"identified\" section (the standard parameters and their covariance): \
+             write the file again with `vigp identify`"
+                .into(),
+        )
+    })?;
+    let identified = serde_json::from_value::<IdentifiedParameters>(section.clone())
+        .map_err(|e| bad(format!("\"identified\": {e}")))?;
+    identified
+        .validate()
+        .map_err(|e| bad(format!("\"identified\": {e}")))?;
+    Ok(identified)
+}
+
+/// Writes the identified parameters of the parameter file `path` into
+/// `p` (the mechanism `name`), so that every view of it carries them.
+pub(super) fn apply_identified<P: Parameters>(
+    p: &mut P,
+    name: &str,
+    path: &Path,
+) -> Result<IdentifiedParameters, CliError> {
+    let identified = read_identified(path, name)?;
+    identified
+        .write_to(p)
+        .map_err(|e| CliError::Usage(format!("--prior identified:{}: {e}", path.display())))?;
+    Ok(identified)
 }

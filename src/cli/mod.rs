@@ -9,7 +9,7 @@
 //!
 //! ```text
 //! vigp fit     --system NAME --data train.csv --out model.json
-//!              [--encoding sincos|minimal|maximal] [--prior nominal|constant] [--restarts K]
+//!              [--encoding sincos|minimal|maximal] [--prior nominal|constant|identified:FILE] [--restarts K]
 //!              [--max-samples N] [--no-screen | --sparse M [--optimise-inducing]]
 //!              [--noise-floor VAR] [--memory K]
 //! vigp score   --model model.json --data test.csv --steps 20 [--substeps K] [--max-subdivision D]
@@ -587,4 +587,15 @@ fn read_plan<const U: usize>(path: &Path, inputs: &[&str]) -> Result<Plans<U>, C
         return Err(bad("no input rows".into()));
     }
     Ok(plans)
+}
+
+/// The prior's name in the tool's messages: `Nominal`, `Constant` or
+/// `Identified` (the identified values are in the model file).
+pub(crate) fn prior_name(prior: &crate::learned::Prior) -> &'static str {
+    use crate::learned::Prior;
+    match prior {
+        Prior::Nominal => "Nominal",
+        Prior::Constant => "Constant",
+        Prior::Identified(_) => "Identified",
+    }
 }

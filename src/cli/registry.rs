@@ -113,10 +113,11 @@ fn run_system<S: System>(cmd: &Command, out: &mut dyn Write) -> Result<(), CliEr
     // the nominal parameters: declared, then an identified prior's, then
     // each `--set`
     let mut sys = S::default();
+    let mut identified = None;
     let set: &[String] = match cmd {
         Command::Fit(FitArgs { set, prior, .. }) => {
             if let PriorArg::Identified(path) = prior {
-                apply_identified(&mut sys, S::NAME, path)?;
+                identified = Some((apply_identified(&mut sys, S::NAME, path)?, path));
             }
             set
         }
@@ -127,6 +128,23 @@ fn run_system<S: System>(cmd: &Command, out: &mut dyn Write) -> Result<(), CliEr
     };
     for s in set {
         set_parameter(&mut sys, s)?;
+    }
+    // the identified prior sets its parameters again when it trains: a
+    // `--set` of one of them would be lost
+    if let Some((identified, path)) = identified {
+        let mut again = sys;
+        identified
+            .write_to(&mut again)
+            .map_err(|e| CliError::Usage(format!("--prior identified:{}: {e}", path.display())))?;
+        if let Some(i) = (0..S::PARAMETER_NAMES.len())
+            .find(|&i| again.parameter(i).map(f64::to_bits) != sys.parameter(i).map(f64::to_bits))
+        {
+            return Err(CliError::Usage(format!(
+                "--set {}: the identified prior (--prior identified:{}) sets this parameter",
+                S::PARAMETER_NAMES[i],
+                path.display()
+            )));
+        }
     }
     sys.visit(Visit { cmd, out })
 }

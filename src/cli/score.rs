@@ -88,11 +88,11 @@ where
     w(
         out,
         format_args!(
-            "model: {} ({} coordinates, {:?} encoding, {:?} prior, N = {}{}, dt = {dt} s)",
+            "model: {} ({} coordinates, {:?} encoding, {} prior, N = {}{}, dt = {dt} s)",
             a.model.display(),
             K,
             learned.encoding(),
-            learned.prior(),
+            super::prior_name(&learned.prior()),
             learned.gp().n(),
             sparse_note(learned.gp())
         ),

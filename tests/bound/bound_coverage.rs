@@ -123,7 +123,7 @@ struct Row {
 }
 
 #[allow(clippy::too_many_arguments)]
-fn evaluate<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+fn evaluate<M: Mechanism<N, C> + vigp::Parameters + Copy, const N: usize, const C: usize>(
     system: &'static str,
     truth: M,
     nominal: M,

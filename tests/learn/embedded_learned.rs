@@ -71,7 +71,7 @@ where
             Encoding::SinCos => CoreEncoding::SinCos,
         },
         prior: match l.prior() {
-            Prior::Nominal => CorePrior::Nominal,
+            Prior::Nominal | Prior::Identified(_) => CorePrior::Nominal,
             Prior::Constant => CorePrior::Constant,
         },
         project: l.projects(),
@@ -598,9 +598,15 @@ fn forced_learned_stepper_equals_the_std_forced_step() {
         (Encoding::Raw, Prior::Nominal),
         (Encoding::Raw, Prior::Constant),
     ] {
-        let (l, _) =
-            Learned::train_forced(nominal.minimal(), DT, &data, encoding, prior, &options())
-                .unwrap();
+        let (l, _) = Learned::train_forced(
+            nominal.minimal(),
+            DT,
+            &data,
+            encoding,
+            prior.clone(),
+            &options(),
+        )
+        .unwrap();
         assert_eq!(l.inputs(), 1);
         let o = owned(&l);
         let worst = match encoding {

@@ -181,7 +181,7 @@ fn held_input_errors<M, const N: usize, const U: usize>(
     seed: u64,
 ) -> Vec<Errors>
 where
-    M: Mechanism<N, 0> + Clone + vigp::Inputs<U>,
+    M: Mechanism<N, 0> + Clone + vigp::Inputs<U> + vigp::Parameters,
 {
     let mut rng = Rng(seed);
     let start =
@@ -217,7 +217,7 @@ fn errors<M, const N: usize, const U: usize>(
     seed: u64,
 ) -> Vec<Errors>
 where
-    M: Mechanism<N, 0> + Clone + vigp::Inputs<U>,
+    M: Mechanism<N, 0> + Clone + vigp::Inputs<U> + vigp::Parameters,
 {
     let mut data: Vec<ForcedTransition<N, U>> = Vec::new();
     for l in logs.iter().filter(|l| l.length == 0) {

@@ -51,7 +51,7 @@ fn learned_rollout_violation<M: Mechanism<N, C> + Clone, const N: usize, const C
 /// Train GP-only integrators on 5 and 40 samples of `data` and check that
 /// 10^4 projected steps keep |g| ≤ 1e-10 and that the projection did work.
 fn check_constraints_in_learned_rollouts<
-    M: Mechanism<N, C> + Clone,
+    M: Mechanism<N, C> + vigp::Parameters + Clone,
     const N: usize,
     const C: usize,
 >(

@@ -13,6 +13,7 @@ mod embedded_learned;
 mod excitation;
 mod fixtures;
 mod held_inputs;
+mod identified_prior;
 mod identify;
 mod learned;
 mod learned_file;

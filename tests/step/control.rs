@@ -1301,7 +1301,7 @@ fn learned_step_derivatives_of_the_paper_systems() {
     use vigp::learned::{Encoding, Learned, Prior, transitions};
     use vigp::systems::{Cartpole, DoublePendulum, Pendulum};
 
-    fn check<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    fn check<M: Mechanism<N, C> + vigp::Parameters + Copy, const N: usize, const C: usize>(
         name: &str,
         nominal: M,
         truth: M,
@@ -1409,7 +1409,7 @@ fn projected_learned_step_derivatives_match_differences() {
     use vigp::projection::consistent_state;
     use vigp::systems::{DoublePendulum, Fourbar};
 
-    fn check<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    fn check<M: Mechanism<N, C> + vigp::Parameters + Copy, const N: usize, const C: usize>(
         name: &str,
         nominal: M,
         runs: &[Vec<SVector<f64, N>>],

@@ -512,7 +512,11 @@ fn parameter_row(file: &serde_json::Value, name: &str) -> serde_json::Value {
 /// truth), and `fit --prior
 /// identified:FILE` makes the model file's nominal model the truth's
 /// dynamics: its 20-step score on a held-out log is below 1e-6 of the
-/// declared model's. A file of another mechanism is refused.
+/// declared model's. The model file records the identified standard
+/// parameters and their covariance (as the parameter file has them), and
+/// `predict` and `export` run on it. A file of another mechanism, one
+/// without the standard parameters, and a `--set` of an identified
+/// parameter are refused.
 #[test]
 fn identify_then_fit_with_the_identified_prior() {
     let dir = temp_dir("identify");
@@ -648,6 +652,96 @@ fn identify_then_fit_with_the_identified_prior() {
         identified_nominal < 1e-6 * declared_nominal,
         "{identified_nominal:e} vs {declared_nominal:e}"
     );
+
+    // the model file records the identified standard parameters and their
+    // covariance as the parameter file has them, and the DSL's values
+    let model_path = dir.join("identified.json");
+    let model: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&model_path).unwrap()).unwrap();
+    let params_file: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let recorded = &model["prior"]["identified"];
+    assert_eq!(recorded, &params_file["identified"], "{recorded}");
+    assert_eq!(recorded["mechanism"], "DriveCartpole");
+    let standard = recorded["parameters"].as_array().unwrap();
+    let covariance = recorded["covariance"].as_array().unwrap();
+    assert_eq!(covariance.len(), standard.len());
+    for (i, row) in covariance.iter().enumerate() {
+        let row = row.as_array().unwrap();
+        assert_eq!(row.len(), standard.len());
+        assert!(row[i].as_f64().unwrap() >= 0.0, "variance {i}: {}", row[i]);
+    }
+    let rail = standard
+        .iter()
+        .find(|r| r["name"] == "joints.rail.damping")
+        .unwrap();
+    assert!(
+        (rail["value"].as_f64().unwrap() - 0.3).abs() <= 1e-8 * 0.3,
+        "{rail}"
+    );
+    for name in [
+        "joints.rail.damping",
+        "joints.hinge.damping",
+        "links.pole.mass",
+    ] {
+        assert_eq!(model["parameters"][name], row(name)["identified"], "{name}");
+    }
+    // predict and export run on it (score did above); export writes the
+    // identified parameters as the embedded model's nominal ones
+    let pred = dir.join("identified-pred.csv");
+    run(&[
+        "predict",
+        "--model",
+        s(&model_path),
+        "--data",
+        s(&test),
+        "--steps",
+        "5",
+        "--out",
+        s(&pred),
+    ])
+    .unwrap();
+    assert!(table(&pred).len() > 1);
+    let rs = dir.join("identified.rs");
+    run(&["export", "--model", s(&model_path), "--out", s(&rs)]).unwrap();
+    let source = std::fs::read_to_string(&rs).unwrap();
+    let damping = model["parameters"]["joints.rail.damping"].as_f64().unwrap();
+    assert!(
+        source.contains(&format!("(\"joints.rail.damping\", {damping:?})")),
+        "{source}"
+    );
+    assert!(source.contains("learned::Prior::Nominal"), "{source}");
+
+    // a `--set` of a parameter the identified prior sets is refused
+    let e = run(&[
+        "fit",
+        "--data",
+        s(&train),
+        "--out",
+        s(&dir.join("never.json")),
+        "--prior",
+        &identified,
+        "--set",
+        "joints.hinge.damping=0.2",
+    ])
+    .unwrap_err();
+    assert!(e.to_string().contains("sets this parameter"), "{e}");
+    // a parameter file without the standard parameters and covariance
+    let bare = dir.join("bare.json");
+    let mut without = params_file.clone();
+    without.as_object_mut().unwrap().remove("identified");
+    std::fs::write(&bare, without.to_string()).unwrap();
+    let e = run(&[
+        "fit",
+        "--data",
+        s(&train),
+        "--out",
+        s(&dir.join("never.json")),
+        "--prior",
+        &format!("identified:{}", s(&bare)),
+    ])
+    .unwrap_err();
+    assert!(e.to_string().contains("no \"identified\" section"), "{e}");
 
     // a parameter file of another mechanism, or no parameter file, is refused
     let other = dir.join("other.json");

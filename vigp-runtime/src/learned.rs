@@ -41,9 +41,11 @@ use nalgebra::SVector;
 mod embedded;
 mod export;
 mod file;
+mod identified;
 pub(crate) mod time_step;
 pub use embedded::{EmbeddedExport, ExportSize};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
+pub use identified::{IdentifiedError, IdentifiedParameters, IdentifiedValue};
 
 /// How a state z = (q, v) is presented to the GP (saved as `"raw"` or
 /// `"sincos"`).
@@ -120,9 +122,40 @@ impl Encoding {
     }
 }
 
-/// The prior mean of the learned velocity map (saved as `"nominal"` or
-/// `"constant"`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+/// The prior mean of the learned velocity map (saved as `"nominal"`,
+/// `"constant"` or `{"identified": {…}}`).
+///
+/// With [`Prior::Identified`] the prior is the nominal step of the
+/// mechanism whose physical parameters were identified from logs
+/// ([`crate::identify`]), and the GP learns what those parameters cannot
+/// explain (Coulomb friction, backlash, unmodelled flexibility):
+///
+/// ```
+/// use vigp_runtime::identify::{DelRegressor, Log, Options, identify};
+/// use vigp_runtime::learned::{
+///     Encoding, IdentifiedParameters, Learned, Prior, Transition,
+/// };
+/// use vigp_runtime::gp::TrainOptions;
+/// use vigp_runtime::{Mechanism, Parameters};
+/// # fn demo<M>(model: M, log: Log, data: &[Transition<1>])
+/// #     -> Result<(), Box<dyn std::error::Error>>
+/// # where M: Mechanism<1, 0> + Parameters + Copy {
+/// // `model`: the mechanism as declared; `log`: positions every 10 ms.
+/// let regressor = DelRegressor::midpoint(model, 0.01)?;
+/// let id = identify(&regressor, &[log], &Options::default())?;
+/// let params = IdentifiedParameters::from_identification::<M>(&id)?;
+/// let prior = Prior::Identified(params);
+/// let (learned, _) =
+///     Learned::train(model, 0.01, data, Encoding::Raw, prior, &TrainOptions::default())?;
+/// // the learned model's prior is the identified mechanism
+/// assert!(learned.identified().is_some());
+/// # Ok(()) }
+/// ```
+///
+/// The model file ([`SavedLearned`]) records the identified standard
+/// parameters and their covariance in its `prior`, and the mechanism's
+/// parameters with the identified values in `parameters`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Prior {
     /// The nominal variational step v̄(z) (paper eq. 7): the GP learns the
@@ -130,6 +163,27 @@ pub enum Prior {
     Nominal,
     /// No prior model: the constant mean of the training targets.
     Constant,
+    /// The nominal variational step of the mechanism with the identified
+    /// parameters (written into it through its [`crate::Parameters`],
+    /// [`IdentifiedParameters::apply`]; its other parameters as given):
+    /// the GP learns what the identified model leaves.
+    Identified(IdentifiedParameters),
+}
+
+impl Prior {
+    /// Whether the prior is a nominal variational step ([`Prior::Nominal`]
+    /// or [`Prior::Identified`]), so that the GP mean is zero.
+    pub fn uses_nominal_step(&self) -> bool {
+        !matches!(self, Prior::Constant)
+    }
+
+    /// The identified parameters of [`Prior::Identified`].
+    pub fn identified(&self) -> Option<&IdentifiedParameters> {
+        match self {
+            Prior::Identified(p) => Some(p),
+            _ => None,
+        }
+    }
 }
 
 /// One training pair: a discrete state and the next discrete velocity.
@@ -211,6 +265,10 @@ pub enum LearnError {
     /// No training data.
     #[error("no training transitions")]
     Empty,
+    /// The identified parameters of [`Prior::Identified`] do not fit the
+    /// mechanism.
+    #[error("identified prior: {0}")]
+    Identified(#[from] IdentifiedError),
     /// A setting is out of its domain.
     #[error("invalid setting {what}: {value}")]
     InvalidSetting {
@@ -298,9 +356,15 @@ pub struct Learned<M: Mechanism<N, C>, const N: usize, const C: usize> {
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
     /// Train on transitions. `model` supplies the prior (for
-    /// [`Prior::Nominal`]), the angle kinds for [`Encoding::SinCos`], and the
-    /// constraints for the projection (on whenever C > 0). The GP options'
-    /// `mean` is overridden by `prior`.
+    /// [`Prior::Nominal`]; for [`Prior::Identified`] with the identified
+    /// parameters written into it, which the learned model then keeps as
+    /// [`Learned::model`]), the angle kinds for [`Encoding::SinCos`], and
+    /// the constraints for the projection (on whenever C > 0). The GP
+    /// options' `mean` is overridden by `prior`.
+    ///
+    /// Errors: no or non-finite transitions, a Δt the transitions
+    /// contradict, identified parameters that do not fit `model`
+    /// ([`LearnError::Identified`]), a failed nominal step or GP training.
     pub fn train(
         model: M,
         dt: f64,
@@ -308,7 +372,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         encoding: Encoding,
         prior: Prior,
         options: &TrainOptions,
-    ) -> Result<(Self, TrainReport), LearnError> {
+    ) -> Result<(Self, TrainReport), LearnError>
+    where
+        M: crate::Parameters,
+    {
         let forced: Vec<ForcedTransition<N, 0>> = data
             .iter()
             .map(|t| ForcedTransition {
@@ -338,7 +405,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         options: &TrainOptions,
     ) -> Result<(Self, TrainReport), LearnError>
     where
-        M: vigp_core::Inputs<U>,
+        M: vigp_core::Inputs<U> + crate::Parameters,
     {
         let nominal = |vi: &Variational<M, N, C>, z: &State<N>, u: &SVector<f64, U>| {
             Ok(vi.step_forced(z, u)?.v)
@@ -366,11 +433,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         ) -> Result<SVector<f64, N>, StepError>,
     ) -> Result<(Self, TrainReport), LearnError>
     where
-        M: vigp_core::Inputs<U>,
+        M: vigp_core::Inputs<U> + crate::Parameters,
     {
         if data.is_empty() {
             return Err(LearnError::Empty);
         }
+        // the identified prior's mechanism: the identified parameters
+        // written into `model` (checked before any data)
+        let model = match &prior {
+            Prior::Identified(p) => p.model(&model)?,
+            _ => model,
+        };
         vigp_core::step::check_time_step(dt).map_err(StepError::from)?;
         if let Some((found, first)) = time_step::estimate(data.iter().map(|t| (&t.z, &t.v_next)))
             && (found - dt).abs() > TRAIN_DT_TOLERANCE * dt
@@ -405,19 +478,20 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 // nominal step would spend Δv ≈ |g|/Δt re-closing it: evaluate
                 // the prior at the nearest consistent state instead, as it is
                 // at prediction time (predictions are projected).
-                Prior::Nominal if C > 0 => {
+                Prior::Nominal | Prior::Identified(_) if C > 0 => {
                     let z = consistent_state(&model, &t.z.q, &t.z.v, dt)?;
                     nominal_velocity(&prior_vi, &z, &t.u)?
                 }
-                Prior::Nominal => nominal_velocity(&prior_vi, &t.z, &t.u)?,
+                Prior::Nominal | Prior::Identified(_) => nominal_velocity(&prior_vi, &t.z, &t.u)?,
                 Prior::Constant => SVector::zeros(),
             };
             targets.extend((t.v_next - base).iter());
         }
         let mut opts = options.clone();
-        opts.mean = match prior {
-            Prior::Nominal => PriorMean::Zero,
-            Prior::Constant => PriorMean::Constant,
+        opts.mean = if prior.uses_nominal_step() {
+            PriorMean::Zero
+        } else {
+            PriorMean::Constant
         };
         let (gp, report) = Gp::train(&inputs, d, &targets, N, &opts)?;
         // near a folded loop the projection converges linearly
@@ -536,7 +610,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             self.with_input_u(z, u_prev.as_slice(), u.as_slice(), predict)?;
         }
         let prior = match self.prior {
-            Prior::Nominal => self.nominal.step_forced(z, u)?.v,
+            Prior::Nominal | Prior::Identified(_) => self.nominal.step_forced(z, u)?.v,
             Prior::Constant => SVector::zeros(),
         };
         let v = prior + mean;
@@ -636,7 +710,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let h = self.dt;
         // prior
         let (mut v, mut v_q, mut v_v, mut v_u) = match self.prior {
-            Prior::Nominal => {
+            Prior::Nominal | Prior::Identified(_) => {
                 let (z1, d) = self.nominal.step_derivatives(z, u)?;
                 (z1.v, d.a.v_q, d.a.v_v, d.b.v_u)
             }
@@ -924,7 +998,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         self.gp.set_parallel_variance(on);
     }
 
-    /// The model (prior and constraints).
+    /// The model (prior and constraints): for [`Prior::Identified`] the
+    /// mechanism with the identified parameters.
     pub fn model(&self) -> &M {
         &self.model
     }
@@ -934,9 +1009,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         self.encoding
     }
 
-    /// The prior.
+    /// The prior (a copy; [`Learned::identified`] borrows the identified
+    /// parameters).
     pub fn prior(&self) -> Prior {
-        self.prior
+        self.prior.clone()
+    }
+
+    /// The identified parameters of a model trained with
+    /// [`Prior::Identified`] (their values and covariance).
+    pub fn identified(&self) -> Option<&IdentifiedParameters> {
+        self.prior.identified()
     }
 
     /// `true` when predictions are projected onto the constraints.
@@ -953,7 +1035,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// prior (whose constant is part of the GP mean).
     fn prior_velocity(&self, z: &State<N>) -> Result<SVector<f64, N>, StepError> {
         Ok(match self.prior {
-            Prior::Nominal => self.nominal.step(z)?.v,
+            Prior::Nominal | Prior::Identified(_) => self.nominal.step(z)?.v,
             Prior::Constant => SVector::zeros(),
         })
     }

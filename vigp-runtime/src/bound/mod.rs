@@ -72,6 +72,10 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum BoundError {
+    /// The identified parameters of an identified prior do not fit the
+    /// mechanism.
+    #[error("identified prior: {0}")]
+    Identified(crate::learned::IdentifiedError),
     /// A setting is out of its domain (NaN, ∞, negative, δ ∉ (0, 1), …).
     #[error("invalid bound setting {what}: {value}")]
     InvalidSetting {
@@ -219,6 +223,7 @@ impl From<LearnError> for BoundError {
                 what: "dt (contradicts the training transitions)",
                 value: given,
             },
+            LearnError::Identified(e) => BoundError::Identified(e),
         }
     }
 }

@@ -123,7 +123,8 @@ where
             Encoding::SinCos => "SinCos",
         };
         let prior = match self.prior {
-            Prior::Nominal => "Nominal",
+            // the identified parameters are the model's (`parameters`)
+            Prior::Nominal | Prior::Identified(_) => "Nominal",
             Prior::Constant => "Constant",
         };
         let name = &opts.name;

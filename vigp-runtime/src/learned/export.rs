@@ -15,7 +15,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// encoding (`<NAME>_ENCODING`, documented component by component) and
     /// the prior (`<NAME>_PRIOR`: with `"nominal"` the GP predicts
     /// v_{k+1} − v̄(z_k), to be added to the nominal variational step
-    /// v̄(z_k); with `"constant"` the GP mean is the velocity itself).
+    /// v̄(z_k); with `"constant"` the GP mean is the velocity itself). A
+    /// model with an identified prior says `"nominal"`: its nominal step is
+    /// that of the mechanism with the identified parameters
+    /// ([`Learned::model`]).
     /// The projection onto constraints (C > 0) is not exported.
     pub fn to_rust_source(&self, opts: &ExportOptions) -> Result<String, GpError> {
         let mut s = self.gp().to_rust_source(opts)?;
@@ -36,7 +39,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 Encoding::SinCos => "sincos",
             },
             match self.prior() {
-                Prior::Nominal => "nominal",
+                Prior::Nominal | Prior::Identified(_) => "nominal",
                 Prior::Constant => "constant",
             },
         );

@@ -61,7 +61,12 @@ pub struct SavedLearned {
     pub dt: f64,
     /// GP input encoding.
     pub encoding: Encoding,
-    /// Prior of the velocity map.
+    /// Prior of the velocity map: `"nominal"`, `"constant"`, or
+    /// `{"identified": {"mechanism", "parameters", "covariance"}}` with the
+    /// identified standard parameters by name and their covariance
+    /// ([`crate::learned::IdentifiedParameters`]); the identified values in
+    /// the DSL's names are those of `parameters`, and loading checks that
+    /// the two agree.
     pub prior: Prior,
     /// Whether predictions are projected onto the constraints.
     pub project: bool,
@@ -235,7 +240,7 @@ fn check_parameter(name: &str, value: f64) -> Result<(), LoadError> {
 
 /// Checks the saved GP's dimensions against the model before the GP's own
 /// checks run, so that errors name the field (`gp.input_dim`, …).
-fn check_gp(saved: &SavedGp, d: usize, p: usize, prior: Prior) -> Result<(), LoadError> {
+fn check_gp(saved: &SavedGp, d: usize, p: usize, prior: &Prior) -> Result<(), LoadError> {
     if saved.input_dim != d {
         return Err(field(
             "gp.input_dim",
@@ -301,14 +306,52 @@ fn check_gp(saved: &SavedGp, d: usize, p: usize, prior: Prior) -> Result<(), Loa
     }
     use crate::gp::SavedMean;
     match (&saved.mean, prior) {
-        (SavedMean::Zero, Prior::Nominal) => {}
+        (SavedMean::Zero, Prior::Nominal | Prior::Identified(_)) => {}
         (SavedMean::Constant(c), Prior::Constant) => {
             expect_len("gp.mean", c.len(), p, "constants (gp.output_dim)")?
         }
         (m, prior) => {
+            let prior = match prior {
+                Prior::Nominal => "nominal",
+                Prior::Constant => "constant",
+                Prior::Identified(_) => "identified",
+            };
             return Err(field(
                 "gp.mean",
-                format!("{m:?} does not fit prior {prior:?} (nominal: Zero, constant: Constant)"),
+                format!(
+                    "{m:?} does not fit prior {prior} (nominal and identified: Zero, constant: Constant)"
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Checks the identified prior of a file against the mechanism (names,
+/// finite values, covariance) and against the file's `parameters`: the
+/// parameters the identified values set must be the file's, to rounding
+/// (1e-12 relative; the two are written from the same numbers, and exactly
+/// equal for files that vigp wrote).
+fn check_identified<M, const N: usize, const C: usize>(
+    model: &M,
+    parameters: &BTreeMap<String, f64>,
+    identified: &super::IdentifiedParameters,
+) -> Result<(), LoadError>
+where
+    M: Mechanism<N, C> + Parameters + Clone,
+{
+    let at = "prior.identified";
+    let applied = identified
+        .model(model)
+        .map_err(|e| field(at, e.to_string()))?;
+    for (i, name) in M::PARAMETER_NAMES.iter().enumerate() {
+        let (Some(a), Some(&b)) = (applied.parameter(i), parameters.get(*name)) else {
+            continue;
+        };
+        if (a - b).abs() > 1e-12 * a.abs().max(b.abs()) {
+            return Err(field(
+                at,
+                format!("the identified values give {name} = {a}, but `parameters.{name}` is {b}"),
             ));
         }
     }
@@ -340,7 +383,7 @@ where
             parameters,
             dt: self.dt,
             encoding: self.encoding,
-            prior: self.prior,
+            prior: self.prior.clone(),
             project: self.project,
             newton: SavedNewton {
                 tolerance: self.options.tolerance,
@@ -466,13 +509,16 @@ where
             saved.inputs.len()
         };
         let d = saved.encoding.dim(&M::KINDS) + tail;
-        check_gp(&saved.gp, d, N, saved.prior)?;
+        if let Prior::Identified(p) = &saved.prior {
+            check_identified(&model, &saved.parameters, p)?;
+        }
+        check_gp(&saved.gp, d, N, &saved.prior)?;
         let gp = Gp::from_saved(&saved.gp, None)?;
         Ok(Self {
             nominal: Variational::new(model.clone(), saved.dt).with_options(options),
             model,
             dt: saved.dt,
-            prior: saved.prior,
+            prior: saved.prior.clone(),
             encoding: saved.encoding,
             project: saved.project,
             gp,

@@ -247,6 +247,16 @@ pub enum LearnSpatialError {
         /// ‖q‖.
         norm: f64,
     },
+    /// [`Prior::Identified`] was given: a Lie-group stepper takes its
+    /// parameters from its mechanism; build the stepper from the mechanism
+    /// with the identified parameters
+    /// ([`crate::learned::IdentifiedParameters::apply`]) and train with
+    /// [`Prior::Nominal`].
+    #[error(
+        "an identified prior is not taken here: build the stepper from the mechanism with the \
+         identified parameters (IdentifiedParameters::apply) and train with Prior::Nominal"
+    )]
+    IdentifiedPrior,
     /// A prediction was asked under a number of inputs other than the one
     /// the model was trained with (0: trained without inputs, by
     /// [`LearnedSpatial::train`]).
@@ -363,6 +373,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         if data.is_empty() {
             return Err(LearnSpatialError::Empty);
         }
+        if let Prior::Identified(_) = prior {
+            return Err(LearnSpatialError::IdentifiedPrior);
+        }
         let d = rotation.input_dim(B) + 2 * U;
         let mut inputs = vec![0.0; data.len() * d];
         let mut targets = Vec::with_capacity(data.len() * N);
@@ -397,14 +410,15 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     let z1 = nominal(&stepper, &z, &t.u)?;
                     pack(&z1.v, &z1.w)
                 }
-                Prior::Constant => SVector::zeros(),
+                Prior::Constant | Prior::Identified(_) => SVector::zeros(),
             };
             targets.extend((next - base).iter());
         }
         let mut opts = options.clone();
-        opts.mean = match prior {
-            Prior::Nominal => PriorMean::Zero,
-            Prior::Constant => PriorMean::Constant,
+        opts.mean = if prior.uses_nominal_step() {
+            PriorMean::Zero
+        } else {
+            PriorMean::Constant
         };
         let (gp, report) = Gp::train(&inputs, d, &targets, N, &opts)?;
         Ok((
@@ -535,7 +549,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             None => self.gp.predict_mean_into(input, mean.as_mut_slice(), ws)?,
         }
         let prior: SVector<f64, N> = match self.prior {
-            Prior::Nominal => {
+            // training refuses an identified prior
+            Prior::Nominal | Prior::Identified(_) => {
                 let z1 = nominal(z)?;
                 pack(&z1.v, &z1.w)
             }
