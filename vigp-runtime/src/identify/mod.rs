@@ -64,6 +64,8 @@ pub mod excitation;
 pub mod output_error;
 pub mod regressor;
 pub mod report;
+#[cfg(feature = "urdf")]
+pub mod robot;
 
 pub use base::Base;
 pub use estimate::{Loss, Noise};
@@ -73,6 +75,8 @@ pub use regressor::{
     BodySlots, DelRegressor, JointSlots, ParameterKind, Regressor, Structure, Transition,
 };
 pub use report::{Report, Status};
+#[cfg(feature = "urdf")]
+pub use robot::RobotRegressor;
 
 use nalgebra::{DMatrix, DVector};
 
@@ -554,7 +558,9 @@ pub fn identify<R: Regressor>(
     let (base_covariance, position_sigma) = match options.intervals {
         Intervals::Independent => (fit.base_covariance.clone(), None),
         Intervals::PositionNoise => {
-            let pi_hat = &fit.pi;
+            // at the estimate reported (physically consistent: a source of
+            // rows may refuse an unrealisable body, as the tree engine does)
+            let pi_hat = DVector::from_column_slice(&estimate);
             let mut jacs = Vec::with_capacity(stack.origin.len());
             let zeros = vec![0.0; regressor.inputs()];
             for &(li, k) in &stack.origin {

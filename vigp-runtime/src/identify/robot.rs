@@ -1,0 +1,372 @@
+//! The regressor of a robot loaded at run time ([`crate::Robot`], e.g.
+//! from URDF): the DEL residual of the linear-time tree engine, affine in
+//! the standard parameters of every body and joint.
+//!
+//! The tree engine's step is the first-order rule (module docs of
+//! `vigp_core::tree::Engine`): for a logged triple (x_{k−1}, x_k, x_{k+1})
+//! with v_{k−1} = (x_k − x_{k−1})/Δt and v_k = (x_{k+1} − x_k)/Δt,
+//!
+//! ```text
+//! r = M(x_{k−1})v_{k−1} − M(x_k)v_k + Δt·(∂T/∂q(x_k, v_k) − ∇V(x_k) − D·v_k + τ(u_k)),
+//! ```
+//!
+//! τ(u_k) the input held over [t_k, t_{k+1}] on the actuated joints. The
+//! parameters carry DSL-style names, so that the report and the parameter
+//! files read as for a declared mechanism: per link `links.<l>.mass`,
+//! `.com.x|y|z` and the nine entries `.inertia.xx` … `.zz` (about the centre
+//! of mass, in the link frame); per joint `joints.<j>.damping` and, for a
+//! joint with a spring, `.stiffness` and `.rest`.
+//!
+//! Y is obtained as [`super::DelRegressor`] does, column by column from the
+//! residual at π₀ and at π₀ + s_i·e_i, exact to rounding because r is
+//! affine. The steps are large (1 + |π_i|), so that the rounding of a
+//! column that should vanish stays below the zero threshold of
+//! [`super::Base`]; the engine refuses a body with a negative mass or
+//! inertia diagonal, so a first moment is flipped (m·c_a → −m·c_a, which
+//! leaves the diagonal of I_c unchanged) or, where it is zero, moved by no
+//! more than the body's inertia allows.
+//!
+//! The robot regressor regresses; it does not simulate for output error
+//! ([`Regressor::position_jacobians`] is the default, a typed error).
+
+use super::IdentifyError;
+use super::regressor::{Regressor, Structure, Transition};
+use crate::robot::{Robot, RobotTree};
+use nalgebra::{DMatrix, DVector};
+use vigp_core::tree::{BodyScratch, Engine};
+
+/// Relative size, against the row's largest residual change, below which a
+/// column's change is rounding (about 10⁴ ε: the residual sums some tens
+/// of terms of the size of the largest change).
+const ROUNDING: f64 = 1e-12;
+
+/// Which field of which body a named parameter is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Field {
+    Mass,
+    Com(usize),
+    Inertia(usize, usize),
+    Damping,
+    Stiffness,
+    Rest,
+}
+
+/// The discrete regressor of a [`Robot`] (module docs).
+#[derive(Clone, Debug)]
+pub struct RobotRegressor {
+    tree: RobotTree,
+    inputs: Vec<usize>,
+    dt: f64,
+    names: Vec<String>,
+    fields: Vec<(usize, Field)>,
+    structure: Structure,
+    base: Vec<f64>,
+    steps: Vec<f64>,
+}
+
+impl RobotRegressor {
+    /// The regressor of `robot` (its bodies' declared parameters as the
+    /// base point, its actuated joints as the inputs) at time step `dt`.
+    pub fn new(robot: &Robot, dt: f64) -> Result<Self, IdentifyError> {
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(IdentifyError::NonFinite {
+                what: format!("time step {dt}"),
+            });
+        }
+        let tree = robot.tree().clone();
+        let (joints, links) = (robot.joint_names(), robot.link_names());
+        let inputs = robot
+            .input_names()
+            .iter()
+            .map(|n| joints.iter().position(|j| j == n))
+            .collect::<Option<Vec<_>>>()
+            .ok_or_else(|| IdentifyError::Layout {
+                message: "an input names no joint of the robot".into(),
+            })?;
+        let mut names = Vec::new();
+        let mut fields = Vec::new();
+        for (i, l) in links.iter().enumerate() {
+            names.push(format!("links.{l}.mass"));
+            fields.push((i, Field::Mass));
+            for (a, x) in ["x", "y", "z"].iter().enumerate() {
+                names.push(format!("links.{l}.com.{x}"));
+                fields.push((i, Field::Com(a)));
+            }
+            for r in 0..3 {
+                for c in 0..3 {
+                    let rc = ["x", "y", "z"];
+                    names.push(format!("links.{l}.inertia.{}{}", rc[r], rc[c]));
+                    fields.push((i, Field::Inertia(r, c)));
+                }
+            }
+        }
+        for (i, j) in joints.iter().enumerate() {
+            names.push(format!("joints.{j}.damping"));
+            fields.push((i, Field::Damping));
+            if tree.bodies[i].stiffness != 0.0 {
+                names.push(format!("joints.{j}.stiffness"));
+                fields.push((i, Field::Stiffness));
+                names.push(format!("joints.{j}.rest"));
+                fields.push((i, Field::Rest));
+            }
+        }
+        let refs: Vec<&str> = names.iter().map(String::as_str).collect();
+        let structure = Structure::from_names(&refs)?;
+        let mut out = RobotRegressor {
+            tree,
+            inputs,
+            dt,
+            names,
+            fields,
+            structure,
+            base: Vec::new(),
+            steps: Vec::new(),
+        };
+        out.base = out.standard();
+        if let Some(i) = out.base.iter().position(|x| !x.is_finite()) {
+            return Err(IdentifyError::NonFinite {
+                what: format!("declared parameter `{}`", out.structure.names[i]),
+            });
+        }
+        if let Some(b) = out
+            .structure
+            .body_offsets()
+            .iter()
+            .position(|&o| out.base[o] <= 0.0)
+        {
+            return Err(IdentifyError::NoDslForm {
+                parameter: format!("links.{}.mass", links[b]),
+            });
+        }
+        out.steps = out.step_sizes();
+        Ok(out)
+    }
+
+    /// The DSL-style names of the robot's parameters (module docs), in
+    /// the order [`Structure`] reads them.
+    pub fn parameter_names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// The time step.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    fn get(&self, tree: &RobotTree, i: usize) -> f64 {
+        let (b, f) = self.fields[i];
+        let body = &tree.bodies[b];
+        match f {
+            Field::Mass => body.mass,
+            Field::Com(a) => body.com[a],
+            Field::Inertia(r, c) => body.inertia[r][c],
+            Field::Damping => body.damping,
+            Field::Stiffness => body.stiffness,
+            Field::Rest => body.rest,
+        }
+    }
+
+    /// The bodies with standard parameters π (geometry, gravity and
+    /// limits as loaded).
+    pub fn tree_with(&self, pi: &[f64]) -> Result<RobotTree, IdentifyError> {
+        let mut tree = self.tree.clone();
+        self.structure.set_standard(pi, |i, v| {
+            let (b, f) = self.fields[i];
+            let body = &mut tree.bodies[b];
+            match f {
+                Field::Mass => body.mass = v,
+                Field::Com(a) => body.com[a] = v,
+                Field::Inertia(r, c) => body.inertia[r][c] = v,
+                Field::Damping => body.damping = v,
+                Field::Stiffness => body.stiffness = v,
+                Field::Rest => body.rest = v,
+            }
+        })?;
+        Ok(tree)
+    }
+
+    /// Steps as large as the body's validity allows, so that the
+    /// columns' rounding stays below [`super::Base`]'s zero threshold
+    /// (module docs).
+    fn step_sizes(&self) -> Vec<f64> {
+        let mut steps = Vec::with_capacity(self.base.len());
+        let offsets = self.structure.body_offsets();
+        for (b, o) in offsets.iter().enumerate() {
+            let m = self.base[*o];
+            let ic = self.tree.bodies[b].inertia;
+            // more mass with m·c and I_O held: I_c grows
+            steps.push(1.0 + m);
+            for a in 0..3 {
+                let h = self.base[o + 1 + a];
+                steps.push(if h != 0.0 {
+                    // m·c_a → −m·c_a: |c| and the diagonal of I_c unchanged
+                    -2.0 * h
+                } else {
+                    // I_c loses s²/m on the two other axes: keep half
+                    let other = (0..3)
+                        .filter(|&x| x != a)
+                        .map(|x| ic[x][x])
+                        .fold(f64::INFINITY, f64::min);
+                    let s = (0.5 * m * other).sqrt();
+                    if s > 0.0 { s } else { 1e-3 * m }
+                });
+            }
+            for x in &self.base[o + 4..o + 10] {
+                steps.push(1.0 + x.abs());
+            }
+        }
+        for x in &self.base[steps.len()..] {
+            steps.push(1.0 + x.abs());
+        }
+        steps
+    }
+
+    /// The raw residual of a transition with bodies `tree`.
+    fn raw(&self, tree: RobotTree, t: &Transition<'_>) -> Result<Vec<f64>, IdentifyError> {
+        let n = tree.bodies.len();
+        for x in t.positions {
+            if x.len() != n {
+                return Err(IdentifyError::Dimension {
+                    what: "positions",
+                    expected: n,
+                    found: x.len(),
+                });
+            }
+            if x.iter().any(|v| !v.is_finite()) {
+                return Err(IdentifyError::NonFinite {
+                    what: "positions".into(),
+                });
+            }
+        }
+        let u = t.inputs[1];
+        if !(u.is_empty() || u.len() == self.inputs.len()) {
+            return Err(IdentifyError::Dimension {
+                what: "inputs",
+                expected: self.inputs.len(),
+                found: u.len(),
+            });
+        }
+        if u.iter().any(|v| !v.is_finite()) {
+            return Err(IdentifyError::NonFinite {
+                what: "inputs".into(),
+            });
+        }
+        let engine = Engine::new(tree).map_err(|e| IdentifyError::Layout {
+            message: format!("the robot with these parameters: {e}"),
+        })?;
+        let dt = self.dt;
+        let [x0, x1, x2] = t.positions;
+        let v0: Vec<f64> = (0..n).map(|i| (x1[i] - x0[i]) / dt).collect();
+        let v1: Vec<f64> = (0..n).map(|i| (x2[i] - x1[i]) / dt).collect();
+        let mut tau = vec![0.0; n];
+        for (&j, &x) in self.inputs.iter().zip(u) {
+            tau[j] += x;
+        }
+        let mut ws = vec![BodyScratch::default(); n];
+        let mut p0 = vec![0.0; n];
+        let mut r = vec![0.0; n];
+        let err = |e| IdentifyError::Simulation {
+            message: format!("tree engine: {e}"),
+        };
+        engine.momentum_of(x0, &v0, &mut p0, &mut ws).map_err(err)?;
+        engine
+            .residual(x0, &v0, &p0, &tau, &v1, dt, &mut r, &mut ws)
+            .map_err(err)?;
+        Ok(r)
+    }
+}
+
+impl Regressor for RobotRegressor {
+    fn structure(&self) -> &Structure {
+        &self.structure
+    }
+
+    fn coordinates(&self) -> usize {
+        self.tree.bodies.len()
+    }
+
+    fn inputs(&self) -> usize {
+        self.inputs.len()
+    }
+
+    fn rows(&self) -> usize {
+        self.tree.bodies.len()
+    }
+
+    fn standard(&self) -> Vec<f64> {
+        self.structure.standard(|i| self.get(&self.tree, i))
+    }
+
+    fn residual(&self, t: &Transition<'_>, pi: &[f64]) -> Result<DVector<f64>, IdentifyError> {
+        Ok(DVector::from_vec(self.raw(self.tree_with(pi)?, t)?))
+    }
+
+    fn transition(
+        &self,
+        t: &Transition<'_>,
+    ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
+        let n = self.coordinates();
+        let p = self.structure.len();
+        let r0 = DVector::from_vec(self.raw(self.tree_with(&self.base)?, t)?);
+        let mut y = DMatrix::zeros(n, p);
+        let mut pi = self.base.clone();
+        for i in 0..p {
+            pi[i] = self.base[i] + self.steps[i];
+            let ri = DVector::from_vec(self.raw(self.tree_with(&pi)?, t)?);
+            pi[i] = self.base[i];
+            y.set_column(i, &((ri - &r0) / self.steps[i]));
+        }
+        // A change at the rounding of the row's largest change is zero (a
+        // parameter that does not enter this coordinate's residual, e.g.
+        // the mass of a link turning about a vertical axis): left as
+        // rounding, Base would scale it to a unit column and count it.
+        for i in 0..n {
+            let big = (0..p)
+                .map(|j| (y[(i, j)] * self.steps[j]).abs())
+                .fold(0.0, f64::max);
+            for j in 0..p {
+                if (y[(i, j)] * self.steps[j]).abs() <= ROUNDING * big {
+                    y[(i, j)] = 0.0;
+                }
+            }
+        }
+        let b = &y * DVector::from_column_slice(&self.base) - r0;
+        if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+            return Err(IdentifyError::NonFinite {
+                what: "regressor rows".into(),
+            });
+        }
+        Ok((y, b))
+    }
+
+    fn noise_jacobian(
+        &self,
+        t: &Transition<'_>,
+        pi: &[f64],
+    ) -> Result<DMatrix<f64>, IdentifyError> {
+        let n = self.coordinates();
+        let tree = self.tree_with(pi)?;
+        let x: [Vec<f64>; 3] = t.positions.map(|x| x.to_vec());
+        let mut jac = DMatrix::zeros(n, 3 * n);
+        // Central differences, step 1e-6·(1 + |x|), as DelRegressor's.
+        for s in 0..3 {
+            for c in 0..n {
+                let h = 1e-6 * (1.0 + x[s][c].abs());
+                let at = |d: f64| {
+                    let mut xs = x.clone();
+                    xs[s][c] += d;
+                    let tt = Transition {
+                        positions: [&xs[0], &xs[1], &xs[2]],
+                        inputs: t.inputs,
+                    };
+                    self.raw(tree.clone(), &tt)
+                };
+                let (rp, rm) = (at(h)?, at(-h)?);
+                for row in 0..n {
+                    jac[(row, s * n + c)] = (rp[row] - rm[row]) / (2.0 * h);
+                }
+            }
+        }
+        Ok(jac)
+    }
+}
