@@ -557,20 +557,26 @@ fn identify_then_fit_with_the_identified_prior() {
     let train = simulate("train", "0.1,0.5", 0.3, 400);
     let test = simulate("test", "-0.2,2.0", 1.1, 120);
 
-    let params = dir.join("params.json");
-    let text = run(&[
-        "identify",
-        "--data",
-        s(&train),
-        "--rule",
-        "first-order",
-        "--out",
-        s(&params),
-    ])
-    .unwrap();
+    // `identify` on the training log into `name`, with `extra` options:
+    // the file's path, what the tool said, the file
+    let identify_into = |name: &str, extra: &[&str]| {
+        let path = dir.join(name);
+        let args = [
+            "identify",
+            "--data",
+            s(&train),
+            "--rule",
+            "first-order",
+            "--out",
+            s(&path),
+        ];
+        let text = run(&[&args[..], extra].concat()).unwrap();
+        let file: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        (path, text, file)
+    };
+    let (params, text, file) = identify_into("params.json", &[]);
     assert!(text.contains("base parameters"), "{text}");
-    let file: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
     let row = |name: &str| parameter_row(&file, name);
     for (name, declared, true_value) in [
         ("joints.rail.damping", 0.1, 0.3),
@@ -587,23 +593,12 @@ fn identify_then_fit_with_the_identified_prior() {
     }
     // the output-error stage keeps the recovery (the log is the rule's
     // own: the simulation reproduces it at the truth)
-    let refined = dir.join("refined.json");
-    let text = run(&[
-        "identify",
-        "--data",
-        s(&train),
-        "--rule",
-        "first-order",
-        "--output-error",
-        "--out",
-        s(&refined),
-    ])
-    .unwrap();
+    let (_, text, refined) = identify_into("refined.json", &["--output-error"]);
     assert!(text.contains("output error: 8 segments"), "{text}");
-    let file: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&refined).unwrap()).unwrap();
     for (name, true_value) in [("joints.rail.damping", 0.3), ("joints.hinge.damping", 0.08)] {
-        let got = parameter_row(&file, name)["identified"].as_f64().unwrap();
+        let got = parameter_row(&refined, name)["identified"]
+            .as_f64()
+            .unwrap();
         assert!(
             (got - true_value).abs() <= 1e-8 * true_value,
             "output error, {name}: {got} vs {true_value}"
