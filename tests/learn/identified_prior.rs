@@ -228,33 +228,14 @@ fn identified_prior_learns_on_the_identified_mechanism() {
 
     let declared = PriorArm::default().minimal();
     let hand = by_hand(&params);
-    let (with_identified, _) = Learned::train_forced(
-        declared,
-        DT,
-        &data,
-        Encoding::SinCos,
-        Prior::Identified(params.clone()),
-        &options(),
-    )
-    .unwrap();
-    let (with_hand, _) = Learned::train_forced(
-        hand,
-        DT,
-        &data,
-        Encoding::SinCos,
-        Prior::Nominal,
-        &options(),
-    )
-    .unwrap();
-    let (with_declared, _) = Learned::train_forced(
-        declared,
-        DT,
-        &data,
-        Encoding::SinCos,
-        Prior::Nominal,
-        &options(),
-    )
-    .unwrap();
+    let train = |model: Arm, prior: Prior| {
+        Learned::train_forced(model, DT, &data, Encoding::SinCos, prior, &options())
+            .unwrap()
+            .0
+    };
+    let with_identified = train(declared, Prior::Identified(params.clone()));
+    let with_hand = train(hand, Prior::Nominal);
+    let with_declared = train(declared, Prior::Nominal);
     // the learned model keeps the identified mechanism and its parameters
     assert_eq!(with_identified.identified(), Some(&params));
     for (i, name) in Arm::PARAMETER_NAMES.iter().enumerate() {

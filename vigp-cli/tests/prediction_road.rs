@@ -707,36 +707,22 @@ fn identify_then_fit_with_the_identified_prior() {
     );
     assert!(source.contains("learned::Prior::Nominal"), "{source}");
 
+    // `fit` on the training log with `extra` options must fail: its message
+    let never = dir.join("never.json");
+    let refused = |extra: &[&str]| {
+        let args = ["fit", "--data", s(&train), "--out", s(&never)];
+        run(&[&args[..], extra].concat()).unwrap_err().to_string()
+    };
     // a `--set` of a parameter the identified prior sets is refused
-    let e = run(&[
-        "fit",
-        "--data",
-        s(&train),
-        "--out",
-        s(&dir.join("never.json")),
-        "--prior",
-        &identified,
-        "--set",
-        "joints.hinge.damping=0.2",
-    ])
-    .unwrap_err();
-    assert!(e.to_string().contains("sets this parameter"), "{e}");
+    let e = refused(&["--prior", &identified, "--set", "joints.hinge.damping=0.2"]);
+    assert!(e.contains("sets this parameter"), "{e}");
     // a parameter file without the standard parameters and covariance
     let bare = dir.join("bare.json");
     let mut without = params_file.clone();
     without.as_object_mut().unwrap().remove("identified");
     std::fs::write(&bare, without.to_string()).unwrap();
-    let e = run(&[
-        "fit",
-        "--data",
-        s(&train),
-        "--out",
-        s(&dir.join("never.json")),
-        "--prior",
-        &format!("identified:{}", s(&bare)),
-    ])
-    .unwrap_err();
-    assert!(e.to_string().contains("no \"identified\" section"), "{e}");
+    let e = refused(&["--prior", &format!("identified:{}", s(&bare))]);
+    assert!(e.contains("no \"identified\" section"), "{e}");
 
     // a parameter file of another mechanism, or no parameter file, is refused
     let other = dir.join("other.json");
@@ -747,32 +733,12 @@ fn identify_then_fit_with_the_identified_prior() {
             .replace("\"DriveCartpole\"", "\"Acrobot\""),
     )
     .unwrap();
-    let model = dir.join("never.json");
     for (file, says) in [(&other, "identified for `Acrobot`"), (&train, "not JSON")] {
-        let prior = format!("identified:{}", s(file));
-        let e = run(&[
-            "fit",
-            "--data",
-            s(&train),
-            "--out",
-            s(&model),
-            "--prior",
-            &prior,
-        ])
-        .unwrap_err();
-        assert!(e.to_string().contains(says), "{e}");
+        let e = refused(&["--prior", &format!("identified:{}", s(file))]);
+        assert!(e.contains(says), "{e}");
     }
-    let e = run(&[
-        "fit",
-        "--data",
-        s(&train),
-        "--out",
-        s(&model),
-        "--prior",
-        "identified:",
-    ])
-    .unwrap_err();
-    assert!(e.to_string().contains("identified:FILE"), "{e}");
+    let e = refused(&["--prior", "identified:"]);
+    assert!(e.contains("identified:FILE"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
 

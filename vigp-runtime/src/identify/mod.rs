@@ -642,21 +642,21 @@ pub fn identify<R: Regressor>(
         refinement: None,
     };
     // Homogeneous rows: the regression pulls the scale towards zero (its
-    // data term shrinks with π), so output error runs, from the declared
-    // values.
-    match (&options.output_error, homogeneous) {
-        (Some(oe), _) => {
-            output_error::refine(regressor, logs, &first, oe, options.consistent, homogeneous)
-        }
-        (None, true) => output_error::refine(
+    // data term shrinks with π), so output error runs there unasked, from
+    // the declared values.
+    match options
+        .output_error
+        .or(homogeneous.then(OutputError::default))
+    {
+        Some(oe) => output_error::refine(
             regressor,
             logs,
             &first,
-            &OutputError::default(),
+            &oe,
             options.consistent,
-            true,
+            homogeneous,
         ),
-        (None, false) => Ok(first),
+        None => Ok(first),
     }
 }
 

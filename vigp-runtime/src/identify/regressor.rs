@@ -511,6 +511,30 @@ pub trait Regressor {
     }
 }
 
+/// Central differences of a transition's residual in its 3N positions
+/// (columns x_{k−1}, x_k, x_{k+1}), step 1e-6·(1 + |x|): truncation ≈ 1e-12
+/// relative, rounding ≈ 1e-10; ample for a covariance
+/// ([`Regressor::noise_jacobian`]). `residual(s, c, d)` is the residual
+/// with coordinate c of sample s moved by d.
+pub(crate) fn position_differences(
+    positions: [&[f64]; 3],
+    mut residual: impl FnMut(usize, usize, f64) -> Result<DVector<f64>, IdentifyError>,
+) -> Result<DMatrix<f64>, IdentifyError> {
+    let n = positions[0].len();
+    let mut jac = DMatrix::zeros(0, 3 * n);
+    for (s, x) in positions.iter().enumerate() {
+        for c in 0..n {
+            let h = 1e-6 * (1.0 + x[c].abs());
+            let d = (residual(s, c, h)? - residual(s, c, -h)?) / (2.0 * h);
+            if jac.nrows() != d.len() {
+                jac = DMatrix::zeros(d.len(), 3 * n);
+            }
+            jac.set_column(s * n + c, &d);
+        }
+    }
+    Ok(jac)
+}
+
 /// The regressor of the DEL residual of a mechanism (module docs), for the
 /// first-order (α = 0) or the midpoint (α = ½) rule, obtained from the
 /// residual itself through the mechanism's [`Parameters`].
@@ -752,22 +776,12 @@ where
             }
             v
         };
-        // Central differences, step 1e-6·(1 + |x|): truncation ≈ 1e-12
-        // relative, rounding ≈ 1e-10; ample for a covariance.
-        let mut jac = DMatrix::zeros(z.nrows(), 3 * N);
-        for s in 0..3 {
-            for c in 0..N {
-                let h = 1e-6 * (1.0 + x[s][c].abs());
-                let mut xp = x;
-                xp[s][c] += h;
-                let mut xm = x;
-                xm[s][c] -= h;
-                let d = (full(&xp) - full(&xm)) / (2.0 * h);
-                let col = &z * d;
-                jac.set_column(s * N + c, &col);
-            }
-        }
-        Ok(jac)
+        let jac = position_differences(t.positions, |s, c, d| {
+            let mut xs = x;
+            xs[s][c] += d;
+            Ok(full(&xs))
+        })?;
+        Ok(&z * jac)
     }
 
     fn position_jacobians(

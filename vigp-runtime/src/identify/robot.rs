@@ -30,7 +30,7 @@
 //! ([`Regressor::position_jacobians`] is the default, a typed error).
 
 use super::IdentifyError;
-use super::regressor::{Regressor, Structure, Transition};
+use super::regressor::{Regressor, Structure, Transition, position_differences};
 use crate::robot::{Robot, RobotTree};
 use nalgebra::{DMatrix, DVector};
 use vigp_core::tree::{BodyScratch, Engine};
@@ -344,29 +344,16 @@ impl Regressor for RobotRegressor {
         t: &Transition<'_>,
         pi: &[f64],
     ) -> Result<DMatrix<f64>, IdentifyError> {
-        let n = self.coordinates();
         let tree = self.tree_with(pi)?;
         let x: [Vec<f64>; 3] = t.positions.map(|x| x.to_vec());
-        let mut jac = DMatrix::zeros(n, 3 * n);
-        // Central differences, step 1e-6·(1 + |x|), as DelRegressor's.
-        for s in 0..3 {
-            for c in 0..n {
-                let h = 1e-6 * (1.0 + x[s][c].abs());
-                let at = |d: f64| {
-                    let mut xs = x.clone();
-                    xs[s][c] += d;
-                    let tt = Transition {
-                        positions: [&xs[0], &xs[1], &xs[2]],
-                        inputs: t.inputs,
-                    };
-                    self.raw(tree.clone(), &tt)
-                };
-                let (rp, rm) = (at(h)?, at(-h)?);
-                for row in 0..n {
-                    jac[(row, s * n + c)] = (rp[row] - rm[row]) / (2.0 * h);
-                }
-            }
-        }
-        Ok(jac)
+        position_differences(t.positions, |s, c, d| {
+            let mut xs = x.clone();
+            xs[s][c] += d;
+            let moved = Transition {
+                positions: [&xs[0], &xs[1], &xs[2]],
+                inputs: t.inputs,
+            };
+            self.raw(tree.clone(), &moved).map(DVector::from_vec)
+        })
     }
 }
