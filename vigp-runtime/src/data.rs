@@ -79,7 +79,7 @@ use std::collections::HashSet;
 use std::io;
 use std::path::{Path, PathBuf};
 
-use nalgebra::SVector;
+use nalgebra::{DVector, SVector};
 
 use crate::learned::{ForcedTransition, Transition, time_step};
 use crate::mechanism::{CoordinateKind, Mechanism, State};
@@ -423,9 +423,11 @@ impl From<csv::Error> for DataError {
     }
 }
 
-/// One run: uniformly sampled positions.
+/// One run: uniformly sampled positions, each a `P`
+/// ([`Positions`]: a fixed-size vector in [`Run`], a run-time-sized one
+/// in [`DynRun`]).
 #[derive(Clone, Debug, PartialEq)]
-pub struct Run<const N: usize> {
+pub struct RunOf<P> {
     /// The run's label.
     pub name: String,
     /// Time of the first sample (s).
@@ -433,7 +435,7 @@ pub struct Run<const N: usize> {
     /// Time step (s); `None` for a run of one row.
     pub dt: Option<f64>,
     /// Positions, one per sample (angles unwrapped).
-    pub positions: Vec<SVector<f64, N>>,
+    pub positions: Vec<P>,
     /// Inputs, one vector (of the dataset's input count) per sample; empty
     /// when the mechanism has no inputs.
     pub inputs: Vec<Vec<f64>>,
@@ -441,7 +443,51 @@ pub struct Run<const N: usize> {
     pub line: u64,
 }
 
-impl<const N: usize> Run<N> {
+/// One run of a mechanism with `N` coordinates.
+pub type Run<const N: usize> = RunOf<SVector<f64, N>>;
+
+/// One run of a mechanism whose coordinate count is known at run time (a
+/// [`crate::Robot`] loaded from URDF).
+pub type DynRun = RunOf<DVector<f64>>;
+
+/// A sample of positions: what the reader needs of a position vector, for
+/// fixed-size ([`SVector`]) and run-time-sized ([`DVector`]) vectors alike.
+pub trait Positions:
+    Clone + core::ops::Index<usize, Output = f64> + core::ops::IndexMut<usize>
+{
+    /// `n` zeros (`n` is the vector's size for a fixed-size vector).
+    fn zeros(n: usize) -> Self;
+    /// The entries.
+    fn entries(&self) -> &[f64];
+    /// (1 − w)·self + w·other.
+    fn lerp(&self, other: &Self, w: f64) -> Self;
+}
+
+impl<const N: usize> Positions for SVector<f64, N> {
+    fn zeros(_: usize) -> Self {
+        SVector::zeros()
+    }
+    fn entries(&self) -> &[f64] {
+        self.as_slice()
+    }
+    fn lerp(&self, other: &Self, w: f64) -> Self {
+        self * (1.0 - w) + other * w
+    }
+}
+
+impl Positions for DVector<f64> {
+    fn zeros(n: usize) -> Self {
+        DVector::zeros(n)
+    }
+    fn entries(&self) -> &[f64] {
+        self.as_slice()
+    }
+    fn lerp(&self, other: &Self, w: f64) -> Self {
+        self * (1.0 - w) + other * w
+    }
+}
+
+impl<P> RunOf<P> {
     /// The input that drives the variational step from state `k` (see
     /// [`Run::state`]) to state k+1: the one held over the interval of the
     /// new discrete velocity, i.e. row k+1's (module docs). `None` past the
@@ -449,7 +495,9 @@ impl<const N: usize> Run<N> {
     pub fn step_input(&self, k: usize) -> Option<&[f64]> {
         self.inputs.get(k + 1).map(Vec::as_slice)
     }
+}
 
+impl<const N: usize> Run<N> {
     /// The discrete state at sample `k`: (x_k, (x_{k+1} − x_k)/Δt), if the
     /// run has a sample after `k`.
     pub fn state(&self, k: usize) -> Option<State<N>> {
@@ -471,22 +519,31 @@ enum Role {
     Input(usize),
 }
 
-/// Trajectories of a mechanism with `N` coordinates, read from CSV.
+/// Trajectories read from CSV, each position a `P` ([`Positions`]):
+/// [`Dataset`] for a mechanism with `N` coordinates, [`DynDataset`] for a
+/// robot loaded at run time.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Dataset<const N: usize> {
+pub struct DatasetOf<P> {
     /// Coordinate names, in the model's order.
     pub coordinates: Vec<String>,
     /// Input names (the actuated joints; columns `u_<name>`), in the
     /// model's order; empty for an unactuated mechanism.
     pub inputs: Vec<String>,
     /// The runs, in file order.
-    pub runs: Vec<Run<N>>,
+    pub runs: Vec<RunOf<P>>,
     /// Readings dropped as outliers ([`ReadOptions::drop_outliers`]).
     pub dropped: Vec<Dropped>,
     /// Unit heuristics that fired ([`DataWarning`]); the data was read as
     /// it is.
     pub warnings: Vec<DataWarning>,
 }
+
+/// Trajectories of a mechanism with `N` coordinates, read from CSV.
+pub type Dataset<const N: usize> = DatasetOf<SVector<f64, N>>;
+
+/// Trajectories of a mechanism whose coordinate count is known at run time
+/// (a [`crate::Robot`] loaded from URDF), read from CSV.
+pub type DynDataset = DatasetOf<DVector<f64>>;
 
 fn join_names(names: &[&str]) -> String {
     names
@@ -629,28 +686,28 @@ enum Cut {
 }
 
 /// A run being read: times, positions and the line of each row.
-struct RawRun<const N: usize> {
+struct RawRun<P> {
     name: String,
     times: Vec<f64>,
     /// The largest rounding of a printed t ([`printed_half_unit`]).
     time_rounding: f64,
-    positions: Vec<SVector<f64, N>>,
+    positions: Vec<P>,
     inputs: Vec<Vec<f64>>,
     lines: Vec<u64>,
 }
 
-impl<const N: usize> RawRun<N> {
+impl<P: Positions> RawRun<P> {
     /// The run's rows as one or more runs: time checked to increase,
     /// outliers refused or (with [`ReadOptions::drop_outliers`]) dropped
     /// into `dropped` with the run split at them, then each piece checked
     /// and unwrapped ([`RawRun::finish_piece`]).
     fn finish(
         self,
-        names: &[&str; N],
-        kinds: &[CoordinateKind; N],
+        names: &[&str],
+        kinds: &[CoordinateKind],
         opts: &ReadOptions,
         dropped: &mut Vec<Dropped>,
-    ) -> Result<Vec<Run<N>>, DataError> {
+    ) -> Result<Vec<RunOf<P>>, DataError> {
         for k in 1..self.times.len() {
             if self.times[k] <= self.times[k - 1] {
                 return Err(DataError::TimeNotIncreasing {
@@ -729,8 +786,8 @@ impl<const N: usize> RawRun<N> {
     /// to the overflow checks.
     fn outliers(
         &self,
-        names: &[&str; N],
-        kinds: &[CoordinateKind; N],
+        names: &[&str],
+        kinds: &[CoordinateKind],
         opts: &ReadOptions,
     ) -> Result<Vec<Cut>, DataError> {
         let n = self.times.len();
@@ -741,7 +798,7 @@ impl<const N: usize> RawRun<N> {
         steps.sort_by(f64::total_cmp);
         let dt = steps[steps.len() / 2];
         let mut cuts = Vec::new();
-        for i in 0..N {
+        for i in 0..names.len() {
             let angle = kinds[i] == CoordinateKind::Angle && opts.unwrap_angles;
             let raw: Vec<f64> = self.positions.iter().map(|p| p[i]).collect();
             // the jump j → j+1 as the reader will see it (angles unwrapped)
@@ -843,10 +900,10 @@ impl<const N: usize> RawRun<N> {
     /// checked finite.
     fn finish_piece(
         self,
-        names: &[&str; N],
-        kinds: &[CoordinateKind; N],
+        names: &[&str],
+        kinds: &[CoordinateKind],
         opts: &ReadOptions,
-    ) -> Result<Run<N>, DataError> {
+    ) -> Result<RunOf<P>, DataError> {
         let RawRun {
             name,
             times,
@@ -891,7 +948,7 @@ impl<const N: usize> RawRun<N> {
         let (t0, line) = (times[0], lines[0]);
         let n = times.len();
         if n == 1 {
-            return Ok(Run {
+            return Ok(RunOf {
                 name,
                 t0,
                 dt: None,
@@ -921,7 +978,7 @@ impl<const N: usize> RawRun<N> {
                 }
                 let (ta, tb) = (times[seg], times[seg + 1]);
                 let w = ((t - ta) / (tb - ta)).clamp(0.0, 1.0);
-                out.push(positions[seg] * (1.0 - w) + positions[seg + 1] * w);
+                out.push(positions[seg].lerp(&positions[seg + 1], w));
                 if !inputs.is_empty() {
                     // zero-order hold: the last sample at or before t. A
                     // sample within 1e-6 of the interval before t counts
@@ -934,7 +991,7 @@ impl<const N: usize> RawRun<N> {
             }
             // resampled rows have no file line: name the run's first
             return check_velocities(
-                Run {
+                RunOf {
                     name,
                     t0,
                     dt: Some(dt),
@@ -974,7 +1031,7 @@ impl<const N: usize> RawRun<N> {
             return Err(DataError::TimeStepOutOfRange { run: name, dt });
         }
         check_velocities(
-            Run {
+            RunOf {
                 name,
                 t0,
                 dt: Some(dt),
@@ -1043,14 +1100,14 @@ fn check_pairs_dt<'a, const N: usize>(
 
 /// The unit heuristics ([`DataWarning`]) over the runs read:
 /// `integer_times` when every timestamp was an integer.
-fn unit_warnings<const N: usize>(
-    runs: &[Run<N>],
-    names: &[&str; N],
-    kinds: &[CoordinateKind; N],
+fn unit_warnings<P: Positions>(
+    runs: &[RunOf<P>],
+    names: &[&str],
+    kinds: &[CoordinateKind],
     integer_times: &bool,
 ) -> Vec<DataWarning> {
     let mut out = Vec::new();
-    for i in 0..N {
+    for i in 0..names.len() {
         if kinds[i] != CoordinateKind::Angle {
             continue;
         }
@@ -1087,15 +1144,15 @@ fn unit_warnings<const N: usize>(
 /// The run unchanged if every discrete velocity (x_{k+1} − x_k)/Δt is
 /// finite: finite readings far apart (±1e308) or a tiny Δt overflow.
 /// `line(k)` is the file line of sample k.
-fn check_velocities<const N: usize>(
-    run: Run<N>,
+fn check_velocities<P: Positions>(
+    run: RunOf<P>,
     line: impl Fn(usize) -> u64,
-    names: &[&str; N],
-) -> Result<Run<N>, DataError> {
+    names: &[&str],
+) -> Result<RunOf<P>, DataError> {
     let Some(dt) = run.dt else { return Ok(run) };
     for k in 1..run.positions.len() {
-        let v = (run.positions[k] - run.positions[k - 1]) / dt;
-        if let Some(i) = v.iter().position(|x| !x.is_finite()) {
+        let (a, b) = (run.positions[k - 1].entries(), run.positions[k].entries());
+        if let Some(i) = (0..a.len()).position(|i| !((b[i] - a[i]) / dt).is_finite()) {
             return Err(DataError::Overflow {
                 run: run.name,
                 line: line(k),
@@ -1107,24 +1164,13 @@ fn check_velocities<const N: usize>(
     Ok(run)
 }
 
-impl<const N: usize> Dataset<N> {
-    /// Reads CSV text (see the module docs) for coordinates `names` of
-    /// kinds `kinds`.
-    pub fn read_csv<R: io::Read>(
+impl<P: Positions> DatasetOf<P> {
+    /// Reads CSV text (module docs) for coordinates `names` of kinds
+    /// `kinds` (as many) and inputs `inputs` (columns `u_<name>`).
+    fn read_rows<R: io::Read>(
         reader: R,
-        names: &[&str; N],
-        kinds: &[CoordinateKind; N],
-        opts: &ReadOptions,
-    ) -> Result<Self, DataError> {
-        Self::read_csv_with_inputs(reader, names, kinds, &[], opts)
-    }
-
-    /// [`Dataset::read_csv`] for a mechanism with inputs `inputs` (the
-    /// actuated joints' names; columns `u_<name>`, module docs).
-    pub fn read_csv_with_inputs<R: io::Read>(
-        reader: R,
-        names: &[&str; N],
-        kinds: &[CoordinateKind; N],
+        names: &[&str],
+        kinds: &[CoordinateKind],
         inputs: &[&str],
         opts: &ReadOptions,
     ) -> Result<Self, DataError> {
@@ -1151,9 +1197,9 @@ impl<const N: usize> Dataset<N> {
             return Err(DataError::Empty("no header line"));
         }
         let roles = header_roles(&header, names, inputs)?;
-        let mut runs: Vec<Run<N>> = Vec::new();
+        let mut runs: Vec<RunOf<P>> = Vec::new();
         let mut finished: HashSet<String> = HashSet::new();
-        let mut current: Option<RawRun<N>> = None;
+        let mut current: Option<RawRun<P>> = None;
         let mut dropped = Vec::new();
         // every timestamp integral (for the milliseconds heuristic)
         let mut time_texts = true;
@@ -1163,7 +1209,7 @@ impl<const N: usize> Dataset<N> {
             let mut run = "";
             let mut t = 0.0;
             let mut t_rounding = 0.0;
-            let mut q = SVector::<f64, N>::zeros();
+            let mut q = P::zeros(names.len());
             let mut u = vec![0.0; inputs.len()];
             for (field, (role, col)) in record.iter().zip(roles.iter().zip(header.iter())) {
                 let number = || -> Result<f64, DataError> {
@@ -1240,50 +1286,99 @@ impl<const N: usize> Dataset<N> {
         })
     }
 
-    /// Reads a CSV file ([`Dataset::read_csv`]).
-    pub fn read_path(
-        path: impl AsRef<Path>,
-        names: &[&str; N],
-        kinds: &[CoordinateKind; N],
-        opts: &ReadOptions,
+    /// The one-run log of [`Dataset::from_rollout`] from states given as
+    /// (q, v) slices of the coordinates' count and inputs as slices of the
+    /// input names' count.
+    fn rollout_log(
+        coordinates: &[&str],
+        input_names: &[&str],
+        run: &str,
+        (t0, dt): (f64, f64),
+        states: &[(&[f64], &[f64])],
+        (previous, inputs): (&[f64], &[&[f64]]),
     ) -> Result<Self, DataError> {
-        Self::read_path_with_inputs(path, names, kinds, &[], opts)
+        let bad = |why: String| Err(DataError::Rollout(why));
+        if !(dt.is_finite() && dt > 0.0 && t0.is_finite()) {
+            return bad(format!("dt = {dt} and t0 = {t0} must be finite, dt > 0"));
+        }
+        if states.is_empty() || inputs.len() + 1 != states.len() {
+            return bad(format!(
+                "{} states and {} inputs: a rollout of K steps has K + 1 states and K inputs",
+                states.len(),
+                inputs.len()
+            ));
+        }
+        let (n, m) = (coordinates.len(), input_names.len());
+        if states.iter().any(|(q, v)| q.len() != n || v.len() != n) {
+            return bad(format!(
+                "a state does not have {n} coordinates and velocities"
+            ));
+        }
+        if inputs.iter().chain([&previous]).any(|u| u.len() != m) {
+            return bad(format!("an input does not have {m} entries"));
+        }
+        let finite = states
+            .iter()
+            .all(|(q, v)| q.iter().chain(v.iter()).all(|x| x.is_finite()))
+            && inputs
+                .iter()
+                .chain([&previous])
+                .all(|u| u.iter().all(|x| x.is_finite()));
+        if !finite {
+            return bad("a state or an input holds NaN or ±∞".into());
+        }
+        let position = |q: &[f64]| {
+            let mut p = P::zeros(n);
+            for (i, x) in q.iter().enumerate() {
+                p[i] = *x;
+            }
+            p
+        };
+        let mut positions: Vec<P> = states.iter().map(|(q, _)| position(q)).collect();
+        let (q, v) = states[states.len() - 1];
+        let end: Vec<f64> = q.iter().zip(v).map(|(q, v)| q + v * dt).collect();
+        positions.push(position(&end));
+        let run_inputs = if m == 0 {
+            Vec::new()
+        } else {
+            let mut rows = Vec::with_capacity(positions.len());
+            rows.push(previous.to_vec());
+            rows.extend(inputs.iter().map(|u| u.to_vec()));
+            let hold = rows[rows.len() - 1].clone();
+            rows.push(hold);
+            rows
+        };
+        Ok(Self {
+            coordinates: coordinates.iter().map(|c| c.to_string()).collect(),
+            inputs: input_names.iter().map(|c| c.to_string()).collect(),
+            runs: vec![RunOf {
+                name: run.to_string(),
+                t0,
+                dt: Some(dt),
+                positions,
+                inputs: run_inputs,
+                line: 2,
+            }],
+            dropped: Vec::new(),
+            warnings: Vec::new(),
+        })
     }
 
-    /// [`Dataset::read_path`] for a mechanism with inputs `inputs` (the
-    /// actuated joints' names; columns `u_<name>`, module docs).
-    pub fn read_path_with_inputs(
-        path: impl AsRef<Path>,
-        names: &[&str; N],
-        kinds: &[CoordinateKind; N],
-        inputs: &[&str],
-        opts: &ReadOptions,
-    ) -> Result<Self, DataError> {
-        let path = path.as_ref();
+    /// Opens a CSV file for reading (a directory is an error here, not an
+    /// empty read at "line 0").
+    fn open(path: &Path) -> Result<io::BufReader<std::fs::File>, DataError> {
         let io_error = |source| DataError::Io {
             path: path.to_path_buf(),
             source,
         };
         let file = std::fs::File::open(path).map_err(io_error)?;
-        // a directory opens on Unix and fails at the first read (which the
-        // CSV reader would report at "line 0")
         if file.metadata().map_err(io_error)?.is_dir() {
             return Err(io_error(io::Error::new(
                 io::ErrorKind::IsADirectory,
                 "is a directory, not a CSV file",
             )));
         }
-        Self::read_csv_with_inputs(io::BufReader::new(file), names, kinds, inputs, opts)
-    }
-
-    /// Reads CSV text with the coordinate names and kinds of mechanism `M`.
-    /// Inputs: the `u_<joint>` columns of its actuated joints
-    /// (`Dynamics::INPUT_NAMES`).
-    pub fn read_for<M: Mechanism<N, C>, const C: usize, R: io::Read>(
-        reader: R,
-        opts: &ReadOptions,
-    ) -> Result<Self, DataError> {
-        Self::read_csv_with_inputs(reader, &M::COORDINATES, &M::KINDS, M::INPUT_NAMES, opts)
+        Ok(io::BufReader::new(file))
     }
 
     /// The common time step of the runs: every run with two or more rows
@@ -1334,6 +1429,98 @@ impl<const N: usize> Dataset<N> {
             }
         }
         Ok(())
+    }
+
+    /// The runs too short to give a transition (fewer than three samples).
+    pub fn short_runs(&self) -> impl Iterator<Item = &RunOf<P>> {
+        self.runs.iter().filter(|r| r.positions.len() < 3)
+    }
+
+    /// Number of samples over all runs.
+    pub fn samples(&self) -> usize {
+        self.runs.iter().map(|r| r.positions.len()).sum()
+    }
+
+    /// Writes the data in the file format the reader takes (module docs):
+    /// `run,t,<coordinates>[,u_<input>…]`, one row per sample, numbers in
+    /// Rust's shortest round-trip form (read back bit for bit) and each
+    /// time written as t_0 + j·Δt at the decimals of t_0 and Δt
+    /// ([`format_time`]: 0.06, not 0.060000000000000005).
+    pub fn write_csv<W: io::Write>(&self, writer: W) -> Result<(), io::Error> {
+        let mut w = csv::Writer::from_writer(writer);
+        let mut header = vec!["run".to_string(), "t".to_string()];
+        header.extend(self.coordinates.iter().cloned());
+        header.extend(self.inputs.iter().map(|u| format!("u_{u}")));
+        w.write_record(&header).map_err(io::Error::other)?;
+        for run in &self.runs {
+            let dt = run.dt.unwrap_or(0.0);
+            for (j, q) in run.positions.iter().enumerate() {
+                let mut row = vec![run.name.clone(), format_time(run.t0, dt, j)];
+                row.extend(q.entries().iter().map(|x| format!("{x:?}")));
+                if let Some(u) = run.inputs.get(j) {
+                    row.extend(u.iter().map(|x| format!("{x:?}")));
+                }
+                w.write_record(&row).map_err(io::Error::other)?;
+            }
+        }
+        w.flush()
+    }
+}
+
+impl<const N: usize> Dataset<N> {
+    /// Reads CSV text (see the module docs) for coordinates `names` of
+    /// kinds `kinds`.
+    pub fn read_csv<R: io::Read>(
+        reader: R,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        Self::read_csv_with_inputs(reader, names, kinds, &[], opts)
+    }
+
+    /// [`Dataset::read_csv`] for a mechanism with inputs `inputs` (the
+    /// actuated joints' names; columns `u_<name>`, module docs).
+    pub fn read_csv_with_inputs<R: io::Read>(
+        reader: R,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        inputs: &[&str],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        Self::read_rows(reader, names, kinds, inputs, opts)
+    }
+
+    /// Reads a CSV file ([`Dataset::read_csv`]).
+    pub fn read_path(
+        path: impl AsRef<Path>,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        Self::read_path_with_inputs(path, names, kinds, &[], opts)
+    }
+
+    /// [`Dataset::read_path`] for a mechanism with inputs `inputs` (the
+    /// actuated joints' names; columns `u_<name>`, module docs).
+    pub fn read_path_with_inputs(
+        path: impl AsRef<Path>,
+        names: &[&str; N],
+        kinds: &[CoordinateKind; N],
+        inputs: &[&str],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        Self::read_rows(Self::open(path.as_ref())?, names, kinds, inputs, opts)
+    }
+
+    /// Reads CSV text with the coordinate names and kinds of mechanism `M`.
+    /// Inputs: the `u_<joint>` columns of its actuated joints
+    /// (`Dynamics::INPUT_NAMES`).
+    pub fn read_for<M: Mechanism<N, C>, const C: usize, R: io::Read>(
+        reader: R,
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        Self::read_csv_with_inputs(reader, &M::COORDINATES, &M::KINDS, M::INPUT_NAMES, opts)
     }
 
     /// Training transitions of every run with three or more samples, each
@@ -1388,16 +1575,6 @@ impl<const N: usize> Dataset<N> {
         Ok(out)
     }
 
-    /// The runs too short to give a transition (fewer than three samples).
-    pub fn short_runs(&self) -> impl Iterator<Item = &Run<N>> {
-        self.runs.iter().filter(|r| r.positions.len() < 3)
-    }
-
-    /// Number of samples over all runs.
-    pub fn samples(&self) -> usize {
-        self.runs.iter().map(|r| r.positions.len()).sum()
-    }
-
     /// A one-run log of a forced rollout, with every input on the row the
     /// reader expects (module docs, **Inputs**): `states` are z_0, …, z_K
     /// (K ≥ 0) of a rollout at step `dt` where step k (z_k → z_{k+1}) was
@@ -1423,85 +1600,84 @@ impl<const N: usize> Dataset<N> {
         states: &[State<N>],
         (previous, inputs): (SVector<f64, U>, &[SVector<f64, U>]),
     ) -> Result<Self, DataError> {
-        let bad = |why: String| Err(DataError::Rollout(why));
-        if !(dt.is_finite() && dt > 0.0 && t0.is_finite()) {
-            return bad(format!("dt = {dt} and t0 = {t0} must be finite, dt > 0"));
-        }
         if input_names.len() != U {
-            return bad(format!(
+            return Err(DataError::Rollout(format!(
                 "{} input name(s) for {U} input(s)",
                 input_names.len()
-            ));
+            )));
         }
-        if states.is_empty() || inputs.len() + 1 != states.len() {
-            return bad(format!(
-                "{} states and {} inputs: a rollout of K steps has K + 1 states and K inputs",
-                states.len(),
-                inputs.len()
-            ));
-        }
-        let finite = states
+        let states: Vec<(&[f64], &[f64])> = states
             .iter()
-            .all(|z| z.q.iter().chain(z.v.iter()).all(|x| x.is_finite()))
-            && inputs
-                .iter()
-                .chain(core::iter::once(&previous))
-                .all(|u| u.iter().all(|x| x.is_finite()));
-        if !finite {
-            return bad("a state or an input holds NaN or ±∞".into());
+            .map(|z| (z.q.as_slice(), z.v.as_slice()))
+            .collect();
+        let inputs: Vec<&[f64]> = inputs.iter().map(|u| u.as_slice()).collect();
+        Self::rollout_log(
+            coordinates,
+            input_names,
+            run,
+            (t0, dt),
+            &states,
+            (previous.as_slice(), &inputs),
+        )
+    }
+}
+
+impl DynDataset {
+    /// Reads CSV text (module docs) for coordinates `names` of kinds
+    /// `kinds` (one per name) and inputs `inputs` (columns `u_<name>`;
+    /// empty for none): the reader of [`Dataset::read_csv_with_inputs`]
+    /// for a coordinate count known at run time, e.g. a
+    /// [`crate::Robot`]'s joints.
+    pub fn read_csv_with_inputs<R: io::Read>(
+        reader: R,
+        names: &[&str],
+        kinds: &[CoordinateKind],
+        inputs: &[&str],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        if names.len() != kinds.len() {
+            return Err(DataError::InvalidOption {
+                what: "kinds (one per coordinate name)",
+                value: kinds.len() as f64,
+            });
         }
-        let last = states[states.len() - 1];
-        let mut positions: Vec<SVector<f64, N>> = states.iter().map(|z| z.q).collect();
-        positions.push(last.q + last.v * dt);
-        let run_inputs = if U == 0 {
-            Vec::new()
-        } else {
-            let mut rows = Vec::with_capacity(positions.len());
-            rows.push(previous.as_slice().to_vec());
-            rows.extend(inputs.iter().map(|u| u.as_slice().to_vec()));
-            let hold = rows[rows.len() - 1].clone();
-            rows.push(hold);
-            rows
-        };
-        Ok(Self {
-            coordinates: coordinates.iter().map(|c| c.to_string()).collect(),
-            inputs: input_names.iter().map(|c| c.to_string()).collect(),
-            runs: vec![Run {
-                name: run.to_string(),
-                t0,
-                dt: Some(dt),
-                positions,
-                inputs: run_inputs,
-                line: 2,
-            }],
-            dropped: Vec::new(),
-            warnings: Vec::new(),
-        })
+        Self::read_rows(reader, names, kinds, inputs, opts)
     }
 
-    /// Writes the data in the file format the reader takes (module docs):
-    /// `run,t,<coordinates>[,u_<input>…]`, one row per sample, numbers in
-    /// Rust's shortest round-trip form (read back bit for bit) and each
-    /// time written as t_0 + j·Δt at the decimals of t_0 and Δt
-    /// ([`format_time`]: 0.06, not 0.060000000000000005).
-    pub fn write_csv<W: io::Write>(&self, writer: W) -> Result<(), io::Error> {
-        let mut w = csv::Writer::from_writer(writer);
-        let mut header = vec!["run".to_string(), "t".to_string()];
-        header.extend(self.coordinates.iter().cloned());
-        header.extend(self.inputs.iter().map(|u| format!("u_{u}")));
-        w.write_record(&header).map_err(io::Error::other)?;
-        for run in &self.runs {
-            let dt = run.dt.unwrap_or(0.0);
-            for (j, q) in run.positions.iter().enumerate() {
-                let mut row = vec![run.name.clone(), format_time(run.t0, dt, j)];
-                row.extend(q.iter().map(|x| format!("{x:?}")));
-                if let Some(u) = run.inputs.get(j) {
-                    row.extend(u.iter().map(|x| format!("{x:?}")));
-                }
-                w.write_record(&row).map_err(io::Error::other)?;
-            }
-        }
-        w.flush()
+    /// Reads a CSV file ([`DynDataset::read_csv_with_inputs`]).
+    pub fn read_path_with_inputs(
+        path: impl AsRef<Path>,
+        names: &[&str],
+        kinds: &[CoordinateKind],
+        inputs: &[&str],
+        opts: &ReadOptions,
+    ) -> Result<Self, DataError> {
+        let reader = Self::open(path.as_ref())?;
+        Self::read_csv_with_inputs(reader, names, kinds, inputs, opts)
+    }
+
+    /// A one-run log of a rollout of a model whose size is known at run
+    /// time, with every input on the row the reader expects: as
+    /// [`Dataset::from_rollout`], with each state z_k given as its (q, v)
+    /// slices (one entry per coordinate) and each input as a slice (one
+    /// entry per input name). Errors: as there, and states or inputs of
+    /// the wrong length ([`DataError::Rollout`]).
+    pub fn from_rollout(
+        coordinates: &[&str],
+        input_names: &[&str],
+        run: &str,
+        (t0, dt): (f64, f64),
+        states: &[(&[f64], &[f64])],
+        (previous, inputs): (&[f64], &[&[f64]]),
+    ) -> Result<Self, DataError> {
+        Self::rollout_log(
+            coordinates,
+            input_names,
+            run,
+            (t0, dt),
+            states,
+            (previous, inputs),
+        )
     }
 }
 

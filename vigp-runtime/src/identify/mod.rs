@@ -178,13 +178,9 @@ impl Log {
     }
 
     /// A log from a run read by `vigp::data` (the same input convention).
-    pub fn from_run<const N: usize>(run: &crate::data::Run<N>) -> Self {
+    pub fn from_run<P: crate::data::Positions>(run: &crate::data::RunOf<P>) -> Self {
         Log {
-            positions: run
-                .positions
-                .iter()
-                .map(|q| q.as_slice().to_vec())
-                .collect(),
+            positions: run.positions.iter().map(|q| q.entries().to_vec()).collect(),
             inputs: run.inputs.clone(),
         }
     }
