@@ -267,7 +267,14 @@ pub fn solve(
         result.ok_or(IdentifyError::Singular)?;
     let prior_precision = linv.transpose() * &linv;
     let pi = &pm + &gain * (&theta - &prior_theta);
-    let covariance = &s2 - &gain * &ks2 + &gain * &cov_theta * gain.transpose();
+    // S² − A K S² in its product form (I − AK) S² (I − AK)ᵀ (AK is a
+    // projector and A K S² symmetric, so the two are equal): the
+    // difference cancels to rounding on parameters the data fix, and can
+    // leave a variance of −1e-21 there; the product's diagonal is a sum of
+    // non-negative terms
+    let free = DMatrix::<f64>::identity(gain.nrows(), gain.nrows()) - &gain * &base.k;
+    let mut covariance = &free * &s2 * free.transpose() + &gain * &cov_theta * gain.transpose();
+    covariance = (&covariance + covariance.transpose()) * 0.5;
     let residuals = &stack.b - &stack.w * &pi;
     Ok(Fit {
         pi,
