@@ -42,6 +42,8 @@ mod embedded;
 mod export;
 mod file;
 mod identified;
+#[cfg(feature = "urdf")]
+pub mod robot;
 pub(crate) mod time_step;
 pub use embedded::{EmbeddedExport, ExportSize};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
@@ -80,21 +82,26 @@ impl Encoding {
         z: &State<N>,
         out: &mut [f64],
     ) {
+        self.encode_parts(kinds, z.q.as_slice(), z.v.as_slice(), out);
+    }
+
+    /// [`Encoding::encode`] of the state with coordinates `q` and
+    /// velocities `v` (one of each per kind), for models whose size is
+    /// known at run time.
+    pub fn encode_parts(self, kinds: &[CoordinateKind], q: &[f64], v: &[f64], out: &mut [f64]) {
         let mut k = 0;
         for (i, kind) in kinds.iter().enumerate() {
             if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
-                let (s, c) = z.q[i].sin_cos();
+                let (s, c) = q[i].sin_cos();
                 out[k] = s;
                 out[k + 1] = c;
                 k += 2;
             } else {
-                out[k] = z.q[i];
+                out[k] = q[i];
                 k += 1;
             }
         }
-        for i in 0..N {
-            out[k + i] = z.v[i];
-        }
+        out[k..k + v.len()].copy_from_slice(v);
     }
 
     /// Inverse of [`Encoding::encode`]: the state whose encoding is `input`

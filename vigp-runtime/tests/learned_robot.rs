@@ -1,0 +1,265 @@
+//! A learned robot ([`LearnedRobot`]): the logs of a robot read at run
+//! time ([`DynDataset`], the same reader as for a declared mechanism), its
+//! transitions, training on top of the tree engine's step, the step's
+//! composition checked against the robot's step and the GP's own
+//! prediction, a model file that round-trips bit for bit, and typed
+//! errors for wrong input.
+
+use vigp_runtime::data::{Dataset, DynDataset, ReadOptions};
+use vigp_runtime::gp::TrainOptions;
+use vigp_runtime::learned::robot::{
+    LearnedRobot, LearnedRobotError, RobotTransition, coordinate_kinds, identified_robot,
+};
+use vigp_runtime::learned::{Encoding, IdentifiedParameters, Prior};
+use vigp_runtime::{CoordinateKind, Robot, RobotState};
+
+const DT: f64 = 0.002;
+
+fn arm(damping: f64) -> Robot {
+    let text = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../tests/fixtures/robots/arm3.urdf"
+    ))
+    .unwrap()
+    .replace(r#"damping="0.1""#, &format!(r#"damping="{damping}""#));
+    Robot::from_urdf_str(&text)
+        .unwrap()
+        .with_actuated(&["j2"])
+        .unwrap()
+}
+
+/// A log of `robot` from `q0` under a sine on j2, as CSV text in the data
+/// format (row k + 1 holds step k's input).
+fn log(robot: &Robot, q0: [f64; 3], steps: usize) -> String {
+    let us: Vec<Vec<f64>> = (0..steps)
+        .map(|k| vec![3.0 + 1.5 * (7.0 * k as f64 * DT).sin()])
+        .collect();
+    let z0 = RobotState::new(q0.to_vec(), vec![0.0; 3]);
+    let roll = robot
+        .rollout_with(&z0, DT, steps, |k, _| us[k].clone())
+        .unwrap();
+    let states: Vec<(&[f64], &[f64])> = roll
+        .states
+        .iter()
+        .map(|z| (z.q.as_slice(), z.v.as_slice()))
+        .collect();
+    let inputs: Vec<&[f64]> = us.iter().map(Vec::as_slice).collect();
+    let data = DynDataset::from_rollout(
+        &["j1", "j2", "j3"],
+        &["j2"],
+        "a",
+        (0.0, DT),
+        &states,
+        (&[0.0], &inputs),
+    )
+    .unwrap();
+    let mut text = Vec::new();
+    data.write_csv(&mut text).unwrap();
+    String::from_utf8(text).unwrap()
+}
+
+fn read(text: &str) -> DynDataset {
+    let kinds = [
+        CoordinateKind::Angle,
+        CoordinateKind::Angle,
+        CoordinateKind::Length,
+    ];
+    DynDataset::read_csv_with_inputs(
+        text.as_bytes(),
+        &["j1", "j2", "j3"],
+        &kinds,
+        &["j2"],
+        &ReadOptions::default(),
+    )
+    .unwrap()
+}
+
+#[test]
+fn the_run_time_reader_reads_what_the_fixed_size_reader_reads() {
+    let text = log(&arm(0.3), [0.1, -0.2, 0.05], 60);
+    let dynamic = read(&text);
+    let kinds = [
+        CoordinateKind::Angle,
+        CoordinateKind::Angle,
+        CoordinateKind::Length,
+    ];
+    let fixed = Dataset::<3>::read_csv_with_inputs(
+        text.as_bytes(),
+        &["j1", "j2", "j3"],
+        &kinds,
+        &["j2"],
+        &ReadOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(dynamic.runs.len(), 1);
+    let (d, f) = (&dynamic.runs[0], &fixed.runs[0]);
+    assert_eq!((d.dt, d.t0, &d.inputs), (f.dt, f.t0, &f.inputs));
+    for (a, b) in d.positions.iter().zip(&f.positions) {
+        assert_eq!(a.as_slice(), b.as_slice());
+    }
+    // kinds of another count than the names: a typed error
+    let e = DynDataset::read_csv_with_inputs(
+        text.as_bytes(),
+        &["j1", "j2", "j3"],
+        &kinds[..2],
+        &["j2"],
+        &ReadOptions::default(),
+    );
+    assert!(e.is_err());
+    // transitions: the state, the inputs around it, the next velocity
+    let ts = RobotTransition::from_dataset(&dynamic);
+    assert_eq!(ts.len(), 60);
+    let x = &d.positions;
+    let t = &ts[7];
+    let diff = |k: usize| -> Vec<f64> { (&x[k + 1] - &x[k]).iter().map(|d| d / DT).collect() };
+    assert_eq!(t.z.q, x[7].as_slice());
+    assert_eq!(t.z.v, diff(7));
+    assert_eq!(t.v_next, diff(8));
+    assert_eq!((&t.u_prev, &t.u), (&d.inputs[7], &d.inputs[8]));
+}
+
+#[test]
+fn a_learned_robot_steps_saves_and_refuses_bad_input() {
+    // the truth damps the elbow 3× more than the declared robot
+    let truth = arm(0.3);
+    let declared = arm(0.1);
+    let mut text = log(&truth, [0.1, -0.2, 0.05], 150);
+    let more = log(&truth, [-0.2, 0.3, 0.0], 150).replace("\na,", "\nb,");
+    text.push_str(more.split_once('\n').unwrap().1);
+    let data = read(&text);
+    let ts = RobotTransition::from_dataset(&data);
+    assert_eq!(ts.len(), 300);
+    let options = TrainOptions {
+        restarts: 1,
+        ..TrainOptions::default()
+    };
+    let (learned, _) = LearnedRobot::train(
+        declared.clone(),
+        DT,
+        &ts,
+        Encoding::SinCos,
+        Prior::Nominal,
+        &options,
+    )
+    .unwrap();
+    assert_eq!(coordinate_kinds(learned.robot())[2], CoordinateKind::Length);
+
+    // one step: q + Δt·v, and the declared robot's velocity plus the GP's
+    // mean at (sin/cos of the angles, the slide, v, u_prev, u)
+    let z = RobotState::new(vec![0.05, -0.1, 0.02], vec![0.3, -0.2, 0.1]);
+    let (u_prev, u) = ([3.2], [3.4]);
+    let next = learned.step(&z, &u_prev, &u).unwrap();
+    let prior = declared.step(&z, &u, DT).unwrap().0;
+    let point = [
+        z.q[0].sin(),
+        z.q[0].cos(),
+        z.q[1].sin(),
+        z.q[1].cos(),
+        z.q[2],
+        z.v[0],
+        z.v[1],
+        z.v[2],
+        u_prev[0],
+        u[0],
+    ];
+    let mean = learned.gp().predict(&point).unwrap().mean;
+    for (i, (v, m)) in next.v.iter().zip(&mean).enumerate() {
+        assert_eq!(next.q[i], z.q[i] + DT * z.v[i]);
+        // the GP's batch and single-point predictions sum in other orders
+        assert!((v - (prior.v[i] + m)).abs() <= 1e-12 * (1.0 + v.abs()));
+    }
+    // the learned step is closer to the truth's than the declared one
+    let true_next = truth.step(&z, &u, DT).unwrap().0;
+    let gap = |a: &RobotState| {
+        a.v.iter()
+            .zip(&true_next.v)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0f64, f64::max)
+    };
+    assert!(
+        gap(&next) < 0.5 * gap(&prior),
+        "{} {}",
+        gap(&next),
+        gap(&prior)
+    );
+
+    // the model file round-trips: the same predictions, bit for bit
+    let dir = std::env::temp_dir().join(format!("vigp-learned-robot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("model.json");
+    learned.save(&path).unwrap();
+    let loaded = LearnedRobot::load(&path).unwrap();
+    let inputs = vec![vec![3.0]; 25];
+    let a = learned.rollout(&z, &u_prev, &inputs).unwrap();
+    let b = loaded.rollout(&z, &u_prev, &inputs).unwrap();
+    assert_eq!(a, b);
+    assert_eq!(loaded.to_saved(), learned.to_saved());
+
+    // wrong input: typed errors
+    let bad = RobotState::new(vec![0.0, f64::NAN, 0.0], vec![0.0; 3]);
+    assert!(matches!(
+        learned.step(&bad, &u_prev, &u),
+        Err(LearnedRobotError::NonFinite(_))
+    ));
+    assert!(matches!(
+        learned.step(&z, &u_prev, &[1.0, 2.0]),
+        Err(LearnedRobotError::Length { .. })
+    ));
+    assert!(matches!(
+        learned.rollout(&bad, &u_prev, &inputs),
+        Err(LearnedRobotError::Rollout { step: 0, .. })
+    ));
+    assert!(matches!(
+        LearnedRobot::train(
+            declared.clone(),
+            0.0,
+            &ts,
+            Encoding::Raw,
+            Prior::Nominal,
+            &options
+        ),
+        Err(LearnedRobotError::TimeStep(_))
+    ));
+    assert!(matches!(
+        LearnedRobot::train(
+            declared.clone(),
+            DT,
+            &[],
+            Encoding::Raw,
+            Prior::Nominal,
+            &options
+        ),
+        Err(LearnedRobotError::Empty)
+    ));
+    let mut short = ts[..3].to_vec();
+    short[1].v_next.pop();
+    let e = LearnedRobot::train(
+        declared.clone(),
+        DT,
+        &short,
+        Encoding::Raw,
+        Prior::Nominal,
+        &options,
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("training transition 1"), "{e}");
+    // a file whose GP does not fit the robot
+    let mut saved = learned.to_saved();
+    saved.encoding = Encoding::Raw;
+    assert!(matches!(
+        LearnedRobot::from_saved(&saved),
+        Err(LearnedRobotError::File(_))
+    ));
+    // identified parameters of another robot
+    let other = IdentifiedParameters::new(
+        "panda",
+        &["links.link1.mass".to_string()],
+        &[1.0],
+        &vigp_runtime::nalgebra::DMatrix::zeros(1, 1),
+    )
+    .unwrap();
+    assert!(matches!(
+        identified_robot(&declared, DT, &other),
+        Err(LearnedRobotError::Identified(_))
+    ));
+}
