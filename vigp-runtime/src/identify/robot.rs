@@ -26,14 +26,15 @@
 //! leaves the diagonal of I_c unchanged) or, where it is zero, moved by no
 //! more than the body's inertia allows.
 //!
-//! The robot regressor regresses; it does not simulate for output error
-//! ([`Regressor::position_jacobians`] is the default, a typed error).
+//! Output error ([`super::output_error`]) simulates with this residual:
+//! [`Regressor::position_jacobians`] comes from the engine's closed-form
+//! term derivatives, exact to rounding.
 
 use super::IdentifyError;
 use super::regressor::{Regressor, Structure, Transition, position_differences};
 use crate::robot::{Robot, RobotTree};
 use nalgebra::{DMatrix, DVector};
-use vigp_core::tree::{BodyScratch, Engine};
+use vigp_core::tree::{BodyScratch, Engine, TermDerivatives};
 
 /// Relative size, against the row's largest residual change, below which a
 /// column's change is rounding (about 10⁴ ε: the residual sums some tens
@@ -151,6 +152,14 @@ impl RobotRegressor {
     /// The time step.
     pub fn dt(&self) -> f64 {
         self.dt
+    }
+
+    /// The value of the parameter named `name` (one of
+    /// [`RobotRegressor::parameter_names`]) in `tree`, e.g. the robot's
+    /// declared tree or [`RobotRegressor::tree_with`] an estimate.
+    pub fn value(&self, tree: &RobotTree, name: &str) -> Option<f64> {
+        let i = self.names.iter().position(|n| n == name)?;
+        (self.fields[i].0 < tree.bodies.len()).then(|| self.get(tree, i))
     }
 
     fn get(&self, tree: &RobotTree, i: usize) -> f64 {
@@ -337,6 +346,64 @@ impl Regressor for RobotRegressor {
             });
         }
         Ok((y, b))
+    }
+
+    /// The residual and its exact Jacobians in x_{k−1}, x_k and x_{k+1}
+    /// from the engine's closed-form term derivatives
+    /// ([`Engine::term_derivatives`], O(N²)): with v₀ = (x_k − x_{k−1})/Δt,
+    /// v₁ = (x_{k+1} − x_k)/Δt, P = M(q)v, D the dampings and the terms'
+    /// derivatives at (x_{k−1}, v₀) (subscript 0) and (x_k, v₁) (1),
+    ///
+    /// ```text
+    /// ∂r/∂x_{k−1} = P_q0 − P_v0/Δt
+    /// ∂r/∂x_k     = P_v0/Δt − P_q1 + P_v1/Δt + Δt·(T_q1 − V_q1) − T_v1 + D
+    /// ∂r/∂x_{k+1} = −P_v1/Δt + T_v1 − D
+    /// ```
+    fn position_jacobians(
+        &self,
+        t: &Transition<'_>,
+        pi: &[f64],
+    ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError> {
+        let tree = self.tree_with(pi)?;
+        let r = self.raw(tree.clone(), t)?;
+        let damping: Vec<f64> = tree.bodies.iter().map(|b| b.damping).collect();
+        let engine = Engine::new(tree).map_err(|e| IdentifyError::Layout {
+            message: format!("the robot with these parameters: {e}"),
+        })?;
+        let (n, h) = (damping.len(), self.dt);
+        let [x0, x1, x2] = t.positions;
+        let v0: Vec<f64> = (0..n).map(|i| (x1[i] - x0[i]) / h).collect();
+        let v1: Vec<f64> = (0..n).map(|i| (x2[i] - x1[i]) / h).collect();
+        let mut ws = vec![BodyScratch::default(); n];
+        // p_q, p_v, t_q, t_v, v_q (row-major N × N) at one (q, v)
+        let terms = |q: &[f64], v: &[f64], ws: &mut [BodyScratch]| {
+            let mut m: [Vec<f64>; 5] = core::array::from_fn(|_| vec![0.0; n * n]);
+            let [p_q, p_v, t_q, t_v, v_q] = &mut m;
+            engine
+                .term_derivatives(
+                    q,
+                    v,
+                    TermDerivatives {
+                        p_q,
+                        p_v,
+                        t_q,
+                        t_v,
+                        v_q,
+                    },
+                    ws,
+                )
+                .map_err(|e| IdentifyError::Simulation {
+                    message: format!("tree engine: {e}"),
+                })
+                .map(|()| m.map(|a| DMatrix::from_row_slice(n, n, &a)))
+        };
+        let [p_q0, p_v0, ..] = terms(x0, &v0, &mut ws)?;
+        let [p_q1, p_v1, t_q1, t_v1, v_q1] = terms(x1, &v1, &mut ws)?;
+        let d = DMatrix::from_diagonal(&DVector::from_vec(damping));
+        let j0 = &p_q0 - &p_v0 / h;
+        let j1 = &p_v0 / h - &p_q1 + &p_v1 / h + (&t_q1 - &v_q1) * h - &t_v1 + &d;
+        let j2 = -&p_v1 / h + &t_v1 - &d;
+        Ok((DVector::from_vec(r), [j0, j1, j2]))
     }
 
     fn noise_jacobian(
