@@ -35,6 +35,21 @@ pub(super) enum Command {
     Excite(ExciteArgs),
 }
 
+/// A robot loaded from URDF at run time instead of a registered mechanism
+/// (`fit`, `simulate`, `identify`).
+#[derive(Args, Debug, Clone, Default)]
+pub(super) struct RobotArgs {
+    /// A robot from a URDF file instead of `--system`: its joints with a
+    /// coordinate (revolute, continuous, prismatic; fixed joints merged)
+    /// are the log's columns, stepped by the linear-time tree engine.
+    #[arg(long, value_name = "FILE", conflicts_with = "system")]
+    pub(super) urdf: Option<PathBuf>,
+    /// With `--urdf`: the actuated joints, in input order (columns
+    /// `u_<joint>`; comma-separated).
+    #[arg(long, value_name = "JOINTS", value_delimiter = ',', requires = "urdf")]
+    pub(super) actuated: Vec<String>,
+}
+
 /// How the nominal model steps (`score`, `simulate`).
 #[derive(Args, Debug, Clone)]
 pub(super) struct StepArgs {
@@ -175,6 +190,8 @@ pub(super) struct IdentifyArgs {
     /// The mechanism (with several registered; case and `_` do not matter).
     #[arg(long)]
     pub(super) system: Option<String>,
+    #[command(flatten)]
+    pub(super) robot: RobotArgs,
     /// The log (CSV: run,t,<coordinates>[,u_<joint>…], as for `fit`).
     #[arg(long)]
     pub(super) data: PathBuf,
@@ -182,9 +199,11 @@ pub(super) struct IdentifyArgs {
     /// identified:FILE` reads it).
     #[arg(long)]
     pub(super) out: PathBuf,
-    /// The discrete Euler–Lagrange rule of the regression.
-    #[arg(long, value_enum, default_value = "midpoint")]
-    pub(super) rule: RuleArg,
+    /// The discrete Euler–Lagrange rule of the regression [default:
+    /// midpoint; a robot from `--urdf`: first-order, the tree engine's
+    /// rule and the only one it has].
+    #[arg(long, value_enum)]
+    pub(super) rule: Option<RuleArg>,
     /// The treatment of position noise.
     #[arg(long, value_enum, default_value = "ls")]
     pub(super) noise: NoiseArg,
@@ -212,6 +231,8 @@ pub(super) struct FitArgs {
     /// The mechanism (with several registered; case and `_` do not matter).
     #[arg(long)]
     pub(super) system: Option<String>,
+    #[command(flatten)]
+    pub(super) robot: RobotArgs,
     /// Training data (CSV: run,t,<coordinates>[,u_<joint>…]; row k's input is
     /// held from t_k to t_{k+1}, so the step from row k to row k + 1 is
     /// driven by row k + 1's input).
@@ -378,6 +399,8 @@ pub(super) struct SimulateArgs {
     /// The mechanism (with several registered; case and `_` do not matter).
     #[arg(long)]
     pub(super) system: Option<String>,
+    #[command(flatten)]
+    pub(super) robot: RobotArgs,
     /// Start positions, one per coordinate in the log's column order
     /// (comma-separated).
     #[arg(

@@ -42,11 +42,36 @@ pub(super) fn set_parameter<P: Parameters>(p: &mut P, assignment: &str) -> Resul
 const DEFAULT_MAX_SAMPLES: usize = 512;
 
 /// Evenly spaced selection of at most `max` items.
-fn spread<T: Copy>(all: &[T], max: usize) -> Vec<T> {
+fn spread<T: Clone>(all: &[T], max: usize) -> Vec<T> {
     if all.len() <= max {
         return all.to_vec();
     }
-    (0..max).map(|i| all[i * all.len() / max]).collect()
+    (0..max).map(|i| all[i * all.len() / max].clone()).collect()
+}
+
+/// The transitions `fit` trains on: at most `--max-samples` of `all`,
+/// evenly spaced (default [`DEFAULT_MAX_SAMPLES`], all with `--sparse`),
+/// at least one, and no fewer than `--sparse`'s inducing points.
+pub(super) fn choose<T: Clone>(a: &FitArgs, all: &[T]) -> Result<Vec<T>, CliError> {
+    let max = match (a.max_samples, a.sparse) {
+        (Some(max), _) => max,
+        (None, Some(_)) => usize::MAX,
+        (None, None) => DEFAULT_MAX_SAMPLES,
+    };
+    let chosen = spread(all, max);
+    if chosen.is_empty() {
+        return Err(CliError::Usage(format!(
+            "{}: no run has three samples: no transition to train on",
+            a.data.display()
+        )));
+    }
+    if let Some(m) = a.sparse.filter(|&m| m > chosen.len()) {
+        return Err(CliError::Usage(format!(
+            "--sparse {m}: more inducing points than the {} training transitions",
+            chosen.len()
+        )));
+    }
+    Ok(chosen)
 }
 
 /// What every view's training starts from: the data read with the
@@ -80,26 +105,6 @@ where
         return Err(nominal_invalid(e));
     }
     maximal?;
-    if a.max_samples == Some(0) {
-        return Err(CliError::Usage("--max-samples must be at least 1".into()));
-    }
-    if a.sparse == Some(0) {
-        return Err(CliError::Usage(
-            "--sparse needs at least 1 inducing point".into(),
-        ));
-    }
-    if a.restarts > vigp_runtime::gp::MAX_RESTARTS {
-        return Err(CliError::Usage(format!(
-            "--restarts must be at most {}",
-            vigp_runtime::gp::MAX_RESTARTS
-        )));
-    }
-    if !(1..=vigp_runtime::gp::MAX_MEMORY).contains(&a.memory) {
-        return Err(CliError::Usage(format!(
-            "--memory must be from 1 to {}",
-            vigp_runtime::gp::MAX_MEMORY
-        )));
-    }
     let prior = match &a.prior {
         PriorArg::Nominal => Prior::Nominal,
         PriorArg::Constant => Prior::Constant,
@@ -114,33 +119,7 @@ where
             Prior::Identified(read_identified(path, Mn::NAME)?)
         }
     };
-    let mut opts = TrainOptions {
-        restarts: a.restarts,
-        seed: a.seed,
-        memory: a.memory,
-        method: match a.sparse {
-            Some(m) => Method::Sparse(SparseOptions {
-                optimise_inducing: a.optimise_inducing,
-                ..SparseOptions::kmeans(m)
-            }),
-            None => Method::Exact,
-        },
-        screening: if a.no_screen {
-            Screening::Off
-        } else {
-            Screening::Auto
-        },
-        ..TrainOptions::default()
-    };
-    if let Some(floor) = a.noise_floor {
-        let upper = opts.bounds.noise_variance.1;
-        if !(floor.is_finite() && floor > 0.0 && floor < upper) {
-            return Err(CliError::Usage(format!(
-                "--noise-floor must be finite and in (0, {upper}): {floor}"
-            )));
-        }
-        opts.bounds.noise_variance.0 = floor;
-    }
+    let opts = train_options(a)?;
     // before the training, which the write would otherwise waste
     check_out_dir(&a.out)?;
     let (data, dt) = read_log::<Mn, N, C>(&a.data, &a.read)?;
@@ -173,6 +152,58 @@ where
         prior,
         opts,
     })
+}
+
+/// The GP training options of `fit`'s flags, checked.
+pub(super) fn train_options(a: &FitArgs) -> Result<TrainOptions, CliError> {
+    if a.max_samples == Some(0) {
+        return Err(CliError::Usage("--max-samples must be at least 1".into()));
+    }
+    if a.sparse == Some(0) {
+        return Err(CliError::Usage(
+            "--sparse needs at least 1 inducing point".into(),
+        ));
+    }
+    if a.restarts > vigp_runtime::gp::MAX_RESTARTS {
+        return Err(CliError::Usage(format!(
+            "--restarts must be at most {}",
+            vigp_runtime::gp::MAX_RESTARTS
+        )));
+    }
+    if !(1..=vigp_runtime::gp::MAX_MEMORY).contains(&a.memory) {
+        return Err(CliError::Usage(format!(
+            "--memory must be from 1 to {}",
+            vigp_runtime::gp::MAX_MEMORY
+        )));
+    }
+    let mut opts = TrainOptions {
+        restarts: a.restarts,
+        seed: a.seed,
+        memory: a.memory,
+        method: match a.sparse {
+            Some(m) => Method::Sparse(SparseOptions {
+                optimise_inducing: a.optimise_inducing,
+                ..SparseOptions::kmeans(m)
+            }),
+            None => Method::Exact,
+        },
+        screening: if a.no_screen {
+            Screening::Off
+        } else {
+            Screening::Auto
+        },
+        ..TrainOptions::default()
+    };
+    if let Some(floor) = a.noise_floor {
+        let upper = opts.bounds.noise_variance.1;
+        if !(floor.is_finite() && floor > 0.0 && floor < upper) {
+            return Err(CliError::Usage(format!(
+                "--noise-floor must be finite and in (0, {upper}): {floor}"
+            )));
+        }
+        opts.bounds.noise_variance.0 = floor;
+    }
+    Ok(opts)
 }
 
 /// The usage error of a nominal model whose parameters (with `--set`) no
@@ -304,18 +335,7 @@ where
     M: Mechanism<N, C> + Parameters + Clone,
     T: Copy,
 {
-    let max = match (a.max_samples, a.sparse) {
-        (Some(max), _) => max,
-        (None, Some(_)) => usize::MAX,
-        (None, None) => DEFAULT_MAX_SAMPLES,
-    };
-    let chosen = spread(all, max);
-    if let Some(m) = a.sparse.filter(|&m| m > chosen.len()) {
-        return Err(CliError::Usage(format!(
-            "--sparse {m}: more inducing points than the {} training transitions",
-            chosen.len()
-        )));
-    }
+    let chosen = choose(a, all)?;
     let d = encoding.dim(&M::KINDS) + u_dim;
     w(
         out,

@@ -8,7 +8,8 @@ use std::path::Path;
 use super::args::{IdentifyArgs, NoiseArg, RuleArg};
 use super::{CliError, check_out_dir, io_error, read_log, w};
 use crate::identify::{
-    DelRegressor, Log, Noise, Options, OutputError, Status, identify as run_identify,
+    DelRegressor, Log, Noise, Options, OutputError, RobotRegressor, Status,
+    identify as run_identify,
 };
 use crate::learned::IdentifiedParameters;
 use crate::{Mechanism, Parameters};
@@ -24,21 +25,110 @@ pub(super) fn identify<Mn, const N: usize, const C: usize>(
 where
     Mn: Mechanism<N, C> + Parameters + Copy,
 {
+    check_args(a)?;
+    let (data, dt) = read_log::<Mn, N, C>(&a.data, &a.read)?;
+    let rule = a.rule.unwrap_or(RuleArg::Midpoint);
+    let regressor = match rule {
+        RuleArg::Midpoint => DelRegressor::midpoint(minimal, dt),
+        RuleArg::FirstOrder => DelRegressor::first_order(minimal, dt),
+    }
+    .map_err(fail)?;
+    let logs: Vec<Log> = data.runs.iter().map(Log::from_run).collect();
+    let id = run_identify(&regressor, &logs, &options(a)).map_err(fail)?;
+    let identified = regressor.model_with(&id.estimate).map_err(fail)?;
+    let value = |m: &Mn, name: &str| Mn::parameter_index(name).and_then(|i| m.parameter(i));
+    let standard = IdentifiedParameters::from_identification::<Mn>(&id)
+        .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
+    let fit = Fit {
+        name: Mn::NAME,
+        runs: data.runs.len(),
+        dt,
+        rule,
+    };
+    write_results(
+        a,
+        &fit,
+        &id,
+        |name| Some((value(&minimal, name)?, value(&identified, name)?)),
+        standard,
+        out,
+    )
+}
+
+/// `vigp identify --urdf`: the robot's parameters by regression on the
+/// tree engine's first-order residual ([`RobotRegressor`]).
+pub(super) fn identify_robot(
+    a: &IdentifyArgs,
+    robot: &crate::Robot,
+    data: &crate::data::DynDataset,
+    dt: f64,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    check_args(a)?;
+    if a.rule == Some(RuleArg::Midpoint) {
+        return Err(CliError::Usage(
+            "--rule midpoint: a robot from --urdf is identified with the tree engine's own \
+             rule, first-order (its step); leave --rule out or give first-order"
+                .into(),
+        ));
+    }
+    let regressor = RobotRegressor::new(robot, dt).map_err(fail)?;
+    let logs: Vec<Log> = data.runs.iter().map(Log::from_run).collect();
+    let id = run_identify(&regressor, &logs, &options(a)).map_err(fail)?;
+    let identified = regressor.tree_with(&id.estimate).map_err(fail)?;
+    let standard = IdentifiedParameters::new(
+        robot.name(),
+        &id.structure.names,
+        &id.estimate,
+        &id.covariance,
+    )
+    .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
+    let fit = Fit {
+        name: robot.name(),
+        runs: data.runs.len(),
+        dt,
+        rule: RuleArg::FirstOrder,
+    };
+    write_results(
+        a,
+        &fit,
+        &id,
+        |name| {
+            Some((
+                regressor.value(robot.tree(), name)?,
+                regressor.value(&identified, name)?,
+            ))
+        },
+        standard,
+        out,
+    )
+}
+
+/// What was identified from what, for the report's first line.
+struct Fit<'a> {
+    name: &'a str,
+    runs: usize,
+    dt: f64,
+    rule: RuleArg,
+}
+
+fn fail(e: crate::identify::IdentifyError) -> CliError {
+    CliError::Usage(format!("identify: {e}"))
+}
+
+/// The checks made before any data is read.
+fn check_args(a: &IdentifyArgs) -> Result<(), CliError> {
     if !(a.prior_sd > 0.0 && a.prior_sd.is_finite()) {
         return Err(CliError::Usage(format!(
             "--prior-sd {}: must be positive and finite",
             a.prior_sd
         )));
     }
-    check_out_dir(&a.out)?;
-    let (data, dt) = read_log::<Mn, N, C>(&a.data, &a.read)?;
-    let fail = |e: crate::identify::IdentifyError| CliError::Usage(format!("identify: {e}"));
-    let regressor = match a.rule {
-        RuleArg::Midpoint => DelRegressor::midpoint(minimal, dt),
-        RuleArg::FirstOrder => DelRegressor::first_order(minimal, dt),
-    }
-    .map_err(fail)?;
-    let logs: Vec<Log> = data.runs.iter().map(Log::from_run).collect();
+    check_out_dir(&a.out)
+}
+
+/// The identification's options from the flags.
+fn options(a: &IdentifyArgs) -> Options {
     let mut options = Options::default();
     options.prior.relative = a.prior_sd;
     options.noise = match a.noise {
@@ -49,18 +139,30 @@ where
         segment,
         ..OutputError::default()
     });
-    let id = run_identify(&regressor, &logs, &options).map_err(fail)?;
+    options
+}
+
+/// Prints the report and writes the parameter file. `values(name)`: the
+/// declared and the identified value of a parameter the report names.
+fn write_results(
+    a: &IdentifyArgs,
+    fit: &Fit<'_>,
+    id: &crate::identify::Identification,
+    values: impl Fn(&str) -> Option<(f64, f64)>,
+    standard: IdentifiedParameters,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
     let report = id.report();
-    let identified = regressor.model_with(&id.estimate).map_err(fail)?;
+    let dt = fit.dt;
     w(
         out,
         format_args!(
             "identify: {} from {} ({} runs, {} transitions, dt = {dt} s), {} rule, prior ±{} of the declared values",
-            Mn::NAME,
+            fit.name,
             a.data.display(),
-            data.runs.len(),
+            fit.runs,
             id.transitions,
-            match a.rule {
+            match fit.rule {
                 RuleArg::Midpoint => "midpoint",
                 RuleArg::FirstOrder => "first-order",
             },
@@ -93,11 +195,10 @@ where
     let mut parameters = Vec::new();
     for row in &report.dsl {
         let name = row.parameter.as_str();
-        let value = |m: &Mn| Mn::parameter_index(name).and_then(|i| m.parameter(i));
-        let (Some(declared), Some(value)) = (value(&minimal), value(&identified)) else {
+        let Some((declared, value)) = values(name) else {
             return Err(CliError::Usage(format!(
                 "identify: `{name}` in the report is not a parameter of `{}`",
-                Mn::NAME
+                fit.name
             )));
         };
         let mut entry = serde_json::json!({
@@ -125,12 +226,10 @@ where
         })
         .collect();
     // the standard parameters and their covariance, as a model file's
-    // identified prior records them
-    let standard = IdentifiedParameters::from_identification::<Mn>(&id)
-        .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
+    // identified prior records them: `standard`
     let file = serde_json::json!({
         "format": FORMAT,
-        "mechanism": Mn::NAME,
+        "mechanism": fit.name,
         "dt": dt,
         "transitions": id.transitions,
         "parameters": parameters,

@@ -24,6 +24,16 @@
 //!              [--q Q,…] [--out plan.csv]
 //! ```
 //!
+//! A robot from a URDF file takes `--urdf robot.urdf [--actuated j1,j2]`
+//! instead of `--system` in `simulate`, `identify` and `fit`; `score`
+//! reads the model `fit` wrote for it. The log's columns are the robot's
+//! joints with a coordinate (file depth-first order) and `u_<joint>` per
+//! actuated joint; the steps are the tree engine's (`vigp::Robot`), the
+//! identification its first-order residual
+//! ([`crate::identify::RobotRegressor`]), the model a
+//! [`crate::learned::robot::LearnedRobot`]. `predict`, `export` and
+//! `excite` take declared mechanisms only.
+//!
 //! * `fit` reads measured positions ([`crate::data`] format), builds the
 //!   transitions, trains a [`Learned`] model on at most `--max-samples`
 //!   of them (evenly spaced; default 512, as exact GP training is O(N³);
@@ -112,6 +122,7 @@ mod fit;
 mod identify;
 mod predict;
 mod registry;
+mod robot;
 mod score;
 mod simulate;
 
@@ -281,6 +292,19 @@ where
     T: Into<std::ffi::OsString> + Clone,
 {
     let cli = Cli::try_parse_from(args)?;
+    // a robot from URDF, or a model of one, runs on the tree engine
+    let on_robot = match &cli.command {
+        Command::Fit(args::FitArgs { robot, .. })
+        | Command::Simulate(args::SimulateArgs { robot, .. })
+        | Command::Identify(args::IdentifyArgs { robot, .. }) => robot.urdf.is_some(),
+        Command::Score(ScoreArgs { model, .. })
+        | Command::Predict(PredictArgs { model, .. })
+        | Command::Export(ExportArgs { model, .. }) => robot::is_robot_model(model),
+        Command::Excite(_) => false,
+    };
+    if on_robot {
+        return robot::run(&cli.command, out);
+    }
     let entry = match &cli.command {
         Command::Fit(args::FitArgs { system, .. })
         | Command::Simulate(args::SimulateArgs { system, .. })
@@ -383,23 +407,30 @@ fn read_data<const N: usize>(
 ) -> Result<Dataset<N>, CliError> {
     let data = Dataset::read_path_with_inputs(path, names, kinds, inputs, &read.options())
         .map_err(data_error(path))?;
-    // unit heuristics and dropped outliers: on stderr, the results stay
-    // on stdout
-    for warning in &data.warnings {
+    report_read(path, &data.warnings, &data.dropped);
+    Ok(data)
+}
+
+/// The unit heuristics that fired and the outliers dropped while reading
+/// `path`: on stderr, the results stay on stdout.
+fn report_read(
+    path: &Path,
+    warnings: &[crate::data::DataWarning],
+    dropped: &[crate::data::Dropped],
+) {
+    for warning in warnings {
         eprintln!("warning: {}: {warning}", path.display());
     }
-    if !data.dropped.is_empty() {
-        let first = &data.dropped[0];
+    if let Some(first) = dropped.first() {
         eprintln!(
             "note: {}: dropped {} outlier reading(s) (--drop-outliers), the first at run `{}`, line {}, column `{}`",
             path.display(),
-            data.dropped.len(),
+            dropped.len(),
             first.run,
             first.line,
             first.column
         );
     }
-    Ok(data)
 }
 
 /// ", sparse GP, M = …" for a sparse model, "" for an exact one.
@@ -513,9 +544,25 @@ fn check_model_inputs<const U: usize>(model: &Path, found: usize) -> Result<(), 
 /// order, with its run label (`None` without a `run` column).
 type Plans<const U: usize> = Vec<(Option<String>, Vec<SVector<f64, U>>)>;
 
+/// [`Plans`] of an input count known at run time: each row a vector.
+type PlanRows = Vec<(Option<String>, Vec<Vec<f64>>)>;
+
 fn read_plan<const U: usize>(path: &Path, inputs: &[&str]) -> Result<Plans<U>, CliError> {
+    Ok(read_plan_rows(path, &inputs[..U.min(inputs.len())])?
+        .into_iter()
+        .map(|(run, rows)| {
+            let us = rows.iter().map(|u| SVector::from_column_slice(u)).collect();
+            (run, us)
+        })
+        .collect())
+}
+
+/// [`read_plan`] for an input count known at run time (`inputs.len()`):
+/// each plan's rows as vectors.
+fn read_plan_rows(path: &Path, inputs: &[&str]) -> Result<PlanRows, CliError> {
     let bad = |why: String| CliError::Usage(format!("{}: {why}", path.display()));
-    if U == 0 {
+    let u_count = inputs.len();
+    if u_count == 0 {
         return Err(bad(
             "the mechanism has no inputs (no `actuated` joint): nothing to plan".into(),
         ));
@@ -525,7 +572,7 @@ fn read_plan<const U: usize>(path: &Path, inputs: &[&str]) -> Result<Plans<U>, C
         .from_path(path)
         .map_err(|e| bad(e.to_string()))?;
     let header = rdr.headers().map_err(|e| bad(e.to_string()))?.clone();
-    let (mut run_col, mut cols) = (None, vec![None; U]);
+    let (mut run_col, mut cols) = (None, vec![None; u_count]);
     for (i, name) in header.iter().enumerate() {
         if name == "t" {
             // times are implied: row j drives step j
@@ -551,11 +598,11 @@ fn read_plan<const U: usize>(path: &Path, inputs: &[&str]) -> Result<Plans<U>, C
     if let Some(j) = cols.iter().position(Option::is_none) {
         return Err(bad(format!("line 1: missing column `u_{}`", inputs[j])));
     }
-    let mut plans: Plans<U> = Vec::new();
+    let mut plans: PlanRows = Vec::new();
     for (n, record) in rdr.records().enumerate() {
         let line = n + 2;
         let record = record.map_err(|e| bad(format!("line {line}: {e}")))?;
-        let mut u = SVector::<f64, U>::zeros();
+        let mut u = vec![0.0; u_count];
         for (j, col) in cols.iter().enumerate() {
             let col = col.unwrap_or_default();
             let text = record.get(col).unwrap_or("");

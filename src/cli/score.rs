@@ -29,6 +29,18 @@ fn produced<const K: usize, const N: usize>(
     p
 }
 
+/// The k-step windows of runs of `lengths` samples: (run, first sample)
+/// for every sample with k more after it (and one more for v₀).
+pub(super) fn windows(lengths: impl Iterator<Item = usize>, k: usize) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for (r, len) in lengths.enumerate() {
+        if len >= k + 2 {
+            out.extend((0..len - k - 1).map(|s| (r, s)));
+        }
+    }
+    out
+}
+
 /// Mean over steps 1..=k of |p − t|²/n.
 fn window_mse<const N: usize>(pred: &[SVector<f64, N>], truth: &[SVector<f64, N>]) -> f64 {
     let s: f64 = pred
@@ -72,14 +84,7 @@ where
     let dt = learned.dt();
     data.check_dt(dt, a.read.time_tolerance)
         .map_err(data_error(&a.data))?;
-    // windows: every sample with k more after it (and one more for v₀)
-    let mut windows: Vec<(usize, usize)> = Vec::new();
-    for (r, run) in data.runs.iter().enumerate() {
-        let len = run.positions.len();
-        if len >= k + 2 {
-            windows.extend((0..len - k - 1).map(|s| (r, s)));
-        }
-    }
+    let windows = windows(data.runs.iter().map(|r| r.positions.len()), k);
     let too_short = data
         .runs
         .iter()

@@ -25,32 +25,7 @@ where
     if let Err(e) = minimal.constants() {
         return usage(format!("the nominal model (with --set): {e}"));
     }
-    if a.q.len() != N {
-        return usage(format!(
-            "--q has {} value(s); {} has {N} coordinates: {}",
-            a.q.len(),
-            Mn::NAME,
-            Mn::COORDINATES.join(", ")
-        ));
-    }
-    if !a.v.is_empty() && a.v.len() != N {
-        return usage(format!(
-            "--v has {} value(s), expected {N} (or none for a start at rest)",
-            a.v.len()
-        ));
-    }
-    if a.q.iter().chain(&a.v).any(|x| !x.is_finite()) {
-        return usage("--q and --v must be finite".into());
-    }
-    if !(a.dt.is_finite() && a.dt > 0.0) {
-        return usage(format!("--dt must be finite and > 0: {}", a.dt));
-    }
-    if !a.t0.is_finite() {
-        return usage(format!("--t0 must be finite: {}", a.t0));
-    }
-    if a.steps == 0 {
-        return usage("--steps must be at least 1".into());
-    }
+    check_start(a, Mn::NAME, &Mn::COORDINATES)?;
     check_out_dir(&a.out)?;
     let z0 = State {
         q: SVector::<f64, N>::from_column_slice(&a.q),
@@ -137,6 +112,45 @@ where
             }
         ),
     )
+}
+
+/// The checks of `simulate`'s start and steps, before any work: `--q`
+/// has one value per coordinate (`coordinates` of `name`), `--v` as many
+/// or none, both finite; `--dt` finite and > 0, `--t0` finite, `--steps`
+/// at least 1.
+pub(super) fn check_start(
+    a: &SimulateArgs,
+    name: &str,
+    coordinates: &[&str],
+) -> Result<(), CliError> {
+    let usage = |why: String| Err(CliError::Usage(why));
+    let n = coordinates.len();
+    if a.q.len() != n {
+        return usage(format!(
+            "--q has {} value(s); {name} has {n} coordinates: {}",
+            a.q.len(),
+            coordinates.join(", ")
+        ));
+    }
+    if !a.v.is_empty() && a.v.len() != n {
+        return usage(format!(
+            "--v has {} value(s), expected {n} (or none for a start at rest)",
+            a.v.len()
+        ));
+    }
+    if a.q.iter().chain(&a.v).any(|x| !x.is_finite()) {
+        return usage("--q and --v must be finite".into());
+    }
+    if !(a.dt.is_finite() && a.dt > 0.0) {
+        return usage(format!("--dt must be finite and > 0: {}", a.dt));
+    }
+    if !a.t0.is_finite() {
+        return usage(format!("--t0 must be finite: {}", a.t0));
+    }
+    if a.steps == 0 {
+        return usage("--steps must be at least 1".into());
+    }
+    Ok(())
 }
 
 /// How many steps of a rollout subdivided themselves, in words.
