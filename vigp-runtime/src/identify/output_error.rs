@@ -49,9 +49,12 @@
 //! Levenberg–Marquardt on the Gauss–Newton normal equations, with the
 //! segments' initial states eliminated block by block (a Schur complement:
 //! cost linear in the number of segments), Marquardt's diagonal scaling,
-//! and a step shortened until the parameters stay physically consistent
-//! ([`super::consistency::feasible`]; the feasible set is convex and the
-//! start is feasible, so the shortened step exists). The covariance of π
+//! and a step that would leave the physically consistent parameters
+//! projected onto them in the metric of the damped Gauss–Newton model
+//! ([`super::consistency::project`]; the set is convex and the iterate
+//! strictly inside it), so that the iteration can slide along the set's
+//! boundary (a joint without friction, a thin link) instead of stopping
+//! there. The covariance of π
 //! is the inverse of the reduced Gauss–Newton matrix at the solution (the
 //! Laplace approximation of the posterior); the base parameters' intervals
 //! follow as in the first stage.
@@ -442,12 +445,42 @@ fn normal<R: Regressor>(
 }
 
 /// Solve the damped system; `None` if a block is singular.
+/// A damped Gauss–Newton step with the initial states eliminated: the
+/// step in π, the reduced (damped) matrix in π, and per segment the pair
+/// (x, y) that gives its initial states' step for any step δπ as
+/// −(y + x·δπ).
+struct Step {
+    dp: DVector<f64>,
+    reduced: DMatrix<f64>,
+    states: Vec<(DMatrix<f64>, DVector<f64>)>,
+}
+
+impl Step {
+    /// The initial states' steps that go with the step `dp` in π.
+    fn states_for(&self, dp: &DVector<f64>) -> Vec<DVector<f64>> {
+        self.states.iter().map(|(x, y)| -(y + x * dp)).collect()
+    }
+
+    /// The feasible π nearest to `at` + the step in the metric of the
+    /// reduced matrix: the minimiser of the damped quadratic model over
+    /// the consistent set (a projected Gauss–Newton step), from `at`
+    /// (strictly feasible).
+    fn projected(&self, structure: &super::Structure, at: &DVector<f64>) -> Option<DVector<f64>> {
+        let l = self.reduced.clone().cholesky()?.l();
+        let f = l.transpose();
+        let rhs = &f * (at + &self.dp);
+        let metric = consistency::Metric { f, rhs };
+        let (pi, _) = consistency::project(structure, &metric, at.as_slice()).ok()?;
+        Some(DVector::from_vec(pi))
+    }
+}
+
 fn solve_step(
     sys: &Normal,
     prior_precision: &DVector<f64>,
     prior_gradient: &DVector<f64>,
     mu: f64,
-) -> Option<(DVector<f64>, Vec<DVector<f64>>)> {
+) -> Option<Step> {
     let damp = |m: &mut DMatrix<f64>| {
         for i in 0..m.nrows() {
             let d = m[(i, i)];
@@ -471,9 +504,12 @@ fn solve_step(
         g -= h_sp.tr_mul(&y);
         inverses.push((x, y));
     }
-    let dp = -h.cholesky()?.solve(&g);
-    let ds = inverses.iter().map(|(x, y)| -(y + x * &dp)).collect();
-    Some((dp, ds))
+    let dp = -h.clone().cholesky()?.solve(&g);
+    Some(Step {
+        dp,
+        reduced: h,
+        states: inverses,
+    })
 }
 
 /// The reduced (undamped) Gauss–Newton matrix in π, prior included: the
@@ -598,26 +634,31 @@ pub fn refine<R: Regressor>(
             let prior_gradient = (&at.pi - &declared).component_mul(&prior_precision);
             let mut accepted = false;
             for _ in 0..20 {
-                let Some((dp, ds)) = solve_step(&sys, &prior_precision, &prior_gradient, mu) else {
+                let Some(step) = solve_step(&sys, &prior_precision, &prior_gradient, mu) else {
                     mu *= 10.0;
                     continue;
                 };
-                // shorten until physically consistent
-                let mut scale = 1.0;
+                // an inconsistent step is projected onto the consistent
+                // set in the model's metric, so that the iteration slides
+                // along the set's boundary instead of stopping there
                 let mut trial = at.clone();
-                for _ in 0..40 {
-                    trial.pi = &at.pi + &dp * scale;
-                    if !consistent || consistency::feasible(&first.structure, trial.pi.as_slice()) {
-                        break;
-                    }
-                    scale *= 0.5;
-                }
+                trial.pi = &at.pi + &step.dp;
+                let mut dp = step.dp.clone();
                 if consistent && !consistency::feasible(&first.structure, trial.pi.as_slice()) {
-                    mu *= 10.0;
-                    continue;
+                    match step.projected(&first.structure, &at.pi) {
+                        Some(pi) if consistency::feasible(&first.structure, pi.as_slice()) => {
+                            dp = &pi - &at.pi;
+                            trial.pi = pi;
+                        }
+                        _ => {
+                            mu *= 10.0;
+                            continue;
+                        }
+                    }
                 }
+                let ds = step.states_for(&dp);
                 for ((t, s), d) in trial.starts.iter_mut().zip(&at.starts).zip(&ds) {
-                    *t = s + d * scale;
+                    *t = s + d;
                 }
                 match sum_squares(regressor, logs, &segs, &trial)? {
                     Some(sum) if objective(sum, &trial.pi, sigma2) < f => {
