@@ -57,8 +57,21 @@ fn chain(n: usize, spatial: bool) -> String {
 /// `Robot::step_in` (no allocation in the loop), and the iterations per
 /// step and subdivided steps of the last rollout.
 fn time(robot: &Robot, z0: &RobotState, dt: f64, steps: usize, reps: usize) -> (f64, f64, usize) {
+    time_driven(robot, z0, dt, steps, reps, |_, _, _| {})
+}
+
+/// [`time`] with the inputs of step k set by `law(k, z_k, u)` inside the
+/// timed loop.
+fn time_driven(
+    robot: &Robot,
+    z0: &RobotState,
+    dt: f64,
+    steps: usize,
+    reps: usize,
+    mut law: impl FnMut(usize, &RobotState, &mut [f64]),
+) -> (f64, f64, usize) {
     let mut ws = robot.workspace();
-    let u = vec![0.0; robot.input_names().len()];
+    let mut u = vec![0.0; robot.input_names().len()];
     let mut times = Vec::new();
     let (mut iterations, mut subdivided) = (0, 0);
     for _ in 0..reps {
@@ -66,7 +79,8 @@ fn time(robot: &Robot, z0: &RobotState, dt: f64, steps: usize, reps: usize) -> (
         let mut p = robot.momentum(&z).expect("momentum");
         (iterations, subdivided) = (0, 0);
         let t = Instant::now();
-        for _ in 0..steps {
+        for k in 0..steps {
+            law(k, &z, &mut u);
             let r = robot
                 .step_in(&mut z, &mut p, &u, dt, &mut ws)
                 .expect("step");
@@ -169,7 +183,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("|---|---|---|---|---|---|---|");
     let (mut fit, mut fit_peer) = (Vec::new(), Vec::new());
     for (k, (name, n, ns, it, sub)) in rows.iter().enumerate() {
-        let mj = peer.get(&(name.clone(), *n)).copied();
+        let key = if name == PANDA_PD { "Panda" } else { name };
+        let mj = peer.get(&(key.to_string(), *n)).copied();
         let (mj_s, ratio) = match mj {
             Some(mj) => (format!("{mj:.0}"), format!("{:.2}", ns / mj)),
             None => ("n/a".into(), "n/a".into()),
@@ -198,6 +213,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/robots");
     derivatives(dir, dt)
 }
+
+/// The row of the Panda driven by a PD law (MuJoCo's Euler step costs the
+/// same in any state without contacts, so its Panda row is the peer).
+const PANDA_PD: &str = "Panda, every joint PD-tracking q₀ + 0.3 sin(πt) rad";
 
 /// One round of our rollouts: (name, N, ns/step, iterations/step,
 /// subdivided steps) of the chains and the robots, from the states of
@@ -243,6 +262,24 @@ fn own_rollouts(
         let z0 = RobotState::new(q.unwrap_or_else(|| vec![0.0; n]), vec![0.0; n]);
         let (ns, it, sub) = time(&robot, &z0, dt, steps, 7);
         rows.push((name.into(), n, ns, it, sub));
+        if name == "Panda" {
+            // every joint driven by a PD law tracking q0 + 0.3 sin(πt) rad,
+            // gains of a 10 rad/s critically damped loop on the diagonal of
+            // M(q0) (no gravity compensation)
+            let joints = robot.joint_names().to_vec();
+            let names: Vec<&str> = joints.iter().map(String::as_str).collect();
+            let m = robot.mass_matrix(&z0.q)?;
+            let driven = robot.with_actuated(&names)?;
+            let q0 = z0.q.clone();
+            let (ns, it, sub) = time_driven(&driven, &z0, dt, steps, 7, |k, z, u| {
+                let offset = 0.3 * (std::f64::consts::PI * k as f64 * dt).sin();
+                for i in 0..u.len() {
+                    let mii = m[i * n + i];
+                    u[i] = -100.0 * mii * (z.q[i] - q0[i] - offset) - 20.0 * mii * z.v[i];
+                }
+            });
+            rows.push((PANDA_PD.into(), n, ns, it, sub));
+        }
     }
     Ok(rows)
 }
