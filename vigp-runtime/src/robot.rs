@@ -466,7 +466,9 @@ impl Robot {
     }
 
     /// One step of `dt` from `z` with inputs `u` (one per actuated joint,
-    /// held over the step), with the engine's report.
+    /// held over the step), with the engine's report. Allocates its
+    /// workspace, the momentum and the new state on every call, and starts
+    /// the iteration from v; a simulation loop uses [`Robot::step_in`].
     pub fn step(
         &self,
         z: &RobotState,
