@@ -1,10 +1,16 @@
 //! The linear-time tree engine (`vigp::Robot`) on planar and spatial chains
-//! of N = 2 … 32 rods and on URDF robots (Panda, UR5 from
-//! tests/fixtures/robots): median time per step of a 2 ms rollout,
-//! iterations per step, subdivided steps, and the fitted slope of
-//! log(time) against log(N) from N = 8 on. Then one step against one step
-//! with its exact A and B (`Robot::step_derivatives`) on the robots of
-//! tests/fixtures/robots and on chains, timed side by side.
+//! of N = 2 … 32 rods and on URDF robots (Panda, UR5, Solo-12 from
+//! tests/fixtures/robots): time per step of a 2 ms rollout by
+//! `Robot::step_in` (the allocation-free loop), iterations per step,
+//! subdivided steps, and the fitted slope of log(time) against log(N) from
+//! N = 8 on, beside MuJoCo's Euler step on the same URDF files and states
+//! (`python3 scripts/robots_bench.py --rollouts`, `mujoco.rollout`, a C
+//! loop), run by this example after its own rollouts. Both sides run
+//! twice, alternately, and each number is the fastest of the 14 runs (7
+//! per round): on a shared machine the fastest run is the least disturbed
+//! by other processes. Then one step
+//! against one step with its exact A and B (`Robot::step_derivatives`) on
+//! the robots of tests/fixtures/robots and on chains, timed side by side.
 //!
 //! ```text
 //! cargo run --release --example robots [-- --steps 2000]
@@ -47,24 +53,92 @@ fn chain(n: usize, spatial: bool) -> String {
     s + "</robot>"
 }
 
-/// Median ns per step over `reps` rollouts of `steps` steps, and the
-/// rollout's report of the last one.
+/// The fastest ns per step of `reps` rollouts of `steps` unforced steps by
+/// `Robot::step_in` (no allocation in the loop), and the iterations per
+/// step and subdivided steps of the last rollout.
 fn time(robot: &Robot, z0: &RobotState, dt: f64, steps: usize, reps: usize) -> (f64, f64, usize) {
+    time_driven(robot, z0, dt, steps, reps, |_, _, _| {})
+}
+
+/// [`time`] with the inputs of step k set by `law(k, z_k, u)` inside the
+/// timed loop.
+fn time_driven(
+    robot: &Robot,
+    z0: &RobotState,
+    dt: f64,
+    steps: usize,
+    reps: usize,
+    mut law: impl FnMut(usize, &RobotState, &mut [f64]),
+) -> (f64, f64, usize) {
+    let mut ws = robot.workspace();
+    let mut u = vec![0.0; robot.input_names().len()];
     let mut times = Vec::new();
-    let mut last = None;
+    let (mut iterations, mut subdivided) = (0, 0);
     for _ in 0..reps {
+        let mut z = z0.clone();
+        let mut p = robot.momentum(&z).expect("momentum");
+        (iterations, subdivided) = (0, 0);
         let t = Instant::now();
-        let run = robot.rollout(z0, dt, steps).expect("rollout");
+        for k in 0..steps {
+            law(k, &z, &mut u);
+            let r = robot
+                .step_in(&mut z, &mut p, &u, dt, &mut ws)
+                .expect("step");
+            iterations += r.iterations;
+            subdivided += usize::from(r.depth > 0);
+        }
         times.push(t.elapsed().as_secs_f64() * 1e9 / steps as f64);
-        last = Some(run.report);
+        std::hint::black_box(&z);
     }
-    times.sort_by(f64::total_cmp);
-    let r = last.unwrap();
     (
-        times[times.len() / 2],
-        r.iterations as f64 / r.steps as f64,
-        r.subdivided,
+        times.iter().copied().fold(f64::INFINITY, f64::min),
+        iterations as f64 / steps as f64,
+        subdivided,
     )
+}
+
+/// MuJoCo's ns per step from `python3 scripts/robots_bench.py --rollouts`
+/// (empty, with the reason printed, when Python or MuJoCo is missing).
+fn mujoco_rollouts() -> std::collections::HashMap<(String, usize), f64> {
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/../scripts/robots_bench.py");
+    let mut out = std::collections::HashMap::new();
+    match std::process::Command::new("python3")
+        .arg(script)
+        .arg("--rollouts")
+        .output()
+    {
+        Ok(o) if o.status.success() => {
+            let text = String::from_utf8_lossy(&o.stdout);
+            if let Some(first) = text.lines().next() {
+                println!("peer: {first} (`python3 scripts/robots_bench.py --rollouts`)");
+            }
+            for line in text.lines() {
+                let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+                // | name | N | ns |
+                if let [_, name, n, ns, _] = cells[..]
+                    && let (Ok(n), Ok(ns)) = (n.parse(), ns.parse())
+                {
+                    out.insert((name.to_string(), n), ns);
+                }
+            }
+        }
+        Ok(o) => println!(
+            "peer: scripts/robots_bench.py failed: {}",
+            String::from_utf8_lossy(&o.stderr)
+                .lines()
+                .last()
+                .unwrap_or("")
+        ),
+        Err(e) => println!("peer: python3 not run: {e}"),
+    }
+    out
+}
+
+/// The load average of the machine (Linux), for the tables' headers.
+fn load() -> String {
+    std::fs::read_to_string("/proc/loadavg")
+        .map(|s| s.split_whitespace().take(3).collect::<Vec<_>>().join(" "))
+        .unwrap_or_else(|_| "unknown".into())
 }
 
 /// Least-squares slope of log y against log x.
@@ -87,49 +161,127 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .transpose()?
         .unwrap_or(2000);
     let dt = 0.002;
-    println!("tree engine, dt = 2 ms, {steps}-step rollouts, median of 5");
-    println!("| mechanism | N | ns/step | iterations/step | subdivided steps |");
-    println!("|---|---|---|---|---|");
+    println!("load average at the start: {}", load());
+    // two rounds of ours, then MuJoCo's; the fastest run of each side
+    let mut rows = own_rollouts(steps, dt)?;
+    let mut peer = mujoco_rollouts();
+    for (r, r2) in rows.iter_mut().zip(own_rollouts(steps, dt)?) {
+        r.2 = r.2.min(r2.2);
+    }
+    for (k, ns) in mujoco_rollouts() {
+        let e = peer.entry(k).or_insert(ns);
+        *e = e.min(ns);
+    }
+    println!("load average after both: {}", load());
+    println!(
+        "tree engine (`Robot::step_in`), dt = 2 ms, {steps}-step rollouts, the fastest of 2 × 7; \
+         MuJoCo's Euler step (`mujoco.rollout`, 2000 steps, the fastest of 2 × 7), measured alternately"
+    );
+    println!(
+        "| mechanism | N | ns/step | iterations/step | subdivided steps | MuJoCo ns/step | ratio |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    let (mut fit, mut fit_peer) = (Vec::new(), Vec::new());
+    for (k, (name, n, ns, it, sub)) in rows.iter().enumerate() {
+        let key = if name == PANDA_PD { "Panda" } else { name };
+        let mj = peer.get(&(key.to_string(), *n)).copied();
+        let (mj_s, ratio) = match mj {
+            Some(mj) => (format!("{mj:.0}"), format!("{:.2}", ns / mj)),
+            None => ("n/a".into(), "n/a".into()),
+        };
+        println!("| {name} | {n} | {ns:.0} | {it:.2} | {sub} | {mj_s} | {ratio} |");
+        if name.contains("chain") && *n >= 8 {
+            fit.push((*n as f64, *ns));
+            if let Some(mj) = mj {
+                fit_peer.push((*n as f64, mj));
+            }
+        }
+        // the fitted slopes after each family of chains
+        if name.contains("chain") && rows.get(k + 1).is_none_or(|next| &next.0 != name) {
+            let peer_slope = if fit_peer.len() == fit.len() {
+                format!("{:.2}", slope(&fit_peer))
+            } else {
+                "n/a".into()
+            };
+            println!(
+                "| fitted slope of log time vs log N, N = 8…32 | | {:.2} | | | {peer_slope} | |",
+                slope(&fit)
+            );
+            (fit, fit_peer) = (Vec::new(), Vec::new());
+        }
+    }
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/robots");
+    derivatives(dir, dt)
+}
+
+/// The row of the Panda driven by a PD law (MuJoCo's Euler step costs the
+/// same in any state without contacts, so its Panda row is the peer).
+const PANDA_PD: &str = "Panda, every joint PD-tracking q₀ + 0.3 sin(πt) rad";
+
+/// One round of our rollouts: (name, N, ns/step, iterations/step,
+/// subdivided steps) of the chains and the robots, from the states of
+/// scripts/robots_bench.py (v = 0, no input).
+#[allow(clippy::type_complexity)]
+fn own_rollouts(
+    steps: usize,
+    dt: f64,
+) -> Result<Vec<(String, usize, f64, f64, usize)>, Box<dyn std::error::Error>> {
+    let mut rows = Vec::new();
     for spatial in [false, true] {
-        let mut fit = Vec::new();
         for n in [2, 4, 8, 12, 16, 24, 32] {
             let robot = Robot::from_urdf_str(&chain(n, spatial))?;
             let mut q = vec![0.0; n];
             q[0] = 1.0;
             q[1] = -0.5;
             let z0 = RobotState::new(q, vec![0.0; n]);
-            let (ns, it, sub) = time(&robot, &z0, dt, steps, 5);
+            let (ns, it, sub) = time(&robot, &z0, dt, steps, 7);
             let name = if spatial {
                 "spatial chain (z/y)"
             } else {
                 "planar chain"
             };
-            println!("| {name} | {n} | {ns:.0} | {it:.2} | {sub} |");
-            if n >= 8 {
-                fit.push((n as f64, ns));
-            }
+            rows.push((name.into(), n, ns, it, sub));
         }
-        println!(
-            "| fitted slope of log time vs log N, N = 8…32 | | {:.2} | | |",
-            slope(&fit)
-        );
     }
     let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/robots");
     for (name, file, q) in [
         (
             "Panda",
             "panda.urdf",
-            vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8],
+            Some(vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8]),
         ),
-        ("UR5", "ur5.urdf", vec![0.3, -1.2, 1.0, -0.5, 0.8, 0.2]),
+        (
+            "UR5",
+            "ur5.urdf",
+            Some(vec![0.3, -1.2, 1.0, -0.5, 0.8, 0.2]),
+        ),
+        ("Solo-12 (fixed base)", "solo12.urdf", None),
     ] {
         let robot = Robot::from_urdf(format!("{dir}/{file}"))?;
         let n = robot.dof();
-        let z0 = RobotState::new(q, vec![0.3; n]);
-        let (ns, it, sub) = time(&robot, &z0, dt, steps, 5);
-        println!("| {name} | {n} | {ns:.0} | {it:.2} | {sub} |");
+        let z0 = RobotState::new(q.unwrap_or_else(|| vec![0.0; n]), vec![0.0; n]);
+        let (ns, it, sub) = time(&robot, &z0, dt, steps, 7);
+        rows.push((name.into(), n, ns, it, sub));
+        if name == "Panda" {
+            // every joint driven by a PD law tracking q0 + 0.3 sin(πt) rad,
+            // gains of a 10 rad/s critically damped loop on the diagonal of
+            // M(q0) (no gravity compensation)
+            let joints = robot.joint_names().to_vec();
+            let names: Vec<&str> = joints.iter().map(String::as_str).collect();
+            let m = robot.mass_matrix(&z0.q)?;
+            let driven = robot.with_actuated(&names)?;
+            let q0 = z0.q.clone();
+            let (ns, it, sub) = time_driven(&driven, &z0, dt, steps, 7, |k, z, u| {
+                let offset = 0.3 * (std::f64::consts::PI * k as f64 * dt).sin();
+                for i in 0..u.len() {
+                    let mii = m[i * n + i];
+                    u[i] = -100.0 * mii * (z.q[i] - q0[i] - offset) - 20.0 * mii * z.v[i];
+                }
+            });
+            rows.push((PANDA_PD.into(), n, ns, it, sub));
+        }
     }
-    derivatives(dir, dt)
+    Ok(rows)
 }
 
 /// Median ns of `f` over `reps` calls, after one warm-up call.

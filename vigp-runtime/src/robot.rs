@@ -245,11 +245,18 @@ impl RolloutReport {
 }
 
 /// The kept scratch of a robot's steps ([`Robot::step_in`]): one
-/// [`BodyScratch`] per body and the generalized forces.
+/// [`BodyScratch`] per body, the generalized forces, and the last step's
+/// velocities (the start of the next step's iteration).
 #[derive(Clone, Debug)]
 pub struct RobotWorkspace {
     bodies: Vec<BodyScratch>,
     tau: Vec<f64>,
+    /// The state (q, v) the last step produced (2N; empty: none).
+    last: Vec<f64>,
+    /// The velocity that step started from.
+    v_prev: Vec<f64>,
+    /// The extrapolation 2v_k − v_{k−1}.
+    guess: Vec<f64>,
 }
 
 /// A robot: a tree of rigid bodies in minimal coordinates with its joint
@@ -402,9 +409,13 @@ impl Robot {
 
     /// A workspace for [`Robot::step_in`].
     pub fn workspace(&self) -> RobotWorkspace {
+        let n = self.dof();
         RobotWorkspace {
-            bodies: vec![BodyScratch::default(); self.dof()],
-            tau: vec![0.0; self.dof()],
+            bodies: vec![BodyScratch::default(); n],
+            tau: vec![0.0; n],
+            last: Vec::with_capacity(2 * n),
+            v_prev: vec![0.0; n],
+            guess: vec![0.0; n],
         }
     }
 
@@ -455,23 +466,35 @@ impl Robot {
     }
 
     /// One step of `dt` from `z` with inputs `u` (one per actuated joint,
-    /// held over the step), with the engine's report.
+    /// held over the step), with the engine's report. Allocates its
+    /// workspace, the momentum and the new state on every call, and starts
+    /// the iteration from v; a simulation loop uses [`Robot::step_in`].
     pub fn step(
         &self,
         z: &RobotState,
         u: &[f64],
         dt: f64,
     ) -> Result<(RobotState, EngineReport), RobotError> {
+        self.check_state(z)?;
         let mut ws = self.workspace();
         let mut z1 = z.clone();
-        let mut p = self.momentum(z)?;
-        let r = self.step_in(&mut z1, &mut p, u, dt, &mut ws)?;
+        let mut p = vec![0.0; self.dof()];
+        self.engine
+            .momentum_of(&z.q, &z.v, &mut p, &mut ws.bodies)
+            .map_err(|e| self.engine_error(e))?;
+        let r = self.step_guessed(&mut z1, &mut p, u, dt, None, &mut ws)?;
         Ok((z1, r))
     }
 
     /// One step in place: `z` and its momentum `p` (from
-    /// [`Robot::momentum`] or the previous step) advance by `dt`. No
-    /// allocation.
+    /// [`Robot::momentum`] or the previous step) advance by `dt`. The fast
+    /// path of a simulation loop: no allocation (after the first call with
+    /// a workspace from [`Robot::workspace`]), and when `z` is the state
+    /// the workspace's previous step produced, the iteration starts from
+    /// the extrapolation 2v_k − v_{k−1} (as [`Robot::rollout_with`]), so a
+    /// loop of `step_in` is that rollout, bit for bit. The converged step
+    /// equals [`Robot::step`]'s (which starts from v_k) to the solver's
+    /// tolerance.
     pub fn step_in(
         &self,
         z: &mut RobotState,
@@ -480,7 +503,28 @@ impl Robot {
         dt: f64,
         ws: &mut RobotWorkspace,
     ) -> Result<EngineReport, RobotError> {
-        self.step_guessed(z, p, u, dt, None, ws)
+        self.check_state(z)?;
+        let n = self.dof();
+        if ws.tau.len() != n || ws.bodies.len() < n || ws.v_prev.len() != n || ws.guess.len() != n {
+            *ws = self.workspace();
+        }
+        let continues =
+            ws.last.len() == 2 * n && ws.last[..n] == z.q[..] && ws.last[n..] == z.v[..];
+        if continues {
+            for ((g, &v), &w) in ws.guess.iter_mut().zip(&z.v).zip(&ws.v_prev) {
+                *g = 2.0 * v - w;
+            }
+        }
+        ws.v_prev.copy_from_slice(&z.v);
+        let guess = std::mem::take(&mut ws.guess);
+        let r = self.step_guessed(z, p, u, dt, continues.then_some(&guess[..]), ws);
+        ws.guess = guess;
+        ws.last.clear();
+        if r.is_ok() {
+            ws.last.extend_from_slice(&z.q);
+            ws.last.extend_from_slice(&z.v);
+        }
+        r
     }
 
     fn step_guessed(

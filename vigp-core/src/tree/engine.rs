@@ -8,8 +8,8 @@
 
 use super::model::{InvalidTree, JointKind, Tree, validate};
 use super::spatial::{
-    IDENTITY, Inertia6, M3, M6, V3, V6, add, axis_angle, congruence, cross, cross_force,
-    cross_motion, dot6, lift3, lift33, mul_mm, mul_mv, mul6, scale, zero,
+    Inertia6, M3, M6, V3, V6, add, axis_angle, congruence, cross, cross_force, cross_motion, dot6,
+    lift3, lift33, mul_mm, mul_mv, mul6, scale, zero,
 };
 use crate::Real;
 
@@ -17,8 +17,11 @@ use crate::Real;
 /// configuration being evaluated, its articulated-body factors, twists,
 /// momenta and the per-coordinate numbers of the solve. A step needs
 /// `tree.len()` of them (`core::mem::size_of::<BodyScratch>()` bytes each,
-/// about 0.9 KB); they are overwritten by every call, so one slice serves
-/// any number of steps and trees.
+/// about 1 KB); they are overwritten by every call, so one slice serves
+/// any number of steps and trees. A step leaves the poses at the state it
+/// committed; the next step of the same tree from exactly that state (bit
+/// for bit: q, v and p) reuses them for its starting energy instead of
+/// recomputing them (every other call clears that mark).
 ///
 /// The kinematic and momentum fields are of the scalar `R`: `f64` for the
 /// step, a jet ([`crate::Jet1`]) for [`Engine::terms`] with exact
@@ -61,21 +64,44 @@ pub struct BodyScratch<R = f64> {
     fprev: f64,
     dvs: [f64; ANDERSON],
     dfs: [f64; ANDERSON],
+    /// In the first body: the [`Engine`]'s fingerprint when the workspace
+    /// holds the poses of that tree at the state its last step committed
+    /// (0 otherwise): the next step from that state reuses them.
+    tag: u64,
 }
 
 /// Memory of the Anderson acceleration of the quasi-Newton iteration.
 const ANDERSON: usize = 3;
 
+/// The Anderson mixing of one iteration: `None`, the plain quasi-Newton
+/// step v ← v + f; `Some((m, γ))`, the Anderson-accelerated update (type
+/// II, memory [`ANDERSON`]) of the fixed-point map G(v) = v + (M + hD)⁻¹r(v):
+/// with ΔV, ΔF the last m differences of iterates and of steps
+/// f = G(v) − v, γ = argmin ‖f − ΔFγ‖₂ (normal equations, at most 3×3) and
+/// v ← v + f − (ΔV + ΔF)γ. On the nearly linear DEL residual near its root
+/// this is GMRES in disguise; a singular Gram matrix falls back to the
+/// plain step.
+type Mixing = Option<(usize, [f64; ANDERSON])>;
+
 /// Solves the m×m system g[..m][..m]·γ = g[..m][ANDERSON] by Gaussian
 /// elimination with partial pivoting; `None` when a pivot is below 1e-12 of
 /// the largest diagonal entry (differences that are linearly dependent).
 fn solve_small(g: &mut [[f64; ANDERSON + 1]; ANDERSON], m: usize) -> Option<[f64; ANDERSON]> {
-    let big = (0..m).map(|i| g[i][i]).fold(0.0f64, f64::max);
+    let mut big = 0.0f64;
+    for i in 0..m {
+        big = big.max(g[i][i]);
+    }
     if !(big > 0.0 && big.is_finite()) {
         return None;
     }
     for c in 0..m {
-        let p = (c..m).max_by(|&a, &b| g[a][c].abs().total_cmp(&g[b][c].abs()))?;
+        // the largest |pivot| (NaN counts as largest; the last of equals)
+        let mut p = c;
+        for r in c + 1..m {
+            if g[r][c].abs().total_cmp(&g[p][c].abs()) != core::cmp::Ordering::Less {
+                p = r;
+            }
+        }
         if g[p][c].abs() <= 1e-12 * big {
             return None;
         }
@@ -132,6 +158,7 @@ impl<R: Real> BodyScratch<R> {
             fprev: 0.0,
             dvs: [0.0; ANDERSON],
             dfs: [0.0; ANDERSON],
+            tag: 0,
         }
     }
 
@@ -367,6 +394,41 @@ enum SubFail {
 pub struct Engine<T: Tree> {
     tree: T,
     options: EngineOptions,
+    /// A hash of what the poses depend on (never 0).
+    fingerprint: u64,
+}
+
+/// FNV-1a over 64-bit words: the fingerprint of a tree's geometry and
+/// masses (what the poses and first moments depend on), so that a
+/// workspace stepped by one engine is not mistaken for another's.
+fn fingerprint<T: Tree>(tree: &T) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |x: u64| {
+        for byte in x.to_le_bytes() {
+            h ^= u64::from(byte);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    eat(tree.len() as u64);
+    for i in 0..tree.len() {
+        let b = tree.body(i);
+        eat(b.parent.map_or(0, |p| p as u64 + 1));
+        eat(match b.joint {
+            JointKind::Revolute => 1,
+            JointKind::Prismatic => 2,
+        });
+        let words = b
+            .axis
+            .iter()
+            .chain(b.rotation.iter().flatten())
+            .chain(&b.translation)
+            .chain(&b.com)
+            .chain(core::iter::once(&b.mass));
+        for x in words {
+            eat(x.to_bits());
+        }
+    }
+    h | 1
 }
 
 fn check_len(what: &'static str, got: usize, expected: usize) -> Result<(), EngineError> {
@@ -443,7 +505,12 @@ impl<T: Tree> Engine<T> {
         if options.max_depth > 30 {
             return Err(EngineError::InvalidOptions("max_depth must be <= 30"));
         }
-        Ok(Self { tree, options })
+        let fingerprint = fingerprint(&tree);
+        Ok(Self {
+            tree,
+            options,
+            fingerprint,
+        })
     }
 
     /// The tree.
@@ -476,6 +543,41 @@ impl<T: Tree> Engine<T> {
         Ok(&mut ws[..n])
     }
 
+    /// Pose, world axis and centre of mass of body `i` at the configuration
+    /// `ws[i].at` (its parent's pose already placed): writes `rot`, `pos`
+    /// and `s`, returns the centre of mass in world coordinates.
+    #[inline(always)]
+    fn place<R: Real>(&self, i: usize, ws: &mut [BodyScratch<R>]) -> V3<R> {
+        let b = self.tree.body(i);
+        // the joint frame (the root's parent is the world: no product)
+        let (rj, pj) = match b.parent {
+            Some(p) => {
+                let (rp, pp) = (ws[p].rot, ws[p].pos);
+                (
+                    mul_mm(&rp, &lift33(&b.rotation)),
+                    add(pp, mul_mv(&rp, lift3(b.translation))),
+                )
+            }
+            None => (lift33(&b.rotation), lift3(b.translation)),
+        };
+        let w = &mut ws[i];
+        let axis = mul_mv(&rj, lift3(b.axis));
+        match b.joint {
+            JointKind::Revolute => {
+                w.rot = mul_mm(&rj, &axis_angle(b.axis, w.at));
+                w.pos = pj;
+                let m = cross(pj, axis);
+                w.s = [axis[0], axis[1], axis[2], m[0], m[1], m[2]];
+            }
+            JointKind::Prismatic => {
+                w.rot = rj;
+                w.pos = add(pj, scale(axis, w.at));
+                w.s = [zero(), zero(), zero(), axis[0], axis[1], axis[2]];
+            }
+        }
+        add(w.pos, mul_mv(&w.rot, lift3(b.com)))
+    }
+
     /// Poses, axes, inertias, composite inertias and ∇V at the
     /// configuration `ws[i].at`; also the articulated inertias' start
     /// values.
@@ -483,29 +585,9 @@ impl<T: Tree> Engine<T> {
         let t = &self.tree;
         let g = t.gravity();
         for i in 0..ws.len() {
+            let c = self.place(i, ws);
             let b = t.body(i);
-            let (rp, pp) = match b.parent {
-                Some(p) => (ws[p].rot, ws[p].pos),
-                None => (lift33(&IDENTITY), [zero(); 3]),
-            };
             let w = &mut ws[i];
-            let rj = mul_mm(&rp, &lift33(&b.rotation));
-            let pj = add(pp, mul_mv(&rp, lift3(b.translation)));
-            let axis = mul_mv(&rj, lift3(b.axis));
-            match b.joint {
-                JointKind::Revolute => {
-                    w.rot = mul_mm(&rj, &axis_angle(b.axis, w.at));
-                    w.pos = pj;
-                    let m = cross(pj, axis);
-                    w.s = [axis[0], axis[1], axis[2], m[0], m[1], m[2]];
-                }
-                JointKind::Prismatic => {
-                    w.rot = rj;
-                    w.pos = add(pj, scale(axis, w.at));
-                    w.s = [zero(), zero(), zero(), axis[0], axis[1], axis[2]];
-                }
-            }
-            let c = add(w.pos, mul_mv(&w.rot, lift3(b.com)));
             let ic = congruence(&w.rot, &lift33(&b.inertia));
             w.inertia = Inertia6::from_com(R::from_f64(b.mass), c, &ic);
             w.composite = w.inertia;
@@ -518,6 +600,17 @@ impl<T: Tree> Engine<T> {
                 let c = ws[i].composite;
                 ws[p].composite = ws[p].composite.add(&c);
             }
+        }
+    }
+
+    /// The part of [`Engine::kinematics`] the energy reads: poses and the
+    /// first moments m·c (`inertia.first`, as [`Inertia6::from_com`] forms
+    /// them) at `ws[i].at`; the rotational inertias, composites and ∇V are
+    /// left stale.
+    fn poses(&self, ws: &mut [BodyScratch]) {
+        for i in 0..ws.len() {
+            let c = self.place(i, ws);
+            ws[i].inertia.first = scale(c, self.tree.body(i).mass);
         }
     }
 
@@ -544,53 +637,24 @@ impl<T: Tree> Engine<T> {
                 return Err(i);
             }
             if let Some(p) = b.parent {
-                let (u, d) = (w.u6, w.d);
-                let mut ia = w.ia;
-                for (r, row) in ia.iter_mut().enumerate() {
-                    for (c, x) in row.iter_mut().enumerate() {
-                        *x -= u[r] * u[c] / d;
-                    }
-                }
+                // the parent gains IA − u·uᵀ/d, symmetric: the upper
+                // triangle, mirrored
+                let (u, dinv) = (w.u6, 1.0 / w.d);
+                let ia = w.ia;
                 let pa = &mut ws[p].ia;
-                for (prow, row) in pa.iter_mut().zip(&ia) {
-                    for (x, y) in prow.iter_mut().zip(row) {
-                        *x += y;
+                for r in 0..6 {
+                    let ur = u[r] * dinv;
+                    for c in r..6 {
+                        let x = ia[r][c] - ur * u[c];
+                        pa[r][c] += x;
+                        if c != r {
+                            pa[c][r] += x;
+                        }
                     }
                 }
             }
         }
         Ok(())
-    }
-
-    /// x = (M + h·D)⁻¹ r with the factors (`ws[i].r` in, `ws[i].x` out).
-    fn solve(&self, ws: &mut [BodyScratch]) {
-        let t = &self.tree;
-        for w in ws.iter_mut() {
-            w.pa = [0.0; 6];
-        }
-        for i in (0..ws.len()).rev() {
-            let w = &mut ws[i];
-            let u = w.r - dot6(&w.s, &w.pa);
-            w.x = u;
-            if let Some(p) = t.body(i).parent {
-                let (pa, u6, k) = (w.pa, w.u6, u / w.d);
-                let pp = &mut ws[p].pa;
-                for c in 0..6 {
-                    pp[c] += pa[c] + u6[c] * k;
-                }
-            }
-        }
-        for i in 0..ws.len() {
-            let ap = match t.body(i).parent {
-                Some(p) => ws[p].acc,
-                None => [0.0; 6],
-            };
-            let w = &mut ws[i];
-            w.x = (w.x - dot6(&w.u6, &ap)) / w.d;
-            for c in 0..6 {
-                w.acc[c] = ap[c] + w.s[c] * w.x;
-            }
-        }
     }
 
     /// Twists, composite momenta, p = M v and ∂T/∂q for v = `ws[i].vn`
@@ -622,6 +686,112 @@ impl<T: Tree> Engine<T> {
         }
     }
 
+    /// The forward pass of an iteration: moves the iterate by the last
+    /// solve's step `x` (`update`: `None` leaves it, `Some(None)` the plain
+    /// step, `Some(Some((m, γ)))` the Anderson-mixed step of
+    /// [`Engine::solve_forward`]), then twists and body momenta at it, and
+    /// clears the solve's articulated forces.
+    #[inline(always)]
+    fn iterate_forward(&self, update: Option<Mixing>, ws: &mut [BodyScratch]) {
+        let t = &self.tree;
+        for i in 0..ws.len() {
+            let vp = match t.body(i).parent {
+                Some(p) => ws[p].vel,
+                None => [0.0; 6],
+            };
+            let w = &mut ws[i];
+            if let Some(mix) = update {
+                let mut step = w.x;
+                if let Some((m, gm)) = mix {
+                    for a in 0..m {
+                        step -= (w.dvs[a] + w.dfs[a]) * gm[a];
+                    }
+                }
+                w.vn += step;
+            }
+            for c in 0..6 {
+                w.vel[c] = vp[c] + w.s[c] * w.vn;
+            }
+            w.hc = w.inertia.mul(&w.vel);
+            w.pa = [0.0; 6];
+        }
+    }
+
+    /// The backward pass of an iteration (after
+    /// [`Engine::iterate_forward`]): composite momenta, p = M v and ∂T/∂q,
+    /// the residual r (sub-step h) and the backward half of the
+    /// articulated-body solve of (M + hD)x = r; returns max|r| (NaN when
+    /// any is NaN or ±∞).
+    #[inline(always)]
+    fn iterate_backward(&self, h: f64, ws: &mut [BodyScratch]) -> f64 {
+        let t = &self.tree;
+        let (mut big, mut poison) = (0.0f64, 0.0f64);
+        for i in (0..ws.len()).rev() {
+            let b = t.body(i);
+            let w = &mut ws[i];
+            w.pn = dot6(&w.s, &w.hc);
+            w.dtq = dot6(&cross_motion(&w.vel, &w.s), &w.hc);
+            w.r = w.p - w.pn + h * (w.dtq - w.dv - b.damping * w.vn + w.tau);
+            big = big.max(w.r.abs());
+            poison += w.r * 0.0;
+            let u = w.r - dot6(&w.s, &w.pa);
+            w.x = u;
+            if let Some(p) = b.parent {
+                let (hc, pa, u6, k) = (w.hc, w.pa, w.u6, u / w.d);
+                let wp = &mut ws[p];
+                for c in 0..6 {
+                    wp.hc[c] += hc[c];
+                    wp.pa[c] += pa[c] + u6[c] * k;
+                }
+            }
+        }
+        big + poison
+    }
+
+    /// The forward half of the solve (x = (M + hD)⁻¹ r into `ws[i].x`, after
+    /// [`Engine::iterate_backward`]), with the bookkeeping of the Anderson
+    /// acceleration after the `k`-th iteration (k = 0, 1, …; module docs of
+    /// [`Mixing`]); returns the mixing of the next
+    /// [`Engine::iterate_forward`].
+    #[inline(always)]
+    fn solve_forward(&self, k: usize, ws: &mut [BodyScratch]) -> Mixing {
+        let t = &self.tree;
+        // iteration 0: the plain step; then the differences of iterates
+        // and steps and their normal equations
+        let (slot, m) = match k {
+            0 => (0, 0),
+            _ => ((k - 1) % ANDERSON, k.min(ANDERSON)),
+        };
+        let mut g = [[0.0f64; ANDERSON + 1]; ANDERSON];
+        for i in 0..ws.len() {
+            let ap = match t.body(i).parent {
+                Some(p) => ws[p].acc,
+                None => [0.0; 6],
+            };
+            let w = &mut ws[i];
+            w.x = (w.x - dot6(&w.u6, &ap)) / w.d;
+            for c in 0..6 {
+                w.acc[c] = ap[c] + w.s[c] * w.x;
+            }
+            if k > 0 {
+                w.dvs[slot] = w.vn - w.vprev;
+                w.dfs[slot] = w.x - w.fprev;
+                for a in 0..m {
+                    for b in 0..m {
+                        g[a][b] += w.dfs[a] * w.dfs[b];
+                    }
+                    g[a][ANDERSON] += w.dfs[a] * w.x;
+                }
+            }
+            w.vprev = w.vn;
+            w.fprev = w.x;
+        }
+        if k == 0 {
+            return None;
+        }
+        solve_small(&mut g, m).map(|gm| (m, gm))
+    }
+
     /// The residual at the iterate `vn`, sub-step h; returns max|r|.
     fn residual_in(&self, h: f64, ws: &mut [BodyScratch]) -> f64 {
         self.momentum(ws);
@@ -631,43 +801,6 @@ impl<T: Tree> Engine<T> {
             w.r = w.p - w.pn + h * (w.dtq - w.dv - b.damping * w.vn + w.tau);
         }
         max_abs(ws, |w| w.r)
-    }
-
-    /// The Anderson-accelerated update (type II, memory [`ANDERSON`]) of the
-    /// fixed-point map G(v) = v + (M + hD)⁻¹r(v) after its `k`-th difference
-    /// (k = 0, 1, …): with ΔV, ΔF the last differences of iterates and of
-    /// steps f = G(v) − v, γ = argmin ‖f − ΔFγ‖₂ (normal equations, at
-    /// most 3×3) and v ← v + f − (ΔV + ΔF)γ. On the nearly linear DEL
-    /// residual near its root this is GMRES in disguise; a singular Gram
-    /// matrix falls back to the plain step.
-    fn anderson(&self, k: usize, ws: &mut [BodyScratch]) {
-        let slot = k % ANDERSON;
-        for w in ws.iter_mut() {
-            w.dvs[slot] = w.vn - w.vprev;
-            w.dfs[slot] = w.x - w.fprev;
-            w.vprev = w.vn;
-            w.fprev = w.x;
-        }
-        let m = (k + 1).min(ANDERSON);
-        let mut g = [[0.0f64; ANDERSON + 1]; ANDERSON];
-        for w in ws.iter() {
-            for a in 0..m {
-                for b in 0..m {
-                    g[a][b] += w.dfs[a] * w.dfs[b];
-                }
-                g[a][ANDERSON] += w.dfs[a] * w.x;
-            }
-        }
-        let gamma = solve_small(&mut g, m);
-        for w in ws.iter_mut() {
-            let mut step = w.x;
-            if let Some(gm) = gamma {
-                for a in 0..m {
-                    step -= (w.dvs[a] + w.dfs[a]) * gm[a];
-                }
-            }
-            w.vn += step;
-        }
     }
 
     /// One sub-step of h from the committed (q, v, p) in `ws`; commits on
@@ -691,8 +824,9 @@ impl<T: Tree> Engine<T> {
         let mut best = f64::INFINITY;
         let mut first = f64::NAN;
         let mut iterations = 0;
+        self.iterate_forward(None, ws);
         loop {
-            let res = self.residual_in(h, ws) / scale;
+            let res = self.iterate_backward(h, ws) / scale;
             if res.is_nan() {
                 return Err(SubFail::NotConverged {
                     iterations,
@@ -729,16 +863,8 @@ impl<T: Tree> Engine<T> {
                 });
             }
             best = best.min(res);
-            self.solve(ws);
-            if iterations == 0 {
-                for w in ws.iter_mut() {
-                    w.vprev = w.vn;
-                    w.fprev = w.x;
-                    w.vn += w.x;
-                }
-            } else {
-                self.anderson(iterations - 1, ws);
-            }
+            let mixing = self.solve_forward(iterations, ws);
+            self.iterate_forward(Some(mixing), ws);
             iterations += 1;
         }
     }
@@ -749,6 +875,9 @@ impl<T: Tree> Engine<T> {
         v: &[R],
         ws: &mut [BodyScratch<R>],
     ) -> Result<(), EngineError> {
+        if let Some(w) = ws.first_mut() {
+            w.tag = 0;
+        }
         let n = self.tree.len();
         check_len("q", q.len(), n)?;
         check_len("v", v.len(), n)?;
@@ -1053,6 +1182,16 @@ impl<T: Tree> Engine<T> {
         (self.energy_loaded(ws), t, work, grav)
     }
 
+    /// T = ½ Σ vn·pn of a workspace after momentum (as
+    /// [`Engine::energy_terms`] sums it).
+    fn kinetic(&self, ws: &[BodyScratch]) -> f64 {
+        let mut t = 0.0;
+        for w in ws {
+            t += 0.5 * w.vn * w.pn;
+        }
+        t
+    }
+
     /// T + V from a workspace after kinematics and momentum.
     fn energy_loaded(&self, ws: &[BodyScratch]) -> f64 {
         let g = self.tree.gravity();
@@ -1108,6 +1247,17 @@ impl<T: Tree> Engine<T> {
         let n = ws.len();
         check_len("p", p.len(), n)?;
         check_len("tau", tau.len(), n)?;
+        // the workspace already holds the poses at q when its last step
+        // (of this tree) committed exactly this state
+        let warm = ws.first().is_some_and(|w| w.tag == self.fingerprint)
+            && ws
+                .iter()
+                .zip(q.iter().zip(v.iter()).zip(p.iter()))
+                .all(|(w, ((a, b), c))| {
+                    w.q.to_bits() == a.to_bits()
+                        && w.v.to_bits() == b.to_bits()
+                        && w.p.to_bits() == c.to_bits()
+                });
         self.load(q, v, ws)?;
         if !p.iter().all(|x| x.is_finite()) {
             return Err(EngineError::NonFiniteState);
@@ -1135,8 +1285,10 @@ impl<T: Tree> Engine<T> {
                 w.vn = w.v;
                 w.pn = w.p;
             }
-            self.kinematics(ws);
-            let (e, t, _, _) = self.energy_terms(0.0, ws);
+            if !warm {
+                self.poses(ws);
+            }
+            let (e, t) = (self.energy_loaded(ws), self.kinetic(ws));
             e0 = (e, t);
         }
         let mut report = EngineReport::default();
@@ -1188,6 +1340,9 @@ impl<T: Tree> Engine<T> {
             q[i] = w.q;
             v[i] = w.v;
             p[i] = w.p;
+        }
+        if let Some(w) = ws.first_mut() {
+            w.tag = self.fingerprint;
         }
         Ok(report)
     }

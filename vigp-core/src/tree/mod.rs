@@ -13,7 +13,7 @@
 //!   solve and the self-subdividing step ([`engine`] has the equations).
 //!
 //! Nothing here allocates: the caller passes a slice of [`BodyScratch`],
-//! one per body (about 0.9 KB each).
+//! one per body (about 1 KB each).
 
 pub mod engine;
 pub mod model;
