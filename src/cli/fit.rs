@@ -105,44 +105,12 @@ where
         return Err(nominal_invalid(e));
     }
     maximal?;
-    let prior = match &a.prior {
-        PriorArg::Nominal => Prior::Nominal,
-        PriorArg::Constant => Prior::Constant,
-        PriorArg::Identified(path) => {
-            w(
-                out,
-                format_args!(
-                    "prior: the nominal step with the parameters identified in {}",
-                    path.display()
-                ),
-            )?;
-            Prior::Identified(read_identified(path, Mn::NAME)?)
-        }
-    };
+    let prior = resolve_prior(a, Mn::NAME, out)?;
     let opts = train_options(a)?;
     // before the training, which the write would otherwise waste
     check_out_dir(&a.out)?;
     let (data, dt) = read_log::<Mn, N, C>(&a.data, &a.read)?;
-    let short: Vec<&str> = data.short_runs().map(|r| r.name.as_str()).collect();
-    w(
-        out,
-        format_args!(
-            "data: {}: {} runs, {} samples, dt = {dt} s",
-            a.data.display(),
-            data.runs.len(),
-            data.samples()
-        ),
-    )?;
-    if !short.is_empty() {
-        w(
-            out,
-            format_args!(
-                "note: {} run(s) with fewer than 3 samples give no transitions: {}",
-                short.len(),
-                short.join(", ")
-            ),
-        )?;
-    }
+    report_data(&a.data, &data, dt, out)?;
     if U > 0 {
         input_shift_check::<Mn, N, C, U>(minimal, dt, &data, &a.data, out)?;
     }
@@ -204,6 +172,60 @@ pub(super) fn train_options(a: &FitArgs) -> Result<TrainOptions, CliError> {
         opts.bounds.noise_variance.0 = floor;
     }
     Ok(opts)
+}
+
+/// The prior of `--prior` for the mechanism (or robot) `name`: an
+/// identified one is read from its parameter file, and the report says so.
+pub(super) fn resolve_prior(
+    a: &FitArgs,
+    name: &str,
+    out: &mut dyn Write,
+) -> Result<Prior, CliError> {
+    Ok(match &a.prior {
+        PriorArg::Nominal => Prior::Nominal,
+        PriorArg::Constant => Prior::Constant,
+        PriorArg::Identified(path) => {
+            w(
+                out,
+                format_args!(
+                    "prior: the nominal step with the parameters identified in {}",
+                    path.display()
+                ),
+            )?;
+            Prior::Identified(read_identified(path, name)?)
+        }
+    })
+}
+
+/// The report's line on the training data, and a note naming the runs too
+/// short to give a transition.
+pub(super) fn report_data<P: crate::data::Positions>(
+    path: &std::path::Path,
+    data: &crate::data::DatasetOf<P>,
+    dt: f64,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    w(
+        out,
+        format_args!(
+            "data: {}: {} runs, {} samples, dt = {dt} s",
+            path.display(),
+            data.runs.len(),
+            data.samples()
+        ),
+    )?;
+    let short: Vec<&str> = data.short_runs().map(|r| r.name.as_str()).collect();
+    if !short.is_empty() {
+        w(
+            out,
+            format_args!(
+                "note: {} run(s) with fewer than 3 samples give no transitions: {}",
+                short.len(),
+                short.join(", ")
+            ),
+        )?;
+    }
+    Ok(())
 }
 
 /// The usage error of a nominal model whose parameters (with `--set`) no

@@ -11,16 +11,16 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::args::{Command, EncodingArg, FitArgs, PriorArg, ReadArgs, ScoreArgs, SimulateArgs};
-use super::fit::{choose, train_options};
-use super::identify::{identify_robot, read_identified};
+use super::args::{Command, EncodingArg, FitArgs, ReadArgs, ScoreArgs, SimulateArgs};
+use super::fit::{choose, report_data, resolve_prior, train_options};
+use super::identify::identify_robot;
 use super::simulate::check_start;
 use super::{
     CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read, spinner, w,
 };
 use crate::data::DynDataset;
+use crate::learned::Encoding;
 use crate::learned::robot::{LearnedRobot, RobotTransition, coordinate_kinds};
-use crate::learned::{Encoding, Prior};
 use crate::robot::{Robot, RobotState};
 use vigp_core::tree::EngineOptions;
 
@@ -217,31 +217,10 @@ fn fit(a: &FitArgs, robot: Robot, out: &mut dyn Write) -> Result<(), CliError> {
         }
     };
     let opts = train_options(a)?;
-    let prior = match &a.prior {
-        PriorArg::Nominal => Prior::Nominal,
-        PriorArg::Constant => Prior::Constant,
-        PriorArg::Identified(path) => {
-            w(
-                out,
-                format_args!(
-                    "prior: the robot's step with the parameters identified in {}",
-                    path.display()
-                ),
-            )?;
-            Prior::Identified(read_identified(path, robot.name())?)
-        }
-    };
+    let prior = resolve_prior(a, robot.name(), out)?;
     check_out_dir(&a.out)?;
     let (data, dt) = read_log(&robot, &a.data, &a.read)?;
-    w(
-        out,
-        format_args!(
-            "data: {}: {} runs, {} samples, dt = {dt} s",
-            a.data.display(),
-            data.runs.len(),
-            data.samples()
-        ),
-    )?;
+    report_data(&a.data, &data, dt, out)?;
     let all = RobotTransition::from_dataset(&data);
     let chosen = choose(a, &all)?;
     let inputs = robot.input_names().join(", ");
@@ -432,29 +411,5 @@ fn score(a: &ScoreArgs, out: &mut dyn Write) -> Result<(), CliError> {
         })
         .collect();
     pb.finish_and_clear();
-    let both: Vec<(f64, f64)> = results
-        .iter()
-        .filter_map(|(a, b)| Some(((*a)?, (*b)?)))
-        .collect();
-    w(
-        out,
-        format_args!(
-            "failed windows: nominal {}, learned {} (scored: {} windows where both succeed)",
-            results.iter().filter(|r| r.0.is_none()).count(),
-            results.iter().filter(|r| r.1.is_none()).count(),
-            both.len()
-        ),
-    )?;
-    if both.is_empty() {
-        return Err(CliError::Usage(
-            "every window failed for the nominal or the learned model".into(),
-        ));
-    }
-    let n = both.len() as f64;
-    let nominal_mse = both.iter().map(|p| p.0).sum::<f64>() / n;
-    let learned_mse = both.iter().map(|p| p.1).sum::<f64>() / n;
-    w(
-        out,
-        format_args!("nominal_mse={nominal_mse:e} learned_mse={learned_mse:e}"),
-    )
+    super::score::summary(results.into_iter(), k, out)
 }

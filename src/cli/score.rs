@@ -168,12 +168,6 @@ where
         })
         .collect();
     pb.finish_and_clear();
-    let nominal_failed = results.iter().filter(|r| r.0.is_err()).count();
-    let learned_failed = results.iter().filter(|r| r.1.is_err()).count();
-    let both: Vec<(f64, f64)> = results
-        .iter()
-        .filter_map(|(a, b, _)| Some(((*a).ok()?, (*b).ok()?)))
-        .collect();
     // the first failure of each model, with the run and the line its
     // window starts at
     for (what, pick) in [("nominal", 0usize), ("learned", 1usize)] {
@@ -215,10 +209,35 @@ where
             ),
         )?;
     }
+    summary(
+        results
+            .iter()
+            .map(|(a, b, _)| (a.as_ref().ok().copied(), b.as_ref().ok().copied())),
+        k,
+        out,
+    )
+}
+
+/// The report's end from each window's (nominal, learned) MSE (`None`:
+/// the model failed there): the failures, what is averaged, and the last
+/// line `nominal_mse=<x> learned_mse=<y>` over the windows where both
+/// succeed (an error when there is none).
+pub(super) fn summary(
+    results: impl Iterator<Item = (Option<f64>, Option<f64>)>,
+    k: usize,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    let results: Vec<_> = results.collect();
+    let both: Vec<(f64, f64)> = results
+        .iter()
+        .filter_map(|&(a, b)| Some((a?, b?)))
+        .collect();
     w(
         out,
         format_args!(
-            "failed windows: nominal {nominal_failed}, learned {learned_failed} (scored: {} windows where both succeed)",
+            "failed windows: nominal {}, learned {} (scored: {} windows where both succeed)",
+            results.iter().filter(|r| r.0.is_none()).count(),
+            results.iter().filter(|r| r.1.is_none()).count(),
             both.len()
         ),
     )?;

@@ -164,17 +164,55 @@ impl RobotState {
 }
 
 /// The Jacobians of the engine's terms at one (q, v).
-struct TermJacobians {
+pub(crate) struct TermJacobians {
     /// ∂(M v)/∂q.
-    p_q: DMatrix<f64>,
+    pub(crate) p_q: DMatrix<f64>,
     /// ∂(M v)/∂v = M.
-    p_v: DMatrix<f64>,
+    pub(crate) p_v: DMatrix<f64>,
     /// ∂(∂T/∂q)/∂q.
-    t_q: DMatrix<f64>,
+    pub(crate) t_q: DMatrix<f64>,
     /// ∂(∂T/∂q)/∂v.
-    t_v: DMatrix<f64>,
+    pub(crate) t_v: DMatrix<f64>,
     /// ∂(∇V)/∂q.
-    v_q: DMatrix<f64>,
+    pub(crate) v_q: DMatrix<f64>,
+}
+
+impl TermJacobians {
+    /// ∂/∂q and ∂/∂v of the momentum P = M(q)v, of ∂T/∂q and of ∇V at
+    /// (q, v) of `engine`'s tree: [`Engine::term_derivatives`], O(N²).
+    pub(crate) fn of<T: vigp_core::tree::Tree>(
+        engine: &Engine<T>,
+        q: &[f64],
+        v: &[f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<Self, EngineError> {
+        let n = engine.dof();
+        let mut buf = vec![0.0; 5 * n * n];
+        let (p_q, rest) = buf.split_at_mut(n * n);
+        let (p_v, rest) = rest.split_at_mut(n * n);
+        let (t_q, rest) = rest.split_at_mut(n * n);
+        let (t_v, v_q) = rest.split_at_mut(n * n);
+        engine.term_derivatives(
+            q,
+            v,
+            TermDerivatives {
+                p_q,
+                p_v,
+                t_q,
+                t_v,
+                v_q,
+            },
+            ws,
+        )?;
+        let m = |k: usize| DMatrix::from_row_slice(n, n, &buf[k * n * n..(k + 1) * n * n]);
+        Ok(TermJacobians {
+            p_q: m(0),
+            p_v: m(1),
+            t_q: m(2),
+            t_v: m(3),
+            v_q: m(4),
+        })
+    }
 }
 
 /// One step with its exact derivatives ([`Robot::step_derivatives`]).
@@ -754,42 +792,14 @@ impl Robot {
         Ok((a, b, end))
     }
 
-    /// ∂/∂q and ∂/∂v of the momentum P = M(q)v, of ∂T/∂q and of ∇V at
-    /// (q, v): [`Engine::term_derivatives`], O(N²).
+    /// [`TermJacobians::of`] the robot's engine, with its errors.
     fn term_jacobians(
         &self,
         q: &[f64],
         v: &[f64],
         ws: &mut [BodyScratch],
     ) -> Result<TermJacobians, RobotError> {
-        let n = self.dof();
-        let mut buf = vec![0.0; 5 * n * n];
-        let (p_q, rest) = buf.split_at_mut(n * n);
-        let (p_v, rest) = rest.split_at_mut(n * n);
-        let (t_q, rest) = rest.split_at_mut(n * n);
-        let (t_v, v_q) = rest.split_at_mut(n * n);
-        self.engine
-            .term_derivatives(
-                q,
-                v,
-                TermDerivatives {
-                    p_q,
-                    p_v,
-                    t_q,
-                    t_v,
-                    v_q,
-                },
-                ws,
-            )
-            .map_err(|e| self.engine_error(e))?;
-        let m = |k: usize| DMatrix::from_row_slice(n, n, &buf[k * n * n..(k + 1) * n * n]);
-        Ok(TermJacobians {
-            p_q: m(0),
-            p_v: m(1),
-            t_q: m(2),
-            t_v: m(3),
-            v_q: m(4),
-        })
+        TermJacobians::of(&self.engine, q, v, ws).map_err(|e| self.engine_error(e))
     }
 
     /// `steps` unforced steps of `dt` from `z0` (inputs zero).

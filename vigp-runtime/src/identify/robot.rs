@@ -32,9 +32,9 @@
 
 use super::IdentifyError;
 use super::regressor::{Regressor, Structure, Transition, position_differences};
-use crate::robot::{Robot, RobotTree};
+use crate::robot::{Robot, RobotTree, TermJacobians};
 use nalgebra::{DMatrix, DVector};
-use vigp_core::tree::{BodyScratch, Engine, TermDerivatives};
+use vigp_core::tree::{BodyScratch, Engine};
 
 /// Relative size, against the row's largest residual change, below which a
 /// column's change is rounding (about 10⁴ ε: the residual sums some tens
@@ -232,7 +232,23 @@ impl RobotRegressor {
 
     /// The raw residual of a transition with bodies `tree`.
     fn raw(&self, tree: RobotTree, t: &Transition<'_>) -> Result<Vec<f64>, IdentifyError> {
-        let n = tree.bodies.len();
+        self.raw_in(&Self::engine(tree)?, t)
+    }
+
+    /// The engine of bodies `tree`, or why it refuses them.
+    fn engine(tree: RobotTree) -> Result<Engine<RobotTree>, IdentifyError> {
+        Engine::new(tree).map_err(|e| IdentifyError::Layout {
+            message: format!("the robot with these parameters: {e}"),
+        })
+    }
+
+    /// The raw residual of a transition on `engine`.
+    fn raw_in(
+        &self,
+        engine: &Engine<RobotTree>,
+        t: &Transition<'_>,
+    ) -> Result<Vec<f64>, IdentifyError> {
+        let n = engine.dof();
         for x in t.positions {
             if x.len() != n {
                 return Err(IdentifyError::Dimension {
@@ -260,9 +276,6 @@ impl RobotRegressor {
                 what: "inputs".into(),
             });
         }
-        let engine = Engine::new(tree).map_err(|e| IdentifyError::Layout {
-            message: format!("the robot with these parameters: {e}"),
-        })?;
         let dt = self.dt;
         let [x0, x1, x2] = t.positions;
         let v0: Vec<f64> = (0..n).map(|i| (x1[i] - x0[i]) / dt).collect();
@@ -365,40 +378,28 @@ impl Regressor for RobotRegressor {
         pi: &[f64],
     ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError> {
         let tree = self.tree_with(pi)?;
-        let r = self.raw(tree.clone(), t)?;
         let damping: Vec<f64> = tree.bodies.iter().map(|b| b.damping).collect();
-        let engine = Engine::new(tree).map_err(|e| IdentifyError::Layout {
-            message: format!("the robot with these parameters: {e}"),
-        })?;
+        let engine = Self::engine(tree)?;
+        let r = self.raw_in(&engine, t)?;
         let (n, h) = (damping.len(), self.dt);
         let [x0, x1, x2] = t.positions;
         let v0: Vec<f64> = (0..n).map(|i| (x1[i] - x0[i]) / h).collect();
         let v1: Vec<f64> = (0..n).map(|i| (x2[i] - x1[i]) / h).collect();
         let mut ws = vec![BodyScratch::default(); n];
-        // p_q, p_v, t_q, t_v, v_q (row-major N × N) at one (q, v)
         let terms = |q: &[f64], v: &[f64], ws: &mut [BodyScratch]| {
-            let mut m: [Vec<f64>; 5] = core::array::from_fn(|_| vec![0.0; n * n]);
-            let [p_q, p_v, t_q, t_v, v_q] = &mut m;
-            engine
-                .term_derivatives(
-                    q,
-                    v,
-                    TermDerivatives {
-                        p_q,
-                        p_v,
-                        t_q,
-                        t_v,
-                        v_q,
-                    },
-                    ws,
-                )
-                .map_err(|e| IdentifyError::Simulation {
-                    message: format!("tree engine: {e}"),
-                })
-                .map(|()| m.map(|a| DMatrix::from_row_slice(n, n, &a)))
+            TermJacobians::of(&engine, q, v, ws).map_err(|e| IdentifyError::Simulation {
+                message: format!("tree engine: {e}"),
+            })
         };
-        let [p_q0, p_v0, ..] = terms(x0, &v0, &mut ws)?;
-        let [p_q1, p_v1, t_q1, t_v1, v_q1] = terms(x1, &v1, &mut ws)?;
+        let start = terms(x0, &v0, &mut ws)?;
+        let TermJacobians {
+            p_q: p_q1,
+            p_v: p_v1,
+            t_q: t_q1,
+            t_v: t_v1,
+            v_q: v_q1,
+        } = terms(x1, &v1, &mut ws)?;
+        let (p_q0, p_v0) = (start.p_q, start.p_v);
         let d = DMatrix::from_diagonal(&DVector::from_vec(damping));
         let j0 = &p_q0 - &p_v0 / h;
         let j1 = &p_v0 / h - &p_q1 + &p_v1 / h + (&t_q1 - &v_q1) * h - &t_v1 + &d;
