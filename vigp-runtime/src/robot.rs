@@ -215,6 +215,38 @@ impl TermJacobians {
     }
 }
 
+/// The momentum P = M(q)v and its Jacobians at one (q, v): what the start
+/// of a step's derivatives needs.
+pub(crate) struct MomentumJacobians {
+    /// P.
+    p: Vec<f64>,
+    /// ∂P/∂q.
+    p_q: DMatrix<f64>,
+    /// ∂P/∂v = M.
+    p_v: DMatrix<f64>,
+}
+
+impl MomentumJacobians {
+    /// At (q, v) of `engine`'s tree: [`Engine::momentum_derivatives`].
+    fn of<T: vigp_core::tree::Tree>(
+        engine: &Engine<T>,
+        q: &[f64],
+        v: &[f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<Self, EngineError> {
+        let n = engine.dof();
+        let mut p = vec![0.0; n];
+        let mut buf = vec![0.0; 2 * n * n];
+        let (p_q, p_v) = buf.split_at_mut(n * n);
+        engine.momentum_derivatives(q, v, &mut p, p_q, p_v, ws)?;
+        Ok(Self {
+            p,
+            p_q: DMatrix::from_row_slice(n, n, p_q),
+            p_v: DMatrix::from_row_slice(n, n, p_v),
+        })
+    }
+}
+
 /// One step with its exact derivatives ([`Robot::step_derivatives`]).
 ///
 /// Each converged sub-step of h solves
@@ -604,35 +636,33 @@ impl Robot {
         self.check_state(z)?;
         self.check_inputs(u)?;
         let mut ws = vec![BodyScratch::default(); self.dof()];
-        let p = self.momentum(z)?;
-        let start = self.term_jacobians(&z.q, &z.v, &mut ws)?;
-        self.derivatives_from(z, p, start, u, dt, &mut ws)
-            .map(|(d, _, _)| d)
+        let start = self.momentum_jacobians(&z.q, &z.v, &mut ws)?;
+        self.derivatives_from(z, start, u, dt, &mut ws)
+            .map(|(d, _)| d)
     }
 
-    /// [`Robot::step_derivatives`] from z with its momentum p and its term
-    /// derivatives `start` known (a rollout carries both from the step
+    /// [`Robot::step_derivatives`] from z with its momentum and momentum
+    /// Jacobians `start` known (a rollout carries them from the step
     /// before); also returns them at the new state.
     fn derivatives_from(
         &self,
         z: &RobotState,
-        mut p: Vec<f64>,
-        mut start: TermJacobians,
+        mut start: MomentumJacobians,
         u: &[f64],
         dt: f64,
         ws: &mut [BodyScratch],
-    ) -> Result<(StepDerivatives, Vec<f64>, TermJacobians), RobotError> {
+    ) -> Result<(StepDerivatives, MomentumJacobians), RobotError> {
         let n = self.dof();
         let options = *self.engine.options();
         // one sub-step at a time: the engine's own step without subdivision
-        let single = Engine::with_options(
-            self.engine.tree(),
-            EngineOptions {
+        let single = self
+            .engine
+            .with_options_borrowed(EngineOptions {
                 max_depth: 0,
                 ..options
-            },
-        )
-        .map_err(RobotError::Engine)?;
+            })
+            .map_err(RobotError::Engine)?;
+        let mut p = std::mem::take(&mut start.p);
         let mut tau = vec![0.0; n];
         for (&i, &x) in self.inputs.iter().zip(u) {
             tau[i] = x;
@@ -682,6 +712,7 @@ impl Robot {
             if depth >= options.max_depth || !(h * 0.5 * h * 0.5).is_normal() {
                 return Err(self.engine_error(failed));
             }
+            // (a failed step leaves p as it was)
             (q, v) = (q0, v0);
             depth += 1;
             done *= 2;
@@ -696,7 +727,8 @@ impl Robot {
             b,
             report,
         };
-        Ok((d, p, start))
+        start.p = p;
+        Ok((d, start))
     }
 
     /// A driven rollout with every step's exact derivatives: entry k is
@@ -725,71 +757,109 @@ impl Robot {
         }
         self.check_state(z0).map_err(|e| fail(0, e))?;
         let mut ws = vec![BodyScratch::default(); self.dof()];
-        let mut p = self.momentum(z0).map_err(|e| fail(0, e))?;
-        let mut terms = self
-            .term_jacobians(&z0.q, &z0.v, &mut ws)
+        let mut start = self
+            .momentum_jacobians(&z0.q, &z0.v, &mut ws)
             .map_err(|e| fail(0, e))?;
         let mut out: Vec<StepDerivatives> = Vec::with_capacity(inputs.len());
         for (k, u) in inputs.iter().enumerate() {
             self.check_inputs(u).map_err(|e| fail(k, e))?;
             let z = out.last().map_or(z0, |d| &d.state);
-            let (d, p1, t1) = self
-                .derivatives_from(z, p, terms, u, dt, &mut ws)
+            let (d, next) = self
+                .derivatives_from(z, start, u, dt, &mut ws)
                 .map_err(|e| fail(k, e))?;
-            (p, terms) = (p1, t1);
+            start = next;
             out.push(d);
         }
         Ok(out)
     }
 
     /// The derivatives of one converged sub-step of h from (q₀, v₀) to
-    /// v₁, given the term derivatives `start` at (q₀, v₀):
-    /// A_s = ∂(q₁, v₁)/∂(q₀, v₀), B_s = ∂(q₁, v₁)/∂u, and the term
-    /// derivatives at (q₁, v₁) (the next sub-step's start).
+    /// v₁, given the momentum Jacobians `start` at (q₀, v₀):
+    /// A_s = ∂(q₁, v₁)/∂(q₀, v₀), B_s = ∂(q₁, v₁)/∂u, and the momentum
+    /// Jacobians at (q₁, v₁) (the next sub-step's start; its `p` is left
+    /// empty for the caller).
     fn substep_derivatives(
         &self,
-        start: &TermJacobians,
+        start: &MomentumJacobians,
         q0: &[f64],
         v0: &[f64],
         v1: &[f64],
         h: f64,
         ws: &mut [BodyScratch],
-    ) -> Result<(DMatrix<f64>, DMatrix<f64>, TermJacobians), RobotError> {
+    ) -> Result<(DMatrix<f64>, DMatrix<f64>, MomentumJacobians), RobotError> {
         let n = self.dof();
+        let inputs = self.inputs.len();
         let q1: Vec<f64> = q0.iter().zip(v0).map(|(q, v)| q + h * v).collect();
-        let end = self.term_jacobians(&q1, v1, ws)?;
+        let TermJacobians {
+            p_q,
+            p_v,
+            t_q,
+            t_v,
+            v_q,
+        } = self.term_jacobians(&q1, v1, ws)?;
         // r = P(q₀, v₀) + F(q₁, v₁) + h·τ,
-        // F = −P(q₁, v₁) + h·(∂T/∂q(q₁, v₁) − ∇V(q₁) − D·v₁)
-        let mut fv = -&end.p_v + (&end.t_v * h);
+        // F = −P(q₁, v₁) + h·(∂T/∂q(q₁, v₁) − ∇V(q₁) − D·v₁):
+        // J = ∂F/∂v₁ = h·∂(∂T/∂q)/∂v − M − h·D, K = ∂F/∂q₁, in place
+        let mut jac = t_v;
+        jac *= h;
+        jac -= &p_v;
         for (i, body) in self.engine.tree().bodies.iter().enumerate() {
-            fv[(i, i)] -= h * body.damping;
+            jac[(i, i)] -= h * body.damping;
         }
-        let fq = -&end.p_q + (&end.t_q - &end.v_q) * h;
-        let lu = fv.lu();
-        let mut rhs = DMatrix::<f64>::zeros(n, 2 * n + self.inputs.len());
-        rhs.view_mut((0, 0), (n, n)).copy_from(&(&start.p_q + &fq));
-        rhs.view_mut((0, n), (n, n))
-            .copy_from(&(&start.p_v + &fq * h));
-        for (k, &i) in self.inputs.iter().enumerate() {
-            rhs[(i, 2 * n + k)] = h;
+        let mut k = t_q;
+        k -= &v_q;
+        k *= h;
+        k -= &p_q;
+        // J·X = [∂P/∂q(q₀, v₀) + K | M(q₀) + h·K | h·S]
+        let mut x = DMatrix::<f64>::zeros(n, 2 * n + inputs);
+        for j in 0..n {
+            for i in 0..n {
+                let kij = k[(i, j)];
+                x[(i, j)] = start.p_q[(i, j)] + kij;
+                x[(i, n + j)] = start.p_v[(i, j)] + h * kij;
+            }
         }
-        let Some(x) = lu.solve(&rhs) else {
+        for (c, &i) in self.inputs.iter().enumerate() {
+            x[(i, 2 * n + c)] = h;
+        }
+        if !jac.lu().solve_mut(&mut x) {
             return Err(RobotError::SingularNewtonMatrix);
-        };
+        }
         let mut a = DMatrix::<f64>::zeros(2 * n, 2 * n);
-        let mut b = DMatrix::<f64>::zeros(2 * n, self.inputs.len());
+        let mut b = DMatrix::<f64>::zeros(2 * n, inputs);
         for i in 0..n {
             a[(i, i)] = 1.0;
             a[(i, n + i)] = h;
         }
-        a.view_mut((n, 0), (n, 2 * n))
-            .copy_from(&-x.columns(0, 2 * n));
-        b.view_mut((n, 0), (n, self.inputs.len()))
-            .copy_from(&-x.columns(2 * n, self.inputs.len()));
+        for j in 0..2 * n {
+            for i in 0..n {
+                a[(n + i, j)] = -x[(i, j)];
+            }
+        }
+        for c in 0..inputs {
+            for i in 0..n {
+                b[(n + i, c)] = -x[(i, 2 * n + c)];
+            }
+        }
         if !(a.iter().chain(b.iter()).all(|x| x.is_finite())) {
             return Err(RobotError::SingularNewtonMatrix);
         }
+        let end = MomentumJacobians {
+            p: Vec::new(),
+            p_q,
+            p_v,
+        };
         Ok((a, b, end))
+    }
+
+    /// [`MomentumJacobians::of`] the robot's engine, with its errors.
+    fn momentum_jacobians(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<MomentumJacobians, RobotError> {
+        MomentumJacobians::of(&self.engine, q, v, ws).map_err(|e| self.engine_error(e))
     }
 
     /// [`TermJacobians::of`] the robot's engine, with its errors.

@@ -432,6 +432,30 @@ fn fingerprint<T: Tree>(tree: &T) -> u64 {
     h | 1
 }
 
+/// The ranges [`Engine::with_options`] accepts.
+fn check_options(options: &EngineOptions) -> Result<(), EngineError> {
+    if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
+        return Err(EngineError::InvalidOptions(
+            "tolerance must be finite and > 0",
+        ));
+    }
+    if options.max_iterations == 0 {
+        return Err(EngineError::InvalidOptions("max_iterations must be >= 1"));
+    }
+    if !(options.max_contraction > 0.0 && options.max_contraction <= 1.0) {
+        return Err(EngineError::InvalidOptions(
+            "max_contraction must be in (0, 1]",
+        ));
+    }
+    if options.energy_tolerance.is_nan() || options.energy_tolerance <= 0.0 {
+        return Err(EngineError::InvalidOptions("energy_tolerance must be > 0"));
+    }
+    if options.max_depth > 30 {
+        return Err(EngineError::InvalidOptions("max_depth must be <= 30"));
+    }
+    Ok(())
+}
+
 fn check_len(what: &'static str, got: usize, expected: usize) -> Result<(), EngineError> {
     if got == expected {
         Ok(())
@@ -487,30 +511,24 @@ impl<T: Tree> Engine<T> {
     /// The engine with the given options.
     pub fn with_options(tree: T, options: EngineOptions) -> Result<Self, EngineError> {
         validate(&tree)?;
-        if !(options.tolerance.is_finite() && options.tolerance > 0.0) {
-            return Err(EngineError::InvalidOptions(
-                "tolerance must be finite and > 0",
-            ));
-        }
-        if options.max_iterations == 0 {
-            return Err(EngineError::InvalidOptions("max_iterations must be >= 1"));
-        }
-        if !(options.max_contraction > 0.0 && options.max_contraction <= 1.0) {
-            return Err(EngineError::InvalidOptions(
-                "max_contraction must be in (0, 1]",
-            ));
-        }
-        if options.energy_tolerance.is_nan() || options.energy_tolerance <= 0.0 {
-            return Err(EngineError::InvalidOptions("energy_tolerance must be > 0"));
-        }
-        if options.max_depth > 30 {
-            return Err(EngineError::InvalidOptions("max_depth must be <= 30"));
-        }
+        check_options(&options)?;
         let fingerprint = fingerprint(&tree);
         Ok(Self {
             tree,
             options,
             fingerprint,
+        })
+    }
+
+    /// An engine over this one's tree, borrowed, with other options: no
+    /// copy of the tree and no second validation (the tree was validated
+    /// when `self` was made), so it is cheap enough to make per call.
+    pub fn with_options_borrowed(&self, options: EngineOptions) -> Result<Engine<&T>, EngineError> {
+        check_options(&options)?;
+        Ok(Engine {
+            tree: &self.tree,
+            options,
+            fingerprint: self.fingerprint,
         })
     }
 
@@ -1004,8 +1022,53 @@ impl<T: Tree> Engine<T> {
         check_len("t_v", t_v.len(), n * n)?;
         check_len("v_q", v_q.len(), n * n)?;
         self.momentum_pass(q, v, ws)?;
-        for m in [&mut *p_q, &mut *p_v, &mut *t_q, &mut *t_v, &mut *v_q] {
-            m.fill(0.0);
+        self.pair_derivatives(ws, p_q, p_v, Some((t_q, t_v, v_q)));
+        Ok(())
+    }
+
+    /// p = M(q)v, ∂p/∂q and ∂p/∂v = M at (q, v): the part of
+    /// [`Engine::term_derivatives`] a step's start needs (row-major N × N
+    /// into `p_q` and `p_v`), by the same closed forms.
+    pub fn momentum_derivatives(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        p: &mut [f64],
+        p_q: &mut [f64],
+        p_v: &mut [f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), EngineError> {
+        let ws = self.scratch(ws)?;
+        let n = ws.len();
+        check_len("p", p.len(), n)?;
+        check_len("p_q", p_q.len(), n * n)?;
+        check_len("p_v", p_v.len(), n * n)?;
+        self.momentum_pass(q, v, ws)?;
+        for (x, w) in p.iter_mut().zip(ws.iter()) {
+            *x = w.pn;
+        }
+        self.pair_derivatives(ws, p_q, p_v, None);
+        Ok(())
+    }
+
+    /// The closed forms of [`Engine::term_derivatives`] after its momentum
+    /// pass: ∂p/∂q and ∂p/∂v, and with `rest` ∂(∂T/∂q)/∂q, ∂(∂T/∂q)/∂v and
+    /// ∂(∇V)/∂q.
+    #[allow(clippy::type_complexity)]
+    fn pair_derivatives(
+        &self,
+        ws: &[BodyScratch],
+        p_q: &mut [f64],
+        p_v: &mut [f64],
+        mut rest: Option<(&mut [f64], &mut [f64], &mut [f64])>,
+    ) {
+        let n = ws.len();
+        p_q.fill(0.0);
+        p_v.fill(0.0);
+        if let Some((t_q, t_v, v_q)) = rest.as_mut() {
+            t_q.fill(0.0);
+            t_v.fill(0.0);
+            v_q.fill(0.0);
         }
         let g = self.tree.gravity();
         let ag = [0.0, 0.0, 0.0, g[0], g[1], g[2]];
@@ -1014,10 +1077,12 @@ impl<T: Tree> Engine<T> {
             let (sb, hb, ib) = (wb.s, wb.hc, wb.composite);
             let w_b = cross_motion(&wb.vel, &sb);
             let a_b = cross_motion(&sb, &wb.vel);
-            let sg_b = cross_motion(&sb, &ag);
             let u_b = ib.mul(&sb);
             let f_b = sub6(&cross_force(&sb, &hb), &ib.mul(&a_b));
-            let e_b = sub6(&cross_force(&sb, &ib.mul(&ag)), &ib.mul(&sg_b));
+            let e_b = rest.as_ref().map(|_| {
+                let sg_b = cross_motion(&sb, &ag);
+                sub6(&cross_force(&sb, &ib.mul(&ag)), &ib.mul(&sg_b))
+            });
             // j runs over b and its ancestors: (row b, column j) with j on
             // b's path; (row j, column b) with j strictly above b
             let mut at = Some(b);
@@ -1029,24 +1094,30 @@ impl<T: Tree> Engine<T> {
                 let is = ib.mul(&sj);
                 let bj = b * n + j;
                 p_q[bj] = -dot6(&sb, &ia);
-                t_q[bj] = -dot6(&cross_motion(&a_j, &sb), &hb) - dot6(&w_b, &ia);
-                v_q[bj] = dot6(&sb, &ib.mul(&cross_motion(&sj, &ag)));
                 p_v[bj] = dot6(&sb, &is);
-                t_v[bj] = dot6(&cross_motion(&sj, &sb), &hb) + dot6(&w_b, &is);
                 if j != b {
-                    let w_j = cross_motion(&wj.vel, &sj);
                     let jb = j * n + b;
                     p_q[jb] = dot6(&sj, &f_b);
-                    t_q[jb] = dot6(&w_j, &f_b);
-                    v_q[jb] = -dot6(&sj, &e_b);
                     p_v[jb] = dot6(&sj, &u_b);
-                    t_v[jb] = dot6(&w_j, &u_b);
+                }
+                if let (Some((t_q, t_v, v_q)), Some(e_b)) = (rest.as_mut(), e_b.as_ref()) {
+                    t_q[bj] = -dot6(&cross_motion(&a_j, &sb), &hb) - dot6(&w_b, &ia);
+                    v_q[bj] = dot6(&sb, &ib.mul(&cross_motion(&sj, &ag)));
+                    t_v[bj] = dot6(&cross_motion(&sj, &sb), &hb) + dot6(&w_b, &is);
+                    if j != b {
+                        let w_j = cross_motion(&wj.vel, &sj);
+                        let jb = j * n + b;
+                        t_q[jb] = dot6(&w_j, &f_b);
+                        v_q[jb] = -dot6(&sj, e_b);
+                        t_v[jb] = dot6(&w_j, &u_b);
+                    }
                 }
                 at = self.tree.body(j).parent;
             }
-            v_q[b * n + b] += self.tree.body(b).stiffness;
+            if let Some((_, _, v_q)) = rest.as_mut() {
+                v_q[b * n + b] += self.tree.body(b).stiffness;
+            }
         }
-        Ok(())
     }
 
     /// The bias forces of the equations of motion M(q)q̈ + b(q, q̇) = τ at

@@ -276,5 +276,77 @@ fn term_derivatives_match_the_terms_on_jets() {
         check("v_q", &v_q, &|i, j| g[i].g[j]);
         // ∇V does not depend on v
         assert!(g.iter().all(|x| x.g[5..].iter().all(|d| *d == 0.0)));
+        // the momentum part alone, with p itself: the same closed forms,
+        // so the same numbers to the bit, and p that of `momentum_of`
+        let (mut pm, mut mq, mut mv, mut want) = ([0.0; 5], [0.0; 25], [0.0; 25], [0.0; 5]);
+        e.momentum_derivatives(&q, &v, &mut pm, &mut mq, &mut mv, &mut ws)
+            .unwrap();
+        e.momentum_of(&q, &v, &mut want, &mut ws).unwrap();
+        assert_eq!((pm, mq, mv), (want, p_q, p_v));
+        check("p_q alone", &mq, &|i, j| p[i].g[j]);
+    }
+}
+
+/// An engine over a borrowed tree with other options steps as one made
+/// with those options from the start (bit for bit), and refuses options
+/// out of range as `with_options` does.
+#[test]
+fn borrowed_engine_steps_as_a_new_one() {
+    let b = bodies(true);
+    let e = engine(&b);
+    let options = EngineOptions {
+        max_depth: 0,
+        tolerance: 1e-13,
+        ..EngineOptions::default()
+    };
+    let borrowed = e.with_options_borrowed(options).unwrap();
+    let fresh = Engine::with_options(
+        TreeRef {
+            bodies: &b,
+            gravity: [0.0, 0.0, -9.81],
+        },
+        options,
+    )
+    .unwrap();
+    let mut out = [[0.0; 5]; 2];
+    for (k, slot) in out.iter_mut().enumerate() {
+        let (mut q, mut v, mut p) = (Q, V, [0.0; 5]);
+        let mut ws = [BodyScratch::default(); 5];
+        e.momentum_of(&q, &v, &mut p, &mut ws).unwrap();
+        let r = if k == 0 {
+            borrowed.step(&mut q, &mut v, &mut p, &[0.1; 5], 2e-3, &mut ws)
+        } else {
+            fresh.step(&mut q, &mut v, &mut p, &[0.1; 5], 2e-3, &mut ws)
+        };
+        assert_eq!(r.unwrap().depth, 0);
+        *slot = v;
+    }
+    assert_eq!(out[0], out[1]);
+    for bad in [
+        EngineOptions {
+            tolerance: f64::NAN,
+            ..options
+        },
+        EngineOptions {
+            max_iterations: 0,
+            ..options
+        },
+        EngineOptions {
+            max_contraction: 1.5,
+            ..options
+        },
+        EngineOptions {
+            energy_tolerance: 0.0,
+            ..options
+        },
+        EngineOptions {
+            max_depth: 31,
+            ..options
+        },
+    ] {
+        assert!(matches!(
+            e.with_options_borrowed(bad),
+            Err(EngineError::InvalidOptions(_))
+        ));
     }
 }
