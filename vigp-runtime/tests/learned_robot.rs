@@ -118,6 +118,102 @@ fn the_run_time_reader_reads_what_the_fixed_size_reader_reads() {
     assert_eq!((&t.u_prev, &t.u), (&d.inputs[7], &d.inputs[8]));
 }
 
+/// A learned step's exact A, B and B_prev against five-point central
+/// differences of the learned step itself, under the robot's step as prior
+/// (sin/cos encoding: the chain rule through the angles) and under a
+/// constant mean (raw encoding), with the state of `step` to the bit.
+///
+/// Tolerance: 1e-6 of the largest entry (and of 1). The step h = 1e-3 of
+/// a five-point stencil truncates at O(h⁴·f⁽⁵⁾) ≈ 1e-12 here. The GP mean
+/// k(x)ᵀα sums terms far larger than itself when the trained noise sits
+/// near its default floor (1e-10): under the constant prior, where the GP
+/// carries the whole velocity, that rounding noise reached ~1e-8 in v₁,
+/// erratic in h (differences off by 1e-6 to 4e-5 for h = 3e-3 … 1e-4),
+/// so the noise variance is kept ≥ 1e-6 (normalised units), as
+/// `Learned::step_derivatives_forced` advises; the derivatives are exact
+/// for any hyperparameters. A wrong block (a sign of the sin/cos chain
+/// rule, u and u_prev swapped, a missing prior term) is off by the size
+/// of the entry itself.
+#[test]
+fn learned_step_derivatives_match_differences_of_the_step() {
+    let truth = arm(0.3);
+    let declared = arm(0.1);
+    let mut text = log(&truth, [0.1, -0.2, 0.05], 120);
+    let more = log(&truth, [-0.2, 0.3, 0.0], 120).replace("\na,", "\nb,");
+    text.push_str(more.split_once('\n').unwrap().1);
+    let ts = RobotTransition::from_dataset(&read(&text));
+    let options = TrainOptions {
+        restarts: 1,
+        bounds: vigp_runtime::gp::Bounds {
+            noise_variance: (1e-6, 10.0),
+            ..vigp_runtime::gp::Bounds::default()
+        },
+        ..TrainOptions::default()
+    };
+    let z = RobotState::new(vec![0.05, -0.1, 0.02], vec![0.3, -0.2, 0.1]);
+    let (u_prev, u) = (vec![3.2], vec![3.4]);
+    for (encoding, prior) in [
+        (Encoding::SinCos, Prior::Nominal),
+        (Encoding::Raw, Prior::Constant),
+    ] {
+        let (learned, _) =
+            LearnedRobot::train(declared.clone(), DT, &ts, encoding, prior.clone(), &options)
+                .unwrap();
+        let mut ws = learned.workspace();
+        let d = learned.step_derivatives(&z, &u_prev, &u, &mut ws).unwrap();
+        assert_eq!(d.state, learned.step(&z, &u_prev, &u).unwrap());
+        let n = 3;
+        // z₁ as one vector, from a perturbed state and inputs
+        let next = |z: &RobotState, up: &[f64], u: &[f64]| -> Vec<f64> {
+            let z1 = learned.step(z, up, u).unwrap();
+            z1.q.into_iter().chain(z1.v).collect()
+        };
+        let h = 1e-3;
+        let stencil = |f: &dyn Fn(f64) -> Vec<f64>| -> Vec<f64> {
+            let (a, b, c, e) = (f(-2.0 * h), f(-h), f(h), f(2.0 * h));
+            (0..2 * n)
+                .map(|r| (a[r] - 8.0 * b[r] + 8.0 * c[r] - e[r]) / (12.0 * h))
+                .collect()
+        };
+        let mut worst: f64 = 0.0;
+        let mut compare =
+            |name: &str, exact: &vigp_runtime::nalgebra::DMatrix<f64>, col: usize, fd: Vec<f64>| {
+                let scale = exact.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+                for (r, x) in fd.iter().enumerate() {
+                    let err = (exact[(r, col)] - x).abs() / scale;
+                    worst = worst.max(err);
+                    assert!(
+                        err <= 1e-6,
+                        "{prior:?}: {name}[{r}][{col}] exact {} vs differences {x}",
+                        exact[(r, col)]
+                    );
+                }
+            };
+        for c in 0..2 * n {
+            let fd = stencil(&|e| {
+                let mut zz = z.clone();
+                if c < n {
+                    zz.q[c] += e;
+                } else {
+                    zz.v[c - n] += e;
+                }
+                next(&zz, &u_prev, &u)
+            });
+            compare("A", &d.a, c, fd);
+        }
+        compare("B", &d.b, 0, stencil(&|e| next(&z, &u_prev, &[u[0] + e])));
+        compare(
+            "B_prev",
+            &d.b_prev,
+            0,
+            stencil(&|e| next(&z, &[u_prev[0] + e], &u)),
+        );
+        println!("{prior:?}, {encoding:?}: largest scaled difference {worst:.1e}");
+        // the GP reads u_prev: B_prev is not zero
+        assert!(d.b_prev.iter().any(|x| *x != 0.0));
+    }
+}
+
 #[test]
 fn a_learned_robot_steps_saves_and_refuses_bad_input() {
     // the truth damps the elbow 3× more than the declared robot

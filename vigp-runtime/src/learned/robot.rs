@@ -16,7 +16,8 @@
 //! interval and u_{k−1} the one that produced v_k (both absent for a robot
 //! without actuated joints). Training pairs come from logged positions
 //! ([`RobotTransition::from_dataset`], the row convention of
-//! [`crate::data`]).
+//! [`crate::data`]). [`LearnedRobot::step_derivatives`] gives a learned
+//! step's exact A = ∂z₁/∂z₀ and B = ∂z₁/∂u (and ∂z₁/∂u_{k−1}) for MPC.
 //!
 //! A model is one JSON file ([`SavedLearnedRobot`]): the bodies (so that a
 //! model trained on identified parameters needs no other file), the
@@ -34,6 +35,7 @@ use crate::gp::{Gp, GpError, PriorMean, SavedGp, TrainOptions, TrainReport, Work
 use crate::identify::{IdentifyError, Regressor, RobotRegressor};
 use crate::mechanism::CoordinateKind;
 use crate::robot::{Robot, RobotError, RobotState, RobotTree};
+use nalgebra::DMatrix;
 
 /// The `format` tag of a learned-robot file.
 pub const FORMAT: &str = "vigp-learned-robot";
@@ -316,6 +318,21 @@ impl LearnedRobotError {
     }
 }
 
+/// One learned mean step with its exact derivatives
+/// ([`LearnedRobot::step_derivatives`]); states ordered z = (q, v).
+#[derive(Clone, Debug, PartialEq)]
+pub struct LearnedRobotDerivatives {
+    /// The state after the step (that of [`LearnedRobot::step`], bit for
+    /// bit).
+    pub state: RobotState,
+    /// A = ∂z₁/∂z₀, 2N × 2N.
+    pub a: DMatrix<f64>,
+    /// B = ∂z₁/∂u, 2N × U.
+    pub b: DMatrix<f64>,
+    /// B_prev = ∂z₁/∂u_prev, 2N × U (the GP reads the previous input).
+    pub b_prev: DMatrix<f64>,
+}
+
 /// A GP-augmented variational integrator of a [`Robot`] (module docs).
 #[derive(Clone, Debug)]
 pub struct LearnedRobot {
@@ -457,6 +474,97 @@ impl LearnedRobot {
         }
         let q = z.q.iter().zip(&z.v).map(|(q, v)| q + m.dt * v).collect();
         Ok(RobotState::new(q, v))
+    }
+
+    /// One learned mean step (as [`LearnedRobot::step_with`]) with its
+    /// exact derivatives A = ∂z₁/∂z₀, B = ∂z₁/∂u and B_prev = ∂z₁/∂u_prev,
+    /// for MPC and iLQR on the learned model. q₁ = q + Δt·v gives the top
+    /// rows [I, Δt·I | 0]; v₁ = prior(z, u) + μ(enc(z), u_prev, u)
+    /// differentiates into the robot's exact step derivatives
+    /// ([`Robot::step_derivatives`], the implicit function theorem on the
+    /// tree engine's residual; zero under [`Prior::Constant`], which does
+    /// not depend on z or u) plus the GP mean's gradient
+    /// ([`Gp::predict_mean_gradient_into`]) through the encoding
+    /// (∂(sin θ, cos θ)/∂θ = (cos θ, −sin θ) under [`Encoding::SinCos`]).
+    ///
+    /// Finite-difference checks: the GP mean k(x)ᵀα sums terms much larger
+    /// than itself when the trained noise variance is small, so the step
+    /// carries rounding noise of 1e-9 or so; use steps of about 1e-3 with a
+    /// five-point stencil rather than 1e-6.
+    pub fn step_derivatives(
+        &self,
+        z: &RobotState,
+        u_prev: &[f64],
+        u: &[f64],
+        ws: &mut Workspace,
+    ) -> Result<LearnedRobotDerivatives, LearnedRobotError> {
+        let m = &self.model;
+        m.check(z, u_prev, u, None)?;
+        let (n, nu, dt) = (m.robot.dof(), m.inputs(), m.dt);
+        let mut a = DMatrix::<f64>::zeros(2 * n, 2 * n);
+        let mut b = DMatrix::<f64>::zeros(2 * n, nu);
+        let mut b_prev = DMatrix::<f64>::zeros(2 * n, nu);
+        for i in 0..n {
+            a[(i, i)] = 1.0;
+            a[(i, n + i)] = dt;
+        }
+        // the prior's velocity and its rows of A and B
+        let mut v = vec![0.0; n];
+        if m.prior.uses_nominal_step() {
+            let d =
+                m.robot
+                    .step_derivatives(z, u, dt)
+                    .map_err(|source| LearnedRobotError::Step {
+                        transition: None,
+                        source,
+                    })?;
+            v = d.state.v;
+            a.rows_mut(n, n).copy_from(&d.a.rows(n, n));
+            b.rows_mut(n, n).copy_from(&d.b.rows(n, n));
+        }
+        // the GP's mean and its gradient in the GP input
+        let dim = m.input_dim();
+        let mut input = vec![0.0; dim];
+        m.gp_input(z, u_prev, u, &mut input);
+        let mut mean = vec![0.0; n];
+        let mut grad = vec![0.0; n * dim];
+        self.gp
+            .predict_mean_gradient_into(&input, &mut mean, &mut grad, ws)?;
+        let e = m.encoding.dim(&m.kinds);
+        for j in 0..n {
+            v[j] += mean[j];
+            let g = &grad[j * dim..(j + 1) * dim];
+            let mut k = 0;
+            for (i, kind) in m.kinds.iter().enumerate() {
+                if m.encoding == Encoding::SinCos && *kind == CoordinateKind::Angle {
+                    let (sn, cs) = z.q[i].sin_cos();
+                    a[(n + j, i)] += g[k] * cs - g[k + 1] * sn;
+                    k += 2;
+                } else {
+                    a[(n + j, i)] += g[k];
+                    k += 1;
+                }
+            }
+            for i in 0..n {
+                a[(n + j, n + i)] += g[k + i];
+            }
+            for c in 0..nu {
+                b_prev[(n + j, c)] = g[e + c];
+                b[(n + j, c)] += g[e + nu + c];
+            }
+        }
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(LearnedRobotError::NonFinite(
+                "the predicted velocity".into(),
+            ));
+        }
+        let q = z.q.iter().zip(&z.v).map(|(q, v)| q + dt * v).collect();
+        Ok(LearnedRobotDerivatives {
+            state: RobotState::new(q, v),
+            a,
+            b,
+            b_prev,
+        })
     }
 
     /// [`LearnedRobot::step_with`] with its own workspace and no variance.
