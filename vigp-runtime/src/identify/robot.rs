@@ -2,13 +2,27 @@
 //! from URDF): the DEL residual of the linear-time tree engine, affine in
 //! the standard parameters of every body and joint.
 //!
-//! The tree engine's step is the first-order rule (module docs of
-//! `vigp_core::tree::Engine`): for a logged triple (x_{k−1}, x_k, x_{k+1})
-//! with v_{k−1} = (x_k − x_{k−1})/Δt and v_k = (x_{k+1} − x_k)/Δt,
+//! Two rules, with L_d(a, b) = Δt·L(a + αΔt·v, v), v = (b − a)/Δt, as for
+//! declared mechanisms ([`super::DelRegressor`], `crate::del`). For a
+//! logged triple (x_{k−1}, x_k, x_{k+1}) with v_{k−1} = (x_k − x_{k−1})/Δt
+//! and v_k = (x_{k+1} − x_k)/Δt, P = M(q)v, F(q, v) = ∂T/∂q − ∇V − D·v:
 //!
-//! ```text
-//! r = M(x_{k−1})v_{k−1} − M(x_k)v_k + Δt·(∂T/∂q(x_k, v_k) − ∇V(x_k) − D·v_k + τ(u_k)),
-//! ```
+//! * the first-order rule (α = 0, [`RobotRegressor::new`]), the tree
+//!   engine's own step (module docs of `vigp_core::tree::Engine`):
+//!
+//!   ```text
+//!   r = P(x_{k−1}, v_{k−1}) − P(x_k, v_k) + Δt·(F(x_k, v_k) + τ(u_k));
+//!   ```
+//!
+//! * the midpoint rule (α = ½, [`RobotRegressor::midpoint`]), second
+//!   order, so that logs of a continuous-time system bias the estimate by
+//!   O(Δt²) instead of O(Δt): with m_{k−1} = (x_{k−1} + x_k)/2 and
+//!   m_k = (x_k + x_{k+1})/2,
+//!
+//!   ```text
+//!   r = P(m_{k−1}, v_{k−1}) + ½Δt·(F(m_{k−1}, v_{k−1}) + τ(u_{k−1}))
+//!       − P(m_k, v_k) + ½Δt·(F(m_k, v_k) + τ(u_k)),
+//!   ```
 //!
 //! τ(u_k) the input held over [t_k, t_{k+1}] on the actuated joints. The
 //! parameters carry DSL-style names, so that the report and the parameter
@@ -63,12 +77,31 @@ pub struct RobotRegressor {
     structure: Structure,
     base: Vec<f64>,
     steps: Vec<f64>,
+    /// The quadrature weight: 0 (first order) or ½ (midpoint).
+    alpha: f64,
 }
 
 impl RobotRegressor {
-    /// The regressor of `robot` (its bodies' declared parameters as the
-    /// base point, its actuated joints as the inputs) at time step `dt`.
+    /// The regressor of the first-order rule, the tree engine's step, of
+    /// `robot` (its bodies' declared parameters as the base point, its
+    /// actuated joints as the inputs) at time step `dt`.
     pub fn new(robot: &Robot, dt: f64) -> Result<Self, IdentifyError> {
+        Self::with_alpha(robot, dt, 0.0)
+    }
+
+    /// The regressor of the midpoint rule (module docs) of `robot` at time
+    /// step `dt`: for logs of a continuous-time system, whose discretisation
+    /// bias it shrinks from O(Δt) to O(Δt²).
+    pub fn midpoint(robot: &Robot, dt: f64) -> Result<Self, IdentifyError> {
+        Self::with_alpha(robot, dt, 0.5)
+    }
+
+    /// The quadrature weight α (0: first order, ½: midpoint).
+    pub fn alpha(&self) -> f64 {
+        self.alpha
+    }
+
+    fn with_alpha(robot: &Robot, dt: f64, alpha: f64) -> Result<Self, IdentifyError> {
         if !(dt.is_finite() && dt > 0.0) {
             return Err(IdentifyError::NonFinite {
                 what: format!("time step {dt}"),
@@ -122,6 +155,7 @@ impl RobotRegressor {
             structure,
             base: Vec::new(),
             steps: Vec::new(),
+            alpha,
         };
         out.base = out.standard();
         if let Some(i) = out.base.iter().position(|x| !x.is_finite()) {
@@ -263,37 +297,59 @@ impl RobotRegressor {
                 });
             }
         }
-        let u = t.inputs[1];
-        if !(u.is_empty() || u.len() == self.inputs.len()) {
-            return Err(IdentifyError::Dimension {
-                what: "inputs",
-                expected: self.inputs.len(),
-                found: u.len(),
-            });
-        }
-        if u.iter().any(|v| !v.is_finite()) {
-            return Err(IdentifyError::NonFinite {
-                what: "inputs".into(),
-            });
+        // τ(u_{k−1}) (read by the midpoint rule only) and τ(u_k) on the
+        // actuated joints
+        let mut tau = [vec![0.0; n], vec![0.0; n]];
+        let first = usize::from(self.alpha == 0.0);
+        for (side, u) in tau.iter_mut().zip(t.inputs).skip(first) {
+            if !(u.is_empty() || u.len() == self.inputs.len()) {
+                return Err(IdentifyError::Dimension {
+                    what: "inputs",
+                    expected: self.inputs.len(),
+                    found: u.len(),
+                });
+            }
+            if u.iter().any(|v| !v.is_finite()) {
+                return Err(IdentifyError::NonFinite {
+                    what: "inputs".into(),
+                });
+            }
+            for (&j, &x) in self.inputs.iter().zip(u) {
+                side[j] += x;
+            }
         }
         let dt = self.dt;
         let [x0, x1, x2] = t.positions;
         let v0: Vec<f64> = (0..n).map(|i| (x1[i] - x0[i]) / dt).collect();
         let v1: Vec<f64> = (0..n).map(|i| (x2[i] - x1[i]) / dt).collect();
-        let mut tau = vec![0.0; n];
-        for (&j, &x) in self.inputs.iter().zip(u) {
-            tau[j] += x;
-        }
         let mut ws = vec![BodyScratch::default(); n];
-        let mut p0 = vec![0.0; n];
         let mut r = vec![0.0; n];
         let err = |e| IdentifyError::Simulation {
             message: format!("tree engine: {e}"),
         };
-        engine.momentum_of(x0, &v0, &mut p0, &mut ws).map_err(err)?;
-        engine
-            .residual(x0, &v0, &p0, &tau, &v1, dt, &mut r, &mut ws)
-            .map_err(err)?;
+        if self.alpha == 0.0 {
+            let mut p0 = vec![0.0; n];
+            engine.momentum_of(x0, &v0, &mut p0, &mut ws).map_err(err)?;
+            engine
+                .residual(x0, &v0, &p0, &tau[1], &v1, dt, &mut r, &mut ws)
+                .map_err(err)?;
+            return Ok(r);
+        }
+        // midpoint: P ± ½Δt·(F + τ) at each interval's midpoint
+        let half = 0.5 * dt;
+        let (mut p, mut dtdq, mut dvdq) = (vec![0.0; n], vec![0.0; n], vec![0.0; n]);
+        for (side, (a, b, v)) in [(x0, x1, &v0), (x1, x2, &v1)].into_iter().enumerate() {
+            let m: Vec<f64> = (0..n).map(|i| 0.5 * (a[i] + b[i])).collect();
+            engine
+                .terms(&m, v, &mut p, &mut dtdq, &mut dvdq, &mut ws)
+                .map_err(err)?;
+            let sign = if side == 0 { 1.0 } else { -1.0 };
+            for i in 0..n {
+                let damping = engine.tree().bodies[i].damping;
+                let f = dtdq[i] - dvdq[i] - damping * v[i] + tau[side][i];
+                r[i] += sign * p[i] + half * f;
+            }
+        }
         Ok(r)
     }
 }
@@ -363,14 +419,20 @@ impl Regressor for RobotRegressor {
 
     /// The residual and its exact Jacobians in x_{k−1}, x_k and x_{k+1}
     /// from the engine's closed-form term derivatives
-    /// ([`Engine::term_derivatives`], O(N²)): with v₀ = (x_k − x_{k−1})/Δt,
-    /// v₁ = (x_{k+1} − x_k)/Δt, P = M(q)v, D the dampings and the terms'
-    /// derivatives at (x_{k−1}, v₀) (subscript 0) and (x_k, v₁) (1),
+    /// ([`Engine::term_derivatives`], O(N²)). With the derivatives of P, of
+    /// ∂T/∂q (T_q, T_v) and of ∇V (V_q) at each interval's point (0: the
+    /// first, 1: the second; x_{k−1} and x_k under the first-order rule,
+    /// the midpoints under the midpoint rule) and D the dampings:
     ///
     /// ```text
+    /// first order:
     /// ∂r/∂x_{k−1} = P_q0 − P_v0/Δt
     /// ∂r/∂x_k     = P_v0/Δt − P_q1 + P_v1/Δt + Δt·(T_q1 − V_q1) − T_v1 + D
     /// ∂r/∂x_{k+1} = −P_v1/Δt + T_v1 − D
+    /// midpoint, with G = P + ½Δt·F and H = ½Δt·F − P (F = ∂T/∂q − ∇V − D·v):
+    /// ∂r/∂x_{k−1} = ½G_q0 − G_v0/Δt
+    /// ∂r/∂x_k     = ½G_q0 + G_v0/Δt + ½H_q1 − H_v1/Δt
+    /// ∂r/∂x_{k+1} = ½H_q1 + H_v1/Δt
     /// ```
     fn position_jacobians(
         &self,
@@ -391,19 +453,36 @@ impl Regressor for RobotRegressor {
                 message: format!("tree engine: {e}"),
             })
         };
-        let start = terms(x0, &v0, &mut ws)?;
-        let TermJacobians {
-            p_q: p_q1,
-            p_v: p_v1,
-            t_q: t_q1,
-            t_v: t_v1,
-            v_q: v_q1,
-        } = terms(x1, &v1, &mut ws)?;
-        let (p_q0, p_v0) = (start.p_q, start.p_v);
         let d = DMatrix::from_diagonal(&DVector::from_vec(damping));
-        let j0 = &p_q0 - &p_v0 / h;
-        let j1 = &p_v0 / h - &p_q1 + &p_v1 / h + (&t_q1 - &v_q1) * h - &t_v1 + &d;
-        let j2 = -&p_v1 / h + &t_v1 - &d;
+        if self.alpha == 0.0 {
+            let start = terms(x0, &v0, &mut ws)?;
+            let TermJacobians {
+                p_q: p_q1,
+                p_v: p_v1,
+                t_q: t_q1,
+                t_v: t_v1,
+                v_q: v_q1,
+            } = terms(x1, &v1, &mut ws)?;
+            let (p_q0, p_v0) = (start.p_q, start.p_v);
+            let j0 = &p_q0 - &p_v0 / h;
+            let j1 = &p_v0 / h - &p_q1 + &p_v1 / h + (&t_q1 - &v_q1) * h - &t_v1 + &d;
+            let j2 = -&p_v1 / h + &t_v1 - &d;
+            return Ok((DVector::from_vec(r), [j0, j1, j2]));
+        }
+        let mid = |a: &[f64], b: &[f64]| -> Vec<f64> {
+            a.iter().zip(b).map(|(a, b)| 0.5 * (a + b)).collect()
+        };
+        // (∂/∂q, ∂/∂v) of ½Δt·F ± P at one midpoint
+        let halves = |j: TermJacobians, sign: f64| {
+            let f_q = (&j.t_q - &j.v_q) * (0.5 * h);
+            let f_v = (&j.t_v - &d) * (0.5 * h);
+            (f_q + &j.p_q * sign, f_v + &j.p_v * sign)
+        };
+        let (g_q, g_v) = halves(terms(&mid(x0, x1), &v0, &mut ws)?, 1.0);
+        let (h_q, h_v) = halves(terms(&mid(x1, x2), &v1, &mut ws)?, -1.0);
+        let j0 = &g_q * 0.5 - &g_v / h;
+        let j1 = &g_q * 0.5 + &g_v / h + &h_q * 0.5 - &h_v / h;
+        let j2 = &h_q * 0.5 + &h_v / h;
         Ok((DVector::from_vec(r), [j0, j1, j2]))
     }
 
