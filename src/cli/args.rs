@@ -200,8 +200,9 @@ pub(super) struct IdentifyArgs {
     #[arg(long)]
     pub(super) out: PathBuf,
     /// The discrete Euler–Lagrange rule of the regression [default:
-    /// midpoint; a robot from `--urdf`: first-order, the tree engine's
-    /// rule and the only one it has].
+    /// midpoint; a robot from `--urdf`: first-order, the rule of the tree
+    /// engine that `simulate` and `fit` step with (give midpoint for logs
+    /// of a real robot)].
     #[arg(long, value_enum)]
     pub(super) rule: Option<RuleArg>,
     /// The treatment of position noise.

@@ -56,7 +56,10 @@ where
 }
 
 /// `vigp identify --urdf`: the robot's parameters by regression on the
-/// tree engine's first-order residual ([`RobotRegressor`]).
+/// tree engine's residual ([`RobotRegressor`]): its first-order rule by
+/// default (the rule of the engine `simulate` and `fit` step with), the
+/// midpoint rule with `--rule midpoint` (logs of a real, continuous-time
+/// robot: bias O(Δt²) instead of O(Δt)).
 pub(super) fn identify_robot(
     a: &IdentifyArgs,
     robot: &crate::Robot,
@@ -65,14 +68,12 @@ pub(super) fn identify_robot(
     out: &mut dyn Write,
 ) -> Result<(), CliError> {
     check_args(a)?;
-    if a.rule == Some(RuleArg::Midpoint) {
-        return Err(CliError::Usage(
-            "--rule midpoint: a robot from --urdf is identified with the tree engine's own \
-             rule, first-order (its step); leave --rule out or give first-order"
-                .into(),
-        ));
+    let rule = a.rule.unwrap_or(RuleArg::FirstOrder);
+    let regressor = match rule {
+        RuleArg::FirstOrder => RobotRegressor::new(robot, dt),
+        RuleArg::Midpoint => RobotRegressor::midpoint(robot, dt),
     }
-    let regressor = RobotRegressor::new(robot, dt).map_err(fail)?;
+    .map_err(fail)?;
     let logs: Vec<Log> = data.runs.iter().map(Log::from_run).collect();
     let id = run_identify(&regressor, &logs, &options(a)).map_err(fail)?;
     let identified = regressor.tree_with(&id.estimate).map_err(fail)?;
@@ -87,7 +88,7 @@ pub(super) fn identify_robot(
         name: robot.name(),
         runs: data.runs.len(),
         dt,
-        rule: RuleArg::FirstOrder,
+        rule,
     };
     write_results(
         a,
