@@ -15,7 +15,7 @@
 //! P(error ≤ q̂·u) ≥ 1 − δ (marginally over both), and ≤ 1 − δ + 1/(n+1) when
 //! the scores have no ties.
 
-use super::windows::{Steps, Windows};
+use super::windows::{CalibrationOf, CalibrationWindow, Windows};
 use super::{BoundError, ConformalSettings, Score, Tube, check_delta};
 use crate::learned::{Learned, Transition};
 use crate::mechanism::{Mechanism, State};
@@ -46,12 +46,9 @@ pub struct Window<const N: usize> {
 /// taken under ([`Calibration::new_forced`],
 /// [`Calibration::from_trajectories_forced`]); they calibrate the bound of
 /// predictions under inputs ([`Learned::error_bound_forced`]).
-#[derive(Clone, Debug, PartialEq)]
-pub struct Calibration<const N: usize> {
-    set: Windows<Window<N>>,
-}
+pub type Calibration<const N: usize> = CalibrationOf<Window<N>>;
 
-impl<const N: usize> Steps for Window<N> {
+impl<const N: usize> CalibrationWindow for Window<N> {
     fn steps(&self) -> usize {
         self.positions.len()
     }
@@ -91,57 +88,6 @@ impl<const N: usize> Calibration<N> {
                 runs: Vec::new(),
             },
         }
-    }
-
-    /// Windows with time step `dt`. Errors: `dt` not finite and positive,
-    /// a window with fewer than 2 positions, windows of different lengths,
-    /// or a NaN/∞ anywhere.
-    pub fn new(dt: f64, windows: Vec<Window<N>>) -> Result<Self, BoundError> {
-        Ok(Self {
-            set: Windows::new(dt, windows)?,
-        })
-    }
-
-    /// Windows of an actuated mechanism with time step `dt`: `inputs[i]`
-    /// holds window i's K inputs, step k (from the start's k-th successor,
-    /// towards `positions[k]`) taken under `inputs[i][k]` held over the
-    /// step. Each window's previous input (the one that produced its
-    /// start's velocity, which a forced learned step takes: see
-    /// `crate::learned`, "Under inputs") is taken as its first, held
-    /// across the start; [`Calibration::with_previous_inputs`] sets it.
-    /// Errors: those of [`Calibration::new`]; `U = 0`; a window's input
-    /// count other than its K; a NaN or ∞ input.
-    pub fn new_forced<const U: usize>(
-        dt: f64,
-        windows: Vec<Window<N>>,
-        inputs: Vec<Vec<SVector<f64, U>>>,
-    ) -> Result<Self, BoundError> {
-        Ok(Self {
-            set: Windows::new(dt, windows)?.with_inputs(inputs)?,
-        })
-    }
-
-    /// These forced windows with `previous[i]` as window i's previous
-    /// input (held over the interval of its start's velocity). Errors: not one per window, a NaN or ∞, or windows
-    /// without inputs of this count ([`BoundError::Mismatch`]).
-    pub fn with_previous_inputs<const U: usize>(
-        self,
-        previous: Vec<SVector<f64, U>>,
-    ) -> Result<Self, BoundError> {
-        if U == 0 || self.set.input_count != U {
-            return Err(BoundError::Mismatch(
-                "previous inputs for windows without inputs of that count",
-            ));
-        }
-        Ok(Self {
-            set: self.set.with_previous(previous)?,
-        })
-    }
-
-    /// Window `index`'s previous input (None without `U` inputs or out of
-    /// range).
-    pub fn window_previous_input<const U: usize>(&self, index: usize) -> Option<SVector<f64, U>> {
-        self.set.window_previous_input(index)
     }
 
     /// One-step calibration cases from held-out transitions (K = 2:
@@ -209,49 +155,6 @@ impl<const N: usize> Calibration<N> {
                 |r, s| window(trajectories[r].as_ref(), s, horizon, dt),
             )?,
         })
-    }
-
-    /// The windows.
-    pub fn windows(&self) -> &[Window<N>] {
-        &self.set.windows
-    }
-
-    /// The run each window was cut from ([`Calibration::from_trajectories`]:
-    /// the trajectory's index; windows given directly: each its own).
-    pub fn window_runs(&self) -> &[usize] {
-        &self.set.runs
-    }
-
-    /// Number of inputs per step the windows carry (0: unforced windows).
-    pub fn input_count(&self) -> usize {
-        self.set.input_count
-    }
-
-    /// Window `index`'s inputs as `U`-vectors, one per step (None when
-    /// `U` is not [`Calibration::input_count`] or the index is out of
-    /// range).
-    pub fn window_inputs<const U: usize>(&self, index: usize) -> Option<Vec<SVector<f64, U>>> {
-        self.set.window_inputs(index)
-    }
-
-    /// Number of windows n.
-    pub fn len(&self) -> usize {
-        self.set.windows.len()
-    }
-
-    /// `true` without windows.
-    pub fn is_empty(&self) -> bool {
-        self.set.windows.is_empty()
-    }
-
-    /// Window length K (0 when empty).
-    pub fn horizon(&self) -> usize {
-        self.set.horizon()
-    }
-
-    /// The time step of the windows.
-    pub fn dt(&self) -> f64 {
-        self.set.dt
     }
 }
 

@@ -57,6 +57,7 @@ pub use conformal::{Calibration, ConformalParts, Region, Window};
 pub use jacobian::projection_jacobian;
 pub use rkhs::RkhsOutput;
 pub use theorem1::Theorem1Output;
+pub use windows::{CalibrationOf, CalibrationWindow};
 
 use crate::gp::{GpError, Workspace};
 use crate::learned::{LearnError, Learned};

@@ -1,13 +1,22 @@
-//! Held-out windows with the inputs their steps were taken under: what the
-//! planar ([`Calibration`](super::Calibration)) and the spatial
-//! (`crate::spatial::bound::SpatialCalibration`) calibration sets share —
-//! validation, the inputs' layout and the cutting of trajectories.
+//! Held-out windows with the inputs their steps were taken under: the one
+//! calibration set ([`CalibrationOf`]) of the planar
+//! ([`Calibration`](super::Calibration)) and the spatial
+//! (`crate::spatial::bound::SpatialCalibration`) bounds — validation, the
+//! inputs' layout, the cutting of trajectories and the accessors.
 
 use super::BoundError;
 use nalgebra::SVector;
 
-/// What the shared code needs of a window.
-pub(crate) trait Steps {
+mod sealed {
+    pub trait Sealed {}
+    impl<const N: usize> Sealed for crate::bound::Window<N> {}
+    impl<const B: usize> Sealed for crate::spatial::bound::SpatialWindow<B> {}
+}
+
+/// A held-out window of a calibration set: a start and the K true states
+/// after it ([`super::Window`] of coordinates, or the spatial bound's
+/// window of configurations). Sealed: the bounds know these two.
+pub trait CalibrationWindow: sealed::Sealed {
     /// K: the true states after the start.
     fn steps(&self) -> usize;
     /// No NaN or ±∞ in the start or the true states.
@@ -38,10 +47,10 @@ pub(crate) struct Windows<W> {
     pub runs: Vec<usize>,
 }
 
-impl<W: Steps> Windows<W> {
+impl<W: CalibrationWindow> Windows<W> {
     /// Errors: `dt` not finite and positive, a window with fewer than 2
     /// steps, windows of different lengths, a NaN/∞ anywhere, or what the
-    /// window's [`Steps::defect`] names.
+    /// window's [`CalibrationWindow::defect`] names.
     pub fn new(dt: f64, windows: Vec<W>) -> Result<Self, BoundError> {
         if vigp_core::step::check_time_step(dt).is_err() {
             return Err(BoundError::InvalidSetting {
@@ -318,4 +327,116 @@ fn logged_inputs<I: AsRef<[SVector<f64, U>]>, const U: usize>(
         .iter()
         .map(|&(r, s)| inputs[r].as_ref()[s + 1..=s + horizon].to_vec())
         .collect())
+}
+
+/// Held-out calibration windows of equal length K with their time step,
+/// their runs and (for a model trained under inputs) the inputs of their
+/// steps: the set a conformal bound is calibrated on. The planar bound
+/// reads [`Calibration`](super::Calibration) (windows of coordinates), the
+/// spatial one `SpatialCalibration` (windows of configurations); both are
+/// this type.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CalibrationOf<W> {
+    pub(crate) set: Windows<W>,
+}
+
+impl<W: CalibrationWindow> CalibrationOf<W> {
+    /// Windows with time step `dt`. Errors ([`BoundError`]): `dt` not
+    /// finite and positive, a window with fewer than 2 true states after
+    /// its start, windows of different lengths, a NaN/∞ anywhere, or (a
+    /// spatial window) a quaternion, start or true orientation, not of
+    /// unit norm to 1e-9 ([`BoundError::Calibration`], naming the window).
+    /// Without windows, calibrating a bound is
+    /// [`BoundError::TooFewCalibration`].
+    pub fn new(dt: f64, windows: Vec<W>) -> Result<Self, BoundError> {
+        Ok(Self {
+            set: Windows::new(dt, windows)?,
+        })
+    }
+
+    /// Windows of an actuated mechanism with time step `dt`: `inputs[i]`
+    /// holds window i's K inputs, step k (from the start's k-th successor
+    /// towards true state k + 1) taken under `inputs[i][k]` held over the
+    /// step. Each window's previous input (the one that produced its
+    /// start's velocity, which a forced learned step takes: see
+    /// `crate::learned`, "Under inputs") is taken as its first, held
+    /// across the start; [`CalibrationOf::with_previous_inputs`] sets it.
+    /// Errors: those of [`CalibrationOf::new`]; `U = 0`; a window's input
+    /// count other than its K; a NaN or ∞ input.
+    pub fn new_forced<const U: usize>(
+        dt: f64,
+        windows: Vec<W>,
+        inputs: Vec<Vec<SVector<f64, U>>>,
+    ) -> Result<Self, BoundError> {
+        Ok(Self {
+            set: Windows::new(dt, windows)?.with_inputs(inputs)?,
+        })
+    }
+
+    /// These forced windows with `previous[i]` as window i's previous
+    /// input (held over the interval of its start's velocity). Errors: not
+    /// one per window, a NaN or ∞, or windows without inputs of this count
+    /// ([`BoundError::Mismatch`]).
+    pub fn with_previous_inputs<const U: usize>(
+        self,
+        previous: Vec<SVector<f64, U>>,
+    ) -> Result<Self, BoundError> {
+        if U == 0 || self.set.input_count != U {
+            return Err(BoundError::Mismatch(
+                "previous inputs for windows without inputs of that count",
+            ));
+        }
+        Ok(Self {
+            set: self.set.with_previous(previous)?,
+        })
+    }
+
+    /// Window `index`'s previous input (None without `U` inputs or out of
+    /// range).
+    pub fn window_previous_input<const U: usize>(&self, index: usize) -> Option<SVector<f64, U>> {
+        self.set.window_previous_input(index)
+    }
+
+    /// The windows.
+    pub fn windows(&self) -> &[W] {
+        &self.set.windows
+    }
+
+    /// The run each window was cut from (cut from trajectories: the
+    /// trajectory's index; windows given directly: each its own).
+    pub fn window_runs(&self) -> &[usize] {
+        &self.set.runs
+    }
+
+    /// Number of inputs per step the windows carry (0: unforced windows).
+    pub fn input_count(&self) -> usize {
+        self.set.input_count
+    }
+
+    /// Window `index`'s inputs as `U`-vectors, one per step (None when
+    /// `U` is not [`CalibrationOf::input_count`] or the index is out of
+    /// range).
+    pub fn window_inputs<const U: usize>(&self, index: usize) -> Option<Vec<SVector<f64, U>>> {
+        self.set.window_inputs(index)
+    }
+
+    /// Number of windows n.
+    pub fn len(&self) -> usize {
+        self.set.windows.len()
+    }
+
+    /// `true` without windows.
+    pub fn is_empty(&self) -> bool {
+        self.set.windows.is_empty()
+    }
+
+    /// Window length K (0 without windows).
+    pub fn horizon(&self) -> usize {
+        self.set.horizon()
+    }
+
+    /// The time step of the windows.
+    pub fn dt(&self) -> f64 {
+        self.set.dt
+    }
 }

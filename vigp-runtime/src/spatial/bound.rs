@@ -40,7 +40,7 @@ use crate::bound::conformal::{
     RegionBuilder, Traced, calibrate_traced, position_scales, predictive_scale, quantile_index,
     score_scale,
 };
-use crate::bound::windows::{Steps, Windows};
+use crate::bound::windows::{CalibrationOf, CalibrationWindow, Windows};
 use crate::bound::{BoundError, ConformalSettings, Region, Score, Tube, check_delta};
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
@@ -65,12 +65,9 @@ pub struct SpatialWindow<const B: usize> {
 /// to be exchangeable (e.g. starts and input sequences drawn the same way).
 /// Overlapping windows of one trajectory are dependent: prefer a stride of
 /// at least the horizon.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SpatialCalibration<const B: usize> {
-    set: Windows<SpatialWindow<B>>,
-}
+pub type SpatialCalibration<const B: usize> = CalibrationOf<SpatialWindow<B>>;
 
-impl<const B: usize> Steps for SpatialWindow<B> {
+impl<const B: usize> CalibrationWindow for SpatialWindow<B> {
     fn steps(&self) -> usize {
         self.configurations.len()
     }
@@ -120,59 +117,6 @@ fn window<const B: usize>(
 }
 
 impl<const B: usize> SpatialCalibration<B> {
-    /// Windows with time step `dt`. Errors: `dt` not finite and positive,
-    /// a window with fewer than 2 configurations, windows of different
-    /// lengths, a NaN/∞ anywhere, or a quaternion (start or true
-    /// orientation) not of unit norm to 1e-9
-    /// ([`BoundError::Calibration`], naming the window). (Without windows, calibrating a bound
-    /// is [`BoundError::TooFewCalibration`].)
-    pub fn new(dt: f64, windows: Vec<SpatialWindow<B>>) -> Result<Self, BoundError> {
-        Ok(Self {
-            set: Windows::new(dt, windows)?,
-        })
-    }
-
-    /// Windows of an actuated mechanism: `inputs[i]` holds window i's K
-    /// inputs, step k (from the start's k-th successor to configuration
-    /// k + 1's velocities) taken under `inputs[i][k]`. Errors: those of
-    /// [`SpatialCalibration::new`]; `U = 0`; a window whose input count is
-    /// not its K; a NaN or ∞ input. Each window's previous input (the
-    /// one that produced its start's velocities, which a forced learned
-    /// step takes) is taken as its first, held across the start;
-    /// [`SpatialCalibration::with_previous_inputs`] sets it.
-    pub fn new_forced<const U: usize>(
-        dt: f64,
-        windows: Vec<SpatialWindow<B>>,
-        inputs: Vec<Vec<SVector<f64, U>>>,
-    ) -> Result<Self, BoundError> {
-        Ok(Self {
-            set: Windows::new(dt, windows)?.with_inputs(inputs)?,
-        })
-    }
-
-    /// These forced windows with `previous[i]` as window i's previous
-    /// input. Errors: not one per window, a NaN or ∞, or windows without
-    /// inputs of this count ([`BoundError::Mismatch`]).
-    pub fn with_previous_inputs<const U: usize>(
-        self,
-        previous: Vec<SVector<f64, U>>,
-    ) -> Result<Self, BoundError> {
-        if U == 0 || self.set.input_count != U {
-            return Err(BoundError::Mismatch(
-                "previous inputs for windows without inputs of that count",
-            ));
-        }
-        Ok(Self {
-            set: self.set.with_previous(previous)?,
-        })
-    }
-
-    /// Window `index`'s previous input (None without `U` inputs or out of
-    /// range).
-    pub fn window_previous_input<const U: usize>(&self, index: usize) -> Option<SVector<f64, U>> {
-        self.set.window_previous_input(index)
-    }
-
     /// Windows of `horizon` steps from trajectories of configurations
     /// sampled every `dt`: a window starts at every `stride`-th sample that
     /// leaves room for its horizon, its start velocities from the first
@@ -221,51 +165,6 @@ impl<const B: usize> SpatialCalibration<B> {
                 |r, s| window(trajectories[r].as_ref(), s, horizon, dt),
             )?,
         })
-    }
-
-    /// The windows.
-    pub fn windows(&self) -> &[SpatialWindow<B>] {
-        &self.set.windows
-    }
-
-    /// Window `index`'s inputs as `U`-vectors, one per step (None when `U`
-    /// is not [`SpatialCalibration::input_count`], is 0, or the index is
-    /// out of range).
-    pub fn window_inputs<const U: usize>(&self, index: usize) -> Option<Vec<SVector<f64, U>>> {
-        self.set.window_inputs(index)
-    }
-
-    /// The run each window was cut from
-    /// ([`SpatialCalibration::from_trajectories`]: the trajectory's index;
-    /// windows given directly: each its own). The region test measures a
-    /// start's distance to the starts of other runs.
-    pub fn window_runs(&self) -> &[usize] {
-        &self.set.runs
-    }
-
-    /// Number of inputs per step the windows carry (0: none).
-    pub fn input_count(&self) -> usize {
-        self.set.input_count
-    }
-
-    /// Number of windows n.
-    pub fn len(&self) -> usize {
-        self.set.windows.len()
-    }
-
-    /// `true` without windows.
-    pub fn is_empty(&self) -> bool {
-        self.set.windows.is_empty()
-    }
-
-    /// Window length K (0 without windows).
-    pub fn horizon(&self) -> usize {
-        self.set.horizon()
-    }
-
-    /// The time step of the windows.
-    pub fn dt(&self) -> f64 {
-        self.set.dt
     }
 }
 
