@@ -14,6 +14,7 @@
 //!
 //! ```text
 //! cargo run --release --example robots [-- --steps 2000]
+//! cargo run --release --example robots -- --derivatives   # the second table alone
 //! ```
 
 use std::time::Instant;
@@ -161,6 +162,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .transpose()?
         .unwrap_or(2000);
     let dt = 0.002;
+    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/robots");
+    if args.iter().any(|a| a == "--derivatives") {
+        println!("load average at the start: {}", load());
+        return derivatives(dir, dt);
+    }
     println!("load average at the start: {}", load());
     // two rounds of ours, then MuJoCo's; the fastest run of each side
     let mut rows = own_rollouts(steps, dt)?;
@@ -210,7 +216,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             (fit, fit_peer) = (Vec::new(), Vec::new());
         }
     }
-    let dir = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/robots");
     derivatives(dir, dt)
 }
 
@@ -284,18 +289,22 @@ fn own_rollouts(
     Ok(rows)
 }
 
-/// Median ns of `f` over `reps` calls, after one warm-up call.
-fn median_ns(reps: usize, mut f: impl FnMut()) -> f64 {
+/// Median ns of `f` and of `g` over `reps` calls each, after one warm-up
+/// call, the calls alternating (f, g, f, g, …) so that both see the same
+/// load of a shared machine.
+fn medians_ns(reps: usize, mut f: impl FnMut(), mut g: impl FnMut()) -> (f64, f64) {
     f();
-    let mut times: Vec<f64> = (0..reps)
-        .map(|_| {
-            let t = Instant::now();
-            f();
-            t.elapsed().as_secs_f64() * 1e9
-        })
-        .collect();
-    times.sort_by(f64::total_cmp);
-    times[times.len() / 2]
+    g();
+    let time = |h: &mut dyn FnMut()| {
+        let t = Instant::now();
+        h();
+        t.elapsed().as_secs_f64() * 1e9
+    };
+    let (mut a, mut b): (Vec<f64>, Vec<f64>) =
+        (0..reps).map(|_| (time(&mut f), time(&mut g))).unzip();
+    a.sort_by(f64::total_cmp);
+    b.sort_by(f64::total_cmp);
+    (a[reps / 2], b[reps / 2])
 }
 
 /// One step (`Robot::step`, from a moving state, every joint driven)
@@ -304,7 +313,7 @@ fn median_ns(reps: usize, mut f: impl FnMut()) -> f64 {
 fn derivatives(dir: &str, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
     println!();
     println!(
-        "one step of dt = 2 ms with every joint driven, and with exact A (2N × 2N) and B (2N × N); median of 301 calls"
+        "one step of dt = 2 ms with every joint driven, and with exact A (2N × 2N) and B (2N × N); medians of 1001 calls each, alternating"
     );
     println!("| mechanism | N | step (µs) | step with A, B (µs) | ratio |");
     println!("|---|---|---|---|---|");
@@ -332,12 +341,15 @@ fn derivatives(dir: &str, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
         let v: Vec<f64> = (0..n).map(|i| 0.4 * ((i as f64) * 0.9).cos()).collect();
         let u: Vec<f64> = (0..n).map(|i| 0.2 * ((i as f64) * 1.3).sin()).collect();
         let z = RobotState::new(q, v);
-        let step = median_ns(301, || {
-            std::hint::black_box(robot.step(&z, &u, dt).expect("step"));
-        });
-        let with = median_ns(301, || {
-            std::hint::black_box(robot.step_derivatives(&z, &u, dt).expect("derivatives"));
-        });
+        let (step, with) = medians_ns(
+            1001,
+            || {
+                std::hint::black_box(robot.step(&z, &u, dt).expect("step"));
+            },
+            || {
+                std::hint::black_box(robot.step_derivatives(&z, &u, dt).expect("derivatives"));
+            },
+        );
         println!(
             "| {name} | {n} | {:.1} | {:.1} | {:.2} |",
             step * 1e-3,
