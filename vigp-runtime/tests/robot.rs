@@ -441,10 +441,22 @@ fn step_derivatives_match_central_differences() {
         .with_actuated(&["j1", "j3"])
         .unwrap();
     let za = RobotState::new(vec![0.3, -0.7, 0.05], vec![1.2, -0.8, 0.3]);
+    // a branching tree (four legs from a fixed base): the Newton matrix is
+    // factored in the tree's pattern
+    let solo = Robot::from_urdf(fixture("solo12.urdf")).unwrap();
+    let joints = solo.joint_names().to_vec();
+    let solo = solo
+        .with_actuated(&[&joints[1], &joints[5], &joints[10]])
+        .unwrap();
+    let zs = RobotState::new(
+        (0..12).map(|i| 0.4 * (1.3 * i as f64).sin()).collect(),
+        (0..12).map(|i| 0.8 * (0.7 * i as f64).cos()).collect(),
+    );
     for (name, robot, z, u, dt) in [
         ("panda", &panda, &z, vec![2.0, -1.0], 0.002),
         ("panda", &panda, &z, vec![2.0, -1.0], 0.02),
         ("arm3", &arm, &za, vec![0.4, 1.5], 0.005),
+        ("solo12", &solo, &zs, vec![0.3, -0.2, 0.5], 0.002),
     ] {
         let d = robot.step_derivatives(z, &u, dt).unwrap();
         let (z1, report) = robot.step(z, &u, dt).unwrap();
