@@ -49,28 +49,24 @@ pub struct Window<const N: usize> {
 pub type Calibration<const N: usize> = CalibrationOf<Window<N>>;
 
 impl<const N: usize> CalibrationWindow for Window<N> {
+    type Sample = SVector<f64, N>;
+
+    fn cut(p: &[SVector<f64, N>], s: usize, horizon: usize, dt: f64) -> Self {
+        Window {
+            start: State {
+                q: p[s],
+                v: (p[s + 1] - p[s]) / dt,
+            },
+            positions: p[s + 1..=s + horizon].to_vec(),
+        }
+    }
+
     fn steps(&self) -> usize {
         self.positions.len()
     }
 
     fn is_finite(&self) -> bool {
         self.start.is_finite() && self.positions.iter().flatten().all(|x| x.is_finite())
-    }
-}
-
-/// Sample counts of trajectories.
-pub(crate) fn lengths<T: AsRef<[E]>, E>(trajectories: &[T]) -> Vec<usize> {
-    trajectories.iter().map(|t| t.as_ref().len()).collect()
-}
-
-/// The window of `horizon` steps of positions `p` from sample `s`.
-fn window<const N: usize>(p: &[SVector<f64, N>], s: usize, horizon: usize, dt: f64) -> Window<N> {
-    Window {
-        start: State {
-            q: p[s],
-            v: (p[s + 1] - p[s]) / dt,
-        },
-        positions: p[s + 1..=s + horizon].to_vec(),
     }
 }
 
@@ -105,56 +101,6 @@ impl<const N: usize> Calibration<N> {
             })
             .collect();
         Self::new(dt, windows)
-    }
-
-    /// Windows of `horizon` steps from trajectories of positions sampled
-    /// every `dt` (the form training data has): a window starts at every
-    /// `stride`-th sample that leaves room for its horizon. Errors: `horizon`
-    /// < 2, `stride` = 0, no window at all, or what [`Calibration::new`]
-    /// rejects.
-    pub fn from_trajectories<T: AsRef<[SVector<f64, N>]>>(
-        trajectories: &[T],
-        dt: f64,
-        horizon: usize,
-        stride: usize,
-    ) -> Result<Self, BoundError> {
-        Ok(Self {
-            set: Windows::cut(&lengths(trajectories), dt, horizon, stride, |r, s| {
-                window(trajectories[r].as_ref(), s, horizon, dt)
-            })?,
-        })
-    }
-
-    /// [`Calibration::from_trajectories`] for an actuated mechanism:
-    /// `inputs[r][i]` is the input logged with sample i of trajectory r
-    /// and held from t_i to t_{i+1} (the data files' convention), so the
-    /// step from a window's state at sample s + k (whose velocity spans
-    /// [t_{s+k}, t_{s+k+1}]) to the next one is driven by sample
-    /// s + k + 1's input, after sample s + k's (sample s's for the first
-    /// step: each window's previous input). Errors: those of `from_trajectories` and
-    /// [`Calibration::new_forced`]; a trajectory whose inputs are not one
-    /// per sample.
-    pub fn from_trajectories_forced<T, I, const U: usize>(
-        trajectories: &[T],
-        inputs: &[I],
-        dt: f64,
-        horizon: usize,
-        stride: usize,
-    ) -> Result<Self, BoundError>
-    where
-        T: AsRef<[SVector<f64, N>]>,
-        I: AsRef<[SVector<f64, U>]>,
-    {
-        Ok(Self {
-            set: Windows::cut_forced(
-                &lengths(trajectories),
-                inputs,
-                dt,
-                horizon,
-                stride,
-                |r, s| window(trajectories[r].as_ref(), s, horizon, dt),
-            )?,
-        })
     }
 }
 

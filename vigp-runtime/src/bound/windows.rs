@@ -16,7 +16,13 @@ mod sealed {
 /// A held-out window of a calibration set: a start and the K true states
 /// after it ([`super::Window`] of coordinates, or the spatial bound's
 /// window of configurations). Sealed: the bounds know these two.
-pub trait CalibrationWindow: sealed::Sealed {
+pub trait CalibrationWindow: sealed::Sealed + Sized {
+    /// One sample of a logged trajectory: positions (`SVector<f64, N>`)
+    /// or configurations.
+    type Sample;
+    /// The window of `horizon` steps from sample `s` of `samples`, its
+    /// start velocity from samples s and s + 1 (the data's convention).
+    fn cut(samples: &[Self::Sample], s: usize, horizon: usize, dt: f64) -> Self;
     /// K: the true states after the start.
     fn steps(&self) -> usize;
     /// No NaN or ±∞ in the start or the true states.
@@ -329,6 +335,11 @@ fn logged_inputs<I: AsRef<[SVector<f64, U>]>, const U: usize>(
         .collect())
 }
 
+/// Sample counts of trajectories.
+fn lengths<T: AsRef<[E]>, E>(trajectories: &[T]) -> Vec<usize> {
+    trajectories.iter().map(|t| t.as_ref().len()).collect()
+}
+
 /// Held-out calibration windows of equal length K with their time step,
 /// their runs and (for a model trained under inputs) the inputs of their
 /// steps: the set a conformal bound is calibrated on. The planar bound
@@ -351,6 +362,57 @@ impl<W: CalibrationWindow> CalibrationOf<W> {
     pub fn new(dt: f64, windows: Vec<W>) -> Result<Self, BoundError> {
         Ok(Self {
             set: Windows::new(dt, windows)?,
+        })
+    }
+
+    /// Windows of `horizon` steps from trajectories sampled every `dt`
+    /// (positions, or configurations; the form training data has): a
+    /// window starts at every `stride`-th sample that leaves room for its
+    /// horizon, its start velocity from its first two samples. Errors:
+    /// `horizon` < 2, `stride` = 0, no window at all, or what
+    /// [`CalibrationOf::new`] rejects.
+    pub fn from_trajectories<T: AsRef<[W::Sample]>>(
+        trajectories: &[T],
+        dt: f64,
+        horizon: usize,
+        stride: usize,
+    ) -> Result<Self, BoundError> {
+        Ok(Self {
+            set: Windows::cut(&lengths(trajectories), dt, horizon, stride, |r, s| {
+                W::cut(trajectories[r].as_ref(), s, horizon, dt)
+            })?,
+        })
+    }
+
+    /// [`CalibrationOf::from_trajectories`] for an actuated mechanism:
+    /// `inputs[r][i]` is the input logged with sample i of trajectory r
+    /// and held from t_i to t_{i+1} (the data files' convention), so the
+    /// step from a window's state at sample s + k (whose velocity spans
+    /// [t_{s+k}, t_{s+k+1}]) to the next one is driven by sample
+    /// s + k + 1's input, after sample s + k's (sample s's for the first
+    /// step: each window's previous input). Errors: those of
+    /// `from_trajectories` and [`CalibrationOf::new_forced`]; a trajectory
+    /// whose inputs are not one per sample.
+    pub fn from_trajectories_forced<T, I, const U: usize>(
+        trajectories: &[T],
+        inputs: &[I],
+        dt: f64,
+        horizon: usize,
+        stride: usize,
+    ) -> Result<Self, BoundError>
+    where
+        T: AsRef<[W::Sample]>,
+        I: AsRef<[SVector<f64, U>]>,
+    {
+        Ok(Self {
+            set: Windows::cut_forced(
+                &lengths(trajectories),
+                inputs,
+                dt,
+                horizon,
+                stride,
+                |r, s| W::cut(trajectories[r].as_ref(), s, horizon, dt),
+            )?,
         })
     }
 

@@ -35,12 +35,11 @@
 
 use super::learned::{Configuration, LearnSpatialError, LearnedSpatial, Trace, velocities};
 use super::{Spatial, SpatialState};
-use crate::bound::conformal::lengths;
 use crate::bound::conformal::{
     RegionBuilder, Traced, calibrate_traced, position_scales, predictive_scale, quantile_index,
     score_scale,
 };
-use crate::bound::windows::{CalibrationOf, CalibrationWindow, Windows};
+use crate::bound::windows::{CalibrationOf, CalibrationWindow};
 use crate::bound::{BoundError, ConformalSettings, Region, Score, Tube, check_delta};
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
@@ -68,6 +67,21 @@ pub struct SpatialWindow<const B: usize> {
 pub type SpatialCalibration<const B: usize> = CalibrationOf<SpatialWindow<B>>;
 
 impl<const B: usize> CalibrationWindow for SpatialWindow<B> {
+    type Sample = Configuration<B>;
+
+    fn cut(c: &[Configuration<B>], s: usize, horizon: usize, dt: f64) -> Self {
+        let (v, w) = velocities(&c[s], &c[s + 1], dt);
+        SpatialWindow {
+            start: SpatialState {
+                x: c[s].0,
+                q: c[s].1,
+                v,
+                w,
+            },
+            configurations: c[s + 1..=s + horizon].to_vec(),
+        }
+    }
+
     fn steps(&self) -> usize {
         self.configurations.len()
     }
@@ -93,78 +107,6 @@ impl<const B: usize> CalibrationWindow for SpatialWindow<B> {
             .then_some(
                 "a quaternion is not of unit norm (to 1e-9): normalise it, e.g. UnitQuaternion::new_normalize",
             )
-    }
-}
-
-/// The window of `horizon` steps of configurations `c` from sample `s`,
-/// its start velocities from the first two samples.
-fn window<const B: usize>(
-    c: &[Configuration<B>],
-    s: usize,
-    horizon: usize,
-    dt: f64,
-) -> SpatialWindow<B> {
-    let (v, w) = velocities(&c[s], &c[s + 1], dt);
-    SpatialWindow {
-        start: SpatialState {
-            x: c[s].0,
-            q: c[s].1,
-            v,
-            w,
-        },
-        configurations: c[s + 1..=s + horizon].to_vec(),
-    }
-}
-
-impl<const B: usize> SpatialCalibration<B> {
-    /// Windows of `horizon` steps from trajectories of configurations
-    /// sampled every `dt`: a window starts at every `stride`-th sample that
-    /// leaves room for its horizon, its start velocities from the first
-    /// two samples. Errors: `horizon` < 2, `stride` = 0, no window, or what
-    /// [`SpatialCalibration::new`] rejects.
-    pub fn from_trajectories<T: AsRef<[Configuration<B>]>>(
-        trajectories: &[T],
-        dt: f64,
-        horizon: usize,
-        stride: usize,
-    ) -> Result<Self, BoundError> {
-        Ok(Self {
-            set: Windows::cut(&lengths(trajectories), dt, horizon, stride, |r, s| {
-                window(trajectories[r].as_ref(), s, horizon, dt)
-            })?,
-        })
-    }
-
-    /// [`SpatialCalibration::from_trajectories`] for an actuated mechanism:
-    /// `inputs[r][i]` is the input logged with sample i of trajectory r and
-    /// held from t_i (the convention of
-    /// [`super::learned::forced_transitions`]), so the step from the
-    /// window's state at sample s + k is driven by sample s + k + 1's
-    /// input, after sample s + k's (sample s's for the first step: the
-    /// window's previous input). Errors: those of `from_trajectories` and
-    /// [`SpatialCalibration::new_forced`]; a trajectory whose inputs are
-    /// not one per sample.
-    pub fn from_trajectories_forced<T, I, const U: usize>(
-        trajectories: &[T],
-        inputs: &[I],
-        dt: f64,
-        horizon: usize,
-        stride: usize,
-    ) -> Result<Self, BoundError>
-    where
-        T: AsRef<[Configuration<B>]>,
-        I: AsRef<[SVector<f64, U>]>,
-    {
-        Ok(Self {
-            set: Windows::cut_forced(
-                &lengths(trajectories),
-                inputs,
-                dt,
-                horizon,
-                stride,
-                |r, s| window(trajectories[r].as_ref(), s, horizon, dt),
-            )?,
-        })
     }
 }
 
