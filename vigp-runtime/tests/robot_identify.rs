@@ -5,7 +5,7 @@
 
 use vigp_runtime::identify::regressor::Transition;
 use vigp_runtime::identify::{
-    Log, Noise, Options, OutputError, Regressor, RobotRegressor, identify,
+    Identification, Log, Noise, Options, OutputError, Regressor, RobotRegressor, identify,
 };
 use vigp_runtime::{Robot, RobotState};
 
@@ -52,6 +52,25 @@ fn rollout(robot: &Robot, q0: &[f64], steps: usize, phase: f64) -> Log {
     inputs.extend(us.iter().cloned());
     inputs.push(us[steps - 1].clone());
     Log { positions, inputs }
+}
+
+/// The largest relative error of the base parameters, each against the
+/// size of its combination's terms, a term's size being the larger of
+/// |π*_j| and the prior's scale of π_j (combinations whose true value is
+/// zero: a damping the arm lacks, a centre of mass on an axis).
+fn base_error(id: &Identification, pi_true: &[f64]) -> f64 {
+    let k = &id.base.k;
+    (0..k.nrows())
+        .map(|i| {
+            let err: f64 = (0..k.ncols())
+                .map(|j| k[(i, j)] * (id.estimate[j] - pi_true[j]))
+                .sum();
+            let size: f64 = (0..k.ncols())
+                .map(|j| k[(i, j)].abs() * pi_true[j].abs().max(id.prior_sd[j]))
+                .sum();
+            err.abs() / size
+        })
+        .fold(0.0, f64::max)
 }
 
 #[test]
@@ -144,24 +163,7 @@ fn output_error_beats_the_regression_on_a_noisy_robot_log() {
         .enumerate()
         .map(|(i, q0)| rollout(&truth, q0, 300, 1.1 * i as f64))
         .collect();
-    // the largest relative error of the base parameters, each against the
-    // size of its combination's terms, a term's size being the larger of
-    // |π*_j| and the prior's scale of π_j (combinations whose true value
-    // is zero: a damping the arm lacks, a centre of mass on an axis)
-    let base_error = |id: &vigp_runtime::identify::Identification| {
-        let k = &id.base.k;
-        (0..k.nrows())
-            .map(|i| {
-                let err: f64 = (0..k.ncols())
-                    .map(|j| k[(i, j)] * (id.estimate[j] - pi_true[j]))
-                    .sum();
-                let size: f64 = (0..k.ncols())
-                    .map(|j| k[(i, j)].abs() * pi_true[j].abs().max(id.prior_sd[j]))
-                    .sum();
-                err.abs() / size
-            })
-            .fold(0.0, f64::max)
-    };
+    let base_error = |id: &Identification| base_error(id, &pi_true);
     // noise-free: the regression is exact, and output error keeps it
     let plain = identify(&regressor, &clean, &Options::default()).unwrap();
     let refined_options = Options {
@@ -317,21 +319,7 @@ fn the_midpoint_rule_shrinks_the_bias_on_continuous_time_logs() {
             RobotRegressor::midpoint(&declared, dt).unwrap(),
         ] {
             let id = identify(&regressor, &logs, &Options::default()).unwrap();
-            // the largest base-parameter error, relative to the size of
-            // its combination's terms (as in the noisy test above)
-            let k = &id.base.k;
-            let worst = (0..k.nrows())
-                .map(|i| {
-                    let err: f64 = (0..k.ncols())
-                        .map(|j| k[(i, j)] * (id.estimate[j] - pi_true[j]))
-                        .sum();
-                    let size: f64 = (0..k.ncols())
-                        .map(|j| k[(i, j)].abs() * pi_true[j].abs().max(id.prior_sd[j]))
-                        .sum();
-                    err.abs() / size
-                })
-                .fold(0.0, f64::max);
-            row.push(worst);
+            row.push(base_error(&id, &pi_true));
         }
         eprintln!(
             "Δt = {:.1} ms: first order {:.2e}, midpoint {:.2e}",
