@@ -221,15 +221,19 @@ impl TermJacobians {
 /// the dense code's contiguous loops are faster; four 3-joint legs
 /// (Solo-12) have 56 against 576, the G1 humanoid's legs, waist and arms
 /// far less than a chain of 29.
-fn branched(parents: &[Option<usize>]) -> bool {
-    let n = parents.len();
-    let mut depth = vec![0usize; n];
+fn branched(bodies: &[Body]) -> bool {
+    let n = bodies.len();
     let mut work = 0usize;
     for k in 0..n {
-        depth[k] = parents[k].map_or(1, |p| depth[p] + 1);
-        work += depth[k] * depth[k];
+        let depth = ancestors(bodies, k).count() + 1;
+        work += depth * depth;
     }
     12 * work <= n * n * n
+}
+
+/// The ancestors of body `k`, its parent first.
+fn ancestors(bodies: &[Body], k: usize) -> impl Iterator<Item = usize> + '_ {
+    std::iter::successors(bodies[k].parent, move |&a| bodies[a].parent)
 }
 
 /// Factors in place, without pivoting, a matrix J whose entry (i, j) is
@@ -242,26 +246,19 @@ fn branched(parents: &[Option<usize>]) -> bool {
 /// itself, the row that solves for x_k. O(Σ depth²) instead of O(N³).
 /// `false` when a pivot is not finite or below 1e-10 of the largest
 /// diagonal entry (then a dense, pivoting factorisation is used).
-fn tree_factor(jac: &mut DMatrix<f64>, parents: &[Option<usize>]) -> bool {
-    let n = parents.len();
+fn tree_factor(jac: &mut DMatrix<f64>, bodies: &[Body]) -> bool {
+    let n = bodies.len();
     let big = (0..n).fold(0.0f64, |m, i| m.max(jac[(i, i)].abs()));
-    let mut ancestors = Vec::with_capacity(n);
     for k in (0..n).rev() {
         let pivot = jac[(k, k)];
         if !(pivot.is_finite() && pivot.abs() > 1e-10 * big) {
             return false;
         }
-        ancestors.clear();
-        let mut at = parents[k];
-        while let Some(a) = at {
-            ancestors.push(a);
-            at = parents[a];
-        }
-        for &i in &ancestors {
+        for i in ancestors(bodies, k) {
             let l = jac[(i, k)] / pivot;
             jac[(i, k)] = l;
             if l != 0.0 {
-                for &j in &ancestors {
+                for j in ancestors(bodies, k) {
                     jac[(i, j)] -= l * jac[(k, j)];
                 }
             }
@@ -274,25 +271,18 @@ fn tree_factor(jac: &mut DMatrix<f64>, parents: &[Option<usize>]) -> bool {
 /// each column forward, leaves first (b_i −= l_ik·b_k for the ancestors i
 /// of k), then backward, root first (x_k from its row and its ancestors'
 /// x). O(Σ depth) per column.
-fn tree_solve(jac: &DMatrix<f64>, parents: &[Option<usize>], b: &mut DMatrix<f64>) {
-    let n = parents.len();
+fn tree_solve(jac: &DMatrix<f64>, bodies: &[Body], b: &mut DMatrix<f64>) {
+    let n = bodies.len();
     for c in 0..b.ncols() {
         let mut col = b.column_mut(c);
         for k in (0..n).rev() {
             let bk = col[k];
-            let mut at = parents[k];
-            while let Some(i) = at {
+            for i in ancestors(bodies, k) {
                 col[i] -= jac[(i, k)] * bk;
-                at = parents[i];
             }
         }
         for k in 0..n {
-            let mut t = col[k];
-            let mut at = parents[k];
-            while let Some(j) = at {
-                t -= jac[(k, j)] * col[j];
-                at = parents[j];
-            }
+            let t = ancestors(bodies, k).fold(col[k], |t, j| t - jac[(k, j)] * col[j]);
             col[k] = t / jac[(k, k)];
         }
     }
@@ -907,12 +897,18 @@ impl Robot {
         for (c, &i) in self.inputs.iter().enumerate() {
             x[(i, 2 * n + c)] = h;
         }
-        let parents: Vec<Option<usize>> =
-            self.engine.tree().bodies.iter().map(|b| b.parent).collect();
-        let dense = jac.clone();
-        if branched(&parents) && tree_factor(&mut jac, &parents) {
-            tree_solve(&jac, &parents, &mut x);
-        } else if !dense.lu().solve_mut(&mut x) {
+        // in the tree's pattern where it branches (a copy kept for the
+        // dense fallback on a tiny pivot), else dense
+        let bodies = &self.engine.tree().bodies;
+        let mut in_tree = false;
+        if branched(bodies) {
+            let mut factors = jac.clone();
+            if tree_factor(&mut factors, bodies) {
+                tree_solve(&factors, bodies, &mut x);
+                in_tree = true;
+            }
+        }
+        if !in_tree && !jac.lu().solve_mut(&mut x) {
             return Err(RobotError::SingularNewtonMatrix);
         }
         let mut a = DMatrix::<f64>::zeros(2 * n, 2 * n);
