@@ -85,6 +85,34 @@ impl Encoding {
         self.encode_parts(kinds, z.q.as_slice(), z.v.as_slice(), out);
     }
 
+    /// The chain rule through the encoding: for a function whose gradient
+    /// with respect to the encoded state (its first [`Encoding::dim`]
+    /// entries) at coordinates `q` is `g`, calls `add(i, ∂/∂q_i)` and then
+    /// `add(n + i, ∂/∂v_i)` for i = 0 … n − 1, n = `kinds.len()`
+    /// (∂(sin θ, cos θ)/∂θ = (cos θ, −sin θ) under [`Encoding::SinCos`]).
+    pub fn pull_back(
+        self,
+        kinds: &[CoordinateKind],
+        q: &[f64],
+        g: &[f64],
+        mut add: impl FnMut(usize, f64),
+    ) {
+        let mut k = 0;
+        for (i, kind) in kinds.iter().enumerate() {
+            if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
+                let (sn, cs) = q[i].sin_cos();
+                add(i, g[k] * cs - g[k + 1] * sn);
+                k += 2;
+            } else {
+                add(i, g[k]);
+                k += 1;
+            }
+        }
+        for i in 0..kinds.len() {
+            add(kinds.len() + i, g[k + i]);
+        }
+    }
+
     /// [`Encoding::encode`] of the state with coordinates `q` and
     /// velocities `v` (one of each per kind), for models whose size is
     /// known at run time.
@@ -754,20 +782,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         // chain rule through the encoding
         for j in 0..N {
             let g = &grad[j * d..(j + 1) * d];
-            let mut k = 0;
-            for (i, kind) in M::KINDS.iter().enumerate() {
-                if self.encoding == Encoding::SinCos && *kind == CoordinateKind::Angle {
-                    let (sn, cs) = z.q[i].sin_cos();
-                    v_q[(j, i)] += g[k] * cs - g[k + 1] * sn;
-                    k += 2;
-                } else {
-                    v_q[(j, i)] += g[k];
-                    k += 1;
-                }
-            }
-            for i in 0..N {
-                v_v[(j, i)] += g[k + i];
-            }
+            self.encoding
+                .pull_back(&M::KINDS, z.q.as_slice(), g, |i, x| {
+                    if i < N {
+                        v_q[(j, i)] += x;
+                    } else {
+                        v_v[(j, i - N)] += x;
+                    }
+                });
             for i in 0..U {
                 v_u[(j, i)] += g[at_u + i];
                 if let Some(p) = at_prev {

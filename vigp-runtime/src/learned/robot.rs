@@ -534,20 +534,8 @@ impl LearnedRobot {
         for j in 0..n {
             v[j] += mean[j];
             let g = &grad[j * dim..(j + 1) * dim];
-            let mut k = 0;
-            for (i, kind) in m.kinds.iter().enumerate() {
-                if m.encoding == Encoding::SinCos && *kind == CoordinateKind::Angle {
-                    let (sn, cs) = z.q[i].sin_cos();
-                    a[(n + j, i)] += g[k] * cs - g[k + 1] * sn;
-                    k += 2;
-                } else {
-                    a[(n + j, i)] += g[k];
-                    k += 1;
-                }
-            }
-            for i in 0..n {
-                a[(n + j, n + i)] += g[k + i];
-            }
+            m.encoding
+                .pull_back(&m.kinds, &z.q, g, |i, x| a[(n + j, i)] += x);
             for c in 0..nu {
                 b_prev[(n + j, c)] = g[e + c];
                 b[(n + j, c)] += g[e + nu + c];
