@@ -41,6 +41,11 @@
 //! from the prior: one combination of π is held at its declared value
 //! (`scale.rs`).
 //!
+//! **Repeated samples.** The draw is with replacement (the `paper`
+//! example's), so a large N holds some samples twice; both GPs train on a
+//! repeated transition once (`vigp::learned::distinct_rows`), the
+//! identification weights its row twice.
+//!
 //! **Too few transitions.** `identify` estimates the rows' noise from their
 //! residuals and refuses fewer rows than base parameters plus one
 //! transition; there the identified model is the declared one (the prior
@@ -102,6 +107,11 @@ struct Cli {
     /// declared parameters (`vigp::identify::Prior::relative`).
     #[arg(long, default_value_t = 0.5)]
     prior_sd: f64,
+    /// Diagnostic: the identification gets the N training samples without
+    /// their noise (the GPs still train on the noisy ones), which separates
+    /// what the noise does to the identification from the rest.
+    #[arg(long)]
+    noise_free_identification: bool,
     /// Output directory (figures, CSV, report.md).
     #[arg(long, default_value = "docs/identify")]
     out: PathBuf,
@@ -247,11 +257,11 @@ where
             .map(|q0| ground_truth(truth, q0, cli.protocol.gt()))
             .collect::<Result<_, _>>()?;
         let (train, test) = trajs.split_at(cli.protocol.train_trajectories);
-        let pool: Vec<Transition<N>> = train
+        let clean: Vec<Transition<N>> = train
             .iter()
             .flat_map(|traj| transitions(traj, DT))
-            .map(|a| add_noise(&a, &mut rng))
             .collect();
+        let pool: Vec<Transition<N>> = clean.iter().map(|a| add_noise(a, &mut rng)).collect();
         let windows = cli.protocol.test_windows(test, &mut rng);
         let counts = Counts::default();
         let vi_mse = |m: M| {
@@ -318,7 +328,15 @@ where
             point(NOMINAL, nominal_mse);
             point(TRUE_PI, true_mse);
             point(NOMINAL_GP, gp_mse(nominal, &data, n, NOMINAL_GP));
-            match identified(&regressor, &data, &direction, cli.prior_sd) {
+            let id_data: Vec<Transition<N>> = if cli.noise_free_identification {
+                draw[..n.min(pool.len())]
+                    .iter()
+                    .map(|&i| clean[i])
+                    .collect()
+            } else {
+                data.clone()
+            };
+            match identified(&regressor, &id_data, &direction, cli.prior_sd) {
                 Ok((model, s)) => {
                     point(IDENTIFIED, vi_mse(model));
                     point(IDENTIFIED_GP, gp_mse(model, &data, n, IDENTIFIED_GP));
@@ -449,9 +467,14 @@ fn main() -> Result<(), Box<dyn std::error::Error + Send + Sync>> {
     }
     let t0 = Instant::now();
     let settings = format!(
-        "{}, identification prior {} × declared",
+        "{}, identification prior {} × declared{}",
         cli.protocol.describe(),
-        cli.prior_sd
+        cli.prior_sd,
+        if cli.noise_free_identification {
+            ", identification on the samples without their noise (diagnostic)"
+        } else {
+            ""
+        }
     );
     println!("vigp identify example: {settings}");
     let bar = ProgressBar::new(

@@ -2,8 +2,8 @@
 //! time ([`DynDataset`], the same reader as for a declared mechanism), its
 //! transitions, training on top of the tree engine's step, the step's
 //! composition checked against the robot's step and the GP's own
-//! prediction, a model file that round-trips bit for bit, and typed
-//! errors for wrong input.
+//! prediction, a model file that round-trips bit for bit, typed errors
+//! for wrong input, and a transition repeated exactly trained on once.
 
 use vigp_runtime::data::{Dataset, DynDataset, ReadOptions};
 use vigp_runtime::gp::TrainOptions;
@@ -358,4 +358,43 @@ fn a_learned_robot_steps_saves_and_refuses_bad_input() {
         identified_robot(&declared, DT, &other),
         Err(LearnedRobotError::Identified(_))
     ));
+}
+
+/// A transition repeated exactly is one measurement, as for a declared
+/// mechanism (`vigp_runtime::learned::distinct_rows`): training on a log's
+/// transitions with the first 15 of them given twice (each repeat right
+/// after its original) gives the model trained on the log's transitions,
+/// bit for bit (its GP on the distinct rows, in their order). Kept twice,
+/// the repeats would be 15 more rows of the GP (`gp().n()` 55, not 40), a
+/// different GP.
+#[test]
+fn a_repeated_transition_trains_once() {
+    let data = read(&log(&arm(0.3), [0.1, -0.2, 0.05], 40));
+    let ts = RobotTransition::from_dataset(&data);
+    assert_eq!(ts.len(), 40);
+    let repeated: Vec<RobotTransition> = ts
+        .iter()
+        .enumerate()
+        .flat_map(|(i, t)| std::iter::repeat_n(t.clone(), if i < 15 { 2 } else { 1 }))
+        .collect();
+    assert_eq!(repeated.len(), 55);
+    let options = TrainOptions {
+        restarts: 1,
+        ..TrainOptions::default()
+    };
+    let train = |data: &[RobotTransition]| {
+        LearnedRobot::train(
+            arm(0.1),
+            DT,
+            data,
+            Encoding::SinCos,
+            Prior::Nominal,
+            &options,
+        )
+        .unwrap()
+        .0
+    };
+    let (once, twice) = (train(&ts), train(&repeated));
+    assert_eq!(twice.gp().n(), 40);
+    assert_eq!(twice.to_saved(), once.to_saved());
 }

@@ -347,6 +347,12 @@ impl LearnedRobot {
     /// identified ones first ([`identified_robot`]), and the learned model
     /// keeps that robot. The GP options' `mean` is overridden by `prior`.
     ///
+    /// A transition that repeats an earlier one exactly (the same state,
+    /// inputs and next velocity, bit for bit) is one measurement recorded
+    /// twice, and the GP trains on it once ([`super::distinct_rows`], as
+    /// for a declared mechanism): the learned model's `gp().n()` counts the
+    /// distinct transitions.
+    ///
     /// Errors: no data, transitions of the wrong lengths or not finite, a
     /// bad `dt`, identified parameters that do not fit, a failing step of
     /// the prior, or GP training.
@@ -393,6 +399,7 @@ impl LearnedRobot {
                     })?;
             targets.extend(t.v_next.iter().zip(&base).map(|(v, b)| v - b));
         }
+        super::distinct_rows(&mut inputs, d, &mut targets, n);
         let mut opts = options.clone();
         opts.mean = prior_model.gp_mean();
         let (gp, report) = Gp::train(&inputs, d, &targets, n, &opts)?;

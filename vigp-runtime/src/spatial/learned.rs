@@ -306,7 +306,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// With constraints, the prior of a (noisy, inconsistent) training state
     /// is evaluated at its consistent neighbour, as at prediction time.
     /// An actuated mechanism's model trained here predicts under u = 0;
-    /// [`LearnedSpatial::train_forced`] learns under inputs.
+    /// [`LearnedSpatial::train_forced`] learns under inputs. A transition
+    /// that repeats an earlier one exactly is one measurement, trained on
+    /// once ([`crate::learned::distinct_rows`]).
     pub fn train(
         stepper: LieStepper<S, B, J, N, C>,
         data: &[SpatialTransition<B>],
@@ -414,6 +416,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             };
             targets.extend((next - base).iter());
         }
+        // a transition repeated exactly is one measurement
+        // (`crate::learned::distinct_rows`)
+        crate::learned::distinct_rows(&mut inputs, d, &mut targets, N);
         let mut opts = options.clone();
         opts.mean = if prior.uses_nominal_step() {
             PriorMean::Zero
