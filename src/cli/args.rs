@@ -36,7 +36,7 @@ pub(super) enum Command {
 }
 
 /// A robot loaded from URDF at run time instead of a registered mechanism
-/// (`fit`, `simulate`, `identify`).
+/// (`fit`, `simulate`, `identify`, `excite`).
 #[derive(Args, Debug, Clone, Default)]
 pub(super) struct RobotArgs {
     /// A robot from a URDF file instead of `--system`: its joints with a
@@ -452,6 +452,10 @@ pub(super) struct ExciteArgs {
     /// The mechanism (with several registered; case and `_` do not matter).
     #[arg(long)]
     pub(super) system: Option<String>,
+    /// Or a robot from URDF, its design kept within the URDF's joint
+    /// position and velocity limits.
+    #[command(flatten)]
+    pub(super) robot: RobotArgs,
     /// Length of the experiment (s); also the period of the inputs.
     #[arg(long, allow_negative_numbers = true)]
     pub(super) duration: f64,
@@ -479,10 +483,12 @@ pub(super) struct ExciteArgs {
         allow_hyphen_values = true
     )]
     pub(super) q: Vec<f64>,
-    /// The discrete Euler–Lagrange rule of the regression (and of the
-    /// design's simulation).
-    #[arg(long, value_enum, default_value = "midpoint")]
-    pub(super) rule: RuleArg,
+    /// The discrete Euler–Lagrange rule of the regression (and of a
+    /// declared mechanism's simulation) [default: midpoint; a robot from
+    /// `--urdf`: first-order, the rule of the tree engine that simulates
+    /// the design].
+    #[arg(long, value_enum)]
+    pub(super) rule: Option<RuleArg>,
     /// Random inputs tried before the optimisation starts from the best.
     #[arg(long, default_value_t = 8)]
     pub(super) starts: usize,

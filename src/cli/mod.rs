@@ -25,14 +25,15 @@
 //! ```
 //!
 //! A robot from a URDF file takes `--urdf robot.urdf [--actuated j1,j2]`
-//! instead of `--system` in `simulate`, `identify` and `fit`; `score`
-//! reads the model `fit` wrote for it. The log's columns are the robot's
+//! instead of `--system` in `simulate`, `identify`, `excite` and `fit`;
+//! `score` reads the model `fit` wrote for it. The log's columns are the robot's
 //! joints with a coordinate (file depth-first order) and `u_<joint>` per
 //! actuated joint; the steps are the tree engine's (`vigp::Robot`), the
 //! identification its first-order residual
 //! ([`crate::identify::RobotRegressor`]), the model a
-//! [`crate::learned::robot::LearnedRobot`]. `predict`, `export` and
-//! `excite` take declared mechanisms only.
+//! [`crate::learned::robot::LearnedRobot`] (by default: `--rule` changes
+//! the identification's). `predict` and `export` take declared mechanisms
+//! only; `excite --urdf` keeps its design within the URDF's joint limits.
 //!
 //! * `fit` reads measured positions ([`crate::data`] format), builds the
 //!   transitions, trains a [`Learned`] model on at most `--max-samples`
@@ -296,11 +297,11 @@ where
     let on_robot = match &cli.command {
         Command::Fit(args::FitArgs { robot, .. })
         | Command::Simulate(args::SimulateArgs { robot, .. })
-        | Command::Identify(args::IdentifyArgs { robot, .. }) => robot.urdf.is_some(),
+        | Command::Identify(args::IdentifyArgs { robot, .. })
+        | Command::Excite(args::ExciteArgs { robot, .. }) => robot.urdf.is_some(),
         Command::Score(ScoreArgs { model, .. })
         | Command::Predict(PredictArgs { model, .. })
         | Command::Export(ExportArgs { model, .. }) => robot::is_robot_model(model),
-        Command::Excite(_) => false,
     };
     if on_robot {
         return robot::run(&cli.command, out);

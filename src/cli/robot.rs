@@ -1,5 +1,5 @@
 //! The tool on a robot loaded from URDF at run time (`--urdf FILE
-//! [--actuated J,…]`): `simulate`, `identify` and `fit` on the linear-time
+//! [--actuated J,…]`): `simulate`, `identify`, `excite` and `fit` on the linear-time
 //! tree engine ([`crate::Robot`]), and `score` of the models `fit` writes
 //! ([`LearnedRobot`]). The log's columns are the robot's joints with a
 //! coordinate, in the file's depth-first order, and `u_<joint>` per
@@ -12,6 +12,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 use super::args::{Command, EncodingArg, FitArgs, ReadArgs, ScoreArgs, SimulateArgs};
+use super::excite::excite_robot;
 use super::fit::{choose, report_data, resolve_prior, train_options};
 use super::identify::identify_robot;
 use super::simulate::check_start;
@@ -34,8 +35,8 @@ pub(super) fn is_robot_model(path: &Path) -> bool {
         .is_ok_and(|v| v["format"] == crate::learned::robot::FORMAT)
 }
 
-/// Runs a command on a robot: `urdf` for `fit`, `simulate` and
-/// `identify`, the model file for `score`.
+/// Runs a command on a robot: `urdf` for `fit`, `simulate`, `identify`
+/// and `excite`, the model file for `score`.
 pub(super) fn run(command: &Command, out: &mut dyn Write) -> Result<(), CliError> {
     match command {
         Command::Simulate(a) => simulate(
@@ -59,9 +60,11 @@ pub(super) fn run(command: &Command, out: &mut dyn Write) -> Result<(), CliError
              `export` take models of declared mechanisms"
                 .into(),
         )),
-        Command::Excite(_) => Err(CliError::Usage(
-            "`excite` designs inputs for declared mechanisms (--system)".into(),
-        )),
+        Command::Excite(a) => excite_robot(
+            a,
+            &load(a.robot.urdf.as_deref(), &a.robot.actuated, &a.set)?,
+            out,
+        ),
     }
 }
 

@@ -67,7 +67,7 @@ fn compare<M, const N: usize, const C: usize, const U: usize>(
     M: Mechanism<N, C> + Parameters + Copy + Inputs<U>,
 {
     let r = DelRegressor::midpoint(declared, DT).unwrap();
-    let ex = Excitation::<_, N, C, U>::new(&r, problem).unwrap();
+    let ex = Excitation::new::<U>(&r, problem).unwrap();
     let d = ex.design().unwrap();
     println!(
         "{name}: design log det {:.3} (best random start {:.3}), {} iterations, {} evaluations, \
@@ -158,7 +158,7 @@ fn designed_input_beats_random_inputs_on_the_double_pendulum() {
 fn bad_problems_are_errors() {
     let r = DelRegressor::midpoint(DrivenCartpole::default().minimal(), DT).unwrap();
     let good = Problem::new(vec![0.0, 0.3], 100, 2, vec![1.0]);
-    let err = |p: &Problem| Excitation::<_, 2, 0, 1>::new(&r, p).err();
+    let err = |p: &Problem| Excitation::new::<1>(&r, p).err();
     let mut p = good.clone();
     p.amplitude = vec![0.0];
     assert!(matches!(err(&p), Some(IdentifyError::Options { .. })));
@@ -186,7 +186,7 @@ fn bad_problems_are_errors() {
     let unforced =
         DelRegressor::midpoint(vigp::systems::Cartpole::default().minimal(), DT).unwrap();
     assert!(matches!(
-        Excitation::<_, 2, 0, 0>::new(&unforced, &Problem::new(vec![0.0, 0.3], 100, 2, vec![])),
+        Excitation::new::<0>(&unforced, &Problem::new(vec![0.0, 0.3], 100, 2, vec![])),
         Err(IdentifyError::NoInputs)
     ));
 }

@@ -2,8 +2,8 @@
 //! tree engine's rollout (checked against the library's), `identify`
 //! recovers a perturbed robot from its log (its identified robot then
 //! reproduces a held-out log), `fit` learns on top of the nominal and of
-//! the identified robot, `score` compares them, and wrong use is a clear
-//! error.
+//! the identified robot, `score` compares them, `excite` designs inputs
+//! within the URDF's limits, and wrong use is a clear error.
 
 use std::path::Path;
 
@@ -275,6 +275,93 @@ fn simulate_identify_fit_score_on_a_perturbed_arm() {
         identified_learned_mse < 1e-3 * learned_mse,
         "{identified_learned_mse}"
     );
+}
+
+/// `excite --urdf` on the test arm with its elbow axis turned vertical (a
+/// SCARA-like arm: gravity does no work, so zero-mean periodic torques can
+/// keep it within its limits): the design beats a random input of the
+/// same amplitude by its log det information (the line it prints), stays
+/// within the URDF's joint position and velocity limits (the excess it
+/// prints, at most the design's tolerance 1e-3), writes a plan of |u| ≤ 1
+/// per input, and `simulate --urdf --inputs` runs on it.
+#[test]
+fn excite_designs_within_the_urdf_limits() {
+    let dir = temp_dir("excite");
+    let urdf = dir.join("scara.urdf");
+    let scara = nominal_urdf().replace(r#"<axis xyz="0 1 0"/>"#, r#"<axis xyz="0 0 1"/>"#);
+    assert_ne!(scara, nominal_urdf());
+    std::fs::write(&urdf, scara).unwrap();
+    let plan = dir.join("plan.csv");
+    let text = run(&[
+        "excite",
+        "--urdf",
+        s(&urdf),
+        "--actuated",
+        ACTUATED,
+        "--duration",
+        "0.2",
+        "--dt",
+        "0.002",
+        "--harmonics",
+        "1",
+        "--amplitude",
+        "1",
+        "--q",
+        "0.2,-0.4,0.05",
+        "--out",
+        s(&plan),
+    ])
+    .unwrap();
+    eprintln!("{text}");
+    let line = |start: &str| {
+        text.lines()
+            .find(|l| l.starts_with(start))
+            .unwrap_or_else(|| panic!("{text}"))
+            .to_string()
+    };
+    let number = |line: &str, after: &str| -> f64 {
+        let rest = &line[line.find(after).unwrap() + after.len()..];
+        let end = rest.find([',', ' ']).unwrap_or(rest.len());
+        rest[..end].parse().unwrap()
+    };
+    let info = line("log det information: design ");
+    assert!(
+        number(&info, "design ") > number(&info, "same amplitude "),
+        "{info}"
+    );
+    let limits = line("joint limits (the URDF's)");
+    assert!(number(&limits, "of the design ") <= 1e-3, "{limits}");
+    let rows = table(&plan);
+    assert_eq!(rows[0].join(","), "t,u_j1,u_j2,u_j3");
+    assert_eq!(rows.len(), 1 + 100);
+    for r in &rows[1..] {
+        for u in &r[1..] {
+            let u: f64 = u.parse().unwrap();
+            assert!(u.abs() <= 1.0 + 1e-12, "{u}");
+        }
+    }
+    let log = dir.join("log.csv");
+    run(&[
+        "simulate",
+        "--urdf",
+        s(&urdf),
+        "--actuated",
+        ACTUATED,
+        "--q",
+        "0.2,-0.4,0.05",
+        "--dt",
+        "0.002",
+        "--steps",
+        "100",
+        "--inputs",
+        s(&plan),
+        "--out",
+        s(&log),
+    ])
+    .unwrap();
+    // 101 states and the last one's q + Δt·v
+    assert_eq!(positions(&log, 3).len(), 102);
+    std::fs::remove_dir_all(&dir).ok();
 }
 
 #[test]

@@ -12,7 +12,8 @@
 //!
 //! The nominal mechanism (the regressor's model, its declared parameters)
 //! is rolled out by its own variational integrator (the regressor's rule
-//! and Δt) from a start at rest under the input; the rows of every
+//! and Δt; a robot's regressor: the robot's tree engine) from a start at
+//! rest under the input; the rows of every
 //! transition are stacked ([`super::stack`], least squares) into W. The
 //! base parameters are fixed once per problem: the independent columns
 //! (a rank-revealing decomposition, [`Base`]) of the rows of the random
@@ -49,9 +50,10 @@
 //! that fails (a Newton step that does not converge) makes the point
 //! unevaluable, and the optimiser steps back from it.
 
-use super::{Base, DelRegressor, IdentifyError, Log, Noise, Regressor, stack};
+use super::{Base, DelRegressor, IdentifyError, Log, Noise, Regressor, RobotRegressor, stack};
 use crate::gp::optimise;
 use crate::mechanism::Mechanism;
+use crate::robot::RobotState;
 use crate::{State, Variational};
 use nalgebra::{DMatrix, SVector};
 use vigp_core::{Inputs, Parameters};
@@ -224,16 +226,22 @@ pub struct Designed {
     pub evaluations: usize,
 }
 
-/// The excitation design of one mechanism ([module docs](self)).
-pub struct Excitation<'a, M, const N: usize, const C: usize, const U: usize>
-where
-    M: Mechanism<N, C>,
-{
-    regressor: &'a DelRegressor<M, N, C>,
+/// The nominal model's forced rollout from the problem's start at rest:
+/// `plan[j]` drives step j; the result is the positions x_0, …, x_S of the
+/// S + 1 states and x_S + Δt·v_S (S + 2 samples, [`Log`]'s convention).
+type Rollout<'a> = Box<dyn Fn(&[Vec<f64>]) -> Result<Vec<Vec<f64>>, IdentifyError> + 'a>;
+
+/// The excitation design of one mechanism or robot ([module docs](self)):
+/// [`Excitation::new`] for a declared mechanism's [`DelRegressor`],
+/// [`Excitation::robot`] for a [`RobotRegressor`]. Both design and score
+/// inputs the same way; they differ in the rollout that produces a log.
+pub struct Excitation<'a, R> {
+    regressor: &'a R,
+    rollout: Rollout<'a>,
     problem: Problem,
     period: f64,
-    vi: Variational<M, N, C>,
-    z0: State<N>,
+    dt: f64,
+    inputs: usize,
     base: Vec<usize>,
     scale: Vec<f64>,
     starts: Vec<Fourier>,
@@ -253,116 +261,140 @@ fn options_error(message: String) -> IdentifyError {
     IdentifyError::Options { message }
 }
 
-impl<'a, M, const N: usize, const C: usize, const U: usize> Excitation<'a, M, N, C, U>
+/// Checks `problem` for `n` coordinates, `u` inputs and `p` parameters at
+/// time step `dt`; returns the period of the inputs.
+fn check_problem(
+    problem: &Problem,
+    n: usize,
+    u: usize,
+    p: usize,
+    dt: f64,
+) -> Result<f64, IdentifyError> {
+    if u == 0 {
+        return Err(IdentifyError::NoInputs);
+    }
+    if problem.start.len() != n {
+        return Err(IdentifyError::Dimension {
+            what: "start",
+            expected: n,
+            found: problem.start.len(),
+        });
+    }
+    if problem.start.iter().any(|x| !x.is_finite()) {
+        return Err(IdentifyError::NonFinite {
+            what: "start".into(),
+        });
+    }
+    if problem.amplitude.len() != u {
+        return Err(IdentifyError::Dimension {
+            what: "amplitudes (one per input)",
+            expected: u,
+            found: problem.amplitude.len(),
+        });
+    }
+    if let Some(a) = problem
+        .amplitude
+        .iter()
+        .find(|a| !(a.is_finite() && **a > 0.0))
+    {
+        return Err(options_error(format!(
+            "input amplitude {a}: must be positive and finite"
+        )));
+    }
+    if problem.harmonics == 0 {
+        return Err(options_error("at least one harmonic".into()));
+    }
+    let period = problem.period.unwrap_or(problem.steps as f64 * dt);
+    if !(period.is_finite() && period > 0.0) {
+        return Err(options_error(format!(
+            "period {period}: must be positive and finite"
+        )));
+    }
+    if !problem.position_limits.is_empty() {
+        if problem.position_limits.len() != n {
+            return Err(IdentifyError::Dimension {
+                what: "position limits",
+                expected: n,
+                found: problem.position_limits.len(),
+            });
+        }
+        if let Some((lo, hi)) = problem
+            .position_limits
+            .iter()
+            .find(|(lo, hi)| lo.is_nan() || hi.is_nan() || lo >= hi)
+        {
+            return Err(options_error(format!("position limits [{lo}, {hi}]")));
+        }
+        if let Some(c) = (0..n).find(|&c| {
+            let (lo, hi) = problem.position_limits[c];
+            !(lo..=hi).contains(&problem.start[c])
+        }) {
+            return Err(options_error(format!(
+                "the start's coordinate {c} is outside its position limits"
+            )));
+        }
+    }
+    if !problem.velocity_limits.is_empty() {
+        if problem.velocity_limits.len() != n {
+            return Err(IdentifyError::Dimension {
+                what: "velocity limits",
+                expected: n,
+                found: problem.velocity_limits.len(),
+            });
+        }
+        if let Some(v) = problem
+            .velocity_limits
+            .iter()
+            .find(|v| v.is_nan() || **v <= 0.0)
+        {
+            return Err(options_error(format!("velocity limit {v}: must be > 0")));
+        }
+    }
+    let positive = |x: f64| x.is_finite() && x > 0.0;
+    if !(positive(problem.penalty) && positive(problem.limit_tolerance) && positive(problem.ridge))
+    {
+        return Err(options_error(
+            "penalty, limit tolerance and ridge must be positive and finite".into(),
+        ));
+    }
+    if problem.starts == 0 {
+        return Err(options_error("at least one random start".into()));
+    }
+    if problem.steps < 2 * p + 2 {
+        return Err(IdentifyError::TooFewTransitions {
+            rows: problem.steps,
+            needed: 2 * p + 2,
+        });
+    }
+    Ok(period)
+}
+
+impl<'a, M, const N: usize, const C: usize> Excitation<'a, DelRegressor<M, N, C>>
 where
-    M: Mechanism<N, C> + Parameters + Copy + Inputs<U>,
+    M: Mechanism<N, C> + Parameters + Copy,
 {
     /// Checks `problem`, simulates its random starts and fixes the base
-    /// parameters and the column scales of the criterion.
-    pub fn new(
+    /// parameters and the column scales of the criterion. `U` is the
+    /// mechanism's number of inputs (`Dynamics::INPUTS`); the rollouts are
+    /// the mechanism's own variational integrator of the regressor's rule,
+    /// from the start projected onto the loops' constraints.
+    pub fn new<const U: usize>(
         regressor: &'a DelRegressor<M, N, C>,
         problem: &Problem,
-    ) -> Result<Self, IdentifyError> {
-        if U == 0 {
-            return Err(IdentifyError::NoInputs);
-        }
+    ) -> Result<Self, IdentifyError>
+    where
+        M: Inputs<U>,
+    {
         let dt = regressor.dt();
-        if problem.start.len() != N {
+        let declared = <M as vigp_core::Dynamics<N, C>>::INPUTS;
+        if U != declared {
             return Err(IdentifyError::Dimension {
-                what: "start",
-                expected: N,
-                found: problem.start.len(),
+                what: "inputs (the mechanism's actuated joints)",
+                expected: declared,
+                found: U,
             });
         }
-        if problem.start.iter().any(|x| !x.is_finite()) {
-            return Err(IdentifyError::NonFinite {
-                what: "start".into(),
-            });
-        }
-        if problem.amplitude.len() != U {
-            return Err(IdentifyError::Dimension {
-                what: "amplitudes (one per input)",
-                expected: U,
-                found: problem.amplitude.len(),
-            });
-        }
-        if let Some(a) = problem
-            .amplitude
-            .iter()
-            .find(|a| !(a.is_finite() && **a > 0.0))
-        {
-            return Err(options_error(format!(
-                "input amplitude {a}: must be positive and finite"
-            )));
-        }
-        if problem.harmonics == 0 {
-            return Err(options_error("at least one harmonic".into()));
-        }
-        let period = problem.period.unwrap_or(problem.steps as f64 * dt);
-        if !(period.is_finite() && period > 0.0) {
-            return Err(options_error(format!(
-                "period {period}: must be positive and finite"
-            )));
-        }
-        if !problem.position_limits.is_empty() {
-            if problem.position_limits.len() != N {
-                return Err(IdentifyError::Dimension {
-                    what: "position limits",
-                    expected: N,
-                    found: problem.position_limits.len(),
-                });
-            }
-            if let Some((lo, hi)) = problem
-                .position_limits
-                .iter()
-                .find(|(lo, hi)| lo.is_nan() || hi.is_nan() || lo >= hi)
-            {
-                return Err(options_error(format!("position limits [{lo}, {hi}]")));
-            }
-            if let Some(c) = (0..N).find(|&c| {
-                let (lo, hi) = problem.position_limits[c];
-                !(lo..=hi).contains(&problem.start[c])
-            }) {
-                return Err(options_error(format!(
-                    "the start's coordinate {c} is outside its position limits"
-                )));
-            }
-        }
-        if !problem.velocity_limits.is_empty() {
-            if problem.velocity_limits.len() != N {
-                return Err(IdentifyError::Dimension {
-                    what: "velocity limits",
-                    expected: N,
-                    found: problem.velocity_limits.len(),
-                });
-            }
-            if let Some(v) = problem
-                .velocity_limits
-                .iter()
-                .find(|v| v.is_nan() || **v <= 0.0)
-            {
-                return Err(options_error(format!("velocity limit {v}: must be > 0")));
-            }
-        }
-        let positive = |x: f64| x.is_finite() && x > 0.0;
-        if !(positive(problem.penalty)
-            && positive(problem.limit_tolerance)
-            && positive(problem.ridge))
-        {
-            return Err(options_error(
-                "penalty, limit tolerance and ridge must be positive and finite".into(),
-            ));
-        }
-        if problem.starts == 0 {
-            return Err(options_error("at least one random start".into()));
-        }
-        let p = regressor.structure().len();
-        if problem.steps < 2 * p + 2 {
-            return Err(IdentifyError::TooFewTransitions {
-                rows: problem.steps,
-                needed: 2 * p + 2,
-            });
-        }
+        let period = check_problem(problem, N, U, regressor.structure().len(), dt)?;
         let model = *regressor.model();
         let vi = if regressor.alpha() == 0.0 {
             Variational::new(model, dt)
@@ -382,12 +414,78 @@ where
                 },
             )?
         };
+        let rollout: Rollout<'a> = Box::new(move |plan: &[Vec<f64>]| {
+            let plan: Vec<SVector<f64, U>> =
+                plan.iter().map(|u| SVector::from_column_slice(u)).collect();
+            let traj = vi
+                .rollout_forced(&z0, &plan)
+                .map_err(|e| IdentifyError::Simulation {
+                    message: e.to_string(),
+                })?;
+            let mut positions: Vec<Vec<f64>> =
+                traj.iter().map(|z| z.q.as_slice().to_vec()).collect();
+            if let Some(last) = traj.last() {
+                positions.push((last.q + last.v * dt).as_slice().to_vec());
+            }
+            Ok(positions)
+        });
+        Self::with_rollout(regressor, problem, period, dt, U, rollout)
+    }
+}
+
+impl<'a> Excitation<'a, RobotRegressor> {
+    /// [`Excitation::new`] for a robot loaded from URDF: the rollouts are
+    /// the robot's tree engine ([`crate::robot::Robot::rollout_with`], the
+    /// first-order rule) from the start at rest, whichever rule the
+    /// regressor stacks (a midpoint regressor of a first-order log only
+    /// scores the design; it does not change the rollout).
+    pub fn robot(regressor: &'a RobotRegressor, problem: &Problem) -> Result<Self, IdentifyError> {
+        let dt = regressor.dt();
+        let robot = regressor.robot();
+        let (n, u) = (robot.dof(), robot.input_names().len());
+        let period = check_problem(problem, n, u, regressor.structure().len(), dt)?;
+        let z0 = RobotState::new(problem.start.clone(), vec![0.0; n]);
+        let rollout: Rollout<'a> = Box::new(move |plan: &[Vec<f64>]| {
+            let run = robot
+                .rollout_with(&z0, dt, plan.len(), |k, _| plan[k].clone())
+                .map_err(|e| IdentifyError::Simulation {
+                    message: e.to_string(),
+                })?;
+            let mut positions: Vec<Vec<f64>> = run.states.iter().map(|z| z.q.clone()).collect();
+            if let Some(last) = run.states.last() {
+                positions.push(
+                    last.q
+                        .iter()
+                        .zip(&last.v)
+                        .map(|(q, v)| q + dt * v)
+                        .collect(),
+                );
+            }
+            Ok(positions)
+        });
+        Self::with_rollout(regressor, problem, period, dt, u, rollout)
+    }
+}
+
+impl<'a, R: Regressor> Excitation<'a, R> {
+    /// Simulates the random starts of a checked problem and fixes the base
+    /// parameters and the column scales of the criterion.
+    fn with_rollout(
+        regressor: &'a R,
+        problem: &Problem,
+        period: f64,
+        dt: f64,
+        inputs: usize,
+        rollout: Rollout<'a>,
+    ) -> Result<Self, IdentifyError> {
+        let p = regressor.structure().len();
         let mut me = Excitation {
             regressor,
+            rollout,
             problem: problem.clone(),
             period,
-            vi,
-            z0,
+            dt,
+            inputs,
             base: Vec::new(),
             scale: Vec::new(),
             starts: Vec::new(),
@@ -396,17 +494,24 @@ where
         let mut rows: Vec<DMatrix<f64>> = Vec::new();
         let mut seed = problem.seed;
         let mut tries = 0;
+        let mut last_error = None;
         while me.starts.len() < problem.starts && tries < 4 * problem.starts {
             tries += 1;
             let input = me.random_with(&mut seed);
-            if let Ok((w, _)) = me.simulate(&input) {
-                rows.push(w);
-                me.starts.push(input);
+            match me.simulate(&input) {
+                Ok((w, _)) => {
+                    rows.push(w);
+                    me.starts.push(input);
+                }
+                Err(e) => last_error = Some(e),
             }
         }
         if me.starts.is_empty() {
             return Err(IdentifyError::Simulation {
-                message: "no random start could be simulated".into(),
+                message: format!(
+                    "no random start could be simulated{}",
+                    last_error.map_or(String::new(), |e| format!(" (the last: {e})"))
+                ),
             });
         }
         let total: usize = rows.iter().map(|w| w.nrows()).sum();
@@ -448,8 +553,8 @@ where
     }
 
     fn random_with(&self, seed: &mut u64) -> Fourier {
-        let two_l = 2 * self.problem.harmonics;
-        let coefficients = (0..U * two_l)
+        let (two_l, u) = (2 * self.problem.harmonics, self.inputs);
+        let coefficients = (0..u * two_l)
             .map(|k| self.problem.amplitude[k / two_l] * (2.0 * next(seed) - 1.0))
             .collect();
         let f = Fourier {
@@ -457,8 +562,8 @@ where
             harmonics: self.problem.harmonics,
             coefficients,
         };
-        let peak = f.peak(self.problem.steps, self.regressor.dt());
-        let factor: Vec<f64> = (0..U)
+        let peak = f.peak(self.problem.steps, self.dt);
+        let factor: Vec<f64> = (0..u)
             .map(|i| {
                 if peak[i] > 0.0 {
                     self.problem.amplitude[i] / peak[i]
@@ -473,8 +578,8 @@ where
     /// The input with its peak brought down to the amplitude where it
     /// exceeds it.
     fn clipped(&self, input: &Fourier) -> Fourier {
-        let peak = input.peak(self.problem.steps, self.regressor.dt());
-        let factor: Vec<f64> = (0..U)
+        let peak = input.peak(self.problem.steps, self.dt);
+        let factor: Vec<f64> = (0..self.inputs)
             .map(|i| {
                 let a = self.problem.amplitude[i];
                 if peak[i] > a { a / peak[i] } else { 1.0 }
@@ -486,27 +591,12 @@ where
     /// The rollout under `input` (as given): the stacked rows W and the
     /// noise-free log.
     fn simulate(&self, input: &Fourier) -> Result<(DMatrix<f64>, Log), IdentifyError> {
-        let dt = self.regressor.dt();
-        let plan: Vec<SVector<f64, U>> = input
-            .sample(self.problem.steps, dt)
-            .iter()
-            .map(|u| SVector::from_column_slice(u))
-            .collect();
-        let traj =
-            self.vi
-                .rollout_forced(&self.z0, &plan)
-                .map_err(|e| IdentifyError::Simulation {
-                    message: e.to_string(),
-                })?;
-        let mut positions: Vec<Vec<f64>> = traj.iter().map(|z| z.q.as_slice().to_vec()).collect();
-        // The last state's discrete velocity gives one more sample.
-        if let Some(last) = traj.last() {
-            positions.push((last.q + last.v * dt).as_slice().to_vec());
-        }
+        let plan = input.sample(self.problem.steps, self.dt);
+        let positions = (self.rollout)(&plan)?;
         // Rollout input j acts over [t_{j+1}, t_{j+2}]: log row j + 1.
-        let mut inputs = vec![vec![0.0; U]];
-        inputs.extend(plan.iter().map(|u| u.as_slice().to_vec()));
-        inputs.push(vec![0.0; U]);
+        let mut inputs = vec![vec![0.0; self.inputs]];
+        inputs.extend(plan);
+        inputs.push(vec![0.0; self.inputs]);
         let log = Log { positions, inputs };
         let (st, _) = stack(
             self.regressor,
@@ -531,7 +621,7 @@ where
 
     /// The largest excess over the limits, and Σ excess² over the samples.
     fn excess(&self, log: &Log) -> (f64, f64) {
-        let dt = self.regressor.dt();
+        let dt = self.dt;
         let (mut worst, mut sum) = (0.0f64, 0.0);
         let mut add = |e: f64| {
             if e > 0.0 {
@@ -560,11 +650,11 @@ where
     /// where it exceeds it).
     pub fn evaluate(&self, input: &Fourier) -> Result<Evaluation, IdentifyError> {
         if input.harmonics != self.problem.harmonics
-            || input.coefficients.len() != 2 * self.problem.harmonics * U
+            || input.coefficients.len() != 2 * self.problem.harmonics * self.inputs
         {
             return Err(IdentifyError::Dimension {
                 what: "Fourier coefficients",
-                expected: 2 * self.problem.harmonics * U,
+                expected: 2 * self.problem.harmonics * self.inputs,
                 found: input.coefficients.len(),
             });
         }
@@ -582,7 +672,7 @@ where
         Ok(Evaluation {
             log_det,
             violation,
-            peak: input.peak(self.problem.steps, self.regressor.dt()),
+            peak: input.peak(self.problem.steps, self.dt),
             log,
         })
     }
@@ -615,7 +705,7 @@ where
         };
         let start_log_det = self.evaluate(best)?.log_det;
         let two_l = 2 * self.problem.harmonics;
-        let hi: Vec<f64> = (0..U * two_l)
+        let hi: Vec<f64> = (0..self.inputs * two_l)
             .map(|k| self.problem.amplitude[k / two_l])
             .collect();
         let lo: Vec<f64> = hi.iter().map(|h| -h).collect();

@@ -69,6 +69,8 @@ enum Field {
 /// The discrete regressor of a [`Robot`] (module docs).
 #[derive(Clone, Debug)]
 pub struct RobotRegressor {
+    /// The declared robot (what [`RobotRegressor::robot`] returns).
+    robot: Robot,
     tree: RobotTree,
     inputs: Vec<usize>,
     dt: f64,
@@ -94,6 +96,12 @@ impl RobotRegressor {
     /// bias it shrinks from O(Δt) to O(Δt²).
     pub fn midpoint(robot: &Robot, dt: f64) -> Result<Self, IdentifyError> {
         Self::with_alpha(robot, dt, 0.5)
+    }
+
+    /// The robot whose declared parameters are the regressor's base point
+    /// (its actuated joints are the inputs).
+    pub fn robot(&self) -> &Robot {
+        &self.robot
     }
 
     /// The quadrature weight α (0: first order, ½: midpoint).
@@ -147,6 +155,7 @@ impl RobotRegressor {
         let refs: Vec<&str> = names.iter().map(String::as_str).collect();
         let structure = Structure::from_names(&refs)?;
         let mut out = RobotRegressor {
+            robot: robot.clone(),
             tree,
             inputs,
             dt,
