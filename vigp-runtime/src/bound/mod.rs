@@ -195,6 +195,9 @@ pub enum BoundError {
     /// The GP failed.
     #[error(transparent)]
     Gp(#[from] GpError),
+    /// A learned robot's step failed ([`crate::learned::robot`]).
+    #[error(transparent)]
+    LearnedRobot(#[from] Box<crate::learned::robot::LearnedRobotError>),
 }
 
 /// A window count for messages: `usize::MAX` stands for "more than any
@@ -540,6 +543,41 @@ pub struct ErrorBound {
 }
 
 impl ErrorBound {
+    /// A conformal bound without a fallback (a learned robot's).
+    pub(crate) fn conformal_alone(
+        delta: f64,
+        parts: ConformalParts,
+        outputs: usize,
+        dt: f64,
+        noise_std: Vec<f64>,
+    ) -> Self {
+        ErrorBound {
+            delta,
+            projection_lipschitz: 1.0,
+            parts: BoundParts::Conformal(parts),
+            samples: 0,
+            fallback: None,
+            outputs,
+            dt,
+            noise_std,
+        }
+    }
+
+    /// Number of GP outputs the bound was made for.
+    pub fn outputs(&self) -> usize {
+        self.outputs
+    }
+
+    /// The time step of the model the bound was made for.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// Per output √(σ_n² + jitter) of the model, in velocity units.
+    pub(crate) fn noise(&self) -> &[f64] {
+        &self.noise_std
+    }
+
     /// `"theorem1"`, `"rkhs"` or `"conformal"`.
     pub fn kind_name(&self) -> &'static str {
         match self.parts {
@@ -804,6 +842,54 @@ impl<const N: usize, const U: usize> Trace<'_, N, U> {
 /// estimate L and pick τ (evenly strided).
 const MAX_SAMPLES: usize = 256;
 
+/// Refuses calibration windows that start at training states: a window
+/// start (`starts`: each encoded as the GP's first `e` inputs) that equals
+/// a GP training input's state part to 1e-12 relative (run contents, not
+/// run names, are compared; held-out runs of a real system never repeat a
+/// state to 12 digits, while windows cut from the training runs start
+/// exactly at them).
+pub(crate) fn check_held_out(
+    gp: &crate::gp::Gp,
+    e: usize,
+    starts: impl Iterator<Item = Vec<f64>>,
+) -> Result<(), BoundError> {
+    let d = gp.input_dim();
+    if e > d || e == 0 {
+        return Ok(());
+    }
+    let train: Vec<&[f64]> = gp.inputs().chunks_exact(d).map(|x| &x[..e]).collect();
+    // sort the training states by their first entry to look windows up
+    let mut order: Vec<usize> = (0..train.len()).collect();
+    order.sort_by(|&a, &b| train[a][0].total_cmp(&train[b][0]));
+    let keys: Vec<f64> = order.iter().map(|&i| train[i][0]).collect();
+    let (mut overlapping, mut first, mut total) = (0, 0, 0);
+    for (wi, buf) in starts.enumerate() {
+        total += 1;
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs().max(b.abs()));
+        let tol = 1e-12 * (1.0 + buf[0].abs());
+        let lo = keys.partition_point(|k| *k < buf[0] - tol);
+        let hit = keys[lo..]
+            .iter()
+            .zip(&order[lo..])
+            .take_while(|(k, _)| **k <= buf[0] + tol)
+            .any(|(_, &i)| train[i].iter().zip(&buf).all(|(a, b)| close(*a, *b)));
+        if hit {
+            if overlapping == 0 {
+                first = wi;
+            }
+            overlapping += 1;
+        }
+    }
+    if overlapping > 0 {
+        return Err(BoundError::CalibrationOverlapsTraining {
+            overlapping,
+            total,
+            first,
+        });
+    }
+    Ok(())
+}
+
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
     /// `steps` learned steps with variances from `z0`: unforced when
     /// `U = 0`, else under `inputs` (one per step) after `u_prev`.
@@ -868,51 +954,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         out
     }
 
-    /// Refuses calibration windows that start at training states: a window
-    /// start whose encoding equals a GP training input's state part to
-    /// 1e-12 relative (run contents, not run names, are compared; held-out
-    /// runs of a real system never repeat a state to 12 digits, while
-    /// windows cut from the training runs start exactly at them).
+    /// [`check_held_out`] on the encoded window starts.
     fn check_held_out(&self, calibration: &Calibration<N>) -> Result<(), BoundError> {
-        let gp = self.gp();
-        let d = gp.input_dim();
         let e = self.encoding().dim(&M::KINDS);
-        if e > d {
-            return Ok(());
-        }
-        let train: Vec<&[f64]> = gp.inputs().chunks_exact(d).map(|x| &x[..e]).collect();
-        // sort the training states by their first entry to look windows up
-        let mut order: Vec<usize> = (0..train.len()).collect();
-        order.sort_by(|&a, &b| train[a][0].total_cmp(&train[b][0]));
-        let keys: Vec<f64> = order.iter().map(|&i| train[i][0]).collect();
-        let mut buf = vec![0.0; e];
-        let (mut overlapping, mut first) = (0, 0);
-        let windows = calibration.windows();
-        for (wi, w) in windows.iter().enumerate() {
+        let starts = calibration.windows().iter().map(|w| {
+            let mut buf = vec![0.0; e];
             self.encoding().encode(&M::KINDS, &w.start, &mut buf);
-            let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * (1.0 + a.abs().max(b.abs()));
-            let tol = 1e-12 * (1.0 + buf[0].abs());
-            let lo = keys.partition_point(|k| *k < buf[0] - tol);
-            let hit = keys[lo..]
-                .iter()
-                .zip(&order[lo..])
-                .take_while(|(k, _)| **k <= buf[0] + tol)
-                .any(|(_, &i)| train[i].iter().zip(&buf).all(|(a, b)| close(*a, *b)));
-            if hit {
-                if overlapping == 0 {
-                    first = wi;
-                }
-                overlapping += 1;
-            }
-        }
-        if overlapping > 0 {
-            return Err(BoundError::CalibrationOverlapsTraining {
-                overlapping,
-                total: windows.len(),
-                first,
-            });
-        }
-        Ok(())
+            buf
+        });
+        check_held_out(self.gp(), e, starts)
     }
 
     /// Training states with their previous and current inputs (decoded

@@ -11,11 +11,13 @@ mod sealed {
     pub trait Sealed {}
     impl<const N: usize> Sealed for crate::bound::Window<N> {}
     impl<const B: usize> Sealed for crate::spatial::bound::SpatialWindow<B> {}
+    impl Sealed for crate::learned::robot::RobotWindow {}
 }
 
 /// A held-out window of a calibration set: a start and the K true states
 /// after it ([`super::Window`] of coordinates, or the spatial bound's
-/// window of configurations). Sealed: the bounds know these two.
+/// window of configurations, or a robot's window of joint positions).
+/// Sealed: the bounds know these three.
 pub trait CalibrationWindow: sealed::Sealed + Sized {
     /// One sample of a logged trajectory: positions (`SVector<f64, N>`)
     /// or configurations.
@@ -256,7 +258,9 @@ impl<W: CalibrationWindow> Windows<W> {
             .with_previous(previous)
     }
 
-    fn from_starts(
+    /// The windows `window(r, s)` at `starts` (run r, sample s), each
+    /// remembering its run.
+    pub(crate) fn from_starts(
         starts: &[(usize, usize)],
         dt: f64,
         window: impl Fn(usize, usize) -> W,
@@ -271,7 +275,7 @@ impl<W: CalibrationWindow> Windows<W> {
 /// (trajectory, first sample) of every window of `horizon` steps that
 /// starts at a `stride`-th sample of trajectories of `lengths` samples.
 /// Errors: `horizon` < 2, `stride` = 0, no window at all.
-fn window_starts(
+pub(crate) fn window_starts(
     lengths: &[usize],
     horizon: usize,
     stride: usize,

@@ -26,6 +26,9 @@
 
 use std::path::Path;
 
+mod bound;
+pub use bound::{RobotCalibration, RobotPrediction, RobotWindow};
+
 use serde::{Deserialize, Serialize};
 use vigp_core::tree::{Body, JointKind, Limits};
 
