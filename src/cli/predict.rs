@@ -1,15 +1,18 @@
-//! `vigp predict`: learned trajectories with error bounds.
+//! `vigp predict`: learned trajectories with error bounds (of a declared
+//! mechanism's model, or of a learned robot's: [`predict_robot`]).
 
 use std::io::Write;
 
 use super::args::{BoundArg, PredictArgs};
 use super::{
     CliError, bar, check_model_inputs, check_out_dir, data_error, io_error, read_data, read_plan,
-    w, window_place,
+    read_plan_rows, report_read, w, window_place,
 };
-use crate::bound::{BoundKind, BoundParts, Calibration, ErrorBound, Tube};
-use crate::data::Dataset;
+use crate::bound::{BoundKind, BoundParts, Calibration, ConformalSettings, ErrorBound, Tube};
+use crate::data::{Dataset, DynDataset};
 use crate::learned::Learned;
+use crate::learned::robot::{LearnedRobot, RobotCalibration, coordinate_kinds};
+use crate::robot::RobotState;
 use crate::{Integrator, Mechanism, SVector, State};
 
 /// `U`: the mechanism's inputs (0 for none; with inputs each run's logged
@@ -443,4 +446,300 @@ fn guarantee(bound: &ErrorBound, delta: f64) -> String {
              inputs at once (if the velocity map is a sample of the fitted GP)"
         ),
     }
+}
+
+/// `predict` with a learned robot's model (`fit --urdf`): the learned
+/// mean prediction under the logged (or planned) inputs, each state with
+/// the conformal bound calibrated on `--calibration`'s held-out runs
+/// ([`LearnedRobot::error_bound`]); the rigorous kinds need a declared
+/// mechanism's integrator and are refused.
+pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), CliError> {
+    let usage = |why: String| Err(CliError::Usage(why));
+    if a.steps == 0 {
+        return usage("--steps must be at least 1".into());
+    }
+    if a.stride == Some(0) {
+        return usage("--stride must be at least 1".into());
+    }
+    if matches!(a.bound, Some(BoundArg::Rkhs | BoundArg::Theorem1)) {
+        return usage(
+            "a learned robot's predictions carry the conformal bound (--calibration FILE): the \
+             rkhs and theorem1 bounds need the Lipschitz constants of a declared mechanism's \
+             integrator"
+                .into(),
+        );
+    }
+    let Some(cal_path) = &a.calibration else {
+        return usage(
+            "a learned robot's bound is conformal: pass --calibration FILE (held-out runs in the \
+             format of --data, not used for training)"
+                .into(),
+        );
+    };
+    let learned = LearnedRobot::load(&a.model)
+        .map_err(|e| CliError::Usage(format!("{}: {e}", a.model.display())))?;
+    check_out_dir(&a.out)?;
+    let robot = learned.robot();
+    let dt = learned.dt();
+    let names: Vec<&str> = robot.joint_names().iter().map(String::as_str).collect();
+    let inputs = robot.input_names();
+    let m = inputs.len();
+    let read = |path: &std::path::Path| -> Result<DynDataset, CliError> {
+        let data = DynDataset::read_path_with_inputs(
+            path,
+            &names,
+            &coordinate_kinds(robot),
+            &inputs,
+            &a.read.options(),
+        )
+        .map_err(data_error(path))?;
+        report_read(path, &data.warnings, &data.dropped);
+        data.check_dt(dt, a.read.time_tolerance)
+            .map_err(data_error(path))?;
+        Ok(data)
+    };
+    let data = read(&a.data)?;
+    let held_out = read(cal_path)?;
+    // a window of h steps needs h + 1 samples of one run
+    let horizon = a.steps.max(2);
+    let positions = |d: &DynDataset| -> Vec<Vec<Vec<f64>>> {
+        d.runs
+            .iter()
+            .map(|r| r.positions.iter().map(|x| x.as_slice().to_vec()).collect())
+            .collect()
+    };
+    let logged = |d: &DynDataset| -> Vec<Vec<Vec<f64>>> {
+        d.runs
+            .iter()
+            .map(|r| {
+                if m == 0 {
+                    vec![Vec::new(); r.positions.len()]
+                } else {
+                    r.inputs.clone()
+                }
+            })
+            .collect()
+    };
+    let longest = held_out
+        .runs
+        .iter()
+        .map(|r| r.positions.len())
+        .max()
+        .unwrap_or(0);
+    if longest <= horizon {
+        return usage(format!(
+            "{}: --steps {} is calibrated on windows of {horizon} steps, which need runs of at \
+             least {} samples; the longest run has {longest}. Give longer held-out runs or fewer \
+             --steps",
+            cal_path.display(),
+            a.steps,
+            horizon + 1
+        ));
+    }
+    let calibration =
+        RobotCalibration::from_logs(&positions(&held_out), &logged(&held_out), dt, horizon, 1)?;
+    let settings = ConformalSettings {
+        delta: a.delta,
+        ..ConformalSettings::default()
+    };
+    let bound = learned.error_bound(&settings, &calibration)?;
+    let plans = match &a.inputs {
+        Some(path) => Some((path, read_plan_rows(path, &inputs)?)),
+        None => None,
+    };
+    let run_inputs = logged(&data);
+    // each start: (run, sample, state, previous input, the steps' inputs)
+    let rows = if m > 0 && plans.is_none() {
+        a.steps + 1
+    } else {
+        2
+    };
+    let mut starts = Vec::new();
+    let mut short = Vec::new();
+    for (r, run) in data.runs.iter().enumerate() {
+        let plan = match &plans {
+            None => None,
+            Some((path, plans)) => {
+                let found = plans
+                    .iter()
+                    .find(|(name, _)| name.as_deref().is_none_or(|x| x == run.name));
+                let Some((_, plan)) = found else {
+                    return usage(format!(
+                        "{}: no inputs for run `{}` of {}",
+                        path.display(),
+                        run.name,
+                        a.data.display()
+                    ));
+                };
+                if plan.len() < a.steps {
+                    return usage(format!(
+                        "{}: {} input row(s), --steps {} needs {}",
+                        path.display(),
+                        plan.len(),
+                        a.steps,
+                        a.steps
+                    ));
+                }
+                Some(&plan[..a.steps])
+            }
+        };
+        let before = starts.len();
+        let mut s = 0usize;
+        while s
+            .checked_add(rows)
+            .is_some_and(|end| end <= run.positions.len())
+        {
+            let q0 = run.positions[s].as_slice().to_vec();
+            let v0 = q0
+                .iter()
+                .zip(run.positions[s + 1].iter())
+                .map(|(a, b)| (b - a) / dt)
+                .collect();
+            let us: Vec<Vec<f64>> = match plan {
+                Some(p) => p.to_vec(),
+                None if m > 0 => run_inputs[r][s + 1..=s + a.steps].to_vec(),
+                None => vec![Vec::new(); a.steps],
+            };
+            starts.push((r, s, RobotState::new(q0, v0), run_inputs[r][s].clone(), us));
+            match a.stride.and_then(|k| s.checked_add(k)) {
+                Some(next) => s = next,
+                None => break,
+            }
+        }
+        if starts.len() == before {
+            short.push(run.name.as_str());
+        }
+    }
+    if starts.is_empty() {
+        return usage(format!(
+            "{}: every run is shorter than {rows} rows (a start needs two{})",
+            a.data.display(),
+            if rows > 2 {
+                ", and the prediction the inputs logged in the rows after it"
+            } else {
+                ""
+            }
+        ));
+    }
+    if !short.is_empty() {
+        w(
+            out,
+            format_args!(
+                "note: skipped {} run(s) shorter than {rows} rows: {}",
+                short.len(),
+                short.join(", ")
+            ),
+        )?;
+    }
+    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
+    let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
+    let csv_err = |e: csv::Error| CliError::Io {
+        path: a.out.clone(),
+        source: std::io::Error::other(e),
+    };
+    let mut header = vec!["run".to_string()];
+    if a.stride.is_some() {
+        header.push("start".into());
+    }
+    header.push("t".into());
+    header.extend(names.iter().map(|c| c.to_string()));
+    header.extend(names.iter().map(|c| format!("v_{c}")));
+    header.extend(inputs.iter().map(|j| format!("u_{j}")));
+    // (`fallback` as for a declared mechanism's conformal bound without a
+    // fallback: `outside` where the guarantee does not apply)
+    header.extend(["bound", "position_bound", "fallback"].map(String::from));
+    wtr.write_record(&header).map_err(csv_err)?;
+    let pb = bar(starts.len(), "predicting");
+    let (mut failed, mut first_error) = (0usize, None);
+    let (mut outside, mut outside_runs) = (0usize, 0usize);
+    for (r, s, z0, u_prev, us) in &starts {
+        let run = &data.runs[*r];
+        let pred = match learned.predict(z0, u_prev, us, &bound) {
+            Ok(p) => p,
+            Err(e) => {
+                failed += 1;
+                w(
+                    out,
+                    format_args!(
+                        "run `{}`, window from line {} (sample {s}): {e}",
+                        run.name,
+                        run.line + *s as u64
+                    ),
+                )?;
+                first_error.get_or_insert(e);
+                continue;
+            }
+        };
+        let n_out = pred.outside.iter().filter(|&&o| o).count();
+        outside += n_out;
+        outside_runs += usize::from(n_out > 0);
+        for (k, z) in pred.states.iter().enumerate() {
+            let mut row = vec![run.name.clone()];
+            if a.stride.is_some() {
+                row.push(s.to_string());
+            }
+            row.push(crate::data::format_time(
+                run.t0,
+                run.dt.unwrap_or(dt),
+                s + k,
+            ));
+            row.extend(z.q.iter().map(|x| format!("{x:?}")));
+            row.extend(z.v.iter().map(|x| format!("{x:?}")));
+            match us.get(k.wrapping_sub(1)) {
+                Some(u) => row.extend(u.iter().map(|x| format!("{x:?}"))),
+                None => row.extend(inputs.iter().map(|_| String::new())),
+            }
+            row.push(if k == 0 {
+                String::new()
+            } else {
+                format!("{:?}", pred.one_step_bounds[k - 1])
+            });
+            row.push(format!("{:?}", pred.position_bounds[k]));
+            // row k's `bound` is predicted from state k − 1, and every
+            // position bound leaves the guarantee when the start is outside
+            let flagged = k > 0 && (pred.outside[k - 1] || pred.outside[0]);
+            row.push(if flagged {
+                "outside".into()
+            } else {
+                String::new()
+            });
+            wtr.write_record(&row).map_err(csv_err)?;
+        }
+        pb.inc(1);
+    }
+    pb.finish_and_clear();
+    wtr.flush().map_err(io_error(&a.out))?;
+    if failed == starts.len()
+        && let Some(e) = first_error
+    {
+        w(
+            out,
+            format_args!(
+                "every run failed ({failed}); {} holds no predictions",
+                a.out.display()
+            ),
+        )?;
+        return Err(e.into());
+    }
+    if outside > 0 {
+        w(
+            out,
+            format_args!(
+                "note: {outside} predicted states in {outside_runs} run(s) lie outside the \
+                 calibrated region (`outside` in column `fallback`): the conformal guarantee does \
+                 not cover them"
+            ),
+        )?;
+    }
+    w(
+        out,
+        format_args!(
+            "wrote {}: {} predictions × {} steps of {} ({failed} failed); {}",
+            a.out.display(),
+            starts.len() - failed,
+            a.steps,
+            robot.name(),
+            guarantee(&bound, a.delta)
+        ),
+    )
 }

@@ -55,9 +55,10 @@ pub(super) fn run(command: &Command, out: &mut dyn Write) -> Result<(), CliError
             out,
         ),
         Command::Score(a) => score(a, out),
-        Command::Predict(_) | Command::Export(_) => Err(CliError::Usage(
-            "a learned robot (fit with --urdf) is scored with `vigp score`; `predict` and \
-             `export` take models of declared mechanisms"
+        Command::Predict(a) => super::predict::predict_robot(a, out),
+        Command::Export(_) => Err(CliError::Usage(
+            "a learned robot (fit with --urdf) is scored with `vigp score` and predicted with \
+             `vigp predict`; `export` takes models of declared mechanisms"
                 .into(),
         )),
         Command::Excite(a) => excite_robot(

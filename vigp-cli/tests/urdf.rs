@@ -2,8 +2,9 @@
 //! tree engine's rollout (checked against the library's), `identify`
 //! recovers a perturbed robot from its log (its identified robot then
 //! reproduces a held-out log), `fit` learns on top of the nominal and of
-//! the identified robot, `score` compares them, `excite` designs inputs
-//! within the URDF's limits, and wrong use is a clear error.
+//! the identified robot, `score` compares them, `predict` attaches the
+//! conformal bound, `excite` designs inputs within the URDF's limits, and
+//! wrong use is a clear error.
 
 use std::path::Path;
 
@@ -277,6 +278,199 @@ fn simulate_identify_fit_score_on_a_perturbed_arm() {
     );
 }
 
+/// A CSV log of `robot`'s rollouts (run `r<i>` from `starts[i]` at rest
+/// under a sine plan of phase i), in the data format.
+fn logs(robot: &Robot, starts: &[[f64; 3]], steps: usize) -> String {
+    let mut text = String::new();
+    for (i, q0) in starts.iter().enumerate() {
+        let us: Vec<Vec<f64>> = (0..steps)
+            .map(|k| {
+                let t = k as f64 * DT + 0.37 * i as f64;
+                vec![
+                    0.5 * (2.1 * t).sin(),
+                    4.0 + (3.3 * t).sin(),
+                    1.5 * (1.7 * t).sin(),
+                ]
+            })
+            .collect();
+        let z0 = RobotState::new(q0.to_vec(), vec![0.0; 3]);
+        let roll = robot
+            .rollout_with(&z0, DT, steps, |k, _| us[k].clone())
+            .unwrap();
+        let states: Vec<(&[f64], &[f64])> = roll
+            .states
+            .iter()
+            .map(|z| (z.q.as_slice(), z.v.as_slice()))
+            .collect();
+        let inputs: Vec<&[f64]> = us.iter().map(Vec::as_slice).collect();
+        let data = vigp::data::DynDataset::from_rollout(
+            &["j1", "j2", "j3"],
+            &["j1", "j2", "j3"],
+            &format!("r{i}"),
+            (0.0, DT),
+            &states,
+            (&[0.0; 3], &inputs),
+        )
+        .unwrap();
+        let mut csv = Vec::new();
+        data.write_csv(&mut csv).unwrap();
+        let csv = String::from_utf8(csv).unwrap();
+        text.push_str(if i == 0 {
+            &csv
+        } else {
+            csv.split_once('\n').unwrap().1
+        });
+    }
+    text
+}
+
+/// `predict` with a learned robot's model: the learned mean prediction
+/// with the conformal bound calibrated on held-out runs, equal (bit for
+/// bit, through the CSV's shortest round-trip numbers) to the library's
+/// `LearnedRobot::error_bound` and `predict` on the model file; the rows
+/// and columns of a declared mechanism's prediction; the rigorous kinds
+/// and a missing `--calibration` refused with a reason.
+#[test]
+fn predict_attaches_the_conformal_bound_to_a_learned_robot() {
+    use vigp::bound::ConformalSettings;
+    use vigp::learned::robot::{LearnedRobot, RobotCalibration};
+    let dir = temp_dir("predict");
+    let nominal = dir.join("arm3.urdf");
+    std::fs::write(&nominal, nominal_urdf()).unwrap();
+    let truth = Robot::from_urdf_str(&truth_urdf())
+        .unwrap()
+        .with_actuated(&["j1", "j2", "j3"])
+        .unwrap();
+    let start = |i: usize| {
+        let x = i as f64;
+        [
+            0.6 * (1.7 * x).sin(),
+            -0.4 + 0.5 * (2.3 * x).cos(),
+            0.05 + 0.05 * (0.9 * x).sin(),
+        ]
+    };
+    let write = |name: &str, starts: Vec<[f64; 3]>, steps: usize| {
+        let path = dir.join(name);
+        std::fs::write(&path, logs(&truth, &starts, steps)).unwrap();
+        path
+    };
+    let train = write("train.csv", (0..2).map(start).collect(), 300);
+    let cal = write("cal.csv", (10..50).map(start).collect(), 30);
+    let test = write("test.csv", vec![start(100)], 60);
+    let model = dir.join("model.json");
+    run(&[
+        "fit",
+        "--urdf",
+        s(&nominal),
+        "--actuated",
+        ACTUATED,
+        "--data",
+        s(&train),
+        "--out",
+        s(&model),
+        "--restarts",
+        "1",
+        "--max-samples",
+        "300",
+    ])
+    .unwrap();
+    let out = dir.join("pred.csv");
+    let base = [
+        "predict",
+        "--model",
+        s(&model),
+        "--data",
+        s(&test),
+        "--steps",
+        "10",
+        "--stride",
+        "10",
+        "--delta",
+        "0.1",
+        "--out",
+        s(&out),
+    ];
+    let said = run(&[&base[..], &["--calibration", s(&cal)]].concat()).unwrap();
+    eprintln!("{said}");
+    assert!(said.contains("conformal bound"), "{said}");
+    let rows = table(&out);
+    assert_eq!(
+        rows[0].join(","),
+        "run,start,t,j1,j2,j3,v_j1,v_j2,v_j3,u_j1,u_j2,u_j3,bound,position_bound,fallback"
+    );
+    // starts 0, 10, …, 50 of 62 samples (a start needs its 10 inputs after it)
+    assert_eq!(rows.len(), 1 + 6 * 11);
+    // the library on the same files
+    let learned = LearnedRobot::load(&model).unwrap();
+    let robot = learned.robot().clone();
+    let read = |path: &Path| {
+        let kinds = vigp::learned::robot::coordinate_kinds(&robot);
+        vigp::data::DynDataset::read_path_with_inputs(
+            path,
+            &["j1", "j2", "j3"],
+            &kinds,
+            &["j1", "j2", "j3"],
+            &vigp::data::ReadOptions::default(),
+        )
+        .unwrap()
+    };
+    type Runs = Vec<Vec<Vec<f64>>>;
+    let split = |d: &vigp::data::DynDataset| -> (Runs, Runs) {
+        d.runs
+            .iter()
+            .map(|r| {
+                let q = r.positions.iter().map(|x| x.as_slice().to_vec()).collect();
+                (q, r.inputs.clone())
+            })
+            .unzip()
+    };
+    let (cq, cu) = split(&read(&cal));
+    let calibration = RobotCalibration::from_logs(&cq, &cu, DT, 10, 1).unwrap();
+    let settings = ConformalSettings {
+        delta: 0.1,
+        ..ConformalSettings::default()
+    };
+    let bound = learned.error_bound(&settings, &calibration).unwrap();
+    let (tq, tu) = split(&read(&test));
+    for (p, first) in (0..6).map(|p| (p, 1 + 11 * p)) {
+        let s0 = 10 * p;
+        let v0 = (0..3)
+            .map(|j| (tq[0][s0 + 1][j] - tq[0][s0][j]) / DT)
+            .collect();
+        let z0 = RobotState::new(tq[0][s0].clone(), v0);
+        let pred = learned
+            .predict(&z0, &tu[0][s0], &tu[0][s0 + 1..=s0 + 10], &bound)
+            .unwrap();
+        for k in 0..=10 {
+            let row = &rows[first + k];
+            assert_eq!(row[1], s0.to_string());
+            let q: Vec<f64> = row[3..6].iter().map(|x| x.parse().unwrap()).collect();
+            assert_eq!(q, pred.states[k].q, "start {s0}, step {k}");
+            let pb: f64 = row[13].parse().unwrap();
+            assert_eq!(pb, pred.position_bounds[k], "start {s0}, step {k}");
+            if k > 0 {
+                let b: f64 = row[12].parse().unwrap();
+                assert_eq!(b, pred.one_step_bounds[k - 1]);
+                // (q_1 = q_0 + Δt·v_0 is known exactly: its bound is 0)
+                assert!(b > 0.0 && (pb > 0.0 || k == 1), "{b} {pb} at step {k}");
+            }
+        }
+    }
+    let refused = |extra: &[&str]| {
+        run(&[&base[..], extra].concat())
+            .expect_err("must fail")
+            .to_string()
+    };
+    let e = refused(&[]);
+    assert!(e.contains("--calibration"), "{e}");
+    let e = refused(&["--calibration", s(&cal), "--bound", "rkhs"]);
+    assert!(e.contains("conformal"), "{e}");
+    // calibration windows cut from the training runs
+    let e = refused(&["--calibration", s(&train)]);
+    assert!(e.contains("training state"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// `excite --urdf` on the test arm with its elbow axis turned vertical (a
 /// SCARA-like arm: gravity does no work, so zero-mean periodic torques can
 /// keep it within its limits): the design beats a random input of the
@@ -524,5 +718,13 @@ fn wrong_use_is_a_clear_error() {
         "--out",
         s(&dir.join("p.csv")),
     ]);
-    assert!(e.contains("vigp score"), "{e}");
+    assert!(e.contains("--calibration"), "{e}");
+    let e = fails(&[
+        "export",
+        "--model",
+        s(&model),
+        "--out",
+        s(&dir.join("m.rs")),
+    ]);
+    assert!(e.contains("declared mechanisms"), "{e}");
 }
