@@ -5,6 +5,7 @@
 # exported by `vigp export` as Rust source. The test includes the source and
 # checks it against the JSON loaded by the std runtime. The same for a model
 # with inputs (learned_drive_cartpole.*, examples/learned_forced_fixture.rs),
+# for a learned robot from URDF (learned_arm3.*),
 # and for a 3-D mechanism (learned_furuta.*: the Furuta pendulum in its
 # minimal coordinates, logged by `vigp simulate` with pivot friction).
 #   bash scripts/learned_fixture.sh
@@ -42,3 +43,28 @@ cargo run --release --bin vigp -- fit --system furuta --data "$dir/learned_furut
     --out "$dir/learned_furuta.json" --max-samples 24 --restarts 0
 cargo run --release --bin vigp -- export --model "$dir/learned_furuta.json" \
     --out "$dir/learned_furuta.rs"
+# A learned robot (learned_arm3.*): the test arm of tests/fixtures/robots/arm3.urdf
+# with its elbow j2 actuated, logged by `vigp simulate --urdf` from an arm
+# with three times the elbow's damping, fitted over the declared arm with
+# `vigp fit --urdf` and exported for `vigp::embedded::tree::LearnedTreeStepper`.
+sed 's/damping="0.1"/damping="0.3"/' tests/fixtures/robots/arm3.urdf > "$dir/arm3_truth.urdf"
+python3 - "$dir/arm3_plan.csv" <<'PY'
+import math, sys
+with open(sys.argv[1], "w") as f:
+    f.write("u_j2\n")
+    for k in range(40):
+        f.write(f"{3.0 + 1.5 * math.sin(7.0 * k * 0.002)!r}\n")
+PY
+for run in "r0 0.1,-0.2,0.05" "r1 -0.2,0.3,0.0"; do
+    set -- $run
+    cargo run --release --bin vigp -- simulate --urdf "$dir/arm3_truth.urdf" --actuated j2 \
+        --q "$2" --dt 0.002 --steps 40 --inputs "$dir/arm3_plan.csv" --run "$1" \
+        --out "$dir/arm3_$1.csv"
+done
+{ cat "$dir/arm3_r0.csv"; tail -n +2 "$dir/arm3_r1.csv"; } > "$dir/learned_arm3_data.csv"
+rm "$dir/arm3_r0.csv" "$dir/arm3_r1.csv" "$dir/arm3_plan.csv" "$dir/arm3_truth.urdf"
+cargo run --release --bin vigp -- fit --urdf tests/fixtures/robots/arm3.urdf --actuated j2 \
+    --data "$dir/learned_arm3_data.csv" --out "$dir/learned_arm3.json" --max-samples 40 \
+    --restarts 0
+cargo run --release --bin vigp -- export --model "$dir/learned_arm3.json" \
+    --out "$dir/learned_arm3.rs" --name LEARNED_ARM

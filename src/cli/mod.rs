@@ -26,16 +26,16 @@
 //!
 //! A robot from a URDF file takes `--urdf robot.urdf [--actuated j1,j2]`
 //! instead of `--system` in `simulate`, `identify`, `excite` and `fit`;
-//! `score` and `predict` read the model `fit` wrote for it. The log's columns are the robot's
+//! `score`, `predict` and `export` read the model `fit` wrote for it. The log's columns are the robot's
 //! joints with a coordinate (file depth-first order) and `u_<joint>` per
 //! actuated joint; the steps are the tree engine's (`vigp::Robot`), the
 //! identification its first-order residual
 //! ([`crate::identify::RobotRegressor`]), the model a
 //! [`crate::learned::robot::LearnedRobot`] (by default: `--rule` changes
 //! the identification's). `predict` of a learned robot's model attaches
-//! the conformal bound (`--calibration` required); `export` takes
-//! declared mechanisms only; `excite --urdf` keeps its design within the
-//! URDF's joint limits.
+//! the conformal bound (`--calibration` required); `export` writes it for
+//! `vigp::embedded::tree::LearnedTreeStepper`; `excite --urdf` keeps its
+//! design within the URDF's joint limits.
 //!
 //! * `fit` reads measured positions ([`crate::data`] format), builds the
 //!   transitions, trains a [`Learned`] model on at most `--max-samples`

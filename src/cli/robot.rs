@@ -1,7 +1,7 @@
 //! The tool on a robot loaded from URDF at run time (`--urdf FILE
 //! [--actuated J,…]`): `simulate`, `identify`, `excite` and `fit` on the linear-time
-//! tree engine ([`crate::Robot`]), and `score` of the models `fit` writes
-//! ([`LearnedRobot`]). The log's columns are the robot's joints with a
+//! tree engine ([`crate::Robot`]), and `score`, `predict` and `export` of the
+//! models `fit` writes ([`LearnedRobot`]). The log's columns are the robot's joints with a
 //! coordinate, in the file's depth-first order, and `u_<joint>` per
 //! actuated joint, as for a declared mechanism ([`crate::data`]).
 
@@ -36,7 +36,7 @@ pub(super) fn is_robot_model(path: &Path) -> bool {
 }
 
 /// Runs a command on a robot: `urdf` for `fit`, `simulate`, `identify`
-/// and `excite`, the model file for `score`.
+/// and `excite`, the model file for `score`, `predict` and `export`.
 pub(super) fn run(command: &Command, out: &mut dyn Write) -> Result<(), CliError> {
     match command {
         Command::Simulate(a) => simulate(
@@ -56,11 +56,7 @@ pub(super) fn run(command: &Command, out: &mut dyn Write) -> Result<(), CliError
         ),
         Command::Score(a) => score(a, out),
         Command::Predict(a) => super::predict::predict_robot(a, out),
-        Command::Export(_) => Err(CliError::Usage(
-            "a learned robot (fit with --urdf) is scored with `vigp score` and predicted with \
-             `vigp predict`; `export` takes models of declared mechanisms"
-                .into(),
-        )),
+        Command::Export(a) => super::export::export_robot(a, out),
         Command::Excite(a) => excite_robot(
             a,
             &load(a.robot.urdf.as_deref(), &a.robot.actuated, &a.set)?,

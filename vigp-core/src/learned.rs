@@ -192,6 +192,9 @@ pub enum LearnedError {
     Step(StepError),
     /// A GP prediction failed.
     Gp(GpError),
+    /// A learned robot's tree engine refused its bodies or failed a step
+    /// ([`crate::tree::LearnedTreeStepper`]).
+    Engine(crate::tree::EngineError),
 }
 
 impl From<StepError> for LearnedError {
@@ -237,6 +240,7 @@ impl core::fmt::Display for LearnedError {
             Self::NothingToProject => f.write_str("projection asked for a mechanism without loops"),
             Self::Step(e) => write!(f, "step failed: {e}"),
             Self::Gp(e) => write!(f, "GP prediction failed: {e}"),
+            Self::Engine(e) => write!(f, "the tree engine: {e}"),
         }
     }
 }

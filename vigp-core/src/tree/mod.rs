@@ -11,15 +11,19 @@
 //!   world coordinates at the world origin.
 //! * [`Engine`]: momentum, ∂T/∂q, ∇V, the DEL residual, the articulated-body
 //!   solve and the self-subdividing step ([`engine`] has the equations).
+//! * [`LearnedTree`]: a learned robot as exported data (bodies, prior,
+//!   encoding, one GP per joint) and its allocation-free stepper.
 //!
 //! Nothing here allocates: the caller passes a slice of [`BodyScratch`],
 //! one per body (about 1 KB each).
 
 pub mod engine;
+pub mod learned;
 pub mod model;
 pub mod spatial;
 
 pub use engine::{BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives};
+pub use learned::{LearnedTree, LearnedTreeStepper};
 pub use model::{Body, InvalidTree, JointKind, Limits, Tree, TreeRef, validate};
 
 #[cfg(test)]

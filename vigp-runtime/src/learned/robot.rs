@@ -27,6 +27,7 @@
 use std::path::Path;
 
 mod bound;
+mod export;
 pub use bound::{RobotCalibration, RobotPrediction, RobotWindow};
 
 use serde::{Deserialize, Serialize};
