@@ -54,7 +54,11 @@
 //! ([`super::consistency::project`]; the set is convex and the iterate
 //! strictly inside it), so that the iteration can slide along the set's
 //! boundary (a joint without friction, a thin link) instead of stopping
-//! there. The covariance of π
+//! there. The objective is not convex: the iteration runs from the first
+//! stage's estimate and from the declared values (the prior's centre),
+//! and the lower objective wins (an estimate far off, e.g. least squares
+//! on noisy positions projected onto the consistent set's boundary, can
+//! otherwise stall in a poorer minimum). The covariance of π
 //! is the inverse of the reduced Gauss–Newton matrix at the solution (the
 //! Laplace approximation of the posterior); the base parameters' intervals
 //! follow as in the first stage.
@@ -527,6 +531,173 @@ fn reduced_precision(sys: &Normal, prior_precision: &DVector<f64>) -> DMatrix<f6
     h
 }
 
+/// What every descent of one refinement shares.
+struct Problem<'a, R> {
+    regressor: &'a R,
+    logs: &'a [Log],
+    segs: &'a [Segment],
+    first: &'a Identification,
+    options: &'a OutputError,
+    consistent: bool,
+    prior_precision: &'a DVector<f64>,
+    declared: &'a DVector<f64>,
+    residual_count: f64,
+    dof: f64,
+}
+
+/// Where a descent ended.
+struct Descent {
+    at: Point,
+    /// The simulation error's sum of squares there.
+    sum: f64,
+    sigma2: f64,
+    iterations: usize,
+    /// RMS simulation error at its start.
+    rms_start: f64,
+    converged: bool,
+}
+
+impl<R: Regressor> Problem<'_, R> {
+    /// The MAP objective: data misfit over σ² plus the prior's term.
+    fn objective(&self, sum: f64, pi: &DVector<f64>, sigma2: f64) -> f64 {
+        let prior: f64 = (pi - self.declared)
+            .iter()
+            .zip(self.prior_precision.iter())
+            .map(|(d, w)| d * d * w)
+            .sum();
+        sum / sigma2 + prior
+    }
+
+    /// Levenberg–Marquardt from the parameters `start`, each segment from
+    /// its logged samples (module docs), with σ² re-estimated at the
+    /// solution and the problem solved again if it moved by more than
+    /// 20 %.
+    fn descend(&self, start: &[f64]) -> Result<Descent, IdentifyError> {
+        let (regressor, logs, segs, first) = (self.regressor, self.logs, self.segs, self.first);
+        let options = self.options;
+        let n = regressor.coordinates();
+        let mut at = Point {
+            pi: DVector::from_column_slice(start),
+            starts: segs
+                .iter()
+                .map(|s| {
+                    let log = &logs[s.log];
+                    DVector::from_iterator(
+                        2 * n,
+                        log.positions[s.start]
+                            .iter()
+                            .chain(&log.positions[s.start + 1])
+                            .cloned(),
+                    )
+                })
+                .collect(),
+        };
+        if self.consistent && !consistency::feasible(&first.structure, start) {
+            return Err(IdentifyError::Inconsistent {
+                message: "output error starts from physically consistent parameters".into(),
+            });
+        }
+        // σ² of the start weighs the prior in the first pass; the noisy
+        // starting samples inflate it, so it is re-estimated at the solution.
+        let mut sigma2 = {
+            let sum = sum_squares(regressor, logs, segs, &at)?.ok_or_else(|| {
+                IdentifyError::Simulation {
+                    message: "a segment does not simulate at the refinement's start; \
+                              shorten the segments"
+                        .into(),
+                }
+            })?;
+            (sum / self.residual_count).max(f64::MIN_POSITIVE)
+        };
+        let mut iterations = 0;
+        let mut rms_start = None;
+        let mut converged = false;
+        let mut sys = normal(regressor, logs, segs, &at, sigma2)?;
+        for _pass in 0..3 {
+            let mut mu = 1e-3;
+            sys = normal(regressor, logs, segs, &at, sigma2)?;
+            if rms_start.is_none() {
+                rms_start = Some((sys.sum / self.residual_count).sqrt());
+            }
+            let mut f = self.objective(sys.sum, &at.pi, sigma2);
+            converged = false;
+            while iterations < options.max_iterations {
+                iterations += 1;
+                let prior_gradient = (&at.pi - self.declared).component_mul(self.prior_precision);
+                let mut accepted = false;
+                for _ in 0..20 {
+                    let Some(step) = solve_step(&sys, self.prior_precision, &prior_gradient, mu)
+                    else {
+                        mu *= 10.0;
+                        continue;
+                    };
+                    // an inconsistent step is projected onto the consistent
+                    // set in the model's metric, so that the iteration
+                    // slides along the set's boundary instead of stopping
+                    // there
+                    let mut trial = at.clone();
+                    trial.pi = &at.pi + &step.dp;
+                    let mut dp = step.dp.clone();
+                    if self.consistent
+                        && !consistency::feasible(&first.structure, trial.pi.as_slice())
+                    {
+                        match step.projected(&first.structure, &at.pi) {
+                            Some(pi) if consistency::feasible(&first.structure, pi.as_slice()) => {
+                                dp = &pi - &at.pi;
+                                trial.pi = pi;
+                            }
+                            _ => {
+                                mu *= 10.0;
+                                continue;
+                            }
+                        }
+                    }
+                    let ds = step.states_for(&dp);
+                    for ((t, s), d) in trial.starts.iter_mut().zip(&at.starts).zip(&ds) {
+                        *t = s + d;
+                    }
+                    match sum_squares(regressor, logs, segs, &trial)? {
+                        Some(sum) if self.objective(sum, &trial.pi, sigma2) < f => {
+                            let f_new = self.objective(sum, &trial.pi, sigma2);
+                            let decrease = (f - f_new) / f.max(f64::MIN_POSITIVE);
+                            at = trial;
+                            f = f_new;
+                            mu = (mu * 0.3).max(1e-12);
+                            accepted = true;
+                            converged = decrease < options.tolerance;
+                            break;
+                        }
+                        _ => mu *= 10.0,
+                    }
+                }
+                if !accepted {
+                    // no decrease at any damping: a minimum to rounding
+                    converged = true;
+                    break;
+                }
+                sys = normal(regressor, logs, segs, &at, sigma2)?;
+                if converged {
+                    break;
+                }
+            }
+            let new_sigma2 = (sys.sum / self.dof).max(f64::MIN_POSITIVE);
+            let moved = (new_sigma2 / sigma2 - 1.0).abs() > 0.44; // σ moved by > 20 %
+            sigma2 = new_sigma2;
+            if !moved || iterations >= options.max_iterations {
+                break;
+            }
+        }
+        Ok(Descent {
+            sum: sys.sum,
+            at,
+            sigma2,
+            iterations,
+            rms_start: rms_start.unwrap_or(f64::NAN),
+            converged,
+        })
+    }
+}
+
 /// Refine the first stage's result `first` by output error (module
 /// docs), starting from its estimate, or from the declared values when
 /// the logs are `homogeneous` in π (no input acts: the regression's scale
@@ -568,129 +739,62 @@ pub fn refine<R: Regressor>(
         first.prior_sd.iter().map(|s| 1.0 / (s * s)),
     );
     let declared = DVector::from_column_slice(&first.declared);
-    let start = if homogeneous {
+    let samples: usize = segs.iter().map(|s| s.len).sum();
+    let problem = Problem {
+        regressor,
+        logs,
+        segs: &segs,
+        first,
+        options,
+        consistent,
+        prior_precision: &prior_precision,
+        declared: &declared,
+        residual_count: (samples * n) as f64,
+        // degrees of freedom of the residuals: minus the initial states
+        // and the base parameters
+        dof: ((samples * n) as f64 - (segs.len() * 2 * n + first.base.rank()) as f64).max(1.0),
+    };
+    // From the regression's estimate, and (unless that is where the
+    // refinement starts anyway) from the declared values: the objective is
+    // not convex, and a regression far off (least squares on noisy
+    // positions) can start the iteration on the consistent set's boundary,
+    // where it stalls in a poorer minimum. The lower objective wins,
+    // compared with the smaller of the two noise estimates.
+    let mut descent = problem.descend(if homogeneous {
         &first.declared
     } else {
         &first.estimate
-    };
-    let mut at = Point {
-        pi: DVector::from_column_slice(start),
-        starts: segs
-            .iter()
-            .map(|s| {
-                let log = &logs[s.log];
-                DVector::from_iterator(
-                    2 * n,
-                    log.positions[s.start]
-                        .iter()
-                        .chain(&log.positions[s.start + 1])
-                        .cloned(),
-                )
-            })
-            .collect(),
-    };
-    if consistent && !consistency::feasible(&first.structure, start) {
-        return Err(IdentifyError::Inconsistent {
-            message: "output error starts from physically consistent parameters".into(),
-        });
-    }
-    let samples: usize = segs.iter().map(|s| s.len).sum();
-    let residual_count = (samples * n) as f64;
-    // Degrees of freedom of the residuals: minus the initial states and
-    // the base parameters.
-    let dof = (residual_count - (segs.len() * 2 * n + first.base.rank()) as f64).max(1.0);
-    let objective = |sum: f64, pi: &DVector<f64>, sigma2: f64| {
-        let prior: f64 = (pi - &declared)
-            .iter()
-            .zip(prior_precision.iter())
-            .map(|(d, w)| d * d * w)
-            .sum();
-        sum / sigma2 + prior
-    };
-    // σ² of the start weighs the prior in the first pass; the noisy
-    // starting samples inflate it, so it is re-estimated at the solution.
-    let mut sigma2 = {
-        let sum =
-            sum_squares(regressor, logs, &segs, &at)?.ok_or_else(|| IdentifyError::Simulation {
-                message: "a segment does not simulate at the first stage's estimate; \
-                          shorten the segments"
-                    .into(),
-            })?;
-        (sum / residual_count).max(f64::MIN_POSITIVE)
-    };
-    let mut iterations = 0;
-    let mut rms_start = None;
-    let mut converged = false;
-    for _pass in 0..3 {
-        let mut mu = 1e-3;
-        let mut sys = normal(regressor, logs, &segs, &at, sigma2)?;
-        if rms_start.is_none() {
-            rms_start = Some((sys.sum / residual_count).sqrt());
-        }
-        let mut f = objective(sys.sum, &at.pi, sigma2);
-        converged = false;
-        while iterations < options.max_iterations {
-            iterations += 1;
-            let prior_gradient = (&at.pi - &declared).component_mul(&prior_precision);
-            let mut accepted = false;
-            for _ in 0..20 {
-                let Some(step) = solve_step(&sys, &prior_precision, &prior_gradient, mu) else {
-                    mu *= 10.0;
-                    continue;
-                };
-                // an inconsistent step is projected onto the consistent
-                // set in the model's metric, so that the iteration slides
-                // along the set's boundary instead of stopping there
-                let mut trial = at.clone();
-                trial.pi = &at.pi + &step.dp;
-                let mut dp = step.dp.clone();
-                if consistent && !consistency::feasible(&first.structure, trial.pi.as_slice()) {
-                    match step.projected(&first.structure, &at.pi) {
-                        Some(pi) if consistency::feasible(&first.structure, pi.as_slice()) => {
-                            dp = &pi - &at.pi;
-                            trial.pi = pi;
-                        }
-                        _ => {
-                            mu *= 10.0;
-                            continue;
-                        }
-                    }
-                }
-                let ds = step.states_for(&dp);
-                for ((t, s), d) in trial.starts.iter_mut().zip(&at.starts).zip(&ds) {
-                    *t = s + d;
-                }
-                match sum_squares(regressor, logs, &segs, &trial)? {
-                    Some(sum) if objective(sum, &trial.pi, sigma2) < f => {
-                        let f_new = objective(sum, &trial.pi, sigma2);
-                        let decrease = (f - f_new) / f.max(f64::MIN_POSITIVE);
-                        at = trial;
-                        f = f_new;
-                        mu = (mu * 0.3).max(1e-12);
-                        accepted = true;
-                        converged = decrease < options.tolerance;
-                        break;
-                    }
-                    _ => mu *= 10.0,
+    })?;
+    if !homogeneous && first.estimate != first.declared {
+        match problem.descend(&first.declared) {
+            Ok(other) => {
+                let sigma2 = descent.sigma2.min(other.sigma2);
+                if problem.objective(other.sum, &other.at.pi, sigma2)
+                    < problem.objective(descent.sum, &descent.at.pi, sigma2)
+                {
+                    let iterations = descent.iterations + other.iterations;
+                    descent = Descent {
+                        iterations,
+                        rms_start: descent.rms_start,
+                        ..other
+                    };
+                } else {
+                    descent.iterations += other.iterations;
                 }
             }
-            if !accepted {
-                // no decrease at any damping: a minimum to rounding
-                converged = true;
-                break;
-            }
-            sys = normal(regressor, logs, &segs, &at, sigma2)?;
-            if converged {
-                break;
-            }
-        }
-        let new_sigma2 = (sys.sum / dof).max(f64::MIN_POSITIVE);
-        let moved = (new_sigma2 / sigma2 - 1.0).abs() > 0.44; // σ moved by > 20 %
-        sigma2 = new_sigma2;
-        if !moved || iterations >= options.max_iterations {
-            break;
+            // the declared values need not simulate every segment
+            Err(IdentifyError::Simulation { .. }) => {}
+            Err(e) => return Err(e),
         }
     }
+    let Descent {
+        at,
+        sigma2,
+        iterations,
+        rms_start,
+        converged,
+        ..
+    } = descent;
     let sys = normal(regressor, logs, &segs, &at, sigma2)?;
     let precision = reduced_precision(&sys, &prior_precision);
     let cov = match precision.clone().cholesky() {
@@ -730,8 +834,8 @@ pub fn refine<R: Regressor>(
         segments: segs.len(),
         samples,
         iterations,
-        rms_start: rms_start.unwrap_or(f64::NAN),
-        rms: (sys.sum / residual_count).sqrt(),
+        rms_start,
+        rms: (sys.sum / problem.residual_count).sqrt(),
         position_sigma: sigma2.sqrt(),
         converged,
         homogeneous,
