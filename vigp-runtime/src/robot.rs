@@ -390,18 +390,38 @@ impl RolloutReport {
 }
 
 /// The kept scratch of a robot's steps ([`Robot::step_in`]): one
-/// [`BodyScratch`] per body, the generalized forces, and the last step's
-/// velocities (the start of the next step's iteration).
+/// [`BodyScratch`] per body, the generalized forces, and the velocities of
+/// the last steps (the start of the next step's iteration).
 #[derive(Clone, Debug)]
 pub struct RobotWorkspace {
     bodies: Vec<BodyScratch>,
     tau: Vec<f64>,
     /// The state (q, v) the last step produced (2N; empty: none).
     last: Vec<f64>,
-    /// The velocity that step started from.
-    v_prev: Vec<f64>,
-    /// The extrapolation 2v_k − v_{k−1}.
+    /// The velocities the last three steps started from, newest first
+    /// (3N), of which `known` belong to the run that produced `last`.
+    past: Vec<f64>,
+    known: usize,
+    /// The extrapolation of the next step's velocity ([`extrapolate`]).
     guess: Vec<f64>,
+}
+
+/// The velocity of the next step extrapolated from the current one `v`
+/// and the `known` (1 to 3) before it in `past` (newest first, N each):
+/// the polynomial through them, of degree `known` (2v − v₋₁;
+/// 3v − 3v₋₁ + v₋₂; 4v − 6v₋₁ + 4v₋₂ − v₋₃): on a smooth motion the cubic
+/// starts the iteration closer to its root than the line, so that fewer
+/// iterations are needed (docs/robots.md, "The engine").
+fn extrapolate(v: &[f64], past: &[f64], known: usize, out: &mut [f64]) {
+    let n = v.len();
+    for i in 0..n {
+        let a = past[i];
+        out[i] = match known {
+            1 => 2.0 * v[i] - a,
+            2 => 3.0 * v[i] - 3.0 * a + past[n + i],
+            _ => 4.0 * v[i] - 6.0 * a + 4.0 * past[n + i] - past[2 * n + i],
+        };
+    }
 }
 
 /// A robot: a tree of rigid bodies in minimal coordinates with its joint
@@ -559,7 +579,8 @@ impl Robot {
             bodies: vec![BodyScratch::default(); n],
             tau: vec![0.0; n],
             last: Vec::with_capacity(2 * n),
-            v_prev: vec![0.0; n],
+            past: vec![0.0; 3 * n],
+            known: 0,
             guess: vec![0.0; n],
         }
     }
@@ -636,8 +657,9 @@ impl Robot {
     /// path of a simulation loop: no allocation (after the first call with
     /// a workspace from [`Robot::workspace`]), and when `z` is the state
     /// the workspace's previous step produced, the iteration starts from
-    /// the extrapolation 2v_k − v_{k−1} (as [`Robot::rollout_with`]), so a
-    /// loop of `step_in` is that rollout, bit for bit. The converged step
+    /// the extrapolation of the velocities of up to four steps of that run
+    /// (a cubic once there are four: 4v_k − 6v_{k−1} + 4v_{k−2} − v_{k−3});
+    /// [`Robot::rollout_with`] is a loop of `step_in`. The converged step
     /// equals [`Robot::step`]'s (which starts from v_k) to the solver's
     /// tolerance.
     pub fn step_in(
@@ -650,19 +672,24 @@ impl Robot {
     ) -> Result<EngineReport, RobotError> {
         self.check_state(z)?;
         let n = self.dof();
-        if ws.tau.len() != n || ws.bodies.len() < n || ws.v_prev.len() != n || ws.guess.len() != n {
+        if ws.tau.len() != n || ws.bodies.len() < n || ws.past.len() != 3 * n || ws.guess.len() != n
+        {
             *ws = self.workspace();
         }
         let continues =
             ws.last.len() == 2 * n && ws.last[..n] == z.q[..] && ws.last[n..] == z.v[..];
-        if continues {
-            for ((g, &v), &w) in ws.guess.iter_mut().zip(&z.v).zip(&ws.v_prev) {
-                *g = 2.0 * v - w;
-            }
+        if !continues {
+            ws.known = 0;
         }
-        ws.v_prev.copy_from_slice(&z.v);
+        let guessed = ws.known > 0;
+        if guessed {
+            extrapolate(&z.v, &ws.past, ws.known, &mut ws.guess);
+        }
+        ws.past.copy_within(0..2 * n, n);
+        ws.past[..n].copy_from_slice(&z.v);
+        ws.known = (ws.known + 1).min(3);
         let guess = std::mem::take(&mut ws.guess);
-        let r = self.step_guessed(z, p, u, dt, continues.then_some(&guess[..]), ws);
+        let r = self.step_guessed(z, p, u, dt, guessed.then_some(&guess[..]), ws);
         ws.guess = guess;
         ws.last.clear();
         if r.is_ok() {
@@ -964,9 +991,10 @@ impl Robot {
         self.rollout_with(z0, dt, steps, |_, _| u.clone())
     }
 
-    /// A rollout whose input at step k is `input(k, z_k)`. Each step's
-    /// iteration starts from the extrapolation 2v_k − v_{k−1} (the converged
-    /// steps are those of [`Robot::step`] to the solver tolerance).
+    /// A rollout whose input at step k is `input(k, z_k)`: a loop of
+    /// [`Robot::step_in`], whose iterations start from the extrapolation of
+    /// the last velocities (the converged steps are those of
+    /// [`Robot::step`] to the solver tolerance).
     pub fn rollout_with(
         &self,
         z0: &RobotState,
@@ -984,17 +1012,10 @@ impl Robot {
         let mut states = Vec::with_capacity(steps + 1);
         states.push(z.clone());
         let mut report = RolloutReport::default();
-        let n = self.dof();
-        let (mut v_prev, mut guess) = (z0.v.clone(), vec![0.0; n]);
         for k in 0..steps {
             let u = input(k, &z);
-            for ((g, &v), &w) in guess.iter_mut().zip(&z.v).zip(&v_prev) {
-                *g = 2.0 * v - w;
-            }
-            v_prev.copy_from_slice(&z.v);
-            let g = (k > 0).then_some(guess.as_slice());
             let r = self
-                .step_guessed(&mut z, &mut p, &u, dt, g, &mut ws)
+                .step_in(&mut z, &mut p, &u, dt, &mut ws)
                 .map_err(|e| fail(k, e))?;
             report.add(&r);
             states.push(z.clone());

@@ -1303,8 +1303,8 @@ impl<T: Tree> Engine<T> {
     }
 
     /// [`Engine::step`] with the iteration of the full step started at
-    /// `guess` instead of v (a rollout passes the extrapolation
-    /// 2v_k − v_{k−1}; the converged step is the same to the tolerance).
+    /// `guess` instead of v (a rollout passes an extrapolation of the last
+    /// velocities; the converged step is the same to the tolerance).
     /// A non-finite guess is ignored.
     #[allow(clippy::too_many_arguments)]
     pub fn step_guessed(
