@@ -64,37 +64,11 @@ where
     let mut starts = Vec::with_capacity(data.runs.len());
     let mut short = Vec::new();
     for (r, run) in data.runs.iter().enumerate() {
-        let plan = match &plans {
-            None => None,
-            Some((path, plans)) => {
-                let found = plans
-                    .iter()
-                    .find(|(name, _)| name.as_deref().is_none_or(|n| n == run.name));
-                let Some((_, plan)) = found else {
-                    return Err(CliError::Usage(format!(
-                        "{}: no inputs for run `{}` of {}",
-                        path.display(),
-                        run.name,
-                        a.data.display()
-                    )));
-                };
-                if plan.len() < a.steps {
-                    return Err(CliError::Usage(format!(
-                        "{}: {} input row(s){}, --steps {} needs {}",
-                        path.display(),
-                        plan.len(),
-                        if plans[0].0.is_some() {
-                            format!(" for run `{}`", run.name)
-                        } else {
-                            String::new()
-                        },
-                        a.steps,
-                        a.steps
-                    )));
-                }
-                Some(&plan[..a.steps])
-            }
-        };
+        let plan = plan_for(
+            a,
+            plans.as_ref().map(|(p, v)| (p.as_path(), v.as_slice())),
+            &run.name,
+        )?;
         let before = starts.len();
         let mut s = 0usize;
         while s
@@ -239,18 +213,7 @@ where
     let bound = learned.error_bound_forced::<U>(&kind, &calibration)?;
     let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
     let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
-    let coords: Vec<String> = data.coordinates.clone();
-    let mut header = vec!["run".to_string()];
-    if a.stride.is_some() {
-        header.push("start".into());
-    }
-    header.push("t".into());
-    header.extend(coords.iter().cloned());
-    header.extend(coords.iter().map(|c| format!("v_{c}")));
-    // the input that drove the step into each row (the data's convention)
-    header.extend(inputs.iter().map(|j| format!("u_{j}")));
-    header.push("bound".into());
-    header.push("position_bound".into());
+    let mut header = header(a, &data.coordinates, inputs);
     // which rows' bounds are the conformal bound's fallback (see below)
     let conformal = bound.kind_name() == "conformal";
     if conformal {
@@ -289,28 +252,15 @@ where
         outside_runs += usize::from(n_out > 0);
         for (k, z) in pred.states.iter().enumerate() {
             let zm = if k == 0 { *z0 } else { to_minimal(z) };
-            let mut row = vec![run.name.clone()];
-            if a.stride.is_some() {
-                row.push(s.to_string());
-            }
-            // t_0 + (s + k)·Δt from the integer index, without float noise
-            row.push(crate::data::format_time(
-                run.t0,
-                run.dt.unwrap_or(dt),
-                s + k,
-            ));
-            row.extend(zm.q.iter().map(|x| format!("{x:?}")));
-            row.extend(zm.v.iter().map(|x| format!("{x:?}")));
-            match us.get(k.wrapping_sub(1)) {
-                Some(u) => row.extend(u.iter().map(|x| format!("{x:?}"))),
-                None => row.extend(inputs.iter().map(|_| String::new())),
-            }
-            row.push(if k == 0 {
-                String::new()
-            } else {
-                format!("{:?}", pred.one_step_bounds[k - 1])
-            });
-            row.push(format!("{:?}", pred.position_bounds[k]));
+            let mut row = row(
+                a,
+                (&run.name, run.t0, run.dt.unwrap_or(dt)),
+                (*s, k),
+                (zm.q.as_slice(), zm.v.as_slice()),
+                us.get(k.wrapping_sub(1)).map(|u| u.as_slice()),
+                inputs.len(),
+                (&pred.one_step_bounds, &pred.position_bounds),
+            );
             if conformal {
                 // row k's `bound` is predicted from state k − 1, and every
                 // position bound falls back when the start is outside
@@ -387,6 +337,95 @@ where
             guarantee(&bound, a.delta)
         ),
     )
+}
+
+/// The output's columns before `fallback`: run, [start,] t, the
+/// coordinates, their velocities, the inputs that drove the steps into
+/// the rows (the data's convention), the one-step and the position bound.
+fn header(a: &PredictArgs, coordinates: &[String], inputs: &[&str]) -> Vec<String> {
+    let mut header = vec!["run".to_string()];
+    if a.stride.is_some() {
+        header.push("start".into());
+    }
+    header.push("t".into());
+    header.extend(coordinates.iter().cloned());
+    header.extend(coordinates.iter().map(|c| format!("v_{c}")));
+    header.extend(inputs.iter().map(|j| format!("u_{j}")));
+    header.push("bound".into());
+    header.push("position_bound".into());
+    header
+}
+
+/// Row k of the prediction from sample s of a run (name, t₀, Δt): the
+/// columns of [`header`], `u` the input of the step into the row (none at
+/// k = 0, and for `inputs` = 0), `bounds` the prediction's one-step and
+/// position bounds.
+fn row(
+    a: &PredictArgs,
+    (name, t0, dt): (&str, f64, f64),
+    (s, k): (usize, usize),
+    (q, v): (&[f64], &[f64]),
+    u: Option<&[f64]>,
+    inputs: usize,
+    (one_step, position): (&[f64], &[f64]),
+) -> Vec<String> {
+    let mut row = vec![name.to_string()];
+    if a.stride.is_some() {
+        row.push(s.to_string());
+    }
+    // t_0 + (s + k)·Δt from the integer index, without float noise
+    row.push(crate::data::format_time(t0, dt, s + k));
+    row.extend(q.iter().map(|x| format!("{x:?}")));
+    row.extend(v.iter().map(|x| format!("{x:?}")));
+    match u {
+        Some(u) => row.extend(u.iter().map(|x| format!("{x:?}"))),
+        None => row.extend((0..inputs).map(|_| String::new())),
+    }
+    row.push(if k == 0 {
+        String::new()
+    } else {
+        format!("{:?}", one_step[k - 1])
+    });
+    row.push(format!("{:?}", position[k]));
+    row
+}
+
+/// The planned inputs of run `run` (the plan file's own run, or its one
+/// plan for every run), its first `--steps` rows; `None` without
+/// `--inputs`.
+fn plan_for<'p, T>(
+    a: &PredictArgs,
+    plans: Option<(&std::path::Path, &'p [(Option<String>, Vec<T>)])>,
+    run: &str,
+) -> Result<Option<&'p [T]>, CliError> {
+    let Some((path, plans)) = plans else {
+        return Ok(None);
+    };
+    let found = plans
+        .iter()
+        .find(|(name, _)| name.as_deref().is_none_or(|n| n == run));
+    let Some((_, plan)) = found else {
+        return Err(CliError::Usage(format!(
+            "{}: no inputs for run `{run}` of {}",
+            path.display(),
+            a.data.display()
+        )));
+    };
+    if plan.len() < a.steps {
+        return Err(CliError::Usage(format!(
+            "{}: {} input row(s){}, --steps {} needs {}",
+            path.display(),
+            plan.len(),
+            if plans[0].0.is_some() {
+                format!(" for run `{run}`")
+            } else {
+                String::new()
+            },
+            a.steps,
+            a.steps
+        )));
+    }
+    Ok(Some(&plan[..a.steps]))
 }
 
 /// What the bound's probability covers, for `predict`'s summary: the
@@ -557,32 +596,11 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
     let mut starts = Vec::new();
     let mut short = Vec::new();
     for (r, run) in data.runs.iter().enumerate() {
-        let plan = match &plans {
-            None => None,
-            Some((path, plans)) => {
-                let found = plans
-                    .iter()
-                    .find(|(name, _)| name.as_deref().is_none_or(|x| x == run.name));
-                let Some((_, plan)) = found else {
-                    return usage(format!(
-                        "{}: no inputs for run `{}` of {}",
-                        path.display(),
-                        run.name,
-                        a.data.display()
-                    ));
-                };
-                if plan.len() < a.steps {
-                    return usage(format!(
-                        "{}: {} input row(s), --steps {} needs {}",
-                        path.display(),
-                        plan.len(),
-                        a.steps,
-                        a.steps
-                    ));
-                }
-                Some(&plan[..a.steps])
-            }
-        };
+        let plan = plan_for(
+            a,
+            plans.as_ref().map(|(p, v)| (p.as_path(), v.as_slice())),
+            &run.name,
+        )?;
         let before = starts.len();
         let mut s = 0usize;
         while s
@@ -637,17 +655,11 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
         path: a.out.clone(),
         source: std::io::Error::other(e),
     };
-    let mut header = vec!["run".to_string()];
-    if a.stride.is_some() {
-        header.push("start".into());
-    }
-    header.push("t".into());
-    header.extend(names.iter().map(|c| c.to_string()));
-    header.extend(names.iter().map(|c| format!("v_{c}")));
-    header.extend(inputs.iter().map(|j| format!("u_{j}")));
+    let coordinates: Vec<String> = names.iter().map(|c| c.to_string()).collect();
+    let mut header = header(a, &coordinates, &inputs);
     // (`fallback` as for a declared mechanism's conformal bound without a
     // fallback: `outside` where the guarantee does not apply)
-    header.extend(["bound", "position_bound", "fallback"].map(String::from));
+    header.push("fallback".into());
     wtr.write_record(&header).map_err(csv_err)?;
     let pb = bar(starts.len(), "predicting");
     let (mut failed, mut first_error) = (0usize, None);
@@ -674,27 +686,15 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
         outside += n_out;
         outside_runs += usize::from(n_out > 0);
         for (k, z) in pred.states.iter().enumerate() {
-            let mut row = vec![run.name.clone()];
-            if a.stride.is_some() {
-                row.push(s.to_string());
-            }
-            row.push(crate::data::format_time(
-                run.t0,
-                run.dt.unwrap_or(dt),
-                s + k,
-            ));
-            row.extend(z.q.iter().map(|x| format!("{x:?}")));
-            row.extend(z.v.iter().map(|x| format!("{x:?}")));
-            match us.get(k.wrapping_sub(1)) {
-                Some(u) => row.extend(u.iter().map(|x| format!("{x:?}"))),
-                None => row.extend(inputs.iter().map(|_| String::new())),
-            }
-            row.push(if k == 0 {
-                String::new()
-            } else {
-                format!("{:?}", pred.one_step_bounds[k - 1])
-            });
-            row.push(format!("{:?}", pred.position_bounds[k]));
+            let mut row = row(
+                a,
+                (&run.name, run.t0, run.dt.unwrap_or(dt)),
+                (*s, k),
+                (&z.q, &z.v),
+                us.get(k.wrapping_sub(1)).map(Vec::as_slice),
+                m,
+                (&pred.one_step_bounds, &pred.position_bounds),
+            );
             // row k's `bound` is predicted from state k − 1, and every
             // position bound leaves the guarantee when the start is outside
             let flagged = k > 0 && (pred.outside[k - 1] || pred.outside[0]);

@@ -586,19 +586,37 @@ pub(super) fn calibrate<
                 .collect(),
         }));
     }
-    let failed = traced.iter().filter(|t| t.is_none()).count();
-    let c = calibrate_traced(&traced, settings, noise, dt, k_max)?;
-    Ok(ConformalParts {
-        score: c.score,
-        tube: settings.tube,
-        calibration_size: c.calibration_size,
-        selection_size: c.selection_size,
-        failed,
-        one_step_quantile: c.one_step,
-        position_quantiles: c.positions,
-        region: region.finish(cal.window_runs()),
-        inputs: U,
-    })
+    let region = region.finish(cal.window_runs());
+    ConformalParts::calibrate(&traced, settings, noise, (dt, k_max), region, U)
+}
+
+impl ConformalParts {
+    /// The quantiles of `traced` windows of K = `k_max` steps of `dt`
+    /// (None: a failed prediction, a miss) with `settings`
+    /// ([`calibrate_traced`]), the calibrated `region`, and the number of
+    /// inputs the windows were predicted under.
+    pub(crate) fn calibrate(
+        traced: &[Option<Traced>],
+        settings: &ConformalSettings,
+        noise: &[f64],
+        (dt, k_max): (f64, usize),
+        region: Region,
+        inputs: usize,
+    ) -> Result<Self, BoundError> {
+        let failed = traced.iter().filter(|t| t.is_none()).count();
+        let c = calibrate_traced(traced, settings, noise, dt, k_max)?;
+        Ok(ConformalParts {
+            score: c.score,
+            tube: settings.tube,
+            calibration_size: c.calibration_size,
+            selection_size: c.selection_size,
+            failed,
+            one_step_quantile: c.one_step,
+            position_quantiles: c.positions,
+            region,
+            inputs,
+        })
+    }
 }
 
 #[cfg(test)]

@@ -56,6 +56,26 @@ pub struct ExportSize {
     pub source_bytes: usize,
 }
 
+impl ExportSize {
+    /// The size of an export of `gp` (with the Cholesky factors when
+    /// `variance`) written in `source_bytes` bytes.
+    pub(crate) fn of(gp: &crate::gp::Gp, variance: bool, source_bytes: usize) -> Self {
+        let (n, d, p) = (gp.posterior_points(), gp.input_dim(), gp.output_dim());
+        let mut numbers = p * (n * (d + 1) + 3 * d + 3);
+        if variance {
+            numbers += p * n * (n + 1) / 2;
+        }
+        ExportSize {
+            n,
+            input_dim: d,
+            outputs: p,
+            numbers,
+            data_bytes: 8 * numbers,
+            source_bytes,
+        }
+    }
+}
+
 impl<M, const N: usize, const C: usize> Learned<M, N, C>
 where
     M: Mechanism<N, C> + Parameters + Clone,
@@ -95,8 +115,7 @@ where
         };
         let mut s = self.gp.to_rust_source(&gp_opts)?;
         let core = &opts.core_path;
-        let (d, p) = (self.gp.input_dim(), self.gp.output_dim());
-        let n = self.gp.posterior_points();
+        let d = self.gp.input_dim();
         let lit = |v: f64| format!("{v:?}");
         let coords: Vec<String> = M::COORDINATES.iter().map(|c| format!("{c:?}")).collect();
         if self.inputs > M::INPUT_NAMES.len() {
@@ -168,18 +187,7 @@ where
             min_step = lit(self.options.min_step),
             stall = lit(self.options.stall_tolerance),
         );
-        let mut numbers = p * (n * (d + 1) + 3 * d + 3);
-        if opts.variance {
-            numbers += p * n * (n + 1) / 2;
-        }
-        let size = ExportSize {
-            n,
-            input_dim: d,
-            outputs: p,
-            numbers,
-            data_bytes: 8 * numbers,
-            source_bytes: s.len(),
-        };
+        let size = ExportSize::of(&self.gp, opts.variance, s.len());
         Ok((s, size))
     }
 }

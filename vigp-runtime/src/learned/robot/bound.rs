@@ -12,8 +12,7 @@
 
 use super::{LearnedRobot, LearnedRobotError};
 use crate::bound::conformal::{
-    RegionBuilder, Traced, calibrate_traced, position_scales, predictive_scale, quantile_index,
-    score_scale,
+    RegionBuilder, Traced, position_scales, predictive_scale, quantile_index, score_scale,
 };
 use crate::bound::windows::{CalibrationOf, CalibrationWindow, Windows, window_starts};
 use crate::bound::{
@@ -307,19 +306,8 @@ impl LearnedRobot {
                 std_devs: t.std_devs,
             }));
         }
-        let failed = traced.iter().filter(|t| t.is_none()).count();
-        let c = calibrate_traced(&traced, settings, &noise, dt, k_max)?;
-        let parts = ConformalParts {
-            score: c.score,
-            tube: settings.tube,
-            calibration_size: c.calibration_size,
-            selection_size: c.selection_size,
-            failed,
-            one_step_quantile: c.one_step,
-            position_quantiles: c.positions,
-            region: region.finish(calibration.window_runs()),
-            inputs: nu,
-        };
+        let region = region.finish(calibration.window_runs());
+        let parts = ConformalParts::calibrate(&traced, settings, &noise, (dt, k_max), region, nu)?;
         Ok(ErrorBound::conformal_alone(
             settings.delta,
             parts,

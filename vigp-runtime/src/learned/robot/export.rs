@@ -94,8 +94,7 @@ impl LearnedRobot {
         };
         let mut s = self.gp.to_rust_source(&gp_opts)?;
         let core = &opts.core_path;
-        let (d, p) = (self.gp.input_dim(), self.gp.output_dim());
-        let n = self.gp.posterior_points();
+        let d = self.gp.input_dim();
         let robot = &m.robot;
         let tree = robot.tree();
         let dof = robot.dof();
@@ -162,18 +161,7 @@ impl LearnedRobot {
             contraction = lit(o.max_contraction),
             energy = lit(o.energy_tolerance),
         );
-        let mut numbers = p * (n * (d + 1) + 3 * d + 3);
-        if opts.variance {
-            numbers += p * n * (n + 1) / 2;
-        }
-        let size = ExportSize {
-            n,
-            input_dim: d,
-            outputs: p,
-            numbers,
-            data_bytes: 8 * numbers,
-            source_bytes: s.len(),
-        };
+        let size = ExportSize::of(&self.gp, opts.variance, s.len());
         Ok((s, size))
     }
 }
