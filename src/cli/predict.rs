@@ -390,12 +390,15 @@ fn row(
     row
 }
 
+/// Plans per run (the run's name, or `None` for every run).
+type RunPlans<'p, T> = &'p [(Option<String>, Vec<T>)];
+
 /// The planned inputs of run `run` (the plan file's own run, or its one
 /// plan for every run), its first `--steps` rows; `None` without
 /// `--inputs`.
 fn plan_for<'p, T>(
     a: &PredictArgs,
-    plans: Option<(&std::path::Path, &'p [(Option<String>, Vec<T>)])>,
+    plans: Option<(&std::path::Path, RunPlans<'p, T>)>,
     run: &str,
 ) -> Result<Option<&'p [T]>, CliError> {
     let Some((path, plans)) = plans else {
