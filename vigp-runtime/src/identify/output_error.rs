@@ -54,11 +54,12 @@
 //! ([`super::consistency::project`]; the set is convex and the iterate
 //! strictly inside it), so that the iteration can slide along the set's
 //! boundary (a joint without friction, a thin link) instead of stopping
-//! there. The objective is not convex: the iteration runs from the first
-//! stage's estimate and from the declared values (the prior's centre),
-//! and the lower objective wins (an estimate far off, e.g. least squares
-//! on noisy positions projected onto the consistent set's boundary, can
-//! otherwise stall in a poorer minimum). The covariance of π
+//! there. The objective is not convex: when the first stage's estimate
+//! was projected onto the consistent set (an estimate far off, e.g. least
+//! squares on noisy positions), the iteration starting on the boundary
+//! can stall in a poorer minimum, so it runs from the declared values (the
+//! prior's centre) as well and the lower objective wins. The covariance
+//! of π
 //! is the inverse of the reduced Gauss–Newton matrix at the solution (the
 //! Laplace approximation of the posterior); the base parameters' intervals
 //! follow as in the first stage.
@@ -754,18 +755,19 @@ pub fn refine<R: Regressor>(
         // and the base parameters
         dof: ((samples * n) as f64 - (segs.len() * 2 * n + first.base.rank()) as f64).max(1.0),
     };
-    // From the regression's estimate, and (unless that is where the
-    // refinement starts anyway) from the declared values: the objective is
-    // not convex, and a regression far off (least squares on noisy
-    // positions) can start the iteration on the consistent set's boundary,
-    // where it stalls in a poorer minimum. The lower objective wins,
-    // compared with the smaller of the two noise estimates.
+    // From the regression's estimate; and when the consistency projection
+    // moved that estimate onto the consistent set's boundary (a regression
+    // far off: least squares on noisy positions), also from the declared
+    // values. The objective is not convex, and from the boundary the
+    // projected steps can stall in a poorer minimum. The lower objective
+    // wins, compared with the smaller of the two noise estimates.
     let mut descent = problem.descend(if homogeneous {
         &first.declared
     } else {
         &first.estimate
     })?;
-    if !homogeneous && first.estimate != first.declared {
+    let on_boundary = !(first.projected.is_empty() && first.projected_joints.is_empty());
+    if !homogeneous && on_boundary && first.estimate != first.declared {
         match problem.descend(&first.declared) {
             Ok(other) => {
                 let sigma2 = descent.sigma2.min(other.sigma2);
