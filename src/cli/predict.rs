@@ -8,7 +8,9 @@ use super::{
     CliError, bar, check_model_inputs, check_out_dir, data_error, io_error, read_data, read_plan,
     read_plan_rows, report_read, w, window_place,
 };
-use crate::bound::{BoundKind, BoundParts, Calibration, ConformalSettings, ErrorBound, Tube};
+use crate::bound::{
+    BoundError, BoundKind, BoundParts, Calibration, ConformalSettings, ErrorBound, Tube,
+};
 use crate::data::{Dataset, DynDataset};
 use crate::learned::Learned;
 use crate::learned::robot::{LearnedRobot, RobotCalibration, coordinate_kinds};
@@ -277,19 +279,7 @@ where
     }
     pb.finish_and_clear();
     wtr.flush().map_err(io_error(&a.out))?;
-    if failed == starts.len()
-        && let Some(e) = first_error
-    {
-        // a file with the header alone is no result: fail (exit code 1)
-        w(
-            out,
-            format_args!(
-                "every run failed ({failed}); {} holds no predictions",
-                a.out.display()
-            ),
-        )?;
-        return Err(e.into());
-    }
+    every_run_failed(a, failed, starts.len(), first_error, out)?;
     if outside > 0 {
         let what = match (&bound.fallback, bound.kind_name()) {
             (Some(f), _) => format!(
@@ -337,6 +327,30 @@ where
             guarantee(&bound, a.delta)
         ),
     )
+}
+
+/// A file with the header alone is no result: when every one of `total`
+/// predictions failed, says so and returns the first error (exit code 1).
+fn every_run_failed(
+    a: &PredictArgs,
+    failed: usize,
+    total: usize,
+    first_error: Option<BoundError>,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    if failed == total
+        && let Some(e) = first_error
+    {
+        w(
+            out,
+            format_args!(
+                "every run failed ({failed}); {} holds no predictions",
+                a.out.display()
+            ),
+        )?;
+        return Err(e.into());
+    }
+    Ok(())
 }
 
 /// The output's columns before `fallback`: run, [start,] t, the
@@ -712,18 +726,7 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
     }
     pb.finish_and_clear();
     wtr.flush().map_err(io_error(&a.out))?;
-    if failed == starts.len()
-        && let Some(e) = first_error
-    {
-        w(
-            out,
-            format_args!(
-                "every run failed ({failed}); {} holds no predictions",
-                a.out.display()
-            ),
-        )?;
-        return Err(e.into());
-    }
+    every_run_failed(a, failed, starts.len(), first_error, out)?;
     if outside > 0 {
         w(
             out,

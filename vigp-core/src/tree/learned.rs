@@ -53,6 +53,8 @@ pub struct LearnedTreeStepper<'a, const N: usize, const D: usize> {
     /// The joint of input i, for i < `inputs`.
     actuated: [usize; N],
     inputs: usize,
+    /// The encoded state's dimension (the GP input's first entries).
+    encoded: usize,
 }
 
 impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
@@ -104,6 +106,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             kinds,
             actuated,
             inputs: m,
+            encoded: e,
         })
     }
 
@@ -159,7 +162,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
                 .map_err(LearnedError::Engine)?;
         }
         let mut x = [0.0; D];
-        let e = l.encoding.dim(&self.kinds);
+        let e = self.encoded;
         l.encoding.encode(&self.kinds, z, &mut x[..e]);
         x[e..e + U].copy_from_slice(u_prev.as_slice());
         x[e + U..e + 2 * U].copy_from_slice(u.as_slice());

@@ -614,9 +614,12 @@ impl<R: Regressor> Problem<'_, R> {
         let mut rms_start = None;
         let mut converged = false;
         let mut sys = normal(regressor, logs, segs, &at, sigma2)?;
-        for _pass in 0..3 {
+        for pass in 0..3 {
             let mut mu = 1e-3;
-            sys = normal(regressor, logs, segs, &at, sigma2)?;
+            // (a later pass starts where the last ended, with σ² moved)
+            if pass > 0 {
+                sys = normal(regressor, logs, segs, &at, sigma2)?;
+            }
             if rms_start.is_none() {
                 rms_start = Some((sys.sum / self.residual_count).sqrt());
             }

@@ -16,7 +16,8 @@ use crate::bound::conformal::{
 };
 use crate::bound::windows::{CalibrationOf, CalibrationWindow, Windows, window_starts};
 use crate::bound::{
-    BoundError, BoundParts, ConformalParts, ConformalSettings, ErrorBound, check_held_out,
+    BoundError, BoundParts, ConformalParts, ConformalSettings, ErrorBound, check_delta,
+    check_held_out,
 };
 use crate::robot::RobotState;
 
@@ -194,11 +195,10 @@ impl LearnedRobot {
         };
         t.states.push(z0.clone());
         let mut prev = u_prev;
+        let mut var = vec![0.0; n];
         for (k, u) in inputs.iter().enumerate() {
-            let mut var = vec![0.0; n];
-            let z = t.states[k].clone();
             let next = self
-                .step_with(&z, prev, u, &mut ws, Some(&mut var))
+                .step_with(&t.states[k], prev, u, &mut ws, Some(&mut var))
                 .map_err(|e| LearnedRobotError::Rollout {
                     step: k,
                     source: Box::new(e),
@@ -229,12 +229,7 @@ impl LearnedRobot {
         settings: &ConformalSettings,
         calibration: &RobotCalibration,
     ) -> Result<ErrorBound, BoundError> {
-        if !(settings.delta > 0.0 && settings.delta < 1.0) {
-            return Err(BoundError::InvalidSetting {
-                what: "delta (must be in (0, 1))",
-                value: settings.delta,
-            });
-        }
+        check_delta(settings.delta)?;
         let n = calibration.len();
         quantile_index(n, settings.delta)?;
         let m = &self.model;
