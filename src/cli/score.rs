@@ -131,10 +131,7 @@ where
             // the positions the k steps produce: x_{s+2} … x_{s+k+1} (x_{s+1}
             // = x_s + Δt·v_s is the logged one, reached by no step)
             let truth = &run.positions[s + 2..=s + k + 1];
-            let z0 = State {
-                q: run.positions[s],
-                v: (run.positions[s + 1] - run.positions[s]) / dt,
-            };
+            let z0 = State::from_positions(run.positions[s], &run.positions[s + 1], dt);
             // step j of the window (from sample s + j) under the input
             // logged over its new velocity's interval, row s + j + 1's,
             // after row s + j's (the learned step takes both)

@@ -772,22 +772,28 @@ fn forced_models_that_do_not_fit_are_refused() {
         let ok = SVector::from([0.5]);
         assert_eq!(
             stepper.step_forced(&z, &ok, &SVector::from([bad])),
-            Err(LearnedError::Step(StepError::NonFiniteInput))
+            Err(LearnedError::Step(StepError::NonFiniteInput { step: None }))
         );
         assert_eq!(
             stepper.step_forced(&z, &SVector::from([bad]), &ok),
-            Err(LearnedError::Step(StepError::NonFiniteInput))
+            Err(LearnedError::Step(StepError::NonFiniteInput { step: None }))
         );
         let mut inputs = [ok; 10];
         inputs[4] = SVector::from([bad]);
         let mut out = [z; 10];
         assert_eq!(
             stepper.rollout_forced_into(&z, &ok, &inputs, &mut out),
-            Err((4, LearnedError::Step(StepError::NonFiniteInput)))
+            Err((
+                4,
+                LearnedError::Step(StepError::NonFiniteInput { step: None })
+            ))
         );
         assert_eq!(
             stepper.rollout_forced_into(&z, &SVector::from([bad]), &[ok; 10], &mut out),
-            Err((0, LearnedError::Step(StepError::NonFiniteInput)))
+            Err((
+                0,
+                LearnedError::Step(StepError::NonFiniteInput { step: None })
+            ))
         );
         assert!(out.iter().all(|s| s.is_finite()));
     }
@@ -799,7 +805,10 @@ fn forced_models_that_do_not_fit_are_refused() {
             &[SVector::from([0.5]); 9],
             &mut out
         ),
-        Err((9, LearnedError::Step(StepError::NonFiniteInput)))
+        Err((
+            9,
+            LearnedError::Step(StepError::NonFiniteInput { step: None })
+        ))
     );
     assert!(out.iter().all(|s| *s == z), "stepped before failing");
 
@@ -1036,6 +1045,6 @@ fn exported_learned_robot_matches_the_model_file() {
     ));
     assert!(matches!(
         stepper.step(&z0, &u_prev, &SVector::from([f64::NAN]), &mut ws),
-        Err(LearnedError::Step(StepError::NonFiniteInput))
+        Err(LearnedError::Step(StepError::NonFiniteInput { step: None }))
     ));
 }

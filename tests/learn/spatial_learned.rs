@@ -576,7 +576,7 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
         assert!(matches!(
             forced.step_forced_with(&z0, up, u, &mut ws),
             Err(LearnSpatialError::Step(
-                vigp::embedded::StepError::NonFiniteInput
+                vigp::embedded::StepError::NonFiniteInput { step: None }
             ))
         ));
     }

@@ -255,7 +255,10 @@ fn bad_input_is_a_typed_error() {
     assert!(Stepper::new(massless, 0.01).is_ok());
     let fast = Stepper::new(dp, 0.01).unwrap();
     let bad = State::new([f64::NAN, 0.0], [0.0, 0.0]);
-    assert_eq!(fast.step(&bad), Err(StepError::NonFiniteState));
+    assert_eq!(
+        fast.step(&bad),
+        Err(StepError::NonFiniteState { step: None })
+    );
     let mut out = [bad; 3];
     let err = fast.rollout_into(&bad, &mut out).unwrap_err();
     assert_eq!(err.step, 0);
@@ -410,7 +413,7 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
     let bad = State::new([f64::NAN, 0.0], [0.0, 0.0]);
     assert!(matches!(
         s[0].step_in(&bad, &mut ws),
-        Err(StepError::NonFiniteState)
+        Err(StepError::NonFiniteState { step: None })
     ));
     // the std `Variational::step` keeps one workspace per size and thread:
     // interleaved models of the same size (and other sizes in between)

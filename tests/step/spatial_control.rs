@@ -761,7 +761,7 @@ fn non_finite_spatial_inputs_are_refused() {
         let u = SVector::<f64, 2>::new(0.0, bad);
         assert_eq!(
             stepper.step_forced(&x, &u).unwrap_err(),
-            vigp::embedded::StepError::NonFiniteInput
+            vigp::embedded::StepError::NonFiniteInput { step: None }
         );
         let mut out = [x; 3];
         assert!(stepper.rollout_forced_into(&x, &[u, u], &mut out).is_err());

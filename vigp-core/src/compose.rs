@@ -219,7 +219,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         if q.iter().chain(p.iter()).all(|x| x.is_finite()) {
             Ok((q, p))
         } else {
-            Err(StepError::NonFiniteResidual { iteration: 0 })
+            Err(StepError::NonFiniteResidual {
+                iteration: 0,
+                step: None,
+            })
         }
     }
 
@@ -266,11 +269,14 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
             nalgebra::SMatrix::zeros()
         };
         let ((v, _), _) = solve_kkt_regularised(&mass, &(-g.transpose()), &g, p, &SVector::zeros())
-            .ok_or(StepError::SingularJacobian { iteration: 0 })?;
+            .ok_or(StepError::SingularJacobian {
+                iteration: 0,
+                step: None,
+            })?;
         if v.iter().all(|x| x.is_finite()) {
             Ok(v)
         } else {
-            Err(StepError::NonFiniteState)
+            Err(StepError::NonFiniteState { step: None })
         }
     }
 
@@ -362,7 +368,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
     {
         // the midpoint stages check u themselves; the explicit ones here
         if self.explicit.is_some() && u.iter().any(|x| !x.is_finite()) {
-            return Err(StepError::NonFiniteInput);
+            return Err(StepError::NonFiniteInput { step: None });
         }
         let model = self.midpoint.model();
         let k = self.midpoint.constants();
@@ -387,7 +393,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         M: crate::Inputs<U>,
     {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         let p = self.momentum(z);
         let (q, p, _) = self.step_momentum_forced(&z.q, &p, &z.v, u)?;
@@ -401,7 +407,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
     /// g(q) = 0, G(q)q̇ = 0).
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         let p = self.momentum(z);
         let (q, p, _) = self.step_momentum(&z.q, &p, &z.v)?;
@@ -416,7 +422,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
     pub fn steps_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), RolloutError> {
         let fail = |step, error| RolloutError { step, error };
         if !z0.is_finite() {
-            return Err(fail(0, StepError::NonFiniteState));
+            return Err(fail(0, StepError::NonFiniteState { step: None }));
         }
         let (mut q, mut p) = (z0.q, self.momentum(z0));
         let mut predictor = Predictor::new(&z0.v);

@@ -387,7 +387,7 @@ pub fn acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize>(
 
 /// [`acceleration_forced`] saying why it failed: an overflow (the mass
 /// matrix, the right-hand side or the result not finite, e.g. a velocity
-/// of 1e200 whose square overflows) is [`StepError::NonFiniteState`], a
+/// of 1e200 whose square overflows) is [`StepError::NonFiniteState { step: None }`], a
 /// singular KKT system [`StepError::SingularJacobian`] (iteration 0: there
 /// is no Newton iteration).
 pub fn try_acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize>(
@@ -435,14 +435,17 @@ pub fn try_acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize
         .chain(gamma.iter())
         .all(finite))
     {
-        return Err(StepError::NonFiniteState);
+        return Err(StepError::NonFiniteState { step: None });
     }
     let ((a, lambda), _) =
         crate::linalg::solve_kkt_regularised(&t.mass, &(-g.transpose()), &g, &rhs, &(-gamma))
-            .ok_or(StepError::SingularJacobian { iteration: 0 })?;
+            .ok_or(StepError::SingularJacobian {
+                iteration: 0,
+                step: None,
+            })?;
     if a.iter().chain(lambda.iter()).all(finite) {
         Ok((a, lambda))
     } else {
-        Err(StepError::NonFiniteState)
+        Err(StepError::NonFiniteState { step: None })
     }
 }

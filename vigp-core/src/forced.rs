@@ -249,7 +249,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             )
         };
         if max_abs(u).is_nan() {
-            Err(StepError::NonFiniteInput)
+            Err(StepError::NonFiniteInput { step: None })
         } else {
             Ok(())
         }
@@ -310,7 +310,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         t: &mut Workspace<N, C>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         if max_abs(p0).is_nan() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         let h = self.substep_dt();
         let (mut z, mut p) = (*z, *p0);
@@ -351,7 +351,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         M: Inputs<U>,
     {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         Self::check_input(u)?;
         let p0 = self.momentum(z);
@@ -373,7 +373,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         M: Inputs<U>,
     {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         Self::check_input(u)?;
         let p0 = self.momentum(z);
@@ -394,7 +394,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         M: Inputs<U>,
     {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         Self::check_input(u)?;
         self.advance_forced(z, p0, &z.v, u, &mut Workspace::new())
@@ -415,10 +415,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     {
         let fail = |step, error| RolloutError { step, error };
         if !z0.is_finite() {
-            return Err(fail(0, StepError::NonFiniteState));
+            return Err(fail(0, StepError::NonFiniteState { step: None }));
         }
         if inputs.len() < out.len() {
-            return Err(fail(inputs.len(), StepError::NonFiniteInput));
+            return Err(fail(inputs.len(), StepError::NonFiniteInput { step: None }));
         }
         let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
         let mut t = Workspace::new();
@@ -513,7 +513,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         } else {
             (SMatrix::zeros(), SMatrix::zeros())
         };
-        let singular = StepError::SingularJacobian { iteration: 0 };
+        let singular = StepError::SingularJacobian {
+            iteration: 0,
+            step: None,
+        };
         let neg_i = -SMatrix::<f64, N, N>::identity();
         let (sx, sp, su) = kkt_solve3(&jac, &g1t, &(g2 * h), &(-dx), &(-g2), &neg_i, &(b * -a1))
             .ok_or(singular)?;
@@ -649,7 +652,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         t: &mut Workspace<N, C>,
     ) -> Result<(State<N>, StepDerivatives<N, U>), StepError> {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         Self::check_input(u)?;
         let h = self.substep_dt();
@@ -695,7 +698,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         M: Inputs<U>,
     {
         if !z.is_finite() || max_abs(p0).is_nan() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         Self::check_input(u)?;
         let h = self.substep_dt();

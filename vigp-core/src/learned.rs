@@ -45,7 +45,7 @@
 //! [`Dynamics::INPUTS`], or be 0 for no input (u = 0, as
 //! [`Stepper::step_forced`] takes it) — the bound `M: Inputs<U>`
 //! ([`crate::Inputs`]), so a wrong-length input is a compile error at the
-//! call; NaN or ±∞ in u is [`StepError::NonFiniteInput`].
+//! call; NaN or ±∞ in u is [`StepError::NonFiniteInput { step: None }`].
 //! [`LearnedStepper::step`] (no input) of a model with inputs is the forced
 //! step under u = 0, as the std runtime's unforced step of such a model. A
 //! model trained without inputs takes only u = 0 in `step_forced` (which is
@@ -341,7 +341,7 @@ where
     /// velocity (for a model with inputs: under u = 0).
     pub fn predict_velocity(&self, z: &State<N>) -> Result<SVector<f64, N>, LearnedError> {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState.into());
+            return Err(StepError::NonFiniteState { step: None }.into());
         }
         let prior = match self.learned.prior {
             Prior::Nominal => self.stepper.step(z)?.v,
@@ -377,10 +377,10 @@ where
             return self.predict_velocity(z);
         }
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState.into());
+            return Err(StepError::NonFiniteState { step: None }.into());
         }
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteInput.into());
+            return Err(StepError::NonFiniteInput { step: None }.into());
         }
         if self.learned.inputs.is_empty() {
             return if u.iter().all(|x| *x == 0.0) {
@@ -461,7 +461,7 @@ where
     /// (enc(z), u_prev, u), nominal prior the forced step
     /// [`Stepper::step_forced`], projection for loops. Equal to the std
     /// runtime's learned forced mean step to solver tolerance. NaN or ±∞
-    /// in `u_prev` or `u` is [`StepError::NonFiniteInput`]; a model trained
+    /// in `u_prev` or `u` is [`StepError::NonFiniteInput { step: None }`]; a model trained
     /// without inputs takes only u = 0 ([`LearnedError::NoInputs`]).
     pub fn step_forced<const U: usize>(
         &self,
@@ -502,7 +502,7 @@ where
     /// input sequence), into a caller-owned slice; each step is
     /// [`step_forced`](Self::step_forced). `inputs` must be at least as
     /// long as `out`: a shorter one fails at step `inputs.len()` with
-    /// [`StepError::NonFiniteInput`], before any step. On failure returns
+    /// [`StepError::NonFiniteInput { step: None }`], before any step. On failure returns
     /// the index of the failing step with the error. No allocation.
     pub fn rollout_forced_into<const U: usize>(
         &self,
@@ -515,7 +515,10 @@ where
         M: crate::Inputs<U>,
     {
         if inputs.len() < out.len() {
-            return Err((inputs.len(), StepError::NonFiniteInput.into()));
+            return Err((
+                inputs.len(),
+                StepError::NonFiniteInput { step: None }.into(),
+            ));
         }
         let mut z = *z0;
         for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
@@ -544,7 +547,7 @@ pub fn project_velocity<M: Dynamics<N, C>, const N: usize, const C: usize>(
 ) -> Result<SVector<f64, N>, StepError> {
     crate::step::check_time_step(dt)?;
     if !(x1.iter().chain(v_u.iter()).all(|x| x.is_finite())) {
-        return Err(StepError::NonFiniteState);
+        return Err(StepError::NonFiniteState { step: None });
     }
     if C == 0 {
         return Ok(*v_u);
@@ -575,7 +578,10 @@ pub fn project_velocity<M: Dynamics<N, C>, const N: usize, const C: usize>(
     for iteration in 0..=options.max_iterations {
         let residual = (r.amax() / v_scale).max(c.amax() / g_scale);
         if !residual.is_finite() {
-            return Err(StepError::NonFiniteResidual { iteration });
+            return Err(StepError::NonFiniteResidual {
+                iteration,
+                step: None,
+            });
         }
         if residual <= options.tolerance {
             return Ok(v);
@@ -584,11 +590,16 @@ pub fn project_velocity<M: Dynamics<N, C>, const N: usize, const C: usize>(
             return Err(StepError::NotConverged {
                 iterations: iteration,
                 residual,
+                tolerance: options.tolerance,
+                step: None,
             });
         }
         let a = gj * dt;
         let Some((dv, dmu)) = solve_kkt(&jac, &a.transpose(), &a, &r, &c) else {
-            return Err(StepError::SingularJacobian { iteration });
+            return Err(StepError::SingularJacobian {
+                iteration,
+                step: None,
+            });
         };
         let phi0 = merit(&r, &c);
         let mut alpha = 1.0;
@@ -604,6 +615,7 @@ pub fn project_velocity<M: Dynamics<N, C>, const N: usize, const C: usize>(
                 return Err(StepError::LineSearchFailed {
                     iteration,
                     residual,
+                    step: None,
                 });
             }
             alpha *= 0.5;
@@ -612,5 +624,7 @@ pub fn project_velocity<M: Dynamics<N, C>, const N: usize, const C: usize>(
     Err(StepError::NotConverged {
         iterations: options.max_iterations,
         residual: f64::NAN,
+        tolerance: options.tolerance,
+        step: None,
     })
 }

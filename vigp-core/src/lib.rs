@@ -28,6 +28,7 @@
 
 pub mod compose;
 pub mod dynamics;
+pub mod error;
 pub mod forced;
 pub mod gp;
 pub mod kinematics;

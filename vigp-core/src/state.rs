@@ -36,8 +36,29 @@ impl<const N: usize> State<N> {
         }
     }
 
+    /// The discrete state at `q0` whose configuration Δt later is `q1`:
+    /// (q₀, (q₁ − q₀)/Δt), the velocity convention of every variational
+    /// integrator here (paper eq. 5–6). Δt is not checked: with Δt = 0,
+    /// NaN or ±∞ the velocities are not finite, which every step refuses.
+    pub fn from_positions(q0: SVector<f64, N>, q1: &SVector<f64, N>, dt: f64) -> Self {
+        Self {
+            v: discrete_velocity(&q0, q1, dt),
+            q: q0,
+        }
+    }
+
     /// `true` when every entry is finite (no NaN, no ±∞).
     pub fn is_finite(&self) -> bool {
         self.q.iter().chain(self.v.iter()).all(|x| x.is_finite())
     }
+}
+
+/// The discrete velocity (q₁ − q₀)/Δt between two configurations Δt apart
+/// ([`State::from_positions`]).
+pub fn discrete_velocity<const N: usize>(
+    q0: &SVector<f64, N>,
+    q1: &SVector<f64, N>,
+    dt: f64,
+) -> SVector<f64, N> {
+    (q1 - q0) / dt
 }

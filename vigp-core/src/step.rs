@@ -116,171 +116,10 @@ impl StepOptions {
     }
 }
 
-/// Why a step failed.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum StepError {
-    /// Δt is not finite, not positive, or so large or small that Δt² is
-    /// not a normal f64.
-    InvalidTimeStep {
-        /// The offending Δt.
-        dt: f64,
-    },
-    /// Options that cannot work.
-    InvalidOptions(&'static str),
-    /// Model parameters that cannot describe a mechanism (the message names
-    /// the parameter).
-    InvalidModel(&'static str),
-    /// The state (or the momentum) holds NaN or ±∞.
-    NonFiniteState,
-    /// A spatial state's orientation quaternion is not of unit norm (see
-    /// [`crate::spatial::SpatialState::validate`]).
-    NonUnitQuaternion {
-        /// The link, in declaration order.
-        link: usize,
-        /// Its quaternion's norm ‖q‖.
-        norm: f64,
-    },
-    /// An input (actuator torque or force) holds NaN or ±∞, or a forced
-    /// rollout has fewer inputs than steps.
-    NonFiniteInput,
-    /// The residual became NaN or ±∞.
-    NonFiniteResidual {
-        /// Newton iteration.
-        iteration: usize,
-    },
-    /// The Newton (or KKT) matrix is singular.
-    SingularJacobian {
-        /// Newton iteration.
-        iteration: usize,
-    },
-    /// The line search found no decrease down to `min_step`, above the
-    /// stall tolerance.
-    LineSearchFailed {
-        /// Newton iteration.
-        iteration: usize,
-        /// Scaled residual reached.
-        residual: f64,
-    },
-    /// The iteration cap was reached before the tolerance.
-    NotConverged {
-        /// Iterations used.
-        iterations: usize,
-        /// Scaled residual reached.
-        residual: f64,
-    },
-    /// Newton converged, but to a root that is not the continuation of the
-    /// motion: the step bends the discrete path by |h·(v₁ − v₀)|∞ = `ratio`
-    /// (radians, or scaled lengths), more than `bound`, and gains more
-    /// energy than half the two energies' magnitudes (see
-    /// [`Stepper::continuation_bound`]).
-    NotContinuation {
-        /// The bend |h·(v₁ − v₀)|∞ of the step.
-        ratio: f64,
-        /// The bound in force.
-        bound: f64,
-    },
-    /// A rollout of this many steps whose states cannot be stored:
-    /// (steps + 1)·(size of a state) exceeds the address space (a duration
-    /// divided by Δt = 0 gives such a count). See [`check_step_count`].
-    TooManySteps {
-        /// The step count asked for.
-        steps: usize,
-    },
-    /// A link whose mass or rotational inertia is negligible against the
-    /// mechanism's (below [`crate::spatial::maximal::NEGLIGIBLE_INERTIA`]
-    /// of its scale): the maximal view's Newton matrix cannot resolve its
-    /// motion, so [`crate::spatial::LieStepper`] refuses it at
-    /// construction. A massless connector (a cross link between two
-    /// revolute joints) is a joint: `universal`, or fold the link into
-    /// its neighbour. The minimal view takes such links.
-    NegligibleInertia {
-        /// The link's name.
-        link: &'static str,
-        /// Which inertia: `"mass"` (kg) or `"smallest principal moment of
-        /// inertia"` (kg·m²).
-        what: &'static str,
-        /// Its value.
-        value: f64,
-        /// The smallest value accepted for this mechanism.
-        bound: f64,
-    },
-}
-
-impl core::fmt::Display for StepError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            Self::InvalidTimeStep { dt } => write!(
-                f,
-                "invalid time step dt = {dt:e} (must be finite and > 0, with dt² a normal number)"
-            ),
-            Self::InvalidOptions(why) => write!(f, "invalid step options: {why}"),
-            Self::InvalidModel(why) => write!(f, "invalid model parameters: {why}"),
-            Self::NonFiniteState => write!(f, "non-finite state or momentum"),
-            Self::NonUnitQuaternion { link, norm } => write!(
-                f,
-                "the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize)"
-            ),
-            Self::NonFiniteInput => write!(f, "non-finite or missing input"),
-            Self::NonFiniteResidual { iteration } => {
-                write!(f, "non-finite residual at Newton iteration {iteration}")
-            }
-            Self::SingularJacobian { iteration } => {
-                write!(f, "singular Newton matrix at iteration {iteration}")
-            }
-            Self::LineSearchFailed {
-                iteration,
-                residual,
-            } => write!(
-                f,
-                "line search failed at Newton iteration {iteration}, residual {residual:.3e}"
-            ),
-            Self::NotConverged {
-                iterations,
-                residual,
-            } => write!(
-                f,
-                "Newton did not converge: {iterations} iterations, residual {residual:.3e}"
-            ),
-            Self::NotContinuation { ratio, bound } => write!(
-                f,
-                "{NOT_CONTINUATION_TEXT}: it bends the path by {ratio:.3e} rad > bound {bound:e}; {NOT_CONTINUATION_REMEDY}"
-            ),
-            Self::TooManySteps { steps } => write!(f, "{TOO_MANY_STEPS_TEXT} ({steps} steps)"),
-            Self::NegligibleInertia {
-                link,
-                what,
-                value,
-                bound,
-            } => write!(
-                f,
-                "link `{link}`: {what} {value:.3e} {NEGLIGIBLE_INERTIA_TEXT} {bound:.3e}); {NEGLIGIBLE_INERTIA_REMEDY}"
-            ),
-        }
-    }
-}
-
-impl core::error::Error for StepError {}
-
-/// The middle of the message of [`StepError::NegligibleInertia`] (shared
-/// with the std runtime's error).
-pub const NEGLIGIBLE_INERTIA_TEXT: &str = "is negligible against the mechanism's inertia (the maximal view's Newton matrix cannot resolve the link's motion below";
-
-/// The remedy of [`StepError::NegligibleInertia`].
-pub const NEGLIGIBLE_INERTIA_REMEDY: &str = "a massless connector such as the cross of a Hooke joint is a joint, not a link: use `universal(parent, child) { axes: [..] }`, or merge the link into its neighbour; the minimal view integrates such links";
-
-/// The message of [`StepError::NotContinuation`] (shared with the std
-/// runtime's error).
-pub const NOT_CONTINUATION_TEXT: &str = "Newton converged to a root that is not the continuation of the motion \
-     (the step does not resolve the motion: its velocity change Δt·|v₁ − v₀| moves the path by more than the bound \
-     and its energy jumps)";
-
-/// The remedy named by [`StepError::NotContinuation`].
-pub const NOT_CONTINUATION_REMEDY: &str = "the step is too large for the motion: use a smaller dt or `substeps` \
-     (or turn the check off with `continuation_bound(f64::INFINITY)`)";
-
-/// The message of [`StepError::TooManySteps`].
-pub const TOO_MANY_STEPS_TEXT: &str = "a rollout whose states do not fit in memory \
-     (a duration divided by a zero or tiny dt?)";
+pub use crate::error::{
+    NEGLIGIBLE_INERTIA_REMEDY, NEGLIGIBLE_INERTIA_TEXT, NOT_CONTINUATION_REMEDY,
+    NOT_CONTINUATION_TEXT, StepError, TOO_MANY_STEPS_TEXT,
+};
 
 /// The default of [`Stepper::continuation_bound`]: a step may bend the
 /// discrete path, |Δt·(v₁ − v₀)|∞, by at most 1 rad (or 1 length scale).
@@ -624,6 +463,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(StepError::NotContinuation {
                 ratio: bend,
                 bound: self.continuation,
+                step: None,
             });
         }
         Ok(())
@@ -774,7 +614,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// One step from `z` with solver diagnostics.
     pub fn step_with_report(&self, z: &State<N>) -> Result<(State<N>, StepReport), StepError> {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         self.step_from_state(z, &mut Workspace::new())
     }
@@ -817,7 +657,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         ws: &mut StepWorkspace<N, C>,
     ) -> Result<(State<N>, StepReport), StepError> {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         self.step_from_state(z, ws.reset::<M>())
     }
@@ -831,7 +671,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         p0: &SVector<f64, N>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         self.advance(z, p0, &z.v, &mut Workspace::new())
     }
@@ -849,7 +689,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         t: &mut Workspace<N, C>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         if max_abs(p0).is_nan() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         if self.substeps == 1 {
             let x1 = z.q + z.v * self.dt;
@@ -888,7 +728,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     pub fn steps_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), RolloutError> {
         let fail = |step, error| RolloutError { step, error };
         if !z0.is_finite() {
-            return Err(fail(0, StepError::NonFiniteState));
+            return Err(fail(0, StepError::NonFiniteState { step: None }));
         }
         if out.is_empty() {
             return Ok(());
@@ -1055,7 +895,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             // M = 0 (every link massless, or masses so small that M
             // underflows): the DEL equations do not determine v₁, and every
             // guess would pass the residual test
-            return Err(StepError::SingularJacobian { iteration: 0 });
+            return Err(StepError::SingularJacobian {
+                iteration: 0,
+                step: None,
+            });
         }
         let p_scale = match max_abs(p0) + m_bar {
             0.0 => 1.0,
@@ -1194,7 +1037,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let mut keep_schur = false;
         'newton: for iteration in 0..opts.max_iterations {
             if !err.is_finite() {
-                return Err(StepError::NonFiniteResidual { iteration });
+                return Err(StepError::NonFiniteResidual {
+                    iteration,
+                    step: None,
+                });
             }
             if err <= opts.tolerance {
                 let report = StepReport {
@@ -1249,7 +1095,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     jac += fq * (alpha * a1 * h);
                 }
             }
-            let singular = StepError::SingularJacobian { iteration };
+            let singular = StepError::SingularJacobian {
+                iteration,
+                step: None,
+            };
             // this iteration's direction comes from a kept S (first-order
             // rule with constraints and a constant J)
             let mut chord = false;
@@ -1401,6 +1250,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     return Err(StepError::LineSearchFailed {
                         iteration,
                         residual: err,
+                        step: None,
                     });
                 }
             }
@@ -1422,6 +1272,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         Err(StepError::NotConverged {
             iterations: opts.max_iterations,
             residual: err,
+            tolerance: opts.tolerance,
+            step: None,
         })
     }
 }

@@ -1,5 +1,5 @@
 //! The fourth-order variational integrator: a symmetric composition of the
-//! midpoint rule ([`vigp_core::compose`]), with the std runtime's errors.
+//! midpoint rule ([`vigp_core::compose`]) behind the std [`Integrator`] trait.
 
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError};
@@ -22,9 +22,8 @@ use vigp_core::Composition;
 /// `step`.
 #[derive(Clone, Copy, Debug)]
 pub struct Variational4<M: Mechanism<N, C>, const N: usize, const C: usize> {
-    inner: Result<Composition<M, N, C>, vigp_core::StepError>,
+    inner: Result<Composition<M, N, C>, StepError>,
     dt: f64,
-    tolerance: f64,
 }
 
 impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational4<M, N, C> {
@@ -33,7 +32,6 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational4<M, N, C> {
         Self {
             inner: Composition::new(model, dt),
             dt,
-            tolerance: NewtonOptions::default().tolerance,
         }
     }
 
@@ -42,20 +40,18 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational4<M, N, C> {
         Self {
             inner: Composition::triple_jump(model, dt),
             dt,
-            tolerance: NewtonOptions::default().tolerance,
         }
     }
 
     /// Replace the Newton options of the sub-steps.
     pub fn with_options(mut self, options: NewtonOptions) -> Self {
         self.inner = self.inner.and_then(|c| c.options(options));
-        self.tolerance = options.tolerance;
         self
     }
 
     /// The core integrator, or why the settings cannot work.
     pub fn composition(&self) -> Result<&Composition<M, N, C>, StepError> {
-        self.inner.as_ref().map_err(|e| StepError::from(*e))
+        self.inner.as_ref().map_err(|e| *e)
     }
 
     /// Energy ½ q̇ᵀM(q)q̇ + V(q) of a continuous state (NaN when the
@@ -73,9 +69,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Varia
     }
 
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
-        self.composition()?
-            .step(z)
-            .map_err(|e| StepError::from(e).with_tolerance(self.tolerance))
+        self.composition()?.step(z)
     }
 
     fn state_energy(&self, z: &State<N>) -> Option<f64> {
@@ -91,17 +85,13 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Varia
     where
         M: vigp_core::Inputs<U>,
     {
-        self.composition()?
-            .step_forced(z, u)
-            .map_err(|e| StepError::from(e).with_tolerance(self.tolerance))
+        self.composition()?.step_forced(z, u)
     }
 
     /// Carries the momentum between steps. No allocation.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
-        self.composition()?.steps_into(z0, out).map_err(|e| {
-            StepError::from(e.error)
-                .with_tolerance(self.tolerance)
-                .at_step(e.step)
-        })
+        self.composition()?
+            .steps_into(z0, out)
+            .map_err(|e| e.error.at_step(e.step))
     }
 }

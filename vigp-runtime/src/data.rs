@@ -503,10 +503,7 @@ impl<const N: usize> Run<N> {
     pub fn state(&self, k: usize) -> Option<State<N>> {
         let dt = self.dt?;
         let (a, b) = (self.positions.get(k)?, self.positions.get(k + 1)?);
-        Some(State {
-            q: *a,
-            v: (b - a) / dt,
-        })
+        Some(State::from_positions(*a, b, dt))
     }
 }
 

@@ -92,9 +92,7 @@ pub fn acceleration_with<M: Mechanism<N, C>, const N: usize, const C: usize>(
         return Err(StepError::NonFiniteState { step: None });
     }
     let mut t = vigp_core::Terms::zeros();
-    Ok(vigp_core::dynamics::try_acceleration_forced(
-        m, k, q, qdot, None, &mut t,
-    )?)
+    vigp_core::dynamics::try_acceleration_forced(m, k, q, qdot, None, &mut t)
 }
 
 /// [`acceleration_with`] under inputs `u` (one per actuated joint; `U`
@@ -130,14 +128,7 @@ pub fn acceleration_forced_with<
     }
     let force = m.input_matrix::<U>(k, q) * u;
     let mut t = vigp_core::Terms::zeros();
-    Ok(vigp_core::dynamics::try_acceleration_forced(
-        m,
-        k,
-        q,
-        qdot,
-        Some(&force),
-        &mut t,
-    )?)
+    vigp_core::dynamics::try_acceleration_forced(m, k, q, qdot, Some(&force), &mut t)
 }
 
 /// [`acceleration`] by dual numbers (the reference implementation).

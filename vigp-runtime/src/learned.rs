@@ -37,6 +37,7 @@ use crate::newton::{NewtonOptions, StepError};
 use crate::projection::{consistent_state, project_velocity};
 use crate::variational::{Integrator, Variational};
 use nalgebra::SVector;
+use vigp_core::state::discrete_velocity;
 
 mod embedded;
 mod export;
@@ -262,13 +263,10 @@ pub fn forced_transitions<const N: usize, const U: usize>(
         .windows(3)
         .zip(inputs.windows(2))
         .map(|(w, u)| ForcedTransition {
-            z: State {
-                q: w[0],
-                v: (w[1] - w[0]) / dt,
-            },
+            z: State::from_positions(w[0], &w[1], dt),
             u_prev: u[0],
             u: u[1],
-            v_next: (w[2] - w[1]) / dt,
+            v_next: discrete_velocity(&w[1], &w[2], dt),
         })
         .collect()
 }
@@ -279,11 +277,8 @@ pub fn transitions<const N: usize>(positions: &[SVector<f64, N>], dt: f64) -> Ve
     positions
         .windows(3)
         .map(|w| Transition {
-            z: State {
-                q: w[0],
-                v: (w[1] - w[0]) / dt,
-            },
-            v_next: (w[2] - w[1]) / dt,
+            z: State::from_positions(w[0], &w[1], dt),
+            v_next: discrete_velocity(&w[1], &w[2], dt),
         })
         .collect()
 }
@@ -531,7 +526,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             Prior::Identified(p) => p.model(&model)?,
             _ => model,
         };
-        vigp_core::step::check_time_step(dt).map_err(StepError::from)?;
+        vigp_core::step::check_time_step(dt)?;
         if let Some((found, first)) = time_step::estimate(data.iter().map(|t| (&t.z, &t.v_next)))
             && (found - dt).abs() > TRAIN_DT_TOLERANCE * dt
         {
@@ -1273,12 +1268,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             return Err(StepError::Prediction { step: None });
         }
         // step counts are checked before anything is allocated
-        vigp_core::step::check_step_count::<(State<N>, LearnedStepInfo<N>)>(steps)
-            .map_err(StepError::from)?;
+        vigp_core::step::check_step_count::<(State<N>, LearnedStepInfo<N>)>(steps)?;
         let len = steps
             .checked_mul(d)
             .ok_or(StepError::TooManySteps { steps })?;
-        vigp_core::step::check_step_count::<f64>(len).map_err(StepError::from)?;
+        vigp_core::step::check_step_count::<f64>(len)?;
         let mut points = vec![0.0; len];
         let mut out = Vec::with_capacity(steps);
         let mut z = *z0;

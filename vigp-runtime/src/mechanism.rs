@@ -108,9 +108,9 @@ pub trait Mechanism<const N: usize, const C: usize>: vigp_core::Dynamics<N, C> {
     }
 
     /// The closed-form constants of this model's parameters
-    /// ([`vigp_core::Dynamics::constants`]) as a std error.
+    /// ([`vigp_core::Dynamics::constants`]).
     fn checked_constants(&self) -> Result<Self::Constants, crate::newton::StepError> {
-        vigp_core::Dynamics::constants(self).map_err(Into::into)
+        vigp_core::Dynamics::constants(self)
     }
 
     /// A state from position and velocity arrays (see [`State::new`]).
@@ -163,10 +163,7 @@ pub trait Coordinates<const N: usize, const M: usize> {
     fn to_maximal(&self, z: &State<N>, dt: f64) -> State<M> {
         let x0 = self.maximal_positions(&z.q);
         let x1 = self.maximal_positions(&(z.q + z.v * dt));
-        State {
-            q: x0,
-            v: (x1 - x0) / dt,
-        }
+        State::from_positions(x0, &x1, dt)
     }
 
     /// A discrete maximal state as a discrete minimal state (the inverse of
@@ -179,9 +176,6 @@ pub trait Coordinates<const N: usize, const M: usize> {
     fn to_minimal(&self, z: &State<M>, dt: f64) -> State<N> {
         let q0 = self.minimal_positions(&z.q);
         let q1 = self.minimal_positions(&(z.q + z.v * dt));
-        State {
-            q: q0,
-            v: (q1 - q0) / dt,
-        }
+        State::from_positions(q0, &q1, dt)
     }
 }

@@ -8,6 +8,7 @@ use crate::mechanism::{Mechanism, State};
 use crate::newton::{NewtonOptions, StepError, StepInfo, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
 use vigp_core::CoordinateKind;
+use vigp_core::state::discrete_velocity;
 
 /// Project a configuration onto g(q) = 0 by Gauss–Newton minimum-norm
 /// corrections q ← q − Gᵀ(GGᵀ)⁻¹g (the nearest consistent configuration to
@@ -188,7 +189,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     let Ok((q2, _)) = project_configuration(m, &(q1 + v_u * dt), options) else {
         return Err(first);
     };
-    let start = (q2 - q1) / dt;
+    let start = discrete_velocity(q1, &q2, dt);
     match newton_projection(m, q1, v_u, &start, dt, options) {
         Ok((v, info)) => Ok((
             v,

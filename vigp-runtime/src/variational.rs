@@ -289,7 +289,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
                 .substeps(substeps)?
                 .continuation_bound(continuation)
         })();
-        let stepper = stepper.map_err(StepError::from).and_then(|s| {
+        let stepper = stepper.and_then(|s| {
             loop_closes(&model)?;
             Ok(s)
         });
@@ -346,7 +346,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         mut attempt: impl FnMut(&Stepper<M, N, C>) -> Result<R, CoreError>,
     ) -> Result<(R, u32), StepError> {
         if !resolvable(&first) || self.subdivision == 0 {
-            return Err(self.explain(StepError::from(first), z));
+            return Err(self.explain(first, z));
         }
         let base = self.stepper()?;
         let mut last = first;
@@ -362,17 +362,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
                 break;
             };
             depth += 1;
-            let finer = base.clone().substeps(k).map_err(StepError::from)?;
+            let finer = base.clone().substeps(k)?;
             substep_dt = finer.substep_dt();
             match attempt(&finer) {
                 Ok(r) => return Ok((r, depth)),
                 Err(e) if resolvable(&e) => last = e,
-                Err(e) => return Err(self.explain(StepError::from(e), z)),
+                Err(e) => return Err(self.explain(e, z)),
             }
         }
         // a start off its quaternions or constraints is named as such,
         // whatever the sub-step
-        let explained = self.explain(StepError::from(last), z);
+        let explained = self.explain(last, z);
         if matches!(
             explained,
             StepError::NonUnitQuaternion { .. } | StepError::OffConstraints { .. }
@@ -510,11 +510,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         }
     }
 
-    /// The tolerance into a `NotConverged`; a Newton failure from a
-    /// configuration off the constraints becomes
+    /// A Newton failure from a configuration off the constraints becomes
     /// [`StepError::OffConstraints`], which names the remedy.
     fn explain(&self, e: StepError, z: &State<N>) -> StepError {
-        let e = e.with_tolerance(self.options.tolerance);
         if let StepError::SingularJacobian { step, .. }
         | StepError::NotConverged { step, .. }
         | StepError::LineSearchFailed { step, .. }
@@ -762,7 +760,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             let Err(e) = run else { break };
             let k = start + e.step;
             if e.step >= tail.len() {
-                return Err(self.explain(StepError::from(e.error), &from).at_step(k));
+                return Err(self.explain(e.error, &from).at_step(k));
             }
             let at = if e.step == 0 { from } else { out[k - 1] };
             let (z1, depth) = match inputs {
@@ -881,7 +879,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         for (k, u) in inputs.iter().enumerate() {
             let (z1, p1, d) = stepper
                 .step_with_momentum_derivatives(&z, &p, u)
-                .map_err(|e| self.explain(StepError::from(e), &z).at_step(k))?;
+                .map_err(|e| self.explain(e, &z).at_step(k))?;
             let prev = initial[k];
             let next = StateJacobian {
                 q_q: d.z_z.q_q * prev.q_q + d.z_z.q_v * prev.v_q + d.q_p * p_q,

@@ -86,17 +86,21 @@ pub fn off_unit_sphere(norm: f64) -> bool {
 }
 
 impl<const B: usize> SpatialState<B> {
-    /// Checks a state before it is stepped: [`StepError::NonFiniteState`]
+    /// Checks a state before it is stepped: [`StepError::NonFiniteState { step: None }`]
     /// when an entry is NaN or ±∞, [`StepError::NonUnitQuaternion`] when a
     /// link's |‖q‖ − 1| exceeds [`UNIT_TOLERANCE`] (nalgebra's
     /// `UnitQuaternion` does not enforce its norm, and a non-unit q is not
     /// a rotation: the step would scale the link's geometry by ‖q‖²).
     pub fn validate(&self) -> Result<(), StepError> {
         if !self.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         match self.non_unit() {
-            Some((link, norm)) => Err(StepError::NonUnitQuaternion { link, norm }),
+            Some((link, norm)) => Err(StepError::NonUnitQuaternion {
+                link,
+                norm,
+                step: None,
+            }),
             None => Ok(()),
         }
     }
@@ -766,7 +770,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         };
         z.validate()?;
         if !u.iter().all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteInput);
+            return Err(StepError::NonFiniteInput { step: None });
         }
         let guess = pack(&z.v, &z.w);
         self.solve(z, &guess, u.as_slice())
@@ -798,14 +802,14 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let fail = |step, error| RolloutError { step, error };
         z0.validate().map_err(|error| fail(0, error))?;
         if inputs.len() < rest.len() {
-            return Err(fail(inputs.len(), StepError::NonFiniteInput));
+            return Err(fail(inputs.len(), StepError::NonFiniteInput { step: None }));
         }
         *first = *z0;
         let mut z = *z0;
         let mut prev = pack(&z0.v, &z0.w);
         for (k, (slot, u)) in rest.iter_mut().zip(inputs).enumerate() {
             if !u.iter().all(|x| x.is_finite()) {
-                return Err(fail(k, StepError::NonFiniteInput));
+                return Err(fail(k, StepError::NonFiniteInput { step: None }));
             }
             let now = pack(&z.v, &z.w);
             let guess = now * 2.0 - prev;
@@ -865,7 +869,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             let scale = 1.0 + x.iter().map(|x| x.amax()).fold(0.0, f64::max);
             let err = g.amax() / scale;
             if !err.is_finite() {
-                return Err(StepError::NonFiniteResidual { iteration });
+                return Err(StepError::NonFiniteResidual {
+                    iteration,
+                    step: None,
+                });
             }
             if err <= self.options.tolerance {
                 return Ok(iteration);
@@ -874,6 +881,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 return Err(StepError::NotConverged {
                     iterations: iteration,
                     residual: err,
+                    tolerance: self.options.tolerance,
+                    step: None,
                 });
             }
             let y = FullPivLu::new(jac * jac.transpose(), 1e-13).solve(&g);
@@ -909,7 +918,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         nu: &SVector<f64, N>,
     ) -> Result<SVector<f64, N>, StepError> {
         if !nu.iter().all(|v| v.is_finite()) {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         if C == 0 {
             return Ok(*nu);
@@ -944,7 +953,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         };
         for iteration in 0..=self.options.max_iterations {
             if !err.is_finite() {
-                return Err(StepError::NonFiniteResidual { iteration });
+                return Err(StepError::NonFiniteResidual {
+                    iteration,
+                    step: None,
+                });
             }
             if err <= self.options.tolerance {
                 return Ok(v);
@@ -953,7 +965,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 break;
             }
             let Some((dv, dl)) = solve_kkt(&eye, &gh.transpose(), &gh, &(-r), &(-c)) else {
-                return Err(StepError::SingularJacobian { iteration });
+                return Err(StepError::SingularJacobian {
+                    iteration,
+                    step: None,
+                });
             };
             mu = mu.max(1.1 * (lambda + dl).amax());
             let phi = merit(&v, &c, mu);
@@ -974,6 +989,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     return Err(StepError::LineSearchFailed {
                         iteration,
                         residual: err,
+                        step: None,
                     });
                 }
             }
@@ -981,6 +997,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         Err(StepError::NotConverged {
             iterations: self.options.max_iterations,
             residual: err,
+            tolerance: self.options.tolerance,
+            step: None,
         })
     }
 
@@ -996,13 +1014,17 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// An already consistent state is returned bit for bit.
     pub fn consistent_state(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, StepError> {
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState);
+            return Err(StepError::NonFiniteState { step: None });
         }
         let (mut x, mut q) = (z.x, z.q);
         for (link, qi) in q.iter_mut().enumerate() {
             let norm = qi.quaternion().norm();
             if norm.is_nan() || norm <= f64::MIN_POSITIVE {
-                return Err(StepError::NonUnitQuaternion { link, norm });
+                return Err(StepError::NonUnitQuaternion {
+                    link,
+                    norm,
+                    step: None,
+                });
             }
             // a quaternion the steps accept keeps its bits (a consistent
             // state is returned unchanged)
@@ -1248,7 +1270,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let mut factorizations = 0;
         for iteration in 0..=self.options.max_iterations {
             if !err.is_finite() {
-                return Err(StepError::NonFiniteResidual { iteration });
+                return Err(StepError::NonFiniteResidual {
+                    iteration,
+                    step: None,
+                });
             }
             if err <= self.options.tolerance {
                 let (v, w) = unpack(&nu);
@@ -1273,13 +1298,16 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             let fresh = kkt.is_none();
             if fresh {
                 factorizations += 1;
-                kkt = Some(
-                    self.factor(&d, &nu)
-                        .ok_or(StepError::SingularJacobian { iteration })?,
-                );
+                kkt = Some(self.factor(&d, &nu).ok_or(StepError::SingularJacobian {
+                    iteration,
+                    step: None,
+                })?);
             }
             let Some(factor) = kkt.as_ref() else {
-                return Err(StepError::SingularJacobian { iteration });
+                return Err(StepError::SingularJacobian {
+                    iteration,
+                    step: None,
+                });
             };
             let (dnu, dl) = factor.solve(&(-r), &(-c));
             let mut alpha = 1.0;
@@ -1303,6 +1331,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     return Err(StepError::LineSearchFailed {
                         iteration,
                         residual: err,
+                        step: None,
                     });
                 }
             }
@@ -1310,6 +1339,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         Err(StepError::NotConverged {
             iterations: self.options.max_iterations,
             residual: err,
+            tolerance: self.options.tolerance,
+            step: None,
         })
     }
 

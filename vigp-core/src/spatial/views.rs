@@ -56,7 +56,7 @@ pub fn configuration<S: Spatial<B, J>, const B: usize, const J: usize, const N: 
 /// Δt must be a valid time step ([`crate::step::check_time_step`]): the
 /// conversion has no error path and does not check it; with Δt = 0, NaN or
 /// ±∞ the velocities are not finite, which every step then refuses
-/// ([`crate::StepError::NonFiniteState`]).
+/// ([`crate::StepError::NonFiniteState { step: None }`]).
 pub fn to_maximal<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize>(
     sys: &S,
     z: &State<N>,
@@ -171,7 +171,7 @@ pub fn minimal_coordinates<S: Spatial<B, J>, const B: usize, const J: usize, con
 /// Δt must be a valid time step ([`crate::step::check_time_step`]): the
 /// conversion has no error path and does not check it; with Δt = 0, NaN or
 /// ±∞ the velocities are not finite, which every step then refuses
-/// ([`crate::StepError::NonFiniteState`]).
+/// ([`crate::StepError::NonFiniteState { step: None }`]).
 pub fn to_minimal<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize>(
     sys: &S,
     z: &SpatialState<B>,
@@ -180,8 +180,5 @@ pub fn to_minimal<S: Spatial<B, J>, const B: usize, const J: usize, const N: usi
     let q0 = minimal_coordinates::<S, B, J, N>(sys, &z.x, &z.q, None);
     let (x1, qq1) = z.advanced(dt);
     let q1 = minimal_coordinates::<S, B, J, N>(sys, &x1, &qq1, Some(&q0));
-    State {
-        q: q0,
-        v: (q1 - q0) / dt,
-    }
+    State::from_positions(q0, &q1, dt)
 }

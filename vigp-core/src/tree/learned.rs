@@ -139,10 +139,10 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             });
         }
         if !z.is_finite() {
-            return Err(StepError::NonFiniteState.into());
+            return Err(StepError::NonFiniteState { step: None }.into());
         }
         if !(u.iter().chain(u_prev.iter()).all(|x| x.is_finite())) {
-            return Err(StepError::NonFiniteInput.into());
+            return Err(StepError::NonFiniteInput { step: None }.into());
         }
         let l = self.learned;
         let mut v1 = [0.0; N];
@@ -171,7 +171,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
         }
         let v = SVector::from(v1);
         if !v.iter().all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteState.into());
+            return Err(StepError::NonFiniteState { step: None }.into());
         }
         Ok(State {
             q: z.q + z.v * l.dt,
@@ -193,7 +193,10 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
         ws: &mut [BodyScratch; N],
     ) -> Result<(), (usize, LearnedError)> {
         if inputs.len() < out.len() {
-            return Err((inputs.len(), StepError::NonFiniteInput.into()));
+            return Err((
+                inputs.len(),
+                StepError::NonFiniteInput { step: None }.into(),
+            ));
         }
         let mut z = *z0;
         for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {

@@ -53,10 +53,7 @@ impl<const N: usize> CalibrationWindow for Window<N> {
 
     fn cut(p: &[SVector<f64, N>], s: usize, horizon: usize, dt: f64) -> Self {
         Window {
-            start: State {
-                q: p[s],
-                v: (p[s + 1] - p[s]) / dt,
-            },
+            start: State::from_positions(p[s], &p[s + 1], dt),
             positions: p[s + 1..=s + horizon].to_vec(),
         }
     }

@@ -33,7 +33,7 @@
 //! (O(N²) per output and step, N training samples); a bounded prediction
 //! is one such prediction.
 
-use super::learned::{Configuration, LearnSpatialError, LearnedSpatial, Trace, velocities};
+use super::learned::{Configuration, LearnSpatialError, LearnedSpatial, Trace, between};
 use super::{Spatial, SpatialState};
 use crate::bound::conformal::{
     RegionBuilder, Traced, calibrate_traced, position_scales, predictive_scale, quantile_index,
@@ -70,14 +70,8 @@ impl<const B: usize> CalibrationWindow for SpatialWindow<B> {
     type Sample = Configuration<B>;
 
     fn cut(c: &[Configuration<B>], s: usize, horizon: usize, dt: f64) -> Self {
-        let (v, w) = velocities(&c[s], &c[s + 1], dt);
         SpatialWindow {
-            start: SpatialState {
-                x: c[s].0,
-                q: c[s].1,
-                v,
-                w,
-            },
+            start: between(&c[s], &c[s + 1], dt),
             configurations: c[s + 1..=s + horizon].to_vec(),
         }
     }
@@ -381,7 +375,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             };
             region.scale(predictive_scale(t.std_devs[0].as_slice(), &noise_std));
             let c = &w.configurations;
-            let (v1, w1) = velocities(&c[0], &c[1], dt);
+            let SpatialState { v: v1, w: w1, .. } = between(&c[0], &c[1], dt);
             let e1v = (0..B)
                 .map(|b| (t.states[1].v[b] - v1[b]).norm_squared())
                 .sum::<f64>()

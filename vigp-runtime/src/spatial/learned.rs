@@ -40,11 +40,12 @@
 //! ([`LearnSpatialError::Inputs`]), never a silent u = 0.
 
 use super::{SpatialError, SpatialIntegrator};
+use crate::StepError;
 use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
 use crate::learned::Prior;
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp_core::spatial::maximal::{pack, unpack};
-use vigp_core::spatial::{LieStepper, Spatial, SpatialState, so3};
+use vigp_core::spatial::{LieStepper, Spatial, SpatialState};
 
 /// How an orientation is presented to the GP.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -140,33 +141,24 @@ pub fn transitions<const B: usize>(
     configurations
         .windows(3)
         .map(|w| {
-            let (v, ww) = velocities(&w[0], &w[1], dt);
-            let (v_next, w_next) = velocities(&w[1], &w[2], dt);
+            let next = between(&w[1], &w[2], dt);
             SpatialTransition {
-                z: SpatialState {
-                    x: w[0].0,
-                    q: w[0].1,
-                    v,
-                    w: ww,
-                },
-                v_next,
-                w_next,
+                z: between(&w[0], &w[1], dt),
+                v_next: next.v,
+                w_next: next.w,
             }
         })
         .collect()
 }
 
-/// The discrete velocities from configuration `a` to `b` a step Δt later:
-/// (x_b − x_a)/Δt and log(q_a⁻¹ q_b)/Δt per link.
-pub(crate) fn velocities<const B: usize>(
+/// The discrete state at configuration `a` whose configuration Δt later
+/// is `b` ([`SpatialState::from_configurations`]).
+pub(crate) fn between<const B: usize>(
     a: &Configuration<B>,
     b: &Configuration<B>,
     dt: f64,
-) -> ([Vector3<f64>; B], [Vector3<f64>; B]) {
-    (
-        std::array::from_fn(|i| (b.0[i] - a.0[i]) / dt),
-        std::array::from_fn(|i| so3::log(&(a.1[i].inverse() * b.1[i])) / dt),
-    )
+) -> SpatialState<B> {
+    SpatialState::from_configurations(&a.0, &a.1, &b.0, &b.1, dt)
 }
 
 /// One training pair of an actuated spatial mechanism: a discrete state,
@@ -222,7 +214,7 @@ pub enum LearnSpatialError {
     Gp(#[from] crate::gp::GpError),
     /// A nominal step or a projection failed.
     #[error(transparent)]
-    Step(#[from] vigp_core::StepError),
+    Step(#[from] StepError),
     /// No training data.
     #[error("no training transitions")]
     Empty,
@@ -367,7 +359,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             &LieStepper<S, B, J, N, C>,
             &SpatialState<B>,
             &SVector<f64, U>,
-        ) -> Result<SpatialState<B>, vigp_core::StepError>,
+        ) -> Result<SpatialState<B>, StepError>,
     ) -> Result<(Self, TrainReport), LearnSpatialError>
     where
         S: vigp_core::Inputs<U>,
@@ -501,7 +493,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z.validate()?;
         self.check_inputs(U)?;
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
-            return Err(vigp_core::StepError::NonFiniteInput.into());
+            return Err(StepError::NonFiniteInput { step: None }.into());
         }
         self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, None, |z| {
             self.stepper.step_forced(z, u)
@@ -531,7 +523,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u: &[f64],
         ws: &mut Workspace,
         var: Option<&mut SVector<f64, N>>,
-        nominal: impl FnOnce(&SpatialState<B>) -> Result<SpatialState<B>, vigp_core::StepError>,
+        nominal: impl FnOnce(&SpatialState<B>) -> Result<SpatialState<B>, StepError>,
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
         // the GP input on the stack (heap only above 128 dimensions, i.e.
         // more than 7 links with rotation matrices)
@@ -563,9 +555,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         };
         let nu = prior + mean;
         if !nu.iter().all(|x| x.is_finite()) {
-            return Err(LearnSpatialError::Step(
-                vigp_core::StepError::NonFiniteState,
-            ));
+            return Err(LearnSpatialError::Step(StepError::NonFiniteState {
+                step: None,
+            }));
         }
         Ok(nu)
     }
@@ -608,7 +600,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             .flatten()
             .all(|x| x.is_finite())
         {
-            return Err(vigp_core::StepError::NonFiniteInput.into());
+            return Err(StepError::NonFiniteInput { step: None }.into());
         }
         self.trace_with(
             z0,
@@ -625,7 +617,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         steps: usize,
         ws: &mut Workspace,
         input: impl Fn(usize) -> (&'u [f64], &'u [f64]),
-        nominal: impl Fn(&SpatialState<B>, usize) -> Result<SpatialState<B>, vigp_core::StepError>,
+        nominal: impl Fn(&SpatialState<B>, usize) -> Result<SpatialState<B>, StepError>,
     ) -> Result<Trace<B, N>, LearnSpatialError> {
         z0.validate()?;
         vigp_core::step::check_step_count::<SpatialState<B>>(steps)

@@ -19,14 +19,14 @@ pub mod learned;
 pub use vigp_core::spatial::*;
 pub use vigp_core::{RolloutError, StepOptions};
 
-use vigp_core::StepError as CoreStepError;
+use crate::StepError;
 
 /// Why a spatial computation failed.
 #[derive(Debug, thiserror::Error)]
 pub enum SpatialError {
     /// A step failed.
     #[error(transparent)]
-    Step(#[from] CoreStepError),
+    Step(#[from] StepError),
     /// A step inside a rollout failed (the index names it).
     #[error(transparent)]
     Rollout(#[from] RolloutError),
@@ -189,7 +189,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
 
 /// An empty vector with room for the `steps + 1` states of a rollout,
 /// the count checked before allocation
-/// ([`vigp_core::step::check_step_count`]; [`CoreStepError::TooManySteps`]
+/// ([`vigp_core::step::check_step_count`]; [`StepError::TooManySteps`]
 /// for a count whose states cannot be stored, not a panic).
 pub fn spatial_trajectory<const B: usize>(
     steps: usize,
@@ -197,7 +197,7 @@ pub fn spatial_trajectory<const B: usize>(
     let len = vigp_core::step::check_step_count::<SpatialState<B>>(steps)?;
     let mut out = Vec::new();
     out.try_reserve_exact(len)
-        .map_err(|_| CoreStepError::TooManySteps { steps })?;
+        .map_err(|_| StepError::TooManySteps { steps })?;
     Ok(out)
 }
 
