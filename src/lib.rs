@@ -20,7 +20,7 @@
 //! | embed | [`embedded`] (`no_std`: `Stepper`, `LearnedStepper`, exported GPs) |
 //!
 //! Solver internals (`del`, `newton`, `linalg`) are grouped under
-//! [`solver`]; the types most programs need from them ([`NewtonOptions`],
+//! [`solver`]; the types most programs need from them ([`StepOptions`],
 //! [`StepError`]) are at the top. [`SVector`] and [`nalgebra`] are
 //! re-exported, so no separate `nalgebra` version is needed.
 //!
@@ -203,7 +203,7 @@ pub mod prelude {
     pub use vigp_runtime::gp::TrainOptions;
     pub use vigp_runtime::learned::{Encoding, Learned, Prior};
     pub use vigp_runtime::{
-        Coordinates, ExplicitEuler, Integrator, Mechanism, NewtonOptions, Rk4, SVector, State,
-        StepError, SymplecticEuler, Variational, Variational4,
+        Coordinates, ExplicitEuler, Integrator, Mechanism, Rk4, SVector, State, StepError,
+        StepOptions, SymplecticEuler, Variational, Variational4,
     };
 }

@@ -34,7 +34,7 @@ fn variational_steps_do_not_allocate() {
             &out[49].q,
             &SVector::from([0.1, 0.2, 0.3, 0.4]),
             0.01,
-            &NewtonOptions::default(),
+            &StepOptions::default(),
         )
         .unwrap();
     });

@@ -54,7 +54,7 @@ impl GtMethod {
 /// The fourth-order ground truth's Newton options: at the default 1e-12
 /// the solver's residual, not the discretisation, dominates its error over
 /// 2 s (the difference to half the step does not shrink with the step).
-pub const GT_SOLVER: NewtonOptions = NewtonOptions {
+pub const GT_SOLVER: StepOptions = StepOptions {
     tolerance: 1e-14,
     max_iterations: 50,
     min_step: 1.0 / 256.0,

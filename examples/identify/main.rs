@@ -168,7 +168,7 @@ fn log_of<M: Mechanism<N, C>, const N: usize, const C: usize>(
     let x2 = x1 + DT * t.v_next;
     let project = |x: SVector<f64, N>| -> Result<Vec<f64>, StepError> {
         let x = if C > 0 {
-            project_configuration(model, &x, &NewtonOptions::default())?.0
+            project_configuration(model, &x, &StepOptions::default())?.0
         } else {
             x
         };

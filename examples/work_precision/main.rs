@@ -372,7 +372,7 @@ fn main() -> Result<(), Box<dyn Error>> {
                 // (closes exactly; projected anyway)
                 let (t1, t3) = (0.9, -0.4);
                 let guess = SVector::from([t1, t3 - t1, t3, t1 - t3]);
-                let (q0, _) = project_configuration(&min, &guess, &NewtonOptions::default())?;
+                let (q0, _) = project_configuration(&min, &guess, &StepOptions::default())?;
                 let problem = Problem {
                     name: "fourbar",
                     model: min,

@@ -122,9 +122,9 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> AnyIntegrator<M,
             Method::Vi4 => {
                 let v = Variational4::new(model, dt);
                 Self::Variational4(tolerance.map_or(v, |tolerance| {
-                    v.with_options(NewtonOptions {
+                    v.with_options(StepOptions {
                         tolerance,
-                        ..NewtonOptions::default()
+                        ..StepOptions::default()
                     })
                 }))
             }

@@ -336,9 +336,9 @@ where
     M: Mechanism<N, C> + Copy,
 {
     let dt = 0.01;
-    let opts = vigp::NewtonOptions {
+    let opts = vigp::StepOptions {
         tolerance: 1e-14,
-        ..vigp::NewtonOptions::default()
+        ..vigp::StepOptions::default()
     };
     let mut worst = 0.0f64;
     for (alpha, fast) in [

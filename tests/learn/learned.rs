@@ -319,11 +319,11 @@ fn projection_jacobian_matches_finite_differences() {
         vu: &SVector<f64, N>,
         dt: f64,
     ) {
-        let opts = NewtonOptions {
+        let opts = StepOptions {
             tolerance: 1e-14,
             stall_tolerance: 1e-12,
             max_iterations: 100,
-            ..NewtonOptions::default()
+            ..StepOptions::default()
         };
         let x1 = q;
         let jac = projection_jacobian(m, x1, vu, dt).unwrap();

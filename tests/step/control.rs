@@ -299,9 +299,9 @@ fn forced_matches_reference<M, const N: usize, const C: usize, const U: usize>(
     M: vigp::Inputs<U>,
 {
     let dt = 0.01;
-    let opts = vigp::NewtonOptions {
+    let opts = vigp::StepOptions {
         tolerance: 1e-14,
-        ..vigp::NewtonOptions::default()
+        ..vigp::StepOptions::default()
     };
     let mut rng = Rng(17);
     let mut worst = 0.0f64;

@@ -169,7 +169,7 @@ proptest! {
         q in prop::array::uniform4(-50.0..50.0f64),
     ) {
         let fb = Fourbar::default().minimal();
-        match project_configuration(&fb, &SVector::from(q), &NewtonOptions::default()) {
+        match project_configuration(&fb, &SVector::from(q), &StepOptions::default()) {
             Ok((p, _)) => prop_assert!(fb.constraints(&p).amax() <= 1e-12),
             Err(e) => prop_assert!(typed_failure(&e), "{e:?}"),
         }

@@ -1055,7 +1055,7 @@ pub fn projection_cases(size: Size) -> Vec<Row> {
         let (mut restarted, mut worst, mut failed) = (0, 0.0f64, 0);
         for _ in 0..n {
             let vu = SVector::<f64, 4>::from_fn(|_, _| (2.0 * rng() - 1.0) * scale);
-            match project_velocity(&fb, &z0.q, &vu, dt, &NewtonOptions::default()) {
+            match project_velocity(&fb, &z0.q, &vu, dt, &StepOptions::default()) {
                 Ok((v, info)) => {
                     restarted += info.restarted as usize;
                     let q2 = z0.q + v * dt;
@@ -1092,7 +1092,7 @@ pub fn projection_cases(size: Size) -> Vec<Row> {
     for i in 0..n {
         let scale = [0.1, 1.0, 10.0, 100.0][i % 4];
         let q = SVector::<f64, 4>::from_fn(|_, _| (2.0 * rng() - 1.0) * scale);
-        match project_configuration(&fb, &q, &NewtonOptions::default()) {
+        match project_configuration(&fb, &q, &StepOptions::default()) {
             Ok((p, _)) => row.check(fb.constraints(&p).amax() <= 1e-12, || "|g|".into()),
             Err(e) => {
                 failed += 1;
@@ -1180,7 +1180,7 @@ pub fn bad_input(size: Size) -> Vec<Row> {
             SymplecticEuler::new(dp, dt).step(z),
             Rk4::new(dp, dt).step(z),
             vigp::dynamics::acceleration(&dp, &z.q, &z.v).map(|_| *z),
-            project_velocity(&dp, &z.q, &z.v, dt, &NewtonOptions::default())
+            project_velocity(&dp, &z.q, &z.v, dt, &StepOptions::default())
                 .map(|(v, _)| State { q: z.q, v }),
         ];
         for r in results {
@@ -1194,7 +1194,7 @@ pub fn bad_input(size: Size) -> Vec<Row> {
     }
     let q4 = SVector::from([f64::NAN, 0.0, 0.0, 0.0]);
     for r in [
-        project_configuration(&fb, &q4, &NewtonOptions::default()).map(|_| ()),
+        project_configuration(&fb, &q4, &StepOptions::default()).map(|_| ()),
         consistent_state(&fb, &q4, &SVector::zeros(), dt).map(|_| ()),
     ] {
         row.check(matches!(r, Err(StepError::NonFiniteState { .. })), || {
@@ -1231,7 +1231,7 @@ pub fn bad_input(size: Size) -> Vec<Row> {
     errs.push(Variational::new(dp, dt).tolerance(f64::NAN).step(&z));
     errs.push(
         Variational::new(dp, dt)
-            .with_options(NewtonOptions {
+            .with_options(StepOptions {
                 min_step: 0.0,
                 ..Default::default()
             })

@@ -2,7 +2,7 @@
 //! midpoint rule ([`vigp_core::compose`]) behind the std [`Integrator`] trait.
 
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{NewtonOptions, StepError};
+use crate::newton::{StepError, StepOptions};
 use crate::variational::Integrator;
 use vigp_core::Composition;
 
@@ -44,7 +44,7 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational4<M, N, C> {
     }
 
     /// Replace the Newton options of the sub-steps.
-    pub fn with_options(mut self, options: NewtonOptions) -> Self {
+    pub fn with_options(mut self, options: StepOptions) -> Self {
         self.inner = self.inner.and_then(|c| c.options(options));
         self
     }

@@ -185,6 +185,6 @@ pub fn discrete_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     if C == 0 {
         return Ok(v);
     }
-    crate::projection::project_velocity(m, q, &v, dt, &crate::newton::NewtonOptions::default())
+    crate::projection::project_velocity(m, q, &v, dt, &crate::newton::StepOptions::default())
         .map(|(v, _)| v)
 }

@@ -33,7 +33,7 @@
 
 use crate::gp::{Gp, GpError, PriorMean, TrainOptions, TrainReport, Workspace};
 use crate::mechanism::{CoordinateKind, Mechanism, State};
-use crate::newton::{NewtonOptions, StepError};
+use crate::newton::{StepError, StepOptions};
 use crate::projection::{consistent_state, project_velocity};
 use crate::variational::{Integrator, Variational};
 use nalgebra::SVector;
@@ -420,7 +420,7 @@ pub struct Learned<M: Mechanism<N, C>, const N: usize, const C: usize> {
     encoding: Encoding,
     project: bool,
     gp: Gp,
-    options: NewtonOptions,
+    options: StepOptions,
     /// Number of inputs of the mechanism the GP takes (0: trained without
     /// inputs, [`Learned::train`]; else [`Learned::train_forced`]).
     pub(crate) inputs: usize,
@@ -578,9 +578,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         };
         let (gp, report) = Gp::train(&inputs, d, &targets, N, &opts)?;
         // near a folded loop the projection converges linearly
-        let options = NewtonOptions {
+        let options = StepOptions {
             max_iterations: 100,
-            ..NewtonOptions::default()
+            ..StepOptions::default()
         };
         Ok((
             Self {

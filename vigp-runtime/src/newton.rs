@@ -7,7 +7,7 @@
 /// stall tolerance (1e-10) under which a step that cannot decrease its
 /// residual further (a loop at a configuration where its constraint
 /// Jacobian loses rank) is accepted.
-pub type NewtonOptions = vigp_core::StepOptions;
+pub use vigp_core::StepOptions;
 
 /// Diagnostics of a converged step.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -17,7 +17,7 @@ pub struct StepInfo {
     /// Final scaled residual (max-norm).
     pub residual: f64,
     /// `true` when the step was accepted as stalled (see
-    /// [`NewtonOptions::stall_tolerance`]) rather than converged.
+    /// [`StepOptions::stall_tolerance`]) rather than converged.
     pub stalled: bool,
     /// `true` when some Newton matrix was singular and the equivalent
     /// regularised KKT system was solved instead (see

@@ -5,7 +5,7 @@
 
 use crate::linalg::FullPivLu;
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{NewtonOptions, StepError, StepInfo, solve_kkt_regularised};
+use crate::newton::{StepError, StepInfo, StepOptions, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
 use vigp_core::CoordinateKind;
 use vigp_core::state::discrete_velocity;
@@ -25,7 +25,7 @@ use vigp_core::state::discrete_velocity;
 pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     q: &SVector<f64, N>,
-    options: &NewtonOptions,
+    options: &StepOptions,
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
     options.validate()?;
     if q.iter().any(|x| !x.is_finite()) {
@@ -71,7 +71,7 @@ fn gauss_newton<const N: usize, const C: usize>(
     hold: &[usize],
     caps: &SVector<f64, N>,
     angles: Option<&[CoordinateKind; N]>,
-    options: &NewtonOptions,
+    options: &StepOptions,
     residual: impl Fn(&SVector<f64, N>) -> (SVector<f64, C>, SMatrix<f64, C, N>),
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
     let mut x = *x0;
@@ -161,7 +161,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     q1: &SVector<f64, N>,
     v_u: &SVector<f64, N>,
     dt: f64,
-    options: &NewtonOptions,
+    options: &StepOptions,
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
     vigp_core::step::check_time_step(dt)?;
     options.validate()?;
@@ -210,7 +210,7 @@ fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
     v_u: &SVector<f64, N>,
     start: &SVector<f64, N>,
     dt: f64,
-    options: &NewtonOptions,
+    options: &StepOptions,
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
     let k = m.checked_constants()?;
     let v_scale = 1.0 + v_u.amax();
@@ -286,7 +286,7 @@ fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
             }
             if alpha <= options.min_step {
                 // no decrease along the Newton direction (see
-                // `NewtonOptions::stall_tolerance`)
+                // `StepOptions::stall_tolerance`)
                 stalled = true;
                 break;
             }
@@ -306,7 +306,7 @@ pub fn consistent_state<M: Mechanism<N, C>, const N: usize, const C: usize>(
     v: &SVector<f64, N>,
     dt: f64,
 ) -> Result<State<N>, StepError> {
-    let options = NewtonOptions::default();
+    let options = StepOptions::default();
     let (q, _) = project_configuration(m, q, &options)?;
     let (v, _) = project_velocity(m, &q, v, dt, &options)?;
     Ok(State { q, v })
@@ -351,7 +351,7 @@ pub fn consistent_state_holding<M: Mechanism<N, C>, const N: usize, const C: usi
             "consistent_state_holding: every coordinate is held, none is free to close the loops",
         ));
     }
-    let options = NewtonOptions::default();
+    let options = StepOptions::default();
     let scale = crate::mechanism::length_scale::<M, N, C>(q);
     let (q, _) = gauss_newton(
         q,

@@ -10,7 +10,7 @@
 
 use crate::del;
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{NewtonOptions, StepError, StepInfo, solve_kkt_regularised};
+use crate::newton::{StepError, StepInfo, StepOptions, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
 
 /// One variational step (α = 0: the paper's first-order rule; α = ½: the
@@ -20,7 +20,7 @@ pub fn step<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     dt: f64,
     alpha: f64,
-    options: &NewtonOptions,
+    options: &StepOptions,
     z: &State<N>,
 ) -> Result<(State<N>, StepInfo), StepError> {
     step_forced(m, dt, alpha, options, z, &[])
@@ -34,7 +34,7 @@ pub fn step_forced<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     dt: f64,
     alpha: f64,
-    options: &NewtonOptions,
+    options: &StepOptions,
     z: &State<N>,
     u: &[f64],
 ) -> Result<(State<N>, StepInfo), StepError> {

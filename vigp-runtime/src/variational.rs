@@ -2,7 +2,7 @@
 //! [`Integrator`] trait shared by every integrator in vigp.
 
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{NewtonOptions, StepError, StepInfo};
+use crate::newton::{StepError, StepInfo, StepOptions};
 use nalgebra::SVector;
 use vigp_core::{Inputs, StepError as CoreError, StepWorkspace, Stepper};
 
@@ -144,7 +144,7 @@ pub struct Variational<M: Mechanism<N, C>, const N: usize, const C: usize> {
     model: M,
     dt: f64,
     alpha: f64,
-    options: NewtonOptions,
+    options: StepOptions,
     substeps: usize,
     continuation: f64,
     subdivision: u32,
@@ -203,9 +203,9 @@ fn loop_closes<M: Mechanism<N, C>, const N: usize, const C: usize>(
     if C == 0 {
         return Ok(());
     }
-    let options = NewtonOptions {
+    let options = StepOptions {
         max_iterations: 100,
-        ..NewtonOptions::default()
+        ..StepOptions::default()
     };
     let Ok(k) = model.checked_constants() else {
         // invalid parameters are reported by the stepper's own check
@@ -252,7 +252,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             model,
             dt,
             0.0,
-            NewtonOptions::default(),
+            StepOptions::default(),
             1,
             DEFAULT_CONTINUATION,
         )
@@ -265,7 +265,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             model,
             dt,
             0.5,
-            NewtonOptions::default(),
+            StepOptions::default(),
             1,
             DEFAULT_CONTINUATION,
         )
@@ -275,7 +275,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         model: M,
         dt: f64,
         alpha: f64,
-        options: NewtonOptions,
+        options: StepOptions,
         substeps: usize,
         continuation: f64,
     ) -> Self {
@@ -412,7 +412,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 
     /// Replace the Newton options.
-    pub fn with_options(mut self, options: NewtonOptions) -> Self {
+    pub fn with_options(mut self, options: StepOptions) -> Self {
         self.options = options;
         self.rebuild()
     }
@@ -455,7 +455,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 
     /// The Newton options in use.
-    pub fn options(&self) -> &NewtonOptions {
+    pub fn options(&self) -> &StepOptions {
         &self.options
     }
 

@@ -5,7 +5,7 @@
 use crate::learned::Learned;
 use crate::linalg::solve_kkt;
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{NewtonOptions, StepError};
+use crate::newton::{StepError, StepOptions};
 use crate::projection::{consistent_state, project_velocity};
 use crate::variational::Integrator;
 use nalgebra::{SMatrix, SVector};
@@ -39,7 +39,7 @@ pub fn projection_jacobian<M: Mechanism<N, C>, const N: usize, const C: usize>(
     if C == 0 {
         return Ok(SMatrix::identity());
     }
-    let (v, _) = project_velocity(m, x1, v_u, dt, &NewtonOptions::default())?;
+    let (v, _) = project_velocity(m, x1, v_u, dt, &StepOptions::default())?;
     let x2 = x1 + v * dt;
     let g: SMatrix<f64, C, N> = m.constraint_jacobian(&x2);
     // multipliers: least squares of v − v_u + Δt·Gᵀμ = 0

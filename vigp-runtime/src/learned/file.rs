@@ -10,7 +10,7 @@ use super::{Encoding, Learned, Prior};
 use crate::Variational;
 use crate::gp::{Gp, GpError, SavedGp};
 use crate::mechanism::{CoordinateKind, Mechanism};
-use crate::newton::NewtonOptions;
+use crate::newton::StepOptions;
 use crate::system::Parameters;
 
 /// The `format` tag of a learned-model file.
@@ -102,17 +102,17 @@ impl From<CoordinateKind> for SavedKind {
     }
 }
 
-/// [`NewtonOptions`] in a saved model.
+/// [`StepOptions`] in a saved model.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SavedNewton {
-    /// See [`NewtonOptions::tolerance`].
+    /// See [`StepOptions::tolerance`].
     pub tolerance: f64,
-    /// See [`NewtonOptions::max_iterations`].
+    /// See [`StepOptions::max_iterations`].
     pub max_iterations: usize,
-    /// See [`NewtonOptions::min_step`].
+    /// See [`StepOptions::min_step`].
     pub min_step: f64,
-    /// See [`NewtonOptions::stall_tolerance`].
+    /// See [`StepOptions::stall_tolerance`].
     pub stall_tolerance: f64,
 }
 
@@ -485,7 +485,7 @@ where
             return Err(field("dt", format!("{} must be finite and > 0", saved.dt)));
         }
         let s = &saved.newton;
-        let options = NewtonOptions {
+        let options = StepOptions {
             tolerance: s.tolerance,
             max_iterations: s.max_iterations,
             min_step: s.min_step,
