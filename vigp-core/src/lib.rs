@@ -50,7 +50,7 @@ pub use kinematics::{Point2, Pose2};
 pub use learned::{LearnedError, LearnedModel, LearnedStepper};
 pub use model::{Body, Model};
 pub use params::{ElasticJoint, Joint, Link, Parameters, Spring};
-pub use real::{Jet1, Jet2, Real};
+pub use real::{Jet1, Jet2, JetDir, Real};
 pub use state::{CoordinateKind, State};
 pub use step::{
     MAX_SUBSTEPS, RolloutError, StepError, StepOptions, StepReport, StepWorkspace, Stepper,

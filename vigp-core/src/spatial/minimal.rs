@@ -258,7 +258,6 @@ pub fn input_force_jacobian<S, const B: usize, const J: usize, const N: usize, c
 where
     S: Spatial<B, J>,
 {
-    use crate::real::Jet2;
     let joints = sys.joints();
     let layout = Layout::of::<S, B>(&joints);
     let loops = S::INPUT_JOINTS
@@ -267,9 +266,7 @@ where
     if !loops {
         return nalgebra::SMatrix::zeros();
     }
-    let qj = SVector::<Jet2<N>, N>::from_fn(|i, _| Jet2::variable(q[i], i));
-    let w = input_work::<S, Jet2<N>, B, J, N>(sys, &qj, u.as_slice());
-    nalgebra::SMatrix::from_fn(|i, k| w.hessian(i, k))
+    hessian(&InputWork::<S, B, J, U> { sys, u }, q)
 }
 
 /// Lagrangian T − V (springs included) in one pass of the kinematics.
@@ -409,30 +406,40 @@ fn constant1<const N: usize>(q: &SVector<f64, N>) -> SVector<crate::real::Jet1<N
     q.map(crate::real::Jet1::constant)
 }
 
+/// One link's velocity column for one velocity direction: the centre of
+/// mass velocity and the body angular velocity, as jets in q.
+type Column<const N: usize> = ([crate::real::Jet1<N>; 3], [crate::real::Jet1<N>; 3]);
+
 /// Per link, for velocity direction e_j: the centre-of-mass velocity and
 /// the body angular velocity (columns j of J_v and J_ω) as jets in q, so
-/// their gradients are ∂J/∂q.
-#[allow(clippy::type_complexity)]
+/// their gradients are ∂J/∂q, written into `cols[j][i]`.
+///
+/// The N·B columns hold 6·N·(N + 1) numbers per link (1.2 MB for the
+/// 29-joint G1): they are written in place, never returned by value,
+/// because an unoptimised build keeps a copy of a returned array in every
+/// frame it passes through (`core::array::from_fn` nests several), which
+/// overflowed the 8 MB main-thread stack.
 fn velocity_columns<S, const B: usize, const J: usize, const N: usize>(
     sys: &S,
     q: &SVector<f64, N>,
-) -> [[([crate::real::Jet1<N>; 3], [crate::real::Jet1<N>; 3]); B]; N]
-where
+    cols: &mut [[Column<N>; B]; N],
+) where
     S: Spatial<B, J>,
 {
     use crate::real::Jet1;
     let links = sys.links();
     let qj = seed1(q);
-    core::array::from_fn(|j| {
-        let v =
-            SVector::<Jet1<N>, N>::from_fn(|i, _| Jet1::constant(if i == j { 1.0 } else { 0.0 }));
+    for (j, col) in cols.iter_mut().enumerate() {
+        let mut v = SVector::<Jet1<N>, N>::from_element(Jet1::constant(0.0));
+        v[j] = Jet1::constant(1.0);
         let (poses, motions) = poses_and_motions::<S, Jet1<N>, B, J, N>(sys, &qj, &v);
-        core::array::from_fn(|i| {
-            let vc = motions[i].point_velocity(&poses[i], links[i].com);
-            let wb = mul_mtv(&poses[i].rot, motions[i].omega);
-            (vc, wb)
-        })
-    })
+        for (i, c) in col.iter_mut().enumerate() {
+            *c = (
+                motions[i].point_velocity(&poses[i], links[i].com),
+                mul_mtv(&poses[i].rot, motions[i].omega),
+            );
+        }
+    }
 }
 
 /// M(q), ∂M/∂q, ∇V(q) and D(q) (see [`MinimalTerms`]). Cost: N + 1 passes
@@ -447,7 +454,9 @@ where
     use crate::real::Jet1;
     use nalgebra::SMatrix;
     let links = sys.links();
-    let cols = velocity_columns::<S, B, J, N>(sys, q);
+    let zero = Jet1::<N>::constant(0.0);
+    let mut cols = [[([zero; 3], [zero; 3]); B]; N];
+    velocity_columns::<S, B, J, N>(sys, q, &mut cols);
     let mut mass = SMatrix::<f64, N, N>::zeros();
     let mut dmass = [SMatrix::<f64, N, N>::zeros(); N];
     for (i, link) in links.iter().enumerate() {
@@ -568,11 +577,8 @@ pub fn force_jacobian<S, const B: usize, const J: usize, const N: usize>(
 where
     S: Spatial<B, J>,
 {
-    use crate::real::{Jet1, Jet2};
-    let qj = SVector::<Jet2<N>, N>::from_fn(|i, _| Jet2::variable(q[i], i));
-    let vj = v.map(Jet2::constant);
-    let l = lagrangian::<S, Jet2<N>, B, J, N>(sys, &qj, &vj);
-    let mut out = nalgebra::SMatrix::<f64, N, N>::from_fn(|i, k| l.hessian(i, k));
+    use crate::real::Jet1;
+    let mut out = hessian(&LagrangianAt::<S, B, J, N> { sys, v }, q);
     if S::DISSIPATIVE {
         // D v = Σ c b (b·v): ∂/∂q_l = Σ c (∂b/∂q_l (b·v) + b ∂(b·v)/∂q_l)
         damping_rows::<S, Jet1<N>, B, J, N>(sys, &seed1(q), &mut |c, b| {
@@ -585,6 +591,121 @@ where
         });
     }
     out
+}
+
+/// The largest N whose Hessians come from one second-order jet pass
+/// ([`Jet2`](crate::real::Jet2): N² + N + 1 numbers per scalar, 1.3 KB at
+/// N = 12). Above it they come column by column
+/// ([`JetDir`](crate::real::JetDir): 2(N + 1) numbers), about three times
+/// the arithmetic but a stack that grows as N instead of N²: one Jet2 pass
+/// of the 29-joint G1's kinematics holds several MB of jets.
+pub const ONE_PASS_HESSIAN: usize = 12;
+
+/// A scalar function of the minimal coordinates, on any [`Real`]: what
+/// [`hessian`] differentiates twice.
+pub(crate) trait OfCoordinates<const N: usize> {
+    /// f(q).
+    fn at<R: Real>(&self, q: &SVector<R, N>) -> R;
+}
+
+/// ∇²f(q): one second-order jet pass up to [`ONE_PASS_HESSIAN`]
+/// coordinates, N column passes above.
+pub(crate) fn hessian<F: OfCoordinates<N>, const N: usize>(
+    f: &F,
+    q: &SVector<f64, N>,
+) -> nalgebra::SMatrix<f64, N, N> {
+    if N <= ONE_PASS_HESSIAN {
+        hessian_one_pass(f, q)
+    } else {
+        hessian_by_columns(f, q)
+    }
+}
+
+/// ∇²f(q) by one second-order jet pass.
+pub(crate) fn hessian_one_pass<F: OfCoordinates<N>, const N: usize>(
+    f: &F,
+    q: &SVector<f64, N>,
+) -> nalgebra::SMatrix<f64, N, N> {
+    use crate::real::Jet2;
+    let y = f.at(&SVector::<Jet2<N>, N>::from_fn(|i, _| {
+        Jet2::variable(q[i], i)
+    }));
+    nalgebra::SMatrix::from_fn(|i, k| y.hessian(i, k))
+}
+
+/// ∇²f(q) by N passes of [`JetDir`](crate::real::JetDir), column l from
+/// the pass along q_l.
+pub(crate) fn hessian_by_columns<F: OfCoordinates<N>, const N: usize>(
+    f: &F,
+    q: &SVector<f64, N>,
+) -> nalgebra::SMatrix<f64, N, N> {
+    use crate::real::JetDir;
+    let mut out = nalgebra::SMatrix::<f64, N, N>::zeros();
+    for l in 0..N {
+        let y = f.at(&SVector::<JetDir<N>, N>::from_fn(|i, _| {
+            JetDir::variable(q[i], i, l)
+        }));
+        for i in 0..N {
+            out[(i, l)] = y.dx.g[i];
+        }
+    }
+    out
+}
+
+/// The Lagrangian at fixed velocities, as a function of q.
+pub(crate) struct LagrangianAt<'a, S, const B: usize, const J: usize, const N: usize> {
+    /// The mechanism.
+    pub sys: &'a S,
+    /// The fixed velocities.
+    pub v: &'a SVector<f64, N>,
+}
+
+impl<S, const B: usize, const J: usize, const N: usize> OfCoordinates<N>
+    for LagrangianAt<'_, S, B, J, N>
+where
+    S: Spatial<B, J>,
+{
+    fn at<R: Real>(&self, q: &SVector<R, N>) -> R {
+        let v = self.v.map(R::from_f64);
+        lagrangian::<S, R, B, J, N>(self.sys, q, &v)
+    }
+}
+
+/// Σ_i μ_i g_i(q), the constraints weighted by multipliers.
+pub(crate) struct WeightedConstraints<'a, S, const B: usize, const J: usize, const C: usize> {
+    /// The mechanism.
+    pub sys: &'a S,
+    /// The weights μ.
+    pub mu: &'a SVector<f64, C>,
+}
+
+impl<S, const B: usize, const J: usize, const N: usize, const C: usize> OfCoordinates<N>
+    for WeightedConstraints<'_, S, B, J, C>
+where
+    S: Spatial<B, J>,
+{
+    fn at<R: Real>(&self, q: &SVector<R, N>) -> R {
+        let g = constraints::<S, R, B, J, N, C>(self.sys, q);
+        (0..C).fold(R::from_f64(0.0), |s, i| s + g[i] * self.mu[i])
+    }
+}
+
+/// The work of the inputs, Σ u_k s_k(q), as a function of q.
+pub(crate) struct InputWork<'a, S, const B: usize, const J: usize, const U: usize> {
+    /// The mechanism.
+    pub sys: &'a S,
+    /// The inputs.
+    pub u: &'a SVector<f64, U>,
+}
+
+impl<S, const B: usize, const J: usize, const N: usize, const U: usize> OfCoordinates<N>
+    for InputWork<'_, S, B, J, U>
+where
+    S: Spatial<B, J>,
+{
+    fn at<R: Real>(&self, q: &SVector<R, N>) -> R {
+        input_work::<S, R, B, J, N>(self.sys, q, self.u.as_slice())
+    }
 }
 
 /// g(q) and G(q) = ∂g/∂q (one first-order jet pass).
@@ -602,7 +723,8 @@ where
     )
 }
 
-/// Σ_i μ_i ∇²g_i(q) (one second-order jet pass).
+/// Σ_i μ_i ∇²g_i(q) (one second-order jet pass, or N column passes
+/// above [`ONE_PASS_HESSIAN`]).
 pub fn constraint_hessian<S, const B: usize, const J: usize, const N: usize, const C: usize>(
     sys: &S,
     q: &SVector<f64, N>,
@@ -611,14 +733,7 @@ pub fn constraint_hessian<S, const B: usize, const J: usize, const N: usize, con
 where
     S: Spatial<B, J>,
 {
-    use crate::real::Jet2;
-    let qj = SVector::<Jet2<N>, N>::from_fn(|i, _| Jet2::variable(q[i], i));
-    let g = constraints::<S, Jet2<N>, B, J, N, C>(sys, &qj);
-    let mut s = Jet2::<N>::constant(0.0);
-    for i in 0..C {
-        s = s + g[i] * mu[i];
-    }
-    nalgebra::SMatrix::from_fn(|i, k| s.hessian(i, k))
+    hessian(&WeightedConstraints::<S, B, J, C> { sys, mu }, q)
 }
 
 /// Potential energy V(q) in f64.

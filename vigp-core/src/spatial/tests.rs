@@ -338,3 +338,34 @@ fn spherical_pendulum_keeps_constraint_norm_and_vertical_momentum() {
     );
     assert!(max_de < 0.2, "energy error {max_de}");
 }
+
+/// The Hessians of the minimal view by N column passes
+/// (`JetDir`, used above `ONE_PASS_HESSIAN` coordinates) equal those of
+/// one second-order jet pass to rounding, on a mechanism with every joint
+/// type, damping and a loop: ∂²L/∂q² and Σ μ_i ∇²g_i at random (q, v, μ).
+/// Tolerance 1e-12 of the largest entry: the same derivatives summed in
+/// another order.
+#[test]
+fn hessians_by_columns_match_one_pass() {
+    use super::minimal;
+    const N: usize = 6;
+    const C: usize = 6;
+    let mut rng = Rng(7);
+    for _ in 0..5 {
+        let q = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-1.0, 1.0));
+        let v = SVector::<f64, N>::from_fn(|_, _| rng.uniform(-2.0, 2.0));
+        let mu = SVector::<f64, C>::from_fn(|_, _| rng.uniform(-3.0, 3.0));
+        let lagrangian = minimal::LagrangianAt::<Zoo, 4, 5, N> { sys: &Zoo, v: &v };
+        let weighted = minimal::WeightedConstraints::<Zoo, 4, 5, C> { sys: &Zoo, mu: &mu };
+        let one = minimal::hessian_one_pass(&lagrangian, &q);
+        let cols = minimal::hessian_by_columns(&lagrangian, &q);
+        let scale = one.amax();
+        assert!(scale > 1e-3, "a Hessian that tests nothing: {scale}");
+        assert!((one - cols).amax() <= 1e-12 * scale, "{one} {cols}");
+        let one = minimal::hessian_one_pass(&weighted, &q);
+        let cols = minimal::hessian_by_columns(&weighted, &q);
+        let scale = one.amax();
+        assert!(scale > 1e-3, "a Hessian that tests nothing: {scale}");
+        assert!((one - cols).amax() <= 1e-12 * scale, "{one} {cols}");
+    }
+}
