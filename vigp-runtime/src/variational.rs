@@ -4,7 +4,7 @@
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{StepError, StepInfo, StepOptions};
 use nalgebra::SVector;
-use vigp_core::{Inputs, StepError as CoreError, StepWorkspace, Stepper};
+use vigp_core::{Inputs, StepWorkspace, Stepper};
 
 /// A one-step map z_k ↦ z_{k+1} with a fixed time step.
 ///
@@ -167,24 +167,24 @@ pub struct RolloutReport {
 
 /// Core errors after which a smaller sub-step may succeed: no root found
 /// near the start, or a root that is not the continuation of the motion.
-fn resolvable(e: &CoreError) -> bool {
+fn resolvable(e: &StepError) -> bool {
     matches!(
         e,
-        CoreError::NotConverged { .. }
-            | CoreError::LineSearchFailed { .. }
-            | CoreError::SingularJacobian { .. }
-            | CoreError::NonFiniteResidual { .. }
-            | CoreError::NotContinuation { .. }
+        StepError::NotConverged { .. }
+            | StepError::LineSearchFailed { .. }
+            | StepError::SingularJacobian { .. }
+            | StepError::NonFiniteResidual { .. }
+            | StepError::NotContinuation { .. }
     )
 }
 
 /// The residual (or bend) a resolvable core error reports.
-fn failure_size(e: &CoreError) -> f64 {
+fn failure_size(e: &StepError) -> f64 {
     match *e {
-        CoreError::NotConverged { residual, .. } | CoreError::LineSearchFailed { residual, .. } => {
+        StepError::NotConverged { residual, .. } | StepError::LineSearchFailed { residual, .. } => {
             residual
         }
-        CoreError::NotContinuation { ratio, .. } => ratio,
+        StepError::NotContinuation { ratio, .. } => ratio,
         _ => f64::NAN,
     }
 }
@@ -342,8 +342,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     fn subdivide<R>(
         &self,
         z: &State<N>,
-        first: CoreError,
-        mut attempt: impl FnMut(&Stepper<M, N, C>) -> Result<R, CoreError>,
+        first: StepError,
+        mut attempt: impl FnMut(&Stepper<M, N, C>) -> Result<R, StepError>,
     ) -> Result<(R, u32), StepError> {
         if !resolvable(&first) || self.subdivision == 0 {
             return Err(self.explain(first, z));
@@ -496,8 +496,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     fn step_from<R>(
         &self,
         z: &State<N>,
-        kept: impl FnOnce(&Stepper<M, N, C>, &mut StepWorkspace<N, C>) -> Result<R, CoreError>,
-        fresh: impl Fn(&Stepper<M, N, C>) -> Result<R, CoreError>,
+        kept: impl FnOnce(&Stepper<M, N, C>, &mut StepWorkspace<N, C>) -> Result<R, StepError>,
+        fresh: impl Fn(&Stepper<M, N, C>) -> Result<R, StepError>,
     ) -> Result<(R, u32), StepError> {
         let stepper = self.stepper()?;
         check_quaternions::<M, N, C>(z)?;
