@@ -413,14 +413,13 @@ pub struct LearnedStepInfo<const N: usize> {
 pub struct Learned<M: Mechanism<N, C>, const N: usize, const C: usize> {
     model: M,
     /// The nominal prior's integrator, built once (its run-time parameters
-    /// are validated here, not at every step).
+    /// are validated here, not at every step). It holds Δt and the Newton
+    /// options of the projection, once.
     nominal: Variational<M, N, C>,
-    dt: f64,
     prior: Prior,
     encoding: Encoding,
     project: bool,
     gp: Gp,
-    options: StepOptions,
     /// Number of inputs of the mechanism the GP takes (0: trained without
     /// inputs, [`Learned::train`]; else [`Learned::train_forced`]).
     pub(crate) inputs: usize,
@@ -586,12 +585,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             Self {
                 nominal: Variational::new(model.clone(), dt).with_options(options),
                 model,
-                dt,
                 prior,
                 encoding,
                 project: C > 0,
                 gp,
-                options,
                 inputs: u_dim,
                 previous_input: forced && U > 0,
             },
@@ -790,7 +787,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
         }
-        let h = self.dt;
+        let h = self.nominal.dt();
         // prior
         let (mut v, mut v_q, mut v_v, mut v_u) = match self.prior {
             Prior::Nominal | Prior::Identified(_) => {
@@ -861,7 +858,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 step: None,
             };
             let vu = v;
-            let (vp, _) = project_velocity(&self.model, &x1, &vu, h, &self.options)?;
+            let (vp, _) = project_velocity(&self.model, &x1, &vu, h, self.nominal.options())?;
             let y = x1 + vp * h;
             let k = self.model.constants()?;
             let (_, g) = self.model.constraints_and_jacobian(&k, &y);
@@ -952,9 +949,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// q₁ = q + Δt·v, and v_u projected onto g(q₁ + Δt·v₁) = 0 when the
     /// model projects (v_u itself otherwise).
     fn next_state(&self, z: &State<N>, vu: &SVector<f64, N>) -> Result<State<N>, StepError> {
-        let x1 = z.q + z.v * self.dt;
+        let x1 = z.q + z.v * self.nominal.dt();
         let v = if self.project && C > 0 {
-            project_velocity(&self.model, &x1, vu, self.dt, &self.options)?.0
+            project_velocity(
+                &self.model,
+                &x1,
+                vu,
+                self.nominal.dt(),
+                self.nominal.options(),
+            )?
+            .0
         } else {
             *vu
         };
@@ -1216,8 +1220,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     fn check_step(&self, z: &State<N>) -> Result<(), StepError> {
-        if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(StepError::InvalidTimeStep { dt: self.dt });
+        let dt = self.nominal.dt();
+        if !(dt.is_finite() && dt > 0.0) {
+            return Err(StepError::InvalidTimeStep { dt });
         }
         if !z.is_finite() {
             return Err(StepError::NonFiniteState { step: None });
@@ -1367,7 +1372,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     type Mechanism = M;
 
     fn dt(&self) -> f64 {
-        self.dt
+        self.nominal.dt()
     }
 
     /// One step (mean only, [`Learned::step_mean_with`]; under u = 0 for

@@ -9,6 +9,7 @@ use super::{Encoding, Learned, Prior};
 use crate::gp::{ExportOptions, GpError};
 use crate::mechanism::Mechanism;
 use crate::system::Parameters;
+use crate::variational::Integrator;
 
 /// Options of [`Learned::to_embedded_source`].
 #[derive(Clone, Debug, PartialEq)]
@@ -167,8 +168,8 @@ where
              \x20   gps: &{gp_name},\n\
              }};\n",
             mech = M::NAME,
-            dt = self.dt,
-            dtl = lit(self.dt),
+            dt = self.nominal.dt(),
+            dtl = lit(self.nominal.dt()),
             coords = coords.join(", "),
             inputs = inputs.join(", "),
             with_inputs = if inputs.is_empty() {
@@ -182,10 +183,10 @@ where
                 format!(", inputs {}", inputs.join(", "))
             },
             project = self.project,
-            tol = lit(self.options.tolerance),
-            iters = self.options.max_iterations,
-            min_step = lit(self.options.min_step),
-            stall = lit(self.options.stall_tolerance),
+            tol = lit(self.nominal.options().tolerance),
+            iters = self.nominal.options().max_iterations,
+            min_step = lit(self.nominal.options().min_step),
+            stall = lit(self.nominal.options().stall_tolerance),
         );
         let size = ExportSize::of(&self.gp, opts.variance, s.len());
         Ok((s, size))

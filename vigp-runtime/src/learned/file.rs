@@ -7,11 +7,11 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::{Encoding, Learned, Prior};
-use crate::Variational;
 use crate::gp::{Gp, GpError, SavedGp};
 use crate::mechanism::{CoordinateKind, Mechanism};
 use crate::newton::StepOptions;
 use crate::system::Parameters;
+use crate::variational::{Integrator, Variational};
 
 /// The `format` tag of a learned-model file.
 pub const FORMAT: &str = "vigp-learned";
@@ -381,15 +381,15 @@ where
                 .collect(),
             previous_input: self.previous_input,
             parameters,
-            dt: self.dt,
+            dt: self.nominal.dt(),
             encoding: self.encoding,
             prior: self.prior.clone(),
             project: self.project,
             newton: SavedNewton {
-                tolerance: self.options.tolerance,
-                max_iterations: self.options.max_iterations,
-                min_step: self.options.min_step,
-                stall_tolerance: self.options.stall_tolerance,
+                tolerance: self.nominal.options().tolerance,
+                max_iterations: self.nominal.options().max_iterations,
+                min_step: self.nominal.options().min_step,
+                stall_tolerance: self.nominal.options().stall_tolerance,
             },
             gp: self.gp.to_saved(),
         }
@@ -517,12 +517,10 @@ where
         Ok(Self {
             nominal: Variational::new(model.clone(), saved.dt).with_options(options),
             model,
-            dt: saved.dt,
             prior: saved.prior.clone(),
             encoding: saved.encoding,
             project: saved.project,
             gp,
-            options,
             inputs: saved.inputs.len(),
             previous_input: saved.previous_input,
         })
