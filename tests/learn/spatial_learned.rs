@@ -630,7 +630,7 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     assert_eq!(unforced.inputs(), 0);
     assert!(matches!(
         unforced.step_forced(&z0, &SVector::from([0.1, 0.0])),
-        Err(SpatialError::InputsNotSupported)
+        Err(SpatialError::Step(vigp::StepError::InputsNotSupported))
     ));
     let zero = unforced
         .step_forced(&z0, &SVector::<f64, 2>::zeros())

@@ -728,7 +728,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// (the trait has no slot for the previous input). A model trained
     /// without inputs takes u = 0 as
     /// [`SpatialIntegrator::step`] and refuses other inputs with
-    /// [`SpatialError::InputsNotSupported`], as integrators without inputs
+    /// `SpatialError::Step(StepError::InputsNotSupported)`, as integrators without inputs
     /// do. Allocates a GP workspace per call.
     fn step_forced<const U: usize>(
         &self,
@@ -783,7 +783,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     {
         let step = if self.inputs == 0 {
             if !u.iter().all(|x| *x == 0.0) {
-                return Err(SpatialError::InputsNotSupported);
+                return Err(SpatialError::Step(StepError::InputsNotSupported));
             }
             self.step_with(z, ws)
         } else {

@@ -33,10 +33,6 @@ pub enum SpatialError {
     /// The description cannot be integrated.
     #[error(transparent)]
     Model(#[from] ModelError),
-    /// Non-zero inputs given to an integrator that takes none (a learned
-    /// spatial integrator trained without inputs).
-    #[error("this spatial integrator takes no inputs")]
-    InputsNotSupported,
     /// A learned integrator's GP failed.
     #[cfg(feature = "alloc")]
     #[error(transparent)]
@@ -71,7 +67,7 @@ pub trait SpatialIntegrator<const B: usize> {
     /// order, `Name::INPUT_NAMES`; `U` must equal their number). The
     /// default, for integrators without inputs, takes u = 0 as
     /// [`SpatialIntegrator::step`] and refuses anything else with
-    /// [`SpatialError::InputsNotSupported`]; [`LieStepper`] implements it
+    /// `SpatialError::Step(StepError::InputsNotSupported)`; [`LieStepper`] implements it
     /// ([`LieStepper::step_forced`]), and so does a learned integrator
     /// trained under inputs (`learned::LearnedSpatial::train_forced`).
     fn step_forced<const U: usize>(
@@ -86,7 +82,7 @@ pub trait SpatialIntegrator<const B: usize> {
         if u.iter().all(|x| *x == 0.0) {
             self.step(z)
         } else {
-            Err(SpatialError::InputsNotSupported)
+            Err(SpatialError::Step(StepError::InputsNotSupported))
         }
     }
 
