@@ -66,17 +66,25 @@ use crate::state::{CoordinateKind, State};
 use crate::step::{StepError, StepOptions, Stepper};
 use nalgebra::{SMatrix, SVector};
 
-/// How a state z = (q, v) is presented to the GP.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// How a state z = (q, v) is presented to the GP (saved as `"raw"` or
+/// `"sincos"` with the `serde` feature). The std runtime and the exported
+/// `no_std` models encode with the same arithmetic (libm's sincos), so a
+/// model and its export see the same GP inputs, bit for bit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "lowercase")
+)]
 pub enum Encoding {
-    /// The coordinates and velocities as they are (2N inputs).
+    /// The model's own coordinates and velocities (minimal or maximal).
     Raw,
-    /// Every angle θ replaced by (sin θ, cos θ), then the velocities.
+    /// Every angle coordinate θ replaced by (sin θ, cos θ); velocities as is.
     SinCos,
 }
 
 impl Encoding {
-    /// The encoded dimension for coordinate kinds `kinds`.
+    /// Input dimension of the encoding for a model with coordinate `kinds`.
     pub fn dim(self, kinds: &[CoordinateKind]) -> usize {
         let angles = kinds
             .iter()
@@ -96,19 +104,78 @@ impl Encoding {
         z: &State<N>,
         out: &mut [f64],
     ) {
+        self.encode_parts(kinds, z.q.as_slice(), z.v.as_slice(), out);
+    }
+
+    /// [`Encoding::encode`] of the state with coordinates `q` and
+    /// velocities `v` (one of each per kind), for models whose size is
+    /// known at run time.
+    pub fn encode_parts(self, kinds: &[CoordinateKind], q: &[f64], v: &[f64], out: &mut [f64]) {
         let mut k = 0;
         for (i, kind) in kinds.iter().enumerate() {
             if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
-                let (s, c) = z.q[i].sincos();
+                let (s, c) = q[i].sincos();
                 out[k] = s;
                 out[k + 1] = c;
                 k += 2;
             } else {
-                out[k] = z.q[i];
+                out[k] = q[i];
                 k += 1;
             }
         }
-        out[k..k + N].copy_from_slice(z.v.as_slice());
+        out[k..k + v.len()].copy_from_slice(v);
+    }
+
+    /// The chain rule through the encoding: for a function whose gradient
+    /// with respect to the encoded state (its first [`Encoding::dim`]
+    /// entries) at coordinates `q` is `g`, calls `add(i, ∂/∂q_i)` and then
+    /// `add(n + i, ∂/∂v_i)` for i = 0 … n − 1, n = `kinds.len()`
+    /// (∂(sin θ, cos θ)/∂θ = (cos θ, −sin θ) under [`Encoding::SinCos`]).
+    pub fn pull_back(
+        self,
+        kinds: &[CoordinateKind],
+        q: &[f64],
+        g: &[f64],
+        mut add: impl FnMut(usize, f64),
+    ) {
+        let mut k = 0;
+        for (i, kind) in kinds.iter().enumerate() {
+            if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
+                let (sn, cs) = q[i].sincos();
+                add(i, g[k] * cs - g[k + 1] * sn);
+                k += 2;
+            } else {
+                add(i, g[k]);
+                k += 1;
+            }
+        }
+        for i in 0..kinds.len() {
+            add(kinds.len() + i, g[k + i]);
+        }
+    }
+
+    /// Inverse of [`Encoding::encode`]: the state whose encoding is `input`
+    /// (length [`Encoding::dim`]). With [`Encoding::SinCos`] an angle comes
+    /// back as atan2(sin, cos) ∈ (−π, π], i.e. modulo 2π.
+    pub fn decode<const N: usize>(self, kinds: &[CoordinateKind; N], input: &[f64]) -> State<N> {
+        let mut z = State {
+            q: SVector::zeros(),
+            v: SVector::zeros(),
+        };
+        let mut k = 0;
+        for (i, kind) in kinds.iter().enumerate() {
+            if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
+                z.q[i] = input[k].atan2(input[k + 1]);
+                k += 2;
+            } else {
+                z.q[i] = input[k];
+                k += 1;
+            }
+        }
+        for i in 0..N {
+            z.v[i] = input[k + i];
+        }
+        z
     }
 }
 

@@ -32,7 +32,7 @@
 //! `u_prev = inputs[0]`.
 
 use crate::gp::{Gp, GpError, PriorMean, TrainOptions, TrainReport, Workspace};
-use crate::mechanism::{CoordinateKind, Mechanism, State};
+use crate::mechanism::{Mechanism, State};
 use crate::newton::{StepError, StepOptions};
 use crate::projection::{consistent_state, project_velocity};
 use crate::variational::{Integrator, Variational};
@@ -50,113 +50,7 @@ pub use embedded::{EmbeddedExport, ExportSize};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
 pub use identified::{IdentifiedError, IdentifiedParameters, IdentifiedValue};
 
-/// How a state z = (q, v) is presented to the GP (saved as `"raw"` or
-/// `"sincos"`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Encoding {
-    /// The model's own coordinates and velocities (minimal or maximal).
-    Raw,
-    /// Every angle coordinate θ replaced by (sin θ, cos θ); velocities as is.
-    SinCos,
-}
-
-impl Encoding {
-    /// Input dimension of the encoding for a model with coordinate `kinds`.
-    pub fn dim(self, kinds: &[CoordinateKind]) -> usize {
-        match self {
-            Encoding::Raw => 2 * kinds.len(),
-            Encoding::SinCos => {
-                2 * kinds.len()
-                    + kinds
-                        .iter()
-                        .filter(|k| **k == CoordinateKind::Angle)
-                        .count()
-            }
-        }
-    }
-
-    /// Write the encoding of `z` into `out` (length [`Encoding::dim`]).
-    pub fn encode<const N: usize>(
-        self,
-        kinds: &[CoordinateKind; N],
-        z: &State<N>,
-        out: &mut [f64],
-    ) {
-        self.encode_parts(kinds, z.q.as_slice(), z.v.as_slice(), out);
-    }
-
-    /// The chain rule through the encoding: for a function whose gradient
-    /// with respect to the encoded state (its first [`Encoding::dim`]
-    /// entries) at coordinates `q` is `g`, calls `add(i, ∂/∂q_i)` and then
-    /// `add(n + i, ∂/∂v_i)` for i = 0 … n − 1, n = `kinds.len()`
-    /// (∂(sin θ, cos θ)/∂θ = (cos θ, −sin θ) under [`Encoding::SinCos`]).
-    pub fn pull_back(
-        self,
-        kinds: &[CoordinateKind],
-        q: &[f64],
-        g: &[f64],
-        mut add: impl FnMut(usize, f64),
-    ) {
-        let mut k = 0;
-        for (i, kind) in kinds.iter().enumerate() {
-            if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
-                let (sn, cs) = q[i].sin_cos();
-                add(i, g[k] * cs - g[k + 1] * sn);
-                k += 2;
-            } else {
-                add(i, g[k]);
-                k += 1;
-            }
-        }
-        for i in 0..kinds.len() {
-            add(kinds.len() + i, g[k + i]);
-        }
-    }
-
-    /// [`Encoding::encode`] of the state with coordinates `q` and
-    /// velocities `v` (one of each per kind), for models whose size is
-    /// known at run time.
-    pub fn encode_parts(self, kinds: &[CoordinateKind], q: &[f64], v: &[f64], out: &mut [f64]) {
-        let mut k = 0;
-        for (i, kind) in kinds.iter().enumerate() {
-            if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
-                let (s, c) = q[i].sin_cos();
-                out[k] = s;
-                out[k + 1] = c;
-                k += 2;
-            } else {
-                out[k] = q[i];
-                k += 1;
-            }
-        }
-        out[k..k + v.len()].copy_from_slice(v);
-    }
-
-    /// Inverse of [`Encoding::encode`]: the state whose encoding is `input`
-    /// (length [`Encoding::dim`]). With [`Encoding::SinCos`] an angle comes
-    /// back as atan2(sin, cos) ∈ (−π, π], i.e. modulo 2π.
-    pub fn decode<const N: usize>(self, kinds: &[CoordinateKind; N], input: &[f64]) -> State<N> {
-        let mut z = State {
-            q: SVector::zeros(),
-            v: SVector::zeros(),
-        };
-        let mut k = 0;
-        for (i, kind) in kinds.iter().enumerate() {
-            if self == Encoding::SinCos && *kind == CoordinateKind::Angle {
-                z.q[i] = input[k].atan2(input[k + 1]);
-                k += 2;
-            } else {
-                z.q[i] = input[k];
-                k += 1;
-            }
-        }
-        for i in 0..N {
-            z.v[i] = input[k + i];
-        }
-        z
-    }
-}
+pub use vigp_core::learned::Encoding;
 
 /// The prior mean of the learned velocity map (saved as `"nominal"`,
 /// `"constant"` or `{"identified": {…}}`).
