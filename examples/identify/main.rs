@@ -216,7 +216,7 @@ where
             // the held direction; moved back, a body can lose its
             // realisability, and then π̂ itself (consistent) is the model
             let held = regressor.model_with(&scaled.hold(&id.estimate))?;
-            if held.checked_constants().is_ok() {
+            if vigp::embedded::Dynamics::constants(&held).is_ok() {
                 Ok((held, IdStatus::Identified(id.base.rank(), false)))
             } else {
                 Ok((

@@ -166,25 +166,6 @@ pub enum StepError {
     },
 }
 
-/// The middle of the message of [`StepError::NegligibleInertia`].
-pub const NEGLIGIBLE_INERTIA_TEXT: &str = "is negligible against the mechanism's inertia (the maximal view's Newton matrix cannot resolve the link's motion below";
-
-/// The remedy of [`StepError::NegligibleInertia`].
-pub const NEGLIGIBLE_INERTIA_REMEDY: &str = "a massless connector such as the cross of a Hooke joint is a joint, not a link: use `universal(parent, child) { axes: [..] }`, or merge the link into its neighbour; the minimal view integrates such links";
-
-/// The message of [`StepError::NotContinuation`].
-pub const NOT_CONTINUATION_TEXT: &str = "Newton converged to a root that is not the continuation of the motion \
-     (the step does not resolve the motion: its velocity change Δt·|v₁ − v₀| moves the path by more than the bound \
-     and its energy jumps)";
-
-/// The remedy named by [`StepError::NotContinuation`].
-pub const NOT_CONTINUATION_REMEDY: &str = "the step is too large for the motion: use a smaller dt or `substeps` \
-     (or turn the check off with `continuation_bound(f64::INFINITY)`)";
-
-/// The message of [`StepError::TooManySteps`].
-pub const TOO_MANY_STEPS_TEXT: &str = "a rollout whose states do not fit in memory \
-     (a duration divided by a zero or tiny dt?)";
-
 /// " (rollout step k)" after a message, or nothing outside a rollout.
 struct At(Option<usize>);
 
@@ -253,8 +234,11 @@ impl fmt::Display for StepError {
             ),
             Self::NotContinuation { ratio, bound, step } => write!(
                 f,
-                "{NOT_CONTINUATION_TEXT}: it bends the path by {ratio:.3e} rad > bound {bound:e}{}; \
-                 {NOT_CONTINUATION_REMEDY}",
+                "Newton converged to a root that is not the continuation of the motion (the step does \
+                 not resolve the motion: its velocity change Δt·|v₁ − v₀| moves the path by more than the \
+                 bound and its energy jumps): it bends the path by {ratio:.3e} rad > bound {bound:e}{}; the \
+                 step is too large for the motion: use a smaller dt or `substeps` (or turn the check off \
+                 with `continuation_bound(f64::INFINITY)`)",
                 At(step)
             ),
             Self::NotResolved {
@@ -269,7 +253,11 @@ impl fmt::Display for StepError {
                  has no solution here",
                 At(step)
             ),
-            Self::TooManySteps { steps } => write!(f, "{TOO_MANY_STEPS_TEXT} ({steps} steps)"),
+            Self::TooManySteps { steps } => write!(
+                f,
+                "a rollout whose states do not fit in memory (a duration divided by a zero or tiny \
+                 dt?) ({steps} steps)"
+            ),
             Self::NegligibleInertia {
                 link,
                 what,
@@ -277,7 +265,11 @@ impl fmt::Display for StepError {
                 bound,
             } => write!(
                 f,
-                "link `{link}`: {what} {value:.3e} {NEGLIGIBLE_INERTIA_TEXT} {bound:.3e}); {NEGLIGIBLE_INERTIA_REMEDY}"
+                "link `{link}`: {what} {value:.3e} is negligible against the mechanism's inertia (the \
+                 maximal view's Newton matrix cannot resolve the link's motion below {bound:.3e}); a \
+                 massless connector such as the cross of a Hooke joint is a joint, not a link: use \
+                 `universal(parent, child) {{ axes: [..] }}`, or merge the link into its neighbour; the \
+                 minimal view integrates such links"
             ),
             Self::LoopCannotClose { residual } => write!(
                 f,

@@ -116,10 +116,7 @@ impl StepOptions {
     }
 }
 
-pub use crate::error::{
-    NEGLIGIBLE_INERTIA_REMEDY, NEGLIGIBLE_INERTIA_TEXT, NOT_CONTINUATION_REMEDY,
-    NOT_CONTINUATION_TEXT, StepError, TOO_MANY_STEPS_TEXT,
-};
+pub use crate::error::StepError;
 
 /// The default of [`Stepper::continuation_bound`]: a step may bend the
 /// discrete path, |Δt·(v₁ − v₀)|∞, by at most 1 rad (or 1 length scale).

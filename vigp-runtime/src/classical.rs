@@ -25,7 +25,7 @@ macro_rules! classical {
             /// An integrator for `model` with time step `dt` (validated by
             /// `step`, as are the model's run-time parameters).
             pub fn new(model: M, dt: f64) -> Self {
-                let k = model.checked_constants();
+                let k = model.constants();
                 Self { model, dt, k }
             }
 

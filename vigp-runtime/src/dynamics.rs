@@ -76,7 +76,7 @@ pub fn acceleration<M: Mechanism<N, C>, const N: usize, const C: usize>(
     q: &SVector<f64, N>,
     qdot: &SVector<f64, N>,
 ) -> Result<(SVector<f64, N>, SVector<f64, C>), StepError> {
-    let k = m.checked_constants()?;
+    let k = m.constants()?;
     acceleration_with(m, &k, q, qdot)
 }
 

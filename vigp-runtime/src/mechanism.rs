@@ -107,12 +107,6 @@ pub trait Mechanism<const N: usize, const C: usize>: vigp_core::Dynamics<N, C> {
         num_dual::jacobian(|q| self.constraints(&q), q).1
     }
 
-    /// The closed-form constants of this model's parameters
-    /// ([`vigp_core::Dynamics::constants`]).
-    fn checked_constants(&self) -> Result<Self::Constants, crate::newton::StepError> {
-        vigp_core::Dynamics::constants(self)
-    }
-
     /// A state from position and velocity arrays (see [`State::new`]).
     fn state(&self, q: [f64; N], v: [f64; N]) -> State<N> {
         State::new(q, v)

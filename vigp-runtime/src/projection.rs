@@ -31,7 +31,7 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
     if q.iter().any(|x| !x.is_finite()) {
         return Err(StepError::NonFiniteState { step: None });
     }
-    let k = m.checked_constants()?;
+    let k = m.constants()?;
     let scale = crate::mechanism::length_scale::<M, N, C>(q);
     gauss_newton(
         q,
@@ -212,7 +212,7 @@ fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
     dt: f64,
     options: &StepOptions,
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
-    let k = m.checked_constants()?;
+    let k = m.constants()?;
     let v_scale = 1.0 + v_u.amax();
     let g_scale = crate::mechanism::length_scale::<M, N, C>(q1);
     let mut v = *start;

@@ -207,7 +207,7 @@ fn loop_closes<M: Mechanism<N, C>, const N: usize, const C: usize>(
         max_iterations: 100,
         ..StepOptions::default()
     };
-    let Ok(k) = model.checked_constants() else {
+    let Ok(k) = model.constants() else {
         // invalid parameters are reported by the stepper's own check
         return Ok(());
     };
