@@ -27,8 +27,11 @@
 //! acted before; a forced rollout ([`Stepper::steps_forced_into`]) carries
 //! p₁, including the previous input's share.
 //!
-//! With u = 0 a forced step takes the unforced code path: an actuated
-//! mechanism steps bit for bit as the same mechanism without `actuated`.
+//! There is one step: the unforced methods ([`Stepper::step`],
+//! [`Stepper::steps_into`], …) are the forced ones with no inputs (U = 0).
+//! With u = 0 a forced step takes the code path of no inputs (the input
+//! force is never evaluated): an actuated mechanism steps bit for bit as
+//! the same mechanism without `actuated`.
 //!
 //! # Exact derivatives
 //!
@@ -257,7 +260,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
 
     /// One forced sub-step (module docs), u = 0 on the unforced path.
     #[inline(always)]
-    fn solve_forced_any<const U: usize>(
+    pub(crate) fn solve_forced_any<const U: usize>(
         &self,
         x1: &SVector<f64, N>,
         p0: &SVector<f64, N>,
@@ -298,10 +301,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             .map(|(v, p, r, _)| (v, p, r))
     }
 
-    /// All sub-steps of one forced step from `z` with momentum `p0`; `t` is
-    /// the terms workspace (as for [`Stepper`]'s unforced steps, a rollout
-    /// reuses one).
-    fn advance_forced<const U: usize>(
+    /// All sub-steps of one step from `z` with momentum `p0` under inputs
+    /// `u`, the first Newton solve started at `guess`; `t` is the terms
+    /// workspace (a rollout reuses one: every call of [`Dynamics::terms`]
+    /// rewrites the same entries, the others stay zero).
+    #[inline(always)]
+    pub(crate) fn advance<const U: usize>(
         &self,
         z: &State<N>,
         p0: &SVector<f64, N>,
@@ -311,6 +316,12 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
         if max_abs(p0).is_nan() {
             return Err(StepError::NonFiniteState { step: None });
+        }
+        if self.substeps == 1 {
+            let x1 = z.q + z.v * self.dt;
+            let (v1, p1, mut r, _) = self.solve_forced_any(&x1, p0, self.dt, guess, u, t)?;
+            self.check_continuation(&z.v, &v1, self.dt, &x1, &mut r)?;
+            return Ok((State { q: x1, v: v1 }, p1, r));
         }
         let h = self.substep_dt();
         let (mut z, mut p) = (*z, *p0);
@@ -350,13 +361,24 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     where
         M: Inputs<U>,
     {
+        self.step_from_state(z, u, &mut Workspace::new())
+    }
+
+    /// The step from `z` under `u` in the workspace `ws`: the checks, the
+    /// momentum p₀ of `z`, then the solve started at v₀.
+    #[inline(always)]
+    fn step_from_state<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace<N, C>,
+    ) -> Result<(State<N>, StepReport), StepError> {
         if !z.is_finite() {
             return Err(StepError::NonFiniteState { step: None });
         }
         Self::check_input(u)?;
         let p0 = self.momentum(z);
-        self.advance_forced(z, &p0, &z.v, u, &mut Workspace::new())
-            .map(|(z1, _, r)| (z1, r))
+        self.advance(z, &p0, &z.v, u, ws).map(|(z1, _, r)| (z1, r))
     }
 
     /// [`Stepper::step_forced`] in a kept workspace: the same state, bit for
@@ -372,13 +394,21 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     where
         M: Inputs<U>,
     {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        Self::check_input(u)?;
-        let p0 = self.momentum(z);
-        self.advance_forced(z, &p0, &z.v, u, ws.reset::<M>())
-            .map(|(z1, _, _)| z1)
+        self.step_forced_with_report_in(z, u, ws).map(|(z1, _)| z1)
+    }
+
+    /// [`Stepper::step_forced_with_report`] in a kept workspace (see
+    /// [`Stepper::step_forced_in`]).
+    pub fn step_forced_with_report_in<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+        ws: &mut StepWorkspace<N, C>,
+    ) -> Result<(State<N>, StepReport), StepError>
+    where
+        M: Inputs<U>,
+    {
+        self.step_from_state(z, u, ws.reset::<M>())
     }
 
     /// One forced step from `z` with its momentum `p0` known (carried from
@@ -397,7 +427,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             return Err(StepError::NonFiniteState { step: None });
         }
         Self::check_input(u)?;
-        self.advance_forced(z, p0, &z.v, u, &mut Workspace::new())
+        self.advance(z, p0, &z.v, u, &mut Workspace::new())
     }
 
     /// Fills `out` with the states after 1, 2, …, `out.len()` forced steps
@@ -413,14 +443,35 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     where
         M: Inputs<U>,
     {
+        if z0.is_finite() && inputs.len() < out.len() {
+            return Err(RolloutError {
+                step: inputs.len(),
+                error: StepError::NonFiniteInput { step: None },
+            });
+        }
+        self.roll_into(z0, inputs.iter(), out)
+    }
+
+    /// The rollout of [`Stepper::steps_forced_into`] and
+    /// [`Stepper::steps_into`]: step k under the k-th of `inputs` (at least
+    /// `out.len()` of them). Newton starts from the linear extrapolation
+    /// 2v_k − v_{k−1}.
+    pub(crate) fn roll_into<'u, const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: impl Iterator<Item = &'u SVector<f64, U>>,
+        out: &mut [State<N>],
+    ) -> Result<(), RolloutError> {
         let fail = |step, error| RolloutError { step, error };
         if !z0.is_finite() {
             return Err(fail(0, StepError::NonFiniteState { step: None }));
         }
-        if inputs.len() < out.len() {
-            return Err(fail(inputs.len(), StepError::NonFiniteInput { step: None }));
+        if out.is_empty() {
+            return Ok(());
         }
         let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
+        // one terms workspace for the whole rollout (zeroing it is not free:
+        // ∂M/∂q alone is N³ numbers)
         let mut t = Workspace::new();
         for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
             Self::check_input(u).map_err(|e| fail(k, e))?;
@@ -430,7 +481,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 z.v
             };
             let (z1, p1, _) = self
-                .advance_forced(&z, &p, &guess, u, &mut t)
+                .advance(&z, &p, &guess, u, &mut t)
                 .map_err(|e| fail(k, e))?;
             *slot = z1;
             v_prev = z.v;

@@ -255,6 +255,12 @@ fn failed<T>(e: StepError) -> Result<T, StepError> {
     Err(e)
 }
 
+/// The inputs of an unforced step: none. Every step is a forced step; an
+/// unforced one is the forced step with U = 0, whose input force the
+/// solver never evaluates.
+pub(crate) const NO_INPUT: SVector<f64, 0> =
+    SVector::from_array_storage(nalgebra::ArrayStorage([[]]));
+
 /// The solver's workspace, reused by the steps of a rollout: the terms,
 /// the constraint values and Jacobians of the Newton iterations, and the
 /// KKT factors. Held across steps, nothing in it is zeroed per step (its
@@ -597,7 +603,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         self.model.energy_at(&self.k, &q, &z.v)
     }
 
-    /// One step from `z`.
+    /// One step from `z`: [`Stepper::step_forced`] with no inputs (U = 0),
+    /// which is the same code.
     pub fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         match self.step_with_report(z) {
             Ok((z1, _)) => Ok(z1),
@@ -608,25 +615,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         }
     }
 
-    /// One step from `z` with solver diagnostics.
+    /// One step from `z` with solver diagnostics
+    /// ([`Stepper::step_forced_with_report`] with no inputs).
     pub fn step_with_report(&self, z: &State<N>) -> Result<(State<N>, StepReport), StepError> {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        self.step_from_state(z, &mut Workspace::new())
-    }
-
-    /// The step from a (finite) state `z` in the workspace `ws`: its
-    /// momentum p₀, then the solve started at v₀ (shared by
-    /// [`Stepper::step_with_report`] and [`Stepper::step_with_report_in`]).
-    #[inline(always)]
-    fn step_from_state(
-        &self,
-        z: &State<N>,
-        ws: &mut Workspace<N, C>,
-    ) -> Result<(State<N>, StepReport), StepError> {
-        let p0 = self.momentum_at(z, self.substep_dt());
-        self.advance(z, &p0, &z.v, ws).map(|(z1, _, r)| (z1, r))
+        self.step_forced_with_report(z, &NO_INPUT)
     }
 
     /// [`Stepper::step`] in a kept workspace: the same state, bit for bit,
@@ -653,59 +645,19 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         z: &State<N>,
         ws: &mut StepWorkspace<N, C>,
     ) -> Result<(State<N>, StepReport), StepError> {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        self.step_from_state(z, ws.reset::<M>())
+        self.step_forced_with_report_in(z, &NO_INPUT, ws)
     }
 
     /// One step from `z` with its momentum `p0` known (from the previous
     /// step, see [`Stepper::momentum`]); returns the new state, its momentum
-    /// and diagnostics.
+    /// and diagnostics ([`Stepper::step_forced_with_momentum`] with no
+    /// inputs).
     pub fn step_with_momentum(
         &self,
         z: &State<N>,
         p0: &SVector<f64, N>,
     ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        self.advance(z, p0, &z.v, &mut Workspace::new())
-    }
-
-    /// All sub-steps of one step from `z` with momentum `p0`, the first
-    /// Newton solve started at `guess`; `t` is the terms workspace (a
-    /// rollout reuses one: every call of [`Dynamics::terms`] rewrites the
-    /// same entries, the others stay zero).
-    #[inline(always)]
-    fn advance(
-        &self,
-        z: &State<N>,
-        p0: &SVector<f64, N>,
-        guess: &SVector<f64, N>,
-        t: &mut Workspace<N, C>,
-    ) -> Result<(State<N>, SVector<f64, N>, StepReport), StepError> {
-        if max_abs(p0).is_nan() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        if self.substeps == 1 {
-            let x1 = z.q + z.v * self.dt;
-            let (v1, p1, mut r) = self.solve_in(&x1, p0, self.dt, guess, t)?;
-            self.check_continuation(&z.v, &v1, self.dt, &x1, &mut r)?;
-            return Ok((State { q: x1, v: v1 }, p1, r));
-        }
-        let h = self.substep_dt();
-        let (mut z, mut p) = (*z, *p0);
-        let mut report = StepReport::default();
-        for i in 0..self.substeps {
-            let x1 = z.q + z.v * h;
-            let g = if i == 0 { *guess } else { z.v };
-            let (v1, p1, mut r) = self.solve_in(&x1, &p, h, &g, t)?;
-            self.check_continuation(&z.v, &v1, h, &x1, &mut r)?;
-            report.merge(&r);
-            (z, p) = (State { q: x1, v: v1 }, p1);
-        }
-        Ok((z, p, report))
+        self.step_forced_with_momentum(z, p0, &NO_INPUT)
     }
 
     /// Fills `out` with the trajectory from `z0`: `out[0] = z0`, then one
@@ -719,42 +671,20 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     }
 
     /// Fills `out` with the states after 1, 2, …, `out.len()` steps from
-    /// `z0`. The momentum is carried from step to step, and Newton starts
-    /// from the linear extrapolation 2v_k − v_{k−1} (the converged step is
-    /// the same to the solver tolerance). No allocation.
+    /// `z0` ([`Stepper::steps_forced_into`] with no inputs). The momentum is
+    /// carried from step to step, and Newton starts from the linear
+    /// extrapolation 2v_k − v_{k−1} (the converged step is the same to the
+    /// solver tolerance). No allocation.
     pub fn steps_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), RolloutError> {
-        let fail = |step, error| RolloutError { step, error };
-        if !z0.is_finite() {
-            return Err(fail(0, StepError::NonFiniteState { step: None }));
-        }
-        if out.is_empty() {
-            return Ok(());
-        }
-        let (mut z, mut p, mut v_prev) = (*z0, self.momentum(z0), z0.v);
-        // one terms workspace for the whole rollout (zeroing it is not free:
-        // ∂M/∂q alone is N³ numbers)
-        let mut t = Workspace::new();
-        for (k, slot) in out.iter_mut().enumerate() {
-            let guess = if self.substeps == 1 {
-                z.v * 2.0 - v_prev
-            } else {
-                z.v
-            };
-            let (z1, p1, _) = self
-                .advance(&z, &p, &guess, &mut t)
-                .map_err(|e| fail(k, e))?;
-            *slot = z1;
-            v_prev = z.v;
-            (z, p) = (z1, p1);
-        }
-        Ok(())
+        self.roll_into(z0, core::iter::repeat(&NO_INPUT), out)
     }
 
     /// One variational step of size `h` from position `x1` with momentum
     /// `p0` (module docs), Newton started at `guess`: returns v₁, the new
     /// momentum p₁ and diagnostics. This is the position–momentum form of
     /// the integrator, (x₁, p₀) ↦ (x₁ + h·v₁, p₁), which composition
-    /// methods chain with different `h`.
+    /// methods chain with different `h` ([`Stepper::solve_forced`] with no
+    /// inputs).
     #[inline(always)]
     pub fn solve(
         &self,
@@ -763,51 +693,11 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         h: f64,
         guess: &SVector<f64, N>,
     ) -> Result<Solved<N>, StepError> {
-        self.solve_in(x1, p0, h, guess, &mut Workspace::new())
+        self.solve_forced_any(x1, p0, h, guess, &NO_INPUT, &mut Workspace::new())
+            .map(|(v, p, r, _)| (v, p, r))
     }
 
-    /// [`Stepper::solve`] with the caller's terms workspace `t`.
-    #[inline(always)]
-    fn solve_in(
-        &self,
-        x1: &SVector<f64, N>,
-        p0: &SVector<f64, N>,
-        h: f64,
-        guess: &SVector<f64, N>,
-        t: &mut Workspace<N, C>,
-    ) -> Result<Solved<N>, StepError> {
-        if self.alpha == 0.0 {
-            self.solve_rule::<false>(x1, p0, h, guess, t)
-        } else {
-            self.solve_rule::<true>(x1, p0, h, guess, t)
-        }
-    }
-
-    /// [`Stepper::solve`] for the first-order (`MID = false`) or the
-    /// midpoint rule, monomorphised so that each rule's loop carries only
-    /// its own terms.
-    #[inline(always)]
-    fn solve_rule<const MID: bool>(
-        &self,
-        x1: &SVector<f64, N>,
-        p0: &SVector<f64, N>,
-        h: f64,
-        guess: &SVector<f64, N>,
-        t: &mut Workspace<N, C>,
-    ) -> Result<Solved<N>, StepError> {
-        self.solve_forced_rule::<MID, false>(
-            x1,
-            p0,
-            h,
-            guess,
-            |_| SVector::zeros(),
-            |_| SMatrix::zeros(),
-            t,
-        )
-        .map(|(v, p, r, _)| (v, p, r))
-    }
-
-    /// [`Stepper::solve_rule`] with the generalized input force
+    /// The sub-step of [`Stepper::solve`] with the generalized input force
     /// `input(q)` = B(q)u and its configuration derivative `input_jac(q)`
     /// when `FORCED` (`crate::forced`: B(m₁)u joins the forces f(m₁, v₁)
     /// in the residual and in the momentum carried on); also returns the
