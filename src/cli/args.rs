@@ -205,8 +205,10 @@ pub(super) struct IdentifyArgs {
     /// of a real robot)].
     #[arg(long, value_enum)]
     pub(super) rule: Option<RuleArg>,
-    /// The treatment of position noise.
-    #[arg(long, value_enum, default_value = "ls")]
+    /// The treatment of position noise (runs shorter than the instruments'
+    /// 19-sample window enter by least squares; the output says how many
+    /// transitions had instruments).
+    #[arg(long, value_enum, default_value = "iv")]
     pub(super) noise: NoiseArg,
     /// Refine the regression by output error: the log simulated in
     /// segments of SAMPLES samples (default 50), their initial positions
