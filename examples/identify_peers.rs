@@ -190,7 +190,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for sigma in sigmas {
         let logs: Vec<&Entry> = file.noisy.iter().filter(|e| e.sigma == sigma).collect();
         let r = DelRegressor::midpoint(declared, logs[0].dt)?;
-        let ls = least_squares.clone();
+        let ls = least_squares;
         let iv = Options {
             noise: Noise::IV,
             ..Options::default()

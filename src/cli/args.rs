@@ -71,10 +71,10 @@ impl StepArgs {
         &self,
         model: M,
         dt: f64,
-    ) -> crate::Variational<M, N, C> {
-        crate::Variational::new(model, dt)
-            .substeps(self.substeps)
-            .max_subdivision(self.max_subdivision)
+    ) -> Result<crate::Variational<M, N, C>, crate::StepError> {
+        Ok(crate::Variational::new(model, dt)?
+            .substeps(self.substeps)?
+            .max_subdivision(self.max_subdivision))
     }
 }
 

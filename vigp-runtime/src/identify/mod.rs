@@ -436,7 +436,7 @@ pub fn stack<R: Regressor>(
         let k_count = log.positions.len();
         // a log too short for the instruments' window enters by least
         // squares (its rows are their own instruments)
-        let windowed = instruments.is_some() && k_count >= 2 * reach + 1;
+        let windowed = instruments.is_some() && k_count > 2 * reach;
         let edge = if windowed { reach } else { 1 };
         if k_count < 2 * edge + 1 {
             continue;
