@@ -134,7 +134,7 @@ fn count(spec: &str) -> Result<(), String> {
             }
         }
         "std_variational_step" => {
-            let vi = Variational::new(sys.minimal(), DT);
+            let vi = Variational::new(sys.minimal(), DT).unwrap();
             for k in 0..n {
                 let z1 = vi.step(black_box(&states[k % 64]));
                 acc += z1.map_err(|e| e.to_string())?.v[0];
@@ -150,7 +150,7 @@ fn bench(g: &mut BenchmarkGroup<'_, WallTime>) {
     let sys = DoublePendulum::default();
     let cf = ClosedForm::new(&Params::default(), DT).expect("valid parameters");
     let stepper = Stepper::new(sys, DT).expect("valid model");
-    let vi = Variational::new(sys.minimal(), DT);
+    let vi = Variational::new(sys.minimal(), DT).unwrap();
     let z = State::new([1.0, -0.5], [0.5, 1.0]);
     let zh = to_hand(&z);
 

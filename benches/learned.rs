@@ -184,7 +184,7 @@ fn bench_learned(c: &mut Criterion) {
         b.iter(|| l.step_mean_with(black_box(&z), &mut ws).unwrap())
     });
     // the two nominal steps a prior could use
-    let vi = Variational::new(DoublePendulum::default().minimal(), DT);
+    let vi = Variational::new(DoublePendulum::default().minimal(), DT).unwrap();
     g.bench_function("nominal/variational_std", |b| {
         b.iter(|| vi.step(black_box(&z)).unwrap())
     });

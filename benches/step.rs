@@ -20,35 +20,35 @@ fn bench_steps(c: &mut Criterion) {
 
     let p = Pendulum::default();
     let z = State::new([1.0], [0.5]);
-    let vi = Variational::new(p.minimal(), dt);
+    let vi = Variational::new(p.minimal(), dt).unwrap();
     g.bench_function("pendulum/minimal/vi", |b| {
         b.iter(|| vi.step(black_box(&z)).unwrap())
     });
     let zm = p.minimal().to_maximal(&z, dt);
-    let vim = Variational::new(p.maximal(), dt);
+    let vim = Variational::new(p.maximal(), dt).unwrap();
     g.bench_function("pendulum/maximal/vi", |b| {
         b.iter(|| vim.step(black_box(&zm)).unwrap())
     });
 
     let cp = Cartpole::default();
     let z = State::new([0.2, 2.0], [0.3, 0.5]);
-    let vi = Variational::new(cp.minimal(), dt);
+    let vi = Variational::new(cp.minimal(), dt).unwrap();
     g.bench_function("cartpole/minimal/vi", |b| {
         b.iter(|| vi.step(black_box(&z)).unwrap())
     });
     let zm = cp.minimal().to_maximal(&z, dt);
-    let vim = Variational::new(cp.maximal(), dt);
+    let vim = Variational::new(cp.maximal(), dt).unwrap();
     g.bench_function("cartpole/maximal/vi", |b| {
         b.iter(|| vim.step(black_box(&zm)).unwrap())
     });
 
     let dp = DoublePendulum::default();
     let z = State::new([1.0, -0.5], [0.5, 1.0]);
-    let vi = Variational::new(dp.minimal(), dt);
+    let vi = Variational::new(dp.minimal(), dt).unwrap();
     g.bench_function("double_pendulum/minimal/vi", |b| {
         b.iter(|| vi.step(black_box(&z)).unwrap())
     });
-    let vi2 = Variational::midpoint(dp.minimal(), dt);
+    let vi2 = Variational::midpoint(dp.minimal(), dt).unwrap();
     g.bench_function("double_pendulum/minimal/midpoint", |b| {
         b.iter(|| vi2.step(black_box(&z)).unwrap())
     });
@@ -57,7 +57,7 @@ fn bench_steps(c: &mut Criterion) {
         b.iter(|| rk4.step(black_box(&z)).unwrap())
     });
     let zm = dp.minimal().to_maximal(&z, dt);
-    let vim = Variational::new(dp.maximal(), dt);
+    let vim = Variational::new(dp.maximal(), dt).unwrap();
     g.bench_function("double_pendulum/maximal/vi", |b| {
         b.iter(|| vim.step(black_box(&zm)).unwrap())
     });
@@ -70,12 +70,12 @@ fn bench_steps(c: &mut Criterion) {
         dt,
     )
     .unwrap();
-    let vi = Variational::new(fb.minimal(), dt);
+    let vi = Variational::new(fb.minimal(), dt).unwrap();
     g.bench_function("fourbar/minimal/vi", |b| {
         b.iter(|| vi.step(black_box(&z)).unwrap())
     });
     let zm = fb.minimal().to_maximal(&z, dt);
-    let vim = Variational::new(fb.maximal(), dt);
+    let vim = Variational::new(fb.maximal(), dt).unwrap();
     g.bench_function("fourbar/maximal/vi", |b| {
         b.iter(|| vim.step(black_box(&zm)).unwrap())
     });
@@ -188,7 +188,7 @@ fn bench_derivatives(c: &mut Criterion) {
     // thread (the same results, bit for bit)
     let (mx, zx) = (m.maximal(), m.minimal().to_maximal(&z, dt));
     let s = Stepper::new(mx, dt).unwrap();
-    let vi = Variational::new(mx, dt);
+    let vi = Variational::new(mx, dt).unwrap();
     g.bench_function("double_pendulum/maximal/step", |b| {
         b.iter(|| s.step_forced(black_box(&zx), black_box(&u)).unwrap())
     });

@@ -15,12 +15,12 @@ fn main() -> Result<(), StepError> {
     let z0 = State::new([0.0, 2.5], [0.5, 0.0]);
     println!("cartpole, dt = {dt} s, pole at 2.5 rad, cart moving at 0.5 m/s");
     let model = sys.minimal();
-    let s = vigp::summarize(&Variational::new(model, dt), &model, &z0, 10_000)?;
+    let s = vigp::summarize(&Variational::new(model, dt)?, &model, &z0, 10_000)?;
     println!("  conservative:           {s}");
     sys.joints.rail.damping = 0.25;
     sys.joints.hinge.damping = 0.5;
     let model = sys.minimal();
-    let s = vigp::summarize(&Variational::new(model, dt), &model, &z0, 10_000)?;
+    let s = vigp::summarize(&Variational::new(model, dt)?, &model, &z0, 10_000)?;
     println!("  damped c1=0.25, c2=0.5: {s}");
     Ok(())
 }

@@ -671,7 +671,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     std::fs::create_dir_all(out)?;
     let cost = Cost::new();
     let z0 = Z::zeros();
-    let nominal = Nominal(Variational::new(DrivenCartpole::default().minimal(), DT));
+    let nominal = Nominal(Variational::new(DrivenCartpole::default().minimal(), DT)?);
     let t = Instant::now();
     let nominal_plan = ilqr(&nominal, &z0, None, &cost, 200).ok_or("nominal iLQR failed")?;
     let nominal_seconds = t.elapsed().as_secs_f64();
@@ -687,7 +687,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let mut coverage = [Coverage::default(), Coverage::default()];
     for system in 0..systems {
         let sys = true_system(&mut rng);
-        let truth = Variational::new(sys.minimal(), DT);
+        let truth = Variational::new(sys.minimal(), DT)?;
         let n = outcome(execute(&truth, &nominal_plan, &z0, &cost), nominal_seconds);
         let t = Instant::now();
         let l = learn(&truth, &nominal_plan, &mut rng)?;

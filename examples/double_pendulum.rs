@@ -27,13 +27,13 @@ fn main() -> Result<(), StepError> {
     println!("double pendulum from (π/2, 0) at rest");
     for dt in [0.01, 0.005] {
         let model = sys.minimal();
-        let s = vigp::summarize(&Variational::new(model, dt), &model, &z0, 100_000)?;
+        let s = vigp::summarize(&Variational::new(model, dt)?, &model, &z0, 100_000)?;
         println!("  conservative, dt = {dt}: {s}");
     }
     sys.joints.shoulder.damping = 1.0;
     sys.joints.elbow.damping = 0.3;
     let model = sys.minimal();
-    let s = vigp::summarize(&Variational::new(model, 0.01), &model, &z0, 10_000)?;
+    let s = vigp::summarize(&Variational::new(model, 0.01)?, &model, &z0, 10_000)?;
     println!("  damped, dt = 0.01:     {s}");
     Ok(())
 }

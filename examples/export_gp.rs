@@ -63,7 +63,7 @@ pub fn generate(n: usize) -> Result<Exported, Box<dyn Error>> {
     truth.links.lower.mass *= 0.9;
     truth.joints.shoulder.damping = 0.5;
     truth.joints.elbow.damping = 0.3;
-    let fine = Variational::midpoint(truth.minimal(), DT / 10.0);
+    let fine = Variational::midpoint(truth.minimal(), DT / 10.0)?;
     let mut pool = Vec::new();
     let mut test = Vec::new();
     for traj in 0..12 {
@@ -174,7 +174,7 @@ fn main() -> Result<(), Box<dyn Error>> {
         );
     }
     // one-step velocity error on held-out (noise-free) transitions
-    let vi = Variational::new(nominal().minimal(), DT);
+    let vi = Variational::new(nominal().minimal(), DT)?;
     let mut ws = e.learned.workspace();
     let (mut nominal_se, mut learned_se) = (0.0, 0.0);
     for t in &e.test {

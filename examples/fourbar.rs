@@ -23,13 +23,13 @@ fn main() -> Result<(), StepError> {
         z0.q.as_slice()
     );
     let model = sys.minimal();
-    let s = vigp::summarize(&Variational::new(model, dt), &model, &z0, 10_000)?;
+    let s = vigp::summarize(&Variational::new(model, dt)?, &model, &z0, 10_000)?;
     println!("  conservative: {s}");
     sys.joints.top1.damping = 1.0;
     sys.joints.middle1.damping = 0.25;
     sys.joints.middle2.damping = 0.25;
     let model = sys.minimal();
-    let s = vigp::summarize(&Variational::new(model, dt), &model, &z0, 10_000)?;
+    let s = vigp::summarize(&Variational::new(model, dt)?, &model, &z0, 10_000)?;
     println!("  damped:       {s}");
     Ok(())
 }

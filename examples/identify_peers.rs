@@ -119,6 +119,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .into());
     }
     let truth = &file.truth;
+    // the noise-free logs measure the bias of the residual itself: least
+    // squares, the rows without instruments
+    let least_squares = Options {
+        noise: Noise::LeastSquares,
+        ..Options::default()
+    };
     let reference = file
         .clean
         .iter()
@@ -127,7 +133,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let id = identify(
         &DelRegressor::midpoint(declared, reference.dt)?,
         &[reference.log()],
-        &Options::default(),
+        &least_squares,
     )?;
     let base = id.base.clone();
     println!(
@@ -151,7 +157,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut errors = [0.0; 2];
         for (i, alpha) in [0.0, 0.5].into_iter().enumerate() {
             let r = DelRegressor::new(declared, e.dt, alpha)?;
-            errors[i] = score(&identify(&r, &[e.log()], &Options::default())?.estimate);
+            errors[i] = score(&identify(&r, &[e.log()], &least_squares)?.estimate);
         }
         let order = |i: usize| match previous {
             Some((dt, a, b)) => {
@@ -184,7 +190,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for sigma in sigmas {
         let logs: Vec<&Entry> = file.noisy.iter().filter(|e| e.sigma == sigma).collect();
         let r = DelRegressor::midpoint(declared, logs[0].dt)?;
-        let ls = Options::default();
+        let ls = least_squares;
         let iv = Options {
             noise: Noise::IV,
             ..Options::default()

@@ -45,7 +45,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     truth.links.cart.mass *= 1.1;
     truth.links.pole.mass *= 1.1;
     truth.joints.rail.damping = 0.4;
-    let vi = Variational::new(truth.minimal(), DT);
+    let vi = Variational::new(truth.minimal(), DT)?;
     let mut rng = Rng(42);
     let mut data = Vec::new();
     for _ in 0..3 {

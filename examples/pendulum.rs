@@ -18,12 +18,12 @@ fn main() -> Result<(), StepError> {
 
     println!("pendulum, dt = {dt} s, from θ = π/2 at rest");
     let model = sys.minimal();
-    let s = vigp::summarize(&Variational::new(model, dt), &model, &z0, 10_000)?;
+    let s = vigp::summarize(&Variational::new(model, dt)?, &model, &z0, 10_000)?;
     println!("  conservative: {s}");
 
     sys.joints.pivot.damping = 0.5;
     let model = sys.minimal();
-    let s = vigp::summarize(&Variational::new(model, dt), &model, &z0, 10_000)?;
+    let s = vigp::summarize(&Variational::new(model, dt)?, &model, &z0, 10_000)?;
     println!("  damped c=0.5: {s}");
     Ok(())
 }

@@ -179,7 +179,7 @@ fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     let q = consistent_state(&m, q0, &SVector::zeros(), h)?.q;
     let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h)?;
     let mut z = State { q, v };
-    let vi = Variational::midpoint(m, h);
+    let vi = Variational::midpoint(m, h)?;
     let mut out = vec![z.q];
     for _ in 1..TRAJ_SAMPLES {
         for _ in 0..sub {
@@ -278,7 +278,7 @@ where
             v[v.len() / 2]
         }
     };
-    let nominal_vi = Variational::new(nmin, DT);
+    let nominal_vi = Variational::new(nmin, DT)?;
     let nominal_mse = mse(&|z| nominal_vi.rollout(z, HORIZON));
     // Warm starts: one chain for the main method at each N, one for the
     // sparse GP trained beside the exact one (`--sparse-also`).

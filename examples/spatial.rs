@@ -241,7 +241,7 @@ where
     if std::env::args().any(|a| a == "--maximal-only") {
         return Ok(());
     }
-    let vi = Variational::new(minimal, DT);
+    let vi = Variational::new(minimal, DT)?;
     let mut out = vec![zmin; steps];
     let t = Instant::now();
     vi.rollout_into(&zmin, &mut out)?;

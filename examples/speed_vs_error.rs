@@ -44,7 +44,7 @@ fn main() -> Result<(), StepError> {
     let zr = State::new(q0, [0.0; 2]);
     let v = vigp::dynamics::discrete_velocity(&m, &zr.q, &zr.v, h)?;
     let reference =
-        Variational::midpoint(m, h).rollout(&State { q: zr.q, v }, (T / h).round() as usize)?;
+        Variational::midpoint(m, h)?.rollout(&State { q: zr.q, v }, (T / h).round() as usize)?;
     let q_ref = reference.last().map(|z| z.q).unwrap_or(zr.q);
     println!(
         "double pendulum from q = {q0:?} at rest, t = {T} s; reference: midpoint VI at dt = 1e-5"
@@ -58,8 +58,8 @@ fn main() -> Result<(), StepError> {
         let vd = vigp::dynamics::discrete_velocity(&m, &z0.q, &z0.v, dt)?;
         let zd = State { q: z0.q, v: vd };
         let energy = |z: &State<2>| m.energy(z);
-        let vi = Variational::new(m, dt);
-        let mid = Variational::midpoint(m, dt);
+        let vi = Variational::new(m, dt)?;
+        let mid = Variational::midpoint(m, dt)?;
         let rows: [(&str, Run); 5] = [
             (
                 "explicit Euler",

@@ -137,7 +137,7 @@ fn table_row<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     use std::hint::black_box;
     use std::time::Instant;
     let s = Stepper::new(sys, 0.01)?;
-    let vi = vigp::Variational::new(sys, 0.01);
+    let vi = vigp::Variational::new(sys, 0.01)?;
     let mut long = vec![z0; 64 * 50 + 1];
     s.rollout_into(&z0, &mut long).map_err(|e| format!("{e}"))?;
     let states: Vec<State<N>> = long.iter().step_by(50).take(64).copied().collect();

@@ -58,7 +58,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     )?;
     // the query states: 40 nominal trajectories of 1 s from rest, every
     // fifth state
-    let nominal = Variational::new(DoublePendulum::default().minimal(), DT);
+    let nominal = Variational::new(DoublePendulum::default().minimal(), DT)?;
     let mut rng = Rng(99);
     let mut queries = Vec::new();
     for _ in 0..40 {

@@ -46,7 +46,7 @@
 //! let mut sys = DoublePendulum::default();
 //! sys.joints.elbow.damping = 0.3;
 //! let model = sys.minimal();
-//! let vi = Variational::new(model, 0.01);
+//! let vi = Variational::new(model, 0.01)?;
 //! let z0 = model.state([std::f64::consts::FRAC_PI_2, 0.0], [0.0, 0.0]);
 //! let z1 = vi.step(&z0)?;
 //! let (e, g) = (model.energy(&z1), model.constraint_violation(&z1));
@@ -117,8 +117,7 @@
 //!   becomes the default value as written, so the compiler checks its type
 //!   (write `2.0 * M`, not `2 * M`, for an `f64` constant). Its value is
 //!   checked at run time like any parameter set by hand: `Stepper::new`
-//!   returns the typed `InvalidModel` error, and `Variational::check` and
-//!   every step report it. Geometry shapes the generated code, so it must be
+//!   and `Variational::new` return the typed `InvalidModel` error. Geometry shapes the generated code, so it must be
 //!   known when the macro runs: prismatic `axis`, the points `world @ [x, y]`
 //!   and `link @ [x, y]`, and for spatial links `frame` and joint axes.
 //!
@@ -203,7 +202,7 @@ pub mod prelude {
     pub use vigp_runtime::gp::TrainOptions;
     pub use vigp_runtime::learned::{Encoding, Learned, Prior};
     pub use vigp_runtime::{
-        Coordinates, ExplicitEuler, Integrator, Mechanism, Rk4, SVector, State, StepError,
-        StepOptions, SymplecticEuler, Variational, Variational4,
+        Composition, Coordinates, ExplicitEuler, Integrator, Mechanism, Rk4, SVector, State,
+        StepError, StepOptions, SymplecticEuler, Variational,
     };
 }

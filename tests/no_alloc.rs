@@ -8,7 +8,7 @@ use vigp::systems::{DoublePendulum, Fourbar};
 
 #[test]
 fn variational_steps_do_not_allocate() {
-    let dp = Variational::new(DoublePendulum::default().minimal(), 0.01);
+    let dp = Variational::new(DoublePendulum::default().minimal(), 0.01).unwrap();
     let mut z = State::new([1.0, 0.3], [0.0, 0.0]);
     let info = allocation_counter::measure(|| {
         for _ in 0..100 {
@@ -25,7 +25,7 @@ fn variational_steps_do_not_allocate() {
         0.01,
     )
     .unwrap();
-    let vi = Variational::new(fb, 0.01);
+    let vi = Variational::new(fb, 0.01).unwrap();
     let mut out = [z0; 50];
     let info = allocation_counter::measure(|| {
         vi.rollout_into(&z0, &mut out).unwrap();
@@ -47,7 +47,7 @@ fn variational_steps_do_not_allocate() {
     // workspace per thread: the thread's first step of that size allocates
     // it, once; the steps after it do not allocate
     use vigp::Coordinates;
-    let fbm = Variational::new(Fourbar::default().maximal(), 0.01);
+    let fbm = Variational::new(Fourbar::default().maximal(), 0.01).unwrap();
     let zf = Fourbar::default().minimal().to_maximal(&z0, 0.01);
     let first = allocation_counter::measure(|| {
         fbm.step(&zf).unwrap();

@@ -26,7 +26,7 @@ pub fn data(n: usize, seed: u64) -> Vec<Transition<2>> {
     truth.links.lower.mass *= 0.95;
     truth.joints.shoulder.damping = 0.8;
     truth.joints.elbow.damping = 0.2;
-    let vi = Variational::new(truth.minimal(), DT);
+    let vi = Variational::new(truth.minimal(), DT).unwrap();
     let mut pool = Vec::new();
     for _ in 0..20 {
         let q0 = SVector::from([rng.uniform(-PI, PI), rng.uniform(-PI, PI)]);

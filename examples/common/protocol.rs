@@ -256,7 +256,7 @@ pub fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     if gt.method == GtMethod::Vi4 {
         // the composition carries the continuous velocity: at rest q̇ = 0
         // (consistent with the loop constraints)
-        let vi = Variational4::new(m, h).with_options(GT_SOLVER);
+        let vi = Composition::new(m, h)?.options(GT_SOLVER)?;
         let z = State {
             q,
             v: SVector::zeros(),
@@ -266,7 +266,7 @@ pub fn ground_truth<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     // at rest: the midpoint rule's discrete velocity belongs to t = h/2, so
     // start from v₀ = ½h·q̈ (projected), not 0, which would cost an order
     let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h)?;
-    let vi = Variational::midpoint(m, h);
+    let vi = Variational::midpoint(m, h)?;
     sample(State { q, v }, &|z| vi.step(z))
 }
 

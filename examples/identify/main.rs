@@ -265,8 +265,11 @@ where
         let windows = cli.protocol.test_windows(test, &mut rng);
         let counts = Counts::default();
         let vi_mse = |m: M| {
+            // a model the integrator refuses fails every window, as a
+            // failed rollout does
             let vi = Variational::new(m, DT);
             mean_mse(&windows, &counts, |z| {
+                let vi = vi.as_ref().map_err(|e| *e)?;
                 Ok(vi.rollout(z, HORIZON)?.into_iter().map(|z| z.q).collect())
             })
         };

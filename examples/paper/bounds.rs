@@ -116,7 +116,7 @@ fn ground_truth_moving<M: Mechanism<N, C> + Copy, const N: usize, const C: usize
     };
     match gt.method {
         super::GtMethod::Midpoint => {
-            let vi = Variational::midpoint(m, h);
+            let vi = Variational::midpoint(m, h).map_err(|e| e.to_string())?;
             run(&|z| vi.step(z), z)
         }
         super::GtMethod::Vi4 => {
@@ -134,7 +134,9 @@ fn ground_truth_moving<M: Mechanism<N, C> + Copy, const N: usize, const C: usize
             } else {
                 z.v = *qd0;
             }
-            let vi = Variational4::new(m, h).with_options(super::GT_SOLVER);
+            let vi = Composition::new(m, h)
+                .and_then(|c| c.options(super::GT_SOLVER))
+                .map_err(|e| e.to_string())?;
             run(&|z| vi.step(z), z)
         }
     }

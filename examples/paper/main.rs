@@ -395,7 +395,7 @@ where
         }
         // test windows: noise-free starts z_k and the next HORIZON positions
         let windows = cli.protocol.test_windows(test, &mut rng);
-        let nominal_vi = Variational::new(nmin, DT);
+        let nominal_vi = Variational::new(nmin, DT)?;
         let nominal_mse = mean_mse(&windows, &counts, |z| {
             Ok(nominal_vi
                 .rollout(z, HORIZON)?

@@ -20,7 +20,7 @@ const DT: f64 = 0.01;
 /// first-order variational integrator of `m`.
 fn log<M: Mechanism<2, 0> + Copy>(m: M, q: [f64; 2], steps: usize) -> Log {
     let z = State::new(q, [0.0, 0.0]);
-    let traj = Variational::new(m, DT).rollout(&z, steps).unwrap();
+    let traj = Variational::new(m, DT).unwrap().rollout(&z, steps).unwrap();
     Log::new(traj.iter().map(|z| z.q.as_slice().to_vec()).collect())
 }
 
@@ -91,8 +91,14 @@ fn free_motion_identified_up_to_the_held_scale() {
     // residual), accumulated over 100 steps: 1e-10 rad (measured 1.3e-13).
     let model = regressor.model_with(&pi).unwrap();
     let z = State::new([1.0, -0.5], [0.0, 0.0]);
-    let a = Variational::new(model, DT).rollout(&z, 100).unwrap();
-    let b = Variational::new(truth, DT).rollout(&z, 100).unwrap();
+    let a = Variational::new(model, DT)
+        .unwrap()
+        .rollout(&z, 100)
+        .unwrap();
+    let b = Variational::new(truth, DT)
+        .unwrap()
+        .rollout(&z, 100)
+        .unwrap();
     let worst = a
         .iter()
         .zip(&b)
@@ -101,7 +107,10 @@ fn free_motion_identified_up_to_the_held_scale() {
     println!("identified vs true rollout: max |Δq| = {worst:.2e} rad");
     assert!(worst <= 1e-10, "{worst:e}");
     // and the nominal mechanism does not (the check can fail)
-    let c = Variational::new(nominal, DT).rollout(&z, 100).unwrap();
+    let c = Variational::new(nominal, DT)
+        .unwrap()
+        .rollout(&z, 100)
+        .unwrap();
     let off: f64 = c
         .iter()
         .zip(&b)

@@ -15,7 +15,7 @@
 //! - error: max_i |q_i(T) − q_ref,i(T)| over the minimal coordinates —
 //!   positions only, since the first-order and midpoint VIs carry a
 //!   discrete velocity and the classical integrators and the fourth-order
-//!   VI (`Variational4`) the continuous one;
+//!   VI (`Composition`) the continuous one;
 //! - reference: the midpoint VI at h/2 and h/4, Richardson-extrapolated;
 //!   its error is estimated from the extrapolation at h and h/2, and checked
 //!   against RK4 (and, for the fourbar, the maximal-coordinate model);
@@ -388,7 +388,8 @@ fn main() -> Result<(), Box<dyn Error>> {
                         let h = t_end / steps as f64;
                         let v = vigp::dynamics::discrete_velocity(&min, &q0, &SVector::zeros(), h)?;
                         let zm = min.to_maximal(&State { q: q0, v }, h);
-                        let vi = Variational::midpoint(max, h).tolerance(run::REFERENCE_TOLERANCE);
+                        let vi =
+                            Variational::midpoint(max, h)?.tolerance(run::REFERENCE_TOLERANCE)?;
                         let (end, _) = run::timed_run(&vi, &zm, steps);
                         Ok(min.minimal_positions(&end?.q))
                     };

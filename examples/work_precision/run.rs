@@ -24,7 +24,7 @@ pub enum Method {
     Vi1,
     /// `Variational::midpoint`: the second-order VI.
     Vi2,
-    /// `Variational4::new`: the fourth-order VI (Suzuki's five-stage
+    /// `Composition::new`: the fourth-order VI (Suzuki's five-stage
     /// composition of the midpoint VI); its state carries the continuous q̇.
     Vi4,
 }
@@ -98,7 +98,7 @@ pub enum AnyIntegrator<M: Mechanism<N, C>, const N: usize, const C: usize> {
     /// The first-order or the midpoint variational integrator.
     Variational(Variational<M, N, C>),
     /// The fourth-order variational integrator.
-    Variational4(Variational4<M, N, C>),
+    Composition(Composition<M, N, C>),
 }
 
 impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> AnyIntegrator<M, N, C> {
@@ -111,22 +111,32 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> AnyIntegrator<M,
     /// (relative residual; `None`: the default 1e-12). The classical
     /// integrators have no Newton iteration and ignore it.
     pub fn with_tolerance(method: Method, model: M, dt: f64, tolerance: Option<f64>) -> Self {
-        let vi =
-            |v: Variational<M, N, C>| Self::Variational(tolerance.map_or(v, |t| v.tolerance(t)));
+        let vi = |v: Variational<M, N, C>| {
+            Self::Variational(match tolerance {
+                Some(t) => v.tolerance(t).expect("the sweep's tolerances are > 0"),
+                None => v,
+            })
+        };
         match method {
             Method::ExplicitEuler => Self::ExplicitEuler(ExplicitEuler::new(model, dt)),
             Method::SymplecticEuler => Self::SymplecticEuler(SymplecticEuler::new(model, dt)),
             Method::Rk4 => Self::Rk4(Rk4::new(model, dt)),
-            Method::Vi1 => vi(Variational::new(model, dt)),
-            Method::Vi2 => vi(Variational::midpoint(model, dt)),
+            Method::Vi1 => {
+                vi(Variational::new(model, dt).expect("the sweep's Δt and models are valid"))
+            }
+            Method::Vi2 => {
+                vi(Variational::midpoint(model, dt).expect("the sweep's Δt and models are valid"))
+            }
             Method::Vi4 => {
-                let v = Variational4::new(model, dt);
-                Self::Variational4(tolerance.map_or(v, |tolerance| {
-                    v.with_options(StepOptions {
-                        tolerance,
-                        ..StepOptions::default()
-                    })
-                }))
+                let options = StepOptions {
+                    tolerance: tolerance.unwrap_or(StepOptions::default().tolerance),
+                    ..StepOptions::default()
+                };
+                Self::Composition(
+                    Composition::new(model, dt)
+                        .and_then(|c| c.options(options))
+                        .expect("the sweep's Δt, models and tolerances are valid"),
+                )
             }
         }
     }
@@ -139,7 +149,7 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> AnyIntegrator<M,
     pub fn energy(&self, model: &M, z: &State<N>) -> f64 {
         match self {
             Self::Variational(vi) => vi.energy(z),
-            Self::Variational4(vi) => vi.energy(z),
+            Self::Composition(vi) => vi.energy(z),
             _ => model.energy(z),
         }
     }
@@ -156,7 +166,7 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Integrator<N>
             Self::SymplecticEuler(i) => i.dt(),
             Self::Rk4(i) => i.dt(),
             Self::Variational(i) => Integrator::dt(i),
-            Self::Variational4(i) => i.dt(),
+            Self::Composition(i) => i.dt(),
         }
     }
 
@@ -166,7 +176,7 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Integrator<N>
             Self::SymplecticEuler(i) => i.step(z),
             Self::Rk4(i) => i.step(z),
             Self::Variational(i) => Integrator::step(i, z),
-            Self::Variational4(i) => i.step(z),
+            Self::Composition(i) => i.step(z),
         }
     }
 }
@@ -391,7 +401,7 @@ pub fn midpoint_positions<M: Mechanism<N, C> + Copy, const N: usize, const C: us
 ) -> Result<SVector<f64, N>, StepError> {
     let h = t_end / steps as f64;
     let z0 = problem.start(Method::Vi2, h)?;
-    let vi = Variational::midpoint(problem.model, h).tolerance(REFERENCE_TOLERANCE);
+    let vi = Variational::midpoint(problem.model, h)?.tolerance(REFERENCE_TOLERANCE)?;
     let (end, _) = timed_run(&vi, &z0, steps);
     Ok(end?.q)
 }

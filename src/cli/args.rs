@@ -71,10 +71,10 @@ impl StepArgs {
         &self,
         model: M,
         dt: f64,
-    ) -> crate::Variational<M, N, C> {
-        crate::Variational::new(model, dt)
-            .substeps(self.substeps)
-            .max_subdivision(self.max_subdivision)
+    ) -> Result<crate::Variational<M, N, C>, crate::StepError> {
+        Ok(crate::Variational::new(model, dt)?
+            .substeps(self.substeps)?
+            .max_subdivision(self.max_subdivision))
     }
 }
 
@@ -205,8 +205,10 @@ pub(super) struct IdentifyArgs {
     /// of a real robot)].
     #[arg(long, value_enum)]
     pub(super) rule: Option<RuleArg>,
-    /// The treatment of position noise.
-    #[arg(long, value_enum, default_value = "ls")]
+    /// The treatment of position noise (runs shorter than the instruments'
+    /// 19-sample window enter by least squares; the output says how many
+    /// transitions had instruments).
+    #[arg(long, value_enum, default_value = "iv")]
     pub(super) noise: NoiseArg,
     /// Refine the regression by output error: the log simulated in
     /// segments of SAMPLES samples (default 50), their initial positions

@@ -514,7 +514,7 @@ where
         }
     }
     let cases = spread(&cases, SHIFT_SAMPLES);
-    let vi = Variational::new(nominal, dt);
+    let vi = Variational::new(nominal, dt)?;
     let mut sums = [0.0f64; 3];
     let mut used = 0usize;
     for (r, k) in cases {

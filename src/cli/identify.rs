@@ -158,11 +158,21 @@ fn write_results(
     w(
         out,
         format_args!(
-            "identify: {} from {} ({} runs, {} transitions, dt = {dt} s), {} rule, prior ±{} of the declared values",
+            "identify: {} from {} ({} runs, {} transitions, {}, dt = {dt} s), {} rule, prior ±{} of the declared values",
             fit.name,
             a.data.display(),
             fit.runs,
             id.transitions,
+            if id.instrumented == id.transitions && id.instrumented > 0 {
+                "instrumental variables".to_string()
+            } else if id.instrumented == 0 {
+                "least squares".to_string()
+            } else {
+                format!(
+                    "instrumental variables on {} (the rest from runs too short for them by least squares)",
+                    id.instrumented
+                )
+            },
             match fit.rule {
                 RuleArg::Midpoint => "midpoint",
                 RuleArg::FirstOrder => "first-order",
@@ -233,6 +243,7 @@ fn write_results(
         "mechanism": fit.name,
         "dt": dt,
         "transitions": id.transitions,
+        "instrumented": id.instrumented,
         "parameters": parameters,
         "base": base,
         "identified": standard,

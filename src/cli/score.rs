@@ -120,8 +120,7 @@ where
     }
     // each run's logged inputs, once (none without inputs)
     let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
-    let vi = a.stepping.integrator(nominal, dt);
-    vi.check()?;
+    let vi = a.stepping.integrator(nominal, dt)?;
     let pb = bar(windows.len(), "scoring");
     type Scored = Result<f64, StepError>;
     let results: Vec<(Scored, Scored, RolloutReport)> = windows

@@ -73,8 +73,7 @@ where
         // the log takes one (empty) input per step
         us.resize(a.steps, SVector::zeros());
     }
-    let vi = a.stepping.integrator(minimal, a.dt);
-    vi.check()?;
+    let vi = a.stepping.integrator(minimal, a.dt)?;
     let (states, report) = if U > 0 {
         vi.rollout_forced_with_report(&z0, &us)?
     } else {

@@ -28,7 +28,7 @@ fn pendulum_windows(seed: u64, count: usize, k: usize) -> Vec<Window<1>> {
     truth.links.rod.mass = 1.05;
     let m = truth.minimal();
     let h = DT / 5.0;
-    let vi = Variational::midpoint(m, h);
+    let vi = Variational::midpoint(m, h).unwrap();
     let mut rng = Rng(seed);
     (0..count)
         .map(|_| {
@@ -693,7 +693,10 @@ fn noisy_transitions<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: u
     steps: usize,
     seed: u64,
 ) -> Vec<Transition<N>> {
-    let traj = Variational::new(truth, DT).rollout(z0, steps).unwrap();
+    let traj = Variational::new(truth, DT)
+        .unwrap()
+        .rollout(z0, steps)
+        .unwrap();
     let q: Vec<_> = traj.iter().map(|z| z.q).collect();
     let mut rng = Rng(seed);
     vigp::learned::transitions(&q, DT)
@@ -884,7 +887,7 @@ fn forced_data<
     noise: f64,
     rng: &mut Rng,
 ) -> Vec<vigp::learned::ForcedTransition<N, U>> {
-    let vi = Variational::new(truth, DT);
+    let vi = Variational::new(truth, DT).unwrap();
     let mut z = *z0;
     let (mut positions, mut inputs) = (vec![z.q], vec![SVector::<f64, U>::zeros()]);
     for _ in 0..steps {
@@ -1333,7 +1336,7 @@ fn driven_model() -> &'static Learned<DrivenPendulumMinimal, 1, 0> {
 /// training region, each followed by `k` steps under inputs uniform in
 /// [−2, 2] (the truth is the midpoint VI at Δt, so its positions are exact).
 fn driven_windows(seed: u64, count: usize, k: usize) -> Vec<(Window<1>, Vec<SVector<f64, 1>>)> {
-    let truth = Variational::new(driven_truth(), DT);
+    let truth = Variational::new(driven_truth(), DT).unwrap();
     let mut rng = Rng(seed);
     (0..count)
         .map(|_| {
@@ -1368,7 +1371,7 @@ fn driven_calibration(seed: u64, count: usize, k: usize) -> Calibration<1> {
 /// here, the inputs being random per step).
 #[test]
 fn forced_windows_from_trajectories_follow_the_data_convention() {
-    let truth = Variational::new(driven_truth(), DT);
+    let truth = Variational::new(driven_truth(), DT).unwrap();
     let mut rng = Rng(31);
     let (mut trajectories, mut logged) = (Vec::new(), Vec::new());
     for _ in 0..3 {
@@ -1437,7 +1440,7 @@ fn a_conformal_bound_under_inputs_covers_exchangeable_windows() {
     let bound = l
         .error_bound_forced::<1>(&BoundKind::conformal(0.05), &cal)
         .unwrap();
-    let truth = Variational::new(driven_truth(), DT);
+    let truth = Variational::new(driven_truth(), DT).unwrap();
     let (mut one, mut last, mut n) = (0usize, 0usize, 0usize);
     let (mut ratio1, mut ratio_k) = (Vec::new(), Vec::new());
     for (w, us) in driven_windows(42, 1000, 10) {
@@ -1484,7 +1487,7 @@ fn a_conformal_bound_under_inputs_covers_exchangeable_windows() {
 #[test]
 fn forced_predictions_carry_bounds_that_hold() {
     let l = driven_model();
-    let truth = Variational::new(driven_truth(), DT);
+    let truth = Variational::new(driven_truth(), DT).unwrap();
     let empty = Calibration::empty(DT);
     let mut rng = Rng(77);
     let windows: Vec<(State<1>, Vec<SVector<f64, 1>>)> = (0..200)

@@ -53,7 +53,7 @@ fn window<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
 ) -> Option<Window<N>> {
     let h = DT / SUB as f64;
     let mut z = consistent_state(&truth, &q, &qd, h).ok()?;
-    let vi = Variational::midpoint(truth, h);
+    let vi = Variational::midpoint(truth, h).unwrap();
     let mut p = vec![z.q];
     for _ in 0..K {
         for _ in 0..SUB {

@@ -25,7 +25,7 @@ pub fn positions<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
         .q;
     let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h).unwrap();
     let z0 = vigp::State { q, v };
-    let vi = Variational::midpoint(m, h);
+    let vi = Variational::midpoint(m, h).unwrap();
     let mut z = z0;
     let mut out = vec![z.q];
     for _ in 1..samples {

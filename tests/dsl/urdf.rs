@@ -133,8 +133,8 @@ fn urdf_wrist_equals_the_hand_written_wrist() {
     // the forced steps of the minimal views from the same state
     let dt = 0.005;
     let (vu, vh) = (
-        Variational::new(u.minimal(), dt),
-        Variational::new(h.minimal(), dt),
+        Variational::new(u.minimal(), dt).unwrap(),
+        Variational::new(h.minimal(), dt).unwrap(),
     );
     let mut zu = u.minimal().state([0.4, -0.7, 0.01], [1.0, -0.5, 0.05]);
     let mut zh = h.minimal().state([0.4, -0.7, 0.01], [1.0, -0.5, 0.05]);
@@ -211,7 +211,7 @@ fn urdf_panda_equals_the_run_time_robot_and_pinocchio() {
     }
     // one step from the same state
     let dt = 0.002;
-    let vi = Variational::new(sys.minimal(), dt);
+    let vi = Variational::new(sys.minimal(), dt).unwrap();
     let (q0, v0) = (
         [0.1, -0.4, 0.3, -1.8, 0.2, 1.4, 0.6],
         [0.5, -0.3, 0.2, 0.4, -0.6, 0.1, 0.3],
@@ -365,6 +365,7 @@ fn urdf_step_derivatives_equal_the_run_time_robots() {
     assert_eq!(n, 3);
     let (q0, v0, u) = ([0.3, -0.5, 0.02], [0.7, -0.4, 0.05], [1.5, -0.8]);
     let (z, d) = Variational::new(wrist, dt)
+        .unwrap()
         .step_derivatives(&wrist.state(q0, v0), &SVector::from(u))
         .unwrap();
     let r = robot
@@ -391,6 +392,7 @@ fn urdf_step_derivatives_equal_the_run_time_robots() {
         [0.5, -0.3, 0.2, 0.4, -0.6, 0.1, 0.3],
     );
     let (_, dp) = Variational::new(panda, dt)
+        .unwrap()
         .step_derivatives(&panda.state(q0, v0), &SVector::<f64, 0>::zeros())
         .unwrap();
     let rp = arm

@@ -562,6 +562,7 @@ fn mean_only_learned_step_equals_the_full_step() {
     let mut truth = Pendulum::default();
     truth.joints.pivot.damping = 0.4;
     let traj = Variational::new(truth.minimal(), dt)
+        .unwrap()
         .rollout(&State::new([1.0], [0.0]), 60)
         .unwrap();
     let q: Vec<_> = traj.iter().map(|z| z.q).collect();
@@ -598,7 +599,7 @@ fn mean_only_learned_step_equals_the_full_step() {
         dt,
     )
     .unwrap();
-    let traj = Variational::new(fb, dt).rollout(&z0, 40).unwrap();
+    let traj = Variational::new(fb, dt).unwrap().rollout(&z0, 40).unwrap();
     let q: Vec<_> = traj.iter().map(|z| z.q).collect();
     let data = transitions(&q, dt);
     let (l, _) = Learned::train(fb, dt, &data, Encoding::Raw, Prior::Constant, &opts).unwrap();
@@ -769,6 +770,7 @@ fn rollout_with_info_equals_repeated_full_steps() {
     let mut truth = Pendulum::default();
     truth.joints.pivot.damping = 0.4;
     let traj = Variational::new(truth.minimal(), dt)
+        .unwrap()
         .rollout(&State::new([1.0], [0.0]), 60)
         .unwrap();
     let q: Vec<_> = traj.iter().map(|z| z.q).collect();
@@ -839,7 +841,7 @@ fn rollout_with_info_equals_repeated_full_steps() {
         dt,
     )
     .unwrap();
-    let traj = Variational::new(fb, dt).rollout(&z0, 40).unwrap();
+    let traj = Variational::new(fb, dt).unwrap().rollout(&z0, 40).unwrap();
     let q: Vec<_> = traj.iter().map(|z| z.q).collect();
     let data = transitions(&q, dt);
     let (l, _) = Learned::train(fb, dt, &data, Encoding::Raw, Prior::Constant, &opts).unwrap();

@@ -463,7 +463,7 @@ fn forced_data<
     rng: &mut common::Rng,
 ) -> Vec<vigp::learned::ForcedTransition<N, U>> {
     use vigp::learned::forced_transitions;
-    let vi = Variational::new(truth, DT);
+    let vi = Variational::new(truth, DT).unwrap();
     let mut data = Vec::new();
     for _ in 0..runs {
         let start = q0 + SVector::from_fn(|_, _| rng.uniform(-0.1, 0.1));

@@ -86,9 +86,9 @@ where
 {
     let z0 = vigp::projection::consistent_state(&m, &q0, &SVector::zeros(), DT).unwrap();
     let vi = if alpha == 0.0 {
-        Variational::new(m, DT)
+        Variational::new(m, DT).unwrap()
     } else {
-        Variational::midpoint(m, DT)
+        Variational::midpoint(m, DT).unwrap()
     };
     let inputs: Vec<SVector<f64, U>> = (0..steps).map(&u).collect();
     let traj: Vec<State<N>> = vi.rollout_forced(&z0, &inputs).unwrap();

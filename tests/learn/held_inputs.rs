@@ -126,7 +126,7 @@ where
             // share of the last interval's input); step k runs under the
             // input over [t_{k+1}, t_{k+2}], and the first interval's
             // input is 0 (at rest, as `held_inputs` logs it)
-            let vi = Variational::midpoint(model, DT);
+            let vi = Variational::midpoint(model, DT).unwrap();
             let z0 = State {
                 q: q0,
                 v: SVector::zeros(),
@@ -232,7 +232,7 @@ where
         Learned::train_forced(model.clone(), DT, &data, encoding, Prior::Nominal, &options)
             .unwrap();
     assert!(learned.takes_previous_input());
-    let nominal = Variational::new(model.clone(), DT);
+    let nominal = Variational::new(model.clone(), DT).unwrap();
     let mut out = Vec::new();
     for l in logs.iter().filter(|l| l.length > 0) {
         let (length, logged, x) = (l.length, &l.inputs, &l.x);

@@ -92,7 +92,7 @@ fn midpoint_log(
     steps: usize,
     phase: f64,
 ) -> (Vec<SVector<f64, 2>>, Vec<SVector<f64, 1>>) {
-    let vi = Variational::midpoint(truth(), DT);
+    let vi = Variational::midpoint(truth(), DT).unwrap();
     let inputs: Vec<SVector<f64, 1>> = (0..=steps)
         .map(|k| SVector::from([if k < 2 { 0.0 } else { drive(k, phase) }]))
         .collect();

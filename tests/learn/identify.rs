@@ -549,7 +549,7 @@ where
     M: Mechanism<N, C> + Parameters + Copy,
 {
     r.model_with(pi)
-        .is_ok_and(|m| Variational::new(m, DT).check().is_ok())
+        .is_ok_and(|m| Variational::new(m, DT).is_ok())
 }
 
 /// A joint without friction, identified from noisy logs (σ = 1e-4,

@@ -114,7 +114,7 @@ fn projection_keeps_constraints_exact_in_long_learned_rollouts() {
 fn trained_on_the_nominal_model_it_reproduces_the_nominal_step() {
     let dt = 0.01;
     let model = DoublePendulum::default().minimal();
-    let vi = Variational::new(model, dt);
+    let vi = Variational::new(model, dt).unwrap();
     let mut rng = Rng(11);
     let gauss = |rng: &mut Rng| {
         let (u1, u2) = (rng.uniform(1e-12, 1.0), rng.uniform(0.0, 1.0));
@@ -365,7 +365,7 @@ fn projection_jacobian_matches_finite_differences() {
 fn repeated_transitions_count_once() {
     let dt = 0.01;
     let model = DoublePendulum::default().minimal();
-    let vi = Variational::new(model, dt);
+    let vi = Variational::new(model, dt).unwrap();
     let mut rng = Rng(23);
     let sigma = 1e-3;
     let signal = |z: &State<2>| SVector::<f64, 2>::new(2e-3 * z.q[0].sin(), 2e-3 * z.q[1].cos());

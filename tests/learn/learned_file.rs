@@ -256,6 +256,7 @@ fn a_zero_length_loads_only_where_the_mechanism_takes_it() {
         v: SVector::from([0.1, 0.0, 0.0, 0.0, 0.05, 0.5, 0.01]),
     };
     let traj = Variational::new(sys.minimal(), DT)
+        .unwrap()
         .rollout(&z0, 20)
         .unwrap();
     let q: Vec<_> = traj.iter().map(|z| z.q).collect();

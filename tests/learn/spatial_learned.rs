@@ -146,6 +146,7 @@ fn learned_minimal_view_projects_onto_the_unit_quaternion() {
     )
     .unwrap();
     let traj = Variational::new(truth.minimal(), dt)
+        .unwrap()
         .rollout(&z0, 61)
         .unwrap();
     let positions: Vec<_> = traj.iter().map(|z| z.q).collect();
@@ -162,9 +163,13 @@ fn learned_minimal_view_projects_onto_the_unit_quaternion() {
     let zt = traj[20];
     let horizon = 30;
     let reference = Variational::new(truth.minimal(), dt)
+        .unwrap()
         .rollout(&zt, horizon)
         .unwrap();
-    let nominal_run = Variational::new(nominal, dt).rollout(&zt, horizon).unwrap();
+    let nominal_run = Variational::new(nominal, dt)
+        .unwrap()
+        .rollout(&zt, horizon)
+        .unwrap();
     let learned_run = learned.rollout(&zt, horizon).unwrap();
     let err = |a: &[State<4>]| {
         a.iter()

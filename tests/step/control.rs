@@ -306,10 +306,10 @@ fn forced_matches_reference<M, const N: usize, const C: usize, const U: usize>(
     let mut rng = Rng(17);
     let mut worst = 0.0f64;
     for (alpha, vi) in [
-        (0.0, Variational::new(m, dt)),
-        (0.5, Variational::midpoint(m, dt)),
+        (0.0, Variational::new(m, dt).unwrap()),
+        (0.5, Variational::midpoint(m, dt).unwrap()),
     ] {
-        let vi = vi.with_options(opts);
+        let vi = vi.with_options(opts).unwrap();
         for z in states {
             let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-5.0, 5.0));
             let us: Vec<f64> = u.iter().copied().collect();
@@ -480,9 +480,9 @@ fn constant_torque_settles_at_the_static_equilibrium() {
         for mid in [false, true] {
             let z0 = State::new([0.0], [0.0]);
             let min = if mid {
-                Variational::midpoint(sys.minimal(), dt)
+                Variational::midpoint(sys.minimal(), dt).unwrap()
             } else {
-                Variational::new(sys.minimal(), dt)
+                Variational::new(sys.minimal(), dt).unwrap()
             };
             let traj = min.rollout_forced(&z0, &inputs).unwrap();
             let theta = traj.last().unwrap().q[0];
@@ -490,9 +490,9 @@ fn constant_torque_settles_at_the_static_equilibrium() {
             println!("u = {u0}, mid = {mid}: minimal |sin θ − u/(m g l_c)| = {err:.1e}");
             assert!(err <= 1e-8, "minimal mid={mid}: {err:.2e}");
             let max = if mid {
-                Variational::midpoint(sys.maximal(), dt)
+                Variational::midpoint(sys.maximal(), dt).unwrap()
             } else {
-                Variational::new(sys.maximal(), dt)
+                Variational::new(sys.maximal(), dt).unwrap()
             };
             let traj = max
                 .rollout_forced(&sys.minimal().to_maximal(&z0, dt), &inputs)
@@ -534,7 +534,7 @@ fn spring_oscillates_about_its_rest_angle_with_the_closed_form_period() {
     let period = 2.0 * std::f64::consts::PI / omega;
     let mut errors = Vec::new();
     for dt in [0.01, 0.005] {
-        let vi = Variational::midpoint(sys.minimal(), dt);
+        let vi = Variational::midpoint(sys.minimal(), dt).unwrap();
         let z0 = State::new([s0 + 0.3], [0.0]);
         let steps = (10.0 * period / dt) as usize;
         let traj = vigp::Integrator::rollout(&vi, &z0, steps).unwrap();
@@ -598,12 +598,14 @@ where
     let mut worst = 0.0f64;
     for mid in [false, true] {
         let vi = if mid {
-            Variational::midpoint(m, dt)
+            Variational::midpoint(m, dt).unwrap()
         } else {
-            Variational::new(m, dt)
+            Variational::new(m, dt).unwrap()
         }
         .tolerance(1e-14)
-        .substeps(substeps);
+        .unwrap()
+        .substeps(substeps)
+        .unwrap();
         for z in states {
             let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-3.0, 3.0));
             let (z1, d) = vi.step_derivatives(z, &u).unwrap();
@@ -674,11 +676,12 @@ where
         .collect();
     for mid in [false, true] {
         let vi = if mid {
-            Variational::midpoint(m, dt)
+            Variational::midpoint(m, dt).unwrap()
         } else {
-            Variational::new(m, dt)
+            Variational::new(m, dt).unwrap()
         }
-        .tolerance(1e-14);
+        .tolerance(1e-14)
+        .unwrap();
         let d = vi.rollout_derivatives(z0, &inputs).unwrap();
         let traj = vi.rollout_forced(z0, &inputs).unwrap();
         // the same steps, Newton started differently: equal to the solver
@@ -752,7 +755,7 @@ fn rollout_derivatives_match_central_differences() {
 /// Non-finite inputs are typed errors, not NaN states.
 #[test]
 fn non_finite_inputs_are_refused() {
-    let vi = Variational::new(TorquePendulum::default().minimal(), 0.01);
+    let vi = Variational::new(TorquePendulum::default().minimal(), 0.01).unwrap();
     let z = State::new([0.1], [0.0]);
     for bad in [f64::NAN, f64::INFINITY] {
         let e = vi
@@ -808,8 +811,16 @@ fn substep_derivatives_are_the_chain_of_smaller_steps() {
     let fb = DriveFourbar::default().minimal();
     let (s, _) = minimal_and_maximal_states::<_, 4, 2, 12>(&fb, 31, 3, dt);
     let u = SVector::<f64, 2>::new(1.5, -0.7);
-    let two = Variational::new(fb, dt).tolerance(1e-14).substeps(2);
-    let half = Variational::new(fb, dt / 2.0).tolerance(1e-14);
+    let two = Variational::new(fb, dt)
+        .unwrap()
+        .tolerance(1e-14)
+        .unwrap()
+        .substeps(2)
+        .unwrap();
+    let half = Variational::new(fb, dt / 2.0)
+        .unwrap()
+        .tolerance(1e-14)
+        .unwrap();
     for z in &s {
         let (z2, d2) = two.step_derivatives(z, &u).unwrap();
         let (za, da) = half.step_derivatives(z, &u).unwrap();
@@ -843,7 +854,7 @@ fn substep_derivatives_are_the_chain_of_smaller_steps() {
 /// halves, 16 asymptotically). u = 0 is each integrator's plain step.
 #[test]
 fn every_integrator_takes_inputs() {
-    use vigp::{ExplicitEuler, Integrator, Rk4, SymplecticEuler, Variational4};
+    use vigp::{Composition, ExplicitEuler, Integrator, Rk4, SymplecticEuler};
     let sys = TorquePendulum::default();
     let m = sys.minimal();
     let u = SVector::<f64, 1>::new(2.0);
@@ -880,10 +891,16 @@ fn every_integrator_takes_inputs() {
         target,
     );
     settle("RK4", &Rk4::new(m, 0.01), &z0, &u, target);
-    settle("Variational4", &Variational4::new(m, 0.01), &z0, &u, target);
+    settle(
+        "Composition",
+        &Composition::new(m, 0.01).unwrap(),
+        &z0,
+        &u,
+        target,
+    );
     settle(
         "Variational",
-        &Variational::midpoint(m, 0.01),
+        &Variational::midpoint(m, 0.01).unwrap(),
         &z0,
         &u,
         target,
@@ -894,7 +911,7 @@ fn every_integrator_takes_inputs() {
     let ua = SVector::<f64, 1>::new(1.3);
     let t_end = 0.5;
     let run = |dt: f64| {
-        let vi = Variational4::new(a, dt);
+        let vi = Composition::new(a, dt).unwrap();
         let n = (t_end / dt).round() as usize;
         let mut out = vec![z; n];
         vi.rollout_forced_into(&z, &vec![ua; n], &mut out).unwrap();
@@ -906,7 +923,7 @@ fn every_integrator_takes_inputs() {
         (run(0.01) - reference).amax(),
     );
     println!(
-        "Variational4 forced: errors {e1:.2e}, {e2:.2e}, ratio {:.1}",
+        "Composition forced: errors {e1:.2e}, {e2:.2e}, ratio {:.1}",
         e1 / e2
     );
     assert!(e1 / e2 >= 12.0, "ratio {}", e1 / e2);
@@ -923,8 +940,11 @@ fn forced_steps_and_derivatives_do_not_allocate() {
     let u = SVector::<f64, 2>::new(0.4, -0.2);
     let inputs = [u; 30];
     let mut out = [s[0]; 30];
-    for vi in [Variational::new(fb, dt), Variational::midpoint(fb, dt)] {
-        let stepper = *vi.stepper().unwrap();
+    for vi in [
+        Variational::new(fb, dt).unwrap(),
+        Variational::midpoint(fb, dt).unwrap(),
+    ] {
+        let stepper = *vi.stepper();
         let p0 = stepper.momentum(&s[0]);
         let info = allocation_counter::measure(|| {
             let z1 = vi.step_forced(&s[0], &u).unwrap();
@@ -942,9 +962,12 @@ fn forced_steps_and_derivatives_do_not_allocate() {
     // thread's list on its first use); the calls after it do not allocate
     let fbm = DriveFourbar::default().maximal();
     let zm = fb.to_maximal(&s[0], dt);
-    for (i, vi) in [Variational::new(fbm, dt), Variational::midpoint(fbm, dt)]
-        .iter()
-        .enumerate()
+    for (i, vi) in [
+        Variational::new(fbm, dt).unwrap(),
+        Variational::midpoint(fbm, dt).unwrap(),
+    ]
+    .iter()
+    .enumerate()
     {
         let first = allocation_counter::measure(|| {
             let _ = vi.step_forced(&zm, &u).unwrap();
@@ -1006,8 +1029,8 @@ fn kept_workspace_forced_steps_equal_fresh_ones_bit_for_bit() {
     let none = SVector::<f64, 0>::zeros();
     let mut rng = Rng(5);
     let vis = [
-        Variational::new(fb.maximal(), dt),
-        Variational::midpoint(fb.maximal(), dt),
+        Variational::new(fb.maximal(), dt).unwrap(),
+        Variational::midpoint(fb.maximal(), dt).unwrap(),
     ];
     for (k, z) in zs.iter().enumerate() {
         let u = SVector::<f64, 2>::new(rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0));
@@ -1086,8 +1109,8 @@ fn learned_integrator_takes_inputs() {
     truth.links.pole.mass *= 1.1;
     truth.links.pole.inertia *= 0.9;
     truth.joints.rail.damping = 0.4;
-    let true_vi = Variational::new(truth.minimal(), dt);
-    let nominal_vi = Variational::new(nominal.minimal(), dt);
+    let true_vi = Variational::new(truth.minimal(), dt).unwrap();
+    let nominal_vi = Variational::new(nominal.minimal(), dt).unwrap();
     let mut rng = Rng(77);
     let mut data = Vec::new();
     for _ in 0..4 {
@@ -1310,7 +1333,7 @@ fn learned_step_derivatives_of_the_paper_systems() {
         seed: u64,
     ) -> f64 {
         let dt = 0.01;
-        let vi = Variational::new(truth, dt);
+        let vi = Variational::new(truth, dt).unwrap();
         let mut rng = Rng(seed);
         let mut data = Vec::new();
         for _ in 0..4 {
@@ -1461,7 +1484,7 @@ fn projected_learned_step_derivatives_match_differences() {
     // fourbar, minimal coordinates (a loop): runs from consistent starts
     let mut fb = Fourbar::default();
     fb.joints.top1.damping = 0.2;
-    let fb_vi = Variational::new(fb.minimal(), dt);
+    let fb_vi = Variational::new(fb.minimal(), dt).unwrap();
     let fb_runs: Vec<Vec<SVector<f64, 4>>> = (0..4)
         .map(|_| {
             // the parallelogram branch: q = (t₁, t₃ − t₁, t₃, t₁ − t₃)
@@ -1485,7 +1508,7 @@ fn projected_learned_step_derivatives_match_differences() {
     // double pendulum, maximal coordinates (joints as constraints)
     let mut dp = DoublePendulum::default();
     dp.joints.elbow.damping = 0.2;
-    let dp_vi = Variational::new(dp.minimal(), dt);
+    let dp_vi = Variational::new(dp.minimal(), dt).unwrap();
     let dp_runs: Vec<Vec<SVector<f64, 6>>> = (0..4)
         .map(|_| {
             let z0 = State::new([rng.uniform(-1.0, 1.0), rng.uniform(-1.0, 1.0)], [0.0, 0.0]);
@@ -1559,15 +1582,15 @@ fn zero_length_input_is_the_input_free_step() {
     let zero = SVector::<f64, 1>::zeros();
     let none = SVector::<f64, 0>::zeros();
     for vi in [
-        Variational::new(DriveCartpole::default().minimal(), 0.01),
-        Variational::midpoint(DriveCartpole::default().minimal(), 0.01),
+        Variational::new(DriveCartpole::default().minimal(), 0.01).unwrap(),
+        Variational::midpoint(DriveCartpole::default().minimal(), 0.01).unwrap(),
     ] {
         let (z1, d1) = vi.step_derivatives(&z, &zero).unwrap();
         let (z0, d0) = vi.step_derivatives(&z, &none).unwrap();
         assert_eq!(z0, z1);
         assert_eq!(d0.a.matrix::<4>(), d1.a.matrix::<4>());
         assert_eq!(vi.step_forced(&z, &none).unwrap(), vi.step(&z).unwrap());
-        let stepper = *vi.stepper().unwrap();
+        let stepper = *vi.stepper();
         let (s1, e1) = stepper.step_with_derivatives(&z, &zero).unwrap();
         let (s0, e0) = stepper.step_with_derivatives(&z, &none).unwrap();
         assert_eq!((s0, e0.a.matrix::<4>()), (s1, e1.a.matrix::<4>()));

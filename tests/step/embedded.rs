@@ -419,12 +419,12 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
     // share it and still equal the fixed-size step in a fresh workspace
     use vigp::Variational;
     let vis = [
-        Variational::new(fb.maximal(), dt),
-        Variational::new(long.maximal(), dt),
-        Variational::new(damped.maximal(), dt),
-        Variational::midpoint(fb.maximal(), dt),
+        Variational::new(fb.maximal(), dt).unwrap(),
+        Variational::new(long.maximal(), dt).unwrap(),
+        Variational::new(damped.maximal(), dt).unwrap(),
+        Variational::midpoint(fb.maximal(), dt).unwrap(),
     ];
-    let vdp = Variational::new(dpd.minimal(), dt);
+    let vdp = Variational::new(dpd.minimal(), dt).unwrap();
     let mut shared = 0;
     for _ in 0..10 {
         let z = random_state(&fb.minimal(), &mut rng, dt);
@@ -444,7 +444,7 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
     }
     assert_eq!(shared, 160);
     assert!(matches!(
-        Variational::new(dp.minimal(), dt).step(&bad),
+        Variational::new(dp.minimal(), dt).unwrap().step(&bad),
         Err(vigp::StepError::NonFiniteState { .. })
     ));
 }

@@ -121,7 +121,10 @@ fn converged_steps_agree_with_the_std_variational_integrator() {
             .unwrap()
             .with_tolerance(TIGHT)
             .unwrap();
-        let vi = Variational::new(sys.minimal(), DT).tolerance(TIGHT);
+        let vi = Variational::new(sys.minimal(), DT)
+            .unwrap()
+            .tolerance(TIGHT)
+            .unwrap();
         for (q, v) in STARTS {
             let traj = vi.rollout(&State::new(q, v), STEPS).unwrap();
             for z in &traj[..STEPS] {

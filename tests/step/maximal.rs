@@ -99,8 +99,14 @@ where
     let steps = (1.0 / dt).round() as usize;
     let z0 = State::new(q0, [0.0; N]);
     let zm0 = min.to_maximal(&z0, dt);
-    let a = Variational::new(min, dt).rollout(&z0, steps).unwrap();
-    let b = Variational::new(max, dt).rollout(&zm0, steps).unwrap();
+    let a = Variational::new(min, dt)
+        .unwrap()
+        .rollout(&z0, steps)
+        .unwrap();
+    let b = Variational::new(max, dt)
+        .unwrap()
+        .rollout(&zm0, steps)
+        .unwrap();
     a.iter()
         .zip(&b)
         .map(|(za, zb)| (min.minimal_positions(&zb.q) - za.q).amax())
@@ -174,7 +180,7 @@ fn maximal_vi_keeps_constraints_while_explicit_euler_drifts() {
     let dp = DoublePendulum::default();
     let (min, max) = (dp.minimal(), dp.maximal());
     let zd = max.to_maximal_start(&min, [std::f64::consts::FRAC_PI_2, 0.0], dt);
-    let (vi, _) = max_violation(&Variational::new(max, dt), &max, &zd, 10_000);
+    let (vi, _) = max_violation(&Variational::new(max, dt).unwrap(), &max, &zd, 10_000);
     let zc = State {
         q: zd.q,
         v: min.maximal_velocity(
@@ -200,7 +206,7 @@ fn maximal_vi_keeps_constraints_while_explicit_euler_drifts() {
     .unwrap();
     let zm = min.to_maximal(&z0, dt);
     let zm = consistent_state(&max, &zm.q, &zm.v, dt).unwrap();
-    let (vi, _) = max_violation(&Variational::new(max, dt), &max, &zm, 10_000);
+    let (vi, _) = max_violation(&Variational::new(max, dt).unwrap(), &max, &zm, 10_000);
     let zc = State {
         q: zm.q,
         v: SVector::zeros(),
@@ -268,9 +274,14 @@ fn explicit_euler_energy_grows_while_the_vis_stay_bounded() {
         },
         steps,
     );
-    let vi = energy_by_tenth(&Variational::new(max, dt), |z| max.energy(z), &z0, steps);
+    let vi = energy_by_tenth(
+        &Variational::new(max, dt).unwrap(),
+        |z| max.energy(z),
+        &z0,
+        steps,
+    );
     // the midpoint rule's discrete velocity belongs to the interval midpoint
-    let midpoint = Variational::midpoint(max, dt);
+    let midpoint = Variational::midpoint(max, dt).unwrap();
     let mid = energy_by_tenth(&midpoint, |z| midpoint.energy(z), &z0, steps);
     eprintln!(
         "pendulum max |ΔE| per tenth (J):\n  explicit Euler {ee:.3?}\n  VI (1st order) {vi:.3?}\n  VI (midpoint)  {mid:.3?}"
@@ -337,12 +348,12 @@ fn measured_convergence_orders() {
         ),
         (
             "paper VI",
-            observed_order(|dt| Variational::new(m, dt), r, true),
+            observed_order(|dt| Variational::new(m, dt).unwrap(), r, true),
             1.0,
         ),
         (
             "midpoint VI",
-            observed_order(|dt| Variational::midpoint(m, dt), r, true),
+            observed_order(|dt| Variational::midpoint(m, dt).unwrap(), r, true),
             2.0,
         ),
         ("RK4", observed_order(|dt| Rk4::new(m, dt), r, false), 4.0),

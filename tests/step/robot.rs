@@ -129,7 +129,7 @@ fn urdf_arm_steps_as_the_generated_integrator() {
     let robot = Robot::from_urdf(fixture("arm3.urdf")).unwrap();
     let sys = Arm3::default();
     let dt = 0.005;
-    let vi = Variational::new(sys.minimal(), dt);
+    let vi = Variational::new(sys.minimal(), dt).unwrap();
     let mut z = sys.minimal().state([0.4, -0.9, 0.05], [1.0, 0.5, -0.2]);
     let mut zr = RobotState::new(vec![0.4, -0.9, 0.05], vec![1.0, 0.5, -0.2]);
     let mut worst = 0.0f64;

@@ -394,13 +394,17 @@ fn compare_forced<
     let steps = inputs.len();
     let min = |m: P, z: &State<N>| {
         Variational::new(m, dt)
+            .unwrap()
             .tolerance(1e-14)
+            .unwrap()
             .rollout_forced(z, inputs)
             .unwrap()
     };
     let a = min(planar_min, z0);
     let b = Variational::new(lifted_min, dt)
+        .unwrap()
         .tolerance(1e-14)
+        .unwrap()
         .rollout_forced(z0, inputs)
         .unwrap();
     let dmin = a
@@ -410,7 +414,9 @@ fn compare_forced<
         .fold(0.0, f64::max);
     let zp = coords.to_maximal(z0, dt);
     let pm = Variational::new(planar_max, dt)
+        .unwrap()
         .tolerance(1e-14)
+        .unwrap()
         .rollout_forced(&zp, inputs)
         .unwrap();
     let stepper = LieStepper::with_options(lifted.maximal_view(), dt, tight()).unwrap();
@@ -470,11 +476,15 @@ fn compare<
 {
     // minimal views
     let a = Variational::new(planar_min, dt)
+        .unwrap()
         .tolerance(1e-14)
+        .unwrap()
         .rollout(z0, steps)
         .unwrap();
     let b = Variational::new(lifted_min, dt)
+        .unwrap()
         .tolerance(1e-14)
+        .unwrap()
         .rollout(z0, steps)
         .unwrap();
     let dmin = a
@@ -485,7 +495,9 @@ fn compare<
     // maximal views
     let zp = coords.to_maximal(z0, dt);
     let pm = Variational::new(planar_max, dt)
+        .unwrap()
         .tolerance(1e-14)
+        .unwrap()
         .rollout(&zp, steps)
         .unwrap();
     let stepper = LieStepper::with_options(lifted.maximal_view(), dt, tight()).unwrap();
@@ -501,7 +513,9 @@ fn compare<
     let mut z1 = *z0;
     z1.q[0] = f64::from_bits(z1.q[0].to_bits() + 1);
     let c = Variational::new(planar_min, dt)
+        .unwrap()
         .tolerance(1e-14)
+        .unwrap()
         .rollout(&z1, steps)
         .unwrap();
     let dself = a
@@ -922,6 +936,7 @@ fn minimal_and_maximal_views_agree() {
         );
         let n = (0.4 / dt) as usize;
         let a = Variational::new(sys.minimal(), dt)
+            .unwrap()
             .rollout(&zmin, n)
             .unwrap();
         let stepper = LieStepper::new(sys.maximal(), dt).unwrap();
@@ -953,7 +968,7 @@ fn spatial_steps_do_not_allocate() {
     );
     let stepper = LieStepper::new(sys.maximal(), dt).unwrap();
     let mut out = [z0; 50];
-    let vi = Variational::new(sys.minimal(), dt);
+    let vi = Variational::new(sys.minimal(), dt).unwrap();
     // the std step keeps its (large) workspace per thread: the thread's
     // first step allocates it once (tests/no_alloc.rs counts that); the
     // steps measured below reuse it

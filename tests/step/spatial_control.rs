@@ -215,8 +215,14 @@ fn zero_input_is_the_unactuated_spatial_mechanism_bit_for_bit() {
     // minimal views
     let (a, p) = (Arm3::default().minimal(), Arm3Plain::default().minimal());
     let zero = SVector::<f64, 2>::zeros();
-    let (va, vp) = (Variational::new(a, dt), Variational::new(p, dt));
-    let (ma, mp) = (Variational::midpoint(a, dt), Variational::midpoint(p, dt));
+    let (va, vp) = (
+        Variational::new(a, dt).unwrap(),
+        Variational::new(p, dt).unwrap(),
+    );
+    let (ma, mp) = (
+        Variational::midpoint(a, dt).unwrap(),
+        Variational::midpoint(p, dt).unwrap(),
+    );
     let none = SVector::<f64, 0>::zeros();
     for z in arm_states(&mut rng, 5) {
         assert!(same_bits(
@@ -248,9 +254,10 @@ fn zero_input_is_the_unactuated_spatial_mechanism_bit_for_bit() {
     );
     let z = crank_state(&c, 0.3, 4.0, dt);
     let ra = Variational::new(c, dt)
+        .unwrap()
         .rollout_forced(&z, &[zero; 30])
         .unwrap();
-    let rp = Variational::new(cp, dt).rollout(&z, 30).unwrap();
+    let rp = Variational::new(cp, dt).unwrap().rollout(&z, 30).unwrap();
     assert!(ra.iter().zip(&rp).all(|(x, y)| same_bits(x, y)));
 
     // maximal views
@@ -411,11 +418,12 @@ fn check_ab<
     let mut worst = 0.0f64;
     for mid in [false, true] {
         let vi = if mid {
-            Variational::midpoint(m, dt)
+            Variational::midpoint(m, dt).unwrap()
         } else {
-            Variational::new(m, dt)
+            Variational::new(m, dt).unwrap()
         }
-        .tolerance(1e-14);
+        .tolerance(1e-14)
+        .unwrap();
         for z in states {
             let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-2.0, 2.0));
             let (z1, d) = vi.step_derivatives(z, &u).unwrap();
@@ -478,9 +486,9 @@ fn the_rail_closed_slider_crank_steps_in_quaternion_coordinates() {
         let mut rule = Vec::new();
         for dt in [0.004, 0.001] {
             let vi = if midpoint {
-                Variational::midpoint(m, dt)
+                Variational::midpoint(m, dt).unwrap()
             } else {
-                Variational::new(m, dt)
+                Variational::new(m, dt).unwrap()
             };
             let mut z = crank_state(&m, 0.3, 0.0, dt);
             let e0 = vi.energy(&z);
@@ -537,9 +545,9 @@ fn constant_torque_settles_at_the_static_equilibrium_in_space() {
         let z0 = State::new([0.0], [0.0]);
         for mid in [false, true] {
             let vi = if mid {
-                Variational::midpoint(sys.minimal(), dt)
+                Variational::midpoint(sys.minimal(), dt).unwrap()
             } else {
-                Variational::new(sys.minimal(), dt)
+                Variational::new(sys.minimal(), dt).unwrap()
             };
             let traj = vi.rollout_forced(&z0, &inputs).unwrap();
             let err = (traj.last().unwrap().q[0].sin() - target).abs();
@@ -595,6 +603,7 @@ fn forced_maximal_converges_to_the_minimal_view() {
             let n = (0.4 / dt).round() as usize;
             let inputs: Vec<SVector<f64, 2>> = (0..n).map(|k| u(k as f64 * dt)).collect();
             let a = Variational::new(minimal, dt)
+                .unwrap()
                 .rollout_forced(&z0, &inputs)
                 .unwrap();
             let stepper = LieStepper::new(view(&sys), dt).unwrap();
@@ -665,7 +674,7 @@ fn forced_spatial_steps_do_not_allocate() {
     let stepper = LieStepper::new(sys.maximal(), dt).unwrap();
     let inputs = [SVector::<f64, 2>::new(0.2, -1.0); 20];
     let mut out = [x0; 21];
-    let vi = Variational::new(sys.minimal(), dt);
+    let vi = Variational::new(sys.minimal(), dt).unwrap();
     let embedded = vigp::embedded::Stepper::new(sys.minimal(), dt).unwrap();
     // the std forced step keeps a workspace of this size per thread, which
     // the thread's first such step allocates (tests/step/control.rs counts it)
@@ -701,6 +710,7 @@ fn constant_inputs_accelerate_a_free_rotor_and_slider_exactly() {
     let z0 = State::new([0.0, 0.0], [0.0, 0.0]);
     let (w, v) = (n as f64 * dt * 1.5 / 3.0, n as f64 * dt * -0.8 / 2.0);
     let traj = Variational::new(sys.minimal(), dt)
+        .unwrap()
         .rollout_forced(&z0, &inputs)
         .unwrap();
     let end = traj.last().unwrap();

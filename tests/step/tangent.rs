@@ -55,7 +55,7 @@ fn worst<M, const N: usize, const C: usize, const T: usize, const U: usize>(
 where
     M: Mechanism<N, C> + vigp::embedded::Dynamics<N, C> + Copy + vigp::Inputs<U>,
 {
-    let vi = Variational::new(model, dt);
+    let vi = Variational::new(model, dt).unwrap();
     let chart = Tangent::new(<M as vigp::embedded::Dynamics<N, C>>::KINDS, dt).unwrap();
     assert_eq!(chart.dim(), T);
     let mut worst: f64 = 0.0;
@@ -227,7 +227,7 @@ fn without_quaternions_the_tangent_jacobians_are_a_and_b() {
     use vigp::systems::Cartpole;
     let dt = 0.01;
     let m = Cartpole::default().minimal();
-    let vi = Variational::new(m, dt);
+    let vi = Variational::new(m, dt).unwrap();
     let z = State::new([0.1, 2.0], [0.3, -0.4]);
     let u = SVector::<f64, 0>::zeros();
     let (z1, d) = vi.step_derivatives(&z, &u).unwrap();

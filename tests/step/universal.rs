@@ -124,8 +124,8 @@ fn hooke_pendulum_matches_two_revolutes_with_a_massless_cross() {
         assert!((eh - ec).abs() <= 1e-10 * (1.0 + eh.abs()), "{eh} vs {ec}");
     }
     let n = 2000;
-    let a = Variational::new(h, dt).rollout(&z, n).unwrap();
-    let b = Variational::new(c, dt).rollout(&z, n).unwrap();
+    let a = Variational::new(h, dt).unwrap().rollout(&z, n).unwrap();
+    let b = Variational::new(c, dt).unwrap().rollout(&z, n).unwrap();
     let worst = a
         .iter()
         .zip(&b)
@@ -155,7 +155,7 @@ fn hooke_pendulum_small_oscillations_match_the_closed_form() {
         v: SVector::from([0.0, 0.7e-3 * omega]),
     };
     let n = 10_000;
-    let traj = Variational::new(m, dt).rollout(&z, n).unwrap();
+    let traj = Variational::new(m, dt).unwrap().rollout(&z, n).unwrap();
     for k in 0..2 {
         let mut ups = Vec::new();
         for i in 0..n {
@@ -198,7 +198,7 @@ fn hooke_pendulum_minimal_and_maximal_views_agree() {
         let back = m.to_minimal(&zmax, dt);
         assert!((back.q - z.q).amax() <= 1e-12 && (back.v - z.v).amax() <= 1e-9);
         let n = (0.4 / dt) as usize;
-        let a = Variational::new(m, dt).rollout(&z, n).unwrap();
+        let a = Variational::new(m, dt).unwrap().rollout(&z, n).unwrap();
         let b = stepper.rollout(&zmax, n).unwrap();
         gaps.push(gap(&m.to_maximal(&a[n], dt), &b[n]));
     }
@@ -240,7 +240,7 @@ fn rsur_four_bar_runs_in_both_views() {
     let dt = 0.005;
     let z = start(dt);
     let n = 2000;
-    let a = Variational::new(m, dt).rollout(&z, n).unwrap();
+    let a = Variational::new(m, dt).unwrap().rollout(&z, n).unwrap();
     let worst_min = a
         .iter()
         .map(|s| m.constraint_violation(s))
@@ -271,7 +271,7 @@ fn rsur_four_bar_runs_in_both_views() {
     for dt in [0.004, 0.001] {
         let z = start(dt);
         let n = (0.4 / dt) as usize;
-        let a = Variational::new(m, dt).rollout(&z, n).unwrap();
+        let a = Variational::new(m, dt).unwrap().rollout(&z, n).unwrap();
         let stepper = LieStepper::new(sys.maximal(), dt).unwrap();
         let b = stepper.rollout(&m.to_maximal(&z, dt), n).unwrap();
         gaps.push(gap(&m.to_maximal(&a[n], dt), &b[n]));

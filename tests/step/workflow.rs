@@ -29,19 +29,19 @@ fn summarize_uses_each_integrators_own_energy() {
         summarize(&vi, &m, &z0(dt), steps).unwrap().max_energy_error
     };
     let (a, b) = (
-        err(Variational::midpoint(m, 0.004), 0.004),
-        err(Variational::midpoint(m, 0.002), 0.002),
+        err(Variational::midpoint(m, 0.004).unwrap(), 0.004),
+        err(Variational::midpoint(m, 0.002).unwrap(), 0.002),
     );
     let ratio = a / b;
     eprintln!("midpoint VI: max |ΔE| {a:.3e} → {b:.3e}, ratio {ratio:.2}");
     assert!((3.5..=4.5).contains(&ratio), "{ratio}");
     // the model's energy at the midpoint VI's discrete velocity is off by O(Δt)
-    let vi = Variational::midpoint(m, 0.004);
+    let vi = Variational::midpoint(m, 0.004).unwrap();
     let z = State::new([1.0, 0.5], [1.0, -1.0]);
     assert!((vi.energy(&z) - m.energy(&z)).abs() > 1e-3);
     let (a, b) = (
-        err(Variational::new(m, 0.004), 0.004),
-        err(Variational::new(m, 0.002), 0.002),
+        err(Variational::new(m, 0.004).unwrap(), 0.004),
+        err(Variational::new(m, 0.002).unwrap(), 0.002),
     );
     let ratio = a / b;
     eprintln!("paper VI: max |ΔE| {a:.3e} → {b:.3e}, ratio {ratio:.2}");
@@ -146,10 +146,10 @@ fn a_failed_step_off_the_constraints_names_the_remedy() {
         v: SVector::zeros(),
     };
     let g = m.constraints(&q).amax();
-    let e = Variational::new(m, 0.01).step(&z).unwrap_err();
+    let e = Variational::new(m, 0.01).unwrap().step(&z).unwrap_err();
     eprintln!("|g| = {g:.2}: {e}");
     assert!(matches!(e, StepError::OffConstraints { .. }), "{e:?}");
     assert!(e.to_string().contains("consistent_state"), "{e}");
     let good = consistent_state(&m, &q, &SVector::zeros(), 0.01).unwrap();
-    Variational::new(m, 0.01).step(&good).unwrap();
+    Variational::new(m, 0.01).unwrap().step(&good).unwrap();
 }

@@ -293,8 +293,8 @@ pub fn long_horizon(size: Size) -> Vec<Row> {
     let z0 = State::new([std::f64::consts::FRAC_PI_2, 0.0], [0.0, 0.0]);
     let mut rows = Vec::new();
     for (name, vi) in [
-        ("paper VI", Variational::new(model, 0.01)),
-        ("midpoint VI", Variational::midpoint(model, 0.01)),
+        ("paper VI", Variational::new(model, 0.01).unwrap()),
+        ("midpoint VI", Variational::midpoint(model, 0.01).unwrap()),
     ] {
         let r = run_vi(&vi, &z0, steps);
         let mut row = Row::new(format!(
@@ -340,7 +340,7 @@ pub fn large_steps(size: Size) -> Vec<Row> {
             let dp = DoublePendulum::default().minimal();
             let q0 = SVector::from([2.0, -1.0]);
             let qd = SVector::from([w, -w]);
-            let plain = Variational::new(dp, dt).max_subdivision(0);
+            let plain = Variational::new(dp, dt).unwrap().max_subdivision(0);
             let z_plain = State {
                 q: q0,
                 v: vigp::dynamics::discrete_velocity(&dp, &q0, &qd, dt).unwrap(),
@@ -354,7 +354,7 @@ pub fn large_steps(size: Size) -> Vec<Row> {
                 &format!("Δt = {dt}, {rev} rev/s: double pendulum"),
                 &plain,
                 &z_plain,
-                &plain.substeps(k),
+                &plain.substeps(k).unwrap(),
                 &z_sub,
                 steps,
                 kinetic + 58.9,
@@ -366,12 +366,12 @@ pub fn large_steps(size: Size) -> Vec<Row> {
             let z_plain = consistent_state(&fb, &q, &v, dt).unwrap();
             let z_sub = consistent_state(&fb, &q, &v, dt / k as f64).unwrap();
             let kinetic = fb.kinetic_energy(&z_sub.q, &z_sub.v);
-            let plain = Variational::new(fb, dt).max_subdivision(0);
+            let plain = Variational::new(fb, dt).unwrap().max_subdivision(0);
             rows.push(large_step_row(
                 &format!("Δt = {dt}, {rev} rev/s: fourbar"),
                 &plain,
                 &z_plain,
-                &plain.substeps(k),
+                &plain.substeps(k).unwrap(),
                 &z_sub,
                 steps,
                 kinetic + 78.5,
@@ -495,7 +495,7 @@ pub fn singular(size: Size) -> Vec<Row> {
         "singular: fourbar started at the folded pose (σ_min(G) = 0), {steps} steps"
     ));
     let s0 = sigma_min(&fm.constraint_jacobian(&z0.q));
-    let r = run_vi(&Variational::new(fm, dt), &z0, steps);
+    let r = run_vi(&Variational::new(fm, dt).unwrap(), &z0, steps);
     row.happened = format!(
         "σ_min(G₀) = {s0:.0e}; {} steps, max |g| {:.1e}, {} stalled-accepted steps",
         r.steps, r.max_g, r.stalled
@@ -519,7 +519,7 @@ pub fn singular(size: Size) -> Vec<Row> {
     let mut row = Row::new(format!(
         "singular: fourbar in maximal coordinates (12 + 10 constraints) from the fold, {n} steps"
     ));
-    let r = run_vi(&Variational::new(fx, dt), &zx, n);
+    let r = run_vi(&Variational::new(fx, dt).unwrap(), &zx, n);
     row.happened = format!(
         "{} steps, max |g| {:.1e}, {} stalled-accepted steps",
         r.steps, r.max_g, r.stalled
@@ -537,7 +537,7 @@ pub fn singular(size: Size) -> Vec<Row> {
     let mut row =
         Row::new("singular: chain pinned at both ends at full stretch (no motion admissible)");
     let s0 = sigma_min(&taut.constraint_jacobian(&zt.q));
-    match Variational::new(taut, dt).step(&zt) {
+    match Variational::new(taut, dt).unwrap().step(&zt) {
         Ok(z) => {
             row.happened = format!("step accepted, |g| {:.1e}", taut.constraint_violation(&z));
             row.fail("gravity cannot be balanced at the straight pose: a step must not converge");
@@ -570,7 +570,7 @@ pub fn singular(size: Size) -> Vec<Row> {
     let mut row = Row::new(format!(
         "singular: chain 2.9 m between pins (3 m long), {steps} steps"
     ));
-    let r = run_vi(&Variational::new(slack, dt), &zs, steps);
+    let r = run_vi(&Variational::new(slack, dt).unwrap(), &zs, steps);
     row.happened = format!(
         "{} steps, max |g| {:.1e}, max |ΔE| {:.2e} J",
         r.steps, r.max_g, r.max_de
@@ -674,7 +674,7 @@ pub fn extreme_parameters(size: Size) -> Vec<Row> {
     let mut row = Row::new(format!(
         "zero rotational inertia, maximal coordinates (singular mass matrix), {steps} steps"
     ));
-    let r = run_vi(&Variational::new(sys.maximal(), dt), &zm, steps);
+    let r = run_vi(&Variational::new(sys.maximal(), dt).unwrap(), &zm, steps);
     row.remedy = "regularised KKT (J + ρ·B·A, same solution)".into();
     row.happened = format!(
         "{} steps, {} needed the regularisation, max |g| {:.1e}, max |ΔE| {:.2e} J",
@@ -691,7 +691,7 @@ pub fn extreme_parameters(size: Size) -> Vec<Row> {
     // the same motion as in minimal coordinates (both are the same VI on
     // the same Lagrangian up to the constraint solve): energy error close
     let rm = run_vi(
-        &Variational::new(sys.minimal(), dt),
+        &Variational::new(sys.minimal(), dt).unwrap(),
         &State::new([1.0, 0.5, -0.3], [0.0; 3]),
         steps,
     );
@@ -716,6 +716,7 @@ pub fn extreme_parameters(size: Size) -> Vec<Row> {
 
     // scaling every mass and inertia by s leaves the motion unchanged
     let reference = Variational::new(DoublePendulum::default().minimal(), dt)
+        .unwrap()
         .rollout(&State::new([2.0, -1.0], [3.0, -2.0]), 200)
         .unwrap();
     let mut worst = 0.0f64;
@@ -726,7 +727,7 @@ pub fn extreme_parameters(size: Size) -> Vec<Row> {
             l.mass *= s;
             l.inertia *= s;
         }
-        let vi = Variational::new(sys.minimal(), dt);
+        let vi = Variational::new(sys.minimal(), dt).unwrap();
         match vi.rollout(&State::new([2.0, -1.0], [3.0, -2.0]), 200) {
             Ok(t) => worst = worst.max((t[200].q - reference[200].q).amax()),
             Err(e) => {
@@ -789,7 +790,11 @@ fn with_substep_remedy<M: Mechanism<N, C> + Copy, const N: usize, const C: usize
     let max_de = max_rel * e_scale;
     let mut first_error = None;
     for k in [1usize, 10, 100] {
-        let vi = Variational::new(m, dt).substeps(k).max_subdivision(0);
+        let vi = Variational::new(m, dt)
+            .unwrap()
+            .substeps(k)
+            .unwrap()
+            .max_subdivision(0);
         let z = if k == 1 {
             *z0
         } else {
@@ -1109,6 +1114,7 @@ pub fn projection_cases(size: Size) -> Vec<Row> {
 
     // a GP-only learned fourbar (5 samples) stepped from 100 rad/s
     let traj = vigp::Variational::midpoint(fb, dt / 10.0)
+        .unwrap()
         .rollout(
             &consistent_state(&fb, &z0.q, &SVector::zeros(), dt / 10.0).unwrap(),
             400,
@@ -1173,9 +1179,13 @@ pub fn bad_input(size: Size) -> Vec<Row> {
     let mut kinds = std::collections::BTreeSet::new();
     for z in &bad_states {
         let results = [
-            Variational::new(dp, dt).step(z),
-            Variational::midpoint(dp, dt).step(z),
-            Variational::new(dp, dt).substeps(4).step(z),
+            Variational::new(dp, dt).unwrap().step(z),
+            Variational::midpoint(dp, dt).unwrap().step(z),
+            Variational::new(dp, dt)
+                .unwrap()
+                .substeps(4)
+                .unwrap()
+                .step(z),
             ExplicitEuler::new(dp, dt).step(z),
             SymplecticEuler::new(dp, dt).step(z),
             Rk4::new(dp, dt).step(z),
@@ -1212,35 +1222,53 @@ pub fn bad_input(size: Size) -> Vec<Row> {
         gravity: [f64::NAN, -9.81],
         ..Default::default()
     };
-    errs.push(Variational::new(s.minimal(), dt).step(&z));
+    errs.push(Variational::new(s.minimal(), dt).unwrap().step(&z));
     let mut s = DoublePendulum::default();
     s.links.lower.mass = f64::INFINITY;
-    errs.push(Variational::new(s.minimal(), dt).step(&z));
+    errs.push(Variational::new(s.minimal(), dt).unwrap().step(&z));
     errs.push(Rk4::new(s.minimal(), dt).step(&z));
     let mut s = DoublePendulum::default();
     s.links.lower.mass = 0.0;
     s.links.lower.inertia = 0.0;
-    errs.push(Variational::new(s.minimal(), dt).step(&z));
+    errs.push(Variational::new(s.minimal(), dt).unwrap().step(&z));
     for bad_dt in [0.0, -0.01, f64::NAN, f64::INFINITY] {
-        errs.push(Variational::new(dp, bad_dt).step(&z));
+        errs.push(Variational::new(dp, bad_dt).unwrap().step(&z));
         errs.push(Rk4::new(dp, bad_dt).step(&z));
     }
-    errs.push(Variational::new(dp, f64::MAX).step(&z));
-    errs.push(Variational::new(dp, 1e300).step(&z));
-    errs.push(Variational::new(dp, dt).substeps(0).step(&z));
-    errs.push(Variational::new(dp, dt).tolerance(f64::NAN).step(&z));
+    errs.push(Variational::new(dp, f64::MAX).unwrap().step(&z));
+    errs.push(Variational::new(dp, 1e300).unwrap().step(&z));
     errs.push(
         Variational::new(dp, dt)
+            .unwrap()
+            .substeps(0)
+            .unwrap()
+            .step(&z),
+    );
+    errs.push(
+        Variational::new(dp, dt)
+            .unwrap()
+            .tolerance(f64::NAN)
+            .unwrap()
+            .step(&z),
+    );
+    errs.push(
+        Variational::new(dp, dt)
+            .unwrap()
             .with_options(StepOptions {
                 min_step: 0.0,
                 ..Default::default()
             })
+            .unwrap()
             .step(&z),
     );
     // velocities whose kinetic terms overflow (1e200² · ∂M/∂q); a state
     // [1e200, 0] alone is a valid, finite step: with the elbow still,
     // ∂M/∂q vanishes there and the DEL residual is exactly zero
-    errs.push(Variational::new(dp, dt).step(&State::new([0.0, 0.0], [1e200, 1e200])));
+    errs.push(
+        Variational::new(dp, dt)
+            .unwrap()
+            .step(&State::new([0.0, 0.0], [1e200, 1e200])),
+    );
     let mut kinds = std::collections::BTreeSet::new();
     for r in &errs {
         match r {
@@ -1427,7 +1455,7 @@ pub fn pendulum_fast(size: Size) -> Row {
     let steps = size.pick(1_000, 100_000);
     let p = Pendulum::default().minimal();
     let z0 = State::new([2.0], [6.0 * REV]);
-    let r = run_vi(&Variational::new(p, 0.1), &z0, steps);
+    let r = run_vi(&Variational::new(p, 0.1).unwrap(), &z0, steps);
     let mut row = Row::new(format!(
         "large step: pendulum, Δt = 0.1, 6 rev/s, {steps} steps"
     ));

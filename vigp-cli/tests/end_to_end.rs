@@ -78,7 +78,7 @@ fn measured_csv<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
             CoordinateKind::Length => rng.uniform(-0.5, 0.5),
             CoordinateKind::Quaternion => panic!("the tool's systems here are planar"),
         });
-        let vi = Variational::midpoint(truth, h);
+        let vi = Variational::midpoint(truth, h).unwrap();
         let mut z = State {
             q: q0,
             v: SVector::zeros(),
@@ -400,7 +400,7 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     truth.links.cart.mass *= 1.1;
     truth.links.pole.mass *= 1.1;
     truth.joints.rail.damping = 0.4;
-    let vi = Variational::new(truth.minimal(), DT);
+    let vi = Variational::new(truth.minimal(), DT).unwrap();
     let mut rng = Rng(5);
     let mut csv = |runs: std::ops::Range<usize>| {
         let mut text = String::from("run,t,rail,hinge,u_rail\n");

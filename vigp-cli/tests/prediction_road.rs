@@ -90,7 +90,7 @@ fn simulate_fit_score_predict() {
     // the log is the rollout z_0 … z_K under the plan (written in
     // round-trip form: bit for bit), one more row q_K + Δt·v_K, and log row
     // k + 1 holds the input of step k (row 0: zero; the last row repeats)
-    let vi = Variational::new(DriveCartpole::default().minimal(), DT);
+    let vi = Variational::new(DriveCartpole::default().minimal(), DT).unwrap();
     let plan_u: Vec<SVector<f64, 1>> = us.iter().map(|u| SVector::from([*u])).collect();
     let states = vi
         .rollout_forced(&State::new([0.1, 0.5], [0.0, 0.0]), &plan_u)
@@ -396,10 +396,13 @@ fn simulate_takes_substeps() {
     let z0 = State::new([0.1, 0.5], [0.0, 0.0]);
     let model = DriveCartpole::default().minimal();
     let fine = Variational::new(model, DT)
+        .unwrap()
         .substeps(4)
+        .unwrap()
         .rollout_forced(&z0, &plan_u)
         .unwrap();
     let plain = Variational::new(model, DT)
+        .unwrap()
         .rollout_forced(&z0, &plan_u)
         .unwrap();
     let x = |r: &[String], i: usize| r[i].parse::<f64>().unwrap();
@@ -449,11 +452,13 @@ fn simulate_subdivides_failing_steps_by_default() {
         .into_iter()
         .find(|&dt| {
             Variational::new(model, dt)
+                .unwrap()
                 .rollout_forced(&z0, &zero)
                 .is_err()
         })
         .expect("a time step at which the plain rollout fails");
     let resolved = Variational::new(model, dt)
+        .unwrap()
         .max_subdivision(8)
         .rollout_forced_with_report(&z0, &zero)
         .unwrap();

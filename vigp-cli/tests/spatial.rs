@@ -228,7 +228,7 @@ fn furuta_fit_score_predict_export() {
     let file = std::fs::File::open(&test).unwrap();
     let data: Dataset<2> =
         Dataset::read_for::<FurutaMinimal, 0, _>(file, &ReadOptions::default()).unwrap();
-    let vi = Variational::new(m, DT);
+    let vi = Variational::new(m, DT).unwrap();
     let (mut sum, mut n) = (0.0, 0);
     for run in &data.runs {
         for w in 0..run.positions.len() - 2 {

@@ -59,12 +59,12 @@
 
 use crate::dynamics::Dynamics;
 use crate::gp::{ExportedGp, GpError};
-use crate::linalg::solve_kkt;
 use crate::params::Parameters;
+use crate::projection::project_velocity;
 use crate::real::Real;
 use crate::state::{CoordinateKind, State};
 use crate::step::{StepError, StepOptions, Stepper};
-use nalgebra::{SMatrix, SVector};
+use nalgebra::SVector;
 
 /// How a state z = (q, v) is presented to the GP (saved as `"raw"` or
 /// `"sincos"` with the `serde` feature). The std runtime and the exported
@@ -595,103 +595,4 @@ where
         }
         Ok(())
     }
-}
-
-/// The velocity projection of paper eq. (8) on fixed-size data:
-/// v = argmin ‖v − v_u‖² subject to g(x₁ + Δt·v) = 0, by exact Newton on
-/// the KKT system [I + Δt²∇²(μᵀg)  Δt·Gᵀ; Δt·G  0] (closed-form
-/// constraints, Jacobian and Σμ_i∇²g_i of the model) with a backtracking line
-/// search on the scaled residual. Residual scales as in the std runtime:
-/// velocity residual relative to 1 + |v_u|∞, constraint residual relative
-/// to 1 + the largest length coordinate.
-pub fn project_velocity<M: Dynamics<N, C>, const N: usize, const C: usize>(
-    model: &M,
-    k: &M::Constants,
-    x1: &SVector<f64, N>,
-    v_u: &SVector<f64, N>,
-    dt: f64,
-    options: &StepOptions,
-) -> Result<SVector<f64, N>, StepError> {
-    crate::step::check_time_step(dt)?;
-    if !(x1.iter().chain(v_u.iter()).all(|x| x.is_finite())) {
-        return Err(StepError::NonFiniteState { step: None });
-    }
-    if C == 0 {
-        return Ok(*v_u);
-    }
-    let v_scale = 1.0 + v_u.amax();
-    let mut g_scale = 1.0f64;
-    for (x, kind) in x1.iter().zip(M::KINDS.iter()) {
-        if *kind == CoordinateKind::Length {
-            g_scale = g_scale.max(1.0 + x.abs());
-        }
-    }
-    // r = v − v_u + Δt·Gᵀμ, c = g(x₁ + Δt·v), J = I + Δt²·Σ μ_i ∇²g_i
-    let eval = |v: &SVector<f64, N>, mu: &SVector<f64, C>| {
-        let x2 = x1 + v * dt;
-        let (c, gj) = model.constraints_and_jacobian(k, &x2);
-        let jac =
-            SMatrix::<f64, N, N>::identity() + model.constraint_hessian(k, &x2, mu) * (dt * dt);
-        let r = v - v_u + gj.transpose() * mu * dt;
-        (r, c, gj, jac)
-    };
-    let merit = |r: &SVector<f64, N>, c: &SVector<f64, C>| {
-        let (a, b) = (r.norm() / v_scale, c.norm() / g_scale);
-        a * a + b * b
-    };
-    let mut v = *v_u;
-    let mut mu = SVector::<f64, C>::zeros();
-    let (mut r, mut c, mut gj, mut jac) = eval(&v, &mu);
-    for iteration in 0..=options.max_iterations {
-        let residual = (r.amax() / v_scale).max(c.amax() / g_scale);
-        if !residual.is_finite() {
-            return Err(StepError::NonFiniteResidual {
-                iteration,
-                step: None,
-            });
-        }
-        if residual <= options.tolerance {
-            return Ok(v);
-        }
-        if iteration == options.max_iterations {
-            return Err(StepError::NotConverged {
-                iterations: iteration,
-                residual,
-                tolerance: options.tolerance,
-                step: None,
-            });
-        }
-        let a = gj * dt;
-        let Some((dv, dmu)) = solve_kkt(&jac, &a.transpose(), &a, &r, &c) else {
-            return Err(StepError::SingularJacobian {
-                iteration,
-                step: None,
-            });
-        };
-        let phi0 = merit(&r, &c);
-        let mut alpha = 1.0;
-        loop {
-            let (v_try, mu_try) = (v - dv * alpha, mu - dmu * alpha);
-            let (r_try, c_try, gj_try, jac_try) = eval(&v_try, &mu_try);
-            let phi = merit(&r_try, &c_try);
-            if phi.is_finite() && phi <= (1.0 - 1e-4 * alpha) * phi0 {
-                (v, mu, r, c, gj, jac) = (v_try, mu_try, r_try, c_try, gj_try, jac_try);
-                break;
-            }
-            if alpha <= options.min_step {
-                return Err(StepError::LineSearchFailed {
-                    iteration,
-                    residual,
-                    step: None,
-                });
-            }
-            alpha *= 0.5;
-        }
-    }
-    Err(StepError::NotConverged {
-        iterations: options.max_iterations,
-        residual: f64::NAN,
-        tolerance: options.tolerance,
-        step: None,
-    })
 }

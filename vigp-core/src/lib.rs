@@ -36,6 +36,7 @@ pub mod learned;
 pub mod linalg;
 pub mod model;
 pub mod params;
+pub mod projection;
 pub mod real;
 pub mod spatial;
 pub mod state;

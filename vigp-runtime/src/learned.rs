@@ -435,7 +435,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let d = e + 2 * u_dim;
         let mut inputs = vec![0.0; data.len() * d];
         let mut targets = Vec::with_capacity(data.len() * N);
-        let prior_vi = Variational::new(model.clone(), dt);
+        let prior_vi = Variational::new(model.clone(), dt)?;
         for (i, t) in data.iter().enumerate() {
             if !(t.z.is_finite()
                 && t.v_next.iter().all(|x| x.is_finite())
@@ -477,7 +477,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         };
         Ok((
             Self {
-                nominal: Variational::new(model.clone(), dt).with_options(options),
+                nominal: prior_vi.with_options(options)?,
                 model,
                 prior,
                 encoding,

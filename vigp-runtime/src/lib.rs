@@ -41,7 +41,7 @@ pub mod system;
 pub mod variational;
 
 pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
-pub use composition::Variational4;
+pub use composition::Composition;
 pub use kinematics::Pose2;
 pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
 /// The linear-algebra crate of vigp's public types (`SVector` in states and

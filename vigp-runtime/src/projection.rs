@@ -5,7 +5,7 @@
 
 use crate::linalg::FullPivLu;
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{StepError, StepInfo, StepOptions, solve_kkt_regularised};
+use crate::newton::{StepError, StepInfo, StepOptions};
 use nalgebra::{SMatrix, SVector};
 use vigp_core::CoordinateKind;
 use vigp_core::state::discrete_velocity;
@@ -203,7 +203,8 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     }
 }
 
-/// Newton on the projection's KKT system from the initial guess `start`.
+/// Newton on the projection's KKT system from the initial guess `start`
+/// ([`vigp_core::projection::project_velocity_from`]).
 fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
     q1: &SVector<f64, N>,
@@ -213,87 +214,19 @@ fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
     options: &StepOptions,
 ) -> Result<(SVector<f64, N>, StepInfo), StepError> {
     let k = m.constants()?;
-    let v_scale = 1.0 + v_u.amax();
-    let g_scale = crate::mechanism::length_scale::<M, N, C>(q1);
-    let mut v = *start;
-    let mut mu = SVector::<f64, C>::zeros();
-    // Exact Newton: ∂r/∂v = I + Δt²·Σ μ_i ∇²g_i(q₂) (a Gauss–Newton step
-    // without the curvature term stalls when the correction is large); the
-    // closed-form terms give g, G and Σ μ_i ∇²g_i.
-    let eval = |v: &SVector<f64, N>, mu: &SVector<f64, C>| {
-        let q2 = q1 + v * dt;
-        let (g, gj) = m.constraints_and_jacobian(&k, &q2);
-        let hess = m.constraint_hessian(&k, &q2, mu) * (dt * dt);
-        let r = v - v_u + gj.transpose() * mu * dt;
-        (r, g, gj, SMatrix::<f64, N, N>::identity() + hess)
-    };
-    let merit = |r: &SVector<f64, N>, c: &SVector<f64, C>| {
-        let (a, b) = (r.norm() / v_scale, c.norm() / g_scale);
-        a * a + b * b
-    };
-    let (mut r, mut c, mut gj, mut jac) = eval(&v, &mu);
-    let mut stalled = false;
-    let mut regularised = false;
-    for iter in 0..=options.max_iterations {
-        let (res_r, res_c) = (r.amax() / v_scale, c.amax() / g_scale);
-        if !(res_r.is_finite() && res_c.is_finite()) {
-            return Err(StepError::NonFiniteResidual {
-                iteration: iter,
-                step: None,
-            });
-        }
-        let converged = res_r <= options.tolerance && res_c <= options.tolerance;
-        let accept_stall = stalled && res_r.max(res_c) <= options.stall_tolerance;
-        if converged || accept_stall {
-            return Ok((
-                v,
-                StepInfo {
-                    subdivisions: 0,
-                    iterations: iter,
-                    residual: res_r.max(res_c),
-                    stalled: !converged,
-                    regularised,
-                    restarted: false,
-                    continuation: 0.0,
-                },
-            ));
-        }
-        if iter == options.max_iterations {
-            return Err(StepError::NotConverged {
-                iterations: iter,
-                residual: res_r.max(res_c),
-                tolerance: options.tolerance,
-                step: None,
-            });
-        }
-        let a = gj * dt;
-        let Some(((dv, dmu), reg)) = solve_kkt_regularised(&jac, &a.transpose(), &a, &r, &c) else {
-            return Err(StepError::SingularJacobian {
-                iteration: iter,
-                step: None,
-            });
-        };
-        regularised |= reg;
-        let phi0 = merit(&r, &c);
-        let mut alpha = 1.0;
-        loop {
-            let (v_try, mu_try) = (v - dv * alpha, mu - dmu * alpha);
-            let (r_try, c_try, gj_try, jac_try) = eval(&v_try, &mu_try);
-            let phi = merit(&r_try, &c_try);
-            if phi.is_finite() && phi <= (1.0 - 1e-4 * alpha) * phi0 {
-                (v, mu, r, c, gj, jac) = (v_try, mu_try, r_try, c_try, gj_try, jac_try);
-                break;
-            }
-            if alpha <= options.min_step {
-                // no decrease along the Newton direction (see
-                // `StepOptions::stall_tolerance`)
-                stalled = true;
-                break;
-            }
-            alpha *= 0.5;
-        }
-    }
-    unreachable!("the loop returns on its last iteration")
+    let (v, r) = vigp_core::projection::project_velocity_from(m, &k, q1, v_u, start, dt, options)?;
+    Ok((
+        v,
+        StepInfo {
+            subdivisions: 0,
+            iterations: r.iterations,
+            residual: r.residual,
+            stalled: r.stalled,
+            regularised: r.regularised,
+            restarted: false,
+            continuation: 0.0,
+        },
+    ))
 }
 
 /// A consistent initial state from guesses: the configuration projected onto

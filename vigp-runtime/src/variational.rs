@@ -116,9 +116,12 @@ pub trait Integrator<const N: usize> {
 /// equations are those of [`crate::del`] (the dual-number reference the
 /// tests compare against).
 ///
-/// Construction never fails; an invalid Δt, invalid options or invalid
-/// run-time parameters (a negative mass: [`StepError::InvalidModel`]) are
-/// reported by every `step` ([`Variational::check`] reports them at once).
+/// Construction checks everything a step needs: an invalid Δt
+/// ([`StepError::InvalidTimeStep`]), invalid run-time parameters (a
+/// negative mass: [`StepError::InvalidModel`]), a loop that cannot close
+/// ([`StepError::LoopCannotClose`]), and, in the builder methods, invalid
+/// options ([`StepError::InvalidOptions`]) are errors there, not at the
+/// first step.
 ///
 /// **Large steps.** The DEL equations are quadratic in v₁ (velocity terms of
 /// D_xL); when Δt·|v| is large against the configuration's curvature they
@@ -141,18 +144,11 @@ pub trait Integrator<const N: usize> {
 /// that is accepted), so it is for motions known to be well posed.
 #[derive(Clone, Copy, Debug)]
 pub struct Variational<M: Mechanism<N, C>, const N: usize, const C: usize> {
-    model: M,
-    dt: f64,
-    alpha: f64,
-    options: StepOptions,
-    substeps: usize,
-    continuation: f64,
+    /// The fixed-size engine: the model, Δt, the rule, the options and the
+    /// sub-steps.
+    stepper: Stepper<M, N, C>,
     subdivision: u32,
-    stepper: Result<Stepper<M, N, C>, StepError>,
 }
-
-/// The default continuation bound of [`Variational`].
-const DEFAULT_CONTINUATION: f64 = vigp_core::step::DEFAULT_CONTINUATION_BOUND;
 
 /// How a rollout of [`Variational`] went ([`Variational::rollout_with_report`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -246,79 +242,33 @@ fn loop_closes<M: Mechanism<N, C>, const N: usize, const C: usize>(
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, N, C> {
     /// An integrator for `model` with time step `dt` and default Newton
-    /// options (the paper's first-order rule).
-    pub fn new(model: M, dt: f64) -> Self {
-        Self::build(
-            model,
-            dt,
-            0.0,
-            StepOptions::default(),
-            1,
-            DEFAULT_CONTINUATION,
-        )
+    /// options (the paper's first-order rule). Errors: an invalid Δt or
+    /// invalid run-time parameters, a loop that cannot close (type docs).
+    pub fn new(model: M, dt: f64) -> Result<Self, StepError> {
+        loop_closes(&model)?;
+        Ok(Self {
+            stepper: Stepper::new(model, dt)?,
+            subdivision: 0,
+        })
     }
 
     /// The second-order variational integrator of the midpoint discrete
     /// Lagrangian L_d = Δt·L((x_k + x_{k+1})/2, (x_{k+1} − x_k)/Δt).
-    pub fn midpoint(model: M, dt: f64) -> Self {
-        Self::build(
-            model,
-            dt,
-            0.5,
-            StepOptions::default(),
-            1,
-            DEFAULT_CONTINUATION,
-        )
-    }
-
-    fn build(
-        model: M,
-        dt: f64,
-        alpha: f64,
-        options: StepOptions,
-        substeps: usize,
-        continuation: f64,
-    ) -> Self {
-        let stepper = (|| {
-            let s = if alpha == 0.0 {
-                Stepper::new(model.clone(), dt)?
-            } else {
-                Stepper::midpoint(model.clone(), dt)?
-            };
-            s.options(options)?
-                .substeps(substeps)?
-                .continuation_bound(continuation)
-        })();
-        let stepper = stepper.and_then(|s| {
-            loop_closes(&model)?;
-            Ok(s)
-        });
-        Self {
-            model,
-            dt,
-            alpha,
-            options,
-            substeps,
-            continuation,
+    /// Errors as [`Variational::new`].
+    pub fn midpoint(model: M, dt: f64) -> Result<Self, StepError> {
+        loop_closes(&model)?;
+        Ok(Self {
+            stepper: Stepper::midpoint(model, dt)?,
             subdivision: 0,
-            stepper,
-        }
+        })
     }
 
-    fn rebuild(self) -> Self {
-        let Self {
-            model,
-            dt,
-            alpha,
-            options,
-            substeps,
-            continuation,
-            subdivision,
-            ..
-        } = self;
-        let mut s = Self::build(model, dt, alpha, options, substeps, continuation);
-        s.subdivision = subdivision;
-        s
+    /// The same integrator on another engine setting.
+    fn with_stepper(self, stepper: Result<Stepper<M, N, C>, StepError>) -> Result<Self, StepError> {
+        Ok(Self {
+            stepper: stepper?,
+            subdivision: self.subdivision,
+        })
     }
 
     /// How often a failing step may halve its sub-step before it is an
@@ -348,14 +298,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         if !resolvable(&first) || self.subdivision == 0 {
             return Err(self.explain(first, z));
         }
-        let base = self.stepper()?;
+        let base = self.stepper();
         let mut last = first;
         let mut depth = 0;
         let mut substep_dt = base.substep_dt();
         while depth < self.subdivision {
-            let Some(k) = self
-                .substeps
-                .max(1)
+            let Some(k) = base
+                .substep_count()
                 .checked_mul(1 << (depth + 1))
                 .filter(|k| *k <= vigp_core::step::MAX_SUBSTEPS)
             else {
@@ -399,35 +348,42 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// released from rest at Δt = 2 s bends 32 rad in its first step). The
     /// bend of each step is
     /// [`StepInfo::continuation`](crate::StepInfo::continuation).
-    /// `f64::INFINITY` turns the check off; NaN or a bound ≤ 0 is reported
-    /// by `step` as [`StepError::InvalidOptions`].
-    pub fn continuation_bound(mut self, bound: f64) -> Self {
-        self.continuation = bound;
-        self.rebuild()
+    /// `f64::INFINITY` turns the check off; NaN or a bound ≤ 0 is
+    /// [`StepError::InvalidOptions`].
+    pub fn continuation_bound(self, bound: f64) -> Result<Self, StepError> {
+        let s = self.stepper.clone().continuation_bound(bound);
+        self.with_stepper(s)
     }
 
     /// Order of accuracy of the discretisation (1 or 2).
     pub fn order(&self) -> usize {
-        if self.alpha == 0.0 { 1 } else { 2 }
+        self.stepper.order()
     }
 
-    /// Replace the Newton options.
-    pub fn with_options(mut self, options: StepOptions) -> Self {
-        self.options = options;
-        self.rebuild()
-    }
-
-    /// Relative residual tolerance (default 1e-12).
-    pub fn tolerance(mut self, tol: f64) -> Self {
-        self.options.tolerance = tol;
-        self.rebuild()
-    }
-
-    /// Iteration cap (default 25; 0 is reported by `step` as
+    /// Replace the Newton options (invalid ones:
     /// [`StepError::InvalidOptions`]).
-    pub fn max_iterations(mut self, n: usize) -> Self {
-        self.options.max_iterations = n;
-        self.rebuild()
+    pub fn with_options(self, options: StepOptions) -> Result<Self, StepError> {
+        let s = self.stepper.clone().options(options);
+        self.with_stepper(s)
+    }
+
+    /// Relative residual tolerance (default 1e-12; it must be finite and
+    /// > 0, else [`StepError::InvalidOptions`]).
+    pub fn tolerance(self, tol: f64) -> Result<Self, StepError> {
+        let options = StepOptions {
+            tolerance: tol,
+            ..*self.options()
+        };
+        self.with_options(options)
+    }
+
+    /// Iteration cap (default 25; 0 is [`StepError::InvalidOptions`]).
+    pub fn max_iterations(self, n: usize) -> Result<Self, StepError> {
+        let options = StepOptions {
+            max_iterations: n,
+            ..*self.options()
+        };
+        self.with_options(options)
     }
 
     /// Opt-in sub-stepping: each step of Δt is `k` variational steps of
@@ -436,38 +392,33 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// discrete velocity of the sub-step**, v = (q(t + h) − q(t))/h (start it
     /// with h, e.g. [`crate::dynamics::discrete_velocity`]`(m, q, q̇, Δt/k)`).
     /// Use it when Δt·|v| is too large for the DEL equations to have a root
-    /// (type docs); cost k steps. `k = 0` and `k >`
-    /// [`vigp_core::MAX_SUBSTEPS`] (2²⁰) are reported by `step` as
-    /// [`StepError::InvalidOptions`].
-    pub fn substeps(mut self, k: usize) -> Self {
-        self.substeps = k;
-        self.rebuild()
+    /// (type docs); cost k steps. `k = 0`, `k >`
+    /// [`vigp_core::MAX_SUBSTEPS`] (2²⁰) and a sub-step Δt/k too small to
+    /// work with are errors ([`StepError::InvalidOptions`],
+    /// [`StepError::InvalidTimeStep`]).
+    pub fn substeps(self, k: usize) -> Result<Self, StepError> {
+        let s = self.stepper.clone().substeps(k);
+        self.with_stepper(s)
     }
 
     /// The number of sub-steps per step (see [`Variational::substeps`]).
     pub fn substep_count(&self) -> usize {
-        self.substeps
+        self.stepper.substep_count()
     }
 
     /// The model.
     pub fn model(&self) -> &M {
-        &self.model
+        self.stepper.model()
     }
 
     /// The Newton options in use.
     pub fn options(&self) -> &StepOptions {
-        &self.options
+        self.stepper.step_options()
     }
 
-    /// The fixed-size engine, or why the settings cannot work.
-    pub fn stepper(&self) -> Result<&Stepper<M, N, C>, StepError> {
-        self.stepper.as_ref().map_err(|e| *e)
-    }
-
-    /// `Ok` when Δt, the options and the model's run-time parameters are
-    /// valid (every step checks the same).
-    pub fn check(&self) -> Result<(), StepError> {
-        self.stepper().map(|_| ())
+    /// The fixed-size engine.
+    pub fn stepper(&self) -> &Stepper<M, N, C> {
+        &self.stepper
     }
 
     /// One step with solver diagnostics (with sub-steps: iterations summed,
@@ -499,7 +450,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         kept: impl FnOnce(&Stepper<M, N, C>, &mut StepWorkspace<N, C>) -> Result<R, StepError>,
         fresh: impl Fn(&Stepper<M, N, C>) -> Result<R, StepError>,
     ) -> Result<(R, u32), StepError> {
-        let stepper = self.stepper()?;
+        let stepper = self.stepper();
         check_quaternions::<M, N, C>(z)?;
         match crate::scratch::with_workspace(|ws: Option<&mut StepWorkspace<N, C>>| match ws {
             Some(ws) => kept(stepper, ws),
@@ -541,7 +492,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             return e;
         }
         let scale = crate::mechanism::length_scale::<M, N, C>(&z.q);
-        let violation = self.model.constraints(&z.q).amax() / scale;
+        let violation = self.model().constraints(&z.q).amax() / scale;
         // consistent states have |g| at solver tolerance (1e-12)
         if violation > 1e-8 {
             StepError::OffConstraints {
@@ -561,12 +512,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// what makes the measured energy error second order. Equals
     /// `model.energy(z)` for the first-order rule.
     pub fn energy(&self, z: &State<N>) -> f64 {
-        let h = self.dt / self.substeps.max(1) as f64;
+        let s = &self.stepper;
+        let alpha = if s.order() == 1 { 0.0 } else { 0.5 };
         let at = State {
-            q: z.q + z.v * (self.alpha * h),
+            q: z.q + z.v * (alpha * s.substep_dt()),
             v: z.v,
         };
-        self.model.energy(&at)
+        self.model().energy(&at)
     }
 
     /// Multipliers are not part of the state; this returns only the state.
@@ -597,7 +549,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         z: &State<N>,
         ws: &mut StepWorkspace<N, C>,
     ) -> Result<State<N>, StepError> {
-        let stepper = self.stepper()?;
+        let stepper = self.stepper();
         match stepper.step_in(z, ws) {
             Ok(z1) => Ok(z1),
             Err(e) => self.subdivide(z, e, |s| s.step(z)).map(|(z1, _)| z1),
@@ -745,7 +697,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         M: Inputs<U>,
     {
         check_quaternions::<M, N, C>(z0)?;
-        let stepper = self.stepper()?;
+        let stepper = self.stepper();
         let mut report = RolloutReport {
             steps: out.len(),
             ..RolloutReport::default()
@@ -864,7 +816,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     {
         use nalgebra::SMatrix;
         use vigp_core::{InputJacobian, StateJacobian};
-        let stepper = self.stepper()?;
+        let stepper = self.stepper();
         if !z0.is_finite() {
             return Err(StepError::NonFiniteState { step: None });
         }
@@ -922,7 +874,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
     type Mechanism = M;
 
     fn dt(&self) -> f64 {
-        self.dt
+        self.stepper.dt()
     }
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         Variational::step(self, z)

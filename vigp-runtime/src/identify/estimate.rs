@@ -53,7 +53,9 @@ pub enum Noise {
     LeastSquares,
     /// Instrumental variables from leave-out local polynomial fits (module
     /// docs): `half_window` samples on each side beyond the three left
-    /// out, polynomial `degree`. Uses transitions with a full window only.
+    /// out, polynomial `degree`. In a log long enough for the window it
+    /// uses the transitions with a full window only; a shorter log's
+    /// transitions are their own instruments (least squares).
     InstrumentalVariables {
         /// Samples used on each side of the left-out triple.
         half_window: usize,
@@ -113,6 +115,10 @@ pub struct Stack {
     pub origin: Vec<(usize, usize)>,
     /// Rows per transition.
     pub block: usize,
+    /// Transitions whose instrument rows came from the leave-out fits (the
+    /// others are their own instruments); `z` is `None` when there are
+    /// none.
+    pub instrumented: usize,
 }
 
 /// What the solver returns.

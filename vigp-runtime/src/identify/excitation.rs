@@ -400,7 +400,10 @@ where
             Variational::new(model, dt)
         } else {
             Variational::midpoint(model, dt)
-        };
+        }
+        .map_err(|e| IdentifyError::Simulation {
+            message: e.to_string(),
+        })?;
         let q0 = SVector::<f64, N>::from_column_slice(&problem.start);
         let z0 = if C == 0 {
             State {

@@ -245,8 +245,11 @@ impl Prior {
 pub struct Options {
     /// The prior (default: 50 % of the declared values).
     pub prior: Prior,
-    /// The noise treatment (default: least squares; use
-    /// [`Noise::IV`] on measured logs).
+    /// The noise treatment (default: [`Noise::IV`], instrumental
+    /// variables: unbiased under position noise, and exact on noise-free
+    /// logs as least squares is. A log too short for the instruments'
+    /// window enters by least squares; see
+    /// [`Identification::instrumented`]).
     pub noise: Noise,
     /// The loss (default: squares).
     pub loss: Loss,
@@ -289,7 +292,7 @@ impl Default for Options {
     fn default() -> Self {
         Options {
             prior: Prior::default(),
-            noise: Noise::LeastSquares,
+            noise: Noise::IV,
             loss: Loss::Squared,
             rank_tolerance: 1e-8,
             consistent: true,
@@ -344,6 +347,12 @@ pub struct Identification {
     pub base_covariance: DMatrix<f64>,
     /// Transitions used.
     pub transitions: usize,
+    /// Of these, the transitions whose rows had instruments
+    /// ([`Noise::InstrumentalVariables`]). The others, from logs too short
+    /// to hold the instruments' window (2·`half_window` + 3 samples),
+    /// entered by least squares, which is biased under position noise;
+    /// 0 with [`Noise::LeastSquares`].
+    pub instrumented: usize,
     /// What the output-error stage did, when it ran
     /// ([`Options::output_error`]); the estimate, covariances and
     /// intervals are then its own.
@@ -390,6 +399,7 @@ pub fn stack<R: Regressor>(
     let mut z_rows: Vec<DMatrix<f64>> = Vec::new();
     let mut b_rows: Vec<DVector<f64>> = Vec::new();
     let mut origin = Vec::new();
+    let mut instrumented = 0;
     for (li, log) in logs.iter().enumerate() {
         for x in &log.positions {
             if x.len() != n {
@@ -424,10 +434,14 @@ pub fn stack<R: Regressor>(
             }
         };
         let k_count = log.positions.len();
-        if k_count < 2 * reach + 1 {
+        // a log too short for the instruments' window enters by least
+        // squares (its rows are their own instruments)
+        let windowed = instruments.is_some() && k_count > 2 * reach;
+        let edge = if windowed { reach } else { 1 };
+        if k_count < 2 * edge + 1 {
             continue;
         }
-        for k in reach..k_count - reach {
+        for k in edge..k_count - edge {
             let t = Transition {
                 positions: [
                     &log.positions[k - 1],
@@ -437,7 +451,9 @@ pub fn stack<R: Regressor>(
                 inputs: [input(k - 1), input(k)],
             };
             let (y, b) = regressor.transition(&t)?;
-            if let Some((taus, weights)) = &instruments {
+            if instruments.is_some() && !windowed {
+                z_rows.push(y.clone());
+            } else if let Some((taus, weights)) = &instruments {
                 let smooth: Vec<Vec<f64>> = (0..3)
                     .map(|e| {
                         (0..n)
@@ -458,6 +474,7 @@ pub fn stack<R: Regressor>(
                     inputs: t.inputs,
                 };
                 z_rows.push(regressor.transition(&tz)?.0);
+                instrumented += 1;
             }
             w_rows.push(y);
             b_rows.push(b);
@@ -468,7 +485,8 @@ pub fn stack<R: Regressor>(
     let rows = transitions * block;
     let mut w = DMatrix::zeros(rows, p);
     let mut b = DVector::zeros(rows);
-    let mut z = instruments.as_ref().map(|_| DMatrix::zeros(rows, p));
+    // no log held a window: least squares throughout, without instruments
+    let mut z = (instrumented > 0).then(|| DMatrix::zeros(rows, p));
     for (t, (y, bb)) in w_rows.iter().zip(&b_rows).enumerate() {
         w.rows_mut(t * block, block).copy_from(y);
         b.rows_mut(t * block, block).copy_from(bb);
@@ -485,6 +503,7 @@ pub fn stack<R: Regressor>(
             slot,
             origin,
             block,
+            instrumented,
         },
         transitions,
     ))
@@ -634,6 +653,7 @@ pub fn identify<R: Regressor>(
         position_sigma,
         base_covariance,
         transitions,
+        instrumented: stack.instrumented,
         structure,
         refinement: None,
     };

@@ -514,8 +514,17 @@ where
         }
         check_gp(&saved.gp, d, N, &saved.prior)?;
         let gp = Gp::from_saved(&saved.gp, None)?;
+        let nominal = Variational::new(model.clone(), saved.dt)
+            .and_then(|vi| vi.with_options(options))
+            .map_err(|e| {
+                let at = match e {
+                    crate::newton::StepError::InvalidTimeStep { .. } => "dt",
+                    _ => "parameters",
+                };
+                field(at, e.to_string())
+            })?;
         Ok(Self {
-            nominal: Variational::new(model.clone(), saved.dt).with_options(options),
+            nominal,
             model,
             prior: saved.prior.clone(),
             encoding: saved.encoding,
