@@ -212,8 +212,8 @@ pub(super) struct IdentifyArgs {
     pub(super) noise: NoiseArg,
     /// Refine the regression by output error: the log simulated in
     /// segments of SAMPLES samples (default 50), their initial positions
-    /// estimated with the parameters. Unbiased under position noise;
-    /// mechanisms without loops.
+    /// estimated with the parameters. Unbiased under position noise; loops
+    /// are simulated with their multipliers.
     #[arg(long, value_name = "SAMPLES", num_args = 0..=1, default_missing_value = "50")]
     pub(super) output_error: Option<usize>,
     /// The prior's standard deviation around the declared values, relative

@@ -264,7 +264,7 @@ pub struct Options {
     /// The second stage: refine the estimate by output error
     /// ([`output_error`]). Unbiased under position noise; costs a
     /// simulation of every log with exact sensitivities per iteration.
-    /// Mechanisms without loops.
+    /// Loops are simulated with their multipliers.
     ///
     /// `None` (the default) runs the regression alone, except on logs where
     /// no input acts: their rows are homogeneous in π, and the regression

@@ -66,8 +66,20 @@
 //!
 //! # Scope
 //!
-//! Mechanisms without loops (a loop's step also solves for its
-//! multipliers: [`IdentifyError::Layout`]). Unforced logs: the unforced
+//! **Loops** are simulated with their multipliers: a step solves
+//! r(x_{j−1}, x_j, x_{j+1}; π) = G(x_j)ᵀλ and g(x_{j+1}) = 0 for
+//! (x_{j+1}, λ), r the residual before the first stage's projection onto
+//! G's null space ([`Regressor::loop_constraints`]), and the sensitivities
+//! come from the same KKT matrix,
+//!
+//! ```text
+//! [ J₂         −G(x_j)ᵀ ] [ D_{j+1} ]     [ Y [I 0] + J₀ D_{j−1} + (J₁ − Σλ_i∇²g_i(x_j)) D_j ]
+//! [ G(x_{j+1})  0       ] [ D_λ     ] = − [ 0                                                ]
+//! ```
+//!
+//! (Y the unprojected rows). The multipliers are eliminated, not
+//! estimated; a segment's two initial positions are free, so the fit
+//! moves them onto the loop only as far as the data do. Unforced logs: the unforced
 //! DEL residual is homogeneous in π, so the simulation does not change
 //! when π is scaled; the data then fix every ratio and the prior the
 //! overall scale. Output error is free of the regression's pull of the
@@ -283,11 +295,32 @@ fn simulate_segment<R: Regressor>(
         d.push(d0);
         d.push(d1);
     }
+    // loops: the multipliers of the step, carried as the next step's guess
+    let c = n - regressor.rows();
+    let mut lambda = DVector::<f64>::zeros(c);
     for j in 1..seg.len - 1 {
         let k = seg.start + j;
         let inputs = [input(k - 1), input(k)];
         // Newton on x_{j+1} from the linear extrapolation
         let mut next: Vec<f64> = (0..n).map(|i| 2.0 * xs[j][i] - xs[j - 1][i]).collect();
+        if c > 0 {
+            let dn = loop_step(
+                regressor,
+                [&xs[j - 1], &xs[j]],
+                &mut next,
+                &mut lambda,
+                inputs,
+                pi,
+                &d,
+                p,
+                derivatives,
+            )?;
+            if let Some(dn) = dn {
+                d.push(dn);
+            }
+            xs.push(next);
+            continue;
+        }
         let mut converged = false;
         for _ in 0..30 {
             let t = Transition {
@@ -354,6 +387,103 @@ fn simulate_segment<R: Regressor>(
         wrt_pi,
         wrt_start,
     })
+}
+
+/// One step of a simulation with loops: x_{j+1} and the multipliers λ
+/// solve r(x_{j−1}, x_j, x_{j+1}) = G(x_j)ᵀλ and g(x_{j+1}) = 0 by Newton
+/// from `next` and `lambda` (updated in place); with `derivatives`, the
+/// sensitivity D_{j+1} by the implicit function theorem on the same KKT
+/// matrix:
+///
+/// ```text
+/// [ J₂         −G(x_j)ᵀ ] [ D_{j+1} ]     [ Y [I 0] + J₀ D_{j−1} + (J₁ − Σλ_i∇²g_i(x_j)) D_j ]
+/// [ G(x_{j+1})  0       ] [ D_λ     ] = − [ 0                                                ]
+/// ```
+#[allow(clippy::too_many_arguments)]
+fn loop_step<R: Regressor>(
+    regressor: &R,
+    before: [&[f64]; 2],
+    next: &mut [f64],
+    lambda: &mut DVector<f64>,
+    inputs: [&[f64]; 2],
+    pi: &[f64],
+    d: &[DMatrix<f64>],
+    p: usize,
+    derivatives: bool,
+) -> Result<Option<DMatrix<f64>>, SimFailure> {
+    let n = next.len();
+    let c = lambda.len();
+    let constraints = |x: &[f64]| -> Result<(DVector<f64>, DMatrix<f64>), SimFailure> {
+        regressor.loop_constraints(x)?.ok_or_else(|| {
+            SimFailure::Error(IdentifyError::Layout {
+                message: "the regressor has fewer rows than coordinates but no loop constraints"
+                    .into(),
+            })
+        })
+    };
+    let (_, gk) = constraints(before[1])?;
+    let kkt = |j2: &DMatrix<f64>, g1: &DMatrix<f64>| {
+        let mut a = DMatrix::zeros(n + c, n + c);
+        a.view_mut((0, 0), (n, n)).copy_from(j2);
+        a.view_mut((0, n), (n, c)).copy_from(&(-gk.transpose()));
+        a.view_mut((n, 0), (c, n)).copy_from(g1);
+        a
+    };
+    let mut converged = false;
+    for _ in 0..30 {
+        let t = Transition {
+            positions: [before[0], before[1], next],
+            inputs,
+        };
+        let (r, js) = regressor.position_jacobians(&t, pi)?;
+        let (g1, gj1) = constraints(next)?;
+        let mut f = DVector::zeros(n + c);
+        f.rows_mut(0, n).copy_from(&(r - gk.transpose() * &*lambda));
+        f.rows_mut(n, c).copy_from(&g1);
+        let step = kkt(&js[2], &gj1)
+            .lu()
+            .solve(&f)
+            .ok_or(SimFailure::Diverged)?;
+        let scale = 1.0 + next.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+        for (x, e) in next.iter_mut().zip(step.rows(0, n).iter()) {
+            *x -= e;
+        }
+        *lambda -= step.rows(n, c);
+        if !(next.iter().all(|v| v.is_finite()) && lambda.iter().all(|v| v.is_finite())) {
+            return Err(SimFailure::Diverged);
+        }
+        if step.rows(0, n).amax() <= 1e-13 * scale {
+            converged = true;
+            break;
+        }
+    }
+    if !converged {
+        return Err(SimFailure::Diverged);
+    }
+    if !derivatives {
+        return Ok(None);
+    }
+    let j = d.len() - 1;
+    let t = Transition {
+        positions: [before[0], before[1], next],
+        inputs,
+    };
+    let js = regressor.position_jacobians(&t, pi)?.1;
+    let (y, _) = regressor.unprojected_transition(&t)?;
+    let (_, gj1) = constraints(next)?;
+    let curvature = regressor.loop_curvature(before[1], lambda.as_slice())?;
+    let cols = d[j].ncols();
+    let mut top = &js[0] * &d[j - 1] + (&js[1] - curvature) * &d[j];
+    let mut left = top.columns_mut(0, p);
+    left += &y;
+    let mut rhs = DMatrix::zeros(n + c, cols);
+    rhs.rows_mut(0, n).copy_from(&top);
+    rhs.neg_mut();
+    let sol = kkt(&js[2], &gj1)
+        .lu()
+        .solve(&rhs)
+        .ok_or(SimFailure::Diverged)?;
+    Ok(Some(sol.rows(0, n).into_owned()))
 }
 
 /// The state of the optimisation: π and every segment's initial positions.
@@ -724,13 +854,6 @@ pub fn refine<R: Regressor>(
                 "output error: segment {} (≥ 3), iterations {} (≥ 1), tolerance {} (in (0, 1))",
                 options.segment, options.max_iterations, options.tolerance
             ),
-        });
-    }
-    if regressor.rows() < regressor.coordinates() {
-        return Err(IdentifyError::Layout {
-            message: "output error simulates the mechanism; with loop constraints it would \
-                      also solve for their multipliers, which it does not"
-                .into(),
         });
     }
     let n = regressor.coordinates();

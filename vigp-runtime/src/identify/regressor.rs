@@ -490,14 +490,15 @@ pub trait Regressor {
     fn noise_jacobian(&self, t: &Transition<'_>, pi: &[f64])
     -> Result<DMatrix<f64>, IdentifyError>;
 
-    /// The residual of a mechanism without loops at parameters π, and its
-    /// exact Jacobians with respect to x_{k−1}, x_k and x_{k+1} (each
-    /// N × N): what a simulation with the parameters π needs (x_{k+1}
-    /// solves residual = 0) and its derivatives by the implicit function
-    /// theorem ([`super::output_error`]). A mechanism with loops gets
-    /// [`IdentifyError::Layout`]: its step also solves for multipliers.
-    /// The default, for a source of rows that cannot simulate, says so
-    /// with [`IdentifyError::Layout`] (the regression needs none of it).
+    /// The residual at parameters π, before any projection (N rows: for a
+    /// mechanism with loops the DEL residual without its multiplier term
+    /// −G(x_k)ᵀλ), and its exact Jacobians with respect to x_{k−1}, x_k and
+    /// x_{k+1} (each N × N): what a simulation with the parameters π needs
+    /// (x_{k+1} solves residual = G(x_k)ᵀλ, g(x_{k+1}) = 0) and its
+    /// derivatives by the implicit function theorem
+    /// ([`super::output_error`]). The default, for a source of rows that
+    /// cannot simulate, says so with [`IdentifyError::Layout`] (the
+    /// regression needs none of it).
     #[allow(clippy::type_complexity)]
     fn position_jacobians(
         &self,
@@ -507,6 +508,38 @@ pub trait Regressor {
         let _ = (t, pi);
         Err(IdentifyError::Layout {
             message: "this regressor gives no position Jacobians, which output error needs".into(),
+        })
+    }
+
+    /// The rows of [`Regressor::position_jacobians`]' residual, before any
+    /// projection (N × P and N: residual = Y·π − b). Equal to
+    /// [`Regressor::transition`] without loops (the default).
+    fn unprojected_transition(
+        &self,
+        t: &Transition<'_>,
+    ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
+        self.transition(t)
+    }
+
+    /// The loop constraints at the configuration `x`: g(x) (C entries) and
+    /// G(x) = ∂g/∂x (C × N); `None` for a mechanism without loops (the
+    /// default).
+    #[allow(clippy::type_complexity)]
+    fn loop_constraints(
+        &self,
+        x: &[f64],
+    ) -> Result<Option<(DVector<f64>, DMatrix<f64>)>, IdentifyError> {
+        let _ = x;
+        Ok(None)
+    }
+
+    /// Σ λ_i ∇²g_i(x) (N × N), the derivative of G(x)ᵀλ in x, for the
+    /// sensitivities of a simulation with loops. The default (no loops):
+    /// [`IdentifyError::Layout`].
+    fn loop_curvature(&self, x: &[f64], lambda: &[f64]) -> Result<DMatrix<f64>, IdentifyError> {
+        let _ = (x, lambda);
+        Err(IdentifyError::Layout {
+            message: "this regressor has no loop constraints".into(),
         })
     }
 }
@@ -631,6 +664,23 @@ where
             }
         })?;
         Ok(m)
+    }
+
+    /// One configuration as a vector: N finite entries.
+    fn vector(&self, x: &[f64]) -> Result<SVector<f64, N>, IdentifyError> {
+        if x.len() != N {
+            return Err(IdentifyError::Dimension {
+                what: "positions",
+                expected: N,
+                found: x.len(),
+            });
+        }
+        if x.iter().any(|v| !v.is_finite()) {
+            return Err(IdentifyError::NonFinite {
+                what: "positions".into(),
+            });
+        }
+        Ok(SVector::from_column_slice(x))
     }
 
     fn vectors(&self, t: &Transition<'_>) -> Result<[SVector<f64, N>; 3], IdentifyError> {
@@ -789,13 +839,6 @@ where
         t: &Transition<'_>,
         pi: &[f64],
     ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError> {
-        if C > 0 {
-            return Err(IdentifyError::Layout {
-                message: format!(
-                    "{C} loop constraint(s): a simulation would also solve for their multipliers"
-                ),
-            });
-        }
         let x = self.vectors(t)?;
         let m = self.model_with(pi)?;
         let mut r = DVector::zeros(N);
@@ -828,6 +871,78 @@ where
     ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
         let x = self.vectors(t)?;
         let z = self.null_basis(&x[1]);
+        let (y, b) = self.raw_rows(t, &x)?;
+        let (y, b) = (&z * y, &z * b);
+        if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+            return Err(IdentifyError::NonFinite {
+                what: "regressor rows".into(),
+            });
+        }
+        Ok((y, b))
+    }
+
+    fn unprojected_transition(
+        &self,
+        t: &Transition<'_>,
+    ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
+        let x = self.vectors(t)?;
+        let (y, b) = self.raw_rows(t, &x)?;
+        if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+            return Err(IdentifyError::NonFinite {
+                what: "regressor rows".into(),
+            });
+        }
+        Ok((y, b))
+    }
+
+    fn loop_constraints(
+        &self,
+        x: &[f64],
+    ) -> Result<Option<(DVector<f64>, DMatrix<f64>)>, IdentifyError> {
+        if C == 0 {
+            return Ok(None);
+        }
+        let x = self.vector(x)?;
+        let g = self.model.constraints(&x);
+        let gj = self.model.constraint_jacobian(&x);
+        Ok(Some((
+            DVector::from_column_slice(g.as_slice()),
+            DMatrix::from_fn(C, N, |i, j| gj[(i, j)]),
+        )))
+    }
+
+    fn loop_curvature(&self, x: &[f64], lambda: &[f64]) -> Result<DMatrix<f64>, IdentifyError> {
+        if lambda.len() != C {
+            return Err(IdentifyError::Dimension {
+                what: "multipliers",
+                expected: C,
+                found: lambda.len(),
+            });
+        }
+        let x = self.vector(x)?;
+        let k =
+            vigp_core::Dynamics::constants(&self.model).map_err(|e| IdentifyError::Simulation {
+                message: e.to_string(),
+            })?;
+        let mu = SVector::<f64, C>::from_column_slice(lambda);
+        let h = vigp_core::Dynamics::constraint_hessian(&self.model, &k, &x, &mu);
+        Ok(DMatrix::from_fn(N, N, |i, j| h[(i, j)]))
+    }
+}
+
+impl<M, const N: usize, const C: usize> DelRegressor<M, N, C>
+where
+    M: Mechanism<N, C> + Parameters + Copy,
+{
+    /// The rows (Y, b) of the raw residual (before the projection onto
+    /// G(x_k)'s null space), by differences in π: the residual is affine in
+    /// π, so they are exact to rounding.
+    fn raw_rows(
+        &self,
+        t: &Transition<'_>,
+        x: &[SVector<f64, N>; 3],
+    ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
+        let x = *x;
         let p = self.structure.len();
         let m0 = self.model_with(&self.base)?;
         let r0 = self.raw(&m0, &x, t.inputs);
@@ -843,12 +958,6 @@ where
         }
         let r0 = DVector::from_column_slice(r0.as_slice());
         let b = &y * DVector::from_column_slice(&self.base) - r0;
-        let (y, b) = (&z * y, &z * b);
-        if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
-            return Err(IdentifyError::NonFinite {
-                what: "regressor rows".into(),
-            });
-        }
         Ok((y, b))
     }
 }
