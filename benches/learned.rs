@@ -59,16 +59,16 @@ fn bench_learned(c: &mut Criterion) {
             .expect("bound");
         let mut ws = l.workspace();
         g.bench_function(format!("double_pendulum/N{n}/mean"), |b| {
-            b.iter(|| l.step_mean_with(black_box(&z), &mut ws).unwrap())
+            b.iter(|| l.step_mean_in(black_box(&z), &mut ws).unwrap())
         });
         g.bench_function(format!("double_pendulum/N{n}/bound"), |b| {
             b.iter(|| {
-                let (next, info) = l.step_with(black_box(&z), &mut ws).unwrap();
+                let (next, info) = l.step_in(black_box(&z), &mut ws).unwrap();
                 (next, bound.one_step(info.std_dev.as_slice()))
             })
         });
         // A 20-step horizon with the one-step bound at every step (MPC):
-        // 20 `step_with` calls, against `rollout_with_info`, which steps on
+        // 20 `step_in` calls, against `rollout_with_info`, which steps on
         // the mean and batches the 20 variances (one pass over each L⁻¹).
         // Divide by 20 for the cost per step.
         g.bench_function(format!("double_pendulum/N{n}/horizon20_step_with"), |b| {
@@ -76,7 +76,7 @@ fn bench_learned(c: &mut Criterion) {
                 let mut z = *black_box(&z);
                 let mut s = 0.0;
                 for _ in 0..20 {
-                    let (next, info) = l.step_with(&z, &mut ws).unwrap();
+                    let (next, info) = l.step_in(&z, &mut ws).unwrap();
                     s += bound.one_step(info.std_dev.as_slice()).unwrap();
                     z = next;
                 }
@@ -116,7 +116,7 @@ fn bench_learned(c: &mut Criterion) {
             format!("double_pendulum/N{n}/bound_parallel_variance"),
             |b| {
                 b.iter(|| {
-                    let (next, info) = seq.step_with(black_box(&z), &mut seq_ws).unwrap();
+                    let (next, info) = seq.step_in(black_box(&z), &mut seq_ws).unwrap();
                     (next, bound.one_step(info.std_dev.as_slice()))
                 })
             },
@@ -181,7 +181,7 @@ fn bench_learned(c: &mut Criterion) {
     let (l, _) = train(512, Prior::Nominal);
     let mut ws = l.workspace();
     g.bench_function("double_pendulum/N512/mean_nominal_prior", |b| {
-        b.iter(|| l.step_mean_with(black_box(&z), &mut ws).unwrap())
+        b.iter(|| l.step_mean_in(black_box(&z), &mut ws).unwrap())
     });
     // the two nominal steps a prior could use
     let vi = Variational::new(DoublePendulum::default().minimal(), DT).unwrap();

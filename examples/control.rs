@@ -152,7 +152,7 @@ impl Model for LearnedModel {
     fn step(&self, z: &Z, u: f64) -> Option<Z> {
         let u = SVector::<f64, 1>::new(u);
         self.0
-            .step_mean_forced_with(&unstack(z), &u, &u, &mut self.1.borrow_mut())
+            .step_mean_forced_in(&unstack(z), &u, &u, &mut self.1.borrow_mut())
             .ok()
             .map(|z| stack(&z))
     }

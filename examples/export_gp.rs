@@ -179,7 +179,7 @@ fn main() -> Result<(), Box<dyn Error>> {
     let (mut nominal_se, mut learned_se) = (0.0, 0.0);
     for t in &e.test {
         nominal_se += (vi.step(&t.z)?.v - t.v_next).norm_squared();
-        learned_se += (e.learned.step_mean_with(&t.z, &mut ws)?.v - t.v_next).norm_squared();
+        learned_se += (e.learned.step_mean_in(&t.z, &mut ws)?.v - t.v_next).norm_squared();
     }
     let m = e.test.len() as f64;
     println!(

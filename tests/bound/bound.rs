@@ -640,14 +640,14 @@ fn norm2<const N: usize>(a: &nalgebra::SMatrix<f64, N, N>) -> f64 {
 
 /// The reference for `Learned::step_jacobian_norms`: five-point central
 /// differences ([`common::stencil`], h = 1e-3·max(|x|, 1)) of z ↦ v′ of
-/// `step_mean_with`, each perturbed state first made consistent when the
+/// `step_mean_in`, each perturbed state first made consistent when the
 /// model projects, i.e. the definition the analytic derivative implements,
 /// evaluated a second way.
 fn fd_norms<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
     l: &Learned<M, N, C>,
     z: &State<N>,
 ) -> (f64, f64) {
-    fd_norms_by(l, z, |p, ws| l.step_mean_with(p, ws).unwrap())
+    fd_norms_by(l, z, |p, ws| l.step_mean_in(p, ws).unwrap())
 }
 
 /// [`fd_norms`] of the mean step `step`.
@@ -906,7 +906,7 @@ fn forced_data<
 }
 
 /// `step_jacobian_norms_forced` at states of a forced prediction against
-/// central differences of `step_mean_forced_with` under the same input;
+/// central differences of `step_mean_forced_in` under the same input;
 /// `predict_forced` along the same inputs, and under zero inputs against
 /// `predict`.
 fn check_forced<
@@ -931,16 +931,14 @@ fn check_forced<
     let mut states = vec![*z0];
     for (k, u) in us.iter().enumerate() {
         let next = l
-            .step_mean_forced_with(states.last().unwrap(), &prev(k), u, &mut ws)
+            .step_mean_forced_in(states.last().unwrap(), &prev(k), u, &mut ws)
             .unwrap();
         states.push(next);
     }
     for k in (0..us.len()).step_by(3) {
         let (z, up, u) = (&states[k], prev(k), &us[k]);
         let (a, c) = l.step_jacobian_norms_forced(z, &up, u, &mut ws).unwrap();
-        let (fa, fc) = fd_norms_by(l, z, |p, ws| {
-            l.step_mean_forced_with(p, &up, u, ws).unwrap()
-        });
+        let (fa, fc) = fd_norms_by(l, z, |p, ws| l.step_mean_forced_in(p, &up, u, ws).unwrap());
         for (got, want, what) in [(a, fa, "|dv'/dq|"), (c, fc, "|dv'/dv|")] {
             assert!(
                 (got - want).abs() <= 1e-6 * want.max(1.0),
@@ -1133,7 +1131,7 @@ fn a_variance_lost_to_rounding_is_an_error_not_a_zero_bound() {
     let z0 = noise_free_transitions()[3].z;
     let tight = fixed_noise_model(1e-10);
     let sd = tight
-        .step_with(&z0, &mut tight.workspace())
+        .step_in(&z0, &mut tight.workspace())
         .unwrap()
         .1
         .std_dev[0];

@@ -550,8 +550,8 @@ fn committed_demo_model_is_what_the_example_generates() {
     );
 }
 
-/// The mean-only learned step (`step_mean_with`, used by `Integrator::step`
-/// and rollouts) is the full step (`step_with`, which also computes the
+/// The mean-only learned step (`step_mean_in`, used by `Integrator::step`
+/// and rollouts) is the full step (`step_in`, which also computes the
 /// variances) without the variances: the same next state, bit for bit.
 #[test]
 fn mean_only_learned_step_equals_the_full_step() {
@@ -583,8 +583,8 @@ fn mean_only_learned_step_equals_the_full_step() {
         .unwrap();
         let mut ws = l.workspace();
         for t in &data {
-            let a = l.step_mean_with(&t.z, &mut ws).unwrap();
-            let (b, _) = l.step_with(&t.z, &mut ws).unwrap();
+            let a = l.step_mean_in(&t.z, &mut ws).unwrap();
+            let (b, _) = l.step_in(&t.z, &mut ws).unwrap();
             let c = l.step(&t.z).unwrap();
             assert_eq!((a.q, a.v), (b.q, b.v));
             assert_eq!((a.q, a.v), (c.q, c.v));
@@ -605,8 +605,8 @@ fn mean_only_learned_step_equals_the_full_step() {
     let (l, _) = Learned::train(fb, dt, &data, Encoding::Raw, Prior::Constant, &opts).unwrap();
     let mut ws = l.workspace();
     for t in data.iter().step_by(5) {
-        let a = l.step_mean_with(&t.z, &mut ws).unwrap();
-        let (b, _) = l.step_with(&t.z, &mut ws).unwrap();
+        let a = l.step_mean_in(&t.z, &mut ws).unwrap();
+        let (b, _) = l.step_in(&t.z, &mut ws).unwrap();
         assert_eq!((a.q, a.v), (b.q, b.v));
     }
 }
@@ -757,7 +757,7 @@ fn batched_prediction_equals_single_points() {
 
 /// `Learned::rollout_with_info` (mean steps, then the variances of all
 /// visited points in one batched prediction) reports what `steps` calls of
-/// `step_with` report, bit for bit: states, unprojected velocities,
+/// `step_in` report, bit for bit: states, unprojected velocities,
 /// standard deviations and projection corrections; with the nominal and the
 /// constant prior, and with a projection (fourbar). A non-finite start is
 /// the same typed error, at step 0.
@@ -789,7 +789,7 @@ fn rollout_with_info_equals_repeated_full_steps() {
         assert_eq!(got.len(), steps);
         let mut z = *z0;
         for (k, (state, info)) in got.iter().enumerate() {
-            let (next, want) = l.step_with(&z, &mut ws).unwrap();
+            let (next, want) = l.step_in(&z, &mut ws).unwrap();
             assert!(
                 same_bits(next.q.as_slice(), state.q.as_slice()),
                 "q, step {k}"
@@ -818,7 +818,7 @@ fn rollout_with_info_equals_repeated_full_steps() {
         let mut bad = *z0;
         bad.v[0] = f64::NAN;
         let a = l.rollout_with_info(&bad, steps, &mut ws).unwrap_err();
-        let b = l.step_with(&bad, &mut ws).unwrap_err().at_step(0);
+        let b = l.step_in(&bad, &mut ws).unwrap_err().at_step(0);
         assert_eq!(format!("{a:?}"), format!("{b:?}"));
     }
     for prior in [Prior::Nominal, Prior::Constant] {

@@ -533,7 +533,7 @@ where
     for z in out.iter().step_by(3) {
         let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-amp, amp));
         let up = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-amp, amp));
-        let a = l.step_mean_forced_with(z, &up, &u, &mut ws).unwrap();
+        let a = l.step_mean_forced_in(z, &up, &u, &mut ws).unwrap();
         let b = embedded.step_forced(z, &up, &u).unwrap();
         worst = worst.max(diff(&a, &b));
         // the input is used
@@ -545,14 +545,14 @@ where
         // U = 0 is "no input" (u = 0), as for the nominal `Stepper`
         let none = SVector::<f64, 0>::zeros();
         assert_eq!(free, embedded.step_forced::<0>(z, &none, &none).unwrap());
-        let std_free = l.step_mean_with(z, &mut ws).unwrap();
+        let std_free = l.step_mean_in(z, &mut ws).unwrap();
         assert_eq!(
             std_free,
-            l.step_mean_forced_with(z, &zero, &zero, &mut ws).unwrap()
+            l.step_mean_forced_in(z, &zero, &zero, &mut ws).unwrap()
         );
         assert_eq!(
             std_free,
-            l.step_mean_forced_with::<0>(z, &none, &none, &mut ws)
+            l.step_mean_forced_in::<0>(z, &none, &none, &mut ws)
                 .unwrap()
         );
         worst = worst.max(diff(&std_free, &free));
@@ -847,7 +847,7 @@ fn forced_models_that_do_not_fit_are_refused() {
     // as the std side: u = 0 is the unforced step, anything else refused
     let mut ws = l0.workspace();
     let a = vigp::Integrator::step_forced(&l0, &z, &SVector::from([0.0])).unwrap();
-    let b = l0.step_mean_with(&z, &mut ws).unwrap();
+    let b = l0.step_mean_in(&z, &mut ws).unwrap();
     assert_eq!(a, b);
     assert!(vigp::Integrator::step_forced(&l0, &z, &SVector::from([1.0])).is_err());
     let d = s0.step(&z).unwrap();

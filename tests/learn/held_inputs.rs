@@ -518,9 +518,9 @@ fn learned_step_derivatives_with_previous_input() {
     for t in data.iter().step_by(17).take(6) {
         let (z, up, u) = (t.z, t.u_prev, t.u);
         let (z1, d, dp) = l.step_derivatives_forced(&z, &up, &u, &mut ws).unwrap();
-        assert_eq!(z1, l.step_mean_forced_with(&z, &up, &u, &mut ws).unwrap());
+        assert_eq!(z1, l.step_mean_forced_in(&z, &up, &u, &mut ws).unwrap());
         let mut step = |z: State<2>, up: SVector<f64, 1>, u: SVector<f64, 1>| {
-            l.step_mean_forced_with(&z, &up, &u, &mut ws2).unwrap()
+            l.step_mean_forced_in(&z, &up, &u, &mut ws2).unwrap()
         };
         let (mut err_a, mut scale_a) = (0.0f64, 0.0f64);
         for j in 0..2 {

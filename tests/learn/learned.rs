@@ -35,7 +35,7 @@ fn learned_rollout_violation<M: Mechanism<N, C> + Clone, const N: usize, const C
     let (mut worst, mut max_corr) = (0.0f64, 0.0f64);
     for k in 0..steps {
         let (next, info) = l
-            .step_with(&z, &mut ws)
+            .step_in(&z, &mut ws)
             .unwrap_or_else(|e| panic!("step {k}: {e}"));
         worst = worst.max(l.model().constraint_violation(&next));
         max_corr = max_corr.max(info.correction);
@@ -146,7 +146,7 @@ fn trained_on_the_nominal_model_it_reproduces_the_nominal_step() {
             [rng.uniform(-1.5, 1.5), rng.uniform(-1.5, 1.5)],
             [rng.uniform(-2.0, 2.0), rng.uniform(-2.0, 2.0)],
         );
-        let (next, _) = l.step_with(&z, &mut ws).unwrap();
+        let (next, _) = l.step_in(&z, &mut ws).unwrap();
         let d = next.v - vi.step(&z).unwrap().v;
         worst = worst.max(d.amax());
         sq += d.norm_squared();
@@ -269,7 +269,7 @@ fn one_step_bound_covers_held_out_errors() {
     let mut ws = l.workspace();
     let (mut exceed, mut ratio_max) = (0usize, 0.0f64);
     for t in &held_out {
-        let (next, info) = l.step_with(&t.z, &mut ws).unwrap();
+        let (next, info) = l.step_in(&t.z, &mut ws).unwrap();
         let err = (next.v - t.v_next).norm();
         let b = bound.one_step(info.std_dev.as_slice()).unwrap();
         ratio_max = ratio_max.max(err / b);

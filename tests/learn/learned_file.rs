@@ -52,8 +52,8 @@ fn assert_same_predictions<M: Mechanism<N, C> + Clone, const N: usize, const C: 
     let (ra, rb) = (a.rollout(z0, 30).unwrap(), b.rollout(z0, 30).unwrap());
     assert_eq!(ra, rb, "rollouts differ");
     let (mut wa, mut wb) = (a.workspace(), b.workspace());
-    let (sa, ia) = a.step_with(z0, &mut wa).unwrap();
-    let (sb, ib) = b.step_with(z0, &mut wb).unwrap();
+    let (sa, ia) = a.step_in(z0, &mut wa).unwrap();
+    let (sb, ib) = b.step_in(z0, &mut wb).unwrap();
     assert_eq!(sa, sb);
     assert_eq!(ia, ib);
 }

@@ -1179,7 +1179,7 @@ fn learned_integrator_takes_inputs() {
         let target = true_vi.step_forced(&z, &u).unwrap().v;
         // the first-order VI's step does not depend on the previous input:
         // the one held over z's velocity interval, here u itself
-        let learned = l.step_mean_forced_with(&z, &u, &u, &mut ws).unwrap().v;
+        let learned = l.step_mean_forced_in(&z, &u, &u, &mut ws).unwrap().v;
         let nominal_next = nominal_vi.step_forced(&z, &u).unwrap().v;
         e_learned += (learned - target).norm_squared();
         e_nominal += (nominal_next - target).norm_squared();
@@ -1203,7 +1203,7 @@ fn learned_integrator_takes_inputs() {
         let u = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
         let up = SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0));
         let (z1, d, dp) = l.step_derivatives_forced(&z, &up, &u, &mut ws).unwrap();
-        assert_eq!(z1, l.step_mean_forced_with(&z, &up, &u, &mut ws).unwrap());
+        assert_eq!(z1, l.step_mean_forced_in(&z, &up, &u, &mut ws).unwrap());
         let mut ws2 = l.workspace();
         let mut err = 0.0f64;
         let mut scale = 0.0f64;
@@ -1216,7 +1216,7 @@ fn learned_integrator_takes_inputs() {
                     } else {
                         zp.v[j] += e;
                     }
-                    l.step_mean_forced_with(&zp, &up, &u, &mut ws2).unwrap()
+                    l.step_mean_forced_in(&zp, &up, &u, &mut ws2).unwrap()
                 });
                 let (aq, av) = if pos {
                     (
@@ -1234,7 +1234,7 @@ fn learned_integrator_takes_inputs() {
             }
         }
         let (dq, dv) = stencil(1e-3, |e| {
-            l.step_mean_forced_with(&z, &up, &(u + SVector::<f64, 1>::new(e)), &mut ws2)
+            l.step_mean_forced_in(&z, &up, &(u + SVector::<f64, 1>::new(e)), &mut ws2)
                 .unwrap()
         });
         let eb = (d.b.q_u.column(0) - dq)
@@ -1244,7 +1244,7 @@ fn learned_integrator_takes_inputs() {
         // ∂z₁/∂u_prev: the truth does not depend on u_prev, so the GP's
         // dependence is small; compare against the whole of B's scale
         let (pq, pv) = stencil(1e-3, |e| {
-            l.step_mean_forced_with(&z, &(up + SVector::<f64, 1>::new(e)), &u, &mut ws2)
+            l.step_mean_forced_in(&z, &(up + SVector::<f64, 1>::new(e)), &u, &mut ws2)
                 .unwrap()
         });
         let ep = (dp.q_u.column(0) - pq)
@@ -1284,8 +1284,8 @@ fn learned_integrator_takes_inputs() {
         vigp::Integrator::step_forced(&l, &z, &zero).unwrap()
     );
     assert_eq!(
-        l.step_mean_forced_with(&z, &none, &none, &mut ws).unwrap(),
-        l.step_mean_with(&z, &mut ws).unwrap()
+        l.step_mean_forced_in(&z, &none, &none, &mut ws).unwrap(),
+        l.step_mean_in(&z, &mut ws).unwrap()
     );
     assert_eq!(
         l.predict_velocity_forced(&z, &none, &none, &mut ws)
@@ -1372,7 +1372,7 @@ fn learned_step_derivatives_of_the_paper_systems() {
                 v: SVector::from_fn(|_, _| rng.uniform(-1.0, 1.0)),
             };
             let (z1, d, _) = l.step_derivatives_forced(&z, &u, &u, &mut ws).unwrap();
-            assert_eq!(z1, l.step_mean_forced_with(&z, &u, &u, &mut ws).unwrap());
+            assert_eq!(z1, l.step_mean_forced_in(&z, &u, &u, &mut ws).unwrap());
             worst = worst.max(learned_a_error(&l, &z, &d, eps, &mut ws2));
         }
         println!("{name}: learned A, worst relative error {worst:.1e}");
@@ -1470,9 +1470,7 @@ fn projected_learned_step_derivatives_match_differences() {
                 v: (q[k + 1] - q[k]) / dt,
             };
             let (z1, d, _) = l.step_derivatives_forced(&z, &u, &u, &mut ws).unwrap();
-            assert!(
-                (z1.v - l.step_mean_forced_with(&z, &u, &u, &mut ws).unwrap().v).amax() < 1e-12
-            );
+            assert!((z1.v - l.step_mean_forced_in(&z, &u, &u, &mut ws).unwrap().v).amax() < 1e-12);
             worst = worst.max(learned_a_error(&l, &z, &d, eps, &mut ws2));
         }
         println!("{name}: projected learned A, worst relative error {worst:.1e}");
@@ -1556,7 +1554,7 @@ fn learned_a_error<M: Mechanism<N, C> + Clone, const N: usize, const C: usize>(
                 } else {
                     zp.v[j] += e;
                 }
-                l.step_mean_forced_with(&zp, &u, &u, ws).unwrap()
+                l.step_mean_forced_in(&zp, &u, &u, ws).unwrap()
             });
             let (aq, av) = if pos {
                 (d.a.q_q.column(j), d.a.v_q.column(j))

@@ -1135,7 +1135,7 @@ pub fn projection_cases(size: Size) -> Vec<Row> {
                 v: SVector::from([100.0, -50.0, 80.0, 30.0]),
             };
             let mut ws = l.workspace();
-            match l.step_with(&z, &mut ws) {
+            match l.step_in(&z, &mut ws) {
                 Ok((next, info)) => {
                     let g = fb.constraint_violation(&State {
                         q: next.q + next.v * dt,

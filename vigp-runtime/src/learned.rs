@@ -300,7 +300,7 @@ pub struct LearnedStepInfo<const N: usize> {
 /// Complexity per step: one nominal VI step (with [`Prior::Nominal`]),
 /// O(N·d) per output for the GP mean (N training samples, d input
 /// dimensions: N·d subtract-multiply-adds and N exponentials), O(N²) more
-/// per output for the variance (only [`Learned::step_with`] and the error
+/// per output for the variance (only [`Learned::step_in`] and the error
 /// bound need it; [`Integrator::step`] and rollouts use the mean), and a
 /// Newton projection for constrained models.
 #[derive(Clone, Debug)]
@@ -595,7 +595,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// One learned mean step under inputs `u` after `u_prev` (as
-    /// [`Learned::step_mean_forced_with`]; `U = 0` for no input, u = 0)
+    /// [`Learned::step_mean_forced_in`]; `U = 0` for no input, u = 0)
     /// with its exact derivatives A = ∂z₁/∂z₀, B = ∂z₁/∂u and
     /// B_prev = ∂z₁/∂u_prev (the third value; zero for a model that does
     /// not take the previous input): q₁ = q₀ + Δt·v₀, and
@@ -655,7 +655,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
 
     /// [`Learned::step_derivatives_forced`] for `U` equal to the model's
     /// inputs, or `U = 0` for any model: the derivatives of the step under
-    /// u = 0 that [`Learned::step_mean_with`] takes (the GP input's input
+    /// u = 0 that [`Learned::step_mean_in`] takes (the GP input's input
     /// tail zero-filled).
     #[allow(clippy::type_complexity)]
     pub(crate) fn step_derivatives_at<const U: usize>(
@@ -807,9 +807,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// One learned step from `z` under inputs `u` after `u_prev` (the
     /// input that produced z's velocity; module docs, "Under inputs") using
     /// the posterior mean (and the projection for constrained models), as
-    /// [`Learned::step_mean_with`]. `U` is the number of inputs the model
+    /// [`Learned::step_mean_in`]. `U` is the number of inputs the model
     /// was trained with, or 0 for no input (u = 0).
-    pub fn step_mean_forced_with<const U: usize>(
+    pub fn step_mean_forced_in<const U: usize>(
         &self,
         z: &State<N>,
         u_prev: &SVector<f64, U>,
@@ -890,7 +890,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// the step predicts, [t_{k+1}, t_{k+2}], as in [`ForcedTransition::u`])
     /// after `inputs[k − 1]`, and after `u_prev` for k = 0 (the input that
     /// produced z₀'s velocity), so `inputs.len()` steps. The states equal
-    /// those of [`Learned::step_mean_forced_with`] step by step, and the
+    /// those of [`Learned::step_mean_forced_in`] step by step, and the
     /// standard deviations are those at (z_k, u_{k−1}, u_k), from one
     /// batched [`Gp::predict`] as in `rollout_with_info`.
     ///
@@ -917,7 +917,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// under `inputs[k]` after `inputs[k − 1]` and the first after `u_prev`
     /// (the input that produced z₀'s velocity): the states of
     /// [`Learned::rollout_forced_with_info`] without the variances, and of
-    /// [`Learned::step_mean_forced_with`] step by step. `inputs` must be at
+    /// [`Learned::step_mean_forced_in`] step by step. `inputs` must be at
     /// least as long as `out` (shorter: [`StepError::NonFiniteInput`] at
     /// step `inputs.len()`, before any step). A model trained without
     /// inputs takes only zeros ([`Integrator::step_forced`]). Stops at the
@@ -944,7 +944,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 Integrator::step_forced(self, &z, u)
             } else {
                 let up = if k == 0 { u_prev } else { &inputs[k - 1] };
-                self.step_mean_forced_with(&z, up, u, &mut ws)
+                self.step_mean_forced_in(&z, up, u, &mut ws)
             }
             .map_err(|e| e.at_step(k))?;
             *slot = z;
@@ -964,7 +964,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         &self.gp
     }
 
-    /// Whether the step with its bound ([`step_with`](Self::step_with)) may
+    /// Whether the step with its bound ([`step_in`](Self::step_in)) may
     /// compute some velocity outputs' variances on a helper thread (see
     /// [`Gp::set_parallel_variance`]: default `false`, results bit-identical
     /// either way; when on, a second core busy-waits for 200 µs after each
@@ -1001,7 +1001,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         self.project
     }
 
-    /// A GP workspace for [`Learned::step_with`].
+    /// A GP workspace for [`Learned::step_in`].
     pub fn workspace(&self) -> Workspace {
         self.gp.workspace()
     }
@@ -1104,12 +1104,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// One learned step using only the posterior mean (what a rollout
-    /// needs): like [`step_with`](Self::step_with) without the variances,
+    /// needs): like [`step_in`](Self::step_in) without the variances,
     /// so O(p·N·d) instead of O(p·N·(d + N)) for the GP. Same next state as
-    /// `step_with`, bit for bit. No allocation for inputs of up to 64
+    /// `step_in`, bit for bit. No allocation for inputs of up to 64
     /// dimensions. A model trained with inputs steps under u = 0 (equal to
-    /// [`Learned::step_mean_forced_with`] with zeros).
-    pub fn step_mean_with(&self, z: &State<N>, ws: &mut Workspace) -> Result<State<N>, StepError> {
+    /// [`Learned::step_mean_forced_in`] with zeros).
+    pub fn step_mean_in(&self, z: &State<N>, ws: &mut Workspace) -> Result<State<N>, StepError> {
         Ok(self.mean_step_parts(z, ws)?.0)
     }
 
@@ -1125,20 +1125,20 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// `steps` learned steps from `z0`, each with what
-    /// [`step_with`](Self::step_with) reports (posterior standard deviations,
+    /// [`step_in`](Self::step_in) reports (posterior standard deviations,
     /// unprojected velocity, projection correction): the states and infos
-    /// equal those of `steps` calls of `step_with`, bit for bit. This is the
+    /// equal those of `steps` calls of `step_in`, bit for bit. This is the
     /// multi-step prediction with uncertainty an MPC horizon needs.
     ///
-    /// The steps run on the posterior mean ([`step_mean_with`](Self::step_mean_with),
+    /// The steps run on the posterior mean ([`step_mean_in`](Self::step_mean_in),
     /// which gives the same next state), and the variances at all visited
     /// points come afterwards from one [`Gp::predict`]. For an exact GP with
     /// the stored inverse (the default) that shares each pass over an
     /// output's L⁻¹ between the points, so the variance of a step costs a
-    /// fraction of `step_with`'s, which streams L⁻¹ (N²/2 values per output)
+    /// fraction of `step_in`'s, which streams L⁻¹ (N²/2 values per output)
     /// once per step. Allocates the result and the batch's buffers.
     ///
-    /// Errors: those of `step_with`, tagged with the failing step.
+    /// Errors: those of `step_in`, tagged with the failing step.
     pub fn rollout_with_info(
         &self,
         z0: &State<N>,
@@ -1206,7 +1206,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         let variance = match self.gp.predict(&points) {
             Ok(p) => p.variance,
             Err(_) => {
-                // Name the step whose prediction fails, as step_with would.
+                // Name the step whose prediction fails, as step_in would.
                 let mut z = *z0;
                 for (k, (next, _)) in out.iter().enumerate() {
                     if U == 0 {
@@ -1241,7 +1241,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
 
     /// One learned step with a caller-owned GP workspace (no allocation for
     /// inputs of up to 64 dimensions).
-    pub fn step_with(
+    pub fn step_in(
         &self,
         z: &State<N>,
         ws: &mut Workspace,
@@ -1269,18 +1269,18 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         self.nominal.dt()
     }
 
-    /// One step (mean only, [`Learned::step_mean_with`]; under u = 0 for
+    /// One step (mean only, [`Learned::step_mean_in`]; under u = 0 for
     /// a model trained with inputs); allocates a GP workspace per call (use
-    /// `step_mean_with` in loops).
+    /// `step_mean_in` in loops).
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         let mut ws = self.gp.workspace();
-        self.step_mean_with(z, &mut ws)
+        self.step_mean_in(z, &mut ws)
     }
 
     /// A model trained with inputs ([`Learned::train_forced`]) steps under
-    /// them ([`Learned::step_mean_forced_with`]) with the input taken as
+    /// them ([`Learned::step_mean_forced_in`]) with the input taken as
     /// held across the start, u_prev = u (the trait has no slot for the
-    /// previous input; pass it to `step_mean_forced_with` where it
+    /// previous input; pass it to `step_mean_forced_in` where it
     /// differs); one trained without inputs takes only u = 0.
     fn step_forced<const U: usize>(
         &self,
@@ -1298,7 +1298,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
             };
         }
         let mut ws = self.gp.workspace();
-        self.step_mean_forced_with(z, u, u, &mut ws)
+        self.step_mean_forced_in(z, u, u, &mut ws)
     }
 
     /// Step k under `inputs[k]` after `inputs[k − 1]`, the first step after
@@ -1321,12 +1321,12 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
         }
     }
 
-    /// Mean-only steps ([`Learned::step_mean_with`]) with one workspace.
+    /// Mean-only steps ([`Learned::step_mean_in`]) with one workspace.
     fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
         let mut ws = self.gp.workspace();
         let mut z = *z0;
         for (k, slot) in out.iter_mut().enumerate() {
-            z = self.step_mean_with(&z, &mut ws).map_err(|e| e.at_step(k))?;
+            z = self.step_mean_in(&z, &mut ws).map_err(|e| e.at_step(k))?;
             *slot = z;
         }
         Ok(())

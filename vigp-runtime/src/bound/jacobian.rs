@@ -104,7 +104,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// solves; not the 2N + 1 mean steps of finite differences.
     ///
     /// A model trained with inputs is differentiated under u = 0, the step
-    /// [`Learned::step_mean_with`] and [`Learned::predict`] take.
+    /// [`Learned::step_mean_in`] and [`Learned::predict`] take.
     ///
     /// Errors: as the step ([`StepError`]); a singular constraint Jacobian
     /// at `z` is [`StepError::SingularJacobian`].

@@ -1202,7 +1202,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// bound was calibrated for, a failed step, or a non-finite bound.
     ///
     /// A model trained with inputs predicts under u = 0 here (as
-    /// [`Learned::step_mean_with`]); [`Learned::predict_forced`] predicts
+    /// [`Learned::step_mean_in`]); [`Learned::predict_forced`] predicts
     /// under planned inputs.
     pub fn predict(
         &self,

@@ -447,7 +447,7 @@ impl LearnedRobot {
         self.model.inputs()
     }
 
-    /// A workspace for [`LearnedRobot::step_with`].
+    /// A workspace for [`LearnedRobot::step_in`].
     pub fn workspace(&self) -> Workspace {
         self.gp.workspace()
     }
@@ -455,7 +455,7 @@ impl LearnedRobot {
     /// One learned mean step from `z` under `u` after `u_prev` (module
     /// docs): q₁ = q + Δt·v, v₁ = prior(z, u) + μ(enc(z), u_prev, u), with
     /// the posterior variance of each v₁ entry into `var` when given.
-    pub fn step_with(
+    pub fn step_in(
         &self,
         z: &RobotState,
         u_prev: &[f64],
@@ -487,7 +487,7 @@ impl LearnedRobot {
         Ok(RobotState::new(q, v))
     }
 
-    /// One learned mean step (as [`LearnedRobot::step_with`]) with its
+    /// One learned mean step (as [`LearnedRobot::step_in`]) with its
     /// exact derivatives A = ∂z₁/∂z₀, B = ∂z₁/∂u and B_prev = ∂z₁/∂u_prev,
     /// for MPC and iLQR on the learned model. q₁ = q + Δt·v gives the top
     /// rows [I, Δt·I | 0]; v₁ = prior(z, u) + μ(enc(z), u_prev, u)
@@ -566,14 +566,14 @@ impl LearnedRobot {
         })
     }
 
-    /// [`LearnedRobot::step_with`] with its own workspace and no variance.
+    /// [`LearnedRobot::step_in`] with its own workspace and no variance.
     pub fn step(
         &self,
         z: &RobotState,
         u_prev: &[f64],
         u: &[f64],
     ) -> Result<RobotState, LearnedRobotError> {
-        self.step_with(z, u_prev, u, &mut self.workspace(), None)
+        self.step_in(z, u_prev, u, &mut self.workspace(), None)
     }
 
     /// The learned mean rollout from `z0`: step k runs under `inputs[k]`
@@ -591,7 +591,7 @@ impl LearnedRobot {
         let mut z = z0.clone();
         let mut prev = u_prev;
         for (k, u) in inputs.iter().enumerate() {
-            z = self.step_with(&z, prev, u, &mut ws, None).map_err(|e| {
+            z = self.step_in(&z, prev, u, &mut ws, None).map_err(|e| {
                 LearnedRobotError::Rollout {
                     step: k,
                     source: Box::new(e),

@@ -33,7 +33,7 @@
 //! over the step (the planar `vigp::learned`, "Under inputs", explains
 //! why) — and the prior is the nominal forced step under u
 //! ([`LieStepper::step_forced`]). Such a model steps with
-//! [`LearnedSpatial::step_forced_with`] (previous input explicit) or
+//! [`LearnedSpatial::step_forced_in`] (previous input explicit) or
 //! [`SpatialIntegrator::rollout_forced`] (step k after `inputs[k − 1]`, the
 //! first after `inputs[0]`: the input taken as held across the start); its
 //! plain step, without inputs, is a typed error
@@ -329,7 +329,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// inputs"), and the nominal prior is the forced
     /// Lie-group step under u ([`LieStepper::step_forced`]). `U` must equal
     /// the mechanism's number of actuated joints (checked at compile time).
-    /// Predict with [`LearnedSpatial::step_forced_with`] or
+    /// Predict with [`LearnedSpatial::step_forced_in`] or
     /// [`SpatialIntegrator::rollout_forced`].
     pub fn train_forced<const U: usize>(
         stepper: LieStepper<S, B, J, N, C>,
@@ -457,7 +457,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         self.inputs
     }
 
-    /// A GP workspace for [`Self::step_with`].
+    /// A GP workspace for [`Self::step_in`].
     pub fn workspace(&self) -> Workspace {
         self.gp.workspace()
     }
@@ -640,8 +640,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// One learned step: configuration k+1 exactly, velocities predicted
     /// and projected so that configuration k+2 is consistent. No
     /// allocation (GP inputs of up to 128 dimensions). A model trained
-    /// with inputs steps with [`Self::step_forced_with`].
-    pub fn step_with(
+    /// with inputs steps with [`Self::step_forced_in`].
+    pub fn step_in(
         &self,
         z: &SpatialState<B>,
         ws: &mut Workspace,
@@ -655,8 +655,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// z's velocities) of a model from [`LearnedSpatial::train_forced`]:
     /// the configuration update is exact, the velocities are the forced
     /// prior plus the GP mean at (enc(z), u_prev, u), projected as in
-    /// [`Self::step_with`]. No allocation.
-    pub fn step_forced_with<const U: usize>(
+    /// [`Self::step_in`]. No allocation.
+    pub fn step_forced_in<const U: usize>(
         &self,
         z: &SpatialState<B>,
         u_prev: &SVector<f64, U>,
@@ -698,10 +698,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 
     /// One step; allocates a GP workspace per call (use
-    /// [`LearnedSpatial::step_with`] in loops).
+    /// [`LearnedSpatial::step_in`] in loops).
     fn step(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, SpatialError> {
         let mut ws = self.gp.workspace();
-        Ok(self.step_with(z, &mut ws)?)
+        Ok(self.step_in(z, &mut ws)?)
     }
 
     /// Steps with one workspace.
@@ -716,14 +716,14 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         out.push(*z0);
         let mut z = *z0;
         for k in 0..steps {
-            z = self.step_with(&z, &mut ws).map_err(|e| in_rollout(e, k))?;
+            z = self.step_in(&z, &mut ws).map_err(|e| in_rollout(e, k))?;
             out.push(z);
         }
         Ok(out)
     }
 
     /// A model from [`LearnedSpatial::train_forced`] steps under `u`
-    /// ([`LearnedSpatial::step_forced_with`]; `U` must be the training
+    /// ([`LearnedSpatial::step_forced_in`]; `U` must be the training
     /// data's) with the input taken as held across the start, u_prev = u
     /// (the trait has no slot for the previous input). A model trained
     /// without inputs takes u = 0 as
@@ -785,9 +785,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             if !u.iter().all(|x| *x == 0.0) {
                 return Err(SpatialError::Step(StepError::InputsNotSupported));
             }
-            self.step_with(z, ws)
+            self.step_in(z, ws)
         } else {
-            self.step_forced_with(z, u_prev, u, ws)
+            self.step_forced_in(z, u_prev, u, ws)
         };
         step.map_err(|e| match k {
             Some(k) => in_rollout(e, k),

@@ -198,7 +198,7 @@ impl LearnedRobot {
         let mut var = vec![0.0; n];
         for (k, u) in inputs.iter().enumerate() {
             let next = self
-                .step_with(&t.states[k], prev, u, &mut ws, Some(&mut var))
+                .step_in(&t.states[k], prev, u, &mut ws, Some(&mut var))
                 .map_err(|e| LearnedRobotError::Rollout {
                     step: k,
                     source: Box::new(e),
