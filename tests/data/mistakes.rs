@@ -132,7 +132,7 @@ fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
     let mut max_e = e0;
     let mut ratios = Vec::new();
     for _ in 0..20 {
-        match off.step_with_info(&z) {
+        match off.step_with_report(&z) {
             Ok((next, info)) => {
                 z = next;
                 max_e = max_e.max(m.energy(&z));
@@ -214,7 +214,7 @@ fn resolved_motions_pass_the_continuation_check() {
     let mut z = State::new([2.0, -1.0], [3.0, -3.0]);
     let mut worst = 0.0f64;
     for _ in 0..2000 {
-        let (next, info) = vi.step_with_info(&z).unwrap();
+        let (next, info) = vi.step_with_report(&z).unwrap();
         worst = worst.max(info.continuation);
         z = next;
     }
@@ -230,7 +230,7 @@ fn resolved_motions_pass_the_continuation_check() {
     let mut z = z0;
     let mut worst_fb = 0.0f64;
     for _ in 0..2000 {
-        let (next, info) = fvi.step_with_info(&z).unwrap();
+        let (next, info) = fvi.step_with_report(&z).unwrap();
         worst_fb = worst_fb.max(info.continuation);
         z = next;
     }
@@ -264,7 +264,7 @@ fn a_stiff_damped_step_that_bends_far_is_accepted() {
     let m = s.minimal();
     let vi = Variational::new(m, 0.047040756234092526).unwrap();
     let z = State::new([0.0, -1.7990825640243568], [11.226092073870637, 0.0]);
-    let (z1, info) = vi.step_with_info(&z).unwrap();
+    let (z1, info) = vi.step_with_report(&z).unwrap();
     println!(
         "stiff damped step: bend {:.2} rad, energy {:.3} J -> {:.3} J",
         info.continuation,

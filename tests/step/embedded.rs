@@ -433,7 +433,7 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
             let z1 = a.step(&zm).unwrap();
             assert!(same(&z1, &sa.step(&zm).unwrap()));
             // the diagnostics path keeps the same workspace
-            assert!(same(&a.step_with_info(&zm).unwrap().0, &z1));
+            assert!(same(&a.step_with_report(&zm).unwrap().0, &z1));
             let zd = random_state(&dp.minimal(), &mut rng, dt);
             assert!(same(&vdp.step(&zd).unwrap(), &s[1].step(&zd).unwrap()));
             for (b, sb) in vis.iter().zip(&steppers) {

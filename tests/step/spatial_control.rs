@@ -496,7 +496,7 @@ fn the_rail_closed_slider_crank_steps_in_quaternion_coordinates() {
             let n = (20.0 / dt).round() as usize;
             for k in 0..n {
                 let (z1, info) = vi
-                    .step_with_info(&z)
+                    .step_with_report(&z)
                     .unwrap_or_else(|e| panic!("midpoint {midpoint}, Δt {dt}, step {k}: {e}"));
                 assert!(
                     !info.stalled,

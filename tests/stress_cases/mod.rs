@@ -140,7 +140,7 @@ pub fn run_vi<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
         regularised: 0,
     };
     for k in 0..steps {
-        match vi.step_with_info(&z) {
+        match vi.step_with_report(&z) {
             Ok((next, info)) => {
                 assert!(next.is_finite(), "step {k} returned a non-finite state");
                 z = next;

@@ -104,6 +104,8 @@ pub fn project_velocity_from<M: Dynamics<N, C>, const N: usize, const C: usize>(
                 stalled: !converged,
                 regularised,
                 continuation: 0.0,
+                restarted: false,
+                subdivisions: 0,
             };
             return Ok((v, report));
         }

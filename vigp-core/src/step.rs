@@ -177,6 +177,14 @@ pub struct StepReport {
     /// The bend |h·(v₁ − v₀)|∞ of the step's discrete path (largest over
     /// sub-steps; [`Stepper::continuation_bound`]).
     pub continuation: f64,
+    /// The solve was restarted from a feasible point after its first run
+    /// failed (the std runtime's velocity projection far off the
+    /// manifold). The core's own solves do not restart.
+    pub restarted: bool,
+    /// How often the step halved its sub-step before it converged (the
+    /// std runtime's `Variational::max_subdivision`; 0: at once). The
+    /// core's [`Stepper`] does not subdivide.
+    pub subdivisions: u32,
 }
 
 impl StepReport {
@@ -186,6 +194,8 @@ impl StepReport {
         self.continuation = self.continuation.max(other.continuation);
         self.stalled |= other.stalled;
         self.regularised |= other.regularised;
+        self.restarted |= other.restarted;
+        self.subdivisions = self.subdivisions.max(other.subdivisions);
     }
 }
 
@@ -936,6 +946,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     stalled: false,
                     regularised,
                     continuation: 0.0,
+                    restarted: false,
+                    subdivisions: 0,
                 };
                 if C > 0 {
                     // c and G at x₁ + h·v, the next step's x₁
@@ -1010,6 +1022,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                                 stalled: false,
                                 regularised,
                                 continuation: 0.0,
+                                restarted: false,
+                                subdivisions: 0,
                             };
                             return Ok((v1, M::mass_times(t, &v1), report, lambda));
                         }
@@ -1127,6 +1141,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                             stalled: true,
                             regularised,
                             continuation: 0.0,
+                            restarted: false,
+                            subdivisions: 0,
                         };
                         if C > 0 {
                             // c and G at x₁ + h·v, the next step's x₁
@@ -1149,6 +1165,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 stalled: false,
                 regularised,
                 continuation: 0.0,
+                restarted: false,
+                subdivisions: 0,
             };
             if C > 0 {
                 // c and G at x₁ + h·v, the next step's x₁

@@ -47,7 +47,7 @@ pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
 /// The linear-algebra crate of vigp's public types (`SVector` in states and
 /// transitions), so that users need not guess a matching version.
 pub use nalgebra::{self, SMatrix, SVector};
-pub use newton::{StepError, StepInfo, StepOptions};
+pub use newton::{StepError, StepOptions, StepReport};
 pub use params::{ElasticJoint, Joint, Link, Spring};
 #[cfg(feature = "urdf")]
 pub use robot::{Robot, RobotError, RobotState};
@@ -66,7 +66,7 @@ pub use vigp_core::Real;
 /// Jacobian ([`del`]), Newton options, diagnostics, the step error and the
 /// regularised KKT solve ([`newton`]), and small dense solvers with pivoting
 /// ([`linalg`]). Most programs need only [`StepOptions`], [`StepError`]
-/// and [`StepInfo`], re-exported at the top; the modules are public for
+/// and [`StepReport`], re-exported at the top; the modules are public for
 /// tests, benchmarks and callers who build their own steps.
 pub mod solver {
     pub use crate::{del, linalg, newton};

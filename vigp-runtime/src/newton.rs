@@ -9,31 +9,13 @@
 /// Jacobian loses rank) is accepted.
 pub use vigp_core::StepOptions;
 
-/// Diagnostics of a converged step.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct StepInfo {
-    /// Newton iterations used.
-    pub iterations: usize,
-    /// Final scaled residual (max-norm).
-    pub residual: f64,
-    /// `true` when the step was accepted as stalled (see
-    /// [`StepOptions::stall_tolerance`]) rather than converged.
-    pub stalled: bool,
-    /// `true` when some Newton matrix was singular and the equivalent
-    /// regularised KKT system was solved instead (see
-    /// [`solve_kkt_regularised`]).
-    pub regularised: bool,
-    /// `true` when the first Newton run failed and the solve was restarted
-    /// from a feasible point (the velocity projection from far off the
-    /// manifold, see [`crate::projection::project_velocity`]).
-    pub restarted: bool,
-    /// The bend |Δt·(v₁ − v₀)|∞ of the step's discrete path (the core's
-    /// [`vigp_core::StepReport::continuation`]; 0 where not measured).
-    pub continuation: f64,
-    /// How often the step halved its sub-step before it converged (0: at
-    /// once; see [`crate::Variational::max_subdivision`]).
-    pub subdivisions: u32,
-}
+/// Diagnostics of a converged step, the core's: Newton iterations, final
+/// scaled residual, whether it was accepted as stalled or needed the
+/// regularised KKT solve ([`solve_kkt_regularised`]), the bend of its
+/// discrete path, whether a velocity projection restarted
+/// ([`crate::projection::project_velocity`]) and how often the step halved
+/// its sub-step ([`crate::Variational::max_subdivision`]).
+pub use vigp_core::StepReport;
 
 pub use vigp_core::linalg::solve_kkt_regularised;
 
@@ -52,19 +34,4 @@ pub fn trajectory_buffer<T: Clone>(first: T, steps: usize) -> Result<Vec<T>, Ste
         .map_err(|_| StepError::TooManySteps { steps })?;
     v.resize(len, first);
     Ok(v)
-}
-
-impl StepInfo {
-    /// Diagnostics of a core step.
-    pub fn from_report(r: &vigp_core::StepReport) -> Self {
-        StepInfo {
-            iterations: r.iterations,
-            residual: r.residual,
-            stalled: r.stalled,
-            regularised: r.regularised,
-            restarted: false,
-            continuation: r.continuation,
-            subdivisions: 0,
-        }
-    }
 }

@@ -5,7 +5,7 @@
 
 use crate::linalg::FullPivLu;
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{StepError, StepInfo, StepOptions};
+use crate::newton::{StepError, StepOptions, StepReport};
 use nalgebra::{SMatrix, SVector};
 use vigp_core::CoordinateKind;
 use vigp_core::state::discrete_velocity;
@@ -26,7 +26,7 @@ pub fn project_configuration<M: Mechanism<N, C>, const N: usize, const C: usize>
     m: &M,
     q: &SVector<f64, N>,
     options: &StepOptions,
-) -> Result<(SVector<f64, N>, StepInfo), StepError> {
+) -> Result<(SVector<f64, N>, StepReport), StepError> {
     options.validate()?;
     if q.iter().any(|x| !x.is_finite()) {
         return Err(StepError::NonFiniteState { step: None });
@@ -73,7 +73,7 @@ fn gauss_newton<const N: usize, const C: usize>(
     angles: Option<&[CoordinateKind; N]>,
     options: &StepOptions,
     residual: impl Fn(&SVector<f64, N>) -> (SVector<f64, C>, SMatrix<f64, C, N>),
-) -> Result<(SVector<f64, N>, StepInfo), StepError> {
+) -> Result<(SVector<f64, N>, StepReport), StepError> {
     let mut x = *x0;
     let (mut r, mut j) = residual(&x);
     for iter in 0..=options.max_iterations {
@@ -97,7 +97,7 @@ fn gauss_newton<const N: usize, const C: usize>(
                     x = wound;
                 }
             }
-            let info = StepInfo {
+            let info = StepReport {
                 subdivisions: 0,
                 iterations: iter,
                 residual: res,
@@ -154,7 +154,7 @@ fn gauss_newton<const N: usize, const C: usize>(
 /// minimum of its merit function, since q₁ + Δt·v wraps around the loop's
 /// configuration space. The remedy used then: restart Newton from the
 /// feasible point v = (P(q₁ + Δt·v_u) − q₁)/Δt, with P the
-/// [`project_configuration`] map (reported as [`StepInfo::restarted`]). If
+/// [`project_configuration`] map (reported as [`StepReport::restarted`]). If
 /// that fails too, the first run's error is returned.
 pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     m: &M,
@@ -162,7 +162,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     v_u: &SVector<f64, N>,
     dt: f64,
     options: &StepOptions,
-) -> Result<(SVector<f64, N>, StepInfo), StepError> {
+) -> Result<(SVector<f64, N>, StepReport), StepError> {
     vigp_core::step::check_time_step(dt)?;
     options.validate()?;
     if q1.iter().chain(v_u.iter()).any(|x| !x.is_finite()) {
@@ -171,7 +171,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     if C == 0 {
         return Ok((
             *v_u,
-            StepInfo {
+            StepReport {
                 subdivisions: 0,
                 iterations: 0,
                 residual: 0.0,
@@ -193,7 +193,7 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
     match newton_projection(m, q1, v_u, &start, dt, options) {
         Ok((v, info)) => Ok((
             v,
-            StepInfo {
+            StepReport {
                 restarted: true,
                 continuation: 0.0,
                 ..info
@@ -212,12 +212,12 @@ fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
     start: &SVector<f64, N>,
     dt: f64,
     options: &StepOptions,
-) -> Result<(SVector<f64, N>, StepInfo), StepError> {
+) -> Result<(SVector<f64, N>, StepReport), StepError> {
     let k = m.constants()?;
     let (v, r) = vigp_core::projection::project_velocity_from(m, &k, q1, v_u, start, dt, options)?;
     Ok((
         v,
-        StepInfo {
+        StepReport {
             subdivisions: 0,
             iterations: r.iterations,
             residual: r.residual,

@@ -10,7 +10,7 @@
 
 use crate::del;
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{StepError, StepInfo, StepOptions, solve_kkt_regularised};
+use crate::newton::{StepError, StepOptions, StepReport, solve_kkt_regularised};
 use nalgebra::{SMatrix, SVector};
 
 /// One variational step (α = 0: the paper's first-order rule; α = ½: the
@@ -22,7 +22,7 @@ pub fn step<M: Mechanism<N, C>, const N: usize, const C: usize>(
     alpha: f64,
     options: &StepOptions,
     z: &State<N>,
-) -> Result<(State<N>, StepInfo), StepError> {
+) -> Result<(State<N>, StepReport), StepError> {
     step_forced(m, dt, alpha, options, z, &[])
 }
 
@@ -37,7 +37,7 @@ pub fn step_forced<M: Mechanism<N, C>, const N: usize, const C: usize>(
     options: &StepOptions,
     z: &State<N>,
     u: &[f64],
-) -> Result<(State<N>, StepInfo), StepError> {
+) -> Result<(State<N>, StepReport), StepError> {
     vigp_core::step::check_time_step(dt)?;
     if !z.is_finite() {
         return Err(StepError::NonFiniteState { step: None });
@@ -116,7 +116,7 @@ pub fn step_forced<M: Mechanism<N, C>, const N: usize, const C: usize>(
             }
             return Ok((
                 next,
-                StepInfo {
+                StepReport {
                     subdivisions: 0,
                     iterations: iter,
                     residual: res_r.max(res_c),

@@ -2,7 +2,7 @@
 //! [`Integrator`] trait shared by every integrator in vigp.
 
 use crate::mechanism::{Mechanism, State};
-use crate::newton::{StepError, StepInfo, StepOptions};
+use crate::newton::{StepError, StepOptions, StepReport};
 use nalgebra::SVector;
 use vigp_core::{Inputs, StepWorkspace, Stepper};
 
@@ -133,7 +133,7 @@ pub trait Integrator<const N: usize> {
 /// step in smaller sub-steps. [`Variational::max_subdivision`]`(d)` makes
 /// a failing step **subdivide itself**: it is taken again with its
 /// sub-step halved, up to d times, until one converges, and only then is
-/// it an error ([`StepError::NotResolved`]); [`StepInfo::subdivisions`] and
+/// it an error ([`StepError::NotResolved`]); [`StepReport::subdivisions`] and
 /// [`Variational::rollout_with_report`] say how often it happened. Steps
 /// that converge at once are unchanged, bit for bit, and cost the same. A
 /// subdivided step restarts from the state (the momentum a rollout carries
@@ -347,7 +347,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// equations but does not continue the motion (the double pendulum
     /// released from rest at Δt = 2 s bends 32 rad in its first step). The
     /// bend of each step is
-    /// [`StepInfo::continuation`](crate::StepInfo::continuation).
+    /// [`StepReport::continuation`](crate::StepReport::continuation).
     /// `f64::INFINITY` turns the check off; NaN or a bound ≤ 0 is
     /// [`StepError::InvalidOptions`].
     pub fn continuation_bound(self, bound: f64) -> Result<Self, StepError> {
@@ -424,15 +424,19 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// One step with solver diagnostics (with sub-steps: iterations summed,
     /// the largest residual, and any sub-step's flags). The solver's
     /// scratch is kept as in [`Variational::step`].
-    pub fn step_with_info(&self, z: &State<N>) -> Result<(State<N>, StepInfo), StepError> {
+    pub fn step_with_report(&self, z: &State<N>) -> Result<(State<N>, StepReport), StepError> {
         let ((z1, report), depth) = self.step_from(
             z,
             |s, ws| s.step_with_report_in(z, ws),
             |s| s.step_with_report(z),
         )?;
-        let mut info = StepInfo::from_report(&report);
-        info.subdivisions = depth;
-        Ok((z1, info))
+        Ok((
+            z1,
+            StepReport {
+                subdivisions: depth,
+                ..report
+            },
+        ))
     }
 
     /// A step from the state `z`: `kept` on this thread's kept workspace
