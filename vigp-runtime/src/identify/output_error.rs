@@ -430,6 +430,7 @@ fn loop_step<R: Regressor>(
         a
     };
     let mut converged = false;
+    let mut last = f64::INFINITY;
     for _ in 0..30 {
         let t = Transition {
             positions: [before[0], before[1], next],
@@ -452,10 +453,15 @@ fn loop_step<R: Regressor>(
         if !(next.iter().all(|v| v.is_finite()) && lambda.iter().all(|v| v.is_finite())) {
             return Err(SimFailure::Diverged);
         }
-        if step.rows(0, n).amax() <= 1e-13 * scale {
+        // converged; or at the rounding floor of an ill-conditioned KKT
+        // matrix (near a loop's singular configuration), where the updates
+        // stop shrinking at a size far below any motion
+        let size = step.rows(0, n).amax();
+        if size <= 1e-13 * scale || (size <= 1e-10 * scale && size >= 0.5 * last) {
             converged = true;
             break;
         }
+        last = size;
     }
     if !converged {
         return Err(SimFailure::Diverged);
@@ -484,6 +490,34 @@ fn loop_step<R: Regressor>(
         .solve(&rhs)
         .ok_or(SimFailure::Diverged)?;
     Ok(Some(sol.rows(0, n).into_owned()))
+}
+
+/// The configuration `x` moved onto the loop constraints g = 0 by
+/// Gauss–Newton minimum-norm corrections x ← x − Gᵀ(GGᵀ)⁻¹g (a logged
+/// sample is off them by its noise); `x` itself without loops, or where
+/// the correction does not converge in 20 iterations.
+fn onto_loops<R: Regressor>(regressor: &R, x: &[f64]) -> Result<Vec<f64>, IdentifyError> {
+    let mut q = x.to_vec();
+    for _ in 0..20 {
+        let Some((g, gj)) = regressor.loop_constraints(&q)? else {
+            return Ok(q);
+        };
+        let scale = 1.0 + q.iter().fold(0.0_f64, |a, v| a.max(v.abs()));
+        if g.amax() <= 1e-13 * scale {
+            return Ok(q);
+        }
+        let Some(y) = (&gj * gj.transpose()).lu().solve(&g) else {
+            break;
+        };
+        let dq = gj.transpose() * y;
+        for (qi, d) in q.iter_mut().zip(dq.iter()) {
+            *qi -= d;
+        }
+        if !q.iter().all(|v| v.is_finite()) {
+            break;
+        }
+    }
+    Ok(x.to_vec())
 }
 
 /// The state of the optimisation: π and every segment's initial positions.
@@ -700,28 +734,26 @@ impl<R: Regressor> Problem<'_, R> {
     }
 
     /// Levenberg–Marquardt from the parameters `start`, each segment from
-    /// its logged samples (module docs), with σ² re-estimated at the
-    /// solution and the problem solved again if it moved by more than
-    /// 20 %.
+    /// its logged samples (module docs; with loops, projected onto them),
+    /// with σ² re-estimated at the solution and the problem solved again
+    /// if it moved by more than 20 %.
     fn descend(&self, start: &[f64]) -> Result<Descent, IdentifyError> {
         let (regressor, logs, segs, first) = (self.regressor, self.logs, self.segs, self.first);
         let options = self.options;
         let n = regressor.coordinates();
+        let mut starts = Vec::with_capacity(segs.len());
+        for s in segs {
+            let log = &logs[s.log];
+            let mut x = DVector::zeros(2 * n);
+            for (i, sample) in [s.start, s.start + 1].into_iter().enumerate() {
+                let q = onto_loops(regressor, &log.positions[sample])?;
+                x.rows_mut(i * n, n).copy_from_slice(&q);
+            }
+            starts.push(x);
+        }
         let mut at = Point {
             pi: DVector::from_column_slice(start),
-            starts: segs
-                .iter()
-                .map(|s| {
-                    let log = &logs[s.log];
-                    DVector::from_iterator(
-                        2 * n,
-                        log.positions[s.start]
-                            .iter()
-                            .chain(&log.positions[s.start + 1])
-                            .cloned(),
-                    )
-                })
-                .collect(),
+            starts,
         };
         if self.consistent && !consistency::feasible(&first.structure, start) {
             return Err(IdentifyError::Inconsistent {
@@ -887,11 +919,18 @@ pub fn refine<R: Regressor>(
     // values. The objective is not convex, and from the boundary the
     // projected steps can stall in a poorer minimum. The lower objective
     // wins, compared with the smaller of the two noise estimates.
-    let mut descent = problem.descend(if homogeneous {
+    // A regression far off may not simulate every segment; the declared
+    // values then start the descent.
+    let mut descent = match problem.descend(if homogeneous {
         &first.declared
     } else {
         &first.estimate
-    })?;
+    }) {
+        Err(IdentifyError::Simulation { .. }) if !homogeneous => {
+            problem.descend(&first.declared)?
+        }
+        other => other?,
+    };
     let on_boundary = !(first.projected.is_empty() && first.projected_joints.is_empty());
     if !homogeneous && on_boundary && first.estimate != first.declared {
         match problem.descend(&first.declared) {
