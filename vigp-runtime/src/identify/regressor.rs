@@ -544,6 +544,19 @@ pub trait Regressor {
     }
 }
 
+/// The rows (Y, b), or [`IdentifyError::NonFinite`] when an entry is NaN
+/// or ∞.
+fn finite_rows(
+    (y, b): (DMatrix<f64>, DVector<f64>),
+) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
+    if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
+        return Err(IdentifyError::NonFinite {
+            what: "regressor rows".into(),
+        });
+    }
+    Ok((y, b))
+}
+
 /// Central differences of a transition's residual in its 3N positions
 /// (columns x_{k−1}, x_k, x_{k+1}), step 1e-6·(1 + |x|): truncation ≈ 1e-12
 /// relative, rounding ≈ 1e-10; ample for a covariance
@@ -872,13 +885,7 @@ where
         let x = self.vectors(t)?;
         let z = self.null_basis(&x[1]);
         let (y, b) = self.raw_rows(t, &x)?;
-        let (y, b) = (&z * y, &z * b);
-        if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
-            return Err(IdentifyError::NonFinite {
-                what: "regressor rows".into(),
-            });
-        }
-        Ok((y, b))
+        finite_rows((&z * y, &z * b))
     }
 
     fn unprojected_transition(
@@ -886,13 +893,7 @@ where
         t: &Transition<'_>,
     ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
         let x = self.vectors(t)?;
-        let (y, b) = self.raw_rows(t, &x)?;
-        if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
-            return Err(IdentifyError::NonFinite {
-                what: "regressor rows".into(),
-            });
-        }
-        Ok((y, b))
+        finite_rows(self.raw_rows(t, &x)?)
     }
 
     fn loop_constraints(
