@@ -1113,11 +1113,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Ok(self.mean_step_parts(z, ws)?.0)
     }
 
+    /// A step's own check: a finite state (Δt was checked when the
+    /// nominal integrator was built).
     fn check_step(&self, z: &State<N>) -> Result<(), StepError> {
-        let dt = self.nominal.dt();
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(StepError::InvalidTimeStep { dt });
-        }
         if !z.is_finite() {
             return Err(StepError::NonFiniteState { step: None });
         }
