@@ -258,6 +258,16 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         }
     }
 
+    /// The checks of a step from a state: a finite `z`, then a finite `u`
+    /// ([`Stepper::check_input`]).
+    #[inline(always)]
+    fn check_start<const U: usize>(z: &State<N>, u: &SVector<f64, U>) -> Result<(), StepError> {
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState { step: None });
+        }
+        Self::check_input(u)
+    }
+
     /// One forced sub-step (module docs), u = 0 on the unforced path.
     #[inline(always)]
     pub(crate) fn solve_forced_any<const U: usize>(
@@ -373,10 +383,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         u: &SVector<f64, U>,
         ws: &mut Workspace<N, C>,
     ) -> Result<(State<N>, StepReport), StepError> {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        Self::check_input(u)?;
+        Self::check_start(z, u)?;
         let p0 = self.momentum(z);
         self.advance(z, &p0, &z.v, u, ws).map(|(z1, _, r)| (z1, r))
     }
@@ -423,10 +430,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     where
         M: Inputs<U>,
     {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        Self::check_input(u)?;
+        Self::check_start(z, u)?;
         self.advance(z, p0, &z.v, u, &mut Workspace::new())
     }
 
@@ -702,10 +706,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         u: &SVector<f64, U>,
         t: &mut Workspace<N, C>,
     ) -> Result<(State<N>, StepDerivatives<N, U>), StepError> {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        Self::check_input(u)?;
+        Self::check_start(z, u)?;
         let h = self.substep_dt();
         let p0 = self.momentum(z);
         let (pq, pv) = self.momentum_derivatives_at(z, h, &mut t.t);

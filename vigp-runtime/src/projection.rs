@@ -98,13 +98,9 @@ fn gauss_newton<const N: usize, const C: usize>(
                 }
             }
             let info = StepReport {
-                subdivisions: 0,
                 iterations: iter,
                 residual: res,
-                stalled: false,
-                regularised: false,
-                restarted: false,
-                continuation: 0.0,
+                ..StepReport::default()
             };
             return Ok((x, info));
         }
@@ -169,20 +165,13 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
         return Err(StepError::NonFiniteState { step: None });
     }
     if C == 0 {
-        return Ok((
-            *v_u,
-            StepReport {
-                subdivisions: 0,
-                iterations: 0,
-                residual: 0.0,
-                stalled: false,
-                regularised: false,
-                restarted: false,
-                continuation: 0.0,
-            },
-        ));
+        return Ok((*v_u, StepReport::default()));
     }
-    let first = match newton_projection(m, q1, v_u, v_u, dt, options) {
+    let k = m.constants()?;
+    // Newton on the projection's KKT system from the initial guess `start`
+    let newton =
+        |start| vigp_core::projection::project_velocity_from(m, &k, q1, v_u, start, dt, options);
+    let first = match newton(v_u) {
         Err(e @ (StepError::NotConverged { .. } | StepError::SingularJacobian { .. })) => e,
         done => return done,
     };
@@ -190,43 +179,16 @@ pub fn project_velocity<M: Mechanism<N, C>, const N: usize, const C: usize>(
         return Err(first);
     };
     let start = discrete_velocity(q1, &q2, dt);
-    match newton_projection(m, q1, v_u, &start, dt, options) {
-        Ok((v, info)) => Ok((
+    match newton(&start) {
+        Ok((v, report)) => Ok((
             v,
             StepReport {
                 restarted: true,
-                continuation: 0.0,
-                ..info
+                ..report
             },
         )),
         Err(_) => Err(first),
     }
-}
-
-/// Newton on the projection's KKT system from the initial guess `start`
-/// ([`vigp_core::projection::project_velocity_from`]).
-fn newton_projection<M: Mechanism<N, C>, const N: usize, const C: usize>(
-    m: &M,
-    q1: &SVector<f64, N>,
-    v_u: &SVector<f64, N>,
-    start: &SVector<f64, N>,
-    dt: f64,
-    options: &StepOptions,
-) -> Result<(SVector<f64, N>, StepReport), StepError> {
-    let k = m.constants()?;
-    let (v, r) = vigp_core::projection::project_velocity_from(m, &k, q1, v_u, start, dt, options)?;
-    Ok((
-        v,
-        StepReport {
-            subdivisions: 0,
-            iterations: r.iterations,
-            residual: r.residual,
-            stalled: r.stalled,
-            regularised: r.regularised,
-            restarted: false,
-            continuation: 0.0,
-        },
-    ))
 }
 
 /// A consistent initial state from guesses: the configuration projected onto

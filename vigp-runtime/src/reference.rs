@@ -117,13 +117,11 @@ pub fn step_forced<M: Mechanism<N, C>, const N: usize, const C: usize>(
             return Ok((
                 next,
                 StepReport {
-                    subdivisions: 0,
                     iterations: iter,
                     residual: res_r.max(res_c),
                     stalled: !converged,
                     regularised,
-                    restarted: false,
-                    continuation: 0.0,
+                    ..StepReport::default()
                 },
             ));
         }

@@ -192,20 +192,18 @@ fn failure_size(e: &StepError) -> f64 {
 /// [`StepError::LoopCannotClose`] with the smallest residual found. (A loop
 /// that closes only at a rank-deficient pose, a chain pinned at full
 /// stretch, converges linearly there and passes: 1e-6 is far above what
-/// 100 such iterations leave, far below a gap between links.)
+/// 100 such iterations leave, far below a gap between links.) Runs on a
+/// built stepper, whose constants are valid.
 fn loop_closes<M: Mechanism<N, C>, const N: usize, const C: usize>(
-    model: &M,
-) -> Result<(), StepError> {
+    stepper: Stepper<M, N, C>,
+) -> Result<Stepper<M, N, C>, StepError> {
+    let (model, k) = (stepper.model(), stepper.constants());
     if C == 0 {
-        return Ok(());
+        return Ok(stepper);
     }
     let options = StepOptions {
         max_iterations: 100,
         ..StepOptions::default()
-    };
-    let Ok(k) = model.constants() else {
-        // invalid parameters are reported by the stepper's own check
-        return Ok(());
     };
     let mut best = f64::INFINITY;
     for s in [0.0, 0.7, -1.3, 2.1, -2.6, 1.6] {
@@ -228,13 +226,13 @@ fn loop_closes<M: Mechanism<N, C>, const N: usize, const C: usize>(
             Err(_) => q,
         };
         let scale = crate::mechanism::length_scale::<M, N, C>(&q);
-        let (g, _) = model.constraints_and_jacobian(&k, &q);
+        let (g, _) = model.constraints_and_jacobian(k, &q);
         let r = g.amax() / scale;
         if r.is_finite() {
             best = best.min(r);
         }
         if best <= 1e-6 {
-            return Ok(());
+            return Ok(stepper);
         }
     }
     Err(StepError::LoopCannotClose { residual: best })
@@ -245,9 +243,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// options (the paper's first-order rule). Errors: an invalid Δt or
     /// invalid run-time parameters, a loop that cannot close (type docs).
     pub fn new(model: M, dt: f64) -> Result<Self, StepError> {
-        loop_closes(&model)?;
         Ok(Self {
-            stepper: Stepper::new(model, dt)?,
+            stepper: loop_closes(Stepper::new(model, dt)?)?,
             subdivision: 0,
         })
     }
@@ -256,9 +253,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// Lagrangian L_d = Δt·L((x_k + x_{k+1})/2, (x_{k+1} − x_k)/Δt).
     /// Errors as [`Variational::new`].
     pub fn midpoint(model: M, dt: f64) -> Result<Self, StepError> {
-        loop_closes(&model)?;
         Ok(Self {
-            stepper: Stepper::midpoint(model, dt)?,
+            stepper: loop_closes(Stepper::midpoint(model, dt)?)?,
             subdivision: 0,
         })
     }

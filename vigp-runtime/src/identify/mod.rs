@@ -398,7 +398,8 @@ pub fn stack<R: Regressor>(
     };
     let zeros = vec![0.0; u];
     let mut w_rows: Vec<DMatrix<f64>> = Vec::new();
-    let mut z_rows: Vec<DMatrix<f64>> = Vec::new();
+    // the instrument rows of a windowed transition; `None`: its own rows
+    let mut z_rows: Vec<Option<DMatrix<f64>>> = Vec::new();
     let mut b_rows: Vec<DVector<f64>> = Vec::new();
     let mut origin = Vec::new();
     let mut instrumented = 0;
@@ -454,7 +455,7 @@ pub fn stack<R: Regressor>(
             };
             let (y, b) = regressor.transition(&t)?;
             if instruments.is_some() && !windowed {
-                z_rows.push(y.clone());
+                z_rows.push(None);
             } else if let Some((taus, weights)) = &instruments {
                 let smooth: Vec<Vec<f64>> = (0..3)
                     .map(|e| {
@@ -475,7 +476,7 @@ pub fn stack<R: Regressor>(
                     positions: [&smooth[0], &smooth[1], &smooth[2]],
                     inputs: t.inputs,
                 };
-                z_rows.push(regressor.transition(&tz)?.0);
+                z_rows.push(Some(regressor.transition(&tz)?.0));
                 instrumented += 1;
             }
             w_rows.push(y);
@@ -493,7 +494,8 @@ pub fn stack<R: Regressor>(
         w.rows_mut(t * block, block).copy_from(y);
         b.rows_mut(t * block, block).copy_from(bb);
         if let Some(z) = z.as_mut() {
-            z.rows_mut(t * block, block).copy_from(&z_rows[t]);
+            z.rows_mut(t * block, block)
+                .copy_from(z_rows[t].as_ref().unwrap_or(y));
         }
     }
     let slot = (0..rows).map(|i| i % block.max(1)).collect();

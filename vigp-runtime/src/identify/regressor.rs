@@ -699,19 +699,7 @@ where
     fn vectors(&self, t: &Transition<'_>) -> Result<[SVector<f64, N>; 3], IdentifyError> {
         let mut out = [SVector::zeros(); 3];
         for (o, x) in out.iter_mut().zip(t.positions) {
-            if x.len() != N {
-                return Err(IdentifyError::Dimension {
-                    what: "positions",
-                    expected: N,
-                    found: x.len(),
-                });
-            }
-            if x.iter().any(|v| !v.is_finite()) {
-                return Err(IdentifyError::NonFinite {
-                    what: "positions".into(),
-                });
-            }
-            *o = SVector::from_column_slice(x);
+            *o = self.vector(x)?;
         }
         for u in t.inputs {
             if u.iter().any(|v| !v.is_finite()) {
