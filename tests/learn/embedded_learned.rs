@@ -10,7 +10,7 @@
 
 use crate::common;
 use common::positions;
-use nalgebra::SVector;
+use nalgebra::{SMatrix, SVector};
 use vigp::embedded::gp::ExportedGp;
 use vigp::embedded::learned::{Encoding as CoreEncoding, LearnedModel, Prior as CorePrior};
 use vigp::embedded::{LearnedError, LearnedStepper, Parameters, StepError, StepOptions};
@@ -1045,6 +1045,85 @@ fn exported_learned_robot_matches_the_model_file() {
     ));
     assert!(matches!(
         stepper.step(&z0, &u_prev, &SVector::from([f64::NAN]), &mut ws),
+        Err(LearnedError::Step(StepError::NonFiniteInput { step: None }))
+    ));
+}
+
+/// The exact derivatives of the exported learned robot's step
+/// (`LearnedTreeStepper::step_derivatives`) against the std
+/// `LearnedRobot::step_derivatives` of the model file it was exported
+/// from, at five states of a driven rollout. The std derivatives are
+/// checked against differences of the step (tests of
+/// vigp-runtime/tests/learned_robot.rs); here the two share the tree
+/// engine's derivative code and differ in the GP mean's gradient (two
+/// implementations of one sum over the training points) and in the
+/// matrix types, so they agree to rounding: 1e-10 of the largest entry
+/// (measured: printed). The derivative step allocates nothing.
+#[test]
+fn exported_learned_robot_derivatives_match_the_model_file() {
+    use vigp::embedded::tree::{BodyScratch, LearnedTreeStepper, TreeDerivativeScratch};
+    use vigp::learned::robot::LearnedRobot;
+    use vigp::robot::RobotState;
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/learned_arm3.json"
+    );
+    let std_model = LearnedRobot::load(path).unwrap();
+    let stepper = LearnedTreeStepper::new(&exported_arm::LEARNED_ARM).unwrap();
+    let mut ws = [BodyScratch::zeroed(); 3];
+    let mut scratch = TreeDerivativeScratch::<3>::new();
+    let mut std_ws = std_model.workspace();
+    let mut z = State::new([0.1, -0.2, 0.05], [0.3, -0.4, 0.02]);
+    let mut u_prev = SVector::from([3.1]);
+    let mut worst = 0.0f64;
+    for k in 0..5 {
+        let u = SVector::from([3.0 + (0.7 * k as f64).sin()]);
+        let d = stepper
+            .step_derivatives(&z, &u_prev, &u, &mut scratch, &mut ws)
+            .unwrap();
+        let zs = RobotState::new(z.q.as_slice().to_vec(), z.v.as_slice().to_vec());
+        let s = std_model
+            .step_derivatives(&zs, &[u_prev[0]], &[u[0]], &mut std_ws)
+            .unwrap();
+        let a: SMatrix<f64, 6, 6> = d.a.matrix();
+        let b: SMatrix<f64, 6, 1> = d.b.matrix();
+        let bp: SMatrix<f64, 6, 1> = d.b_prev.matrix();
+        let scale = s.a.iter().chain(&s.b).fold(1.0f64, |m, x| m.max(x.abs()));
+        for r in 0..6 {
+            for c in 0..6 {
+                worst = worst.max((a[(r, c)] - s.a[(r, c)]).abs() / scale);
+            }
+            worst = worst.max((b[(r, 0)] - s.b[(r, 0)]).abs() / scale);
+            worst = worst.max((bp[(r, 0)] - s.b_prev[(r, 0)]).abs() / scale);
+        }
+        let next: Vec<f64> = d.state.q.iter().chain(d.state.v.iter()).copied().collect();
+        let want: Vec<f64> = s.state.q.iter().chain(&s.state.v).copied().collect();
+        for (x, y) in next.iter().zip(&want) {
+            assert!((x - y).abs() <= 1e-12, "state {next:?} vs {want:?}");
+        }
+        // the GP reads both inputs and the state: none of these is zero
+        assert!(d.b_prev.v_u.iter().any(|x| *x != 0.0));
+        assert!(d.a.v_q.iter().any(|x| *x != 0.0));
+        z = d.state;
+        u_prev = u;
+    }
+    eprintln!("exported learned robot derivatives: max |std − embedded| / scale = {worst:.2e}");
+    assert!(worst <= 1e-10, "{worst:e}");
+    let u = SVector::from([3.2]);
+    let info = allocation_counter::measure(|| {
+        stepper
+            .step_derivatives(&z, &u_prev, &u, &mut scratch, &mut ws)
+            .unwrap();
+    });
+    assert_eq!(info.count_total, 0);
+    assert!(matches!(
+        stepper.step_derivatives(
+            &z,
+            &u_prev,
+            &SVector::from([f64::NAN]),
+            &mut scratch,
+            &mut ws
+        ),
         Err(LearnedError::Step(StepError::NonFiniteInput { step: None }))
     ));
 }

@@ -53,7 +53,8 @@ use std::path::Path;
 use nalgebra::DMatrix;
 use vigp_core::tree::spatial::V3;
 use vigp_core::tree::{
-    Body, BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives, Tree,
+    Body, BodyScratch, DerivativeBuffers, Engine, EngineError, EngineOptions, EngineReport,
+    TermDerivatives, Tree, derivative_scratch_len,
 };
 pub use vigp_urdf::UrdfError;
 
@@ -215,108 +216,22 @@ impl TermJacobians {
     }
 }
 
-/// Whether the tree branches enough for [`tree_factor`] to pay: its work,
-/// Σ depth², at most a quarter of a dense factorisation's N³/3. A chain
-/// (the Panda, the UR5) has Σ depth² ≈ N³/3 and is factored densely, where
-/// the dense code's contiguous loops are faster; four 3-joint legs
-/// (Solo-12) have 56 against 576, the G1 humanoid's legs, waist and arms
-/// far less than a chain of 29.
-fn branched(bodies: &[Body]) -> bool {
-    let n = bodies.len();
-    let mut work = 0usize;
-    for k in 0..n {
-        let depth = ancestors(bodies, k).count() + 1;
-        work += depth * depth;
-    }
-    12 * work <= n * n * n
-}
-
-/// The ancestors of body `k`, its parent first.
-fn ancestors(bodies: &[Body], k: usize) -> impl Iterator<Item = usize> + '_ {
-    std::iter::successors(bodies[k].parent, move |&a| bodies[a].parent)
-}
-
-/// Factors in place, without pivoting, a matrix J whose entry (i, j) is
-/// zero unless body i is body j, an ancestor or a descendant of it (the
-/// pattern of the mass matrix, and of the Newton matrix
-/// −M + h·∂(∂T/∂q)/∂v − h·D): bodies are eliminated leaves first, each
-/// against its ancestors only, which creates no entry outside the pattern
-/// (Featherstone's LTL order). Afterwards (i, k), i an ancestor of k,
-/// holds the multiplier J_ik/J_kk, and (k, j), j an ancestor of k or k
-/// itself, the row that solves for x_k. O(Σ depth²) instead of O(N³).
-/// `false` when a pivot is not finite or below 1e-10 of the largest
-/// diagonal entry (then a dense, pivoting factorisation is used).
-fn tree_factor(jac: &mut DMatrix<f64>, bodies: &[Body]) -> bool {
-    let n = bodies.len();
-    let big = (0..n).fold(0.0f64, |m, i| m.max(jac[(i, i)].abs()));
-    for k in (0..n).rev() {
-        let pivot = jac[(k, k)];
-        if !(pivot.is_finite() && pivot.abs() > 1e-10 * big) {
-            return false;
-        }
-        for i in ancestors(bodies, k) {
-            let l = jac[(i, k)] / pivot;
-            jac[(i, k)] = l;
-            if l != 0.0 {
-                for j in ancestors(bodies, k) {
-                    jac[(i, j)] -= l * jac[(k, j)];
-                }
-            }
-        }
-    }
-    true
-}
-
-/// Solves J·X = B in place of B with the factors of [`tree_factor`]:
-/// each column forward, leaves first (b_i −= l_ik·b_k for the ancestors i
-/// of k), then backward, root first (x_k from its row and its ancestors'
-/// x). O(Σ depth) per column.
-fn tree_solve(jac: &DMatrix<f64>, bodies: &[Body], b: &mut DMatrix<f64>) {
-    let n = bodies.len();
-    for c in 0..b.ncols() {
-        let mut col = b.column_mut(c);
-        for k in (0..n).rev() {
-            let bk = col[k];
-            for i in ancestors(bodies, k) {
-                col[i] -= jac[(i, k)] * bk;
-            }
-        }
-        for k in 0..n {
-            let t = ancestors(bodies, k).fold(col[k], |t, j| t - jac[(k, j)] * col[j]);
-            col[k] = t / jac[(k, k)];
-        }
-    }
-}
-
-/// The momentum P = M(q)v and its Jacobians at one (q, v): what the start
-/// of a step's derivatives needs.
-pub(crate) struct MomentumJacobians {
-    /// P.
+/// What a step's derivatives carry to the next step of a rollout: the
+/// momentum and the scratch of [`Engine::step_derivatives`], whose first
+/// 2N² entries then hold the momentum's Jacobians at the state.
+struct DerivativeCarry {
     p: Vec<f64>,
-    /// ∂P/∂q.
-    p_q: DMatrix<f64>,
-    /// ∂P/∂v = M.
-    p_v: DMatrix<f64>,
+    scratch: Vec<f64>,
+    start_known: bool,
 }
 
-impl MomentumJacobians {
-    /// At (q, v) of `engine`'s tree: [`Engine::momentum_derivatives`].
-    fn of<T: vigp_core::tree::Tree>(
-        engine: &Engine<T>,
-        q: &[f64],
-        v: &[f64],
-        ws: &mut [BodyScratch],
-    ) -> Result<Self, EngineError> {
-        let n = engine.dof();
-        let mut p = vec![0.0; n];
-        let mut buf = vec![0.0; 2 * n * n];
-        let (p_q, p_v) = buf.split_at_mut(n * n);
-        engine.momentum_derivatives(q, v, &mut p, p_q, p_v, ws)?;
-        Ok(Self {
-            p,
-            p_q: DMatrix::from_row_slice(n, n, p_q),
-            p_v: DMatrix::from_row_slice(n, n, p_v),
-        })
+impl DerivativeCarry {
+    fn new(n: usize, inputs: usize) -> Self {
+        Self {
+            p: vec![0.0; n],
+            scratch: vec![0.0; derivative_scratch_len(n, inputs)],
+            start_known: false,
+        }
     }
 }
 
@@ -590,6 +505,7 @@ impl Robot {
             EngineError::SingularMass { body } => RobotError::SingularMass {
                 joint: self.joints[body].clone(),
             },
+            EngineError::SingularNewtonMatrix => RobotError::SingularNewtonMatrix,
             e => RobotError::Engine(e),
         }
     }
@@ -738,99 +654,52 @@ impl Robot {
         self.check_state(z)?;
         self.check_inputs(u)?;
         let mut ws = vec![BodyScratch::default(); self.dof()];
-        let start = self.momentum_jacobians(&z.q, &z.v, &mut ws)?;
-        self.derivatives_from(z, start, u, dt, &mut ws)
-            .map(|(d, _)| d)
+        let mut carry = DerivativeCarry::new(self.dof(), self.inputs.len());
+        self.derivatives_from(z, &mut carry, u, dt, &mut ws)
     }
 
-    /// [`Robot::step_derivatives`] from z with its momentum and momentum
-    /// Jacobians `start` known (a rollout carries them from the step
-    /// before); also returns them at the new state.
+    /// [`Robot::step_derivatives`] from z with the momentum and its
+    /// Jacobians in `carry` when known (a rollout carries them from the
+    /// step before); `carry` then holds them at the new state.
     fn derivatives_from(
         &self,
         z: &RobotState,
-        mut start: MomentumJacobians,
+        carry: &mut DerivativeCarry,
         u: &[f64],
         dt: f64,
         ws: &mut [BodyScratch],
-    ) -> Result<(StepDerivatives, MomentumJacobians), RobotError> {
-        let n = self.dof();
-        let options = *self.engine.options();
-        // one sub-step at a time: the engine's own step without subdivision
-        let single = self
-            .engine
-            .with_options_borrowed(EngineOptions {
-                max_depth: 0,
-                ..options
-            })
-            .map_err(RobotError::Engine)?;
-        let mut p = std::mem::take(&mut start.p);
+    ) -> Result<StepDerivatives, RobotError> {
+        let (n, nu) = (self.dof(), self.inputs.len());
         let mut tau = vec![0.0; n];
         for (&i, &x) in self.inputs.iter().zip(u) {
             tau[i] = x;
         }
         let (mut q, mut v) = (z.q.clone(), z.v.clone());
-        // the product of the converged sub-steps' derivatives so far
-        let mut ab: Option<(DMatrix<f64>, DMatrix<f64>)> = None;
-        let mut report = EngineReport::default();
-        let (mut depth, mut done, mut total) = (0u32, 0usize, 1usize);
-        while done < total {
-            let h = dt / total as f64;
-            let (q0, v0) = (q.clone(), v.clone());
-            let failed = match single.step(&mut q, &mut v, &mut p, &tau, h, ws) {
-                Ok(r) => {
-                    report.iterations += r.iterations;
-                    report.substeps += 1;
-                    report.residual = report.residual.max(r.residual);
-                    done += 1;
-                    let (sa, sb, end) = self.substep_derivatives(&start, &q0, &v0, &v, h, ws)?;
-                    start = end;
-                    ab = Some(match ab {
-                        None => (sa, sb),
-                        Some((a, b)) => (&sa * a, &sa * b + sb),
-                    });
-                    continue;
-                }
-                Err(EngineError::NotConverged {
-                    iterations,
-                    residual,
-                    ..
-                }) => {
-                    report.iterations += iterations;
-                    EngineError::NotConverged {
-                        depth,
-                        substep_dt: h,
-                        iterations,
-                        residual,
-                    }
-                }
-                Err(EngineError::EnergyJump { jump, .. }) => EngineError::EnergyJump {
-                    depth,
-                    substep_dt: h,
-                    jump,
-                },
-                Err(e) => return Err(self.engine_error(e)),
-            };
-            if depth >= options.max_depth || !(h * 0.5 * h * 0.5).is_normal() {
-                return Err(self.engine_error(failed));
-            }
-            // (a failed step leaves p as it was)
-            (q, v) = (q0, v0);
-            depth += 1;
-            done *= 2;
-            total *= 2;
-        }
-        report.depth = depth;
-        // the loop ends only after a converged sub-step
-        let (a, b) = ab.ok_or(RobotError::SingularNewtonMatrix)?;
-        let d = StepDerivatives {
-            state: RobotState { q, v },
-            a,
-            b,
-            report,
+        let (mut a, mut b) = (vec![0.0; 4 * n * n], vec![0.0; 2 * n * nu]);
+        let buffers = DerivativeBuffers {
+            a: &mut a,
+            b: &mut b,
+            scratch: &mut carry.scratch,
+            start_known: carry.start_known,
         };
-        start.p = p;
-        Ok((d, start))
+        let result = self.engine.step_derivatives(
+            &mut q,
+            &mut v,
+            &mut carry.p,
+            &tau,
+            &self.inputs,
+            dt,
+            buffers,
+            ws,
+        );
+        carry.start_known = result.is_ok();
+        let report = result.map_err(|e| self.engine_error(e))?;
+        Ok(StepDerivatives {
+            state: RobotState { q, v },
+            a: DMatrix::from_row_slice(2 * n, 2 * n, &a),
+            b: DMatrix::from_row_slice(2 * n, nu, &b),
+            report,
+        })
     }
 
     /// A driven rollout with every step's exact derivatives: entry k is
@@ -859,130 +728,17 @@ impl Robot {
         }
         self.check_state(z0).map_err(|e| fail(0, e))?;
         let mut ws = vec![BodyScratch::default(); self.dof()];
-        let mut start = self
-            .momentum_jacobians(&z0.q, &z0.v, &mut ws)
-            .map_err(|e| fail(0, e))?;
+        let mut carry = DerivativeCarry::new(self.dof(), self.inputs.len());
         let mut out: Vec<StepDerivatives> = Vec::with_capacity(inputs.len());
         for (k, u) in inputs.iter().enumerate() {
             self.check_inputs(u).map_err(|e| fail(k, e))?;
             let z = out.last().map_or(z0, |d| &d.state);
-            let (d, next) = self
-                .derivatives_from(z, start, u, dt, &mut ws)
+            let d = self
+                .derivatives_from(z, &mut carry, u, dt, &mut ws)
                 .map_err(|e| fail(k, e))?;
-            start = next;
             out.push(d);
         }
         Ok(out)
-    }
-
-    /// The derivatives of one converged sub-step of h from (q₀, v₀) to
-    /// v₁, given the momentum Jacobians `start` at (q₀, v₀):
-    /// A_s = ∂(q₁, v₁)/∂(q₀, v₀), B_s = ∂(q₁, v₁)/∂u, and the momentum
-    /// Jacobians at (q₁, v₁) (the next sub-step's start; its `p` is left
-    /// empty for the caller).
-    fn substep_derivatives(
-        &self,
-        start: &MomentumJacobians,
-        q0: &[f64],
-        v0: &[f64],
-        v1: &[f64],
-        h: f64,
-        ws: &mut [BodyScratch],
-    ) -> Result<(DMatrix<f64>, DMatrix<f64>, MomentumJacobians), RobotError> {
-        let n = self.dof();
-        let inputs = self.inputs.len();
-        let q1: Vec<f64> = q0.iter().zip(v0).map(|(q, v)| q + h * v).collect();
-        let TermJacobians {
-            p_q,
-            p_v,
-            t_q,
-            t_v,
-            v_q,
-        } = self.term_jacobians(&q1, v1, ws)?;
-        // r = P(q₀, v₀) + F(q₁, v₁) + h·τ,
-        // F = −P(q₁, v₁) + h·(∂T/∂q(q₁, v₁) − ∇V(q₁) − D·v₁):
-        // J = ∂F/∂v₁ = h·∂(∂T/∂q)/∂v − M − h·D, K = ∂F/∂q₁, in place
-        let mut jac = t_v;
-        jac *= h;
-        jac -= &p_v;
-        for (i, body) in self.engine.tree().bodies.iter().enumerate() {
-            jac[(i, i)] -= h * body.damping;
-        }
-        let mut k = t_q;
-        k -= &v_q;
-        k *= h;
-        k -= &p_q;
-        // J·X = [∂P/∂q(q₀, v₀) + K | M(q₀) + h·K | h·S]
-        let mut x = DMatrix::<f64>::zeros(n, 2 * n + inputs);
-        for j in 0..n {
-            for i in 0..n {
-                let kij = k[(i, j)];
-                x[(i, j)] = start.p_q[(i, j)] + kij;
-                x[(i, n + j)] = start.p_v[(i, j)] + h * kij;
-            }
-        }
-        for (c, &i) in self.inputs.iter().enumerate() {
-            x[(i, 2 * n + c)] = h;
-        }
-        // in the tree's pattern where it branches (a copy kept for the
-        // dense fallback on a tiny pivot), else dense
-        let bodies = &self.engine.tree().bodies;
-        let mut in_tree = false;
-        if branched(bodies) {
-            let mut factors = jac.clone();
-            if tree_factor(&mut factors, bodies) {
-                tree_solve(&factors, bodies, &mut x);
-                in_tree = true;
-            }
-        }
-        if !in_tree && !jac.lu().solve_mut(&mut x) {
-            return Err(RobotError::SingularNewtonMatrix);
-        }
-        let mut a = DMatrix::<f64>::zeros(2 * n, 2 * n);
-        let mut b = DMatrix::<f64>::zeros(2 * n, inputs);
-        for i in 0..n {
-            a[(i, i)] = 1.0;
-            a[(i, n + i)] = h;
-        }
-        for j in 0..2 * n {
-            for i in 0..n {
-                a[(n + i, j)] = -x[(i, j)];
-            }
-        }
-        for c in 0..inputs {
-            for i in 0..n {
-                b[(n + i, c)] = -x[(i, 2 * n + c)];
-            }
-        }
-        if !(a.iter().chain(b.iter()).all(|x| x.is_finite())) {
-            return Err(RobotError::SingularNewtonMatrix);
-        }
-        let end = MomentumJacobians {
-            p: Vec::new(),
-            p_q,
-            p_v,
-        };
-        Ok((a, b, end))
-    }
-
-    /// [`MomentumJacobians::of`] the robot's engine, with its errors.
-    fn momentum_jacobians(
-        &self,
-        q: &[f64],
-        v: &[f64],
-        ws: &mut [BodyScratch],
-    ) -> Result<MomentumJacobians, RobotError> {
-        MomentumJacobians::of(&self.engine, q, v, ws).map_err(|e| self.engine_error(e))
-    }
-
-    /// [`TermJacobians::of`] the robot's engine, with its errors.
-    fn term_jacobians(
-        &self,
-        q: &[f64],
-        v: &[f64],
-        ws: &mut [BodyScratch],
-    ) -> Result<TermJacobians, RobotError> {
-        TermJacobians::of(&self.engine, q, v, ws).map_err(|e| self.engine_error(e))
     }
 
     /// `steps` unforced steps of `dt` from `z0` (inputs zero).

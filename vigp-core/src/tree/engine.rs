@@ -244,6 +244,10 @@ pub enum EngineError {
         /// The body (= coordinate) whose articulated inertia vanished.
         body: usize,
     },
+    /// The Newton matrix of a converged sub-step is singular (or its
+    /// solve not finite), so the step has no derivatives there
+    /// ([`Engine::step_derivatives`]).
+    SingularNewtonMatrix,
     /// The sub-steps converged, but down to `substep_dt` one still changed
     /// the energy by more than [`EngineOptions::energy_tolerance`].
     EnergyJump {
@@ -287,6 +291,10 @@ impl core::fmt::Display for EngineError {
             Self::SingularMass { body } => write!(
                 f,
                 "singular mass matrix: the subtree of body {body} has no inertia along its joint"
+            ),
+            Self::SingularNewtonMatrix => write!(
+                f,
+                "the Newton matrix of a converged sub-step is singular: the step has no derivatives there"
             ),
             Self::EnergyJump {
                 depth,
@@ -456,7 +464,11 @@ fn check_options(options: &EngineOptions) -> Result<(), EngineError> {
     Ok(())
 }
 
-fn check_len(what: &'static str, got: usize, expected: usize) -> Result<(), EngineError> {
+pub(super) fn check_len(
+    what: &'static str,
+    got: usize,
+    expected: usize,
+) -> Result<(), EngineError> {
     if got == expected {
         Ok(())
     } else {

@@ -8,8 +8,10 @@
 //! the tree engine's step from the momentum of z under the inputs held
 //! over the step (zero under [`Prior::Constant`]) and μ the GP means.
 
+use super::derivatives::{DerivativeBuffers, derivative_scratch_len};
 use super::spatial::V3;
 use super::{Body, BodyScratch, Engine, EngineError, EngineOptions, JointKind, TreeRef};
+use crate::forced::{InputJacobian, StateJacobian};
 use crate::gp::ExportedGp;
 use crate::learned::{Encoding, LearnedError, Prior};
 use crate::state::{CoordinateKind, State};
@@ -41,6 +43,49 @@ pub struct LearnedTree<'a, const N: usize, const D: usize> {
     pub options: EngineOptions,
     /// One GP per joint velocity.
     pub gps: &'a [ExportedGp<'a, D>; N],
+}
+
+/// The exact derivatives of one learned robot step
+/// ([`LearnedTreeStepper::step_derivatives`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LearnedTreeDerivatives<const N: usize, const U: usize> {
+    /// The state after the step (that of [`LearnedTreeStepper::step`], to
+    /// the solver's tolerance).
+    pub state: State<N>,
+    /// A = ∂z₁/∂z₀.
+    pub a: StateJacobian<N>,
+    /// B = ∂z₁/∂u (the input held over this step).
+    pub b: InputJacobian<N, U>,
+    /// ∂z₁/∂u_prev (the GP reads the previous input).
+    pub b_prev: InputJacobian<N, U>,
+}
+
+/// Number of N × N blocks in a [`TreeDerivativeScratch`]: the prior's A
+/// (4) and B (2, U ≤ N), and the engine's derivative scratch
+/// (12N² + 2N·U + 2N ≤ 16N²).
+const DERIVATIVE_BLOCKS: usize = 22;
+
+/// The scratch of [`LearnedTreeStepper::step_derivatives`]: 22 N × N
+/// blocks of `f64` (for the Panda, N = 7: 8.6 KB), on the stack or in a
+/// `static`.
+#[derive(Clone, Debug)]
+pub struct TreeDerivativeScratch<const N: usize> {
+    blocks: [[[f64; N]; N]; DERIVATIVE_BLOCKS],
+}
+
+impl<const N: usize> TreeDerivativeScratch<N> {
+    /// Zeroed scratch.
+    pub const fn new() -> Self {
+        Self {
+            blocks: [[[0.0; N]; N]; DERIVATIVE_BLOCKS],
+        }
+    }
+}
+
+impl<const N: usize> Default for TreeDerivativeScratch<N> {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 /// The stepper of a [`LearnedTree`]: its engine over the bodies
@@ -132,18 +177,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
         u: &SVector<f64, U>,
         ws: &mut [BodyScratch; N],
     ) -> Result<State<N>, LearnedError> {
-        if U != self.inputs {
-            return Err(LearnedError::InputCount {
-                expected: self.inputs,
-                got: U,
-            });
-        }
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None }.into());
-        }
-        if !(u.iter().chain(u_prev.iter()).all(|x| x.is_finite())) {
-            return Err(StepError::NonFiniteInput { step: None }.into());
-        }
+        self.check_step(z, u_prev, u)?;
         let l = self.learned;
         let mut v1 = [0.0; N];
         if l.prior == Prior::Nominal {
@@ -161,11 +195,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
                 .step(&mut q, &mut v1, &mut p, &tau, l.dt, ws)
                 .map_err(LearnedError::Engine)?;
         }
-        let mut x = [0.0; D];
-        let e = self.encoded;
-        l.encoding.encode(&self.kinds, z, &mut x[..e]);
-        x[e..e + U].copy_from_slice(u_prev.as_slice());
-        x[e + U..e + 2 * U].copy_from_slice(u.as_slice());
+        let x = self.gp_input(z, u_prev, u);
         for (v, gp) in v1.iter_mut().zip(l.gps) {
             *v += gp.predict_mean(&x)?;
         }
@@ -176,6 +206,146 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
         Ok(State {
             q: z.q + z.v * l.dt,
             v,
+        })
+    }
+
+    /// The checks of a step: the number of inputs, a finite state and
+    /// finite inputs.
+    fn check_step<const U: usize>(
+        &self,
+        z: &State<N>,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+    ) -> Result<(), LearnedError> {
+        if U != self.inputs {
+            return Err(LearnedError::InputCount {
+                expected: self.inputs,
+                got: U,
+            });
+        }
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState { step: None }.into());
+        }
+        if !(u.iter().chain(u_prev.iter()).all(|x| x.is_finite())) {
+            return Err(StepError::NonFiniteInput { step: None }.into());
+        }
+        Ok(())
+    }
+
+    /// The GP input: the encoded state, then `u_prev`, then `u`.
+    fn gp_input<const U: usize>(
+        &self,
+        z: &State<N>,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+    ) -> [f64; D] {
+        let mut x = [0.0; D];
+        let e = self.encoded;
+        self.learned.encoding.encode(&self.kinds, z, &mut x[..e]);
+        x[e..e + U].copy_from_slice(u_prev.as_slice());
+        x[e + U..e + 2 * U].copy_from_slice(u.as_slice());
+        x
+    }
+
+    /// One learned step (as [`LearnedTreeStepper::step`]) with its exact
+    /// derivatives, for MPC and iLQR on the learned model without
+    /// allocation. q₁ = q + Δt·v gives A's top rows [I, Δt·I] and none of
+    /// B; v₁ = v̄(z, u) + μ(enc(z), u_prev, u) differentiates into the
+    /// tree engine's exact step derivatives
+    /// ([`Engine::step_derivatives`], the implicit function theorem on its
+    /// residual; none under [`Prior::Constant`]) plus each GP mean's
+    /// gradient ([`ExportedGp::predict_mean_gradient`](crate::gp::ExportedGp::predict_mean_gradient))
+    /// through the encoding. The same derivatives as the std runtime's
+    /// learned robot, to rounding.
+    pub fn step_derivatives<const U: usize>(
+        &self,
+        z: &State<N>,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+        scratch: &mut TreeDerivativeScratch<N>,
+        ws: &mut [BodyScratch; N],
+    ) -> Result<LearnedTreeDerivatives<N, U>, LearnedError> {
+        self.check_step(z, u_prev, u)?;
+        let l = self.learned;
+        let mut a = StateJacobian::<N>::zeros();
+        let mut b = InputJacobian::<N, U>::zeros();
+        let mut b_prev = InputJacobian::<N, U>::zeros();
+        for i in 0..N {
+            a.q_q[(i, i)] = 1.0;
+            a.q_v[(i, i)] = l.dt;
+        }
+        let mut v1 = [0.0; N];
+        if l.prior == Prior::Nominal {
+            let flat = scratch.blocks.as_flattened_mut().as_flattened_mut();
+            let (pa, rest) = flat.split_at_mut(4 * N * N);
+            let (pb, rest) = rest.split_at_mut(2 * N * U);
+            let engine_scratch = &mut rest[..derivative_scratch_len(N, U)];
+            let mut q: [f64; N] = z.q.into();
+            v1 = z.v.into();
+            let mut p = [0.0; N];
+            let mut tau = [0.0; N];
+            for (k, &j) in self.actuated[..U].iter().enumerate() {
+                tau[j] = u[k];
+            }
+            let buffers = DerivativeBuffers {
+                a: pa,
+                b: pb,
+                scratch: engine_scratch,
+                start_known: false,
+            };
+            self.engine
+                .step_derivatives(
+                    &mut q,
+                    &mut v1,
+                    &mut p,
+                    &tau,
+                    &self.actuated[..U],
+                    l.dt,
+                    buffers,
+                    ws,
+                )
+                .map_err(LearnedError::Engine)?;
+            for i in 0..N {
+                let row = &pa[(N + i) * 2 * N..(N + i + 1) * 2 * N];
+                for j in 0..N {
+                    a.v_q[(i, j)] = row[j];
+                    a.v_v[(i, j)] = row[N + j];
+                }
+                for c in 0..U {
+                    b.v_u[(i, c)] = pb[(N + i) * U + c];
+                }
+            }
+        }
+        let x = self.gp_input(z, u_prev, u);
+        let e = self.encoded;
+        for (j, gp) in l.gps.iter().enumerate() {
+            let (mean, g) = gp.predict_mean_gradient(&x)?;
+            v1[j] += mean;
+            l.encoding
+                .pull_back(&self.kinds, z.q.as_slice(), &g, |i, d| {
+                    if i < N {
+                        a.v_q[(j, i)] += d;
+                    } else {
+                        a.v_v[(j, i - N)] += d;
+                    }
+                });
+            for c in 0..U {
+                b_prev.v_u[(j, c)] = g[e + c];
+                b.v_u[(j, c)] += g[e + U + c];
+            }
+        }
+        let v = SVector::from(v1);
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteState { step: None }.into());
+        }
+        Ok(LearnedTreeDerivatives {
+            state: State {
+                q: z.q + z.v * l.dt,
+                v,
+            },
+            a,
+            b,
+            b_prev,
         })
     }
 

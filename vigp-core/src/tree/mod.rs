@@ -10,20 +10,23 @@
 //! * [`spatial`]: 6-D motion and force vectors and spatial inertias, all in
 //!   world coordinates at the world origin.
 //! * [`Engine`]: momentum, ∂T/∂q, ∇V, the DEL residual, the articulated-body
-//!   solve and the self-subdividing step ([`engine`] has the equations).
+//!   solve and the self-subdividing step ([`engine`] has the equations), and
+//!   the step's exact derivatives A and B ([`derivatives`]).
 //! * [`LearnedTree`]: a learned robot as exported data (bodies, prior,
 //!   encoding, one GP per joint) and its allocation-free stepper.
 //!
 //! Nothing here allocates: the caller passes a slice of [`BodyScratch`],
 //! one per body (about 1 KB each).
 
+pub mod derivatives;
 pub mod engine;
 pub mod learned;
 pub mod model;
 pub mod spatial;
 
+pub use derivatives::{DerivativeBuffers, derivative_scratch_len};
 pub use engine::{BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives};
-pub use learned::{LearnedTree, LearnedTreeStepper};
+pub use learned::{LearnedTree, LearnedTreeDerivatives, LearnedTreeStepper, TreeDerivativeScratch};
 pub use model::{Body, InvalidTree, JointKind, Limits, Tree, TreeRef, validate};
 
 #[cfg(test)]
