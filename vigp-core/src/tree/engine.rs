@@ -33,8 +33,13 @@ pub struct BodyScratch<R = f64> {
     s: V6<R>,
     inertia: Inertia6<R>,
     composite: Inertia6<R>,
+    /// The solve's factors (module docs of [`Engine::factor`]): the
+    /// articulated operator IA, m = IA·S, the left vector ℓ, the row
+    /// vector e and the pivot δ.
     ia: M6,
     u6: V6,
+    l: V6,
+    e: V6,
     d: f64,
     vel: V6<R>,
     hc: V6<R>,
@@ -75,7 +80,7 @@ const ANDERSON: usize = 3;
 
 /// The Anderson mixing of one iteration: `None`, the plain quasi-Newton
 /// step v ← v + f; `Some((m, γ))`, the Anderson-accelerated update (type
-/// II, memory [`ANDERSON`]) of the fixed-point map G(v) = v + (M + hD)⁻¹r(v):
+/// II, memory [`ANDERSON`]) of the chord map G(v) = v + K⁻¹r(v) ([`Engine::factor`]):
 /// with ΔV, ΔF the last m differences of iterates and of steps
 /// f = G(v) − v, γ = argmin ‖f − ΔFγ‖₂ (normal equations, at most 3×3) and
 /// v ← v + f − (ΔV + ΔF)γ. On the nearly linear DEL residual near its root
@@ -137,6 +142,8 @@ impl<R: Real> BodyScratch<R> {
             composite: Inertia6::zero(),
             ia: [[0.0; 6]; 6],
             u6: [0.0; 6],
+            l: [0.0; 6],
+            e: [0.0; 6],
             d: 0.0,
             vel: z6,
             hc: z6,
@@ -652,38 +659,142 @@ impl<T: Tree> Engine<T> {
             .fold(0.0, f64::max)
     }
 
-    /// Articulated-body factorisation of M + h·D (after kinematics).
+    /// Factorisation of the Newton matrix of the residual at the current
+    /// iterate (after kinematics and [`Engine::iterate_forward`]), for the
+    /// chord iteration v ← v + K⁻¹r(v) of the sub-step:
+    /// K = −∂r/∂v = M + h·D − h·C, C = ∂(∂T/∂q)/∂v, in O(N).
+    ///
+    /// With u_b = I_b S_b (I_b the composite inertia of b's subtree, h_b its
+    /// composite momentum, V_b b's twist and w_b = V_b × S_b), the entries
+    /// of C are C_bj = S_jᵀ(S_b ×* h_b + I_b w_b) for j on b's path and
+    /// C_jb = w_jᵀ u_b for j strictly above b ([`Engine::term_derivatives`]),
+    /// so K_bj = S_jᵀ a_b (a_b = u_b − h·(S_b ×* h_b + I_b w_b)),
+    /// K_jb = e_jᵀ u_b (e_j = S_j − h·w_j) and K_bb = e_bᵀ u_b + h·d_b.
+    /// Eliminating leaves first, as the articulated-body algorithm does
+    /// for M (to which this reduces at h·C = 0), each body's subtree sends
+    /// its parent the operator IA − m ℓᵀ/δ with
+    ///
+    /// ```text
+    /// IA_b = I_b(own) + Σ_children (IA_c − m_c ℓ_cᵀ/δ_c),   m_b = IA_b S_b,
+    /// ℓ_b = IA_bᵀ e_b − h·(S_b ×* h_b),   δ_b = e_bᵀ m_b + h·d_b,
+    /// ```
+    ///
+    /// and the solve is a backward pass ρ_b = r_b − e_bᵀ g_b,
+    /// g_parent += g_b + m_b ρ_b/δ_b, then a forward pass
+    /// x_b = (ρ_b − ℓ_bᵀ Y_parent)/δ_b, Y_b = Y_parent + S_b x_b. Checked
+    /// against a dense solve with K from [`Engine::term_derivatives`]
+    /// (unit tests). K is that of the iterate the sub-step starts from
+    /// (the guess); near the root the chord iteration contracts by
+    /// h·|C(v) − C(v_start)|, against h·|C| for M + h·D alone.
+    ///
+    /// Where a pivot δ is not positive (K is far from M, h·|v| large:
+    /// the DEL may have no root near the start), the factors are those of
+    /// M + h·D (e = ℓ = S, the articulated-body algorithm), whose
+    /// iteration then decides, by its contraction, whether to subdivide.
+    /// `Err(body)` when M + h·D itself is singular there.
     fn factor(&self, h: f64, mbar: f64, ws: &mut [BodyScratch]) -> Result<(), usize> {
+        if self.factor_with(h, mbar, true, ws).is_ok() {
+            return Ok(());
+        }
+        self.factor_with(h, mbar, false, ws)
+    }
+
+    /// [`Engine::factor`] of K (`newton`) or of M + h·D.
+    fn factor_with(
+        &self,
+        h: f64,
+        mbar: f64,
+        newton: bool,
+        ws: &mut [BodyScratch],
+    ) -> Result<(), usize> {
         let t = &self.tree;
+        let hn = if newton { h } else { 0.0 };
         for w in ws.iter_mut() {
             w.ia = w.inertia.matrix();
+            // the composite momenta, in `acc` (the solve's forward pass
+            // overwrites it)
+            w.acc = w.hc;
         }
         for i in (0..ws.len()).rev() {
             let b = t.body(i);
             let w = &mut ws[i];
-            w.u6 = mul6(&w.ia, &w.s);
-            w.d = dot6(&w.s, &w.u6) + h * b.damping;
+            let s = w.s;
+            let wv = cross_motion(&w.vel, &s);
+            let sh = cross_force(&s, &w.acc);
+            let e: V6 = core::array::from_fn(|c| s[c] - hn * wv[c]);
+            let m = mul6(&w.ia, &s);
+            let l: V6 = core::array::from_fn(|c| {
+                (0..6).map(|r| w.ia[r][c] * e[r]).sum::<f64>() - hn * sh[c]
+            });
+            let d = dot6(&e, &m) + h * b.damping;
             // NaN fails this test too
-            if w.d.is_nan() || w.d <= 1e-13 * mbar {
+            if d.is_nan() || d <= 1e-13 * mbar {
                 return Err(i);
             }
+            (w.u6, w.l, w.e, w.d) = (m, l, e, d);
             if let Some(p) = b.parent {
-                // the parent gains IA − u·uᵀ/d, symmetric: the upper
-                // triangle, mirrored
-                let (u, dinv) = (w.u6, 1.0 / w.d);
-                let ia = w.ia;
-                let pa = &mut ws[p].ia;
+                // the parent gains IA − m·ℓᵀ/δ
+                let (ia, acc, dinv) = (w.ia, w.acc, 1.0 / d);
+                let wp = &mut ws[p];
                 for r in 0..6 {
-                    let ur = u[r] * dinv;
-                    for c in r..6 {
-                        let x = ia[r][c] - ur * u[c];
-                        pa[r][c] += x;
-                        if c != r {
-                            pa[c][r] += x;
-                        }
+                    let mr = m[r] * dinv;
+                    for c in 0..6 {
+                        wp.ia[r][c] += ia[r][c] - mr * l[c];
                     }
                 }
+                for c in 0..6 {
+                    wp.acc[c] += acc[c];
+                }
             }
+        }
+        Ok(())
+    }
+
+    /// The solve of [`Engine::factor`] at configuration q (as the
+    /// evaluated `at`) and iterate v for the right-hand side `rhs`, into
+    /// `x`: x = K⁻¹·rhs, K = M + h·D − h·∂(∂T/∂q)/∂v (unit tests compare it
+    /// with a dense solve).
+    #[cfg(test)]
+    pub(super) fn newton_solve(
+        &self,
+        q: &[f64],
+        v: &[f64],
+        h: f64,
+        rhs: &[f64],
+        x: &mut [f64],
+        ws: &mut [BodyScratch],
+    ) -> Result<(), usize> {
+        let t = &self.tree;
+        let ws = &mut ws[..t.len()];
+        for (i, w) in ws.iter_mut().enumerate() {
+            (w.at, w.vn) = (q[i], v[i]);
+        }
+        self.kinematics(ws);
+        let mbar = self.mass_scale(ws);
+        self.iterate_forward(None, ws);
+        self.factor_with(h, mbar, true, ws)?;
+        for i in (0..ws.len()).rev() {
+            let w = &mut ws[i];
+            let u = rhs[i] - dot6(&w.e, &w.pa);
+            w.x = u;
+            if let Some(p) = t.body(i).parent {
+                let (pa, u6, k) = (w.pa, w.u6, u / w.d);
+                for c in 0..6 {
+                    ws[p].pa[c] += pa[c] + u6[c] * k;
+                }
+            }
+        }
+        for i in 0..ws.len() {
+            let ap = match t.body(i).parent {
+                Some(p) => ws[p].acc,
+                None => [0.0; 6],
+            };
+            let w = &mut ws[i];
+            w.x = (w.x - dot6(&w.l, &ap)) / w.d;
+            for c in 0..6 {
+                w.acc[c] = ap[c] + w.s[c] * w.x;
+            }
+            x[i] = w.x;
         }
         Ok(())
     }
@@ -751,7 +862,7 @@ impl<T: Tree> Engine<T> {
     /// The backward pass of an iteration (after
     /// [`Engine::iterate_forward`]): composite momenta, p = M v and ∂T/∂q,
     /// the residual r (sub-step h) and the backward half of the
-    /// articulated-body solve of (M + hD)x = r; returns max|r| (NaN when
+    /// solve of K·x = r ([`Engine::factor`]); returns max|r| (NaN when
     /// any is NaN or ±∞).
     #[inline(always)]
     fn iterate_backward(&self, h: f64, ws: &mut [BodyScratch]) -> f64 {
@@ -765,7 +876,7 @@ impl<T: Tree> Engine<T> {
             w.r = w.p - w.pn + h * (w.dtq - w.dv - b.damping * w.vn + w.tau);
             big = big.max(w.r.abs());
             poison += w.r * 0.0;
-            let u = w.r - dot6(&w.s, &w.pa);
+            let u = w.r - dot6(&w.e, &w.pa);
             w.x = u;
             if let Some(p) = b.parent {
                 let (hc, pa, u6, k) = (w.hc, w.pa, w.u6, u / w.d);
@@ -779,7 +890,7 @@ impl<T: Tree> Engine<T> {
         big + poison
     }
 
-    /// The forward half of the solve (x = (M + hD)⁻¹ r into `ws[i].x`, after
+    /// The forward half of the solve (x = K⁻¹ r into `ws[i].x`, after
     /// [`Engine::iterate_backward`]), with the bookkeeping of the Anderson
     /// acceleration after the `k`-th iteration (k = 0, 1, …; module docs of
     /// [`Mixing`]); returns the mixing of the next
@@ -800,7 +911,7 @@ impl<T: Tree> Engine<T> {
                 None => [0.0; 6],
             };
             let w = &mut ws[i];
-            w.x = (w.x - dot6(&w.u6, &ap)) / w.d;
+            w.x = (w.x - dot6(&w.l, &ap)) / w.d;
             for c in 0..6 {
                 w.acc[c] = ap[c] + w.s[c] * w.x;
             }
@@ -849,13 +960,13 @@ impl<T: Tree> Engine<T> {
         }
         self.kinematics(ws);
         let mbar = self.mass_scale(ws);
+        self.iterate_forward(None, ws);
         self.factor(h, mbar, ws).map_err(SubFail::Singular)?;
         let scale = max_abs(ws, |w| w.p) + mbar;
         let tol = self.options.tolerance;
         let mut best = f64::INFINITY;
         let mut first = f64::NAN;
         let mut iterations = 0;
-        self.iterate_forward(None, ws);
         loop {
             let res = self.iterate_backward(h, ws) / scale;
             if res.is_nan() {
