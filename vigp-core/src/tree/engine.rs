@@ -75,10 +75,10 @@ pub struct BodyScratch<R = f64> {
     tag: u64,
 }
 
-/// Memory of the Anderson acceleration of the quasi-Newton iteration.
+/// Memory of the Anderson acceleration of the chord iteration.
 const ANDERSON: usize = 3;
 
-/// The Anderson mixing of one iteration: `None`, the plain quasi-Newton
+/// The Anderson mixing of one iteration: `None`, the plain chord
 /// step v ← v + f; `Some((m, γ))`, the Anderson-accelerated update (type
 /// II, memory [`ANDERSON`]) of the chord map G(v) = v + K⁻¹r(v) ([`Engine::factor`]):
 /// with ΔV, ΔF the last m differences of iterates and of steps
@@ -190,7 +190,7 @@ pub struct EngineOptions {
     pub max_depth: u32,
     /// Largest contraction of the scaled residual by the first iteration
     /// (default 0.5): a step whose iteration contracts less is too long for
-    /// the quasi-Newton map to be a contraction around v₀ (the DEL equations
+    /// the chord map to be a contraction around v₀ (the DEL equations
     /// then may have their root far away, or another root nearer), and is
     /// subdivided. Not tested when the first residual is already within
     /// 1000 × tolerance.
@@ -336,7 +336,7 @@ impl From<InvalidTree> for EngineError {
 /// Diagnostics of a step (sums and maxima over its sub-steps).
 #[derive(Clone, Copy, Debug, PartialEq, Default)]
 pub struct EngineReport {
-    /// Quasi-Newton iterations (articulated-body solves) over all sub-steps,
+    /// Chord iterations (solves with the factored Newton matrix) over all sub-steps,
     /// failed attempts included.
     pub iterations: usize,
     /// Sub-steps that converged (1 when the step was not subdivided).
@@ -381,15 +381,19 @@ enum SubFail {
 /// kinematics, the composite inertias and ∇V are evaluated once per
 /// sub-step; each residual is a forward and a backward pass.
 ///
-/// # The iteration: quasi-Newton with M + Δt·D, Anderson-accelerated
+/// # The iteration: a chord method on the Newton matrix, in O(N)
 ///
-/// The exact Newton matrix is −(M + Δt·D) + Δt·∂(∂T/∂q)/∂v. The engine
-/// iterates the fixed-point map v ← v + (M(q₁) + Δt·D)⁻¹ r(v), solving with
-/// the articulated-body factorisation of M + Δt·D (the damping enters as
-/// joint armature): factored once per sub-step (one backward pass of 6×6
-/// articulated inertias), each solve is a backward and a forward pass on
-/// 6-vectors. The plain map contracts by about
-/// ‖Δt·M⁻¹∂(vᵀ∂M/∂q v)/∂v‖ ~ Δt·|ω|; from the second iteration on it is
+/// The Newton matrix of the residual is −K, K = M + Δt·D − Δt·C with
+/// C = ∂(∂T/∂q)/∂v. The engine iterates v ← v + K⁻¹ r(v) with K factored
+/// once per sub-step at the iterate it starts from (the caller's guess or
+/// v), by a leaves-first elimination that is the articulated-body
+/// algorithm with a non-symmetric rank-one update per body
+/// ([`Engine::factor`]: one backward pass of 6×6 operators); each solve is
+/// a backward and a forward pass on 6-vectors. Near the root this chord
+/// map contracts by about Δt·|C(v₁) − C(v_start)|, which a good start
+/// makes small (the map with M + Δt·D alone contracts by Δt·|C| ~ Δt·|ω|).
+/// Where a pivot of K is not positive (Δt·|ω| large), the factors are
+/// those of M + Δt·D. From the second iteration on the map is
 /// Anderson-accelerated (memory 3), which on the nearly linear residual
 /// near its root acts as GMRES. It converges to the scaled residual of
 /// [`crate::Stepper`] (module docs of [`EngineOptions::tolerance`]). Where
