@@ -410,3 +410,83 @@ fn urdf_step_derivatives_equal_the_run_time_robots() {
     );
     assert!(worst_panda < 1e-9, "{worst_panda:e}");
 }
+
+/// The tree engine's constants of a `urdf:` mechanism (`Name::TREE_BODIES`,
+/// `NameTree`) against the run-time `vigp::Robot` of the same file: the
+/// same bodies, exactly (the file's numbers emitted as literals that
+/// round-trip), with the block's overrides (the Moon's gravity, the
+/// elbow's damping, the inputs in file order); and the engine stepping the
+/// compile-time constants as it steps the robot's run-time tree, bit for
+/// bit, over 300 falling Panda steps and 300 driven wrist steps (one
+/// algorithm on the same numbers).
+#[test]
+fn urdf_tree_constants_equal_the_run_time_robot() {
+    use vigp::embedded::tree::{Body, BodyScratch, Engine, Tree};
+    let wrist = Robot::from_urdf(format!("{FIXTURES}/wrist.urdf"))
+        .unwrap()
+        .with_actuated(&["shoulder", "slide"])
+        .unwrap();
+    assert_eq!(
+        WristUrdf::TREE_BODIES.as_slice(),
+        wrist.tree().bodies.as_slice()
+    );
+    assert_eq!(WristUrdf::TREE_GRAVITY, wrist.tree().gravity);
+    assert_eq!(WristUrdf::TREE_INPUTS, [0, 2]);
+    assert_eq!(wrist.input_names(), ["shoulder", "slide"]);
+    // the Moon's block: gravity and the elbow's damping replaced
+    assert_eq!(WristMoon::TREE_GRAVITY, [0.0, 0.0, -1.62]);
+    assert_eq!(WristMoon::TREE_INPUTS.len(), 0);
+    for (k, (a, b)) in WristMoon::TREE_BODIES
+        .iter()
+        .zip(&wrist.tree().bodies)
+        .enumerate()
+    {
+        let damping = if k == 1 { 0.5 } else { b.damping };
+        assert_eq!(*a, Body { damping, ..*b }, "body {k}");
+    }
+    assert_eq!(WristUrdfTree.len(), 3);
+    // the Panda: the same bodies; steps bit for bit
+    let panda = Robot::from_urdf(format!("{FIXTURES}/panda.urdf")).unwrap();
+    assert_eq!(
+        Panda::TREE_BODIES.as_slice(),
+        panda.tree().bodies.as_slice()
+    );
+    let folded = Engine::new(PandaTree).unwrap();
+    let data = panda.engine();
+    let mut ws = [BodyScratch::default(); 7];
+    let mut ws2 = [BodyScratch::default(); 7];
+    let (mut q, mut v, mut p) = ([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8], [0.0; 7], [0.0; 7]);
+    let (mut q2, mut v2, mut p2) = (q, v, p);
+    folded.momentum_of(&q, &v, &mut p, &mut ws).unwrap();
+    data.momentum_of(&q2, &v2, &mut p2, &mut ws2).unwrap();
+    for _ in 0..300 {
+        folded
+            .step(&mut q, &mut v, &mut p, &[0.0; 7], 0.002, &mut ws)
+            .unwrap();
+        data.step(&mut q2, &mut v2, &mut p2, &[0.0; 7], 0.002, &mut ws2)
+            .unwrap();
+        assert_eq!((q, v, p), (q2, v2, p2));
+    }
+    assert!(v.iter().any(|x| x.abs() > 0.5), "the arm falls: {v:?}");
+    // the wrist, driven through its inputs
+    let folded = Engine::new(WristUrdfTree).unwrap();
+    let data = wrist.engine();
+    let mut ws = [BodyScratch::default(); 3];
+    let mut ws2 = [BodyScratch::default(); 3];
+    let (mut q, mut v, mut p) = ([0.3, -0.8, 0.02], [0.1, 0.2, -0.05], [0.0; 3]);
+    let (mut q2, mut v2, mut p2) = (q, v, p);
+    folded.momentum_of(&q, &v, &mut p, &mut ws).unwrap();
+    data.momentum_of(&q2, &v2, &mut p2, &mut ws2).unwrap();
+    for k in 0..300 {
+        let mut tau = [0.0; 3];
+        for (c, &i) in WristUrdf::TREE_INPUTS.iter().enumerate() {
+            tau[i] = (0.01 * k as f64 + c as f64).sin();
+        }
+        folded
+            .step(&mut q, &mut v, &mut p, &tau, 0.002, &mut ws)
+            .unwrap();
+        data.step(&mut q2, &mut v2, &mut p2, &tau, 0.002, &mut ws2)
+            .unwrap();
+        assert_eq!((q, v, p), (q2, v2, p2));
+    }
+}

@@ -29,6 +29,14 @@
 //! to it) and a `free(world, root.start)` joint named `root_joint`.
 //! `<limit>` has no place in the spatial description and is not emitted.
 //!
+//! On a fixed base the same bodies are also emitted as constants for the
+//! linear-time tree engine ([`tree_items`]): `Name::TREE_BODIES` (the
+//! file's bodies with the joint overrides), `Name::TREE_GRAVITY`,
+//! `Name::TREE_INPUTS` (the coordinate of each input) and the unit type
+//! `NameTree`, which implements `vigp::embedded::tree::Tree` over them,
+//! so that `Engine::new(NameTree)` steps the robot, `no_std`, with every
+//! body's constants known to the compiler.
+//!
 //! Every mistake in the file or in the overrides is a compile error at the
 //! `urdf:` path (or at the override), naming the URDF element and its line.
 
@@ -251,10 +259,160 @@ fn transpose(m: &M3) -> M3 {
     std::array::from_fn(|i| std::array::from_fn(|j| m[j][i]))
 }
 
+/// A number as a constant expression: the macro's value when it knows it
+/// (±∞ by name), else the expression as written (a named constant).
+fn constant(value: Option<f64>, expr: Option<&syn::Expr>) -> TokenStream {
+    match (value, expr) {
+        (Some(x), _) if x == f64::INFINITY => quote!(::core::f64::INFINITY),
+        (Some(x), _) if x == f64::NEG_INFINITY => quote!(::core::f64::NEG_INFINITY),
+        (Some(x), _) => lit(x),
+        (None, Some(e)) => quote!(#e),
+        (None, None) => quote!(0.0),
+    }
+}
+
+/// The bodies of a fixed-base robot as constants of the tree engine
+/// (module docs): the file's bodies in its order, each joint's `damping`,
+/// `stiffness` and `rest` replaced where the block overrides them (an
+/// override the description refuses, e.g. an unknown joint, is reported by
+/// [`lower`]; here it is skipped), the gravity as declared (default
+/// (0, 0, −9.81)), and the inputs in the order `actuated` appears in the
+/// file.
+fn tree_items(
+    vis: &Visibility,
+    name: &Ident,
+    tree: &vigp_urdf::UrdfTree,
+    overrides: &[Override],
+    gravity: Option<&Value>,
+) -> TokenStream {
+    let core = quote!(::vigp::embedded::tree);
+    let f = |x: f64| constant(Some(x), None);
+    let v3 = |v: &V3| {
+        let (a, b, c) = (f(v[0]), f(v[1]), f(v[2]));
+        quote!([#a, #b, #c])
+    };
+    let mut inputs = Vec::new();
+    let bodies: Vec<TokenStream> = tree
+        .bodies
+        .iter()
+        .enumerate()
+        .map(|(k, b)| {
+            let mut damping = f(b.damping);
+            let (mut stiffness, mut rest) = (f(b.stiffness), f(b.rest));
+            let wanted = rust_name(&tree.joints[k]);
+            for o in overrides
+                .iter()
+                .filter(|o| rust_name(&o.name.unraw().to_string()) == wanted)
+            {
+                for field in &o.fields {
+                    let number = |v: &Value| match v {
+                        Value::Number(n) => Some(constant(n.value, Some(&n.expr))),
+                        _ => None,
+                    };
+                    match (field.key.to_string().as_str(), &field.value) {
+                        ("actuated", Value::Flag(_)) => inputs.push(k),
+                        ("damping", v) => damping = number(v).unwrap_or(damping),
+                        ("stiffness", v) => stiffness = number(v).unwrap_or(stiffness),
+                        ("rest", v) => rest = number(v).unwrap_or(rest),
+                        _ => {}
+                    }
+                }
+            }
+            let parent = match b.parent {
+                Some(p) => quote!(::core::option::Option::Some(#p)),
+                None => quote!(::core::option::Option::None),
+            };
+            let joint = match b.joint {
+                vigp_core::tree::JointKind::Revolute => quote!(#core::JointKind::Revolute),
+                vigp_core::tree::JointKind::Prismatic => quote!(#core::JointKind::Prismatic),
+            };
+            let (axis, translation, com) = (v3(&b.axis), v3(&b.translation), v3(&b.com));
+            let (rot, inertia) = (b.rotation.map(|r| v3(&r)), b.inertia.map(|r| v3(&r)));
+            let mass = f(b.mass);
+            let l = &b.limits;
+            let (lower, upper, effort, velocity) =
+                (f(l.lower), f(l.upper), f(l.effort), f(l.velocity));
+            quote! {
+                #core::Body {
+                    parent: #parent,
+                    joint: #joint,
+                    axis: #axis,
+                    rotation: [#(#rot),*],
+                    translation: #translation,
+                    mass: #mass,
+                    com: #com,
+                    inertia: [#(#inertia),*],
+                    damping: #damping,
+                    stiffness: #stiffness,
+                    rest: #rest,
+                    limits: #core::Limits { lower: #lower, upper: #upper, effort: #effort, velocity: #velocity },
+                }
+            }
+        })
+        .collect();
+    let gravity = match gravity.and_then(|g| g.items(3)) {
+        Some(g) => {
+            let g: Vec<TokenStream> = g.iter().map(|n| constant(n.value, Some(&n.expr))).collect();
+            quote!([#(#g),*])
+        }
+        None => v3(&[0.0, 0.0, -9.81]),
+    };
+    let n = bodies.len();
+    let u = inputs.len();
+    let tree_name = Ident::new(&format!("{name}Tree"), name.span());
+    let doc_bodies = format!(
+        " The robot of `{name}` as the tree engine's bodies, parents first (the \
+         file's joints with a coordinate, fixed joints merged), with the joint \
+         overrides of the block: the constants `{tree_name}` gives \
+         `vigp::embedded::tree::Engine`."
+    );
+    let doc_tree = format!(
+        " The tree of `{name}` as compile-time constants \
+         (`{name}::TREE_BODIES`, `{name}::TREE_GRAVITY`): \
+         `vigp::embedded::tree::Engine::new({tree_name})` steps it on the \
+         linear-time engine, `no_std`, with every body's constants known to the \
+         compiler (the run-time `vigp::Robot::from_urdf` of the same file \
+         steps the same bodies)."
+    );
+    quote! {
+        // the file's numbers as written: a limit of 0.5235987755982988 is
+        // the file's, not an approximation of π/6
+        #[allow(clippy::approx_constant)]
+        impl #name {
+            #[doc = #doc_bodies]
+            pub const TREE_BODIES: [#core::Body; #n] = [#(#bodies),*];
+            /// Gravity of the tree engine's model (m/s², world axes).
+            pub const TREE_GRAVITY: [f64; 3] = #gravity;
+            /// The coordinate (body) each input drives, in input order.
+            pub const TREE_INPUTS: [usize; #u] = [#(#inputs),*];
+        }
+
+        #[doc = #doc_tree]
+        #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+        #vis struct #tree_name;
+
+        impl #core::Tree for #tree_name {
+            #[inline(always)]
+            fn len(&self) -> usize {
+                #n
+            }
+            #[inline(always)]
+            fn body(&self, i: usize) -> &#core::Body {
+                &#name::TREE_BODIES[i]
+            }
+            #[inline(always)]
+            fn gravity(&self) -> [f64; 3] {
+                #name::TREE_GRAVITY
+            }
+        }
+    }
+}
+
 /// Reads the file of a `urdf:` description and lowers it to the spatial
 /// description a user would write by hand; also returns the tokens that
 /// make the compiled crate depend on the file (`include_bytes!`), so that
-/// editing it recompiles the mechanism.
+/// editing it recompiles the mechanism, and on a fixed base the tree
+/// engine's constants ([`tree_items`]).
 pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
     let u = parse.parse2(tokens)?;
     let span = u.path.span();
@@ -379,6 +537,17 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
         });
     }
 
+    let tree_items = if u.floating {
+        TokenStream::new()
+    } else {
+        tree_items(
+            &u.vis,
+            &u.name,
+            &tree,
+            &u.joints,
+            u.gravity.as_ref().map(|g| &g.1),
+        )
+    };
     // the overrides, by joint name
     let mut errors: Option<syn::Error> = None;
     let mut err = |e: syn::Error| match &mut errors {
@@ -435,6 +604,7 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
             const _: &[u8] = include_bytes!(concat!(env!("CARGO_MANIFEST_DIR"), #rel));
         )
     };
+    let track = quote!(#track #tree_items);
     let input = Input {
         dim: Dim::Spatial,
         attrs: u.attrs,
