@@ -179,13 +179,48 @@ impl Encoding {
     }
 }
 
-/// The prior of the learned velocity map.
+/// The prior of the learned velocity map: what the GPs learn on top of.
+///
+/// `I` is what an identified prior carries: nothing on a target (the
+/// default, [`Infallible`](core::convert::Infallible): an exported model
+/// carries its identified parameters in its prior's mechanism and is
+/// [`Prior::Nominal`]), the identified parameters and their covariance in
+/// the std runtime (`vigp::learned::Prior`, which saves as `"nominal"`,
+/// `"constant"` or `{"identified": {…}}`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Prior {
-    /// The nominal variational step: the GPs predict v₁ − v̄(z₀).
+#[cfg_attr(
+    feature = "serde",
+    derive(serde::Serialize, serde::Deserialize),
+    serde(rename_all = "lowercase")
+)]
+pub enum Prior<I = core::convert::Infallible> {
+    /// The nominal variational step v̄(z) (paper eq. 7): the GPs learn
+    /// the residual v_{k+1} − v̄(z_k).
     Nominal,
-    /// No model: the GP means are the velocity itself.
+    /// No prior model: the GP means (with their constant mean, the
+    /// training targets' mean) are the velocity itself.
     Constant,
+    /// The nominal variational step of the mechanism with identified
+    /// physical parameters (written into it through its parameters; its
+    /// other parameters as given): the GPs learn what the identified model
+    /// leaves.
+    Identified(I),
+}
+
+impl<I> Prior<I> {
+    /// Whether the prior is a nominal variational step ([`Prior::Nominal`]
+    /// or [`Prior::Identified`]), so that the GP mean is zero.
+    pub fn uses_nominal_step(&self) -> bool {
+        !matches!(self, Prior::Constant)
+    }
+
+    /// The identified parameters of [`Prior::Identified`].
+    pub fn identified(&self) -> Option<&I> {
+        match self {
+            Prior::Identified(p) => Some(p),
+            _ => None,
+        }
+    }
 }
 
 /// A learned model as exported data (normally a `static` in a generated
@@ -413,6 +448,8 @@ where
         let prior = match self.learned.prior {
             Prior::Nominal => self.stepper.step(z)?.v,
             Prior::Constant => SVector::zeros(),
+            // an exported model's identified parameters are in its mechanism
+            Prior::Identified(never) => match never {},
         };
         self.add_gp_mean(z, &[], &[], prior)
     }
@@ -459,6 +496,8 @@ where
         let prior = match self.learned.prior {
             Prior::Nominal => self.stepper.step_forced(z, u)?.v,
             Prior::Constant => SVector::zeros(),
+            // an exported model's identified parameters are in its mechanism
+            Prior::Identified(never) => match never {},
         };
         self.add_gp_mean(z, u_prev.as_slice(), u.as_slice(), prior)
     }

@@ -85,36 +85,11 @@ pub use vigp_core::learned::Encoding;
 /// The model file ([`SavedLearned`]) records the identified standard
 /// parameters and their covariance in its `prior`, and the mechanism's
 /// parameters with the identified values in `parameters`.
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Prior {
-    /// The nominal variational step v̄(z) (paper eq. 7): the GP learns the
-    /// residual v_{k+1} − v̄(z_k).
-    Nominal,
-    /// No prior model: the constant mean of the training targets.
-    Constant,
-    /// The nominal variational step of the mechanism with the identified
-    /// parameters (written into it through its [`crate::Parameters`],
-    /// [`IdentifiedParameters::apply`]; its other parameters as given):
-    /// the GP learns what the identified model leaves.
-    Identified(IdentifiedParameters),
-}
-
-impl Prior {
-    /// Whether the prior is a nominal variational step ([`Prior::Nominal`]
-    /// or [`Prior::Identified`]), so that the GP mean is zero.
-    pub fn uses_nominal_step(&self) -> bool {
-        !matches!(self, Prior::Constant)
-    }
-
-    /// The identified parameters of [`Prior::Identified`].
-    pub fn identified(&self) -> Option<&IdentifiedParameters> {
-        match self {
-            Prior::Identified(p) => Some(p),
-            _ => None,
-        }
-    }
-}
+///
+/// One type with the target's [`vigp_core::learned::Prior`], whose
+/// `Identified` carries the identified parameters here (an exported model
+/// writes the identified parameters into its prior's mechanism instead).
+pub type Prior = vigp_core::learned::Prior<IdentifiedParameters>;
 
 /// One training pair: a discrete state and the next discrete velocity.
 #[derive(Clone, Copy, Debug, PartialEq)]

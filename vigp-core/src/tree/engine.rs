@@ -387,9 +387,22 @@ enum SubFail {
 /// C = ∂(∂T/∂q)/∂v. The engine iterates v ← v + K⁻¹ r(v) with K factored
 /// once per sub-step at the iterate it starts from (the caller's guess or
 /// v), by a leaves-first elimination that is the articulated-body
-/// algorithm with a non-symmetric rank-one update per body
-/// ([`Engine::factor`]: one backward pass of 6×6 operators); each solve is
-/// a backward and a forward pass on 6-vectors. Near the root this chord
+/// algorithm with a non-symmetric rank-one update per body. With I_b and
+/// h_b the composite inertia and momentum of b's subtree, V_b its twist
+/// and w_b = V_b ×ₘ S_b, the entries of C are S_jᵀ(S_b ×* h_b + I_b w_b)
+/// for j on b's path and w_jᵀ I_b S_b for j strictly above b, and one
+/// backward pass of 6×6 operators gives
+///
+/// ```text
+/// IA_b = I_b(own) + Σ_children (IA_c − m_c ℓ_cᵀ/δ_c),   m_b = IA_b S_b,   e_b = S_b − Δt·w_b,
+/// ℓ_b = IA_bᵀ e_b − Δt·(S_b ×* h_b),   δ_b = e_bᵀ m_b + Δt·d_b;
+/// ```
+///
+/// each solve is then a backward pass ρ_b = r_b − e_bᵀ g_b,
+/// g_parent += g_b + m_b ρ_b/δ_b and a forward pass
+/// x_b = (ρ_b − ℓ_bᵀ Y_parent)/δ_b, Y_b = Y_parent + S_b x_b, on
+/// 6-vectors (at Δt·C = 0 this is the articulated-body algorithm for
+/// M + Δt·D). Near the root this chord
 /// map contracts by about Δt·|C(v₁) − C(v_start)|, which a good start
 /// makes small (the map with M + Δt·D alone contracts by Δt·|C| ~ Δt·|ω|).
 /// Where a pivot of K is not positive (Δt·|ω| large), the factors are
