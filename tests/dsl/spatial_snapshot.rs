@@ -111,8 +111,9 @@ fn generated_code_of_a_universal_joint() {
 }
 
 /// The generated code of a `urdf:` mechanism (tests/fixtures/robots/wrist.urdf,
-/// two joints actuated): the spatial code of its lowered description, plus
-/// the `include_bytes!` that makes the crate depend on the file.
+/// two joints actuated): the spatial code of its lowered description, the
+/// `include_bytes!` that makes the crate depend on the file, and the tree
+/// engine's constants (`Wrist::TREE_BODIES`, `WristTree`).
 #[test]
 fn generated_code_of_a_urdf_mechanism() {
     let code = vigp_codegen::expand_to_string(

@@ -189,22 +189,7 @@ impl TermJacobians {
     ) -> Result<Self, EngineError> {
         let n = engine.dof();
         let mut buf = vec![0.0; 5 * n * n];
-        let (p_q, rest) = buf.split_at_mut(n * n);
-        let (p_v, rest) = rest.split_at_mut(n * n);
-        let (t_q, rest) = rest.split_at_mut(n * n);
-        let (t_v, v_q) = rest.split_at_mut(n * n);
-        engine.term_derivatives(
-            q,
-            v,
-            TermDerivatives {
-                p_q,
-                p_v,
-                t_q,
-                t_v,
-                v_q,
-            },
-            ws,
-        )?;
+        engine.term_derivatives(q, v, TermDerivatives::split(&mut buf, n), ws)?;
         let m = |k: usize| DMatrix::from_row_slice(n, n, &buf[k * n * n..(k + 1) * n * n]);
         Ok(TermJacobians {
             p_q: m(0),

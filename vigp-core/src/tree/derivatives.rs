@@ -350,22 +350,11 @@ impl<T: Tree> Engine<T> {
     ) -> Result<(), EngineError> {
         let n = self.dof();
         let w = 2 * n + inputs.len();
+        self.term_derivatives(q1, v1, TermDerivatives::split(terms, n), ws)?;
         let (p_q, rest) = terms.split_at_mut(n * n);
         let (p_v, rest) = rest.split_at_mut(n * n);
         let (t_q, rest) = rest.split_at_mut(n * n);
         let (t_v, v_q) = rest.split_at_mut(n * n);
-        self.term_derivatives(
-            q1,
-            v1,
-            TermDerivatives {
-                p_q,
-                p_v,
-                t_q,
-                t_v,
-                v_q,
-            },
-            ws,
-        )?;
         // K = ∂r/∂q₁ = h·(∂(∂T/∂q)/∂q − ∂(∇V)/∂q) − ∂P/∂q, in t_q
         for ((k, vq), pq) in t_q.iter_mut().zip(v_q.iter()).zip(p_q.iter()) {
             *k = h * (*k - vq) - pq;

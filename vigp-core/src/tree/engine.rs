@@ -520,6 +520,24 @@ pub struct TermDerivatives<'a> {
     pub v_q: &'a mut [f64],
 }
 
+impl<'a> TermDerivatives<'a> {
+    /// The five outputs as consecutive N × N blocks of `buf` (at least
+    /// 5N² numbers), in the order of the fields.
+    pub fn split(buf: &'a mut [f64], n: usize) -> Self {
+        let (p_q, rest) = buf.split_at_mut(n * n);
+        let (p_v, rest) = rest.split_at_mut(n * n);
+        let (t_q, rest) = rest.split_at_mut(n * n);
+        let (t_v, rest) = rest.split_at_mut(n * n);
+        Self {
+            p_q,
+            p_v,
+            t_q,
+            t_v,
+            v_q: &mut rest[..n * n],
+        }
+    }
+}
+
 /// a − b for spatial vectors.
 #[inline(always)]
 fn sub6(a: &V6, b: &V6) -> V6 {
@@ -801,17 +819,9 @@ impl<T: Tree> Engine<T> {
                 }
             }
         }
-        for i in 0..ws.len() {
-            let ap = match t.body(i).parent {
-                Some(p) => ws[p].acc,
-                None => [0.0; 6],
-            };
-            let w = &mut ws[i];
-            w.x = (w.x - dot6(&w.l, &ap)) / w.d;
-            for c in 0..6 {
-                w.acc[c] = ap[c] + w.s[c] * w.x;
-            }
-            x[i] = w.x;
+        self.solve_forward(0, ws);
+        for (x, w) in x.iter_mut().zip(ws.iter()) {
+            *x = w.x;
         }
         Ok(())
     }

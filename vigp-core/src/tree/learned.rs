@@ -184,10 +184,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             let mut q: [f64; N] = z.q.into();
             v1 = z.v.into();
             let mut p = [0.0; N];
-            let mut tau = [0.0; N];
-            for (k, &j) in self.actuated[..U].iter().enumerate() {
-                tau[j] = u[k];
-            }
+            let tau = self.forces(u);
             self.engine
                 .momentum_of(&q, &v1, &mut p, ws)
                 .map_err(LearnedError::Engine)?;
@@ -230,6 +227,15 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             return Err(StepError::NonFiniteInput { step: None }.into());
         }
         Ok(())
+    }
+
+    /// The generalized forces of the inputs `u` (each on its joint).
+    fn forces<const U: usize>(&self, u: &SVector<f64, U>) -> [f64; N] {
+        let mut tau = [0.0; N];
+        for (k, &j) in self.actuated[..U].iter().enumerate() {
+            tau[j] = u[k];
+        }
+        tau
     }
 
     /// The GP input: the encoded state, then `u_prev`, then `u`.
@@ -283,10 +289,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             let mut q: [f64; N] = z.q.into();
             v1 = z.v.into();
             let mut p = [0.0; N];
-            let mut tau = [0.0; N];
-            for (k, &j) in self.actuated[..U].iter().enumerate() {
-                tau[j] = u[k];
-            }
+            let tau = self.forces(u);
             let buffers = DerivativeBuffers {
                 a: pa,
                 b: pb,

@@ -367,21 +367,10 @@ fn newton_solve_matches_a_dense_solve() {
         let v: [f64; 5] = core::array::from_fn(|i| V[i] * scale_v);
         let mut x = [0.0; 5];
         e.newton_solve(&Q, &v, h, &rhs, &mut x, &mut ws).unwrap();
-        let (mut p_q, mut p_v, mut t_q, mut t_v, mut v_q) =
-            ([0.0; 25], [0.0; 25], [0.0; 25], [0.0; 25], [0.0; 25]);
-        e.term_derivatives(
-            &Q,
-            &v,
-            TermDerivatives {
-                p_q: &mut p_q,
-                p_v: &mut p_v,
-                t_q: &mut t_q,
-                t_v: &mut t_v,
-                v_q: &mut v_q,
-            },
-            &mut ws,
-        )
-        .unwrap();
+        let mut buf = [0.0; 125];
+        e.term_derivatives(&Q, &v, TermDerivatives::split(&mut buf, 5), &mut ws)
+            .unwrap();
+        let (p_v, t_v) = (&buf[25..50], &buf[75..100]);
         let mut k = [0.0; 25];
         for i in 0..5 {
             for j in 0..5 {
