@@ -104,6 +104,25 @@ fn tree_factor<T: Tree>(jac: &mut [f64], tree: &T) -> bool {
     true
 }
 
+/// Row `i` of the row-major n × w matrix `x` minus `a` times its row `k`
+/// (nothing for a = 0).
+#[inline(always)]
+fn sub_row(x: &mut [f64], w: usize, i: usize, k: usize, a: f64) {
+    if a != 0.0 {
+        for c in 0..w {
+            x[i * w + c] -= a * x[k * w + c];
+        }
+    }
+}
+
+/// Row `k` of the row-major n × w matrix `x` divided by `d`.
+#[inline(always)]
+fn div_row(x: &mut [f64], w: usize, k: usize, d: f64) {
+    for v in &mut x[k * w..(k + 1) * w] {
+        *v /= d;
+    }
+}
+
 /// Solves J·X = R in place of the row-major n × w matrix `x` with the
 /// factors of [`tree_factor`]: each column forward, leaves first
 /// (r_i −= l_ik·r_k for the ancestors i of k), then backward, root first
@@ -112,27 +131,14 @@ fn tree_solve<T: Tree>(jac: &[f64], tree: &T, x: &mut [f64], w: usize) {
     let n = tree.len();
     for k in (0..n).rev() {
         for i in ancestors(tree, k) {
-            let l = jac[i * n + k];
-            if l != 0.0 {
-                for c in 0..w {
-                    x[i * w + c] -= l * x[k * w + c];
-                }
-            }
+            sub_row(x, w, i, k, jac[i * n + k]);
         }
     }
     for k in 0..n {
         for j in ancestors(tree, k) {
-            let a = jac[k * n + j];
-            if a != 0.0 {
-                for c in 0..w {
-                    x[k * w + c] -= a * x[j * w + c];
-                }
-            }
+            sub_row(x, w, k, j, jac[k * n + j]);
         }
-        let d = jac[k * n + k];
-        for c in 0..w {
-            x[k * w + c] /= d;
-        }
+        div_row(x, w, k, jac[k * n + k]);
     }
 }
 
@@ -166,25 +172,15 @@ pub(super) fn dense_solve(jac: &mut [f64], n: usize, x: &mut [f64], w: usize) ->
                 for j in k + 1..n {
                     jac[i * n + j] -= l * jac[k * n + j];
                 }
-                for c in 0..w {
-                    x[i * w + c] -= l * x[k * w + c];
-                }
+                sub_row(x, w, i, k, l);
             }
         }
     }
     for k in (0..n).rev() {
         for j in k + 1..n {
-            let a = jac[k * n + j];
-            if a != 0.0 {
-                for c in 0..w {
-                    x[k * w + c] -= a * x[j * w + c];
-                }
-            }
+            sub_row(x, w, k, j, jac[k * n + j]);
         }
-        let d = jac[k * n + k];
-        for c in 0..w {
-            x[k * w + c] /= d;
-        }
+        div_row(x, w, k, jac[k * n + k]);
     }
     true
 }
