@@ -273,16 +273,15 @@ fn constant(value: Option<f64>, expr: Option<&syn::Expr>) -> TokenStream {
 
 /// The bodies of a fixed-base robot as constants of the tree engine
 /// (module docs): the file's bodies in its order, each joint's `damping`,
-/// `stiffness` and `rest` replaced where the block overrides them (an
-/// override the description refuses, e.g. an unknown joint, is reported by
-/// [`lower`]; here it is skipped), the gravity as declared (default
-/// (0, 0, −9.81)), and the inputs in the order `actuated` appears in the
-/// file.
+/// `stiffness`, `rest` and `actuated` read from `joints`, its lowered
+/// declaration with the block's overrides applied (joint k is body k's),
+/// the gravity as declared (default (0, 0, −9.81)), and the inputs in the
+/// order `actuated` appears in the file.
 fn tree_items(
     vis: &Visibility,
     name: &Ident,
     tree: &vigp_urdf::UrdfTree,
-    overrides: &[Override],
+    joints: &[JointDecl],
     gravity: Option<&Value>,
 ) -> TokenStream {
     let core = quote!(::vigp::embedded::tree);
@@ -297,25 +296,21 @@ fn tree_items(
         .iter()
         .enumerate()
         .map(|(k, b)| {
+            // the joint's declaration, with the file's damping and the
+            // block's overrides already applied
             let mut damping = f(b.damping);
             let (mut stiffness, mut rest) = (f(b.stiffness), f(b.rest));
-            let wanted = rust_name(&tree.joints[k]);
-            for o in overrides
-                .iter()
-                .filter(|o| rust_name(&o.name.unraw().to_string()) == wanted)
-            {
-                for field in &o.fields {
-                    let number = |v: &Value| match v {
-                        Value::Number(n) => Some(constant(n.value, Some(&n.expr))),
-                        _ => None,
-                    };
-                    match (field.key.to_string().as_str(), &field.value) {
-                        ("actuated", Value::Flag(_)) => inputs.push(k),
-                        ("damping", v) => damping = number(v).unwrap_or(damping),
-                        ("stiffness", v) => stiffness = number(v).unwrap_or(stiffness),
-                        ("rest", v) => rest = number(v).unwrap_or(rest),
-                        _ => {}
-                    }
+            for field in &joints[k].fields {
+                let number = |v: &Value| match v {
+                    Value::Number(n) => Some(constant(n.value, Some(&n.expr))),
+                    _ => None,
+                };
+                match (field.key.to_string().as_str(), &field.value) {
+                    ("actuated", Value::Flag(_)) => inputs.push(k),
+                    ("damping", v) => damping = number(v).unwrap_or(damping),
+                    ("stiffness", v) => stiffness = number(v).unwrap_or(stiffness),
+                    ("rest", v) => rest = number(v).unwrap_or(rest),
+                    _ => {}
                 }
             }
             let parent = match b.parent {
@@ -537,17 +532,6 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
         });
     }
 
-    let tree_items = if u.floating {
-        TokenStream::new()
-    } else {
-        tree_items(
-            &u.vis,
-            &u.name,
-            &tree,
-            &u.joints,
-            u.gravity.as_ref().map(|g| &g.1),
-        )
-    };
     // the overrides, by joint name
     let mut errors: Option<syn::Error> = None;
     let mut err = |e: syn::Error| match &mut errors {
@@ -602,6 +586,18 @@ pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
         let rel = format!("/{rel}");
         quote!(
             const _: &[u8] = include_bytes!(concat!(env!("CARGO_MANIFEST_DIR"), #rel));
+        )
+    };
+    // on a fixed base, joint k is body k's
+    let tree_items = if u.floating {
+        TokenStream::new()
+    } else {
+        tree_items(
+            &u.vis,
+            &u.name,
+            &tree,
+            &joints,
+            u.gravity.as_ref().map(|g| &g.1),
         )
     };
     let track = quote!(#track #tree_items);

@@ -445,11 +445,11 @@ where
         if !z.is_finite() {
             return Err(StepError::NonFiniteState { step: None }.into());
         }
-        let prior = match self.learned.prior {
-            Prior::Nominal => self.stepper.step(z)?.v,
-            Prior::Constant => SVector::zeros(),
-            // an exported model's identified parameters are in its mechanism
-            Prior::Identified(never) => match never {},
+        // (an exported model's identified parameters are in its mechanism)
+        let prior = if self.learned.prior.uses_nominal_step() {
+            self.stepper.step(z)?.v
+        } else {
+            SVector::zeros()
         };
         self.add_gp_mean(z, &[], &[], prior)
     }
@@ -493,11 +493,11 @@ where
                 Err(LearnedError::NoInputs)
             };
         }
-        let prior = match self.learned.prior {
-            Prior::Nominal => self.stepper.step_forced(z, u)?.v,
-            Prior::Constant => SVector::zeros(),
-            // an exported model's identified parameters are in its mechanism
-            Prior::Identified(never) => match never {},
+        // (an exported model's identified parameters are in its mechanism)
+        let prior = if self.learned.prior.uses_nominal_step() {
+            self.stepper.step_forced(z, u)?.v
+        } else {
+            SVector::zeros()
         };
         self.add_gp_mean(z, u_prev.as_slice(), u.as_slice(), prior)
     }

@@ -26,6 +26,7 @@
 
 use super::engine::{
     BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives, check_len,
+    check_time_step,
 };
 use super::model::Tree;
 
@@ -227,9 +228,7 @@ impl<T: Tree> Engine<T> {
         out: DerivativeBuffers<'_>,
         ws: &mut [BodyScratch],
     ) -> Result<EngineReport, EngineError> {
-        if !(dt.is_finite() && dt > 0.0 && (dt * dt).is_normal()) {
-            return Err(EngineError::InvalidTimeStep { dt });
-        }
+        check_time_step(dt)?;
         let n = self.dof();
         let u = inputs.len();
         for (what, got) in [

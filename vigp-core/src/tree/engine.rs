@@ -488,6 +488,16 @@ fn check_options(options: &EngineOptions) -> Result<(), EngineError> {
     Ok(())
 }
 
+/// Δt must be finite and > 0 with Δt² a normal number (the step divides
+/// by it); else [`EngineError::InvalidTimeStep`].
+pub(super) fn check_time_step(dt: f64) -> Result<(), EngineError> {
+    if dt.is_finite() && dt > 0.0 && (dt * dt).is_normal() {
+        Ok(())
+    } else {
+        Err(EngineError::InvalidTimeStep { dt })
+    }
+}
+
 pub(super) fn check_len(
     what: &'static str,
     got: usize,
@@ -1467,9 +1477,7 @@ impl<T: Tree> Engine<T> {
         guess: Option<&[f64]>,
         ws: &mut [BodyScratch],
     ) -> Result<EngineReport, EngineError> {
-        if !(dt.is_finite() && dt > 0.0 && (dt * dt).is_normal()) {
-            return Err(EngineError::InvalidTimeStep { dt });
-        }
+        check_time_step(dt)?;
         let ws = self.scratch(ws)?;
         let n = ws.len();
         check_len("p", p.len(), n)?;

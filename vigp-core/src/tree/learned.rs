@@ -10,7 +10,7 @@
 
 use super::derivatives::{DerivativeBuffers, derivative_scratch_len};
 use super::spatial::V3;
-use super::{Body, BodyScratch, Engine, EngineError, EngineOptions, JointKind, TreeRef};
+use super::{Body, BodyScratch, Engine, EngineOptions, JointKind, TreeRef};
 use crate::forced::{InputJacobian, StateJacobian};
 use crate::gp::ExportedGp;
 use crate::learned::{Encoding, LearnedError, Prior};
@@ -112,11 +112,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             gravity: learned.gravity,
         };
         let engine = Engine::with_options(tree, learned.options).map_err(LearnedError::Engine)?;
-        if !(learned.dt.is_finite() && learned.dt > 0.0 && (learned.dt * learned.dt).is_normal()) {
-            return Err(LearnedError::Engine(EngineError::InvalidTimeStep {
-                dt: learned.dt,
-            }));
-        }
+        super::engine::check_time_step(learned.dt).map_err(LearnedError::Engine)?;
         let kinds = core::array::from_fn(|i| match learned.bodies[i].joint {
             JointKind::Revolute => CoordinateKind::Angle,
             JointKind::Prismatic => CoordinateKind::Length,
@@ -180,7 +176,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
         self.check_step(z, u_prev, u)?;
         let l = self.learned;
         let mut v1 = [0.0; N];
-        if l.prior == Prior::Nominal {
+        if l.prior.uses_nominal_step() {
             let mut q: [f64; N] = z.q.into();
             v1 = z.v.into();
             let mut p = [0.0; N];
@@ -281,7 +277,7 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             a.q_v[(i, i)] = l.dt;
         }
         let mut v1 = [0.0; N];
-        if l.prior == Prior::Nominal {
+        if l.prior.uses_nominal_step() {
             let flat = scratch.blocks.as_flattened_mut().as_flattened_mut();
             let (pa, rest) = flat.split_at_mut(4 * N * N);
             let (pb, rest) = rest.split_at_mut(2 * N * U);
