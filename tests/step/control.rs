@@ -1260,6 +1260,71 @@ fn learned_integrator_takes_inputs() {
     }
     println!("learned step derivatives: worst relative error {worst:.1e}");
     assert!(worst <= 1e-6, "{worst:e}");
+    // the K-step rollout derivatives (A, B and B_prev chained) against
+    // five-point differences of the whole learned mean rollout
+    let k_steps = 5;
+    let z0 = State::new([0.1, -0.6], [0.4, 1.1]);
+    let up = SVector::<f64, 1>::new(1.5);
+    let plan: Vec<SVector<f64, 1>> = (0..k_steps)
+        .map(|_| SVector::<f64, 1>::new(rng.uniform(-4.0, 4.0)))
+        .collect();
+    let rd = l
+        .rollout_derivatives_forced(&z0, &up, &plan, &mut ws)
+        .unwrap();
+    let mut traj = vec![z0; k_steps];
+    l.rollout_mean_forced_into(&z0, &up, &plan, &mut traj)
+        .unwrap();
+    assert_eq!(&rd.states[1..], &traj[..]);
+    let last = |z: &State<2>, us: &[SVector<f64, 1>]| {
+        let mut out = vec![*z; us.len()];
+        l.rollout_mean_forced_into(z, &up, us, &mut out).unwrap();
+        out[us.len() - 1]
+    };
+    let jk = &rd.initial[k_steps];
+    let mut err = 0.0f64;
+    let mut scale = 0.0f64;
+    for j in 0..2 {
+        for pos in [true, false] {
+            let (dq, dv) = stencil(1e-3, |e| {
+                let mut zp = z0;
+                if pos {
+                    zp.q[j] += e;
+                } else {
+                    zp.v[j] += e;
+                }
+                last(&zp, &plan)
+            });
+            let (aq, av) = if pos {
+                (jk.q_q.column(j).into_owned(), jk.v_q.column(j).into_owned())
+            } else {
+                (jk.q_v.column(j).into_owned(), jk.v_v.column(j).into_owned())
+            };
+            err = err.max((aq - dq).amax()).max((av - dv).amax());
+            scale = scale.max(dq.amax()).max(dv.amax());
+        }
+    }
+    let mut rollout_worst = err / scale;
+    for (j, bj) in rd.inputs[k_steps].iter().enumerate() {
+        let (dq, dv) = stencil(1e-3, |e| {
+            let mut us = plan.clone();
+            us[j][0] += e;
+            last(&z0, &us)
+        });
+        let e = (bj.q_u.column(0) - dq)
+            .amax()
+            .max((bj.v_u.column(0) - dv).amax());
+        rollout_worst = rollout_worst.max(e / dq.amax().max(dv.amax()));
+    }
+    // inputs act on later states only
+    assert!(
+        rd.inputs[2][2..]
+            .iter()
+            .all(|b| b.q_u.amax() == 0.0 && b.v_u.amax() == 0.0)
+    );
+    println!(
+        "learned {k_steps}-step rollout derivatives: worst relative error {rollout_worst:.1e}"
+    );
+    assert!(rollout_worst <= 1e-6, "{rollout_worst:e}");
     // the input matters, and the Integrator trait reaches it
     let z = State::new([0.0, 0.3], [0.0, 0.0]);
     let a = vigp::Integrator::step_forced(&l, &z, &SVector::<f64, 1>::new(3.0)).unwrap();

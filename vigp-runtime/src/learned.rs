@@ -614,6 +614,67 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         self.step_derivatives_at(z, u_prev, u, ws)
     }
 
+    /// The learned mean rollout under planned inputs (the states of
+    /// [`Learned::rollout_mean_forced_into`], bit for bit: step k from z_k
+    /// under `inputs[k]` after `inputs[k − 1]`, the first after `u_prev`)
+    /// with the exact derivatives of every state with respect to z_0 and to
+    /// every planned input: what a shooting MPC over the learned model
+    /// needs. The learned step reads the previous input too
+    /// ([`Learned::takes_previous_input`]), so u_j reaches z_{j+1} through
+    /// B_j and z_{j+2} through B_prev,(j+1):
+    ///
+    /// ∂z_{k+1}/∂u_j = A_k ∂z_k/∂u_j + [j = k] B_k + [j = k − 1] B_prev,k,
+    ///
+    /// with A_k, B_k and B_prev,k from [`Learned::step_derivatives_forced`]
+    /// at (z_k, u_{k−1}, u_k). `u_prev` is data, not a decision: its column
+    /// is not returned. Cost: K derivative steps plus O(K²) products of
+    /// N × N blocks. Errors are those of the steps, tagged with the step.
+    pub fn rollout_derivatives_forced<const U: usize>(
+        &self,
+        z0: &State<N>,
+        u_prev: &SVector<f64, U>,
+        inputs: &[SVector<f64, U>],
+        ws: &mut Workspace,
+    ) -> Result<crate::RolloutDerivatives<N, U>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
+        use vigp_core::{InputJacobian, StateJacobian};
+        self.check_input_count::<U>()?;
+        let k_steps = inputs.len();
+        let mut states = Vec::with_capacity(k_steps + 1);
+        states.push(*z0);
+        let mut initial = Vec::with_capacity(k_steps + 1);
+        initial.push(StateJacobian::identity());
+        let mut wrt_u = vec![vec![InputJacobian::<N, U>::zeros(); k_steps]; k_steps + 1];
+        for (k, u) in inputs.iter().enumerate() {
+            let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+            let (z1, d, d_prev) = self
+                .step_derivatives_at(&states[k], up, u, ws)
+                .map_err(|e| e.at_step(k))?;
+            initial.push(d.a.after(&initial[k]));
+            // u_j for j > k does not reach z_{k+1}
+            let (before, after) = wrt_u.split_at_mut(k + 1);
+            let rows = after[0].iter_mut().zip(&before[k]).take(k + 1);
+            for (j, (next, now)) in rows.enumerate() {
+                *next = d.a.times_input(now);
+                if j == k {
+                    next.q_u += d.b.q_u;
+                    next.v_u += d.b.v_u;
+                } else if j + 1 == k {
+                    next.q_u += d_prev.q_u;
+                    next.v_u += d_prev.v_u;
+                }
+            }
+            states.push(z1);
+        }
+        Ok(crate::RolloutDerivatives {
+            states,
+            initial,
+            inputs: wrt_u,
+        })
+    }
+
     /// The forced calls take `U` equal to the inputs the model was trained
     /// with, or `U = 0` (no input: u = 0, as every [`Integrator`] takes
     /// it). A `U` other than 0 and the mechanism's input count does not

@@ -12,6 +12,7 @@ use vigp_runtime::learned::robot::{
     LearnedRobot, LearnedRobotError, RobotTransition, coordinate_kinds, identified_robot,
 };
 use vigp_runtime::learned::{Encoding, IdentifiedParameters, Prior};
+use vigp_runtime::nalgebra::DMatrix;
 use vigp_runtime::{CoordinateKind, Robot, RobotState};
 
 #[path = "../../tests/common/rng.rs"]
@@ -137,7 +138,9 @@ fn the_run_time_reader_reads_what_the_fixed_size_reader_reads() {
 /// `Learned::step_derivatives_forced` advises; the derivatives are exact
 /// for any hyperparameters. A wrong block (a sign of the sin/cos chain
 /// rule, u and u_prev swapped, a missing prior term) is off by the size
-/// of the entry itself.
+/// of the entry itself. The rollout derivatives, chained from the
+/// per-step A, B and B_prev, are checked the same way against differences
+/// of a whole 4-step rollout.
 #[test]
 fn learned_step_derivatives_match_differences_of_the_step() {
     let truth = arm(0.3);
@@ -212,6 +215,52 @@ fn learned_step_derivatives_match_differences_of_the_step() {
             0,
             stencil(&|e| next(&z, &[u_prev[0] + e], &u)),
         );
+        // a K-step rollout: the per-step A, B and B_prev chained against
+        // differences of the whole rollout
+        let plan = vec![vec![3.0], vec![3.6], vec![2.9], vec![3.3]];
+        let k_steps = plan.len();
+        let steps = learned
+            .rollout_derivatives(&z, &u_prev, &plan, &mut ws)
+            .unwrap();
+        let traj = learned.rollout(&z, &u_prev, &plan).unwrap();
+        assert!(steps.iter().zip(&traj).all(|(d, s)| d.state == *s));
+        let last = |z: &RobotState, plan: &[Vec<f64>]| -> Vec<f64> {
+            let z1 = learned.rollout(z, &u_prev, plan).unwrap().pop().unwrap();
+            z1.q.into_iter().chain(z1.v).collect()
+        };
+        let mut initial = DMatrix::<f64>::identity(2 * n, 2 * n);
+        let mut wrt_u = vec![DMatrix::<f64>::zeros(2 * n, 1); k_steps];
+        for (k, d) in steps.iter().enumerate() {
+            initial = &d.a * &initial;
+            for (j, b) in wrt_u.iter_mut().enumerate().take(k + 1) {
+                *b = &d.a * &*b;
+                if j == k {
+                    *b += &d.b;
+                } else if j + 1 == k {
+                    *b += &d.b_prev;
+                }
+            }
+        }
+        for c in 0..2 * n {
+            let fd = stencil(&|e| {
+                let mut zz = z.clone();
+                if c < n {
+                    zz.q[c] += e;
+                } else {
+                    zz.v[c - n] += e;
+                }
+                last(&zz, &plan)
+            });
+            compare("rollout ∂z_K/∂z_0", &initial, c, fd);
+        }
+        for (j, b) in wrt_u.iter().enumerate() {
+            let fd = stencil(&|e| {
+                let mut p = plan.clone();
+                p[j][0] += e;
+                last(&z, &p)
+            });
+            compare(&format!("rollout ∂z_K/∂u_{j}"), b, 0, fd);
+        }
         println!("{prior:?}, {encoding:?}: largest scaled difference {worst:.1e}");
         // the GP reads u_prev: B_prev is not zero
         assert!(d.b_prev.iter().any(|x| *x != 0.0));

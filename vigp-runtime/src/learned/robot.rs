@@ -566,6 +566,39 @@ impl LearnedRobot {
         })
     }
 
+    /// The learned mean rollout of [`LearnedRobot::rollout`] with every
+    /// step's exact derivatives: entry k is [`LearnedRobot::step_derivatives`]
+    /// at (z_k, u_{k−1}, u_k) (`u_prev` before the first), so its `state`
+    /// is z_{k+1}, bit for bit that of the rollout, and its `a`, `b`,
+    /// `b_prev` are A_k, B_k and B_prev,k: the linearisation along the
+    /// trajectory that iLQR and linear MPC take. Across steps the
+    /// derivatives chain as ∂z_K/∂z_0 = A_{K−1}⋯A_0 and, since u_j reaches
+    /// z_{j+1} through B_j and z_{j+2} through B_prev,(j+1),
+    /// ∂z_{k+1}/∂u_j = A_k ∂z_k/∂u_j + [j = k] B_k + [j = k − 1] B_prev,k.
+    /// A failure names the step.
+    pub fn rollout_derivatives(
+        &self,
+        z0: &RobotState,
+        u_prev: &[f64],
+        inputs: &[Vec<f64>],
+        ws: &mut Workspace,
+    ) -> Result<Vec<LearnedRobotDerivatives>, LearnedRobotError> {
+        let mut out: Vec<LearnedRobotDerivatives> = Vec::with_capacity(inputs.len());
+        let mut prev = u_prev;
+        for (k, u) in inputs.iter().enumerate() {
+            let z = out.last().map_or(z0, |d| &d.state);
+            let d =
+                self.step_derivatives(z, prev, u, ws)
+                    .map_err(|e| LearnedRobotError::Rollout {
+                        step: k,
+                        source: Box::new(e),
+                    })?;
+            out.push(d);
+            prev = u;
+        }
+        Ok(out)
+    }
+
     /// [`LearnedRobot::step_in`] with its own workspace and no variance.
     pub fn step(
         &self,
