@@ -115,9 +115,10 @@ fn rollouts_of_impossible_lengths_are_typed_errors() {
 
 /// The double pendulum at Δt = 2 s: Newton converges, but to a root no
 /// motion has (with the check off the energy goes from −17 J to thousands
-/// of joules). By default the step is `NotContinuation`, with the ratio;
-/// with `max_subdivision(8)` it subdivides itself until it resolves the
-/// motion.
+/// of joules). Without subdivision (`max_subdivision(0)`) the step is
+/// `NotContinuation`, with the ratio; by default (a mechanism without
+/// constraints subdivides a failing step up to 8 times) it subdivides
+/// itself until it resolves the motion.
 #[test]
 fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
     let m = DoublePendulum::default().minimal();
@@ -148,10 +149,10 @@ fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
     // after 2 s from rest, E = 58.6 J)
     assert!(max_e > 100.0, "max energy {max_e}");
     assert!(ratios[0] > 30.0, "{ratios:?}");
-    // default: a typed error naming the ratio and the remedy
-    let on = Variational::new(m, 2.0).unwrap();
+    // without subdivision: a typed error naming the ratio and the remedy
+    let on = Variational::new(m, 2.0).unwrap().max_subdivision(0);
     let e = on.rollout(&z0, 20).unwrap_err();
-    println!("default: {e}");
+    println!("max_subdivision(0): {e}");
     match e {
         StepError::NotContinuation { ratio, bound, .. } => {
             assert!(ratio > bound && bound == 1.0, "{e:?}")
@@ -164,16 +165,14 @@ fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
         "{text}"
     );
     assert!(text.contains("substeps"), "{text}");
-    // a step that subdivides itself (`max_subdivision(8)`) takes sub-steps
-    // until they resolve the motion: 20 steps of 2 s complete, and the
+    // by default the step subdivides itself (up to 8 halvings) until its
+    // sub-steps resolve the motion: 20 steps of 2 s complete, and the
     // energy stays within the
     // first-order bound of the finest sub-step used (Δt·max|v|·scale, the
     // scale Σ m·|g|·l = 29.4 J plus the largest kinetic energy)
-    let (traj, report) = Variational::new(m, 2.0)
-        .unwrap()
-        .max_subdivision(8)
-        .rollout_with_report(&z0, 20)
-        .unwrap();
+    let default = Variational::new(m, 2.0).unwrap();
+    assert_eq!(default.subdivision_depth(), 8);
+    let (traj, report) = default.rollout_with_report(&z0, 20).unwrap();
     let h = 2.0 / f64::from(1u32 << report.deepest);
     let vmax = traj
         .iter()
@@ -189,7 +188,7 @@ fn a_root_that_is_not_the_continuation_of_the_motion_is_an_error() {
             .map(|z| m.energy(z) - m.potential_energy(&z.q))
             .fold(0.0f64, f64::max);
     println!(
-        "max_subdivision(8): {report:?}, finest sub-step {h} s, max |E − E0| {drift:.3e} J (scale {scale:.1} J, max |v| {vmax:.2})"
+        "default (max_subdivision(8)): {report:?}, finest sub-step {h} s, max |E − E0| {drift:.3e} J (scale {scale:.1} J, max |v| {vmax:.2})"
     );
     assert_eq!((report.steps, report.subdivided), (20, 20), "{report:?}");
     assert!(drift <= h * vmax * scale, "{drift} > {}", h * vmax * scale);

@@ -57,7 +57,7 @@ pub use summary::summarize;
 pub use system::{Parameters, System, ViewVisitor};
 #[cfg(feature = "alloc")]
 pub use variational::RolloutDerivatives;
-pub use variational::{Integrator, Variational};
+pub use variational::{DEFAULT_SUBDIVISION, Integrator, Variational};
 pub use vigp_core as embedded;
 pub use vigp_core::Inputs;
 pub use vigp_core::Real;

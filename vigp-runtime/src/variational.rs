@@ -138,10 +138,14 @@ pub trait Integrator<const N: usize> {
 /// that converge at once are unchanged, bit for bit, and cost the same. A
 /// subdivided step restarts from the state (the momentum a rollout carries
 /// is rebuilt from it: for the midpoint rule under inputs, the previous
-/// input's share in it is not). It is off by default: a smaller sub-step
-/// also shrinks the residual a singular configuration leaves (a chain
-/// pinned at full stretch, where no motion is admissible, has a sub-step
-/// that is accepted), so it is for motions known to be well posed.
+/// input's share in it is not). It is **on by default for mechanisms
+/// without constraints** (`C = 0`: minimal coordinates of trees, whose
+/// DEL equations have a root for every small enough sub-step, since M(q)
+/// is positive definite everywhere), down to Δt/256, and off for
+/// constrained ones: there a smaller sub-step also shrinks the residual
+/// a singular configuration leaves (a chain pinned at full stretch, where
+/// no motion is admissible, has a sub-step that is accepted), so it is
+/// for motions known to be well posed ([`DEFAULT_SUBDIVISION`]).
 #[derive(Clone, Copy, Debug)]
 pub struct Variational<M: Mechanism<N, C>, const N: usize, const C: usize> {
     /// The fixed-size engine: the model, Δt, the rule, the options and the
@@ -149,6 +153,12 @@ pub struct Variational<M: Mechanism<N, C>, const N: usize, const C: usize> {
     stepper: Stepper<M, N, C>,
     subdivision: u32,
 }
+
+/// The halvings a failing step of [`Variational`] may take unless
+/// [`Variational::max_subdivision`] says otherwise: `[0]` for mechanisms
+/// without constraints (8: sub-steps down to Δt/256), `[1]` for
+/// constrained ones (0: an error at once; type docs of [`Variational`]).
+pub const DEFAULT_SUBDIVISION: [u32; 2] = [8, 0];
 
 /// How a rollout of [`Variational`] went ([`Variational::rollout_with_report`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -245,7 +255,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     pub fn new(model: M, dt: f64) -> Result<Self, StepError> {
         Ok(Self {
             stepper: loop_closes(Stepper::new(model, dt)?)?,
-            subdivision: 0,
+            subdivision: DEFAULT_SUBDIVISION[usize::from(C > 0)],
         })
     }
 
@@ -255,7 +265,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     pub fn midpoint(model: M, dt: f64) -> Result<Self, StepError> {
         Ok(Self {
             stepper: loop_closes(Stepper::midpoint(model, dt)?)?,
-            subdivision: 0,
+            subdivision: DEFAULT_SUBDIVISION[usize::from(C > 0)],
         })
     }
 
@@ -268,8 +278,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     }
 
     /// How often a failing step may halve its sub-step before it is an
-    /// error (default 0: never, a failing step is an error at once; 8 goes
-    /// down to Δt/256). See "Large steps" above.
+    /// error (0: never, a failing step is an error at once; 8 goes down to
+    /// Δt/256). Default: 8 without constraints, 0 with them
+    /// ([`DEFAULT_SUBDIVISION`]). See "Large steps" above.
     pub fn max_subdivision(mut self, depth: u32) -> Self {
         self.subdivision = depth;
         self
