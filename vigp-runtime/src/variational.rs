@@ -327,11 +327,14 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
             }
         }
         // a start off its quaternions or constraints is named as such,
-        // whatever the sub-step
+        // whatever the sub-step, and so is a Newton matrix still singular
+        // at the finest sub-step (a link without mass or inertia)
         let explained = self.explain(last, z);
         if matches!(
             explained,
-            StepError::NonUnitQuaternion { .. } | StepError::OffConstraints { .. }
+            StepError::NonUnitQuaternion { .. }
+                | StepError::OffConstraints { .. }
+                | StepError::SingularJacobian { .. }
         ) {
             return Err(explained);
         }
