@@ -529,6 +529,7 @@ where
         .zip(&out)
         .map(|(a, b)| diff(a, b))
         .fold(0.0, f64::max);
+    let mut derivative_worst = 0.0f64;
     // single steps from the states of the rollout, under fresh inputs
     for z in out.iter().step_by(3) {
         let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-amp, amp));
@@ -556,13 +557,57 @@ where
                 .unwrap()
         );
         worst = worst.max(diff(&std_free, &free));
+        // the exact derivatives: the embedded step's state is its own
+        // step's, bit for bit, and A, B and B_prev are the std model's
+        // (the same nominal derivatives and projection code, two
+        // implementations of the GP gradient's sum), relative to the
+        // largest entry of each. Tolerance 1e-9: the gradient sums terms
+        // far larger than itself when the trained noise is small (under a
+        // constant prior the GP carries the whole velocity), so two
+        // orders of summation differ at ~1e-10 (measured 2.1e-10 there,
+        // ≤ 5e-12 under the nominal prior)
+        let (z1, d, dp) = embedded.step_derivatives(z, &up, &u).unwrap();
+        assert_eq!(z1, b);
+        let (_, sd, sdp) = l.step_derivatives_forced(z, &up, &u, &mut ws).unwrap();
+        let rel = |x: f64, scale: f64| x / scale.max(1e-300);
+        let blocks = |a: &vigp::embedded::StateJacobian<N>| [a.q_q, a.q_v, a.v_q, a.v_v];
+        let a_diff = |a: &vigp::embedded::StateJacobian<N>,
+                      b: &vigp::embedded::StateJacobian<N>| {
+            let (x, y) = (blocks(a), blocks(b));
+            let d = (0..4).map(|i| (x[i] - y[i]).amax()).fold(0.0, f64::max);
+            rel(d, y.iter().map(|m| m.amax()).fold(0.0, f64::max))
+        };
+        let ea = a_diff(&d.a, &sd.a);
+        let eb = rel((d.b.v_u - sd.b.v_u).amax(), sd.b.v_u.amax());
+        let ep = rel(
+            (dp.v_u - sdp.v_u).amax(),
+            sdp.v_u.amax().max(sd.b.v_u.amax()),
+        );
+        derivative_worst = derivative_worst.max(ea).max(eb).max(ep);
+        // U = 0: A alone, the step under u = 0
+        let (f1, fd, _) = embedded.step_derivatives::<0>(z, &none, &none).unwrap();
+        assert_eq!(f1, free);
+        let (_, sfd, _) = l
+            .step_derivatives_forced::<0>(z, &none, &none, &mut ws)
+            .unwrap();
+        derivative_worst = derivative_worst.max(a_diff(&fd.a, &sfd.a));
     }
+    eprintln!("  step derivatives: max |std − embedded| / largest entry = {derivative_worst:.2e}");
+    assert!(derivative_worst <= 1e-9, "{derivative_worst:e}");
     let info = allocation_counter::measure(|| {
         embedded
             .rollout_forced_into(z0, &u_prev, &inputs, &mut out)
             .unwrap();
     });
     assert_eq!(info.count_total, 0, "the forced embedded step allocated");
+    let zero = SVector::<f64, U>::zeros();
+    let info = allocation_counter::measure(|| {
+        embedded.step_derivatives(z0, &zero, &zero).unwrap();
+    });
+    assert_eq!(
+        info.count_total, 0,
+        "the embedded step derivatives allocated"
+    );
     worst
 }
 
@@ -778,6 +823,12 @@ fn forced_models_that_do_not_fit_are_refused() {
             stepper.step_forced(&z, &SVector::from([bad]), &ok),
             Err(LearnedError::Step(StepError::NonFiniteInput { step: None }))
         );
+        for (up, u) in [(ok, SVector::from([bad])), (SVector::from([bad]), ok)] {
+            assert_eq!(
+                stepper.step_derivatives(&z, &up, &u).map(drop),
+                Err(LearnedError::Step(StepError::NonFiniteInput { step: None }))
+            );
+        }
         let mut inputs = [ok; 10];
         inputs[4] = SVector::from([bad]);
         let mut out = [z; 10];
@@ -843,6 +894,16 @@ fn forced_models_that_do_not_fit_are_refused() {
     assert_eq!(
         s0.step_forced(&z, &zero, &SVector::from([1.0])),
         Err(LearnedError::NoInputs)
+    );
+    // no derivative in an input the model does not take; A alone under U = 0
+    assert_eq!(
+        s0.step_derivatives(&z, &zero, &zero).map(drop),
+        Err(LearnedError::NoInputs)
+    );
+    let none = SVector::<f64, 0>::zeros();
+    assert_eq!(
+        s0.step_derivatives(&z, &none, &none).unwrap().0,
+        s0.step(&z).unwrap()
     );
     // as the std side: u = 0 is the unforced step, anything else refused
     let mut ws = l0.workspace();

@@ -57,7 +57,12 @@
 //! Newton iterations on the (N+C)-dimensional KKT system of the projection.
 //! Stack only.
 
+mod derivatives;
+
+pub use derivatives::VelocityDerivatives;
+
 use crate::dynamics::Dynamics;
+use crate::forced::{InputJacobian, StepDerivatives};
 use crate::gp::{ExportedGp, GpError};
 use crate::params::Parameters;
 use crate::projection::project_velocity;
@@ -533,6 +538,103 @@ where
             return Err(GpError::NonFiniteOutput.into());
         }
         Ok(v)
+    }
+
+    /// One learned step (that of [`step_forced`](Self::step_forced), bit
+    /// for bit) with its exact derivatives: A = ∂z₁/∂z₀, B = ∂z₁/∂u and
+    /// B_prev = ∂z₁/∂u_prev. They are the nominal step's
+    /// ([`Stepper::step_with_derivatives`]; zero under a constant prior),
+    /// plus the GP means' gradient ([`ExportedGp::predict_mean_gradient`])
+    /// through the encoding, then for loops the projection differentiated
+    /// through its KKT conditions ([`VelocityDerivatives::project`]). `U`
+    /// as for `step_forced` (0: the step under u = 0, A alone; a model
+    /// trained without inputs takes only U = 0 here,
+    /// [`LearnedError::NoInputs`] otherwise). The same
+    /// arithmetic as the std runtime's `Learned::step_derivatives_forced`
+    /// on the model this one was exported from. No allocation: the
+    /// nominal solver's workspace and N gradients of D numbers on the
+    /// stack.
+    #[allow(clippy::type_complexity)]
+    pub fn step_derivatives<const U: usize>(
+        &self,
+        z: &State<N>,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+    ) -> Result<(State<N>, StepDerivatives<N, U>, InputJacobian<N, U>), LearnedError>
+    where
+        M: crate::Inputs<U>,
+    {
+        const {
+            assert!(
+                U == M::INPUTS || U == 0,
+                "U must equal Dynamics::INPUTS (or 0: no input)"
+            )
+        };
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState { step: None }.into());
+        }
+        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput { step: None }.into());
+        }
+        let m = self.learned.inputs.len();
+        if U > 0 && m == 0 {
+            // no derivative in an input the model does not take
+            return Err(LearnedError::NoInputs);
+        }
+        // U = 0: the GP's input tail is zero
+        let with_inputs = U > 0;
+        let (mut v, mut d) = if self.learned.prior.uses_nominal_step() {
+            let (z1, d) = self.stepper.step_with_derivatives(z, u)?;
+            (z1.v, VelocityDerivatives::of_step(&d))
+        } else {
+            (SVector::zeros(), VelocityDerivatives::zeros())
+        };
+        // the GP input: enc(z), then u_prev (when taken), then u
+        let mut x = [0.0f64; D];
+        let previous = self.takes_previous_input();
+        let e = D.saturating_sub(if previous { 2 * m } else { m });
+        let (state, inputs) = x.split_at_mut(e);
+        self.learned.encoding.encode(&M::KINDS, z, state);
+        let (before, current) = inputs.split_at_mut(if previous { m } else { 0 });
+        if with_inputs {
+            before.copy_from_slice(&u_prev.as_slice()[..before.len()]);
+            current.copy_from_slice(&u.as_slice()[..current.len()]);
+        }
+        let mut grads = [[0.0f64; D]; N];
+        for ((vi, gp), g) in v.iter_mut().zip(self.learned.gps.iter()).zip(&mut grads) {
+            let (mean, grad) = gp.predict_mean_gradient(&x)?;
+            *vi += mean;
+            *g = grad;
+        }
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(GpError::NonFiniteOutput.into());
+        }
+        if with_inputs {
+            let at_prev = previous.then_some(e);
+            let at_u = if previous { e + m } else { e };
+            d.add_gp_gradient(self.learned.encoding, &M::KINDS, &z.q, at_prev, at_u, |j| {
+                &grads[j][..]
+            });
+        } else {
+            // u and u_prev do not enter the GP input
+            let mut no_inputs = VelocityDerivatives::<N, 0>::zeros();
+            no_inputs.q = d.q;
+            no_inputs.v = d.v;
+            no_inputs.add_gp_gradient(self.learned.encoding, &M::KINDS, &z.q, None, e, |j| {
+                &grads[j][..]
+            });
+            d.q = no_inputs.q;
+            d.v = no_inputs.v;
+        }
+        let h = self.learned.dt;
+        let x1 = z.q + z.v * h;
+        if self.learned.project && C > 0 {
+            let k = self.stepper.constants();
+            let vp = project_velocity(self.stepper.model(), k, &x1, &v, h, &self.learned.options)?;
+            d.project(self.stepper.model(), k, &x1, &v, &vp, h)?;
+            v = vp;
+        }
+        Ok(d.into_step(z, v, h))
     }
 
     /// x₁ = x₀ + Δt·v₀ and the velocity `vu`, projected for loops.

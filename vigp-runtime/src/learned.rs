@@ -711,7 +711,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     where
         M: vigp_core::Inputs<U>,
     {
-        use nalgebra::SMatrix;
+        use vigp_core::learned::VelocityDerivatives;
         debug_assert!(U == self.inputs || U == 0);
         self.check_step(z)?;
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
@@ -719,19 +719,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         }
         let h = self.nominal.dt();
         // prior
-        let (mut v, mut v_q, mut v_v, mut v_u) = match self.prior {
+        let (mut v, mut dv) = match self.prior {
             Prior::Nominal | Prior::Identified(_) => {
                 let (z1, d) = self.nominal.step_derivatives(z, u)?;
-                (z1.v, d.a.v_q, d.a.v_v, d.b.v_u)
+                (z1.v, VelocityDerivatives::of_step(&d))
             }
-            Prior::Constant => (
-                SVector::zeros(),
-                SMatrix::zeros(),
-                SMatrix::zeros(),
-                SMatrix::zeros(),
-            ),
+            Prior::Constant => (SVector::zeros(), VelocityDerivatives::zeros()),
         };
-        let mut v_p = SMatrix::<f64, N, U>::zeros();
         // GP mean and its gradient in the GP input
         let e = self.encoding.dim(&M::KINDS);
         let d = e + self.input_tail();
@@ -754,90 +748,20 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             (None, e)
         };
         v += mean;
-        // chain rule through the encoding
-        for j in 0..N {
-            let g = &grad[j * d..(j + 1) * d];
-            self.encoding
-                .pull_back(&M::KINDS, z.q.as_slice(), g, |i, x| {
-                    if i < N {
-                        v_q[(j, i)] += x;
-                    } else {
-                        v_v[(j, i - N)] += x;
-                    }
-                });
-            for i in 0..U {
-                v_u[(j, i)] += g[at_u + i];
-                if let Some(p) = at_prev {
-                    v_p[(j, i)] += g[p + i];
-                }
-            }
-        }
+        dv.add_gp_gradient(self.encoding, &M::KINDS, &z.q, at_prev, at_u, |j| {
+            &grad[j * d..(j + 1) * d]
+        });
         if !v.iter().all(|x| x.is_finite()) {
             return Err(StepError::Prediction { step: None });
         }
-        let eye = SMatrix::<f64, N, N>::identity();
         let x1 = z.q + z.v * h;
         if self.project && C > 0 {
-            // v* = argmin ½‖v − v_u‖² subject to g(x₁ + h·v) = 0; its KKT
-            // conditions F = [v − v_u + h·G(y)ᵀλ; g(y)] = 0, y = x₁ + h·v,
-            // differentiate (implicit function theorem) into
-            // [I + h²H, h·Gᵀ; h·G, 0] [dv; dλ] = [dv_u − h·H·dx₁; −G·dx₁]
-            // with H = Σλ_i∇²g_i(y), for every direction of (q₀, v₀, u)
-            let singular = StepError::SingularJacobian {
-                iteration: 0,
-                step: None,
-            };
-            let vu = v;
-            let (vp, _) = project_velocity(&self.model, &x1, &vu, h, self.nominal.options())?;
-            let y = x1 + vp * h;
+            let (vp, _) = project_velocity(&self.model, &x1, &v, h, self.nominal.options())?;
             let k = self.model.constants()?;
-            let (_, g) = self.model.constraints_and_jacobian(&k, &y);
-            // λ from the first KKT row, h·Gᵀλ = v_u − v* (least squares)
-            let gg = g * g.transpose();
-            let lambda =
-                vigp_core::linalg::solve_partial(&gg, &(g * (vu - vp) / h)).ok_or(singular)?;
-            let hess = self.model.constraint_hessian(&k, &y, &lambda);
-            let jm = eye + hess * (h * h);
-            let bm = g.transpose() * h;
-            let am = g * h;
-            let solve = |dvu: SVector<f64, N>, dx1: SVector<f64, N>| {
-                let r = dvu - hess * dx1 * h;
-                let c = -(g * dx1);
-                vigp_core::linalg::solve_kkt(&jm, &bm, &am, &r, &c)
-                    .map(|(dv, _)| dv)
-                    .ok_or(singular)
-            };
-            let (mut pq, mut pv, mut pu, mut pp) = (v_q, v_v, v_u, v_p);
-            for i in 0..N {
-                let e = eye.column(i).into_owned();
-                pq.set_column(i, &solve(v_q.column(i).into_owned(), e)?);
-                pv.set_column(i, &solve(v_v.column(i).into_owned(), e * h)?);
-            }
-            for i in 0..U {
-                pu.set_column(i, &solve(v_u.column(i).into_owned(), SVector::zeros())?);
-                pp.set_column(i, &solve(v_p.column(i).into_owned(), SVector::zeros())?);
-            }
-            (v, v_q, v_v, v_u, v_p) = (vp, pq, pv, pu, pp);
+            dv.project(&self.model, &k, &x1, &v, &vp, h)?;
+            v = vp;
         }
-        Ok((
-            State { q: x1, v },
-            vigp_core::StepDerivatives {
-                a: vigp_core::StateJacobian {
-                    q_q: eye,
-                    q_v: eye * h,
-                    v_q,
-                    v_v,
-                },
-                b: vigp_core::InputJacobian {
-                    q_u: SMatrix::zeros(),
-                    v_u,
-                },
-            },
-            vigp_core::InputJacobian {
-                q_u: SMatrix::zeros(),
-                v_u: v_p,
-            },
-        ))
+        Ok(dv.into_step(z, v, h))
     }
 
     /// One learned step from `z` under inputs `u` after `u_prev` (the
