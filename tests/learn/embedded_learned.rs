@@ -565,7 +565,8 @@ where
         // far larger than itself when the trained noise is small (under a
         // constant prior the GP carries the whole velocity), so two
         // orders of summation differ at ~1e-10 (measured 2.1e-10 there,
-        // ≤ 5e-12 under the nominal prior)
+        // ≤ 5e-12 under the nominal prior; 6.1e-10 after the 6 chained
+        // steps of the rollout derivatives below)
         let (z1, d, dp) = embedded.step_derivatives(z, &up, &u).unwrap();
         assert_eq!(z1, b);
         let (_, sd, sdp) = l.step_derivatives_forced(z, &up, &u, &mut ws).unwrap();
@@ -592,7 +593,79 @@ where
             .unwrap();
         derivative_worst = derivative_worst.max(a_diff(&fd.a, &sfd.a));
     }
-    eprintln!("  step derivatives: max |std − embedded| / largest entry = {derivative_worst:.2e}");
+    // the 6-step rollout derivatives against the std model's
+    const K: usize = 6;
+    let (mut states, mut initial) = ([*z0; K], [vigp::embedded::StateJacobian::<N>::zeros(); K]);
+    let mut wrt_u = [vigp::embedded::InputJacobian::<N, U>::zeros(); K * K];
+    let rollout = |states: &mut [State<N>], initial: &mut [_], wrt_u: &mut [_]| {
+        embedded.rollout_derivatives_into(
+            z0,
+            &u_prev,
+            &inputs[..K],
+            vigp::embedded::RolloutDerivativeBuffers {
+                states,
+                initial,
+                inputs: wrt_u,
+            },
+        )
+    };
+    rollout(&mut states, &mut initial, &mut wrt_u).unwrap();
+    assert_eq!(&states[..], &out[..K]);
+    let sr = l
+        .rollout_derivatives_forced(z0, &u_prev, &inputs[..K], &mut ws)
+        .unwrap();
+    for k in 0..K {
+        let a = &sr.initial[k + 1];
+        let scale = [a.q_q, a.q_v, a.v_q, a.v_v]
+            .iter()
+            .map(|m| m.amax())
+            .fold(0.0, f64::max);
+        let e = &initial[k];
+        let diff = [e.q_q - a.q_q, e.q_v - a.q_v, e.v_q - a.v_q, e.v_v - a.v_v]
+            .iter()
+            .map(|m| m.amax())
+            .fold(0.0, f64::max);
+        derivative_worst = derivative_worst.max(diff / scale);
+        let bscale = sr.inputs[k + 1]
+            .iter()
+            .map(|b| b.q_u.amax().max(b.v_u.amax()))
+            .fold(0.0, f64::max);
+        for j in 0..K {
+            let (x, y) = (&wrt_u[k * K + j], &sr.inputs[k + 1][j]);
+            let d = (x.q_u - y.q_u).amax().max((x.v_u - y.v_u).amax());
+            if j > k {
+                assert_eq!(d, 0.0, "u_{j} reached z_{}", k + 1);
+            } else if U > 0 {
+                derivative_worst = derivative_worst.max(d / bscale);
+            }
+        }
+    }
+    let info = allocation_counter::measure(|| {
+        rollout(&mut states, &mut initial, &mut wrt_u).unwrap();
+    });
+    assert_eq!(
+        info.count_total, 0,
+        "the embedded rollout derivatives allocated"
+    );
+    // buffers of the wrong length are refused before any step
+    let e = rollout(&mut states[..K - 1], &mut initial, &mut wrt_u).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            (
+                0,
+                LearnedError::BufferLength {
+                    name: "states",
+                    expected: K,
+                    got: 5
+                }
+            )
+        ),
+        "{e:?}"
+    );
+    eprintln!(
+        "  step and rollout derivatives: max |std − embedded| / largest entry = {derivative_worst:.2e}"
+    );
     assert!(derivative_worst <= 1e-9, "{derivative_worst:e}");
     let info = allocation_counter::measure(|| {
         embedded

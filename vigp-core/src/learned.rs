@@ -59,10 +59,10 @@
 
 mod derivatives;
 
-pub use derivatives::VelocityDerivatives;
+pub use derivatives::{VelocityDerivatives, chain_step};
 
 use crate::dynamics::Dynamics;
-use crate::forced::{InputJacobian, StepDerivatives};
+use crate::forced::{InputJacobian, StateJacobian, StepDerivatives};
 use crate::gp::{ExportedGp, GpError};
 use crate::params::Parameters;
 use crate::projection::project_velocity;
@@ -302,6 +302,16 @@ pub enum LearnedError {
     /// A learned robot's tree engine refused its bodies or failed a step
     /// ([`crate::tree::LearnedTreeStepper`]).
     Engine(crate::tree::EngineError),
+    /// A caller-owned buffer of the wrong length
+    /// ([`LearnedStepper::rollout_derivatives_into`]).
+    BufferLength {
+        /// Which buffer.
+        name: &'static str,
+        /// The length it must have.
+        expected: usize,
+        /// Its length.
+        got: usize,
+    },
 }
 
 impl From<StepError> for LearnedError {
@@ -348,11 +358,30 @@ impl core::fmt::Display for LearnedError {
             Self::Step(e) => write!(f, "step failed: {e}"),
             Self::Gp(e) => write!(f, "GP prediction failed: {e}"),
             Self::Engine(e) => write!(f, "the tree engine: {e}"),
+            Self::BufferLength {
+                name,
+                expected,
+                got,
+            } => write!(f, "buffer `{name}` holds {got} entries, {expected} needed"),
         }
     }
 }
 
 impl core::error::Error for LearnedError {}
+
+/// Caller-owned buffers of [`LearnedStepper::rollout_derivatives_into`]
+/// for a rollout of K steps.
+#[derive(Debug)]
+pub struct RolloutDerivativeBuffers<'b, const N: usize, const U: usize> {
+    /// z_1, …, z_K (K entries).
+    pub states: &'b mut [State<N>],
+    /// ∂z_k/∂z_0 for k = 1, …, K (K entries).
+    pub initial: &'b mut [StateJacobian<N>],
+    /// ∂z_k/∂u_j row-major, K × K: entry (k − 1)·K + j is ∂z_k/∂u_j for
+    /// k = 1, …, K and j = 0, …, K − 1 (zero for j ≥ k: an input acts on
+    /// later states only).
+    pub inputs: &'b mut [InputJacobian<N, U>],
+}
 
 /// The learned integrator on fixed-size data: nominal [`Stepper`] prior,
 /// encoding, exported GP means, and the projection for loops. No
@@ -635,6 +664,73 @@ where
             v = vp;
         }
         Ok(d.into_step(z, v, h))
+    }
+
+    /// The learned rollout of [`rollout_forced_into`](Self::rollout_forced_into)
+    /// (step k under `inputs[k]` after `inputs[k − 1]`, the first after
+    /// `u_prev`; K = `inputs.len()` steps) with the exact derivatives of
+    /// every state with respect to z_0 and to every planned input, into
+    /// caller-owned buffers: what a shooting MPC over the learned model
+    /// needs on the target. Each step is
+    /// [`step_derivatives`](Self::step_derivatives) (its state bit for bit
+    /// that of `step_forced`), chained by [`chain_step`]: u_j reaches
+    /// z_{j+1} through B_j and z_{j+2} through B_prev,(j+1). Buffers of
+    /// the wrong length are [`LearnedError::BufferLength`], before any
+    /// step; a failing step returns its index with the error. No
+    /// allocation. Cost: K derivative steps plus K²/2 products of
+    /// N × N by N × U blocks.
+    pub fn rollout_derivatives_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        u_prev: &SVector<f64, U>,
+        inputs: &[SVector<f64, U>],
+        out: RolloutDerivativeBuffers<'_, N, U>,
+    ) -> Result<(), (usize, LearnedError)>
+    where
+        M: crate::Inputs<U>,
+    {
+        let k_steps = inputs.len();
+        let RolloutDerivativeBuffers {
+            states,
+            initial,
+            inputs: wrt_u,
+        } = out;
+        for (name, expected, got) in [
+            ("states", k_steps, states.len()),
+            ("initial", k_steps, initial.len()),
+            ("inputs", k_steps * k_steps, wrt_u.len()),
+        ] {
+            if got != expected {
+                return Err((
+                    0,
+                    LearnedError::BufferLength {
+                        name,
+                        expected,
+                        got,
+                    },
+                ));
+            }
+        }
+        wrt_u.fill(InputJacobian::zeros());
+        let mut z = *z0;
+        let mut start = StateJacobian::identity();
+        // ∂z_0/∂u_j = 0: the row before the first step
+        let zero_row = [InputJacobian::<N, U>::zeros(); 1];
+        for (k, u) in inputs.iter().enumerate() {
+            let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+            let (z1, d, d_prev) = self.step_derivatives(&z, up, u).map_err(|e| (k, e))?;
+            let (done, rest) = wrt_u.split_at_mut(k * k_steps);
+            let row_k = if k == 0 {
+                &zero_row[..]
+            } else {
+                &done[(k - 1) * k_steps..]
+            };
+            start = chain_step(&d, &d_prev, k, &start, row_k, &mut rest[..k_steps]);
+            initial[k] = start;
+            states[k] = z1;
+            z = z1;
+        }
+        Ok(())
     }
 
     /// x₁ = x₀ + Δt·v₀ and the velocity `vu`, projected for loops.

@@ -652,20 +652,16 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             let (z1, d, d_prev) = self
                 .step_derivatives_at(&states[k], up, u, ws)
                 .map_err(|e| e.at_step(k))?;
-            initial.push(d.a.after(&initial[k]));
-            // u_j for j > k does not reach z_{k+1}
             let (before, after) = wrt_u.split_at_mut(k + 1);
-            let rows = after[0].iter_mut().zip(&before[k]).take(k + 1);
-            for (j, (next, now)) in rows.enumerate() {
-                *next = d.a.times_input(now);
-                if j == k {
-                    next.q_u += d.b.q_u;
-                    next.v_u += d.b.v_u;
-                } else if j + 1 == k {
-                    next.q_u += d_prev.q_u;
-                    next.v_u += d_prev.v_u;
-                }
-            }
+            let next = vigp_core::learned::chain_step(
+                &d,
+                &d_prev,
+                k,
+                &initial[k],
+                &before[k],
+                &mut after[0],
+            );
+            initial.push(next);
             states.push(z1);
         }
         Ok(crate::RolloutDerivatives {

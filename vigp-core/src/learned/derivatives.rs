@@ -186,3 +186,33 @@ impl<const N: usize, const U: usize> VelocityDerivatives<N, U> {
         )
     }
 }
+
+/// One step of a rollout's chain rule, for steps that read the previous
+/// input too (z_{k+1} = Φ(z_k, u_{k−1}, u_k), a learned step): from step
+/// k's derivatives `d` (A_k, B_k) and `b_prev` (B_prev,k), the row
+/// `row_k[j]` = ∂z_k/∂u_j and `initial_k` = ∂z_k/∂z_0, writes
+/// `row_next[j]` = ∂z_{k+1}/∂u_j = A_k ∂z_k/∂u_j + [j = k] B_k +
+/// [j = k − 1] B_prev,k for j ≤ k (later inputs do not reach z_{k+1}; their
+/// entries are left as they are) and returns ∂z_{k+1}/∂z_0 = A_k ∂z_k/∂z_0.
+/// `row_k` and `row_next` must hold at least k + 1 entries (fewer: only
+/// those present are written).
+pub fn chain_step<const N: usize, const U: usize>(
+    d: &StepDerivatives<N, U>,
+    b_prev: &InputJacobian<N, U>,
+    k: usize,
+    initial_k: &StateJacobian<N>,
+    row_k: &[InputJacobian<N, U>],
+    row_next: &mut [InputJacobian<N, U>],
+) -> StateJacobian<N> {
+    for (j, (next, now)) in row_next.iter_mut().zip(row_k).take(k + 1).enumerate() {
+        *next = d.a.times_input(now);
+        if j == k {
+            next.q_u += d.b.q_u;
+            next.v_u += d.b.v_u;
+        } else if j + 1 == k {
+            next.q_u += b_prev.q_u;
+            next.v_u += b_prev.v_u;
+        }
+    }
+    d.a.after(initial_k)
+}
