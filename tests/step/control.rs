@@ -946,6 +946,12 @@ fn forced_steps_and_derivatives_do_not_allocate() {
     ] {
         let stepper = *vi.stepper();
         let p0 = stepper.momentum(&s[0]);
+        // the K-step rollout derivatives into caller-owned buffers
+        const K: usize = 8;
+        let mut states = [s[0]; K];
+        let mut initial = [vigp::embedded::StateJacobian::<4>::zeros(); K];
+        let mut wrt_u = [vigp::embedded::InputJacobian::<4, 2>::zeros(); K * K];
+        let mut momentum = [SMatrix::<f64, 4, 2>::zeros(); K];
         let info = allocation_counter::measure(|| {
             let z1 = vi.step_forced(&s[0], &u).unwrap();
             let _ = vi.step_derivatives(&z1, &u).unwrap();
@@ -953,8 +959,37 @@ fn forced_steps_and_derivatives_do_not_allocate() {
             let _ = stepper
                 .step_with_momentum_derivatives(&s[0], &p0, &u)
                 .unwrap();
+            let buffers = vigp::embedded::RolloutDerivativeBuffers {
+                states: &mut states,
+                initial: &mut initial,
+                inputs: &mut wrt_u,
+            };
+            stepper
+                .rollout_derivatives_into(&s[0], &inputs[..K], buffers, &mut momentum)
+                .unwrap();
         });
         assert_eq!(info.count_total, 0, "forced steps / derivatives allocated");
+        // the std rollout derivatives (checked against differences in
+        // `rollout_derivatives_match_central_differences`) are these
+        let d = vi.rollout_derivatives(&s[0], &inputs[..K]).unwrap();
+        assert_eq!(&d.states[1..], &states[..]);
+        assert_eq!(&d.initial[1..], &initial[..]);
+        for k in 0..K {
+            assert_eq!(&d.inputs[k + 1][..], &wrt_u[k * K..(k + 1) * K]);
+        }
+        // buffers of the wrong length: an error before any step
+        let buffers = vigp::embedded::RolloutDerivativeBuffers {
+            states: &mut states[..K - 1],
+            initial: &mut initial,
+            inputs: &mut wrt_u,
+        };
+        let e = stepper
+            .rollout_derivatives_into(&s[0], &inputs[..K], buffers, &mut momentum)
+            .unwrap_err();
+        assert!(
+            matches!(e.error, vigp::StepError::InvalidOptions(_)) && e.step == 0,
+            "{e:?}"
+        );
     }
     // in maximal coordinates (N = 12, C = 10) the std forced step and the
     // step with derivatives keep their 24 KB workspace per thread: the

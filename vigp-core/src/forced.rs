@@ -174,6 +174,40 @@ pub struct StepDerivatives<const N: usize, const U: usize> {
     pub b: InputJacobian<N, U>,
 }
 
+/// Caller-owned buffers of a K-step rollout's derivatives
+/// ([`Stepper::rollout_derivatives_into`],
+/// [`LearnedStepper::rollout_derivatives_into`](crate::LearnedStepper::rollout_derivatives_into)).
+#[derive(Debug)]
+pub struct RolloutDerivativeBuffers<'b, const N: usize, const U: usize> {
+    /// z_1, …, z_K (K entries).
+    pub states: &'b mut [State<N>],
+    /// ∂z_k/∂z_0 for k = 1, …, K (K entries).
+    pub initial: &'b mut [StateJacobian<N>],
+    /// ∂z_k/∂u_j row-major, K × K: entry (k − 1)·K + j is ∂z_k/∂u_j for
+    /// k = 1, …, K and j = 0, …, K − 1 (zero for j ≥ k: an input acts on
+    /// later states only).
+    pub inputs: &'b mut [InputJacobian<N, U>],
+}
+
+impl<const N: usize, const U: usize> RolloutDerivativeBuffers<'_, N, U> {
+    /// Checks the lengths for `k` steps (the buffer's name, the length it
+    /// must have and its length, for the first that is wrong) and zeroes
+    /// the input Jacobians.
+    pub(crate) fn prepare(&mut self, k: usize) -> Result<(), (&'static str, usize, usize)> {
+        for (name, expected, got) in [
+            ("states", k, self.states.len()),
+            ("initial", k, self.initial.len()),
+            ("inputs", k * k, self.inputs.len()),
+        ] {
+            if got != expected {
+                return Err((name, expected, got));
+            }
+        }
+        self.inputs.fill(InputJacobian::zeros());
+        Ok(())
+    }
+}
+
 /// The exact derivatives of one step in momentum form,
 /// (z₀, p₀, u) ↦ (z₁, p₁) with the momentum p₀ given (carried from the
 /// previous step, [`Stepper::step_forced_with_momentum`]): what a rollout's
@@ -733,6 +767,99 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                 },
             },
         ))
+    }
+
+    /// A forced rollout from `z0`, step k under `inputs[k]` (K =
+    /// `inputs.len()` steps), with the exact derivatives of every state
+    /// with respect to z_0 and to every input, into caller-owned buffers.
+    /// The derivatives chain through the carried momentum (the Markov
+    /// state of a forced midpoint rollout is (z, p)), so they are exact for
+    /// both rules: with P_k = ∂p_k/∂(·) carried alongside,
+    ///
+    /// ```text
+    /// ∂z_{k+1} = ∂z₁/∂z₀·∂z_k + ∂z₁/∂p₀·P_k (+ ∂z₁/∂u for u_k)
+    /// P_{k+1}  = ∂p₁/∂z₀·∂z_k + ∂p₁/∂p₀·P_k (+ ∂p₁/∂u for u_k)
+    /// ```
+    ///
+    /// from each step's [`Stepper::step_with_momentum_derivatives`]. Each
+    /// step starts Newton from the previous velocity and carries the
+    /// momentum, so the states solve the equations of
+    /// [`Stepper::steps_forced_into`] to the solver's tolerance (not bit
+    /// for bit: that rollout extrapolates its start). `momentum` is scratch
+    /// for ∂p_k/∂u_j, K entries. Buffers of the wrong length are
+    /// [`StepError::InvalidOptions`] at step 0, before any step; a failing
+    /// step returns its index with the error. No allocation. Cost: K steps
+    /// with derivatives plus K²/2 products of N × N by N × U blocks.
+    pub fn rollout_derivatives_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        inputs: &[SVector<f64, U>],
+        out: RolloutDerivativeBuffers<'_, N, U>,
+        momentum: &mut [SMatrix<f64, N, U>],
+    ) -> Result<(), RolloutError>
+    where
+        M: Inputs<U>,
+    {
+        let k_steps = inputs.len();
+        let fail = |step, error| RolloutError { step, error };
+        let mut out = out;
+        if out.prepare(k_steps).is_err() || momentum.len() != k_steps {
+            return Err(fail(
+                0,
+                StepError::InvalidOptions(
+                    "rollout derivative buffers: K states, K state Jacobians, K × K input \
+                     Jacobians and K momentum Jacobians for K inputs",
+                ),
+            ));
+        }
+        if !z0.is_finite() {
+            return Err(fail(0, StepError::NonFiniteState { step: None }));
+        }
+        let RolloutDerivativeBuffers {
+            states,
+            initial,
+            inputs: wrt_u,
+        } = out;
+        momentum.fill(SMatrix::zeros());
+        let (mut p_q, mut p_v) = self.momentum_derivatives(z0);
+        let (mut z, mut p) = (*z0, self.momentum(z0));
+        let mut prev = StateJacobian::identity();
+        for (k, u) in inputs.iter().enumerate() {
+            let (z1, p1, d) = self
+                .step_with_momentum_derivatives(&z, &p, u)
+                .map_err(|e| fail(k, e))?;
+            let next = StateJacobian {
+                q_q: d.z_z.q_q * prev.q_q + d.z_z.q_v * prev.v_q + d.q_p * p_q,
+                q_v: d.z_z.q_q * prev.q_v + d.z_z.q_v * prev.v_v + d.q_p * p_v,
+                v_q: d.z_z.v_q * prev.q_q + d.z_z.v_v * prev.v_q + d.v_p * p_q,
+                v_v: d.z_z.v_q * prev.q_v + d.z_z.v_v * prev.v_v + d.v_p * p_v,
+            };
+            let np_q = d.p_q * prev.q_q + d.p_v * prev.v_q + d.p_p * p_q;
+            let np_v = d.p_q * prev.q_v + d.p_v * prev.v_v + d.p_p * p_v;
+            (p_q, p_v) = (np_q, np_v);
+            // row k (∂z_k/∂u_j; zero for k = 0) into row k + 1
+            let (done, rest) = wrt_u.split_at_mut(k * k_steps);
+            let row_next = &mut rest[..k_steps];
+            for (j, p_u) in momentum.iter_mut().enumerate().take(k + 1) {
+                let (q_u, v_u, pu) = if j == k {
+                    (d.z_u.q_u, d.z_u.v_u, d.p_u)
+                } else {
+                    let b = done[(k - 1) * k_steps + j];
+                    (
+                        d.z_z.q_q * b.q_u + d.z_z.q_v * b.v_u + d.q_p * *p_u,
+                        d.z_z.v_q * b.q_u + d.z_z.v_v * b.v_u + d.v_p * *p_u,
+                        d.p_q * b.q_u + d.p_v * b.v_u + d.p_p * *p_u,
+                    )
+                };
+                row_next[j] = InputJacobian { q_u, v_u };
+                *p_u = pu;
+            }
+            initial[k] = next;
+            states[k] = z1;
+            prev = next;
+            (z, p) = (z1, p1);
+        }
+        Ok(())
     }
 
     /// One forced step in momentum form (as

@@ -62,7 +62,7 @@ mod derivatives;
 pub use derivatives::{VelocityDerivatives, chain_step};
 
 use crate::dynamics::Dynamics;
-use crate::forced::{InputJacobian, StateJacobian, StepDerivatives};
+use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StateJacobian, StepDerivatives};
 use crate::gp::{ExportedGp, GpError};
 use crate::params::Parameters;
 use crate::projection::project_velocity;
@@ -368,20 +368,6 @@ impl core::fmt::Display for LearnedError {
 }
 
 impl core::error::Error for LearnedError {}
-
-/// Caller-owned buffers of [`LearnedStepper::rollout_derivatives_into`]
-/// for a rollout of K steps.
-#[derive(Debug)]
-pub struct RolloutDerivativeBuffers<'b, const N: usize, const U: usize> {
-    /// z_1, …, z_K (K entries).
-    pub states: &'b mut [State<N>],
-    /// ∂z_k/∂z_0 for k = 1, …, K (K entries).
-    pub initial: &'b mut [StateJacobian<N>],
-    /// ∂z_k/∂u_j row-major, K × K: entry (k − 1)·K + j is ∂z_k/∂u_j for
-    /// k = 1, …, K and j = 0, …, K − 1 (zero for j ≥ k: an input acts on
-    /// later states only).
-    pub inputs: &'b mut [InputJacobian<N, U>],
-}
 
 /// The learned integrator on fixed-size data: nominal [`Stepper`] prior,
 /// encoding, exported GP means, and the projection for loops. No
@@ -690,28 +676,22 @@ where
         M: crate::Inputs<U>,
     {
         let k_steps = inputs.len();
+        let mut out = out;
+        out.prepare(k_steps).map_err(|(name, expected, got)| {
+            (
+                0,
+                LearnedError::BufferLength {
+                    name,
+                    expected,
+                    got,
+                },
+            )
+        })?;
         let RolloutDerivativeBuffers {
             states,
             initial,
             inputs: wrt_u,
         } = out;
-        for (name, expected, got) in [
-            ("states", k_steps, states.len()),
-            ("initial", k_steps, initial.len()),
-            ("inputs", k_steps * k_steps, wrt_u.len()),
-        ] {
-            if got != expected {
-                return Err((
-                    0,
-                    LearnedError::BufferLength {
-                        name,
-                        expected,
-                        got,
-                    },
-                ));
-            }
-        }
-        wrt_u.fill(InputJacobian::zeros());
         let mut z = *z0;
         let mut start = StateJacobian::identity();
         // ∂z_0/∂u_j = 0: the row before the first step

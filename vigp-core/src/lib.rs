@@ -46,9 +46,11 @@ pub mod tree;
 
 pub use compose::Composition;
 pub use dynamics::{Dynamics, Inputs, Terms};
-pub use forced::{InputJacobian, MomentumDerivatives, StateJacobian, StepDerivatives};
+pub use forced::{
+    InputJacobian, MomentumDerivatives, RolloutDerivativeBuffers, StateJacobian, StepDerivatives,
+};
 pub use kinematics::{Point2, Pose2};
-pub use learned::{LearnedError, LearnedModel, LearnedStepper, RolloutDerivativeBuffers};
+pub use learned::{LearnedError, LearnedModel, LearnedStepper};
 pub use model::{Body, Model};
 pub use params::{ElasticJoint, Joint, Link, Parameters, Spring};
 pub use real::{Jet1, Jet2, JetDir, Real};

@@ -829,51 +829,31 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         M: Inputs<U>,
     {
         use nalgebra::SMatrix;
-        use vigp_core::{InputJacobian, StateJacobian};
-        let stepper = self.stepper();
+        use vigp_core::{InputJacobian, RolloutDerivativeBuffers, StateJacobian};
         if !z0.is_finite() {
             return Err(StepError::NonFiniteState { step: None });
         }
         let k_steps = inputs.len();
-        let mut states = vec![*z0];
-        let mut initial = vec![StateJacobian::identity()];
-        let mut wrt_u = vec![vec![InputJacobian::<N, U>::zeros(); k_steps]; k_steps + 1];
-        // momentum sensitivities: to q₀, v₀ and to every input
-        let (mut p_q, mut p_v) = stepper.momentum_derivatives(z0);
-        let mut p_u = vec![SMatrix::<f64, N, U>::zeros(); k_steps];
-        let (mut z, mut p) = (*z0, stepper.momentum(z0));
-        for (k, u) in inputs.iter().enumerate() {
-            let (z1, p1, d) = stepper
-                .step_with_momentum_derivatives(&z, &p, u)
-                .map_err(|e| self.explain(e, &z).at_step(k))?;
-            let prev = initial[k];
-            let next = StateJacobian {
-                q_q: d.z_z.q_q * prev.q_q + d.z_z.q_v * prev.v_q + d.q_p * p_q,
-                q_v: d.z_z.q_q * prev.q_v + d.z_z.q_v * prev.v_v + d.q_p * p_v,
-                v_q: d.z_z.v_q * prev.q_q + d.z_z.v_v * prev.v_q + d.v_p * p_q,
-                v_v: d.z_z.v_q * prev.q_v + d.z_z.v_v * prev.v_v + d.v_p * p_v,
-            };
-            let np_q = d.p_q * prev.q_q + d.p_v * prev.v_q + d.p_p * p_q;
-            let np_v = d.p_q * prev.q_v + d.p_v * prev.v_v + d.p_p * p_v;
-            (p_q, p_v) = (np_q, np_v);
-            initial.push(next);
-            for j in 0..=k {
-                let b = wrt_u[k][j];
-                let (q_u, v_u, pu) = if j == k {
-                    (d.z_u.q_u, d.z_u.v_u, d.p_u)
-                } else {
-                    (
-                        d.z_z.q_q * b.q_u + d.z_z.q_v * b.v_u + d.q_p * p_u[j],
-                        d.z_z.v_q * b.q_u + d.z_z.v_v * b.v_u + d.v_p * p_u[j],
-                        d.p_q * b.q_u + d.p_v * b.v_u + d.p_p * p_u[j],
-                    )
-                };
-                wrt_u[k + 1][j] = InputJacobian { q_u, v_u };
-                p_u[j] = pu;
-            }
-            states.push(z1);
-            (z, p) = (z1, p1);
+        let mut states = vec![*z0; k_steps];
+        let mut initial = vec![StateJacobian::identity(); k_steps];
+        let mut flat = vec![InputJacobian::<N, U>::zeros(); k_steps * k_steps];
+        let mut momentum = vec![SMatrix::<f64, N, U>::zeros(); k_steps];
+        let buffers = RolloutDerivativeBuffers {
+            states: &mut states,
+            initial: &mut initial,
+            inputs: &mut flat,
+        };
+        if let Err(e) = self
+            .stepper()
+            .rollout_derivatives_into(z0, inputs, buffers, &mut momentum)
+        {
+            let z = if e.step == 0 { z0 } else { &states[e.step - 1] };
+            return Err(self.explain(e.error, z).at_step(e.step));
         }
+        states.insert(0, *z0);
+        initial.insert(0, StateJacobian::identity());
+        let mut wrt_u = vec![vec![InputJacobian::<N, U>::zeros(); k_steps]];
+        wrt_u.extend(flat.chunks(k_steps.max(1)).map(<[_]>::to_vec));
         Ok(RolloutDerivatives {
             states,
             initial,
