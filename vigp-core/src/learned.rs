@@ -490,21 +490,10 @@ where
     where
         M: crate::Inputs<U>,
     {
-        const {
-            assert!(
-                U == M::INPUTS || U == 0,
-                "U must equal Dynamics::INPUTS (or 0: no input)"
-            )
-        };
+        Self::check_call(z, u_prev, u)?;
         if U == 0 {
             // no input: u = 0, as `Stepper::step_forced` takes it
             return self.predict_velocity(z);
-        }
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None }.into());
-        }
-        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteInput { step: None }.into());
         }
         if self.learned.inputs.is_empty() {
             return if u.iter().all(|x| *x == 0.0) {
@@ -520,6 +509,33 @@ where
             SVector::zeros()
         };
         self.add_gp_mean(z, u_prev.as_slice(), u.as_slice(), prior)
+    }
+
+    /// The checks of a forced call: `U` is the mechanism's input count or
+    /// 0 (at compile time: the bound `M: Inputs<U>`, with a `const`
+    /// assertion as a backstop against an `Inputs` implementation that
+    /// contradicts [`Dynamics::INPUTS`]), the state and inputs finite.
+    fn check_call<const U: usize>(
+        z: &State<N>,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+    ) -> Result<(), LearnedError>
+    where
+        M: crate::Inputs<U>,
+    {
+        const {
+            assert!(
+                U == M::INPUTS || U == 0,
+                "U must equal Dynamics::INPUTS (or 0: no input)"
+            )
+        };
+        if !z.is_finite() {
+            return Err(StepError::NonFiniteState { step: None }.into());
+        }
+        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput { step: None }.into());
+        }
+        Ok(())
     }
 
     /// v + μ(enc(z), u_prev, u): the GP input is the encoded state
@@ -579,18 +595,7 @@ where
     where
         M: crate::Inputs<U>,
     {
-        const {
-            assert!(
-                U == M::INPUTS || U == 0,
-                "U must equal Dynamics::INPUTS (or 0: no input)"
-            )
-        };
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None }.into());
-        }
-        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteInput { step: None }.into());
-        }
+        Self::check_call(z, u_prev, u)?;
         let m = self.learned.inputs.len();
         if U > 0 && m == 0 {
             // no derivative in an input the model does not take

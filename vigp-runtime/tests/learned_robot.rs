@@ -196,16 +196,18 @@ fn learned_step_derivatives_match_differences_of_the_step() {
                     );
                 }
             };
+        // z with its state entry c (q then v) moved by e
+        let nudged = |c: usize, e: f64| {
+            let mut zz = z.clone();
+            if c < n {
+                zz.q[c] += e;
+            } else {
+                zz.v[c - n] += e;
+            }
+            zz
+        };
         for c in 0..2 * n {
-            let fd = stencil(&|e| {
-                let mut zz = z.clone();
-                if c < n {
-                    zz.q[c] += e;
-                } else {
-                    zz.v[c - n] += e;
-                }
-                next(&zz, &u_prev, &u)
-            });
+            let fd = stencil(&|e| next(&nudged(c, e), &u_prev, &u));
             compare("A", &d.a, c, fd);
         }
         compare("B", &d.b, 0, stencil(&|e| next(&z, &u_prev, &[u[0] + e])));
@@ -242,15 +244,7 @@ fn learned_step_derivatives_match_differences_of_the_step() {
             }
         }
         for c in 0..2 * n {
-            let fd = stencil(&|e| {
-                let mut zz = z.clone();
-                if c < n {
-                    zz.q[c] += e;
-                } else {
-                    zz.v[c - n] += e;
-                }
-                last(&zz, &plan)
-            });
+            let fd = stencil(&|e| last(&nudged(c, e), &plan));
             compare("rollout ∂z_K/∂z_0", &initial, c, fd);
         }
         for (j, b) in wrt_u.iter().enumerate() {
