@@ -1,5 +1,6 @@
-//! The actuated four-bar shared by tests/bound/bound.rs and
-//! tests/learn/embedded_learned.rs (included with `#[path]`).
+//! The actuated four-bar shared by tests/bound/bound.rs and the `learn`
+//! binary (its embedded-stepper and output-error files; included with
+//! `#[path]`).
 
 vigp::mechanism! {
     /// The paper's four-bar rhombus driven at the top pivot and at the

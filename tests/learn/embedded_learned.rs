@@ -442,9 +442,7 @@ fn exported_furuta_source_matches_the_model_file() {
 mod drive_cartpole;
 use drive_cartpole::DriveCartpole;
 
-#[path = "../common/drive_fourbar.rs"]
-mod drive_fourbar;
-use drive_fourbar::DriveFourbar;
+use crate::drive_fourbar::DriveFourbar;
 
 /// Transitions of `runs` forced trajectories of `truth` (first-order VI at
 /// DT) from consistent states at rest near `q0`, under random

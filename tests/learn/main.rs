@@ -9,6 +9,11 @@
 mod common;
 use common::Rng;
 
+/// The actuated four-bar, shared by the embedded-stepper and
+/// output-error files.
+#[path = "../common/drive_fourbar.rs"]
+mod drive_fourbar;
+
 mod embedded_learned;
 mod excitation;
 mod fixtures;

@@ -318,9 +318,6 @@ fn unforced_logs_keep_the_scale_of_the_prior() {
     assert!((e[0] / d[0] - 1.0).abs() < 0.5, "{e:?}");
 }
 
-#[path = "../common/drive_fourbar.rs"]
-mod drive_fourbar;
-
 /// A loop under position noise: the four-bar driven at two joints (one of
 /// them the loop-closing joint), its truth perturbed, logged by the
 /// midpoint rule for 8 s at 10 ms with σ = 1e-4 rad on every angle, two
@@ -341,7 +338,7 @@ mod drive_fourbar;
 /// near zero, e.g. −0.018 ± 0.26), so that number is printed, not checked.
 #[test]
 fn noisy_loops_fit_to_the_noise_with_honest_intervals() {
-    use drive_fourbar::DriveFourbar;
+    use crate::drive_fourbar::DriveFourbar;
     let declared = DriveFourbar::default().minimal();
     let truth = perturbed(declared, &mut Rng(31));
     let q0 = SVector::from([0.9, -1.3, -0.4, 1.3]);
