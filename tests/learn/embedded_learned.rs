@@ -1239,8 +1239,68 @@ fn exported_learned_robot_derivatives_match_the_model_file() {
         z = d.state;
         u_prev = u;
     }
-    eprintln!("exported learned robot derivatives: max |std − embedded| / scale = {worst:.2e}");
+    // the 5-step rollout derivatives against the std robot's per-step
+    // derivatives chained (∂z_{k+1}/∂u_j = A_k ∂z_k/∂u_j + [j = k] B_k +
+    // [j = k − 1] B_prev,k)
+    const K: usize = 5;
+    let z0 = State::new([0.1, -0.2, 0.05], [0.3, -0.4, 0.02]);
+    let up0 = SVector::from([3.1]);
+    let plan: Vec<SVector<f64, 1>> = (0..K)
+        .map(|k| SVector::from([3.0 + (0.7 * k as f64).sin()]))
+        .collect();
+    let mut states = [z0; K];
+    let mut initial = [vigp::embedded::StateJacobian::<3>::zeros(); K];
+    let mut wrt_u = [vigp::embedded::InputJacobian::<3, 1>::zeros(); K * K];
+    let mut rollout = |scratch: &mut TreeDerivativeScratch<3>, ws: &mut [BodyScratch; 3]| {
+        let buffers = vigp::embedded::RolloutDerivativeBuffers {
+            states: &mut states,
+            initial: &mut initial,
+            inputs: &mut wrt_u,
+        };
+        stepper
+            .rollout_derivatives_into(&z0, &up0, &plan, buffers, scratch, ws)
+            .unwrap();
+    };
+    rollout(&mut scratch, &mut ws);
+    let info = allocation_counter::measure(|| rollout(&mut scratch, &mut ws));
+    assert_eq!(info.count_total, 0, "the rollout derivatives allocated");
+    let zs = RobotState::new(z0.q.as_slice().to_vec(), z0.v.as_slice().to_vec());
+    let plan_std: Vec<Vec<f64>> = plan.iter().map(|u| vec![u[0]]).collect();
+    let steps = std_model
+        .rollout_derivatives(&zs, &[up0[0]], &plan_std, &mut std_ws)
+        .unwrap();
+    let mut chained = nalgebra::DMatrix::<f64>::identity(6, 6);
+    let mut chained_u = vec![nalgebra::DMatrix::<f64>::zeros(6, 1); K];
+    let mut rollout_worst = 0.0f64;
+    for (k, d) in steps.iter().enumerate() {
+        chained = &d.a * &chained;
+        for (j, b) in chained_u.iter_mut().enumerate().take(k + 1) {
+            *b = &d.a * &*b;
+            if j == k {
+                *b += &d.b;
+            } else if j + 1 == k {
+                *b += &d.b_prev;
+            }
+        }
+        let a: SMatrix<f64, 6, 6> = initial[k].matrix();
+        let scale = chained.amax();
+        rollout_worst = rollout_worst.max((a - &chained).amax() / scale);
+        let bscale = chained_u.iter().map(|b| b.amax()).fold(0.0, f64::max);
+        for j in 0..K {
+            let b: SMatrix<f64, 6, 1> = wrt_u[k * K + j].matrix();
+            if j > k {
+                assert_eq!(b.amax(), 0.0);
+            } else {
+                rollout_worst = rollout_worst.max((b - &chained_u[j]).amax() / bscale);
+            }
+        }
+    }
+    eprintln!(
+        "exported learned robot derivatives: max |std − embedded| / scale = {worst:.2e} \
+         (steps), {rollout_worst:.2e} ({K}-step rollout)"
+    );
     assert!(worst <= 1e-10, "{worst:e}");
+    assert!(rollout_worst <= 1e-10, "{rollout_worst:e}");
     let u = SVector::from([3.2]);
     let info = allocation_counter::measure(|| {
         stepper

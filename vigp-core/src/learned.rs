@@ -59,10 +59,11 @@
 
 mod derivatives;
 
+pub(crate) use derivatives::chain_rollout;
 pub use derivatives::{VelocityDerivatives, chain_step};
 
 use crate::dynamics::Dynamics;
-use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StateJacobian, StepDerivatives};
+use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StepDerivatives};
 use crate::gp::{ExportedGp, GpError};
 use crate::params::Parameters;
 use crate::projection::project_velocity;
@@ -680,42 +681,9 @@ where
     where
         M: crate::Inputs<U>,
     {
-        let k_steps = inputs.len();
-        let mut out = out;
-        out.prepare(k_steps).map_err(|(name, expected, got)| {
-            (
-                0,
-                LearnedError::BufferLength {
-                    name,
-                    expected,
-                    got,
-                },
-            )
-        })?;
-        let RolloutDerivativeBuffers {
-            states,
-            initial,
-            inputs: wrt_u,
-        } = out;
-        let mut z = *z0;
-        let mut start = StateJacobian::identity();
-        // ∂z_0/∂u_j = 0: the row before the first step
-        let zero_row = [InputJacobian::<N, U>::zeros(); 1];
-        for (k, u) in inputs.iter().enumerate() {
-            let up = if k == 0 { u_prev } else { &inputs[k - 1] };
-            let (z1, d, d_prev) = self.step_derivatives(&z, up, u).map_err(|e| (k, e))?;
-            let (done, rest) = wrt_u.split_at_mut(k * k_steps);
-            let row_k = if k == 0 {
-                &zero_row[..]
-            } else {
-                &done[(k - 1) * k_steps..]
-            };
-            start = chain_step(&d, &d_prev, k, &start, row_k, &mut rest[..k_steps]);
-            initial[k] = start;
-            states[k] = z1;
-            z = z1;
-        }
-        Ok(())
+        derivatives::chain_rollout(z0, u_prev, inputs, out, |z, up, u| {
+            self.step_derivatives(z, up, u)
+        })
     }
 
     /// x₁ = x₀ + Δt·v₀ and the velocity `vu`, projected for loops.

@@ -12,9 +12,9 @@
 //! differentiated through its KKT conditions
 //! ([`VelocityDerivatives::project`]).
 
-use super::Encoding;
+use super::{Encoding, LearnedError};
 use crate::dynamics::Dynamics;
-use crate::forced::{InputJacobian, StateJacobian, StepDerivatives};
+use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StateJacobian, StepDerivatives};
 use crate::linalg::{solve_kkt, solve_partial};
 use crate::state::{CoordinateKind, State};
 use crate::step::StepError;
@@ -215,4 +215,62 @@ pub fn chain_step<const N: usize, const U: usize>(
         }
     }
     d.a.after(initial_k)
+}
+
+/// The derivatives of a K-step rollout of a step that reads the previous
+/// input (K = `inputs.len()`), into `out`: step k is `step(z_k, u_{k−1},
+/// u_k)` (`u_prev` before the first), returning z_{k+1}, A_k, B_k and
+/// B_prev,k, chained by [`chain_step`]. What the embedded learned steppers'
+/// `rollout_derivatives_into` run. Buffers of the wrong length are
+/// [`LearnedError::BufferLength`] at step 0; a failing step returns its
+/// index with the error.
+#[allow(clippy::type_complexity)]
+pub(crate) fn chain_rollout<const N: usize, const U: usize>(
+    z0: &State<N>,
+    u_prev: &SVector<f64, U>,
+    inputs: &[SVector<f64, U>],
+    out: RolloutDerivativeBuffers<'_, N, U>,
+    mut step: impl FnMut(
+        &State<N>,
+        &SVector<f64, U>,
+        &SVector<f64, U>,
+    )
+        -> Result<(State<N>, StepDerivatives<N, U>, InputJacobian<N, U>), LearnedError>,
+) -> Result<(), (usize, LearnedError)> {
+    let k_steps = inputs.len();
+    let mut out = out;
+    out.prepare(k_steps).map_err(|(name, expected, got)| {
+        (
+            0,
+            LearnedError::BufferLength {
+                name,
+                expected,
+                got,
+            },
+        )
+    })?;
+    let RolloutDerivativeBuffers {
+        states,
+        initial,
+        inputs: wrt_u,
+    } = out;
+    let mut z = *z0;
+    let mut start = StateJacobian::identity();
+    // ∂z_0/∂u_j = 0: the row before the first step
+    let zero_row = [InputJacobian::<N, U>::zeros(); 1];
+    for (k, u) in inputs.iter().enumerate() {
+        let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+        let (z1, d, d_prev) = step(&z, up, u).map_err(|e| (k, e))?;
+        let (done, rest) = wrt_u.split_at_mut(k * k_steps);
+        let row_k = if k == 0 {
+            &zero_row[..]
+        } else {
+            &done[(k - 1) * k_steps..]
+        };
+        start = chain_step(&d, &d_prev, k, &start, row_k, &mut rest[..k_steps]);
+        initial[k] = start;
+        states[k] = z1;
+        z = z1;
+    }
+    Ok(())
 }

@@ -11,7 +11,7 @@
 use super::derivatives::{DerivativeBuffers, derivative_scratch_len};
 use super::spatial::V3;
 use super::{Body, BodyScratch, Engine, EngineOptions, JointKind, TreeRef};
-use crate::forced::{InputJacobian, StateJacobian};
+use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StateJacobian, StepDerivatives};
 use crate::gp::ExportedGp;
 use crate::learned::{Encoding, LearnedError, Prior};
 use crate::state::{CoordinateKind, State};
@@ -345,6 +345,31 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             a,
             b,
             b_prev,
+        })
+    }
+
+    /// The learned rollout of [`LearnedTreeStepper::rollout_into`] (step k
+    /// under `inputs[k]` after `inputs[k − 1]`, the first after `u_prev`;
+    /// K = `inputs.len()` steps) with the exact derivatives of every state
+    /// with respect to z_0 and to every planned input, into caller-owned
+    /// buffers. Each step is [`LearnedTreeStepper::step_derivatives`],
+    /// chained by [`chain_step`](crate::learned::chain_step), as the
+    /// declared mechanisms' learned rollouts are. Buffers of the wrong
+    /// length are [`LearnedError::BufferLength`], before any step; a
+    /// failing step returns its index with the error. No allocation.
+    #[allow(clippy::too_many_arguments)]
+    pub fn rollout_derivatives_into<const U: usize>(
+        &self,
+        z0: &State<N>,
+        u_prev: &SVector<f64, U>,
+        inputs: &[SVector<f64, U>],
+        out: RolloutDerivativeBuffers<'_, N, U>,
+        scratch: &mut TreeDerivativeScratch<N>,
+        ws: &mut [BodyScratch; N],
+    ) -> Result<(), (usize, LearnedError)> {
+        crate::learned::chain_rollout(z0, u_prev, inputs, out, |z, up, u| {
+            let d = self.step_derivatives(z, up, u, scratch, ws)?;
+            Ok((d.state, StepDerivatives { a: d.a, b: d.b }, d.b_prev))
         })
     }
 
