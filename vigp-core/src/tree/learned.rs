@@ -357,7 +357,6 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
     /// declared mechanisms' learned rollouts are. Buffers of the wrong
     /// length are [`LearnedError::BufferLength`], before any step; a
     /// failing step returns its index with the error. No allocation.
-    #[allow(clippy::too_many_arguments)]
     pub fn rollout_derivatives_into<const U: usize>(
         &self,
         z0: &State<N>,
