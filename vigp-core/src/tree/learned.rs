@@ -13,7 +13,7 @@ use super::spatial::V3;
 use super::{Body, BodyScratch, Engine, EngineOptions, JointKind, TreeRef};
 use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StateJacobian, StepDerivatives};
 use crate::gp::ExportedGp;
-use crate::learned::{Encoding, LearnedError, Prior};
+use crate::learned::{Encoding, LearnedError, Prior, VelocityDerivatives};
 use crate::state::{CoordinateKind, State};
 use crate::step::StepError;
 use nalgebra::SVector;
@@ -317,22 +317,23 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
         }
         let x = self.gp_input(z, u_prev, u);
         let e = self.encoded;
-        for (j, gp) in l.gps.iter().enumerate() {
-            let (mean, g) = gp.predict_mean_gradient(&x)?;
-            v1[j] += mean;
-            l.encoding
-                .pull_back(&self.kinds, z.q.as_slice(), &g, |i, d| {
-                    if i < N {
-                        a.v_q[(j, i)] += d;
-                    } else {
-                        a.v_v[(j, i - N)] += d;
-                    }
-                });
-            for c in 0..U {
-                b_prev.v_u[(j, c)] = g[e + c];
-                b.v_u[(j, c)] += g[e + U + c];
-            }
+        let mut grads = [[0.0f64; D]; N];
+        for ((v, gp), g) in v1.iter_mut().zip(l.gps.iter()).zip(&mut grads) {
+            let (mean, grad) = gp.predict_mean_gradient(&x)?;
+            *v += mean;
+            *g = grad;
         }
+        // the GP input is (enc(z), u_prev, u)
+        let mut dv = VelocityDerivatives {
+            q: a.v_q,
+            v: a.v_v,
+            u: b.v_u,
+            u_prev: b_prev.v_u,
+        };
+        dv.add_gp_gradient(l.encoding, &self.kinds, &z.q, Some(e), e + U, |j| {
+            &grads[j][..]
+        });
+        (a.v_q, a.v_v, b.v_u, b_prev.v_u) = (dv.q, dv.v, dv.u, dv.u_prev);
         let v = SVector::from(v1);
         if !v.iter().all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteState { step: None }.into());
