@@ -820,7 +820,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             initial,
             inputs: wrt_u,
         } = out;
-        momentum.fill(SMatrix::zeros());
+        // (`momentum[j]` is written at step j before it is read)
         let (mut p_q, mut p_v) = self.momentum_derivatives(z0);
         let (mut z, mut p) = (*z0, self.momentum(z0));
         let mut prev = StateJacobian::identity();

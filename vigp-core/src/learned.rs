@@ -59,8 +59,8 @@
 
 mod derivatives;
 
-pub(crate) use derivatives::chain_rollout;
-pub use derivatives::{VelocityDerivatives, chain_step};
+pub(crate) use derivatives::buffer_length;
+pub use derivatives::{VelocityDerivatives, chain_rollout, chain_step};
 
 use crate::dynamics::Dynamics;
 use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StepDerivatives};
@@ -549,6 +549,20 @@ where
         u: &[f64],
         mut v: SVector<f64, N>,
     ) -> Result<SVector<f64, N>, LearnedError> {
+        let (x, _) = self.gp_input(z, u_prev, u);
+        for (vi, gp) in v.iter_mut().zip(self.learned.gps.iter()) {
+            *vi += gp.predict_mean(&x)?;
+        }
+        if !v.iter().all(|x| x.is_finite()) {
+            return Err(GpError::NonFiniteOutput.into());
+        }
+        Ok(v)
+    }
+
+    /// The GP input (enc(z), then `u_prev` when the model takes it, then
+    /// `u`; zeros where they are empty) and the encoding's dimension, where
+    /// the inputs start.
+    fn gp_input(&self, z: &State<N>, u_prev: &[f64], u: &[f64]) -> ([f64; D], usize) {
         let mut x = [0.0f64; D];
         let m = self.learned.inputs.len();
         let previous = self.takes_previous_input();
@@ -563,13 +577,7 @@ where
         for (xi, ui) in current.iter_mut().zip(u) {
             *xi = *ui;
         }
-        for (vi, gp) in v.iter_mut().zip(self.learned.gps.iter()) {
-            *vi += gp.predict_mean(&x)?;
-        }
-        if !v.iter().all(|x| x.is_finite()) {
-            return Err(GpError::NonFiniteOutput.into());
-        }
-        Ok(v)
+        (x, e)
     }
 
     /// One learned step (that of [`step_forced`](Self::step_forced), bit
@@ -602,25 +610,14 @@ where
             // no derivative in an input the model does not take
             return Err(LearnedError::NoInputs);
         }
-        // U = 0: the GP's input tail is zero
-        let with_inputs = U > 0;
         let (mut v, mut d) = if self.learned.prior.uses_nominal_step() {
             let (z1, d) = self.stepper.step_with_derivatives(z, u)?;
             (z1.v, VelocityDerivatives::of_step(&d))
         } else {
             (SVector::zeros(), VelocityDerivatives::zeros())
         };
-        // the GP input: enc(z), then u_prev (when taken), then u
-        let mut x = [0.0f64; D];
-        let previous = self.takes_previous_input();
-        let e = D.saturating_sub(if previous { 2 * m } else { m });
-        let (state, inputs) = x.split_at_mut(e);
-        self.learned.encoding.encode(&M::KINDS, z, state);
-        let (before, current) = inputs.split_at_mut(if previous { m } else { 0 });
-        if with_inputs {
-            before.copy_from_slice(&u_prev.as_slice()[..before.len()]);
-            current.copy_from_slice(&u.as_slice()[..current.len()]);
-        }
+        // U = 0: the GP input's input tail stays zero
+        let (x, e) = self.gp_input(z, u_prev.as_slice(), u.as_slice());
         let mut grads = [[0.0f64; D]; N];
         for ((vi, gp), g) in v.iter_mut().zip(self.learned.gps.iter()).zip(&mut grads) {
             let (mean, grad) = gp.predict_mean_gradient(&x)?;
@@ -630,23 +627,17 @@ where
         if !v.iter().all(|x| x.is_finite()) {
             return Err(GpError::NonFiniteOutput.into());
         }
-        if with_inputs {
-            let at_prev = previous.then_some(e);
-            let at_u = if previous { e + m } else { e };
-            d.add_gp_gradient(self.learned.encoding, &M::KINDS, &z.q, at_prev, at_u, |j| {
-                &grads[j][..]
-            });
-        } else {
-            // u and u_prev do not enter the GP input
-            let mut no_inputs = VelocityDerivatives::<N, 0>::zeros();
-            no_inputs.q = d.q;
-            no_inputs.v = d.v;
-            no_inputs.add_gp_gradient(self.learned.encoding, &M::KINDS, &z.q, None, e, |j| {
-                &grads[j][..]
-            });
-            d.q = no_inputs.q;
-            d.v = no_inputs.v;
-        }
+        // where u_prev and u sit in the GP input (U = 0: no input columns)
+        let previous = self.takes_previous_input();
+        let at_u = if previous { e + m } else { e };
+        d.add_gp_gradient(
+            self.learned.encoding,
+            &M::KINDS,
+            &z.q,
+            previous.then_some(e),
+            at_u,
+            |j| &grads[j][..],
+        );
         let h = self.learned.dt;
         let x1 = z.q + z.v * h;
         if self.learned.project && C > 0 {
@@ -681,9 +672,14 @@ where
     where
         M: crate::Inputs<U>,
     {
-        derivatives::chain_rollout(z0, u_prev, inputs, out, |z, up, u| {
-            self.step_derivatives(z, up, u)
-        })
+        chain_rollout(
+            z0,
+            u_prev,
+            inputs,
+            out,
+            |z, up, u| self.step_derivatives(z, up, u),
+            buffer_length,
+        )
     }
 
     /// x₁ = x₀ + Δt·v₀ and the velocity `vu`, projected for loops.

@@ -639,36 +639,22 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     where
         M: vigp_core::Inputs<U>,
     {
-        use vigp_core::{InputJacobian, StateJacobian};
         self.check_input_count::<U>()?;
-        let k_steps = inputs.len();
-        let mut states = Vec::with_capacity(k_steps + 1);
-        states.push(*z0);
-        let mut initial = Vec::with_capacity(k_steps + 1);
-        initial.push(StateJacobian::identity());
-        let mut wrt_u = vec![vec![InputJacobian::<N, U>::zeros(); k_steps]; k_steps + 1];
-        for (k, u) in inputs.iter().enumerate() {
-            let up = if k == 0 { u_prev } else { &inputs[k - 1] };
-            let (z1, d, d_prev) = self
-                .step_derivatives_at(&states[k], up, u, ws)
-                .map_err(|e| e.at_step(k))?;
-            let (before, after) = wrt_u.split_at_mut(k + 1);
-            let next = vigp_core::learned::chain_step(
-                &d,
-                &d_prev,
-                k,
-                &initial[k],
-                &before[k],
-                &mut after[0],
-            );
-            initial.push(next);
-            states.push(z1);
-        }
-        Ok(crate::RolloutDerivatives {
-            states,
-            initial,
-            inputs: wrt_u,
-        })
+        crate::RolloutDerivatives::fill(
+            z0,
+            inputs.len(),
+            |buffers| {
+                vigp_core::learned::chain_rollout(
+                    z0,
+                    u_prev,
+                    inputs,
+                    buffers,
+                    |z, up, u| self.step_derivatives_at(z, up, u, ws),
+                    |_, _, _| StepError::InvalidOptions("rollout derivative buffers"),
+                )
+            },
+            |e, _| e,
+        )
     }
 
     /// The forced calls take `U` equal to the inputs the model was trained

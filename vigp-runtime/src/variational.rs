@@ -829,35 +829,56 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
         M: Inputs<U>,
     {
         use nalgebra::SMatrix;
-        use vigp_core::{InputJacobian, RolloutDerivativeBuffers, StateJacobian};
         if !z0.is_finite() {
             return Err(StepError::NonFiniteState { step: None });
         }
-        let k_steps = inputs.len();
-        let mut states = vec![*z0; k_steps];
-        let mut initial = vec![StateJacobian::identity(); k_steps];
-        let mut flat = vec![InputJacobian::<N, U>::zeros(); k_steps * k_steps];
-        let mut momentum = vec![SMatrix::<f64, N, U>::zeros(); k_steps];
+        let mut momentum = vec![SMatrix::<f64, N, U>::zeros(); inputs.len()];
+        RolloutDerivatives::fill(
+            z0,
+            inputs.len(),
+            |buffers| {
+                self.stepper()
+                    .rollout_derivatives_into(z0, inputs, buffers, &mut momentum)
+                    .map_err(|e| (e.step, e.error))
+            },
+            |e, z| self.explain(e, z),
+        )
+    }
+}
+
+#[cfg(feature = "alloc")]
+impl<const N: usize, const U: usize> RolloutDerivatives<N, U> {
+    /// Allocates the derivatives of a `k`-step rollout from `z0` and lets
+    /// `run` write steps 1 … k through the core's caller-owned buffers
+    /// (`vigp_core::RolloutDerivativeBuffers`, its K × K input Jacobians
+    /// flat). A step that fails is `explain`ed at the state it started
+    /// from and tagged with its index.
+    pub(crate) fn fill(
+        z0: &State<N>,
+        k: usize,
+        run: impl FnOnce(
+            vigp_core::RolloutDerivativeBuffers<'_, N, U>,
+        ) -> Result<(), (usize, StepError)>,
+        explain: impl FnOnce(StepError, &State<N>) -> StepError,
+    ) -> Result<Self, StepError> {
+        use vigp_core::{InputJacobian, RolloutDerivativeBuffers, StateJacobian};
+        let mut states = vec![*z0; k + 1];
+        let mut initial = vec![StateJacobian::identity(); k + 1];
+        let mut flat = vec![InputJacobian::<N, U>::zeros(); k * k];
         let buffers = RolloutDerivativeBuffers {
-            states: &mut states,
-            initial: &mut initial,
+            states: &mut states[1..],
+            initial: &mut initial[1..],
             inputs: &mut flat,
         };
-        if let Err(e) = self
-            .stepper()
-            .rollout_derivatives_into(z0, inputs, buffers, &mut momentum)
-        {
-            let z = if e.step == 0 { z0 } else { &states[e.step - 1] };
-            return Err(self.explain(e.error, z).at_step(e.step));
+        if let Err((step, e)) = run(buffers) {
+            return Err(explain(e, &states[step]).at_step(step));
         }
-        states.insert(0, *z0);
-        initial.insert(0, StateJacobian::identity());
-        let mut wrt_u = vec![vec![InputJacobian::<N, U>::zeros(); k_steps]];
-        wrt_u.extend(flat.chunks(k_steps.max(1)).map(<[_]>::to_vec));
-        Ok(RolloutDerivatives {
+        let mut inputs = vec![vec![InputJacobian::<N, U>::zeros(); k]];
+        inputs.extend(flat.chunks(k.max(1)).map(<[_]>::to_vec));
+        Ok(Self {
             states,
             initial,
-            inputs: wrt_u,
+            inputs,
         })
     }
 }

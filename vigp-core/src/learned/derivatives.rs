@@ -220,12 +220,12 @@ pub fn chain_step<const N: usize, const U: usize>(
 /// The derivatives of a K-step rollout of a step that reads the previous
 /// input (K = `inputs.len()`), into `out`: step k is `step(z_k, u_{k−1},
 /// u_k)` (`u_prev` before the first), returning z_{k+1}, A_k, B_k and
-/// B_prev,k, chained by [`chain_step`]. What the embedded learned steppers'
-/// `rollout_derivatives_into` run. Buffers of the wrong length are
-/// [`LearnedError::BufferLength`] at step 0; a failing step returns its
+/// B_prev,k, chained by [`chain_step`]. What the learned rollouts'
+/// derivatives run, std and embedded. Buffers of the wrong length are
+/// `wrong(name, expected, got)` at step 0; a failing step returns its
 /// index with the error.
 #[allow(clippy::type_complexity)]
-pub(crate) fn chain_rollout<const N: usize, const U: usize>(
+pub fn chain_rollout<const N: usize, const U: usize, E>(
     z0: &State<N>,
     u_prev: &SVector<f64, U>,
     inputs: &[SVector<f64, U>],
@@ -234,21 +234,13 @@ pub(crate) fn chain_rollout<const N: usize, const U: usize>(
         &State<N>,
         &SVector<f64, U>,
         &SVector<f64, U>,
-    )
-        -> Result<(State<N>, StepDerivatives<N, U>, InputJacobian<N, U>), LearnedError>,
-) -> Result<(), (usize, LearnedError)> {
+    ) -> Result<(State<N>, StepDerivatives<N, U>, InputJacobian<N, U>), E>,
+    wrong: impl FnOnce(&'static str, usize, usize) -> E,
+) -> Result<(), (usize, E)> {
     let k_steps = inputs.len();
     let mut out = out;
-    out.prepare(k_steps).map_err(|(name, expected, got)| {
-        (
-            0,
-            LearnedError::BufferLength {
-                name,
-                expected,
-                got,
-            },
-        )
-    })?;
+    out.prepare(k_steps)
+        .map_err(|(name, expected, got)| (0, wrong(name, expected, got)))?;
     let RolloutDerivativeBuffers {
         states,
         initial,
@@ -273,4 +265,13 @@ pub(crate) fn chain_rollout<const N: usize, const U: usize>(
         z = z1;
     }
     Ok(())
+}
+
+/// [`LearnedError::BufferLength`] for [`chain_rollout`].
+pub(crate) fn buffer_length(name: &'static str, expected: usize, got: usize) -> LearnedError {
+    LearnedError::BufferLength {
+        name,
+        expected,
+        got,
+    }
 }

@@ -13,7 +13,7 @@ use super::spatial::V3;
 use super::{Body, BodyScratch, Engine, EngineOptions, JointKind, TreeRef};
 use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StateJacobian, StepDerivatives};
 use crate::gp::ExportedGp;
-use crate::learned::{Encoding, LearnedError, Prior, VelocityDerivatives};
+use crate::learned::{Encoding, LearnedError, Prior, VelocityDerivatives, buffer_length};
 use crate::state::{CoordinateKind, State};
 use crate::step::StepError;
 use nalgebra::SVector;
@@ -269,13 +269,8 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
     ) -> Result<LearnedTreeDerivatives<N, U>, LearnedError> {
         self.check_step(z, u_prev, u)?;
         let l = self.learned;
-        let mut a = StateJacobian::<N>::zeros();
-        let mut b = InputJacobian::<N, U>::zeros();
-        let mut b_prev = InputJacobian::<N, U>::zeros();
-        for i in 0..N {
-            a.q_q[(i, i)] = 1.0;
-            a.q_v[(i, i)] = l.dt;
-        }
+        // ∂v₁/∂(q, v, u, u_prev): the robot's step's rows, then the GPs'
+        let mut dv = VelocityDerivatives::<N, U>::zeros();
         let mut v1 = [0.0; N];
         if l.prior.uses_nominal_step() {
             let flat = scratch.blocks.as_flattened_mut().as_flattened_mut();
@@ -307,11 +302,11 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             for i in 0..N {
                 let row = &pa[(N + i) * 2 * N..(N + i + 1) * 2 * N];
                 for j in 0..N {
-                    a.v_q[(i, j)] = row[j];
-                    a.v_v[(i, j)] = row[N + j];
+                    dv.q[(i, j)] = row[j];
+                    dv.v[(i, j)] = row[N + j];
                 }
                 for c in 0..U {
-                    b.v_u[(i, c)] = pb[(N + i) * U + c];
+                    dv.u[(i, c)] = pb[(N + i) * U + c];
                 }
             }
         }
@@ -324,27 +319,19 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
             *g = grad;
         }
         // the GP input is (enc(z), u_prev, u)
-        let mut dv = VelocityDerivatives {
-            q: a.v_q,
-            v: a.v_v,
-            u: b.v_u,
-            u_prev: b_prev.v_u,
-        };
         dv.add_gp_gradient(l.encoding, &self.kinds, &z.q, Some(e), e + U, |j| {
             &grads[j][..]
         });
-        (a.v_q, a.v_v, b.v_u, b_prev.v_u) = (dv.q, dv.v, dv.u, dv.u_prev);
         let v = SVector::from(v1);
         if !v.iter().all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteState { step: None }.into());
         }
+        // q₁ = q + Δt·v: A's top rows [I, Δt·I], none of B
+        let (state, d, b_prev) = dv.into_step(z, v, l.dt);
         Ok(LearnedTreeDerivatives {
-            state: State {
-                q: z.q + z.v * l.dt,
-                v,
-            },
-            a,
-            b,
+            state,
+            a: d.a,
+            b: d.b,
             b_prev,
         })
     }
@@ -367,10 +354,11 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
         scratch: &mut TreeDerivativeScratch<N>,
         ws: &mut [BodyScratch; N],
     ) -> Result<(), (usize, LearnedError)> {
-        crate::learned::chain_rollout(z0, u_prev, inputs, out, |z, up, u| {
+        let step = |z: &State<N>, up: &SVector<f64, U>, u: &SVector<f64, U>| {
             let d = self.step_derivatives(z, up, u, scratch, ws)?;
             Ok((d.state, StepDerivatives { a: d.a, b: d.b }, d.b_prev))
-        })
+        };
+        crate::learned::chain_rollout(z0, u_prev, inputs, out, step, buffer_length)
     }
 
     /// The states after 1, 2, …, `out.len()` steps from `z0`, step k under
