@@ -23,7 +23,12 @@ fn pose_ident(m: &Model, link: usize) -> Ident {
 }
 
 /// Local coordinates of an anchor, reading lengths from `params`.
-fn anchor_local(m: &Model, params: &TokenStream, link: usize, anchor: Anchor) -> TokenStream {
+pub(crate) fn anchor_local(
+    m: &Model,
+    params: &TokenStream,
+    link: usize,
+    anchor: Anchor,
+) -> TokenStream {
     let name = &m.links[link].name;
     match anchor {
         Anchor::Start => quote!([0.0, 0.0]),
@@ -489,10 +494,20 @@ fn emit_maximal(m: &Model) -> (TokenStream, TokenStream) {
     (items, std_items)
 }
 
-/// The whole expansion.
-/// The generated items for a validated model; `target` chooses whether the
-/// std runtime's items (dual-number views) are included.
-pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream> {
+/// The parameter types of a planar description and the items of
+/// `impl Name` that need no closed-form terms: what every planar
+/// mechanism has, with or without its coordinate views.
+pub(crate) struct ParameterItems {
+    /// The parameter struct, its link and joint types and `Default`.
+    pub types: TokenStream,
+    /// `DOF`, `LOOP_CONSTRAINTS`, `LINKS` and `INPUT_NAMES`.
+    pub consts: TokenStream,
+    /// The forward kinematics `link_poses`.
+    pub link_poses: TokenStream,
+}
+
+/// The [`ParameterItems`] of `m`.
+pub(crate) fn parameter_items(m: &Model) -> ParameterItems {
     let Model {
         attrs, vis, name, ..
     } = m;
@@ -501,7 +516,6 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
     let nl = Literal::usize_unsuffixed(m.links.len());
     let links_ty = format_ident!("{}Links", name);
     let joints_ty = format_ident!("{}Joints", name);
-    let minimal_ty = format_ident!("{}Minimal", name);
     let dissipative = m.dissipative();
     let elastic = m.elastic();
     let has_joints = dissipative || elastic;
@@ -609,6 +623,80 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
         quote!([#gx, #gy])
     };
     let link_names = m.links.iter().map(|l| l.name.unraw().to_string());
+    let input_joints = m.inputs();
+    let input_names = if input_joints.is_empty() {
+        quote!()
+    } else {
+        let u = Literal::usize_unsuffixed(input_joints.len());
+        let names = input_joints
+            .iter()
+            .map(|&j| m.joints[j].name.unraw().to_string());
+        quote! {
+            #[doc = " Names of the inputs (the actuated joints, in declaration order): input i is a torque on a revolute joint or a force along a prismatic axis."]
+            pub const INPUT_NAMES: [&'static str; #u] = [#(#names),*];
+        }
+    };
+    let links_doc = format!(" Link parameters of [`{}`].", name);
+    let fk = forward_kinematics(m, &quote!(self));
+    let poses = all_poses(m);
+    ParameterItems {
+        types: quote! {
+            #(#attrs)*
+            #[derive(Clone, Copy, Debug, PartialEq)]
+            #vis struct #name {
+                #[doc = " Gravitational acceleration in world coordinates (m/s²)."]
+                pub gravity: [f64; 2],
+                #[doc = " Link parameters."]
+                pub links: #links_ty,
+                #joints_field
+            }
+
+            #[doc = #links_doc]
+            #[derive(Clone, Copy, Debug, PartialEq)]
+            #vis struct #links_ty { #(#link_fields)* }
+
+            #joints_items
+
+            impl ::core::default::Default for #name {
+                fn default() -> Self {
+                    Self {
+                        gravity: #gravity,
+                        links: #links_ty { #(#link_defaults)* },
+                        #joints_default
+                    }
+                }
+            }
+        },
+        consts: quote! {
+            #[doc = " Number of minimal coordinates (one per tree joint)."]
+            pub const DOF: usize = #n;
+            #[doc = " Number of loop-closure constraint equations in minimal coordinates."]
+            pub const LOOP_CONSTRAINTS: usize = #c;
+            #[doc = " Link names, in declaration order (the order of [`Self::link_poses`])."]
+            pub const LINKS: [&'static str; #nl] = [#(#link_names),*];
+            #input_names
+        },
+        link_poses: quote! {
+            #[doc = " Forward kinematics: the pose of every link frame (origin at the link's `start`) for minimal coordinates `q`, in [`Self::LINKS`] order. Any attachment point follows with [`::vigp::Pose2::point`]."]
+            pub fn link_poses<D: ::vigp::Real>(&self, q: &#svector<D, #n>) -> [::vigp::Pose2<D>; #nl] {
+                #fk
+                [#(#poses),*]
+            }
+        },
+    }
+}
+
+/// The whole expansion.
+/// The generated items for a validated model; `target` chooses whether the
+/// std runtime's items (dual-number views) are included.
+pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream> {
+    let Model { vis, name, .. } = m;
+    let n = Literal::usize_unsuffixed(m.dof());
+    let c = Literal::usize_unsuffixed(m.loop_constraints());
+    let minimal_ty = format_ident!("{}Minimal", name);
+    let dissipative = m.dissipative();
+    let svector = quote!(::vigp::__private::nalgebra::SVector);
+
     let coord_names = m.tree.iter().map(|&j| m.joints[j].name.unraw().to_string());
     let kinds: Vec<_> = m
         .tree
@@ -619,10 +707,7 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
         })
         .collect();
 
-    // ---- forward kinematics ----
     let params = quote!(self);
-    let fk = forward_kinematics(m, &params);
-    let poses = all_poses(m);
 
     // ---- Mechanism impl (minimal coordinates) ----
     let sys = quote!(self.sys);
@@ -744,13 +829,10 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
             impl ::vigp::embedded::Inputs<#u> for #name {}
         }
     };
-    let (inputs_delegate_const, inputs_delegate_fns, input_names) = if input_joints.is_empty() {
-        (quote!(), quote!(), quote!())
+    let (inputs_delegate_const, inputs_delegate_fns) = if input_joints.is_empty() {
+        (quote!(), quote!())
     } else {
         let u = Literal::usize_unsuffixed(input_joints.len());
-        let names = input_joints
-            .iter()
-            .map(|&j| m.joints[j].name.unraw().to_string());
         (
             quote! {
                 const INPUTS: usize = #u;
@@ -764,10 +846,6 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
                     ::vigp::embedded::Dynamics::input_force_jacobian::<U>(&self.minimal(), k, q, u)
                 }
             },
-            quote! {
-                #[doc = " Names of the inputs (the actuated joints, in declaration order): input i is a torque on a revolute joint or a force along a prismatic axis."]
-                pub const INPUT_NAMES: [&'static str; #u] = [#(#names),*];
-            },
         )
     };
     let name_str = name.to_string();
@@ -780,7 +858,6 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
             .join(", "),
         m.loop_constraints()
     );
-    let links_doc = format!(" Link parameters of [`{name_str}`].");
     let (maximal_items, maximal_std) = emit_maximal(m);
     let maximal_kinds: Vec<TokenStream> = m
         .links
@@ -859,52 +936,23 @@ pub fn emit(m: &Model, target: crate::target::Target) -> syn::Result<TokenStream
         quote!()
     };
 
+    let ParameterItems {
+        types,
+        consts,
+        link_poses,
+    } = parameter_items(m);
     Ok(quote! {
-        #(#attrs)*
-        #[derive(Clone, Copy, Debug, PartialEq)]
-        #vis struct #name {
-            #[doc = " Gravitational acceleration in world coordinates (m/s²)."]
-            pub gravity: [f64; 2],
-            #[doc = " Link parameters."]
-            pub links: #links_ty,
-            #joints_field
-        }
-
-        #[doc = #links_doc]
-        #[derive(Clone, Copy, Debug, PartialEq)]
-        #vis struct #links_ty { #(#link_fields)* }
-
-        #joints_items
-
-        impl ::core::default::Default for #name {
-            fn default() -> Self {
-                Self {
-                    gravity: #gravity,
-                    links: #links_ty { #(#link_defaults)* },
-                    #joints_default
-                }
-            }
-        }
+        #types
 
         impl #name {
-            #[doc = " Number of minimal coordinates (one per tree joint)."]
-            pub const DOF: usize = #n;
-            #[doc = " Number of loop-closure constraint equations in minimal coordinates."]
-            pub const LOOP_CONSTRAINTS: usize = #c;
-            #[doc = " Link names, in declaration order (the order of [`Self::link_poses`])."]
-            pub const LINKS: [&'static str; #nl] = [#(#link_names),*];
-            #input_names
+            #consts
 
             #[doc = " The minimal-coordinate model with these parameters."]
             pub fn minimal(&self) -> #minimal_ty {
                 #minimal_ty { sys: *self }
             }
 
-            #[doc = " Forward kinematics: the pose of every link frame (origin at the link's `start`) for minimal coordinates `q`, in [`Self::LINKS`] order. Any attachment point follows with [`::vigp::Pose2::point`]."]
-            pub fn link_poses<D: ::vigp::Real>(&self, q: &#svector<D, #n>) -> [::vigp::Pose2<D>; #nl] {
-                #fk
-                [#(#poses),*]
-            }
+            #link_poses
         }
 
         impl ::vigp::embedded::Model<#n, #c> for #name {

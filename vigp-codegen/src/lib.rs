@@ -34,6 +34,7 @@ pub mod geom3;
 pub mod lit;
 pub mod mechanics;
 pub mod number;
+pub mod planar_tree;
 pub mod spatial;
 pub mod symbolic;
 pub mod syntax;
@@ -79,6 +80,7 @@ pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream
     let model = desc::validate::<2, desc::planar::Planar>(parsed)?;
     let mut out = emit::emit(&model, target)?;
     out.extend(describe::emit(&model, target));
+    out.extend(planar_tree::emit(&model, target));
     let bytes = out.to_string().len();
     if bytes > MAX_PLANAR_EXPANSION {
         return Err(syn::Error::new(

@@ -5,8 +5,10 @@
 //! * [`model`]: the tree as data ([`Body`]: parent, joint type and axis,
 //!   joint placement, mass properties, damping, spring, limits) and the
 //!   [`Tree`] trait through which the engine reads it. Run-time data
-//!   ([`TreeRef`], or a `Vec`-backed model in the std runtime) and
+//!   ([`TreeRef`], [`TreeArray`], or a `Vec`-backed model in the std runtime) and
 //!   generated constants implement the same trait.
+//! * [`planar`]: a planar tree (what `mechanism!` declares in the plane)
+//!   as such bodies.
 //! * [`spatial`]: 6-D motion and force vectors and spatial inertias, all in
 //!   world coordinates at the world origin.
 //! * [`Engine`]: momentum, ∂T/∂q, ∇V, the DEL residual, the articulated-body
@@ -22,12 +24,13 @@ pub mod derivatives;
 pub mod engine;
 pub mod learned;
 pub mod model;
+pub mod planar;
 pub mod spatial;
 
 pub use derivatives::{DerivativeBuffers, derivative_scratch_len};
 pub use engine::{BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives};
 pub use learned::{LearnedTree, LearnedTreeDerivatives, LearnedTreeStepper, TreeDerivativeScratch};
-pub use model::{Body, InvalidTree, JointKind, Limits, Tree, TreeRef, validate};
+pub use model::{Body, InvalidTree, JointKind, Limits, Tree, TreeArray, TreeRef, validate};
 
 #[cfg(test)]
 mod tests;

@@ -132,6 +132,32 @@ impl Tree for TreeRef<'_> {
     }
 }
 
+/// A tree of `N` bodies held by value: what `mechanism!` builds from a
+/// description's run-time parameters (`Name::tree`), so that a `no_std`
+/// program steps it without allocating or borrowing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TreeArray<const N: usize> {
+    /// The bodies, parents first.
+    pub bodies: [Body; N],
+    /// Gravity in world coordinates (m/s²).
+    pub gravity: V3,
+}
+
+impl<const N: usize> Tree for TreeArray<N> {
+    #[inline(always)]
+    fn len(&self) -> usize {
+        N
+    }
+    #[inline(always)]
+    fn body(&self, i: usize) -> &Body {
+        &self.bodies[i]
+    }
+    #[inline(always)]
+    fn gravity(&self) -> V3 {
+        self.gravity
+    }
+}
+
 /// Why a tree cannot be integrated: the body's index and what is wrong.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct InvalidTree {

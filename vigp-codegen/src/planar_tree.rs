@@ -1,0 +1,146 @@
+//! A planar tree description as bodies of the linear-time tree engine:
+//! `Name::tree()` (`no_std`: the bodies from the run-time parameters, no
+//! allocation) and `Name::robot()` (std: a `vigp::Robot` over them), with
+//! the maps between the engine's body order and the minimal coordinates.
+//! The geometry is `vigp::embedded::tree::planar`'s; this module only
+//! names each body's parent, joint, anchors and parameters. A description
+//! with loops gets none of it (the engine steps trees).
+
+use crate::desc::planar::{JointKind, Model, Point};
+use crate::emit::anchor_local;
+use crate::lit::lit;
+use crate::target::Target;
+use proc_macro2::{Literal, TokenStream};
+use quote::quote;
+use syn::ext::IdentExt;
+
+/// The tree items of `m`, or nothing when it has loops.
+pub fn emit(m: &Model, target: Target) -> TokenStream {
+    if !m.loops.is_empty() {
+        return quote!();
+    }
+    let name = &m.name;
+    let n = Literal::usize_unsuffixed(m.dof());
+    let core = quote!(::vigp::embedded::tree);
+    let params = quote!(self);
+    // body k is placed by joint m.placement[k]; its link is m.order[k]
+    let body_of_link = |l: usize| m.order.iter().position(|&o| o == l);
+    let dissipative = m.dissipative();
+    let elastic = m.elastic();
+    let bodies = m.placement.iter().zip(&m.order).map(|(&j, &l)| {
+        let joint = &m.joints[j];
+        let jn = &joint.name;
+        let ln = &m.links[l].name;
+        let parent = match joint.parent.link().and_then(body_of_link) {
+            Some(p) => {
+                let p = Literal::usize_unsuffixed(p);
+                quote!(::core::option::Option::Some(#p))
+            }
+            None => quote!(::core::option::Option::None),
+        };
+        let kind = match joint.kind {
+            JointKind::Revolute => quote!(#core::planar::PlanarJoint::Revolute),
+            JointKind::Prismatic { axis } => {
+                let (x, y) = (lit(axis[0]), lit(axis[1]));
+                quote!(#core::planar::PlanarJoint::Prismatic { axis: [#x, #y] })
+            }
+        };
+        let at = match joint.parent {
+            Point::World(w) => {
+                let (x, y) = (lit(w[0]), lit(w[1]));
+                quote!([#x, #y])
+            }
+            Point::Link { link, anchor } => anchor_local(m, &params, link, anchor),
+        };
+        let anchor = match joint.child {
+            Point::Link { link, anchor } => anchor_local(m, &params, link, anchor),
+            Point::World(_) => unreachable!("a tree joint's child is a link"),
+        };
+        let damping = if dissipative {
+            quote!(self.joints.#jn.damping)
+        } else {
+            quote!(0.0)
+        };
+        let (stiffness, rest) = if elastic {
+            (
+                quote!(self.joints.#jn.stiffness),
+                quote!(self.joints.#jn.rest),
+            )
+        } else {
+            (quote!(0.0), quote!(0.0))
+        };
+        quote! {
+            #core::planar::PlanarBody {
+                parent: #parent,
+                joint: #kind,
+                at: #at,
+                anchor: #anchor,
+                link: self.links.#ln,
+                damping: #damping,
+                stiffness: #stiffness,
+                rest: #rest,
+            }
+        }
+    });
+    let coordinates = m.placement.iter().map(|&j| {
+        Literal::usize_unsuffixed(m.coordinate_of(j).expect("a tree joint has a coordinate"))
+    });
+    let inputs: Vec<Literal> = m
+        .inputs()
+        .iter()
+        .map(|&j| {
+            let body = m.placement.iter().position(|&p| p == j);
+            Literal::usize_unsuffixed(body.expect("an actuated tree joint places a body"))
+        })
+        .collect();
+    let u = Literal::usize_unsuffixed(inputs.len());
+    let doc_tree = format!(
+        " The mechanism as the bodies of the linear-time tree engine, from these \
+         parameters, parents first (body `k` is minimal coordinate \
+         [`{name}::TREE_COORDINATES`]`[k]`): `vigp::embedded::tree::Engine::new(sys.tree())` \
+         steps it in O(N) per residual and per solve, without allocation. The \
+         engine's first-order step is that of `Variational::new(sys.minimal(), dt)`."
+    );
+    let robot = if target == Target::Std {
+        let joint_names = m
+            .placement
+            .iter()
+            .map(|&j| m.joints[j].name.unraw().to_string());
+        let link_names = m.order.iter().map(|&l| m.links[l].name.unraw().to_string());
+        let input_names = m
+            .inputs()
+            .into_iter()
+            .map(|j| m.joints[j].name.unraw().to_string());
+        let name_str = name.unraw().to_string();
+        quote! {
+            #[doc = " The mechanism as a [`vigp::Robot`] on the tree engine (its coordinates in [`Self::TREE_COORDINATES`] order, inputs on the `actuated` joints in declaration order): the std road of a robot (rollouts, exact A and B, `vigp::learned::robot`). A parameter out of its domain is a [`vigp::RobotError`]."]
+            pub fn robot(&self) -> ::core::result::Result<::vigp::Robot, ::vigp::RobotError> {
+                let tree = self.tree();
+                ::vigp::Robot::from_tree(
+                    #name_str,
+                    ::vigp::robot::RobotTree { bodies: tree.bodies.to_vec(), gravity: tree.gravity },
+                    ::std::vec![#(::std::string::String::from(#joint_names)),*],
+                    ::std::vec![#(::std::string::String::from(#link_names)),*],
+                )?
+                .with_actuated(&[#(#input_names),*])
+            }
+        }
+    } else {
+        quote!()
+    };
+    quote! {
+        impl #name {
+            #[doc = " The minimal coordinate of each body of [`Self::tree`] (bodies come parents first; coordinates follow the tree joints' declaration order)."]
+            pub const TREE_COORDINATES: [usize; #n] = [#(#coordinates),*];
+            #[doc = " The body of [`Self::tree`] that each input drives (the `actuated` joints in declaration order)."]
+            pub const TREE_INPUTS: [usize; #u] = [#(#inputs),*];
+
+            #[doc = #doc_tree]
+            pub fn tree(&self) -> #core::TreeArray<#n> {
+                #core::planar::planar_tree([#(#bodies),*], self.gravity)
+            }
+
+            #robot
+        }
+    }
+}
