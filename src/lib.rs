@@ -78,14 +78,20 @@
 //! * Angles: θ = 0 hangs straight down, counter-clockwise positive; a
 //!   revolute coordinate is the child's angle relative to its parent; a
 //!   prismatic coordinate is the slide distance along the unit axis.
+//! * The tree engine: a planar tree (no loop) also gets `Name::tree()`, its
+//!   bodies for the linear-time engine `vigp::embedded::tree::Engine`
+//!   (`no_std`), and `Name::robot()`, a `vigp::Robot` over them
+//!   (docs/robots.md); `Name::TREE_COORDINATES` maps the engine's bodies
+//!   (parents first) to the minimal coordinates.
 //! * Size: the planar terms are expanded in closed form and grow about
 //!   1.5× per link of a chain (12 links: 3.3 MB of Rust, 40 s and 4 GB to
-//!   compile); past 8 MB the macro refuses with a `compile_error!` at the
-//!   name. Longer chains: the 3-D syntax (gravity `[gx, gy, 0.0]`, revolute
-//!   axes `[0.0, 0.0, 1.0]`, an `inertia: [i1, i2, i3]` per link) evaluates
-//!   its terms at run time and grows linearly (20 links: 0.13 MB); its
-//!   angles are measured from the links' declared frames (each link along
-//!   its frame's x-axis at zero), not from hanging down.
+//!   compile). Past 14 joints on one path, or 8 MB, the macro applies a
+//!   rule: a tree gets its parameters and the tree engine's items alone
+//!   (no `minimal()` or `maximal()`; the expansion grows linearly, 60
+//!   links: 0.1 MB), and a loop is refused with a `compile_error!` at the
+//!   name that points to the 3-D syntax (gravity `[gx, gy, 0.0]`, revolute
+//!   axes `[0.0, 0.0, 1.0]`, an `inertia: [i1, i2, i3]` per link), whose
+//!   terms are evaluated at run time.
 //! * Damping: when any joint declares `damping` (even `0.0`), every joint
 //!   gets a run-time damping parameter and the generated code contains the
 //!   Rayleigh dissipation function; when none does, no damping code exists.

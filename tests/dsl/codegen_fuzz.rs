@@ -263,21 +263,47 @@ fn chain(n: usize) -> String {
 }
 
 /// The closed-form planar terms grow ≈ 1.5× per link of a chain; past
-/// `MAX_PLANAR_EXPANSION` (8 MB of tokens, between 14 and 15 links) the
-/// macro refuses with the size, the limit and the way out, at the name,
-/// instead of handing rustc code it cannot compile (a 20-link chain
-/// expanded to 83 MB and rustc was killed after 5 minutes).
+/// 14 joints on one path (`MAX_CLOSED_FORM_DEPTH`; 14 links expand to
+/// 7.8 MB, 15 would to 11 MB, and rustc was killed after 5 minutes on a
+/// 20-link chain's 83 MB) the macro does not attempt them: a tree gets its
+/// parameter types and the tree engine's items alone, with a small
+/// expansion that grows linearly, and a loop is refused at the name with
+/// the size and the way out.
 #[test]
-fn a_planar_expansion_too_large_to_compile_is_refused_with_the_remedy() {
-    let tokens = |n: usize| {
-        let ts: TokenStream = chain(n).parse().unwrap();
-        vigp_codegen::expand(ts).map(|t| t.to_string().len())
+fn a_planar_tree_too_large_for_closed_forms_gets_the_tree_engine_alone() {
+    let expand = |src: String| {
+        let ts: TokenStream = src.parse().unwrap();
+        vigp_codegen::expand(ts).map(|t| t.to_string())
     };
-    let fourteen = tokens(14).expect("14 links are within the limit");
-    assert!(fourteen > 5_000_000 && fourteen < 8_000_000, "{fourteen}");
-    let e = tokens(15).unwrap_err().to_string();
+    let fourteen = expand(chain(14)).expect("14 links are within the limit");
     assert!(
-        e.contains("would expand to 11.") && e.contains("3-D syntax"),
+        fourteen.len() > 5_000_000 && fourteen.len() < 8_000_000,
+        "{}",
+        fourteen.len()
+    );
+    assert!(fourteen.contains("fn minimal") && fourteen.contains("fn tree"));
+    let sizes: Vec<usize> = [15, 30, 60]
+        .iter()
+        .map(|&n| {
+            let out = expand(chain(n)).expect("a tree past the limit expands");
+            assert!(!out.contains("fn minimal") && !out.contains("fn maximal"));
+            assert!(out.contains("fn tree") && out.contains("fn robot"));
+            assert!(out.contains("no closed-form coordinate views"));
+            out.len()
+        })
+        .collect();
+    // linear in the links: each further link adds the same amount
+    let (a, b) = (sizes[1] - sizes[0], sizes[2] - sizes[1]);
+    println!("15, 30, 60 links: {sizes:?} bytes");
+    assert!(sizes[0] < 100_000, "{sizes:?}");
+    assert!((b as f64 / (2 * a) as f64 - 1.0).abs() < 0.05, "{sizes:?}");
+    // a loop past the limit: refused with the remedy
+    let mut looped = chain(15);
+    looped.truncate(looped.len() - " } }".len());
+    looped += ", close: revolute(l14.end, world @ [1.0, 0.0]) } }";
+    let e = expand(looped).unwrap_err().to_string();
+    assert!(
+        e.contains("has a loop") && e.contains("15 joints") && e.contains("3-D syntax"),
         "{e}"
     );
 }

@@ -103,6 +103,13 @@ pub(crate) fn parameters_impl(
     }
 }
 
+/// The `Parameters` implementation of the parameter struct alone (a
+/// description without coordinate views: [`crate::planar_tree`]).
+pub fn emit_own(m: &Model) -> TokenStream {
+    let name = &m.name;
+    parameters_impl(&m.name, &quote!(#name), &quote!(self), &parameter_places(m))
+}
+
 /// The description items of `m` for `target`.
 pub fn emit(m: &Model, target: Target) -> TokenStream {
     let name = &m.name;

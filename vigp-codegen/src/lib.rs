@@ -45,12 +45,13 @@ pub use target::Target;
 
 use proc_macro2::TokenStream;
 
-/// The largest planar expansion accepted, in bytes of token text. The
-/// closed-form planar terms grow about 1.5× per link of a chain (a
+/// The largest planar expansion with closed-form views, in bytes of token
+/// text (past it a tree gets the tree engine's items alone and a loop is
+/// refused: [`planar_tree`]). The closed-form planar terms grow about 1.5× per link of a chain (a
 /// 12-link chain expands to 3.3 MB, which rustc compiled in 40 s using
 /// 3.9 GB; 14 links 7.8 MB; 16 links 17 MB, which rustc could not
 /// finish in 5 minutes on a 24 GB machine).
-const MAX_PLANAR_EXPANSION: usize = 8_000_000;
+pub const MAX_PLANAR_EXPANSION: usize = 8_000_000;
 
 /// Expand a `mechanism!` body into Rust items ([`Target::Std`]), or a
 /// spanned error.
@@ -78,27 +79,50 @@ pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream
         return Ok(spatial::emit::emit(&model, target));
     }
     let model = desc::validate::<2, desc::planar::Planar>(parsed)?;
+    // the closed-form terms while they compile; past that a tree steps on
+    // the tree engine alone, and a loop is refused
+    let depth = planar_tree::depth(&model);
+    if depth > planar_tree::MAX_CLOSED_FORM_DEPTH {
+        let why = format!(
+            "its longest chain has {depth} joints, and the closed form's size grows about \
+             1.5× per joint past {} (14 joints: 7.8 MB of Rust)",
+            planar_tree::MAX_CLOSED_FORM_DEPTH
+        );
+        return too_large(&model, target, &why);
+    }
     let mut out = emit::emit(&model, target)?;
     out.extend(describe::emit(&model, target));
     out.extend(planar_tree::emit(&model, target));
     let bytes = out.to_string().len();
     if bytes > MAX_PLANAR_EXPANSION {
-        return Err(syn::Error::new(
-            model.name.span(),
-            format!(
-                "mechanism `{}` would expand to {:.1} MB of Rust, more than rustc can compile in \
-                 reasonable time and memory (limit {} MB): the closed-form planar terms grow \
-                 about 1.5× per link of a chain (12 links: 3.3 MB, 40 s and 4 GB to compile). \
-                 Declare it with the 3-D syntax (`gravity: [gx, gy, 0.0]`, revolute axes \
-                 `[0.0, 0.0, 1.0]`, each link's `inertia: [i1, i2, i3]`), whose terms are \
-                 evaluated at run time (a 20-link chain expands to 0.13 MB), or use fewer links",
-                model.name,
-                bytes as f64 / 1e6,
-                MAX_PLANAR_EXPANSION / 1_000_000
-            ),
-        ));
+        let why = format!(
+            "they would expand to {:.1} MB of Rust, more than rustc compiles in reasonable \
+             time and memory (limit {} MB)",
+            bytes as f64 / 1e6,
+            MAX_PLANAR_EXPANSION / 1_000_000
+        );
+        return too_large(&model, target, &why);
     }
     Ok(out)
+}
+
+/// A planar description whose closed form is too large: a tree gets the
+/// tree engine's items alone ([`planar_tree::emit_tree_only`]); a loop,
+/// which the tree engine does not step, is refused.
+fn too_large(model: &desc::planar::Model, target: Target, why: &str) -> syn::Result<TokenStream> {
+    if model.loops.is_empty() {
+        return Ok(planar_tree::emit_tree_only(model, target, why));
+    }
+    Err(syn::Error::new(
+        model.name.span(),
+        format!(
+            "mechanism `{}` has a loop and closed-form terms too large to compile: {why}. \
+             Declare it with the 3-D syntax (`gravity: [gx, gy, 0.0]`, revolute axes \
+             `[0.0, 0.0, 1.0]`, each link's `inertia: [i1, i2, i3]`), whose terms are \
+             evaluated at run time, or use fewer links",
+            model.name
+        ),
+    ))
 }
 
 /// Expand a description given as source text and pretty-print the result,

@@ -7,7 +7,7 @@
 //! with loops gets none of it (the engine steps trees).
 
 use crate::desc::planar::{JointKind, Model, Point};
-use crate::emit::anchor_local;
+use crate::emit::{ParameterItems, anchor_local, parameter_items};
 use crate::lit::lit;
 use crate::target::Target;
 use proc_macro2::{Literal, TokenStream};
@@ -142,5 +142,59 @@ pub fn emit(m: &Model, target: Target) -> TokenStream {
 
             #robot
         }
+    }
+}
+
+/// The longest path from the world, in tree joints, above which the
+/// closed-form terms are not attempted: a chain of 14 links expands to
+/// 7.8 MB of Rust in 1.3 s of macro time, each further link about 1.5×
+/// both, past [`crate::MAX_PLANAR_EXPANSION`].
+pub const MAX_CLOSED_FORM_DEPTH: usize = 14;
+
+/// The number of tree joints on the longest path from the world.
+pub fn depth(m: &Model) -> usize {
+    let mut depth = vec![0usize; m.links.len()];
+    for (&j, &l) in m.placement.iter().zip(&m.order) {
+        depth[l] = 1 + m.joints[j].parent.link().map_or(0, |p| depth[p]);
+    }
+    depth.into_iter().max().unwrap_or(0)
+}
+
+/// The whole expansion of a planar tree whose closed-form terms would be
+/// too large to compile: the parameter types, forward kinematics and the
+/// tree engine's items, without the coordinate views (`minimal()`,
+/// `maximal()`), which the struct's documentation says.
+pub fn emit_tree_only(m: &Model, target: Target, why: &str) -> TokenStream {
+    let mut m = m.clone();
+    let note = format!(
+        " This mechanism has no closed-form coordinate views (`minimal()`, \
+         `maximal()`): {why}. It steps on the linear-time tree engine: \
+         `vigp::embedded::tree::Engine::new(sys.tree())` (`no_std`), or \
+         `sys.robot()` (std: rollouts, exact A and B, learned robots)."
+    );
+    if !m.attrs.is_empty() {
+        m.attrs.push(syn::parse_quote!(#[doc = ""]));
+    }
+    m.attrs.push(syn::parse_quote!(#[doc = #note]));
+    let ParameterItems {
+        types,
+        consts,
+        link_poses,
+    } = parameter_items(&m);
+    let name = &m.name;
+    let own = crate::describe::emit_own(&m);
+    let tree = emit(&m, target);
+    quote! {
+        #types
+
+        impl #name {
+            #consts
+
+            #link_poses
+        }
+
+        #own
+
+        #tree
     }
 }

@@ -30,7 +30,7 @@
 //! `<limit>` has no place in the spatial description and is not emitted.
 //!
 //! On a fixed base the same bodies are also emitted as constants for the
-//! linear-time tree engine ([`tree_items`]): `Name::TREE_BODIES` (the
+//! linear-time tree engine (`tree_items`): `Name::TREE_BODIES` (the
 //! file's bodies with the joint overrides), `Name::TREE_GRAVITY`,
 //! `Name::TREE_INPUTS` (the coordinate of each input) and the unit type
 //! `NameTree`, which implements `vigp::embedded::tree::Tree` over them,
@@ -407,7 +407,7 @@ fn tree_items(
 /// description a user would write by hand; also returns the tokens that
 /// make the compiled crate depend on the file (`include_bytes!`), so that
 /// editing it recompiles the mechanism, and on a fixed base the tree
-/// engine's constants ([`tree_items`]).
+/// engine's constants (`tree_items`).
 pub fn lower(tokens: TokenStream) -> syn::Result<(Input, TokenStream)> {
     let u = parse.parse2(tokens)?;
     let span = u.path.span();
