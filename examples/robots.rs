@@ -11,15 +11,77 @@
 //! by other processes. Then one step
 //! against one step with its exact A and B (`Robot::step_derivatives`) on
 //! the robots of tests/fixtures/robots and on chains, timed side by side.
+//! Last, planar chains declared in `mechanism!` (N = 2, 4, 6, 8): the
+//! closed-form step (`Variational::step`) against the tree engine's
+//! (`Name::robot()`, `Robot::step_in`) on the same description, the
+//! measurement behind the macro's rule (docs/robots.md).
 //!
 //! ```text
 //! cargo run --release --example robots [-- --steps 2000]
 //! cargo run --release --example robots -- --derivatives   # the second table alone
+//! cargo run --release --example robots -- --declared      # the third table alone
 //! ```
 
 use std::time::Instant;
 
+use vigp::prelude::*;
 use vigp::robot::{Robot, RobotState};
+
+vigp::mechanism! {
+    /// Two uniform rods (m = 1 kg, l = 0.5 m) in a chain.
+    Rods2 {
+        links { r0: { mass: 1.0, length: 0.5 }, r1: { mass: 1.0, length: 0.5 } }
+        joints { j0: revolute(world, r0.start), j1: revolute(r0.end, r1.start) }
+    }
+}
+
+vigp::mechanism! {
+    /// Four uniform rods in a chain.
+    Rods4 {
+        links {
+            r0: { mass: 1.0, length: 0.5 }, r1: { mass: 1.0, length: 0.5 },
+            r2: { mass: 1.0, length: 0.5 }, r3: { mass: 1.0, length: 0.5 },
+        }
+        joints {
+            j0: revolute(world, r0.start), j1: revolute(r0.end, r1.start),
+            j2: revolute(r1.end, r2.start), j3: revolute(r2.end, r3.start),
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// Six uniform rods in a chain.
+    Rods6 {
+        links {
+            r0: { mass: 1.0, length: 0.5 }, r1: { mass: 1.0, length: 0.5 },
+            r2: { mass: 1.0, length: 0.5 }, r3: { mass: 1.0, length: 0.5 },
+            r4: { mass: 1.0, length: 0.5 }, r5: { mass: 1.0, length: 0.5 },
+        }
+        joints {
+            j0: revolute(world, r0.start), j1: revolute(r0.end, r1.start),
+            j2: revolute(r1.end, r2.start), j3: revolute(r2.end, r3.start),
+            j4: revolute(r3.end, r4.start), j5: revolute(r4.end, r5.start),
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// Eight uniform rods in a chain.
+    Rods8 {
+        links {
+            r0: { mass: 1.0, length: 0.5 }, r1: { mass: 1.0, length: 0.5 },
+            r2: { mass: 1.0, length: 0.5 }, r3: { mass: 1.0, length: 0.5 },
+            r4: { mass: 1.0, length: 0.5 }, r5: { mass: 1.0, length: 0.5 },
+            r6: { mass: 1.0, length: 0.5 }, r7: { mass: 1.0, length: 0.5 },
+        }
+        joints {
+            j0: revolute(world, r0.start), j1: revolute(r0.end, r1.start),
+            j2: revolute(r1.end, r2.start), j3: revolute(r2.end, r3.start),
+            j4: revolute(r3.end, r4.start), j5: revolute(r4.end, r5.start),
+            j6: revolute(r5.end, r6.start), j7: revolute(r6.end, r7.start),
+        }
+    }
+}
 
 /// A chain of n rods (m = 1, l = 0.5) hanging along −z; `spatial`
 /// alternates the axes z, y (else every axis is y: a planar chain).
@@ -167,6 +229,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("load average at the start: {}", load());
         return derivatives(dir, dt);
     }
+    if args.iter().any(|a| a == "--declared") {
+        println!("load average at the start: {}", load());
+        return declared(steps, dt);
+    }
     println!("load average at the start: {}", load());
     // two rounds of ours, then MuJoCo's; the fastest run of each side
     let mut rows = own_rollouts(steps, dt)?;
@@ -216,7 +282,97 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             (fit, fit_peer) = (Vec::new(), Vec::new());
         }
     }
-    derivatives(dir, dt)
+    derivatives(dir, dt)?;
+    declared(steps, dt)
+}
+
+/// ns/step of a rollout of `steps` steps of the closed form
+/// (`Variational::step`) and of the tree engine (`Robot::step_in` on
+/// `robot()`) of one planar description, from q = (1, −0.5, 0, …) at rest;
+/// the fastest of 7 rollouts each, alternating.
+fn declared_row<M: Mechanism<N, 0> + Copy, const N: usize>(
+    model: M,
+    robot: &Robot,
+    steps: usize,
+    dt: f64,
+) -> Result<(f64, f64), Box<dyn std::error::Error>> {
+    let vi = Variational::new(model, dt)?;
+    let mut q0 = [0.0; N];
+    (q0[0], q0[1]) = (1.0, -0.5);
+    let z0 = model.state(q0, [0.0; N]);
+    let robot_z0 = RobotState::new(q0.to_vec(), vec![0.0; N]);
+    let mut closed = f64::INFINITY;
+    let mut engine = f64::INFINITY;
+    for _ in 0..7 {
+        let t = Instant::now();
+        let mut z = z0;
+        for _ in 0..steps {
+            z = vi.step(&z)?;
+        }
+        std::hint::black_box(&z);
+        closed = closed.min(t.elapsed().as_secs_f64() * 1e9 / steps as f64);
+        engine = engine.min(time(robot, &robot_z0, dt, steps, 1).0);
+    }
+    Ok((closed, engine))
+}
+
+/// The closed form against the tree engine on the same planar
+/// descriptions (`mechanism!`): the measurement behind the macro's rule.
+fn declared(steps: usize, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
+    println!();
+    println!(
+        "planar chains declared in `mechanism!`, dt = 2 ms, {steps}-step rollouts from rest, \
+         the fastest of 7 each, alternating: the closed form (`Variational::step`) against the \
+         tree engine (`Name::robot()`, `Robot::step_in`)"
+    );
+    println!("| N | closed form (ns/step) | tree engine (ns/step) | engine / closed form |");
+    println!("|---|---|---|---|");
+    let rows = [
+        (
+            2,
+            declared_row(
+                Rods2::default().minimal(),
+                &Rods2::default().robot()?,
+                steps,
+                dt,
+            )?,
+        ),
+        (
+            4,
+            declared_row(
+                Rods4::default().minimal(),
+                &Rods4::default().robot()?,
+                steps,
+                dt,
+            )?,
+        ),
+        (
+            6,
+            declared_row(
+                Rods6::default().minimal(),
+                &Rods6::default().robot()?,
+                steps,
+                dt,
+            )?,
+        ),
+        (
+            8,
+            declared_row(
+                Rods8::default().minimal(),
+                &Rods8::default().robot()?,
+                steps,
+                dt,
+            )?,
+        ),
+    ];
+    for (n, (closed, engine)) in rows {
+        println!(
+            "| {n} | {closed:.0} | {engine:.0} | {:.2} |",
+            engine / closed
+        );
+    }
+    println!("load average after: {}", load());
+    Ok(())
 }
 
 /// The row of the Panda driven by a PD law (MuJoCo's Euler step costs the
