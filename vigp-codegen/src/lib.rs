@@ -39,6 +39,7 @@ pub mod spatial;
 pub mod symbolic;
 pub mod syntax;
 pub mod target;
+pub mod tree_items;
 pub mod urdf;
 
 pub use target::Target;
@@ -76,7 +77,9 @@ pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream
     let parsed = syntax::Input::parse2(input, dim)?;
     if dim == syntax::Dim::Spatial {
         let model = desc::validate::<3, desc::spatial::Spatial>(parsed)?;
-        return Ok(spatial::emit::emit(&model, target));
+        let mut out = spatial::emit::emit(&model, target);
+        out.extend(spatial::tree::emit(&model, target));
+        return Ok(out);
     }
     let model = desc::validate::<2, desc::planar::Planar>(parsed)?;
     // the closed-form terms while they compile; past that a tree steps on

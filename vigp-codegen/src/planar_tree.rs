@@ -10,34 +10,21 @@ use crate::desc::planar::{JointKind, Model, Point};
 use crate::emit::{ParameterItems, anchor_local, parameter_items};
 use crate::lit::lit;
 use crate::target::Target;
-use proc_macro2::{Literal, TokenStream};
+use proc_macro2::TokenStream;
 use quote::quote;
-use syn::ext::IdentExt;
 
 /// The tree items of `m`, or nothing when it has loops.
 pub fn emit(m: &Model, target: Target) -> TokenStream {
     if !m.loops.is_empty() {
         return quote!();
     }
-    let name = &m.name;
-    let n = Literal::usize_unsuffixed(m.dof());
     let core = quote!(::vigp::embedded::tree);
     let params = quote!(self);
     // body k is placed by joint m.placement[k]; its link is m.order[k]
-    let body_of_link = |l: usize| m.order.iter().position(|&o| o == l);
-    let dissipative = m.dissipative();
-    let elastic = m.elastic();
     let bodies = m.placement.iter().zip(&m.order).map(|(&j, &l)| {
         let joint = &m.joints[j];
-        let jn = &joint.name;
         let ln = &m.links[l].name;
-        let parent = match joint.parent.link().and_then(body_of_link) {
-            Some(p) => {
-                let p = Literal::usize_unsuffixed(p);
-                quote!(::core::option::Option::Some(#p))
-            }
-            None => quote!(::core::option::Option::None),
-        };
+        let parent = crate::tree_items::parent_body(m, j);
         let kind = match joint.kind {
             JointKind::Revolute => quote!(#core::planar::PlanarJoint::Revolute),
             JointKind::Prismatic { axis } => {
@@ -56,19 +43,7 @@ pub fn emit(m: &Model, target: Target) -> TokenStream {
             Point::Link { link, anchor } => anchor_local(m, &params, link, anchor),
             Point::World(_) => unreachable!("a tree joint's child is a link"),
         };
-        let damping = if dissipative {
-            quote!(self.joints.#jn.damping)
-        } else {
-            quote!(0.0)
-        };
-        let (stiffness, rest) = if elastic {
-            (
-                quote!(self.joints.#jn.stiffness),
-                quote!(self.joints.#jn.rest),
-            )
-        } else {
-            (quote!(0.0), quote!(0.0))
-        };
+        let [damping, stiffness, rest] = crate::tree_items::joint_parameters(m, j);
         quote! {
             #core::planar::PlanarBody {
                 parent: #parent,
@@ -82,67 +57,8 @@ pub fn emit(m: &Model, target: Target) -> TokenStream {
             }
         }
     });
-    let coordinates = m.placement.iter().map(|&j| {
-        Literal::usize_unsuffixed(m.coordinate_of(j).expect("a tree joint has a coordinate"))
-    });
-    let inputs: Vec<Literal> = m
-        .inputs()
-        .iter()
-        .map(|&j| {
-            let body = m.placement.iter().position(|&p| p == j);
-            Literal::usize_unsuffixed(body.expect("an actuated tree joint places a body"))
-        })
-        .collect();
-    let u = Literal::usize_unsuffixed(inputs.len());
-    let doc_tree = format!(
-        " The mechanism as the bodies of the linear-time tree engine, from these \
-         parameters, parents first (body `k` is minimal coordinate \
-         [`{name}::TREE_COORDINATES`]`[k]`): `vigp::embedded::tree::Engine::new(sys.tree())` \
-         steps it in O(N) per residual and per solve, without allocation. The \
-         engine's first-order step is that of `Variational::new(sys.minimal(), dt)`."
-    );
-    let robot = if target == Target::Std {
-        let joint_names = m
-            .placement
-            .iter()
-            .map(|&j| m.joints[j].name.unraw().to_string());
-        let link_names = m.order.iter().map(|&l| m.links[l].name.unraw().to_string());
-        let input_names = m
-            .inputs()
-            .into_iter()
-            .map(|j| m.joints[j].name.unraw().to_string());
-        let name_str = name.unraw().to_string();
-        quote! {
-            #[doc = " The mechanism as a [`vigp::Robot`] on the tree engine (its coordinates in [`Self::TREE_COORDINATES`] order, inputs on the `actuated` joints in declaration order): the std road of a robot (rollouts, exact A and B, `vigp::learned::robot`). A parameter out of its domain is a [`vigp::RobotError`]."]
-            pub fn robot(&self) -> ::core::result::Result<::vigp::Robot, ::vigp::RobotError> {
-                let tree = self.tree();
-                ::vigp::Robot::from_tree(
-                    #name_str,
-                    ::vigp::robot::RobotTree { bodies: tree.bodies.to_vec(), gravity: tree.gravity },
-                    ::std::vec![#(::std::string::String::from(#joint_names)),*],
-                    ::std::vec![#(::std::string::String::from(#link_names)),*],
-                )?
-                .with_actuated(&[#(#input_names),*])
-            }
-        }
-    } else {
-        quote!()
-    };
-    quote! {
-        impl #name {
-            #[doc = " The minimal coordinate of each body of [`Self::tree`] (bodies come parents first; coordinates follow the tree joints' declaration order)."]
-            pub const TREE_COORDINATES: [usize; #n] = [#(#coordinates),*];
-            #[doc = " The body of [`Self::tree`] that each input drives (the `actuated` joints in declaration order)."]
-            pub const TREE_INPUTS: [usize; #u] = [#(#inputs),*];
-
-            #[doc = #doc_tree]
-            pub fn tree(&self) -> #core::TreeArray<#n> {
-                #core::planar::planar_tree([#(#bodies),*], self.gravity)
-            }
-
-            #robot
-        }
-    }
+    let tree = quote!(#core::planar::planar_tree([#(#bodies),*], self.gravity));
+    crate::tree_items::emit(m, tree, |l| &l.name, target)
 }
 
 /// The longest path from the world, in tree joints, above which the

@@ -30,7 +30,7 @@ fn usize_lit(n: usize) -> Literal {
 
 /// Link-frame (or world) coordinates of a point, with lengths and centres
 /// of mass read from the run-time parameters `links`.
-fn anchor_expr(m: &Model, p: Point) -> TokenStream {
+pub(crate) fn anchor_expr(m: &Model, p: Point) -> TokenStream {
     let sp = quote!(::vigp::spatial);
     match p {
         Point::World(w) => triple(w),

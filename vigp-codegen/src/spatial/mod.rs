@@ -39,3 +39,4 @@
 //! runtime code.
 
 pub mod emit;
+pub mod tree;

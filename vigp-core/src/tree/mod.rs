@@ -7,6 +7,8 @@
 //!   [`Tree`] trait through which the engine reads it. Run-time data
 //!   ([`TreeRef`], [`TreeArray`], or a `Vec`-backed model in the std runtime) and
 //!   generated constants implement the same trait.
+//! * [`links3`]: a 3-D tree description (links with reference frames)
+//!   as such bodies.
 //! * [`planar`]: a planar tree (what `mechanism!` declares in the plane)
 //!   as such bodies.
 //! * [`spatial`]: 6-D motion and force vectors and spatial inertias, all in
@@ -23,6 +25,7 @@
 pub mod derivatives;
 pub mod engine;
 pub mod learned;
+pub mod links3;
 pub mod model;
 pub mod planar;
 pub mod spatial;

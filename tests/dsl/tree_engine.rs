@@ -1,11 +1,13 @@
-//! A planar tree description on the linear-time tree engine
-//! (`Name::tree()`, `Name::robot()`): its mass matrix, energy and steps
-//! against the closed-form terms and the `Variational` step of the same
-//! description (another derivation of the same equations: symbolic
-//! closed forms against recursive spatial-vector algorithms).
+//! Tree descriptions, planar and 3-D, on the linear-time tree engine
+//! (`Name::tree()`, `Name::robot()`): their mass matrices, energies and
+//! steps against the minimal views' terms and `Variational` steps of the
+//! same descriptions (other derivations of the same equations: symbolic
+//! closed forms in the plane, jets through the link kinematics in 3-D,
+//! against recursive spatial-vector algorithms).
 
 use vigp::embedded::tree::{BodyScratch, Engine, EngineOptions, Tree};
 use vigp::prelude::*;
+use vigp::systems::spatial::{DoublePendulum3d, Furuta};
 use vigp::systems::{Cartpole, DoublePendulum, Pendulum};
 
 vigp::mechanism! {
@@ -40,6 +42,32 @@ vigp::mechanism! {
         joints {
             rail: prismatic(world @ [0.2, -0.1], cart.center) { axis: [0.8, -0.6], actuated },
             hinge: revolute(cart.center, pole.start),
+        }
+    }
+}
+
+vigp::mechanism! {
+    /// A 3-D tree declared out of placement order: rotated link frames, a
+    /// full inertia tensor, a slider on an oblique axis of a turned link,
+    /// offset anchors, damping, springs and two inputs.
+    Branched3 {
+        gravity: [0.2, -0.1, -9.81],
+        links {
+            hand: { mass: 0.4, length: 0.3, inertia: [0.002, 0.004, 0.005], com: [0.1, 0.02, -0.01] },
+            arm: {
+                mass: 1.2,
+                length: 0.8,
+                inertia: [[0.01, 0.001, 0.0], [0.001, 0.06, 0.002], [0.0, 0.002, 0.065]],
+                frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
+            },
+            slider: { mass: 0.5, length: 0.2, inertia: [0.001, 0.002, 0.002] },
+            side: { mass: 0.7, length: 0.5, inertia: [0.003, 0.015, 0.015], frame: [[0.6, 0.8, 0.0], [-0.8, 0.6, 0.0], [0.0, 0.0, 1.0]] },
+        }
+        joints {
+            wrist: revolute(arm.end, hand @ [0.05, 0.01, 0.0]) { axis: [0.0, 0.6, 0.8], damping: 0.2, actuated },
+            shoulder: revolute(world @ [0.1, 0.2, 0.3], arm.start) { axis: [0.0, 1.0, 0.0], stiffness: 3.0, rest: 0.4, actuated },
+            rail: prismatic(arm.center, slider.center) { axis: [0.6, 0.0, 0.8], damping: 0.1, stiffness: 5.0 },
+            hip: revolute(arm @ [0.3, -0.1, 0.05], side.start) { axis: [1.0, 0.0, 0.0] },
         }
     }
 }
@@ -170,29 +198,62 @@ fn planar_trees_on_the_engine_equal_their_closed_forms() {
         compare::<_, 2, 0>(
             sys.minimal(),
             &DoublePendulum::TREE_COORDINATES,
-            &DoublePendulum::TREE_INPUTS,
+            &[],
             sys.tree(),
         ),
     );
     let sys = Cartpole::default();
     report(
         "cart-pole",
-        compare::<_, 2, 0>(
-            sys.minimal(),
-            &Cartpole::TREE_COORDINATES,
-            &Cartpole::TREE_INPUTS,
-            sys.tree(),
-        ),
+        compare::<_, 2, 0>(sys.minimal(), &Cartpole::TREE_COORDINATES, &[], sys.tree()),
     );
     let sys = Pendulum::default();
     report(
         "pendulum",
-        compare::<_, 1, 0>(
+        compare::<_, 1, 0>(sys.minimal(), &Pendulum::TREE_COORDINATES, &[], sys.tree()),
+    );
+}
+
+/// The same checks on 3-D trees (the minimal view's terms are jets
+/// through the link kinematics: M to rounding, 1e-12; the steps to 1e-10
+/// as above).
+#[test]
+fn spatial_trees_on_the_engine_equal_their_minimal_views() {
+    let report = |name: &str, (m, e, s): (f64, f64, f64)| {
+        println!("{name}: M(q) {m:.1e}, E(q, v) {e:.1e}, 100 steps {s:.1e}");
+        assert!(m < 1e-12 && e < 1e-12, "{name}: M {m:e}, E {e:e}");
+        assert!(s < 1e-10, "{name}: steps {s:e}");
+    };
+    let sys = Branched3::default();
+    assert_eq!(Branched3::TREE_COORDINATES, [1, 2, 3, 0]);
+    assert_eq!(Branched3::TREE_INPUTS, [3, 0]);
+    report(
+        "3-D branched",
+        compare::<_, 4, 2>(
             sys.minimal(),
-            &Pendulum::TREE_COORDINATES,
-            &Pendulum::TREE_INPUTS,
+            &Branched3::TREE_COORDINATES,
+            &Branched3::TREE_INPUTS,
             sys.tree(),
         ),
+    );
+    let sys = Furuta::default();
+    report(
+        "Furuta",
+        compare::<_, 2, 0>(sys.minimal(), &Furuta::TREE_COORDINATES, &[], sys.tree()),
+    );
+    let sys = DoublePendulum3d::default();
+    report(
+        "3-D double pendulum",
+        compare::<_, 2, 0>(
+            sys.minimal(),
+            &DoublePendulum3d::TREE_COORDINATES,
+            &[],
+            sys.tree(),
+        ),
+    );
+    assert_eq!(
+        Branched3::default().robot().unwrap().joint_names(),
+        ["shoulder", "rail", "hip", "wrist"]
     );
 }
 
