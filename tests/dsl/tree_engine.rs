@@ -156,6 +156,14 @@ where
     (mass_err, energy_err, step_err)
 }
 
+/// Prints the largest differences of [`compare`] and checks them: M and E
+/// to 1e-12, the steps to 1e-10 (the reasons at each test).
+fn report(name: &str, (m, e, s): (f64, f64, f64)) {
+    println!("{name}: M(q) {m:.1e}, E(q, v) {e:.1e}, 100 steps {s:.1e}");
+    assert!(m < 1e-12 && e < 1e-12, "{name}: M {m:e}, E {e:e}");
+    assert!(s < 1e-10, "{name}: steps {s:e}");
+}
+
 /// Mass matrices and energies agree to rounding (1e-12: a few hundred
 /// operations of either derivation on numbers of order 1; measured
 /// ≤ 5.1e-16); 100 steps to 1e-10 (both solvers stop at 1e-14 of the
@@ -163,11 +171,6 @@ where
 /// ≤ 8.4e-12).
 #[test]
 fn planar_trees_on_the_engine_equal_their_closed_forms() {
-    let report = |name: &str, (m, e, s): (f64, f64, f64)| {
-        println!("{name}: M(q) {m:.1e}, E(q, v) {e:.1e}, 100 steps {s:.1e}");
-        assert!(m < 1e-12 && e < 1e-12, "{name}: M {m:e}, E {e:e}");
-        assert!(s < 1e-10, "{name}: steps {s:e}");
-    };
     let sys = Branched::default();
     // placed parents first: shoulder, rail, hip, then elbow
     assert_eq!(Branched::TREE_COORDINATES, [1, 2, 3, 0]);
@@ -219,11 +222,6 @@ fn planar_trees_on_the_engine_equal_their_closed_forms() {
 /// as above).
 #[test]
 fn spatial_trees_on_the_engine_equal_their_minimal_views() {
-    let report = |name: &str, (m, e, s): (f64, f64, f64)| {
-        println!("{name}: M(q) {m:.1e}, E(q, v) {e:.1e}, 100 steps {s:.1e}");
-        assert!(m < 1e-12 && e < 1e-12, "{name}: M {m:e}, E {e:e}");
-        assert!(s < 1e-10, "{name}: steps {s:e}");
-    };
     let sys = Branched3::default();
     assert_eq!(Branched3::TREE_COORDINATES, [1, 2, 3, 0]);
     assert_eq!(Branched3::TREE_INPUTS, [3, 0]);

@@ -10,18 +10,17 @@
 //! parent's (counter-clockwise about z); a prismatic one slides the
 //! child's anchor along an axis fixed in the parent, orientations equal.
 //!
-//! Each engine body's frame is its link frame moved to the link's own
-//! joint anchor (the engine turns a body about its frame's origin). So a
-//! body's joint sits, in its parent body's frame, at the parent-side point
-//! minus the parent's own anchor, with the parent's orientation; a body
-//! hung from the world sits at the world point, turned by −π/2 about z.
-//! The scalar inertia I about the centre of mass becomes the lamina's
-//! diag(I/2, I/2, I) (the perpendicular-axis theorem; only I acts in the
-//! plane).
+//! So a planar body is a 3-D one ([`super::links3`]) whose link frame, in
+//! its parent's, is not turned (Q = 1), or turned by −π/2 about z under
+//! the world, with points at z = 0. The scalar inertia I about the centre
+//! of mass becomes the lamina's diag(I/2, I/2, I) (the perpendicular-axis
+//! theorem; only I acts in the plane).
 
-use super::model::{Body, JointKind, Limits, TreeArray};
-use super::spatial::{IDENTITY, M3, V3};
+use super::links3::{Link3Body, link3_tree};
+use super::model::{JointKind, TreeArray};
+use super::spatial::{IDENTITY, M3};
 use crate::params::Link;
+use crate::spatial::Link3;
 
 /// What joins a planar body to its parent.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -90,13 +89,8 @@ const HANGING: M3 = [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 1.0]];
 /// assert!(Engine::new(pendulum).is_ok());
 /// ```
 pub fn planar_tree<const N: usize>(bodies: [PlanarBody; N], gravity: [f64; 2]) -> TreeArray<N> {
-    let own_anchor = |p: Option<usize>| p.map_or([0.0, 0.0], |p| bodies[p].anchor);
+    let lift = |p: [f64; 2]| [p[0], p[1], 0.0];
     let body = |b: &PlanarBody| {
-        let base = own_anchor(b.parent);
-        let (rotation, translation): (M3, V3) = match b.parent {
-            Some(_) => (IDENTITY, [b.at[0] - base[0], b.at[1] - base[1], 0.0]),
-            None => (HANGING, [b.at[0], b.at[1], 0.0]),
-        };
         let (joint, axis) = match b.joint {
             PlanarJoint::Revolute => (JointKind::Revolute, [0.0, 0.0, 1.0]),
             // the axis in the joint frame: the parent's frame, or the
@@ -107,27 +101,27 @@ pub fn planar_tree<const N: usize>(bodies: [PlanarBody; N], gravity: [f64; 2]) -
             },
         };
         let i = b.link.inertia;
-        Body {
+        Link3Body {
             parent: b.parent,
             joint,
             axis,
-            rotation,
-            translation,
-            mass: b.link.mass,
-            com: [
-                b.link.com[0] - b.anchor[0],
-                b.link.com[1] - b.anchor[1],
-                0.0,
-            ],
-            inertia: [[0.5 * i, 0.0, 0.0], [0.0, 0.5 * i, 0.0], [0.0, 0.0, i]],
+            rotation: if b.parent.is_some() {
+                IDENTITY
+            } else {
+                HANGING
+            },
+            at: lift(b.at),
+            anchor: lift(b.anchor),
+            link: Link3 {
+                mass: b.link.mass,
+                inertia: [[0.5 * i, 0.0, 0.0], [0.0, 0.5 * i, 0.0], [0.0, 0.0, i]],
+                com: lift(b.link.com),
+                length: b.link.length,
+            },
             damping: b.damping,
             stiffness: b.stiffness,
             rest: b.rest,
-            limits: Limits::NONE,
         }
     };
-    TreeArray {
-        bodies: core::array::from_fn(|k| body(&bodies[k])),
-        gravity: [gravity[0], gravity[1], 0.0],
-    }
+    link3_tree(core::array::from_fn(|k| body(&bodies[k])), lift(gravity))
 }
