@@ -131,11 +131,12 @@ fn items(name: &Ident, build: &TokenStream, t: &TreeItems, target: Target) -> To
             #[doc = " The mechanism as a [`vigp::Robot`] on the tree engine (its coordinates in [`Self::TREE_COORDINATES`] order, inputs on the `actuated` joints in declaration order): the std road of a robot (rollouts, exact A and B, `vigp::learned::robot`). A parameter out of its domain is a [`vigp::RobotError`]."]
             pub fn robot(&self) -> ::core::result::Result<::vigp::Robot, ::vigp::RobotError> {
                 let tree = self.tree();
-                ::vigp::Robot::from_tree(
+                ::vigp::Robot::from_bodies(
                     #name_str,
-                    ::vigp::robot::RobotTree { bodies: tree.bodies.to_vec(), gravity: tree.gravity },
-                    ::std::vec![#(::std::string::String::from(#joints)),*],
-                    ::std::vec![#(::std::string::String::from(#links)),*],
+                    &tree.bodies,
+                    tree.gravity,
+                    &[#(#joints),*],
+                    &[#(#links),*],
                 )
                 #actuated
             }

@@ -385,6 +385,29 @@ impl Robot {
         Ok(robot)
     }
 
+    /// A robot from borrowed bodies and names (what `mechanism!`'s
+    /// `Name::robot()` calls with a declared tree's bodies): as
+    /// [`Robot::from_tree`], with `joints[k]` and `links[k]` the names of
+    /// body k's joint and link.
+    pub fn from_bodies(
+        name: &str,
+        bodies: &[Body],
+        gravity: V3,
+        joints: &[&str],
+        links: &[&str],
+    ) -> Result<Self, RobotError> {
+        let names = |n: &[&str]| n.iter().map(|s| s.to_string()).collect();
+        Self::from_tree(
+            name,
+            RobotTree {
+                bodies: bodies.to_vec(),
+                gravity,
+            },
+            names(joints),
+            names(links),
+        )
+    }
+
     /// Factorises M at q = 0 to name a joint that moves no inertia.
     fn check_mass(&self) -> Result<(), RobotError> {
         let n = self.dof();
