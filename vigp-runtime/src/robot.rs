@@ -53,34 +53,14 @@ use std::path::Path;
 use nalgebra::DMatrix;
 use vigp_core::tree::spatial::V3;
 use vigp_core::tree::{
-    Body, BodyScratch, DerivativeBuffers, Engine, EngineError, EngineOptions, EngineReport,
-    TermDerivatives, Tree, derivative_scratch_len,
+    Bodies, Body, BodyScratch, DerivativeBuffers, Engine, EngineError, EngineOptions, EngineReport,
+    TermDerivatives, derivative_scratch_len,
 };
 pub use vigp_urdf::UrdfError;
 
-/// The bodies of a robot as run-time data: what the engine reads.
-#[derive(Clone, Debug, PartialEq)]
-pub struct RobotTree {
-    /// The bodies, parents first (one per coordinate).
-    pub bodies: Vec<Body>,
-    /// Gravity in world coordinates (m/s²).
-    pub gravity: V3,
-}
-
-impl Tree for RobotTree {
-    #[inline(always)]
-    fn len(&self) -> usize {
-        self.bodies.len()
-    }
-    #[inline(always)]
-    fn body(&self, i: usize) -> &Body {
-        &self.bodies[i]
-    }
-    #[inline(always)]
-    fn gravity(&self) -> V3 {
-        self.gravity
-    }
-}
+/// The bodies of a robot as run-time data: what the engine reads (the
+/// bodies, parents first, and gravity in world coordinates).
+pub type RobotTree = Bodies<Vec<Body>>;
 
 /// Why a robot could not be loaded or stepped.
 #[derive(Debug, thiserror::Error)]

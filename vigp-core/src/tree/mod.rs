@@ -33,7 +33,7 @@ pub mod spatial;
 pub use derivatives::{DerivativeBuffers, derivative_scratch_len};
 pub use engine::{BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives};
 pub use learned::{LearnedTree, LearnedTreeDerivatives, LearnedTreeStepper, TreeDerivativeScratch};
-pub use model::{Body, InvalidTree, JointKind, Limits, Tree, TreeArray, TreeRef, validate};
+pub use model::{Bodies, Body, InvalidTree, JointKind, Limits, Tree, TreeArray, TreeRef, validate};
 
 #[cfg(test)]
 mod tests;

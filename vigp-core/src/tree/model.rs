@@ -108,55 +108,39 @@ impl<T: Tree + ?Sized> Tree for &T {
     }
 }
 
-/// A tree over borrowed bodies: no allocation.
-#[derive(Clone, Copy, Debug)]
-pub struct TreeRef<'a> {
-    /// The bodies, parents first.
-    pub bodies: &'a [Body],
-    /// Gravity in world coordinates (m/s²).
-    pub gravity: V3,
-}
-
-impl Tree for TreeRef<'_> {
-    #[inline(always)]
-    fn len(&self) -> usize {
-        self.bodies.len()
-    }
-    #[inline(always)]
-    fn body(&self, i: usize) -> &Body {
-        &self.bodies[i]
-    }
-    #[inline(always)]
-    fn gravity(&self) -> V3 {
-        self.gravity
-    }
-}
-
-/// A tree of `N` bodies held by value: what `mechanism!` builds from a
-/// description's run-time parameters (`Name::tree`), so that a `no_std`
-/// program steps it without allocating or borrowing.
+/// A tree as a list of bodies, parents first, and gravity: borrowed
+/// ([`TreeRef`]), held by value ([`TreeArray`], what `mechanism!`'s
+/// `Name::tree()` builds from the run-time parameters), or in a `Vec`
+/// (the std runtime's `vigp::robot::RobotTree`).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct TreeArray<const N: usize> {
+pub struct Bodies<B> {
     /// The bodies, parents first.
-    pub bodies: [Body; N],
+    pub bodies: B,
     /// Gravity in world coordinates (m/s²).
     pub gravity: V3,
 }
 
-impl<const N: usize> Tree for TreeArray<N> {
+impl<B: AsRef<[Body]>> Tree for Bodies<B> {
     #[inline(always)]
     fn len(&self) -> usize {
-        N
+        self.bodies.as_ref().len()
     }
     #[inline(always)]
     fn body(&self, i: usize) -> &Body {
-        &self.bodies[i]
+        &self.bodies.as_ref()[i]
     }
     #[inline(always)]
     fn gravity(&self) -> V3 {
         self.gravity
     }
 }
+
+/// A tree over borrowed bodies: no allocation.
+pub type TreeRef<'a> = Bodies<&'a [Body]>;
+
+/// A tree of `N` bodies held by value, so that a `no_std` program steps
+/// it without allocating or borrowing.
+pub type TreeArray<const N: usize> = Bodies<[Body; N]>;
 
 /// Why a tree cannot be integrated: the body's index and what is wrong.
 #[derive(Clone, Copy, Debug, PartialEq)]
