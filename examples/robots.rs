@@ -24,6 +24,7 @@
 
 use std::time::Instant;
 
+use vigp::embedded::tree::{BodyScratch, DerivativeBuffers, derivative_scratch_len};
 use vigp::prelude::*;
 use vigp::robot::{Robot, RobotState};
 
@@ -471,8 +472,10 @@ fn derivatives(dir: &str, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "one step of dt = 2 ms with every joint driven, and with exact A (2N × 2N) and B (2N × N); medians of 1001 calls each, alternating"
     );
-    println!("| mechanism | N | step (µs) | step with A, B (µs) | ratio |");
-    println!("|---|---|---|---|---|");
+    println!(
+        "| mechanism | N | `Robot::step` (µs) | `Robot::step_derivatives` (µs) | ratio | `Engine::step` on slices (µs) | `Engine::step_derivatives` on slices (µs) | ratio |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
     let mut cases: Vec<(String, Robot)> = Vec::new();
     for (name, file) in [
         ("Panda", "panda.urdf"),
@@ -506,11 +509,54 @@ fn derivatives(dir: &str, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
                 std::hint::black_box(robot.step_derivatives(&z, &u, dt).expect("derivatives"));
             },
         );
+        // the same pair on the engine with caller-owned slices (what a
+        // control loop keeps between calls): every joint driven, input i
+        // on body i, from the same state on every call
+        let engine = robot.engine();
+        let inputs: Vec<usize> = (0..n).collect();
+        let mut p0 = vec![0.0; n];
+        let mut ws = vec![BodyScratch::zeroed(); n];
+        engine.momentum_of(&z.q, &z.v, &mut p0, &mut ws)?;
+        let mut ws2 = ws.clone();
+        let (mut q1, mut v1, mut p1) = (z.q.clone(), z.v.clone(), p0.clone());
+        let (mut q2, mut v2, mut p2) = (z.q.clone(), z.v.clone(), p0.clone());
+        let (mut a, mut b) = (vec![0.0; 4 * n * n], vec![0.0; 2 * n * n]);
+        let mut scratch = vec![0.0; derivative_scratch_len(n, n)];
+        let (slice_step, slice_with) = medians_ns(
+            1001,
+            || {
+                q1.copy_from_slice(&z.q);
+                v1.copy_from_slice(&z.v);
+                p1.copy_from_slice(&p0);
+                engine
+                    .step(&mut q1, &mut v1, &mut p1, &u, dt, &mut ws)
+                    .expect("step");
+                std::hint::black_box(&v1);
+            },
+            || {
+                q2.copy_from_slice(&z.q);
+                v2.copy_from_slice(&z.v);
+                p2.copy_from_slice(&p0);
+                let out = DerivativeBuffers {
+                    a: &mut a,
+                    b: &mut b,
+                    scratch: &mut scratch,
+                    start_known: false,
+                };
+                engine
+                    .step_derivatives(&mut q2, &mut v2, &mut p2, &u, &inputs, dt, out, &mut ws2)
+                    .expect("derivatives");
+                std::hint::black_box(&a);
+            },
+        );
         println!(
-            "| {name} | {n} | {:.1} | {:.1} | {:.2} |",
+            "| {name} | {n} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} |",
             step * 1e-3,
             with * 1e-3,
-            with / step
+            with / step,
+            slice_step * 1e-3,
+            slice_with * 1e-3,
+            slice_with / slice_step
         );
     }
     Ok(())

@@ -1232,6 +1232,10 @@ impl<T: Tree> Engine<T> {
         }
         let g = self.tree.gravity();
         let ag = [0.0, 0.0, 0.0, g[0], g[1], g[2]];
+        // The composite inertia I_b is symmetric (motion·(I·motion)), so
+        // s_b·(I_b x) = (I_b s_b)·x: each b multiplies by I_b a fixed number
+        // of times, and a pair (b, j) costs dot products and two cross
+        // products.
         for b in 0..n {
             let wb = &ws[b];
             let (sb, hb, ib) = (wb.s, wb.hc, wb.composite);
@@ -1239,9 +1243,11 @@ impl<T: Tree> Engine<T> {
             let a_b = cross_motion(&sb, &wb.vel);
             let u_b = ib.mul(&sb);
             let f_b = sub6(&cross_force(&sb, &hb), &ib.mul(&a_b));
-            let e_b = rest.as_ref().map(|_| {
+            // I_b w_b and the gravity term, for the rest
+            let extra = rest.as_ref().map(|_| {
                 let sg_b = cross_motion(&sb, &ag);
-                sub6(&cross_force(&sb, &ib.mul(&ag)), &ib.mul(&sg_b))
+                let e_b = sub6(&cross_force(&sb, &ib.mul(&ag)), &ib.mul(&sg_b));
+                (ib.mul(&w_b), e_b)
             });
             // j runs over b and its ancestors: (row b, column j) with j on
             // b's path; (row j, column b) with j strictly above b
@@ -1250,20 +1256,18 @@ impl<T: Tree> Engine<T> {
                 let wj = &ws[j];
                 let sj = wj.s;
                 let a_j = cross_motion(&sj, &wj.vel);
-                let ia = ib.mul(&a_j);
-                let is = ib.mul(&sj);
                 let bj = b * n + j;
-                p_q[bj] = -dot6(&sb, &ia);
-                p_v[bj] = dot6(&sb, &is);
+                p_q[bj] = -dot6(&u_b, &a_j);
+                p_v[bj] = dot6(&u_b, &sj);
                 if j != b {
                     let jb = j * n + b;
                     p_q[jb] = dot6(&sj, &f_b);
                     p_v[jb] = dot6(&sj, &u_b);
                 }
-                if let (Some((t_q, t_v, v_q)), Some(e_b)) = (rest.as_mut(), e_b.as_ref()) {
-                    t_q[bj] = -dot6(&cross_motion(&a_j, &sb), &hb) - dot6(&w_b, &ia);
-                    v_q[bj] = dot6(&sb, &ib.mul(&cross_motion(&sj, &ag)));
-                    t_v[bj] = dot6(&cross_motion(&sj, &sb), &hb) + dot6(&w_b, &is);
+                if let (Some((t_q, t_v, v_q)), Some((y_b, e_b))) = (rest.as_mut(), extra.as_ref()) {
+                    t_q[bj] = -dot6(&cross_motion(&a_j, &sb), &hb) - dot6(y_b, &a_j);
+                    v_q[bj] = dot6(&u_b, &cross_motion(&sj, &ag));
+                    t_v[bj] = dot6(&cross_motion(&sj, &sb), &hb) + dot6(y_b, &sj);
                     if j != b {
                         let w_j = cross_motion(&wj.vel, &sj);
                         let jb = j * n + b;
