@@ -284,7 +284,7 @@ impl<T: Tree> Engine<T> {
                     report.substeps += 1;
                     report.residual = report.residual.max(r.residual);
                     done += 1;
-                    self.substep_derivatives(q, v, h, inputs, start, terms, jac, x, branches, ws)?;
+                    self.substep_derivatives(h, inputs, start, terms, jac, x, branches, ws)?;
                     chain(out.a, out.b, x, tmp, n, u, h, first);
                     first = false;
                     continue;
@@ -326,14 +326,13 @@ impl<T: Tree> Engine<T> {
         Ok(report)
     }
 
-    /// −∂v₁/∂(q₀, v₀, u) of one converged sub-step of h ending at (q, v)
-    /// = (q₁, v₁), into `x` (row-major N × (2N + U)), from the momentum
-    /// Jacobians `start` at its start; `start` then holds them at its end.
+    /// −∂v₁/∂(q₀, v₀, u) of one sub-step of h, right after it converged
+    /// (`ws` as it left it, at its end (q₁, v₁)), into `x` (row-major
+    /// N × (2N + U)), from the momentum Jacobians `start` at its start;
+    /// `start` then holds them at its end.
     #[allow(clippy::too_many_arguments)]
     fn substep_derivatives(
         &self,
-        q1: &[f64],
-        v1: &[f64],
         h: f64,
         inputs: &[usize],
         start: &mut [f64],
@@ -345,11 +344,18 @@ impl<T: Tree> Engine<T> {
     ) -> Result<(), EngineError> {
         let n = self.dof();
         let w = 2 * n + inputs.len();
-        self.term_derivatives(q1, v1, TermDerivatives::split(terms, n), ws)?;
-        let (p_q, rest) = terms.split_at_mut(n * n);
-        let (p_v, rest) = rest.split_at_mut(n * n);
-        let (t_q, rest) = rest.split_at_mut(n * n);
-        let (t_v, v_q) = rest.split_at_mut(n * n);
+        // the converged sub-step left in `ws` what the momentum pass at
+        // (q₁, v₁) computes, bit for bit: the kinematics at q₁ = q₀ + h·v₀
+        // (fixed through the iteration) and the twists and composite
+        // momenta of the last iterate, v₁
+        let TermDerivatives {
+            p_q,
+            p_v,
+            t_q,
+            t_v,
+            v_q,
+        } = TermDerivatives::split(terms, n);
+        self.pair_derivatives(ws, p_q, p_v, Some((&mut *t_q, &mut *t_v, &mut *v_q)));
         // K = ∂r/∂q₁ = h·(∂(∂T/∂q)/∂q − ∂(∇V)/∂q) − ∂P/∂q, in t_q
         for ((k, vq), pq) in t_q.iter_mut().zip(v_q.iter()).zip(p_q.iter()) {
             *k = h * (*k - vq) - pq;

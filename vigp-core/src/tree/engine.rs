@@ -1215,7 +1215,7 @@ impl<T: Tree> Engine<T> {
     /// pass: ∂p/∂q and ∂p/∂v, and with `rest` ∂(∂T/∂q)/∂q, ∂(∂T/∂q)/∂v and
     /// ∂(∇V)/∂q.
     #[allow(clippy::type_complexity)]
-    fn pair_derivatives(
+    pub(super) fn pair_derivatives(
         &self,
         ws: &[BodyScratch],
         p_q: &mut [f64],
