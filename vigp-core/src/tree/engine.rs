@@ -1232,22 +1232,25 @@ impl<T: Tree> Engine<T> {
         }
         let g = self.tree.gravity();
         let ag = [0.0, 0.0, 0.0, g[0], g[1], g[2]];
-        // The composite inertia I_b is symmetric (motion·(I·motion)), so
-        // s_b·(I_b x) = (I_b s_b)·x: each b multiplies by I_b a fixed number
-        // of times, and a pair (b, j) costs dot products and two cross
-        // products.
+        // Every pair (b, j) is a few dot products of per-body vectors:
+        // the composite inertia I_b is symmetric, s·(I_b x) = (I_b s)·x,
+        // and the motion and force cross products are dual,
+        // (x × y)·f = −y·(x ×* f). With a = S × V (w = V × S = −a),
+        // u_b = I_b S_b and f_b = S_b ×* h_b − I_b a_b:
+        //   (a_j × S_b)·h_b + w_b·(I_b a_j) = a_j·f_b,
+        //   (S_j × S_b)·h_b + w_b·(I_b S_j) = S_j·f_b,
+        //   S_b·(I_b (S_j × a_g)) = S_j·(a_g ×* u_b).
         for b in 0..n {
             let wb = &ws[b];
             let (sb, hb, ib) = (wb.s, wb.hc, wb.composite);
-            let w_b = cross_motion(&wb.vel, &sb);
             let a_b = cross_motion(&sb, &wb.vel);
             let u_b = ib.mul(&sb);
             let f_b = sub6(&cross_force(&sb, &hb), &ib.mul(&a_b));
-            // I_b w_b and the gravity term, for the rest
-            let extra = rest.as_ref().map(|_| {
+            // the gravity terms, for the rest
+            let gravity = rest.as_ref().map(|_| {
                 let sg_b = cross_motion(&sb, &ag);
                 let e_b = sub6(&cross_force(&sb, &ib.mul(&ag)), &ib.mul(&sg_b));
-                (ib.mul(&w_b), e_b)
+                (cross_force(&ag, &u_b), e_b)
             });
             // j runs over b and its ancestors: (row b, column j) with j on
             // b's path; (row j, column b) with j strictly above b
@@ -1256,24 +1259,26 @@ impl<T: Tree> Engine<T> {
                 let wj = &ws[j];
                 let sj = wj.s;
                 let a_j = cross_motion(&sj, &wj.vel);
+                let (ua, us, sf) = (dot6(&u_b, &a_j), dot6(&u_b, &sj), dot6(&sj, &f_b));
                 let bj = b * n + j;
-                p_q[bj] = -dot6(&u_b, &a_j);
-                p_v[bj] = dot6(&u_b, &sj);
+                p_q[bj] = -ua;
+                p_v[bj] = us;
                 if j != b {
                     let jb = j * n + b;
-                    p_q[jb] = dot6(&sj, &f_b);
-                    p_v[jb] = dot6(&sj, &u_b);
+                    p_q[jb] = sf;
+                    p_v[jb] = us;
                 }
-                if let (Some((t_q, t_v, v_q)), Some((y_b, e_b))) = (rest.as_mut(), extra.as_ref()) {
-                    t_q[bj] = -dot6(&cross_motion(&a_j, &sb), &hb) - dot6(y_b, &a_j);
-                    v_q[bj] = dot6(&u_b, &cross_motion(&sj, &ag));
-                    t_v[bj] = dot6(&cross_motion(&sj, &sb), &hb) + dot6(y_b, &sj);
+                if let (Some((t_q, t_v, v_q)), Some((g_b, e_b))) = (rest.as_mut(), gravity.as_ref())
+                {
+                    let af = dot6(&a_j, &f_b);
+                    t_q[bj] = -af;
+                    v_q[bj] = dot6(&sj, g_b);
+                    t_v[bj] = sf;
                     if j != b {
-                        let w_j = cross_motion(&wj.vel, &sj);
                         let jb = j * n + b;
-                        t_q[jb] = dot6(&w_j, &f_b);
+                        t_q[jb] = -af;
                         v_q[jb] = -dot6(&sj, e_b);
-                        t_v[jb] = dot6(&w_j, &u_b);
+                        t_v[jb] = -ua;
                     }
                 }
                 at = self.tree.body(j).parent;
