@@ -14,7 +14,7 @@ use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::ext::IdentExt;
 
-fn triple(p: [f64; 3]) -> TokenStream {
+pub(crate) fn triple(p: [f64; 3]) -> TokenStream {
     let (a, b, c) = (lit(p[0]), lit(p[1]), lit(p[2]));
     quote!([#a, #b, #c])
 }

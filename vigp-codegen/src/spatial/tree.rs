@@ -5,18 +5,11 @@
 //! frames, which it knows, each joint frame's rotation Q = R_p⁰ᵀR_c⁰ and
 //! the axis in it, Qᵀa, and names the run-time points and parameters.
 
-use super::emit::anchor_expr;
-use crate::desc::spatial::{JointKind, Model, Point};
-use crate::geom3::{IDENTITY, mul_tn};
-use crate::lit::lit;
+use super::emit::{anchor_expr, triple};
+use crate::desc::spatial::{JointKind, Model};
 use crate::target::Target;
 use proc_macro2::TokenStream;
 use quote::quote;
-
-fn triple(v: [f64; 3]) -> TokenStream {
-    let [a, b, c] = v.map(lit);
-    quote!([#a, #b, #c])
-}
 
 /// The tree items of `m`, or nothing when it has a loop or a joint other
 /// than revolute and prismatic in its tree (the engine steps trees of
@@ -32,7 +25,6 @@ pub fn emit(m: &Model, target: Target) -> TokenStream {
         return quote!();
     }
     let core = quote!(::vigp::embedded::tree);
-    let frame_of = |p: &Point| p.link().map_or(IDENTITY, |l| m.links[l].frame);
     let bodies = m.placement.iter().zip(&m.order).map(|(&j, &l)| {
         let joint = &m.joints[j];
         let ln = &m.links[l].name;
@@ -42,7 +34,7 @@ pub fn emit(m: &Model, target: Target) -> TokenStream {
             JointKind::Prismatic { axis } => (quote!(#core::JointKind::Prismatic), axis),
             _ => unreachable!("checked above: revolute or prismatic"),
         };
-        let q = mul_tn(&frame_of(&joint.parent), &frame_of(&joint.child));
+        let q = m.relative_rotation(joint);
         // Qᵀa
         let axis: [f64; 3] = core::array::from_fn(|i| (0..3).map(|k| q[k][i] * a[k]).sum());
         let rotation = q.map(triple);

@@ -1186,6 +1186,22 @@ impl<T: Tree> Engine<T> {
         Ok(())
     }
 
+    /// [`Engine::term_derivatives`] at the (q, v) whose kinematics and
+    /// momenta `ws` already holds (its momentum pass, or the last
+    /// iterate of a converged sub-step, which equals it bit for bit),
+    /// into consecutive N × N blocks of `terms` in the order of
+    /// [`TermDerivatives`].
+    pub(super) fn loaded_term_derivatives(&self, terms: &mut [f64], ws: &[BodyScratch]) {
+        let TermDerivatives {
+            p_q,
+            p_v,
+            t_q,
+            t_v,
+            v_q,
+        } = TermDerivatives::split(terms, ws.len());
+        self.pair_derivatives(ws, p_q, p_v, Some((t_q, t_v, v_q)));
+    }
+
     /// p = M(q)v, ∂p/∂q and ∂p/∂v = M at (q, v): the part of
     /// [`Engine::term_derivatives`] a step's start needs (row-major N × N
     /// into `p_q` and `p_v`), by the same closed forms.
@@ -1215,7 +1231,7 @@ impl<T: Tree> Engine<T> {
     /// pass: ∂p/∂q and ∂p/∂v, and with `rest` ∂(∂T/∂q)/∂q, ∂(∂T/∂q)/∂v and
     /// ∂(∇V)/∂q.
     #[allow(clippy::type_complexity)]
-    pub(super) fn pair_derivatives(
+    fn pair_derivatives(
         &self,
         ws: &[BodyScratch],
         p_q: &mut [f64],

@@ -162,11 +162,17 @@ impl Model {
         self.joints.iter().map(|j| j.kind.rows()).sum()
     }
 
-    /// A joint's reference relative rotation R_p⁰ᵀR_c⁰ as a unit
-    /// quaternion (w, x, y, z).
-    pub fn rel(&self, joint: &Joint) -> [f64; 4] {
+    /// A joint's reference relative rotation Q = R_p⁰ᵀR_c⁰ (the world's
+    /// frame for a world point): the child link's frame in its parent's at
+    /// the reference configuration.
+    pub fn relative_rotation(&self, joint: &Joint) -> [[f64; 3]; 3] {
         let frame_of = |p: &Point| p.link().map_or(IDENTITY, |l| self.links[l].frame);
-        matrix_to_quaternion(&mul_tn(&frame_of(&joint.parent), &frame_of(&joint.child)))
+        mul_tn(&frame_of(&joint.parent), &frame_of(&joint.child))
+    }
+
+    /// [`Model::relative_rotation`] as a unit quaternion (w, x, y, z).
+    pub fn rel(&self, joint: &Joint) -> [f64; 4] {
+        matrix_to_quaternion(&self.relative_rotation(joint))
     }
 }
 
