@@ -31,7 +31,7 @@
 //! `u_prev = u`, and `rollout_forced_into(z0, inputs, …)` starts with
 //! `u_prev = inputs[0]`.
 
-use crate::gp::{Gp, GpError, PriorMean, TrainOptions, TrainReport, Workspace};
+use crate::gp::{GpError, TrainOptions, TrainReport, Workspace};
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{StepError, StepOptions};
 use crate::projection::{consistent_state, project_velocity};
@@ -41,12 +41,15 @@ use vigp_core::state::discrete_velocity;
 
 mod embedded;
 mod export;
+mod family;
 mod file;
 mod identified;
 #[cfg(feature = "urdf")]
 pub mod robot;
 pub(crate) mod time_step;
 pub use embedded::{EmbeddedExport, ExportSize};
+pub(crate) use family::{InputLayout, Row};
+pub use family::{LearnedIntegrator, Space};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
 pub use identified::{IdentifiedError, IdentifiedParameters, IdentifiedValue};
 
@@ -200,6 +203,43 @@ pub enum LearnError {
         /// A hint when the two differ by a round factor.
         hint: &'static str,
     },
+    /// A training transition's orientation is not a unit quaternion
+    /// (|‖q‖ − 1| > [`UNIT_TOLERANCE`](vigp_core::spatial::maximal::UNIT_TOLERANCE):
+    /// built with `UnitQuaternion::new_unchecked` from
+    /// unnormalised data).
+    #[error(
+        "training transition {transition}: the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize)"
+    )]
+    NotUnit {
+        /// The transition.
+        transition: usize,
+        /// The link.
+        link: usize,
+        /// ‖q‖.
+        norm: f64,
+    },
+    /// [`Prior::Identified`] was given to a model that takes its
+    /// parameters from its nominal stepper (a Lie-group stepper): build
+    /// the stepper from the mechanism with the identified parameters
+    /// ([`IdentifiedParameters::apply`]) and train with
+    /// [`Prior::Nominal`].
+    #[error(
+        "an identified prior is not taken here: build the stepper from the mechanism with the \
+         identified parameters (IdentifiedParameters::apply) and train with Prior::Nominal"
+    )]
+    IdentifiedPrior,
+    /// A prediction was asked under a number of inputs other than the one
+    /// the model was trained with (0: trained without inputs).
+    #[error("the model was trained with {trained} inputs, and was given {given}")]
+    Inputs {
+        /// Inputs of the training data.
+        trained: usize,
+        /// Inputs given to the prediction.
+        given: usize,
+    },
+    /// An error bound could not be calibrated or used.
+    #[error(transparent)]
+    Bound(#[from] crate::bound::BoundError),
 }
 
 /// Leaves out every training row of a GP that repeats an earlier row
@@ -269,8 +309,9 @@ pub struct LearnedStepInfo<const N: usize> {
     pub correction: f64,
 }
 
-/// A learned integrator: prior + GP velocity map (+ projection when the
-/// model has constraints and projection is on).
+/// A learned integrator in minimal coordinates: prior + GP velocity map
+/// (+ projection when the model has constraints and projection is on),
+/// the [`LearnedIntegrator`] over the nominal [`Variational`] step.
 ///
 /// Complexity per step: one nominal VI step (with [`Prior::Nominal`]),
 /// O(N·d) per output for the GP mean (N training samples, d input
@@ -278,25 +319,68 @@ pub struct LearnedStepInfo<const N: usize> {
 /// per output for the variance (only [`Learned::step_in`] and the error
 /// bound need it; [`Integrator::step`] and rollouts use the mean), and a
 /// Newton projection for constrained models.
-#[derive(Clone, Debug)]
-pub struct Learned<M: Mechanism<N, C>, const N: usize, const C: usize> {
-    model: M,
-    /// The nominal prior's integrator, built once (its run-time parameters
-    /// are validated here, not at every step). It holds Δt and the Newton
-    /// options of the projection, once.
-    nominal: Variational<M, N, C>,
-    prior: Prior,
-    encoding: Encoding,
-    project: bool,
-    gp: Gp,
-    /// Number of inputs of the mechanism the GP takes (0: trained without
-    /// inputs, [`Learned::train`]; else [`Learned::train_forced`]).
-    pub(crate) inputs: usize,
-    /// Whether the GP input carries the previous input before the current
-    /// one, (enc(z), u_prev, u) (every model from
-    /// [`Learned::train_forced`]), or only the current one, (enc(z), u) (a
-    /// model file without `previous_input`, [`SavedLearned`]).
-    pub(crate) previous_input: bool,
+pub type Learned<M, const N: usize, const C: usize> = LearnedIntegrator<Variational<M, N, C>, N>;
+
+/// Minimal coordinates in ℝⁿ: the state is (q, v), the configuration
+/// update q₁ = q + Δt·v, the encoding [`Encoding`] over the mechanism's
+/// coordinate kinds, the projection [`project_velocity`] onto
+/// g(q₁ + Δt·v₁) = 0.
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Space<N> for Variational<M, N, C> {
+    type State = State<N>;
+    type Encoding = Encoding;
+
+    fn constrained(&self) -> bool {
+        C > 0
+    }
+
+    fn encoded_dim(&self, encoding: Encoding) -> usize {
+        encoding.dim(&M::KINDS)
+    }
+
+    fn encode(&self, encoding: Encoding, z: &State<N>, out: &mut [f64]) {
+        encoding.encode(&M::KINDS, z, out);
+    }
+
+    fn is_finite(z: &State<N>) -> bool {
+        z.is_finite()
+    }
+
+    fn check(z: &State<N>) -> Result<(), StepError> {
+        if z.is_finite() {
+            Ok(())
+        } else {
+            Err(StepError::NonFiniteState { step: None })
+        }
+    }
+
+    fn consistent(&self, z: &State<N>) -> Result<State<N>, StepError> {
+        consistent_state(self.model(), &z.q, &z.v, self.stepper().dt())
+    }
+
+    fn advance(
+        &self,
+        z: &State<N>,
+        vu: &SVector<f64, N>,
+        project: bool,
+    ) -> Result<State<N>, StepError> {
+        let dt = self.stepper().dt();
+        let x1 = z.q + z.v * dt;
+        let v = if project && C > 0 {
+            project_velocity(self.model(), &x1, vu, dt, self.options())?.0
+        } else {
+            *vu
+        };
+        Ok(State { q: x1, v })
+    }
+}
+
+/// A learned step's error as a step error: the GP's failure is the
+/// prediction's.
+fn step_error(e: LearnError) -> StepError {
+    match e {
+        LearnError::Step(e) => e,
+        _ => StepError::Prediction { step: None },
+    }
 }
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
@@ -405,107 +489,36 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 hint: time_step::factor_hint(dt, found),
             });
         }
-        let u_dim = if forced { U } else { 0 };
-        let e = encoding.dim(&M::KINDS);
-        let d = e + 2 * u_dim;
-        let mut inputs = vec![0.0; data.len() * d];
-        let mut targets = Vec::with_capacity(data.len() * N);
-        let prior_vi = Variational::new(model.clone(), dt)?;
-        for (i, t) in data.iter().enumerate() {
-            if !(t.z.is_finite()
-                && t.v_next.iter().all(|x| x.is_finite())
-                && t.u.iter().chain(t.u_prev.iter()).all(|x| x.is_finite()))
-            {
-                return Err(LearnError::NonFinite(i));
-            }
-            encoding.encode(&M::KINDS, &t.z, &mut inputs[i * d..i * d + e]);
-            if forced {
-                inputs[i * d + e..i * d + e + U].copy_from_slice(t.u_prev.as_slice());
-                inputs[i * d + e + U..(i + 1) * d].copy_from_slice(t.u.as_slice());
-            }
-            let base = match prior {
-                // With constraints, a noisy state is off the manifold and the
-                // nominal step would spend Δv ≈ |g|/Δt re-closing it: evaluate
-                // the prior at the nearest consistent state instead, as it is
-                // at prediction time (predictions are projected).
-                Prior::Nominal | Prior::Identified(_) if C > 0 => {
-                    let z = consistent_state(&model, &t.z.q, &t.z.v, dt)?;
-                    nominal_velocity(&prior_vi, &z, &t.u)?
-                }
-                Prior::Nominal | Prior::Identified(_) => nominal_velocity(&prior_vi, &t.z, &t.u)?,
-                Prior::Constant => SVector::zeros(),
-            };
-            targets.extend((t.v_next - base).iter());
-        }
-        distinct_rows(&mut inputs, d, &mut targets, N);
-        let mut opts = options.clone();
-        opts.mean = if prior.uses_nominal_step() {
-            PriorMean::Zero
-        } else {
-            PriorMean::Constant
+        let layout = InputLayout {
+            inputs: if forced { U } else { 0 },
+            previous_input: forced && U > 0,
         };
-        let (gp, report) = Gp::train(&inputs, d, &targets, N, &opts)?;
+        // With constraints, a noisy state is off the manifold and the
+        // nominal step would spend Δv ≈ |g|/Δt re-closing it: the prior is
+        // evaluated at the nearest consistent state instead, as it is at
+        // prediction time (predictions are projected).
+        let (mut learned, report) = Self::fit(
+            Variational::new(model, dt)?,
+            data,
+            |t| Row {
+                z: &t.z,
+                u_prev: if forced { t.u_prev.as_slice() } else { &[] },
+                u: if forced { t.u.as_slice() } else { &[] },
+                next: t.v_next,
+            },
+            layout,
+            encoding,
+            prior,
+            options,
+            |vi, z, t| nominal_velocity(vi, z, &t.u),
+        )?;
         // near a folded loop the projection converges linearly
         let options = StepOptions {
             max_iterations: 100,
             ..StepOptions::default()
         };
-        Ok((
-            Self {
-                nominal: prior_vi.with_options(options)?,
-                model,
-                prior,
-                encoding,
-                project: C > 0,
-                gp,
-                inputs: u_dim,
-                previous_input: forced && U > 0,
-            },
-            report,
-        ))
-    }
-
-    /// Number of inputs the model was trained with (0: without inputs).
-    pub fn inputs(&self) -> usize {
-        self.inputs
-    }
-
-    /// Whether the GP takes the previous input, (enc(z), u_prev, u): `true`
-    /// for every model trained with inputs by [`Learned::train_forced`];
-    /// `false` without inputs, and for a model file written with the GP
-    /// input (enc(z), u) ([`SavedLearned::previous_input`]), whose
-    /// predictions ignore `u_prev`.
-    pub fn takes_previous_input(&self) -> bool {
-        self.previous_input
-    }
-
-    /// Number of GP input components after the encoded state.
-    fn input_tail(&self) -> usize {
-        if self.previous_input {
-            2 * self.inputs
-        } else {
-            self.inputs
-        }
-    }
-
-    /// Writes the GP input of a step from `z` after `u_prev` under `u`
-    /// into `out` (length `gp().input_dim()`): the encoded state, then
-    /// u_prev (when the model takes it) and u; empty `u_prev` and `u` (or
-    /// a model without inputs) leave zeros.
-    pub(crate) fn gp_input_into(&self, z: &State<N>, u_prev: &[f64], u: &[f64], out: &mut [f64]) {
-        let e = self.encoding.dim(&M::KINDS);
-        self.encoding.encode(&M::KINDS, z, &mut out[..e]);
-        out[e..].fill(0.0);
-        if u.is_empty() || self.inputs == 0 {
-            return;
-        }
-        let m = self.inputs;
-        if self.previous_input {
-            out[e..e + m].copy_from_slice(&u_prev[..m]);
-            out[e + m..e + 2 * m].copy_from_slice(&u[..m]);
-        } else {
-            out[e..e + m].copy_from_slice(&u[..m]);
-        }
+        learned.nominal = learned.nominal.with_options(options)?;
+        Ok((learned, report))
     }
 
     /// The unprojected mean prediction under inputs `u` after `u_prev` (a
@@ -541,32 +554,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
         }
-        let mut mean = SVector::<f64, N>::zeros();
-        let predict = |input: &[f64]| {
-            match var {
-                Some(var) => {
-                    self.gp
-                        .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)
-                }
-                None => self.gp.predict_mean_into(input, mean.as_mut_slice(), ws),
-            }
-            .map_err(|_| StepError::Prediction { step: None })
-        };
-        if U == 0 {
-            // no input: u = 0 in the GP input of a model trained with inputs
-            self.with_input(z, predict)?;
-        } else {
-            self.with_input_u(z, u_prev.as_slice(), u.as_slice(), predict)?;
-        }
-        let prior = match self.prior {
-            Prior::Nominal | Prior::Identified(_) => self.nominal.step_forced(z, u)?.v,
-            Prior::Constant => SVector::zeros(),
-        };
-        let v = prior + mean;
-        if !v.iter().all(|x| x.is_finite()) {
-            return Err(StepError::Prediction { step: None });
-        }
-        Ok(v)
+        // U = 0: no input, u = 0 in the GP input of a model trained with inputs
+        self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, var, |vi, z| {
+            Ok(vi.step_forced(z, u)?.v)
+        })
+        .map_err(step_error)
     }
 
     /// One learned mean step under inputs `u` after `u_prev` (as
@@ -695,7 +687,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     {
         use vigp_core::learned::VelocityDerivatives;
         debug_assert!(U == self.inputs || U == 0);
-        self.check_step(z)?;
+        <Variational<M, N, C> as Space<N>>::check(z)?;
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
         }
@@ -710,7 +702,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         };
         // GP mean and its gradient in the GP input
         let e = self.encoding.dim(&M::KINDS);
-        let d = e + self.input_tail();
+        let d = e + self.layout().tail();
         let mut mean = SVector::<f64, N>::zeros();
         let mut grad = vec![0.0; N * d];
         let gradient = |input: &[f64]| {
@@ -718,11 +710,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 .predict_mean_gradient_into(input, mean.as_mut_slice(), &mut grad, ws)
                 .map_err(|_| StepError::Prediction { step: None })
         };
-        if U == self.inputs {
-            self.with_input_u(z, u_prev.as_slice(), u.as_slice(), gradient)?;
-        } else {
-            self.with_input(z, gradient)?;
-        }
+        // U = 0 on a model with inputs: u = 0 in the GP input
+        self.with_gp_input(z, u_prev.as_slice(), u.as_slice(), gradient)?;
         // where u and u_prev sit in the GP input (U = 0: nowhere)
         let (at_prev, at_u) = if self.previous_input {
             (Some(e), e + U)
@@ -738,9 +727,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         }
         let x1 = z.q + z.v * h;
         if self.project && C > 0 {
-            let (vp, _) = project_velocity(&self.model, &x1, &v, h, self.nominal.options())?;
-            let k = self.model.constants()?;
-            dv.project(&self.model, &k, &x1, &v, &vp, h)?;
+            let model = self.nominal.model();
+            let (vp, _) = project_velocity(model, &x1, &v, h, self.nominal.options())?;
+            let k = model.constants()?;
+            dv.project(model, &k, &x1, &v, &vp, h)?;
             v = vp;
         }
         Ok(dv.into_step(z, v, h))
@@ -776,29 +766,9 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     where
         M: vigp_core::Inputs<U>,
     {
-        self.check_step(z)?;
+        <Variational<M, N, C> as Space<N>>::check(z)?;
         let vu = self.predict_mean_velocity_forced(z, u_prev, u, ws)?;
         Ok((self.next_state(z, &vu)?, vu))
-    }
-
-    /// The next state from `z` and the unprojected velocity v_u:
-    /// q₁ = q + Δt·v, and v_u projected onto g(q₁ + Δt·v₁) = 0 when the
-    /// model projects (v_u itself otherwise).
-    fn next_state(&self, z: &State<N>, vu: &SVector<f64, N>) -> Result<State<N>, StepError> {
-        let x1 = z.q + z.v * self.nominal.dt();
-        let v = if self.project && C > 0 {
-            project_velocity(
-                &self.model,
-                &x1,
-                vu,
-                self.nominal.dt(),
-                self.nominal.options(),
-            )?
-            .0
-        } else {
-            *vu
-        };
-        Ok(State { q: x1, v })
     }
 
     /// [`Learned::predict_velocity`] under inputs `u` after `u_prev` (a
@@ -894,111 +864,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Ok(())
     }
 
-    /// Switch the projection off (eq. 7 even for a constrained model), e.g.
-    /// to measure what the projection buys.
-    pub fn without_projection(mut self) -> Self {
-        self.project = false;
-        self
-    }
-
-    /// The trained GP.
-    pub fn gp(&self) -> &Gp {
-        &self.gp
-    }
-
-    /// Whether the step with its bound ([`step_in`](Self::step_in)) may
-    /// compute some velocity outputs' variances on a helper thread (see
-    /// [`Gp::set_parallel_variance`]: default `false`, results bit-identical
-    /// either way; when on, a second core busy-waits for 200 µs after each
-    /// step).
-    pub fn set_parallel_variance(&mut self, on: bool) {
-        self.gp.set_parallel_variance(on);
-    }
-
     /// The model (prior and constraints): for [`Prior::Identified`] the
     /// mechanism with the identified parameters.
     pub fn model(&self) -> &M {
-        &self.model
-    }
-
-    /// The encoding of GP inputs.
-    pub fn encoding(&self) -> Encoding {
-        self.encoding
-    }
-
-    /// The prior (a copy; [`Learned::identified`] borrows the identified
-    /// parameters).
-    pub fn prior(&self) -> Prior {
-        self.prior.clone()
-    }
-
-    /// The identified parameters of a model trained with
-    /// [`Prior::Identified`] (their values and covariance).
-    pub fn identified(&self) -> Option<&IdentifiedParameters> {
-        self.prior.identified()
-    }
-
-    /// `true` when predictions are projected onto the constraints.
-    pub fn projects(&self) -> bool {
-        self.project
-    }
-
-    /// A GP workspace for [`Learned::step_in`].
-    pub fn workspace(&self) -> Workspace {
-        self.gp.workspace()
-    }
-
-    /// The prior v̄(z): the nominal variational step, or 0 for a constant
-    /// prior (whose constant is part of the GP mean).
-    fn prior_velocity(&self, z: &State<N>) -> Result<SVector<f64, N>, StepError> {
-        Ok(match self.prior {
-            Prior::Nominal | Prior::Identified(_) => self.nominal.step(z)?.v,
-            Prior::Constant => SVector::zeros(),
-        })
-    }
-
-    /// Encodes `z` followed by the inputs `u` into a stack buffer (heap
-    /// only above 64 input dimensions) and passes the GP input to `f`.
-    fn with_input_u<T>(
-        &self,
-        z: &State<N>,
-        u_prev: &[f64],
-        u: &[f64],
-        f: impl FnOnce(&[f64]) -> Result<T, StepError>,
-    ) -> Result<T, StepError> {
-        let d = self.encoding.dim(&M::KINDS) + self.input_tail();
-        let mut x = [0.0f64; 64];
-        let mut heap;
-        let input: &mut [f64] = if d <= x.len() {
-            &mut x[..d]
-        } else {
-            heap = vec![0.0; d];
-            &mut heap
-        };
-        self.gp_input_into(z, u_prev, u, input);
-        f(input)
-    }
-
-    /// Encodes `z` into a stack buffer (heap only above 64 input
-    /// dimensions), followed by u_prev = u = 0 for a model trained with
-    /// inputs, and passes the GP input to `f`.
-    fn with_input<T>(
-        &self,
-        z: &State<N>,
-        f: impl FnOnce(&[f64]) -> Result<T, StepError>,
-    ) -> Result<T, StepError> {
-        let e = self.encoding.dim(&M::KINDS);
-        let d = e + self.input_tail();
-        let mut x = [0.0f64; 64];
-        let mut heap;
-        let input: &mut [f64] = if d <= x.len() {
-            &mut x[..d]
-        } else {
-            heap = vec![0.0; d];
-            &mut heap
-        };
-        self.encoding.encode(&M::KINDS, z, &mut input[..e]);
-        f(input)
+        self.nominal.model()
     }
 
     /// The unprojected prediction v_u = prior(z) + μ(z) (eq. 7) and the
@@ -1010,17 +879,10 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         z: &State<N>,
         ws: &mut Workspace,
     ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
-        let mut mean = SVector::<f64, N>::zeros();
         let mut var = SVector::<f64, N>::zeros();
-        self.with_input(z, |input| {
-            self.gp
-                .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)
-                .map_err(|_| StepError::Prediction { step: None })
-        })?;
-        let v = self.prior_velocity(z)? + mean;
-        if !v.iter().all(|x| x.is_finite()) {
-            return Err(StepError::Prediction { step: None });
-        }
+        let v = self
+            .velocity(z, &[], &[], ws, Some(&mut var), |vi, z| Ok(vi.step(z)?.v))
+            .map_err(step_error)?;
         Ok((v, var.map(|s| s.max(0.0).sqrt())))
     }
 
@@ -1032,17 +894,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         z: &State<N>,
         ws: &mut Workspace,
     ) -> Result<SVector<f64, N>, StepError> {
-        let mut mean = SVector::<f64, N>::zeros();
-        self.with_input(z, |input| {
-            self.gp
-                .predict_mean_into(input, mean.as_mut_slice(), ws)
-                .map_err(|_| StepError::Prediction { step: None })
-        })?;
-        let v = self.prior_velocity(z)? + mean;
-        if !v.iter().all(|x| x.is_finite()) {
-            return Err(StepError::Prediction { step: None });
-        }
-        Ok(v)
+        self.velocity(z, &[], &[], ws, None, |vi, z| Ok(vi.step(z)?.v))
+            .map_err(step_error)
     }
 
     /// One learned step using only the posterior mean (what a rollout
@@ -1053,15 +906,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// [`Learned::step_mean_forced_in`] with zeros).
     pub fn step_mean_in(&self, z: &State<N>, ws: &mut Workspace) -> Result<State<N>, StepError> {
         Ok(self.mean_step_parts(z, ws)?.0)
-    }
-
-    /// A step's own check: a finite state (Δt was checked when the
-    /// nominal integrator was built).
-    fn check_step(&self, z: &State<N>) -> Result<(), StepError> {
-        if !z.is_finite() {
-            return Err(StepError::NonFiniteState { step: None });
-        }
-        Ok(())
     }
 
     /// `steps` learned steps from `z0`, each with what
@@ -1125,11 +969,11 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             };
             let (next, vu) = if U == 0 {
                 // the GP input of z, followed by u = 0 for a model with inputs
-                self.with_input(&z, copy)?;
+                self.with_gp_input(&z, &[], &[], copy)?;
                 self.mean_step_parts(&z, ws)
             } else {
                 let up = if k == 0 { u_prev } else { &inputs[k - 1] };
-                self.with_input_u(&z, up.as_slice(), inputs[k].as_slice(), copy)?;
+                self.with_gp_input(&z, up.as_slice(), inputs[k].as_slice(), copy)?;
                 self.mean_step_forced_parts(&z, up, &inputs[k], ws)
             }
             .map_err(|e| e.at_step(k))?;
@@ -1174,7 +1018,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         z: &State<N>,
         ws: &mut Workspace,
     ) -> Result<(State<N>, SVector<f64, N>), StepError> {
-        self.check_step(z)?;
+        <Variational<M, N, C> as Space<N>>::check(z)?;
         let vu = self.predict_mean_velocity(z, ws)?;
         Ok((self.next_state(z, &vu)?, vu))
     }
@@ -1186,7 +1030,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         z: &State<N>,
         ws: &mut Workspace,
     ) -> Result<(State<N>, LearnedStepInfo<N>), StepError> {
-        self.check_step(z)?;
+        <Variational<M, N, C> as Space<N>>::check(z)?;
         let (vu, std_dev) = self.predict_velocity(z, ws)?;
         let next = self.next_state(z, &vu)?;
         Ok((

@@ -248,6 +248,24 @@ fn loop_closes<M: Mechanism<N, C>, const N: usize, const C: usize>(
     Err(StepError::LoopCannotClose { residual: best })
 }
 
+/// What a built integrator holds, for any mechanism (no `Clone` needed).
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
+    /// The model.
+    pub fn model(&self) -> &M {
+        self.stepper.model()
+    }
+
+    /// The Newton options in use.
+    pub fn options(&self) -> &StepOptions {
+        self.stepper.step_options()
+    }
+
+    /// The fixed-size engine.
+    pub fn stepper(&self) -> &Stepper<M, N, C> {
+        &self.stepper
+    }
+}
+
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, N, C> {
     /// An integrator for `model` with time step `dt` and default Newton
     /// options (the paper's first-order rule). Errors: an invalid Δt or
@@ -414,21 +432,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Variational<M, 
     /// The number of sub-steps per step (see [`Variational::substeps`]).
     pub fn substep_count(&self) -> usize {
         self.stepper.substep_count()
-    }
-
-    /// The model.
-    pub fn model(&self) -> &M {
-        self.stepper.model()
-    }
-
-    /// The Newton options in use.
-    pub fn options(&self) -> &StepOptions {
-        self.stepper.step_options()
-    }
-
-    /// The fixed-size engine.
-    pub fn stepper(&self) -> &Stepper<M, N, C> {
-        &self.stepper
     }
 
     /// One step with solver diagnostics (with sub-steps: iterations summed,

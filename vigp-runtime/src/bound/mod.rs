@@ -228,6 +228,17 @@ impl From<LearnError> for BoundError {
                 value: given,
             },
             LearnError::Identified(e) => BoundError::Identified(e),
+            LearnError::NotUnit { norm, .. } => BoundError::NonFinite {
+                what: "training quaternion norm (must be 1)",
+                value: norm,
+            },
+            LearnError::IdentifiedPrior => BoundError::Mismatch(
+                "an identified prior is not taken by a Lie-group stepper: train with Prior::Nominal on the identified mechanism",
+            ),
+            LearnError::Inputs { .. } => {
+                BoundError::Mismatch("the inputs differ from the model's training inputs")
+            }
+            LearnError::Bound(b) => b,
         }
     }
 }

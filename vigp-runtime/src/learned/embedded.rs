@@ -132,7 +132,7 @@ where
             .collect();
         let mut params = String::new();
         for (i, name) in M::PARAMETER_NAMES.iter().enumerate() {
-            let value = self.model.parameter(i).unwrap_or(f64::NAN);
+            let value = self.model().parameter(i).unwrap_or(f64::NAN);
             if !value.is_finite() {
                 return Err(GpError::Export(format!("parameter {name} is not finite")));
             }

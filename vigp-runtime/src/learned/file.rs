@@ -367,7 +367,7 @@ where
         let parameters = M::PARAMETER_NAMES
             .iter()
             .enumerate()
-            .map(|(i, n)| (n.to_string(), self.model.parameter(i).unwrap_or(f64::NAN)))
+            .map(|(i, n)| (n.to_string(), self.model().parameter(i).unwrap_or(f64::NAN)))
             .collect();
         SavedLearned {
             format: FORMAT.into(),
@@ -525,7 +525,6 @@ where
             })?;
         Ok(Self {
             nominal,
-            model,
             prior: saved.prior.clone(),
             encoding: saved.encoding,
             project: saved.project,

@@ -41,8 +41,8 @@
 
 use super::{SpatialError, SpatialIntegrator};
 use crate::StepError;
-use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
-use crate::learned::Prior;
+use crate::gp::{TrainOptions, TrainReport, Workspace};
+use crate::learned::{InputLayout, LearnError, LearnedIntegrator, Prior, Row, Space};
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp_core::spatial::maximal::{pack, unpack};
 use vigp_core::spatial::{LieStepper, Spatial, SpatialState};
@@ -69,22 +69,6 @@ impl Rotation {
     /// v (3) and ω (3).
     pub fn input_dim(self, links: usize) -> usize {
         links * (9 + self.dim())
-    }
-
-    /// The GP input of a step from `z` after `u_prev` under `u` (both
-    /// empty: unforced): the encoded state, then u_prev, then u. `out` has
-    /// length `input_dim(B) + u_prev.len() + u.len()`.
-    pub(crate) fn encode_input<const B: usize>(
-        self,
-        z: &SpatialState<B>,
-        u_prev: &[f64],
-        u: &[f64],
-        out: &mut [f64],
-    ) {
-        let e = self.input_dim(B);
-        self.encode(z, &mut out[..e]);
-        out[e..e + u_prev.len()].copy_from_slice(u_prev);
-        out[e + u_prev.len()..].copy_from_slice(u);
     }
 
     /// Write the GP input of `z` into `out` (length [`Rotation::input_dim`]).
@@ -206,64 +190,11 @@ pub fn forced_transitions<const B: usize, const U: usize>(
         .collect()
 }
 
-/// Why training or prediction of a learned spatial integrator failed.
-#[derive(Debug, thiserror::Error)]
-pub enum LearnSpatialError {
-    /// The GP could not be trained or evaluated.
-    #[error(transparent)]
-    Gp(#[from] crate::gp::GpError),
-    /// A nominal step or a projection failed.
-    #[error(transparent)]
-    Step(#[from] StepError),
-    /// No training data.
-    #[error("no training transitions")]
-    Empty,
-    /// A training transition contains NaN or ±∞ (in the data, or
-    /// velocities differenced with Δt = 0).
-    #[error(
-        "training transition {0} is not finite (NaN or ∞ in the data, or velocities from dt = 0)"
-    )]
-    NonFinite(usize),
-    /// A training transition's orientation is not a unit quaternion
-    /// (|‖q‖ − 1| > [`UNIT_TOLERANCE`](vigp_core::spatial::maximal::UNIT_TOLERANCE):
-    /// built with `UnitQuaternion::new_unchecked` from
-    /// unnormalised data).
-    #[error(
-        "training transition {transition}: the quaternion of link {link} has norm {norm} (must be 1 to 1e-9: normalise it, e.g. UnitQuaternion::new_normalize)"
-    )]
-    NotUnit {
-        /// The transition.
-        transition: usize,
-        /// The link.
-        link: usize,
-        /// ‖q‖.
-        norm: f64,
-    },
-    /// [`Prior::Identified`] was given: a Lie-group stepper takes its
-    /// parameters from its mechanism; build the stepper from the mechanism
-    /// with the identified parameters
-    /// ([`crate::learned::IdentifiedParameters::apply`]) and train with
-    /// [`Prior::Nominal`].
-    #[error(
-        "an identified prior is not taken here: build the stepper from the mechanism with the \
-         identified parameters (IdentifiedParameters::apply) and train with Prior::Nominal"
-    )]
-    IdentifiedPrior,
-    /// A prediction was asked under a number of inputs other than the one
-    /// the model was trained with (0: trained without inputs, by
-    /// [`LearnedSpatial::train`]).
-    #[error("the model was trained with {trained} inputs, and was given {given}")]
-    Inputs {
-        /// Inputs of the training data.
-        trained: usize,
-        /// Inputs given to the prediction.
-        given: usize,
-    },
-    /// An error bound could not be calibrated or used
-    /// ([`super::bound`]).
-    #[error(transparent)]
-    Bound(#[from] crate::bound::BoundError),
-}
+/// Why training or prediction of a learned spatial integrator failed: the
+/// one error of the learned family ([`LearnError`]), whose
+/// [`LearnError::NotUnit`], [`LearnError::IdentifiedPrior`] and
+/// [`LearnError::Inputs`] arise here.
+pub type LearnSpatialError = LearnError;
 
 /// A mean prediction with the GP's latent standard deviations along it.
 pub(crate) struct Trace<const B: usize, const N: usize> {
@@ -274,20 +205,84 @@ pub(crate) struct Trace<const B: usize, const N: usize> {
 }
 
 /// A learned spatial integrator: prior + GP velocity map, projected onto
-/// the joint constraints (when the mechanism has any and projection is on).
+/// the joint constraints (when the mechanism has any and projection is
+/// on), the [`LearnedIntegrator`] over the nominal Lie-group step.
 ///
 /// Cost per step: the nominal Lie-group step (with [`Prior::Nominal`]), the
 /// GP mean (O(N·d) per output: N samples, d inputs, 6B outputs) and the
 /// velocity projection (a few Newton iterations on a (6B + C) KKT system).
-#[derive(Clone, Debug)]
-pub struct LearnedSpatial<S, const B: usize, const J: usize, const N: usize, const C: usize> {
-    stepper: LieStepper<S, B, J, N, C>,
-    gp: Gp,
-    prior: Prior,
-    rotation: Rotation,
-    project: bool,
-    /// Inputs of the training data (0: trained without inputs).
-    inputs: usize,
+pub type LearnedSpatial<S, const B: usize, const J: usize, const N: usize, const C: usize> =
+    LearnedIntegrator<LieStepper<S, B, J, N, C>, N>;
+
+/// Bodies in ℝ³ × SO(3): the state is every link's centre of mass,
+/// orientation and velocities (linear, and angular in the body frame), the
+/// configuration update x₁ = x + Δt·v, q₁ = q ⊗ exp(Δt·ω) (exact: unit
+/// quaternions stay unit), the encoding [`Rotation`], the projection
+/// [`LieStepper::project_velocity`] onto the joints.
+impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize> Space<N>
+    for LieStepper<S, B, J, N, C>
+{
+    type State = SpatialState<B>;
+    type Encoding = Rotation;
+
+    fn constrained(&self) -> bool {
+        C > 0
+    }
+
+    fn encoded_dim(&self, rotation: Rotation) -> usize {
+        rotation.input_dim(B)
+    }
+
+    fn encode(&self, rotation: Rotation, z: &SpatialState<B>, out: &mut [f64]) {
+        rotation.encode(z, out);
+    }
+
+    fn is_finite(z: &SpatialState<B>) -> bool {
+        z.is_finite()
+    }
+
+    fn check(z: &SpatialState<B>) -> Result<(), StepError> {
+        z.validate()
+    }
+
+    fn check_training(i: usize, z: &SpatialState<B>) -> Result<(), LearnError> {
+        match z.non_unit() {
+            Some((link, norm)) => Err(LearnError::NotUnit {
+                transition: i,
+                link,
+                norm,
+            }),
+            None => Ok(()),
+        }
+    }
+
+    fn consistent(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, StepError> {
+        self.consistent_state(z)
+    }
+
+    fn advance(
+        &self,
+        z: &SpatialState<B>,
+        nu: &SVector<f64, N>,
+        project: bool,
+    ) -> Result<SpatialState<B>, StepError> {
+        let (x1, q1) = z.advanced(self.dt());
+        let nu = if project && C > 0 {
+            self.project_velocity(&x1, &q1, nu)?
+        } else {
+            *nu
+        };
+        let (v, w) = unpack(&nu);
+        Ok(SpatialState { x: x1, q: q1, v, w })
+    }
+}
+
+/// The next velocities of the nominal step from `z`.
+fn next_velocities<const N: usize, const B: usize>(
+    z1: Result<SpatialState<B>, StepError>,
+) -> Result<SVector<f64, N>, StepError> {
+    let z1 = z1?;
+    Ok(pack(&z1.v, &z1.w))
 }
 
 impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
@@ -319,7 +314,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             })
             .collect();
         Self::train_inputs(stepper, &data, rotation, prior, options, |s, z, _| {
-            s.step(z)
+            next_velocities(s.step(z))
         })
     }
 
@@ -342,7 +337,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         S: vigp_core::Inputs<U>,
     {
         Self::train_inputs(stepper, data, rotation, prior, options, |s, z, u| {
-            s.step_forced(z, u)
+            next_velocities(s.step_forced(z, u))
         })
     }
 
@@ -359,7 +354,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             &LieStepper<S, B, J, N, C>,
             &SpatialState<B>,
             &SVector<f64, U>,
-        ) -> Result<SpatialState<B>, StepError>,
+        ) -> Result<SVector<f64, N>, StepError>,
     ) -> Result<(Self, TrainReport), LearnSpatialError>
     where
         S: vigp_core::Inputs<U>,
@@ -370,96 +365,34 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         if let Prior::Identified(_) = prior {
             return Err(LearnSpatialError::IdentifiedPrior);
         }
-        let d = rotation.input_dim(B) + 2 * U;
-        let mut inputs = vec![0.0; data.len() * d];
-        let mut targets = Vec::with_capacity(data.len() * N);
-        for (i, t) in data.iter().enumerate() {
-            let next: SVector<f64, N> = pack(&t.v_next, &t.w_next);
-            if !(t.z.is_finite()
-                && next.iter().all(|x| x.is_finite())
-                && t.u.iter().chain(t.u_prev.iter()).all(|x| x.is_finite()))
-            {
-                return Err(LearnSpatialError::NonFinite(i));
-            }
-            if let Some((link, norm)) = t.z.non_unit() {
-                return Err(LearnSpatialError::NotUnit {
-                    transition: i,
-                    link,
-                    norm,
-                });
-            }
-            rotation.encode_input(
-                &t.z,
-                t.u_prev.as_slice(),
-                t.u.as_slice(),
-                &mut inputs[i * d..(i + 1) * d],
-            );
-            let base: SVector<f64, N> = match prior {
-                Prior::Nominal => {
-                    let z = if C > 0 {
-                        stepper.consistent_state(&t.z)?
-                    } else {
-                        t.z
-                    };
-                    let z1 = nominal(&stepper, &z, &t.u)?;
-                    pack(&z1.v, &z1.w)
-                }
-                Prior::Constant | Prior::Identified(_) => SVector::zeros(),
-            };
-            targets.extend((next - base).iter());
-        }
-        // a transition repeated exactly is one measurement
-        // (`crate::learned::distinct_rows`)
-        crate::learned::distinct_rows(&mut inputs, d, &mut targets, N);
-        let mut opts = options.clone();
-        opts.mean = if prior.uses_nominal_step() {
-            PriorMean::Zero
-        } else {
-            PriorMean::Constant
-        };
-        let (gp, report) = Gp::train(&inputs, d, &targets, N, &opts)?;
-        Ok((
-            Self {
-                stepper,
-                gp,
-                prior,
-                rotation,
-                project: C > 0,
-                inputs: U,
+        Self::fit(
+            stepper,
+            data,
+            |t| Row {
+                z: &t.z,
+                u_prev: t.u_prev.as_slice(),
+                u: t.u.as_slice(),
+                next: pack(&t.v_next, &t.w_next),
             },
-            report,
-        ))
-    }
-
-    /// Switch the projection off (eq. 7 alone), e.g. to measure what it buys.
-    pub fn without_projection(mut self) -> Self {
-        self.project = false;
-        self
-    }
-
-    /// The trained GP.
-    pub fn gp(&self) -> &Gp {
-        &self.gp
+            InputLayout {
+                inputs: U,
+                previous_input: U > 0,
+            },
+            rotation,
+            prior,
+            options,
+            |s, z, t| nominal(s, z, &t.u),
+        )
     }
 
     /// The nominal stepper.
     pub fn stepper(&self) -> &LieStepper<S, B, J, N, C> {
-        &self.stepper
+        &self.nominal
     }
 
     /// The rotation representation of the GP inputs.
     pub fn rotation(&self) -> Rotation {
-        self.rotation
-    }
-
-    /// Number of inputs the model was trained with (0: without inputs).
-    pub fn inputs(&self) -> usize {
-        self.inputs
-    }
-
-    /// A GP workspace for [`Self::step_in`].
-    pub fn workspace(&self) -> Workspace {
-        self.gp.workspace()
+        self.encoding
     }
 
     /// The unprojected velocities ν_u = prior(z) + μ(z) (eq. 7) of a model
@@ -471,7 +404,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<SVector<f64, N>, LearnSpatialError> {
         z.validate()?;
         self.check_inputs(0)?;
-        self.velocity(z, &[], &[], ws, None, |z| self.stepper.step(z))
+        self.velocity(z, &[], &[], ws, None, |s, z| next_velocities(s.step(z)))
     }
 
     /// The unprojected velocities under inputs `u` after `u_prev` (the
@@ -495,8 +428,8 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None }.into());
         }
-        self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, None, |z| {
-            self.stepper.step_forced(z, u)
+        self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, None, |s, z| {
+            next_velocities(s.step_forced(z, u))
         })
     }
 
@@ -512,60 +445,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         }
     }
 
-    /// prior + μ at the GP input (encoded z, then `u_prev` and `u`), the prior's next
-    /// state from `nominal` (unused for [`Prior::Constant`]); the GP's
-    /// latent variances into `var` when given (the mean is the same bits
-    /// either way).
-    fn velocity(
-        &self,
-        z: &SpatialState<B>,
-        u_prev: &[f64],
-        u: &[f64],
-        ws: &mut Workspace,
-        var: Option<&mut SVector<f64, N>>,
-        nominal: impl FnOnce(&SpatialState<B>) -> Result<SpatialState<B>, StepError>,
-    ) -> Result<SVector<f64, N>, LearnSpatialError> {
-        // the GP input on the stack (heap only above 128 dimensions, i.e.
-        // more than 7 links with rotation matrices)
-        let d = self.rotation.input_dim(B) + u_prev.len() + u.len();
-        let mut stack = [0.0f64; 128];
-        let mut heap;
-        let input: &mut [f64] = if d <= stack.len() {
-            &mut stack[..d]
-        } else {
-            heap = vec![0.0; d];
-            &mut heap
-        };
-        self.gp_input(z, u_prev, u, input);
-        let mut mean = SVector::<f64, N>::zeros();
-        match var {
-            Some(var) => {
-                self.gp
-                    .predict_into(input, mean.as_mut_slice(), var.as_mut_slice(), ws)?
-            }
-            None => self.gp.predict_mean_into(input, mean.as_mut_slice(), ws)?,
-        }
-        let prior: SVector<f64, N> = match self.prior {
-            // training refuses an identified prior
-            Prior::Nominal | Prior::Identified(_) => {
-                let z1 = nominal(z)?;
-                pack(&z1.v, &z1.w)
-            }
-            Prior::Constant => SVector::zeros(),
-        };
-        let nu = prior + mean;
-        if !nu.iter().all(|x| x.is_finite()) {
-            return Err(LearnSpatialError::Step(StepError::NonFiniteState {
-                step: None,
-            }));
-        }
-        Ok(nu)
-    }
-
     /// The GP input of a step from `z` after `u_prev` under `u` (both
     /// empty: unforced).
     pub(crate) fn gp_input(&self, z: &SpatialState<B>, u_prev: &[f64], u: &[f64], out: &mut [f64]) {
-        self.rotation.encode_input(z, u_prev, u, out);
+        self.gp_input_into(z, u_prev, u, out);
     }
 
     /// The mean prediction z₀, …, z_steps with the GP's latent standard
@@ -578,7 +461,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         ws: &mut Workspace,
     ) -> Result<Trace<B, N>, LearnSpatialError> {
         self.check_inputs(0)?;
-        self.trace_with(z0, steps, ws, |_| (&[], &[]), |z, _| self.stepper.step(z))
+        self.trace_with(z0, steps, ws, |_| (&[], &[]), |s, z, _| s.step(z))
     }
 
     /// [`Self::trace`] under `inputs` (one per step) after `u_prev`, a
@@ -607,7 +490,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             inputs.len(),
             ws,
             |k| step_inputs(u_prev, inputs, k),
-            |z, k| self.stepper.step_forced(z, &inputs[k]),
+            |s, z, k| s.step_forced(z, &inputs[k]),
         )
     }
 
@@ -617,7 +500,11 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         steps: usize,
         ws: &mut Workspace,
         input: impl Fn(usize) -> (&'u [f64], &'u [f64]),
-        nominal: impl Fn(&SpatialState<B>, usize) -> Result<SpatialState<B>, StepError>,
+        nominal: impl Fn(
+            &LieStepper<S, B, J, N, C>,
+            &SpatialState<B>,
+            usize,
+        ) -> Result<SpatialState<B>, StepError>,
     ) -> Result<Trace<B, N>, LearnSpatialError> {
         z0.validate()?;
         vigp_core::step::check_step_count::<SpatialState<B>>(steps)
@@ -629,8 +516,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         for k in 0..steps {
             let mut var = SVector::<f64, N>::zeros();
             let (up, u) = input(k);
-            let nu = self.velocity(&z, up, u, ws, Some(&mut var), |z| nominal(z, k))?;
-            z = self.advance(&z, nu)?;
+            let nu = self.velocity(&z, up, u, ws, Some(&mut var), |s, z| {
+                next_velocities(nominal(s, z, k))
+            })?;
+            z = self.next_state(&z, &nu)?;
             states.push(z);
             std_devs.push(var.map(|v| v.max(0.0).sqrt()));
         }
@@ -647,7 +536,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         ws: &mut Workspace,
     ) -> Result<SpatialState<B>, LearnSpatialError> {
         let nu = self.predict_velocity(z, ws)?;
-        self.advance(z, nu)
+        Ok(self.next_state(z, &nu)?)
     }
 
     /// One learned step under inputs `u` (held over the step, as in
@@ -667,24 +556,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         S: vigp_core::Inputs<U>,
     {
         let nu = self.predict_velocity_forced(z, u_prev, u, ws)?;
-        self.advance(z, nu)
-    }
-
-    /// z's exact configuration update with the predicted velocities `nu`,
-    /// projected onto the joints of the next configuration.
-    fn advance(
-        &self,
-        z: &SpatialState<B>,
-        nu: SVector<f64, N>,
-    ) -> Result<SpatialState<B>, LearnSpatialError> {
-        let (x1, q1) = z.advanced(self.stepper.dt());
-        let nu = if self.project && C > 0 {
-            self.stepper.project_velocity(&x1, &q1, &nu)?
-        } else {
-            nu
-        };
-        let (v, w) = unpack(&nu);
-        Ok(SpatialState { x: x1, q: q1, v, w })
+        Ok(self.next_state(z, &nu)?)
     }
 }
 
@@ -694,7 +566,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     type Mechanism = S;
 
     fn dt(&self) -> f64 {
-        self.stepper.dt()
+        self.nominal.dt()
     }
 
     /// One step; allocates a GP workspace per call (use
