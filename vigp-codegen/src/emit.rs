@@ -5,7 +5,6 @@
 //!
 //! [`Mechanism`]: https://docs.rs/vigp-runtime
 
-use crate::desc::DefaultValue;
 use crate::desc::planar::{Anchor, JointKind, Model, Point};
 use crate::lit::lit;
 use proc_macro2::{Literal, TokenStream};
@@ -508,35 +507,12 @@ pub(crate) struct ParameterItems {
 
 /// The [`ParameterItems`] of `m`.
 pub(crate) fn parameter_items(m: &Model) -> ParameterItems {
-    let Model {
-        attrs, vis, name, ..
-    } = m;
     let n = Literal::usize_unsuffixed(m.dof());
     let c = Literal::usize_unsuffixed(m.loop_constraints());
     let nl = Literal::usize_unsuffixed(m.links.len());
-    let links_ty = format_ident!("{}Links", name);
-    let joints_ty = format_ident!("{}Joints", name);
-    let dissipative = m.dissipative();
-    let elastic = m.elastic();
-    let has_joints = dissipative || elastic;
-    let joint_ty = match (dissipative, elastic) {
-        (true, true) => quote!(::vigp::ElasticJoint),
-        (false, true) => quote!(::vigp::Spring),
-        _ => quote!(::vigp::Joint),
-    };
     let svector = quote!(::vigp::__private::nalgebra::SVector);
 
     // ---- parameter types ----
-    let link_fields = m.links.iter().map(|l| {
-        let (ln, la) = (&l.name, &l.attrs);
-        let doc = format!(" Link `{ln}`.");
-        let doc = if la.is_empty() {
-            quote!(#[doc = #doc])
-        } else {
-            quote!(#(#la)*)
-        };
-        quote!(#doc pub #ln: ::vigp::Link,)
-    });
     let link_defaults = m.links.iter().map(|l| {
         let ln = &l.name;
         let (mass, length) = (l.mass.tokens(), l.length.tokens());
@@ -567,61 +543,6 @@ pub(crate) fn parameter_items(m: &Model) -> ParameterItems {
             }
         }
     });
-    let joints_items = if has_joints {
-        let fields = m.joints.iter().map(|j| {
-            let (jn, ja) = (&j.name, &j.attrs);
-            let doc = format!(" Joint `{jn}`.");
-            let doc = if ja.is_empty() {
-                quote!(#[doc = #doc])
-            } else {
-                quote!(#(#ja)*)
-            };
-            quote!(#doc pub #jn: #joint_ty,)
-        });
-        let doc = format!(" Joint parameters of [`{name}`].");
-        quote! {
-            #[doc = #doc]
-            #[derive(Clone, Copy, Debug, PartialEq)]
-            #vis struct #joints_ty { #(#fields)* }
-        }
-    } else {
-        quote!()
-    };
-    let joints_field = match (dissipative, elastic) {
-        (true, false) => {
-            quote!(#[doc = " Joint parameters (damping)."] pub joints: #joints_ty,)
-        }
-        (false, true) => {
-            quote!(#[doc = " Joint parameters (springs)."] pub joints: #joints_ty,)
-        }
-        (true, true) => {
-            quote!(#[doc = " Joint parameters (damping and springs)."] pub joints: #joints_ty,)
-        }
-        (false, false) => quote!(),
-    };
-    let joints_default = if has_joints {
-        let defaults = m.joints.iter().map(|j| {
-            let value = |p: &Option<DefaultValue>| {
-                p.as_ref().map_or_else(|| lit(0.0), DefaultValue::tokens)
-            };
-            let (jn, d) = (&j.name, value(&j.damping));
-            let (k, r) = (value(&j.stiffness), value(&j.rest));
-            match (dissipative, elastic) {
-                (true, true) => {
-                    quote!(#jn: ::vigp::ElasticJoint { damping: #d, stiffness: #k, rest: #r },)
-                }
-                (false, true) => quote!(#jn: ::vigp::Spring { stiffness: #k, rest: #r },),
-                _ => quote!(#jn: ::vigp::Joint { damping: #d },),
-            }
-        });
-        quote!(joints: #joints_ty { #(#defaults)* },)
-    } else {
-        quote!()
-    };
-    let gravity = {
-        let [gx, gy] = [m.gravity[0].tokens(), m.gravity[1].tokens()];
-        quote!([#gx, #gy])
-    };
     let link_names = m.links.iter().map(|l| l.name.unraw().to_string());
     let input_joints = m.inputs();
     let input_names = if input_joints.is_empty() {
@@ -636,37 +557,18 @@ pub(crate) fn parameter_items(m: &Model) -> ParameterItems {
             pub const INPUT_NAMES: [&'static str; #u] = [#(#names),*];
         }
     };
-    let links_doc = format!(" Link parameters of [`{}`].", name);
     let fk = forward_kinematics(m, &quote!(self));
     let poses = all_poses(m);
     ParameterItems {
-        types: quote! {
-            #(#attrs)*
-            #[derive(Clone, Copy, Debug, PartialEq)]
-            #vis struct #name {
-                #[doc = " Gravitational acceleration in world coordinates (m/s²)."]
-                pub gravity: [f64; 2],
-                #[doc = " Link parameters."]
-                pub links: #links_ty,
-                #joints_field
-            }
-
-            #[doc = #links_doc]
-            #[derive(Clone, Copy, Debug, PartialEq)]
-            #vis struct #links_ty { #(#link_fields)* }
-
-            #joints_items
-
-            impl ::core::default::Default for #name {
-                fn default() -> Self {
-                    Self {
-                        gravity: #gravity,
-                        links: #links_ty { #(#link_defaults)* },
-                        #joints_default
-                    }
-                }
-            }
-        },
+        types: crate::param_struct::parameter_struct(
+            m,
+            crate::param_struct::Links {
+                ty: quote!(::vigp::Link),
+                name: &|l: &crate::desc::planar::Link| (&l.name, &l.attrs[..]),
+                defaults: link_defaults.collect(),
+            },
+            quote!(),
+        ),
         consts: quote! {
             #[doc = " Number of minimal coordinates (one per tree joint)."]
             pub const DOF: usize = #n;

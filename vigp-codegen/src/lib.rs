@@ -34,6 +34,7 @@ pub mod geom3;
 pub mod lit;
 pub mod mechanics;
 pub mod number;
+mod param_struct;
 pub mod planar_tree;
 pub mod spatial;
 pub mod symbolic;

@@ -10,6 +10,7 @@
 use crate::desc::DefaultValue;
 use crate::desc::spatial::{Anchor, JointKind, Model, Point};
 use crate::lit::lit;
+use crate::param_struct::{Links, parameter_struct};
 use proc_macro2::{Literal, TokenStream};
 use quote::{format_ident, quote};
 use syn::ext::IdentExt;
@@ -47,19 +48,9 @@ pub(crate) fn anchor_expr(m: &Model, p: Point) -> TokenStream {
     }
 }
 
-fn doc_or(attrs: &[syn::Attribute], fallback: String) -> TokenStream {
-    if attrs.is_empty() {
-        quote!(#[doc = #fallback])
-    } else {
-        quote!(#(#attrs)*)
-    }
-}
-
 /// The whole expansion of a spatial description.
 pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
-    let Model {
-        attrs, vis, name, ..
-    } = m;
+    let Model { vis, name, .. } = m;
     let name_str = name.unraw().to_string();
     let b = usize_lit(m.links.len());
     let j = usize_lit(m.joints.len());
@@ -67,8 +58,6 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
     let c_max = usize_lit(m.maximal_constraints());
     let nm = usize_lit(m.coordinates());
     let cm = usize_lit(m.minimal_constraints());
-    let links_ty = format_ident!("{}Links", name);
-    let joints_ty = format_ident!("{}Joints", name);
     let minimal_ty = format_ident!("{}Minimal", name);
     let dissipative = m.dissipative();
     let svector = quote!(::vigp::__private::nalgebra::SVector);
@@ -76,11 +65,6 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
     let sp = quote!(::vigp::spatial);
 
     // ---- parameter types ----
-    let link_fields = m.links.iter().map(|l| {
-        let ln = &l.name;
-        let doc = doc_or(&l.attrs, format!(" Link `{}`.", ln.unraw()));
-        quote!(#doc pub #ln: #sp::Link3,)
-    });
     let link_defaults = m.links.iter().map(|l| {
         let ln = &l.name;
         let mass = l.mass.tokens();
@@ -112,49 +96,6 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
     });
     let elastic = m.elastic();
     let input_joints = m.inputs();
-    let (joints_items, joints_field, joints_default) = if dissipative || elastic {
-        let joint_ty = match (dissipative, elastic) {
-            (true, true) => quote!(::vigp::ElasticJoint),
-            (false, true) => quote!(::vigp::Spring),
-            _ => quote!(::vigp::Joint),
-        };
-        let fields = m.joints.iter().map(|jt| {
-            let jn = &jt.name;
-            let doc = doc_or(&jt.attrs, format!(" Joint `{}`.", jn.unraw()));
-            quote!(#doc pub #jn: #joint_ty,)
-        });
-        let defaults = m.joints.iter().map(|jt| {
-            let value = |x: &Option<DefaultValue>| {
-                x.as_ref().map_or_else(|| lit(0.0), DefaultValue::tokens)
-            };
-            let jn = &jt.name;
-            let (d, k, r) = (value(&jt.damping), value(&jt.stiffness), value(&jt.rest));
-            match (dissipative, elastic) {
-                (true, true) => {
-                    quote!(#jn: ::vigp::ElasticJoint { damping: #d, stiffness: #k, rest: #r },)
-                }
-                (false, true) => quote!(#jn: ::vigp::Spring { stiffness: #k, rest: #r },),
-                _ => quote!(#jn: ::vigp::Joint { damping: #d },),
-            }
-        });
-        let doc = format!(" Joint parameters of [`{name_str}`].");
-        let field_doc = match (dissipative, elastic) {
-            (true, true) => " Joint parameters (damping and springs).",
-            (false, true) => " Joint parameters (springs).",
-            _ => " Joint parameters (damping).",
-        };
-        (
-            quote! {
-                #[doc = #doc]
-                #[derive(Clone, Copy, Debug, PartialEq)]
-                #vis struct #joints_ty { #(#fields)* }
-            },
-            quote!(#[doc = #field_doc] pub joints: #joints_ty,),
-            quote!(joints: #joints_ty { #(#defaults)* },),
-        )
-    } else {
-        (quote!(), quote!(), quote!())
-    };
     // springs and inputs: only what is declared is generated
     let spatial_springs = if elastic {
         let springs = m.joints.iter().map(|jt| {
@@ -231,10 +172,6 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
                 }
             },
         )
-    };
-    let gravity = {
-        let g = m.gravity.iter().map(DefaultValue::tokens);
-        quote!([#(#g),*])
     };
     let link_names: Vec<String> = m.links.iter().map(|l| l.name.unraw().to_string()).collect();
     let joint_names: Vec<String> = m
@@ -488,7 +425,17 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
         quote!()
     };
 
-    let links_doc = format!(" Link parameters of [`{name_str}`].");
+    let parameter_struct = parameter_struct(
+        m,
+        Links {
+            ty: quote!(#sp::Link3),
+            name: &|l: &crate::desc::spatial::Link| (&l.name, &l.attrs[..]),
+            defaults: link_defaults.collect(),
+        },
+        // literals computed by the macro (reference rotations such as
+        // cos(π/4)) or copied from the description are exact values
+        quote!(#[allow(clippy::approx_constant)]),
+    );
     let coordinates_doc = if m
         .joints
         .iter()
@@ -499,34 +446,7 @@ pub fn emit(m: &Model, target: crate::target::Target) -> TokenStream {
         " Number of minimal coordinates (one per revolute or prismatic tree joint, four per spherical, seven per free)."
     };
     quote! {
-        #(#attrs)*
-        #[derive(Clone, Copy, Debug, PartialEq)]
-        #vis struct #name {
-            #[doc = " Gravitational acceleration in world coordinates (m/s²)."]
-            pub gravity: [f64; 3],
-            #[doc = " Link parameters."]
-            pub links: #links_ty,
-            #joints_field
-        }
-
-        #[doc = #links_doc]
-        #[derive(Clone, Copy, Debug, PartialEq)]
-        #vis struct #links_ty { #(#link_fields)* }
-
-        #joints_items
-
-        // literals computed by the macro (reference rotations such as
-        // cos(π/4)) or copied from the description are exact values
-        #[allow(clippy::approx_constant)]
-        impl ::core::default::Default for #name {
-            fn default() -> Self {
-                Self {
-                    gravity: #gravity,
-                    links: #links_ty { #(#link_defaults)* },
-                    #joints_default
-                }
-            }
-        }
+        #parameter_struct
 
         impl #name {
             #[doc = #coordinates_doc]
