@@ -490,3 +490,115 @@ fn urdf_tree_constants_equal_the_run_time_robot() {
         assert_eq!((q, v, p), (q2, v2, p2));
     }
 }
+
+/// `Name::tree()` and `Name::robot()` of a `urdf:` mechanism: the bodies
+/// built from the run-time parameters (as for any declared 3-D tree)
+/// against the file's constants (`TREE_BODIES`, the same conversion as
+/// `Robot::from_urdf`). The two are built by different routes (the
+/// lowered description through `links3`, the file's bodies directly), so
+/// they are held to rounding: the mass matrices to 1e-12 of their largest
+/// entry, 300 steps of 2 ms to 1e-10 (both engines converge to 1e-12; the
+/// rollouts stay well conditioned over 0.6 s). A parameter changed at run
+/// time reaches `tree()` and not the constants.
+#[test]
+fn urdf_tree_from_parameters_steps_as_the_constants() {
+    use vigp::embedded::tree::{BodyScratch, Engine};
+    assert_eq!(Panda::TREE_COORDINATES, [0, 1, 2, 3, 4, 5, 6]);
+    assert_eq!(WristUrdf::TREE_COORDINATES, [0, 1, 2]);
+    assert_eq!(WristUrdf::TREE_INPUTS, [0, 2]);
+    assert_eq!(WristMoon::TREE_INPUTS.len(), 0);
+
+    let (data, folded) = (
+        Engine::new(Panda::default().tree()).unwrap(),
+        Engine::new(PandaTree).unwrap(),
+    );
+    let mut ws = [BodyScratch::default(); 7];
+    let (mut m1, mut m2) = ([0.0; 49], [0.0; 49]);
+    let mut worst_m = 0.0f64;
+    for q in [
+        [0.0; 7],
+        [0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8],
+        [0.7, 0.4, -1.1, -1.5, 0.9, 1.2, -0.4],
+    ] {
+        data.mass_matrix(&q, &mut m1, &mut ws).unwrap();
+        folded.mass_matrix(&q, &mut m2, &mut ws).unwrap();
+        let scale = m2.iter().fold(0.0f64, |a, x| a.max(x.abs()));
+        let gap = m1
+            .iter()
+            .zip(&m2)
+            .fold(0.0f64, |a, (x, y)| a.max((x - y).abs()));
+        worst_m = worst_m.max(gap / scale);
+    }
+    assert!(
+        worst_m < 1e-12,
+        "Panda M: tree() vs TREE_BODIES {worst_m:.1e}"
+    );
+
+    let mut ws2 = [BodyScratch::default(); 7];
+    let (mut q, mut v, mut p) = ([0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8], [0.0; 7], [0.0; 7]);
+    let (mut q2, mut v2, mut p2) = (q, v, p);
+    data.momentum_of(&q, &v, &mut p, &mut ws).unwrap();
+    folded.momentum_of(&q2, &v2, &mut p2, &mut ws2).unwrap();
+    let mut worst_step = 0.0f64;
+    for _ in 0..300 {
+        data.step(&mut q, &mut v, &mut p, &[0.0; 7], 0.002, &mut ws)
+            .unwrap();
+        folded
+            .step(&mut q2, &mut v2, &mut p2, &[0.0; 7], 0.002, &mut ws2)
+            .unwrap();
+        for (a, b) in q.iter().chain(&v).zip(q2.iter().chain(&v2)) {
+            worst_step = worst_step.max((a - b).abs());
+        }
+    }
+    assert!(worst_step < 1e-10, "Panda 300 steps: {worst_step:.1e}");
+    assert!(v.iter().any(|x| x.abs() > 0.5), "the arm falls: {v:?}");
+
+    // the std robot of the block: names and inputs as declared, the same
+    // driven steps as the file read at run time
+    let robot = WristUrdf::default().robot().unwrap();
+    let file = Robot::from_urdf(format!("{FIXTURES}/wrist.urdf"))
+        .unwrap()
+        .with_actuated(&["shoulder", "slide"])
+        .unwrap();
+    assert_eq!(robot.input_names(), file.input_names());
+    assert_eq!(robot.dof(), 3);
+    let (mut a, mut b) = (
+        RobotState::new(vec![0.3, -0.8, 0.02], vec![0.1, 0.2, -0.05]),
+        RobotState::new(vec![0.3, -0.8, 0.02], vec![0.1, 0.2, -0.05]),
+    );
+    let (mut pa, mut pb) = (robot.momentum(&a).unwrap(), file.momentum(&b).unwrap());
+    let (mut wa, mut wb) = (robot.workspace(), file.workspace());
+    let mut worst_driven = 0.0f64;
+    for k in 0..300 {
+        let u = [(0.01 * k as f64).sin(), (0.01 * k as f64 + 1.0).sin()];
+        robot.step_in(&mut a, &mut pa, &u, 0.002, &mut wa).unwrap();
+        file.step_in(&mut b, &mut pb, &u, 0.002, &mut wb).unwrap();
+        for (x, y) in a.q.iter().chain(&a.v).zip(b.q.iter().chain(&b.v)) {
+            worst_driven = worst_driven.max((x - y).abs());
+        }
+    }
+    assert!(worst_driven < 1e-10, "wrist, driven: {worst_driven:.1e}");
+
+    // a heavier forearm at run time: tree() changes, the constants do not
+    let mut heavy = WristUrdf::default();
+    heavy.links.fore.mass *= 2.0;
+    let (light, heavy) = (
+        Engine::new(WristUrdf::default().tree()).unwrap(),
+        Engine::new(heavy.tree()).unwrap(),
+    );
+    let mut ws = [BodyScratch::default(); 3];
+    let (mut ml, mut mh, mut mc) = ([0.0; 9], [0.0; 9], [0.0; 9]);
+    let q = [0.3, -0.8, 0.02];
+    light.mass_matrix(&q, &mut ml, &mut ws).unwrap();
+    heavy.mass_matrix(&q, &mut mh, &mut ws).unwrap();
+    Engine::new(WristUrdfTree)
+        .unwrap()
+        .mass_matrix(&q, &mut mc, &mut ws)
+        .unwrap();
+    assert!(mh[0] > ml[0] * 1.05, "M₀₀ {} against {}", mh[0], ml[0]);
+    assert!((ml[0] - mc[0]).abs() < 1e-12 * mc[0]);
+    println!(
+        "urdf: tree() vs TREE_BODIES: Panda M {worst_m:.1e} (relative), 300 steps {worst_step:.1e}; \
+         wrist robot() vs Robot::from_urdf, 300 driven steps {worst_driven:.1e}"
+    );
+}

@@ -69,6 +69,11 @@ pub fn expand_for(input: TokenStream, target: Target) -> syn::Result<TokenStream
         let (parsed, track) = urdf::lower(input)?;
         let model = desc::validate::<3, desc::spatial::Spatial>(parsed)?;
         let mut out = spatial::emit::emit(&model, target);
+        // `tree()` and `robot()` from the run-time parameters, as for a
+        // declared 3-D tree (a fixed base: the file's order is the
+        // placement order, so the bodies and inputs are those of
+        // `TREE_BODIES` and `TREE_INPUTS`)
+        out.extend(spatial::tree::emit(&model, target));
         out.extend(track);
         return Ok(out);
     }

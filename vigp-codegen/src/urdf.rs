@@ -35,7 +35,9 @@
 //! `Name::TREE_INPUTS` (the coordinate of each input) and the unit type
 //! `NameTree`, which implements `vigp::embedded::tree::Tree` over them,
 //! so that `Engine::new(NameTree)` steps the robot, `no_std`, with every
-//! body's constants known to the compiler.
+//! body's constants known to the compiler. As every declared 3-D tree, it
+//! also gets `Name::tree()` and `Name::robot()` (`crate::spatial::tree`):
+//! the same bodies built from the run-time parameters.
 //!
 //! Every mistake in the file or in the overrides is a compile error at the
 //! `urdf:` path (or at the override), naming the URDF element and its line.
@@ -353,7 +355,16 @@ fn tree_items(
         None => v3(&[0.0, 0.0, -9.81]),
     };
     let n = bodies.len();
-    let u = inputs.len();
+    // with inputs, `TREE_INPUTS` comes with `tree()` (`tree_items`): the
+    // same bodies, as the file's order is the placement order
+    let tree_inputs = if inputs.is_empty() {
+        quote! {
+            /// The coordinate (body) each input drives, in input order.
+            pub const TREE_INPUTS: [usize; 0] = [];
+        }
+    } else {
+        quote!()
+    };
     let tree_name = Ident::new(&format!("{name}Tree"), name.span());
     let doc_bodies = format!(
         " The robot of `{name}` as the tree engine's bodies, parents first (the \
@@ -378,8 +389,7 @@ fn tree_items(
             pub const TREE_BODIES: [#core::Body; #n] = [#(#bodies),*];
             /// Gravity of the tree engine's model (m/s², world axes).
             pub const TREE_GRAVITY: [f64; 3] = #gravity;
-            /// The coordinate (body) each input drives, in input order.
-            pub const TREE_INPUTS: [usize; #u] = [#(#inputs),*];
+            #tree_inputs
         }
 
         #[doc = #doc_tree]

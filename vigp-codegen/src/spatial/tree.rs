@@ -59,7 +59,11 @@ pub fn emit(m: &Model, target: Target) -> TokenStream {
     });
     let build = quote! {
         let links = &self.links;
-        #core::links3::link3_tree([#(#bodies),*], self.gravity)
+        // frame rotations and axes computed by the macro (cos(π/4), …)
+        // are exact values, not approximations of constants
+        #[allow(clippy::approx_constant)]
+        let bodies = [#(#bodies),*];
+        #core::links3::link3_tree(bodies, self.gravity)
     };
     crate::tree_items::emit(m, build, |l| &l.name, target)
 }
