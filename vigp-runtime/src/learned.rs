@@ -804,7 +804,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// produced z₀'s velocity), so `inputs.len()` steps. The states equal
     /// those of [`Learned::step_mean_forced_in`] step by step, and the
     /// standard deviations are those at (z_k, u_{k−1}, u_k), from one
-    /// batched [`Gp::predict`] as in `rollout_with_info`.
+    /// batched [`Gp::predict`](crate::gp::Gp::predict) as in `rollout_with_info`.
     ///
     /// `U` is the model's input count, or 0 for no input (u = 0; a
     /// different `U` does not compile). Errors: the mechanism's input count
@@ -916,7 +916,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     ///
     /// The steps run on the posterior mean ([`step_mean_in`](Self::step_mean_in),
     /// which gives the same next state), and the variances at all visited
-    /// points come afterwards from one [`Gp::predict`]. For an exact GP with
+    /// points come afterwards from one [`Gp::predict`](crate::gp::Gp::predict). For an exact GP with
     /// the stored inverse (the default) that shares each pass over an
     /// output's L⁻¹ between the points, so the variance of a step costs a
     /// fraction of `step_in`'s, which streams L⁻¹ (N²/2 values per output)
