@@ -305,10 +305,42 @@ fn learned_spatial_step_does_not_allocate() {
     let mut z = z0;
     let info = allocation_counter::measure(|| {
         for _ in 0..10 {
-            z = learned.step_in(&z, &mut ws).unwrap();
+            z = learned.step_mean_in(&z, &mut ws).unwrap();
         }
     });
     assert_eq!(info.count_total, 0, "learned spatial step allocated");
+
+    // the family's step with its report (the planar `Learned`'s API):
+    // the mean step's state bit for bit, the projection's correction
+    // measured, the mean of `predict_velocity` that of
+    // `predict_mean_velocity`, and no allocation either
+    let mut z = z0;
+    let mut reports = Vec::with_capacity(10);
+    let info = allocation_counter::measure(|| {
+        for _ in 0..10 {
+            let (next, report) = learned.step_in(&z, &mut ws).unwrap();
+            reports.push((z, next, report));
+            z = next;
+        }
+    });
+    assert_eq!(info.count_total, 0, "learned spatial step_in allocated");
+    for (from, next, report) in &reports {
+        let mean = learned.step_mean_in(from, &mut ws).unwrap();
+        assert!(same_state(&mean, next), "step_in and step_mean_in differ");
+        let (nu, sigma) = learned.predict_velocity(from, &mut ws).unwrap();
+        let nu_mean = learned.predict_mean_velocity(from, &mut ws).unwrap();
+        assert_eq!(nu, nu_mean);
+        assert_eq!(report.unprojected, nu);
+        assert_eq!(report.std_dev, sigma);
+        assert!(sigma.iter().all(|s| s.is_finite() && *s >= 0.0));
+        let projected = vigp::SVector::<f64, 12>::from_iterator(
+            next.v
+                .iter()
+                .zip(&next.w)
+                .flat_map(|(v, w)| v.iter().chain(w.iter()).copied()),
+        );
+        assert!((report.correction - (projected - nu).norm()).abs() <= 1e-15 * (1.0 + nu.norm()));
+    }
 }
 
 vigp::mechanism! {
@@ -412,7 +444,7 @@ fn driven_data(
 ///   driven truth by more than 30× its error under them (so the inputs
 ///   are used, not ignored);
 /// * every learned step keeps |g| ≤ 1e-10 and |‖q‖ − 1| ≤ 1e-14;
-/// * `rollout_forced` is `step_forced_in` step by step, bit for bit.
+/// * `rollout_forced` is `step_mean_forced_in` step by step, bit for bit.
 #[test]
 fn a_forced_learned_spatial_model_follows_a_driven_arm() {
     let dt = 0.01;
@@ -442,7 +474,7 @@ fn a_forced_learned_spatial_model_follows_a_driven_arm() {
         for (k, u) in inputs.iter().enumerate() {
             // the rollout takes its first input as held across the start
             let up = &inputs[k.saturating_sub(1)];
-            z = learned.step_forced_in(&z, up, u, &mut ws).unwrap();
+            z = learned.step_mean_forced_in(&z, up, u, &mut ws).unwrap();
             assert!(same_state(&z, &pred[k + 1]), "rollout_forced step {k}");
             assert!(t_step.constraint_violation(&z) <= 1e-10);
             assert!(z.norm_error() <= 1e-14);
@@ -560,7 +592,7 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     let (mut z, u) = (z0, SVector::from([0.4, -0.2]));
     let info = allocation_counter::measure(|| {
         for _ in 0..10 {
-            z = forced.step_forced_in(&z, &u, &u, &mut ws).unwrap();
+            z = forced.step_mean_forced_in(&z, &u, &u, &mut ws).unwrap();
         }
     });
     assert_eq!(info.count_total, 0, "forced learned spatial step allocated");
@@ -579,7 +611,7 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     let nan = SVector::from([f64::NAN, 0.0]);
     for (up, u) in [(&u, &nan), (&nan, &u)] {
         assert!(matches!(
-            forced.step_forced_in(&z0, up, u, &mut ws),
+            forced.step_mean_forced_in(&z0, up, u, &mut ws),
             Err(LearnSpatialError::Step(
                 vigp::embedded::StepError::NonFiniteInput { step: None }
             ))
@@ -617,7 +649,7 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     let mut long = z0;
     long.q[1] = nalgebra::UnitQuaternion::new_unchecked(z0.q[1].into_inner() * 1.01);
     assert!(matches!(
-        forced.step_forced_in(&long, &u, &u, &mut ws),
+        forced.step_mean_forced_in(&long, &u, &u, &mut ws),
         Err(LearnSpatialError::Step(
             vigp::embedded::StepError::NonUnitQuaternion { link: 1, .. }
         ))

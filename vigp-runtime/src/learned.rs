@@ -49,7 +49,7 @@ pub mod robot;
 pub(crate) mod time_step;
 pub use embedded::{EmbeddedExport, ExportSize};
 pub(crate) use family::{InputLayout, Row};
-pub use family::{LearnedIntegrator, Space};
+pub use family::{LearnedIntegrator, NominalStep, Space};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
 pub use identified::{IdentifiedError, IdentifiedParameters, IdentifiedValue};
 
@@ -328,6 +328,26 @@ pub type Learned<M, const N: usize, const C: usize> = LearnedIntegrator<Variatio
 impl<M: Mechanism<N, C>, const N: usize, const C: usize> Space<N> for Variational<M, N, C> {
     type State = State<N>;
     type Encoding = Encoding;
+    type Mechanism = M;
+    type Error = StepError;
+
+    fn error(e: LearnError) -> StepError {
+        step_error(e)
+    }
+
+    /// The model's input count, or none: a model trained with inputs
+    /// predicts under u = 0 without them (its `Integrator::step`).
+    fn check_inputs(trained: usize, given: usize) -> Result<(), LearnError> {
+        if given == 0 || given == trained {
+            Ok(())
+        } else {
+            Err(StepError::InputsNotSupported.into())
+        }
+    }
+
+    fn velocities(z: &State<N>) -> SVector<f64, N> {
+        z.v
+    }
 
     fn constrained(&self) -> bool {
         C > 0
@@ -371,6 +391,26 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Space<N> for Variationa
             *vu
         };
         Ok(State { q: x1, v })
+    }
+}
+
+/// The prior: the nominal variational step (its velocity).
+impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> NominalStep<N>
+    for Variational<M, N, C>
+{
+    fn prior_velocity(&self, z: &State<N>) -> Result<SVector<f64, N>, StepError> {
+        Ok(self.step(z)?.v)
+    }
+
+    fn prior_velocity_forced<const U: usize>(
+        &self,
+        z: &State<N>,
+        u: &SVector<f64, U>,
+    ) -> Result<SVector<f64, N>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
+        Ok(self.step_forced(z, u)?.v)
     }
 }
 
@@ -420,7 +460,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             })
             .collect();
         let nominal =
-            |vi: &Variational<M, N, C>, z: &State<N>, _: &SVector<f64, 0>| Ok(vi.step(z)?.v);
+            |vi: &Variational<M, N, C>, z: &State<N>, _: &SVector<f64, 0>| vi.prior_velocity(z);
         Self::train_inputs(model, dt, &forced, encoding, prior, options, false, nominal)
     }
 
@@ -442,7 +482,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         M: vigp_core::Inputs<U> + crate::Parameters,
     {
         let nominal = |vi: &Variational<M, N, C>, z: &State<N>, u: &SVector<f64, U>| {
-            Ok(vi.step_forced(z, u)?.v)
+            vi.prior_velocity_forced(z, u)
         };
         Self::train_inputs(model, dt, data, encoding, prior, options, true, nominal)
     }
@@ -519,46 +559,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         };
         learned.nominal = learned.nominal.with_options(options)?;
         Ok((learned, report))
-    }
-
-    /// The unprojected mean prediction under inputs `u` after `u_prev` (a
-    /// model from [`Learned::train_forced`]): v_u = forced prior(z, u) +
-    /// μ(enc(z), u_prev, u).
-    pub fn predict_mean_velocity_forced<const U: usize>(
-        &self,
-        z: &State<N>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-    ) -> Result<SVector<f64, N>, StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        self.forced_velocity(z, u_prev, u, ws, None)
-    }
-
-    /// prior(z, u) + μ(enc(z), u_prev, u), and the posterior variances into
-    /// `var` when given (the GP's mean is the same bits either way).
-    fn forced_velocity<const U: usize>(
-        &self,
-        z: &State<N>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-        var: Option<&mut SVector<f64, N>>,
-    ) -> Result<SVector<f64, N>, StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        self.check_input_count::<U>()?;
-        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteInput { step: None });
-        }
-        // U = 0: no input, u = 0 in the GP input of a model trained with inputs
-        self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, var, |vi, z| {
-            Ok(vi.step_forced(z, u)?.v)
-        })
-        .map_err(step_error)
     }
 
     /// One learned mean step under inputs `u` after `u_prev` (as
@@ -656,11 +656,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// run-time refusal is the mechanism's input count on a model trained
     /// without inputs.
     fn check_input_count<const U: usize>(&self) -> Result<(), StepError> {
-        if U == 0 || U == self.inputs {
-            Ok(())
-        } else {
-            Err(StepError::InputsNotSupported)
-        }
+        <Variational<M, N, C> as Space<N>>::check_inputs(self.inputs, U).map_err(step_error)
     }
 
     /// [`Learned::step_derivatives_forced`] for `U` equal to the model's
@@ -736,67 +732,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Ok(dv.into_step(z, v, h))
     }
 
-    /// One learned step from `z` under inputs `u` after `u_prev` (the
-    /// input that produced z's velocity; module docs, "Under inputs") using
-    /// the posterior mean (and the projection for constrained models), as
-    /// [`Learned::step_mean_in`]. `U` is the number of inputs the model
-    /// was trained with, or 0 for no input (u = 0).
-    pub fn step_mean_forced_in<const U: usize>(
-        &self,
-        z: &State<N>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-    ) -> Result<State<N>, StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        Ok(self.mean_step_forced_parts(z, u_prev, u, ws)?.0)
-    }
-
-    /// The next state of a mean step under `u` after `u_prev` and the
-    /// unprojected velocity v_u.
-    fn mean_step_forced_parts<const U: usize>(
-        &self,
-        z: &State<N>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-    ) -> Result<(State<N>, SVector<f64, N>), StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        <Variational<M, N, C> as Space<N>>::check(z)?;
-        let vu = self.predict_mean_velocity_forced(z, u_prev, u, ws)?;
-        Ok((self.next_state(z, &vu)?, vu))
-    }
-
-    /// [`Learned::predict_velocity`] under inputs `u` after `u_prev` (a
-    /// model from [`Learned::train_forced`]): v_u = forced prior(z, u) +
-    /// μ(enc(z), u_prev, u) and the posterior standard deviations, the GP
-    /// input being the encoded state followed by u_prev and u. The mean
-    /// equals [`Learned::predict_mean_velocity_forced`] bit for bit.
-    ///
-    /// `U` is the model's input count, or 0 for no input (u = 0; a
-    /// different `U` does not compile). Errors: the mechanism's input count
-    /// on a model trained without inputs
-    /// ([`StepError::InputsNotSupported`]), a NaN or ∞ in `u`, a failed
-    /// prior step or GP prediction.
-    pub fn predict_velocity_forced<const U: usize>(
-        &self,
-        z: &State<N>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        let mut var = SVector::<f64, N>::zeros();
-        let v = self.forced_velocity(z, u_prev, u, ws, Some(&mut var))?;
-        Ok((v, var.map(|s| s.max(0.0).sqrt())))
-    }
-
     /// [`Learned::rollout_with_info`] under planned inputs: step k goes from
     /// z_k under `inputs[k]` (u is held over the interval of the velocity
     /// the step predicts, [t_{k+1}, t_{k+2}], as in [`ForcedTransition::u`])
@@ -870,44 +805,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         self.nominal.model()
     }
 
-    /// The unprojected prediction v_u = prior(z) + μ(z) (eq. 7) and the
-    /// posterior standard deviations (a model trained with inputs,
-    /// [`Learned::train_forced`], predicts under u = 0). Cost O(p·N·(d + N)) for the GP (the
-    /// variance needs a triangular solve per output) plus the prior.
-    pub fn predict_velocity(
-        &self,
-        z: &State<N>,
-        ws: &mut Workspace,
-    ) -> Result<(SVector<f64, N>, SVector<f64, N>), StepError> {
-        let mut var = SVector::<f64, N>::zeros();
-        let v = self
-            .velocity(z, &[], &[], ws, Some(&mut var), |vi, z| Ok(vi.step(z)?.v))
-            .map_err(step_error)?;
-        Ok((v, var.map(|s| s.max(0.0).sqrt())))
-    }
-
-    /// The unprojected mean prediction v_u = prior(z) + μ(z) (eq. 7) without
-    /// the variance: O(p·N·d) for the GP plus the prior. Equal bit for bit
-    /// to the first component of [`predict_velocity`](Self::predict_velocity).
-    pub fn predict_mean_velocity(
-        &self,
-        z: &State<N>,
-        ws: &mut Workspace,
-    ) -> Result<SVector<f64, N>, StepError> {
-        self.velocity(z, &[], &[], ws, None, |vi, z| Ok(vi.step(z)?.v))
-            .map_err(step_error)
-    }
-
-    /// One learned step using only the posterior mean (what a rollout
-    /// needs): like [`step_in`](Self::step_in) without the variances,
-    /// so O(p·N·d) instead of O(p·N·(d + N)) for the GP. Same next state as
-    /// `step_in`, bit for bit. No allocation for inputs of up to 64
-    /// dimensions. A model trained with inputs steps under u = 0 (equal to
-    /// [`Learned::step_mean_forced_in`] with zeros).
-    pub fn step_mean_in(&self, z: &State<N>, ws: &mut Workspace) -> Result<State<N>, StepError> {
-        Ok(self.mean_step_parts(z, ws)?.0)
-    }
-
     /// `steps` learned steps from `z0`, each with what
     /// [`step_in`](Self::step_in) reports (posterior standard deviations,
     /// unprojected velocity, projection correction): the states and infos
@@ -976,7 +873,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 self.with_gp_input(&z, up.as_slice(), inputs[k].as_slice(), copy)?;
                 self.mean_step_forced_parts(&z, up, &inputs[k], ws)
             }
-            .map_err(|e| e.at_step(k))?;
+            .map_err(|e| step_error(e).at_step(k))?;
             out.push((
                 next,
                 LearnedStepInfo {
@@ -1010,37 +907,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             info.std_dev = SVector::from_iterator(var.iter().map(|s| s.max(0.0).sqrt()));
         }
         Ok(out)
-    }
-
-    /// The next state of a mean step and the unprojected velocity v_u.
-    fn mean_step_parts(
-        &self,
-        z: &State<N>,
-        ws: &mut Workspace,
-    ) -> Result<(State<N>, SVector<f64, N>), StepError> {
-        <Variational<M, N, C> as Space<N>>::check(z)?;
-        let vu = self.predict_mean_velocity(z, ws)?;
-        Ok((self.next_state(z, &vu)?, vu))
-    }
-
-    /// One learned step with a caller-owned GP workspace (no allocation for
-    /// inputs of up to 64 dimensions).
-    pub fn step_in(
-        &self,
-        z: &State<N>,
-        ws: &mut Workspace,
-    ) -> Result<(State<N>, LearnedStepInfo<N>), StepError> {
-        <Variational<M, N, C> as Space<N>>::check(z)?;
-        let (vu, std_dev) = self.predict_velocity(z, ws)?;
-        let next = self.next_state(z, &vu)?;
-        Ok((
-            next,
-            LearnedStepInfo {
-                unprojected: vu,
-                std_dev,
-                correction: (next.v - vu).norm(),
-            },
-        ))
     }
 }
 

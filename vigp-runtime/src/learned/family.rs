@@ -16,7 +16,7 @@
 //! [`LearnedIntegrator`], whose training, velocity prediction and step are
 //! written once here.
 
-use super::{LearnError, Prior, distinct_rows};
+use super::{LearnError, LearnedStepInfo, Prior, distinct_rows};
 use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
 use crate::newton::StepError;
 use nalgebra::SVector;
@@ -39,6 +39,25 @@ pub trait Space<const N: usize> {
     /// Writes the encoded state into `out` (length
     /// [`Space::encoded_dim`]).
     fn encode(&self, encoding: Self::Encoding, z: &Self::State, out: &mut [f64]);
+
+    /// The mechanism whose inputs the forced calls take: `U` inputs
+    /// compile where it implements [`vigp_core::Inputs<U>`] (`U = 0`
+    /// always does).
+    type Mechanism: ?Sized;
+    /// The error of this space's learned predictions and steps.
+    type Error;
+
+    /// A learned step's error as this space's error.
+    fn error(e: LearnError) -> Self::Error;
+
+    /// Whether predictions under `given` inputs fit a model trained with
+    /// `trained` ([`LearnError::Inputs`] or
+    /// [`StepError::InputsNotSupported`] otherwise; module docs of the
+    /// space's learned integrator).
+    fn check_inputs(trained: usize, given: usize) -> Result<(), LearnError>;
+
+    /// The velocities ν of a state.
+    fn velocities(z: &Self::State) -> SVector<f64, N>;
 
     /// Whether every number of the state is finite.
     fn is_finite(z: &Self::State) -> bool;
@@ -68,6 +87,23 @@ pub trait Space<const N: usize> {
         nu: &SVector<f64, N>,
         project: bool,
     ) -> Result<Self::State, StepError>;
+}
+
+/// The nominal step of a [`Space`]: the prior of eq. 7 (a separate trait
+/// because stepping may ask more of the mechanism, e.g. `Clone` to
+/// subdivide, than its geometry does).
+pub trait NominalStep<const N: usize>: Space<N> {
+    /// The nominal step's next velocities from `z` (no inputs).
+    fn prior_velocity(&self, z: &Self::State) -> Result<SVector<f64, N>, StepError>;
+
+    /// The nominal forced step's next velocities from `z` under `u`.
+    fn prior_velocity_forced<const U: usize>(
+        &self,
+        z: &Self::State,
+        u: &SVector<f64, U>,
+    ) -> Result<SVector<f64, N>, StepError>
+    where
+        Self::Mechanism: vigp_core::Inputs<U>;
 }
 
 /// One training row: a state, the input that produced its velocities, the
@@ -395,5 +431,205 @@ impl InputLayout {
         } else {
             out[e..e + m].copy_from_slice(&u[..m]);
         }
+    }
+}
+
+/// Prediction and steps, with the nominal step as the prior.
+impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
+    /// The unprojected prediction ν_u = prior(z) + μ(z) (eq. 7) and the
+    /// posterior standard deviations of the velocities, without inputs.
+    /// Cost O(p·N·(d + N)) for the GP (the variance needs a triangular
+    /// solve per output) plus the prior. A model trained with inputs is
+    /// the space's to refuse or to predict under u = 0
+    /// ([`Space::check_inputs`]).
+    pub fn predict_velocity(
+        &self,
+        z: &S::State,
+        ws: &mut Workspace,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), S::Error> {
+        let mut var = SVector::<f64, N>::zeros();
+        let nu = self
+            .unforced_velocity(z, ws, Some(&mut var))
+            .map_err(S::error)?;
+        Ok((nu, std_dev(&var)))
+    }
+
+    /// ν_u = prior(z) + μ(z) without the variance: O(p·N·d) for the GP plus
+    /// the prior. Equal bit for bit to the first component of
+    /// [`Self::predict_velocity`].
+    pub fn predict_mean_velocity(
+        &self,
+        z: &S::State,
+        ws: &mut Workspace,
+    ) -> Result<SVector<f64, N>, S::Error> {
+        self.unforced_velocity(z, ws, None).map_err(S::error)
+    }
+
+    /// [`Self::predict_velocity`] under inputs `u` after `u_prev` (the
+    /// input that produced z's velocities): ν_u = forced prior(z, u) +
+    /// μ(enc(z), u_prev, u) and the posterior standard deviations. `U` is
+    /// the model's input count (or what [`Space::check_inputs`] admits);
+    /// a NaN or ∞ in `u_prev` or `u` is [`StepError::NonFiniteInput`].
+    pub fn predict_velocity_forced<const U: usize>(
+        &self,
+        z: &S::State,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), S::Error>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        let mut var = SVector::<f64, N>::zeros();
+        let nu = self
+            .forced_velocity(z, u_prev, u, ws, Some(&mut var))
+            .map_err(S::error)?;
+        Ok((nu, std_dev(&var)))
+    }
+
+    /// [`Self::predict_velocity_forced`] without the variance (the same
+    /// mean, bit for bit).
+    pub fn predict_mean_velocity_forced<const U: usize>(
+        &self,
+        z: &S::State,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<SVector<f64, N>, S::Error>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        self.forced_velocity(z, u_prev, u, ws, None)
+            .map_err(S::error)
+    }
+
+    /// One learned step with a caller-owned GP workspace: the exact
+    /// configuration update, the velocities predicted (with their
+    /// standard deviations) and projected; what the step reports. No
+    /// allocation for GP inputs of up to 128 dimensions.
+    pub fn step_in(
+        &self,
+        z: &S::State,
+        ws: &mut Workspace,
+    ) -> Result<(S::State, LearnedStepInfo<N>), S::Error> {
+        let mut var = SVector::<f64, N>::zeros();
+        let (next, nu) = self
+            .mean_step(z, |l| l.unforced_velocity(z, ws, Some(&mut var)))
+            .map_err(S::error)?;
+        Ok((next, info::<S, N>(&next, nu, std_dev(&var))))
+    }
+
+    /// One learned step using only the posterior mean (what a rollout
+    /// needs): [`Self::step_in`]'s next state, bit for bit, at
+    /// O(p·N·d) instead of O(p·N·(d + N)) for the GP.
+    pub fn step_mean_in(&self, z: &S::State, ws: &mut Workspace) -> Result<S::State, S::Error> {
+        Ok(self.mean_step_parts(z, ws).map_err(S::error)?.0)
+    }
+
+    /// One learned mean step under inputs `u` (held over the step) after
+    /// `u_prev` (the input that produced z's velocities), as
+    /// [`Self::step_mean_in`].
+    pub fn step_mean_forced_in<const U: usize>(
+        &self,
+        z: &S::State,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<S::State, S::Error>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        Ok(self
+            .mean_step_forced_parts(z, u_prev, u, ws)
+            .map_err(S::error)?
+            .0)
+    }
+
+    /// The next state of a mean step without inputs and ν_u.
+    pub(crate) fn mean_step_parts(
+        &self,
+        z: &S::State,
+        ws: &mut Workspace,
+    ) -> Result<(S::State, SVector<f64, N>), LearnError> {
+        self.mean_step(z, |l| l.unforced_velocity(z, ws, None))
+    }
+
+    /// The next state of a mean step under `u` after `u_prev` and ν_u.
+    pub(crate) fn mean_step_forced_parts<const U: usize>(
+        &self,
+        z: &S::State,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<(S::State, SVector<f64, N>), LearnError>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        self.mean_step(z, |l| l.forced_velocity(z, u_prev, u, ws, None))
+    }
+
+    /// ν_u from `velocity` (which checks the state), and the next state.
+    fn mean_step(
+        &self,
+        z: &S::State,
+        velocity: impl FnOnce(&Self) -> Result<SVector<f64, N>, LearnError>,
+    ) -> Result<(S::State, SVector<f64, N>), LearnError> {
+        // the velocity checks the state
+        let nu = velocity(self)?;
+        Ok((self.next_state(z, &nu)?, nu))
+    }
+
+    /// ν_u without inputs (u = 0 in the GP input of a model with inputs,
+    /// where the space admits it).
+    pub(crate) fn unforced_velocity(
+        &self,
+        z: &S::State,
+        ws: &mut Workspace,
+        var: Option<&mut SVector<f64, N>>,
+    ) -> Result<SVector<f64, N>, LearnError> {
+        S::check(z)?;
+        S::check_inputs(self.inputs, 0)?;
+        self.velocity(z, &[], &[], ws, var, |s, z| s.prior_velocity(z))
+    }
+
+    /// ν_u under `u` after `u_prev`.
+    pub(crate) fn forced_velocity<const U: usize>(
+        &self,
+        z: &S::State,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+        var: Option<&mut SVector<f64, N>>,
+    ) -> Result<SVector<f64, N>, LearnError>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        S::check(z)?;
+        S::check_inputs(self.inputs, U)?;
+        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
+            return Err(StepError::NonFiniteInput { step: None }.into());
+        }
+        self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, var, |s, z| {
+            s.prior_velocity_forced(z, u)
+        })
+    }
+}
+
+/// Standard deviations from latent variances (negative rounding is 0).
+fn std_dev<const N: usize>(var: &SVector<f64, N>) -> SVector<f64, N> {
+    var.map(|v| v.max(0.0).sqrt())
+}
+
+/// What a step reports: ν_u, σ, and the size of the projection's
+/// correction ‖ν − ν_u‖.
+fn info<S: Space<N>, const N: usize>(
+    next: &S::State,
+    nu: SVector<f64, N>,
+    std_dev: SVector<f64, N>,
+) -> LearnedStepInfo<N> {
+    LearnedStepInfo {
+        unprojected: nu,
+        std_dev,
+        correction: (S::velocities(next) - nu).norm(),
     }
 }

@@ -33,7 +33,7 @@
 //! over the step (the planar `vigp::learned`, "Under inputs", explains
 //! why) — and the prior is the nominal forced step under u
 //! ([`LieStepper::step_forced`]). Such a model steps with
-//! [`LearnedSpatial::step_forced_in`] (previous input explicit) or
+//! [`LearnedSpatial::step_mean_forced_in`] (previous input explicit) or
 //! [`SpatialIntegrator::rollout_forced`] (step k after `inputs[k − 1]`, the
 //! first after `inputs[0]`: the input taken as held across the start); its
 //! plain step, without inputs, is a typed error
@@ -42,7 +42,7 @@
 use super::{SpatialError, SpatialIntegrator};
 use crate::StepError;
 use crate::gp::{TrainOptions, TrainReport, Workspace};
-use crate::learned::{InputLayout, LearnError, LearnedIntegrator, Prior, Row, Space};
+use crate::learned::{InputLayout, LearnError, LearnedIntegrator, NominalStep, Prior, Row, Space};
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp_core::spatial::maximal::{pack, unpack};
 use vigp_core::spatial::{LieStepper, Spatial, SpatialState};
@@ -224,6 +224,26 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
 {
     type State = SpatialState<B>;
     type Encoding = Rotation;
+    type Mechanism = S;
+    type Error = LearnError;
+
+    fn error(e: LearnError) -> LearnError {
+        e
+    }
+
+    /// Exactly the model's: a model trained with inputs refuses a
+    /// prediction without them, never a silent u = 0 (module docs).
+    fn check_inputs(trained: usize, given: usize) -> Result<(), LearnError> {
+        if given == trained {
+            Ok(())
+        } else {
+            Err(LearnError::Inputs { trained, given })
+        }
+    }
+
+    fn velocities(z: &SpatialState<B>) -> SVector<f64, N> {
+        pack(&z.v, &z.w)
+    }
 
     fn constrained(&self) -> bool {
         C > 0
@@ -277,6 +297,26 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 }
 
+/// The prior: the nominal Lie-group step (its velocities).
+impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
+    NominalStep<N> for LieStepper<S, B, J, N, C>
+{
+    fn prior_velocity(&self, z: &SpatialState<B>) -> Result<SVector<f64, N>, StepError> {
+        next_velocities(self.step(z))
+    }
+
+    fn prior_velocity_forced<const U: usize>(
+        &self,
+        z: &SpatialState<B>,
+        u: &SVector<f64, U>,
+    ) -> Result<SVector<f64, N>, StepError>
+    where
+        S: vigp_core::Inputs<U>,
+    {
+        next_velocities(self.step_forced(z, u))
+    }
+}
+
 /// The next velocities of the nominal step from `z`.
 fn next_velocities<const N: usize, const B: usize>(
     z1: Result<SpatialState<B>, StepError>,
@@ -314,7 +354,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             })
             .collect();
         Self::train_inputs(stepper, &data, rotation, prior, options, |s, z, _| {
-            next_velocities(s.step(z))
+            s.prior_velocity(z)
         })
     }
 
@@ -324,7 +364,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// inputs"), and the nominal prior is the forced
     /// Lie-group step under u ([`LieStepper::step_forced`]). `U` must equal
     /// the mechanism's number of actuated joints (checked at compile time).
-    /// Predict with [`LearnedSpatial::step_forced_in`] or
+    /// Predict with [`LearnedSpatial::step_mean_forced_in`] or
     /// [`SpatialIntegrator::rollout_forced`].
     pub fn train_forced<const U: usize>(
         stepper: LieStepper<S, B, J, N, C>,
@@ -337,7 +377,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         S: vigp_core::Inputs<U>,
     {
         Self::train_inputs(stepper, data, rotation, prior, options, |s, z, u| {
-            next_velocities(s.step_forced(z, u))
+            s.prior_velocity_forced(z, u)
         })
     }
 
@@ -395,54 +435,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         self.encoding
     }
 
-    /// The unprojected velocities ν_u = prior(z) + μ(z) (eq. 7) of a model
-    /// trained without inputs ([`LearnSpatialError::Inputs`] otherwise).
-    pub fn predict_velocity(
-        &self,
-        z: &SpatialState<B>,
-        ws: &mut Workspace,
-    ) -> Result<SVector<f64, N>, LearnSpatialError> {
-        z.validate()?;
-        self.check_inputs(0)?;
-        self.velocity(z, &[], &[], ws, None, |s, z| next_velocities(s.step(z)))
-    }
-
-    /// The unprojected velocities under inputs `u` after `u_prev` (the
-    /// input that produced z's velocities) of a model from
-    /// [`LearnedSpatial::train_forced`]: ν_u = prior(z, u) +
-    /// μ(enc(z), u_prev, u), the prior being the forced nominal step.
-    /// Errors: `U` other than the training data's
-    /// ([`LearnSpatialError::Inputs`]), NaN or ±∞ in `u_prev` or `u`.
-    pub fn predict_velocity_forced<const U: usize>(
-        &self,
-        z: &SpatialState<B>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-    ) -> Result<SVector<f64, N>, LearnSpatialError>
-    where
-        S: vigp_core::Inputs<U>,
-    {
-        z.validate()?;
-        self.check_inputs(U)?;
-        if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
-            return Err(StepError::NonFiniteInput { step: None }.into());
-        }
-        self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, None, |s, z| {
-            next_velocities(s.step_forced(z, u))
-        })
-    }
-
     /// `given` inputs must be the training data's.
     pub(crate) fn check_inputs(&self, given: usize) -> Result<(), LearnSpatialError> {
-        if given == self.inputs {
-            Ok(())
-        } else {
-            Err(LearnSpatialError::Inputs {
-                trained: self.inputs,
-                given,
-            })
-        }
+        <LieStepper<S, B, J, N, C> as Space<N>>::check_inputs(self.inputs, given)
     }
 
     /// The GP input of a step from `z` after `u_prev` under `u` (both
@@ -525,39 +520,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         }
         Ok(Trace { states, std_devs })
     }
-
-    /// One learned step: configuration k+1 exactly, velocities predicted
-    /// and projected so that configuration k+2 is consistent. No
-    /// allocation (GP inputs of up to 128 dimensions). A model trained
-    /// with inputs steps with [`Self::step_forced_in`].
-    pub fn step_in(
-        &self,
-        z: &SpatialState<B>,
-        ws: &mut Workspace,
-    ) -> Result<SpatialState<B>, LearnSpatialError> {
-        let nu = self.predict_velocity(z, ws)?;
-        Ok(self.next_state(z, &nu)?)
-    }
-
-    /// One learned step under inputs `u` (held over the step, as in
-    /// [`LieStepper::step_forced`]) after `u_prev` (the input that produced
-    /// z's velocities) of a model from [`LearnedSpatial::train_forced`]:
-    /// the configuration update is exact, the velocities are the forced
-    /// prior plus the GP mean at (enc(z), u_prev, u), projected as in
-    /// [`Self::step_in`]. No allocation.
-    pub fn step_forced_in<const U: usize>(
-        &self,
-        z: &SpatialState<B>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-    ) -> Result<SpatialState<B>, LearnSpatialError>
-    where
-        S: vigp_core::Inputs<U>,
-    {
-        let nu = self.predict_velocity_forced(z, u_prev, u, ws)?;
-        Ok(self.next_state(z, &nu)?)
-    }
 }
 
 impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
@@ -569,11 +531,11 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         self.nominal.dt()
     }
 
-    /// One step; allocates a GP workspace per call (use
-    /// [`LearnedSpatial::step_in`] in loops).
+    /// One mean step; allocates a GP workspace per call (use
+    /// [`LearnedSpatial::step_mean_in`] in loops).
     fn step(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, SpatialError> {
         let mut ws = self.gp.workspace();
-        Ok(self.step_in(z, &mut ws)?)
+        Ok(self.step_mean_in(z, &mut ws)?)
     }
 
     /// Steps with one workspace.
@@ -588,14 +550,16 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         out.push(*z0);
         let mut z = *z0;
         for k in 0..steps {
-            z = self.step_in(&z, &mut ws).map_err(|e| in_rollout(e, k))?;
+            z = self
+                .step_mean_in(&z, &mut ws)
+                .map_err(|e| in_rollout(e, k))?;
             out.push(z);
         }
         Ok(out)
     }
 
     /// A model from [`LearnedSpatial::train_forced`] steps under `u`
-    /// ([`LearnedSpatial::step_forced_in`]; `U` must be the training
+    /// ([`LearnedSpatial::step_mean_forced_in`]; `U` must be the training
     /// data's) with the input taken as held across the start, u_prev = u
     /// (the trait has no slot for the previous input). A model trained
     /// without inputs takes u = 0 as
@@ -657,9 +621,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             if !u.iter().all(|x| *x == 0.0) {
                 return Err(SpatialError::Step(StepError::InputsNotSupported));
             }
-            self.step_in(z, ws)
+            self.step_mean_in(z, ws)
         } else {
-            self.step_forced_in(z, u_prev, u, ws)
+            self.step_mean_forced_in(z, u_prev, u, ws)
         };
         step.map_err(|e| match k {
             Some(k) => in_rollout(e, k),
