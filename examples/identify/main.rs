@@ -112,6 +112,11 @@ struct Cli {
     /// what the noise does to the identification from the rest.
     #[arg(long)]
     noise_free_identification: bool,
+    /// Refine the regression by output error (`Options::output_error`),
+    /// each training sample a segment of its three positions whose first
+    /// two are estimated with the parameters.
+    #[arg(long)]
+    output_error: bool,
     /// Output directory (figures, CSV, report.md).
     #[arg(long, default_value = "docs/identify")]
     out: PathBuf,
@@ -192,6 +197,7 @@ fn identified<M, const N: usize, const C: usize>(
     data: &[Transition<N>],
     direction: &DVector<f64>,
     prior_sd: f64,
+    output_error: bool,
 ) -> Result<(M, IdStatus), IdentifyError>
 where
     M: Mechanism<N, C> + Parameters + Copy,
@@ -207,6 +213,10 @@ where
         prior: id_prior(prior_sd),
         // the intervals are not used here
         intervals: Intervals::Independent,
+        output_error: output_error.then_some(vigp::identify::OutputError {
+            segment: 3,
+            ..Default::default()
+        }),
         ..Options::default()
     };
     let scaled = ScaleFixed::new(regressor, direction.clone(), &options.prior);
@@ -339,7 +349,13 @@ where
             } else {
                 data.clone()
             };
-            match identified(&regressor, &id_data, &direction, cli.prior_sd) {
+            match identified(
+                &regressor,
+                &id_data,
+                &direction,
+                cli.prior_sd,
+                cli.output_error,
+            ) {
                 Ok((model, s)) => {
                     point(IDENTIFIED, vi_mse(model));
                     point(IDENTIFIED_GP, gp_mse(model, &data, n, IDENTIFIED_GP));

@@ -174,4 +174,35 @@ impl<R: Regressor> Regressor for ScaleFixed<'_, R> {
     ) -> Result<DMatrix<f64>, IdentifyError> {
         self.inner.noise_jacobian(t, &self.hold(pi))
     }
+
+    // what output error simulates: the inner mechanism at h(π), its rows
+    // held as `transition`'s are, its loops its own
+
+    fn position_jacobians(
+        &self,
+        t: &Transition<'_>,
+        pi: &[f64],
+    ) -> Result<(DVector<f64>, [DMatrix<f64>; 3]), IdentifyError> {
+        self.inner.position_jacobians(t, &self.hold(pi))
+    }
+
+    fn unprojected_transition(
+        &self,
+        t: &Transition<'_>,
+    ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
+        let (y, b) = self.inner.unprojected_transition(t)?;
+        let yd = &y * &self.d;
+        Ok((&y - &yd * self.l.transpose(), b - yd * self.target))
+    }
+
+    fn loop_constraints(
+        &self,
+        x: &[f64],
+    ) -> Result<Option<(DVector<f64>, DMatrix<f64>)>, IdentifyError> {
+        self.inner.loop_constraints(x)
+    }
+
+    fn loop_curvature(&self, x: &[f64], lambda: &[f64]) -> Result<DMatrix<f64>, IdentifyError> {
+        self.inner.loop_curvature(x, lambda)
+    }
 }
