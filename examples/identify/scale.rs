@@ -124,6 +124,13 @@ impl<'a, R: Regressor> ScaleFixed<'a, R> {
         }
     }
 
+    /// The rows (Y, b) of the inner regressor as rows of this one:
+    /// Y·P and b − Y·d (ℓ·π₀)/(ℓ·d) (module docs).
+    fn held(&self, (y, b): (DMatrix<f64>, DVector<f64>)) -> (DMatrix<f64>, DVector<f64>) {
+        let yd = &y * &self.d;
+        (&y - &yd * self.l.transpose(), b - yd * self.target)
+    }
+
     /// h(π): `pi` moved along d onto ℓ·π = ℓ·π₀, the parameters the rows
     /// of this regressor describe.
     pub fn hold(&self, pi: &[f64]) -> Vec<f64> {
@@ -162,9 +169,7 @@ impl<R: Regressor> Regressor for ScaleFixed<'_, R> {
         &self,
         t: &Transition<'_>,
     ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
-        let (y, b) = self.inner.transition(t)?;
-        let yd = &y * &self.d;
-        Ok((&y - &yd * self.l.transpose(), b - yd * self.target))
+        self.inner.transition(t).map(|rows| self.held(rows))
     }
 
     fn noise_jacobian(
@@ -190,9 +195,9 @@ impl<R: Regressor> Regressor for ScaleFixed<'_, R> {
         &self,
         t: &Transition<'_>,
     ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
-        let (y, b) = self.inner.unprojected_transition(t)?;
-        let yd = &y * &self.d;
-        Ok((&y - &yd * self.l.transpose(), b - yd * self.target))
+        self.inner
+            .unprojected_transition(t)
+            .map(|rows| self.held(rows))
     }
 
     fn loop_constraints(
