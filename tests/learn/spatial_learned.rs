@@ -1098,19 +1098,18 @@ fn spatial_bound_misuse_is_a_typed_error() {
         delta: 0.2,
         ..ConformalSettings::default()
     };
-    let is_mismatch =
-        |e: &LearnSpatialError| matches!(e, LearnSpatialError::Bound(BoundError::Mismatch(_)));
+    let is_mismatch = |e: &BoundError| matches!(e, BoundError::Mismatch(_));
     // inputs: model, calibration and prediction must agree
     assert!(matches!(
         plain.conformal_bound_forced::<2>(&cal_f, &loose),
-        Err(LearnSpatialError::Inputs {
+        Err(BoundError::Inputs {
             trained: 0,
             given: 2
         })
     ));
     assert!(matches!(
         forced.conformal_bound(&cal_p, &loose),
-        Err(LearnSpatialError::Inputs {
+        Err(BoundError::Inputs {
             trained: 2,
             given: 0
         })
@@ -1130,14 +1129,14 @@ fn spatial_bound_misuse_is_a_typed_error() {
     );
     assert!(matches!(
         plain.predict_bounded(&z0, horizon, &bound),
-        Err(LearnSpatialError::Bound(BoundError::Mismatch(_)))
+        Err(BoundError::Mismatch(_))
     ));
     assert!(matches!(
         forced.predict_bounded_forced(&z0, &logged[0], &logged[1..=horizon + 1], &bound),
-        Err(LearnSpatialError::Bound(BoundError::HorizonTooLong {
+        Err(BoundError::HorizonTooLong {
             calibrated: 4,
             requested: 5
-        }))
+        })
     ));
     // no steps: the start alone, bounds 0
     let alone = forced
@@ -1168,24 +1167,16 @@ fn spatial_bound_misuse_is_a_typed_error() {
     };
     assert!(matches!(
         edited(&|b| b.translation.per_step.truncate(3)),
-        Err(LearnSpatialError::Bound(BoundError::HorizonTooLong {
+        Err(BoundError::HorizonTooLong {
             calibrated: 3,
             requested: 4
-        }))
+        })
     ));
     assert!(matches!(
         edited(&|b| b.rotation.per_step.clear()),
-        Err(LearnSpatialError::Bound(BoundError::HorizonTooLong {
-            calibrated: 0,
-            ..
-        }))
+        Err(BoundError::HorizonTooLong { calibrated: 0, .. })
     ));
-    let non_finite = |r: Result<(), LearnSpatialError>| {
-        matches!(
-            r,
-            Err(LearnSpatialError::Bound(BoundError::NonFinite { .. }))
-        )
-    };
+    let non_finite = |r: Result<(), BoundError>| matches!(r, Err(BoundError::NonFinite { .. }));
     assert!(non_finite(
         edited(&|b| b.translation.per_step[3] = f64::NAN)
     ));
@@ -1213,11 +1204,11 @@ fn spatial_bound_misuse_is_a_typed_error() {
     ));
     assert!(matches!(
         plain.conformal_bound(&cal_p, &ConformalSettings::default()),
-        Err(LearnSpatialError::Bound(BoundError::TooFewCalibration {
+        Err(BoundError::TooFewCalibration {
             needed: 19,
             got: 18,
             ..
-        }))
+        })
     ));
     assert!(matches!(
         plain.conformal_bound(
@@ -1227,7 +1218,7 @@ fn spatial_bound_misuse_is_a_typed_error() {
                 ..loose.clone()
             }
         ),
-        Err(LearnSpatialError::Bound(BoundError::InvalidSetting { .. }))
+        Err(BoundError::InvalidSetting { .. })
     ));
     // malformed calibration data
     assert!(SpatialCalibration::<2>::from_trajectories(&runs, dt, 1, 5).is_err());
@@ -1236,10 +1227,7 @@ fn spatial_bound_misuse_is_a_typed_error() {
     let none = SpatialCalibration::<2>::new(dt, Vec::new()).unwrap();
     assert!(matches!(
         plain.conformal_bound(&none, &loose),
-        Err(LearnSpatialError::Bound(BoundError::TooFewCalibration {
-            got: 0,
-            ..
-        }))
+        Err(BoundError::TooFewCalibration { got: 0, .. })
     ));
     let mut w = cal_p.windows()[0].clone();
     w.configurations[1].0[0].x = f64::INFINITY;

@@ -237,9 +237,6 @@ pub enum LearnError {
         /// Inputs given to the prediction.
         given: usize,
     },
-    /// An error bound could not be calibrated or used.
-    #[error(transparent)]
-    Bound(#[from] crate::bound::BoundError),
 }
 
 /// Leaves out every training row of a GP that repeats an earlier row

@@ -33,6 +33,8 @@ pub struct Window<const N: usize> {
     pub positions: Vec<SVector<f64, N>>,
 }
 
+impl<const N: usize> crate::bound::windows::sealed::Sealed for Window<N> {}
+
 /// Held-out calibration data for the conformal bound: windows of equal
 /// length K, each a start state and the K true positions after it.
 ///

@@ -189,6 +189,15 @@ pub enum BoundError {
     /// the inputs do not fit the model.
     #[error("bound and model do not match: {0}")]
     Mismatch(&'static str),
+    /// A bound was asked under a number of inputs other than the one the
+    /// model was trained with (0: trained without inputs).
+    #[error("the model was trained with {trained} inputs, and was given {given}")]
+    Inputs {
+        /// Inputs of the training data.
+        trained: usize,
+        /// Inputs given.
+        given: usize,
+    },
     /// A step, projection or nominal prior failed.
     #[error(transparent)]
     Step(#[from] StepError),
@@ -235,10 +244,7 @@ impl From<LearnError> for BoundError {
             LearnError::IdentifiedPrior => BoundError::Mismatch(
                 "an identified prior is not taken by a Lie-group stepper: train with Prior::Nominal on the identified mechanism",
             ),
-            LearnError::Inputs { .. } => {
-                BoundError::Mismatch("the inputs differ from the model's training inputs")
-            }
-            LearnError::Bound(b) => b,
+            LearnError::Inputs { trained, given } => BoundError::Inputs { trained, given },
         }
     }
 }

@@ -7,11 +7,11 @@
 use super::BoundError;
 use nalgebra::SVector;
 
-mod sealed {
+/// The seal of [`CalibrationWindow`]: each window type implements it
+/// beside its definition (the planar, spatial and robot bounds'), so
+/// this module names none of them.
+pub(crate) mod sealed {
     pub trait Sealed {}
-    impl<const N: usize> Sealed for crate::bound::Window<N> {}
-    impl<const B: usize> Sealed for crate::spatial::bound::SpatialWindow<B> {}
-    impl Sealed for crate::learned::robot::RobotWindow {}
 }
 
 /// A held-out window of a calibration set: a start and the K true states

@@ -33,7 +33,7 @@
 //! (O(N²) per output and step, N training samples); a bounded prediction
 //! is one such prediction.
 
-use super::learned::{Configuration, LearnSpatialError, LearnedSpatial, Trace, between};
+use super::learned::{Configuration, LearnedSpatial, Trace, between};
 use super::{Spatial, SpatialState};
 use crate::bound::conformal::{
     RegionBuilder, Traced, calibrate_traced, position_scales, predictive_scale, quantile_index,
@@ -41,6 +41,7 @@ use crate::bound::conformal::{
 };
 use crate::bound::windows::{CalibrationOf, CalibrationWindow};
 use crate::bound::{BoundError, ConformalSettings, Region, Score, Tube, check_delta};
+use crate::learned::LearnError;
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
 use vigp_core::spatial::maximal::off_unit_sphere;
@@ -56,6 +57,8 @@ pub struct SpatialWindow<const B: usize> {
     /// configurations 1 and 2.
     pub configurations: Vec<Configuration<B>>,
 }
+
+impl<const B: usize> crate::bound::windows::sealed::Sealed for SpatialWindow<B> {}
 
 /// Held-out calibration windows of equal length K for the spatial
 /// conformal bound, with their inputs for a model trained under inputs.
@@ -209,7 +212,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         calibration: &SpatialCalibration<B>,
         settings: &ConformalSettings,
-    ) -> Result<SpatialConformal, LearnSpatialError> {
+    ) -> Result<SpatialConformal, BoundError> {
         self.check_inputs(0)?;
         let mut ws = self.workspace();
         self.calibrate(calibration, settings, 0, |_, w| {
@@ -227,13 +230,15 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         &self,
         calibration: &SpatialCalibration<B>,
         settings: &ConformalSettings,
-    ) -> Result<SpatialConformal, LearnSpatialError>
+    ) -> Result<SpatialConformal, BoundError>
     where
         S: vigp_core::Inputs<U>,
     {
         self.check_inputs(U)?;
         if calibration.input_count() != U {
-            return Err(BoundError::Mismatch("calibration windows carry other inputs").into());
+            return Err(BoundError::Mismatch(
+                "calibration windows carry other inputs",
+            ));
         }
         let mut ws = self.workspace();
         self.calibrate(calibration, settings, U, |i, w| {
@@ -258,7 +263,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z0: &SpatialState<B>,
         steps: usize,
         bound: &SpatialConformal,
-    ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
+    ) -> Result<Vec<BoundedSpatialState<B>>, BoundError> {
         self.check_bound(bound, 0, steps)?;
         let trace = self.trace(z0, steps, &mut self.workspace())?;
         self.bounded(trace, bound, |_| (&[], &[]))
@@ -275,7 +280,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         bound: &SpatialConformal,
-    ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError>
+    ) -> Result<Vec<BoundedSpatialState<B>>, BoundError>
     where
         S: vigp_core::Inputs<U>,
     {
@@ -295,13 +300,12 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         bound: &SpatialConformal,
         inputs: usize,
         steps: usize,
-    ) -> Result<(), LearnSpatialError> {
+    ) -> Result<(), BoundError> {
         self.check_inputs(inputs)?;
         if bound.inputs != inputs {
             return Err(BoundError::Mismatch(
                 "the bound was calibrated under another number of inputs",
-            )
-            .into());
+            ));
         }
         if let Some(bad) = bound
             .noise_std
@@ -311,11 +315,12 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             return Err(BoundError::NonFinite {
                 what: "noise standard deviation",
                 value: *bad,
-            }
-            .into());
+            });
         }
         if bound.noise_std.len() != N || !same_dt(bound.dt, self.stepper().dt()) {
-            return Err(BoundError::Mismatch("the bound was calibrated for another model").into());
+            return Err(BoundError::Mismatch(
+                "the bound was calibrated for another model",
+            ));
         }
         bound.region.check(self.gp().input_dim())?;
         // a bound edited or loaded from a file: its quantiles must cover
@@ -328,8 +333,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             return Err(BoundError::HorizonTooLong {
                 calibrated,
                 requested: steps,
-            }
-            .into());
+            });
         }
         Ok(())
     }
@@ -342,14 +346,16 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         cal: &SpatialCalibration<B>,
         settings: &ConformalSettings,
         inputs: usize,
-        mut trace: impl FnMut(usize, &SpatialWindow<B>) -> Result<Trace<B, N>, LearnSpatialError>,
-    ) -> Result<SpatialConformal, LearnSpatialError> {
+        mut trace: impl FnMut(usize, &SpatialWindow<B>) -> Result<Trace<B, N>, LearnError>,
+    ) -> Result<SpatialConformal, BoundError> {
         check_delta(settings.delta)?;
         // fail early, before the predictions
         quantile_index(cal.len(), settings.delta)?;
         let dt = self.stepper().dt();
         if !same_dt(cal.dt(), dt) {
-            return Err(BoundError::Mismatch("calibration dt differs from the model's").into());
+            return Err(BoundError::Mismatch(
+                "calibration dt differs from the model's",
+            ));
         }
         let noise_std = self.gp().noise_std();
         let (noise_v, noise_w) = split::<B>(&noise_std);
@@ -434,7 +440,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         trace: Trace<B, N>,
         bound: &SpatialConformal,
         input: impl Fn(usize) -> (&'u [f64], &'u [f64]),
-    ) -> Result<Vec<BoundedSpatialState<B>>, LearnSpatialError> {
+    ) -> Result<Vec<BoundedSpatialState<B>>, BoundError> {
         let dt = self.stepper().dt();
         let (noise_v, noise_w) = split::<B>(&bound.noise_std);
         let (mut st, mut sr) = (Vec::new(), Vec::new());
@@ -476,7 +482,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                     ("rotation bound", state.rotation),
                 ] {
                     if !(value.is_finite() && value >= 0.0) {
-                        return Err(BoundError::NonFinite { what, value }.into());
+                        return Err(BoundError::NonFinite { what, value });
                     }
                 }
                 Ok(state)

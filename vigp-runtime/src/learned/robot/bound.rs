@@ -31,6 +31,8 @@ pub struct RobotWindow {
     pub positions: Vec<Vec<f64>>,
 }
 
+impl crate::bound::windows::sealed::Sealed for RobotWindow {}
+
 impl CalibrationWindow for RobotWindow {
     type Sample = Vec<f64>;
 
