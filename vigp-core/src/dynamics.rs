@@ -15,8 +15,8 @@
 //! evaluated on dual numbers (`vigp::Mechanism`), against which the tests
 //! check every generated term.
 
+use crate::error::StepError;
 use crate::state::CoordinateKind;
-use crate::step::StepError;
 use nalgebra::{SMatrix, SVector};
 
 /// The mechanical terms of a model at one configuration q.

@@ -132,3 +132,23 @@ pub(crate) fn check_positive(what: &'static str, value: f64) -> Result<(), GpErr
         Err(GpError::InvalidHyperparameter { what, value })
     }
 }
+
+/// Normalised-unit hyperparameters in original units: ℓ_j·s_x,j,
+/// σ_f²·s_y², σ_n²·s_y² (`input_scale` s_x, `output_scale` s_y).
+pub(crate) fn original_units(
+    hp: &Hyperparameters,
+    input_scale: &[f64],
+    output_scale: f64,
+) -> Hyperparameters {
+    let s2 = output_scale * output_scale;
+    Hyperparameters {
+        length_scales: hp
+            .length_scales
+            .iter()
+            .zip(input_scale)
+            .map(|(l, s)| l * s)
+            .collect(),
+        signal_variance: hp.signal_variance * s2,
+        noise_variance: hp.noise_variance * s2,
+    }
+}

@@ -9,10 +9,11 @@ use vigp_core::gp as core_gp;
 
 use crate::error::GpError;
 use crate::kernel::Hyperparameters;
+use crate::kernel::original_units;
 use crate::mean::Resolved;
 use crate::normalise::InputNormaliser;
 use crate::packed;
-use crate::train::{lower_inverse, original_units};
+use crate::packed::lower_inverse;
 use crate::variance_thread::Helper;
 
 /// How [`Gp::predict_into`] computes the posterior variance of an exact GP

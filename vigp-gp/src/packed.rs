@@ -46,6 +46,25 @@ pub(crate) fn unpack(l: &[f64], n: usize) -> Mat<f64> {
     m
 }
 
+/// L⁻¹ of a lower-triangular factor (the upper part of `l` is ignored),
+/// packed by rows.
+pub(crate) fn lower_inverse(l: &Mat<f64>) -> Vec<f64> {
+    let n = l.nrows();
+    let mut low = Mat::<f64>::zeros(n, n);
+    for j in 0..n {
+        for i in j..n {
+            low[(i, j)] = l[(i, j)];
+        }
+    }
+    let mut inv = Mat::<f64>::zeros(n, n);
+    faer::linalg::triangular_inverse::invert_lower_triangular(
+        inv.as_mut(),
+        low.as_ref(),
+        faer::Par::Seq,
+    );
+    pack_rows(&inv)
+}
+
 /// The lower triangle packed column by column (the layout of
 /// `vigp_core::gp::ExportedGp::cholesky`).
 pub(crate) fn to_column_packed(l: &[f64], n: usize) -> Vec<f64> {

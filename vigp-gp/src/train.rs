@@ -5,11 +5,12 @@
 
 use std::sync::Arc;
 
-use faer::{Mat, Par};
+use faer::Par;
 use rayon::prelude::*;
 
 use crate::error::GpError;
 use crate::kernel::Hyperparameters;
+use crate::kernel::original_units;
 use crate::lbfgs::{self, LbfgsOptions};
 use crate::likelihood::{self, Factor};
 use crate::mean::{PriorMean, Resolved};
@@ -18,6 +19,7 @@ use crate::normalise::{InputNormaliser, output_scale};
 use crate::options::{
     Curvature, InducingInit, InducingReport, Method, OutputReport, TrainOptions, TrainReport,
 };
+use crate::packed::lower_inverse;
 use crate::rng::SplitMix64;
 use crate::{packed, restarts, sparse};
 
@@ -68,26 +70,6 @@ fn seed_memory(c: &Curvature, n: usize, d: usize) -> Result<CurvaturePairs, GpEr
             Ok((s.clone(), y.iter().map(|v| v * scale).collect()))
         })
         .collect()
-}
-
-/// Normalised-unit hyperparameters in original units: ℓ_j·s_x,j,
-/// σ_f²·s_y², σ_n²·s_y² (`input_scale` s_x, `output_scale` s_y).
-pub(crate) fn original_units(
-    hp: &Hyperparameters,
-    input_scale: &[f64],
-    output_scale: f64,
-) -> Hyperparameters {
-    let s2 = output_scale * output_scale;
-    Hyperparameters {
-        length_scales: hp
-            .length_scales
-            .iter()
-            .zip(input_scale)
-            .map(|(l, s)| l * s)
-            .collect(),
-        signal_variance: hp.signal_variance * s2,
-        noise_variance: hp.noise_variance * s2,
-    }
 }
 
 pub(crate) fn prepare(
@@ -170,21 +152,6 @@ fn column_major(x: &[f64], d: usize) -> Vec<f64> {
         }
     }
     out
-}
-
-/// L⁻¹ of a lower-triangular factor (the upper part of `l` is ignored),
-/// packed by rows.
-pub(crate) fn lower_inverse(l: &Mat<f64>) -> Vec<f64> {
-    let n = l.nrows();
-    let mut low = Mat::<f64>::zeros(n, n);
-    for j in 0..n {
-        for i in j..n {
-            low[(i, j)] = l[(i, j)];
-        }
-    }
-    let mut inv = Mat::<f64>::zeros(n, n);
-    faer::linalg::triangular_inverse::invert_lower_triangular(inv.as_mut(), low.as_ref(), Par::Seq);
-    packed::pack_rows(&inv)
 }
 
 /// The inducing inputs (normalised units, row-major M × d) of a sparse

@@ -142,7 +142,8 @@ pub trait Coordinates<const N: usize, const M: usize> {
 
     /// Continuous maximal velocity Ẋ = (∂X/∂q)·q̇ (exact, by a dual number).
     fn maximal_velocity(&self, q: &SVector<f64, N>, qdot: &SVector<f64, N>) -> SVector<f64, M> {
-        self.maximal_positions(&crate::kinematics::tangent(q, qdot))
+        // q + ε·q̇: the ε part of X carries (∂X/∂q)·q̇
+        self.maximal_positions(&q.zip_map(qdot, num_dual::Dual::new))
             .map(|x| x.eps)
     }
 

@@ -14,10 +14,10 @@
 
 use super::{Encoding, LearnedError};
 use crate::dynamics::Dynamics;
+use crate::error::StepError;
 use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StateJacobian, StepDerivatives};
 use crate::linalg::{solve_kkt, solve_partial};
 use crate::state::{CoordinateKind, State};
-use crate::step::StepError;
 use nalgebra::{SMatrix, SVector};
 
 /// ∂v/∂q₀, ∂v/∂v₀, ∂v/∂u and ∂v/∂u_prev of a learned step's velocity

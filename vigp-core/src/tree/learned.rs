@@ -11,11 +11,11 @@
 use super::derivatives::{DerivativeBuffers, derivative_scratch_len};
 use super::spatial::V3;
 use super::{Body, BodyScratch, Engine, EngineOptions, JointKind, TreeRef};
+use crate::error::StepError;
 use crate::forced::{InputJacobian, RolloutDerivativeBuffers, StateJacobian, StepDerivatives};
 use crate::gp::ExportedGp;
 use crate::learned::{Encoding, LearnedError, Prior, VelocityDerivatives, buffer_length};
 use crate::state::{CoordinateKind, State};
-use crate::step::StepError;
 use nalgebra::SVector;
 
 /// A learned robot as data: `N` joints, `D` GP inputs (the encoded state,

@@ -52,6 +52,7 @@
 //! retraction in tests/step/tangent.rs.
 
 use super::{LieStepper, SpatialState, constraints_and_jacobian, link_pose, pack, unpack};
+use crate::error::StepError;
 use crate::forced::{InputJacobian, StateJacobian};
 use crate::real::Jet2;
 use crate::spatial::geometry::{Motion3, Pose3, cross, mul_mv, mul_mv_f, sub};
@@ -59,7 +60,6 @@ use crate::spatial::model::{
     Joint3, Link3, Spatial, joint_coordinate, joint_rates, joint_residual,
 };
 use crate::spatial::so3;
-use crate::step::StepError;
 use nalgebra::{Matrix3, SMatrix, SVector, UnitQuaternion, Vector3};
 
 /// R·(I + ε̂ + s·ε̂²) with ε the jet variables `base..base + 3`.
