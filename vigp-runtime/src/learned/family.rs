@@ -8,13 +8,19 @@
 //! projected onto the constraints of the next configuration (eq. 8).
 //!
 //! What differs between configuration spaces is what a [`Space`] says:
-//! how a state is encoded, checked and advanced, and where the nominal
-//! prior of a noisy state is evaluated. Minimal coordinates in ℝⁿ
+//! how a state is encoded, checked and advanced, where the nominal prior
+//! of a noisy state is evaluated, the space's error type and whether a
+//! model trained with inputs predicts without them. Its prior step is a
+//! [`NominalStep`]. Minimal coordinates in ℝⁿ
 //! ([`Variational`](crate::Variational), `vigp::learned::Learned`) and
 //! bodies in ℝ³ × SO(3) ([`LieStepper`](vigp_core::spatial::LieStepper),
 //! `vigp::spatial::learned::LearnedSpatial`) are the one type
-//! [`LearnedIntegrator`], whose training, velocity prediction and step are
-//! written once here.
+//! [`LearnedIntegrator`], whose training, velocity prediction
+//! (`predict_velocity`, `predict_mean_velocity`), step (`step_in`,
+//! `step_mean_in`), their forced forms and accessors are written once
+//! here. What only one space has stays with it: exact derivatives and
+//! model files in minimal coordinates, the spatial conformal bound's
+//! pose errors.
 
 use super::{LearnError, LearnedStepInfo, Prior, distinct_rows};
 use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
