@@ -50,13 +50,13 @@
 pub(crate) mod conformal;
 mod jacobian;
 mod rkhs;
-mod theorem1;
+mod uniform;
 pub(crate) mod windows;
 
 pub use conformal::{Calibration, ConformalParts, Region, Window};
 pub use jacobian::projection_jacobian;
 pub use rkhs::RkhsOutput;
-pub use theorem1::Theorem1Output;
+pub use uniform::Theorem1Output;
 pub use windows::{CalibrationOf, CalibrationWindow};
 
 use crate::gp::{GpError, Workspace};
@@ -1190,7 +1190,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         }
         let parts = match kind {
             BoundKind::Theorem1(s) => {
-                let t = theorem1::compute(gp, s, &sigma)?;
+                let t = uniform::compute(gp, s, &sigma)?;
                 BoundParts::Theorem1 {
                     outputs: t.outputs,
                     domain_lower: t.lower,
