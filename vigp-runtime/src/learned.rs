@@ -362,14 +362,6 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Space<N> for Variationa
         z.is_finite()
     }
 
-    fn check(z: &State<N>) -> Result<(), StepError> {
-        if z.is_finite() {
-            Ok(())
-        } else {
-            Err(StepError::NonFiniteState { step: None })
-        }
-    }
-
     fn consistent(&self, z: &State<N>) -> Result<State<N>, StepError> {
         consistent_state(self.model(), &z.q, &z.v, self.stepper().dt())
     }

@@ -25,7 +25,8 @@
 #![allow(clippy::needless_range_loop)]
 
 use super::engine::{
-    BodyScratch, Engine, EngineError, EngineOptions, EngineReport, check_len, check_time_step,
+    BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives, check_len,
+    check_time_step,
 };
 use super::model::Tree;
 
@@ -347,11 +348,15 @@ impl<T: Tree> Engine<T> {
         // (q₁, v₁) computes, bit for bit: the kinematics at q₁ = q₀ + h·v₀
         // (fixed through the iteration) and the twists and composite
         // momenta of the last iterate, v₁
-        self.loaded_term_derivatives(terms, ws);
-        let (p_q, rest) = terms.split_at_mut(n * n);
-        let (p_v, rest) = rest.split_at_mut(n * n);
-        let (t_q, rest) = rest.split_at_mut(n * n);
-        let (t_v, v_q) = rest.split_at_mut(n * n);
+        let mut blocks = TermDerivatives::split(terms, n);
+        self.loaded_term_derivatives(&mut blocks, ws);
+        let TermDerivatives {
+            p_q,
+            p_v,
+            t_q,
+            t_v,
+            v_q,
+        } = blocks;
         // K = ∂r/∂q₁ = h·(∂(∂T/∂q)/∂q − ∂(∇V)/∂q) − ∂P/∂q, in t_q
         for ((k, vq), pq) in t_q.iter_mut().zip(v_q.iter()).zip(p_q.iter()) {
             *k = h * (*k - vq) - pq;

@@ -1169,37 +1169,28 @@ impl<T: Tree> Engine<T> {
     ) -> Result<(), EngineError> {
         let ws = self.scratch(ws)?;
         let n = ws.len();
-        let TermDerivatives {
-            p_q,
-            p_v,
-            t_q,
-            t_v,
-            v_q,
-        } = out;
-        check_len("p_q", p_q.len(), n * n)?;
-        check_len("p_v", p_v.len(), n * n)?;
-        check_len("t_q", t_q.len(), n * n)?;
-        check_len("t_v", t_v.len(), n * n)?;
-        check_len("v_q", v_q.len(), n * n)?;
+        let mut out = out;
+        check_len("p_q", out.p_q.len(), n * n)?;
+        check_len("p_v", out.p_v.len(), n * n)?;
+        check_len("t_q", out.t_q.len(), n * n)?;
+        check_len("t_v", out.t_v.len(), n * n)?;
+        check_len("v_q", out.v_q.len(), n * n)?;
         self.momentum_pass(q, v, ws)?;
-        self.pair_derivatives(ws, p_q, p_v, Some((t_q, t_v, v_q)));
+        self.loaded_term_derivatives(&mut out, ws);
         Ok(())
     }
 
     /// [`Engine::term_derivatives`] at the (q, v) whose kinematics and
     /// momenta `ws` already holds (its momentum pass, or the last
     /// iterate of a converged sub-step, which equals it bit for bit),
-    /// into consecutive N × N blocks of `terms` in the order of
-    /// [`TermDerivatives`].
-    pub(super) fn loaded_term_derivatives(&self, terms: &mut [f64], ws: &[BodyScratch]) {
-        let TermDerivatives {
-            p_q,
-            p_v,
-            t_q,
-            t_v,
-            v_q,
-        } = TermDerivatives::split(terms, ws.len());
-        self.pair_derivatives(ws, p_q, p_v, Some((t_q, t_v, v_q)));
+    /// into `out` (blocks of N × N, lengths checked by the caller).
+    pub(super) fn loaded_term_derivatives(
+        &self,
+        out: &mut TermDerivatives<'_>,
+        ws: &[BodyScratch],
+    ) {
+        let rest = (&mut *out.t_q, &mut *out.t_v, &mut *out.v_q);
+        self.pair_derivatives(ws, out.p_q, out.p_v, Some(rest));
     }
 
     /// p = M(q)v, ∂p/∂q and ∂p/∂v = M at (q, v): the part of

@@ -68,9 +68,16 @@ pub trait Space<const N: usize> {
     /// Whether every number of the state is finite.
     fn is_finite(z: &Self::State) -> bool;
 
-    /// A state a step may start from, as the nominal step checks it
-    /// (finite; unit quaternions).
-    fn check(z: &Self::State) -> Result<(), StepError>;
+    /// A state a step may start from, as the nominal step checks it: by
+    /// default a finite one ([`StepError::NonFiniteState`] otherwise); a
+    /// space with more to check (unit quaternions) says so.
+    fn check(z: &Self::State) -> Result<(), StepError> {
+        if Self::is_finite(z) {
+            Ok(())
+        } else {
+            Err(StepError::NonFiniteState { step: None })
+        }
+    }
 
     /// What training asks of a finite state beyond finiteness (transition
     /// `i`; e.g. unit quaternions). Nothing by default.
