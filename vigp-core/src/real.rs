@@ -94,6 +94,56 @@ fn sincos_f64(x: f64) -> (f64, f64) {
     libm::sincos(x)
 }
 
+/// The operations of a jet with a value field `v` that touch the value
+/// alone or reduce to a product: −x = x·(−1) and x ± c.
+macro_rules! scalar_shifts {
+    ($jet:ident) => {
+        impl<const N: usize> Neg for $jet<N> {
+            type Output = Self;
+            #[inline]
+            fn neg(self) -> Self {
+                self * -1.0
+            }
+        }
+
+        impl<const N: usize> Add<f64> for $jet<N> {
+            type Output = Self;
+            #[inline]
+            fn add(mut self, o: f64) -> Self {
+                self.v += o;
+                self
+            }
+        }
+
+        impl<const N: usize> Sub<f64> for $jet<N> {
+            type Output = Self;
+            #[inline]
+            fn sub(mut self, o: f64) -> Self {
+                self.v -= o;
+                self
+            }
+        }
+    };
+}
+
+/// Inside `impl Real for` a jet with a value field `v`: `from_f64` (a
+/// constant) and `value` (the field).
+macro_rules! value_of_v {
+    () => {
+        #[inline]
+        fn from_f64(x: f64) -> Self {
+            Self::constant(x)
+        }
+        #[inline]
+        fn value(self) -> f64 {
+            self.v
+        }
+    };
+}
+
+scalar_shifts!(Jet1);
+scalar_shifts!(Jet2);
+
 /// A first-order jet in `N` directions: value `v` and gradient `g`.
 ///
 /// Cost: one value operation plus `N` for the gradient (products: `2N`).
@@ -169,32 +219,6 @@ impl<const N: usize> Mul for Jet1<N> {
     }
 }
 
-impl<const N: usize> Neg for Jet1<N> {
-    type Output = Self;
-    #[inline]
-    fn neg(self) -> Self {
-        self * -1.0
-    }
-}
-
-impl<const N: usize> Add<f64> for Jet1<N> {
-    type Output = Self;
-    #[inline]
-    fn add(mut self, o: f64) -> Self {
-        self.v += o;
-        self
-    }
-}
-
-impl<const N: usize> Sub<f64> for Jet1<N> {
-    type Output = Self;
-    #[inline]
-    fn sub(mut self, o: f64) -> Self {
-        self.v -= o;
-        self
-    }
-}
-
 impl<const N: usize> Mul<f64> for Jet1<N> {
     type Output = Self;
     #[inline]
@@ -208,14 +232,7 @@ impl<const N: usize> Mul<f64> for Jet1<N> {
 }
 
 impl<const N: usize> Real for Jet1<N> {
-    #[inline]
-    fn from_f64(x: f64) -> Self {
-        Self::constant(x)
-    }
-    #[inline]
-    fn value(self) -> f64 {
-        self.v
-    }
+    value_of_v!();
     #[inline]
     fn sincos(self) -> (Self, Self) {
         let (s, c) = sincos_f64(self.v);
@@ -348,32 +365,6 @@ impl<const N: usize> Mul for Jet2<N> {
     }
 }
 
-impl<const N: usize> Neg for Jet2<N> {
-    type Output = Self;
-    #[inline]
-    fn neg(self) -> Self {
-        self * -1.0
-    }
-}
-
-impl<const N: usize> Add<f64> for Jet2<N> {
-    type Output = Self;
-    #[inline]
-    fn add(mut self, o: f64) -> Self {
-        self.v += o;
-        self
-    }
-}
-
-impl<const N: usize> Sub<f64> for Jet2<N> {
-    type Output = Self;
-    #[inline]
-    fn sub(mut self, o: f64) -> Self {
-        self.v -= o;
-        self
-    }
-}
-
 impl<const N: usize> Mul<f64> for Jet2<N> {
     type Output = Self;
     #[inline]
@@ -390,14 +381,7 @@ impl<const N: usize> Mul<f64> for Jet2<N> {
 }
 
 impl<const N: usize> Real for Jet2<N> {
-    #[inline]
-    fn from_f64(x: f64) -> Self {
-        Self::constant(x)
-    }
-    #[inline]
-    fn value(self) -> f64 {
-        self.v
-    }
+    value_of_v!();
     #[inline]
     fn sincos(self) -> (Self, Self) {
         let (s, c) = sincos_f64(self.v);
