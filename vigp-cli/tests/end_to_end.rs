@@ -10,13 +10,16 @@
 //! `u_<joint>` columns).
 
 use std::f64::consts::PI;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use vigp::prelude::*;
 use vigp::systems::Cartpole;
 
 mod common;
-use common::{mse_line, run_tool, s, temp_dir, vigp};
+use common::{
+    argv, assert_file_is, cell, mse_line, predict_args, run_error, run_tool, s, score_args, table,
+    table_with_header, temp_dir, vigp, write_file,
+};
 
 #[path = "../../tests/common/drive_cartpole.rs"]
 mod drive_cartpole;
@@ -108,12 +111,36 @@ fn measured_csv<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     text
 }
 
-/// `predict --model MODEL --data DATA --steps STEPS --out OUT` (without the
-/// program name).
-fn predict_args<'a>(model: &'a str, data: &'a str, steps: &'a str, out: &'a str) -> Vec<&'a str> {
-    vec![
-        "predict", "--model", model, "--data", data, "--steps", steps, "--out", out,
-    ]
+/// `measured_csv(truth, runs, seed)` written into `dir` as `name`: its path.
+fn write_measured<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    dir: &Path,
+    name: &str,
+    truth: M,
+    runs: std::ops::Range<usize>,
+    seed: u64,
+) -> PathBuf {
+    write_file(dir, name, measured_csv(truth, runs, seed))
+}
+
+/// Asserts that a `score` report's learned MSE is below its nominal one.
+fn learned_below_nominal(report: &str) {
+    let (nominal, learned) = mse_line(report);
+    assert!(
+        learned < nominal,
+        "learned {learned:e} ≥ nominal {nominal:e}"
+    );
+}
+
+/// `fit --system cartpole --data TRAIN --out OUT --restarts 0 --sparse M`,
+/// then `extra` (without the program name).
+fn sparse_fit_args<'a>(
+    train: &'a Path,
+    out: &'a Path,
+    sparse: &'a str,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
+    let line = "fit --system cartpole --data {} --out {} --restarts 0 --sparse {}";
+    [&argv(line, &[s(train), s(out), sparse])[..], extra].concat()
 }
 
 #[test]
@@ -126,37 +153,14 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     truth.links.pole.mass *= 1.1;
     truth.joints.rail.damping = 0.5;
     truth.joints.hinge.damping = 0.1;
-    let (train, test) = (dir.join("train.csv"), dir.join("test.csv"));
-    std::fs::write(&train, measured_csv(truth.minimal(), 0..8, 1)).unwrap();
-    std::fs::write(&test, measured_csv(truth.minimal(), 100..104, 2)).unwrap();
+    let train = write_measured(&dir, "train.csv", truth.minimal(), 0..8, 1);
+    let test = write_measured(&dir, "test.csv", truth.minimal(), 100..104, 2);
     let model = dir.join("model.json");
-    vigp(&[
-        "fit",
-        "--system",
-        "cartpole",
-        "--data",
-        s(&train),
-        "--out",
-        s(&model),
-        "--restarts",
-        "1",
-        "--max-samples",
-        "200",
-    ]);
-    let report = vigp(&[
-        "score",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "20",
-    ]);
-    let (nominal, learned) = mse_line(&report);
-    assert!(
-        learned < nominal,
-        "learned {learned:e} ≥ nominal {nominal:e}"
-    );
+    vigp(&argv(
+        "fit --system cartpole --data {} --out {} --restarts 1 --max-samples 200",
+        &[s(&train), s(&model)],
+    ));
+    learned_below_nominal(&vigp(&score_args(s(&model), s(&test), "20")));
 
     // predict: trajectories with one-step bounds
     let pred = dir.join("pred.csv");
@@ -186,8 +190,7 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     );
 
     // predict with a conformal bound calibrated on other held-out runs
-    let cal = dir.join("calibration.csv");
-    std::fs::write(&cal, measured_csv(truth.minimal(), 200..204, 3)).unwrap();
+    let cal = write_measured(&dir, "calibration.csv", truth.minimal(), 200..204, 3);
     let pred_c = dir.join("pred_conformal.csv");
     let mut args = predict_args(s(&model), s(&test), "5", s(&pred_c));
     args.extend(["--calibration", s(&cal)]);
@@ -218,34 +221,23 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
     // predict refuses what score refuses, before any work: no steps, an
     // output in a directory that does not exist
     let tool = vigp::cli::paper_systems();
-    let mut sink = Vec::new();
     for (steps, out) in [("0", s(&pred)), ("5", "/nonexistent/pred.csv")] {
-        let args = std::iter::once("vigp").chain(predict_args(s(&model), s(&test), steps, out));
-        let e = vigp::cli::run(&tool, args, &mut sink).unwrap_err();
-        let e = e.to_string();
+        let e = run_error(&tool, &predict_args(s(&model), s(&test), steps, out));
         assert!(
             e.contains("--steps must be at least 1") || e.contains("/nonexistent does not exist"),
             "{e}"
         );
     }
     // export says so too, rather than the operating system's bare error
-    let args = [
-        "vigp",
-        "export",
-        "--model",
-        s(&model),
-        "--out",
-        "/nonexistent/model.rs",
-    ];
-    let e = vigp::cli::run(&tool, args, &mut sink).unwrap_err();
-    assert!(e.to_string().contains("/nonexistent does not exist"), "{e}");
+    let line = "export --model {} --out /nonexistent/model.rs";
+    let e = run_error(&tool, &argv(line, &[s(&model)]));
+    assert!(e.contains("/nonexistent does not exist"), "{e}");
 
     // a run of one row cannot start a prediction: skipped with a note (it
     // refused the whole file)
-    let with_lonely = dir.join("with_lonely.csv");
     let mut text = std::fs::read_to_string(&test).unwrap();
     text.push_str("lonely,0,0.1,0.2\n");
-    std::fs::write(&with_lonely, text).unwrap();
+    let with_lonely = write_file(&dir, "with_lonely.csv", text);
     let report = vigp(&predict_args(s(&model), s(&with_lonely), "5", s(&pred)));
     assert!(
         report.contains("note: skipped 1 run(s) of one row (a start state needs two): lonely"),
@@ -263,24 +255,12 @@ fn perturbed_cartpole_fit_then_score_beats_the_nominal_model() {
         1,
     );
     assert_ne!(swapped, json, "the coordinates block moved: {json:.200}");
-    let edited = dir.join("edited.json");
-    std::fs::write(&edited, swapped).unwrap();
+    let edited = write_file(&dir, "edited.json", swapped);
     for args in [
-        vec![
-            "vigp",
-            "score",
-            "--model",
-            s(&edited),
-            "--data",
-            s(&test),
-            "--steps",
-            "5",
-        ],
-        vec!["vigp", "export", "--model", s(&edited), "--out", s(&pred)],
+        score_args(s(&edited), s(&test), "5").to_vec(),
+        vec!["export", "--model", s(&edited), "--out", s(&pred)],
     ] {
-        let e = vigp::cli::run(&tool, args, &mut sink)
-            .unwrap_err()
-            .to_string();
+        let e = run_error(&tool, &args);
         assert!(
             e.contains(
                 "[hinge, rail] are neither the minimal coordinates [rail, hinge] nor the maximal"
@@ -311,39 +291,19 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
     truth.links.rope.mass *= 1.1;
     truth.joints.rail.damping = 0.5;
     truth.joints.hook.damping = 0.02;
-    let (train, test) = (dir.join("train.csv"), dir.join("test.csv"));
-    std::fs::write(&train, measured_csv(truth.minimal(), 0..8, 3)).unwrap();
-    std::fs::write(&test, measured_csv(truth.minimal(), 50..53, 4)).unwrap();
+    let train = write_measured(&dir, "train.csv", truth.minimal(), 0..8, 3);
+    let test = write_measured(&dir, "test.csv", truth.minimal(), 50..53, 4);
     let model = dir.join("crane.json");
     let tool = [vigp::cli::system::<Crane>()];
     let run = |args: &[&str]| {
         run_tool(&tool, "crane-tool", args).unwrap_or_else(|e| panic!("{args:?}: {e}"))
     };
     // no --system needed with one mechanism
-    run(&[
-        "fit",
-        "--data",
-        s(&train),
-        "--out",
-        s(&model),
-        "--restarts",
-        "1",
-        "--max-samples",
-        "200",
-    ]);
-    let (nominal, learned) = mse_line(&run(&[
-        "score",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "20",
-    ]));
-    assert!(
-        learned < nominal,
-        "learned {learned:e} ≥ nominal {nominal:e}"
-    );
+    run(&argv(
+        "fit --data {} --out {} --restarts 1 --max-samples 200",
+        &[s(&train), s(&model)],
+    ));
+    learned_below_nominal(&run(&score_args(s(&model), s(&test), "20")));
     // a model of another mechanism is refused with its name
     let mut out = Vec::new();
     let e = vigp::cli::run(
@@ -357,12 +317,11 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
     // an actuated mechanism's model trained with inputs exports with them:
     // the source is exactly the fixture that tests/learn/embedded_learned.rs
     // compiles and steps under inputs (against the std model, 1e-12)
-    let forced = dir.join("learned_drive_cartpole.json");
-    std::fs::write(
-        &forced,
+    let forced = write_file(
+        &dir,
+        "learned_drive_cartpole.json",
         include_str!("../../tests/fixtures/learned_drive_cartpole.json"),
-    )
-    .unwrap();
+    );
     let rs = dir.join("forced.rs");
     let mut out = Vec::new();
     vigp::cli::run(
@@ -376,9 +335,9 @@ fn a_mechanism_declared_here_gets_the_same_tool() {
         out.contains("d = 7 inputs (state, then control inputs rail, previous then current)"),
         "{out}"
     );
-    assert_eq!(
-        std::fs::read_to_string(&rs).unwrap(),
-        include_str!("../../tests/fixtures/learned_drive_cartpole.rs")
+    assert_file_is(
+        &rs,
+        include_str!("../../tests/fixtures/learned_drive_cartpole.rs"),
     );
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -430,42 +389,24 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
         }
         text
     };
-    let (train, test) = (dir.join("train.csv"), dir.join("test.csv"));
-    std::fs::write(&train, csv(0..6)).unwrap();
-    std::fs::write(&test, csv(6..9)).unwrap();
+    let train = write_file(&dir, "train.csv", csv(0..6));
+    let test = write_file(&dir, "test.csv", csv(6..9));
     // held-out runs for the conformal calibration (drawn after the others,
     // so that the training and test runs are unchanged)
-    let held_out = dir.join("held_out.csv");
-    std::fs::write(&held_out, csv(9..15)).unwrap();
+    let held_out = write_file(&dir, "held_out.csv", csv(9..15));
     let model = dir.join("drive.json");
     let tool = [vigp::cli::system::<DriveCartpole>()];
     let run = |args: &[&str]| run_tool(&tool, "drive-tool", args);
-    let fit = run(&[
-        "fit",
-        "--data",
-        s(&train),
-        "--out",
-        s(&model),
-        "--restarts",
-        "1",
-    ])
+    let fit = run(&argv(
+        "fit --data {} --out {} --restarts 1",
+        &[s(&train), s(&model)],
+    ))
     .unwrap();
     assert!(
         fit.contains("with inputs [rail], SinCos encoding (7 inputs)"),
         "{fit}"
     );
-    let (nominal, learned) = mse_line(
-        &run(&[
-            "score",
-            "--model",
-            s(&model),
-            "--data",
-            s(&test),
-            "--steps",
-            "20",
-        ])
-        .unwrap(),
-    );
+    let (nominal, learned) = mse_line(&run(&score_args(s(&model), s(&test), "20")).unwrap());
     // measured: nominal 3.3e-6, learned 9.6e-15 (noise-free data). The
     // bound checks the inputs' alignment: on a driven pendulum, inputs
     // logged one row early left the learned error at 0.6× the nominal one.
@@ -498,17 +439,10 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
         "{fit}"
     );
     let floored = dir.join("floored.json");
-    let said = run(&[
-        "fit",
-        "--data",
-        s(&train),
-        "--out",
-        s(&floored),
-        "--restarts",
-        "1",
-        "--noise-floor",
-        "1e-6",
-    ])
+    let said = run(&argv(
+        "fit --data {} --out {} --restarts 1 --noise-floor 1e-6",
+        &[s(&train), s(&floored)],
+    ))
     .unwrap();
     assert!(!said.contains("note: v_"), "{said}");
     // the default fit's RKHS bound loses the variance in every run: an
@@ -517,7 +451,7 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     let e = run(&predict_args(s(&model), s(&test), "5", s(&pred))).unwrap_err();
     assert!(e.to_string().contains("lost to rounding"), "{e}");
     // an output path that is a directory is refused before any work
-    let e = run(&["fit", "--data", s(&train), "--out", s(&dir)]).unwrap_err();
+    let e = run(&argv("fit --data {} --out {}", &[s(&train), s(&dir)])).unwrap_err();
     assert!(e.to_string().contains("is a directory"), "{e}");
     assert!(
         noise(&floored).iter().all(|&n| n >= 1e-6),
@@ -532,16 +466,11 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
     // out of range; a negative value is a value to refuse with its
     // reason, not a flag
     for floor in ["10", "-1"] {
-        let e = run(&[
-            "fit",
-            "--data",
-            s(&train),
-            "--out",
-            s(&floored),
-            "--noise-floor",
-            floor,
-        ])
-        .unwrap_err();
+        let fit = argv(
+            "fit --data {} --out {} --noise-floor {}",
+            &[s(&train), s(&floored), floor],
+        );
+        let e = run(&fit).unwrap_err();
         assert!(e.to_string().contains("--noise-floor must be"), "{e}");
     }
     // `predict` under each run's logged inputs, with the RKHS bound (the
@@ -552,34 +481,25 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
         said.contains("3 runs × 5 steps (0 failed); rkhs bound"),
         "{said}"
     );
-    let table = |path: &Path| -> Vec<Vec<String>> {
-        std::fs::read_to_string(path)
-            .unwrap()
-            .lines()
-            .map(|l| l.split(',').map(str::to_string).collect())
-            .collect()
-    };
-    let (p, truth) = (table(&pred), table(&test));
-    assert_eq!(
-        p[0].join(","),
-        "run,t,rail,hinge,v_rail,v_hinge,u_rail,bound,position_bound"
-    );
+    let header = "run,t,rail,hinge,v_rail,v_hinge,u_rail,bound,position_bound";
+    let (p, truth) = (table_with_header(&pred, header), table(&test));
     let mut worst = 0.0f64;
     for run in 0..3 {
         // 6 rows per run in the prediction, 81 in the data
         for k in 0..6 {
             let (row, want) = (&p[1 + 6 * run + k], &truth[1 + 81 * run + k]);
             assert_eq!(row[0], want[0]);
-            let x = |r: &[String], i: usize| r[i].parse::<f64>().unwrap();
             // the input that drove the step into row k is the data's row k
             if k > 0 {
-                assert_eq!(x(row, 6), x(want, 4), "run {run}, row {k}");
+                assert_eq!(cell(row, 6), cell(want, 4), "run {run}, row {k}");
             } else {
                 assert_eq!(row[6], "");
             }
-            let err = ((x(row, 2) - x(want, 2)).powi(2) + (x(row, 3) - x(want, 3)).powi(2)).sqrt();
+            let err = ((cell(row, 2) - cell(want, 2)).powi(2)
+                + (cell(row, 3) - cell(want, 3)).powi(2))
+            .sqrt();
             assert!(
-                err <= x(row, 8),
+                err <= cell(row, 8),
                 "run {run}, row {k}: {err:e} vs {}",
                 row[8]
             );
@@ -616,9 +536,16 @@ fn an_actuated_mechanism_learns_from_its_input_columns() {
         "{e}"
     );
     // data without the input column
-    let bare = dir.join("bare.csv");
-    std::fs::write(&bare, "run,t,rail,hinge\na,0,0,0\na,0.01,0,0\na,0.02,0,0\n").unwrap();
-    let e = run(&["fit", "--data", s(&bare), "--out", s(&dir.join("x.json"))]).unwrap_err();
+    let bare = write_file(
+        &dir,
+        "bare.csv",
+        "run,t,rail,hinge\na,0,0,0\na,0.01,0,0\na,0.02,0,0\n",
+    );
+    let e = run(&argv(
+        "fit --data {} --out {}",
+        &[s(&bare), s(&dir.join("x.json"))],
+    ))
+    .unwrap_err();
     assert!(e.to_string().contains("missing column `u_rail`"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -634,61 +561,22 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
     truth.links.pole.mass *= 1.1;
     truth.joints.rail.damping = 0.5;
     truth.joints.hinge.damping = 0.1;
-    let (train, test, cal) = (
-        dir.join("train.csv"),
-        dir.join("test.csv"),
-        dir.join("cal.csv"),
-    );
-    std::fs::write(&train, measured_csv(truth.minimal(), 0..4, 11)).unwrap();
-    std::fs::write(&test, measured_csv(truth.minimal(), 100..102, 12)).unwrap();
-    std::fs::write(&cal, measured_csv(truth.minimal(), 200..204, 13)).unwrap();
+    let train = write_measured(&dir, "train.csv", truth.minimal(), 0..4, 11);
+    let test = write_measured(&dir, "test.csv", truth.minimal(), 100..102, 12);
+    let cal = write_measured(&dir, "cal.csv", truth.minimal(), 200..204, 13);
     let model = dir.join("model.json");
-    let fit_args = |sparse: &'static str| {
-        [
-            "fit",
-            "--system",
-            "cartpole",
-            "--data",
-            s(&train),
-            "--out",
-            s(&model),
-            "--restarts",
-            "0",
-            "--sparse",
-            sparse,
-        ]
-        .map(str::to_owned)
-    };
     let tool = vigp::cli::paper_systems();
-    let fit_error = |sparse| {
-        let args = std::iter::once("vigp".to_owned()).chain(fit_args(sparse));
-        vigp::cli::run(&tool, args, &mut Vec::new())
-            .unwrap_err()
-            .to_string()
-    };
     // 4 runs of 200 samples: 4 × 198 transitions, all of them (more than
     // the exact GP's default 512)
-    let out = vigp(&fit_args("32").each_ref().map(String::as_str));
+    let out = vigp(&sparse_fit_args(&train, &model, "32", &[]));
     assert!(
         out.contains("N = 792 of 792 transitions")
             && out.contains("sparse GP with 32 inducing points"),
         "{out}"
     );
-    let report = vigp(&[
-        "score",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "20",
-    ]);
+    let report = vigp(&score_args(s(&model), s(&test), "20"));
     assert!(report.contains("N = 792, sparse GP, M = 32"), "{report}");
-    let (nominal, learned) = mse_line(&report);
-    assert!(
-        learned < nominal,
-        "learned {learned:e} ≥ nominal {nominal:e}"
-    );
+    learned_below_nominal(&report);
     // `--optimise-inducing` runs the joint refinement (2 outputs, 16
     // points in 5 inputs: 94 variables, the optimiser's compact form) and
     // reports it; the model still beats the nominal one. (Here the fits
@@ -697,10 +585,8 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
     // stops at its first gradient test; tests/gp/gp_sparse.rs shows the
     // refinement raising a bound.)
     let model_z = dir.join("model_z.json");
-    let mut args = fit_args("16").to_vec();
-    args[6] = s(&model_z).to_owned();
-    args.push("--optimise-inducing".into());
-    let out = vigp(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let optimise = ["--optimise-inducing"];
+    let out = vigp(&sparse_fit_args(&train, &model_z, "16", &optimise));
     assert!(out.contains("16 inducing points (optimised)"), "{out}");
     let line = out
         .lines()
@@ -711,15 +597,7 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
         .filter_map(|w| w.parse().ok())
         .collect();
     assert!(nums.len() >= 2 && nums[1] >= nums[0], "{line}");
-    let report_z = vigp(&[
-        "score",
-        "--model",
-        s(&model_z),
-        "--data",
-        s(&test),
-        "--steps",
-        "20",
-    ]);
+    let report_z = vigp(&score_args(s(&model_z), s(&test), "20"));
     let (nominal_z, learned_z) = mse_line(&report_z);
     assert!(learned_z < nominal_z, "{report_z}");
     let pred = dir.join("pred.csv");
@@ -727,12 +605,9 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
     // the message says why and what to use (it was "invalid saved model:
     // log_det_normalised is defined for exact GPs only")
     for bound in ["rkhs", "theorem1"] {
-        let mut args = vec!["vigp"];
-        args.extend(predict_args(s(&model), s(&test), "5", s(&pred)));
+        let mut args = predict_args(s(&model), s(&test), "5", s(&pred));
         args.extend(["--bound", bound]);
-        let e = vigp::cli::run(&tool, args, &mut Vec::new())
-            .unwrap_err()
-            .to_string();
+        let e = run_error(&tool, &args);
         assert!(
             e.contains("assumes the exact GP posterior, and this model is a sparse GP")
                 && e.contains("use the conformal bound"),
@@ -761,9 +636,8 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
     );
     // a model in maximal coordinates exports too (the tool refused it,
     // though the embedded engine steps either view)
-    let mut args = fit_args("16").to_vec();
-    args.extend(["--encoding".into(), "maximal".into()]);
-    vigp(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    let maximal = ["--encoding", "maximal"];
+    vigp(&sparse_fit_args(&train, &model, "16", &maximal));
     let out = vigp(&["export", "--model", s(&model), "--out", s(&rs)]);
     assert!(out.contains("6 GPs on M = 16 inducing points"), "{out}");
     let src = std::fs::read_to_string(&rs).unwrap();
@@ -773,23 +647,19 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
         "{src:.300}"
     );
     // more inducing points than transitions, or none: usage errors
-    let e = fit_error("5000");
+    let e = run_error(&tool, &sparse_fit_args(&train, &model, "5000", &[]));
     assert!(
         e.contains("--sparse 5000: more inducing points than the 792 training transitions"),
         "{e}"
     );
-    let e = fit_error("0");
+    let e = run_error(&tool, &sparse_fit_args(&train, &model, "0", &[]));
     assert!(
         e.contains("--sparse needs at least 1 inducing point"),
         "{e}"
     );
     // an optimiser memory of 0 is a usage error, not a training failure
-    let args = std::iter::once("vigp".to_owned())
-        .chain(fit_args("32"))
-        .chain(["--memory".to_owned(), "0".to_owned()]);
-    let e = vigp::cli::run(&tool, args, &mut Vec::new())
-        .unwrap_err()
-        .to_string();
+    let memory = ["--memory", "0"];
+    let e = run_error(&tool, &sparse_fit_args(&train, &model, "32", &memory));
     assert!(e.contains("--memory must be from 1 to 1000"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -797,56 +667,21 @@ fn a_sparse_fit_uses_every_transition_and_bounds_conformally() {
 #[test]
 fn usage_errors_are_reported_not_panicked() {
     let tool = vigp::cli::paper_systems();
-    let mut out = Vec::new();
-    let e = vigp::cli::run(
+    let e = run_error(&tool, &argv("fit --data x.csv --out m.json", &[]));
+    assert!(e.contains("--system is needed"), "{e}");
+    let e = run_error(
         &tool,
-        ["vigp", "fit", "--data", "x.csv", "--out", "m.json"],
-        &mut out,
-    )
-    .unwrap_err();
-    assert!(e.to_string().contains("--system is needed"), "{e}");
-    let e = vigp::cli::run(
-        &tool,
-        [
-            "vigp", "fit", "--system", "robot", "--data", "x.csv", "--out", "m.json",
-        ],
-        &mut out,
-    )
-    .unwrap_err();
-    assert!(e.to_string().contains("unknown mechanism `robot`"), "{e}");
+        &argv("fit --system robot --data x.csv --out m.json", &[]),
+    );
+    assert!(e.contains("unknown mechanism `robot`"), "{e}");
     // moving inducing points needs a sparse GP
-    let e = vigp::cli::run(
-        &tool,
-        [
-            "vigp",
-            "fit",
-            "--system",
-            "pendulum",
-            "--data",
-            "x.csv",
-            "--out",
-            "m.json",
-            "--optimise-inducing",
-        ],
-        &mut out,
-    )
-    .unwrap_err();
-    assert!(e.to_string().contains("--sparse"), "{e}");
+    let line = "fit --system pendulum --data x.csv --out m.json --optimise-inducing";
+    let e = run_error(&tool, &argv(line, &[]));
+    assert!(e.contains("--sparse"), "{e}");
     // `fit` of the double pendulum on `data` into `out`: its error
     let fit_error = |data: &str, out_path: &str| {
-        let args = [
-            "vigp",
-            "fit",
-            "--system",
-            "double_pendulum",
-            "--data",
-            data,
-            "--out",
-            out_path,
-        ];
-        vigp::cli::run(&tool, args, &mut Vec::new())
-            .unwrap_err()
-            .to_string()
+        let line = "fit --system double_pendulum --data {} --out {}";
+        run_error(&tool, &argv(line, &[data, out_path]))
     };
     // usage errors come before the data are read: an out-of-range `--set`
     // (a negative mass) and an optimiser memory of 0
@@ -857,20 +692,8 @@ fn usage_errors_are_reported_not_panicked() {
         ),
         (["--memory", "0"], "--memory must be from 1 to 1000"),
     ] {
-        let mut args = vec![
-            "vigp",
-            "fit",
-            "--system",
-            "pendulum",
-            "--data",
-            "/nonexistent.csv",
-            "--out",
-            "m.json",
-        ];
-        args.extend(extra);
-        let e = vigp::cli::run(&tool, args, &mut Vec::new())
-            .unwrap_err()
-            .to_string();
+        let line = "fit --system pendulum --data /nonexistent.csv --out m.json";
+        let e = run_error(&tool, &[&argv(line, &[])[..], &extra].concat());
         assert!(e.contains(expect) && !e.contains("nonexistent"), "{e}");
     }
     // the path once (the I/O error names it already)
@@ -886,20 +709,11 @@ fn usage_errors_are_reported_not_panicked() {
         e.contains("/nonexistent/m.json: directory /nonexistent does not exist"),
         "{e}"
     );
-    let e = vigp::cli::run(
+    let e = run_error(
         &tool,
-        [
-            "vigp",
-            "score",
-            "--model",
-            "/nonexistent.json",
-            "--data",
-            "x",
-        ],
-        &mut out,
-    )
-    .unwrap_err();
-    assert_eq!(e.to_string().matches("/nonexistent.json").count(), 1, "{e}");
-    let e = vigp::cli::run(&tool, ["vigp", "frobnicate"], &mut out).unwrap_err();
+        &["score", "--model", "/nonexistent.json", "--data", "x"],
+    );
+    assert_eq!(e.matches("/nonexistent.json").count(), 1, "{e}");
+    let e = vigp::cli::run(&tool, ["vigp", "frobnicate"], &mut Vec::new()).unwrap_err();
     assert!(matches!(e, vigp::cli::CliError::Args(_)), "{e}");
 }

@@ -13,7 +13,11 @@ use vigp::SVector;
 use vigp::prelude::*;
 
 mod common;
-use common::{mse_line, run_tool, s, table, temp_dir};
+use common::{
+    argv, assert_same_mean, cell, line_starting, mse_line, number_after, parameter_row,
+    predict_args, read_json, run_tool, s, score_args, table, table_with_header, temp_dir,
+    write_file,
+};
 
 #[path = "../../tests/common/drive_cartpole.rs"]
 mod drive_cartpole;
@@ -33,12 +37,31 @@ fn plan(n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The plan of `steps` inputs, written into `dir` as `plan.csv`: the inputs
+/// and the file's path.
+fn plan_file(dir: &Path, steps: usize) -> (Vec<f64>, PathBuf) {
+    let us = plan(steps);
+    let path = dir.join("plan.csv");
+    write_plan(&path, &us);
+    (us, path)
+}
+
+/// Writes `us` as a plan file (one `u_rail` column).
 fn write_plan(path: &Path, us: &[f64]) {
     let mut text = String::from("u_rail\n");
     for u in us {
         text.push_str(&format!("{u:?}\n"));
     }
     std::fs::write(path, text).unwrap();
+}
+
+/// Asserts that the positions of a log's rows (after the header) are those
+/// of `states`, bit for bit.
+fn assert_positions(rows: &[Vec<String>], states: &[State<2>]) {
+    for (k, z) in states.iter().enumerate() {
+        let row = &rows[1 + k];
+        assert_eq!((cell(row, 2), cell(row, 3)), (z.q[0], z.q[1]), "row {k}");
+    }
 }
 
 #[test]
@@ -60,29 +83,12 @@ fn time_column_has_no_float_noise() {
 fn simulate_fit_score_predict() {
     let dir = temp_dir("sim");
     let steps = 200;
-    let us = plan(steps);
-    let plan_path = dir.join("plan.csv");
-    write_plan(&plan_path, &us);
+    let (us, plan_path) = plan_file(&dir, steps);
     let log = dir.join("log.csv");
-    let said = run(&[
-        "simulate",
-        "--q",
-        "0.1,0.5",
-        "--dt",
-        "0.01",
-        "--steps",
-        "200",
-        "--inputs",
-        s(&plan_path),
-        "--out",
-        s(&log),
-        "--run",
-        "a",
-    ])
-    .unwrap();
+    let line = "simulate --q 0.1,0.5 --dt 0.01 --steps 200 --inputs {} --out {} --run a";
+    let said = run(&argv(line, &[s(&plan_path), s(&log)])).unwrap();
     assert!(said.contains("202 rows"), "{said}");
-    let rows = table(&log);
-    assert_eq!(rows[0].join(","), "run,t,rail,hinge,u_rail");
+    let rows = table_with_header(&log, "run,t,rail,hinge,u_rail");
     assert_eq!(rows.len(), 1 + steps + 2);
     // t without float noise
     assert_eq!(rows[1 + 6][1], "0.06");
@@ -95,68 +101,35 @@ fn simulate_fit_score_predict() {
     let states = vi
         .rollout_forced(&State::new([0.1, 0.5], [0.0, 0.0]), &plan_u)
         .unwrap();
-    let x = |r: &[String], i: usize| r[i].parse::<f64>().unwrap();
     let last = states[steps].q + states[steps].v * DT;
     for (k, row) in rows[1..].iter().enumerate() {
         let q = states.get(k).map_or(last, |z| z.q);
-        assert_eq!((x(row, 2), x(row, 3)), (q[0], q[1]), "row {k}");
+        assert_eq!((cell(row, 2), cell(row, 3)), (q[0], q[1]), "row {k}");
         let u = match k {
             0 => 0.0,
             k if k <= steps => us[k - 1],
             _ => us[steps - 1],
         };
-        assert_eq!(x(row, 4), u, "row {k}");
+        assert_eq!(cell(row, 4), u, "row {k}");
     }
 
     // a truth with a heavier cart (simulate --set) to learn from
     let heavy = dir.join("heavy.csv");
-    run(&[
-        "simulate",
-        "--q",
-        "0.1,0.5",
-        "--dt",
-        "0.01",
-        "--steps",
-        "200",
-        "--inputs",
-        s(&plan_path),
-        "--out",
-        s(&heavy),
-        "--set",
-        "links.cart.mass=1.5",
-    ])
-    .unwrap();
+    let line = "simulate --q 0.1,0.5 --dt 0.01 --steps 200 --inputs {} --out {} \
+                --set links.cart.mass=1.5";
+    run(&argv(line, &[s(&plan_path), s(&heavy)])).unwrap();
     // fit on it (no warning about the inputs), and score on the log: the
     // nominal model (the file's parameters, the defaults) reproduces it to
     // rounding (the numbers are written in round-trip form)
     let model = dir.join("m.json");
-    let fit = run(&[
-        "fit",
-        "--data",
-        s(&heavy),
-        "--out",
-        s(&model),
-        "--restarts",
-        "0",
-        "--max-samples",
-        "60",
-        "--noise-floor",
-        "1e-6",
-    ])
-    .unwrap();
-    assert!(!fit.contains("warning"), "{fit}");
-    let score = |data: &Path, steps: &str| {
-        run(&[
-            "score",
-            "--model",
-            s(&model),
-            "--data",
-            s(data),
-            "--steps",
-            steps,
-        ])
-        .unwrap()
+    // `fit` on `data` into `out`, quickly (the noise floored)
+    let fit = |data: &Path, out: &Path| {
+        let line = "fit --data {} --out {} --restarts 0 --max-samples 60 --noise-floor 1e-6";
+        run(&argv(line, &[s(data), s(out)])).unwrap()
     };
+    let fit_heavy = fit(&heavy, &model);
+    assert!(!fit_heavy.contains("warning"), "{fit_heavy}");
+    let score = |data: &Path, steps: &str| run(&score_args(s(&model), s(data), steps)).unwrap();
     let report = score(&log, "5");
     assert!(
         report.contains("averaged over the positions the steps produce: x_(s+2) … x_(s+6)"),
@@ -179,20 +152,7 @@ fn simulate_fit_score_predict() {
         ));
     }
     std::fs::write(&early, text).unwrap();
-    let fit_early = run(&[
-        "fit",
-        "--data",
-        s(&early),
-        "--out",
-        s(&dir.join("early.json")),
-        "--restarts",
-        "0",
-        "--max-samples",
-        "60",
-        "--noise-floor",
-        "1e-6",
-    ])
-    .unwrap();
+    let fit_early = fit(&early, &dir.join("early.json"));
     assert!(
         fit_early.contains("the inputs look logged one row early"),
         "{fit_early}"
@@ -205,7 +165,7 @@ fn simulate_fit_score_predict() {
     // |x̂_(s+2) − x_(s+2)|²/2 over the windows, computed here directly
     let (nominal_1, _) = mse_line(&score(&heavy, "1"));
     let h = table(&heavy);
-    let q = |r: usize| SVector::<f64, 2>::new(x(&h[1 + r], 2), x(&h[1 + r], 3));
+    let q = |r: usize| SVector::<f64, 2>::new(cell(&h[1 + r], 2), cell(&h[1 + r], 3));
     let (mut sum, mut n) = (0.0, 0);
     for w in 0..h.len() - 3 {
         let z0 = State {
@@ -213,52 +173,22 @@ fn simulate_fit_score_predict() {
             v: (q(w + 1) - q(w)) / DT,
         };
         let z1 = vi
-            .step_forced(&z0, &SVector::from([x(&h[1 + w + 1], 4)]))
+            .step_forced(&z0, &SVector::from([cell(&h[1 + w + 1], 4)]))
             .unwrap();
         sum += (z1.q + z1.v * DT - q(w + 2)).norm_squared() / 2.0;
         n += 1;
     }
-    let want = sum / n as f64;
     // the same sums in another order: agreement to 1e-9 relative
-    assert!(want > 1e-12, "{want:e}");
-    assert!(
-        (nominal_1 - want).abs() <= 1e-9 * want,
-        "{nominal_1:e} vs {want:e}"
-    );
+    assert_same_mean(nominal_1, sum / n as f64);
 
     // held-out runs for the conformal bound, from another start
     let held = dir.join("held.csv");
-    run(&[
-        "simulate",
-        "--q",
-        "-0.15,-0.4",
-        "--dt",
-        "0.01",
-        "--steps",
-        "200",
-        "--inputs",
-        s(&plan_path),
-        "--out",
-        s(&held),
-        "--run",
-        "h",
-    ])
-    .unwrap();
+    let line = "simulate --q -0.15,-0.4 --dt 0.01 --steps 200 --inputs {} --out {} --run h";
+    run(&argv(line, &[s(&plan_path), s(&held)])).unwrap();
     let pred = dir.join("pred.csv");
     let predict = |extra: &[&str]| {
-        let mut args = vec![
-            "predict",
-            "--model",
-            s(&model),
-            "--steps",
-            "5",
-            "--out",
-            s(&pred),
-            "--calibration",
-            s(&held),
-        ];
-        args.extend_from_slice(extra);
-        run(&args)
+        let line = "predict --model {} --steps 5 --out {} --calibration {}";
+        run(&[&argv(line, &[s(&model), s(&pred), s(&held)])[..], extra].concat())
     };
     // --stride 50 on the 202-row log: starts 0, 50, 100, 150 (a start s
     // needs rows s … s + 5 for its inputs)
@@ -273,10 +203,9 @@ fn simulate_fit_score_predict() {
             && said.contains("per step"),
         "{said}"
     );
-    let p = table(&pred);
-    assert_eq!(
-        p[0].join(","),
-        "run,start,t,rail,hinge,v_rail,v_hinge,u_rail,bound,position_bound,fallback"
+    let p = table_with_header(
+        &pred,
+        "run,start,t,rail,hinge,v_rail,v_hinge,u_rail,bound,position_bound,fallback",
     );
     assert_eq!(p.len(), 1 + 4 * 6);
     let starts: Vec<&str> = p[1..].iter().step_by(6).map(|r| r[1].as_str()).collect();
@@ -294,16 +223,15 @@ fn simulate_fit_score_predict() {
 
     // the same prediction from start 50 with the inputs from a plan: the
     // start's two rows alone, no position rows for the inputs
-    let start = dir.join("start.csv");
-    std::fs::write(
-        &start,
+    let start = write_file(
+        &dir,
+        "start.csv",
         format!(
             "run,t,rail,hinge,u_rail\n{}\n{}\n",
             rows[1 + 50].join(","),
             rows[1 + 51].join(",")
         ),
-    )
-    .unwrap();
+    );
     let part = dir.join("part.csv");
     write_plan(&part, &us[50..55]);
     let said = predict(&["--data", s(&start), "--inputs", s(&part)]).unwrap();
@@ -330,9 +258,9 @@ fn simulate_fit_score_predict() {
     assert!(e.contains("unknown column `rail`"), "{e}");
 
     // calibration runs too short for the horizon: the lengths needed and had
-    let short = dir.join("short.csv");
-    std::fs::write(
-        &short,
+    let short = write_file(
+        &dir,
+        "short.csv",
         format!(
             "run,t,rail,hinge,u_rail\n{}\n",
             rows[1..5]
@@ -341,23 +269,10 @@ fn simulate_fit_score_predict() {
                 .collect::<Vec<_>>()
                 .join("\n")
         ),
-    )
-    .unwrap();
-    let e = run(&[
-        "predict",
-        "--model",
-        s(&model),
-        "--data",
-        s(&log),
-        "--steps",
-        "5",
-        "--out",
-        s(&pred),
-        "--calibration",
-        s(&short),
-    ])
-    .unwrap_err()
-    .to_string();
+    );
+    let mut args = predict_args(s(&model), s(&log), "5", s(&pred));
+    args.extend(["--calibration", s(&short)]);
+    let e = run(&args).unwrap_err().to_string();
     assert!(
         e.contains("need runs of at least 6 samples; the longest run has 4") && e.contains("`a` 4"),
         "{e}"
@@ -371,26 +286,10 @@ fn simulate_fit_score_predict() {
 fn simulate_takes_substeps() {
     let dir = temp_dir("substeps");
     let steps = 50;
-    let us = plan(steps);
-    let plan_path = dir.join("plan.csv");
-    write_plan(&plan_path, &us);
+    let (us, plan_path) = plan_file(&dir, steps);
     let log = dir.join("log.csv");
-    run(&[
-        "simulate",
-        "--q",
-        "0.1,0.5",
-        "--dt",
-        "0.01",
-        "--steps",
-        "50",
-        "--substeps",
-        "4",
-        "--inputs",
-        s(&plan_path),
-        "--out",
-        s(&log),
-    ])
-    .unwrap();
+    let line = "simulate --q 0.1,0.5 --dt 0.01 --steps 50 --substeps 4 --inputs {} --out {}";
+    run(&argv(line, &[s(&plan_path), s(&log)])).unwrap();
     let rows = table(&log);
     let plan_u: Vec<SVector<f64, 1>> = us.iter().map(|u| SVector::from([*u])).collect();
     let z0 = State::new([0.1, 0.5], [0.0, 0.0]);
@@ -405,31 +304,11 @@ fn simulate_takes_substeps() {
         .unwrap()
         .rollout_forced(&z0, &plan_u)
         .unwrap();
-    let x = |r: &[String], i: usize| r[i].parse::<f64>().unwrap();
-    for k in 0..=steps {
-        let row = &rows[1 + k];
-        assert_eq!(
-            (x(row, 2), x(row, 3)),
-            (fine[k].q[0], fine[k].q[1]),
-            "row {k}"
-        );
-    }
+    assert_positions(&rows, &fine[..=steps]);
     assert!((fine[steps].q - plain[steps].q).amax() > 1e-9);
     // K = 0 is refused with a typed error, not a panic
-    let e = run(&[
-        "simulate",
-        "--q",
-        "0.1,0.5",
-        "--dt",
-        "0.01",
-        "--steps",
-        "5",
-        "--substeps",
-        "0",
-        "--out",
-        s(&dir.join("zero.csv")),
-    ])
-    .unwrap_err();
+    let line = "simulate --q 0.1,0.5 --dt 0.01 --steps 5 --substeps 0 --out {}";
+    let e = run(&argv(line, &[s(&dir.join("zero.csv"))])).unwrap_err();
     assert!(e.to_string().contains("substeps"), "{e}");
 }
 
@@ -478,15 +357,7 @@ fn simulate_subdivides_failing_steps_by_default() {
     );
     assert!(text.contains(&said), "{text}");
     let rows = table(&log);
-    let x = |r: &[String], i: usize| r[i].parse::<f64>().unwrap();
-    for k in 0..=steps {
-        let row = &rows[1 + k];
-        assert_eq!(
-            (x(row, 2), x(row, 3)),
-            (resolved.0[k].q[0], resolved.0[k].q[1]),
-            "row {k}"
-        );
-    }
+    assert_positions(&rows, &resolved.0[..=steps]);
     let e = run(&[
         &args[..],
         &[s(&dir.join("plain.csv")), "--max-subdivision", "0"],
@@ -495,17 +366,6 @@ fn simulate_subdivides_failing_steps_by_default() {
     .unwrap_err();
     assert!(e.to_string().contains("step"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
-}
-
-/// The row of parameter `name` in a parameter file of `vigp identify`.
-fn parameter_row(file: &serde_json::Value, name: &str) -> serde_json::Value {
-    file["parameters"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|r| r["name"] == name)
-        .unwrap_or_else(|| panic!("no row {name} in {file}"))
-        .clone()
 }
 
 /// `identify` on a log that the first-order integrator wrote under a
@@ -526,14 +386,8 @@ fn parameter_row(file: &serde_json::Value, name: &str) -> serde_json::Value {
 #[test]
 fn identify_then_fit_with_the_identified_prior() {
     let dir = temp_dir("identify");
-    let truth = [
-        "--set",
-        "links.pole.mass=0.36",
-        "--set",
-        "joints.rail.damping=0.3",
-        "--set",
-        "joints.hinge.damping=0.08",
-    ];
+    let truth = "--set links.pole.mass=0.36 --set joints.rail.damping=0.3 \
+                 --set joints.hinge.damping=0.08";
     let simulate = |name: &str, q: &str, phase: f64, steps: usize| -> PathBuf {
         let us: Vec<f64> = (0..steps)
             .map(|j| 3.0 * (0.7 * (j / 7) as f64 + phase).sin() + 1.5 * (0.13 * j as f64).cos())
@@ -542,22 +396,9 @@ fn identify_then_fit_with_the_identified_prior() {
         write_plan(&plan_path, &us);
         let log = dir.join(format!("{name}.csv"));
         let steps_s = steps.to_string();
-        let args = [
-            "simulate",
-            "--q",
-            q,
-            "--dt",
-            "0.01",
-            "--steps",
-            &steps_s,
-            "--inputs",
-            s(&plan_path),
-            "--run",
-            name,
-            "--out",
-            s(&log),
-        ];
-        run(&[&args[..], &truth[..]].concat()).unwrap();
+        let line = "simulate --q {} --dt 0.01 --steps {} --inputs {} --run {} --out {}";
+        let args = argv(line, &[q, &steps_s, s(&plan_path), name, s(&log)]);
+        run(&[args, argv(truth, &[])].concat()).unwrap();
         log
     };
     let train = simulate("train", "0.1,0.5", 0.3, 400);
@@ -567,18 +408,12 @@ fn identify_then_fit_with_the_identified_prior() {
     // the file's path, what the tool said, the file
     let identify_into = |name: &str, extra: &[&str]| {
         let path = dir.join(name);
-        let args = [
-            "identify",
-            "--data",
-            s(&train),
-            "--rule",
-            "first-order",
-            "--out",
-            s(&path),
-        ];
+        let args = argv(
+            "identify --data {} --rule first-order --out {}",
+            &[s(&train), s(&path)],
+        );
         let text = run(&[&args[..], extra].concat()).unwrap();
-        let file: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+        let file = read_json(&path);
         (path, text, file)
     };
     let (params, text, file) = identify_into("params.json", &[]);
@@ -613,35 +448,12 @@ fn identify_then_fit_with_the_identified_prior() {
 
     let fit_score = |prior: &str, name: &str| -> (f64, f64) {
         let model = dir.join(format!("{name}.json"));
-        let said = run(&[
-            "fit",
-            "--data",
-            s(&train),
-            "--out",
-            s(&model),
-            "--prior",
-            prior,
-            "--restarts",
-            "0",
-            "--max-samples",
-            "150",
-        ])
-        .unwrap();
+        let line = "fit --data {} --out {} --prior {} --restarts 0 --max-samples 150";
+        let said = run(&argv(line, &[s(&train), s(&model), prior])).unwrap();
         if prior.starts_with("identified:") {
             assert!(said.contains("parameters identified in"), "{said}");
         }
-        mse_line(
-            &run(&[
-                "score",
-                "--model",
-                s(&model),
-                "--data",
-                s(&test),
-                "--steps",
-                "20",
-            ])
-            .unwrap(),
-        )
+        mse_line(&run(&score_args(s(&model), s(&test), "20")).unwrap())
     };
     let (declared_nominal, _) = fit_score("nominal", "declared");
     let identified = format!("identified:{}", s(&params));
@@ -657,10 +469,8 @@ fn identify_then_fit_with_the_identified_prior() {
     // the model file records the identified standard parameters and their
     // covariance as the parameter file has them, and the DSL's values
     let model_path = dir.join("identified.json");
-    let model: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&model_path).unwrap()).unwrap();
-    let params_file: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
+    let model = read_json(&model_path);
+    let params_file = read_json(&params);
     let recorded = &model["prior"]["identified"];
     assert_eq!(recorded, &params_file["identified"], "{recorded}");
     assert_eq!(recorded["mechanism"], "DriveCartpole");
@@ -690,18 +500,7 @@ fn identify_then_fit_with_the_identified_prior() {
     // predict and export run on it (score did above); export writes the
     // identified parameters as the embedded model's nominal ones
     let pred = dir.join("identified-pred.csv");
-    run(&[
-        "predict",
-        "--model",
-        s(&model_path),
-        "--data",
-        s(&test),
-        "--steps",
-        "5",
-        "--out",
-        s(&pred),
-    ])
-    .unwrap();
+    run(&predict_args(s(&model_path), s(&test), "5", s(&pred))).unwrap();
     assert!(table(&pred).len() > 1);
     let rs = dir.join("identified.rs");
     run(&["export", "--model", s(&model_path), "--out", s(&rs)]).unwrap();
@@ -731,14 +530,13 @@ fn identify_then_fit_with_the_identified_prior() {
     assert!(e.contains("no \"identified\" section"), "{e}");
 
     // a parameter file of another mechanism, or no parameter file, is refused
-    let other = dir.join("other.json");
-    std::fs::write(
-        &other,
+    let other = write_file(
+        &dir,
+        "other.json",
         std::fs::read_to_string(&params)
             .unwrap()
             .replace("\"DriveCartpole\"", "\"Acrobot\""),
-    )
-    .unwrap();
+    );
     for (file, says) in [(&other, "identified for `Acrobot`"), (&train, "not JSON")] {
         let e = refused(&["--prior", &format!("identified:{}", s(file))]);
         assert!(e.contains(says), "{e}");
@@ -756,66 +554,22 @@ fn identify_then_fit_with_the_identified_prior() {
 fn excite_writes_a_plan_that_simulate_reads() {
     let dir = temp_dir("excite");
     let plan_path = dir.join("plan.csv");
-    let text = run(&[
-        "excite",
-        "--duration",
-        "1.5",
-        "--dt",
-        "0.01",
-        "--harmonics",
-        "3",
-        "--amplitude",
-        "2",
-        "--q",
-        "0,0.3",
-        "--out",
-        s(&plan_path),
-    ])
-    .unwrap();
-    let line = text
-        .lines()
-        .find(|l| l.starts_with("log det information: design "))
-        .unwrap_or_else(|| panic!("{text}"));
-    let number = |after: &str| -> f64 {
-        let rest = &line[line.find(after).unwrap() + after.len()..];
-        let end = rest.find([',', ' ']).unwrap_or(rest.len());
-        rest[..end].parse().unwrap()
-    };
-    let design = number("design ");
-    let random = number("same amplitude ");
+    let excite = "excite --duration 1.5 --dt 0.01 --harmonics 3 --amplitude 2 --q 0,0.3 --out {}";
+    let text = run(&argv(excite, &[s(&plan_path)])).unwrap();
+    let line = line_starting(&text, "log det information: design ");
+    let design = number_after(line, "design ");
+    let random = number_after(line, "same amplitude ");
     assert!(design > random, "{line}");
-    let rows = table(&plan_path);
-    assert_eq!(rows[0].join(","), "t,u_rail");
+    let rows = table_with_header(&plan_path, "t,u_rail");
     assert_eq!(rows.len(), 1 + 150);
     for r in &rows[1..] {
         let u: f64 = r[1].parse().unwrap();
         assert!(u.abs() <= 2.0 * (1.0 + 1e-12), "{u}");
     }
     let log = dir.join("log.csv");
-    run(&[
-        "simulate",
-        "--q",
-        "0,0.3",
-        "--dt",
-        "0.01",
-        "--steps",
-        "150",
-        "--inputs",
-        s(&plan_path),
-        "--out",
-        s(&log),
-    ])
-    .unwrap();
-    let e = run(&[
-        "excite",
-        "--duration",
-        "1",
-        "--dt",
-        "0.01",
-        "--amplitude",
-        "0",
-    ])
-    .unwrap_err();
+    let line = "simulate --q 0,0.3 --dt 0.01 --steps 150 --inputs {} --out {}";
+    run(&argv(line, &[s(&plan_path), s(&log)])).unwrap();
+    let e = run(&argv("excite --duration 1 --dt 0.01 --amplitude 0", &[])).unwrap_err();
     assert!(e.to_string().contains("amplitude"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
 }

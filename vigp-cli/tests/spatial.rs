@@ -12,7 +12,10 @@
 use std::path::Path;
 
 mod common;
-use common::{mse_line, run_tool, s, table, temp_dir, vigp, vigp_fails};
+use common::{
+    argv, assert_file_is, assert_same_mean, cell, mse_line, parameter_row, read_json, run_tool, s,
+    score_args, table, table_with_header, temp_dir, vigp, vigp_fails, write_file,
+};
 
 use vigp::SVector;
 use vigp::data::{Dataset, ReadOptions};
@@ -23,14 +26,8 @@ const DT: f64 = 0.01;
 
 /// The truth of the Furuta logs: the pendulum 10 % heavier, viscous
 /// friction on both joints (the nominal model has none).
-const TRUTH: [&str; 6] = [
-    "--set",
-    "links.pendulum.mass=0.11",
-    "--set",
-    "joints.base.damping=0.004",
-    "--set",
-    "joints.pivot.damping=0.002",
-];
+const TRUTH: &str = "--set links.pendulum.mass=0.11 --set joints.base.damping=0.004 \
+                     --set joints.pivot.damping=0.002";
 
 vigp::mechanism! {
     /// A Furuta pendulum whose arm is driven by a motor (declared only in
@@ -78,25 +75,10 @@ fn furuta_log(dir: &Path, path: &Path, runs: std::ops::Range<usize>, steps: usiz
         let (q, v) = (format!("{},{}", q[0], q[1]), format!("{},{}", v[0], v[1]));
         let steps = steps.to_string();
         let run = format!("r{i}");
-        let mut args = vec![
-            "simulate",
-            "--system",
-            "furuta",
-            "--q",
-            &q,
-            "--v",
-            &v,
-            "--dt",
-            "0.01",
-            "--steps",
-            &steps,
-            "--run",
-            &run,
-            "--out",
-            s(&one),
-        ];
+        let line = "simulate --system furuta --q {} --v {} --dt 0.01 --steps {} --run {} --out {}";
+        let mut args = argv(line, &[&q, &v, &steps, &run, s(&one)]);
         if truth {
-            args.extend_from_slice(&TRUTH);
+            args.extend(argv(TRUTH, &[]));
         }
         let said = vigp(&args);
         assert!(said.contains("steps of Furuta"), "{said}");
@@ -129,7 +111,7 @@ fn furuta_fit_score_predict_export() {
     furuta_log(&dir, &calib, 40..46, 60, true);
 
     // the binary knows the 3-D examples and says which
-    let e = vigp_fails(&["fit", "--system", "nope", "--data", s(&train), "--out", "x"]);
+    let e = vigp_fails(&argv("fit --system nope --data {} --out x", &[s(&train)]));
     assert!(
         e.contains("furuta") || e.contains("Furuta"),
         "the registry lists Furuta: {e}"
@@ -144,36 +126,20 @@ fn furuta_fit_score_predict_export() {
     }
 
     // a 3-D mechanism's maximal view is refused before the data are read
-    let e = vigp_fails(&[
-        "fit",
-        "--system",
-        "furuta",
-        "--data",
-        "does-not-exist.csv",
-        "--out",
-        s(&dir.join("x.json")),
-        "--encoding",
-        "maximal",
-    ]);
+    let e = vigp_fails(&argv(
+        "fit --system furuta --data does-not-exist.csv --out {} --encoding maximal",
+        &[s(&dir.join("x.json"))],
+    ));
     assert!(
         e.contains("Furuta is a 3-D mechanism: --encoding maximal is not available"),
         "{e}"
     );
 
     let model = dir.join("furuta.json");
-    let fit = vigp(&[
-        "fit",
-        "--system",
-        "furuta",
-        "--data",
-        s(&train),
-        "--out",
-        s(&model),
-        "--restarts",
-        "1",
-        "--max-samples",
-        "300",
-    ]);
+    let fit = vigp(&argv(
+        "fit --system furuta --data {} --out {} --restarts 1 --max-samples 300",
+        &[s(&train), s(&model)],
+    ));
     assert!(
         fit.contains("data: ") && fit.contains("6 runs, 912 samples, dt = 0.01 s"),
         "{fit}"
@@ -187,15 +153,7 @@ fn furuta_fit_score_predict_export() {
     );
 
     // score on held-out runs: the learned model well below the nominal one
-    let report = vigp(&[
-        "score",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "20",
-    ]);
+    let report = vigp(&score_args(s(&model), s(&test), "20"));
     assert!(
         report.contains("6 runs (0 shorter than 22 samples), 246 windows"),
         "{report}"
@@ -215,15 +173,7 @@ fn furuta_fit_score_predict_export() {
     // `--steps 1` scores x_(s+2), produced by one step: the nominal score
     // is the mean of |x̂_(s+2) − x_(s+2)|²/2 over the windows, computed here
     // with the library's integrator on the frictionless Furuta pendulum
-    let (nominal_1, _) = mse_line(&vigp(&[
-        "score",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "1",
-    ]));
+    let (nominal_1, _) = mse_line(&vigp(&score_args(s(&model), s(&test), "1")));
     let m = Furuta::default().minimal();
     let file = std::fs::File::open(&test).unwrap();
     let data: Dataset<2> =
@@ -237,34 +187,18 @@ fn furuta_fit_score_predict_export() {
             n += 1;
         }
     }
-    let want = sum / n as f64;
     // the same sums in another order (score runs the windows in
     // parallel): agreement to 1e-9 relative
-    assert!(want > 1e-12, "{want:e}");
-    assert!(
-        (nominal_1 - want).abs() <= 1e-9 * want,
-        "{nominal_1:e} vs {want:e}"
-    );
+    assert_same_mean(nominal_1, sum / n as f64);
 
     // predict, conformal: calibrated on the held-out runs, from every 5th
     // sample of the test runs (starts exchangeable with the calibration
     // windows, which start at every sample of their runs)
     let pred = dir.join("pred.csv");
-    let said = vigp(&[
-        "predict",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "20",
-        "--stride",
-        "5",
-        "--calibration",
-        s(&calib),
-        "--out",
-        s(&pred),
-    ]);
+    let said = vigp(&argv(
+        "predict --model {} --data {} --steps 20 --stride 5 --calibration {} --out {}",
+        &[s(&model), s(&test), s(&calib), s(&pred)],
+    ));
     // 13 starts per run of 62 rows (s = 0, 5, …, 60: a start needs two)
     assert!(
         said.contains("78 predictions (every 5 samples of 6 run(s)) × 20 steps (0 failed)"),
@@ -274,27 +208,25 @@ fn furuta_fit_score_predict_export() {
         said.contains("conformal bound") && said.contains("coverage ≥ 0.95"),
         "{said}"
     );
-    let rows = table(&pred);
-    assert_eq!(
-        rows[0].join(","),
-        "run,start,t,base,pivot,v_base,v_pivot,bound,position_bound,fallback"
+    let rows = table_with_header(
+        &pred,
+        "run,start,t,base,pivot,v_base,v_pivot,bound,position_bound,fallback",
     );
     assert_eq!(rows.len(), 1 + 78 * 21);
     let logged = table(&test);
-    let value = |r: &[String], c: usize| r[c].parse::<f64>().unwrap();
     let (mut inside, mut total) = (0usize, 0usize);
     for (p, rows) in rows[1..].chunks(21).enumerate() {
         let (j, start) = (p / 13, 5 * (p % 13));
         for (k, row) in rows.iter().enumerate() {
             assert_eq!(row[0], format!("r{}", 20 + j));
             assert_eq!(row[1], start.to_string());
-            let pb = value(row, 8);
+            let pb = cell(row, 8);
             assert!(pb.is_finite() && pb >= 0.0, "{row:?}");
             if k == 0 {
                 // no bound of the start's own
                 assert_eq!(row[7], "");
             } else {
-                let b = value(row, 7);
+                let b = cell(row, 7);
                 assert!(b.is_finite() && b > 0.0, "{row:?}");
             }
             // the logged truth, where the log reaches
@@ -306,8 +238,8 @@ fn furuta_fit_score_predict_export() {
             };
             // the time of the sample, as the log has it
             assert_eq!(row[2], truth[1], "{row:?}");
-            let q = SVector::<f64, 2>::new(value(row, 3), value(row, 4));
-            let x = SVector::<f64, 2>::new(value(truth, 2), value(truth, 3));
+            let q = SVector::<f64, 2>::new(cell(row, 3), cell(row, 4));
+            let x = SVector::<f64, 2>::new(cell(truth, 2), cell(truth, 3));
             if k == 0 {
                 // the start is the logged sample
                 assert_eq!(q, x);
@@ -341,17 +273,16 @@ fn furuta_fit_score_predict_export() {
     // the export of a small Furuta model is exactly the fixture that
     // tests/learn/embedded_learned.rs compiles and steps against the std
     // model (1e-12)
-    let small = dir.join("learned_furuta.json");
-    std::fs::write(
-        &small,
+    let small = write_file(
+        &dir,
+        "learned_furuta.json",
         include_str!("../../tests/fixtures/learned_furuta.json"),
-    )
-    .unwrap();
+    );
     let small_rs = dir.join("learned_furuta.rs");
     vigp(&["export", "--model", s(&small), "--out", s(&small_rs)]);
-    assert_eq!(
-        std::fs::read_to_string(&small_rs).unwrap(),
-        include_str!("../../tests/fixtures/learned_furuta.rs")
+    assert_file_is(
+        &small_rs,
+        include_str!("../../tests/fixtures/learned_furuta.rs"),
     );
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -364,30 +295,11 @@ fn a_furuta_log_of_the_nominal_model_is_reproduced() {
     let log = dir.join("log.csv");
     furuta_log(&dir, &log, 0..2, 80, false);
     let model = dir.join("m.json");
-    vigp(&[
-        "fit",
-        "--system",
-        "furuta",
-        "--data",
-        s(&log),
-        "--out",
-        s(&model),
-        "--restarts",
-        "0",
-        "--max-samples",
-        "60",
-        "--noise-floor",
-        "1e-6",
-    ]);
-    let (nominal, _) = mse_line(&vigp(&[
-        "score",
-        "--model",
-        s(&model),
-        "--data",
-        s(&log),
-        "--steps",
-        "5",
-    ]));
+    vigp(&argv(
+        "fit --system furuta --data {} --out {} --restarts 0 --max-samples 60 --noise-floor 1e-6",
+        &[s(&log), s(&model)],
+    ));
+    let (nominal, _) = mse_line(&vigp(&score_args(s(&model), s(&log), "5")));
     assert!(nominal < 1e-24, "{nominal:e}");
     std::fs::remove_dir_all(&dir).ok();
 }
@@ -415,28 +327,9 @@ fn a_driven_3d_mechanism_declared_here_gets_the_same_tool() {
         let (q, v) = (format!("{},{}", q[0], q[1]), format!("{},{}", v[0], v[1]));
         let one = dir.join(format!("log{i}.csv"));
         let run_name = format!("d{i}");
-        run(&[
-            "simulate",
-            "--q",
-            &q,
-            "--v",
-            &v,
-            "--dt",
-            "0.01",
-            "--steps",
-            "120",
-            "--inputs",
-            s(&plan),
-            "--run",
-            &run_name,
-            "--out",
-            s(&one),
-            "--set",
-            "links.pendulum.mass=0.11",
-            "--set",
-            "joints.pivot.damping=0.002",
-        ])
-        .unwrap();
+        let line = "simulate --q {} --v {} --dt 0.01 --steps 120 --inputs {} --run {} --out {} \
+                    --set links.pendulum.mass=0.11 --set joints.pivot.damping=0.002";
+        run(&argv(line, &[&q, &v, s(&plan), &run_name, s(&one)])).unwrap();
         let log = std::fs::read_to_string(&one).unwrap();
         let dest = if i < 4 { &mut train } else { &mut test };
         for (k, line) in log.lines().enumerate() {
@@ -450,39 +343,20 @@ fn a_driven_3d_mechanism_declared_here_gets_the_same_tool() {
             dest.push('\n');
         }
     }
-    let (train_path, test_path) = (dir.join("train.csv"), dir.join("test.csv"));
-    std::fs::write(&train_path, train).unwrap();
-    std::fs::write(&test_path, test).unwrap();
+    let train_path = write_file(&dir, "train.csv", train);
+    let test_path = write_file(&dir, "test.csv", test);
     let model = dir.join("driven.json");
-    let fit = run(&[
-        "fit",
-        "--data",
-        s(&train_path),
-        "--out",
-        s(&model),
-        "--restarts",
-        "1",
-        "--max-samples",
-        "300",
-    ])
+    let fit = run(&argv(
+        "fit --data {} --out {} --restarts 1 --max-samples 300",
+        &[s(&train_path), s(&model)],
+    ))
     .unwrap();
     assert!(
         fit.contains("with inputs [base], SinCos encoding (8 inputs)"),
         "{fit}"
     );
     assert!(!fit.contains("warning"), "{fit}");
-    let (nominal, learned) = mse_line(
-        &run(&[
-            "score",
-            "--model",
-            s(&model),
-            "--data",
-            s(&test_path),
-            "--steps",
-            "20",
-        ])
-        .unwrap(),
-    );
+    let (nominal, learned) = mse_line(&run(&score_args(s(&model), s(&test_path), "20")).unwrap());
     // measured: nominal 2.4e-4, learned 1.3e-7; checked at 10×
     assert!(nominal > 1e-6, "{nominal:e}");
     assert!(
@@ -504,27 +378,12 @@ fn a_driven_3d_mechanism_declared_here_gets_the_same_tool() {
         s(&params),
     ])
     .unwrap();
-    let file: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
-    let pivot = file["parameters"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .find(|r| r["name"] == "joints.pivot.damping")
-        .unwrap_or_else(|| panic!("{said}"))
-        .clone();
+    let file = read_json(&params);
+    let row = |name: &str| parameter_row(&file, name);
+    let pivot = row("joints.pivot.damping");
     assert_eq!(pivot["status"], "identified", "{said}");
     let got = pivot["identified"].as_f64().unwrap();
     assert!((got - 0.002).abs() <= 1e-8 * 0.002, "{got}");
-    let row = |name: &str| {
-        file["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|r| r["name"] == name)
-            .unwrap_or_else(|| panic!("no {name}: {said}"))
-            .clone()
-    };
     // the frictionless base joint: its damping is 0 in truth, and fit
     // refuses a negative one, so identify must not return one
     let base = row("joints.base.damping")["identified"].as_f64().unwrap();
@@ -544,47 +403,23 @@ fn a_driven_3d_mechanism_declared_here_gets_the_same_tool() {
     }
     let identified_model = dir.join("identified.json");
     let prior = format!("identified:{}", s(&params));
-    run(&[
-        "fit",
-        "--data",
-        s(&train_path),
-        "--out",
-        s(&identified_model),
-        "--prior",
-        &prior,
-        "--restarts",
-        "0",
-        "--max-samples",
-        "100",
-    ])
+    run(&argv(
+        "fit --data {} --out {} --prior {} --restarts 0 --max-samples 100",
+        &[s(&train_path), s(&identified_model), &prior],
+    ))
     .unwrap();
-    let (identified_nominal, _) = mse_line(
-        &run(&[
-            "score",
-            "--model",
-            s(&identified_model),
-            "--data",
-            s(&test_path),
-            "--steps",
-            "20",
-        ])
-        .unwrap(),
-    );
+    let score = score_args(s(&identified_model), s(&test_path), "20");
+    let (identified_nominal, _) = mse_line(&run(&score).unwrap());
     println!("20-step nominal MSE: declared {nominal:.3e}, identified {identified_nominal:.3e}");
     assert!(
         identified_nominal < 1e-6 * nominal,
         "{identified_nominal:e} vs {nominal:e}"
     );
     // the maximal view is a typed error
-    let e = run(&[
-        "fit",
-        "--data",
-        s(&train_path),
-        "--out",
-        s(&model),
-        "--encoding",
-        "maximal",
-    ])
+    let e = run(&argv(
+        "fit --data {} --out {} --encoding maximal",
+        &[s(&train_path), s(&model)],
+    ))
     .unwrap_err();
     assert!(
         matches!(
@@ -644,77 +479,22 @@ fn quaternion_mechanisms_fit_and_score() {
             dir.join(format!("{system}_b.csv")),
         ];
         for (j, log) in logs.iter().enumerate() {
-            vigp(&[
-                "simulate",
-                "--system",
-                system,
-                "--q",
-                qs[j],
-                "--v",
-                vs[j],
-                "--dt",
-                "0.01",
-                "--steps",
-                "150",
-                "--out",
-                s(log),
-                "--set",
-                truth,
-            ]);
+            let line = "simulate --system {} --q {} --v {} --dt 0.01 --steps 150 --out {} --set {}";
+            vigp(&argv(line, &[system, qs[j], vs[j], s(log), truth]));
             assert_eq!(table(log)[0].join(","), header);
         }
         // the nominal model reproduces a log of itself
         let own = dir.join(format!("{system}_own.csv"));
-        vigp(&[
-            "simulate",
-            "--system",
-            system,
-            "--q",
-            qs[0],
-            "--v",
-            vs[0],
-            "--dt",
-            "0.01",
-            "--steps",
-            "30",
-            "--out",
-            s(&own),
-        ]);
+        let line = "simulate --system {} --q {} --v {} --dt 0.01 --steps 30 --out {}";
+        vigp(&argv(line, &[system, qs[0], vs[0], s(&own)]));
         let model = dir.join(format!("{system}.json"));
-        vigp(&[
-            "fit",
-            "--system",
-            system,
-            "--data",
-            s(&logs[0]),
-            "--out",
-            s(&model),
-            "--restarts",
-            "0",
-            "--max-samples",
-            "150",
-            "--noise-floor",
-            "1e-6",
-        ]);
-        let (own_nominal, _) = mse_line(&vigp(&[
-            "score",
-            "--model",
-            s(&model),
-            "--data",
-            s(&own),
-            "--steps",
-            "5",
-        ]));
+        vigp(&argv(
+            "fit --system {} --data {} --out {} --restarts 0 --max-samples 150 --noise-floor 1e-6",
+            &[system, s(&logs[0]), s(&model)],
+        ));
+        let (own_nominal, _) = mse_line(&vigp(&score_args(s(&model), s(&own), "5")));
         assert!(own_nominal < 1e-24, "{system}: {own_nominal:e}");
-        let (nominal, learned) = mse_line(&vigp(&[
-            "score",
-            "--model",
-            s(&model),
-            "--data",
-            s(&logs[1]),
-            "--steps",
-            "10",
-        ]));
+        let (nominal, learned) = mse_line(&vigp(&score_args(s(&model), s(&logs[1]), "10")));
         // measured: spherical pendulum nominal 1.7e-7, learned 2.8e-10;
         // tumbler nominal 5.0e-11, learned 1.1e-11
         eprintln!("{system}: nominal {nominal:e} learned {learned:e}");

@@ -13,7 +13,10 @@ use vigp::learned::robot::identified_robot;
 use vigp::{Robot, RobotState};
 
 mod common;
-use common::{mse_line, run_tool, s, table, temp_dir};
+use common::{
+    argv, line_starting, mse_line, number_after, parameter_row, predict_args, read_json, run_tool,
+    s, score_args, table, table_with_header, temp_dir, write_file,
+};
 
 const DT: f64 = 0.002;
 const ACTUATED: &str = "j1,j2,j3";
@@ -41,6 +44,14 @@ fn truth_urdf() -> String {
         );
     assert_ne!(text, nominal_urdf());
     text
+}
+
+/// The robot of the URDF text `urdf`, its three joints actuated.
+fn arm(urdf: &str) -> Robot {
+    Robot::from_urdf_str(urdf)
+        .unwrap()
+        .with_actuated(&["j1", "j2", "j3"])
+        .unwrap()
 }
 
 /// The tool in-process (no registered mechanism: `--urdf` needs none).
@@ -79,28 +90,9 @@ fn positions(path: &Path, n: usize) -> Vec<Vec<f64>> {
 /// is one step of the first-order rule, so that a window's start state
 /// (x_s, (x_(s+1) − x_s)/Δt) is the engine's own state.
 fn simulate(urdf: &Path, q: &str, plan: &Path, log: &Path, label: &str) {
-    let args = [
-        "simulate",
-        "--urdf",
-        s(urdf),
-        "--actuated",
-        ACTUATED,
-        "--q",
-        q,
-        "--dt",
-        "0.002",
-        "--steps",
-        "400",
-        "--inputs",
-        s(plan),
-        "--out",
-        s(log),
-        "--run",
-        label,
-        "--max-subdivision",
-        "0",
-    ];
-    run(&args).unwrap();
+    let line = "simulate --urdf {} --actuated {} --q {} --dt 0.002 --steps 400 --inputs {} \
+                --out {} --run {} --max-subdivision 0";
+    run(&argv(line, &[s(urdf), ACTUATED, q, s(plan), s(log), label])).unwrap();
 }
 
 /// The largest |x − y| over the states' positions and a log's rows.
@@ -115,9 +107,8 @@ fn largest_gap(states: &[RobotState], log: &[Vec<f64>]) -> f64 {
 #[test]
 fn simulate_identify_fit_score_on_a_perturbed_arm() {
     let dir = temp_dir("arm");
-    let (nominal, truth) = (dir.join("arm3.urdf"), dir.join("arm3_truth.urdf"));
-    std::fs::write(&nominal, nominal_urdf()).unwrap();
-    std::fs::write(&truth, truth_urdf()).unwrap();
+    let nominal = write_file(&dir, "arm3.urdf", nominal_urdf());
+    let truth = write_file(&dir, "arm3_truth.urdf", truth_urdf());
     // training: three runs from different starts under different plans;
     // held out: a fourth
     let starts = [
@@ -147,12 +138,6 @@ fn simulate_identify_fit_score_on_a_perturbed_arm() {
     // the log is the library's rollout of the same robot under the plan,
     // row k + 1 holding the input of step k; numbers are written in their
     // shortest round-trip form, so they agree bit for bit
-    let robot = |urdf: &str| {
-        Robot::from_urdf_str(urdf)
-            .unwrap()
-            .with_actuated(&["j1", "j2", "j3"])
-            .unwrap()
-    };
     let rollout = |r: &Robot, i: usize| {
         let z0 = RobotState::new(starts[i].to_vec(), vec![0.0; 3]);
         r.rollout_with(&z0, DT, 400, |k, _| plans[i][k].clone())
@@ -161,7 +146,7 @@ fn simulate_identify_fit_score_on_a_perturbed_arm() {
     };
     let logged = positions(&logs[0], 3);
     assert_eq!(logged.len(), 402);
-    for (k, z) in rollout(&robot(&truth_urdf()), 0).iter().enumerate() {
+    for (k, z) in rollout(&arm(&truth_urdf()), 0).iter().enumerate() {
         assert_eq!(logged[k], z.q, "row {k}");
     }
     let rows = table(&logs[0]);
@@ -172,31 +157,11 @@ fn simulate_identify_fit_score_on_a_perturbed_arm() {
 
     // identification with the declared arm as the prior's centre
     let params = dir.join("params.json");
-    let said = run(&[
-        "identify",
-        "--urdf",
-        s(&nominal),
-        "--actuated",
-        ACTUATED,
-        "--data",
-        s(&train),
-        "--out",
-        s(&params),
-    ])
-    .unwrap();
+    let line = "identify --urdf {} --actuated {} --data {} --out {}";
+    let said = run(&argv(line, &[s(&nominal), ACTUATED, s(&train), s(&params)])).unwrap();
     assert!(said.contains("first-order rule"), "{said}");
-    let file: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(&params).unwrap()).unwrap();
-    let dsl = |name: &str| {
-        file["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["name"] == name)
-            .unwrap_or_else(|| panic!("{name} not in {file}"))["identified"]
-            .as_f64()
-            .unwrap()
-    };
+    let file = read_json(&params);
+    let dsl = |name: &str| parameter_row(&file, name)["identified"].as_f64().unwrap();
     // a noise-free log written by the rule the regression uses: the
     // dampings, each identifiable on its own here, to the rounding of the
     // regression (1e-8 absolute on values of 0.05–0.25)
@@ -211,7 +176,7 @@ fn simulate_identify_fit_score_on_a_perturbed_arm() {
     // the identified robot reproduces the held-out log it never saw
     let identified: IdentifiedParameters =
         serde_json::from_value(file["identified"].clone()).unwrap();
-    let declared = robot(&nominal_urdf());
+    let declared = arm(&nominal_urdf());
     let fitted = identified_robot(&declared, DT, &identified).unwrap();
     let test_log = positions(&test, 3);
     let off = largest_gap(&rollout(&fitted, 3), &test_log);
@@ -225,37 +190,15 @@ fn simulate_identify_fit_score_on_a_perturbed_arm() {
     let (m_nominal, m_identified) = (dir.join("nominal.json"), dir.join("identified.json"));
     let prior = format!("identified:{}", s(&params));
     for (model, prior) in [(&m_nominal, "nominal"), (&m_identified, prior.as_str())] {
-        run(&[
-            "fit",
-            "--urdf",
-            s(&nominal),
-            "--actuated",
-            ACTUATED,
-            "--data",
-            s(&train),
-            "--out",
-            s(model),
-            "--prior",
-            prior,
-            "--restarts",
-            "1",
-            "--max-samples",
-            "400",
-        ])
+        let line = "fit --urdf {} --actuated {} --data {} --out {} --prior {} --restarts 1 \
+                    --max-samples 400";
+        run(&argv(
+            line,
+            &[s(&nominal), ACTUATED, s(&train), s(model), prior],
+        ))
         .unwrap();
     }
-    let score = |model: &Path| {
-        let said = run(&[
-            "score",
-            "--model",
-            s(model),
-            "--data",
-            s(&test),
-            "--steps",
-            "20",
-        ]);
-        mse_line(&said.unwrap())
-    };
+    let score = |model: &Path| mse_line(&run(&score_args(s(model), s(&test), "20")).unwrap());
     let (nominal_mse, learned_mse) = score(&m_nominal);
     let (identified_mse, identified_learned_mse) = score(&m_identified);
     eprintln!(
@@ -335,12 +278,8 @@ fn predict_attaches_the_conformal_bound_to_a_learned_robot() {
     use vigp::bound::ConformalSettings;
     use vigp::learned::robot::{LearnedRobot, RobotCalibration};
     let dir = temp_dir("predict");
-    let nominal = dir.join("arm3.urdf");
-    std::fs::write(&nominal, nominal_urdf()).unwrap();
-    let truth = Robot::from_urdf_str(&truth_urdf())
-        .unwrap()
-        .with_actuated(&["j1", "j2", "j3"])
-        .unwrap();
+    let nominal = write_file(&dir, "arm3.urdf", nominal_urdf());
+    let truth = arm(&truth_urdf());
     let start = |i: usize| {
         let x = i as f64;
         [
@@ -350,53 +289,25 @@ fn predict_attaches_the_conformal_bound_to_a_learned_robot() {
         ]
     };
     let write = |name: &str, starts: Vec<[f64; 3]>, steps: usize| {
-        let path = dir.join(name);
-        std::fs::write(&path, logs(&truth, &starts, steps)).unwrap();
-        path
+        write_file(&dir, name, logs(&truth, &starts, steps))
     };
     let train = write("train.csv", (0..2).map(start).collect(), 300);
     let cal = write("cal.csv", (10..50).map(start).collect(), 30);
     let test = write("test.csv", vec![start(100)], 60);
     let model = dir.join("model.json");
-    run(&[
-        "fit",
-        "--urdf",
-        s(&nominal),
-        "--actuated",
-        ACTUATED,
-        "--data",
-        s(&train),
-        "--out",
-        s(&model),
-        "--restarts",
-        "1",
-        "--max-samples",
-        "300",
-    ])
-    .unwrap();
+    let line = "fit --urdf {} --actuated {} --data {} --out {} --restarts 1 --max-samples 300";
+    run(&argv(line, &[s(&nominal), ACTUATED, s(&train), s(&model)])).unwrap();
     let out = dir.join("pred.csv");
-    let base = [
-        "predict",
-        "--model",
-        s(&model),
-        "--data",
-        s(&test),
-        "--steps",
-        "10",
-        "--stride",
-        "10",
-        "--delta",
-        "0.1",
-        "--out",
-        s(&out),
-    ];
+    let base = argv(
+        "predict --model {} --data {} --steps 10 --stride 10 --delta 0.1 --out {}",
+        &[s(&model), s(&test), s(&out)],
+    );
     let said = run(&[&base[..], &["--calibration", s(&cal)]].concat()).unwrap();
     eprintln!("{said}");
     assert!(said.contains("conformal bound"), "{said}");
-    let rows = table(&out);
-    assert_eq!(
-        rows[0].join(","),
-        "run,start,t,j1,j2,j3,v_j1,v_j2,v_j3,u_j1,u_j2,u_j3,bound,position_bound,fallback"
+    let rows = table_with_header(
+        &out,
+        "run,start,t,j1,j2,j3,v_j1,v_j2,v_j3,u_j1,u_j2,u_j3,bound,position_bound,fallback",
     );
     // starts 0, 10, …, 50 of 62 samples (a start needs its 10 inputs after it)
     assert_eq!(rows.len(), 1 + 6 * 11);
@@ -481,52 +392,22 @@ fn predict_attaches_the_conformal_bound_to_a_learned_robot() {
 #[test]
 fn excite_designs_within_the_urdf_limits() {
     let dir = temp_dir("excite");
-    let urdf = dir.join("scara.urdf");
     let scara = nominal_urdf().replace(r#"<axis xyz="0 1 0"/>"#, r#"<axis xyz="0 0 1"/>"#);
     assert_ne!(scara, nominal_urdf());
-    std::fs::write(&urdf, scara).unwrap();
+    let urdf = write_file(&dir, "scara.urdf", scara);
     let plan = dir.join("plan.csv");
-    let text = run(&[
-        "excite",
-        "--urdf",
-        s(&urdf),
-        "--actuated",
-        ACTUATED,
-        "--duration",
-        "0.2",
-        "--dt",
-        "0.002",
-        "--harmonics",
-        "1",
-        "--amplitude",
-        "1",
-        "--q",
-        "0.2,-0.4,0.05",
-        "--out",
-        s(&plan),
-    ])
-    .unwrap();
+    let line = "excite --urdf {} --actuated {} --duration 0.2 --dt 0.002 --harmonics 1 \
+                --amplitude 1 --q 0.2,-0.4,0.05 --out {}";
+    let text = run(&argv(line, &[s(&urdf), ACTUATED, s(&plan)])).unwrap();
     eprintln!("{text}");
-    let line = |start: &str| {
-        text.lines()
-            .find(|l| l.starts_with(start))
-            .unwrap_or_else(|| panic!("{text}"))
-            .to_string()
-    };
-    let number = |line: &str, after: &str| -> f64 {
-        let rest = &line[line.find(after).unwrap() + after.len()..];
-        let end = rest.find([',', ' ']).unwrap_or(rest.len());
-        rest[..end].parse().unwrap()
-    };
-    let info = line("log det information: design ");
+    let info = line_starting(&text, "log det information: design ");
     assert!(
-        number(&info, "design ") > number(&info, "same amplitude "),
+        number_after(info, "design ") > number_after(info, "same amplitude "),
         "{info}"
     );
-    let limits = line("joint limits (the URDF's)");
-    assert!(number(&limits, "of the design ") <= 1e-3, "{limits}");
-    let rows = table(&plan);
-    assert_eq!(rows[0].join(","), "t,u_j1,u_j2,u_j3");
+    let limits = line_starting(&text, "joint limits (the URDF's)");
+    assert!(number_after(limits, "of the design ") <= 1e-3, "{limits}");
+    let rows = table_with_header(&plan, "t,u_j1,u_j2,u_j3");
     assert_eq!(rows.len(), 1 + 100);
     for r in &rows[1..] {
         for u in &r[1..] {
@@ -535,24 +416,9 @@ fn excite_designs_within_the_urdf_limits() {
         }
     }
     let log = dir.join("log.csv");
-    run(&[
-        "simulate",
-        "--urdf",
-        s(&urdf),
-        "--actuated",
-        ACTUATED,
-        "--q",
-        "0.2,-0.4,0.05",
-        "--dt",
-        "0.002",
-        "--steps",
-        "100",
-        "--inputs",
-        s(&plan),
-        "--out",
-        s(&log),
-    ])
-    .unwrap();
+    let line = "simulate --urdf {} --actuated {} --q 0.2,-0.4,0.05 --dt 0.002 --steps 100 \
+                --inputs {} --out {}";
+    run(&argv(line, &[s(&urdf), ACTUATED, s(&plan), s(&log)])).unwrap();
     // 101 states and the last one's q + Δt·v
     assert_eq!(positions(&log, 3).len(), 102);
     std::fs::remove_dir_all(&dir).ok();
@@ -561,59 +427,23 @@ fn excite_designs_within_the_urdf_limits() {
 #[test]
 fn wrong_use_is_a_clear_error() {
     let dir = temp_dir("errors");
-    let urdf = dir.join("arm3.urdf");
-    std::fs::write(&urdf, nominal_urdf()).unwrap();
+    let urdf = write_file(&dir, "arm3.urdf", nominal_urdf());
     let fails = |args: &[&str]| run(args).expect_err("must fail").to_string();
     let out = dir.join("out.csv");
-    let sim = |extra: &[&str]| {
-        let mut args = vec![
-            "simulate",
-            "--urdf",
-            s(&urdf),
-            "--q",
-            "0,0,0",
-            "--dt",
-            "0.01",
-            "--steps",
-            "5",
-            "--out",
-            s(&out),
-        ];
-        args.extend_from_slice(extra);
-        fails(&args)
+    // `simulate` of `urdf` from `q` for 5 steps, then `extra`: its error
+    let simulate = |urdf: &Path, q: &str, extra: &[&str]| {
+        let line = "simulate --urdf {} --q {} --dt 0.01 --steps 5 --out {}";
+        fails(&[&argv(line, &[s(urdf), q, s(&out)])[..], extra].concat())
     };
+    let sim = |extra: &[&str]| simulate(&urdf, "0,0,0", extra);
     let e = sim(&["--actuated", "j9"]);
     assert!(
         e.contains("unknown joint `j9`") && e.contains("j1, j2, j3"),
         "{e}"
     );
-    let e = fails(&[
-        "simulate",
-        "--urdf",
-        s(&dir.join("missing.urdf")),
-        "--q",
-        "0,0,0",
-        "--dt",
-        "0.01",
-        "--steps",
-        "5",
-        "--out",
-        s(&out),
-    ]);
+    let e = simulate(&dir.join("missing.urdf"), "0,0,0", &[]);
     assert!(e.contains("missing.urdf"), "{e}");
-    let e = fails(&[
-        "simulate",
-        "--urdf",
-        s(&urdf),
-        "--q",
-        "0,0",
-        "--dt",
-        "0.01",
-        "--steps",
-        "5",
-        "--out",
-        s(&out),
-    ]);
+    let e = simulate(&urdf, "0,0", &[]);
     assert!(
         e.contains("--q has 2 value(s)") && e.contains("j1, j2, j3"),
         "{e}"
@@ -622,102 +452,34 @@ fn wrong_use_is_a_clear_error() {
     assert!(e.contains("edit the URDF"), "{e}");
     let e = sim(&["--substeps", "2"]);
     assert!(e.contains("--substeps"), "{e}");
-    let e = fails(&[
-        "simulate",
-        "--urdf",
-        s(&urdf),
-        "--system",
-        "pendulum",
-        "--q",
-        "0,0,0",
-        "--dt",
-        "0.01",
-        "--steps",
-        "5",
-        "--out",
-        s(&out),
-    ]);
+    let line = "simulate --urdf {} --system pendulum --q 0,0,0 --dt 0.01 --steps 5 --out {}";
+    let e = fails(&argv(line, &[s(&urdf), s(&out)]));
     assert!(e.contains("--system"), "{e}");
     // a log to read
-    run(&[
-        "simulate",
-        "--urdf",
-        s(&urdf),
-        "--q",
-        "0.1,0.2,0",
-        "--dt",
-        "0.01",
-        "--steps",
-        "40",
-        "--out",
-        s(&out),
-    ])
-    .unwrap();
+    let line = "simulate --urdf {} --q 0.1,0.2,0 --dt 0.01 --steps 40 --out {}";
+    run(&argv(line, &[s(&urdf), s(&out)])).unwrap();
     // the midpoint rule (for logs of a real robot) is the regressor's other
     // rule, named in the report
-    let report = run(&[
-        "identify",
-        "--urdf",
-        s(&urdf),
-        "--data",
-        s(&out),
-        "--out",
-        s(&dir.join("p.json")),
-        "--rule",
-        "midpoint",
-    ])
-    .unwrap();
+    let line = "identify --urdf {} --data {} --out {} --rule midpoint";
+    let report = run(&argv(line, &[s(&urdf), s(&out), s(&dir.join("p.json"))])).unwrap();
     assert!(report.contains("midpoint rule"), "{report}");
     // the log has no input columns, the robot now has inputs
-    let e = fails(&[
-        "fit",
-        "--urdf",
-        s(&urdf),
-        "--actuated",
-        "j2",
-        "--data",
-        s(&out),
-        "--out",
-        s(&dir.join("m.json")),
-    ]);
+    let line = "fit --urdf {} --actuated j2 --data {} --out {}";
+    let e = fails(&argv(line, &[s(&urdf), s(&out), s(&dir.join("m.json"))]));
     assert!(e.contains("u_j2"), "{e}");
-    let e = fails(&[
-        "fit",
-        "--urdf",
-        s(&urdf),
-        "--data",
-        s(&out),
-        "--out",
-        s(&dir.join("m.json")),
-        "--encoding",
-        "maximal",
-    ]);
+    let line = "fit --urdf {} --data {} --out {} --encoding maximal";
+    let e = fails(&argv(line, &[s(&urdf), s(&out), s(&dir.join("m.json"))]));
     assert!(e.contains("joint coordinates"), "{e}");
     // a model of the robot: `predict` says what takes it
     let model = dir.join("m.json");
-    run(&[
-        "fit",
-        "--urdf",
-        s(&urdf),
-        "--data",
-        s(&out),
-        "--out",
+    let line = "fit --urdf {} --data {} --out {} --restarts 0";
+    run(&argv(line, &[s(&urdf), s(&out), s(&model)])).unwrap();
+    let e = fails(&predict_args(
         s(&model),
-        "--restarts",
-        "0",
-    ])
-    .unwrap();
-    let e = fails(&[
-        "predict",
-        "--model",
-        s(&model),
-        "--data",
         s(&out),
-        "--steps",
         "3",
-        "--out",
         s(&dir.join("p.csv")),
-    ]);
+    ));
     assert!(e.contains("--calibration"), "{e}");
     // export writes the learned robot for the no_std stepper (the
     // generated source is compiled and checked in tests/learn)

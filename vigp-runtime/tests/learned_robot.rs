@@ -20,6 +20,14 @@ mod rng;
 
 const DT: f64 = 0.002;
 
+/// The kinds of the arm's coordinates j1, j2, j3.
+const KINDS: [CoordinateKind; 3] = [
+    CoordinateKind::Angle,
+    CoordinateKind::Angle,
+    CoordinateKind::Length,
+];
+
+/// The test arm with `damping` in place of its declared 0.1, driven on j2.
 fn arm(damping: f64) -> Robot {
     let text = std::fs::read_to_string(concat!(
         env!("CARGO_MANIFEST_DIR"),
@@ -63,31 +71,55 @@ fn log(robot: &Robot, q0: [f64; 3], steps: usize) -> String {
     String::from_utf8(text).unwrap()
 }
 
+/// Two runs of `truth` (`a` and `b`, `steps` steps each) as one CSV text.
+fn two_runs(truth: &Robot, steps: usize) -> String {
+    let mut text = log(truth, [0.1, -0.2, 0.05], steps);
+    let more = log(truth, [-0.2, 0.3, 0.0], steps).replace("\na,", "\nb,");
+    text.push_str(more.split_once('\n').unwrap().1);
+    text
+}
+
+/// The data of two runs of `truth` (`steps` steps each) and their
+/// transitions.
+fn two_run_data(truth: &Robot, steps: usize) -> (DynDataset, Vec<RobotTransition>) {
+    let data = read(&two_runs(truth, steps));
+    let ts = RobotTransition::from_dataset(&data);
+    (data, ts)
+}
+
+/// The data of a CSV text, read with the arm's coordinates and input.
 fn read(text: &str) -> DynDataset {
-    let kinds = [
-        CoordinateKind::Angle,
-        CoordinateKind::Angle,
-        CoordinateKind::Length,
-    ];
     DynDataset::read_csv_with_inputs(
         text.as_bytes(),
         &["j1", "j2", "j3"],
-        &kinds,
+        &KINDS,
         &["j2"],
         &ReadOptions::default(),
     )
     .unwrap()
 }
 
+/// The training options with one restart.
+fn one_restart() -> TrainOptions {
+    TrainOptions {
+        restarts: 1,
+        ..TrainOptions::default()
+    }
+}
+
+/// `declared` with a GP trained on `ts` (sin/cos encoding, the robot's
+/// step as prior).
+fn train(declared: Robot, ts: &[RobotTransition], options: &TrainOptions) -> LearnedRobot {
+    LearnedRobot::train(declared, DT, ts, Encoding::SinCos, Prior::Nominal, options)
+        .unwrap()
+        .0
+}
+
 #[test]
 fn the_run_time_reader_reads_what_the_fixed_size_reader_reads() {
     let text = log(&arm(0.3), [0.1, -0.2, 0.05], 60);
     let dynamic = read(&text);
-    let kinds = [
-        CoordinateKind::Angle,
-        CoordinateKind::Angle,
-        CoordinateKind::Length,
-    ];
+    let kinds = KINDS;
     let fixed = Dataset::<3>::read_csv_with_inputs(
         text.as_bytes(),
         &["j1", "j2", "j3"],
@@ -145,9 +177,7 @@ fn the_run_time_reader_reads_what_the_fixed_size_reader_reads() {
 fn learned_step_derivatives_match_differences_of_the_step() {
     let truth = arm(0.3);
     let declared = arm(0.1);
-    let mut text = log(&truth, [0.1, -0.2, 0.05], 120);
-    let more = log(&truth, [-0.2, 0.3, 0.0], 120).replace("\na,", "\nb,");
-    text.push_str(more.split_once('\n').unwrap().1);
+    let text = two_runs(&truth, 120);
     let ts = RobotTransition::from_dataset(&read(&text));
     let options = TrainOptions {
         restarts: 1,
@@ -266,25 +296,10 @@ fn a_learned_robot_steps_saves_and_refuses_bad_input() {
     // the truth damps the elbow 3× more than the declared robot
     let truth = arm(0.3);
     let declared = arm(0.1);
-    let mut text = log(&truth, [0.1, -0.2, 0.05], 150);
-    let more = log(&truth, [-0.2, 0.3, 0.0], 150).replace("\na,", "\nb,");
-    text.push_str(more.split_once('\n').unwrap().1);
-    let data = read(&text);
-    let ts = RobotTransition::from_dataset(&data);
+    let (_, ts) = two_run_data(&truth, 150);
     assert_eq!(ts.len(), 300);
-    let options = TrainOptions {
-        restarts: 1,
-        ..TrainOptions::default()
-    };
-    let (learned, _) = LearnedRobot::train(
-        declared.clone(),
-        DT,
-        &ts,
-        Encoding::SinCos,
-        Prior::Nominal,
-        &options,
-    )
-    .unwrap();
+    let options = one_restart();
+    let learned = train(declared.clone(), &ts, &options);
     assert_eq!(coordinate_kinds(learned.robot())[2], CoordinateKind::Length);
 
     // one step: q + Δt·v, and the declared robot's velocity plus the GP's
@@ -352,39 +367,25 @@ fn a_learned_robot_steps_saves_and_refuses_bad_input() {
         learned.rollout(&bad, &u_prev, &inputs),
         Err(LearnedRobotError::Rollout { step: 0, .. })
     ));
-    assert!(matches!(
+    // the declared robot trained raw with Δt = `dt` on `ts`
+    let train_raw = |dt, ts: &[RobotTransition]| {
         LearnedRobot::train(
             declared.clone(),
-            0.0,
-            &ts,
+            dt,
+            ts,
             Encoding::Raw,
             Prior::Nominal,
-            &options
-        ),
+            &options,
+        )
+    };
+    assert!(matches!(
+        train_raw(0.0, &ts),
         Err(LearnedRobotError::TimeStep(_))
     ));
-    assert!(matches!(
-        LearnedRobot::train(
-            declared.clone(),
-            DT,
-            &[],
-            Encoding::Raw,
-            Prior::Nominal,
-            &options
-        ),
-        Err(LearnedRobotError::Empty)
-    ));
+    assert!(matches!(train_raw(DT, &[]), Err(LearnedRobotError::Empty)));
     let mut short = ts[..3].to_vec();
     short[1].v_next.pop();
-    let e = LearnedRobot::train(
-        declared.clone(),
-        DT,
-        &short,
-        Encoding::Raw,
-        Prior::Nominal,
-        &options,
-    )
-    .unwrap_err();
+    let e = train_raw(DT, &short).unwrap_err();
     assert!(e.to_string().contains("training transition 1"), "{e}");
     // a file whose GP does not fit the robot
     let mut saved = learned.to_saved();
@@ -425,23 +426,11 @@ fn a_repeated_transition_trains_once() {
         .flat_map(|(i, t)| std::iter::repeat_n(t.clone(), if i < 15 { 2 } else { 1 }))
         .collect();
     assert_eq!(repeated.len(), 55);
-    let options = TrainOptions {
-        restarts: 1,
-        ..TrainOptions::default()
-    };
-    let train = |data: &[RobotTransition]| {
-        LearnedRobot::train(
-            arm(0.1),
-            DT,
-            data,
-            Encoding::SinCos,
-            Prior::Nominal,
-            &options,
-        )
-        .unwrap()
-        .0
-    };
-    let (once, twice) = (train(&ts), train(&repeated));
+    let options = one_restart();
+    let (once, twice) = (
+        train(arm(0.1), &ts, &options),
+        train(arm(0.1), &repeated, &options),
+    );
     assert_eq!(twice.gp().n(), 40);
     assert_eq!(twice.to_saved(), once.to_saved());
 }
@@ -496,24 +485,8 @@ fn the_conformal_bound_of_a_learned_robot_covers_held_out_windows() {
     use vigp_runtime::learned::robot::RobotCalibration;
     let truth = arm(0.3);
     let declared = arm(0.1);
-    let mut text = log(&truth, [0.1, -0.2, 0.05], 150);
-    let more = log(&truth, [-0.2, 0.3, 0.0], 150).replace("\na,", "\nb,");
-    text.push_str(more.split_once('\n').unwrap().1);
-    let data = read(&text);
-    let ts = RobotTransition::from_dataset(&data);
-    let options = TrainOptions {
-        restarts: 1,
-        ..TrainOptions::default()
-    };
-    let (learned, _) = LearnedRobot::train(
-        declared,
-        DT,
-        &ts,
-        Encoding::SinCos,
-        Prior::Nominal,
-        &options,
-    )
-    .unwrap();
+    let (data, ts) = two_run_data(&truth, 150);
+    let learned = train(declared, &ts, &one_restart());
     let k = 10;
     let mut rng = rng::Rng(5);
     let runs = |rng: &mut rng::Rng| -> (Vec<_>, Vec<_>) {

@@ -12,14 +12,56 @@ use vigp_runtime::robot::{Robot, RobotError, RobotState, UrdfError};
 
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/robots");
 
+/// The path of the fixture `name`.
 fn fixture(name: &str) -> String {
     format!("{FIXTURES}/{name}")
 }
 
+/// The robot of the URDF fixture `file`, the joints `joints` driven.
+fn driven(file: &str, joints: &[&str]) -> Robot {
+    Robot::from_urdf(fixture(file))
+        .unwrap()
+        .with_actuated(joints)
+        .unwrap()
+}
+
+/// The largest |exact[(i, j)] − (f(j, ε) − f(j, −ε))/2ε| over the `cols`
+/// columns j of `exact`: `f(j, e)` is the state (q then v) reached with
+/// the j-th variable moved by e.
+fn worst_columns(
+    exact: &nalgebra::DMatrix<f64>,
+    cols: usize,
+    eps: f64,
+    f: impl Fn(usize, f64) -> Vec<f64>,
+) -> f64 {
+    let mut worst = 0.0f64;
+    for j in 0..cols {
+        let (sp, sm) = (f(j, eps), f(j, -eps));
+        for i in 0..exact.nrows() {
+            worst = worst.max((exact[(i, j)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
+        }
+    }
+    worst
+}
+
+/// `z` with its state entry `j` (q then v) moved by `e`.
+fn nudged(z: &RobotState, j: usize, e: f64) -> RobotState {
+    let mut z = z.clone();
+    let n = z.q.len();
+    if j < n {
+        z.q[j] += e;
+    } else {
+        z.v[j - n] += e;
+    }
+    z
+}
+
+/// The JSON file at `path`, parsed.
 fn read_json(path: &str) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// The numbers of a JSON array.
 fn floats(v: &serde_json::Value) -> Vec<f64> {
     v.as_array()
         .unwrap()
@@ -346,10 +388,7 @@ fn an_input_is_a_generalized_force_on_its_joint() {
     // u on j3 (prismatic) against the same step with that force as the
     // engine's generalized force: a constant force on the slide raises the
     // slide's momentum by u·Δt over an unforced step, to first order
-    let robot = Robot::from_urdf(fixture("arm3.urdf"))
-        .unwrap()
-        .with_actuated(&["j3"])
-        .unwrap();
+    let robot = driven("arm3.urdf", &["j3"]);
     let z = RobotState::new(vec![0.1, 0.2, 0.0], vec![0.0; 3]);
     let dt = 1e-3;
     let (a, _) = robot.step(&z, &[0.0], dt).unwrap();
@@ -395,31 +434,12 @@ fn against_differences(robot: &Robot, z: &RobotState, u: &[f64], dt: f64) -> (f6
         let (z1, _) = fine.step(z, u, dt).unwrap();
         [z1.q, z1.v].concat()
     };
-    let mut worst_a = 0.0f64;
-    for j in 0..2 * n {
-        let (mut zp, mut zm) = (z.clone(), z.clone());
-        if j < n {
-            zp.q[j] += eps;
-            zm.q[j] -= eps;
-        } else {
-            zp.v[j - n] += eps;
-            zm.v[j - n] -= eps;
-        }
-        let (sp, sm) = (state(&zp, u), state(&zm, u));
-        for i in 0..2 * n {
-            worst_a = worst_a.max((d.a[(i, j)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
-        }
-    }
-    let mut worst_b = 0.0f64;
-    for k in 0..u.len() {
-        let (mut up, mut um) = (u.to_vec(), u.to_vec());
-        up[k] += eps;
-        um[k] -= eps;
-        let (sp, sm) = (state(z, &up), state(z, &um));
-        for i in 0..2 * n {
-            worst_b = worst_b.max((d.b[(i, k)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
-        }
-    }
+    let worst_a = worst_columns(&d.a, 2 * n, eps, |j, e| state(&nudged(z, j, e), u));
+    let worst_b = worst_columns(&d.b, u.len(), eps, |k, e| {
+        let mut u = u.to_vec();
+        u[k] += e;
+        state(z, &u)
+    });
     let scale_b = d.b.amax().max(f64::MIN_POSITIVE);
     (worst_a / d.a.amax(), worst_b / scale_b)
 }
@@ -428,18 +448,12 @@ fn against_differences(robot: &Robot, z: &RobotState, u: &[f64], dt: f64) -> (f6
 fn step_derivatives_match_central_differences() {
     // the damped Panda, two joints driven, from a moving state; the arm3
     // (a prismatic joint, a yawed frame, a welded tool) driven on its slide
-    let panda = Robot::from_urdf(fixture("panda.urdf"))
-        .unwrap()
-        .with_actuated(&["panda_joint2", "panda_joint6"])
-        .unwrap();
+    let panda = driven("panda.urdf", &["panda_joint2", "panda_joint6"]);
     let z = RobotState::new(
         vec![0.1, -0.4, 0.3, -1.8, 0.2, 1.4, 0.6],
         vec![0.5, -0.3, 0.2, 0.4, -0.6, 0.1, 0.3],
     );
-    let arm = Robot::from_urdf(fixture("arm3.urdf"))
-        .unwrap()
-        .with_actuated(&["j1", "j3"])
-        .unwrap();
+    let arm = driven("arm3.urdf", &["j1", "j3"]);
     let za = RobotState::new(vec![0.3, -0.7, 0.05], vec![1.2, -0.8, 0.3]);
     // a branching tree (four legs from a fixed base): the Newton matrix is
     // factored in the tree's pattern
@@ -583,10 +597,7 @@ fn rollout_derivatives_chain_to_the_differences_of_the_whole_rollout() {
     // per-step A_k, B_k against central differences of the final state
     // (ε = 1e-5, solver tolerance 1e-13: 1e-6 of the largest entry, as
     // for one step)
-    let robot = Robot::from_urdf(fixture("arm3.urdf"))
-        .unwrap()
-        .with_actuated(&["j1", "j3"])
-        .unwrap();
+    let robot = driven("arm3.urdf", &["j1", "j3"]);
     let fine = robot
         .clone()
         .with_options(EngineOptions {
@@ -618,31 +629,12 @@ fn rollout_derivatives_chain_to_the_differences_of_the_whole_rollout() {
         [z.q, z.v].concat()
     };
     let eps = 1e-5;
-    let mut worst_a = 0.0f64;
-    for j in 0..2 * n {
-        let (mut zp, mut zm) = (z0.clone(), z0.clone());
-        if j < n {
-            zp.q[j] += eps;
-            zm.q[j] -= eps;
-        } else {
-            zp.v[j - n] += eps;
-            zm.v[j - n] -= eps;
-        }
-        let (sp, sm) = (last(&zp, &inputs), last(&zm, &inputs));
-        for i in 0..2 * n {
-            worst_a = worst_a.max((a[(i, j)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
-        }
-    }
-    let mut worst_b = 0.0f64;
-    for k in 0..2 {
-        let (mut up, mut um) = (inputs.clone(), inputs.clone());
-        up[2][k] += eps;
-        um[2][k] -= eps;
-        let (sp, sm) = (last(&z0, &up), last(&z0, &um));
-        for i in 0..2 * n {
-            worst_b = worst_b.max((b2[(i, k)] - (sp[i] - sm[i]) / (2.0 * eps)).abs());
-        }
-    }
+    let worst_a = worst_columns(&a, 2 * n, eps, |j, e| last(&nudged(&z0, j, e), &inputs));
+    let worst_b = worst_columns(&b2, 2, eps, |k, e| {
+        let mut us = inputs.clone();
+        us[2][k] += e;
+        last(&z0, &us)
+    });
     let (ea, eb) = (worst_a / a.amax(), worst_b / b2.amax());
     println!("arm3, 6 steps of 5 ms: dz6/dz0 {ea:.1e}, dz6/du2 {eb:.1e} (of the largest entry)");
     assert!(ea < 1e-6 && eb < 1e-6, "{ea:e} {eb:e}");
@@ -660,10 +652,7 @@ fn rollout_derivatives_chain_to_the_differences_of_the_whole_rollout() {
 
 #[test]
 fn step_derivatives_refuse_bad_input_with_typed_errors() {
-    let robot = Robot::from_urdf(fixture("arm3.urdf"))
-        .unwrap()
-        .with_actuated(&["j3"])
-        .unwrap();
+    let robot = driven("arm3.urdf", &["j3"]);
     let z = RobotState::new(vec![0.1, 0.2, 0.0], vec![0.0; 3]);
     let nan = RobotState::new(vec![0.1, f64::NAN, 0.0], vec![0.0; 3]);
     let short = RobotState::new(vec![0.1, 0.2], vec![0.0; 2]);
@@ -845,10 +834,7 @@ fn robot_regressor_recovers_its_own_log() {
 #[test]
 fn step_in_is_the_rollout_and_kept_poses_change_nothing() {
     use vigp_core::tree::{BodyScratch, Engine};
-    let robot = Robot::from_urdf(fixture("panda.urdf"))
-        .unwrap()
-        .with_actuated(&["panda_joint2", "panda_joint6"])
-        .unwrap();
+    let robot = driven("panda.urdf", &["panda_joint2", "panda_joint6"]);
     let z0 = RobotState::new(vec![0.0, -0.3, 0.0, -2.2, 0.0, 2.0, 0.8], vec![0.0; 7]);
     let (dt, steps) = (0.002, 400);
     let input = |k: usize| vec![3.0 * (0.01 * k as f64).sin(), -0.5];

@@ -15,12 +15,42 @@ use rng::Rng;
 
 const DT: f64 = 0.002;
 
+/// The text of the URDF fixture `name`.
 fn fixture(name: &str) -> String {
     std::fs::read_to_string(format!(
         "{}/../tests/fixtures/robots/{name}.urdf",
         env!("CARGO_MANIFEST_DIR")
     ))
     .unwrap()
+}
+
+/// The robot of the URDF text `urdf`, the joints `actuated` driven.
+fn driven(urdf: &str, actuated: &[&str]) -> Robot {
+    Robot::from_urdf_str(urdf)
+        .unwrap()
+        .with_actuated(actuated)
+        .unwrap()
+}
+
+/// `log` with Gaussian noise of σ = 1e-5 (draws from `rng`) on every
+/// position.
+fn with_noise(log: &Log, rng: &mut Rng) -> Log {
+    Log {
+        positions: log
+            .positions
+            .iter()
+            .map(|x| x.iter().map(|v| v + 1e-5 * rng.normal()).collect())
+            .collect(),
+        inputs: log.inputs.clone(),
+    }
+}
+
+/// The identification options with instrumental variables.
+fn iv() -> Options {
+    Options {
+        noise: Noise::IV,
+        ..Options::default()
+    }
 }
 
 /// A driven rollout's positions (q of every state, then q + Δt·v of the
@@ -76,10 +106,7 @@ fn base_error(id: &Identification, pi_true: &[f64]) -> f64 {
 #[test]
 fn position_jacobians_match_central_differences() {
     let text = fixture("panda").replace(r#"damping="0.003""#, r#"damping="0.2""#);
-    let robot = Robot::from_urdf_str(&text)
-        .unwrap()
-        .with_actuated(&["panda_joint2", "panda_joint4"])
-        .unwrap();
+    let robot = driven(&text, &["panda_joint2", "panda_joint4"]);
     let q0 = [0.1, -0.6, 0.2, -2.0, 0.3, 1.4, 0.7];
     let log = rollout(&robot, &q0, 40, 0.3);
     for (rule, regressor) in [
@@ -148,14 +175,8 @@ fn output_error_beats_the_regression_on_a_noisy_robot_log() {
     <dynamics damping="0.05"/>"#,
         );
     let actuated = ["j1", "j2", "j3"];
-    let truth = Robot::from_urdf_str(&truth_text)
-        .unwrap()
-        .with_actuated(&actuated)
-        .unwrap();
-    let declared = Robot::from_urdf_str(&fixture("arm3"))
-        .unwrap()
-        .with_actuated(&actuated)
-        .unwrap();
+    let truth = driven(&truth_text, &actuated);
+    let declared = driven(&fixture("arm3"), &actuated);
     let regressor = RobotRegressor::new(&declared, DT).unwrap();
     let pi_true = RobotRegressor::new(&truth, DT).unwrap().standard();
     let clean: Vec<Log> = [[0.2, -0.4, 0.05], [-0.5, 0.1, 0.0], [0.6, -0.8, 0.1]]
@@ -181,25 +202,12 @@ fn output_error_beats_the_regression_on_a_noisy_robot_log() {
     // σ = 1e-5 rad (or m) on every position: the regression's noisy second
     // differences bias it; the simulation error does not
     let mut rng = Rng(7);
-    let noisy: Vec<Log> = clean
-        .iter()
-        .map(|log| Log {
-            positions: log
-                .positions
-                .iter()
-                .map(|x| x.iter().map(|v| v + 1e-5 * rng.normal()).collect())
-                .collect(),
-            inputs: log.inputs.clone(),
-        })
-        .collect();
+    let noisy: Vec<Log> = clean.iter().map(|log| with_noise(log, &mut rng)).collect();
     // the first stage with instrumental variables (least squares on
     // second differences of this noise is ~100 % off, and its projection
     // onto consistent parameters lands on the feasible set's boundary,
     // where output error's shortened steps stall), then output error
-    let iv = Options {
-        noise: Noise::IV,
-        ..Options::default()
-    };
+    let iv = iv();
     let regression = identify(&regressor, &noisy, &iv).unwrap();
     let refined_iv = Options {
         output_error: Some(OutputError::default()),
@@ -280,17 +288,11 @@ fn the_midpoint_rule_shrinks_the_bias_on_continuous_time_logs() {
         json["sample"].as_f64().unwrap(),
     );
     let actuated = ["j1", "j2", "j3"];
-    let truth = Robot::from_urdf_str(&fixture("arm3"))
-        .unwrap()
-        .with_actuated(&actuated)
-        .unwrap();
+    let truth = driven(&fixture("arm3"), &actuated);
     let declared_text = fixture("arm3")
         .replace(r#"<mass value="1.2"/>"#, r#"<mass value="1.44"/>"#)
         .replace(r#"<mass value="0.5"/>"#, r#"<mass value="0.6"/>"#);
-    let declared = Robot::from_urdf_str(&declared_text)
-        .unwrap()
-        .with_actuated(&actuated)
-        .unwrap();
+    let declared = driven(&declared_text, &actuated);
     let pi_true = RobotRegressor::new(&truth, DT).unwrap().standard();
     let mut errors = Vec::new();
     for stride in [4, 2, 1] {
@@ -367,10 +369,7 @@ fn log_det(a: &nalgebra::DMatrix<f64>) -> f64 {
 #[test]
 fn a_designed_input_identifies_a_urdf_arm_better_than_random_inputs() {
     use vigp_runtime::identify::excitation::{Excitation, Problem};
-    let robot = Robot::from_urdf_str(&fixture("arm3"))
-        .unwrap()
-        .with_actuated(&["j1", "j2", "j3"])
-        .unwrap()
+    let robot = driven(&fixture("arm3"), &["j1", "j2", "j3"])
         .with_gravity([0.0, 0.0, 0.0])
         .unwrap();
     let regressor = RobotRegressor::new(&robot, DT).unwrap();
@@ -396,21 +395,8 @@ fn a_designed_input_identifies_a_urdf_arm_better_than_random_inputs() {
         assert!(*p <= a * (1.0 + 1e-12), "peak {p} > {a}");
     }
     assert!(d.evaluation.violation <= problem.limit_tolerance);
-    let iv = Options {
-        noise: Noise::IV,
-        ..Options::default()
-    };
-    let noisy = |log: &Log| {
-        let mut rng = Rng(31);
-        Log {
-            positions: log
-                .positions
-                .iter()
-                .map(|x| x.iter().map(|v| v + 1e-5 * rng.normal()).collect())
-                .collect(),
-            inputs: log.inputs.clone(),
-        }
-    };
+    let iv = iv();
+    let noisy = |log: &Log| with_noise(log, &mut Rng(31));
     let designed = identify(&regressor, &[noisy(&d.evaluation.log)], &iv).unwrap();
     let cov_design = log_det(&designed.base_covariance);
     let mut random_cov = Vec::new();
