@@ -40,13 +40,7 @@ fn pendulum_windows(seed: u64, count: usize, k: usize) -> Vec<Window<1>> {
                 }
                 p.push(z.q);
             }
-            Window {
-                start: State {
-                    q: p[0],
-                    v: (p[1] - p[0]) / DT,
-                },
-                positions: p[1..].to_vec(),
-            }
+            common::window(&p, DT)
         })
         .collect()
 }
@@ -54,23 +48,14 @@ fn pendulum_windows(seed: u64, count: usize, k: usize) -> Vec<Window<1>> {
 /// A small learned pendulum (nominal prior, sin/cos inputs) trained once.
 fn model() -> &'static Learned<PendulumMinimal, 1, 0> {
     static MODEL: OnceLock<Learned<PendulumMinimal, 1, 0>> = OnceLock::new();
-    MODEL.get_or_init(|| {
-        train_noise_free(&TrainOptions {
-            restarts: 1,
-            seed: 3,
-            ..TrainOptions::default()
-        })
-    })
+    MODEL.get_or_init(|| train_noise_free(&common::train_options(1, 3)))
 }
 
 /// The noise-free transitions of 40 pendulum windows (seed 1).
 fn noise_free_transitions() -> Vec<Transition<1>> {
     pendulum_windows(1, 40, 2)
         .iter()
-        .map(|w| Transition {
-            z: w.start,
-            v_next: (w.positions[1] - w.positions[0]) / DT,
-        })
+        .map(|w| common::first_transition(w, DT))
         .collect()
 }
 
@@ -106,11 +91,7 @@ fn noisy_model() -> &'static Learned<PendulumMinimal, 1, 0> {
                 }
             })
             .collect();
-        let opts = TrainOptions {
-            restarts: 1,
-            seed: 3,
-            ..TrainOptions::default()
-        };
+        let opts = common::train_options(1, 3);
         Learned::train(
             Pendulum::default().minimal(),
             DT,
@@ -121,6 +102,25 @@ fn noisy_model() -> &'static Learned<PendulumMinimal, 1, 0> {
         )
         .unwrap()
         .0
+    })
+}
+
+/// The conformal bound at δ = 0.05 on the latent-std score, falling back
+/// to Theorem 1.
+fn latent_std_with_theorem1() -> BoundKind {
+    BoundKind::Conformal(ConformalSettings {
+        delta: 0.05,
+        score: Score::LatentStd,
+        fallback: Fallback::Theorem1,
+        ..ConformalSettings::default()
+    })
+}
+
+/// The default conformal bound with the fallback `fallback`.
+fn conformal_with(fallback: Fallback) -> BoundKind {
+    BoundKind::Conformal(ConformalSettings {
+        fallback,
+        ..ConformalSettings::default()
     })
 }
 
@@ -489,12 +489,7 @@ fn predict_carries_a_bound_per_state() {
             tube: Tube::Simultaneous,
             fallback: Fallback::None,
         }),
-        BoundKind::Conformal(ConformalSettings {
-            delta: 0.05,
-            score: Score::LatentStd,
-            fallback: Fallback::Theorem1,
-            ..ConformalSettings::default()
-        }),
+        latent_std_with_theorem1(),
     ] {
         let b = l.error_bound(&kind, cal).unwrap();
         let p = l.predict(&z0, 5, &b).unwrap();
@@ -552,12 +547,7 @@ fn predict_bounds_equals_predict_bound_by_bound() {
         BoundKind::theorem1(0.05),
         BoundKind::rkhs(0.05),
         BoundKind::conformal(0.05),
-        BoundKind::Conformal(ConformalSettings {
-            delta: 0.05,
-            score: Score::LatentStd,
-            fallback: Fallback::Theorem1,
-            ..ConformalSettings::default()
-        }),
+        latent_std_with_theorem1(),
     ];
     let bounds: Vec<_> = kinds
         .iter()
@@ -735,11 +725,7 @@ fn noisy_transitions<M: vigp::Mechanism<N, C> + Copy, const N: usize, const C: u
 #[test]
 fn step_jacobian_norms_match_central_differences() {
     use vigp::systems::{DoublePendulum, Fourbar};
-    let opts = TrainOptions {
-        restarts: 1,
-        seed: 5,
-        ..TrainOptions::default()
-    };
+    let opts = common::train_options(1, 5);
     fn check<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
         name: &str,
         l: &Learned<M, N, C>,
@@ -1167,13 +1153,7 @@ fn a_conformal_bound_survives_a_fallback_without_variance() {
     let cal = calibration();
     let with = tight.error_bound(&BoundKind::conformal(0.05), cal).unwrap();
     let without = tight
-        .error_bound(
-            &BoundKind::Conformal(ConformalSettings {
-                fallback: Fallback::None,
-                ..ConformalSettings::default()
-            }),
-            cal,
-        )
+        .error_bound(&conformal_with(Fallback::None), cal)
         .unwrap();
     let rkhs = tight.error_bound(&BoundKind::rkhs(0.05), cal).unwrap();
     let (mut flagged, mut kept, mut raised, mut mixed) = (0, 0, 0, 0);
@@ -1226,10 +1206,7 @@ fn a_sparse_model_is_bounded_conformally_only() {
     use vigp::gp::{Method, SparseOptions};
     let data: Vec<Transition<1>> = pendulum_windows(5, 60, 2)
         .iter()
-        .map(|w| Transition {
-            z: w.start,
-            v_next: (w.positions[1] - w.positions[0]) / DT,
-        })
+        .map(|w| common::first_transition(w, DT))
         .collect();
     let opts = TrainOptions {
         method: Method::Sparse(SparseOptions::kmeans(16)),
@@ -1258,24 +1235,10 @@ fn a_sparse_model_is_bounded_conformally_only() {
         assert!(e.to_string().contains("use the conformal bound"), "{e}");
     }
     let flag_only = sparse
-        .error_bound(
-            &BoundKind::Conformal(ConformalSettings {
-                fallback: Fallback::None,
-                ..ConformalSettings::default()
-            }),
-            cal,
-        )
+        .error_bound(&conformal_with(Fallback::None), cal)
         .unwrap();
     for fallback in [Fallback::Rkhs, Fallback::Theorem1] {
-        let b = sparse
-            .error_bound(
-                &BoundKind::Conformal(ConformalSettings {
-                    fallback,
-                    ..ConformalSettings::default()
-                }),
-                cal,
-            )
-            .unwrap();
+        let b = sparse.error_bound(&conformal_with(fallback), cal).unwrap();
         assert!(b.fallback.is_none());
         let z = data[7].z;
         let (p, q) = (
@@ -1318,11 +1281,7 @@ fn driven_model() -> &'static Learned<DrivenPendulumMinimal, 1, 0> {
                 &mut rng,
             ));
         }
-        let opts = TrainOptions {
-            restarts: 2,
-            seed: 4,
-            ..TrainOptions::default()
-        };
+        let opts = common::train_options(2, 4);
         let nominal = DrivenPendulum::default().minimal();
         Learned::train_forced(nominal, DT, &data, Encoding::SinCos, Prior::Nominal, &opts)
             .unwrap()
@@ -1601,10 +1560,7 @@ fn forced_bound_misuse_is_a_typed_error() {
     let empty = Calibration::empty(DT);
     let z0 = State::new([0.2], [0.1]);
     let data = noisy_transitions(driven_truth(), &State::new([1.0], [0.0]), 30, 8);
-    let opts = TrainOptions {
-        restarts: 0,
-        ..TrainOptions::default()
-    };
+    let opts = common::restarts(0);
     let nominal = DrivenPendulum::default().minimal();
     let (plain, _) =
         Learned::train(nominal, DT, &data, Encoding::SinCos, Prior::Nominal, &opts).unwrap();

@@ -25,7 +25,6 @@ use crate::common;
 use common::Rng;
 use nalgebra::SVector;
 use vigp::bound::{BoundKind, Calibration, ConformalSettings, Fallback, Window};
-use vigp::gp::TrainOptions;
 use vigp::learned::{Encoding, Learned, Prior, Transition};
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
@@ -61,13 +60,7 @@ fn window<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
         }
         p.push(z.q);
     }
-    Some(Window {
-        start: State {
-            q: p[0],
-            v: (p[1] - p[0]) / DT,
-        },
-        positions: p[1..].to_vec(),
-    })
+    Some(common::window(&p, DT))
 }
 
 fn windows<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
@@ -150,11 +143,7 @@ fn evaluate<M: Mechanism<N, C> + vigp::Parameters + Copy, const N: usize, const 
     let cal = Calibration::new(DT, windows(truth, 2, CAL, sample)).unwrap();
     let test = windows(truth, 3, TEST, sample);
     let shift = windows(truth, 4, SHIFTED, shifted);
-    let opts = TrainOptions {
-        restarts: 1,
-        seed: 5,
-        ..TrainOptions::default()
-    };
+    let opts = common::train_options(1, 5);
     let (l, _) = Learned::train(nominal, DT, &train, encoding, prior, &opts).unwrap();
     eprintln!(
         "{system}: data and training {:.1} s",

@@ -9,6 +9,88 @@ pub use rng::Rng;
 use nalgebra::SVector;
 use vigp::{Mechanism, Variational};
 
+/// Training options with `restarts` restarts and seed `seed` (the rest
+/// default).
+pub fn train_options(restarts: usize, seed: u64) -> vigp::gp::TrainOptions {
+    vigp::gp::TrainOptions {
+        restarts,
+        seed,
+        ..vigp::gp::TrainOptions::default()
+    }
+}
+
+/// Training options with `restarts` restarts (the rest default).
+pub fn restarts(restarts: usize) -> vigp::gp::TrainOptions {
+    vigp::gp::TrainOptions {
+        restarts,
+        ..vigp::gp::TrainOptions::default()
+    }
+}
+
+/// Step options solving to 1e-14 (the rest default).
+pub fn tight() -> vigp::StepOptions {
+    vigp::StepOptions {
+        tolerance: 1e-14,
+        ..vigp::StepOptions::default()
+    }
+}
+
+/// The state at sample `k` of positions `q` sampled every `dt`: q_k with
+/// the velocity (q_{k+1} − q_k)/dt.
+pub fn state_at<const N: usize>(q: &[SVector<f64, N>], k: usize, dt: f64) -> vigp::State<N> {
+    vigp::State {
+        q: q[k],
+        v: (q[k + 1] - q[k]) / dt,
+    }
+}
+
+/// The bound window of positions `p` sampled every `dt`: the state at the
+/// first sample, then the positions after it.
+pub fn window<const N: usize>(p: &[SVector<f64, N>], dt: f64) -> vigp::bound::Window<N> {
+    vigp::bound::Window {
+        start: state_at(p, 0, dt),
+        positions: p[1..].to_vec(),
+    }
+}
+
+/// The first transition of a bound window sampled every `dt`: its start
+/// and the velocity of its first step.
+pub fn first_transition<const N: usize>(
+    w: &vigp::bound::Window<N>,
+    dt: f64,
+) -> vigp::learned::Transition<N> {
+    vigp::learned::Transition {
+        z: w.start,
+        v_next: (w.positions[1] - w.positions[0]) / dt,
+    }
+}
+
+/// `f` run in a fresh rayon pool of `threads` threads.
+pub fn in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap()
+        .install(f)
+}
+
+/// Whether the two reference-step results agree: the engine's step and
+/// the reference step (`name`, `alpha` name them in failures) give the
+/// same positions and velocities within 1e-11; returns |Δv|.
+pub fn reference_gap<const N: usize, T, E: std::fmt::Display, F: std::fmt::Display>(
+    name: &str,
+    alpha: f64,
+    engine: Result<vigp::State<N>, E>,
+    reference: Result<(vigp::State<N>, T), F>,
+) -> f64 {
+    let a = engine.unwrap_or_else(|e| panic!("{name} α={alpha}: {e}"));
+    let (b, _) = reference.unwrap_or_else(|e| panic!("{name} α={alpha} reference: {e}"));
+    assert_eq!(a.q, b.q);
+    let d = (a.v - b.v).amax();
+    assert!(d <= 1e-11, "{name} α={alpha}: |Δv| = {d:.2e}");
+    d
+}
+
 /// Positions every `dt` for `samples` samples, integrated by the midpoint VI
 /// at `dt / substeps` from a state at rest at `q0` (projected first when the
 /// model has constraints).
@@ -69,6 +151,43 @@ pub fn stencil<const N: usize>(
     (d(p1.q, m1.q, p2.q, m2.q), d(p1.v, m1.v, p2.v, m2.v))
 }
 
+/// `z` with `e` added to q_j (`in_q`) or to v_j.
+pub fn nudged<const N: usize>(z: &vigp::State<N>, j: usize, in_q: bool, e: f64) -> vigp::State<N> {
+    let mut zp = *z;
+    if in_q {
+        zp.q[j] += e;
+    } else {
+        zp.v[j] += e;
+    }
+    zp
+}
+
+/// The largest deviation of the columns of an exact A (`a`) from
+/// five-point differences ([`stencil`], step `eps`) of `step` at `z`
+/// perturbed in each coordinate of q and v, and the largest entry of
+/// those differences: (error, scale).
+pub fn a_stencil_errors<const N: usize>(
+    z: &vigp::State<N>,
+    a: &vigp::embedded::StateJacobian<N>,
+    eps: f64,
+    mut step: impl FnMut(&vigp::State<N>) -> vigp::State<N>,
+) -> (f64, f64) {
+    let (mut err, mut scale) = (0.0f64, 0.0f64);
+    for j in 0..N {
+        for pos in [true, false] {
+            let (dq, dv) = stencil(eps, |e| step(&nudged(z, j, pos, e)));
+            let (aq, av) = if pos {
+                (a.q_q.column(j), a.v_q.column(j))
+            } else {
+                (a.q_v.column(j), a.v_v.column(j))
+            };
+            err = err.max((aq - dq).amax()).max((av - dv).amax());
+            scale = scale.max(dq.amax()).max(dv.amax());
+        }
+    }
+    (err, scale)
+}
+
 /// The relative errors (max |A − A_fd| / max |A_fd|, the same for B) of the
 /// exact one-step derivatives `d` of the forced step `step` at (`z`, `u`)
 /// against five-point central differences ([`stencil`]) with steps `fd`
@@ -88,15 +207,7 @@ pub fn ab_errors<const N: usize, const U: usize>(
         for (which, base) in [(0usize, true), (1, false)] {
             let x = if base { z.q[j] } else { z.v[j] };
             let eps = fd * x.abs().max(1.0);
-            let (dq, dv) = stencil(eps, |e| {
-                let mut zp = *z;
-                if base {
-                    zp.q[j] += e;
-                } else {
-                    zp.v[j] += e;
-                }
-                step(&zp, u)
-            });
+            let (dq, dv) = stencil(eps, |e| step(&nudged(z, j, base, e), u));
             a_fd[which].set_column(j, &dq);
             a_fd[2 + which].set_column(j, &dv);
         }
@@ -129,4 +240,64 @@ pub fn ab_errors<const N: usize, const U: usize>(
         0.0
     };
     (e_a, e_b)
+}
+
+/// The bits of a state's coordinates, q then v.
+pub fn state_bits<const N: usize>(z: &vigp::State<N>) -> Vec<u64> {
+    z.q.iter().chain(z.v.iter()).map(|x| x.to_bits()).collect()
+}
+
+/// Whether two states are equal bit for bit.
+pub fn same_bits<const N: usize>(a: &vigp::State<N>, b: &vigp::State<N>) -> bool {
+    state_bits(a) == state_bits(b)
+}
+
+/// The bits of a spatial state, link by link: x, q, v, ω.
+pub fn spatial_bits<const B: usize>(z: &vigp::spatial::SpatialState<B>) -> Vec<u64> {
+    (0..B)
+        .flat_map(|i| {
+            z.x[i]
+                .iter()
+                .chain(z.q[i].quaternion().coords.iter())
+                .chain(z.v[i].iter())
+                .chain(z.w[i].iter())
+                .map(|x| x.to_bits())
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// Whether two spatial states are equal bit for bit.
+pub fn same_spatial_bits<const B: usize>(
+    a: &vigp::spatial::SpatialState<B>,
+    b: &vigp::spatial::SpatialState<B>,
+) -> bool {
+    spatial_bits(a) == spatial_bits(b)
+}
+
+/// The default Furuta pendulum's consistent maximal state at `dt` from
+/// minimal coordinates (0.3, 2.5) and rates (2.0, 0.5).
+pub fn furuta_start(dt: f64) -> vigp::spatial::SpatialState<2> {
+    let sys = vigp::systems::spatial::Furuta::default();
+    let zmin = vigp::projection::consistent_state(
+        &sys.minimal(),
+        &SVector::from([0.3, 2.5]),
+        &SVector::from([2.0, 0.5]),
+        dt,
+    )
+    .unwrap();
+    sys.minimal().to_maximal(&zmin, dt)
+}
+
+/// Deterministic pseudo-random numbers in [lo, hi) (xorshift).
+pub struct XorShift(pub u64);
+
+impl XorShift {
+    /// Uniform in [lo, hi) with 53 random bits.
+    pub fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
+    }
 }

@@ -4,10 +4,10 @@
 //! error variant and the key words of its message, so each fails if the
 //! mistake is accepted again or fails another way.
 
+use crate::common;
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp::bound::{BoundError, BoundKind, Calibration, Window};
 use vigp::data::{DataError, DataWarning, check_transitions_dt};
-use vigp::gp::TrainOptions;
 use vigp::learned::{Encoding, LearnError, Learned, Prior, Transition};
 use vigp::prelude::*;
 use vigp::spatial::{LieStepper, SpatialError, SpatialIntegrator, SpatialState};
@@ -93,10 +93,7 @@ fn rollouts_of_impossible_lengths_are_typed_errors() {
         });
         zp = z1;
     }
-    let options = TrainOptions {
-        restarts: 0,
-        ..TrainOptions::default()
-    };
+    let options = common::restarts(0);
     let (learned, _) =
         Learned::train(m, 0.01, &tr, Encoding::SinCos, Prior::Nominal, &options).unwrap();
     let mut ws = learned.workspace();
@@ -491,10 +488,7 @@ fn a_dt_that_contradicts_the_data_is_a_typed_error() {
     // training itself refuses the contradicting Δt before fitting anything
     // (and takes the right one)
     let model = Pendulum::default().minimal();
-    let options = TrainOptions {
-        restarts: 0,
-        ..TrainOptions::default()
-    };
+    let options = common::restarts(0);
     let train = |dt: f64| {
         Learned::train(model, dt, &tr, Encoding::SinCos, Prior::Nominal, &options).map(|_| ())
     };
@@ -536,10 +530,7 @@ fn training_accepts_measured_velocities_at_the_right_dt() {
             v_next: w[1].v,
         })
         .collect();
-    let options = TrainOptions {
-        restarts: 0,
-        ..TrainOptions::default()
-    };
+    let options = common::restarts(0);
     Learned::train(model, DT, &tr, Encoding::SinCos, Prior::Nominal, &options).unwrap();
     let e = Learned::train(
         model,
@@ -572,13 +563,7 @@ fn windows(seed: u64, count: usize) -> Vec<Window<1>> {
             let v0 = 5.0 * next() - 2.5;
             let traj = vi.rollout(&State::new([q0], [v0]), 6).unwrap();
             let p: Vec<_> = traj.iter().map(|z| z.q).collect();
-            Window {
-                start: State {
-                    q: p[0],
-                    v: (p[1] - p[0]) / DT,
-                },
-                positions: p[1..].to_vec(),
-            }
+            common::window(&p, DT)
         })
         .collect()
 }
@@ -589,16 +574,9 @@ fn windows(seed: u64, count: usize) -> Vec<Window<1>> {
 fn calibration_on_the_training_runs_is_refused() {
     let train: Vec<Transition<1>> = windows(1, 40)
         .iter()
-        .map(|w| Transition {
-            z: w.start,
-            v_next: (w.positions[1] - w.positions[0]) / DT,
-        })
+        .map(|w| common::first_transition(w, DT))
         .collect();
-    let opts = TrainOptions {
-        restarts: 1,
-        seed: 3,
-        ..TrainOptions::default()
-    };
+    let opts = common::train_options(1, 3);
     let (learned, _) = Learned::train(
         Pendulum::default().minimal(),
         DT,

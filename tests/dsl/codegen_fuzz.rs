@@ -5,43 +5,14 @@
 //! one to four mutations (delete, duplicate, swap, replace, extreme numbers)
 //! of the paper's four descriptions in `src/systems.rs`.
 
-use crate::sources::mechanism_bodies;
+use crate::fuzz::{assert_cases_do_not_panic, expand_no_panic, flat_tokens, mutated, mutation};
 use proc_macro2::TokenStream;
 use proptest::prelude::*;
-use std::panic::{AssertUnwindSafe, catch_unwind};
 
 /// The mechanism descriptions of `src/systems.rs` (the text inside each
 /// `crate::mechanism! { … }`).
 fn descriptions() -> Vec<String> {
-    mechanism_bodies(include_str!("../../src/systems.rs"), "crate::mechanism! {")
-        .into_iter()
-        .map(String::from)
-        .collect()
-}
-
-/// The description as a flat list of token texts (delimiters separate).
-fn flat_tokens(src: &str) -> Vec<String> {
-    fn walk(ts: TokenStream, out: &mut Vec<String>) {
-        for tt in ts {
-            match tt {
-                proc_macro2::TokenTree::Group(g) => {
-                    let (open, close) = match g.delimiter() {
-                        proc_macro2::Delimiter::Brace => ("{", "}"),
-                        proc_macro2::Delimiter::Bracket => ("[", "]"),
-                        proc_macro2::Delimiter::Parenthesis => ("(", ")"),
-                        proc_macro2::Delimiter::None => ("", ""),
-                    };
-                    out.push(open.into());
-                    walk(g.stream(), out);
-                    out.push(close.into());
-                }
-                other => out.push(other.to_string()),
-            }
-        }
-    }
-    let mut out = Vec::new();
-    walk(src.parse().expect("systems.rs parses"), &mut out);
-    out
+    crate::fuzz::descriptions(include_str!("../../src/systems.rs"))
 }
 
 const VOCAB: &[&str] = &[
@@ -108,63 +79,6 @@ const VOCAB: &[&str] = &[
     "#[cfg(test)]",
 ];
 
-/// Expand `src` (text) both ways; a panic is reported as `Err(message)`.
-fn expand_no_panic(src: &str) -> Result<(), String> {
-    let r = catch_unwind(AssertUnwindSafe(|| {
-        if let Ok(ts) = src.parse::<TokenStream>() {
-            match vigp_codegen::expand(ts) {
-                Ok(code) => assert!(!code.is_empty(), "empty expansion"),
-                Err(e) => assert!(!e.to_string().is_empty(), "empty error"),
-            }
-        }
-        match vigp_codegen::expand_to_string(src) {
-            Ok(code) => assert!(code.contains("impl"), "no impl in {code}"),
-            Err(msg) => assert!(!msg.is_empty(), "empty error message"),
-        }
-    }));
-    r.map_err(|p| {
-        p.downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_else(|| "non-string panic".into())
-    })
-}
-
-#[derive(Clone, Debug)]
-enum Mutation {
-    Delete(usize),
-    Duplicate(usize),
-    Swap(usize, usize),
-    Replace(usize, usize),
-}
-
-fn apply(tokens: &mut Vec<String>, m: &Mutation) {
-    let n = tokens.len();
-    if n == 0 {
-        return;
-    }
-    match *m {
-        Mutation::Delete(i) => {
-            tokens.remove(i % n);
-        }
-        Mutation::Duplicate(i) => {
-            let t = tokens[i % n].clone();
-            tokens.insert(i % n, t);
-        }
-        Mutation::Swap(i, j) => tokens.swap(i % n, j % n),
-        Mutation::Replace(i, v) => tokens[i % n] = VOCAB[v % VOCAB.len()].to_string(),
-    }
-}
-
-fn mutation() -> impl Strategy<Value = Mutation> {
-    prop_oneof![
-        any::<usize>().prop_map(Mutation::Delete),
-        any::<usize>().prop_map(Mutation::Duplicate),
-        (any::<usize>(), any::<usize>()).prop_map(|(i, j)| Mutation::Swap(i, j)),
-        (any::<usize>(), any::<usize>()).prop_map(|(i, v)| Mutation::Replace(i, v)),
-    ]
-}
-
 #[test]
 fn the_paper_systems_expand() {
     let all = descriptions();
@@ -199,9 +113,7 @@ fn edge_cases_do_not_panic() {
         "X { links { a: { mass: 1.0f32, length: 1u8 } } }",
         "X { gravity: [0.0, -9.81, 1.0], gravity: [], links { a: { } } }",
     ];
-    for c in cases {
-        expand_no_panic(c).unwrap_or_else(|p| panic!("panic on {c:?}: {p}"));
-    }
+    assert_cases_do_not_panic(&cases);
 }
 
 /// A mechanism named like a primitive type is refused at its name (it
@@ -327,11 +239,8 @@ proptest! {
         which in 0usize..4,
         mutations in prop::collection::vec(mutation(), 1..5),
     ) {
-        let mut tokens = flat_tokens(&descriptions()[which]);
-        for m in &mutations {
-            apply(&mut tokens, m);
-        }
-        let src = tokens.join(" ");
+        let tokens = flat_tokens(&descriptions()[which], "systems.rs parses");
+        let src = mutated(tokens, &mutations, VOCAB);
         prop_assert!(expand_no_panic(&src).is_ok(), "panic on {src:?}: {:?}", expand_no_panic(&src));
     }
 }

@@ -10,6 +10,7 @@ mod common;
 mod codegen_fuzz;
 mod constants;
 mod dynamics;
+mod fuzz;
 mod snapshots;
 mod sources;
 mod spatial_fuzz;

@@ -2,44 +2,12 @@
 //! token stream gives code or an error, never a panic (the spatial
 //! counterpart of tests/dsl/codegen_fuzz.rs).
 
-use crate::sources::mechanism_bodies;
-use proc_macro2::TokenStream;
+use crate::fuzz::{assert_cases_do_not_panic, expand_no_panic, flat_tokens, mutated, mutation};
 use proptest::prelude::*;
-use std::panic::{AssertUnwindSafe, catch_unwind};
 
 /// The descriptions of `src/systems/spatial.rs`.
 fn descriptions() -> Vec<String> {
-    mechanism_bodies(
-        include_str!("../../src/systems/spatial.rs"),
-        "crate::mechanism! {",
-    )
-    .into_iter()
-    .map(String::from)
-    .collect()
-}
-
-fn flat_tokens(src: &str) -> Vec<String> {
-    fn walk(ts: TokenStream, out: &mut Vec<String>) {
-        for tt in ts {
-            match tt {
-                proc_macro2::TokenTree::Group(g) => {
-                    let (open, close) = match g.delimiter() {
-                        proc_macro2::Delimiter::Brace => ("{", "}"),
-                        proc_macro2::Delimiter::Bracket => ("[", "]"),
-                        proc_macro2::Delimiter::Parenthesis => ("(", ")"),
-                        proc_macro2::Delimiter::None => ("", ""),
-                    };
-                    out.push(open.into());
-                    walk(g.stream(), out);
-                    out.push(close.into());
-                }
-                other => out.push(other.to_string()),
-            }
-        }
-    }
-    let mut out = Vec::new();
-    walk(src.parse().expect("spatial systems parse"), &mut out);
-    out
+    crate::fuzz::descriptions(include_str!("../../src/systems/spatial.rs"))
 }
 
 const VOCAB: &[&str] = &[
@@ -93,27 +61,6 @@ const VOCAB: &[&str] = &[
     "[[1e308, 0.0, 0.0], [1e308, 1e-320, 0.0]]",
 ];
 
-fn expand_no_panic(src: &str) -> Result<(), String> {
-    let r = catch_unwind(AssertUnwindSafe(|| {
-        if let Ok(ts) = src.parse::<TokenStream>() {
-            match vigp_codegen::expand(ts) {
-                Ok(code) => assert!(!code.is_empty(), "empty expansion"),
-                Err(e) => assert!(!e.to_string().is_empty(), "empty error"),
-            }
-        }
-        match vigp_codegen::expand_to_string(src) {
-            Ok(code) => assert!(code.contains("impl"), "no impl in {code}"),
-            Err(msg) => assert!(!msg.is_empty(), "empty error message"),
-        }
-    }));
-    r.map_err(|p| {
-        p.downcast_ref::<String>()
-            .cloned()
-            .or_else(|| p.downcast_ref::<&str>().map(|s| s.to_string()))
-            .unwrap_or_else(|| "non-string panic".into())
-    })
-}
-
 #[test]
 fn extreme_spatial_values_do_not_panic() {
     let cases = [
@@ -132,44 +79,7 @@ fn extreme_spatial_values_do_not_panic() {
         "X { gravity: [0.0, 0.0, 0.0], links { a: { mass: 1.0, inertia: [1.0, 1.0, 1.0] } } joints { j: universal(world, a.com) { axes: [[[1.0]], [0.0, 1.0]] } } }",
         "X { gravity: [0.0, 0.0, 0.0], links { a: { mass: 1.0, inertia: [1.0, 1.0, 1.0] } } joints { j: universal(world, a.com) { axes: [] } } }",
     ];
-    for c in cases {
-        expand_no_panic(c).unwrap_or_else(|p| panic!("panic on {c:?}: {p}"));
-    }
-}
-
-#[derive(Clone, Debug)]
-enum Mutation {
-    Delete(usize),
-    Duplicate(usize),
-    Swap(usize, usize),
-    Replace(usize, usize),
-}
-
-fn apply(tokens: &mut Vec<String>, m: &Mutation) {
-    let n = tokens.len();
-    if n == 0 {
-        return;
-    }
-    match *m {
-        Mutation::Delete(i) => {
-            tokens.remove(i % n);
-        }
-        Mutation::Duplicate(i) => {
-            let t = tokens[i % n].clone();
-            tokens.insert(i % n, t);
-        }
-        Mutation::Swap(i, j) => tokens.swap(i % n, j % n),
-        Mutation::Replace(i, v) => tokens[i % n] = VOCAB[v % VOCAB.len()].to_string(),
-    }
-}
-
-fn mutation() -> impl Strategy<Value = Mutation> {
-    prop_oneof![
-        any::<usize>().prop_map(Mutation::Delete),
-        any::<usize>().prop_map(Mutation::Duplicate),
-        (any::<usize>(), any::<usize>()).prop_map(|(i, j)| Mutation::Swap(i, j)),
-        (any::<usize>(), any::<usize>()).prop_map(|(i, v)| Mutation::Replace(i, v)),
-    ]
+    assert_cases_do_not_panic(&cases);
 }
 
 proptest! {
@@ -181,11 +91,8 @@ proptest! {
         which in 0usize..5,
         mutations in prop::collection::vec(mutation(), 1..5),
     ) {
-        let mut tokens = flat_tokens(&descriptions()[which]);
-        for m in &mutations {
-            apply(&mut tokens, m);
-        }
-        let src = tokens.join(" ");
+        let tokens = flat_tokens(&descriptions()[which], "spatial systems parse");
+        let src = mutated(tokens, &mutations, VOCAB);
         prop_assert!(expand_no_panic(&src).is_ok(), "panic on {src:?}: {:?}", expand_no_panic(&src));
     }
 

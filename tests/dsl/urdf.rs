@@ -17,6 +17,7 @@
 //!   (the base translation's mass block and gravity gradient are the
 //!   total mass of the file's links) and against the fixed-base arm.
 
+use crate::common::XorShift as Rng;
 use vigp::SVector;
 use vigp::robot::{Robot, RobotState};
 use vigp::spatial::minimal;
@@ -80,17 +81,6 @@ vigp::mechanism! {
 vigp::mechanism! {
     /// The Panda on a floating base: `panda_link0` on a free joint.
     PandaFloating { urdf: "tests/fixtures/robots/panda.urdf", base: floating }
-}
-
-/// Deterministic pseudo-random numbers in [lo, hi) (xorshift).
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
-    }
 }
 
 fn largest<const R: usize, const C: usize>(m: &nalgebra::SMatrix<f64, R, C>) -> f64 {

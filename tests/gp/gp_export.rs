@@ -170,16 +170,7 @@ fn dense_reference(gp: &Gp, x: &[f64], j: usize) -> (f64, f64, f64) {
 #[test]
 fn exported_predictions_equal_the_std_model() {
     // (d = 2, p = 2), constant prior, both normalisations: the default
-    let gp = train(
-        77,
-        2,
-        2,
-        0.05,
-        TrainOptions {
-            restarts: 1,
-            ..Default::default()
-        },
-    );
+    let gp = train(77, 2, 2, 0.05, common::restarts(1));
     let w2 = compare::<2>(&gp, 300, 1);
     // d = 6 as the learned double pendulum (zero prior = nominal prior), N > 2 blocks
     let gp6 = train(
@@ -204,16 +195,7 @@ fn exported_predictions_equal_the_std_model() {
     let w1 = compare::<1>(&train(40, 1, 1, 0.01, raw.clone()), 200, 3);
     let w9 = compare::<9>(&train(70, 9, 1, 0.05, raw), 200, 4);
     // nearly noise-free: tiny noise variance, large weights (ill-conditioned)
-    let gpi = train(
-        60,
-        2,
-        1,
-        0.0,
-        TrainOptions {
-            restarts: 1,
-            ..Default::default()
-        },
-    );
+    let gpi = train(60, 2, 1, 0.0, common::restarts(1));
     let wi = compare::<2>(&gpi, 200, 5);
     println!(
         "max variance difference (of var, of σ_f²): {w2:?} (d=2) {w6:?} (d=6) {w1:?} (d=1) {w9:?} (d=9) {wi:?} (noise-free, σ_n² = {:e})",
@@ -223,16 +205,7 @@ fn exported_predictions_equal_the_std_model() {
 
 #[test]
 fn std_and_exported_agree_with_a_dense_reference() {
-    let gp = train(
-        60,
-        3,
-        2,
-        0.05,
-        TrainOptions {
-            restarts: 1,
-            ..Default::default()
-        },
-    );
+    let gp = train(60, 3, 2, 0.05, common::restarts(1));
     let views: Vec<ExportedArrays> = (0..2).map(|j| gp.export_output(j, true).unwrap()).collect();
     let mut rng = Rng(9);
     let mut scratch = vec![0.0; gp.n()];
@@ -296,11 +269,7 @@ fn same_bits(a: &[f64], b: &[f64]) -> bool {
 
 #[test]
 fn rust_source_round_trips_every_float_and_is_deterministic() {
-    let opts = TrainOptions {
-        restarts: 1,
-        seed: 3,
-        ..Default::default()
-    };
+    let opts = common::train_options(1, 3);
     let gp = train(50, 4, 2, 0.05, opts.clone());
     let export = ExportOptions {
         name: "MODEL".into(),
@@ -382,16 +351,7 @@ fn export_errors_are_typed() {
         gp.export_output(0, false),
         Err(GpError::Export(_))
     ));
-    let gp = train(
-        20,
-        2,
-        1,
-        0.05,
-        TrainOptions {
-            restarts: 0,
-            ..Default::default()
-        },
-    );
+    let gp = train(20, 2, 1, 0.05, common::restarts(0));
     assert!(matches!(
         gp.export_output(1, false),
         Err(GpError::DimensionMismatch { .. })
@@ -555,32 +515,13 @@ fn committed_demo_model_is_what_the_example_generates() {
 /// variances) without the variances: the same next state, bit for bit.
 #[test]
 fn mean_only_learned_step_equals_the_full_step() {
-    use vigp::learned::{Encoding, Learned, Prior, transitions};
+    use vigp::learned::Prior;
     use vigp::prelude::*;
-    use vigp::systems::{Fourbar, Pendulum};
     let dt = 0.01;
-    let mut truth = Pendulum::default();
-    truth.joints.pivot.damping = 0.4;
-    let traj = Variational::new(truth.minimal(), dt)
-        .unwrap()
-        .rollout(&State::new([1.0], [0.0]), 60)
-        .unwrap();
-    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
-    let data = transitions(&q, dt);
-    let opts = TrainOptions {
-        restarts: 1,
-        ..Default::default()
-    };
+    let data = damped_pendulum_data(dt);
+    let opts = common::restarts(1);
     for prior in [Prior::Nominal, Prior::Constant] {
-        let (l, _) = Learned::train(
-            Pendulum::default().minimal(),
-            dt,
-            &data,
-            Encoding::SinCos,
-            prior,
-            &opts,
-        )
-        .unwrap();
+        let l = learned_pendulum(dt, &data, prior, &opts);
         let mut ws = l.workspace();
         for t in &data {
             let a = l.step_mean_in(&t.z, &mut ws).unwrap();
@@ -591,18 +532,7 @@ fn mean_only_learned_step_equals_the_full_step() {
         }
     }
     // a constrained model: the projection runs on the same unprojected mean
-    let fb = Fourbar::default().minimal();
-    let z0 = vigp::projection::consistent_state(
-        &fb,
-        &nalgebra::SVector::from([0.9, -1.3, -0.4, 1.3]),
-        &nalgebra::SVector::zeros(),
-        dt,
-    )
-    .unwrap();
-    let traj = Variational::new(fb, dt).unwrap().rollout(&z0, 40).unwrap();
-    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
-    let data = transitions(&q, dt);
-    let (l, _) = Learned::train(fb, dt, &data, Encoding::Raw, Prior::Constant, &opts).unwrap();
+    let (_, data, l) = learned_fourbar(dt, &opts);
     let mut ws = l.workspace();
     for t in data.iter().step_by(5) {
         let a = l.step_mean_in(&t.z, &mut ws).unwrap();
@@ -620,16 +550,7 @@ fn mean_only_learned_step_equals_the_full_step() {
 #[test]
 fn parallel_variance_equals_the_sequential_path() {
     let n = vigp::gp::PARALLEL_VARIANCE_MIN_N + 44;
-    let mut gp = train(
-        n,
-        3,
-        3,
-        0.05,
-        TrainOptions {
-            restarts: 0,
-            ..Default::default()
-        },
-    );
+    let mut gp = train(n, 3, 3, 0.05, common::restarts(0));
     assert!(!gp.parallel_variance(), "off by default");
     gp.set_parallel_variance(true);
     let mut ws = gp.workspace();
@@ -725,12 +646,7 @@ fn batched_prediction_equals_single_points() {
         (&many[..], VarianceMode::Solve),
     ] {
         gp.set_variance_mode(mode);
-        let batch = rayon::ThreadPoolBuilder::new()
-            .num_threads(2)
-            .build()
-            .unwrap()
-            .install(|| gp.predict(points))
-            .unwrap();
+        let batch = common::in_pool(2, || gp.predict(points)).unwrap();
         let mut ws = gp.workspace();
         for (h, q) in points.chunks_exact(3).enumerate() {
             let (mut m, mut v) = ([0.0; 3], [0.0; 3]);
@@ -763,22 +679,11 @@ fn batched_prediction_equals_single_points() {
 /// the same typed error, at step 0.
 #[test]
 fn rollout_with_info_equals_repeated_full_steps() {
-    use vigp::learned::{Encoding, Learned, Prior, transitions};
+    use vigp::learned::{Learned, Prior};
     use vigp::prelude::*;
-    use vigp::systems::{Fourbar, Pendulum};
     let dt = 0.01;
-    let mut truth = Pendulum::default();
-    truth.joints.pivot.damping = 0.4;
-    let traj = Variational::new(truth.minimal(), dt)
-        .unwrap()
-        .rollout(&State::new([1.0], [0.0]), 60)
-        .unwrap();
-    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
-    let data = transitions(&q, dt);
-    let opts = TrainOptions {
-        restarts: 1,
-        ..Default::default()
-    };
+    let data = damped_pendulum_data(dt);
+    let opts = common::restarts(1);
     fn check<M: vigp::Mechanism<N, C> + Clone, const N: usize, const C: usize>(
         l: &Learned<M, N, C>,
         z0: &State<N>,
@@ -822,18 +727,57 @@ fn rollout_with_info_equals_repeated_full_steps() {
         assert_eq!(format!("{a:?}"), format!("{b:?}"));
     }
     for prior in [Prior::Nominal, Prior::Constant] {
-        let (l, _) = Learned::train(
-            Pendulum::default().minimal(),
-            dt,
-            &data,
-            Encoding::SinCos,
-            prior,
-            &opts,
-        )
-        .unwrap();
+        let l = learned_pendulum(dt, &data, prior, &opts);
         check(&l, &data[3].z, 40);
     }
-    let fb = Fourbar::default().minimal();
+    let (z0, _, l) = learned_fourbar(dt, &opts);
+    assert!(l.projects());
+    check(&l, &z0, 25);
+}
+
+/// Transitions of a damped pendulum (pivot damping 0.4) released at rest
+/// from θ = 1: 60 steps of `dt` of the first-order VI.
+fn damped_pendulum_data(dt: f64) -> Vec<vigp::learned::Transition<1>> {
+    use vigp::prelude::*;
+    let mut truth = vigp::systems::Pendulum::default();
+    truth.joints.pivot.damping = 0.4;
+    let traj = Variational::new(truth.minimal(), dt)
+        .unwrap()
+        .rollout(&State::new([1.0], [0.0]), 60)
+        .unwrap();
+    let q: Vec<_> = traj.iter().map(|z| z.q).collect();
+    vigp::learned::transitions(&q, dt)
+}
+
+/// The default pendulum learned at `dt` on `data` (sin/cos encoding) with
+/// `prior`.
+fn learned_pendulum(
+    dt: f64,
+    data: &[vigp::learned::Transition<1>],
+    prior: vigp::learned::Prior,
+    opts: &TrainOptions,
+) -> vigp::learned::Learned<vigp::systems::PendulumMinimal, 1, 0> {
+    use vigp::learned::{Encoding, Learned};
+    let m = vigp::systems::Pendulum::default().minimal();
+    Learned::train(m, dt, data, Encoding::SinCos, prior, opts)
+        .unwrap()
+        .0
+}
+
+/// The default fourbar's consistent start, the transitions of a 40-step
+/// run from it at `dt`, and the fourbar learned on them (raw encoding,
+/// constant prior).
+fn learned_fourbar(
+    dt: f64,
+    opts: &TrainOptions,
+) -> (
+    vigp::State<4>,
+    Vec<vigp::learned::Transition<4>>,
+    vigp::learned::Learned<vigp::systems::FourbarMinimal, 4, 2>,
+) {
+    use vigp::learned::{Encoding, Learned, Prior, transitions};
+    use vigp::prelude::*;
+    let fb = vigp::systems::Fourbar::default().minimal();
     let z0 = vigp::projection::consistent_state(
         &fb,
         &nalgebra::SVector::from([0.9, -1.3, -0.4, 1.3]),
@@ -844,7 +788,6 @@ fn rollout_with_info_equals_repeated_full_steps() {
     let traj = Variational::new(fb, dt).unwrap().rollout(&z0, 40).unwrap();
     let q: Vec<_> = traj.iter().map(|z| z.q).collect();
     let data = transitions(&q, dt);
-    let (l, _) = Learned::train(fb, dt, &data, Encoding::Raw, Prior::Constant, &opts).unwrap();
-    assert!(l.projects());
-    check(&l, &z0, 25);
+    let (l, _) = Learned::train(fb, dt, &data, Encoding::Raw, Prior::Constant, opts).unwrap();
+    (z0, data, l)
 }

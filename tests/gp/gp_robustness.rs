@@ -2,6 +2,7 @@
 //! independent checks of the gradient and of the error-bound accessors, and
 //! save/load.
 
+use crate::common;
 use vigp::gp::{
     Bounds, Gp, GpError, Hyperparameters, PriorMean, SavedGp, TrainOptions, log_marginal_likelihood,
 };
@@ -24,10 +25,7 @@ fn data_1d(n: usize, scale_x: f64, scale_y: f64) -> (Vec<f64>, Vec<f64>) {
 }
 
 fn fast() -> TrainOptions {
-    TrainOptions {
-        restarts: 2,
-        ..Default::default()
-    }
+    common::restarts(2)
 }
 
 fn assert_all_finite(v: &[f64]) {
@@ -241,18 +239,8 @@ fn data_multi() -> (Vec<f64>, Vec<f64>) {
 #[test]
 fn training_is_bit_reproducible_across_thread_counts() {
     let (x, y) = data_multi();
-    let opts = TrainOptions {
-        restarts: 3,
-        seed: 42,
-        ..Default::default()
-    };
-    let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| Gp::train(&x, 3, &y, 2, &opts).unwrap())
-    };
+    let opts = common::train_options(3, 42);
+    let run = |threads: usize| common::in_pool(threads, || Gp::train(&x, 3, &y, 2, &opts).unwrap());
     let (a, ra) = run(1);
     let (b, rb) = run(2);
     // Bit-identical: each (output, start) run is sequential and seeded.
@@ -303,13 +291,8 @@ fn large_trainings_are_bit_reproducible_across_thread_counts() {
         .enumerate()
         .map(|(i, r)| (2.0 * r[0]).sin() * r[1] + 0.01 * (weyl(i + 1, 0.7548776662) - 0.5))
         .collect();
-    let in_pool = |threads: usize, f: &(dyn Fn() -> (f64, Vec<f64>) + Sync)| {
-        rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap()
-            .install(f)
-    };
+    let in_pool =
+        |threads: usize, f: &(dyn Fn() -> (f64, Vec<f64>) + Sync)| common::in_pool(threads, f);
     let bits = |v: &(f64, Vec<f64>)| -> Vec<u64> {
         std::iter::once(v.0)
             .chain(v.1.iter().copied())

@@ -180,10 +180,7 @@ fn data(n: usize, d: usize, p: usize, seed: u64) -> (Vec<f64>, Vec<f64>) {
 fn trained_sparse_bound_approaches_the_exact_optimum() {
     let (n, d) = (300, 2);
     let (x, y) = data(n, d, 1, 3);
-    let base = TrainOptions {
-        restarts: 2,
-        ..Default::default()
-    };
+    let base = common::restarts(2);
     let (_, exact) = Gp::train(&x, d, &y, 1, &base).unwrap();
     let exact = exact.outputs[0].log_marginal_likelihood;
     let mut last = f64::NEG_INFINITY;
@@ -227,10 +224,7 @@ fn summed(rep: &TrainReport) -> f64 {
 fn optimised_inducing_points_close_the_gap_to_the_exact_optimum() {
     let (n, d, p, m) = (300, 2, 2, 16);
     let (x, y) = data(n, d, p, 5);
-    let base = TrainOptions {
-        restarts: 1,
-        ..Default::default()
-    };
+    let base = common::restarts(1);
     let (_, exact) = Gp::train(&x, d, &y, p, &base).unwrap();
     let exact = summed(&exact);
     let fixed_opts = TrainOptions {
@@ -299,11 +293,7 @@ fn optimised_inducing_points_close_the_gap_to_the_exact_optimum() {
     assert!(e_opt < e_fixed, "{e_opt} vs {e_fixed}");
     // the outputs' evaluations run in parallel; their sums are added in
     // output order, so one thread gives the same bits
-    let one = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .unwrap();
-    let (g1, r1) = one.install(|| Gp::train(&x, d, &y, p, &opts).unwrap());
+    let (g1, r1) = common::in_pool(1, || Gp::train(&x, d, &y, p, &opts).unwrap());
     assert_eq!(g1.to_saved(), gp.to_saved());
     assert_eq!(r1, rep);
     // given inducing points, one far outside the data: the box widens to
@@ -361,10 +351,7 @@ fn online_updates_equal_refitting() {
     let (x0, y0) = (&x[..200 * d], &y[..200 * p]);
     let (x1, y1) = (&x[200 * d..], &y[200 * p..]);
     let probes: Vec<f64> = data(40, d, 1, 77).0.iter().map(|v| v * 1.2).collect();
-    let opts = TrainOptions {
-        restarts: 1,
-        ..Default::default()
-    };
+    let opts = common::restarts(1);
     let (exact, _) = Gp::train(x0, d, y0, p, &opts).unwrap();
     let mut solve = exact.clone();
     solve.set_variance_mode(VarianceMode::Solve);
@@ -444,17 +431,7 @@ fn sparse_save_load_export_and_old_files() {
         Err(GpError::InvalidModel(_))
     ));
     // format 1 (exact GPs, before sparse models existed) still loads
-    let (exact, _) = Gp::train(
-        &x,
-        d,
-        &y,
-        p,
-        &TrainOptions {
-            restarts: 0,
-            ..Default::default()
-        },
-    )
-    .unwrap();
+    let (exact, _) = Gp::train(&x, d, &y, p, &common::restarts(0)).unwrap();
     let mut v1: serde_json::Value = serde_json::to_value(exact.to_saved()).unwrap();
     v1["version"] = 1.into();
     v1.as_object_mut().unwrap().remove("inducing_normalised");
@@ -469,10 +446,7 @@ fn sparse_save_load_export_and_old_files() {
 fn warm_start_refines_a_previous_optimum_cheaply() {
     let (d, p) = (2, 1);
     let (x, y) = data(220, d, p, 21);
-    let opts = TrainOptions {
-        restarts: 3,
-        ..Default::default()
-    };
+    let opts = common::restarts(3);
     let (small, _) = Gp::train(&x[..180 * d], d, &y[..180 * p], p, &opts).unwrap();
     let (full, cold) = Gp::train(&x, d, &y, p, &opts).unwrap();
     let warm_opts = TrainOptions {
@@ -520,13 +494,7 @@ fn sparse_training_is_bit_reproducible_across_thread_counts() {
         method: Method::Sparse(SparseOptions::kmeans(24)),
         ..Default::default()
     };
-    let run = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| Gp::train(&x, d, &y, 1, &opts).unwrap())
-    };
+    let run = |threads: usize| common::in_pool(threads, || Gp::train(&x, d, &y, 1, &opts).unwrap());
     let (a, ra) = run(1);
     let (b, rb) = run(2);
     assert_eq!(a.to_saved(), b.to_saved());

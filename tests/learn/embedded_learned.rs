@@ -9,7 +9,7 @@
 //! refusal of models whose inputs do not fit the mechanism; NaN inputs.
 
 use crate::common;
-use common::positions;
+use common::{positions, state_at};
 use nalgebra::{SMatrix, SVector};
 use vigp::embedded::gp::ExportedGp;
 use vigp::embedded::learned::{Encoding as CoreEncoding, LearnedModel, Prior as CorePrior};
@@ -22,11 +22,56 @@ use vigp::systems::{Cartpole, Fourbar, Pendulum};
 const DT: f64 = 0.01;
 
 fn options() -> TrainOptions {
-    TrainOptions {
-        restarts: 1,
-        seed: 11,
-        ..TrainOptions::default()
-    }
+    common::train_options(1, 11)
+}
+
+/// `Learned::train` with [`options`] on the transitions of the positions
+/// `q` sampled every `DT`.
+fn train_on<M, const N: usize, const C: usize>(
+    m: M,
+    q: &[SVector<f64, N>],
+    encoding: Encoding,
+    prior: Prior,
+) -> Learned<M, N, C>
+where
+    M: Mechanism<N, C> + Parameters + Clone,
+{
+    Learned::train(m, DT, &transitions(q, DT), encoding, prior, &options())
+        .unwrap()
+        .0
+}
+
+/// The `K`-step rollout of `stepper` from `z0`, asserting that it
+/// allocates nothing (`what` names it in the failure).
+fn rollout_without_allocating<E, const N: usize, const C: usize, const D: usize, const K: usize>(
+    stepper: &LearnedStepper<'_, E, N, C, D>,
+    z0: &State<N>,
+    what: &str,
+) -> [State<N>; K]
+where
+    E: vigp::embedded::Dynamics<N, C> + Parameters,
+{
+    let mut out = [*z0; K];
+    let info = allocation_counter::measure(|| {
+        stepper.rollout_into(z0, &mut out).unwrap();
+    });
+    assert_eq!(info.count_total, 0, "{what}");
+    out
+}
+
+/// `Learned::train_forced` with [`options`] on forced transitions at `DT`.
+fn train_forced_on<M, const N: usize, const C: usize, const U: usize>(
+    m: M,
+    data: &[vigp::learned::ForcedTransition<N, U>],
+    encoding: Encoding,
+    prior: Prior,
+) -> Learned<M, N, C>
+where
+    M: Mechanism<N, C> + Parameters + Clone + vigp::Inputs<U>,
+{
+    Learned::train_forced(m, DT, data, encoding, prior, &options())
+        .unwrap()
+        .0
 }
 
 /// Owns what a generated file would hold as statics.
@@ -121,15 +166,7 @@ fn learned_stepper_equals_the_std_learned_step() {
     let q = positions(truth.minimal(), SVector::from([0.1, 2.0]), DT, 10, 80);
     let mut nominal = Cartpole::default();
     nominal.joints.rail.damping = 0.02;
-    let (l, _) = Learned::train(
-        nominal.minimal(),
-        DT,
-        &transitions(&q, DT),
-        Encoding::SinCos,
-        Prior::Nominal,
-        &options(),
-    )
-    .unwrap();
+    let l = train_on(nominal.minimal(), &q, Encoding::SinCos, Prior::Nominal);
     let o = owned(&l);
     let gps: [ExportedGp<'_, 5>; 2] = [
         o.arrays[0].as_exported().unwrap(),
@@ -139,48 +176,28 @@ fn learned_stepper_equals_the_std_learned_step() {
     // the stepper takes the parameters from the learned model, not the default
     let stepper = LearnedStepper::new(Cartpole::default(), &lm).unwrap();
     assert_eq!(stepper.nominal().model().joints.rail.damping, 0.02);
-    let z0 = State {
-        q: q[5],
-        v: (q[6] - q[5]) / DT,
-    };
+    let z0 = state_at(&q, 5, DT);
     let diff = compare(&l, &stepper, &z0, 50);
     eprintln!("cartpole (sincos, nominal): max |std − embedded| over 50 steps = {diff:.2e}");
     assert!(diff <= 1e-12, "{diff:e}");
-    let mut out = [z0; 50];
-    let info = allocation_counter::measure(|| {
-        stepper.rollout_into(&z0, &mut out).unwrap();
-    });
-    assert_eq!(info.count_total, 0, "the embedded learned step allocated");
+    let _: [_; 50] =
+        rollout_without_allocating(&stepper, &z0, "the embedded learned step allocated");
 
     // fourbar: loops, projection, nominal prior, raw (8 inputs)
     let fb = Fourbar::default().minimal();
     let q = positions(fb, SVector::from([0.5, -0.9, -0.3, 0.9]), DT, 10, 60);
-    let (lf, _) = Learned::train(
-        fb,
-        DT,
-        &transitions(&q, DT),
-        Encoding::Raw,
-        Prior::Nominal,
-        &options(),
-    )
-    .unwrap();
+    let lf = train_on(fb, &q, Encoding::Raw, Prior::Nominal);
     assert!(lf.projects());
     let o = owned(&lf);
     let gps: [ExportedGp<'_, 8>; 4] = core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
     let lm = core_model(&lf, &o, &gps);
     let stepper = LearnedStepper::new(Fourbar::default(), &lm).unwrap();
-    let z0 = State {
-        q: q[7],
-        v: (q[8] - q[7]) / DT,
-    };
+    let z0 = state_at(&q, 7, DT);
     let diff = compare(&lf, &stepper, &z0, 50);
     eprintln!("fourbar (raw, nominal, projected): max |std − embedded| over 50 steps = {diff:.2e}");
     assert!(diff <= 1e-12, "{diff:e}");
-    let mut out = [z0; 50];
-    let info = allocation_counter::measure(|| {
-        stepper.rollout_into(&z0, &mut out).unwrap();
-    });
-    assert_eq!(info.count_total, 0, "the projected embedded step allocated");
+    let out: [_; 50] =
+        rollout_without_allocating(&stepper, &z0, "the projected embedded step allocated");
     // and the constraints hold after projection
     let worst = out
         .iter()
@@ -191,23 +208,12 @@ fn learned_stepper_equals_the_std_learned_step() {
     // pendulum: constant prior (the GP is the whole velocity map)
     let pm = Pendulum::default().minimal();
     let q = positions(pm, SVector::from([1.0]), DT, 10, 40);
-    let (lp, _) = Learned::train(
-        pm,
-        DT,
-        &transitions(&q, DT),
-        Encoding::SinCos,
-        Prior::Constant,
-        &options(),
-    )
-    .unwrap();
+    let lp = train_on(pm, &q, Encoding::SinCos, Prior::Constant);
     let o = owned(&lp);
     let gps: [ExportedGp<'_, 3>; 1] = [o.arrays[0].as_exported().unwrap()];
     let lm = core_model(&lp, &o, &gps);
     let stepper = LearnedStepper::new(Pendulum::default(), &lm).unwrap();
-    let z0 = State {
-        q: q[2],
-        v: (q[3] - q[2]) / DT,
-    };
+    let z0 = state_at(&q, 2, DT);
     let diff = compare(&lp, &stepper, &z0, 50);
     eprintln!("pendulum (sincos, constant): max |std − embedded| over 50 steps = {diff:.2e}");
     assert!(diff <= 1e-12, "{diff:e}");
@@ -226,20 +232,22 @@ fn learned_stepper_equals_the_std_learned_step() {
     );
 }
 
+/// A GP of 3 inputs without training points (for mismatched models).
+const EMPTY_GP: ExportedGp<'static, 3> = ExportedGp {
+    inputs: &[],
+    weights: &[],
+    length_scales: [1.0; 3],
+    signal_variance: 1.0,
+    input_shift: [0.0; 3],
+    input_scale: [1.0; 3],
+    output_scale: 1.0,
+    prior_mean: 0.0,
+    cholesky: None,
+};
+
 /// A `LearnedModel<1, 3>` renamed: only used to build a mismatched model.
 fn lm_cartpole_like<'a>(lm: &LearnedModel<'a, 1, 3>) -> LearnedModel<'a, 2, 3> {
     static NO_GPS: [ExportedGp<'static, 3>; 2] = [EMPTY_GP, EMPTY_GP];
-    const EMPTY_GP: ExportedGp<'static, 3> = ExportedGp {
-        inputs: &[],
-        weights: &[],
-        length_scales: [1.0; 3],
-        signal_variance: 1.0,
-        input_shift: [0.0; 3],
-        input_scale: [1.0; 3],
-        output_scale: 1.0,
-        prior_mean: 0.0,
-        cholesky: None,
-    };
     LearnedModel {
         mechanism: "Cartpole",
         coordinates: ["rail", "hinge"],
@@ -268,17 +276,7 @@ fn mismatched_learned_models_are_refused() {
         prior: CorePrior::Nominal,
         project: false,
         options: StepOptions::default(),
-        gps: &[ExportedGp {
-            inputs: &[],
-            weights: &[],
-            length_scales: [1.0; 3],
-            signal_variance: 1.0,
-            input_shift: [0.0; 3],
-            input_scale: [1.0; 3],
-            output_scale: 1.0,
-            prior_mean: 0.0,
-            cholesky: None,
-        }],
+        gps: &[EMPTY_GP],
     });
     // no parameters at all: the first one is reported missing
     assert_eq!(
@@ -325,15 +323,12 @@ fn export_writes_only_what_the_mean_needs() {
         10,
         42,
     );
-    let (l, _) = Learned::train(
+    let l = train_on(
         Cartpole::default().minimal(),
-        DT,
-        &transitions(&q, DT),
+        &q,
         Encoding::SinCos,
         Prior::Nominal,
-        &options(),
-    )
-    .unwrap();
+    );
     let (src, size) = l.to_embedded_source(&EmbeddedExport::default()).unwrap();
     assert_eq!((size.n, size.input_dim, size.outputs), (40, 5, 2));
     // per output: N·(d+1) = 240 array numbers, 3d + 3 = 18 scalars
@@ -357,27 +352,20 @@ fn export_writes_only_what_the_mean_needs() {
         .iter()
         .map(|x| Cartpole::default().minimal().maximal_positions(x))
         .collect();
-    let (lm, _) = Learned::train(
+    let lm = train_on(
         Cartpole::default().maximal(),
-        DT,
-        &transitions(&qm, DT),
+        &qm,
         Encoding::Raw,
         Prior::Constant,
-        &options(),
-    )
-    .unwrap();
+    );
     assert!(lm.to_embedded_source(&EmbeddedExport::default()).is_ok());
     let o = owned(&lm);
     let gps: [ExportedGp<'_, 12>; 6] = core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
     let core_lm = core_model(&lm, &o, &gps);
     let stepper = LearnedStepper::new(Cartpole::default().maximal(), &core_lm).unwrap();
-    let z0 = Cartpole::default().minimal().to_maximal(
-        &State {
-            q: q[5],
-            v: (q[6] - q[5]) / DT,
-        },
-        DT,
-    );
+    let z0 = Cartpole::default()
+        .minimal()
+        .to_maximal(&state_at(&q, 5, DT), DT);
     let diff = compare(&lm, &stepper, &z0, 30);
     eprintln!("cartpole maximal (raw, constant, projected): max |std − embedded| = {diff:.2e}");
     assert!(diff <= 1e-12, "{diff:e}");
@@ -402,11 +390,7 @@ fn exported_source_matches_the_model_file() {
     let diff = compare(&l, &stepper, &z0, 30);
     eprintln!("exported fixture: max |std − embedded| over 30 steps = {diff:.2e}");
     assert!(diff <= 1e-12, "{diff:e}");
-    let mut out = [z0; 30];
-    let info = allocation_counter::measure(|| {
-        stepper.rollout_into(&z0, &mut out).unwrap();
-    });
-    assert_eq!(info.count_total, 0);
+    let _: [_; 30] = rollout_without_allocating(&stepper, &z0, "the embedded rollout allocated");
 }
 
 /// The source `vigp export` writes for a 3-D mechanism (the Furuta
@@ -431,11 +415,7 @@ fn exported_furuta_source_matches_the_model_file() {
     let diff = compare(&l, &stepper, &z0, 30);
     eprintln!("exported Furuta fixture: max |std − embedded| over 30 steps = {diff:.2e}");
     assert!(diff <= 1e-12, "{diff:e}");
-    let mut out = [z0; 30];
-    let info = allocation_counter::measure(|| {
-        stepper.rollout_into(&z0, &mut out).unwrap();
-    });
-    assert_eq!(info.count_total, 0);
+    let _: [_; 30] = rollout_without_allocating(&stepper, &z0, "the embedded rollout allocated");
 }
 
 #[path = "../common/drive_cartpole.rs"]
@@ -691,7 +671,6 @@ where
 /// nominal prior).
 #[test]
 fn forced_learned_stepper_equals_the_std_forced_step() {
-    use vigp::learned::Learned;
     let mut rng = common::Rng(5);
     // cart-pole: truth heavier with more friction than the nominal model
     let mut truth = DriveCartpole::default();
@@ -714,15 +693,7 @@ fn forced_learned_stepper_equals_the_std_forced_step() {
         (Encoding::Raw, Prior::Nominal),
         (Encoding::Raw, Prior::Constant),
     ] {
-        let (l, _) = Learned::train_forced(
-            nominal.minimal(),
-            DT,
-            &data,
-            encoding,
-            prior.clone(),
-            &options(),
-        )
-        .unwrap();
+        let l = train_forced_on(nominal.minimal(), &data, encoding, prior.clone());
         assert_eq!(l.inputs(), 1);
         let o = owned(&l);
         let worst = match encoding {
@@ -759,15 +730,7 @@ fn forced_learned_stepper_equals_the_std_forced_step() {
     let z0 = data[2].z;
     let z0 = vigp::projection::consistent_state(&nominal.minimal(), &z0.q, &z0.v, DT).unwrap();
     for encoding in [Encoding::Raw, Encoding::SinCos] {
-        let (l, _) = Learned::train_forced(
-            nominal.minimal(),
-            DT,
-            &data,
-            encoding,
-            Prior::Nominal,
-            &options(),
-        )
-        .unwrap();
+        let l = train_forced_on(nominal.minimal(), &data, encoding, Prior::Nominal);
         assert!(l.projects());
         let o = owned(&l);
         let worst = match encoding {
@@ -823,15 +786,12 @@ fn forced_models_that_do_not_fit_are_refused() {
         40,
         &mut rng,
     );
-    let (l, _) = Learned::train_forced(
+    let l = train_forced_on(
         DriveCartpole::default().minimal(),
-        DT,
         &data,
         Encoding::Raw,
         Prior::Nominal,
-        &options(),
-    )
-    .unwrap();
+    );
     let o = owned(&l);
     let gps: [ExportedGp<'_, 6>; 2] = core::array::from_fn(|j| o.arrays[j].as_exported().unwrap());
     let lm = core_model(&l, &o, &gps);
@@ -1104,6 +1064,20 @@ mod exported_arm {
     include!("../fixtures/learned_arm3.rs");
 }
 
+/// The learned robot of tests/fixtures/learned_arm3.json.
+fn arm3_model() -> vigp::learned::robot::LearnedRobot {
+    let path = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/fixtures/learned_arm3.json"
+    );
+    vigp::learned::robot::LearnedRobot::load(path).unwrap()
+}
+
+/// A state as the std robot's state.
+fn robot_state<const N: usize>(z: &State<N>) -> vigp::robot::RobotState {
+    vigp::robot::RobotState::new(z.q.as_slice().to_vec(), z.v.as_slice().to_vec())
+}
+
 /// The exported learned robot (`LearnedTreeStepper` over `LearnedTree`)
 /// against the std `LearnedRobot` loaded from the JSON it was exported
 /// from, over 30 steps under inputs: both run the same tree engine on the
@@ -1116,13 +1090,7 @@ mod exported_arm {
 #[test]
 fn exported_learned_robot_matches_the_model_file() {
     use vigp::embedded::tree::{BodyScratch, LearnedTreeStepper};
-    use vigp::learned::robot::LearnedRobot;
-    use vigp::robot::RobotState;
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/fixtures/learned_arm3.json"
-    );
-    let std_model = LearnedRobot::load(path).unwrap();
+    let std_model = arm3_model();
     let (src, _) = std_model
         .to_embedded_source(&EmbeddedExport {
             name: "LEARNED_ARM".into(),
@@ -1147,11 +1115,7 @@ fn exported_learned_robot_matches_the_model_file() {
         .unwrap();
     let plan: Vec<Vec<f64>> = us.iter().map(|u| vec![u[0]]).collect();
     let std_states = std_model
-        .rollout(
-            &RobotState::new(z0.q.as_slice().to_vec(), z0.v.as_slice().to_vec()),
-            &[u_prev[0]],
-            &plan,
-        )
+        .rollout(&robot_state(&z0), &[u_prev[0]], &plan)
         .unwrap();
     let mut diff = 0.0f64;
     for (a, b) in out.iter().zip(&std_states) {
@@ -1194,13 +1158,7 @@ fn exported_learned_robot_matches_the_model_file() {
 #[test]
 fn exported_learned_robot_derivatives_match_the_model_file() {
     use vigp::embedded::tree::{BodyScratch, LearnedTreeStepper, TreeDerivativeScratch};
-    use vigp::learned::robot::LearnedRobot;
-    use vigp::robot::RobotState;
-    let path = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/tests/fixtures/learned_arm3.json"
-    );
-    let std_model = LearnedRobot::load(path).unwrap();
+    let std_model = arm3_model();
     let stepper = LearnedTreeStepper::new(&exported_arm::LEARNED_ARM).unwrap();
     let mut ws = [BodyScratch::zeroed(); 3];
     let mut scratch = TreeDerivativeScratch::<3>::new();
@@ -1213,7 +1171,7 @@ fn exported_learned_robot_derivatives_match_the_model_file() {
         let d = stepper
             .step_derivatives(&z, &u_prev, &u, &mut scratch, &mut ws)
             .unwrap();
-        let zs = RobotState::new(z.q.as_slice().to_vec(), z.v.as_slice().to_vec());
+        let zs = robot_state(&z);
         let s = std_model
             .step_derivatives(&zs, &[u_prev[0]], &[u[0]], &mut std_ws)
             .unwrap();
@@ -1264,7 +1222,7 @@ fn exported_learned_robot_derivatives_match_the_model_file() {
     rollout(&mut scratch, &mut ws);
     let info = allocation_counter::measure(|| rollout(&mut scratch, &mut ws));
     assert_eq!(info.count_total, 0, "the rollout derivatives allocated");
-    let zs = RobotState::new(z0.q.as_slice().to_vec(), z0.v.as_slice().to_vec());
+    let zs = robot_state(&z0);
     let plan_std: Vec<Vec<f64>> = plan.iter().map(|u| vec![u[0]]).collect();
     let steps = std_model
         .rollout_derivatives(&zs, &[up0[0]], &plan_std, &mut std_ws)

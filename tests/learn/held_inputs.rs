@@ -23,7 +23,7 @@
 //! differences.
 
 use crate::common;
-use common::{Rng, stencil};
+use common::{Rng, a_stencil_errors, stencil};
 use nalgebra::SVector;
 use vigp::gp::TrainOptions;
 use vigp::learned::{Encoding, ForcedTransition, Learned, Prior, forced_transitions};
@@ -238,10 +238,7 @@ where
         let (length, logged, x) = (l.length, &l.inputs, &l.x);
         let (mut e_nom, mut e_lrn, mut n) = (0.0, 0.0, 0usize);
         for s in 1..=STARTS {
-            let z0 = State {
-                q: x[s],
-                v: (x[s + 1] - x[s]) / DT,
-            };
+            let z0 = common::state_at(x, s, DT);
             // step k from sample s + k under the input of row s + k + 1,
             // after row s + k's: the start's velocity was produced by row s's
             let us = &logged[s + 1..=s + HORIZON];
@@ -504,11 +501,7 @@ fn learned_step_derivatives_with_previous_input() {
             t
         })
         .collect();
-    let options = TrainOptions {
-        restarts: 1,
-        seed: 5,
-        ..TrainOptions::default()
-    };
+    let options = common::train_options(1, 5);
     let (l, _) =
         Learned::train_forced(model, DT, &data, Encoding::SinCos, Prior::Nominal, &options)
             .unwrap();
@@ -522,33 +515,7 @@ fn learned_step_derivatives_with_previous_input() {
         let mut step = |z: State<2>, up: SVector<f64, 1>, u: SVector<f64, 1>| {
             l.step_mean_forced_in(&z, &up, &u, &mut ws2).unwrap()
         };
-        let (mut err_a, mut scale_a) = (0.0f64, 0.0f64);
-        for j in 0..2 {
-            for pos in [true, false] {
-                let (dq, dv) = stencil(1e-3, |e| {
-                    let mut zp = z;
-                    if pos {
-                        zp.q[j] += e;
-                    } else {
-                        zp.v[j] += e;
-                    }
-                    step(zp, up, u)
-                });
-                let (aq, av) = if pos {
-                    (
-                        d.a.q_q.column(j).into_owned(),
-                        d.a.v_q.column(j).into_owned(),
-                    )
-                } else {
-                    (
-                        d.a.q_v.column(j).into_owned(),
-                        d.a.v_v.column(j).into_owned(),
-                    )
-                };
-                err_a = err_a.max((aq - dq).amax()).max((av - dv).amax());
-                scale_a = scale_a.max(dq.amax()).max(dv.amax());
-            }
-        }
+        let (err_a, scale_a) = a_stencil_errors(&z, &d.a, 1e-3, |zp| step(*zp, up, u));
         let one = SVector::<f64, 1>::new(1.0);
         let (bq, bv) = stencil(1e-3, |e| step(z, up, u + one * e));
         let err_b = (d.b.q_u.column(0) - bq)

@@ -9,6 +9,7 @@
 //!
 //! Numbers quoted in the report are printed with `-- --nocapture`.
 
+use crate::common;
 use nalgebra::SVector;
 use vigp::gp::TrainOptions;
 use vigp::identify::{DelRegressor, Log, Options, identify};
@@ -145,11 +146,7 @@ fn by_hand(p: &IdentifiedParameters) -> Arm {
 }
 
 fn options() -> TrainOptions {
-    TrainOptions {
-        restarts: 0,
-        seed: 7,
-        ..TrainOptions::default()
-    }
+    common::train_options(0, 7)
 }
 
 /// The identified parameters of the truth's training log, with the
@@ -187,10 +184,7 @@ fn rollout_error(
         H
     ];
     for k in (0..positions.len() - H - 2).step_by(10) {
-        let z0 = State {
-            q: positions[k],
-            v: (positions[k + 1] - positions[k]) / DT,
-        };
+        let z0 = common::state_at(positions, k, DT);
         l.rollout_mean_forced_into(&z0, &inputs[k], &inputs[k + 1..k + 1 + H], &mut out)
             .unwrap();
         for (j, z) in out.iter().enumerate() {
@@ -472,14 +466,7 @@ fn spatial_learned_refuses_an_identified_prior() {
     let dt = 0.01;
     let sys = vigp::systems::spatial::Furuta::default();
     let stepper = LieStepper::new(sys.maximal(), dt).unwrap();
-    let zmin = vigp::projection::consistent_state(
-        &sys.minimal(),
-        &SVector::from([0.3, 2.5]),
-        &SVector::from([2.0, 0.5]),
-        dt,
-    )
-    .unwrap();
-    let z0 = sys.minimal().to_maximal(&zmin, dt);
+    let z0 = common::furuta_start(dt);
     let traj = stepper.rollout(&z0, 6).unwrap();
     let configs: Vec<Configuration<2>> = traj.iter().map(|z| (z.x, z.q)).collect();
     let params = IdentifiedParameters::new(

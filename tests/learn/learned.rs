@@ -12,11 +12,7 @@ use vigp::prelude::*;
 use vigp::systems::{DoublePendulum, Fourbar, Pendulum};
 
 fn quick_options() -> TrainOptions {
-    TrainOptions {
-        restarts: 2,
-        seed: 7,
-        ..TrainOptions::default()
-    }
+    common::train_options(2, 7)
 }
 
 /// Every `stride`-th transition, at most `n`.

@@ -14,11 +14,7 @@ use vigp::systems::{Cartpole, CartpoleMaximal, CartpoleMinimal, Fourbar, Pendulu
 const DT: f64 = 0.01;
 
 fn options() -> TrainOptions {
-    TrainOptions {
-        restarts: 0,
-        seed: 3,
-        ..TrainOptions::default()
-    }
+    common::train_options(0, 3)
 }
 
 /// A cart-pole model trained on `n` transitions of a perturbed cart-pole.
@@ -85,10 +81,7 @@ fn reload_predicts_bit_identically() {
     .unwrap();
     assert!(lf.projects());
     let back = Learned::from_json(four, &lf.to_json()).unwrap();
-    let z0 = State {
-        q: q[3],
-        v: (q[4] - q[3]) / DT,
-    };
+    let z0 = common::state_at(&q, 3, DT);
     assert_same_predictions(&lf, &back, &z0);
     std::fs::remove_dir_all(&dir).ok();
 }

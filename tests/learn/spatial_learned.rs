@@ -21,16 +21,12 @@ use vigp::spatial::{LieStepper, SpatialError, SpatialIntegrator, SpatialState};
 use vigp::systems::spatial::{Furuta, SphericalPendulum, SphericalPendulumMinimal};
 
 fn options() -> TrainOptions {
-    TrainOptions {
-        restarts: 2,
-        seed: 3,
-        ..TrainOptions::default()
-    }
+    common::train_options(2, 3)
 }
 
 #[path = "../common/spatial_states.rs"]
 mod spatial_states;
-use crate::common::Rng;
+use crate::common::{self, Rng, same_spatial_bits};
 use spatial_states::{distance, twin};
 
 /// The Furuta pendulum with unmodelled joint friction (base 0.02, pivot
@@ -280,14 +276,7 @@ fn learned_spatial_step_does_not_allocate() {
     let dt = 0.01;
     let sys = Furuta::default();
     let stepper = LieStepper::new(sys.maximal(), dt).unwrap();
-    let zmin = consistent_state(
-        &sys.minimal(),
-        &SVector::from([0.3, 2.5]),
-        &SVector::from([2.0, 0.5]),
-        dt,
-    )
-    .unwrap();
-    let z0 = sys.minimal().to_maximal(&zmin, dt);
+    let z0 = crate::common::furuta_start(dt);
     let traj = stepper.rollout(&z0, 12).unwrap();
     let configs: Vec<Configuration<2>> = traj.iter().map(|z| (z.x, z.q)).collect();
     let (learned, _) = LearnedSpatial::train(
@@ -295,10 +284,7 @@ fn learned_spatial_step_does_not_allocate() {
         &transitions(&configs, dt),
         Rotation::Matrix,
         Prior::Nominal,
-        &TrainOptions {
-            restarts: 0,
-            ..TrainOptions::default()
-        },
+        &common::restarts(0),
     )
     .unwrap();
     let mut ws = learned.workspace();
@@ -326,7 +312,10 @@ fn learned_spatial_step_does_not_allocate() {
     assert_eq!(info.count_total, 0, "learned spatial step_in allocated");
     for (from, next, report) in &reports {
         let mean = learned.step_mean_in(from, &mut ws).unwrap();
-        assert!(same_state(&mean, next), "step_in and step_mean_in differ");
+        assert!(
+            same_spatial_bits(&mean, next),
+            "step_in and step_mean_in differ"
+        );
         let (nu, sigma) = learned.predict_velocity(from, &mut ws).unwrap();
         let nu_mean = learned.predict_mean_velocity(from, &mut ws).unwrap();
         assert_eq!(nu, nu_mean);
@@ -391,6 +380,23 @@ fn arm_inputs(rng: &mut Rng, samples: usize) -> Vec<SVector<f64, 2>> {
             u
         })
         .collect()
+}
+
+/// A logged run (see [`logged_run`]) of `stepper` from a random arm state
+/// under `samples` random inputs: (start, inputs, configurations).
+fn random_logged_run<I: SpatialIntegrator<2>>(
+    stepper: &I,
+    rng: &mut Rng,
+    dt: f64,
+    samples: usize,
+) -> (SpatialState<2>, Vec<SVector<f64, 2>>, Vec<Configuration<2>>)
+where
+    I::Mechanism: vigp::Inputs<2>,
+{
+    let z0 = arm_state(rng, dt);
+    let logged = arm_inputs(rng, samples);
+    let configs = logged_run(stepper, &z0, &logged);
+    (z0, logged, configs)
 }
 
 /// The configurations of a driven run logged as a user's data are: sample
@@ -475,7 +481,10 @@ fn a_forced_learned_spatial_model_follows_a_driven_arm() {
             // the rollout takes its first input as held across the start
             let up = &inputs[k.saturating_sub(1)];
             z = learned.step_mean_forced_in(&z, up, u, &mut ws).unwrap();
-            assert!(same_state(&z, &pred[k + 1]), "rollout_forced step {k}");
+            assert!(
+                same_spatial_bits(&z, &pred[k + 1]),
+                "rollout_forced step {k}"
+            );
             assert!(t_step.constraint_violation(&z) <= 1e-10);
             assert!(z.norm_error() <= 1e-14);
         }
@@ -496,23 +505,6 @@ fn a_forced_learned_spatial_model_follows_a_driven_arm() {
     assert!(unforced > 30.0 * lrn);
 }
 
-fn same_state<const B: usize>(a: &SpatialState<B>, b: &SpatialState<B>) -> bool {
-    let bits = |z: &SpatialState<B>| -> Vec<u64> {
-        (0..B)
-            .flat_map(|i| {
-                z.x[i]
-                    .iter()
-                    .chain(z.q[i].quaternion().coords.iter())
-                    .chain(z.v[i].iter())
-                    .chain(z.w[i].iter())
-                    .map(|x| x.to_bits())
-                    .collect::<Vec<_>>()
-            })
-            .collect()
-    };
-    bits(a) == bits(b)
-}
-
 /// `forced_transitions` pairs each transition with the input that drove
 /// it: from every transition's state, the truth's forced step under the
 /// transition's input lands on its next velocities to rounding; pairing
@@ -522,9 +514,7 @@ fn forced_spatial_transitions_follow_the_data_convention() {
     let dt = 0.01;
     let t_step = LieStepper::new(driven_truth().maximal(), dt).unwrap();
     let mut rng = Rng(12);
-    let z0 = arm_state(&mut rng, dt);
-    let logged = arm_inputs(&mut rng, 40);
-    let configs = logged_run(&t_step, &z0, &logged);
+    let (_, logged, configs) = random_logged_run(&t_step, &mut rng, dt, 40);
     let data = forced_transitions(&configs, &logged, dt);
     assert_eq!(data.len(), 38);
     let miss = |data: &[SpatialForcedTransition<2, 2>]| {
@@ -576,14 +566,9 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     let t_step = LieStepper::new(driven_truth().maximal(), dt).unwrap();
     let n_step = LieStepper::new(DrivenArm::default().maximal(), dt).unwrap();
     let mut rng = Rng(13);
-    let z0 = arm_state(&mut rng, dt);
-    let logged = arm_inputs(&mut rng, 15);
-    let configs = logged_run(&t_step, &z0, &logged);
+    let (z0, logged, configs) = random_logged_run(&t_step, &mut rng, dt, 15);
     let data = forced_transitions(&configs, &logged, dt);
-    let opts = TrainOptions {
-        restarts: 0,
-        ..TrainOptions::default()
-    };
+    let opts = common::restarts(0);
     let (forced, _) =
         LearnedSpatial::train_forced(n_step, &data, Rotation::Matrix, Prior::Nominal, &opts)
             .unwrap();
@@ -672,7 +657,7 @@ fn forced_spatial_model_misuse_is_a_typed_error() {
     let zero = unforced
         .step_forced(&z0, &SVector::<f64, 2>::zeros())
         .unwrap();
-    assert!(same_state(&zero, &unforced.step(&z0).unwrap()));
+    assert!(same_spatial_bits(&zero, &unforced.step(&z0).unwrap()));
     assert!(matches!(
         unforced.step(&long),
         Err(SpatialError::Step(
@@ -730,6 +715,19 @@ struct Coverage {
     rotation_at_k: f64,
     /// median over windows of bound ÷ error at K (translation)
     tightness: f64,
+}
+
+/// Asserts every coverage of `c` at least 0.93 and its tightness below 20.
+fn assert_covered(c: &Coverage) {
+    for v in [
+        c.translation,
+        c.rotation,
+        c.translation_at_k,
+        c.rotation_at_k,
+    ] {
+        assert!(v >= 0.93, "{c:?}");
+    }
+    assert!(c.tightness < 20.0, "{c:?}");
 }
 
 fn coverage(
@@ -856,15 +854,7 @@ fn a_spatial_conformal_bound_covers_exchangeable_windows() {
             c.rotation_at_k,
             c.tightness
         );
-        for v in [
-            c.translation,
-            c.rotation,
-            c.translation_at_k,
-            c.rotation_at_k,
-        ] {
-            assert!(v >= 0.93, "{c:?}");
-        }
-        assert!(c.tightness < 20.0, "{c:?}");
+        assert_covered(&c);
         if score == Score::Auto {
             // the region test: starts drawn like the calibration starts are
             // rarely flagged; starts spinning 5× faster than any
@@ -937,9 +927,8 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
     let mut runs = |count: usize| {
         let (mut configs, mut inputs) = (Vec::new(), Vec::new());
         for _ in 0..count {
-            let z0 = arm_state(&mut rng, dt);
-            let logged = arm_inputs(&mut rng, horizon + 1);
-            configs.push(logged_run(&t_step, &z0, &logged));
+            let (_, logged, run) = random_logged_run(&t_step, &mut rng, dt, horizon + 1);
+            configs.push(run);
             inputs.push(logged);
         }
         (configs, inputs)
@@ -1015,15 +1004,7 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
         z.translation,
         z.rotation
     );
-    for v in [
-        c.translation,
-        c.rotation,
-        c.translation_at_k,
-        c.rotation_at_k,
-    ] {
-        assert!(v >= 0.93, "{c:?}");
-    }
-    assert!(c.tightness < 20.0, "{c:?}");
+    assert_covered(&c);
     assert!(z.translation <= 0.5 && z.rotation <= 0.5, "{z:?}");
     // the region test includes the first step's input: few test starts
     // under their own inputs are flagged, every one whose first torque on
@@ -1064,13 +1045,8 @@ fn spatial_bound_misuse_is_a_typed_error() {
     let t_step = LieStepper::new(driven_truth().maximal(), dt).unwrap();
     let n_step = LieStepper::new(DrivenArm::default().maximal(), dt).unwrap();
     let mut rng = Rng(31);
-    let z0 = arm_state(&mut rng, dt);
-    let logged = arm_inputs(&mut rng, 30);
-    let configs = logged_run(&t_step, &z0, &logged);
-    let opts = TrainOptions {
-        restarts: 0,
-        ..TrainOptions::default()
-    };
+    let (z0, logged, configs) = random_logged_run(&t_step, &mut rng, dt, 30);
+    let opts = common::restarts(0);
     let (forced, _) = LearnedSpatial::train_forced(
         n_step,
         &forced_transitions(&configs, &logged, dt),

@@ -11,7 +11,7 @@
 use crate::common;
 use crate::slider_crank;
 
-use common::{Rng, ab_errors, stencil};
+use common::{Rng, a_stencil_errors, ab_errors, nudged, state_bits, stencil};
 use nalgebra::{SMatrix, SVector};
 use num_dual::DualVec;
 use slider_crank::SliderCrank;
@@ -160,6 +160,20 @@ vigp::mechanism! {
     }
 }
 
+/// The first-order (`mid` false) or midpoint variational integrator of
+/// `m` at `dt`.
+fn vi_rule<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    m: M,
+    dt: f64,
+    mid: bool,
+) -> Variational<M, N, C> {
+    if mid {
+        Variational::midpoint(m, dt).unwrap()
+    } else {
+        Variational::new(m, dt).unwrap()
+    }
+}
+
 fn rel(a: f64, scale: f64) -> f64 {
     a / (1.0 + scale)
 }
@@ -286,6 +300,34 @@ where
     (states, max)
 }
 
+/// Runs `$check::<_, N, C, U>(name, view, states, extra…)` on the minimal
+/// and the maximal view of each actuated test mechanism (its sizes are
+/// const generics, hence a macro), at `$count` random consistent states
+/// (seed `$seed`, step `$dt`) of its minimal view and their maximal images.
+macro_rules! on_actuated_views {
+    ($check:ident $extra:tt, $seed:expr, $count:expr, $dt:expr) => {
+        on_actuated_views!(@one $check $extra, $seed, $count, $dt,
+            "torque pendulum", TorquePendulum::default(), 1, 0, 3, 2, 1);
+        on_actuated_views!(@one $check $extra, $seed, $count, $dt,
+            "cartpole", DriveCartpole::default(), 2, 0, 6, 4, 1);
+        on_actuated_views!(@one $check $extra, $seed, $count, $dt,
+            "acrobot", Acrobot::default(), 2, 0, 6, 4, 1);
+        on_actuated_views!(@one $check $extra, $seed, $count, $dt,
+            "fourbar", DriveFourbar::default(), 4, 2, 12, 10, 2);
+        on_actuated_views!(@one $check $extra, $seed, $count, $dt,
+            "slider-crank", DriveSliderCrank::default(), 3, 2, 9, 8, 2);
+        on_actuated_views!(@one $check $extra, $seed, $count, $dt,
+            "slide arm", SlideArm::default(), 2, 0, 6, 4, 2);
+    };
+    (@one $check:ident ($($extra:expr),*), $seed:expr, $count:expr, $dt:expr,
+     $name:expr, $sys:expr, $n:literal, $c:literal, $nm:literal, $cm:literal, $u:literal) => {{
+        let sys = $sys;
+        let (s, x) = minimal_and_maximal_states::<_, $n, $c, $nm>(&sys.minimal(), $seed, $count, $dt);
+        $check::<_, $n, $c, $u>(&format!("{} minimal", $name), sys.minimal(), &s $(, $extra)*);
+        $check::<_, $nm, $cm, $u>(&format!("{} maximal", $name), sys.maximal(), &x $(, $extra)*);
+    }};
+}
+
 /// The engine's forced step against the dual-number reference step
 /// (`vigp::reference::step_forced`: the input force by differentiating the
 /// virtual work on dual numbers), both rules, both solved to 1e-14: the
@@ -299,10 +341,7 @@ fn forced_matches_reference<M, const N: usize, const C: usize, const U: usize>(
     M: vigp::Inputs<U>,
 {
     let dt = 0.01;
-    let opts = vigp::StepOptions {
-        tolerance: 1e-14,
-        ..vigp::StepOptions::default()
-    };
+    let opts = common::tight();
     let mut rng = Rng(17);
     let mut worst = 0.0f64;
     for (alpha, vi) in [
@@ -313,14 +352,8 @@ fn forced_matches_reference<M, const N: usize, const C: usize, const U: usize>(
         for z in states {
             let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-5.0, 5.0));
             let us: Vec<f64> = u.iter().copied().collect();
-            let a = vi
-                .step_forced(z, &u)
-                .unwrap_or_else(|e| panic!("{name} α={alpha}: {e}"));
-            let (b, _) = vigp::reference::step_forced(&m, dt, alpha, &opts, z, &us)
-                .unwrap_or_else(|e| panic!("{name} α={alpha} reference: {e}"));
-            assert_eq!(a.q, b.q);
-            let d = (a.v - b.v).amax();
-            assert!(d <= 1e-11, "{name} α={alpha}: |Δv| = {d:.2e}");
+            let reference = vigp::reference::step_forced(&m, dt, alpha, &opts, z, &us);
+            let d = common::reference_gap(name, alpha, vi.step_forced(z, &u), reference);
             worst = worst.max(d);
         }
     }
@@ -330,28 +363,7 @@ fn forced_matches_reference<M, const N: usize, const C: usize, const U: usize>(
 #[test]
 fn forced_steps_match_the_dual_number_reference() {
     let dt = 0.01;
-    macro_rules! both {
-        ($name:expr, $sys:expr, $n:literal, $c:literal, $nm:literal, $cm:literal, $u:literal) => {{
-            let sys = $sys;
-            let (s, x) = minimal_and_maximal_states::<_, $n, $c, $nm>(&sys.minimal(), 5, 8, dt);
-            forced_matches_reference::<_, $n, $c, $u>(
-                &format!("{} minimal", $name),
-                sys.minimal(),
-                &s,
-            );
-            forced_matches_reference::<_, $nm, $cm, $u>(
-                &format!("{} maximal", $name),
-                sys.maximal(),
-                &x,
-            );
-        }};
-    }
-    both!("torque pendulum", TorquePendulum::default(), 1, 0, 3, 2, 1);
-    both!("cartpole", DriveCartpole::default(), 2, 0, 6, 4, 1);
-    both!("acrobot", Acrobot::default(), 2, 0, 6, 4, 1);
-    both!("fourbar", DriveFourbar::default(), 4, 2, 12, 10, 2);
-    both!("slider-crank", DriveSliderCrank::default(), 3, 2, 9, 8, 2);
-    both!("slide arm", SlideArm::default(), 2, 0, 6, 4, 2);
+    on_actuated_views!(forced_matches_reference(), 5, 8, dt);
 }
 
 /// u = 0 reproduces the same mechanism without `actuated` bit for bit:
@@ -381,23 +393,11 @@ fn bitwise<A, B, const N: usize, const C: usize, const U: usize>(
             )
         };
         for z in states {
-            let a = sa.step_forced(z, &zero).unwrap();
-            let b = sb.step(z).unwrap();
-            let c = sa.step(z).unwrap();
-            for (x, y) in
-                a.q.iter()
-                    .chain(a.v.iter())
-                    .zip(b.q.iter().chain(b.v.iter()))
-            {
-                assert_eq!(x.to_bits(), y.to_bits(), "{name} mid={mid}");
-            }
-            for (x, y) in
-                c.q.iter()
-                    .chain(c.v.iter())
-                    .zip(b.q.iter().chain(b.v.iter()))
-            {
-                assert_eq!(x.to_bits(), y.to_bits(), "{name} mid={mid} (step)");
-            }
+            let a = state_bits(&sa.step_forced(z, &zero).unwrap());
+            let b = state_bits(&sb.step(z).unwrap());
+            let c = state_bits(&sa.step(z).unwrap());
+            assert_eq!(a, b, "{name} mid={mid}");
+            assert_eq!(c, b, "{name} mid={mid} (step)");
         }
         let mut ra = [states[0]; 20];
         let mut rb = ra;
@@ -405,62 +405,50 @@ fn bitwise<A, B, const N: usize, const C: usize, const U: usize>(
             .unwrap();
         sb.steps_into(&states[0], &mut rb).unwrap();
         for (a, b) in ra.iter().zip(&rb) {
-            for (x, y) in
-                a.q.iter()
-                    .chain(a.v.iter())
-                    .zip(b.q.iter().chain(b.v.iter()))
-            {
-                assert_eq!(x.to_bits(), y.to_bits(), "{name} mid={mid} rollout");
-            }
+            assert_eq!(state_bits(a), state_bits(b), "{name} mid={mid} rollout");
         }
     }
 }
 
 #[test]
 fn zero_input_is_the_unactuated_mechanism_bit_for_bit() {
-    let dt = 0.01;
-    let (s, x) =
-        minimal_and_maximal_states::<_, 1, 0, 3>(&PlainPendulum::default().minimal(), 9, 5, dt);
-    bitwise::<_, _, 1, 0, 1>(
-        "pendulum minimal",
-        TorquePendulum::default().minimal(),
-        PlainPendulum::default().minimal(),
-        &s,
-    );
-    bitwise::<_, _, 3, 2, 1>(
-        "pendulum maximal",
-        TorquePendulum::default().maximal(),
-        PlainPendulum::default().maximal(),
-        &x,
-    );
-    let (s, x) =
-        minimal_and_maximal_states::<_, 4, 2, 12>(&TwinFourbar::default().minimal(), 9, 5, dt);
-    bitwise::<_, _, 4, 2, 2>(
-        "fourbar minimal",
-        DriveFourbar::default().minimal(),
-        TwinFourbar::default().minimal(),
-        &s,
-    );
-    bitwise::<_, _, 12, 10, 2>(
-        "fourbar maximal",
-        DriveFourbar::default().maximal(),
-        TwinFourbar::default().maximal(),
-        &x,
-    );
-    let (s, x) =
-        minimal_and_maximal_states::<_, 3, 2, 9>(&SliderCrank::default().minimal(), 9, 5, dt);
-    bitwise::<_, _, 3, 2, 2>(
-        "slider-crank minimal",
-        DriveSliderCrank::default().minimal(),
-        SliderCrank::default().minimal(),
-        &s,
-    );
-    bitwise::<_, _, 9, 8, 2>(
-        "slider-crank maximal",
-        DriveSliderCrank::default().maximal(),
-        SliderCrank::default().maximal(),
-        &x,
-    );
+    let (a, p) = (TorquePendulum::default(), PlainPendulum::default());
+    let (actuated, plain) = ((a.minimal(), a.maximal()), (p.minimal(), p.maximal()));
+    bitwise_views::<_, _, _, _, 1, 0, 3, 2, 1>("pendulum", actuated, plain);
+    let (a, p) = (DriveFourbar::default(), TwinFourbar::default());
+    let (actuated, plain) = ((a.minimal(), a.maximal()), (p.minimal(), p.maximal()));
+    bitwise_views::<_, _, _, _, 4, 2, 12, 10, 2>("fourbar", actuated, plain);
+    let (a, p) = (DriveSliderCrank::default(), SliderCrank::default());
+    let (actuated, plain) = ((a.minimal(), a.maximal()), (p.minimal(), p.maximal()));
+    bitwise_views::<_, _, _, _, 3, 2, 9, 8, 2>("slider-crank", actuated, plain);
+}
+
+/// [`bitwise`] in both views: the actuated (minimal, maximal) pair against
+/// the plain one at 5 random consistent states (seed 9) of the plain
+/// minimal view, and at their maximal images.
+fn bitwise_views<
+    A,
+    P,
+    AX,
+    PX,
+    const N: usize,
+    const C: usize,
+    const NM: usize,
+    const CM: usize,
+    const U: usize,
+>(
+    name: &str,
+    actuated: (A, AX),
+    plain: (P, PX),
+) where
+    A: Dynamics<N, C> + Copy + vigp::Inputs<U>,
+    P: Dynamics<N, C> + Mechanism<N, C> + Coordinates<N, NM> + Copy,
+    AX: Dynamics<NM, CM> + Copy + vigp::Inputs<U>,
+    PX: Dynamics<NM, CM> + Copy,
+{
+    let (s, x) = minimal_and_maximal_states::<_, N, C, NM>(&plain.0, 9, 5, 0.01);
+    bitwise::<_, _, N, C, U>(&format!("{name} minimal"), actuated.0, plain.0, &s);
+    bitwise::<_, _, NM, CM, U>(&format!("{name} maximal"), actuated.1, plain.1, &x);
 }
 
 /// A damped pendulum under a constant torque u settles where gravity's
@@ -479,21 +467,13 @@ fn constant_torque_settles_at_the_static_equilibrium() {
         let inputs = vec![u; 2000];
         for mid in [false, true] {
             let z0 = State::new([0.0], [0.0]);
-            let min = if mid {
-                Variational::midpoint(sys.minimal(), dt).unwrap()
-            } else {
-                Variational::new(sys.minimal(), dt).unwrap()
-            };
+            let min = vi_rule(sys.minimal(), dt, mid);
             let traj = min.rollout_forced(&z0, &inputs).unwrap();
             let theta = traj.last().unwrap().q[0];
             let err = (theta.sin() - target).abs();
             println!("u = {u0}, mid = {mid}: minimal |sin θ − u/(m g l_c)| = {err:.1e}");
             assert!(err <= 1e-8, "minimal mid={mid}: {err:.2e}");
-            let max = if mid {
-                Variational::midpoint(sys.maximal(), dt).unwrap()
-            } else {
-                Variational::new(sys.maximal(), dt).unwrap()
-            };
+            let max = vi_rule(sys.maximal(), dt, mid);
             let traj = max
                 .rollout_forced(&sys.minimal().to_maximal(&z0, dt), &inputs)
                 .unwrap();
@@ -597,15 +577,11 @@ where
     let mut rng = Rng(23);
     let mut worst = 0.0f64;
     for mid in [false, true] {
-        let vi = if mid {
-            Variational::midpoint(m, dt).unwrap()
-        } else {
-            Variational::new(m, dt).unwrap()
-        }
-        .tolerance(1e-14)
-        .unwrap()
-        .substeps(substeps)
-        .unwrap();
+        let vi = vi_rule(m, dt, mid)
+            .tolerance(1e-14)
+            .unwrap()
+            .substeps(substeps)
+            .unwrap();
         for z in states {
             let u = SVector::<f64, U>::from_fn(|_, _| rng.uniform(-3.0, 3.0));
             let (z1, d) = vi.step_derivatives(z, &u).unwrap();
@@ -625,25 +601,7 @@ where
 #[test]
 fn step_derivatives_match_central_differences() {
     let dt = 0.01;
-    macro_rules! both {
-        ($name:expr, $sys:expr, $n:literal, $c:literal, $nm:literal, $cm:literal, $u:literal) => {{
-            let sys = $sys;
-            let (s, x) = minimal_and_maximal_states::<_, $n, $c, $nm>(&sys.minimal(), 31, 3, dt);
-            check_derivatives::<_, $n, $c, $u>(&format!("{} minimal", $name), sys.minimal(), &s, 1);
-            check_derivatives::<_, $nm, $cm, $u>(
-                &format!("{} maximal", $name),
-                sys.maximal(),
-                &x,
-                1,
-            );
-        }};
-    }
-    both!("torque pendulum", TorquePendulum::default(), 1, 0, 3, 2, 1);
-    both!("cartpole", DriveCartpole::default(), 2, 0, 6, 4, 1);
-    both!("acrobot", Acrobot::default(), 2, 0, 6, 4, 1);
-    both!("fourbar", DriveFourbar::default(), 4, 2, 12, 10, 2);
-    both!("slider-crank", DriveSliderCrank::default(), 3, 2, 9, 8, 2);
-    both!("slide arm", SlideArm::default(), 2, 0, 6, 4, 2);
+    on_actuated_views!(check_derivatives(1), 31, 3, dt);
     // unactuated (U = 0: A alone), and sub-steps
     let (s, _) =
         minimal_and_maximal_states::<_, 1, 0, 3>(&SpringRod::default().minimal(), 31, 3, dt);
@@ -675,13 +633,7 @@ where
         .map(|_| SVector::from_fn(|_, _| rng.uniform(-3.0, 3.0)))
         .collect();
     for mid in [false, true] {
-        let vi = if mid {
-            Variational::midpoint(m, dt).unwrap()
-        } else {
-            Variational::new(m, dt).unwrap()
-        }
-        .tolerance(1e-14)
-        .unwrap();
+        let vi = vi_rule(m, dt, mid).tolerance(1e-14).unwrap();
         let d = vi.rollout_derivatives(z0, &inputs).unwrap();
         let traj = vi.rollout_forced(z0, &inputs).unwrap();
         // the same steps, Newton started differently: equal to the solver
@@ -704,15 +656,8 @@ where
             .max(jk.v_v.amax());
         for j in 0..N {
             for pos in [true, false] {
-                let (mut zp, mut zm) = (*z0, *z0);
-                if pos {
-                    zp.q[j] += eps;
-                    zm.q[j] -= eps;
-                } else {
-                    zp.v[j] += eps;
-                    zm.v[j] -= eps;
-                }
-                let (p, q) = (last(&zp, &inputs), last(&zm, &inputs));
+                let p = last(&nudged(z0, j, pos, eps), &inputs);
+                let q = last(&nudged(z0, j, pos, -eps), &inputs);
                 let dq = (p.q - q.q) / (2.0 * eps);
                 let dv = (p.v - q.v) / (2.0 * eps);
                 let (eq, ev) = if pos {
@@ -1028,7 +973,7 @@ fn bits<const N: usize, const U: usize>(
     z: &State<N>,
     d: Option<&vigp::embedded::StepDerivatives<N, U>>,
 ) -> Vec<u64> {
-    let mut out: Vec<u64> = z.q.iter().chain(z.v.iter()).map(|x| x.to_bits()).collect();
+    let mut out = state_bits(z);
     if let Some(d) = d {
         for m in [&d.a.q_q, &d.a.q_v, &d.a.v_q, &d.a.v_v] {
             out.extend(m.iter().map(|x| x.to_bits()));
@@ -1135,7 +1080,6 @@ fn kept_workspace_forced_steps_equal_fresh_ones_bit_for_bit() {
 /// round-trips with its inputs.
 #[test]
 fn learned_integrator_takes_inputs() {
-    use vigp::gp::TrainOptions;
     use vigp::learned::{Encoding, ForcedTransition, Learned, Prior, forced_transitions};
     let dt = 0.01;
     let nominal = DriveCartpole::default();
@@ -1188,11 +1132,7 @@ fn learned_integrator_takes_inputs() {
             t
         })
         .collect();
-    let options = TrainOptions {
-        restarts: 2,
-        seed: 3,
-        ..TrainOptions::default()
-    };
+    let options = common::train_options(2, 3);
     let (l, _) = Learned::train_forced(
         nominal.minimal(),
         dt,
@@ -1240,34 +1180,9 @@ fn learned_integrator_takes_inputs() {
         let (z1, d, dp) = l.step_derivatives_forced(&z, &up, &u, &mut ws).unwrap();
         assert_eq!(z1, l.step_mean_forced_in(&z, &up, &u, &mut ws).unwrap());
         let mut ws2 = l.workspace();
-        let mut err = 0.0f64;
-        let mut scale = 0.0f64;
-        for j in 0..2 {
-            for pos in [true, false] {
-                let (dq, dv) = stencil(1e-3, |e| {
-                    let mut zp = z;
-                    if pos {
-                        zp.q[j] += e;
-                    } else {
-                        zp.v[j] += e;
-                    }
-                    l.step_mean_forced_in(&zp, &up, &u, &mut ws2).unwrap()
-                });
-                let (aq, av) = if pos {
-                    (
-                        d.a.q_q.column(j).into_owned(),
-                        d.a.v_q.column(j).into_owned(),
-                    )
-                } else {
-                    (
-                        d.a.q_v.column(j).into_owned(),
-                        d.a.v_v.column(j).into_owned(),
-                    )
-                };
-                err = err.max((aq - dq).amax()).max((av - dv).amax());
-                scale = scale.max(dq.amax()).max(dv.amax());
-            }
-        }
+        let (err, scale) = a_stencil_errors(&z, &d.a, 1e-3, |zp| {
+            l.step_mean_forced_in(zp, &up, &u, &mut ws2).unwrap()
+        });
         let (dq, dv) = stencil(1e-3, |e| {
             l.step_mean_forced_in(&z, &up, &(u + SVector::<f64, 1>::new(e)), &mut ws2)
                 .unwrap()
@@ -1316,28 +1231,7 @@ fn learned_integrator_takes_inputs() {
         out[us.len() - 1]
     };
     let jk = &rd.initial[k_steps];
-    let mut err = 0.0f64;
-    let mut scale = 0.0f64;
-    for j in 0..2 {
-        for pos in [true, false] {
-            let (dq, dv) = stencil(1e-3, |e| {
-                let mut zp = z0;
-                if pos {
-                    zp.q[j] += e;
-                } else {
-                    zp.v[j] += e;
-                }
-                last(&zp, &plan)
-            });
-            let (aq, av) = if pos {
-                (jk.q_q.column(j).into_owned(), jk.v_q.column(j).into_owned())
-            } else {
-                (jk.q_v.column(j).into_owned(), jk.v_v.column(j).into_owned())
-            };
-            err = err.max((aq - dq).amax()).max((av - dv).amax());
-            scale = scale.max(dq.amax()).max(dv.amax());
-        }
-    }
+    let (err, scale) = a_stencil_errors(&z0, jk, 1e-3, |zp| last(zp, &plan));
     let mut rollout_worst = err / scale;
     for (j, bj) in rd.inputs[k_steps].iter().enumerate() {
         let (dq, dv) = stencil(1e-3, |e| {
@@ -1527,7 +1421,6 @@ fn learned_step_derivatives_of_the_paper_systems() {
 #[test]
 fn projected_learned_step_derivatives_match_differences() {
     use vigp::Integrator;
-    use vigp::gp::TrainOptions;
     use vigp::learned::{Encoding, Learned, Prior, transitions};
     use vigp::projection::consistent_state;
     use vigp::systems::{DoublePendulum, Fourbar};
@@ -1550,11 +1443,7 @@ fn projected_learned_step_derivatives_match_differences() {
                 t
             }));
         }
-        let options = TrainOptions {
-            restarts: 1,
-            seed: 5,
-            ..TrainOptions::default()
-        };
+        let options = common::train_options(1, 5);
         let (l, _) = Learned::train(nominal, dt, &data, Encoding::Raw, prior, &options).unwrap();
         let (mut ws, mut ws2) = (l.workspace(), l.workspace());
         let u = SVector::<f64, 0>::zeros();
@@ -1565,10 +1454,7 @@ fn projected_learned_step_derivatives_match_differences() {
         let mut worst = 0.0f64;
         for k in [5, 20, 35] {
             let q = &test[0];
-            let z = State {
-                q: q[k],
-                v: (q[k + 1] - q[k]) / dt,
-            };
+            let z = common::state_at(q, k, dt);
             let (z1, d, _) = l.step_derivatives_forced(&z, &u, &u, &mut ws).unwrap();
             assert!((z1.v - l.step_mean_forced_in(&z, &u, &u, &mut ws).unwrap().v).amax() < 1e-12);
             worst = worst.max(learned_a_error(&l, &z, &d, eps, &mut ws2));
@@ -1644,27 +1530,9 @@ fn learned_a_error<M: Mechanism<N, C> + Clone, const N: usize, const C: usize>(
     ws: &mut vigp::gp::Workspace,
 ) -> f64 {
     let u = SVector::<f64, 0>::zeros();
-    let (mut err, mut scale) = (0.0f64, 0.0f64);
-    for j in 0..N {
-        for pos in [true, false] {
-            let (dq, dv) = stencil(eps, |e| {
-                let mut zp = *z;
-                if pos {
-                    zp.q[j] += e;
-                } else {
-                    zp.v[j] += e;
-                }
-                l.step_mean_forced_in(&zp, &u, &u, ws).unwrap()
-            });
-            let (aq, av) = if pos {
-                (d.a.q_q.column(j), d.a.v_q.column(j))
-            } else {
-                (d.a.q_v.column(j), d.a.v_v.column(j))
-            };
-            err = err.max((aq - dq).amax()).max((av - dv).amax());
-            scale = scale.max(dq.amax()).max(dv.amax());
-        }
-    }
+    let (err, scale) = a_stencil_errors(z, &d.a, eps, |zp| {
+        l.step_mean_forced_in(zp, &u, &u, ws).unwrap()
+    });
     err / scale
 }
 

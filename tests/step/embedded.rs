@@ -7,7 +7,7 @@
 //! differences).
 
 use crate::common;
-use common::Rng;
+use common::{Rng, same_bits};
 use nalgebra::SVector;
 use vigp::embedded::{Dynamics, Model, StepError, StepOptions, Stepper, model};
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
@@ -348,13 +348,6 @@ fn accepted_steps_meet_the_tolerance_by_an_independent_residual() {
 fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
     use vigp::Coordinates;
     use vigp::embedded::StepWorkspace;
-    fn same<const N: usize>(a: &State<N>, b: &State<N>) -> bool {
-        a.q.iter().chain(a.v.iter()).map(|x| x.to_bits()).eq(b
-            .q
-            .iter()
-            .chain(b.v.iter())
-            .map(|x| x.to_bits()))
-    }
     let dt = 0.01;
     let fb = Fourbar::default();
     let mut long = fb;
@@ -379,15 +372,15 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
             // a's converged step leaves G cached at z1.q + dt·z1.v, the
             // x₁ of every stepper's next step from z1
             let z1 = a.step_in(&zm, &mut ws).unwrap();
-            assert!(same(&z1, &a.step(&zm).unwrap()));
+            assert!(same_bits(&z1, &a.step(&zm).unwrap()));
             // the momentum from the public `momentum` (as a rollout starts)
             // and the solve in a fresh workspace: the same bits
             let (z1m, _, _) = a.step_with_momentum(&zm, &a.momentum(&zm)).unwrap();
-            assert!(same(&z1, &z1m));
+            assert!(same_bits(&z1, &z1m));
             for b in &steppers {
                 let fresh = b.step(&z1).unwrap();
                 let kept = b.step_in(&z1, &mut ws).unwrap();
-                assert!(same(&kept, &fresh), "{kept:?} vs {fresh:?}");
+                assert!(same_bits(&kept, &fresh), "{kept:?} vs {fresh:?}");
                 checked += 1;
             }
         }
@@ -405,7 +398,10 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
     for _ in 0..10 {
         let z = random_state(&dp.minimal(), &mut rng, dt);
         for a in &s {
-            assert!(same(&a.step_in(&z, &mut ws).unwrap(), &a.step(&z).unwrap()));
+            assert!(same_bits(
+                &a.step_in(&z, &mut ws).unwrap(),
+                &a.step(&z).unwrap()
+            ));
         }
     }
     // errors are those of `step`
@@ -431,13 +427,13 @@ fn steps_in_a_kept_workspace_equal_fresh_steps_bit_for_bit() {
         let zm = fb.minimal().to_maximal(&z, dt);
         for (a, sa) in vis.iter().zip(&steppers) {
             let z1 = a.step(&zm).unwrap();
-            assert!(same(&z1, &sa.step(&zm).unwrap()));
+            assert!(same_bits(&z1, &sa.step(&zm).unwrap()));
             // the diagnostics path keeps the same workspace
-            assert!(same(&a.step_with_report(&zm).unwrap().0, &z1));
+            assert!(same_bits(&a.step_with_report(&zm).unwrap().0, &z1));
             let zd = random_state(&dp.minimal(), &mut rng, dt);
-            assert!(same(&vdp.step(&zd).unwrap(), &s[1].step(&zd).unwrap()));
+            assert!(same_bits(&vdp.step(&zd).unwrap(), &s[1].step(&zd).unwrap()));
             for (b, sb) in vis.iter().zip(&steppers) {
-                assert!(same(&b.step(&z1).unwrap(), &sb.step(&z1).unwrap()));
+                assert!(same_bits(&b.step(&z1).unwrap(), &sb.step(&z1).unwrap()));
                 shared += 1;
             }
         }

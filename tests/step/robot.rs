@@ -4,6 +4,7 @@
 //! rollouts. Pinocchio, energy, subdivision and error tests of `Robot`:
 //! vigp-runtime/tests/robot.rs.
 
+use crate::common::XorShift as Rng;
 use vigp::SVector;
 use vigp::embedded::tree::BodyScratch;
 use vigp::prelude::*;
@@ -41,17 +42,6 @@ vigp::mechanism! {
             j3: prismatic(link2 @ [0.3, 0.0, 0.0], link3.start) { axis: [1.0, 0.0, 0.0], damping: 0.0 },
             tool_weld: fixed(link3 @ [0.1, 0.0, 0.0], tool.start),
         }
-    }
-}
-
-/// Deterministic pseudo-random numbers in [lo, hi) (xorshift).
-struct Rng(u64);
-impl Rng {
-    fn uniform(&mut self, lo: f64, hi: f64) -> f64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        lo + (hi - lo) * ((self.0 >> 11) as f64 / (1u64 << 53) as f64)
     }
 }
 

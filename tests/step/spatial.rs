@@ -6,12 +6,12 @@
 //! Numbers quoted in docs/spatial.md are printed with `-- --nocapture`.
 
 use crate::common;
-use common::Rng;
+use common::{Rng, tight};
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
 use vigp::spatial::so3;
-use vigp::spatial::{LieStepper, SpatialIntegrator, SpatialState, StepOptions, summarize};
+use vigp::spatial::{LieStepper, SpatialIntegrator, SpatialState, summarize};
 use vigp::systems::spatial::{
     DoublePendulum3d, Furuta, SpatialSliderCrank, SphericalPendulum, Tumbler,
 };
@@ -220,13 +220,6 @@ fn sci(x: &[f64]) -> String {
         .join(", ")
 }
 
-fn tight() -> StepOptions {
-    StepOptions {
-        tolerance: 1e-14,
-        ..StepOptions::default()
-    }
-}
-
 /// A spatial mechanism whose axes are all parallel reproduces the planar
 /// implementation, in both views: the minimal views are the same
 /// Lagrangian (same `Variational` integrator), and the maximal Lie-group
@@ -240,6 +233,7 @@ fn tight() -> StepOptions {
 fn parallel_axes_reproduce_the_planar_implementation() {
     let dt = 0.01;
     let steps = 300;
+    let free = Drive::Free(dt, steps);
 
     // double pendulum with elbow damping
     let mut planar = DoublePendulum::default();
@@ -247,53 +241,18 @@ fn parallel_axes_reproduce_the_planar_implementation() {
     let mut lifted = LiftedDoublePendulum::default();
     lifted.joints.elbow.damping = 0.2;
     let z0 = State::new([1.2, -0.7], [0.5, 1.5]);
-    compare(
-        "double pendulum",
-        planar.minimal(),
-        planar.maximal(),
-        planar.minimal(),
-        lifted.minimal(),
-        lifted,
-        &z0,
-        dt,
-        steps,
-    );
+    let name = "double pendulum";
+    compare(name, planar.minimal(), planar.maximal(), lifted, &z0, free);
 
     let planar = Cartpole::default();
-    let lifted = LiftedCartpole::default();
     let z0 = State::new([0.1, 2.0], [0.3, -1.0]);
-    compare(
-        "cartpole",
-        planar.minimal(),
-        planar.maximal(),
-        planar.minimal(),
-        lifted.minimal(),
-        lifted,
-        &z0,
-        dt,
-        steps,
-    );
+    let (lifted, name) = (LiftedCartpole::default(), "cartpole");
+    compare(name, planar.minimal(), planar.maximal(), lifted, &z0, free);
 
     let planar = Fourbar::default();
-    let lifted = LiftedFourbar::default();
-    let z0 = consistent_state(
-        &planar.minimal(),
-        &SVector::from([0.9, -1.3, -0.4, 1.3]),
-        &SVector::from([1.0, -0.5, 0.8, 0.2]),
-        dt,
-    )
-    .unwrap();
-    compare(
-        "fourbar",
-        planar.minimal(),
-        planar.maximal(),
-        planar.minimal(),
-        lifted.minimal(),
-        lifted,
-        &z0,
-        dt,
-        steps,
-    );
+    let z0 = fourbar_start(&planar.minimal(), dt);
+    let (lifted, name) = (LiftedFourbar::default(), "fourbar");
+    compare(name, planar.minimal(), planar.maximal(), lifted, &z0, free);
 
     // the same with inputs and springs: every joint driven by a torque or
     // force varying over the run, springs with rest coordinates (the
@@ -304,62 +263,89 @@ fn parallel_axes_reproduce_the_planar_implementation() {
         SVector::<f64, 2>::new(2.0 * (3.0 * t).sin(), -1.5 + (2.0 * t).cos())
     };
     let inputs: Vec<SVector<f64, 2>> = (0..steps).map(inputs).collect();
+    let held = Drive::Forced(dt, &inputs);
     let planar = DrivenDoublePendulum::default();
     let lifted = LiftedDrivenDoublePendulum::default();
-    compare_forced(
-        "driven double pendulum",
-        planar.minimal(),
-        planar.maximal(),
-        planar.minimal(),
-        lifted.minimal(),
-        lifted,
-        &State::new([1.2, -0.7], [0.5, 1.5]),
-        dt,
-        &inputs,
-    );
+    let z0 = State::new([1.2, -0.7], [0.5, 1.5]);
+    let name = "driven double pendulum";
+    compare(name, planar.minimal(), planar.maximal(), lifted, &z0, held);
+
     let planar = DrivenCartpole::default();
-    let lifted = LiftedDrivenCartpole::default();
-    compare_forced(
-        "driven cartpole",
-        planar.minimal(),
-        planar.maximal(),
-        planar.minimal(),
-        lifted.minimal(),
-        lifted,
-        &State::new([0.1, 2.0], [0.3, -1.0]),
-        dt,
-        &inputs,
-    );
+    let z0 = State::new([0.1, 2.0], [0.3, -1.0]);
+    let (lifted, name) = (LiftedDrivenCartpole::default(), "driven cartpole");
+    compare(name, planar.minimal(), planar.maximal(), lifted, &z0, held);
+
     let planar = DrivenFourbar::default();
-    let lifted = LiftedDrivenFourbar::default();
-    let z0 = consistent_state(
-        &planar.minimal(),
+    let z0 = fourbar_start(&planar.minimal(), dt);
+    let (lifted, name) = (LiftedDrivenFourbar::default(), "driven fourbar");
+    compare(name, planar.minimal(), planar.maximal(), lifted, &z0, held);
+}
+
+/// The fourbar's consistent start for [`compare`] (from an energetic
+/// guess, projected at `dt`).
+fn fourbar_start<M: Mechanism<4, C>, const C: usize>(m: &M, dt: f64) -> State<4> {
+    consistent_state(
+        m,
         &SVector::from([0.9, -1.3, -0.4, 1.3]),
         &SVector::from([1.0, -0.5, 0.8, 0.2]),
         dt,
     )
-    .unwrap();
-    compare_forced(
-        "driven fourbar",
-        planar.minimal(),
-        planar.maximal(),
-        planar.minimal(),
-        lifted.minimal(),
-        lifted,
-        &z0,
-        dt,
-        &inputs,
-    );
+    .unwrap()
 }
 
-/// [`compare`] under inputs: every trajectory through its forced rollout
-/// (`Variational::rollout_forced`, `LieStepper::rollout_forced_into`),
-/// the same input sequence for all four; the same tolerances.
-#[allow(clippy::too_many_arguments)]
-fn compare_forced<
+/// What drives a [`compare`] run of steps `Δt`: free steps, or a forced
+/// rollout (`Variational::rollout_forced`, `LieStepper::rollout_forced_into`)
+/// under one input a step, the same input sequence for all four.
+#[derive(Clone, Copy)]
+enum Drive<'a, const U: usize> {
+    Free(f64, usize),
+    Forced(f64, &'a [SVector<f64, U>]),
+}
+
+impl<const U: usize> Drive<'_, U> {
+    /// The step Δt and the number of steps of the run.
+    fn dt_and_steps(&self) -> (f64, usize) {
+        match self {
+            Drive::Free(dt, steps) => (*dt, *steps),
+            Drive::Forced(dt, inputs) => (*dt, inputs.len()),
+        }
+    }
+}
+
+/// The trajectory of `m` from `z0` under `drive`, solved to 1e-14.
+fn run<M, const N: usize, const C: usize, const U: usize>(
+    m: M,
+    z0: &State<N>,
+    drive: Drive<U>,
+) -> Vec<State<N>>
+where
+    M: Mechanism<N, C> + Copy + vigp::Inputs<U>,
+{
+    let vi = Variational::new(m, drive.dt_and_steps().0)
+        .unwrap()
+        .tolerance(1e-14)
+        .unwrap();
+    match drive {
+        Drive::Free(_, steps) => vi.rollout(z0, steps).unwrap(),
+        Drive::Forced(_, inputs) => vi.rollout_forced(z0, inputs).unwrap(),
+    }
+}
+
+/// The largest difference in q or v between two trajectories.
+fn max_gap<const N: usize>(a: &[State<N>], b: &[State<N>]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(x, y)| (x.q - y.q).amax().max((x.v - y.v).amax()))
+        .fold(0.0, f64::max)
+}
+
+/// The planar minimal and maximal views against the lifted mechanism's
+/// minimal and maximal views (Lie-group stepper) from `z0` under `drive`: minimal
+/// views to 1e-10 (or 10× the planar trajectory's own sensitivity),
+/// maximal views to 1e-10, out of the plane by at most 1e-12.
+fn compare<
     P,
     PM,
-    LM,
     L,
     const N: usize,
     const C: usize,
@@ -375,134 +361,32 @@ fn compare_forced<
     name: &str,
     planar_min: P,
     planar_max: PM,
-    coords: P,
-    lifted_min: LM,
     lifted: L,
     z0: &State<N>,
-    dt: f64,
-    inputs: &[SVector<f64, U>],
+    drive: Drive<U>,
 ) where
-    P: Mechanism<N, C> + vigp::Coordinates<N, M> + Copy,
-    PM: Mechanism<M, CM> + Copy,
-    LM: Mechanism<N, CL> + Copy,
-    L: vigp::spatial::Spatial<B, J> + Copy + MaximalOf<B, J, NB, CB>,
-    P: vigp::Inputs<U>,
-    PM: vigp::Inputs<U>,
-    LM: vigp::Inputs<U>,
-    L: vigp::Inputs<U>,
+    P: Mechanism<N, C> + vigp::Coordinates<N, M> + Copy + vigp::Inputs<U>,
+    PM: Mechanism<M, CM> + Copy + vigp::Inputs<U>,
+    L: vigp::spatial::Spatial<B, J> + Copy + Views<B, J, NB, CB> + vigp::Inputs<U>,
+    L::Minimal: Mechanism<N, CL> + Copy + vigp::Inputs<U>,
 {
-    let steps = inputs.len();
-    let min = |m: P, z: &State<N>| {
-        Variational::new(m, dt)
-            .unwrap()
-            .tolerance(1e-14)
-            .unwrap()
-            .rollout_forced(z, inputs)
-            .unwrap()
-    };
-    let a = min(planar_min, z0);
-    let b = Variational::new(lifted_min, dt)
-        .unwrap()
-        .tolerance(1e-14)
-        .unwrap()
-        .rollout_forced(z0, inputs)
-        .unwrap();
-    let dmin = a
-        .iter()
-        .zip(&b)
-        .map(|(x, y)| (x.q - y.q).amax().max((x.v - y.v).amax()))
-        .fold(0.0, f64::max);
-    let zp = coords.to_maximal(z0, dt);
-    let pm = Variational::new(planar_max, dt)
-        .unwrap()
-        .tolerance(1e-14)
-        .unwrap()
-        .rollout_forced(&zp, inputs)
-        .unwrap();
-    let stepper = LieStepper::with_options(lifted.maximal_view(), dt, tight()).unwrap();
-    let zs = vigp::spatial::views::to_maximal::<L, B, J, N>(&lifted, z0, dt);
-    let mut sm = vec![zs; steps + 1];
-    stepper.rollout_forced_into(&zs, inputs, &mut sm).unwrap();
-    let (dmax, out) = planar_distance(&pm, &sm);
-    // the planar minimal trajectory's own sensitivity (see `compare`)
-    let mut z1 = *z0;
-    z1.q[0] = f64::from_bits(z1.q[0].to_bits() + 1);
-    let dself = a
-        .iter()
-        .zip(&min(planar_min, &z1))
-        .map(|(x, y)| (x.q - y.q).amax().max((x.v - y.v).amax()))
-        .fold(0.0, f64::max);
-    println!(
-        "{name}: minimal views differ by {dmin:.2e} (planar vs itself from z₀ + 1 ulp: {dself:.2e}), maximal views by {dmax:.2e} (out of plane {out:.1e}) over {steps} steps"
-    );
-    assert!(
-        dmin <= 1e-10f64.max(10.0 * dself),
-        "{name} minimal: {dmin:e}"
-    );
-    assert!(dmax <= 1e-10, "{name} maximal: {dmax:e}");
-    assert!(out <= 1e-12, "{name}: left the plane by {out:e}");
-}
-
-#[allow(clippy::too_many_arguments)]
-fn compare<
-    P,
-    PM,
-    LM,
-    L,
-    const N: usize,
-    const C: usize,
-    const M: usize,
-    const CM: usize,
-    const CL: usize,
-    const B: usize,
-    const J: usize,
-    const NB: usize,
-    const CB: usize,
->(
-    name: &str,
-    planar_min: P,
-    planar_max: PM,
-    coords: P,
-    lifted_min: LM,
-    lifted: L,
-    z0: &State<N>,
-    dt: f64,
-    steps: usize,
-) where
-    P: Mechanism<N, C> + vigp::Coordinates<N, M> + Copy,
-    PM: Mechanism<M, CM> + Copy,
-    LM: Mechanism<N, CL> + Copy,
-    L: vigp::spatial::Spatial<B, J> + Copy + MaximalOf<B, J, NB, CB>,
-{
+    let (dt, steps) = drive.dt_and_steps();
     // minimal views
-    let a = Variational::new(planar_min, dt)
-        .unwrap()
-        .tolerance(1e-14)
-        .unwrap()
-        .rollout(z0, steps)
-        .unwrap();
-    let b = Variational::new(lifted_min, dt)
-        .unwrap()
-        .tolerance(1e-14)
-        .unwrap()
-        .rollout(z0, steps)
-        .unwrap();
-    let dmin = a
-        .iter()
-        .zip(&b)
-        .map(|(x, y)| (x.q - y.q).amax().max((x.v - y.v).amax()))
-        .fold(0.0, f64::max);
+    let a = run(planar_min, z0, drive);
+    let b = run(lifted.minimal_view(), z0, drive);
+    let dmin = max_gap(&a, &b);
     // maximal views
-    let zp = coords.to_maximal(z0, dt);
-    let pm = Variational::new(planar_max, dt)
-        .unwrap()
-        .tolerance(1e-14)
-        .unwrap()
-        .rollout(&zp, steps)
-        .unwrap();
+    let pm = run(planar_max, &planar_min.to_maximal(z0, dt), drive);
     let stepper = LieStepper::with_options(lifted.maximal_view(), dt, tight()).unwrap();
     let zs = vigp::spatial::views::to_maximal::<L, B, J, N>(&lifted, z0, dt);
-    let sm = stepper.rollout(&zs, steps).unwrap();
+    let sm = match drive {
+        Drive::Free(_, steps) => stepper.rollout(&zs, steps).unwrap(),
+        Drive::Forced(_, inputs) => {
+            let mut sm = vec![zs; steps + 1];
+            stepper.rollout_forced_into(&zs, inputs, &mut sm).unwrap();
+            sm
+        }
+    };
     let (dmax, out) = planar_distance(&pm, &sm);
     // The planar minimal trajectory's own sensitivity: the same integrator
     // from z₀ moved by one ulp. Through the fourbar's folded pose the loop
@@ -512,17 +396,7 @@ fn compare<
     // this sensitivity instead of 1e-10.
     let mut z1 = *z0;
     z1.q[0] = f64::from_bits(z1.q[0].to_bits() + 1);
-    let c = Variational::new(planar_min, dt)
-        .unwrap()
-        .tolerance(1e-14)
-        .unwrap()
-        .rollout(&z1, steps)
-        .unwrap();
-    let dself = a
-        .iter()
-        .zip(&c)
-        .map(|(x, y)| (x.q - y.q).amax().max((x.v - y.v).amax()))
-        .fold(0.0, f64::max);
+    let dself = max_gap(&a, &run(planar_min, &z1, drive));
     println!(
         "{name}: minimal views differ by {dmin:.2e} (planar vs itself from z₀ + 1 ulp: {dself:.2e}), maximal views by {dmax:.2e} (out of plane {out:.1e}) over {steps} steps"
     );
@@ -534,15 +408,21 @@ fn compare<
     assert!(out <= 1e-12, "{name}: left the plane by {out:e}");
 }
 
-/// The generated `maximal()` as a trait, so one generic helper serves every
-/// test mechanism.
-trait MaximalOf<const B: usize, const J: usize, const N: usize, const C: usize>: Sized {
+/// The generated `minimal()` and `maximal()` as a trait, so one generic
+/// helper serves every test mechanism.
+trait Views<const B: usize, const J: usize, const N: usize, const C: usize>: Sized {
+    type Minimal;
+    fn minimal_view(&self) -> Self::Minimal;
     fn maximal_view(&self) -> vigp::spatial::Maximal<Self, B, J, N, C>;
 }
 
-macro_rules! maximal_of {
-    ($($t:ty: $b:literal, $j:literal, $n:literal, $c:literal;)*) => {$(
-        impl MaximalOf<$b, $j, $n, $c> for $t {
+macro_rules! views {
+    ($($t:ty, $min:ty: $b:literal, $j:literal, $n:literal, $c:literal;)*) => {$(
+        impl Views<$b, $j, $n, $c> for $t {
+            type Minimal = $min;
+            fn minimal_view(&self) -> $min {
+                self.minimal()
+            }
             fn maximal_view(&self) -> vigp::spatial::Maximal<Self, $b, $j, $n, $c> {
                 self.maximal()
             }
@@ -550,13 +430,13 @@ macro_rules! maximal_of {
     )*};
 }
 
-maximal_of! {
-    LiftedDrivenDoublePendulum: 2, 2, 12, 10;
-    LiftedDrivenCartpole: 2, 2, 12, 10;
-    LiftedDrivenFourbar: 4, 5, 24, 25;
-    LiftedDoublePendulum: 2, 2, 12, 10;
-    LiftedCartpole: 2, 2, 12, 10;
-    LiftedFourbar: 4, 5, 24, 25;
+views! {
+    LiftedDrivenDoublePendulum, LiftedDrivenDoublePendulumMinimal: 2, 2, 12, 10;
+    LiftedDrivenCartpole, LiftedDrivenCartpoleMinimal: 2, 2, 12, 10;
+    LiftedDrivenFourbar, LiftedDrivenFourbarMinimal: 4, 5, 24, 25;
+    LiftedDoublePendulum, LiftedDoublePendulumMinimal: 2, 2, 12, 10;
+    LiftedCartpole, LiftedCartpoleMinimal: 2, 2, 12, 10;
+    LiftedFourbar, LiftedFourbarMinimal: 4, 5, 24, 25;
 }
 
 /// A consistent maximal initial state of a spatial mechanism from a guess

@@ -13,12 +13,12 @@
 //! `-- --nocapture`.
 
 use crate::common;
-use common::{Rng, ab_errors};
+use common::{Rng, ab_errors, same_bits, same_spatial_bits, tight};
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp::embedded::Dynamics;
 use vigp::projection::{consistent_state, consistent_state_holding};
+use vigp::spatial::LieStepper;
 use vigp::spatial::SpatialIntegrator;
-use vigp::spatial::{LieStepper, SpatialState, StepOptions};
 use vigp::{Integrator, Mechanism, State, Variational};
 
 vigp::mechanism! {
@@ -146,13 +146,6 @@ vigp::mechanism! {
     }
 }
 
-fn tight() -> StepOptions {
-    StepOptions {
-        tolerance: 1e-14,
-        ..StepOptions::default()
-    }
-}
-
 /// A consistent minimal state of the slider-crank near crank angle `a`
 /// (the rod yawed to reach the off-plane rail, the slider's ball joint
 /// undoing the rest so that the slider keeps the rail's orientation).
@@ -178,30 +171,6 @@ fn arm_states(rng: &mut Rng, n: usize) -> Vec<State<2>> {
             )
         })
         .collect()
-}
-
-fn same_bits<const N: usize>(a: &State<N>, b: &State<N>) -> bool {
-    a.q.iter()
-        .chain(a.v.iter())
-        .zip(b.q.iter().chain(b.v.iter()))
-        .all(|(x, y)| x.to_bits() == y.to_bits())
-}
-
-fn same_bits_max<const B: usize>(a: &SpatialState<B>, b: &SpatialState<B>) -> bool {
-    let flat = |z: &SpatialState<B>| -> Vec<u64> {
-        (0..B)
-            .flat_map(|i| {
-                z.x[i]
-                    .iter()
-                    .chain(z.q[i].quaternion().coords.iter())
-                    .chain(z.v[i].iter())
-                    .chain(z.w[i].iter())
-                    .map(|x| x.to_bits())
-                    .collect::<Vec<_>>()
-            })
-            .collect()
-    };
-    flat(a) == flat(b)
 }
 
 /// u = 0 steps the actuated mechanism exactly as the same mechanism
@@ -268,12 +237,12 @@ fn zero_input_is_the_unactuated_spatial_mechanism_bit_for_bit() {
     );
     for z in arm_states(&mut rng, 5) {
         let x = sa.minimal().to_maximal(&z, dt);
-        assert!(same_bits_max(
+        assert!(same_spatial_bits(
             &la.step_forced(&x, &zero).unwrap(),
             &lp.step(&x).unwrap()
         ));
         // U = 0 (no input vector) as in the minimal view
-        assert!(same_bits_max(
+        assert!(same_spatial_bits(
             &la.step_forced(&x, &none).unwrap(),
             &lp.step(&x).unwrap()
         ));
@@ -283,9 +252,9 @@ fn zero_input_is_the_unactuated_spatial_mechanism_bit_for_bit() {
     let mut rp = ra;
     la.rollout_forced_into(&x0, &[zero; 30], &mut ra).unwrap();
     lp.rollout_into(&x0, &mut rp).unwrap();
-    assert!(ra.iter().zip(&rp).all(|(x, y)| same_bits_max(x, y)));
+    assert!(ra.iter().zip(&rp).all(|(x, y)| same_spatial_bits(x, y)));
     la.rollout_forced_into(&x0, &[none; 30], &mut ra).unwrap();
-    assert!(ra.iter().zip(&rp).all(|(x, y)| same_bits_max(x, y)));
+    assert!(ra.iter().zip(&rp).all(|(x, y)| same_spatial_bits(x, y)));
     let (sc, scp) = (DriveCrank3::default(), PlainCrank3::default());
     let x0 = sc.minimal().to_maximal(&z, dt);
     let (lc, lcp) = (
@@ -296,7 +265,7 @@ fn zero_input_is_the_unactuated_spatial_mechanism_bit_for_bit() {
     let mut rp = ra;
     lc.rollout_forced_into(&x0, &[zero; 30], &mut ra).unwrap();
     lcp.rollout_into(&x0, &mut rp).unwrap();
-    assert!(ra.iter().zip(&rp).all(|(x, y)| same_bits_max(x, y)));
+    assert!(ra.iter().zip(&rp).all(|(x, y)| same_spatial_bits(x, y)));
 }
 
 /// The generated input terms of the minimal views against dual numbers:

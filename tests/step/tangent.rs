@@ -410,12 +410,9 @@ fn along_a_motion<
 /// curvature the arm's (elbow torque 3 N·m) by 6.4e-3.
 #[test]
 fn lie_stepper_tangent_derivatives_match_finite_differences() {
-    use vigp::spatial::{LieStepper, StepOptions};
+    use vigp::spatial::LieStepper;
     let dt = 0.01;
-    let tight = StepOptions {
-        tolerance: 1e-14,
-        ..StepOptions::default()
-    };
+    let tight = crate::common::tight();
     let u = SVector::<f64, 1>::from([0.4]);
 
     let sys = DrivenRsur::default();

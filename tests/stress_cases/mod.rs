@@ -95,15 +95,27 @@ pub fn table(rows: &[Row]) -> String {
 
 /// "Variant: message" of a step error.
 pub fn describe(e: &StepError) -> String {
-    let dbg = format!("{e:?}");
-    let variant = dbg.split([' ', '(', '{']).next().unwrap_or("").to_string();
-    format!("`StepError::{variant}`: {e}")
+    describe_as("StepError", e)
 }
 
 fn describe_gp(e: &GpError) -> String {
+    describe_as("GpError", e)
+}
+
+/// "`Type::Variant`: message" of an error of the type named `ty`.
+fn describe_as<E: std::fmt::Debug + std::fmt::Display>(ty: &str, e: &E) -> String {
     let dbg = format!("{e:?}");
     let variant = dbg.split([' ', '(', '{']).next().unwrap_or("").to_string();
-    format!("`GpError::{variant}`: {e}")
+    format!("`{ty}::{variant}`: {e}")
+}
+
+/// The error kinds as a list of code spans: "`a`, `b`".
+fn code_list(kinds: std::collections::BTreeSet<String>) -> String {
+    kinds
+        .into_iter()
+        .map(|k| format!("`{k}`"))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 /// What a rollout did: steps taken, max |E − E₀| (with `energy`), max |g|,
@@ -1276,11 +1288,7 @@ pub fn bad_input(size: Size) -> Vec<Row> {
         }
     }
     row.happened = format!("{} calls, each a typed error", errs.len());
-    row.error = kinds
-        .into_iter()
-        .map(|k| format!("`{k}`"))
-        .collect::<Vec<_>>()
-        .join(", ");
+    row.error = code_list(kinds);
     rows.push(row);
 
     // GP: wrong dimensions and NaN
@@ -1334,11 +1342,7 @@ pub fn bad_input(size: Size) -> Vec<Row> {
         }
     }
     row.happened = format!("{} bad calls, each a typed error", checks.len());
-    row.error = kinds
-        .into_iter()
-        .map(|k| format!("`{k}`"))
-        .collect::<Vec<_>>()
-        .join(", ");
+    row.error = code_list(kinds);
     rows.push(row);
 
     // corrupt model files
