@@ -14,6 +14,17 @@ use vigp::prelude::*;
 use vigp::projection::consistent_state;
 use vigp::systems::{Cartpole, DoublePendulum, Fourbar, Pendulum};
 
+/// One step of `integrator` from `z`, any integrator and any state (the
+/// one `Integrator` trait).
+fn bench_step<I: Integrator>(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    name: &str,
+    integrator: &I,
+    z: &I::State,
+) {
+    g.bench_function(name, |b| b.iter(|| integrator.step(black_box(z)).unwrap()));
+}
+
 fn bench_steps(c: &mut Criterion) {
     let dt = 0.01;
     let mut g = c.benchmark_group("step");
@@ -21,46 +32,46 @@ fn bench_steps(c: &mut Criterion) {
     let p = Pendulum::default();
     let z = State::new([1.0], [0.5]);
     let vi = Variational::new(p.minimal(), dt).unwrap();
-    g.bench_function("pendulum/minimal/vi", |b| {
-        b.iter(|| vi.step(black_box(&z)).unwrap())
-    });
-    let zm = p.minimal().to_maximal(&z, dt);
+    bench_step(&mut g, "pendulum/minimal/vi", &vi, &z);
     let vim = Variational::new(p.maximal(), dt).unwrap();
-    g.bench_function("pendulum/maximal/vi", |b| {
-        b.iter(|| vim.step(black_box(&zm)).unwrap())
-    });
+    bench_step(
+        &mut g,
+        "pendulum/maximal/vi",
+        &vim,
+        &p.minimal().to_maximal(&z, dt),
+    );
 
     let cp = Cartpole::default();
     let z = State::new([0.2, 2.0], [0.3, 0.5]);
     let vi = Variational::new(cp.minimal(), dt).unwrap();
-    g.bench_function("cartpole/minimal/vi", |b| {
-        b.iter(|| vi.step(black_box(&z)).unwrap())
-    });
-    let zm = cp.minimal().to_maximal(&z, dt);
+    bench_step(&mut g, "cartpole/minimal/vi", &vi, &z);
     let vim = Variational::new(cp.maximal(), dt).unwrap();
-    g.bench_function("cartpole/maximal/vi", |b| {
-        b.iter(|| vim.step(black_box(&zm)).unwrap())
-    });
+    bench_step(
+        &mut g,
+        "cartpole/maximal/vi",
+        &vim,
+        &cp.minimal().to_maximal(&z, dt),
+    );
 
     let dp = DoublePendulum::default();
     let z = State::new([1.0, -0.5], [0.5, 1.0]);
     let vi = Variational::new(dp.minimal(), dt).unwrap();
-    g.bench_function("double_pendulum/minimal/vi", |b| {
-        b.iter(|| vi.step(black_box(&z)).unwrap())
-    });
+    bench_step(&mut g, "double_pendulum/minimal/vi", &vi, &z);
     let vi2 = Variational::midpoint(dp.minimal(), dt).unwrap();
-    g.bench_function("double_pendulum/minimal/midpoint", |b| {
-        b.iter(|| vi2.step(black_box(&z)).unwrap())
-    });
-    let rk4 = Rk4::new(dp.minimal(), dt);
-    g.bench_function("double_pendulum/minimal/rk4", |b| {
-        b.iter(|| rk4.step(black_box(&z)).unwrap())
-    });
-    let zm = dp.minimal().to_maximal(&z, dt);
+    bench_step(&mut g, "double_pendulum/minimal/midpoint", &vi2, &z);
+    bench_step(
+        &mut g,
+        "double_pendulum/minimal/rk4",
+        &Rk4::new(dp.minimal(), dt),
+        &z,
+    );
     let vim = Variational::new(dp.maximal(), dt).unwrap();
-    g.bench_function("double_pendulum/maximal/vi", |b| {
-        b.iter(|| vim.step(black_box(&zm)).unwrap())
-    });
+    bench_step(
+        &mut g,
+        "double_pendulum/maximal/vi",
+        &vim,
+        &dp.minimal().to_maximal(&z, dt),
+    );
 
     let fb = Fourbar::default();
     let z = consistent_state(
@@ -71,14 +82,10 @@ fn bench_steps(c: &mut Criterion) {
     )
     .unwrap();
     let vi = Variational::new(fb.minimal(), dt).unwrap();
-    g.bench_function("fourbar/minimal/vi", |b| {
-        b.iter(|| vi.step(black_box(&z)).unwrap())
-    });
+    bench_step(&mut g, "fourbar/minimal/vi", &vi, &z);
     let zm = fb.minimal().to_maximal(&z, dt);
     let vim = Variational::new(fb.maximal(), dt).unwrap();
-    g.bench_function("fourbar/maximal/vi", |b| {
-        b.iter(|| vim.step(black_box(&zm)).unwrap())
-    });
+    bench_step(&mut g, "fourbar/maximal/vi", &vim, &zm);
     // the same step in a kept workspace (no 24 KB of zeros per call)
     let mut ws = vigp::embedded::StepWorkspace::new();
     g.bench_function("fourbar/maximal/vi_in", |b| {

@@ -111,7 +111,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         w: [Vector3::new(1e-4, 2.0, 1e-4)],
     };
     let t = Instant::now();
-    let traj = vigp::spatial::SpatialIntegrator::rollout(&stepper, &z0, steps)?;
+    let traj = vigp::Integrator::rollout(&stepper, &z0, steps)?;
     let cost = t.elapsed().as_secs_f64() / steps as f64 * 1e6;
     let s = summarize(&stepper, &traj);
     row(

@@ -14,11 +14,12 @@
 //! ```
 
 use nalgebra::SVector;
+use vigp::Integrator;
 use vigp::gp::TrainOptions;
 use vigp::learned::Prior;
 use vigp::projection::consistent_state;
 use vigp::spatial::learned::{Configuration, LearnedSpatial, Rotation, transitions};
-use vigp::spatial::{LieStepper, SpatialIntegrator, SpatialState};
+use vigp::spatial::{LieStepper, SpatialState};
 use vigp::systems::spatial::Furuta;
 
 #[path = "../tests/common/rng.rs"]

@@ -14,7 +14,11 @@ const T: f64 = 2.0;
 /// Final state, median µs per step, max |ΔE|.
 type Run = Result<(State<2>, f64, f64), StepError>;
 
-fn run<I: Integrator<2>>(i: &I, z0: &State<2>, energy: impl Fn(&State<2>) -> f64) -> Run {
+fn run<I: Integrator<State = State<2>, Error = StepError>>(
+    i: &I,
+    z0: &State<2>,
+    energy: impl Fn(&State<2>) -> f64,
+) -> Run {
     let steps = (T / i.dt()).round() as usize;
     let e0 = energy(z0);
     let mut best = Vec::new();

@@ -11,7 +11,7 @@
 //! | step | where |
 //! |---|---|
 //! | declare a mechanism | [`mechanism!`], [`Mechanism`], [`systems`] (the paper's four) |
-//! | simulate | [`Variational`] (paper eq. 5–6, midpoint), classical integrators, [`Integrator`], [`summarize`] |
+//! | simulate | [`Variational`] (paper eq. 5–6, midpoint), classical integrators, [`spatial::LieStepper`] (bodies in space), [`Robot`] (URDF at run time); one [`Integrator`] trait over planar and spatial states; [`summarize`] |
 //! | consistent states for loops | [`projection`] (`consistent_state`, `consistent_state_holding`) |
 //! | load measured data | [`data`] (CSV: `run,t,<coordinates>`) |
 //! | learn | [`learned`] (`Learned`, save/load, export), [`gp`] |

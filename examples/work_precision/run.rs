@@ -155,9 +155,11 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> AnyIntegrator<M,
     }
 }
 
-impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Integrator<N>
+impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Integrator
     for AnyIntegrator<M, N, C>
 {
+    type State = State<N>;
+    type Error = StepError;
     type Mechanism = M;
 
     fn dt(&self) -> f64 {
@@ -250,7 +252,7 @@ impl<M: Mechanism<N, C> + Copy, const N: usize, const C: usize> Problem<M, N, C>
 
 /// Runs `steps` steps from `z0`; returns the final state (or the error,
 /// naming the step) and the wall time of the stepping loop in seconds.
-pub fn timed_run<I: Integrator<N>, const N: usize>(
+pub fn timed_run<I: Integrator<State = State<N>, Error = StepError>, const N: usize>(
     integrator: &I,
     z0: &State<N>,
     steps: usize,

@@ -10,7 +10,7 @@ use vigp::bound::{BoundError, BoundKind, Calibration, Window};
 use vigp::data::{DataError, DataWarning, check_transitions_dt};
 use vigp::learned::{Encoding, LearnError, Learned, Prior, Transition};
 use vigp::prelude::*;
-use vigp::spatial::{LieStepper, SpatialError, SpatialIntegrator, SpatialState};
+use vigp::spatial::{LieStepper, SpatialError, SpatialState};
 use vigp::systems::{DoublePendulum, Fourbar, Pendulum, PendulumMinimal};
 
 #[macro_use]
@@ -71,7 +71,7 @@ fn rollouts_of_impossible_lengths_are_typed_errors() {
         v: [Vector3::zeros()],
         w: [Vector3::zeros()],
     };
-    let e = SpatialIntegrator::rollout(&stepper, &z3, usize::MAX).unwrap_err();
+    let e = vigp::Integrator::rollout(&stepper, &z3, usize::MAX).unwrap_err();
     assert!(
         matches!(
             e,

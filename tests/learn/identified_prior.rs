@@ -459,10 +459,11 @@ fn identified_prior_errors() {
 /// stepper from the mechanism with the identified parameters instead).
 #[test]
 fn spatial_learned_refuses_an_identified_prior() {
+    use vigp::Integrator;
+    use vigp::spatial::LieStepper;
     use vigp::spatial::learned::{
         Configuration, LearnSpatialError, LearnedSpatial, Rotation, transitions as spatial,
     };
-    use vigp::spatial::{LieStepper, SpatialIntegrator};
     let dt = 0.01;
     let sys = vigp::systems::spatial::Furuta::default();
     let stepper = LieStepper::new(sys.maximal(), dt).unwrap();

@@ -4,6 +4,7 @@
 //! minimal view (quaternion coordinates with their unit-norm constraint).
 
 use nalgebra::SVector;
+use vigp::Integrator;
 use vigp::bound::{BoundError, ConformalSettings, Score, Tube};
 use vigp::embedded::gp::ExportedGp;
 use vigp::embedded::learned::{Encoding as CoreEncoding, LearnedModel, Prior as CorePrior};
@@ -17,7 +18,7 @@ use vigp::spatial::learned::{
     Configuration, LearnSpatialError, LearnedSpatial, Rotation, SpatialForcedTransition,
     forced_transitions, transitions,
 };
-use vigp::spatial::{LieStepper, SpatialError, SpatialIntegrator, SpatialState};
+use vigp::spatial::{LieStepper, SpatialError, SpatialState};
 use vigp::systems::spatial::{Furuta, SphericalPendulum, SphericalPendulumMinimal};
 
 fn options() -> TrainOptions {
@@ -88,7 +89,8 @@ fn rotation_matrix_inputs_are_sign_invariant_quaternion_inputs_are_not() {
     .unwrap();
 
     let horizon = 30;
-    let run = |m: &dyn SpatialIntegrator<2, Mechanism = Furuta>, z: &SpatialState<2>| {
+    let run = |m: &dyn Integrator<State = SpatialState<2>, Error = SpatialError, Mechanism = Furuta>,
+               z: &SpatialState<2>| {
         let p = m.rollout(z, horizon).unwrap();
         for z in &p[1..] {
             assert!(t_step.constraint_violation(z) <= 1e-10);
@@ -384,7 +386,7 @@ fn arm_inputs(rng: &mut Rng, samples: usize) -> Vec<SVector<f64, 2>> {
 
 /// A logged run (see [`logged_run`]) of `stepper` from a random arm state
 /// under `samples` random inputs: (start, inputs, configurations).
-fn random_logged_run<I: SpatialIntegrator<2>>(
+fn random_logged_run<I: Integrator<State = SpatialState<2>>>(
     stepper: &I,
     rng: &mut Rng,
     dt: f64,
@@ -402,7 +404,7 @@ where
 /// The configurations of a driven run logged as a user's data are: sample
 /// k's input held from t_k, so the step from z_k (which sets the velocity
 /// over [t_{k+1}, t_{k+2}]) runs under `logged[k + 1]`.
-fn logged_run<I: SpatialIntegrator<2>>(
+fn logged_run<I: Integrator<State = SpatialState<2>>>(
     stepper: &I,
     z0: &SpatialState<2>,
     logged: &[SVector<f64, 2>],
@@ -422,7 +424,7 @@ where
 /// The driven arm's training data: 6 logged runs of 25 samples under
 /// piecewise-constant random torques.
 fn driven_data(
-    truth: &impl SpatialIntegrator<2, Mechanism: vigp::Inputs<2>>,
+    truth: &impl Integrator<State = SpatialState<2>, Mechanism: vigp::Inputs<2>>,
     rng: &mut Rng,
     dt: f64,
 ) -> Vec<SpatialForcedTransition<2, 2>> {

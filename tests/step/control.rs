@@ -805,8 +805,13 @@ fn every_integrator_takes_inputs() {
     let u = SVector::<f64, 1>::new(2.0);
     let target = 2.0 / (9.81 * 0.5);
     let z0 = State::new([0.0], [0.0]);
-    fn settle<I: Integrator<1>>(name: &str, i: &I, z0: &State<1>, u: &SVector<f64, 1>, target: f64)
-    where
+    fn settle<I: Integrator<State = State<1>>>(
+        name: &str,
+        i: &I,
+        z0: &State<1>,
+        u: &SVector<f64, 1>,
+        target: f64,
+    ) where
         I::Mechanism: vigp::Inputs<1>,
     {
         let mut out = vec![*z0; 3000];

@@ -14,6 +14,7 @@ mod control;
 mod embedded;
 mod fourth_order;
 mod handwritten;
+mod integrator;
 mod maximal;
 mod nominal;
 mod properties;

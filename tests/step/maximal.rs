@@ -156,7 +156,12 @@ fn minimal_and_maximal_trajectories_converge_together() {
     }
 }
 
-fn max_violation<I: Integrator<N>, Mx: Mechanism<N, K>, const N: usize, const K: usize>(
+fn max_violation<
+    I: Integrator<State = State<N>>,
+    Mx: Mechanism<N, K>,
+    const N: usize,
+    const K: usize,
+>(
     i: &I,
     m: &Mx,
     z0: &State<N>,
@@ -238,7 +243,7 @@ impl<T, const M: usize> MaximalStart<M> for T {
     }
 }
 
-fn energy_by_tenth<I: Integrator<N>, const N: usize>(
+fn energy_by_tenth<I: Integrator<State = State<N>>, const N: usize>(
     i: &I,
     energy: impl Fn(&State<N>) -> f64,
     z0: &State<N>,
@@ -303,7 +308,7 @@ fn explicit_euler_energy_grows_while_the_vis_stay_bounded() {
 /// Observed order from the errors at Δt = 1/40 and 1/160. Classical
 /// integrators start from the continuous state (1, 0); the VIs from the
 /// consistent discrete velocity `discrete_velocity` (q̇ + ½Δt·q̈).
-fn observed_order<I: Integrator<1>>(
+fn observed_order<I: Integrator<State = State<1>>>(
     make: impl Fn(f64) -> I,
     reference: f64,
     discrete: bool,

@@ -8,10 +8,11 @@
 use crate::common;
 use common::{Rng, tight};
 use nalgebra::{SVector, UnitQuaternion, Vector3};
+use vigp::Integrator;
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
 use vigp::spatial::so3;
-use vigp::spatial::{LieStepper, SpatialIntegrator, SpatialState, summarize};
+use vigp::spatial::{LieStepper, SpatialState, summarize};
 use vigp::systems::spatial::{
     DoublePendulum3d, Furuta, SpatialSliderCrank, SphericalPendulum, Tumbler,
 };

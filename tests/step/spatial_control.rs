@@ -18,7 +18,6 @@ use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp::embedded::Dynamics;
 use vigp::projection::{consistent_state, consistent_state_holding};
 use vigp::spatial::LieStepper;
-use vigp::spatial::SpatialIntegrator;
 use vigp::{Integrator, Mechanism, State, Variational};
 
 vigp::mechanism! {
@@ -528,7 +527,7 @@ fn constant_torque_settles_at_the_static_equilibrium_in_space() {
         stepper.rollout_forced_into(&x0, &inputs, &mut out).unwrap();
         // the std trait's rollout is the same trajectory
         assert_eq!(
-            SpatialIntegrator::rollout_forced(&stepper, &x0, &inputs).unwrap(),
+            Integrator::rollout_forced(&stepper, &x0, &inputs).unwrap(),
             out
         );
         let theta = stepper.joint_coordinates(out.last().unwrap())[0];

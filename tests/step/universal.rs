@@ -8,9 +8,10 @@
 //! Numbers quoted in docs/mechanisms.md are printed with `-- --nocapture`.
 
 use nalgebra::SVector;
+use vigp::Integrator;
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
-use vigp::spatial::{LieStepper, SpatialIntegrator, SpatialState, summarize};
+use vigp::spatial::{LieStepper, SpatialState, summarize};
 
 vigp::mechanism! {
     /// A 1 m, 1 kg rod hanging from a Hooke joint at the origin: the first

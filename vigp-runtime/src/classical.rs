@@ -6,9 +6,9 @@
 //! integrators, so swapping is one line.
 
 use crate::dynamics::{acceleration_forced_with, acceleration_with};
+use crate::integrator::Integrator;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
-use crate::variational::Integrator;
 use nalgebra::SVector;
 
 macro_rules! classical {
@@ -145,7 +145,9 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Update<N> for Rk4<M, N,
 
 macro_rules! integrator {
     ($name:ident) => {
-        impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for $name<M, N, C> {
+        impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator for $name<M, N, C> {
+            type State = State<N>;
+            type Error = StepError;
             type Mechanism = M;
 
             fn dt(&self) -> f64 {

@@ -16,12 +16,14 @@
 //! for loops. Construction checks Δt and the model's parameters, and
 //! `Composition::options` the Newton options.
 
+use crate::integrator::Integrator;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
-use crate::variational::Integrator;
 pub use vigp_core::Composition;
 
-impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator<N> for Composition<M, N, C> {
+impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator for Composition<M, N, C> {
+    type State = State<N>;
+    type Error = StepError;
     type Mechanism = M;
 
     fn dt(&self) -> f64 {

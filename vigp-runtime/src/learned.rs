@@ -26,7 +26,7 @@
 //! a step from z_k takes `u_prev` (the input that produced v_k) and `u`;
 //! a rollout from z₀ takes the input that produced v₀ and the sequence
 //! `inputs`, step k running under `inputs[k]` after `inputs[k − 1]`. The
-//! [`Integrator`] trait's forced calls, which have no slot for it, take the
+//! [`Integrator`](crate::Integrator) trait's forced calls, which have no slot for it, take the
 //! input as held across the start: `step_forced(z, u)` is the step with
 //! `u_prev = u`, and `rollout_forced_into(z0, inputs, …)` starts with
 //! `u_prev = inputs[0]`.
@@ -35,7 +35,7 @@ use crate::gp::{GpError, TrainOptions, TrainReport, Workspace};
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{StepError, StepOptions};
 use crate::projection::{consistent_state, project_velocity};
-use crate::variational::{Integrator, Variational};
+use crate::variational::Variational;
 use nalgebra::SVector;
 use vigp_core::state::discrete_velocity;
 
@@ -314,7 +314,7 @@ pub struct LearnedStepInfo<const N: usize> {
 /// O(N·d) per output for the GP mean (N training samples, d input
 /// dimensions: N·d subtract-multiply-adds and N exponentials), O(N²) more
 /// per output for the variance (only [`Learned::step_in`] and the error
-/// bound need it; [`Integrator::step`] and rollouts use the mean), and a
+/// bound need it; [`Integrator::step`](crate::Integrator::step) and rollouts use the mean), and a
 /// Newton projection for constrained models.
 pub type Learned<M, const N: usize, const C: usize> = LearnedIntegrator<Variational<M, N, C>, N>;
 
@@ -327,6 +327,11 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Space<N> for Variationa
     type Encoding = Encoding;
     type Mechanism = M;
     type Error = StepError;
+    type IntegratorError = StepError;
+
+    fn dt(&self) -> f64 {
+        Variational::dt(self)
+    }
 
     fn error(e: LearnError) -> StepError {
         step_error(e)
@@ -639,7 +644,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     }
 
     /// The forced calls take `U` equal to the inputs the model was trained
-    /// with, or `U = 0` (no input: u = 0, as every [`Integrator`] takes
+    /// with, or `U = 0` (no input: u = 0, as every [`Integrator`](crate::Integrator) takes
     /// it). A `U` other than 0 and the mechanism's input count does not
     /// compile (the `Inputs<U>` bound on every forced call), so the only
     /// run-time refusal is the mechanism's input count on a model trained
@@ -747,45 +752,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     {
         self.check_input_count::<U>()?;
         self.rollout_info(z0, inputs.len(), u_prev, inputs, ws)
-    }
-
-    /// The states after 1, …, `out.len()` mean steps from `z0`, step k
-    /// under `inputs[k]` after `inputs[k − 1]` and the first after `u_prev`
-    /// (the input that produced z₀'s velocity): the states of
-    /// [`Learned::rollout_forced_with_info`] without the variances, and of
-    /// [`Learned::step_mean_forced_in`] step by step. `inputs` must be at
-    /// least as long as `out` (shorter: [`StepError::NonFiniteInput`] at
-    /// step `inputs.len()`, before any step). A model trained without
-    /// inputs takes only zeros ([`Integrator::step_forced`]). Stops at the
-    /// first error (which names the step).
-    pub fn rollout_mean_forced_into<const U: usize>(
-        &self,
-        z0: &State<N>,
-        u_prev: &SVector<f64, U>,
-        inputs: &[SVector<f64, U>],
-        out: &mut [State<N>],
-    ) -> Result<(), StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        if inputs.len() < out.len() {
-            return Err(StepError::NonFiniteInput {
-                step: Some(inputs.len()),
-            });
-        }
-        let mut ws = self.gp.workspace();
-        let mut z = *z0;
-        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
-            z = if self.inputs == 0 {
-                Integrator::step_forced(self, &z, u)
-            } else {
-                let up = if k == 0 { u_prev } else { &inputs[k - 1] };
-                self.step_mean_forced_in(&z, up, u, &mut ws)
-            }
-            .map_err(|e| e.at_step(k))?;
-            *slot = z;
-        }
-        Ok(())
     }
 
     /// The model (prior and constraints): for [`Prior::Identified`] the
@@ -896,78 +862,5 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             info.std_dev = SVector::from_iterator(var.iter().map(|s| s.max(0.0).sqrt()));
         }
         Ok(out)
-    }
-}
-
-impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
-    for Learned<M, N, C>
-{
-    type Mechanism = M;
-
-    fn dt(&self) -> f64 {
-        self.nominal.dt()
-    }
-
-    /// One step (mean only, [`Learned::step_mean_in`]; under u = 0 for
-    /// a model trained with inputs); allocates a GP workspace per call (use
-    /// `step_mean_in` in loops).
-    fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
-        let mut ws = self.gp.workspace();
-        self.step_mean_in(z, &mut ws)
-    }
-
-    /// A model trained with inputs ([`Learned::train_forced`]) steps under
-    /// them ([`Learned::step_mean_forced_in`]) with the input taken as
-    /// held across the start, u_prev = u (the trait has no slot for the
-    /// previous input; pass it to `step_mean_forced_in` where it
-    /// differs); one trained without inputs takes only u = 0.
-    fn step_forced<const U: usize>(
-        &self,
-        z: &State<N>,
-        u: &SVector<f64, U>,
-    ) -> Result<State<N>, StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        if self.inputs == 0 {
-            return if u.iter().all(|x| *x == 0.0) {
-                self.step(z)
-            } else {
-                Err(StepError::InputsNotSupported)
-            };
-        }
-        let mut ws = self.gp.workspace();
-        self.step_mean_forced_in(z, u, u, &mut ws)
-    }
-
-    /// Step k under `inputs[k]` after `inputs[k − 1]`, the first step after
-    /// `inputs[0]` (the input taken as held across the start;
-    /// [`Learned::rollout_mean_forced_into`] takes the previous input
-    /// explicitly). A model trained without inputs takes only zeros.
-    fn rollout_forced_into<const U: usize>(
-        &self,
-        z0: &State<N>,
-        inputs: &[SVector<f64, U>],
-        out: &mut [State<N>],
-    ) -> Result<(), StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        match inputs.first() {
-            Some(u0) => self.rollout_mean_forced_into(z0, u0, inputs, out),
-            None if out.is_empty() => Ok(()),
-            None => Err(StepError::NonFiniteInput { step: Some(0) }),
-        }
-    }
-
-    /// Mean-only steps ([`Learned::step_mean_in`]) with one workspace.
-    fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
-        let mut ws = self.gp.workspace();
-        let mut z = *z0;
-        for (k, slot) in out.iter_mut().enumerate() {
-            z = self.step_mean_in(&z, &mut ws).map_err(|e| e.at_step(k))?;
-            *slot = z;
-        }
-        Ok(())
     }
 }

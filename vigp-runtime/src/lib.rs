@@ -23,6 +23,7 @@ pub mod del;
 pub mod dynamics;
 #[cfg(feature = "alloc")]
 pub mod identify;
+pub mod integrator;
 pub mod kinematics;
 #[cfg(feature = "alloc")]
 pub mod learned;
@@ -42,6 +43,7 @@ pub mod variational;
 
 pub use classical::{ExplicitEuler, Rk4, SymplecticEuler};
 pub use composition::Composition;
+pub use integrator::{Integrator, StepFailure};
 pub use kinematics::Pose2;
 pub use mechanism::{CoordinateKind, Coordinates, Mechanism, Scalar, State};
 /// The linear-algebra crate of vigp's public types (`SVector` in states and
@@ -57,7 +59,7 @@ pub use summary::summarize;
 pub use system::{Parameters, System, ViewVisitor};
 #[cfg(feature = "alloc")]
 pub use variational::RolloutDerivatives;
-pub use variational::{DEFAULT_SUBDIVISION, Integrator, Variational};
+pub use variational::{DEFAULT_SUBDIVISION, Variational};
 pub use vigp_core as embedded;
 pub use vigp_core::Inputs;
 pub use vigp_core::Real;

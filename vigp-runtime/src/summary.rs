@@ -1,9 +1,9 @@
 //! A rollout summary: energy error, constraint violation and time per step,
 //! the numbers the examples print.
 
+use crate::integrator::Integrator;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
-use crate::variational::Integrator;
 use core::fmt;
 
 /// What a rollout did to energy and constraints, and what it cost.
@@ -53,7 +53,7 @@ pub fn summarize<I, M, const N: usize, const C: usize>(
     steps: usize,
 ) -> Result<RolloutSummary, StepError>
 where
-    I: Integrator<N>,
+    I: Integrator<State = State<N>, Error = StepError>,
     M: Mechanism<N, C>,
 {
     let energy = |z: &State<N>| {

@@ -1,106 +1,11 @@
-//! The first-order variational integrator (paper eq. 5–6) and the
-//! [`Integrator`] trait shared by every integrator in vigp.
+//! The variational integrators on a [`Mechanism`]: the paper's first-order
+//! rule (eq. 5–6) and the second-order midpoint rule.
 
+use crate::integrator::Integrator;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{StepError, StepOptions, StepReport};
 use nalgebra::SVector;
 use vigp_core::{Inputs, StepWorkspace, Stepper};
-
-/// A one-step map z_k ↦ z_{k+1} with a fixed time step.
-///
-/// Implemented by every integrator, so a user swaps integrators in one line.
-pub trait Integrator<const N: usize> {
-    /// The mechanism this integrator steps: its forced steps take the input
-    /// vectors it takes ([`vigp_core::Inputs`]), so a wrong input length is
-    /// a compile error at the call.
-    type Mechanism: ?Sized;
-
-    /// The time step Δt in seconds.
-    fn dt(&self) -> f64;
-
-    /// One step. Never returns a non-finite state.
-    fn step(&self, z: &State<N>) -> Result<State<N>, StepError>;
-
-    /// One step under inputs `u` (one per actuated joint, in declaration
-    /// order; `U` must equal the mechanism's `Dynamics::INPUTS`). Every
-    /// integrator of vigp implements it; the default, for integrators that
-    /// cannot take inputs, takes u = 0 as [`Integrator::step`] and refuses
-    /// anything else with [`StepError::InputsNotSupported`].
-    fn step_forced<const U: usize>(
-        &self,
-        z: &State<N>,
-        u: &nalgebra::SVector<f64, U>,
-    ) -> Result<State<N>, StepError>
-    where
-        Self: Sized,
-        Self::Mechanism: Inputs<U>,
-    {
-        if u.iter().all(|x| *x == 0.0) {
-            self.step(z)
-        } else {
-            Err(StepError::InputsNotSupported)
-        }
-    }
-
-    /// The states after 1, …, `out.len()` steps from `z0`, step k under
-    /// `inputs[k]` (which must be at least as long as `out`). Stops at the
-    /// first error (which names the step).
-    fn rollout_forced_into<const U: usize>(
-        &self,
-        z0: &State<N>,
-        inputs: &[nalgebra::SVector<f64, U>],
-        out: &mut [State<N>],
-    ) -> Result<(), StepError>
-    where
-        Self: Sized,
-        Self::Mechanism: Inputs<U>,
-    {
-        if inputs.len() < out.len() {
-            return Err(StepError::NonFiniteInput {
-                step: Some(inputs.len()),
-            });
-        }
-        let mut z = *z0;
-        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
-            z = self.step_forced(&z, u).map_err(|e| e.at_step(k))?;
-            *slot = z;
-        }
-        Ok(())
-    }
-
-    /// The energy of a state as this integrator defines it, when that is
-    /// not the model's `energy(z)`: the midpoint VI's discrete velocity
-    /// belongs to the interval's midpoint ([`Variational::energy`]).
-    /// `None` (the default) means the model's energy; [`crate::summarize`]
-    /// uses this.
-    fn state_energy(&self, z: &State<N>) -> Option<f64> {
-        let _ = z;
-        None
-    }
-
-    /// Fill `out` with the states after 1, 2, …, `out.len()` steps from `z0`,
-    /// without allocating. Stops at the first error (which names the step).
-    fn rollout_into(&self, z0: &State<N>, out: &mut [State<N>]) -> Result<(), StepError> {
-        let mut z = *z0;
-        for (k, slot) in out.iter_mut().enumerate() {
-            z = self.step(&z).map_err(|e| e.at_step(k))?;
-            *slot = z;
-        }
-        Ok(())
-    }
-
-    /// The trajectory z_0, z_1, …, z_steps (`steps + 1` states).
-    #[cfg(feature = "alloc")]
-    ///
-    /// A `steps` whose trajectory cannot be stored (`usize::MAX`, a
-    /// duration divided by Δt = 0) is [`StepError::TooManySteps`], checked
-    /// before allocation ([`crate::newton::trajectory_buffer`]).
-    fn rollout(&self, z0: &State<N>, steps: usize) -> Result<Vec<State<N>>, StepError> {
-        let mut traj = crate::newton::trajectory_buffer(*z0, steps)?;
-        self.rollout_into(z0, &mut traj[1..])?;
-        Ok(traj)
-    }
-}
 
 /// A variational integrator on a [`Mechanism`]: the paper's first-order
 /// rule ([`Variational::new`]) or the second-order midpoint rule
@@ -263,6 +168,11 @@ impl<M: Mechanism<N, C>, const N: usize, const C: usize> Variational<M, N, C> {
     /// The fixed-size engine.
     pub fn stepper(&self) -> &Stepper<M, N, C> {
         &self.stepper
+    }
+
+    /// The time step Δt in seconds (held once, by the engine).
+    pub fn dt(&self) -> f64 {
+        self.stepper.dt()
     }
 }
 
@@ -886,13 +796,15 @@ impl<const N: usize, const U: usize> RolloutDerivatives<N, U> {
     }
 }
 
-impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator<N>
+impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Integrator
     for Variational<M, N, C>
 {
+    type State = State<N>;
+    type Error = StepError;
     type Mechanism = M;
 
     fn dt(&self) -> f64 {
-        self.stepper.dt()
+        Variational::dt(self)
     }
     fn step(&self, z: &State<N>) -> Result<State<N>, StepError> {
         Variational::step(self, z)

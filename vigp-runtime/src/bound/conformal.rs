@@ -17,9 +17,9 @@
 
 use super::windows::{CalibrationOf, CalibrationWindow, Windows};
 use super::{BoundError, ConformalSettings, Score, Tube, check_delta};
+use crate::integrator::Integrator;
 use crate::learned::{Learned, Transition};
 use crate::mechanism::{Mechanism, State};
-use crate::variational::Integrator;
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
 

@@ -2,12 +2,12 @@
 //! L, paper Assumption 1) and the learned step's (for propagating the
 //! rigorous one-step bounds over several steps).
 
+use crate::integrator::Integrator;
 use crate::learned::Learned;
 use crate::linalg::solve_kkt;
 use crate::mechanism::{Mechanism, State};
 use crate::newton::{StepError, StepOptions};
 use crate::projection::{consistent_state, project_velocity};
-use crate::variational::Integrator;
 use nalgebra::{SMatrix, SVector};
 use num_dual::Dual2Vec;
 

@@ -60,10 +60,10 @@ pub use uniform::Theorem1Output;
 pub use windows::{CalibrationOf, CalibrationWindow};
 
 use crate::gp::{GpError, Workspace};
+use crate::integrator::Integrator;
 use crate::learned::{LearnError, Learned};
 use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
-use crate::variational::Integrator;
 use conformal::{position_scales, predictive_scale, score_scale};
 use core::fmt;
 use nalgebra::SVector;

@@ -9,7 +9,6 @@ use super::{Encoding, Learned, Prior};
 use crate::gp::{ExportOptions, GpError};
 use crate::mechanism::Mechanism;
 use crate::system::Parameters;
-use crate::variational::Integrator;
 
 /// Options of [`Learned::to_embedded_source`].
 #[derive(Clone, Debug, PartialEq)]

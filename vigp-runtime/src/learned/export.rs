@@ -6,8 +6,8 @@ use core::fmt::Write;
 
 use super::{Encoding, Learned, Prior};
 use crate::gp::{ExportOptions, GpError};
+use crate::integrator::Integrator;
 use crate::mechanism::{CoordinateKind, Mechanism};
-use crate::variational::Integrator;
 
 impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C> {
     /// The learned velocity map's GP as Rust source ([`Gp::to_rust_source`](crate::gp::Gp::to_rust_source)),

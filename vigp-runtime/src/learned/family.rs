@@ -24,6 +24,7 @@
 
 use super::{LearnError, LearnedStepInfo, Prior, distinct_rows};
 use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
+use crate::integrator::{Integrator, StepFailure, check_inputs_cover};
 use crate::newton::StepError;
 use nalgebra::SVector;
 
@@ -32,7 +33,7 @@ use nalgebra::SVector;
 pub trait Space<const N: usize> {
     /// A discrete state z_k: configuration k and the velocities of the
     /// step to configuration k + 1.
-    type State: Copy;
+    type State: Copy + core::fmt::Debug + PartialEq;
     /// How a state enters the GP.
     type Encoding: Copy + core::fmt::Debug + PartialEq;
 
@@ -52,6 +53,12 @@ pub trait Space<const N: usize> {
     type Mechanism: ?Sized;
     /// The error of this space's learned predictions and steps.
     type Error;
+    /// The error of this space's integrators ([`Integrator::Error`]): the
+    /// nominal step's, which a learned step's error converts into.
+    type IntegratorError: StepFailure + From<Self::Error>;
+
+    /// The time step Δt of the nominal model, in seconds.
+    fn dt(&self) -> f64;
 
     /// A learned step's error as this space's error.
     fn error(e: LearnError) -> Self::Error;
@@ -625,6 +632,132 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         self.velocity(z, u_prev.as_slice(), u.as_slice(), ws, var, |s, z| {
             s.prior_velocity_forced(z, u)
         })
+    }
+}
+
+/// Rollouts of the posterior mean under inputs.
+impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
+    /// One mean step under `u` after `u_prev` as the integrator takes it:
+    /// a model trained without inputs takes only u = 0 (its unforced step)
+    /// and refuses other inputs with [`StepError::InputsNotSupported`].
+    fn held_step_in<const U: usize>(
+        &self,
+        z: &S::State,
+        u_prev: &SVector<f64, U>,
+        u: &SVector<f64, U>,
+        ws: &mut Workspace,
+    ) -> Result<S::State, S::IntegratorError>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        if self.inputs == 0 {
+            if !u.iter().all(|x| *x == 0.0) {
+                return Err(StepError::InputsNotSupported.into());
+            }
+            return Ok(self.step_mean_in(z, ws)?);
+        }
+        Ok(self.step_mean_forced_in(z, u_prev, u, ws)?)
+    }
+
+    /// The states after 1, …, `out.len()` mean steps from `z0`, step k
+    /// under `inputs[k]` after `inputs[k − 1]` and the first after `u_prev`
+    /// (the input that produced z₀'s velocities): the states of
+    /// [`Self::step_mean_forced_in`] step by step, with one workspace.
+    /// `inputs` must be at least as long as `out` (shorter:
+    /// [`StepError::NonFiniteInput`] at step `inputs.len()`, before any
+    /// step). A model trained without inputs takes only zeros
+    /// ([`Integrator::step_forced`]). Stops at the first error (which names
+    /// the step).
+    pub fn rollout_mean_forced_into<const U: usize>(
+        &self,
+        z0: &S::State,
+        u_prev: &SVector<f64, U>,
+        inputs: &[SVector<f64, U>],
+        out: &mut [S::State],
+    ) -> Result<(), S::IntegratorError>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        check_inputs_cover(inputs.len(), out.len())?;
+        let mut ws = self.gp.workspace();
+        let mut z = *z0;
+        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
+            let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+            z = self
+                .held_step_in(&z, up, u, &mut ws)
+                .map_err(|e| e.at_step(k))?;
+            *slot = z;
+        }
+        Ok(())
+    }
+}
+
+/// The learned integrator as an [`Integrator`] of its space: mean steps
+/// (the GP's posterior mean), each call allocating a GP workspace (use
+/// [`LearnedIntegrator::step_mean_in`] in loops); a rollout allocates one.
+impl<S: NominalStep<N>, const N: usize> Integrator for LearnedIntegrator<S, N> {
+    type State = S::State;
+    type Error = S::IntegratorError;
+    type Mechanism = S::Mechanism;
+
+    fn dt(&self) -> f64 {
+        self.nominal.dt()
+    }
+
+    /// One mean step ([`LearnedIntegrator::step_mean_in`]); a model
+    /// trained with inputs steps under u = 0 or refuses, as its space says
+    /// ([`Space::check_inputs`]).
+    fn step(&self, z: &S::State) -> Result<S::State, S::IntegratorError> {
+        Ok(self.step_mean_in(z, &mut self.gp.workspace())?)
+    }
+
+    /// A model trained with inputs steps under them
+    /// ([`LearnedIntegrator::step_mean_forced_in`]) with the input taken as
+    /// held across the start, u_prev = u (the trait has no slot for the
+    /// previous input; pass it to `step_mean_forced_in` where it differs);
+    /// one trained without inputs takes only u = 0.
+    fn step_forced<const U: usize>(
+        &self,
+        z: &S::State,
+        u: &SVector<f64, U>,
+    ) -> Result<S::State, S::IntegratorError>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        self.held_step_in(z, u, u, &mut self.gp.workspace())
+    }
+
+    /// Mean steps with one workspace.
+    fn rollout_into(&self, z0: &S::State, out: &mut [S::State]) -> Result<(), S::IntegratorError> {
+        let mut ws = self.gp.workspace();
+        let mut z = *z0;
+        for (k, slot) in out.iter_mut().enumerate() {
+            z = self
+                .step_mean_in(&z, &mut ws)
+                .map_err(|e| S::IntegratorError::from(e).at_step(k))?;
+            *slot = z;
+        }
+        Ok(())
+    }
+
+    /// Step k under `inputs[k]` after `inputs[k − 1]`, the first after
+    /// `inputs[0]` (the input taken as held across the start;
+    /// [`LearnedIntegrator::rollout_mean_forced_into`] takes the previous
+    /// input explicitly).
+    fn rollout_forced_into<const U: usize>(
+        &self,
+        z0: &S::State,
+        inputs: &[SVector<f64, U>],
+        out: &mut [S::State],
+    ) -> Result<(), S::IntegratorError>
+    where
+        S::Mechanism: vigp_core::Inputs<U>,
+    {
+        match inputs.first() {
+            Some(u0) => self.rollout_mean_forced_into(z0, u0, inputs, out),
+            None if out.is_empty() => Ok(()),
+            None => Err(StepError::NonFiniteInput { step: Some(0) }.into()),
+        }
     }
 }
 

@@ -11,7 +11,7 @@ use crate::gp::{Gp, GpError, SavedGp};
 use crate::mechanism::{CoordinateKind, Mechanism};
 use crate::newton::StepOptions;
 use crate::system::Parameters;
-use crate::variational::{Integrator, Variational};
+use crate::variational::Variational;
 
 /// The `format` tag of a learned-model file.
 pub const FORMAT: &str = "vigp-learned";

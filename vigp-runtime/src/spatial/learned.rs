@@ -34,12 +34,12 @@
 //! why) — and the prior is the nominal forced step under u
 //! ([`LieStepper::step_forced`]). Such a model steps with
 //! [`LearnedSpatial::step_mean_forced_in`] (previous input explicit) or
-//! [`SpatialIntegrator::rollout_forced`] (step k after `inputs[k − 1]`, the
+//! [`Integrator::rollout_forced`](crate::Integrator::rollout_forced) (step k after `inputs[k − 1]`, the
 //! first after `inputs[0]`: the input taken as held across the start); its
 //! plain step, without inputs, is a typed error
 //! ([`LearnSpatialError::Inputs`]), never a silent u = 0.
 
-use super::{SpatialError, SpatialIntegrator};
+use super::SpatialError;
 use crate::StepError;
 use crate::gp::{TrainOptions, TrainReport, Workspace};
 use crate::learned::{InputLayout, LearnError, LearnedIntegrator, NominalStep, Prior, Row, Space};
@@ -227,6 +227,12 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     type Mechanism = S;
     type Error = LearnError;
 
+    type IntegratorError = SpatialError;
+
+    fn dt(&self) -> f64 {
+        LieStepper::dt(self)
+    }
+
     fn error(e: LearnError) -> LearnError {
         e
     }
@@ -365,7 +371,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// Lie-group step under u ([`LieStepper::step_forced`]). `U` must equal
     /// the mechanism's number of actuated joints (checked at compile time).
     /// Predict with [`LearnedSpatial::step_mean_forced_in`] or
-    /// [`SpatialIntegrator::rollout_forced`].
+    /// [`Integrator::rollout_forced`](crate::Integrator::rollout_forced).
     pub fn train_forced<const U: usize>(
         stepper: LieStepper<S, B, J, N, C>,
         data: &[SpatialForcedTransition<B, U>],
@@ -522,116 +528,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     }
 }
 
-impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
-    SpatialIntegrator<B> for LearnedSpatial<S, B, J, N, C>
-{
-    type Mechanism = S;
-
-    fn dt(&self) -> f64 {
-        self.nominal.dt()
-    }
-
-    /// One mean step; allocates a GP workspace per call (use
-    /// [`LearnedSpatial::step_mean_in`] in loops).
-    fn step(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, SpatialError> {
-        let mut ws = self.gp.workspace();
-        Ok(self.step_mean_in(z, &mut ws)?)
-    }
-
-    /// Steps with one workspace.
-    fn rollout(
-        &self,
-        z0: &SpatialState<B>,
-        steps: usize,
-    ) -> Result<Vec<SpatialState<B>>, SpatialError> {
-        vigp_core::step::check_step_count::<SpatialState<B>>(steps)?;
-        let mut ws = self.gp.workspace();
-        let mut out = Vec::with_capacity(steps + 1);
-        out.push(*z0);
-        let mut z = *z0;
-        for k in 0..steps {
-            z = self
-                .step_mean_in(&z, &mut ws)
-                .map_err(|e| in_rollout(e, k))?;
-            out.push(z);
-        }
-        Ok(out)
-    }
-
-    /// A model from [`LearnedSpatial::train_forced`] steps under `u`
-    /// ([`LearnedSpatial::step_mean_forced_in`]; `U` must be the training
-    /// data's) with the input taken as held across the start, u_prev = u
-    /// (the trait has no slot for the previous input). A model trained
-    /// without inputs takes u = 0 as
-    /// [`SpatialIntegrator::step`] and refuses other inputs with
-    /// `SpatialError::Step(StepError::InputsNotSupported)`, as integrators without inputs
-    /// do. Allocates a GP workspace per call.
-    fn step_forced<const U: usize>(
-        &self,
-        z: &SpatialState<B>,
-        u: &SVector<f64, U>,
-    ) -> Result<SpatialState<B>, SpatialError>
-    where
-        S: vigp_core::Inputs<U>,
-    {
-        self.forced_step_in(z, u, u, &mut self.gp.workspace(), None)
-    }
-
-    /// [`SpatialIntegrator::step_forced`] with one workspace, step k after
-    /// `inputs[k − 1]` (the first after `inputs[0]`, held across the
-    /// start).
-    fn rollout_forced<const U: usize>(
-        &self,
-        z0: &SpatialState<B>,
-        inputs: &[SVector<f64, U>],
-    ) -> Result<Vec<SpatialState<B>>, SpatialError>
-    where
-        S: vigp_core::Inputs<U>,
-    {
-        let mut ws = self.gp.workspace();
-        let mut out = Vec::with_capacity(inputs.len() + 1);
-        out.push(*z0);
-        let mut z = *z0;
-        for (k, u) in inputs.iter().enumerate() {
-            let up = if k == 0 { u } else { &inputs[k - 1] };
-            z = self.forced_step_in(&z, up, u, &mut ws, Some(k))?;
-            out.push(z);
-        }
-        Ok(out)
-    }
-}
-
-impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
-    LearnedSpatial<S, B, J, N, C>
-{
-    /// The rule of [`SpatialIntegrator::step_forced`] in workspace `ws`;
-    /// a step error is reported at rollout step `k` when given.
-    fn forced_step_in<const U: usize>(
-        &self,
-        z: &SpatialState<B>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-        k: Option<usize>,
-    ) -> Result<SpatialState<B>, SpatialError>
-    where
-        S: vigp_core::Inputs<U>,
-    {
-        let step = if self.inputs == 0 {
-            if !u.iter().all(|x| *x == 0.0) {
-                return Err(SpatialError::Step(StepError::InputsNotSupported));
-            }
-            self.step_mean_in(z, ws)
-        } else {
-            self.step_mean_forced_in(z, u_prev, u, ws)
-        };
-        step.map_err(|e| match k {
-            Some(k) => in_rollout(e, k),
-            None => e.into(),
-        })
-    }
-}
-
 /// The previous and the current input of step k of a rollout after
 /// `u_prev` under `inputs`.
 pub(crate) fn step_inputs<'u, const U: usize>(
@@ -641,14 +537,4 @@ pub(crate) fn step_inputs<'u, const U: usize>(
 ) -> (&'u [f64], &'u [f64]) {
     let up = if k == 0 { u_prev } else { &inputs[k - 1] };
     (up.as_slice(), inputs[k].as_slice())
-}
-
-/// A learned step's error inside a rollout, at step `k`.
-fn in_rollout(e: LearnSpatialError, k: usize) -> SpatialError {
-    match e {
-        LearnSpatialError::Step(error) => {
-            SpatialError::Rollout(vigp_core::RolloutError { step: k, error })
-        }
-        other => SpatialError::Learn(Box::new(other)),
-    }
 }

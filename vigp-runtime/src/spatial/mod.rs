@@ -20,6 +20,7 @@ pub use vigp_core::spatial::*;
 pub use vigp_core::{RolloutError, StepOptions};
 
 use crate::StepError;
+use crate::integrator::{Integrator, StepFailure};
 
 /// Why a spatial computation failed.
 #[derive(Debug, thiserror::Error)]
@@ -49,91 +50,24 @@ impl From<learned::LearnSpatialError> for SpatialError {
     }
 }
 
-/// A one-step map of maximal spatial states with a fixed time step: the
-/// Lie-group variational integrator ([`LieStepper`]) or a learned one.
-pub trait SpatialIntegrator<const B: usize> {
-    /// The mechanism this integrator steps: its forced steps take the input
-    /// vectors it takes ([`vigp_core::Inputs`]), so a wrong input length is
-    /// a compile error at the call.
-    type Mechanism: ?Sized;
-
-    /// Δt (s).
-    fn dt(&self) -> f64;
-
-    /// One step.
-    fn step(&self, z: &SpatialState<B>) -> Result<SpatialState<B>, SpatialError>;
-
-    /// One step under inputs `u` (one per actuated joint in declaration
-    /// order, `Name::INPUT_NAMES`; `U` must equal their number). The
-    /// default, for integrators without inputs, takes u = 0 as
-    /// [`SpatialIntegrator::step`] and refuses anything else with
-    /// `SpatialError::Step(StepError::InputsNotSupported)`; [`LieStepper`] implements it
-    /// ([`LieStepper::step_forced`]), and so does a learned integrator
-    /// trained under inputs (`learned::LearnedSpatial::train_forced`).
-    fn step_forced<const U: usize>(
-        &self,
-        z: &SpatialState<B>,
-        u: &nalgebra::SVector<f64, U>,
-    ) -> Result<SpatialState<B>, SpatialError>
-    where
-        Self: Sized,
-        Self::Mechanism: vigp_core::Inputs<U>,
-    {
-        if u.iter().all(|x| *x == 0.0) {
-            self.step(z)
-        } else {
-            Err(SpatialError::Step(StepError::InputsNotSupported))
+impl StepFailure for SpatialError {
+    /// A step's error becomes [`SpatialError::Rollout`] at step `k`; the
+    /// others stay as they are.
+    fn at_step(self, k: usize) -> Self {
+        match self {
+            SpatialError::Step(error) => SpatialError::Rollout(RolloutError { step: k, error }),
+            other => other,
         }
-    }
-
-    /// The forced trajectory z₀, z₁, …, z_K (K = `inputs.len()`), step k
-    /// under `inputs[k]`; a failing step is reported with its index.
-    fn rollout_forced<const U: usize>(
-        &self,
-        z0: &SpatialState<B>,
-        inputs: &[nalgebra::SVector<f64, U>],
-    ) -> Result<Vec<SpatialState<B>>, SpatialError>
-    where
-        Self: Sized,
-        Self::Mechanism: vigp_core::Inputs<U>,
-    {
-        let mut out = spatial_trajectory::<B>(inputs.len())?;
-        out.push(*z0);
-        let mut z = *z0;
-        for (k, u) in inputs.iter().enumerate() {
-            z = self.step_forced(&z, u).map_err(|e| match e {
-                SpatialError::Step(error) => SpatialError::Rollout(RolloutError { step: k, error }),
-                other => other,
-            })?;
-            out.push(z);
-        }
-        Ok(out)
-    }
-
-    /// The trajectory z₀, z₁, …, z_steps (`steps + 1` states); a failing
-    /// step is reported with its index.
-    fn rollout(
-        &self,
-        z0: &SpatialState<B>,
-        steps: usize,
-    ) -> Result<Vec<SpatialState<B>>, SpatialError> {
-        let mut out = spatial_trajectory::<B>(steps)?;
-        out.push(*z0);
-        let mut z = *z0;
-        for k in 0..steps {
-            z = self.step(&z).map_err(|e| match e {
-                SpatialError::Step(error) => SpatialError::Rollout(RolloutError { step: k, error }),
-                other => other,
-            })?;
-            out.push(z);
-        }
-        Ok(out)
     }
 }
 
-impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
-    SpatialIntegrator<B> for LieStepper<S, B, J, N, C>
+/// The Lie-group variational integrator as an [`Integrator`] of spatial
+/// states.
+impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize> Integrator
+    for LieStepper<S, B, J, N, C>
 {
+    type State = SpatialState<B>;
+    type Error = SpatialError;
     type Mechanism = S;
 
     fn dt(&self) -> f64 {
@@ -144,7 +78,9 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         Ok(LieStepper::step(self, z)?)
     }
 
-    /// Through [`LieStepper::rollout_into`] (extrapolated Newton starts).
+    /// Through [`LieStepper::rollout_into`] (extrapolated Newton starts;
+    /// that inherent method fills a buffer that starts with z₀, this
+    /// trait's [`Integrator::rollout_into`] one that starts with z₁).
     fn rollout(
         &self,
         z0: &SpatialState<B>,
@@ -152,7 +88,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     ) -> Result<Vec<SpatialState<B>>, SpatialError> {
         let mut out = spatial_trajectory::<B>(steps)?;
         out.resize(steps + 1, *z0);
-        self.rollout_into(z0, &mut out)?;
+        LieStepper::rollout_into(self, z0, &mut out)?;
         Ok(out)
     }
 
@@ -178,7 +114,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     {
         let mut out = spatial_trajectory::<B>(inputs.len())?;
         out.resize(inputs.len() + 1, *z0);
-        self.rollout_forced_into(z0, inputs, &mut out)?;
+        LieStepper::rollout_forced_into(self, z0, inputs, &mut out)?;
         Ok(out)
     }
 }
