@@ -226,7 +226,6 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     type Encoding = Rotation;
     type Mechanism = S;
     type Error = LearnError;
-
     type IntegratorError = SpatialError;
 
     fn dt(&self) -> f64 {
