@@ -11,38 +11,8 @@ use vigp::Integrator;
 use vigp::spatial::{LieStepper, SpatialError, SpatialState};
 use vigp::{State, StepError, Variational};
 
-vigp::mechanism! {
-    /// A damped planar pendulum driven at its pivot.
-    DrivenPendulum2 {
-        gravity: [0.0, -9.81],
-        links {
-            rod: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            pivot: revolute(world, rod.start) { damping: 0.1, actuated },
-        }
-    }
-}
-
-vigp::mechanism! {
-    /// A two-link 3-D arm, both joints driven (yaw, then pitch).
-    DrivenArm3 {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            arm: { mass: 0.3, length: 0.25, inertia: [0.000015, 0.00157, 0.00157] },
-            rod: {
-                mass: 0.1,
-                length: 0.4,
-                inertia: [0.000005, 0.0013358, 0.0013358],
-                frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
-            },
-        }
-        joints {
-            base: revolute(world, arm.start) { axis: [0.0, 0.0, 1.0], damping: 0.01, actuated },
-            pivot: revolute(arm.end, rod.start) { axis: [1.0, 0.0, 0.0], damping: 0.001, actuated },
-        }
-    }
-}
+use crate::control::TorquePendulum;
+use crate::spatial_control::Arm3;
 
 /// `steps` single steps from `z0` under `inputs[k]` (z₀ first): the
 /// reference every rollout of the trait is held to. Written once for
@@ -115,18 +85,19 @@ fn torques<const U: usize>(k: usize) -> Vec<SVector<f64, U>> {
 /// (spatial `rollout`/`rollout_forced`) converge to the same roots as the
 /// single steps to the Newton tolerance, a residual of 1e-12 in momentum
 /// units, which the mass matrix turns into velocities: 1e-10 over 40 steps
-/// on the 1 kg pendulum (measured 1.3e-15), 1e-8 on the light arm, whose
-/// rod has 5e-6 kg·m² about its axis (measured 1.8e-10). The spatial
-/// `rollout_into`, which steps from scratch, is bit for bit.
+/// on the 1 kg pendulum (measured 6.7e-16), 1e-8 on the arm, whose links
+/// have 2e-4 kg·m² about their axes, so up to 5e-9 rad/s a step (measured
+/// 1.4e-10). The spatial `rollout_into`, which steps from scratch, is bit
+/// for bit.
 #[test]
 fn one_trait_rolls_out_planar_and_spatial_integrators() {
     let dt = 0.01;
-    let planar = Variational::new(DrivenPendulum2::default().minimal(), dt).unwrap();
+    let planar = Variational::new(TorquePendulum::default().minimal(), dt).unwrap();
     let z0 = State::new([0.7], [-0.2]);
     let planar_gap = |a: &State<1>, b: &State<1>| (a.q - b.q).amax().max((a.v - b.v).amax());
     let p = rollouts_are_steps(&planar, &z0, &torques::<1>(40), planar_gap, 1e-10);
 
-    let arm = DrivenArm3::default();
+    let arm = Arm3::default();
     let spatial = LieStepper::new(arm.maximal(), dt).unwrap();
     let zs = arm
         .minimal()
@@ -163,7 +134,7 @@ fn spatial_gap<const B: usize>(a: &SpatialState<B>, b: &SpatialState<B>) -> f64 
 #[test]
 fn rollouts_name_the_failing_step_in_both_spaces() {
     let dt = 0.01;
-    let planar = Variational::new(DrivenPendulum2::default().minimal(), dt).unwrap();
+    let planar = Variational::new(TorquePendulum::default().minimal(), dt).unwrap();
     let bad = State::new([f64::NAN], [0.0]);
     assert!(matches!(
         planar.rollout(&bad, 3),
@@ -176,7 +147,7 @@ fn rollouts_name_the_failing_step_in_both_spaces() {
         Err(StepError::NonFiniteInput { step: Some(2) })
     ));
 
-    let arm = DrivenArm3::default();
+    let arm = Arm3::default();
     let spatial = LieStepper::new(arm.maximal(), dt).unwrap();
     let zs = arm
         .minimal()
