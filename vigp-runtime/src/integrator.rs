@@ -86,12 +86,7 @@ pub trait Integrator {
     /// `z0`, without allocating. Stops at the first error (which names the
     /// step).
     fn rollout_into(&self, z0: &Self::State, out: &mut [Self::State]) -> Result<(), Self::Error> {
-        let mut z = *z0;
-        for (k, slot) in out.iter_mut().enumerate() {
-            z = self.step(&z).map_err(|e| e.at_step(k))?;
-            *slot = z;
-        }
-        Ok(())
+        roll(z0, out, |_, z| self.step(z))
     }
 
     /// The states after 1, …, `out.len()` steps from `z0`, step k under
@@ -109,12 +104,7 @@ pub trait Integrator {
         Self::Mechanism: vigp_core::Inputs<U>,
     {
         check_inputs_cover(inputs.len(), out.len())?;
-        let mut z = *z0;
-        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
-            z = self.step_forced(&z, u).map_err(|e| e.at_step(k))?;
-            *slot = z;
-        }
-        Ok(())
+        roll(z0, out, |k, z| self.step_forced(z, &inputs[k]))
     }
 
     /// The trajectory z₀, z₁, …, z_steps (`steps + 1` states), through
@@ -156,6 +146,22 @@ pub trait Integrator {
         let _ = z;
         None
     }
+}
+
+/// Fills `out` with the states after 1, …, `out.len()` steps from `z0`,
+/// step k by `step(k, z_k)`; stops at the first error, placed at its step
+/// ([`StepFailure::at_step`]). The loop of every rollout of the trait.
+pub(crate) fn roll<Z: Copy, E: StepFailure>(
+    z0: &Z,
+    out: &mut [Z],
+    mut step: impl FnMut(usize, &Z) -> Result<Z, E>,
+) -> Result<(), E> {
+    let mut z = *z0;
+    for (k, slot) in out.iter_mut().enumerate() {
+        z = step(k, &z).map_err(|e| e.at_step(k))?;
+        *slot = z;
+    }
+    Ok(())
 }
 
 /// A forced rollout of `steps` states needs at least as many inputs:

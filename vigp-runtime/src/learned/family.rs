@@ -24,7 +24,7 @@
 
 use super::{LearnError, LearnedStepInfo, Prior, distinct_rows};
 use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
-use crate::integrator::{Integrator, StepFailure, check_inputs_cover};
+use crate::integrator::{Integrator, StepFailure, check_inputs_cover, roll};
 use crate::newton::StepError;
 use nalgebra::SVector;
 
@@ -680,15 +680,10 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
     {
         check_inputs_cover(inputs.len(), out.len())?;
         let mut ws = self.gp.workspace();
-        let mut z = *z0;
-        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
+        roll(z0, out, |k, z| {
             let up = if k == 0 { u_prev } else { &inputs[k - 1] };
-            z = self
-                .held_step_in(&z, up, u, &mut ws)
-                .map_err(|e| e.at_step(k))?;
-            *slot = z;
-        }
-        Ok(())
+            self.held_step_in(z, up, &inputs[k], &mut ws)
+        })
     }
 }
 
@@ -730,14 +725,7 @@ impl<S: NominalStep<N>, const N: usize> Integrator for LearnedIntegrator<S, N> {
     /// Mean steps with one workspace.
     fn rollout_into(&self, z0: &S::State, out: &mut [S::State]) -> Result<(), S::IntegratorError> {
         let mut ws = self.gp.workspace();
-        let mut z = *z0;
-        for (k, slot) in out.iter_mut().enumerate() {
-            z = self
-                .step_mean_in(&z, &mut ws)
-                .map_err(|e| S::IntegratorError::from(e).at_step(k))?;
-            *slot = z;
-        }
-        Ok(())
+        roll(z0, out, |_, z| Ok(self.step_mean_in(z, &mut ws)?))
     }
 
     /// Step k under `inputs[k]` after `inputs[k − 1]`, the first after

@@ -86,8 +86,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         z0: &SpatialState<B>,
         steps: usize,
     ) -> Result<Vec<SpatialState<B>>, SpatialError> {
-        let mut out = spatial_trajectory::<B>(steps)?;
-        out.resize(steps + 1, *z0);
+        let mut out = crate::newton::trajectory_buffer(*z0, steps)?;
         LieStepper::rollout_into(self, z0, &mut out)?;
         Ok(out)
     }
@@ -112,25 +111,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     where
         S: vigp_core::Inputs<U>,
     {
-        let mut out = spatial_trajectory::<B>(inputs.len())?;
-        out.resize(inputs.len() + 1, *z0);
+        let mut out = crate::newton::trajectory_buffer(*z0, inputs.len())?;
         LieStepper::rollout_forced_into(self, z0, inputs, &mut out)?;
         Ok(out)
     }
-}
-
-/// An empty vector with room for the `steps + 1` states of a rollout,
-/// the count checked before allocation
-/// ([`vigp_core::step::check_step_count`]; [`StepError::TooManySteps`]
-/// for a count whose states cannot be stored, not a panic).
-pub fn spatial_trajectory<const B: usize>(
-    steps: usize,
-) -> Result<Vec<SpatialState<B>>, SpatialError> {
-    let len = vigp_core::step::check_step_count::<SpatialState<B>>(steps)?;
-    let mut out = Vec::new();
-    out.try_reserve_exact(len)
-        .map_err(|_| StepError::TooManySteps { steps })?;
-    Ok(out)
 }
 
 /// What a run did to the invariants: energy error, constraint violation
