@@ -77,9 +77,9 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{DVector, SVector};
 use output::{Fig2Point, med};
 use protocol::{
-    Counts, DT, HORIZON, Protocol, add_noise, cartpole_start, double_pendulum_start, fourbar_start,
-    ground_truth, mean_mse, pendulum_start, perturb_cartpole, perturb_double_pendulum,
-    perturb_fourbar, perturb_pendulum,
+    Counts, DT, HORIZON, NOISE, Protocol, add_noise, cartpole_start, double_pendulum_start,
+    fourbar_start, ground_truth, mean_mse, pendulum_start, perturb_cartpole,
+    perturb_double_pendulum, perturb_fourbar, perturb_pendulum,
 };
 use rayon::prelude::*;
 use rng::Rng;
@@ -90,7 +90,9 @@ use std::sync::atomic::Ordering;
 use std::time::Instant;
 use vigp::Parameters;
 use vigp::gp::{Screening, TrainOptions};
-use vigp::identify::{DelRegressor, IdentifyError, Intervals, Log, Options, identify};
+use vigp::identify::{
+    DelRegressor, IdentifyError, Intervals, Log, Noise, Options, SampleNoise, identify,
+};
 use vigp::learned::{Encoding, Learned, Prior, Transition, transitions};
 use vigp::prelude::*;
 use vigp::projection::project_configuration;
@@ -117,6 +119,11 @@ struct Cli {
     /// two are estimated with the parameters.
     #[arg(long)]
     output_error: bool,
+    /// Treat the samples' noise as known (σ on q, v and v_next) by
+    /// bias-compensated least squares (`Noise::ErrorsInVariables`) instead
+    /// of least squares.
+    #[arg(long)]
+    errors_in_variables: bool,
     /// Output directory (figures, CSV, report.md).
     #[arg(long, default_value = "docs/identify")]
     out: PathBuf,
@@ -198,6 +205,7 @@ fn identified<M, const N: usize, const C: usize>(
     direction: &DVector<f64>,
     prior_sd: f64,
     output_error: bool,
+    errors_in_variables: bool,
 ) -> Result<(M, IdStatus), IdentifyError>
 where
     M: Mechanism<N, C> + Parameters + Copy,
@@ -217,6 +225,11 @@ where
             segment: 3,
             ..Default::default()
         }),
+        noise: if errors_in_variables {
+            Noise::ErrorsInVariables(SampleNoise::from_states(NOISE, NOISE, DT))
+        } else {
+            Options::default().noise
+        },
         ..Options::default()
     };
     let scaled = ScaleFixed::new(regressor, direction.clone(), &options.prior);
@@ -355,6 +368,7 @@ where
                 &direction,
                 cli.prior_sd,
                 cli.output_error,
+                cli.errors_in_variables,
             ) {
                 Ok((model, s)) => {
                     point(IDENTIFIED, vi_mse(model));

@@ -15,6 +15,7 @@ use common::Rng;
 mod drive_fourbar;
 
 mod embedded_learned;
+mod errors_in_variables;
 mod excitation;
 mod fixtures;
 mod held_inputs;

@@ -51,6 +51,13 @@ pub enum Noise {
     /// Ordinary (weighted) least squares: right for noise-free logs,
     /// biased under position noise.
     LeastSquares,
+    /// Bias-compensated least squares for position noise of a known size
+    /// ([`super::errors_in_variables`]): each row weighted by its own
+    /// predicted noise, the noise's expected contribution to the normal
+    /// equations removed. Needs no neighbouring samples, so it serves logs
+    /// of isolated transitions, where instrumental variables cannot. The
+    /// robust losses do not combine with it.
+    ErrorsInVariables(super::errors_in_variables::SampleNoise),
     /// Instrumental variables from leave-out local polynomial fits (module
     /// docs): `half_window` samples on each side beyond the three left
     /// out, polynomial `degree`. In a log long enough for the window it
@@ -192,25 +199,8 @@ pub fn solve(
         (ss / (dof * rows.len() as f64 / n as f64)).sqrt()
     });
     floor_sigma(&mut sigma, stack);
-    // The prior on θ.
-    let pm = DVector::from_column_slice(prior_mean);
-    let s2 = DMatrix::from_diagonal(&DVector::from_iterator(
-        prior_sd.len(),
-        prior_sd.iter().map(|s| s * s),
-    ));
-    let ks2 = &base.k * &s2;
-    let prior_cov = &ks2 * base.k.transpose();
-    let prior_chol = prior_cov
-        .clone()
-        .cholesky()
-        .ok_or(IdentifyError::Singular)?;
-    let gain = prior_chol.solve(&ks2).transpose(); // A = S²Kᵀ(KS²Kᵀ)⁻¹, P × r
-    let prior_theta = &base.k * &pm;
-    // Prior rows: L⁻¹(θ − Kπ₀) with K S² Kᵀ = L Lᵀ.
-    let linv = prior_chol
-        .l()
-        .solve_lower_triangular(&DMatrix::identity(r, r))
-        .ok_or(IdentifyError::Singular)?;
+    let prior = BasePrior::new(base, prior_mean, prior_sd)?;
+    let (prior_theta, linv) = (&prior.theta, &prior.linv);
     let mut weights: Vec<f64> = vec![1.0; n];
     let max_iter = if loss == Loss::Squared { 1 } else { 100 };
     let mut theta = prior_theta.clone();
@@ -229,10 +219,10 @@ pub fn solve(
         let rows = a.nrows();
         let mut stacked = DMatrix::zeros(rows + r, r);
         stacked.rows_mut(0, rows).copy_from(&a);
-        stacked.rows_mut(rows, r).copy_from(&linv);
+        stacked.rows_mut(rows, r).copy_from(linv);
         let mut rhs = DVector::zeros(rows + r);
         rhs.rows_mut(0, rows).copy_from(&c);
-        rhs.rows_mut(rows, r).copy_from(&(&linv * &prior_theta));
+        rhs.rows_mut(rows, r).copy_from(&(linv * prior_theta));
         let svd = stacked.svd(true, true);
         let new_theta = svd.solve(&rhs, 0.0).map_err(|_| IdentifyError::Singular)?;
         let vt = svd.v_t.as_ref().ok_or(IdentifyError::Singular)?;
@@ -271,16 +261,8 @@ pub fn solve(
     }
     let (cov_theta, data_theta, data_r, fitted_rows, row_scale) =
         result.ok_or(IdentifyError::Singular)?;
-    let prior_precision = linv.transpose() * &linv;
-    let pi = &pm + &gain * (&theta - &prior_theta);
-    // S² − A K S² in its product form (I − AK) S² (I − AK)ᵀ (AK is a
-    // projector and A K S² symmetric, so the two are equal): the
-    // difference cancels to rounding on parameters the data fix, and can
-    // leave a variance of −1e-21 there; the product's diagonal is a sum of
-    // non-negative terms
-    let free = DMatrix::<f64>::identity(gain.nrows(), gain.nrows()) - &gain * &base.k;
-    let mut covariance = &free * &s2 * free.transpose() + &gain * &cov_theta * gain.transpose();
-    covariance = (&covariance + covariance.transpose()) * 0.5;
+    let prior_precision = prior.precision();
+    let (pi, covariance) = prior.standard(&base.k, &theta, &cov_theta);
     let residuals = &stack.b - &stack.w * &pi;
     Ok(Fit {
         pi,
@@ -296,6 +278,81 @@ pub fn solve(
         row_scale,
         prior_precision,
     })
+}
+
+/// The prior π ~ 𝒩(π₀, S²) seen on the base parameters θ = K·π:
+/// θ ~ 𝒩(K·π₀, K S² Kᵀ), and the way back from an estimate of θ to π
+/// ([`solve`]'s docs).
+pub(crate) struct BasePrior {
+    mean: DVector<f64>,
+    s2: DMatrix<f64>,
+    /// A = S²Kᵀ(KS²Kᵀ)⁻¹ (P × r).
+    gain: DMatrix<f64>,
+    /// K·π₀.
+    pub(crate) theta: DVector<f64>,
+    /// L⁻¹ with K S² Kᵀ = L Lᵀ: the prior's whitening rows.
+    pub(crate) linv: DMatrix<f64>,
+}
+
+impl BasePrior {
+    /// The prior of mean `prior_mean` and standard deviations `prior_sd`
+    /// on `base`'s parameters.
+    pub(crate) fn new(
+        base: &Base,
+        prior_mean: &[f64],
+        prior_sd: &[f64],
+    ) -> Result<Self, IdentifyError> {
+        let r = base.rank();
+        let mean = DVector::from_column_slice(prior_mean);
+        let s2 = DMatrix::from_diagonal(&DVector::from_iterator(
+            prior_sd.len(),
+            prior_sd.iter().map(|s| s * s),
+        ));
+        let ks2 = &base.k * &s2;
+        let chol = (&ks2 * base.k.transpose())
+            .cholesky()
+            .ok_or(IdentifyError::Singular)?;
+        let gain = chol.solve(&ks2).transpose();
+        let theta = &base.k * &mean;
+        let linv = chol
+            .l()
+            .solve_lower_triangular(&DMatrix::identity(r, r))
+            .ok_or(IdentifyError::Singular)?;
+        Ok(BasePrior {
+            mean,
+            s2,
+            gain,
+            theta,
+            linv,
+        })
+    }
+
+    /// The prior precision (K S² Kᵀ)⁻¹ of the base parameters.
+    pub(crate) fn precision(&self) -> DMatrix<f64> {
+        self.linv.transpose() * &self.linv
+    }
+
+    /// π̂, the prior's conditional mean given θ̂ (of covariance
+    /// `cov_theta`), and its covariance.
+    pub(crate) fn standard(
+        &self,
+        k: &DMatrix<f64>,
+        theta: &DVector<f64>,
+        cov_theta: &DMatrix<f64>,
+    ) -> (DVector<f64>, DMatrix<f64>) {
+        let pi = &self.mean + &self.gain * (theta - &self.theta);
+        // S² − A K S² in its product form (I − AK) S² (I − AK)ᵀ (AK is a
+        // projector and A K S² symmetric, so the two are equal): the
+        // difference cancels to rounding on parameters the data fix, and
+        // can leave a variance of −1e-21 there; the product's diagonal is
+        // a sum of non-negative terms
+        let p = self.gain.nrows();
+        let free = DMatrix::<f64>::identity(p, p) - &self.gain * k;
+        let covariance =
+            &free * &self.s2 * free.transpose() + &self.gain * cov_theta * self.gain.transpose();
+        let covariance = (&covariance + covariance.transpose()) * 0.5;
+        (pi, covariance)
+    }
 }
 
 /// The data rows of the (weighted) base problem: W₁ itself, or with

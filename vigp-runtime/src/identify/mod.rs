@@ -16,8 +16,9 @@
 //! 2. estimates π by least squares with a **prior** centred on the declared
 //!    values (each standard parameter ~ 𝒩(declared, s²), s stated in
 //!    [`Prior`]), treating the **position noise** by instrumental
-//!    variables ([`Noise`]) and outliers by an optional **robust loss**
-//!    ([`Loss`]) ([`estimate`]);
+//!    variables, or by bias-compensated least squares where its size is
+//!    known ([`Noise`], [`errors_in_variables`]), and outliers by an
+//!    optional **robust loss** ([`Loss`]) ([`estimate`]);
 //! 3. keeps the estimate **physically consistent** (every body a positive
 //!    mass and a positive definite pseudo-inertia, every joint a damping
 //!    and a stiffness ≥ 0, so that the mechanism accepts it) by projecting
@@ -59,6 +60,7 @@
 pub mod base;
 pub mod consistency;
 pub mod covariance;
+pub mod errors_in_variables;
 pub mod estimate;
 pub mod excitation;
 pub mod output_error;
@@ -68,6 +70,7 @@ pub mod report;
 pub mod robot;
 
 pub use base::Base;
+pub use errors_in_variables::SampleNoise;
 pub use estimate::{Loss, Noise};
 pub use excitation::{Designed, Evaluation, Excitation, Fourier, Problem};
 pub use output_error::{OutputError, Refinement};
@@ -386,14 +389,14 @@ pub fn stack<R: Regressor>(
     let p = regressor.structure().len();
     let block = regressor.rows();
     let instruments = match noise {
-        Noise::LeastSquares => None,
+        Noise::LeastSquares | Noise::ErrorsInVariables(_) => None,
         Noise::InstrumentalVariables {
             half_window,
             degree,
         } => Some(estimate::leave_out_weights(half_window, degree)?),
     };
     let reach = match noise {
-        Noise::LeastSquares => 1,
+        Noise::LeastSquares | Noise::ErrorsInVariables(_) => 1,
         Noise::InstrumentalVariables { half_window, .. } => half_window + 1,
     };
     let zeros = vec![0.0; u];
@@ -531,6 +534,14 @@ pub fn identify<R: Regressor>(
                 .into(),
         });
     }
+    if let Noise::ErrorsInVariables(noise) = options.noise {
+        noise.validate()?;
+        if options.loss != Loss::Squared {
+            return Err(IdentifyError::Options {
+                message: "a robust loss does not combine with Noise::ErrorsInVariables".into(),
+            });
+        }
+    }
     if let Loss::Huber(k) | Loss::Cauchy(k) = options.loss
         && !(k > 0.0 && k.is_finite())
     {
@@ -556,7 +567,12 @@ pub fn identify<R: Regressor>(
         base = Base::new(&stack.w, options.rank_tolerance);
     }
     let homogeneous = homogeneous(&stack, &declared);
-    let fit = estimate::solve(&stack, &base, &declared, &prior_sd, options.loss)?;
+    let fit = match options.noise {
+        Noise::ErrorsInVariables(noise) => {
+            errors_in_variables::solve(regressor, logs, &stack, &base, &declared, &prior_sd, noise)?
+        }
+        _ => estimate::solve(&stack, &base, &declared, &prior_sd, options.loss)?,
+    };
     let unconstrained: Vec<f64> = fit.pi.iter().cloned().collect();
     let bad = consistency::inconsistent_bodies(&structure, &unconstrained);
     let negative = consistency::negative_joint_parameters(&structure, &unconstrained);
