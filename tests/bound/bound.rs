@@ -59,19 +59,23 @@ fn noise_free_transitions() -> Vec<Transition<1>> {
         .collect()
 }
 
-/// A sin/cos, nominal-prior pendulum model trained on
-/// [`noise_free_transitions`] with `opts`.
-fn train_noise_free(opts: &TrainOptions) -> Learned<PendulumMinimal, 1, 0> {
+/// A sin/cos, nominal-prior pendulum model trained on `data` with `opts`.
+fn train_sin_cos(data: &[Transition<1>], opts: &TrainOptions) -> Learned<PendulumMinimal, 1, 0> {
     Learned::train(
         Pendulum::default().minimal(),
         DT,
-        &noise_free_transitions(),
+        data,
         Encoding::SinCos,
         Prior::Nominal,
         opts,
     )
     .unwrap()
     .0
+}
+
+/// [`train_sin_cos`] on [`noise_free_transitions`].
+fn train_noise_free(opts: &TrainOptions) -> Learned<PendulumMinimal, 1, 0> {
+    train_sin_cos(&noise_free_transitions(), opts)
 }
 
 /// The same with noisy targets (σ = 3e-3), so that the fitted noise is far
@@ -91,17 +95,7 @@ fn noisy_model() -> &'static Learned<PendulumMinimal, 1, 0> {
                 }
             })
             .collect();
-        let opts = common::train_options(1, 3);
-        Learned::train(
-            Pendulum::default().minimal(),
-            DT,
-            &data,
-            Encoding::SinCos,
-            Prior::Nominal,
-            &opts,
-        )
-        .unwrap()
-        .0
+        train_sin_cos(&data, &common::train_options(1, 3))
     })
 }
 
@@ -1212,15 +1206,7 @@ fn a_sparse_model_is_bounded_conformally_only() {
         method: Method::Sparse(SparseOptions::kmeans(16)),
         ..TrainOptions::default()
     };
-    let (sparse, _) = Learned::train(
-        Pendulum::default().minimal(),
-        DT,
-        &data,
-        Encoding::SinCos,
-        Prior::Nominal,
-        &opts,
-    )
-    .unwrap();
+    let sparse = train_sin_cos(&data, &opts);
     assert!(sparse.gp().is_sparse());
     let cal = calibration();
     for (kind, name) in [

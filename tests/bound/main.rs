@@ -5,6 +5,10 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+/// The four-bar rhombus of bound.rs's actuated four-bar.
+#[macro_use]
+#[path = "../common/rhombus.rs"]
+mod rhombus;
 
 mod bound;
 mod bound_coverage;

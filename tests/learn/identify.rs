@@ -723,23 +723,13 @@ fn noisy_intervals_cover_the_truth() {
     assert!((0.88..=1.0).contains(&frac), "{frac}");
 }
 
-vigp::mechanism! {
+rhombus! {
     /// The paper's fourbar with its first top joint actuated.
     DrivenFourbar {
         gravity: [0.0, -9.81],
-        links {
-            link1: { mass: 1.0, length: 1.0 },
-            link2: { mass: 1.0, length: 1.0 },
-            link3: { mass: 1.0, length: 1.0 },
-            link4: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            top1: revolute(world, link1.start) { damping: 0.0, actuated },
-            middle1: revolute(link1.end, link2.start) { damping: 0.0 },
-            top2: revolute(world, link3.start) { damping: 0.0 },
-            middle2: revolute(link3.end, link4.start) { damping: 0.0 },
-            bottom: revolute(link2.end, link4.end) { damping: 0.0 },
-        }
+        top1: { damping: 0.0, actuated },
+        middle: [{ damping: 0.0 }],
+        bottom: { damping: 0.0 },
     }
 }
 

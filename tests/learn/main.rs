@@ -9,6 +9,10 @@
 mod common;
 use common::Rng;
 
+/// The four-bar rhombus, declared by `drive_fourbar` and in identify.rs.
+#[macro_use]
+#[path = "../common/rhombus.rs"]
+mod rhombus;
 /// The actuated four-bar, shared by the embedded-stepper and
 /// output-error files.
 #[path = "../common/drive_fourbar.rs"]

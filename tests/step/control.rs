@@ -18,30 +18,33 @@ use slider_crank::SliderCrank;
 use vigp::embedded::{Dynamics, Stepper, Terms};
 use vigp::{Coordinates, Mechanism, State, Variational};
 
-vigp::mechanism! {
-    /// A damped pendulum driven by a torque at its pivot.
-    pub TorquePendulum {
-        gravity: [0.0, -9.81],
-        links {
-            rod: { mass: 1.0, length: 1.0 },
+/// Declares the damped pendulum `$name` with the doc comment `$doc`,
+/// driven by a torque at its pivot when `$actuated` is given.
+macro_rules! torque_pendulum {
+    ($(#[doc = $doc:tt])* $name:ident [$($actuated:ident)?]) => {
+        vigp::mechanism! {
+            $(#[doc = $doc])*
+            pub $name {
+                gravity: [0.0, -9.81],
+                links {
+                    rod: { mass: 1.0, length: 1.0 },
+                }
+                joints {
+                    pivot: revolute(world, rod.start) { damping: 2.0 $(, $actuated)? },
+                }
+            }
         }
-        joints {
-            pivot: revolute(world, rod.start) { damping: 2.0, actuated },
-        }
-    }
+    };
 }
 
-vigp::mechanism! {
+torque_pendulum! {
+    /// A damped pendulum driven by a torque at its pivot.
+    TorquePendulum [actuated]
+}
+
+torque_pendulum! {
     /// `TorquePendulum` without the actuator.
-    pub PlainPendulum {
-        gravity: [0.0, -9.81],
-        links {
-            rod: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            pivot: revolute(world, rod.start) { damping: 2.0 },
-        }
-    }
+    PlainPendulum []
 }
 
 vigp::mechanism! {
@@ -86,63 +89,30 @@ vigp::mechanism! {
     }
 }
 
-vigp::mechanism! {
+rhombus! {
     /// The paper's four-bar rhombus, driven at the top pivot and at the
     /// loop-closing joint (an actuated loop joint), with a spring on it.
-    pub DriveFourbar {
-        links {
-            link1: { mass: 1.0, length: 1.0 },
-            link2: { mass: 1.0, length: 1.0 },
-            link3: { mass: 1.0, length: 1.0 },
-            link4: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            top1: revolute(world, link1.start) { damping: 0.1, actuated },
-            middle1: revolute(link1.end, link2.start) { damping: 0.0 },
-            top2: revolute(world, link3.start) { damping: 0.0 },
-            middle2: revolute(link3.end, link4.start) { damping: 0.0 },
-            bottom: revolute(link2.end, link4.end) { damping: 0.05, stiffness: 2.0, rest: 0.4, actuated },
-        }
+    DriveFourbar {
+        top1: { damping: 0.1, actuated },
+        middle: [{ damping: 0.0 }],
+        bottom: { damping: 0.05, stiffness: 2.0, rest: 0.4, actuated },
     }
 }
 
-vigp::mechanism! {
+rhombus! {
     /// `DriveFourbar` without actuators.
-    pub TwinFourbar {
-        links {
-            link1: { mass: 1.0, length: 1.0 },
-            link2: { mass: 1.0, length: 1.0 },
-            link3: { mass: 1.0, length: 1.0 },
-            link4: { mass: 1.0, length: 1.0 },
-        }
-        joints {
-            top1: revolute(world, link1.start) { damping: 0.1 },
-            middle1: revolute(link1.end, link2.start) { damping: 0.0 },
-            top2: revolute(world, link3.start) { damping: 0.0 },
-            middle2: revolute(link3.end, link4.start) { damping: 0.0 },
-            bottom: revolute(link2.end, link4.end) { damping: 0.05, stiffness: 2.0, rest: 0.4 },
-        }
+    TwinFourbar {
+        top1: { damping: 0.1 },
+        middle: [{ damping: 0.0 }],
+        bottom: { damping: 0.05, stiffness: 2.0, rest: 0.4 },
     }
 }
 
-vigp::mechanism! {
+slider_crank! {
     /// tests/common/slider_crank.rs driven at the crank pivot and along the
     /// tilted rail (a prismatic input: its direction turns with nothing in
     /// minimal coordinates, with the rail's frame in maximal ones).
-    pub DriveSliderCrank {
-        gravity: [0.0, -9.81],
-        links {
-            crank: { mass: 0.5, length: 0.4, com: [0.15, 0.02] },
-            rod: { mass: 0.8, length: 1.2, inertia: 0.11 },
-            block: { mass: 2.0, length: 0.3 },
-        }
-        joints {
-            pivot: revolute(world @ [0.1, 0.2], crank.start) { damping: 0.05, actuated },
-            pin: revolute(crank @ [0.4, 0.01], rod.start) { damping: 0.02 },
-            rail: prismatic(world @ [1.0, 0.0], block.center) { axis: [1.0, 0.2], damping: 0.3, actuated },
-            wrist: revolute(rod.end, block.center) { damping: 0.01 },
-        }
-    }
+    DriveSliderCrank [actuated]
 }
 
 vigp::mechanism! {

@@ -7,8 +7,15 @@
 
 #[path = "../common/mod.rs"]
 mod common;
+#[macro_use]
 #[path = "../common/slider_crank.rs"]
 mod slider_crank;
+#[macro_use]
+#[path = "../common/rhombus.rs"]
+mod rhombus;
+#[macro_use]
+#[path = "../common/spatial_four_bar.rs"]
+mod spatial_four_bar;
 
 mod control;
 mod embedded;

@@ -20,97 +20,95 @@ use vigp::projection::{consistent_state, consistent_state_holding};
 use vigp::spatial::LieStepper;
 use vigp::{Integrator, Mechanism, State, Variational};
 
-vigp::mechanism! {
+/// Declares the 3-D double pendulum `$name` with the doc comment `$doc`:
+/// non-parallel axes, a torsion spring on each joint, elbow damping, and a
+/// motor on each joint when `$actuated` is given.
+macro_rules! arm3 {
+    ($(#[doc = $doc:tt])* $name:ident [$($actuated:ident)?]) => {
+        vigp::mechanism! {
+            $(#[doc = $doc])*
+            pub $name {
+                gravity: [0.0, 0.0, -9.81],
+                links {
+                    upper: { mass: 1.0, length: 1.0, inertia: [0.0002, 0.0834333, 0.0834333],
+                             frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]] },
+                    lower: { mass: 1.0, length: 1.0, inertia: [0.0002, 0.0834333, 0.0834333],
+                             frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]] },
+                }
+                joints {
+                    shoulder: revolute(world, upper.start) { axis: [0.0, 1.0, 0.0], $($actuated,)? stiffness: 4.0, rest: 0.3 },
+                    elbow: revolute(upper.end, lower.start) { axis: [0.0, 0.6, 0.8], damping: 0.2, stiffness: 2.5, rest: -0.4 $(, $actuated)? },
+                }
+            }
+        }
+    };
+}
+
+arm3! {
     /// A 3-D double pendulum with non-parallel axes, a motor and a torsion
     /// spring on each joint, and elbow damping.
-    pub Arm3 {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            upper: { mass: 1.0, length: 1.0, inertia: [0.0002, 0.0834333, 0.0834333],
-                     frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]] },
-            lower: { mass: 1.0, length: 1.0, inertia: [0.0002, 0.0834333, 0.0834333],
-                     frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]] },
-        }
-        joints {
-            shoulder: revolute(world, upper.start) { axis: [0.0, 1.0, 0.0], actuated, stiffness: 4.0, rest: 0.3 },
-            elbow: revolute(upper.end, lower.start) { axis: [0.0, 0.6, 0.8], damping: 0.2, stiffness: 2.5, rest: -0.4, actuated },
-        }
-    }
+    Arm3 [actuated]
 }
 
-vigp::mechanism! {
+arm3! {
     /// `Arm3` without the motors.
-    pub Arm3Plain {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            upper: { mass: 1.0, length: 1.0, inertia: [0.0002, 0.0834333, 0.0834333],
-                     frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]] },
-            lower: { mass: 1.0, length: 1.0, inertia: [0.0002, 0.0834333, 0.0834333],
-                     frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]] },
-        }
-        joints {
-            shoulder: revolute(world, upper.start) { axis: [0.0, 1.0, 0.0], stiffness: 4.0, rest: 0.3 },
-            elbow: revolute(upper.end, lower.start) { axis: [0.0, 0.6, 0.8], damping: 0.2, stiffness: 2.5, rest: -0.4 },
-        }
-    }
+    Arm3Plain []
 }
 
-vigp::mechanism! {
+/// Declares the spatial slider-crank `$name` with the doc comment `$doc`:
+/// a torsion spring on the crankshaft and a linear one on the rail, a
+/// motor on the crankshaft and a force on the rail when `$actuated` is
+/// given, the joint `wristpin` or `rail` declared last (closing the loop).
+macro_rules! crank3 {
+    ($(#[doc = $doc:tt])* $name:ident [$($actuated:ident)?] rail last) => {
+        crank3!(@joints $(#[doc = $doc])* $name [$($actuated)?]
+            wristpin: spherical(rod.end, slider.com),
+            rail: prismatic(world @ [0.75, 0.15, 0.0], slider.com) { axis: [1.0, 0.0, 0.0], $($actuated,)? stiffness: 20.0, rest: 0.02 },
+        );
+    };
+    ($(#[doc = $doc:tt])* $name:ident [$($actuated:ident)?] wristpin last) => {
+        crank3!(@joints $(#[doc = $doc])* $name [$($actuated)?]
+            rail: prismatic(world @ [0.75, 0.15, 0.0], slider.com) { axis: [1.0, 0.0, 0.0], $($actuated,)? stiffness: 20.0, rest: 0.02 },
+            wristpin: spherical(rod.end, slider.com),
+        );
+    };
+    (@joints $(#[doc = $doc:tt])* $name:ident [$($actuated:ident)?] $($last:tt)*) => {
+        vigp::mechanism! {
+            $(#[doc = $doc])*
+            pub $name {
+                gravity: [0.0, 0.0, -9.81],
+                links {
+                    crank: { mass: 0.5, length: 0.2, inertia: [0.0001, 0.0017167, 0.0017167] },
+                    rod: { mass: 0.4, length: 0.6, inertia: [0.00008, 0.012040, 0.012040] },
+                    slider: { mass: 0.6, inertia: [0.0005, 0.0008, 0.0008] },
+                }
+                joints {
+                    crankshaft: revolute(world, crank.start) { axis: [0.0, 1.0, 0.0], damping: 0.05, $($actuated,)? stiffness: 0.3, rest: 0.2 },
+                    crankpin: spherical(crank.end, rod.start),
+                    $($last)*
+                }
+            }
+        }
+    };
+}
+
+crank3! {
     /// The spatial slider-crank with its rail declared last, so that the
     /// prismatic rail closes the loop: a motor on the crankshaft (tree) and
     /// a force with a spring on the rail (a loop joint, whose coordinate
     /// the minimal view reads from the link poses).
-    pub DriveCrank3 {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            crank: { mass: 0.5, length: 0.2, inertia: [0.0001, 0.0017167, 0.0017167] },
-            rod: { mass: 0.4, length: 0.6, inertia: [0.00008, 0.012040, 0.012040] },
-            slider: { mass: 0.6, inertia: [0.0005, 0.0008, 0.0008] },
-        }
-        joints {
-            crankshaft: revolute(world, crank.start) { axis: [0.0, 1.0, 0.0], damping: 0.05, actuated, stiffness: 0.3, rest: 0.2 },
-            crankpin: spherical(crank.end, rod.start),
-            wristpin: spherical(rod.end, slider.com),
-            rail: prismatic(world @ [0.75, 0.15, 0.0], slider.com) { axis: [1.0, 0.0, 0.0], actuated, stiffness: 20.0, rest: 0.02 },
-        }
-    }
+    DriveCrank3 [actuated] rail last
 }
 
-vigp::mechanism! {
+crank3! {
     /// `DriveCrank3` without the inputs.
-    pub PlainCrank3 {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            crank: { mass: 0.5, length: 0.2, inertia: [0.0001, 0.0017167, 0.0017167] },
-            rod: { mass: 0.4, length: 0.6, inertia: [0.00008, 0.012040, 0.012040] },
-            slider: { mass: 0.6, inertia: [0.0005, 0.0008, 0.0008] },
-        }
-        joints {
-            crankshaft: revolute(world, crank.start) { axis: [0.0, 1.0, 0.0], damping: 0.05, stiffness: 0.3, rest: 0.2 },
-            crankpin: spherical(crank.end, rod.start),
-            wristpin: spherical(rod.end, slider.com),
-            rail: prismatic(world @ [0.75, 0.15, 0.0], slider.com) { axis: [1.0, 0.0, 0.0], stiffness: 20.0, rest: 0.02 },
-        }
-    }
+    PlainCrank3 [] rail last
 }
 
-vigp::mechanism! {
+crank3! {
     /// The spatial slider-crank in its usual order (the rail a tree joint,
     /// the wristpin closing the loop) with the same inputs and springs.
-    pub DriveCrankTree {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            crank: { mass: 0.5, length: 0.2, inertia: [0.0001, 0.0017167, 0.0017167] },
-            rod: { mass: 0.4, length: 0.6, inertia: [0.00008, 0.012040, 0.012040] },
-            slider: { mass: 0.6, inertia: [0.0005, 0.0008, 0.0008] },
-        }
-        joints {
-            crankshaft: revolute(world, crank.start) { axis: [0.0, 1.0, 0.0], damping: 0.05, actuated, stiffness: 0.3, rest: 0.2 },
-            crankpin: spherical(crank.end, rod.start),
-            rail: prismatic(world @ [0.75, 0.15, 0.0], slider.com) { axis: [1.0, 0.0, 0.0], actuated, stiffness: 20.0, rest: 0.02 },
-            wristpin: spherical(rod.end, slider.com),
-        }
-    }
+    DriveCrankTree [actuated] wristpin last
 }
 
 vigp::mechanism! {

@@ -251,33 +251,14 @@ fn without_quaternions_the_tangent_jacobians_are_a_and_b() {
 // ---- chart (6 + 6 coordinates per link), against central differences
 // ---- through `LieStepper::retract` and `LieStepper::local`.
 
-vigp::mechanism! {
+spatial_four_bar! {
     /// An R-S-U-R four-bar with an actuated crank, no damping or springs:
     /// a loop, a ball joint and a Hooke joint (17 maximal constraint rows
     /// on 3 links, 1 DoF).
-    pub DrivenRsur {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            crank: { mass: 0.4, length: 0.3, inertia: [0.0001, 0.0031, 0.0031] },
-            coupler: {
-                mass: 0.3,
-                length: 0.7483314773547883,
-                inertia: [0.00005, 0.014, 0.014],
-                frame: [[0.2, 0.6, -0.4], [0.6, -0.2, 0.0], [-0.08, -0.24, -0.4]],
-            },
-            rocker: {
-                mass: 0.5,
-                length: 0.4,
-                inertia: [0.0001, 0.0067, 0.0067],
-                frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
-            },
-        }
-        joints {
-            crankshaft: revolute(world, crank.start) { axis: [0.0, 0.0, 1.0], actuated },
-            ball: spherical(crank.end, coupler.start),
-            pivot: revolute(world @ [0.5, 0.6, 0.0], rocker.start) { axis: [1.0, 0.0, 0.0] },
-            cardan: universal(rocker.end, coupler.end) { axes: [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] },
-        }
+    DrivenRsur {
+        crankshaft: [actuated],
+        ball: ball,
+        cardan: universal(rocker.end, coupler.end) { axes: [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] },
     }
 }
 

@@ -49,7 +49,7 @@ vigp::mechanism! {
     }
 }
 
-vigp::mechanism! {
+spatial_four_bar! {
     /// A spatial four-bar R-S-U-R: a crank about world z, a coupler on a
     /// ball joint at the crank's end, a rocker about world x, and a Hooke
     /// joint between the rocker's end and the coupler (axes: the rocker's
@@ -57,28 +57,9 @@ vigp::mechanism! {
     /// degree of freedom: the universal joint stops the coupler's spin
     /// about its own axis, which an R-S-S-R leaves free.
     Rsur {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            crank: { mass: 0.4, length: 0.3, inertia: [0.0001, 0.0031, 0.0031] },
-            coupler: {
-                mass: 0.3,
-                length: 0.7483314773547883,
-                inertia: [0.00005, 0.014, 0.014],
-                frame: [[0.2, 0.6, -0.4], [0.6, -0.2, 0.0], [-0.08, -0.24, -0.4]],
-            },
-            rocker: {
-                mass: 0.5,
-                length: 0.4,
-                inertia: [0.0001, 0.0067, 0.0067],
-                frame: [[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]],
-            },
-        }
-        joints {
-            crankshaft: revolute(world, crank.start) { axis: [0.0, 0.0, 1.0] },
-            ball: spherical(crank.end, coupler.start),
-            pivot: revolute(world @ [0.5, 0.6, 0.0], rocker.start) { axis: [1.0, 0.0, 0.0] },
-            cardan: universal(rocker.end, coupler.end) { axes: [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] },
-        }
+        crankshaft: [],
+        ball: ball,
+        cardan: universal(rocker.end, coupler.end) { axes: [[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]] },
     }
 }
 

@@ -10,6 +10,8 @@
 use vigp_core::tree::{EngineError, EngineOptions};
 use vigp_runtime::robot::{Robot, RobotError, RobotState, UrdfError};
 
+mod common;
+
 const FIXTURES: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../tests/fixtures/robots");
 
 /// The path of the fixture `name`.
@@ -700,9 +702,7 @@ fn step_derivatives_refuse_bad_input_with_typed_errors() {
 /// dampings are identified.
 #[test]
 fn robot_regressor_recovers_its_own_log() {
-    use vigp_runtime::identify::{
-        Log, Options, Regressor, RobotRegressor, Status, Transition, identify,
-    };
+    use vigp_runtime::identify::{Log, Options, Regressor, RobotRegressor, Status, identify};
     let dt = 0.002;
     let base = Robot::from_urdf(fixture("panda.urdf")).unwrap();
     let joints: Vec<String> = base.joint_names().to_vec();
@@ -764,14 +764,7 @@ fn robot_regressor_recovers_its_own_log() {
     let mut worst_affine = 0.0f64;
     let mut worst_truth = 0.0f64;
     for k in [1, 150, 300, 450, 599] {
-        let t = Transition {
-            positions: [
-                &log.positions[k - 1],
-                &log.positions[k],
-                &log.positions[k + 1],
-            ],
-            inputs: [&log.inputs[k - 1], &log.inputs[k]],
-        };
+        let t = common::transition_at(&log, k);
         let (y, b) = r.transition(&t).unwrap();
         for (pi, worst) in [(&truth_pi, &mut worst_truth), (&r.standard(), &mut 0.0)] {
             let res = r.residual(&t, pi).unwrap();

@@ -3,12 +3,12 @@
 //! against central differences of its residual, and the output-error
 //! stage on a noisy log of a perturbed arm against the regression alone.
 
-use vigp_runtime::identify::regressor::Transition;
 use vigp_runtime::identify::{
     Identification, Log, Noise, Options, OutputError, Regressor, RobotRegressor, identify,
 };
 use vigp_runtime::{Robot, RobotState};
 
+mod common;
 #[path = "../../tests/common/rng.rs"]
 mod rng;
 use rng::Rng;
@@ -115,14 +115,7 @@ fn position_jacobians_match_central_differences() {
     ] {
         let pi = regressor.standard();
         for k in [5, 30] {
-            let t = Transition {
-                positions: [
-                    &log.positions[k - 1],
-                    &log.positions[k],
-                    &log.positions[k + 1],
-                ],
-                inputs: [&log.inputs[k - 1], &log.inputs[k]],
-            };
+            let t = common::transition_at(&log, k);
             let (r, [j0, j1, j2]) = regressor.position_jacobians(&t, &pi).unwrap();
             assert_eq!(r, regressor.residual(&t, &pi).unwrap());
             // central differences, truncation ≈ 1e-12 and rounding ≈ 1e-10
