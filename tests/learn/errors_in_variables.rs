@@ -107,7 +107,7 @@ fn bad_sample_noise_is_an_error() {
             noise: Noise::ErrorsInVariables(noise),
             ..Options::default()
         };
-        let err = identify(&r, &[case.clean.clone()], &options).unwrap_err();
+        let err = identify(&r, std::slice::from_ref(&case.clean), &options).unwrap_err();
         println!("{err}");
         assert!(err.to_string().contains("sample noise"), "{err}");
     }
