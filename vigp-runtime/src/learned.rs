@@ -322,16 +322,9 @@ pub type Learned<M, const N: usize, const C: usize> = LearnedIntegrator<Variatio
 /// update q₁ = q + Δt·v, the encoding [`Encoding`] over the mechanism's
 /// coordinate kinds, the projection [`project_velocity`] onto
 /// g(q₁ + Δt·v₁) = 0.
-impl<M: Mechanism<N, C>, const N: usize, const C: usize> Space<N> for Variational<M, N, C> {
-    type State = State<N>;
+impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Space<N> for Variational<M, N, C> {
     type Encoding = Encoding;
-    type Mechanism = M;
-    type Error = StepError;
-    type IntegratorError = StepError;
-
-    fn dt(&self) -> f64 {
-        Variational::dt(self)
-    }
+    type PredictionError = StepError;
 
     fn error(e: LearnError) -> StepError {
         step_error(e)

@@ -24,16 +24,18 @@
 
 use super::{LearnError, LearnedStepInfo, Prior, distinct_rows};
 use crate::gp::{Gp, PriorMean, TrainOptions, TrainReport, Workspace};
-use crate::integrator::{Integrator, StepFailure, check_inputs_cover, roll};
+use crate::integrator::{Integrator, check_inputs_cover, roll};
 use crate::newton::StepError;
 use nalgebra::SVector;
 
 /// A configuration space with its nominal model, as a learned integrator
-/// sees it. `N` is the number of velocity coordinates (the GP's outputs).
-pub trait Space<const N: usize> {
-    /// A discrete state z_k: configuration k and the velocities of the
-    /// step to configuration k + 1.
-    type State: Copy + core::fmt::Debug + PartialEq;
+/// sees it: the nominal [`Integrator`] of the space (its state, mechanism,
+/// time step and error are the learned integrator's too) with what
+/// learning adds. `N` is the number of velocity coordinates (the GP's
+/// outputs).
+pub trait Space<const N: usize>:
+    Integrator<Error: From<<Self as Space<N>>::PredictionError>>
+{
     /// How a state enters the GP.
     type Encoding: Copy + core::fmt::Debug + PartialEq;
 
@@ -47,21 +49,12 @@ pub trait Space<const N: usize> {
     /// [`Space::encoded_dim`]).
     fn encode(&self, encoding: Self::Encoding, z: &Self::State, out: &mut [f64]);
 
-    /// The mechanism whose inputs the forced calls take: `U` inputs
-    /// compile where it implements [`vigp_core::Inputs<U>`] (`U = 0`
-    /// always does).
-    type Mechanism: ?Sized;
-    /// The error of this space's learned predictions and steps.
-    type Error;
-    /// The error of this space's integrators ([`Integrator::Error`]): the
-    /// nominal step's, which a learned step's error converts into.
-    type IntegratorError: StepFailure + From<Self::Error>;
-
-    /// The time step Δt of the nominal model, in seconds.
-    fn dt(&self) -> f64;
+    /// The error of this space's learned predictions and steps; the
+    /// integrator's error ([`Integrator::Error`]) converts from it.
+    type PredictionError;
 
     /// A learned step's error as this space's error.
-    fn error(e: LearnError) -> Self::Error;
+    fn error(e: LearnError) -> Self::PredictionError;
 
     /// Whether predictions under `given` inputs fit a model trained with
     /// `trained` ([`LearnError::Inputs`] or
@@ -466,7 +459,7 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         &self,
         z: &S::State,
         ws: &mut Workspace,
-    ) -> Result<(SVector<f64, N>, SVector<f64, N>), S::Error> {
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), S::PredictionError> {
         let mut var = SVector::<f64, N>::zeros();
         let nu = self
             .unforced_velocity(z, ws, Some(&mut var))
@@ -481,7 +474,7 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         &self,
         z: &S::State,
         ws: &mut Workspace,
-    ) -> Result<SVector<f64, N>, S::Error> {
+    ) -> Result<SVector<f64, N>, S::PredictionError> {
         self.unforced_velocity(z, ws, None).map_err(S::error)
     }
 
@@ -496,7 +489,7 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<(SVector<f64, N>, SVector<f64, N>), S::Error>
+    ) -> Result<(SVector<f64, N>, SVector<f64, N>), S::PredictionError>
     where
         S::Mechanism: vigp_core::Inputs<U>,
     {
@@ -515,7 +508,7 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<SVector<f64, N>, S::Error>
+    ) -> Result<SVector<f64, N>, S::PredictionError>
     where
         S::Mechanism: vigp_core::Inputs<U>,
     {
@@ -531,7 +524,7 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         &self,
         z: &S::State,
         ws: &mut Workspace,
-    ) -> Result<(S::State, LearnedStepInfo<N>), S::Error> {
+    ) -> Result<(S::State, LearnedStepInfo<N>), S::PredictionError> {
         let mut var = SVector::<f64, N>::zeros();
         let (next, nu) = self
             .mean_step(z, |l| l.unforced_velocity(z, ws, Some(&mut var)))
@@ -542,7 +535,11 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
     /// One learned step using only the posterior mean (what a rollout
     /// needs): [`Self::step_in`]'s next state, bit for bit, at
     /// O(p·N·d) instead of O(p·N·(d + N)) for the GP.
-    pub fn step_mean_in(&self, z: &S::State, ws: &mut Workspace) -> Result<S::State, S::Error> {
+    pub fn step_mean_in(
+        &self,
+        z: &S::State,
+        ws: &mut Workspace,
+    ) -> Result<S::State, S::PredictionError> {
         Ok(self.mean_step_parts(z, ws).map_err(S::error)?.0)
     }
 
@@ -555,7 +552,7 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<S::State, S::Error>
+    ) -> Result<S::State, S::PredictionError>
     where
         S::Mechanism: vigp_core::Inputs<U>,
     {
@@ -646,7 +643,7 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<S::State, S::IntegratorError>
+    ) -> Result<S::State, <S as Integrator>::Error>
     where
         S::Mechanism: vigp_core::Inputs<U>,
     {
@@ -674,7 +671,7 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
         u_prev: &SVector<f64, U>,
         inputs: &[SVector<f64, U>],
         out: &mut [S::State],
-    ) -> Result<(), S::IntegratorError>
+    ) -> Result<(), <S as Integrator>::Error>
     where
         S::Mechanism: vigp_core::Inputs<U>,
     {
@@ -692,8 +689,8 @@ impl<S: NominalStep<N>, const N: usize> LearnedIntegrator<S, N> {
 /// [`LearnedIntegrator::step_mean_in`] in loops); a rollout allocates one.
 impl<S: NominalStep<N>, const N: usize> Integrator for LearnedIntegrator<S, N> {
     type State = S::State;
-    type Error = S::IntegratorError;
-    type Mechanism = S::Mechanism;
+    type Error = <S as Integrator>::Error;
+    type Mechanism = <S as Integrator>::Mechanism;
 
     fn dt(&self) -> f64 {
         self.nominal.dt()
@@ -702,7 +699,7 @@ impl<S: NominalStep<N>, const N: usize> Integrator for LearnedIntegrator<S, N> {
     /// One mean step ([`LearnedIntegrator::step_mean_in`]); a model
     /// trained with inputs steps under u = 0 or refuses, as its space says
     /// ([`Space::check_inputs`]).
-    fn step(&self, z: &S::State) -> Result<S::State, S::IntegratorError> {
+    fn step(&self, z: &S::State) -> Result<S::State, <S as Integrator>::Error> {
         Ok(self.step_mean_in(z, &mut self.gp.workspace())?)
     }
 
@@ -715,7 +712,7 @@ impl<S: NominalStep<N>, const N: usize> Integrator for LearnedIntegrator<S, N> {
         &self,
         z: &S::State,
         u: &SVector<f64, U>,
-    ) -> Result<S::State, S::IntegratorError>
+    ) -> Result<S::State, <S as Integrator>::Error>
     where
         S::Mechanism: vigp_core::Inputs<U>,
     {
@@ -723,7 +720,11 @@ impl<S: NominalStep<N>, const N: usize> Integrator for LearnedIntegrator<S, N> {
     }
 
     /// Mean steps with one workspace.
-    fn rollout_into(&self, z0: &S::State, out: &mut [S::State]) -> Result<(), S::IntegratorError> {
+    fn rollout_into(
+        &self,
+        z0: &S::State,
+        out: &mut [S::State],
+    ) -> Result<(), <S as Integrator>::Error> {
         let mut ws = self.gp.workspace();
         roll(z0, out, |_, z| Ok(self.step_mean_in(z, &mut ws)?))
     }
@@ -737,7 +738,7 @@ impl<S: NominalStep<N>, const N: usize> Integrator for LearnedIntegrator<S, N> {
         z0: &S::State,
         inputs: &[SVector<f64, U>],
         out: &mut [S::State],
-    ) -> Result<(), S::IntegratorError>
+    ) -> Result<(), <S as Integrator>::Error>
     where
         S::Mechanism: vigp_core::Inputs<U>,
     {

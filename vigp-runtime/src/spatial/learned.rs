@@ -39,7 +39,6 @@
 //! plain step, without inputs, is a typed error
 //! ([`LearnSpatialError::Inputs`]), never a silent u = 0.
 
-use super::SpatialError;
 use crate::StepError;
 use crate::gp::{TrainOptions, TrainReport, Workspace};
 use crate::learned::{InputLayout, LearnError, LearnedIntegrator, NominalStep, Prior, Row, Space};
@@ -222,15 +221,8 @@ pub type LearnedSpatial<S, const B: usize, const J: usize, const N: usize, const
 impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize> Space<N>
     for LieStepper<S, B, J, N, C>
 {
-    type State = SpatialState<B>;
     type Encoding = Rotation;
-    type Mechanism = S;
-    type Error = LearnError;
-    type IntegratorError = SpatialError;
-
-    fn dt(&self) -> f64 {
-        LieStepper::dt(self)
-    }
+    type PredictionError = LearnError;
 
     fn error(e: LearnError) -> LearnError {
         e
