@@ -35,6 +35,30 @@
 //! the data with tiny noise they carry absolute errors of order
 //! ε·cond(K)·σ_f². See `docs/gp.md` for the method notes and benchmarks.
 
+/// A [`pulp::WithSimd`] operation: a value of a local struct `Op` whose
+/// fields are the locals `$field` (by those names, of types `$ty` with
+/// lifetime `$lt`), and whose `with_simd` binds them again by the same
+/// names and evaluates `$body` to an `$out`. A struct, not a closure:
+/// `with_simd` is always inlined into pulp's AVX2 function, a closure's
+/// body is not reliably, and its intrinsics then become calls (measured
+/// 30× slower).
+macro_rules! simd_op {
+    (<$lt:lifetime> { $($field:ident: $ty:ty),* $(,)? } -> $out:ty $body:block) => {{
+        struct Op<$lt> {
+            $($field: $ty,)*
+        }
+        impl pulp::WithSimd for Op<'_> {
+            type Output = $out;
+            #[inline(always)]
+            fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
+                let Op { $($field),* } = self;
+                $body
+            }
+        }
+        Op { $($field),* }
+    }};
+}
+
 mod error;
 mod export;
 mod kernel;
@@ -69,6 +93,33 @@ pub use options::{
 pub use predict::{PARALLEL_VARIANCE_MIN_N, Prediction, Workspace};
 pub use save::{SavedGp, SavedMean, SavedOutput};
 
+/// The checks [`log_marginal_likelihood`] and [`sparse_bound`] share: the
+/// data's dimensions and θ's length (d + 2) and finiteness. Returns the
+/// number of points N and faer's parallelism for `parallel`.
+fn check_objective(
+    inputs: &[f64],
+    input_dim: usize,
+    targets: &[f64],
+    log_params: &[f64],
+    parallel: bool,
+) -> Result<(usize, faer::Par), GpError> {
+    let n = model::check_dims(inputs, input_dim, targets, 1)?;
+    if log_params.len() != input_dim + 2 {
+        return Err(GpError::DimensionMismatch {
+            what: "log_params (d + 2)",
+            expected: input_dim + 2,
+            got: log_params.len(),
+        });
+    }
+    model::check_finite("log_params", log_params)?;
+    let par = if parallel {
+        faer::Par::rayon(0)
+    } else {
+        faer::Par::Seq
+    };
+    Ok((n, par))
+}
+
 /// Log marginal likelihood and its gradient on data as given (no
 /// normalisation, zero prior mean).
 ///
@@ -91,20 +142,7 @@ pub fn log_marginal_likelihood(
     log_params: &[f64],
     parallel: bool,
 ) -> Result<(f64, Vec<f64>), GpError> {
-    let n = model::check_dims(inputs, input_dim, targets, 1)?;
-    if log_params.len() != input_dim + 2 {
-        return Err(GpError::DimensionMismatch {
-            what: "log_params (d + 2)",
-            expected: input_dim + 2,
-            got: log_params.len(),
-        });
-    }
-    model::check_finite("log_params", log_params)?;
-    let par = if parallel {
-        faer::Par::rayon(0)
-    } else {
-        faer::Par::Seq
-    };
+    let (n, par) = check_objective(inputs, input_dim, targets, log_params, parallel)?;
     let e = likelihood::lml(inputs, n, input_dim, targets, log_params, true, par)?;
     Ok((e.value, e.gradient))
 }
@@ -134,15 +172,7 @@ pub fn sparse_bound(
     log_params: &[f64],
     parallel: bool,
 ) -> Result<(f64, Vec<f64>), GpError> {
-    let n = model::check_dims(inputs, input_dim, targets, 1)?;
-    if log_params.len() != input_dim + 2 {
-        return Err(GpError::DimensionMismatch {
-            what: "log_params (d + 2)",
-            expected: input_dim + 2,
-            got: log_params.len(),
-        });
-    }
-    model::check_finite("log_params", log_params)?;
+    let (n, par) = check_objective(inputs, input_dim, targets, log_params, parallel)?;
     model::check_finite("inducing points", inducing)?;
     if inducing.is_empty() || inducing.len() % input_dim != 0 {
         return Err(GpError::DimensionMismatch {
@@ -151,11 +181,6 @@ pub fn sparse_bound(
             got: inducing.len(),
         });
     }
-    let par = if parallel {
-        faer::Par::rayon(0)
-    } else {
-        faer::Par::Seq
-    };
     let mut ws = sparse::SparseWorkspace::new(inducing.len() / input_dim, n);
     let e = sparse::elbo_ws(
         &mut ws, inputs, inducing, input_dim, targets, log_params, true, par,

@@ -173,60 +173,28 @@ fn col_slice(m: &Mat<f64>, j: usize) -> &[f64] {
 fn kernel_lower_into(xs: &[f64], n: usize, d: usize, sf2: f64, k: &mut Mat<f64>) {
     #[cfg(target_arch = "x86_64")]
     if let Some(simd) = pulp::x86::V3::try_new() {
-        // A struct, not a closure: `with_simd` is always inlined into
-        // pulp's AVX2 function, a closure's body is not reliably, and its
-        // intrinsics then become calls (measured 30× slower).
-        struct Op<'a> {
+        let op = simd_op!(<'a> {
             simd: pulp::x86::V3,
             xs: &'a [f64],
             n: usize,
             d: usize,
             sf2: f64,
             k: &'a mut Mat<f64>,
-        }
-        impl pulp::WithSimd for Op<'_> {
-            type Output = ();
-            #[inline(always)]
-            fn with_simd<S: pulp::Simd>(self, _simd: S) {
-                let Op {
-                    simd,
-                    xs,
-                    n,
-                    d,
-                    sf2,
-                    k,
-                } = self;
-                kernel_lower_avx2(simd, xs, n, d, sf2, k);
-            }
-        }
-        return pulp::Simd::vectorize(
-            simd,
-            Op {
-                simd,
-                xs,
-                n,
-                d,
-                sf2,
-                k,
-            },
-        );
+        } -> () {
+            kernel_lower_avx2(simd, xs, n, d, sf2, k)
+        });
+        return pulp::Simd::vectorize(simd, op);
     }
-    struct Op<'a> {
+    let op = simd_op!(<'a> {
         xs: &'a [f64],
         n: usize,
         d: usize,
         sf2: f64,
         k: &'a mut Mat<f64>,
-    }
-    impl pulp::WithSimd for Op<'_> {
-        type Output = ();
-        #[inline(always)]
-        fn with_simd<S: pulp::Simd>(self, _simd: S) {
-            let Op { xs, n, d, sf2, k } = self;
-            kernel_columns(xs, n, d, sf2, k, 0..n);
-        }
-    }
-    pulp::Arch::new().dispatch(Op { xs, n, d, sf2, k });
+    } -> () {
+        kernel_columns(xs, n, d, sf2, k, 0..n)
+    });
+    pulp::Arch::new().dispatch(op);
 }
 
 /// Columns `cols` of [`kernel_lower_into`], one [`kernel_column`] each.
@@ -397,8 +365,7 @@ fn gradient_pass(
 ) -> f64 {
     #[cfg(target_arch = "x86_64")]
     if let Some(simd) = pulp::x86::V3::try_new() {
-        // a struct, not a closure: see `kernel_lower_into`
-        struct Op<'a> {
+        let op = simd_op!(<'a> {
             simd: pulp::x86::V3,
             xs: &'a [f64],
             n: usize,
@@ -408,41 +375,14 @@ fn gradient_pass(
             kf: &'a Mat<f64>,
             kw: &'a mut [f64],
             gl: &'a mut [f64],
-        }
-        impl pulp::WithSimd for Op<'_> {
-            type Output = f64;
-            #[inline(always)]
-            fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
-                let Op {
-                    simd,
-                    xs,
-                    n,
-                    d,
-                    alpha,
-                    ainv,
-                    kf,
-                    kw,
-                    gl,
-                } = self;
-                gradient_pass_with(n, d, alpha, ainv, kf, kw, gl, |w, b, gl| {
-                    for (j, g) in gl.iter_mut().enumerate() {
-                        let col = &xs[j * n + b + 1..(j + 1) * n];
-                        *g += weighted_sqdist_sum_avx2(simd, w, col, xs[j * n + b]);
-                    }
-                })
-            }
-        }
-        let op = Op {
-            simd,
-            xs,
-            n,
-            d,
-            alpha,
-            ainv,
-            kf,
-            kw,
-            gl,
-        };
+        } -> f64 {
+            gradient_pass_with(n, d, alpha, ainv, kf, kw, gl, |w, b, gl| {
+                for (j, g) in gl.iter_mut().enumerate() {
+                    let col = &xs[j * n + b + 1..(j + 1) * n];
+                    *g += weighted_sqdist_sum_avx2(simd, w, col, xs[j * n + b]);
+                }
+            })
+        });
         return pulp::Simd::vectorize(simd, op);
     }
     gradient_pass_with(n, d, alpha, ainv, kf, kw, gl, |w, b, gl| {

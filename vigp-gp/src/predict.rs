@@ -554,27 +554,16 @@ fn kernel_row_dispatched(
     signal_variance: f64,
     out: &mut [f64],
 ) -> Result<(), core_gp::GpError> {
-    struct Op<'a> {
+    let op = simd_op!(<'a> {
         inputs: &'a [f64],
         n: usize,
         q: &'a [f64],
         signal_variance: f64,
         out: &'a mut [f64],
-    }
-    impl pulp::WithSimd for Op<'_> {
-        type Output = Result<(), core_gp::GpError>;
-        #[inline(always)]
-        fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
-            core_gp::kernel_row(self.inputs, self.n, self.q, self.signal_variance, self.out)
-        }
-    }
-    pulp::Arch::new().dispatch(Op {
-        inputs,
-        n,
-        q,
-        signal_variance,
-        out,
-    })
+    } -> Result<(), core_gp::GpError> {
+        core_gp::kernel_row(inputs, n, q, signal_variance, out)
+    });
+    pulp::Arch::new().dispatch(op)
 }
 
 /// [`core_gp::kernel_dot`] compiled for AVX2 where the CPU has it: inlined
@@ -588,33 +577,16 @@ fn kernel_dot_dispatched(
     signal_variance: f64,
     weights: &[f64],
 ) -> Result<f64, core_gp::GpError> {
-    struct Op<'a> {
+    let op = simd_op!(<'a> {
         inputs: &'a [f64],
         n: usize,
         q: &'a [f64],
         signal_variance: f64,
         weights: &'a [f64],
-    }
-    impl pulp::WithSimd for Op<'_> {
-        type Output = Result<f64, core_gp::GpError>;
-        #[inline(always)]
-        fn with_simd<S: pulp::Simd>(self, _simd: S) -> Self::Output {
-            core_gp::kernel_dot(
-                self.inputs,
-                self.n,
-                self.q,
-                self.signal_variance,
-                self.weights,
-            )
-        }
-    }
-    pulp::Arch::new().dispatch(Op {
-        inputs,
-        n,
-        q,
-        signal_variance,
-        weights,
-    })
+    } -> Result<f64, core_gp::GpError> {
+        core_gp::kernel_dot(inputs, n, q, signal_variance, weights)
+    });
+    pulp::Arch::new().dispatch(op)
 }
 
 /// Bytes of kernel rows and products a chunk of [`Gp::predict`] keeps.

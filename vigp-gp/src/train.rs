@@ -72,15 +72,19 @@ fn seed_memory(c: &Curvature, n: usize, d: usize) -> Result<CurvaturePairs, GpEr
         .collect()
 }
 
+/// The data as [`Gp::train`] and [`Gp::fit`] model it: dimensions checked,
+/// inputs and targets normalised and the prior mean resolved as `opts`
+/// ([`TrainOptions::mean`], [`TrainOptions::normalise_inputs`],
+/// [`TrainOptions::normalise_outputs`]) say.
 pub(crate) fn prepare(
     inputs: &[f64],
     d: usize,
     targets: &[f64],
     p: usize,
-    mean: &PriorMean,
-    normalise_inputs: bool,
-    normalise_outputs: bool,
+    opts: &TrainOptions,
 ) -> Result<Prepared, GpError> {
+    let (mean, normalise_inputs, normalise_outputs) =
+        (&opts.mean, opts.normalise_inputs, opts.normalise_outputs);
     let n = check_dims(inputs, d, targets, p)?;
     let norm = if normalise_inputs {
         InputNormaliser::fit(inputs, d)
@@ -342,15 +346,7 @@ impl Gp {
         output_dim: usize,
         opts: &TrainOptions,
     ) -> Result<(Self, TrainReport), GpError> {
-        let prep = prepare(
-            inputs,
-            input_dim,
-            targets,
-            output_dim,
-            &opts.mean,
-            opts.normalise_inputs,
-            opts.normalise_outputs,
-        )?;
+        let prep = prepare(inputs, input_dim, targets, output_dim, opts)?;
         opts.bounds.validate()?;
         opts.validate_settings()?;
         let (n, d, p) = (prep.n, prep.d, prep.p);
@@ -629,15 +625,7 @@ impl Gp {
         hyperparameters: &[Hyperparameters],
         opts: &TrainOptions,
     ) -> Result<Self, GpError> {
-        let prep = prepare(
-            inputs,
-            input_dim,
-            targets,
-            output_dim,
-            &opts.mean,
-            opts.normalise_inputs,
-            opts.normalise_outputs,
-        )?;
+        let prep = prepare(inputs, input_dim, targets, output_dim, opts)?;
         if hyperparameters.len() != output_dim {
             return Err(GpError::DimensionMismatch {
                 what: "hyperparameters (one per output)",

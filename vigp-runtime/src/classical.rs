@@ -11,8 +11,15 @@ use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
 use nalgebra::SVector;
 
+/// An integrator type `$name` whose step is `$update`: with the time step
+/// `$h`, the state `$z` (validated first) and the acceleration
+/// `$accel(&q, &q̇)` (with or without inputs) it returns the next state,
+/// checked to be finite.
 macro_rules! classical {
-    ($(#[$doc:meta])* $name:ident) => {
+    (
+        $(#[$doc:meta])* $name:ident,
+        |$h:ident, $z:ident, $accel:ident| $update:block
+    ) => {
         $(#[$doc])*
         #[derive(Clone, Copy, Debug)]
         pub struct $name<M: Mechanism<N, C>, const N: usize, const C: usize> {
@@ -41,110 +48,21 @@ macro_rules! classical {
             pub fn model(&self) -> &M {
                 &self.model
             }
+
+            /// The update with the acceleration as a parameter (with or
+            /// without inputs).
+            fn update(
+                &self,
+                $z: &State<N>,
+                $accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>)
+                    -> Result<SVector<f64, N>, StepError>,
+            ) -> Result<State<N>, StepError> {
+                check(self.dt, $z)?;
+                let $h = self.dt;
+                finite($update)
+            }
         }
-    };
-}
 
-classical! {
-    /// Explicit (forward) Euler: q⁺ = q + Δt q̇, q̇⁺ = q̇ + Δt q̈(q, q̇).
-    /// First order; energy grows on conservative systems.
-    ExplicitEuler
-}
-classical! {
-    /// Symplectic (semi-implicit) Euler: q̇⁺ = q̇ + Δt q̈(q, q̇), q⁺ = q + Δt q̇⁺.
-    /// First order.
-    SymplecticEuler
-}
-classical! {
-    /// Classical fourth-order Runge–Kutta on (q, q̇).
-    Rk4
-}
-
-/// Δt as every integrator checks it (finite, > 0, Δt² a normal number:
-/// [`vigp_core::step::check_time_step`]), then the state.
-fn check<const N: usize>(dt: f64, z: &State<N>) -> Result<(), StepError> {
-    vigp_core::step::check_time_step(dt)?;
-    if !z.is_finite() {
-        return Err(StepError::NonFiniteState { step: None });
-    }
-    Ok(())
-}
-
-fn finite<const N: usize>(z: State<N>) -> Result<State<N>, StepError> {
-    if z.is_finite() {
-        Ok(z)
-    } else {
-        Err(StepError::NonFiniteState { step: None })
-    }
-}
-
-/// The integrators' updates with the acceleration as a parameter (with or
-/// without inputs).
-trait Update<const N: usize> {
-    fn update(
-        &self,
-        z: &State<N>,
-        accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>) -> Result<SVector<f64, N>, StepError>,
-    ) -> Result<State<N>, StepError>;
-}
-
-impl<M: Mechanism<N, C>, const N: usize, const C: usize> Update<N> for ExplicitEuler<M, N, C> {
-    fn update(
-        &self,
-        z: &State<N>,
-        accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>) -> Result<SVector<f64, N>, StepError>,
-    ) -> Result<State<N>, StepError> {
-        check(self.dt, z)?;
-        let a = accel(&z.q, &z.v)?;
-        finite(State {
-            q: z.q + z.v * self.dt,
-            v: z.v + a * self.dt,
-        })
-    }
-}
-
-impl<M: Mechanism<N, C>, const N: usize, const C: usize> Update<N> for SymplecticEuler<M, N, C> {
-    fn update(
-        &self,
-        z: &State<N>,
-        accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>) -> Result<SVector<f64, N>, StepError>,
-    ) -> Result<State<N>, StepError> {
-        check(self.dt, z)?;
-        let a = accel(&z.q, &z.v)?;
-        let v = z.v + a * self.dt;
-        finite(State {
-            q: z.q + v * self.dt,
-            v,
-        })
-    }
-}
-
-impl<M: Mechanism<N, C>, const N: usize, const C: usize> Update<N> for Rk4<M, N, C> {
-    fn update(
-        &self,
-        z: &State<N>,
-        accel: impl Fn(&SVector<f64, N>, &SVector<f64, N>) -> Result<SVector<f64, N>, StepError>,
-    ) -> Result<State<N>, StepError> {
-        check(self.dt, z)?;
-        let h = self.dt;
-        let f = |q, v| accel(&q, &v);
-        let (q, v) = (z.q, z.v);
-        let a1 = f(q, v)?;
-        let (q2, v2) = (q + v * (0.5 * h), v + a1 * (0.5 * h));
-        let a2 = f(q2, v2)?;
-        let (q3, v3) = (q + v2 * (0.5 * h), v + a2 * (0.5 * h));
-        let a3 = f(q3, v3)?;
-        let (q4, v4) = (q + v3 * h, v + a3 * h);
-        let a4 = f(q4, v4)?;
-        finite(State {
-            q: q + (v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0),
-            v: v + (a1 + a2 * 2.0 + a3 * 2.0 + a4) * (h / 6.0),
-        })
-    }
-}
-
-macro_rules! integrator {
-    ($name:ident) => {
         impl<M: Mechanism<N, C>, const N: usize, const C: usize> Integrator for $name<M, N, C> {
             type State = State<N>;
             type Error = StepError;
@@ -174,6 +92,64 @@ macro_rules! integrator {
         }
     };
 }
-integrator!(ExplicitEuler);
-integrator!(SymplecticEuler);
-integrator!(Rk4);
+
+classical! {
+    /// Explicit (forward) Euler: q⁺ = q + Δt q̇, q̇⁺ = q̇ + Δt q̈(q, q̇).
+    /// First order; energy grows on conservative systems.
+    ExplicitEuler,
+    |h, z, accel| {
+        let a = accel(&z.q, &z.v)?;
+        State {
+            q: z.q + z.v * h,
+            v: z.v + a * h,
+        }
+    }
+}
+classical! {
+    /// Symplectic (semi-implicit) Euler: q̇⁺ = q̇ + Δt q̈(q, q̇), q⁺ = q + Δt q̇⁺.
+    /// First order.
+    SymplecticEuler,
+    |h, z, accel| {
+        let a = accel(&z.q, &z.v)?;
+        let v = z.v + a * h;
+        State { q: z.q + v * h, v }
+    }
+}
+classical! {
+    /// Classical fourth-order Runge–Kutta on (q, q̇).
+    Rk4,
+    |h, z, accel| {
+        let f = |q, v| accel(&q, &v);
+        let (q, v) = (z.q, z.v);
+        let a1 = f(q, v)?;
+        let (q2, v2) = (q + v * (0.5 * h), v + a1 * (0.5 * h));
+        let a2 = f(q2, v2)?;
+        let (q3, v3) = (q + v2 * (0.5 * h), v + a2 * (0.5 * h));
+        let a3 = f(q3, v3)?;
+        let (q4, v4) = (q + v3 * h, v + a3 * h);
+        let a4 = f(q4, v4)?;
+        State {
+            q: q + (v + v2 * 2.0 + v3 * 2.0 + v4) * (h / 6.0),
+            v: v + (a1 + a2 * 2.0 + a3 * 2.0 + a4) * (h / 6.0),
+        }
+    }
+}
+
+/// Δt as every integrator checks it (finite, > 0, Δt² a normal number:
+/// [`vigp_core::step::check_time_step`]), then the state.
+fn check<const N: usize>(dt: f64, z: &State<N>) -> Result<(), StepError> {
+    vigp_core::step::check_time_step(dt)?;
+    if !z.is_finite() {
+        return Err(StepError::NonFiniteState { step: None });
+    }
+    Ok(())
+}
+
+/// `z` if it is finite.
+fn finite<const N: usize>(z: State<N>) -> Result<State<N>, StepError> {
+    if z.is_finite() {
+        Ok(z)
+    } else {
+        Err(StepError::NonFiniteState { step: None })
+    }
+}

@@ -18,7 +18,7 @@
 //! [`Row::mirror_of`]. A tool writes the DSL section as it is.
 
 use super::Identification;
-use super::regressor::{BodySlots, SYM};
+use super::regressor::{BodySlots, SYM, Structure};
 use std::fmt;
 
 /// Whether the data determine a row of the table.
@@ -95,6 +95,15 @@ impl Report {
 
 /// The axis letters of a 3-D inertia's entries.
 const AXES: [char; 3] = ['x', 'y', 'z'];
+
+/// The offset in π of the first joint parameter: past the last body's
+/// block (`offsets` those of [`Structure::body_offsets`]).
+fn joints_start(s: &Structure, offsets: &[usize]) -> usize {
+    offsets
+        .last()
+        .map(|o| o + s.bodies.last().map_or(0, |b| b.len()))
+        .unwrap_or(0)
+}
 
 pub(crate) fn build(id: &Identification) -> Report {
     let s = &id.structure;
@@ -177,10 +186,7 @@ pub(crate) fn build(id: &Identification) -> Report {
                 }
             }
         }
-        let mut at = offsets
-            .last()
-            .map(|o| o + s.bodies.last().map_or(0, |b| b.len()))
-            .unwrap_or(0);
+        let mut at = joints_start(s, &offsets);
         for j in &s.joints {
             if j.damping.is_some() {
                 out.push((format!("joints.{}.damping", j.name), pi[at]));
@@ -219,10 +225,7 @@ pub(crate) fn build(id: &Identification) -> Report {
             );
         }
     }
-    let mut at = offsets
-        .last()
-        .map(|o| o + s.bodies.last().map_or(0, |b| b.len()))
-        .unwrap_or(0);
+    let mut at = joints_start(s, &offsets);
     for j in &s.joints {
         if j.damping.is_some() {
             deps.push(vec![at]);

@@ -56,6 +56,39 @@ pub struct ExportSize {
     pub source_bytes: usize,
 }
 
+impl EmbeddedExport {
+    /// The GP part of an export of `gp` under these options: its Rust
+    /// source (items named `<NAME>_GP`, with the Cholesky factors when
+    /// [`EmbeddedExport::variance`]) and that name.
+    pub(crate) fn gp_source(&self, gp: &crate::gp::Gp) -> Result<(String, String), GpError> {
+        let gp_name = format!("{}_GP", self.name);
+        let gp_opts = ExportOptions {
+            name: gp_name.clone(),
+            core_path: self.core_path.clone(),
+            cholesky: self.variance,
+            header: self.header.clone(),
+            check_points: Vec::new(),
+        };
+        Ok((gp.to_rust_source(&gp_opts)?, gp_name))
+    }
+}
+
+/// The names of `encoding` and `prior` in the generated code's
+/// `Encoding::…` and `Prior::…`. An identified prior is `Nominal` there:
+/// the identified parameters are the exported model's own (a mechanism's
+/// `parameters`, a robot's bodies).
+pub(crate) fn source_names(encoding: &Encoding, prior: &Prior) -> (&'static str, &'static str) {
+    let encoding = match encoding {
+        Encoding::Raw => "Raw",
+        Encoding::SinCos => "SinCos",
+    };
+    let prior = match prior {
+        Prior::Nominal | Prior::Identified(_) => "Nominal",
+        Prior::Constant => "Constant",
+    };
+    (encoding, prior)
+}
+
 impl ExportSize {
     /// The size of an export of `gp` (with the Cholesky factors when
     /// `variance`) written in `source_bytes` bytes.
@@ -105,15 +138,7 @@ where
         &self,
         opts: &EmbeddedExport,
     ) -> Result<(String, ExportSize), GpError> {
-        let gp_name = format!("{}_GP", opts.name);
-        let gp_opts = ExportOptions {
-            name: gp_name.clone(),
-            core_path: opts.core_path.clone(),
-            cholesky: opts.variance,
-            header: opts.header.clone(),
-            check_points: Vec::new(),
-        };
-        let mut s = self.gp.to_rust_source(&gp_opts)?;
+        let (mut s, gp_name) = opts.gp_source(&self.gp)?;
         let core = &opts.core_path;
         let d = self.gp.input_dim();
         let lit = |v: f64| format!("{v:?}");
@@ -137,15 +162,7 @@ where
             }
             let _ = writeln!(params, "        ({name:?}, {}),", lit(value));
         }
-        let encoding = match self.encoding {
-            Encoding::Raw => "Raw",
-            Encoding::SinCos => "SinCos",
-        };
-        let prior = match self.prior {
-            // the identified parameters are the model's (`parameters`)
-            Prior::Nominal | Prior::Identified(_) => "Nominal",
-            Prior::Constant => "Constant",
-        };
+        let (encoding, prior) = source_names(&self.encoding, &self.prior);
         let name = &opts.name;
         let _ = write!(
             s,

@@ -5,8 +5,9 @@
 use core::fmt::Write;
 
 use super::LearnedRobot;
-use crate::gp::{ExportOptions, GpError};
-use crate::learned::{EmbeddedExport, Encoding, ExportSize, Prior};
+use crate::gp::GpError;
+use crate::learned::embedded::source_names;
+use crate::learned::{EmbeddedExport, ExportSize};
 use vigp_core::tree::{Body, JointKind};
 
 /// A float literal that round-trips, ±∞ included (URDF limits).
@@ -83,16 +84,8 @@ impl LearnedRobot {
         opts: &EmbeddedExport,
     ) -> Result<(String, ExportSize), GpError> {
         let m = &self.model;
-        let gp_name = format!("{}_GP", opts.name);
         let bodies_name = format!("{}_BODIES", opts.name);
-        let gp_opts = ExportOptions {
-            name: gp_name.clone(),
-            core_path: opts.core_path.clone(),
-            cholesky: opts.variance,
-            header: opts.header.clone(),
-            check_points: Vec::new(),
-        };
-        let mut s = self.gp.to_rust_source(&gp_opts)?;
+        let (mut s, gp_name) = opts.gp_source(&self.gp)?;
         let core = &opts.core_path;
         let d = self.gp.input_dim();
         let robot = &m.robot;
@@ -119,15 +112,7 @@ impl LearnedRobot {
             s.push_str(&body(b, core));
         }
         s.push_str("];\n");
-        let encoding = match m.encoding {
-            Encoding::Raw => "Raw",
-            Encoding::SinCos => "SinCos",
-        };
-        let prior = match m.prior {
-            // the identified parameters are the bodies'
-            Prior::Nominal | Prior::Identified(_) => "Nominal",
-            Prior::Constant => "Constant",
-        };
+        let (encoding, prior) = source_names(&m.encoding, &m.prior);
         let o = robot.engine().options();
         let _ = write!(
             s,
