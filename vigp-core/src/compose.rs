@@ -219,10 +219,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
         if q.iter().chain(p.iter()).all(|x| x.is_finite()) {
             Ok((q, p))
         } else {
-            Err(StepError::NonFiniteResidual {
-                iteration: 0,
-                step: None,
-            })
+            Err(StepError::non_finite_residual(0))
         }
     }
 
@@ -269,10 +266,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Composition<M, N, C> {
             nalgebra::SMatrix::zeros()
         };
         let ((v, _), _) = solve_kkt_regularised(&mass, &(-g.transpose()), &g, p, &SVector::zeros())
-            .ok_or(StepError::SingularJacobian {
-                iteration: 0,
-                step: None,
-            })?;
+            .ok_or(StepError::singular(0))?;
         if v.iter().all(|x| x.is_finite()) {
             Ok(v)
         } else {

@@ -73,6 +73,16 @@ pub trait Inputs<const U: usize> {}
 
 impl<T: ?Sized> Inputs<0> for T {}
 
+/// The compile-time check of an input vector's length `u` against a
+/// model's [`Dynamics::INPUTS`] (`inputs`): equal, or 0 (no input). Call it
+/// in a `const` block.
+pub(crate) const fn check_input_count(u: usize, inputs: usize) {
+    assert!(
+        u == inputs || u == 0,
+        "U must equal Dynamics::INPUTS (or 0: no input)"
+    )
+}
+
 /// A mechanical model in `N` generalized coordinates with `C` holonomic
 /// constraints, described by closed-form terms: what
 /// [`Stepper`](crate::Stepper) (and every std integrator) evaluates.
@@ -264,12 +274,7 @@ pub trait Dynamics<const N: usize, const C: usize> {
         k: &Self::Constants,
         q: &SVector<f64, N>,
     ) -> SMatrix<f64, N, U> {
-        const {
-            assert!(
-                U == Self::INPUTS || U == 0,
-                "U must equal Dynamics::INPUTS (or 0: no input)"
-            )
-        };
+        const { check_input_count(U, Self::INPUTS) };
         let _ = (k, q);
         SMatrix::zeros()
     }
@@ -284,12 +289,7 @@ pub trait Dynamics<const N: usize, const C: usize> {
         q: &SVector<f64, N>,
         u: &SVector<f64, U>,
     ) -> SMatrix<f64, N, N> {
-        const {
-            assert!(
-                U == Self::INPUTS || U == 0,
-                "U must equal Dynamics::INPUTS (or 0: no input)"
-            )
-        };
+        const { check_input_count(U, Self::INPUTS) };
         let _ = (k, q, u);
         SMatrix::zeros()
     }
@@ -439,10 +439,7 @@ pub fn try_acceleration_forced<M: Dynamics<N, C>, const N: usize, const C: usize
     }
     let ((a, lambda), _) =
         crate::linalg::solve_kkt_regularised(&t.mass, &(-g.transpose()), &g, &rhs, &(-gamma))
-            .ok_or(StepError::SingularJacobian {
-                iteration: 0,
-                step: None,
-            })?;
+            .ok_or(StepError::singular(0))?;
     if a.iter().chain(lambda.iter()).all(finite) {
         Ok((a, lambda))
     } else {

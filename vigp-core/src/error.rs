@@ -296,6 +296,45 @@ impl fmt::Display for StepError {
 impl core::error::Error for StepError {}
 
 impl StepError {
+    /// [`StepError::NonFiniteResidual`] outside a rollout.
+    #[inline]
+    pub(crate) const fn non_finite_residual(iteration: usize) -> Self {
+        StepError::NonFiniteResidual {
+            iteration,
+            step: None,
+        }
+    }
+
+    /// [`StepError::SingularJacobian`] outside a rollout.
+    #[inline]
+    pub(crate) const fn singular(iteration: usize) -> Self {
+        StepError::SingularJacobian {
+            iteration,
+            step: None,
+        }
+    }
+
+    /// [`StepError::LineSearchFailed`] outside a rollout.
+    #[inline]
+    pub(crate) const fn line_search_failed(iteration: usize, residual: f64) -> Self {
+        StepError::LineSearchFailed {
+            iteration,
+            residual,
+            step: None,
+        }
+    }
+
+    /// [`StepError::NotConverged`] outside a rollout.
+    #[inline]
+    pub(crate) const fn not_converged(iterations: usize, residual: f64, tolerance: f64) -> Self {
+        StepError::NotConverged {
+            iterations,
+            residual,
+            tolerance,
+            step: None,
+        }
+    }
+
     /// The same error, tagged with a rollout step index (errors that cannot
     /// happen inside a rollout are returned as they are).
     pub fn at_step(mut self, k: usize) -> Self {

@@ -88,9 +88,8 @@ impl<const N: usize> StateJacobian<N> {
     pub fn identity() -> Self {
         Self {
             q_q: SMatrix::identity(),
-            q_v: SMatrix::zeros(),
-            v_q: SMatrix::zeros(),
             v_v: SMatrix::identity(),
+            ..Self::zeros()
         }
     }
 
@@ -109,14 +108,10 @@ impl<const N: usize> StateJacobian<N> {
     pub fn matrix<const Z: usize>(&self) -> SMatrix<f64, Z, Z> {
         const { assert!(Z == 2 * N, "Z must equal 2N") };
         let mut a = SMatrix::<f64, Z, Z>::zeros();
-        for i in 0..N {
-            for j in 0..N {
-                a[(i, j)] = self.q_q[(i, j)];
-                a[(i, N + j)] = self.q_v[(i, j)];
-                a[(N + i, j)] = self.v_q[(i, j)];
-                a[(N + i, N + j)] = self.v_v[(i, j)];
-            }
-        }
+        a.fixed_view_mut::<N, N>(0, 0).copy_from(&self.q_q);
+        a.fixed_view_mut::<N, N>(0, N).copy_from(&self.q_v);
+        a.fixed_view_mut::<N, N>(N, 0).copy_from(&self.v_q);
+        a.fixed_view_mut::<N, N>(N, N).copy_from(&self.v_v);
         a
     }
 
@@ -154,12 +149,8 @@ impl<const N: usize, const U: usize> InputJacobian<N, U> {
     pub fn matrix<const Z: usize>(&self) -> SMatrix<f64, Z, U> {
         const { assert!(Z == 2 * N, "Z must equal 2N") };
         let mut b = SMatrix::<f64, Z, U>::zeros();
-        for i in 0..N {
-            for j in 0..U {
-                b[(i, j)] = self.q_u[(i, j)];
-                b[(N + i, j)] = self.v_u[(i, j)];
-            }
-        }
+        b.fixed_view_mut::<N, U>(0, 0).copy_from(&self.q_u);
+        b.fixed_view_mut::<N, U>(N, 0).copy_from(&self.v_u);
         b
     }
 }
@@ -272,6 +263,28 @@ struct Groups<const N: usize, const U: usize> {
     u: Seeds<N, U>,
 }
 
+impl<const N: usize, const U: usize> Groups<N, U> {
+    /// ∂z₁/∂z₀ read from propagated groups.
+    #[inline]
+    fn state_jacobian(&self) -> StateJacobian<N> {
+        StateJacobian {
+            q_q: self.q.x,
+            q_v: self.v.x,
+            v_q: self.q.v,
+            v_v: self.v.v,
+        }
+    }
+
+    /// ∂z₁/∂u read from propagated groups.
+    #[inline]
+    fn input_jacobian(&self) -> InputJacobian<N, U> {
+        InputJacobian {
+            q_u: self.u.x,
+            v_u: self.u.v,
+        }
+    }
+}
+
 impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// Refuses an input vector with NaN or ±∞; `U` must equal
     /// [`Dynamics::INPUTS`], or be 0 for the input-free step: the public
@@ -279,12 +292,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
     /// the backstop against an `Inputs` implementation that contradicts
     /// [`Dynamics::INPUTS`].
     fn check_input<const U: usize>(u: &SVector<f64, U>) -> Result<(), StepError> {
-        const {
-            assert!(
-                U == M::INPUTS || U == 0,
-                "U must equal Dynamics::INPUTS (or 0: no input)"
-            )
-        };
+        const { crate::dynamics::check_input_count(U, M::INPUTS) };
         if max_abs(u).is_nan() {
             Err(StepError::NonFiniteInput { step: None })
         } else {
@@ -602,10 +610,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         } else {
             (SMatrix::zeros(), SMatrix::zeros())
         };
-        let singular = StepError::SingularJacobian {
-            iteration: 0,
-            step: None,
-        };
+        let singular = StepError::singular(0);
         let neg_i = -SMatrix::<f64, N, N>::identity();
         let (sx, sp, su) = kkt_solve3(&jac, &g1t, &(g2 * h), &(-dx), &(-g2), &neg_i, &(b * -a1))
             .ok_or(singular)?;
@@ -755,16 +760,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         Ok((
             z1,
             StepDerivatives {
-                a: StateJacobian {
-                    q_q: s.q.x,
-                    q_v: s.v.x,
-                    v_q: s.q.v,
-                    v_v: s.v.v,
-                },
-                b: InputJacobian {
-                    q_u: s.u.x,
-                    v_u: s.u.v,
-                },
+                a: s.state_jacobian(),
+                b: s.input_jacobian(),
             },
         ))
     }
@@ -896,18 +893,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             z1,
             p1,
             MomentumDerivatives {
-                z_z: StateJacobian {
-                    q_q: s.q.x,
-                    q_v: s.v.x,
-                    v_q: s.q.v,
-                    v_v: s.v.v,
-                },
+                z_z: s.state_jacobian(),
                 q_p: s.p.x,
                 v_p: s.p.v,
-                z_u: InputJacobian {
-                    q_u: s.u.x,
-                    v_u: s.u.v,
-                },
+                z_u: s.input_jacobian(),
                 p_q: s.q.p,
                 p_v: s.v.p,
                 p_p: s.p.p,

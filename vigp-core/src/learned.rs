@@ -524,12 +524,7 @@ where
     where
         M: crate::Inputs<U>,
     {
-        const {
-            assert!(
-                U == M::INPUTS || U == 0,
-                "U must equal Dynamics::INPUTS (or 0: no input)"
-            )
-        };
+        const { crate::dynamics::check_input_count(U, M::INPUTS) };
         if !z.is_finite() {
             return Err(StepError::NonFiniteState { step: None }.into());
         }
@@ -767,18 +762,40 @@ where
     where
         M: crate::Inputs<U>,
     {
-        if inputs.len() < out.len() {
-            return Err((
-                inputs.len(),
-                StepError::NonFiniteInput { step: None }.into(),
-            ));
-        }
-        let mut z = *z0;
-        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
-            let up = if k == 0 { u_prev } else { &inputs[k - 1] };
-            z = self.step_forced(&z, up, u).map_err(|e| (k, e))?;
-            *slot = z;
-        }
-        Ok(())
+        forced_rollout(z0, u_prev, inputs, out, |z, up, u| {
+            self.step_forced(z, up, u)
+        })
     }
+}
+
+/// The states after 1, 2, …, `out.len()` steps from `z0` of a step that
+/// reads the previous input: step k is `step(z_k, u_{k−1}, u_k)`
+/// (`u_prev` before the first). `inputs` shorter than `out` fails at step
+/// `inputs.len()` with [`StepError::NonFiniteInput`], before any step; a
+/// failing step returns its index with the error.
+#[inline]
+pub(crate) fn forced_rollout<const N: usize, const U: usize>(
+    z0: &State<N>,
+    u_prev: &SVector<f64, U>,
+    inputs: &[SVector<f64, U>],
+    out: &mut [State<N>],
+    mut step: impl FnMut(
+        &State<N>,
+        &SVector<f64, U>,
+        &SVector<f64, U>,
+    ) -> Result<State<N>, LearnedError>,
+) -> Result<(), (usize, LearnedError)> {
+    if inputs.len() < out.len() {
+        return Err((
+            inputs.len(),
+            StepError::NonFiniteInput { step: None }.into(),
+        ));
+    }
+    let mut z = *z0;
+    for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
+        let up = if k == 0 { u_prev } else { &inputs[k - 1] };
+        z = step(&z, up, u).map_err(|e| (k, e))?;
+        *slot = z;
+    }
+    Ok(())
 }

@@ -103,12 +103,22 @@ impl<const M: usize> FullPivLu<M> {
 
     /// Solve A X = B column by column.
     pub fn solve_matrix<const K: usize>(&self, b: &SMatrix<f64, M, K>) -> SMatrix<f64, M, K> {
-        let mut x = SMatrix::<f64, M, K>::zeros();
-        for k in 0..K {
-            x.set_column(k, &self.solve(&b.column(k).into_owned()));
-        }
-        x
+        solve_columns(b, |col| self.solve(col))
     }
+}
+
+/// X with column k = `solve(B column k)`: a factorisation's
+/// `solve_matrix` from its vector solve.
+#[inline]
+fn solve_columns<const M: usize, const K: usize>(
+    b: &SMatrix<f64, M, K>,
+    solve: impl Fn(&SVector<f64, M>) -> SVector<f64, M>,
+) -> SMatrix<f64, M, K> {
+    let mut x = SMatrix::<f64, M, K>::zeros();
+    for k in 0..K {
+        x.set_column(k, &solve(&b.column(k).into_owned()));
+    }
+    x
 }
 
 /// LU factorisation with partial (row) pivoting, P·A = L·U, for
@@ -259,11 +269,7 @@ impl<const M: usize> PartialLu<M> {
 
     /// Solve A X = B column by column.
     pub fn solve_matrix<const K: usize>(&self, b: &SMatrix<f64, M, K>) -> SMatrix<f64, M, K> {
-        let mut x = SMatrix::<f64, M, K>::zeros();
-        for k in 0..K {
-            x.set_column(k, &self.solve(&b.column(k).into_owned()));
-        }
-        x
+        solve_columns(b, |col| self.solve(col))
     }
 }
 
@@ -573,6 +579,24 @@ impl<const N: usize, const C: usize> ConstraintColumns<N, C> {
     }
 }
 
+/// One term a_ik of row i of [`schur_sparse`]: `acc` += a_ik·jr_k, `row`
+/// += a_ik·w_k·R_k.
+#[inline(always)]
+fn add_schur_term<const C: usize>(
+    aik: f64,
+    jr_k: f64,
+    w_k: f64,
+    rows_k: &[f64; C],
+    acc: &mut f64,
+    row: &mut [f64; C],
+) {
+    *acc += aik * jr_k;
+    let f = aik * w_k;
+    for (sij, x) in row.iter_mut().zip(rows_k.iter()) {
+        *sij += f * x;
+    }
+}
+
 /// The Schur complement S = A·W·R (C×C, into `s`) and the right-hand side
 /// A·(J⁻¹r) − c (returned), for W = diag(`w`) and R given by its rows
 /// (R = J⁻¹B with W = I; R = B with W = J⁻¹ for a diagonal J), visiting
@@ -600,12 +624,7 @@ fn schur_sparse<const N: usize, const C: usize>(
             let mut row = [0.0f64; C];
             let mut acc = -c[i];
             for &k in cols.row(i) {
-                let aik = a_s[k * C + i];
-                acc += aik * jr[k];
-                let f = aik * w[k];
-                for (sij, x) in row.iter_mut().zip(rows[k].iter()) {
-                    *sij += f * x;
-                }
+                add_schur_term(a_s[k * C + i], jr[k], w[k], &rows[k], &mut acc, &mut row);
             }
             *srow = row;
             *rh = acc;
@@ -620,11 +639,7 @@ fn schur_sparse<const N: usize, const C: usize>(
         for k in 0..N {
             let aik = a_s[k * C + i];
             if aik != 0.0 {
-                acc += aik * jr[k];
-                let f = aik * w[k];
-                for (sij, x) in row.iter_mut().zip(rows[k].iter()) {
-                    *sij += f * x;
-                }
+                add_schur_term(aik, jr[k], w[k], &rows[k], &mut acc, &mut row);
             }
         }
         *srow = row;

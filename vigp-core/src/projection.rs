@@ -90,39 +90,24 @@ pub fn project_velocity_from<M: Dynamics<N, C>, const N: usize, const C: usize>(
     for iteration in 0..=options.max_iterations {
         let (res_r, res_c) = (r.amax() / v_scale, c.amax() / g_scale);
         if !(res_r.is_finite() && res_c.is_finite()) {
-            return Err(StepError::NonFiniteResidual {
-                iteration,
-                step: None,
-            });
+            return Err(StepError::non_finite_residual(iteration));
         }
         let converged = res_r <= options.tolerance && res_c <= options.tolerance;
         let accept_stall = stalled && res_r.max(res_c) <= options.stall_tolerance;
         if converged || accept_stall {
-            let report = StepReport {
-                iterations: iteration,
-                residual: res_r.max(res_c),
-                stalled: !converged,
-                regularised,
-                continuation: 0.0,
-                restarted: false,
-                subdivisions: 0,
-            };
+            let report = StepReport::newton(iteration, res_r.max(res_c), !converged, regularised);
             return Ok((v, report));
         }
         if iteration == options.max_iterations {
-            return Err(StepError::NotConverged {
-                iterations: iteration,
-                residual: res_r.max(res_c),
-                tolerance: options.tolerance,
-                step: None,
-            });
+            return Err(StepError::not_converged(
+                iteration,
+                res_r.max(res_c),
+                options.tolerance,
+            ));
         }
         let a = gj * dt;
         let Some(((dv, dmu), reg)) = solve_kkt_regularised(&jac, &a.transpose(), &a, &r, &c) else {
-            return Err(StepError::SingularJacobian {
-                iteration,
-                step: None,
-            });
+            return Err(StepError::singular(iteration));
         };
         regularised |= reg;
         let phi0 = merit(&r, &c);
@@ -145,10 +130,9 @@ pub fn project_velocity_from<M: Dynamics<N, C>, const N: usize, const C: usize>(
         }
     }
     // the loop returns on its last iteration (iteration == max_iterations)
-    Err(StepError::NotConverged {
-        iterations: options.max_iterations,
-        residual: f64::NAN,
-        tolerance: options.tolerance,
-        step: None,
-    })
+    Err(StepError::not_converged(
+        options.max_iterations,
+        f64::NAN,
+        options.tolerance,
+    ))
 }

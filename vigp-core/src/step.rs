@@ -188,6 +188,26 @@ pub struct StepReport {
 }
 
 impl StepReport {
+    /// The report of one Newton solve of the core (no continuation, no
+    /// restart, no subdivision).
+    #[inline]
+    pub(crate) const fn newton(
+        iterations: usize,
+        residual: f64,
+        stalled: bool,
+        regularised: bool,
+    ) -> Self {
+        StepReport {
+            iterations,
+            residual,
+            stalled,
+            regularised,
+            continuation: 0.0,
+            restarted: false,
+            subdivisions: 0,
+        }
+    }
+
     pub(crate) fn merge(&mut self, other: &StepReport) {
         self.iterations += other.iterations;
         self.residual = self.residual.max(other.residual);
@@ -730,25 +750,6 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         input_jac: impl Fn(&SVector<f64, N>) -> SMatrix<f64, N, N>,
         ws: &mut Workspace<N, C>,
     ) -> Result<Forced<N, C>, StepError> {
-        self.newton_forced_rule::<MID, FORCED>(x1, p0, h, guess, input_force, input_jac, ws)
-    }
-
-    /// The Newton solve of [`Stepper::solve_forced_rule`].
-    #[inline(always)]
-    #[expect(
-        clippy::too_many_arguments,
-        reason = "internal: the sub-step's data, the two input closures and the terms workspace"
-    )]
-    fn newton_forced_rule<const MID: bool, const FORCED: bool>(
-        &self,
-        x1: &SVector<f64, N>,
-        p0: &SVector<f64, N>,
-        h: f64,
-        guess: &SVector<f64, N>,
-        input_force: impl Fn(&SVector<f64, N>) -> SVector<f64, N>,
-        input_jac: impl Fn(&SVector<f64, N>) -> SMatrix<f64, N, N>,
-        ws: &mut Workspace<N, C>,
-    ) -> Result<Forced<N, C>, StepError> {
         let alpha = if MID { 0.5 } else { 0.0 };
         let Workspace {
             t,
@@ -792,10 +793,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
             // M = 0 (every link massless, or masses so small that M
             // underflows): the DEL equations do not determine v₁, and every
             // guess would pass the residual test
-            return Err(StepError::SingularJacobian {
-                iteration: 0,
-                step: None,
-            });
+            return Err(StepError::singular(0));
         }
         let p_scale = match max_abs(p0) + m_bar {
             0.0 => 1.0,
@@ -934,21 +932,10 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
         let mut keep_schur = false;
         'newton: for iteration in 0..opts.max_iterations {
             if !err.is_finite() {
-                return Err(StepError::NonFiniteResidual {
-                    iteration,
-                    step: None,
-                });
+                return Err(StepError::non_finite_residual(iteration));
             }
             if err <= opts.tolerance {
-                let report = StepReport {
-                    iterations: iteration,
-                    residual: err,
-                    stalled: false,
-                    regularised,
-                    continuation: 0.0,
-                    restarted: false,
-                    subdivisions: 0,
-                };
+                let report = StepReport::newton(iteration, err, false, regularised);
                 if C > 0 {
                     // c and G at x₁ + h·v, the next step's x₁
                     (*g_slot, *g_at) = (cur, x1 + v * h);
@@ -994,10 +981,7 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     jac += fq * (alpha * a1 * h);
                 }
             }
-            let singular = StepError::SingularJacobian {
-                iteration,
-                step: None,
-            };
+            let singular = StepError::singular(iteration);
             // this iteration's direction comes from a kept S (first-order
             // rule with constraints and a constant J)
             let mut chord = false;
@@ -1016,15 +1000,8 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     if bound <= 0.5 * opts.tolerance {
                         let v1 = v + dv;
                         if v1.iter().all(|x| x.is_finite()) {
-                            let report = StepReport {
-                                iterations: iteration + 1,
-                                residual: bound,
-                                stalled: false,
-                                regularised,
-                                continuation: 0.0,
-                                restarted: false,
-                                subdivisions: 0,
-                            };
+                            let report =
+                                StepReport::newton(iteration + 1, bound, false, regularised);
                             return Ok((v1, M::mass_times(t, &v1), report, lambda));
                         }
                     }
@@ -1135,51 +1112,30 @@ impl<M: Dynamics<N, C>, const N: usize, const C: usize> Stepper<M, N, C> {
                     // no decrease along the exact Newton direction: accept
                     // at the attainable accuracy, or fail
                     if err <= opts.stall_tolerance {
-                        let report = StepReport {
-                            iterations: iteration + 1,
-                            residual: err,
-                            stalled: true,
-                            regularised,
-                            continuation: 0.0,
-                            restarted: false,
-                            subdivisions: 0,
-                        };
+                        let report = StepReport::newton(iteration + 1, err, true, regularised);
                         if C > 0 {
                             // c and G at x₁ + h·v, the next step's x₁
                             (*g_slot, *g_at) = (cur, x1 + v * h);
                         }
                         return Ok((v, momentum(t, &bu, &v), report, lambda));
                     }
-                    return Err(StepError::LineSearchFailed {
-                        iteration,
-                        residual: err,
-                        step: None,
-                    });
+                    return Err(StepError::line_search_failed(iteration, err));
                 }
             }
         }
         if err <= opts.tolerance {
-            let report = StepReport {
-                iterations: opts.max_iterations,
-                residual: err,
-                stalled: false,
-                regularised,
-                continuation: 0.0,
-                restarted: false,
-                subdivisions: 0,
-            };
+            let report = StepReport::newton(opts.max_iterations, err, false, regularised);
             if C > 0 {
                 // c and G at x₁ + h·v, the next step's x₁
                 (*g_slot, *g_at) = (cur, x1 + v * h);
             }
             return Ok((v, momentum(t, &bu, &v), report, lambda));
         }
-        Err(StepError::NotConverged {
-            iterations: opts.max_iterations,
-            residual: err,
-            tolerance: opts.tolerance,
-            step: None,
-        })
+        Err(StepError::not_converged(
+            opts.max_iterations,
+            err,
+            opts.tolerance,
+        ))
     }
 }
 

@@ -113,10 +113,7 @@ impl<const N: usize, const U: usize> VelocityDerivatives<N, U> {
         v_p: &SVector<f64, N>,
         h: f64,
     ) -> Result<(), StepError> {
-        let singular = StepError::SingularJacobian {
-            iteration: 0,
-            step: None,
-        };
+        let singular = StepError::singular(0);
         let eye = SMatrix::<f64, N, N>::identity();
         let y = x1 + v_p * h;
         let (_, g) = model.constraints_and_jacobian(k, &y);

@@ -553,6 +553,16 @@ fn negligible_inertia<const B: usize>(
     Ok(())
 }
 
+/// The compile-time check of an input vector's length `u` against the
+/// number of actuated joints (`inputs`): equal, or 0 (no input). Call it
+/// in a `const` block.
+const fn check_input_count(u: usize, inputs: usize) {
+    assert!(
+        u == inputs || u == 0,
+        "U must equal the number of inputs (or 0: no input)"
+    )
+}
+
 /// Diagnostics of a converged step.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LieStepReport {
@@ -762,12 +772,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     where
         S: crate::Inputs<U>,
     {
-        const {
-            assert!(
-                U == S::INPUT_JOINTS.len() || U == 0,
-                "U must equal the number of inputs (or 0: no input)"
-            )
-        };
+        const { check_input_count(U, S::INPUT_JOINTS.len()) };
         z.validate()?;
         if !u.iter().all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
@@ -790,12 +795,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     where
         S: crate::Inputs<U>,
     {
-        const {
-            assert!(
-                U == S::INPUT_JOINTS.len() || U == 0,
-                "U must equal the number of inputs (or 0: no input)"
-            )
-        };
+        const { check_input_count(U, S::INPUT_JOINTS.len()) };
         let Some((first, rest)) = out.split_first_mut() else {
             return Ok(());
         };
@@ -869,21 +869,17 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             let scale = 1.0 + x.iter().map(|x| x.amax()).fold(0.0, f64::max);
             let err = g.amax() / scale;
             if !err.is_finite() {
-                return Err(StepError::NonFiniteResidual {
-                    iteration,
-                    step: None,
-                });
+                return Err(StepError::non_finite_residual(iteration));
             }
             if err <= self.options.tolerance {
                 return Ok(iteration);
             }
             if iteration == self.options.max_iterations {
-                return Err(StepError::NotConverged {
-                    iterations: iteration,
-                    residual: err,
-                    tolerance: self.options.tolerance,
-                    step: None,
-                });
+                return Err(StepError::not_converged(
+                    iteration,
+                    err,
+                    self.options.tolerance,
+                ));
             }
             let y = FullPivLu::new(jac * jac.transpose(), 1e-13).solve(&g);
             let d = jac.transpose() * y;
@@ -953,10 +949,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         };
         for iteration in 0..=self.options.max_iterations {
             if !err.is_finite() {
-                return Err(StepError::NonFiniteResidual {
-                    iteration,
-                    step: None,
-                });
+                return Err(StepError::non_finite_residual(iteration));
             }
             if err <= self.options.tolerance {
                 return Ok(v);
@@ -965,10 +958,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 break;
             }
             let Some((dv, dl)) = solve_kkt(&eye, &gh.transpose(), &gh, &(-r), &(-c)) else {
-                return Err(StepError::SingularJacobian {
-                    iteration,
-                    step: None,
-                });
+                return Err(StepError::singular(iteration));
             };
             mu = mu.max(1.1 * (lambda + dl).amax());
             let phi = merit(&v, &c, mu);
@@ -986,20 +976,15 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 }
                 alpha *= 0.5;
                 if alpha < self.options.min_step {
-                    return Err(StepError::LineSearchFailed {
-                        iteration,
-                        residual: err,
-                        step: None,
-                    });
+                    return Err(StepError::line_search_failed(iteration, err));
                 }
             }
         }
-        Err(StepError::NotConverged {
-            iterations: self.options.max_iterations,
-            residual: err,
-            tolerance: self.options.tolerance,
-            step: None,
-        })
+        Err(StepError::not_converged(
+            self.options.max_iterations,
+            err,
+            self.options.tolerance,
+        ))
     }
 
     /// A consistent initial state near `z`: its configuration projected
@@ -1270,10 +1255,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let mut factorizations = 0;
         for iteration in 0..=self.options.max_iterations {
             if !err.is_finite() {
-                return Err(StepError::NonFiniteResidual {
-                    iteration,
-                    step: None,
-                });
+                return Err(StepError::non_finite_residual(iteration));
             }
             if err <= self.options.tolerance {
                 let (v, w) = unpack(&nu);
@@ -1298,16 +1280,10 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
             let fresh = kkt.is_none();
             if fresh {
                 factorizations += 1;
-                kkt = Some(self.factor(&d, &nu).ok_or(StepError::SingularJacobian {
-                    iteration,
-                    step: None,
-                })?);
+                kkt = Some(self.factor(&d, &nu).ok_or(StepError::singular(iteration))?);
             }
             let Some(factor) = kkt.as_ref() else {
-                return Err(StepError::SingularJacobian {
-                    iteration,
-                    step: None,
-                });
+                return Err(StepError::singular(iteration));
             };
             let (dnu, dl) = factor.solve(&(-r), &(-c));
             let mut alpha = 1.0;
@@ -1328,20 +1304,15 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                         kkt = None;
                         break;
                     }
-                    return Err(StepError::LineSearchFailed {
-                        iteration,
-                        residual: err,
-                        step: None,
-                    });
+                    return Err(StepError::line_search_failed(iteration, err));
                 }
             }
         }
-        Err(StepError::NotConverged {
-            iterations: self.options.max_iterations,
-            residual: err,
-            tolerance: self.options.tolerance,
-            step: None,
-        })
+        Err(StepError::not_converged(
+            self.options.max_iterations,
+            err,
+            self.options.tolerance,
+        ))
     }
 
     /// The KKT matrix [A  −G₁ᵀ; Ĝ₂  0] at ν, factored: A⁻¹ blockwise

@@ -26,6 +26,39 @@ fn parent_of<R: Real, const B: usize>(j: &Joint3, poses: &[Pose3<R>; B]) -> Pose
     }
 }
 
+/// The pose and motion of the parent of joint `j` (the world frame at
+/// rest for a world parent).
+#[inline]
+fn parent_motion_of<R: Real, const B: usize>(
+    j: &Joint3,
+    poses: &[Pose3<R>; B],
+    motions: &[Motion3<R>; B],
+) -> (Pose3<R>, Motion3<R>) {
+    match j.parent {
+        Some(p) => (poses[p], motions[p]),
+        None => (Pose3::identity(), Motion3::zero()),
+    }
+}
+
+/// The rates of joint `j` ([`joint_rates`]) at the link poses and motions,
+/// into `rates`; returns how many it has.
+#[inline]
+fn rates_of<R: Real, const B: usize>(
+    j: &Joint3,
+    poses: &[Pose3<R>; B],
+    motions: &[Motion3<R>; B],
+    rates: &mut [R; 3],
+) -> usize {
+    let (pp, pm) = parent_motion_of(j, poses, motions);
+    joint_rates(j, (&pp, &pm), (&poses[j.child], &motions[j.child]), rates)
+}
+
+/// Whether an input drives a loop joint (one without a minimal coordinate).
+#[inline]
+fn inputs_drive_loops<const J: usize>(layout: &Layout<J>, inputs: &[usize]) -> bool {
+    inputs.iter().any(|&k| layout.coordinate[k] == usize::MAX)
+}
+
 /// Link frame poses for minimal coordinates `q`, in link declaration order.
 pub fn poses<S, R, const B: usize, const J: usize, const N: usize>(
     sys: &S,
@@ -65,10 +98,7 @@ where
     let mut motions = [Motion3::zero(); B];
     for &t in &S::TREE {
         let j = &joints[t];
-        let (parent, pm) = match j.parent {
-            Some(p) => (poses[p], motions[p]),
-            None => (Pose3::identity(), Motion3::zero()),
-        };
+        let (parent, pm) = parent_motion_of(j, &poses, &motions);
         let o = layout.coordinate[t];
         let n = j.kind.coordinates();
         let c = &q.as_slice()[o..o + n];
@@ -199,9 +229,7 @@ where
 {
     let joints = sys.joints();
     let layout = Layout::of::<S, B>(&joints);
-    let loops = S::INPUT_JOINTS
-        .iter()
-        .any(|&k| layout.coordinate[k] == usize::MAX);
+    let loops = inputs_drive_loops(&layout, S::INPUT_JOINTS);
     let poses = if loops {
         poses::<S, R, B, J, N>(sys, q)
     } else {
@@ -260,9 +288,7 @@ where
 {
     let joints = sys.joints();
     let layout = Layout::of::<S, B>(&joints);
-    let loops = S::INPUT_JOINTS
-        .iter()
-        .any(|&k| layout.coordinate[k] == usize::MAX);
+    let loops = inputs_drive_loops(&layout, S::INPUT_JOINTS);
     if !loops {
         return nalgebra::SMatrix::zeros();
     }
@@ -309,17 +335,8 @@ where
         if j.damping == 0.0 {
             continue;
         }
-        let (pp, pm) = match j.parent {
-            Some(p) => (poses[p], motions[p]),
-            None => (Pose3::identity(), Motion3::zero()),
-        };
         let mut rates = [R::from_f64(0.0); 3];
-        let n = joint_rates(
-            j,
-            (&pp, &pm),
-            (&poses[j.child], &motions[j.child]),
-            &mut rates,
-        );
+        let n = rates_of(j, &poses, &motions, &mut rates);
         for r in &rates[..n] {
             out = out + *r * *r * (0.5 * j.damping);
         }
@@ -521,17 +538,8 @@ fn damping_rows<S, R, const B: usize, const J: usize, const N: usize>(
             if jt.damping == 0.0 {
                 continue;
             }
-            let (pp, pm) = match jt.parent {
-                Some(p) => (poses[p], motions[p]),
-                None => (Pose3::identity(), Motion3::zero()),
-            };
             let mut r = [R::from_f64(0.0); 3];
-            let n = joint_rates(
-                jt,
-                (&pp, &pm),
-                (&poses[jt.child], &motions[jt.child]),
-                &mut r,
-            );
+            let n = rates_of(jt, &poses, &motions, &mut r);
             counts[k] = n;
             for (row, rate) in r[..n].iter().enumerate() {
                 rows[k][row][j] = *rate;

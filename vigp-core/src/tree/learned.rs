@@ -374,18 +374,8 @@ impl<'a, const N: usize, const D: usize> LearnedTreeStepper<'a, N, D> {
         out: &mut [State<N>],
         ws: &mut [BodyScratch; N],
     ) -> Result<(), (usize, LearnedError)> {
-        if inputs.len() < out.len() {
-            return Err((
-                inputs.len(),
-                StepError::NonFiniteInput { step: None }.into(),
-            ));
-        }
-        let mut z = *z0;
-        for (k, (slot, u)) in out.iter_mut().zip(inputs).enumerate() {
-            let up = if k == 0 { u_prev } else { &inputs[k - 1] };
-            z = self.step(&z, up, u, ws).map_err(|e| (k, e))?;
-            *slot = z;
-        }
-        Ok(())
+        let step =
+            |z: &State<N>, up: &SVector<f64, U>, u: &SVector<f64, U>| self.step(z, up, u, ws);
+        crate::learned::forced_rollout(z0, u_prev, inputs, out, step)
     }
 }

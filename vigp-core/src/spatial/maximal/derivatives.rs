@@ -233,10 +233,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
         let (z1, _, lambda) = self.solve_full(z, &pack(&z.v, &z.w), u.as_slice())?;
         let d = self.prepare(z, u.as_slice());
         let nu = pack::<B, N>(&z1.v, &z1.w);
-        let kkt = self.factor(&d, &nu).ok_or(StepError::SingularJacobian {
-            iteration: 0,
-            step: None,
-        })?;
+        let kkt = self.factor(&d, &nu).ok_or(StepError::singular(0))?;
         let poses: [Pose3<f64>; B] =
             core::array::from_fn(|i| link_pose(&self.links[i], &d.x1[i], &d.q1[i]));
 
