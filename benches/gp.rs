@@ -119,6 +119,29 @@ fn predict(c: &mut Criterion) {
 /// factor's storage grows geometrically, so a reallocation is amortised as
 /// it is while a system runs), and the sparse GP's one-point prediction at
 /// M = 256.
+/// Adds the samples `xn` (4 inputs each), `yn` (1 output each) to a copy of
+/// `gp` one at a time.
+fn bench_add_one_at_a_time(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    name: &str,
+    gp: &Gp,
+    xn: &[f64],
+    yn: &[f64],
+) {
+    g.bench_function(name, |b| {
+        b.iter_batched(
+            || gp.clone(),
+            |mut gp| {
+                for (xi, yi) in xn.chunks(4).zip(yn.chunks(1)) {
+                    gp.add_samples(black_box(xi), yi).unwrap();
+                }
+                gp
+            },
+            BatchSize::LargeInput,
+        )
+    });
+}
+
 fn online_and_sparse(c: &mut Criterion) {
     let mut g = c.benchmark_group("online");
     g.sample_size(20).measurement_time(Duration::from_secs(6));
@@ -134,35 +157,13 @@ fn online_and_sparse(c: &mut Criterion) {
     )
     .unwrap();
     let (xn, yn) = (&x[2048 * 4..], &y[2048..]);
-    g.bench_function("exact_N2048_add_16_one_at_a_time", |b| {
-        b.iter_batched(
-            || exact.clone(),
-            |mut gp| {
-                for (xi, yi) in xn.chunks(4).zip(yn.chunks(1)) {
-                    gp.add_samples(black_box(xi), yi).unwrap();
-                }
-                gp
-            },
-            BatchSize::LargeInput,
-        )
-    });
+    bench_add_one_at_a_time(&mut g, "exact_N2048_add_16_one_at_a_time", &exact, xn, yn);
     let sopts = TrainOptions {
         method: Method::Sparse(SparseOptions::kmeans(256)),
         ..Default::default()
     };
     let sparse = Gp::fit(&x[..2048 * 4], 4, &y[..2048], 1, &[hp], &sopts).unwrap();
-    g.bench_function("sparse_M256_add_16_one_at_a_time", |b| {
-        b.iter_batched(
-            || sparse.clone(),
-            |mut gp| {
-                for (xi, yi) in xn.chunks(4).zip(yn.chunks(1)) {
-                    gp.add_samples(black_box(xi), yi).unwrap();
-                }
-                gp
-            },
-            BatchSize::LargeInput,
-        )
-    });
+    bench_add_one_at_a_time(&mut g, "sparse_M256_add_16_one_at_a_time", &sparse, xn, yn);
     g.finish();
     let mut g = c.benchmark_group("predict");
     let mut ws = sparse.workspace();

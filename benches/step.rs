@@ -25,33 +25,38 @@ fn bench_step<I: Integrator>(
     g.bench_function(name, |b| b.iter(|| integrator.step(black_box(z)).unwrap()));
 }
 
+/// The first-order VI step of a planar mechanism from the minimal state
+/// `z`, in its minimal coordinates (`<name>/minimal/vi`) and in its maximal
+/// ones (`<name>/maximal/vi`, from `z` taken there).
+fn bench_views<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM: usize>(
+    g: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    name: &str,
+    minimal: Mn,
+    maximal: Mx,
+    z: &State<N>,
+    dt: f64,
+) where
+    Mn: Mechanism<N, C> + Coordinates<N, NM> + Clone,
+    Mx: Mechanism<NM, CM> + Clone,
+{
+    let zm = minimal.to_maximal(z, dt);
+    let vi = Variational::new(minimal, dt).unwrap();
+    bench_step(g, &format!("{name}/minimal/vi"), &vi, z);
+    let vim = Variational::new(maximal, dt).unwrap();
+    bench_step(g, &format!("{name}/maximal/vi"), &vim, &zm);
+}
+
 fn bench_steps(c: &mut Criterion) {
     let dt = 0.01;
     let mut g = c.benchmark_group("step");
 
     let p = Pendulum::default();
     let z = State::new([1.0], [0.5]);
-    let vi = Variational::new(p.minimal(), dt).unwrap();
-    bench_step(&mut g, "pendulum/minimal/vi", &vi, &z);
-    let vim = Variational::new(p.maximal(), dt).unwrap();
-    bench_step(
-        &mut g,
-        "pendulum/maximal/vi",
-        &vim,
-        &p.minimal().to_maximal(&z, dt),
-    );
+    bench_views(&mut g, "pendulum", p.minimal(), p.maximal(), &z, dt);
 
     let cp = Cartpole::default();
     let z = State::new([0.2, 2.0], [0.3, 0.5]);
-    let vi = Variational::new(cp.minimal(), dt).unwrap();
-    bench_step(&mut g, "cartpole/minimal/vi", &vi, &z);
-    let vim = Variational::new(cp.maximal(), dt).unwrap();
-    bench_step(
-        &mut g,
-        "cartpole/maximal/vi",
-        &vim,
-        &cp.minimal().to_maximal(&z, dt),
-    );
+    bench_views(&mut g, "cartpole", cp.minimal(), cp.maximal(), &z, dt);
 
     let dp = DoublePendulum::default();
     let z = State::new([1.0, -0.5], [0.5, 1.0]);

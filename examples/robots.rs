@@ -287,7 +287,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     declared(steps, dt)
 }
 
-/// ns/step of a rollout of `steps` steps of the closed form
+/// N and the ns/step of a rollout of `steps` steps of the closed form
 /// (`Variational::step`) and of the tree engine (`Robot::step_in` on
 /// `robot()`) of one planar description, from q = (1, −0.5, 0, …) at rest;
 /// the fastest of 7 rollouts each, alternating.
@@ -296,7 +296,7 @@ fn declared_row<M: Mechanism<N, 0> + Copy, const N: usize>(
     robot: &Robot,
     steps: usize,
     dt: f64,
-) -> Result<(f64, f64), Box<dyn std::error::Error>> {
+) -> Result<(usize, f64, f64), Box<dyn std::error::Error>> {
     let vi = Variational::new(model, dt)?;
     let mut q0 = [0.0; N];
     (q0[0], q0[1]) = (1.0, -0.5);
@@ -314,7 +314,7 @@ fn declared_row<M: Mechanism<N, 0> + Copy, const N: usize>(
         closed = closed.min(t.elapsed().as_secs_f64() * 1e9 / steps as f64);
         engine = engine.min(time(robot, &robot_z0, dt, steps, 1).0);
     }
-    Ok((closed, engine))
+    Ok((N, closed, engine))
 }
 
 /// The closed form against the tree engine on the same planar
@@ -328,45 +328,19 @@ fn declared(steps: usize, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
     );
     println!("| N | closed form (ns/step) | tree engine (ns/step) | engine / closed form |");
     println!("|---|---|---|---|");
+    let (rods2, rods4, rods6, rods8) = (
+        Rods2::default(),
+        Rods4::default(),
+        Rods6::default(),
+        Rods8::default(),
+    );
     let rows = [
-        (
-            2,
-            declared_row(
-                Rods2::default().minimal(),
-                &Rods2::default().robot()?,
-                steps,
-                dt,
-            )?,
-        ),
-        (
-            4,
-            declared_row(
-                Rods4::default().minimal(),
-                &Rods4::default().robot()?,
-                steps,
-                dt,
-            )?,
-        ),
-        (
-            6,
-            declared_row(
-                Rods6::default().minimal(),
-                &Rods6::default().robot()?,
-                steps,
-                dt,
-            )?,
-        ),
-        (
-            8,
-            declared_row(
-                Rods8::default().minimal(),
-                &Rods8::default().robot()?,
-                steps,
-                dt,
-            )?,
-        ),
+        declared_row(rods2.minimal(), &rods2.robot()?, steps, dt)?,
+        declared_row(rods4.minimal(), &rods4.robot()?, steps, dt)?,
+        declared_row(rods6.minimal(), &rods6.robot()?, steps, dt)?,
+        declared_row(rods8.minimal(), &rods8.robot()?, steps, dt)?,
     ];
-    for (n, (closed, engine)) in rows {
+    for (n, closed, engine) in rows {
         println!(
             "| {n} | {closed:.0} | {engine:.0} | {:.2} |",
             engine / closed

@@ -195,6 +195,25 @@ fn settings(cli: &Cli) -> Result<Settings, Box<dyn Error>> {
 }
 
 /// Runs the reference, the sweep and the energy runs of one system.
+/// [`evaluate`] of `model` started at rest at `q0` (`start`: its label),
+/// without independent checks; `(name, label)`: the system's name and
+/// its label in the progress lines.
+fn at_rest<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    (name, label): (&'static str, &str),
+    model: M,
+    q0: [f64; N],
+    start: &str,
+    s: &Settings,
+) -> Result<SystemResult, Box<dyn Error>> {
+    let problem = Problem {
+        name,
+        model,
+        q0: SVector::from(q0),
+        qdot0: SVector::zeros(),
+    };
+    evaluate(&problem, label, start.into(), &[], s)
+}
+
 fn evaluate<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     problem: &Problem<M, N, C>,
     label: &str,
@@ -325,44 +344,28 @@ fn main() -> Result<(), Box<dyn Error>> {
         s.energy_horizon,
         s.energy_steps
     );
-    let zero2 = SVector::<f64, 2>::zeros();
     let mut results = Vec::new();
     for name in &cli.systems {
         let r = match name.as_str() {
-            "pendulum" => evaluate(
-                &Problem {
-                    name: "pendulum",
-                    model: Pendulum::default().minimal(),
-                    q0: SVector::from([1.5]),
-                    qdot0: SVector::zeros(),
-                },
-                "pendulum",
-                "θ = 1.5 rad".into(),
-                &[],
+            "pendulum" => at_rest(
+                ("pendulum", "pendulum"),
+                Pendulum::default().minimal(),
+                [1.5],
+                "θ = 1.5 rad",
                 &s,
             )?,
-            "cartpole" => evaluate(
-                &Problem {
-                    name: "cartpole",
-                    model: Cartpole::default().minimal(),
-                    q0: SVector::from([0.0, 2.0]),
-                    qdot0: zero2,
-                },
-                "cartpole",
-                "x = 0 m, θ = 2.0 rad".into(),
-                &[],
+            "cartpole" => at_rest(
+                ("cartpole", "cartpole"),
+                Cartpole::default().minimal(),
+                [0.0, 2.0],
+                "x = 0 m, θ = 2.0 rad",
                 &s,
             )?,
-            "double_pendulum" => evaluate(
-                &Problem {
-                    name: "double_pendulum",
-                    model: DoublePendulum::default().minimal(),
-                    q0: SVector::from([1.0, 0.5]),
-                    qdot0: zero2,
-                },
-                "double pendulum",
-                "θ = (1.0, 0.5) rad".into(),
-                &[],
+            "double_pendulum" => at_rest(
+                ("double_pendulum", "double pendulum"),
+                DoublePendulum::default().minimal(),
+                [1.0, 0.5],
+                "θ = (1.0, 0.5) rad",
                 &s,
             )?,
             "fourbar" => {

@@ -142,6 +142,31 @@ fn write_rows(
     Ok(path)
 }
 
+/// A point's columns from `status` to `note`: `ok`, the `measured`
+/// columns that `ok` gives and an empty note for a point that ran, else
+/// the failure's status, `measured` empty columns and its message.
+fn outcome_columns<M>(
+    outcome: &Result<M, Failure>,
+    measured: usize,
+    ok: impl FnOnce(&M) -> Vec<String>,
+) -> Vec<String> {
+    match outcome {
+        Ok(m) => {
+            let mut r = vec!["ok".to_string()];
+            r.extend(ok(m));
+            debug_assert_eq!(r.len(), 1 + measured);
+            r.push(String::new());
+            r
+        }
+        Err(f) => {
+            let mut r = vec![f.status().to_string()];
+            r.extend(std::iter::repeat_n(String::new(), measured));
+            r.push(f.message.clone());
+            r
+        }
+    }
+}
+
 fn write_error_csv(dir: &Path, systems: &[SystemResult]) -> Result<PathBuf, Box<dyn Error>> {
     let header = [
         "system",
@@ -171,9 +196,8 @@ fn write_error_csv(dir: &Path, systems: &[SystemResult]) -> Result<PathBuf, Box<
                 p.dt.to_string(),
                 p.steps.to_string(),
             ];
-            let rest = match &p.outcome {
-                Ok(m) => vec![
-                    "ok".to_string(),
+            let rest = outcome_columns(&p.outcome, 11, |m| {
+                vec![
                     m.error.to_string(),
                     (m.error >= s.fit_window.lo).to_string(),
                     opt(m.solver_error),
@@ -187,15 +211,8 @@ fn write_error_csv(dir: &Path, systems: &[SystemResult]) -> Result<PathBuf, Box<
                     m.cost_max.to_string(),
                     (m.cost * p.dt * 1e6).to_string(),
                     m.reps.to_string(),
-                    String::new(),
-                ],
-                Err(f) => {
-                    let mut r = vec![f.status().to_string()];
-                    r.extend(std::iter::repeat_n(String::new(), 11));
-                    r.push(f.message.clone());
-                    r
-                }
-            };
+                ]
+            });
             rows.push(base.into_iter().chain(rest).collect());
         }
     }
@@ -337,24 +354,16 @@ fn write_energy_csv(dir: &Path, systems: &[SystemResult]) -> Result<PathBuf, Box
                 p.steps.to_string(),
                 horizon.to_string(),
             ];
-            let rest = match &p.outcome {
-                Ok(m) => vec![
-                    "ok".to_string(),
+            let rest = outcome_columns(&p.outcome, 6, |m| {
+                vec![
                     m.max_de.to_string(),
                     m.max_de_first_tenth.to_string(),
                     m.max_de_last_tenth.to_string(),
                     m.max_constraint_violation.to_string(),
                     m.cost.to_string(),
                     (m.cost * p.dt * 1e6).to_string(),
-                    String::new(),
-                ],
-                Err(f) => {
-                    let mut r = vec![f.status().to_string()];
-                    r.extend(std::iter::repeat_n(String::new(), 6));
-                    r.push(f.message.clone());
-                    r
-                }
-            };
+                ]
+            });
             rows.push(base.into_iter().chain(rest).collect());
         }
     }

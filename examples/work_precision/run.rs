@@ -401,11 +401,9 @@ pub fn midpoint_positions<M: Mechanism<N, C> + Copy, const N: usize, const C: us
     steps: usize,
     t_end: f64,
 ) -> Result<SVector<f64, N>, StepError> {
-    let h = t_end / steps as f64;
-    let z0 = problem.start(Method::Vi2, h)?;
-    let vi = Variational::midpoint(problem.model, h)?.tolerance(REFERENCE_TOLERANCE)?;
-    let (end, _) = timed_run(&vi, &z0, steps);
-    Ok(end?.q)
+    final_positions(problem, Method::Vi2, steps, t_end, |h| {
+        Variational::midpoint(problem.model, h)?.tolerance(REFERENCE_TOLERANCE)
+    })
 }
 
 /// Final positions of RK4 at step `t_end / steps`.
@@ -414,9 +412,27 @@ pub fn rk4_positions<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     steps: usize,
     t_end: f64,
 ) -> Result<SVector<f64, N>, StepError> {
+    final_positions(problem, Method::Rk4, steps, t_end, |h| {
+        Ok(Rk4::new(problem.model, h))
+    })
+}
+
+/// Final positions at step h = `t_end / steps` of the integrator that
+/// `integrator(h)` makes, from `method`'s start state.
+fn final_positions<I, M, const N: usize, const C: usize>(
+    problem: &Problem<M, N, C>,
+    method: Method,
+    steps: usize,
+    t_end: f64,
+    integrator: impl FnOnce(f64) -> Result<I, StepError>,
+) -> Result<SVector<f64, N>, StepError>
+where
+    I: Integrator<State = State<N>, Error = StepError>,
+    M: Mechanism<N, C> + Copy,
+{
     let h = t_end / steps as f64;
-    let z0 = problem.start(Method::Rk4, h)?;
-    let (end, _) = timed_run(&Rk4::new(problem.model, h), &z0, steps);
+    let z0 = problem.start(method, h)?;
+    let (end, _) = timed_run(&integrator(h)?, &z0, steps);
     Ok(end?.q)
 }
 

@@ -35,10 +35,38 @@ pub(super) enum Command {
     Excite(ExciteArgs),
 }
 
-/// A robot loaded from URDF at run time instead of a registered mechanism
-/// (`fit`, `simulate`, `identify`, `excite`).
+/// What a command runs on: a mechanism given on the command line, or the
+/// mechanism that a saved model file names.
+#[derive(Clone, Copy, Debug)]
+pub(super) enum Target<'a> {
+    /// `fit`, `simulate`, `identify`, `excite`: `--system` or `--urdf`.
+    Mechanism(&'a MechanismArgs),
+    /// `score`, `predict`, `export`: the `--model` file.
+    Model(&'a std::path::Path),
+}
+
+impl Command {
+    /// What the command runs on.
+    pub(super) fn target(&self) -> Target<'_> {
+        match self {
+            Command::Fit(FitArgs { mechanism, .. })
+            | Command::Simulate(SimulateArgs { mechanism, .. })
+            | Command::Identify(IdentifyArgs { mechanism, .. })
+            | Command::Excite(ExciteArgs { mechanism, .. }) => Target::Mechanism(mechanism),
+            Command::Score(ScoreArgs { model, .. })
+            | Command::Predict(PredictArgs { model, .. })
+            | Command::Export(ExportArgs { model, .. }) => Target::Model(model),
+        }
+    }
+}
+
+/// The mechanism of `fit`, `simulate`, `identify` and `excite`: a
+/// registered one by name, or a robot loaded from URDF at run time.
 #[derive(Args, Debug, Clone, Default)]
-pub(super) struct RobotArgs {
+pub(super) struct MechanismArgs {
+    /// The mechanism (with several registered; case and `_` do not matter).
+    #[arg(long)]
+    pub(super) system: Option<String>,
     /// A robot from a URDF file instead of `--system`: its joints with a
     /// coordinate (revolute, continuous, prismatic; fixed joints merged)
     /// are the log's columns, stepped by the linear-time tree engine.
@@ -187,11 +215,8 @@ pub(super) enum NoiseArg {
 
 #[derive(Args, Debug, Clone)]
 pub(super) struct IdentifyArgs {
-    /// The mechanism (with several registered; case and `_` do not matter).
-    #[arg(long)]
-    pub(super) system: Option<String>,
     #[command(flatten)]
-    pub(super) robot: RobotArgs,
+    pub(super) mechanism: MechanismArgs,
     /// The log (CSV: run,t,<coordinates>[,u_<joint>…], as for `fit`).
     #[arg(long)]
     pub(super) data: PathBuf,
@@ -231,11 +256,8 @@ pub(super) struct IdentifyArgs {
 
 #[derive(Args, Debug, Clone)]
 pub(super) struct FitArgs {
-    /// The mechanism (with several registered; case and `_` do not matter).
-    #[arg(long)]
-    pub(super) system: Option<String>,
     #[command(flatten)]
-    pub(super) robot: RobotArgs,
+    pub(super) mechanism: MechanismArgs,
     /// Training data (CSV: run,t,<coordinates>[,u_<joint>…]; row k's input is
     /// held from t_k to t_{k+1}, so the step from row k to row k + 1 is
     /// driven by row k + 1's input).
@@ -399,11 +421,8 @@ pub(super) struct ExportArgs {
 
 #[derive(Args, Debug, Clone)]
 pub(super) struct SimulateArgs {
-    /// The mechanism (with several registered; case and `_` do not matter).
-    #[arg(long)]
-    pub(super) system: Option<String>,
     #[command(flatten)]
-    pub(super) robot: RobotArgs,
+    pub(super) mechanism: MechanismArgs,
     /// Start positions, one per coordinate in the log's column order
     /// (comma-separated).
     #[arg(
@@ -451,13 +470,10 @@ pub(super) struct SimulateArgs {
 
 #[derive(Args, Debug, Clone)]
 pub(super) struct ExciteArgs {
-    /// The mechanism (with several registered; case and `_` do not matter).
-    #[arg(long)]
-    pub(super) system: Option<String>,
-    /// Or a robot from URDF, its design kept within the URDF's joint
-    /// position and velocity limits.
+    /// The mechanism, or a robot from URDF, its design kept within the
+    /// URDF's joint position and velocity limits.
     #[command(flatten)]
-    pub(super) robot: RobotArgs,
+    pub(super) mechanism: MechanismArgs,
     /// Length of the experiment (s); also the period of the inputs.
     #[arg(long, allow_negative_numbers = true)]
     pub(super) duration: f64,

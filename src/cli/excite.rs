@@ -186,7 +186,7 @@ fn design<R: Regressor>(
             text.push('\n');
         }
         std::fs::write(path, text).map_err(io_error(path))?;
-        let source = if a.robot.urdf.is_some() {
+        let source = if a.mechanism.urdf.is_some() {
             "--urdf … --actuated …"
         } else {
             "--system …"

@@ -143,7 +143,7 @@ use crate::gp::GpError;
 use crate::learned::{LearnError, Learned, LoadError, SavedLearned};
 use crate::{Mechanism, Parameters, SVector, StepError, System};
 
-use args::{Cli, Command, ExportArgs, PredictArgs, ReadArgs, ScoreArgs};
+use args::{Cli, ReadArgs, Target};
 pub use registry::{SystemEntry, paper_systems, spatial_systems, system};
 use registry::{find, names};
 
@@ -296,23 +296,16 @@ where
 {
     let cli = Cli::try_parse_from(args)?;
     // a robot from URDF, or a model of one, runs on the tree engine
-    let on_robot = match &cli.command {
-        Command::Fit(args::FitArgs { robot, .. })
-        | Command::Simulate(args::SimulateArgs { robot, .. })
-        | Command::Identify(args::IdentifyArgs { robot, .. })
-        | Command::Excite(args::ExciteArgs { robot, .. }) => robot.urdf.is_some(),
-        Command::Score(ScoreArgs { model, .. })
-        | Command::Predict(PredictArgs { model, .. })
-        | Command::Export(ExportArgs { model, .. }) => robot::is_robot_model(model),
+    let target = cli.command.target();
+    let on_robot = match target {
+        Target::Mechanism(mechanism) => mechanism.urdf.is_some(),
+        Target::Model(model) => robot::is_robot_model(model),
     };
     if on_robot {
         return robot::run(&cli.command, out);
     }
-    let entry = match &cli.command {
-        Command::Fit(args::FitArgs { system, .. })
-        | Command::Simulate(args::SimulateArgs { system, .. })
-        | Command::Identify(args::IdentifyArgs { system, .. })
-        | Command::Excite(args::ExciteArgs { system, .. }) => match system {
+    let entry = match target {
+        Target::Mechanism(mechanism) => match &mechanism.system {
             Some(name) => find(systems, name)?,
             None if systems.len() == 1 => systems[0],
             None => {
@@ -322,9 +315,7 @@ where
                 )));
             }
         },
-        Command::Score(ScoreArgs { model, .. })
-        | Command::Predict(PredictArgs { model, .. })
-        | Command::Export(ExportArgs { model, .. }) => {
+        Target::Model(model) => {
             let saved = read_saved(model)?;
             find(systems, &saved.mechanism)?
         }

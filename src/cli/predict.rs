@@ -4,6 +4,7 @@
 use std::io::Write;
 
 use super::args::{BoundArg, PredictArgs};
+use super::robot::state_at;
 use super::{
     CliError, bar, check_model_inputs, check_out_dir, data_error, io_error, read_data, read_plan,
     read_plan_rows, report_read, w, window_place,
@@ -11,10 +12,9 @@ use super::{
 use crate::bound::{
     BoundError, BoundKind, BoundParts, Calibration, ConformalSettings, ErrorBound, Tube,
 };
-use crate::data::{Dataset, DynDataset};
+use crate::data::{Dataset, DynDataset, RunOf};
 use crate::learned::Learned;
 use crate::learned::robot::{LearnedRobot, RobotCalibration, coordinate_kinds};
-use crate::robot::RobotState;
 use crate::{Integrator, Mechanism, SVector, State};
 
 /// `U`: the mechanism's inputs (0 for none; with inputs each run's logged
@@ -54,52 +54,23 @@ where
         Some(path) => Some((path, read_plan::<U>(path, inputs)?)),
         None => None,
     };
-    // a start state needs two rows (position and discrete velocity), and a
-    // forced prediction of k steps from row s the inputs of rows
-    // s+1..=s+k unless planned: shorter runs are skipped with a note, as
-    // `fit` notes its short runs
-    let rows = if U > 0 && plans.is_none() {
-        a.steps + 1
-    } else {
-        2
-    };
-    let mut starts = Vec::with_capacity(data.runs.len());
-    let mut short = Vec::new();
-    for (r, run) in data.runs.iter().enumerate() {
-        let plan = plan_for(
-            a,
-            plans.as_ref().map(|(p, v)| (p.as_path(), v.as_slice())),
-            &run.name,
-        )?;
-        let before = starts.len();
-        let mut s = 0usize;
-        while s
-            .checked_add(rows)
-            .is_some_and(|end| end <= run.positions.len())
-        {
-            let Some(z) = run.state(s) else { break };
-            // the inputs of rows s+1..=s+k (or the plan's), after row s's
-            // (which produced the start's velocity)
-            let (up, us): (SVector<f64, U>, Vec<SVector<f64, U>>) = if U > 0 {
-                let us = match plan {
-                    Some(p) => p.to_vec(),
-                    None => logged[r][s + 1..=s + a.steps].to_vec(),
-                };
-                (logged[r][s], us)
-            } else {
-                (SVector::zeros(), Vec::new())
+    // shorter runs are skipped with a note, as `fit` notes its short runs
+    let (starts, short, rows) = gather_starts(a, &data.runs, U > 0, &plans, |r, s, plan| {
+        let run = &data.runs[r];
+        let z = run.state(s)?;
+        // the inputs of rows s+1..=s+k (or the plan's), after row s's
+        // (which produced the start's velocity)
+        let (up, us): (SVector<f64, U>, Vec<SVector<f64, U>>) = if U > 0 {
+            let us = match plan {
+                Some(p) => p.to_vec(),
+                None => logged[r][s + 1..=s + a.steps].to_vec(),
             };
-            starts.push((run, s, z, up, us));
-            // one start per run without --stride
-            match a.stride.and_then(|k| s.checked_add(k)) {
-                Some(next) => s = next,
-                None => break,
-            }
-        }
-        if starts.len() == before {
-            short.push(run.name.as_str());
-        }
-    }
+            (logged[r][s], us)
+        } else {
+            (SVector::zeros(), Vec::new())
+        };
+        Some((run, s, z, up, us))
+    })?;
     // what a skipped run lacks, for the note and the error
     let (too_few, why) = if rows > 2 {
         (
@@ -410,6 +381,54 @@ type RunPlans<'p, T> = &'p [(Option<String>, Vec<T>)];
 /// The planned inputs of run `run` (the plan file's own run, or its one
 /// plan for every run), its first `--steps` rows; `None` without
 /// `--inputs`.
+/// The planned inputs of `--inputs` (the file and its plans), if given.
+type Planned<'a, T> = Option<(&'a std::path::PathBuf, Vec<(Option<String>, Vec<T>)>)>;
+
+/// The prediction starts of every run of `runs`: rows s = 0, k, 2k, …
+/// with `--stride k` (row 0 alone without), while the rows a start needs
+/// from s are in the run (two, the position and the discrete velocity;
+/// `forced` without `plans`: also the inputs of rows s+1..=s+k for k
+/// steps). `start(r, s, plan)` makes the start of run r at row s with the
+/// run's planned inputs, if any (`None`: no more starts in this run).
+/// Also the names of the runs without a start, and the rows a start needs.
+fn gather_starts<'d, 'p, P, T, S>(
+    a: &PredictArgs,
+    runs: &'d [RunOf<P>],
+    forced: bool,
+    plans: &'p Planned<'_, T>,
+    mut start: impl FnMut(usize, usize, Option<&'p [T]>) -> Option<S>,
+) -> Result<(Vec<S>, Vec<&'d str>, usize), CliError> {
+    let rows = if forced && plans.is_none() {
+        a.steps + 1
+    } else {
+        2
+    };
+    let plans = plans.as_ref().map(|(p, v)| (p.as_path(), v.as_slice()));
+    let mut starts = Vec::new();
+    let mut short = Vec::new();
+    for (r, run) in runs.iter().enumerate() {
+        let plan = plan_for(a, plans, &run.name)?;
+        let before = starts.len();
+        let mut s = 0usize;
+        while s
+            .checked_add(rows)
+            .is_some_and(|end| end <= run.positions.len())
+        {
+            let Some(made) = start(r, s, plan) else { break };
+            starts.push(made);
+            // one start per run without --stride
+            match a.stride.and_then(|k| s.checked_add(k)) {
+                Some(next) => s = next,
+                None => break,
+            }
+        }
+        if starts.len() == before {
+            short.push(run.name.as_str());
+        }
+    }
+    Ok((starts, short, rows))
+}
+
 fn plan_for<'p, T>(
     a: &PredictArgs,
     plans: Option<(&std::path::Path, RunPlans<'p, T>)>,
@@ -605,46 +624,15 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
     };
     let run_inputs = logged(&data);
     // each start: (run, sample, state, previous input, the steps' inputs)
-    let rows = if m > 0 && plans.is_none() {
-        a.steps + 1
-    } else {
-        2
-    };
-    let mut starts = Vec::new();
-    let mut short = Vec::new();
-    for (r, run) in data.runs.iter().enumerate() {
-        let plan = plan_for(
-            a,
-            plans.as_ref().map(|(p, v)| (p.as_path(), v.as_slice())),
-            &run.name,
-        )?;
-        let before = starts.len();
-        let mut s = 0usize;
-        while s
-            .checked_add(rows)
-            .is_some_and(|end| end <= run.positions.len())
-        {
-            let q0 = run.positions[s].as_slice().to_vec();
-            let v0 = q0
-                .iter()
-                .zip(run.positions[s + 1].iter())
-                .map(|(a, b)| (b - a) / dt)
-                .collect();
-            let us: Vec<Vec<f64>> = match plan {
-                Some(p) => p.to_vec(),
-                None if m > 0 => run_inputs[r][s + 1..=s + a.steps].to_vec(),
-                None => vec![Vec::new(); a.steps],
-            };
-            starts.push((r, s, RobotState::new(q0, v0), run_inputs[r][s].clone(), us));
-            match a.stride.and_then(|k| s.checked_add(k)) {
-                Some(next) => s = next,
-                None => break,
-            }
-        }
-        if starts.len() == before {
-            short.push(run.name.as_str());
-        }
-    }
+    let (starts, short, rows) = gather_starts(a, &data.runs, m > 0, &plans, |r, s, plan| {
+        let us: Vec<Vec<f64>> = match plan {
+            Some(p) => p.to_vec(),
+            None if m > 0 => run_inputs[r][s + 1..=s + a.steps].to_vec(),
+            None => vec![Vec::new(); a.steps],
+        };
+        let z0 = state_at(&data.runs[r], s, dt);
+        Some((r, s, z0, run_inputs[r][s].clone(), us))
+    })?;
     if starts.is_empty() {
         return usage(format!(
             "{}: every run is shorter than {rows} rows (a start needs two{})",

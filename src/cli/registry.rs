@@ -4,10 +4,11 @@
 //! ([`MaximalView`]: a planar mechanism's, or none for a 3-D mechanism).
 
 use std::io::Write;
+use std::path::Path;
 
 use super::args::{
-    Command, EncodingArg, ExportArgs, FitArgs, IdentifyArgs, PredictArgs, PriorArg, ScoreArgs,
-    SimulateArgs,
+    Command, EncodingArg, ExportArgs, FitArgs, IdentifyArgs, PredictArgs, PriorArg, ReadArgs,
+    ScoreArgs, SimulateArgs,
 };
 use super::export::export;
 use super::fit::{Prepared, fit_maximal, fit_minimal, nominal_invalid, prepare, set_parameter};
@@ -213,25 +214,8 @@ where
                 fit_minimal::<Mn, N, C, U>(a, minimal, &p, out)
             }
         }
-        Command::Score(a) => {
-            let (saved, nominal, data) = model_and_data(&a.model, &a.data, &a.read, minimal)?;
-            if in_minimal::<Mn, N, C>(&a.model, &saved, maximal.coordinates())? {
-                let l = load(&a.model, &saved, minimal)?;
-                score::<_, _, N, C, N, C, U>(a, &l, nominal, &data, |z| *z, |q| *q, out)
-            } else {
-                maximal.score(a, &saved, nominal, &data, out)
-            }
-        }
-        Command::Predict(a) => {
-            let (saved, nominal, data) = model_and_data(&a.model, &a.data, &a.read, minimal)?;
-            if in_minimal::<Mn, N, C>(&a.model, &saved, maximal.coordinates())? {
-                let l = load(&a.model, &saved, minimal)?;
-                let coords = (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES);
-                predict::<_, N, N, C, U>(a, &l, &data, coords, |z| *z, |z| *z, out)
-            } else {
-                maximal.predict(a, &saved, nominal, &data, out)
-            }
-        }
+        Command::Score(a) => on_data::<Mn, X, N, C, U>(OnData::Score(a), minimal, maximal, out),
+        Command::Predict(a) => on_data::<Mn, X, N, C, U>(OnData::Predict(a), minimal, maximal, out),
         Command::Simulate(a) => super::simulate::simulate::<Mn, N, C, U>(a, minimal, out),
         Command::Identify(a) => identify::<Mn, N, C>(a, minimal, out),
         Command::Excite(a) => super::excite::excite::<Mn, N, C, U>(a, minimal, out),
@@ -242,6 +226,52 @@ where
             } else {
                 maximal.export(a, &saved, out)
             }
+        }
+    }
+}
+
+/// `score` or `predict`: a saved model run on a data file.
+#[derive(Clone, Copy)]
+enum OnData<'a> {
+    Score(&'a ScoreArgs),
+    Predict(&'a PredictArgs),
+}
+
+impl OnData<'_> {
+    /// The model file, the data file and how to read it.
+    fn files(&self) -> (&Path, &Path, &ReadArgs) {
+        match self {
+            OnData::Score(a) => (&a.model, &a.data, &a.read),
+            OnData::Predict(a) => (&a.model, &a.data, &a.read),
+        }
+    }
+}
+
+/// `score` or `predict` in the view that the model file is in.
+fn on_data<Mn, X, const N: usize, const C: usize, const U: usize>(
+    cmd: OnData<'_>,
+    minimal: Mn,
+    maximal: X,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    Mn: Mechanism<N, C> + Parameters + Copy + Send + Sync + 'static,
+    Mn: Inputs<U>,
+    X: MaximalView<Mn, N, C, U>,
+{
+    let (model, data, read) = cmd.files();
+    let (saved, nominal, data) = model_and_data(model, data, read, minimal)?;
+    if !in_minimal::<Mn, N, C>(model, &saved, maximal.coordinates())? {
+        return maximal.on_data(cmd, &saved, nominal, &data, out);
+    }
+    let l = load(model, &saved, minimal)?;
+    match cmd {
+        OnData::Score(a) => {
+            score::<_, _, N, C, N, C, U>(a, &l, nominal, &data, |z| *z, |q| *q, out)
+        }
+        OnData::Predict(a) => {
+            let coords = (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES);
+            predict::<_, N, N, C, U>(a, &l, &data, coords, |z| *z, |z| *z, out)
         }
     }
 }
@@ -264,20 +294,11 @@ trait MaximalView<Mn, const N: usize, const C: usize, const U: usize> {
         p: &Prepared<N>,
         out: &mut dyn Write,
     ) -> Result<(), CliError>;
-    /// `score` of a model in maximal coordinates (`nominal`: the minimal
-    /// view with the model's parameters).
-    fn score(
+    /// `score` or `predict` of a model in maximal coordinates (`nominal`:
+    /// the minimal view with the model's parameters).
+    fn on_data(
         &self,
-        a: &ScoreArgs,
-        saved: &SavedLearned,
-        nominal: Mn,
-        data: &Dataset<N>,
-        out: &mut dyn Write,
-    ) -> Result<(), CliError>;
-    /// `predict` with a model in maximal coordinates.
-    fn predict(
-        &self,
-        a: &PredictArgs,
+        cmd: OnData<'_>,
         saved: &SavedLearned,
         nominal: Mn,
         data: &Dataset<N>,
@@ -322,46 +343,36 @@ where
         fit_maximal::<Mn, Mx, N, C, NM, CM, U>(a, minimal, self.0, p, out)
     }
 
-    fn score(
+    fn on_data(
         &self,
-        a: &ScoreArgs,
+        cmd: OnData<'_>,
         saved: &SavedLearned,
         nominal: Mn,
         data: &Dataset<N>,
         out: &mut dyn Write,
     ) -> Result<(), CliError> {
-        let l = load(&a.model, saved, self.0)?;
+        let l = load(cmd.files().0, saved, self.0)?;
         let dt = saved.dt;
-        score::<_, _, N, C, NM, CM, U>(
-            a,
-            &l,
-            nominal,
-            data,
-            |z| nominal.to_maximal(z, dt),
-            |x| nominal.minimal_positions(x),
-            out,
-        )
-    }
-
-    fn predict(
-        &self,
-        a: &PredictArgs,
-        saved: &SavedLearned,
-        nominal: Mn,
-        data: &Dataset<N>,
-        out: &mut dyn Write,
-    ) -> Result<(), CliError> {
-        let l = load(&a.model, saved, self.0)?;
-        let dt = saved.dt;
-        predict::<_, N, NM, CM, U>(
-            a,
-            &l,
-            data,
-            (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES),
-            |z| nominal.to_maximal(z, dt),
-            |z| nominal.to_minimal(z, dt),
-            out,
-        )
+        match cmd {
+            OnData::Score(a) => score::<_, _, N, C, NM, CM, U>(
+                a,
+                &l,
+                nominal,
+                data,
+                |z| nominal.to_maximal(z, dt),
+                |x| nominal.minimal_positions(x),
+                out,
+            ),
+            OnData::Predict(a) => predict::<_, N, NM, CM, U>(
+                a,
+                &l,
+                data,
+                (&Mn::COORDINATES, &Mn::KINDS, Mn::INPUT_NAMES),
+                |z| nominal.to_maximal(z, dt),
+                |z| nominal.to_minimal(z, dt),
+                out,
+            ),
+        }
     }
 
     fn export(
@@ -412,20 +423,9 @@ impl<Mn: Parameters, const N: usize, const C: usize, const U: usize> MaximalView
         Self::refuse::<Mn>("--encoding maximal")
     }
 
-    fn score(
+    fn on_data(
         &self,
-        _: &ScoreArgs,
-        _: &SavedLearned,
-        _: Mn,
-        _: &Dataset<N>,
-        _: &mut dyn Write,
-    ) -> Result<(), CliError> {
-        Self::refuse::<Mn>(MAXIMAL_MODEL)
-    }
-
-    fn predict(
-        &self,
-        _: &PredictArgs,
+        _: OnData<'_>,
         _: &SavedLearned,
         _: Mn,
         _: &Dataset<N>,

@@ -11,7 +11,9 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
-use super::args::{Command, EncodingArg, FitArgs, ReadArgs, ScoreArgs, SimulateArgs};
+use super::args::{
+    Command, EncodingArg, FitArgs, MechanismArgs, ReadArgs, ScoreArgs, SimulateArgs,
+};
 use super::excite::excite_robot;
 use super::fit::{choose, report_data, resolve_prior, train_options};
 use super::identify::identify_robot;
@@ -19,7 +21,7 @@ use super::simulate::check_start;
 use super::{
     CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read, spinner, w,
 };
-use crate::data::DynDataset;
+use crate::data::{DynDataset, DynRun};
 use crate::learned::Encoding;
 use crate::learned::robot::{LearnedRobot, RobotTransition, coordinate_kinds};
 use crate::robot::{Robot, RobotState};
@@ -39,35 +41,23 @@ pub(super) fn is_robot_model(path: &Path) -> bool {
 /// and `excite`, the model file for `score`, `predict` and `export`.
 pub(super) fn run(command: &Command, out: &mut dyn Write) -> Result<(), CliError> {
     match command {
-        Command::Simulate(a) => simulate(
-            a,
-            &load(a.robot.urdf.as_deref(), &a.robot.actuated, &a.set)?,
-            out,
-        ),
+        Command::Simulate(a) => simulate(a, &load(&a.mechanism, &a.set)?, out),
         Command::Identify(a) => {
-            let robot = load(a.robot.urdf.as_deref(), &a.robot.actuated, &a.set)?;
+            let robot = load(&a.mechanism, &a.set)?;
             let (data, dt) = read_log(&robot, &a.data, &a.read)?;
             identify_robot(a, &robot, &data, dt, out)
         }
-        Command::Fit(a) => fit(
-            a,
-            load(a.robot.urdf.as_deref(), &a.robot.actuated, &a.set)?,
-            out,
-        ),
+        Command::Fit(a) => fit(a, load(&a.mechanism, &a.set)?, out),
         Command::Score(a) => score(a, out),
         Command::Predict(a) => super::predict::predict_robot(a, out),
         Command::Export(a) => super::export::export_robot(a, out),
-        Command::Excite(a) => excite_robot(
-            a,
-            &load(a.robot.urdf.as_deref(), &a.robot.actuated, &a.set)?,
-            out,
-        ),
+        Command::Excite(a) => excite_robot(a, &load(&a.mechanism, &a.set)?, out),
     }
 }
 
 /// The robot of `--urdf` with its `--actuated` joints.
-fn load(urdf: Option<&Path>, actuated: &[String], set: &[String]) -> Result<Robot, CliError> {
-    let Some(path) = urdf else {
+fn load(mechanism: &MechanismArgs, set: &[String]) -> Result<Robot, CliError> {
+    let Some(path) = &mechanism.urdf else {
         return Err(CliError::Usage("--urdf FILE is needed".into()));
     };
     if !set.is_empty() {
@@ -77,10 +67,22 @@ fn load(urdf: Option<&Path>, actuated: &[String], set: &[String]) -> Result<Robo
                 .into(),
         ));
     }
-    let names: Vec<&str> = actuated.iter().map(String::as_str).collect();
+    let names: Vec<&str> = mechanism.actuated.iter().map(String::as_str).collect();
     Robot::from_urdf(path)
         .and_then(|r| r.with_actuated(&names))
         .map_err(|e| CliError::Usage(format!("--urdf {}: {e}", path.display())))
+}
+
+/// The robot's state at sample `s` of `run` (time step `dt`): the
+/// positions there and the discrete velocity to sample s + 1.
+pub(super) fn state_at(run: &DynRun, s: usize, dt: f64) -> RobotState {
+    let q0 = run.positions[s].as_slice().to_vec();
+    let v0 = q0
+        .iter()
+        .zip(run.positions[s + 1].iter())
+        .map(|(a, b)| (b - a) / dt)
+        .collect();
+    RobotState::new(q0, v0)
 }
 
 /// A robot's log and its runs' common time step.
@@ -381,13 +383,7 @@ fn score(a: &ScoreArgs, out: &mut dyn Write) -> Result<(), CliError> {
         .map(|&(r, s)| {
             let run = &data.runs[r];
             let truth = &run.positions[s + 2..=s + k + 1];
-            let q0 = run.positions[s].as_slice().to_vec();
-            let v0 = q0
-                .iter()
-                .zip(run.positions[s + 1].iter())
-                .map(|(a, b)| (b - a) / dt)
-                .collect();
-            let z0 = RobotState::new(q0, v0);
+            let z0 = state_at(run, s, dt);
             // step j of the window runs under row s + j + 1's input after
             // row s + j's
             let input = |row: usize| {
