@@ -211,6 +211,10 @@ pub(super) enum NoiseArg {
     /// Instrumental variables from local polynomial fits that leave each
     /// transition's own samples out.
     Iv,
+    /// Bias-compensated least squares for independent position noise of
+    /// the size `--noise-sigma` gives: for logs of short runs, where the
+    /// instruments have no neighbours.
+    Eiv,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -235,6 +239,10 @@ pub(super) struct IdentifyArgs {
     /// transitions had instruments).
     #[arg(long, value_enum, default_value = "iv")]
     pub(super) noise: NoiseArg,
+    /// The standard deviation of every logged position's noise (the log's
+    /// units), which `--noise eiv` needs.
+    #[arg(long)]
+    pub(super) noise_sigma: Option<f64>,
     /// Refine the regression by output error: the log simulated in
     /// segments of SAMPLES samples (default 50), their initial positions
     /// estimated with the parameters. Unbiased under position noise; loops

@@ -8,7 +8,7 @@ use std::path::Path;
 use super::args::{IdentifyArgs, NoiseArg, RuleArg};
 use super::{CliError, check_out_dir, io_error, read_log, w};
 use crate::identify::{
-    DelRegressor, Log, Noise, Options, OutputError, RobotRegressor, Status,
+    DelRegressor, Log, Noise, Options, OutputError, RobotRegressor, SampleNoise, Status,
     identify as run_identify,
 };
 use crate::learned::IdentifiedParameters;
@@ -125,6 +125,25 @@ fn check_args(a: &IdentifyArgs) -> Result<(), CliError> {
             a.prior_sd
         )));
     }
+    match (a.noise, a.noise_sigma) {
+        (NoiseArg::Eiv, Some(sigma)) if sigma > 0.0 && sigma.is_finite() => {}
+        (NoiseArg::Eiv, Some(sigma)) => {
+            return Err(CliError::Usage(format!(
+                "--noise-sigma {sigma}: must be positive and finite"
+            )));
+        }
+        (NoiseArg::Eiv, None) => {
+            return Err(CliError::Usage(
+                "--noise eiv needs --noise-sigma (the positions' noise)".into(),
+            ));
+        }
+        (_, Some(_)) => {
+            return Err(CliError::Usage(
+                "--noise-sigma serves --noise eiv only".into(),
+            ));
+        }
+        (_, None) => {}
+    }
     check_out_dir(&a.out)
 }
 
@@ -135,6 +154,9 @@ fn options(a: &IdentifyArgs) -> Options {
     options.noise = match a.noise {
         NoiseArg::Ls => Noise::LeastSquares,
         NoiseArg::Iv => Noise::IV,
+        NoiseArg::Eiv => {
+            Noise::ErrorsInVariables(SampleNoise::independent(a.noise_sigma.unwrap_or(f64::NAN)))
+        }
     };
     options.output_error = a.output_error.map(|segment| OutputError {
         segment,

@@ -375,7 +375,8 @@ fn simulate_subdivides_failing_steps_by_default() {
 /// parameters and zero at the truth; tolerance 1e-8 relative, far above
 /// the regression's rounding of about 1e-12), also with `--output-error`
 /// (the log is the rule's own, so its simulation reproduces it at the
-/// truth), and `fit --prior
+/// truth), and with `--noise eiv --noise-sigma 1e-9` (a correction of
+/// order σ²; the flag's misuse is refused), and `fit --prior
 /// identified:FILE` makes the model file's nominal model the truth's
 /// dynamics: its 20-step score on a held-out log is below 1e-6 of the
 /// declared model's. The model file records the identified standard
@@ -444,6 +445,33 @@ fn identify_then_fit_with_the_identified_prior() {
             (got - true_value).abs() <= 1e-8 * true_value,
             "output error, {name}: {got} vs {true_value}"
         );
+    }
+
+    // bias compensation for noise far below the log's rounding keeps the
+    // recovery (the correction is σ² small); it needs the noise's size
+    let (_, _, compensated) =
+        identify_into("eiv.json", &["--noise", "eiv", "--noise-sigma", "1e-9"]);
+    for (name, true_value) in [("joints.rail.damping", 0.3), ("joints.hinge.damping", 0.08)] {
+        let got = parameter_row(&compensated, name)["identified"]
+            .as_f64()
+            .unwrap();
+        assert!(
+            (got - true_value).abs() <= 1e-8 * true_value,
+            "bias-compensated, {name}: {got} vs {true_value}"
+        );
+    }
+    let refused = dir.join("refused.json");
+    for (extra, says) in [
+        (&["--noise", "eiv"][..], "needs --noise-sigma"),
+        (
+            &["--noise", "eiv", "--noise-sigma=-1"][..],
+            "positive and finite",
+        ),
+        (&["--noise-sigma", "1e-4"][..], "serves --noise eiv only"),
+    ] {
+        let args = argv("identify --data {} --out {}", &[s(&train), s(&refused)]);
+        let err = run(&[&args[..], extra].concat()).unwrap_err().to_string();
+        assert!(err.contains(says), "{extra:?}: {err}");
     }
 
     let fit_score = |prior: &str, name: &str| -> (f64, f64) {
