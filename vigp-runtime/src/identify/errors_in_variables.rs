@@ -174,11 +174,12 @@ pub fn solve<R: Regressor>(
     }
     let prior = BasePrior::new(base, prior_mean, prior_sd)?;
     let transitions = derivatives(regressor, logs, stack, base, noise)?;
+    let rows = augmented(&stack.w, &stack.b, base);
     let mut theta = prior.theta.clone();
     let mut iterations = 0;
     let mut last = None;
     for it in 0..ITERATIONS {
-        let (mc, weights) = accumulate(stack, base, &transitions, &theta);
+        let (mc, weights) = accumulate(&rows, stack.block, &transitions, &theta);
         let spread = |v: &DVector<f64>| noise_spread(&transitions, &weights, stack.block, v);
         let post = Posterior::new(&mc, &prior, spread)?;
         let change = (&post.theta - &theta).amax() / post.theta.amax().max(f64::MIN_POSITIVE);
@@ -199,9 +200,7 @@ pub fn solve<R: Regressor>(
     let (pi, covariance) = prior.standard(&base.k, &theta, &cov_theta);
     let residuals = &stack.b - &stack.w * &pi;
     let row_scale: Vec<f64> = weights.iter().map(|w| w.sqrt()).collect();
-    let fitted_rows = DMatrix::from_fn(n, r, |i, c| {
-        stack.w[(i, base.independent[c])] * row_scale[i]
-    });
+    let fitted_rows = DMatrix::from_fn(n, r, |i, c| rows[(i, c)] * row_scale[i]);
     // σ per row position: the r.m.s. of the rows' predicted noise
     let sigma = (0..stack.block)
         .map(|j| {
@@ -252,12 +251,8 @@ impl Posterior {
     ) -> Result<Self, IdentifyError> {
         let r = mc.nrows() - 1;
         let info = mc.view((0, 0), (r, r));
-        let l = prior
-            .linv
-            .clone()
-            .try_inverse()
-            .ok_or(IdentifyError::Singular)?;
-        let a = l.transpose() * info * &l;
+        let l = &prior.l;
+        let a = l.transpose() * info * l;
         let eig = ((&a + a.transpose()) * 0.5).symmetric_eigen();
         let (u, lam) = (&eig.eigenvectors, &eig.eigenvalues);
         let g = l.transpose() * (mc.column(r).rows(0, r) - info * &prior.theta);
@@ -265,7 +260,7 @@ impl Posterior {
         // informed: information above SIGNIFICANCE standard deviations of
         // what the noise alone gives along that direction
         let kept = DVector::from_fn(r, |i, _| {
-            let v = &l * u.column(i);
+            let v = l * u.column(i);
             if lam[i] > SIGNIFICANCE * spread(&v) {
                 lam[i]
             } else {
@@ -277,9 +272,9 @@ impl Posterior {
             u * DVector::from_fn(r, |i, _| if kept[i] > 0.0 { ug[i] / kept[i] } else { 0.0 });
         let cov_phi = u * DMatrix::from_diagonal(&kept.map(|x| 1.0 / (x + 1.0))) * u.transpose();
         Ok(Posterior {
-            theta: &prior.theta + &l * phi,
-            cov_theta: &l * cov_phi * l.transpose(),
-            data_theta: &prior.theta + &l * phi_data,
+            theta: &prior.theta + l * phi,
+            cov_theta: l * cov_phi * l.transpose(),
+            data_theta: &prior.theta + l * phi_data,
             root: DMatrix::from_diagonal(&kept.map(f64::sqrt)) * u.transpose() * &prior.linv,
         })
     }
@@ -359,7 +354,7 @@ fn column_differences(
 }
 
 /// The rows (Y, b) as one matrix [Y₁ | b] on the independent columns.
-fn augmented((y, b): (DMatrix<f64>, DVector<f64>), base: &Base) -> DMatrix<f64> {
+fn augmented(y: &DMatrix<f64>, b: &DVector<f64>, base: &Base) -> DMatrix<f64> {
     let r = base.rank();
     DMatrix::from_fn(y.nrows(), r + 1, |i, e| {
         if e < r {
@@ -384,20 +379,9 @@ fn derivatives<R: Regressor>(
     let sample_root = covariance_root(&noise.covariance);
     let mut out = Vec::with_capacity(stack.origin.len());
     for &(li, k) in &stack.origin {
-        let log = &logs[li];
-        let input = |k: usize| -> &[f64] {
-            if log.inputs.is_empty() {
-                &zeros
-            } else {
-                &log.inputs[k]
-            }
-        };
-        let positions = [
-            log.positions[k - 1].clone(),
-            log.positions[k].clone(),
-            log.positions[k + 1].clone(),
-        ];
-        let inputs = [input(k - 1), input(k)];
+        let at = logs[li].transition(k, &zeros);
+        let positions = at.positions.map(<[f64]>::to_vec);
+        let inputs = at.inputs;
         let rows_of = |xs: &[Vec<f64>; 3], project: bool| {
             let t = Transition {
                 positions: [&xs[0], &xs[1], &xs[2]],
@@ -408,7 +392,7 @@ fn derivatives<R: Regressor>(
             } else {
                 regressor.unprojected_transition(&t)?
             };
-            Ok(augmented(rows, base))
+            Ok(augmented(&rows.0, &rows.1, base))
         };
         // per column of [Y₁ | b]: its derivative, rows × 3N
         let columns = match regressor.loop_constraints(&positions[1])? {
@@ -419,11 +403,7 @@ fn derivatives<R: Regressor>(
                     .lu()
                     .solve(&(&g * &raw))
                     .ok_or(IdentifyError::Singular)?;
-                let tangent = DMatrix::identity(n, n)
-                    - g.clone()
-                        .pseudo_inverse(1e-12)
-                        .map_err(|_| IdentifyError::Singular)?
-                        * &g;
+                let tangent = tangent_of(&g)?;
                 let held = column_differences(&positions, |xs| {
                     let gk = regressor
                         .loop_constraints(&xs[1])?
@@ -464,13 +444,12 @@ fn derivatives<R: Regressor>(
 /// noise variance, so that M and C do not depend on the basis a
 /// regressor chose for a loop's rows.
 fn accumulate(
-    stack: &Stack,
-    base: &Base,
+    rows: &DMatrix<f64>,
+    block: usize,
     transitions: &[Derivatives],
     theta: &DVector<f64>,
 ) -> (DMatrix<f64>, Vec<f64>) {
-    let r = base.rank();
-    let block = stack.block;
+    let r = rows.ncols() - 1;
     let mut tilde = DVector::zeros(r + 1);
     tilde.rows_mut(0, r).copy_from(theta);
     tilde[r] = -1.0;
@@ -488,17 +467,11 @@ fn accumulate(
     let top = variances.iter().cloned().fold(0.0, f64::max);
     let floor = 1e-30 * top.max(f64::MIN_POSITIVE);
     let mut mc = DMatrix::zeros(r + 1, r + 1);
-    let mut weights = Vec::with_capacity(stack.w.nrows());
+    let mut weights = Vec::with_capacity(rows.nrows());
     for (t, d) in transitions.iter().enumerate() {
         let w = 1.0 / variances[t].max(floor);
         for i in t * block..(t + 1) * block {
-            let row = DVector::from_fn(r + 1, |e, _| {
-                if e < r {
-                    stack.w[(i, base.independent[e])]
-                } else {
-                    stack.b[i]
-                }
-            });
+            let row = rows.row(i).transpose();
             mc.ger(w, &row, &row, 1.0);
             weights.push(w);
         }
@@ -525,16 +498,18 @@ fn tangent_projector<R: Regressor>(
     x: &[f64],
     scale: f64,
 ) -> Result<DMatrix<f64>, IdentifyError> {
-    let n = x.len();
-    let id = DMatrix::identity(n, n);
     match regressor.loop_constraints(x)? {
-        Some((g, jac)) if g.amax() <= 1e-3 * scale && jac.nrows() > 0 => {
-            let pinv = jac
-                .clone()
-                .pseudo_inverse(1e-12)
-                .map_err(|_| IdentifyError::Singular)?;
-            Ok(id - pinv * jac)
-        }
-        _ => Ok(id),
+        Some((g, jac)) if g.amax() <= 1e-3 * scale && jac.nrows() > 0 => tangent_of(&jac),
+        _ => Ok(DMatrix::identity(x.len(), x.len())),
     }
+}
+
+/// T = I − G⁺G: the orthogonal projector onto the null space of the
+/// constraint Jacobian G (C × N), the loop's tangent space.
+fn tangent_of(g: &DMatrix<f64>) -> Result<DMatrix<f64>, IdentifyError> {
+    let pinv = g
+        .clone()
+        .pseudo_inverse(1e-12)
+        .map_err(|_| IdentifyError::Singular)?;
+    Ok(DMatrix::identity(g.ncols(), g.ncols()) - pinv * g)
 }

@@ -290,7 +290,9 @@ pub(crate) struct BasePrior {
     gain: DMatrix<f64>,
     /// K·π₀.
     pub(crate) theta: DVector<f64>,
-    /// L⁻¹ with K S² Kᵀ = L Lᵀ: the prior's whitening rows.
+    /// L with K S² Kᵀ = L Lᵀ (lower triangular).
+    pub(crate) l: DMatrix<f64>,
+    /// L⁻¹: the prior's whitening rows.
     pub(crate) linv: DMatrix<f64>,
 }
 
@@ -314,8 +316,8 @@ impl BasePrior {
             .ok_or(IdentifyError::Singular)?;
         let gain = chol.solve(&ks2).transpose();
         let theta = &base.k * &mean;
-        let linv = chol
-            .l()
+        let l = chol.l();
+        let linv = l
             .solve_lower_triangular(&DMatrix::identity(r, r))
             .ok_or(IdentifyError::Singular)?;
         Ok(BasePrior {
@@ -323,6 +325,7 @@ impl BasePrior {
             s2,
             gain,
             theta,
+            l,
             linv,
         })
     }

@@ -180,6 +180,26 @@ impl Log {
         }
     }
 
+    /// Transition k: samples k − 1, k, k + 1 and the inputs u_{k−1}, u_k
+    /// (`zeros`, the right length of zeros, for a log without inputs).
+    pub(crate) fn transition<'a>(&'a self, k: usize, zeros: &'a [f64]) -> Transition<'a> {
+        let input = |j: usize| -> &'a [f64] {
+            if self.inputs.is_empty() {
+                zeros
+            } else {
+                &self.inputs[j]
+            }
+        };
+        Transition {
+            positions: [
+                &self.positions[k - 1],
+                &self.positions[k],
+                &self.positions[k + 1],
+            ],
+            inputs: [input(k - 1), input(k)],
+        }
+    }
+
     /// A log from a run read by `vigp::data` (the same input convention).
     pub fn from_run<P: crate::data::Positions>(run: &crate::data::RunOf<P>) -> Self {
         Log {
@@ -432,13 +452,6 @@ pub fn stack<R: Regressor>(
                 });
             }
         }
-        let input = |k: usize| -> &[f64] {
-            if log.inputs.is_empty() {
-                &zeros
-            } else {
-                &log.inputs[k]
-            }
-        };
         let k_count = log.positions.len();
         // a log too short for the instruments' window enters by least
         // squares (its rows are their own instruments)
@@ -448,14 +461,7 @@ pub fn stack<R: Regressor>(
             continue;
         }
         for k in edge..k_count - edge {
-            let t = Transition {
-                positions: [
-                    &log.positions[k - 1],
-                    &log.positions[k],
-                    &log.positions[k + 1],
-                ],
-                inputs: [input(k - 1), input(k)],
-            };
+            let t = log.transition(k, &zeros);
             let (y, b) = regressor.transition(&t)?;
             if instruments.is_some() && !windowed {
                 z_rows.push(None);
@@ -603,22 +609,7 @@ pub fn identify<R: Regressor>(
             let mut jacs = Vec::with_capacity(stack.origin.len());
             let zeros = vec![0.0; regressor.inputs()];
             for &(li, k) in &stack.origin {
-                let log = &logs[li];
-                let input = |k: usize| -> &[f64] {
-                    if log.inputs.is_empty() {
-                        &zeros
-                    } else {
-                        &log.inputs[k]
-                    }
-                };
-                let t = Transition {
-                    positions: [
-                        &log.positions[k - 1],
-                        &log.positions[k],
-                        &log.positions[k + 1],
-                    ],
-                    inputs: [input(k - 1), input(k)],
-                };
+                let t = logs[li].transition(k, &zeros);
                 jacs.push(regressor.noise_jacobian(&t, pi_hat.as_slice())?);
             }
             let offsets: Vec<usize> = logs
