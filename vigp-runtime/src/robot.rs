@@ -183,11 +183,18 @@ impl TermJacobians {
 
 /// What a step's derivatives carry to the next step of a rollout: the
 /// momentum and the scratch of [`Engine::step_derivatives`], whose first
-/// 2N² entries then hold the momentum's Jacobians at the state.
+/// 2N² entries then hold the momentum's Jacobians at the state, and the
+/// last velocities, whose extrapolation starts the next iteration (as in
+/// [`Robot::step_in`]).
 struct DerivativeCarry {
     p: Vec<f64>,
     scratch: Vec<f64>,
     start_known: bool,
+    /// The last 3 velocities before the state's, newest first (N each),
+    /// `known` of them valid.
+    past: Vec<f64>,
+    known: usize,
+    guess: Vec<f64>,
 }
 
 impl DerivativeCarry {
@@ -196,6 +203,9 @@ impl DerivativeCarry {
             p: vec![0.0; n],
             scratch: vec![0.0; derivative_scratch_len(n, inputs)],
             start_known: false,
+            past: vec![0.0; 3 * n],
+            known: 0,
+            guess: vec![0.0; n],
         }
     }
 }
@@ -670,17 +680,29 @@ impl Robot {
             scratch: &mut carry.scratch,
             start_known: carry.start_known,
         };
-        let result = self.engine.step_derivatives(
+        let guessed = carry.known > 0;
+        if guessed {
+            extrapolate(&z.v, &carry.past, carry.known, &mut carry.guess);
+        }
+        let result = self.engine.step_derivatives_guessed(
             &mut q,
             &mut v,
             &mut carry.p,
             &tau,
             &self.inputs,
             dt,
+            guessed.then_some(&carry.guess[..]),
             buffers,
             ws,
         );
         carry.start_known = result.is_ok();
+        carry.past.copy_within(0..2 * n, n);
+        carry.past[..n].copy_from_slice(&z.v);
+        carry.known = if result.is_ok() {
+            (carry.known + 1).min(3)
+        } else {
+            0
+        };
         let report = result.map_err(|e| self.engine_error(e))?;
         Ok(StepDerivatives {
             state: RobotState { q, v },
@@ -696,9 +718,9 @@ impl Robot {
     /// B_k = ∂z_{k+1}/∂u_k: the linearisation along the trajectory that
     /// iLQR and linear MPC take. Derivatives across steps are the products:
     /// ∂z_K/∂z_0 = A_{K−1}⋯A_0 and ∂z_K/∂u_j = A_{K−1}⋯A_{j+1}B_j. Each step
-    /// starts its iteration from the state's own velocity (not the
-    /// extrapolation of [`Robot::rollout_with`]), so the states agree with
-    /// that rollout's to the solver's tolerance; the momentum and the term
+    /// starts its iteration from the extrapolation of the last velocities,
+    /// as [`Robot::rollout_with`] does, so the states agree with that
+    /// rollout's to the solver's tolerance; the momentum and the term
     /// derivatives at each state are carried from the step before, not
     /// recomputed. A failure names the step.
     pub fn rollout_derivatives(

@@ -53,6 +53,12 @@ pub struct DerivativeBuffers<'a> {
     pub start_known: bool,
 }
 
+/// Whether every entry is finite (a branch-free reduction, which the
+/// compiler vectorizes).
+fn all_finite(xs: &[f64]) -> bool {
+    xs.iter().fold(true, |ok, x| ok & x.is_finite())
+}
+
 /// Whether the tree branches enough for [`tree_factor`] to pay: its work,
 /// Σ depth², at most a quarter of a dense factorisation's N³/3. A chain
 /// (the Panda, the UR5) has Σ depth² ≈ N³/3 and is factored densely, where
@@ -106,21 +112,30 @@ fn tree_factor<T: Tree>(jac: &mut [f64], tree: &T) -> bool {
 }
 
 /// Row `i` of the row-major n × w matrix `x` minus `a` times its row `k`
-/// (nothing for a = 0).
+/// (i ≠ k; nothing for a = 0).
 #[inline(always)]
 fn sub_row(x: &mut [f64], w: usize, i: usize, k: usize, a: f64) {
-    if a != 0.0 {
-        for c in 0..w {
-            x[i * w + c] -= a * x[k * w + c];
-        }
+    if a == 0.0 {
+        return;
+    }
+    let (dst, src) = if i > k {
+        let (lo, hi) = x.split_at_mut(i * w);
+        (&mut hi[..w], &lo[k * w..(k + 1) * w])
+    } else {
+        let (lo, hi) = x.split_at_mut(k * w);
+        (&mut lo[i * w..(i + 1) * w], &hi[..w])
+    };
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d -= a * s;
     }
 }
 
-/// Row `k` of the row-major n × w matrix `x` divided by `d`.
+/// Row `k` of the row-major n × w matrix `x` divided by `d` (times 1/d).
 #[inline(always)]
 fn div_row(x: &mut [f64], w: usize, k: usize, d: f64) {
+    let r = 1.0 / d;
     for v in &mut x[k * w..(k + 1) * w] {
-        *v /= d;
+        *v *= r;
     }
 }
 
@@ -144,8 +159,10 @@ fn tree_solve<T: Tree>(jac: &[f64], tree: &T, x: &mut [f64], w: usize) {
 }
 
 /// Solves J·X = R in place (J row-major n × n, destroyed; X row-major
-/// n × w) by Gaussian elimination with partial pivoting. `false` when a
-/// pivot is zero or not finite.
+/// n × w) by Gaussian elimination with partial pivoting: J = P·L·U in
+/// place (the row swaps applied to X as they happen), then X by forward
+/// and back substitution, [`SUBSTITUTION_BLOCK`] columns at a time held
+/// in registers. `false` when a pivot is zero or not finite.
 pub(super) fn dense_solve(jac: &mut [f64], n: usize, x: &mut [f64], w: usize) -> bool {
     for k in 0..n {
         let (mut piv, mut best) = (k, jac[k * n + k].abs());
@@ -166,24 +183,69 @@ pub(super) fn dense_solve(jac: &mut [f64], n: usize, x: &mut [f64], w: usize) ->
                 x.swap(k * w + c, piv * w + c);
             }
         }
-        let d = jac[k * n + k];
+        let r = 1.0 / jac[k * n + k];
         for i in k + 1..n {
-            let l = jac[i * n + k] / d;
+            let l = jac[i * n + k] * r;
+            jac[i * n + k] = l;
             if l != 0.0 {
                 for j in k + 1..n {
                     jac[i * n + j] -= l * jac[k * n + j];
                 }
-                sub_row(x, w, i, k, l);
             }
         }
     }
-    for k in (0..n).rev() {
-        for j in k + 1..n {
-            sub_row(x, w, k, j, jac[k * n + j]);
-        }
-        div_row(x, w, k, jac[k * n + k]);
+    let blocks = w / SUBSTITUTION_BLOCK * SUBSTITUTION_BLOCK;
+    for c in (0..blocks).step_by(SUBSTITUTION_BLOCK) {
+        substitute::<SUBSTITUTION_BLOCK>(jac, n, x, w, c);
+    }
+    for c in blocks..w {
+        substitute::<1>(jac, n, x, w, c);
     }
     true
+}
+
+/// Columns of X that [`substitute`] carries at once.
+const SUBSTITUTION_BLOCK: usize = 4;
+
+/// Columns `c..c + B` of the row-major n × w matrix `x` replaced by
+/// U⁻¹L⁻¹ of them, L (unit lower) and U the factors [`dense_solve`] left
+/// in `lu`: each row accumulated in B registers, its terms subtracted in
+/// the order of a row-by-row elimination.
+#[inline(always)]
+fn substitute<const B: usize>(lu: &[f64], n: usize, x: &mut [f64], w: usize, c: usize) {
+    let block = |x: &[f64], i: usize| -> [f64; B] {
+        let mut a = [0.0; B];
+        a.copy_from_slice(&x[i * w + c..i * w + c + B]);
+        a
+    };
+    for i in 0..n {
+        let mut acc = block(x, i);
+        for j in 0..i {
+            let (l, xj) = (lu[i * n + j], block(x, j));
+            if l != 0.0 {
+                for b in 0..B {
+                    acc[b] -= l * xj[b];
+                }
+            }
+        }
+        x[i * w + c..i * w + c + B].copy_from_slice(&acc);
+    }
+    for i in (0..n).rev() {
+        let mut acc = block(x, i);
+        for j in i + 1..n {
+            let (u, xj) = (lu[i * n + j], block(x, j));
+            if u != 0.0 {
+                for b in 0..B {
+                    acc[b] -= u * xj[b];
+                }
+            }
+        }
+        let r = 1.0 / lu[i * n + i];
+        for b in 0..B {
+            acc[b] *= r;
+        }
+        x[i * w + c..i * w + c + B].copy_from_slice(&acc);
+    }
 }
 
 /// J = h·∂(∂T/∂q)/∂v − M − h·D into `jac` (row-major n × n).
@@ -225,6 +287,27 @@ impl<T: Tree> Engine<T> {
         tau: &[f64],
         inputs: &[usize],
         dt: f64,
+        out: DerivativeBuffers<'_>,
+        ws: &mut [BodyScratch],
+    ) -> Result<EngineReport, EngineError> {
+        self.step_derivatives_guessed(q, v, p, tau, inputs, dt, None, out, ws)
+    }
+
+    /// [`Engine::step_derivatives`] with the iteration of the full step
+    /// started at `guess` instead of v, as [`Engine::step_guessed`] starts
+    /// it (a rollout passes an extrapolation of the last velocities; the
+    /// state and its derivatives are the same to the solver's tolerance).
+    /// A non-finite guess is ignored.
+    #[allow(clippy::too_many_arguments)]
+    pub fn step_derivatives_guessed(
+        &self,
+        q: &mut [f64],
+        v: &mut [f64],
+        p: &mut [f64],
+        tau: &[f64],
+        inputs: &[usize],
+        dt: f64,
+        guess: Option<&[f64]>,
         out: DerivativeBuffers<'_>,
         ws: &mut [BodyScratch],
     ) -> Result<EngineReport, EngineError> {
@@ -278,7 +361,8 @@ impl<T: Tree> Engine<T> {
             let h = dt / total as f64;
             q0.copy_from_slice(q);
             v0.copy_from_slice(v);
-            let failed = match single.step(q, v, p, tau, h, ws) {
+            let first_guess = if total == 1 { guess } else { None };
+            let failed = match single.step_guessed(q, v, p, tau, h, first_guess, ws) {
                 Ok(r) => {
                     report.iterations += r.iterations;
                     report.substeps += 1;
@@ -320,7 +404,7 @@ impl<T: Tree> Engine<T> {
             total *= 2;
         }
         report.depth = depth;
-        if !out.a.iter().chain(out.b.iter()).all(|x| x.is_finite()) {
+        if !(all_finite(out.a) && all_finite(out.b)) {
             return Err(EngineError::SingularNewtonMatrix);
         }
         Ok(report)
@@ -472,6 +556,27 @@ mod tests {
         assert!(dense_solve(&mut j, 3, &mut x, 1));
         for (got, want) in x.iter().zip([1.0, 2.0, 3.0]) {
             assert!((got - want).abs() < 1e-14, "{x:?}");
+        }
+        // five right-hand sides: one block of four columns and one more;
+        // X's columns are (1, 2, 3) scaled by c + 1, and (0, 0, 1) for the last
+        let mut j = [0.0, 2.0, 1.0, 1.0, 1.0, 0.0, 3.0, 0.0, 1.0];
+        let mut x = [0.0; 15];
+        for (i, r) in [7.0, 3.0, 6.0].iter().enumerate() {
+            for c in 0..4 {
+                x[i * 5 + c] = r * (c + 1) as f64;
+            }
+            x[i * 5 + 4] = [1.0, 0.0, 1.0][i];
+        }
+        assert!(dense_solve(&mut j, 3, &mut x, 5));
+        for i in 0..3 {
+            for c in 0..5 {
+                let want = if c < 4 {
+                    (i + 1) as f64 * (c + 1) as f64
+                } else {
+                    [0.0, 0.0, 1.0][i]
+                };
+                assert!((x[i * 5 + c] - want).abs() < 1e-14, "{x:?}");
+            }
         }
         let mut singular = [1.0, 2.0, 2.0, 4.0];
         assert!(!dense_solve(&mut singular, 2, &mut [1.0, 1.0], 1));

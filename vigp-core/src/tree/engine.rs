@@ -19,7 +19,8 @@ use crate::Real;
 /// `tree.len()` of them (`core::mem::size_of::<BodyScratch>()` bytes each,
 /// about 1 KB); they are overwritten by every call, so one slice serves
 /// any number of steps and trees. A step leaves the poses at the state it
-/// committed; the next step of the same tree from exactly that state (bit
+/// committed, as [`Engine::momentum_of`] and
+/// [`Engine::momentum_derivatives`] leave them at theirs; the next step of the same tree from exactly that state (bit
 /// for bit: q, v and p) reuses them for its starting energy instead of
 /// recomputing them (every other call clears that mark).
 ///
@@ -45,6 +46,9 @@ pub struct BodyScratch<R = f64> {
     hc: V6<R>,
     pa: V6,
     acc: V6,
+    /// a = S ×ₘ V, read by every pair of [`Engine::term_derivatives`]
+    /// that the body is on.
+    sv: V6,
     /// ∂V/∂q at `at` (gravity and spring).
     dv: R,
     // per coordinate: the committed state (q, v) and its momentum p, the
@@ -149,6 +153,7 @@ impl<R: Real> BodyScratch<R> {
             hc: z6,
             pa: [0.0; 6],
             acc: [0.0; 6],
+            sv: [0.0; 6],
             dv: zero(),
             q: 0.0,
             v: 0.0,
@@ -1083,10 +1088,21 @@ impl<T: Tree> Engine<T> {
         let ws = self.scratch(ws)?;
         check_len("p", p.len(), ws.len())?;
         self.momentum_pass(q, v, ws)?;
-        for (x, w) in p.iter_mut().zip(ws.iter()) {
-            *x = w.pn;
-        }
+        self.commit_start(p, ws);
         Ok(())
+    }
+
+    /// After a momentum pass at (q, v): p = M(q)v out, and the workspace
+    /// marked as holding the poses of the committed state (q, v, p), as a
+    /// step leaves it, so that a step from there reuses them.
+    fn commit_start(&self, p: &mut [f64], ws: &mut [BodyScratch]) {
+        for (x, w) in p.iter_mut().zip(ws.iter_mut()) {
+            *x = w.pn;
+            w.p = w.pn;
+        }
+        if let Some(w) = ws.first_mut() {
+            w.tag = self.fingerprint;
+        }
     }
 
     /// Loads (q, v), then the kinematics and momentum passes: what
@@ -1187,7 +1203,7 @@ impl<T: Tree> Engine<T> {
     pub(super) fn loaded_term_derivatives(
         &self,
         out: &mut TermDerivatives<'_>,
-        ws: &[BodyScratch],
+        ws: &mut [BodyScratch],
     ) {
         let rest = (&mut *out.t_q, &mut *out.t_v, &mut *out.v_q);
         self.pair_derivatives(ws, out.p_q, out.p_v, Some(rest));
@@ -1211,10 +1227,8 @@ impl<T: Tree> Engine<T> {
         check_len("p_q", p_q.len(), n * n)?;
         check_len("p_v", p_v.len(), n * n)?;
         self.momentum_pass(q, v, ws)?;
-        for (x, w) in p.iter_mut().zip(ws.iter()) {
-            *x = w.pn;
-        }
         self.pair_derivatives(ws, p_q, p_v, None);
+        self.commit_start(p, ws);
         Ok(())
     }
 
@@ -1224,7 +1238,7 @@ impl<T: Tree> Engine<T> {
     #[allow(clippy::type_complexity)]
     fn pair_derivatives(
         &self,
-        ws: &[BodyScratch],
+        ws: &mut [BodyScratch],
         p_q: &mut [f64],
         p_v: &mut [f64],
         mut rest: Option<(&mut [f64], &mut [f64], &mut [f64])>,
@@ -1239,6 +1253,10 @@ impl<T: Tree> Engine<T> {
         }
         let g = self.tree.gravity();
         let ag = [0.0, 0.0, 0.0, g[0], g[1], g[2]];
+        for w in ws.iter_mut() {
+            w.sv = cross_motion(&w.s, &w.vel);
+        }
+        let ws = &*ws;
         // Every pair (b, j) is a few dot products of per-body vectors:
         // the composite inertia I_b is symmetric, s·(I_b x) = (I_b s)·x,
         // and the motion and force cross products are dual,
@@ -1249,8 +1267,7 @@ impl<T: Tree> Engine<T> {
         //   S_b·(I_b (S_j × a_g)) = S_j·(a_g ×* u_b).
         for b in 0..n {
             let wb = &ws[b];
-            let (sb, hb, ib) = (wb.s, wb.hc, wb.composite);
-            let a_b = cross_motion(&sb, &wb.vel);
+            let (sb, hb, ib, a_b) = (wb.s, wb.hc, wb.composite, wb.sv);
             let u_b = ib.mul(&sb);
             let f_b = sub6(&cross_force(&sb, &hb), &ib.mul(&a_b));
             // the gravity terms, for the rest
@@ -1264,8 +1281,7 @@ impl<T: Tree> Engine<T> {
             let mut at = Some(b);
             while let Some(j) = at {
                 let wj = &ws[j];
-                let sj = wj.s;
-                let a_j = cross_motion(&sj, &wj.vel);
+                let (sj, a_j) = (wj.s, wj.sv);
                 let (ua, us, sf) = (dot6(&u_b, &a_j), dot6(&u_b, &sj), dot6(&sj, &f_b));
                 let bj = b * n + j;
                 p_q[bj] = -ua;

@@ -396,3 +396,84 @@ fn newton_solve_matches_a_dense_solve() {
         }
     }
 }
+
+/// A step from the state that `momentum_of` or `momentum_derivatives`
+/// just evaluated (whose poses it reuses for its starting energy) equals,
+/// bit for bit, the step from a workspace that holds nothing.
+#[test]
+fn a_step_after_the_momentum_equals_a_cold_step_bit_for_bit() {
+    let b = bodies(true);
+    let e = engine(&b);
+    let step = |ws: &mut [BodyScratch], p: &mut [f64; 5]| {
+        let (mut q, mut v) = (Q, V);
+        e.step(&mut q, &mut v, p, &[0.1; 5], 2e-3, ws).unwrap();
+        (q, v, *p)
+    };
+    let (mut p, mut ws) = ([0.0; 5], [BodyScratch::default(); 5]);
+    e.momentum_of(&Q, &V, &mut p, &mut ws).unwrap();
+    let warm = step(&mut ws, &mut p.clone());
+    let mut cold_ws = [BodyScratch::default(); 5];
+    assert_eq!(warm, step(&mut cold_ws, &mut p.clone()));
+    let (mut pq, mut pv) = ([0.0; 25], [0.0; 25]);
+    let mut p2 = [0.0; 5];
+    e.momentum_derivatives(&Q, &V, &mut p2, &mut pq, &mut pv, &mut ws)
+        .unwrap();
+    assert_eq!(p2, p);
+    assert_eq!(warm, step(&mut ws, &mut p2));
+}
+
+/// The derivative step started from a guess (as a rollout starts it)
+/// converges to the state of the unguessed one, and its A and B agree, to
+/// the solver's tolerance (1e-13 here): 1e-10 of the largest entry.
+#[test]
+fn a_guessed_derivative_step_agrees_with_the_unguessed_one() {
+    let b = bodies(true);
+    let e = Engine::with_options(
+        TreeRef {
+            bodies: &b,
+            gravity: [0.0, 0.0, -9.81],
+        },
+        EngineOptions {
+            tolerance: 1e-13,
+            ..EngineOptions::default()
+        },
+    )
+    .unwrap();
+    let inputs = [1, 3];
+    let tau = [0.0, 0.4, 0.0, -0.2, 0.0];
+    let run = |guess: Option<&[f64]>| {
+        let (mut q, mut v, mut p) = (Q, V, [0.0; 5]);
+        let (mut a, mut bm) = ([0.0; 100], [0.0; 20]);
+        let mut scratch = [0.0; derivative_scratch_len(5, 2)];
+        let mut ws = [BodyScratch::default(); 5];
+        let out = DerivativeBuffers {
+            a: &mut a,
+            b: &mut bm,
+            scratch: &mut scratch,
+            start_known: false,
+        };
+        let r = e
+            .step_derivatives_guessed(
+                &mut q, &mut v, &mut p, &tau, &inputs, 2e-3, guess, out, &mut ws,
+            )
+            .unwrap();
+        (q, v, a, bm, r.iterations)
+    };
+    let plain = run(None);
+    // a guess near the root (the plain step's v₁, moved off it)
+    let near = plain.1.map(|x| x + 1e-4);
+    let guessed = run(Some(&near));
+    assert!(guessed.4 < plain.4, "{} vs {}", guessed.4, plain.4);
+    let close = |x: &[f64], y: &[f64], what: &str| {
+        let big = x.iter().fold(0.0f64, |m, a| m.max(a.abs()));
+        let err = x
+            .iter()
+            .zip(y)
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        assert!(err <= 1e-10 * big, "{what}: {err:e} of {big:e}");
+    };
+    close(&plain.1, &guessed.1, "v");
+    close(&plain.2, &guessed.2, "A");
+    close(&plain.3, &guessed.3, "B");
+    assert_eq!(plain.0, guessed.0);
+}
