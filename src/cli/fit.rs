@@ -75,9 +75,15 @@ pub(super) fn choose<T: Clone>(a: &FitArgs, all: &[T]) -> Result<Vec<T>, CliErro
 }
 
 /// What every view's training starts from: the data read with the
-/// mechanism's columns, its time step, and the training options.
+/// mechanism's columns, and how the views train.
 pub(super) struct Prepared<const N: usize> {
     data: Dataset<N>,
+    training: Training,
+}
+
+/// How every view of `fit` trains: the data's time step, the prior and the
+/// GP training options.
+struct Training {
     dt: f64,
     prior: Prior,
     opts: TrainOptions,
@@ -116,9 +122,7 @@ where
     }
     Ok(Prepared {
         data,
-        dt,
-        prior,
-        opts,
+        training: Training { dt, prior, opts },
     })
 }
 
@@ -246,33 +250,18 @@ where
     Mn: Mechanism<N, C> + Parameters + Copy + Send + Sync + 'static,
     Mn: crate::Inputs<U>,
 {
-    let Prepared {
-        data,
-        dt,
-        prior,
-        opts,
-    } = p;
-    let dt = *dt;
-    let enc = if a.encoding == EncodingArg::Sincos {
+    let encoding = if a.encoding == EncodingArg::Sincos {
         Encoding::SinCos
     } else {
         Encoding::Raw
     };
-    if U == 0 {
-        let all = data.transitions();
-        let train = |chosen: &[Transition<N>]| {
-            Learned::train(minimal, dt, chosen, enc, prior.clone(), opts)
-        };
-        fit_view(a, &all, (enc, prior), 0, opts, train, out)
+    let all = if U == 0 {
+        ViewTransitions::Plain(p.data.transitions())
     } else {
-        let all = data
-            .forced_transitions::<U>()
-            .map_err(data_error(&a.data))?;
-        let train = |chosen: &[ForcedTransition<N, U>]| {
-            Learned::train_forced(minimal, dt, chosen, enc, prior.clone(), opts)
-        };
-        fit_view(a, &all, (enc, prior), 2 * U, opts, train, out)
-    }
+        let forced = p.data.forced_transitions::<U>();
+        ViewTransitions::Forced(forced.map_err(data_error(&a.data))?)
+    };
+    fit_transitions::<Mn, N, C, U>(a, minimal, encoding, all, &p.training, out)
 }
 
 /// Trains and saves a model in a planar mechanism's maximal coordinates
@@ -282,7 +271,6 @@ pub(super) fn fit_maximal<
     Mn,
     Mx,
     const N: usize,
-    const C: usize,
     const NM: usize,
     const CM: usize,
     const U: usize,
@@ -298,13 +286,7 @@ where
     Mx: Mechanism<NM, CM> + Parameters + Copy + Send + Sync + 'static,
     Mx: crate::Inputs<U>,
 {
-    let Prepared {
-        data,
-        dt,
-        prior,
-        opts,
-    } = p;
-    let dt = *dt;
+    let data = &p.data;
     let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
     let (mut plain, mut forced) = (Vec::new(), Vec::new());
     for (run, us) in data.runs.iter().zip(&inputs) {
@@ -320,16 +302,50 @@ where
             forced.extend(forced_transitions(&xs, us, run_dt));
         }
     }
-    if U == 0 {
-        let train = |chosen: &[Transition<NM>]| {
-            Learned::train(maximal, dt, chosen, Encoding::Raw, prior.clone(), opts)
-        };
-        fit_view(a, &plain, (Encoding::Raw, prior), 0, opts, train, out)
+    let all = if U == 0 {
+        ViewTransitions::Plain(plain)
     } else {
-        let train = |chosen: &[ForcedTransition<NM, U>]| {
-            Learned::train_forced(maximal, dt, chosen, Encoding::Raw, prior.clone(), opts)
-        };
-        fit_view(a, &forced, (Encoding::Raw, prior), 2 * U, opts, train, out)
+        ViewTransitions::Forced(forced)
+    };
+    fit_transitions::<Mx, NM, CM, U>(a, maximal, Encoding::Raw, all, &p.training, out)
+}
+
+/// A view's training transitions: of a mechanism without inputs, or with
+/// the `U` inputs that drove them.
+enum ViewTransitions<const N: usize, const U: usize> {
+    Plain(Vec<Transition<N>>),
+    Forced(Vec<ForcedTransition<N, U>>),
+}
+
+/// Trains `model` (a mechanism's minimal or maximal view) in `encoding` on
+/// at most `--max-samples` of `all`, the plain or the forced way, then
+/// reports and saves ([`fit_view`]).
+fn fit_transitions<M, const N: usize, const C: usize, const U: usize>(
+    a: &FitArgs,
+    model: M,
+    encoding: Encoding,
+    all: ViewTransitions<N, U>,
+    training: &Training,
+    out: &mut dyn Write,
+) -> Result<(), CliError>
+where
+    M: Mechanism<N, C> + Parameters + Copy,
+    M: crate::Inputs<U>,
+{
+    let Training { dt, prior, opts } = training;
+    match all {
+        ViewTransitions::Plain(all) => {
+            let train = |chosen: &[Transition<N>]| {
+                Learned::train(model, *dt, chosen, encoding, prior.clone(), opts)
+            };
+            fit_view(a, &all, encoding, training, 0, train, out)
+        }
+        ViewTransitions::Forced(all) => {
+            let train = |chosen: &[ForcedTransition<N, U>]| {
+                Learned::train_forced(model, *dt, chosen, encoding, prior.clone(), opts)
+            };
+            fit_view(a, &all, encoding, training, 2 * U, train, out)
+        }
     }
 }
 
@@ -340,16 +356,16 @@ where
 const VARIANCE_RESOLVED: f64 = 1e-10;
 
 /// Trains on at most `--max-samples` of `all` (`train`: the plain or the
-/// forced training of one view, with `encoding` and `prior`), reports and
-/// saves. `u_dim`: the GP inputs that are control inputs, after the
-/// `encoding`'s state inputs (2·U for a forced model: the previous and the
-/// current input).
+/// forced training of one view, in `encoding`, as `training` says),
+/// reports and saves. `u_dim`: the GP inputs that are control inputs,
+/// after the `encoding`'s state inputs (2·U for a forced model: the
+/// previous and the current input).
 fn fit_view<M, T, const N: usize, const C: usize>(
     a: &FitArgs,
     all: &[T],
-    (encoding, prior): (Encoding, &Prior),
+    encoding: Encoding,
+    training: &Training,
     u_dim: usize,
-    opts: &TrainOptions,
     train: impl FnOnce(&[T]) -> Result<(Learned<M, N, C>, TrainReport), LearnError>,
     out: &mut dyn Write,
 ) -> Result<(), CliError>
@@ -357,6 +373,7 @@ where
     M: Mechanism<N, C> + Parameters + Clone,
     T: Copy,
 {
+    let opts = &training.opts;
     let chosen = choose(a, all)?;
     let d = encoding.dim(&M::KINDS) + u_dim;
     w(
@@ -371,7 +388,7 @@ where
             } else {
                 String::new()
             },
-            super::prior_name(prior),
+            super::prior_name(&training.prior),
             chosen.len(),
             all.len(),
             opts.restarts,
@@ -388,19 +405,8 @@ where
             }
         ),
     )?;
-    let pb = spinner(format!(
-        "training {N} GPs on N = {} ({} starts each)",
-        chosen.len(),
-        1 + opts.restarts
-    ));
-    let start = Instant::now();
-    let result = train(&chosen);
-    pb.finish_and_clear();
-    let (learned, report) = result?;
-    w(
-        out,
-        format_args!("trained in {:.1} s", start.elapsed().as_secs_f64()),
-    )?;
+    let (learned, report) =
+        train_timed(N, chosen.len(), opts.restarts, out, || Ok(train(&chosen)?))?;
     for (j, o) in report.outputs.iter().enumerate() {
         w(
             out,
@@ -471,10 +477,40 @@ where
         path: a.out.clone(),
         source,
     })?;
-    let bytes = std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0);
+    report_saved(&a.out, out)
+}
+
+/// Runs `train` behind a spinner that says what trains (`gps` GPs on `n`
+/// transitions, each from 1 + `restarts` starts), then reports how long it
+/// took (a view of `fit`, or a robot).
+pub(super) fn train_timed<T>(
+    gps: usize,
+    n: usize,
+    restarts: usize,
+    out: &mut dyn Write,
+    train: impl FnOnce() -> Result<T, CliError>,
+) -> Result<T, CliError> {
+    let pb = spinner(format!(
+        "training {gps} GPs on N = {n} ({} starts each)",
+        1 + restarts
+    ));
+    let start = Instant::now();
+    let result = train();
+    pb.finish_and_clear();
+    let trained = result?;
     w(
         out,
-        format_args!("wrote {} ({bytes} bytes)", a.out.display()),
+        format_args!("trained in {:.1} s", start.elapsed().as_secs_f64()),
+    )?;
+    Ok(trained)
+}
+
+/// The report's last line on a model saved to `path`: its size.
+pub(super) fn report_saved(path: &std::path::Path, out: &mut dyn Write) -> Result<(), CliError> {
+    let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+    w(
+        out,
+        format_args!("wrote {} ({bytes} bytes)", path.display()),
     )
 }
 

@@ -7,9 +7,10 @@ use std::path::Path;
 
 use super::args::{IdentifyArgs, NoiseArg, RuleArg};
 use super::{CliError, check_out_dir, io_error, read_log, w};
+use crate::data::{DatasetOf, Positions};
 use crate::identify::{
-    DelRegressor, Log, Noise, Options, OutputError, RobotRegressor, SampleNoise, Status,
-    identify as run_identify,
+    DelRegressor, Identification, IdentifyError, Log, Noise, Options, OutputError, Regressor,
+    RobotRegressor, SampleNoise, Status, identify as run_identify,
 };
 use crate::learned::IdentifiedParameters;
 use crate::{Mechanism, Parameters};
@@ -27,24 +28,14 @@ where
 {
     check_args(a)?;
     let (data, dt) = read_log::<Mn, N, C>(&a.data, &a.read)?;
-    let rule = a.rule.unwrap_or(RuleArg::Midpoint);
-    let regressor = match rule {
+    let by_rule = |rule: RuleArg| match rule {
         RuleArg::Midpoint => DelRegressor::midpoint(minimal, dt),
         RuleArg::FirstOrder => DelRegressor::first_order(minimal, dt),
-    }
-    .map_err(fail)?;
-    let logs: Vec<Log> = data.runs.iter().map(Log::from_run).collect();
-    let id = run_identify(&regressor, &logs, &options(a)).map_err(fail)?;
+    };
+    let (fit, regressor, id) = regress(a, Mn::NAME, &data, dt, RuleArg::Midpoint, by_rule)?;
     let identified = regressor.model_with(&id.estimate).map_err(fail)?;
     let value = |m: &Mn, name: &str| Mn::parameter_index(name).and_then(|i| m.parameter(i));
-    let standard = IdentifiedParameters::from_identification::<Mn>(&id)
-        .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
-    let fit = Fit {
-        name: Mn::NAME,
-        runs: data.runs.len(),
-        dt,
-        rule,
-    };
+    let standard = IdentifiedParameters::from_identification::<Mn>(&id).map_err(fail)?;
     write_results(
         a,
         &fit,
@@ -68,14 +59,11 @@ pub(super) fn identify_robot(
     out: &mut dyn Write,
 ) -> Result<(), CliError> {
     check_args(a)?;
-    let rule = a.rule.unwrap_or(RuleArg::FirstOrder);
-    let regressor = match rule {
+    let by_rule = |rule: RuleArg| match rule {
         RuleArg::FirstOrder => RobotRegressor::new(robot, dt),
         RuleArg::Midpoint => RobotRegressor::midpoint(robot, dt),
-    }
-    .map_err(fail)?;
-    let logs: Vec<Log> = data.runs.iter().map(Log::from_run).collect();
-    let id = run_identify(&regressor, &logs, &options(a)).map_err(fail)?;
+    };
+    let (fit, regressor, id) = regress(a, robot.name(), data, dt, RuleArg::FirstOrder, by_rule)?;
     let identified = regressor.tree_with(&id.estimate).map_err(fail)?;
     let standard = IdentifiedParameters::new(
         robot.name(),
@@ -83,13 +71,7 @@ pub(super) fn identify_robot(
         &id.estimate,
         &id.covariance,
     )
-    .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
-    let fit = Fit {
-        name: robot.name(),
-        runs: data.runs.len(),
-        dt,
-        rule,
-    };
+    .map_err(fail)?;
     write_results(
         a,
         &fit,
@@ -105,6 +87,31 @@ pub(super) fn identify_robot(
     )
 }
 
+/// The regression of the mechanism (or robot) `name` on every run of
+/// `data` (time step `dt`), with the options of the flags: by the
+/// regressor that `by_rule` makes for the rule of `--rule` (`default`
+/// without). What was identified from what, the regressor, and its result.
+fn regress<'a, R: Regressor, P: Positions>(
+    a: &IdentifyArgs,
+    name: &'a str,
+    data: &DatasetOf<P>,
+    dt: f64,
+    default: RuleArg,
+    by_rule: impl FnOnce(RuleArg) -> Result<R, IdentifyError>,
+) -> Result<(Fit<'a>, R, Identification), CliError> {
+    let rule = a.rule.unwrap_or(default);
+    let regressor = by_rule(rule).map_err(fail)?;
+    let logs: Vec<Log> = data.runs.iter().map(Log::from_run).collect();
+    let id = run_identify(&regressor, &logs, &options(a)).map_err(fail)?;
+    let fit = Fit {
+        name,
+        runs: data.runs.len(),
+        dt,
+        rule,
+    };
+    Ok((fit, regressor, id))
+}
+
 /// What was identified from what, for the report's first line.
 struct Fit<'a> {
     name: &'a str,
@@ -113,7 +120,8 @@ struct Fit<'a> {
     rule: RuleArg,
 }
 
-fn fail(e: crate::identify::IdentifyError) -> CliError {
+/// A usage error of `identify` saying why.
+fn fail(e: impl std::fmt::Display) -> CliError {
     CliError::Usage(format!("identify: {e}"))
 }
 
@@ -170,7 +178,7 @@ fn options(a: &IdentifyArgs) -> Options {
 fn write_results(
     a: &IdentifyArgs,
     fit: &Fit<'_>,
-    id: &crate::identify::Identification,
+    id: &Identification,
     values: impl Fn(&str) -> Option<(f64, f64)>,
     standard: IdentifiedParameters,
     out: &mut dyn Write,
@@ -270,8 +278,7 @@ fn write_results(
         "base": base,
         "identified": standard,
     });
-    let text = serde_json::to_string_pretty(&file)
-        .map_err(|e| CliError::Usage(format!("identify: {e}")))?;
+    let text = serde_json::to_string_pretty(&file).map_err(fail)?;
     std::fs::write(&a.out, text + "\n").map_err(io_error(&a.out))?;
     w(
         out,

@@ -580,7 +580,7 @@ fn read_plan_rows(path: &Path, inputs: &[&str]) -> Result<PlanRows, CliError> {
             }
         } else {
             return Err(bad(format!(
-                "line 1: unknown column `{name}`: a plan has the input columns {} (and may have                  `run` and `t`), no positions",
+                "line 1: unknown column `{name}`: a plan has the input columns {} (and may have `run` and `t`), no positions",
                 inputs
                     .iter()
                     .map(|n| format!("`u_{n}`"))

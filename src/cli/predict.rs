@@ -2,6 +2,7 @@
 //! mechanism's model, or of a learned robot's: [`predict_robot`]).
 
 use std::io::Write;
+use std::path::Path;
 
 use super::args::{BoundArg, PredictArgs};
 use super::robot::state_at;
@@ -36,12 +37,7 @@ where
     L: Mechanism<K, CK> + Clone,
     L: crate::Inputs<U>,
 {
-    if a.steps == 0 {
-        return Err(CliError::Usage("--steps must be at least 1".into()));
-    }
-    if a.stride == Some(0) {
-        return Err(CliError::Usage("--stride must be at least 1".into()));
-    }
+    check_counts(a)?;
     check_model_inputs::<U>(&a.model, learned.inputs())?;
     check_out_dir(&a.out)?;
     let dt = learned.dt();
@@ -113,32 +109,7 @@ where
                 .map_err(data_error(path))?;
             // a window of h steps needs h + 1 samples of one run
             let horizon = a.steps.max(2);
-            let longest = held_out
-                .runs
-                .iter()
-                .map(|r| r.positions.len())
-                .max()
-                .unwrap_or(0);
-            if longest <= horizon {
-                let mut lengths: Vec<String> = held_out
-                    .runs
-                    .iter()
-                    .take(8)
-                    .map(|r| format!("`{}` {}", r.name, r.positions.len()))
-                    .collect();
-                if held_out.runs.len() > 8 {
-                    lengths.push(format!("… ({} runs)", held_out.runs.len()));
-                }
-                return Err(CliError::Usage(format!(
-                    "{}: --steps {} is calibrated on windows of {horizon} steps, which need runs \
-                     of at least {} samples; the longest run has {longest} (samples per run: {}). \
-                     Give longer held-out runs or fewer --steps",
-                    path.display(),
-                    a.steps,
-                    horizon + 1,
-                    lengths.join(", ")
-                )));
-            }
+            check_horizon(path, &held_out.runs, a.steps, horizon, true)?;
             // windows in the model's coordinates: positions of the view
             // (and, with inputs, each sample's logged input)
             let trajectories: Vec<Vec<SVector<f64, K>>> = held_out
@@ -184,45 +155,26 @@ where
     };
     // (U = 0 is `error_bound`; the model's input count is checked above)
     let bound = learned.error_bound_forced::<U>(&kind, &calibration)?;
-    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
-    let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
     let mut header = header(a, &data.coordinates, inputs);
     // which rows' bounds are the conformal bound's fallback (see below)
     let conformal = bound.kind_name() == "conformal";
     if conformal {
         header.push("fallback".into());
     }
-    let csv_err = |e: csv::Error| CliError::Io {
-        path: a.out.clone(),
-        source: std::io::Error::other(e),
-    };
-    wtr.write_record(&header).map_err(csv_err)?;
+    let mut csv = CsvOut::create(&a.out, &header)?;
     let pb = bar(starts.len(), "predicting");
-    let mut failed = 0usize;
-    let mut first_error = None;
-    // states outside what the bound covers, and the runs holding them
-    let (mut outside, mut outside_runs) = (0usize, 0usize);
+    let mut tally = Tally::default();
     for ((run, s, z0, up, us), zv) in starts.iter().zip(&view_starts) {
         let pred = if U > 0 {
             learned.predict_forced(zv, up, us, &bound)
         } else {
             learned.predict(zv, a.steps, &bound)
         };
-        let pred = match pred {
-            Ok(p) => p,
-            Err(e) => {
-                failed += 1;
-                w(
-                    out,
-                    format_args!("{}: {e}", window_place(run, *s, a.read.resample.is_some())),
-                )?;
-                first_error.get_or_insert(e);
-                continue;
-            }
+        let place = || window_place(run, *s, a.read.resample.is_some());
+        let Some(pred) = tally.take(pred, place, out)? else {
+            continue;
         };
-        let n_out = pred.outside.iter().filter(|&&o| o).count();
-        outside += n_out;
-        outside_runs += usize::from(n_out > 0);
+        tally.count_outside(&pred.outside);
         for (k, z) in pred.states.iter().enumerate() {
             let zm = if k == 0 { *z0 } else { to_minimal(z) };
             let mut row = row(
@@ -244,39 +196,32 @@ where
                     (_, false) => String::new(),
                 });
             }
-            wtr.write_record(&row).map_err(csv_err)?;
+            csv.write(&row)?;
         }
         pb.inc(1);
     }
     pb.finish_and_clear();
-    wtr.flush().map_err(io_error(&a.out))?;
-    every_run_failed(a, failed, starts.len(), first_error, out)?;
-    if outside > 0 {
-        let what = match (&bound.fallback, bound.kind_name()) {
-            (Some(f), _) => format!(
-                "outside the calibrated region: their bounds (and, where the start is \
-                 outside, the whole run's position bounds) are the larger of the conformal \
-                 and the {} bound",
-                f.kind_name()
-            ),
-            (None, "conformal") => format!(
-                "outside the calibrated region: the conformal guarantee does not cover them{}",
-                if learned.gp().is_sparse() {
-                    " (a sparse GP has no rigorous bound to fall back to)"
-                } else {
-                    ""
-                }
-            ),
-            _ => {
-                "outside the box of the training inputs, where the bound's constants were estimated"
-                    .into()
+    csv.finish()?;
+    tally.every_run_failed(a, starts.len(), out)?;
+    let what = match (&bound.fallback, bound.kind_name()) {
+        (Some(f), _) => format!(
+            "outside the calibrated region: their bounds (and, where the start is outside, the \
+             whole run's position bounds) are the larger of the conformal and the {} bound",
+            f.kind_name()
+        ),
+        (None, "conformal") => format!(
+            "outside the calibrated region: the conformal guarantee does not cover them{}",
+            if learned.gp().is_sparse() {
+                " (a sparse GP has no rigorous bound to fall back to)"
+            } else {
+                ""
             }
-        };
-        w(
-            out,
-            format_args!("note: {outside} predicted states in {outside_runs} run(s) lie {what}"),
-        )?;
-    }
+        ),
+        _ => "outside the box of the training inputs, where the bound's constants were estimated"
+            .into(),
+    };
+    tally.note_outside(&what, out)?;
+    let failed = tally.failed;
     let what = if a.stride.is_some() {
         format!(
             "{} predictions (every {} samples of {} run(s))",
@@ -300,28 +245,160 @@ where
     )
 }
 
-/// A file with the header alone is no result: when every one of `total`
-/// predictions failed, says so and returns the first error (exit code 1).
-fn every_run_failed(
-    a: &PredictArgs,
-    failed: usize,
-    total: usize,
-    first_error: Option<BoundError>,
-    out: &mut dyn Write,
+/// The checks of `--steps` and `--stride`, before any work.
+fn check_counts(a: &PredictArgs) -> Result<(), CliError> {
+    if a.steps == 0 {
+        return Err(CliError::Usage("--steps must be at least 1".into()));
+    }
+    if a.stride == Some(0) {
+        return Err(CliError::Usage("--stride must be at least 1".into()));
+    }
+    Ok(())
+}
+
+/// Refuses held-out runs (`runs` of the file `path`) none of which is long
+/// enough for a calibration window of `horizon` steps (for `--steps`
+/// `steps`); with `per_run` the message lists the runs' lengths.
+fn check_horizon<P>(
+    path: &Path,
+    runs: &[RunOf<P>],
+    steps: usize,
+    horizon: usize,
+    per_run: bool,
 ) -> Result<(), CliError> {
-    if failed == total
-        && let Some(e) = first_error
-    {
+    let longest = runs.iter().map(|r| r.positions.len()).max().unwrap_or(0);
+    if longest > horizon {
+        return Ok(());
+    }
+    let lengths = if per_run {
+        let mut lengths: Vec<String> = runs
+            .iter()
+            .take(8)
+            .map(|r| format!("`{}` {}", r.name, r.positions.len()))
+            .collect();
+        if runs.len() > 8 {
+            lengths.push(format!("… ({} runs)", runs.len()));
+        }
+        format!(" (samples per run: {})", lengths.join(", "))
+    } else {
+        String::new()
+    };
+    Err(CliError::Usage(format!(
+        "{}: --steps {steps} is calibrated on windows of {horizon} steps, which need runs of at \
+         least {} samples; the longest run has {longest}{lengths}. Give longer held-out runs or \
+         fewer --steps",
+        path.display(),
+        horizon + 1,
+    )))
+}
+
+/// The output CSV of `--out`.
+struct CsvOut<'a> {
+    wtr: csv::Writer<std::io::BufWriter<std::fs::File>>,
+    path: &'a Path,
+}
+
+impl<'a> CsvOut<'a> {
+    /// Creates the file `path` and writes its `header`.
+    fn create(path: &'a Path, header: &[String]) -> Result<Self, CliError> {
+        let file = std::fs::File::create(path).map_err(io_error(path))?;
+        let wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
+        let mut csv = CsvOut { wtr, path };
+        csv.write(header)?;
+        Ok(csv)
+    }
+
+    /// Writes one record.
+    fn write(&mut self, record: &[String]) -> Result<(), CliError> {
+        self.wtr.write_record(record).map_err(|e| CliError::Io {
+            path: self.path.to_path_buf(),
+            source: std::io::Error::other(e),
+        })
+    }
+
+    /// Flushes what is buffered to the file.
+    fn finish(mut self) -> Result<(), CliError> {
+        self.wtr.flush().map_err(io_error(self.path))
+    }
+}
+
+/// What became of the predictions: how many failed (and the first
+/// error), and the predicted states outside what the bound covers, and
+/// the runs holding them.
+#[derive(Default)]
+struct Tally {
+    failed: usize,
+    first_error: Option<BoundError>,
+    outside: usize,
+    outside_runs: usize,
+}
+
+impl Tally {
+    /// The prediction `pred`, or `None` when it failed: then it is counted
+    /// and its error said at its `place`.
+    fn take<P>(
+        &mut self,
+        pred: Result<P, BoundError>,
+        place: impl FnOnce() -> String,
+        out: &mut dyn Write,
+    ) -> Result<Option<P>, CliError> {
+        match pred {
+            Ok(p) => Ok(Some(p)),
+            Err(e) => {
+                self.failed += 1;
+                w(out, format_args!("{}: {e}", place()))?;
+                self.first_error.get_or_insert(e);
+                Ok(None)
+            }
+        }
+    }
+
+    /// Counts the states of one prediction that lie `outside`.
+    fn count_outside(&mut self, outside: &[bool]) {
+        let n_out = outside.iter().filter(|&&o| o).count();
+        self.outside += n_out;
+        self.outside_runs += usize::from(n_out > 0);
+    }
+
+    /// The note on the predicted states outside what the bound covers, if
+    /// any (`what`: where they lie, and what that means).
+    fn note_outside(&self, what: &str, out: &mut dyn Write) -> Result<(), CliError> {
+        if self.outside == 0 {
+            return Ok(());
+        }
         w(
             out,
             format_args!(
-                "every run failed ({failed}); {} holds no predictions",
-                a.out.display()
+                "note: {} predicted states in {} run(s) lie {what}",
+                self.outside, self.outside_runs
             ),
-        )?;
-        return Err(e.into());
+        )
     }
-    Ok(())
+
+    /// A file with the header alone is no result: when every one of
+    /// `total` predictions failed, says so and returns the first error
+    /// (exit code 1).
+    fn every_run_failed(
+        &mut self,
+        a: &PredictArgs,
+        total: usize,
+        out: &mut dyn Write,
+    ) -> Result<(), CliError> {
+        let failed = self.failed;
+        if failed == total
+            && let Some(e) = self.first_error.take()
+        {
+            w(
+                out,
+                format_args!(
+                    "every run failed ({failed}); {} holds no predictions",
+                    a.out.display()
+                ),
+            )?;
+            return Err(e.into());
+        }
+        Ok(())
+    }
 }
 
 /// The output's columns before `fallback`: run, [start,] t, the
@@ -530,12 +607,7 @@ fn guarantee(bound: &ErrorBound, delta: f64) -> String {
 /// mechanism's integrator and are refused.
 pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let usage = |why: String| Err(CliError::Usage(why));
-    if a.steps == 0 {
-        return usage("--steps must be at least 1".into());
-    }
-    if a.stride == Some(0) {
-        return usage("--stride must be at least 1".into());
-    }
+    check_counts(a)?;
     if matches!(a.bound, Some(BoundArg::Rkhs | BoundArg::Theorem1)) {
         return usage(
             "a learned robot's predictions carry the conformal bound (--calibration FILE): the \
@@ -595,22 +667,7 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
             })
             .collect()
     };
-    let longest = held_out
-        .runs
-        .iter()
-        .map(|r| r.positions.len())
-        .max()
-        .unwrap_or(0);
-    if longest <= horizon {
-        return usage(format!(
-            "{}: --steps {} is calibrated on windows of {horizon} steps, which need runs of at \
-             least {} samples; the longest run has {longest}. Give longer held-out runs or fewer \
-             --steps",
-            cal_path.display(),
-            a.steps,
-            horizon + 1
-        ));
-    }
+    check_horizon(cal_path, &held_out.runs, a.steps, horizon, false)?;
     let calibration =
         RobotCalibration::from_logs(&positions(&held_out), &logged(&held_out), dt, horizon, 1)?;
     let settings = ConformalSettings {
@@ -654,42 +711,28 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
             ),
         )?;
     }
-    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
-    let mut wtr = csv::Writer::from_writer(std::io::BufWriter::new(file));
-    let csv_err = |e: csv::Error| CliError::Io {
-        path: a.out.clone(),
-        source: std::io::Error::other(e),
-    };
     let coordinates: Vec<String> = names.iter().map(|c| c.to_string()).collect();
     let mut header = header(a, &coordinates, &inputs);
     // (`fallback` as for a declared mechanism's conformal bound without a
     // fallback: `outside` where the guarantee does not apply)
     header.push("fallback".into());
-    wtr.write_record(&header).map_err(csv_err)?;
+    let mut csv = CsvOut::create(&a.out, &header)?;
     let pb = bar(starts.len(), "predicting");
-    let (mut failed, mut first_error) = (0usize, None);
-    let (mut outside, mut outside_runs) = (0usize, 0usize);
+    let mut tally = Tally::default();
     for (r, s, z0, u_prev, us) in &starts {
         let run = &data.runs[*r];
-        let pred = match learned.predict(z0, u_prev, us, &bound) {
-            Ok(p) => p,
-            Err(e) => {
-                failed += 1;
-                w(
-                    out,
-                    format_args!(
-                        "run `{}`, window from line {} (sample {s}): {e}",
-                        run.name,
-                        run.line + *s as u64
-                    ),
-                )?;
-                first_error.get_or_insert(e);
-                continue;
-            }
+        let pred = learned.predict(z0, u_prev, us, &bound);
+        let place = || {
+            format!(
+                "run `{}`, window from line {} (sample {s})",
+                run.name,
+                run.line + *s as u64
+            )
         };
-        let n_out = pred.outside.iter().filter(|&&o| o).count();
-        outside += n_out;
-        outside_runs += usize::from(n_out > 0);
+        let Some(pred) = tally.take(pred, place, out)? else {
+            continue;
+        };
+        tally.count_outside(&pred.outside);
         for (k, z) in pred.states.iter().enumerate() {
             let mut row = row(
                 a,
@@ -708,23 +751,19 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
             } else {
                 String::new()
             });
-            wtr.write_record(&row).map_err(csv_err)?;
+            csv.write(&row)?;
         }
         pb.inc(1);
     }
     pb.finish_and_clear();
-    wtr.flush().map_err(io_error(&a.out))?;
-    every_run_failed(a, failed, starts.len(), first_error, out)?;
-    if outside > 0 {
-        w(
-            out,
-            format_args!(
-                "note: {outside} predicted states in {outside_runs} run(s) lie outside the \
-                 calibrated region (`outside` in column `fallback`): the conformal guarantee does \
-                 not cover them"
-            ),
-        )?;
-    }
+    csv.finish()?;
+    tally.every_run_failed(a, starts.len(), out)?;
+    tally.note_outside(
+        "outside the calibrated region (`outside` in column `fallback`): the conformal \
+         guarantee does not cover them",
+        out,
+    )?;
+    let failed = tally.failed;
     w(
         out,
         format_args!(

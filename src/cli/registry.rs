@@ -340,7 +340,7 @@ where
         p: &Prepared<N>,
         out: &mut dyn Write,
     ) -> Result<(), CliError> {
-        fit_maximal::<Mn, Mx, N, C, NM, CM, U>(a, minimal, self.0, p, out)
+        fit_maximal::<Mn, Mx, N, NM, CM, U>(a, minimal, self.0, p, out)
     }
 
     fn on_data(

@@ -7,7 +7,6 @@
 
 use std::io::Write;
 use std::path::Path;
-use std::time::Instant;
 
 use rayon::prelude::*;
 
@@ -15,12 +14,10 @@ use super::args::{
     Command, EncodingArg, FitArgs, MechanismArgs, ReadArgs, ScoreArgs, SimulateArgs,
 };
 use super::excite::excite_robot;
-use super::fit::{choose, report_data, resolve_prior, train_options};
+use super::fit::{choose, report_data, report_saved, resolve_prior, train_options, train_timed};
 use super::identify::identify_robot;
-use super::simulate::check_start;
-use super::{
-    CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read, spinner, w,
-};
+use super::simulate::{INPUT_ROWS, check_start, one_plan};
+use super::{CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read, w};
 use crate::data::{DynDataset, DynRun};
 use crate::learned::Encoding;
 use crate::learned::robot::{LearnedRobot, RobotTransition, coordinate_kinds};
@@ -128,27 +125,7 @@ fn simulate(a: &SimulateArgs, robot: &Robot, out: &mut dyn Write) -> Result<(), 
     let inputs = robot.input_names();
     let m = inputs.len();
     let plan: Vec<Vec<f64>> = match &a.inputs {
-        Some(path) => {
-            let plans = read_plan_rows(path, &inputs)?;
-            if plans.len() > 1 {
-                return usage(format!(
-                    "{}: {} runs of inputs; simulate takes one plan",
-                    path.display(),
-                    plans.len()
-                ));
-            }
-            let rows = &plans[0].1;
-            if rows.len() < a.steps {
-                return usage(format!(
-                    "{}: {} input row(s), --steps {} needs {}",
-                    path.display(),
-                    rows.len(),
-                    a.steps,
-                    a.steps
-                ));
-            }
-            rows[..a.steps].to_vec()
-        }
+        Some(path) => one_plan(path, &read_plan_rows(path, &inputs)?, a.steps)?.to_vec(),
         None => vec![vec![0.0; m]; a.steps],
     };
     let v0 = if a.v.is_empty() {
@@ -193,13 +170,7 @@ fn simulate(a: &SimulateArgs, robot: &Robot, out: &mut dyn Write) -> Result<(), 
             n,
             r.subdivided,
             r.deepest,
-            if m > 0 {
-                "; row k's input is held from t_k to t_{k+1}, so the step from row k to row k + 1 \
-                 is driven by row k + 1's input (row 0's, zero, is held over the start velocity; \
-                 the last row's repeats the one before)"
-            } else {
-                ""
-            }
+            if m > 0 { INPUT_ROWS } else { "" }
         ),
     )
 }
@@ -245,20 +216,10 @@ fn fit(a: &FitArgs, robot: Robot, out: &mut dyn Write) -> Result<(), CliError> {
             opts.restarts
         ),
     )?;
-    let pb = spinner(format!(
-        "training {} GPs on N = {} ({} starts each)",
-        robot.dof(),
-        chosen.len(),
-        1 + opts.restarts
-    ));
-    let start = Instant::now();
-    let result = LearnedRobot::train(robot, dt, &chosen, encoding, prior, &opts);
-    pb.finish_and_clear();
-    let (learned, report) = result.map_err(|e| CliError::Usage(format!("training failed: {e}")))?;
-    w(
-        out,
-        format_args!("trained in {:.1} s", start.elapsed().as_secs_f64()),
-    )?;
+    let (learned, report) = train_timed(robot.dof(), chosen.len(), opts.restarts, out, || {
+        LearnedRobot::train(robot, dt, &chosen, encoding, prior, &opts)
+            .map_err(|e| CliError::Usage(format!("training failed: {e}")))
+    })?;
     for (j, o) in report.outputs.iter().enumerate() {
         w(
             out,
@@ -274,11 +235,7 @@ fn fit(a: &FitArgs, robot: Robot, out: &mut dyn Write) -> Result<(), CliError> {
     learned
         .save(&a.out)
         .map_err(|e| CliError::Usage(format!("{}: {e}", a.out.display())))?;
-    let bytes = std::fs::metadata(&a.out).map(|m| m.len()).unwrap_or(0);
-    w(
-        out,
-        format_args!("wrote {} ({bytes} bytes)", a.out.display()),
-    )
+    report_saved(&a.out, out)
 }
 
 /// Mean over the steps of |p − t|²/n.
@@ -361,21 +318,8 @@ fn score(a: &ScoreArgs, out: &mut dyn Write) -> Result<(), CliError> {
             learned.gp().n()
         ),
     )?;
-    w(
-        out,
-        format_args!(
-            "data: {}: {} runs, {} windows of {k} steps",
-            a.data.display(),
-            data.runs.len(),
-            windows.len()
-        ),
-    )?;
-    if windows.is_empty() {
-        return Err(CliError::Usage(format!(
-            "no run has {} samples: nothing to score with --steps {k}",
-            k + 2
-        )));
-    }
+    let runs = data.runs.len();
+    super::score::report_windows(&a.data, runs, None, windows.len(), k, out)?;
     let m = learned.inputs();
     let pb = bar(windows.len(), "scoring");
     let results: Vec<(Option<f64>, Option<f64>)> = windows

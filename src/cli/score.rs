@@ -2,6 +2,7 @@
 //! model on held-out runs.
 
 use std::io::Write;
+use std::path::Path;
 
 use rayon::prelude::*;
 
@@ -102,22 +103,8 @@ where
             sparse_note(learned.gp())
         ),
     )?;
-    w(
-        out,
-        format_args!(
-            "data: {}: {} runs ({too_short} shorter than {} samples), {} windows of {k} steps",
-            a.data.display(),
-            data.runs.len(),
-            k + 2,
-            windows.len()
-        ),
-    )?;
-    if windows.is_empty() {
-        return Err(CliError::Usage(format!(
-            "no run has {} samples: nothing to score with --steps {k}",
-            k + 2
-        )));
-    }
+    let runs = data.runs.len();
+    report_windows(&a.data, runs, Some(too_short), windows.len(), k, out)?;
     // each run's logged inputs, once (none without inputs)
     let inputs = data.input_vectors::<U>().map_err(data_error(&a.data))?;
     let vi = a.stepping.integrator(nominal, dt)?;
@@ -212,6 +199,37 @@ where
         k,
         out,
     )
+}
+
+/// The report's line on the held-out data `path`: its `runs` (with
+/// `too_short`, how many of them are shorter than a window) and their
+/// `windows` of `k` steps; an error when there is none.
+pub(super) fn report_windows(
+    path: &Path,
+    runs: usize,
+    too_short: Option<usize>,
+    windows: usize,
+    k: usize,
+    out: &mut dyn Write,
+) -> Result<(), CliError> {
+    let short = match too_short {
+        Some(n) => format!(" ({n} shorter than {} samples)", k + 2),
+        None => String::new(),
+    };
+    w(
+        out,
+        format_args!(
+            "data: {}: {runs} runs{short}, {windows} windows of {k} steps",
+            path.display()
+        ),
+    )?;
+    if windows == 0 {
+        return Err(CliError::Usage(format!(
+            "no run has {} samples: nothing to score with --steps {k}",
+            k + 2
+        )));
+    }
+    Ok(())
 }
 
 /// The report's end from each window's (nominal, learned) MSE (`None`:

@@ -2,6 +2,7 @@
 //! rows the data reader expects.
 
 use std::io::Write;
+use std::path::Path;
 
 use super::args::SimulateArgs;
 use super::{CliError, check_out_dir, io_error, read_plan, w};
@@ -44,24 +45,7 @@ where
         match &a.inputs {
             Some(path) => {
                 let plans = read_plan::<U>(path, Mn::INPUT_NAMES)?;
-                if plans.len() > 1 {
-                    return usage(format!(
-                        "{}: {} runs of inputs; simulate takes one plan",
-                        path.display(),
-                        plans.len()
-                    ));
-                }
-                let plan = &plans[0].1;
-                if plan.len() < a.steps {
-                    return usage(format!(
-                        "{}: {} input row(s), --steps {} needs {}",
-                        path.display(),
-                        plan.len(),
-                        a.steps,
-                        a.steps
-                    ));
-                }
-                us.extend_from_slice(&plan[..a.steps]);
+                us.extend_from_slice(one_plan(path, &plans, a.steps)?);
             }
             None => us.resize(a.steps, SVector::zeros()),
         }
@@ -102,15 +86,40 @@ where
             a.steps,
             Mn::NAME,
             subdivided(&report),
-            if U > 0 {
-                "; row k's input is held from t_k to t_{k+1}, so the step from row k to row k + 1 \
-                 is driven by row k + 1's input (row 0's, zero, is held over the start velocity; \
-                 the last row's repeats the one before)"
-            } else {
-                ""
-            }
+            if U > 0 { INPUT_ROWS } else { "" }
         ),
     )
+}
+
+/// The end of `simulate`'s report on a log with inputs: on which rows they
+/// stand.
+pub(super) const INPUT_ROWS: &str = "; row k's input is held from t_k to t_{k+1}, so the step \
+     from row k to row k + 1 is driven by row k + 1's input (row 0's, zero, is held over the \
+     start velocity; the last row's repeats the one before)";
+
+/// The first `steps` rows of the one plan in `plans` (of the file
+/// `path`): `simulate` takes one plan of at least `--steps` rows.
+pub(super) fn one_plan<'p, T>(
+    path: &Path,
+    plans: &'p [(Option<String>, Vec<T>)],
+    steps: usize,
+) -> Result<&'p [T], CliError> {
+    if plans.len() > 1 {
+        return Err(CliError::Usage(format!(
+            "{}: {} runs of inputs; simulate takes one plan",
+            path.display(),
+            plans.len()
+        )));
+    }
+    let plan = &plans[0].1;
+    if plan.len() < steps {
+        return Err(CliError::Usage(format!(
+            "{}: {} input row(s), --steps {steps} needs {steps}",
+            path.display(),
+            plan.len(),
+        )));
+    }
+    Ok(&plan[..steps])
 }
 
 /// The checks of `simulate`'s start and steps, before any work: `--q`
