@@ -91,6 +91,16 @@ pub fn reference_gap<const N: usize, T, E: std::fmt::Display, F: std::fmt::Displ
     d
 }
 
+/// The consistent state of `m` at rest near the positions `q`: `q`
+/// projected onto the constraints, and the velocity zero projected at `dt`.
+pub fn at_rest<M: Mechanism<N, C>, const N: usize, const C: usize>(
+    m: &M,
+    q: impl Into<SVector<f64, N>>,
+    dt: f64,
+) -> vigp::State<N> {
+    vigp::projection::consistent_state(m, &q.into(), &SVector::zeros(), dt).unwrap()
+}
+
 /// Positions every `dt` for `samples` samples, integrated by the midpoint VI
 /// at `dt / substeps` from a state at rest at `q0` (projected first when the
 /// model has constraints).
@@ -102,9 +112,7 @@ pub fn positions<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
     samples: usize,
 ) -> Vec<SVector<f64, N>> {
     let h = dt / substeps as f64;
-    let q = vigp::projection::consistent_state(&m, &q0, &SVector::zeros(), h)
-        .unwrap()
-        .q;
+    let q = at_rest(&m, q0, h).q;
     let v = vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), h).unwrap();
     let z0 = vigp::State { q, v };
     let vi = Variational::midpoint(m, h).unwrap();

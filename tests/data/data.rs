@@ -474,6 +474,7 @@ fn input_columns_are_read() {
     let read = |text: &str, opts: &ReadOptions| {
         Dataset::<2>::read_for::<DrivenCartpoleMinimal, 0, _>(text.as_bytes(), opts)
     };
+    let read_err = |text: &str| read(text, &ReadOptions::default()).unwrap_err();
     let text = "run,t,u_hinge,rail,hinge,u_rail\n\
                 a,0.0,0.5,0.0,0.1,1.0\n\
                 a,0.1,0.6,0.1,0.2,2.0\n\
@@ -488,29 +489,17 @@ fn input_columns_are_read() {
     assert_eq!(r.step_input(0), Some(&[2.0, 0.6][..]));
     assert_eq!(r.step_input(2), None);
     // a missing input column, a bad value
-    let e = read(
-        "run,t,rail,hinge,u_rail\na,0,0,0,1\n",
-        &ReadOptions::default(),
-    )
-    .unwrap_err();
+    let e = read_err("run,t,rail,hinge,u_rail\na,0,0,0,1\n");
     assert!(
         matches!(&e, DataError::MissingColumn { name, .. } if name == "u_hinge"),
         "{e}"
     );
-    let e = read(
-        "run,t,rail,hinge,u_rail,u_hinge\na,0,0,0,1,nan\n",
-        &ReadOptions::default(),
-    )
-    .unwrap_err();
+    let e = read_err("run,t,rail,hinge,u_rail,u_hinge\na,0,0,0,1,nan\n");
     assert!(
         matches!(&e, DataError::NonFinite { column, .. } if column == "u_hinge"),
         "{e}"
     );
-    let e = read(
-        "run,t,rail,hinge,u_rail,u_hinge,u_elbow\na,0,0,0,1,1,1\n",
-        &ReadOptions::default(),
-    )
-    .unwrap_err();
+    let e = read_err("run,t,rail,hinge,u_rail,u_hinge,u_elbow\na,0,0,0,1,1,1\n");
     assert!(e.to_string().contains("u_<actuated joint>"), "{e}");
     // resampling holds the input (zero-order hold), positions interpolate
     let opts = ReadOptions {

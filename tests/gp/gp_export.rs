@@ -778,13 +778,7 @@ fn learned_fourbar(
     use vigp::learned::{Encoding, Learned, Prior, transitions};
     use vigp::prelude::*;
     let fb = vigp::systems::Fourbar::default().minimal();
-    let z0 = vigp::projection::consistent_state(
-        &fb,
-        &nalgebra::SVector::from([0.9, -1.3, -0.4, 1.3]),
-        &nalgebra::SVector::zeros(),
-        dt,
-    )
-    .unwrap();
+    let z0 = common::at_rest(&fb, [0.9, -1.3, -0.4, 1.3], dt);
     let traj = Variational::new(fb, dt).unwrap().rollout(&z0, 40).unwrap();
     let q: Vec<_> = traj.iter().map(|z| z.q).collect();
     let data = transitions(&q, dt);

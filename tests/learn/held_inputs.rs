@@ -290,87 +290,57 @@ fn assert_learned_wins(errors: &[Errors]) {
     }
 }
 
+/// [`assert_learned_wins`] on [`held_input_errors`] of `model` (one
+/// input, sin/cos-encoded angles) against `truth`.
+fn learned_wins_on_held_inputs<M, const N: usize>(
+    name: &str,
+    model: M,
+    truth: Truth,
+    scale: f64,
+    q_range: [f64; N],
+    seed: u64,
+) where
+    M: Mechanism<N, 0> + Clone + vigp::Inputs<1> + vigp::Parameters,
+{
+    let e =
+        held_input_errors::<_, N, 1>(name, model, truth, Encoding::SinCos, scale, q_range, seed);
+    assert_learned_wins(&e);
+}
+
 #[test]
 fn pendulum_midpoint_truth() {
     let m = HeldPendulum::default().minimal();
-    let e = held_input_errors::<_, 1, 1>(
-        "pendulum",
-        m,
-        Truth::Midpoint,
-        Encoding::SinCos,
-        4.0,
-        [1.5],
-        1,
-    );
-    assert_learned_wins(&e);
+    learned_wins_on_held_inputs("pendulum", m, Truth::Midpoint, 4.0, [1.5], 1);
 }
 
 #[test]
 fn pendulum_rk4_truth() {
     let m = HeldPendulum::default().minimal();
-    let e =
-        held_input_errors::<_, 1, 1>("pendulum", m, Truth::Rk4, Encoding::SinCos, 4.0, [1.5], 2);
-    assert_learned_wins(&e);
+    learned_wins_on_held_inputs("pendulum", m, Truth::Rk4, 4.0, [1.5], 2);
 }
 
 #[test]
 fn acrobot_midpoint_truth() {
     let m = HeldAcrobot::default().minimal();
-    let e = held_input_errors::<_, 2, 1>(
-        "acrobot",
-        m,
-        Truth::Midpoint,
-        Encoding::SinCos,
-        4.0,
-        [0.8, 0.8],
-        3,
-    );
-    assert_learned_wins(&e);
+    learned_wins_on_held_inputs("acrobot", m, Truth::Midpoint, 4.0, [0.8, 0.8], 3);
 }
 
 #[test]
 fn acrobot_rk4_truth() {
     let m = HeldAcrobot::default().minimal();
-    let e = held_input_errors::<_, 2, 1>(
-        "acrobot",
-        m,
-        Truth::Rk4,
-        Encoding::SinCos,
-        4.0,
-        [0.8, 0.8],
-        4,
-    );
-    assert_learned_wins(&e);
+    learned_wins_on_held_inputs("acrobot", m, Truth::Rk4, 4.0, [0.8, 0.8], 4);
 }
 
 #[test]
 fn cartpole_midpoint_truth() {
     let m = HeldCartpole::default().minimal();
-    let e = held_input_errors::<_, 2, 1>(
-        "cart-pole",
-        m,
-        Truth::Midpoint,
-        Encoding::SinCos,
-        5.0,
-        [0.3, 0.8],
-        5,
-    );
-    assert_learned_wins(&e);
+    learned_wins_on_held_inputs("cart-pole", m, Truth::Midpoint, 5.0, [0.3, 0.8], 5);
 }
 
 #[test]
 fn cartpole_rk4_truth() {
     let m = HeldCartpole::default().minimal();
-    let e = held_input_errors::<_, 2, 1>(
-        "cart-pole",
-        m,
-        Truth::Rk4,
-        Encoding::SinCos,
-        5.0,
-        [0.3, 0.8],
-        6,
-    );
-    assert_learned_wins(&e);
+    learned_wins_on_held_inputs("cart-pole", m, Truth::Rk4, 5.0, [0.3, 0.8], 6);
 }
 
 /// The logs of `tests/fixtures/held_inputs/{system}_{truth}.csv`, written
@@ -446,26 +416,25 @@ fn peer_truth(truth: &str) {
     let p = HeldPendulum::default().minimal();
     let a = HeldAcrobot::default().minimal();
     let c = HeldCartpole::default().minimal();
-    {
-        let logs = peer_logs::<1, 1>("pendulum", truth);
-        if truth == "rk45" {
-            assert_same_mechanism(p, &logs);
-        }
-        let name = format!("pendulum {truth}");
-        assert_learned_wins(&errors(&name, p, &logs, Encoding::SinCos, 1));
-        let logs = peer_logs::<2, 1>("acrobot", truth);
-        if truth == "rk45" {
-            assert_same_mechanism(a, &logs);
-        }
-        let name = format!("acrobot {truth}");
-        assert_learned_wins(&errors(&name, a, &logs, Encoding::SinCos, 3));
-        let logs = peer_logs::<2, 1>("cartpole", truth);
-        if truth == "rk45" {
-            assert_same_mechanism(c, &logs);
-        }
-        let name = format!("cart-pole {truth}");
-        assert_learned_wins(&errors(&name, c, &logs, Encoding::SinCos, 5));
+    peer_learned_wins::<_, 1>("pendulum", "pendulum", p, truth, 1);
+    peer_learned_wins::<_, 2>("acrobot", "acrobot", a, truth, 3);
+    peer_learned_wins::<_, 2>("cartpole", "cart-pole", c, truth, 5);
+}
+
+/// The peer logs of `truth` for `system` (`name` in messages): on the
+/// RK45 logs, vigp simulates the same mechanism
+/// ([`assert_same_mechanism`]); the learned model wins at every switch
+/// length ([`assert_learned_wins`], seed `seed`).
+fn peer_learned_wins<M, const N: usize>(system: &str, name: &str, model: M, truth: &str, seed: u64)
+where
+    M: Mechanism<N, 0> + Clone + vigp::Inputs<1> + vigp::Parameters,
+{
+    let logs = peer_logs::<N, 1>(system, truth);
+    if truth == "rk45" {
+        assert_same_mechanism(model.clone(), &logs);
     }
+    let name = format!("{name} {truth}");
+    assert_learned_wins(&errors(&name, model, &logs, Encoding::SinCos, seed));
 }
 
 /// A = ∂z₁/∂z₀, B = ∂z₁/∂u and B_prev = ∂z₁/∂u_prev of the learned step

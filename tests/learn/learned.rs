@@ -294,18 +294,12 @@ fn one_step_bound_covers_held_out_errors() {
 #[test]
 fn projection_jacobian_matches_finite_differences() {
     use vigp::bound::projection_jacobian;
-    use vigp::projection::{consistent_state, project_velocity};
+    use vigp::projection::project_velocity;
     let dt = 0.01;
     let fb = Fourbar::default().minimal();
     let dp = DoublePendulum::default().maximal();
     let mut rng = Rng(3);
-    let z = consistent_state(
-        &fb,
-        &SVector::from([0.7, -1.1, -0.3, 1.1]),
-        &SVector::zeros(),
-        dt,
-    )
-    .unwrap();
+    let z = common::at_rest(&fb, [0.7, -1.1, -0.3, 1.1], dt);
     let zm = DoublePendulum::default()
         .minimal()
         .to_maximal(&State::new([0.8, -0.4], [0.5, 1.0]), dt);

@@ -7,7 +7,8 @@
 
 use crate::common::Rng;
 use crate::fixtures::{
-    DT, DrivenSprung, base_error, coverage_case, covers, drive, noisy, perturbed, standard, vi_log,
+    DT, DrivenSprung, DrivenSprungMinimal, base_error, coverage_case, covers, drive, noisy,
+    perturbed, standard, vi_log,
 };
 use crate::identify::Arm;
 use nalgebra::SVector;
@@ -72,6 +73,14 @@ fn sensitivity_defect<R: Regressor>(r: &R, log: &Log, pi: &[f64]) -> (f64, f64) 
     (worst_pi, worst_x)
 }
 
+/// A midpoint log of the driven, sprung double pendulum `m` for `steps`
+/// steps from (0.5, 0.2) at rest, under `drive(k)` and `drive(k + 30)`.
+fn sprung_log(m: DrivenSprungMinimal, steps: usize) -> Log {
+    vi_log::<_, 2, 0, 2>(m, 0.5, SVector::from([0.5, 0.2]), steps, |k| {
+        SVector::from([drive(k), drive(k + 30)])
+    })
+}
+
 /// ∂x/∂π and ∂x/∂(x₀, x₁) by the implicit function theorem against
 /// central differences of the same simulation, planar (driven, sprung,
 /// damped double pendulum, midpoint rule) and spatial (the 3-D arm, first
@@ -84,9 +93,7 @@ fn sensitivities_match_central_differences() {
     let mut rng = Rng(3);
     let declared = DrivenSprung::default().minimal();
     let truth = perturbed(declared, &mut rng);
-    let log = vi_log::<_, 2, 0, 2>(truth, 0.5, SVector::from([0.5, 0.2]), 60, |k| {
-        SVector::from([drive(k), drive(k + 30)])
-    });
+    let log = sprung_log(truth, 60);
     let r = DelRegressor::midpoint(declared, DT).unwrap();
     let (p, x) = sensitivity_defect(&r, &log, &r.standard());
     println!("driven sprung, midpoint: ∂x/∂π {p:.1e}, ∂x/∂(x0, x1) {x:.1e}");
@@ -112,9 +119,7 @@ fn noise_free_logs_stay_recovered() {
     let mut rng = Rng(5);
     let declared = DrivenSprung::default().minimal();
     let truth = perturbed(declared, &mut rng);
-    let log = vi_log::<_, 2, 0, 2>(truth, 0.5, SVector::from([0.5, 0.2]), 600, |k| {
-        SVector::from([drive(k), drive(k + 30)])
-    });
+    let log = sprung_log(truth, 600);
     let r = DelRegressor::midpoint(declared, DT).unwrap();
     let options = Options {
         output_error: Some(OutputError::default()),
@@ -231,9 +236,7 @@ fn loops_are_simulated_with_their_multipliers() {
 #[test]
 fn bad_options_are_typed_errors() {
     let declared = DrivenSprung::default().minimal();
-    let log = vi_log::<_, 2, 0, 2>(declared, 0.5, SVector::from([0.5, 0.2]), 40, |k| {
-        SVector::from([drive(k), drive(k + 30)])
-    });
+    let log = sprung_log(declared, 40);
     let r = DelRegressor::midpoint(declared, DT).unwrap();
     for oe in [
         OutputError {

@@ -1397,7 +1397,6 @@ fn learned_step_derivatives_of_the_paper_systems() {
 fn projected_learned_step_derivatives_match_differences() {
     use vigp::Integrator;
     use vigp::learned::{Encoding, Learned, Prior, transitions};
-    use vigp::projection::consistent_state;
     use vigp::systems::{DoublePendulum, Fourbar};
 
     fn check<M: Mechanism<N, C> + vigp::Parameters + Copy, const N: usize, const C: usize>(
@@ -1449,13 +1448,7 @@ fn projected_learned_step_derivatives_match_differences() {
             // the parallelogram branch: q = (t₁, t₃ − t₁, t₃, t₁ − t₃)
             let t1 = rng.uniform(-1.0, 1.0);
             let t3 = t1 + rng.uniform(-0.2, 0.2);
-            let z0 = consistent_state(
-                &fb.minimal(),
-                &SVector::from([t1, t3 - t1, t3, t1 - t3]),
-                &SVector::zeros(),
-                dt,
-            )
-            .unwrap();
+            let z0 = common::at_rest(&fb.minimal(), [t1, t3 - t1, t3, t1 - t3], dt);
             fb_vi
                 .rollout(&z0, 50)
                 .unwrap()

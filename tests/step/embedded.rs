@@ -166,13 +166,7 @@ fn rollouts_carry_momentum_and_keep_structure() {
 
     let fb = Fourbar::default();
     let m = fb.minimal();
-    let z0 = vigp::projection::consistent_state(
-        &m,
-        &SVector::from([0.5, -0.9, -0.4, 0.9]),
-        &SVector::zeros(),
-        0.01,
-    )
-    .unwrap();
+    let z0 = common::at_rest(&m, [0.5, -0.9, -0.4, 0.9], 0.01);
     let fast = Stepper::new(fb, 0.01).unwrap();
     let mut traj = [z0; 1001];
     fast.rollout_into(&z0, &mut traj).unwrap();

@@ -4,6 +4,7 @@
 //! its constraints through the fourbar's folded pose; and its explicit
 //! (Störmer–Verlet) path for constant-mass models.
 
+use crate::common;
 use nalgebra::SVector;
 use vigp::prelude::*;
 use vigp::systems::{DoublePendulum, Fourbar};
@@ -68,13 +69,7 @@ fn composition_energy_is_bounded() {
 #[test]
 fn composition_holds_the_fourbar_constraints() {
     let m = Fourbar::default().minimal();
-    let z = vigp::projection::consistent_state(
-        &m,
-        &SVector::from([0.5, -0.9, -0.4, 0.9]),
-        &SVector::zeros(),
-        0.01,
-    )
-    .unwrap();
+    let z = common::at_rest(&m, [0.5, -0.9, -0.4, 0.9], 0.01);
     // continuous state at rest: q̇ = 0 is tangent
     let z0 = State {
         q: z.q,

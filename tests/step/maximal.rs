@@ -202,13 +202,7 @@ fn maximal_vi_keeps_constraints_while_explicit_euler_drifts() {
 
     let fb = Fourbar::default();
     let (min, max) = (fb.minimal(), fb.maximal());
-    let z0 = consistent_state(
-        &min,
-        &SVector::from([0.9, -1.3, -0.4, 1.3]),
-        &SVector::zeros(),
-        dt,
-    )
-    .unwrap();
+    let z0 = common::at_rest(&min, [0.9, -1.3, -0.4, 1.3], dt);
     let zm = min.to_maximal(&z0, dt);
     let zm = consistent_state(&max, &zm.q, &zm.v, dt).unwrap();
     let (vi, _) = max_violation(&Variational::new(max, dt).unwrap(), &max, &zm, 10_000);

@@ -290,47 +290,39 @@ fn fourbar_constraints_hold_through_the_folded_pose() {
     eprintln!("fourbar: max |g| = {worst:.2e}, min σ(G) = {smin:.2e}");
 }
 
+/// A rollout of 2000 steps of the VI of `m` at `dt` from the consistent
+/// state near (`q`, `v`), and its largest constraint violation |g|.
+fn constrained_rollout<M: Mechanism<N, C> + Copy, const N: usize, const C: usize>(
+    m: M,
+    q: [f64; N],
+    v: [f64; N],
+    dt: f64,
+) -> (Vec<State<N>>, f64) {
+    let z0 = consistent_state(&m, &SVector::from(q), &SVector::from(v), dt).unwrap();
+    let traj = Variational::new(m, dt)
+        .unwrap()
+        .rollout(&z0, 2_000)
+        .unwrap();
+    let worst = traj
+        .iter()
+        .map(|z| m.constraint_violation(z))
+        .fold(0.0, f64::max);
+    (traj, worst)
+}
+
 /// Slider-crank and telescope (prismatic joints, offsets, prismatic loop):
 /// the constraints hold over a damped rollout.
 #[test]
 fn other_loop_mechanisms_keep_their_constraints() {
     let dt = 0.005;
     let sc = SliderCrank::default().minimal();
-    let z0 = consistent_state(
-        &sc,
-        &SVector::from([0.3, 1.0, 0.5]),
-        &SVector::from([2.0, 0.0, 0.0]),
-        dt,
-    )
-    .unwrap();
-    let traj = Variational::new(sc, dt)
-        .unwrap()
-        .rollout(&z0, 2_000)
-        .unwrap();
-    let worst = traj
-        .iter()
-        .map(|z| sc.constraint_violation(z))
-        .fold(0.0, f64::max);
+    let (traj, worst) = constrained_rollout(sc, [0.3, 1.0, 0.5], [2.0, 0.0, 0.0], dt);
     assert!(worst <= 1e-10, "slider-crank |g| = {worst:e}");
     // damping dissipates energy
     assert!(sc.energy(traj.last().unwrap()) < sc.energy(&traj[0]));
 
     let tel = Telescope::default().minimal();
-    let z0 = consistent_state(
-        &tel,
-        &SVector::from([0.0, 0.2, 0.3, 0.5]),
-        &SVector::from([0.5, 0.0, 0.0, 0.0]),
-        dt,
-    )
-    .unwrap();
-    let traj = Variational::new(tel, dt)
-        .unwrap()
-        .rollout(&z0, 2_000)
-        .unwrap();
-    let worst = traj
-        .iter()
-        .map(|z| tel.constraint_violation(z))
-        .fold(0.0, f64::max);
+    let (_, worst) = constrained_rollout(tel, [0.0, 0.2, 0.3, 0.5], [0.5, 0.0, 0.0, 0.0], dt);
     assert!(worst <= 1e-10, "telescope |g| = {worst:e}");
 }
 
