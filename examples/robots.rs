@@ -444,12 +444,12 @@ fn medians_ns(reps: usize, mut f: impl FnMut(), mut g: impl FnMut()) -> (f64, f6
 fn derivatives(dir: &str, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
     println!();
     println!(
-        "one step of dt = 2 ms with every joint driven, and with exact A (2N × 2N) and B (2N × N); medians of 1001 calls each, alternating"
+        "one step of dt = 2 ms with every joint driven, and with exact A (2N × 2N) and B (2N × N); medians of 1001 calls each, alternating; then per step of 100-step rollouts under the same inputs, medians of 31 each, alternating"
     );
     println!(
-        "| mechanism | N | `Robot::step` (µs) | `Robot::step_derivatives` (µs) | ratio | `Engine::step` on slices (µs) | `Engine::step_derivatives` on slices (µs) | ratio |"
+        "| mechanism | N | `Robot::step` (µs) | `Robot::step_derivatives` (µs) | ratio | `Engine::step` on slices (µs) | `Engine::step_derivatives` on slices (µs) | ratio | `Robot::rollout_with`, per step (µs) | `Robot::rollout_derivatives_into`, per step (µs) | ratio |"
     );
-    println!("|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     let mut cases: Vec<(String, Robot)> = Vec::new();
     for (name, file) in [
         ("Panda", "panda.urdf"),
@@ -523,15 +523,44 @@ fn derivatives(dir: &str, dt: f64) -> Result<(), Box<dyn std::error::Error>> {
                 std::hint::black_box(&a);
             },
         );
+        // per step of a driven rollout from the same state: what an iLQR
+        // linearisation of a trajectory pays on every cycle (the
+        // derivatives' start terms carried from the step before, both
+        // loops starting each iteration from the extrapolation of the last
+        // velocities, the derivatives' matrices kept between calls)
+        let inputs_k = vec![u.clone(); ROLLOUT_STEPS];
+        let mut kept = Vec::new();
+        let (roll_step, roll_with) = medians_ns(
+            ROLLOUT_REPS,
+            || {
+                let r = robot.rollout_with(&z, dt, ROLLOUT_STEPS, |k, _| inputs_k[k].clone());
+                std::hint::black_box(r.expect("rollout"));
+            },
+            || {
+                robot
+                    .rollout_derivatives_into(&z, &inputs_k, dt, &mut kept)
+                    .expect("rollout derivatives");
+                std::hint::black_box(&kept);
+            },
+        );
+        let per = 1e-3 / ROLLOUT_STEPS as f64;
         println!(
-            "| {name} | {n} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            "| {name} | {n} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
             step * 1e-3,
             with * 1e-3,
             with / step,
             slice_step * 1e-3,
             slice_with * 1e-3,
-            slice_with / slice_step
+            slice_with / slice_step,
+            roll_step * per,
+            roll_with * per,
+            roll_with / roll_step
         );
     }
     Ok(())
 }
+
+/// Steps of the driven rollouts of [`derivatives`], and how many of each
+/// are timed.
+const ROLLOUT_STEPS: usize = 100;
+const ROLLOUT_REPS: usize = 31;

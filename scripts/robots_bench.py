@@ -14,7 +14,8 @@ by centred differences of `mj_step`, eps = 1e-6), median ns per call over
 301 calls with preallocated matrices.
 
     pip install mujoco
-    python3 scripts/robots_bench.py
+    python3 scripts/robots_bench.py                 # both tables
+    python3 scripts/robots_bench.py --derivatives   # the second alone
 """
 import os
 import time
@@ -134,6 +135,9 @@ def derivatives_table():
 
 def main():
     import sys
+    if "--derivatives" in sys.argv[1:]:
+        derivatives_table()
+        return
     fastest = "--rollouts" in sys.argv[1:]
     reps, stat, how = (7, np.min, "fastest of 7") if fastest else (5, np.median, "median of 5")
     print("MuJoCo", mujoco.__version__, f"Euler, dt = 2 ms, 2000-step rollouts, {how}")

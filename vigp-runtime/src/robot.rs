@@ -50,7 +50,7 @@
 
 use std::path::Path;
 
-use nalgebra::DMatrix;
+use nalgebra::{DMatrix, DMatrixView};
 use vigp_core::tree::spatial::V3;
 use vigp_core::tree::{
     Bodies, Body, BodyScratch, DerivativeBuffers, Engine, EngineError, EngineOptions, EngineReport,
@@ -188,6 +188,10 @@ impl TermJacobians {
 /// [`Robot::step_in`]).
 struct DerivativeCarry {
     p: Vec<f64>,
+    /// The step's generalized forces, and its A and B row-major.
+    tau: Vec<f64>,
+    a: Vec<f64>,
+    b: Vec<f64>,
     scratch: Vec<f64>,
     start_known: bool,
     /// The last 3 velocities before the state's, newest first (N each),
@@ -201,6 +205,9 @@ impl DerivativeCarry {
     fn new(n: usize, inputs: usize) -> Self {
         Self {
             p: vec![0.0; n],
+            tau: vec![0.0; n],
+            a: vec![0.0; 4 * n * n],
+            b: vec![0.0; 2 * n * inputs],
             scratch: vec![0.0; derivative_scratch_len(n, inputs)],
             start_known: false,
             past: vec![0.0; 3 * n],
@@ -240,6 +247,19 @@ pub struct StepDerivatives {
     /// What the step took (as [`Robot::step`]'s report, except that a
     /// sub-step refused for its energy jump adds no iterations).
     pub report: EngineReport,
+}
+
+impl StepDerivatives {
+    /// No state and empty matrices: a slot that
+    /// [`Robot::rollout_derivatives_into`] fills.
+    fn empty() -> Self {
+        Self {
+            state: RobotState::new(Vec::new(), Vec::new()),
+            a: DMatrix::zeros(0, 0),
+            b: DMatrix::zeros(0, 0),
+            report: EngineReport::default(),
+        }
+    }
 }
 
 /// A rollout: the states (the initial one first) and what the steps took.
@@ -653,30 +673,34 @@ impl Robot {
         self.check_inputs(u)?;
         let mut ws = vec![BodyScratch::default(); self.dof()];
         let mut carry = DerivativeCarry::new(self.dof(), self.inputs.len());
-        self.derivatives_from(z, &mut carry, u, dt, &mut ws)
+        let mut out = StepDerivatives::empty();
+        self.derivatives_into(z, &mut carry, u, dt, &mut ws, &mut out)?;
+        Ok(out)
     }
 
     /// [`Robot::step_derivatives`] from z with the momentum and its
     /// Jacobians in `carry` when known (a rollout carries them from the
-    /// step before); `carry` then holds them at the new state.
-    fn derivatives_from(
+    /// step before); `carry` then holds them at the new state. Into `out`,
+    /// whose matrices are reused when they have the right shape.
+    fn derivatives_into(
         &self,
         z: &RobotState,
         carry: &mut DerivativeCarry,
         u: &[f64],
         dt: f64,
         ws: &mut [BodyScratch],
-    ) -> Result<StepDerivatives, RobotError> {
+        out: &mut StepDerivatives,
+    ) -> Result<(), RobotError> {
         let (n, nu) = (self.dof(), self.inputs.len());
-        let mut tau = vec![0.0; n];
+        carry.tau.iter_mut().for_each(|t| *t = 0.0);
         for (&i, &x) in self.inputs.iter().zip(u) {
-            tau[i] = x;
+            carry.tau[i] = x;
         }
-        let (mut q, mut v) = (z.q.clone(), z.v.clone());
-        let (mut a, mut b) = (vec![0.0; 4 * n * n], vec![0.0; 2 * n * nu]);
+        out.state.q.clone_from(&z.q);
+        out.state.v.clone_from(&z.v);
         let buffers = DerivativeBuffers {
-            a: &mut a,
-            b: &mut b,
+            a: &mut carry.a,
+            b: &mut carry.b,
             scratch: &mut carry.scratch,
             start_known: carry.start_known,
         };
@@ -685,10 +709,10 @@ impl Robot {
             extrapolate(&z.v, &carry.past, carry.known, &mut carry.guess);
         }
         let result = self.engine.step_derivatives_guessed(
-            &mut q,
-            &mut v,
+            &mut out.state.q,
+            &mut out.state.v,
             &mut carry.p,
-            &tau,
+            &carry.tau,
             &self.inputs,
             dt,
             guessed.then_some(&carry.guess[..]),
@@ -703,13 +727,20 @@ impl Robot {
         } else {
             0
         };
-        let report = result.map_err(|e| self.engine_error(e))?;
-        Ok(StepDerivatives {
-            state: RobotState { q, v },
-            a: DMatrix::from_row_slice(2 * n, 2 * n, &a),
-            b: DMatrix::from_row_slice(2 * n, nu, &b),
-            report,
-        })
+        out.report = result.map_err(|e| self.engine_error(e))?;
+        // the engine's matrices are row-major: as column-major views they
+        // are the transposes
+        if out.a.shape() != (2 * n, 2 * n) {
+            out.a = DMatrix::zeros(2 * n, 2 * n);
+        }
+        out.a
+            .tr_copy_from(&DMatrixView::from_slice(&carry.a, 2 * n, 2 * n));
+        if out.b.shape() != (2 * n, nu) {
+            out.b = DMatrix::zeros(2 * n, nu);
+        }
+        out.b
+            .tr_copy_from(&DMatrixView::from_slice(&carry.b, nu, 2 * n));
+        Ok(())
     }
 
     /// A driven rollout with every step's exact derivatives: entry k is
@@ -729,26 +760,52 @@ impl Robot {
         inputs: &[Vec<f64>],
         dt: f64,
     ) -> Result<Vec<StepDerivatives>, RobotError> {
+        let mut out = Vec::new();
+        self.rollout_derivatives_into(z0, inputs, dt, &mut out)?;
+        Ok(out)
+    }
+
+    /// [`Robot::rollout_derivatives`] into `out`, which ends with one entry
+    /// per input: the entries it already holds are overwritten in place
+    /// (their matrices and states reused), so a control loop that
+    /// linearises a horizon of the same length on every cycle allocates
+    /// nothing after its first. On an error `out` holds the steps before
+    /// the failing one.
+    pub fn rollout_derivatives_into(
+        &self,
+        z0: &RobotState,
+        inputs: &[Vec<f64>],
+        dt: f64,
+        out: &mut Vec<StepDerivatives>,
+    ) -> Result<(), RobotError> {
         let fail = |step, e| RobotError::Rollout {
             step,
             source: Box::new(e),
         };
+        let (n, nu) = (self.dof(), self.inputs.len());
+        out.truncate(inputs.len());
         if inputs.is_empty() {
-            return Ok(Vec::new());
+            return Ok(());
         }
         self.check_state(z0).map_err(|e| fail(0, e))?;
-        let mut ws = vec![BodyScratch::default(); self.dof()];
-        let mut carry = DerivativeCarry::new(self.dof(), self.inputs.len());
-        let mut out: Vec<StepDerivatives> = Vec::with_capacity(inputs.len());
+        let mut ws = vec![BodyScratch::default(); n];
+        let mut carry = DerivativeCarry::new(n, nu);
         for (k, u) in inputs.iter().enumerate() {
-            self.check_inputs(u).map_err(|e| fail(k, e))?;
-            let z = out.last().map_or(z0, |d| &d.state);
-            let d = self
-                .derivatives_from(z, &mut carry, u, dt, &mut ws)
-                .map_err(|e| fail(k, e))?;
-            out.push(d);
+            if let Err(e) = self.check_inputs(u) {
+                out.truncate(k);
+                return Err(fail(k, e));
+            }
+            if out.len() == k {
+                out.push(StepDerivatives::empty());
+            }
+            let (done, rest) = out.split_at_mut(k);
+            let z = done.last().map_or(z0, |d| &d.state);
+            if let Err(e) = self.derivatives_into(z, &mut carry, u, dt, &mut ws, &mut rest[0]) {
+                out.truncate(k);
+                return Err(fail(k, e));
+            }
         }
-        Ok(out)
+        Ok(())
     }
 
     /// `steps` unforced steps of `dt` from `z0` (inputs zero).

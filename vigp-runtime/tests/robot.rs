@@ -650,6 +650,26 @@ fn rollout_derivatives_chain_to_the_differences_of_the_whole_rollout() {
         .flat_map(|(d, z)| d.state.q.iter().zip(&z.q).map(|(x, y)| (x - y).abs()))
         .fold(0.0f64, f64::max);
     assert!(gap < 1e-10, "{gap:e}");
+    // into a caller's vector: the same entries, bit for bit, and on the
+    // next call of the same length the same matrices (no new allocation)
+    let mut reused = Vec::new();
+    robot
+        .rollout_derivatives_into(&z0, &inputs, dt, &mut reused)
+        .unwrap();
+    assert_eq!(reused, steps);
+    let where_a: Vec<_> = reused.iter().map(|d| d.a.as_ptr()).collect();
+    let z1 = RobotState::new(vec![-0.2, 0.4, 0.0], vec![0.5, 0.1, -0.2]);
+    robot
+        .rollout_derivatives_into(&z1, &inputs, dt, &mut reused)
+        .unwrap();
+    assert_eq!(reused, robot.rollout_derivatives(&z1, &inputs, dt).unwrap());
+    let again: Vec<_> = reused.iter().map(|d| d.a.as_ptr()).collect();
+    assert_eq!(again, where_a);
+    // a shorter horizon drops the entries past it
+    robot
+        .rollout_derivatives_into(&z0, &inputs[..2], dt, &mut reused)
+        .unwrap();
+    assert_eq!(reused[..], steps[..2]);
 }
 
 #[test]
@@ -689,6 +709,13 @@ fn step_derivatives_refuse_bad_input_with_typed_errors() {
         Err(RobotError::Rollout { step: 1, .. }) => {}
         other => panic!("expected a failure at step 1, got {other:?}"),
     }
+    // … and leaves the steps before it in a caller's vector
+    let mut out = Vec::new();
+    assert!(matches!(
+        robot.rollout_derivatives_into(&z, &inputs, 1e-3, &mut out),
+        Err(RobotError::Rollout { step: 1, .. })
+    ));
+    assert_eq!(out.len(), 1);
 }
 
 /// The regressor of a robot loaded at run time (`RobotRegressor`, the
