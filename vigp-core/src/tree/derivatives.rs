@@ -213,33 +213,27 @@ const SUBSTITUTION_BLOCK: usize = 4;
 /// the order of a row-by-row elimination.
 #[inline(always)]
 fn substitute<const B: usize>(lu: &[f64], n: usize, x: &mut [f64], w: usize, c: usize) {
-    let block = |x: &[f64], i: usize| -> [f64; B] {
-        let mut a = [0.0; B];
-        a.copy_from_slice(&x[i * w + c..i * w + c + B]);
-        a
-    };
-    for i in 0..n {
-        let mut acc = block(x, i);
-        for j in 0..i {
-            let (l, xj) = (lu[i * n + j], block(x, j));
-            if l != 0.0 {
+    // row i of the block minus Σ_j lu_ij·(row j), j over `js` in order
+    let eliminated = |x: &[f64], i: usize, js: core::ops::Range<usize>| -> [f64; B] {
+        let mut acc = [0.0; B];
+        acc.copy_from_slice(&x[i * w + c..i * w + c + B]);
+        for j in js {
+            let f = lu[i * n + j];
+            if f != 0.0 {
+                let xj = &x[j * w + c..j * w + c + B];
                 for b in 0..B {
-                    acc[b] -= l * xj[b];
+                    acc[b] -= f * xj[b];
                 }
             }
         }
+        acc
+    };
+    for i in 0..n {
+        let acc = eliminated(x, i, 0..i);
         x[i * w + c..i * w + c + B].copy_from_slice(&acc);
     }
     for i in (0..n).rev() {
-        let mut acc = block(x, i);
-        for j in i + 1..n {
-            let (u, xj) = (lu[i * n + j], block(x, j));
-            if u != 0.0 {
-                for b in 0..B {
-                    acc[b] -= u * xj[b];
-                }
-            }
-        }
+        let mut acc = eliminated(x, i, i + 1..n);
         let r = 1.0 / lu[i * n + i];
         for b in 0..B {
             acc[b] *= r;
