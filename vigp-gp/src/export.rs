@@ -177,6 +177,17 @@ fn inline_array(values: &[f64]) -> String {
     format!("[{}]", parts.join(", "))
 }
 
+/// Writes a blank line, the doc line `doc` and the `static` item `item`
+/// (`NAME: [[f64; width]; rows]`) holding `rows`, one inline array a line.
+fn write_table<'a>(out: &mut String, doc: &str, item: &str, rows: impl Iterator<Item = &'a [f64]>) {
+    let _ = writeln!(out, "\n/// {doc}");
+    let _ = writeln!(out, "{ITEM_ATTRS}pub static {item} = [");
+    for row in rows {
+        let _ = writeln!(out, "    {},", inline_array(row));
+    }
+    let _ = writeln!(out, "];");
+}
+
 /// Attributes on every generated item: the numbers are data (clippy would
 /// flag a weight that happens to be close to π), and the layout is ours.
 const ITEM_ATTRS: &str =
@@ -370,43 +381,25 @@ impl Gp {
             let k = opts.check_points.len();
             let flat: Vec<f64> = opts.check_points.concat();
             let pred = self.predict(&flat)?;
-            let _ = writeln!(
-                s,
-                "\n/// GP inputs (original units) at which the exporting std model was evaluated."
+            write_table(
+                &mut s,
+                "GP inputs (original units) at which the exporting std model was evaluated.",
+                &format!("{name}_CHECK_POINTS: [[f64; {d}]; {k}]"),
+                opts.check_points.iter().map(Vec::as_slice),
             );
-            let _ = writeln!(
-                s,
-                "{ITEM_ATTRS}pub static {name}_CHECK_POINTS: [[f64; {d}]; {k}] = ["
+            write_table(
+                &mut s,
+                "The std model's posterior means at the check points (one per output).",
+                &format!("{name}_CHECK_MEANS: [[f64; {p}]; {k}]"),
+                pred.mean.chunks(p),
             );
-            for pt in &opts.check_points {
-                let _ = writeln!(s, "    {},", inline_array(pt));
-            }
-            let _ = writeln!(s, "];");
-            let _ = writeln!(
-                s,
-                "\n/// The std model's posterior means at the check points (one per output)."
-            );
-            let _ = writeln!(
-                s,
-                "{ITEM_ATTRS}pub static {name}_CHECK_MEANS: [[f64; {p}]; {k}] = ["
-            );
-            for row in pred.mean.chunks(p) {
-                let _ = writeln!(s, "    {},", inline_array(row));
-            }
-            let _ = writeln!(s, "];");
             if opts.cholesky {
-                let _ = writeln!(
-                    s,
-                    "\n/// The std model's latent variances at the check points (one per output)."
+                write_table(
+                    &mut s,
+                    "The std model's latent variances at the check points (one per output).",
+                    &format!("{name}_CHECK_VARIANCES: [[f64; {p}]; {k}]"),
+                    pred.variance.chunks(p),
                 );
-                let _ = writeln!(
-                    s,
-                    "{ITEM_ATTRS}pub static {name}_CHECK_VARIANCES: [[f64; {p}]; {k}] = ["
-                );
-                for row in pred.variance.chunks(p) {
-                    let _ = writeln!(s, "    {},", inline_array(row));
-                }
-                let _ = writeln!(s, "];");
             }
         }
         Ok(s)

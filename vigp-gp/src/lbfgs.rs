@@ -321,6 +321,16 @@ impl MoreThuente {
     }
 }
 
+/// γ of [`dcstep`]'s cubic interpolation with slope term `theta` between
+/// an end of derivative `d` and the trial (derivative `dp`):
+/// γ = s·√((θ/s)² − (d/s)(dp/s)) with s = max(|θ|, |d|, |dp|) against
+/// overflow (the radicand clamped at 0), negated when `negate`.
+fn cubic_gamma(theta: f64, d: f64, dp: f64, negate: bool) -> f64 {
+    let s = theta.abs().max(d.abs()).max(dp.abs());
+    let gamma = s * ((theta / s).powi(2) - (d / s) * (dp / s)).max(0.0).sqrt();
+    if negate { -gamma } else { gamma }
+}
+
 /// One safeguarded step of Moré–Thuente (MINPACK-2 `dcstep`): updates the
 /// interval [stx, sty] containing a step that satisfies the conditions and
 /// computes the next trial `stp` from cubic and quadratic interpolation.
@@ -344,11 +354,7 @@ fn dcstep(
     if fp > *fx {
         // Case 1: higher function value; the minimum is bracketed.
         let theta = 3.0 * (*fx - fp) / (*stp - *stx) + *dx + dp;
-        let s = theta.abs().max(dx.abs()).max(dp.abs());
-        let mut gamma = s * ((theta / s).powi(2) - (*dx / s) * (dp / s)).max(0.0).sqrt();
-        if *stp < *stx {
-            gamma = -gamma;
-        }
+        let gamma = cubic_gamma(theta, *dx, dp, *stp < *stx);
         let p = (gamma - *dx) + theta;
         let q = ((gamma - *dx) + gamma) + dp;
         let r = p / q;
@@ -363,11 +369,7 @@ fn dcstep(
     } else if sgnd < 0.0 {
         // Case 2: lower value, derivatives of opposite sign: bracketed.
         let theta = 3.0 * (*fx - fp) / (*stp - *stx) + *dx + dp;
-        let s = theta.abs().max(dx.abs()).max(dp.abs());
-        let mut gamma = s * ((theta / s).powi(2) - (*dx / s) * (dp / s)).max(0.0).sqrt();
-        if *stp > *stx {
-            gamma = -gamma;
-        }
+        let gamma = cubic_gamma(theta, *dx, dp, *stp > *stx);
         let p = (gamma - dp) + theta;
         let q = ((gamma - dp) + gamma) + *dx;
         let r = p / q;
@@ -382,11 +384,7 @@ fn dcstep(
     } else if dp.abs() < dx.abs() {
         // Case 3: lower value, same sign, derivative decreases in magnitude.
         let theta = 3.0 * (*fx - fp) / (*stp - *stx) + *dx + dp;
-        let s = theta.abs().max(dx.abs()).max(dp.abs());
-        let mut gamma = s * ((theta / s).powi(2) - (*dx / s) * (dp / s)).max(0.0).sqrt();
-        if *stp > *stx {
-            gamma = -gamma;
-        }
+        let gamma = cubic_gamma(theta, *dx, dp, *stp > *stx);
         let p = (gamma - dp) + theta;
         let q = (gamma + (*dx - dp)) + gamma;
         let r = p / q;
@@ -422,11 +420,7 @@ fn dcstep(
         // Case 4: lower value, same sign, derivative does not decrease.
         stpf = if *brackt {
             let theta = 3.0 * (fp - *fy) / (*sty - *stp) + *dy + dp;
-            let s = theta.abs().max(dy.abs()).max(dp.abs());
-            let mut gamma = s * ((theta / s).powi(2) - (*dy / s) * (dp / s)).max(0.0).sqrt();
-            if *stp > *sty {
-                gamma = -gamma;
-            }
+            let gamma = cubic_gamma(theta, *dy, dp, *stp > *sty);
             let p = (gamma - dp) + theta;
             let q = ((gamma - dp) + gamma) + *dy;
             let r = p / q;

@@ -854,6 +854,14 @@ mod tests {
         (x, y, z, vec![0.2, -0.3, 0.5, 0.4, -3.0])
     }
 
+    /// The bound F alone (no gradient, sequential) on the tests' problem
+    /// size, for the finite differences.
+    fn bound(ws: &mut SparseWorkspace, x: &[f64], z: &[f64], y: &[f64], theta: &[f64]) -> f64 {
+        elbo_ws(ws, x, z, D, y, theta, false, Par::Seq)
+            .unwrap()
+            .value
+    }
+
     /// (f(a + h·e_k) − f(a − h·e_k))/(2h) with h = 1e-5.
     fn central_difference(mut f: impl FnMut(&[f64]) -> f64, at: &[f64], k: usize) -> f64 {
         let h = 1e-5;
@@ -871,15 +879,7 @@ mod tests {
         let mut ws = SparseWorkspace::new(m, n);
         let e = elbo_ws(&mut ws, &x, &z, d, &y, &theta, true, Par::Seq).unwrap();
         for k in 0..theta.len() {
-            let fd = central_difference(
-                |t| {
-                    elbo_ws(&mut ws, &x, &z, d, &y, t, false, Par::Seq)
-                        .unwrap()
-                        .value
-                },
-                &theta,
-                k,
-            );
+            let fd = central_difference(|t| bound(&mut ws, &x, &z, &y, t), &theta, k);
             // central differences: O(h²) truncation ≈ 1e-10·|f'''|, rounding
             // ≈ ε·|F|/h ≈ 1e-9 here
             assert!(
@@ -911,15 +911,7 @@ mod tests {
         assert_eq!(t.gradient[..], e.gradient[..d + 2]);
         let mut largest = 0.0f64;
         for k in 0..m * d {
-            let fd = central_difference(
-                |zk| {
-                    elbo_ws(&mut ws, &x, zk, d, &y, &theta, false, Par::Seq)
-                        .unwrap()
-                        .value
-                },
-                &z,
-                k,
-            );
+            let fd = central_difference(|zk| bound(&mut ws, &x, zk, &y, &theta), &z, k);
             let an = e.gradient[d + 2 + k];
             largest = largest.max(an.abs());
             assert!(

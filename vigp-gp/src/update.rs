@@ -169,16 +169,7 @@ fn update_output(
             let mut alpha = o.alpha.clone();
             let mut c = Vec::with_capacity(n + k);
             for (i, xq) in xs_new.chunks_exact(d).enumerate() {
-                let b: Vec<f64> = (0..n)
-                    .map(|a| {
-                        let r2 = sqdist(&xs[a * d..(a + 1) * d], xq);
-                        if r2 > vigp_core::gp::R2_CUTOFF {
-                            0.0
-                        } else {
-                            sf2 * (-0.5 * r2).exp()
-                        }
-                    })
-                    .collect();
+                let b = kernel_vector(&xs, d, n, xq, sf2);
                 // c = L⁻¹b and, with a stored L⁻¹, its new row −cᵀL⁻¹/δ
                 // (= −(A⁻¹b)ᵀ/δ) in the same pass over L⁻¹; without it, a
                 // forward and a backward solve with L.
@@ -241,16 +232,7 @@ fn update_output(
             let sigma = o.hp.noise_variance.sqrt();
             let zs = row_major(&o.xs_cols, d, m);
             for (i, xq) in xs_new.chunks_exact(d).enumerate() {
-                let mut a: Vec<f64> = (0..m)
-                    .map(|c| {
-                        let r2 = sqdist(&zs[c * d..(c + 1) * d], xq);
-                        if r2 > vigp_core::gp::R2_CUTOFF {
-                            0.0
-                        } else {
-                            sf2 * (-0.5 * r2).exp()
-                        }
-                    })
-                    .collect();
+                let mut a = kernel_vector(&zs, d, m, xq, sf2);
                 packed::forward_rows(lu, &mut a);
                 a.iter_mut().for_each(|v| *v /= sigma);
                 for (y, v) in ay.iter_mut().zip(&a) {
@@ -295,6 +277,22 @@ fn sparse_bound<'a>(
         + 0.5 * ctc
         - 0.5 * nf * sf2 / s2
         + 0.5 * tr_aat
+}
+
+/// k(x_a, x_q) = σ_f²·exp(−½‖x_a − x_q‖²) for the first `n` rows x_a of
+/// the row-major scaled inputs `xs` (d each) and the scaled query `xq`; 0
+/// where the squared distance exceeds [`vigp_core::gp::R2_CUTOFF`].
+fn kernel_vector(xs: &[f64], d: usize, n: usize, xq: &[f64], sf2: f64) -> Vec<f64> {
+    (0..n)
+        .map(|a| {
+            let r2 = sqdist(&xs[a * d..(a + 1) * d], xq);
+            if r2 > vigp_core::gp::R2_CUTOFF {
+                0.0
+            } else {
+                sf2 * (-0.5 * r2).exp()
+            }
+        })
+        .collect()
 }
 
 fn row_major(cols: &[f64], d: usize, n: usize) -> Vec<f64> {

@@ -401,6 +401,15 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> NominalStep<N>
     }
 }
 
+/// A learned step with its exact derivatives
+/// ([`Learned::step_derivatives_forced`]): the next state, A = ∂z₁/∂z₀
+/// and B = ∂z₁/∂u, and B_prev = ∂z₁/∂u_prev.
+type StepWithDerivatives<const N: usize, const U: usize> = (
+    State<N>,
+    vigp_core::StepDerivatives<N, U>,
+    vigp_core::InputJacobian<N, U>,
+);
+
 /// A learned step's error as a step error: the GP's failure is the
 /// prediction's.
 fn step_error(e: LearnError) -> StepError {
@@ -571,21 +580,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// stencil, or raise the noise floor (`TrainOptions::bounds`, e.g.
     /// `noise_variance: (1e-6, 10.0)` in the GP's normalised units), which
     /// also smooths the step for line searches. The exact derivatives returned here are not affected.
-    #[allow(clippy::type_complexity)]
     pub fn step_derivatives_forced<const U: usize>(
         &self,
         z: &State<N>,
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<
-        (
-            State<N>,
-            vigp_core::StepDerivatives<N, U>,
-            vigp_core::InputJacobian<N, U>,
-        ),
-        StepError,
-    >
+    ) -> Result<StepWithDerivatives<N, U>, StepError>
     where
         M: vigp_core::Inputs<U>,
     {
@@ -650,21 +651,13 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     /// inputs, or `U = 0` for any model: the derivatives of the step under
     /// u = 0 that [`Learned::step_mean_in`] takes (the GP input's input
     /// tail zero-filled).
-    #[allow(clippy::type_complexity)]
     pub(crate) fn step_derivatives_at<const U: usize>(
         &self,
         z: &State<N>,
         u_prev: &SVector<f64, U>,
         u: &SVector<f64, U>,
         ws: &mut Workspace,
-    ) -> Result<
-        (
-            State<N>,
-            vigp_core::StepDerivatives<N, U>,
-            vigp_core::InputJacobian<N, U>,
-        ),
-        StepError,
-    >
+    ) -> Result<StepWithDerivatives<N, U>, StepError>
     where
         M: vigp_core::Inputs<U>,
     {

@@ -164,14 +164,7 @@ pub fn solve<R: Regressor>(
     noise: SampleNoise,
 ) -> Result<Fit, IdentifyError> {
     noise.validate()?;
-    let n = stack.w.nrows();
-    let r = base.rank();
-    if n < r + stack.block || r == 0 {
-        return Err(IdentifyError::TooFewTransitions {
-            rows: n,
-            needed: r + stack.block,
-        });
-    }
+    let (n, r) = stack.rows_for(base)?;
     let prior = BasePrior::new(base, prior_mean, prior_sd)?;
     let transitions = derivatives(regressor, logs, stack, base, noise)?;
     let rows = augmented(&stack.w, &stack.b, base);

@@ -128,6 +128,23 @@ pub struct Stack {
     pub instrumented: usize,
 }
 
+impl Stack {
+    /// The number of rows n and of `base`'s parameters r, checked:
+    /// n ≥ r + one transition's block and r > 0, else
+    /// [`IdentifyError::TooFewTransitions`].
+    pub(crate) fn rows_for(&self, base: &Base) -> Result<(usize, usize), IdentifyError> {
+        let n = self.w.nrows();
+        let r = base.rank();
+        if n < r + self.block || r == 0 {
+            return Err(IdentifyError::TooFewTransitions {
+                rows: n,
+                needed: r + self.block,
+            });
+        }
+        Ok((n, r))
+    }
+}
+
 /// What the solver returns.
 #[derive(Clone, Debug)]
 pub struct Fit {
@@ -177,14 +194,7 @@ pub fn solve(
     prior_sd: &[f64],
     loss: Loss,
 ) -> Result<Fit, IdentifyError> {
-    let n = stack.w.nrows();
-    let r = base.rank();
-    if n < r + stack.block || r == 0 {
-        return Err(IdentifyError::TooFewTransitions {
-            rows: n,
-            needed: r + stack.block,
-        });
-    }
+    let (n, r) = stack.rows_for(base)?;
     let cols =
         |m: &DMatrix<f64>| DMatrix::from_fn(m.nrows(), r, |i, c| m[(i, base.independent[c])]);
     let w1 = cols(&stack.w);

@@ -50,7 +50,10 @@
 //! that fails (a Newton step that does not converge) makes the point
 //! unevaluable, and the optimiser steps back from it.
 
-use super::{Base, DelRegressor, IdentifyError, Log, Noise, Regressor, RobotRegressor, stack};
+use super::{
+    Base, DelRegressor, IdentifyError, Log, Noise, Regressor, RobotRegressor, check_finite_vector,
+    check_length, stack,
+};
 use crate::gp::optimise;
 use crate::mechanism::Mechanism;
 use crate::robot::RobotState;
@@ -273,25 +276,8 @@ fn check_problem(
     if u == 0 {
         return Err(IdentifyError::NoInputs);
     }
-    if problem.start.len() != n {
-        return Err(IdentifyError::Dimension {
-            what: "start",
-            expected: n,
-            found: problem.start.len(),
-        });
-    }
-    if problem.start.iter().any(|x| !x.is_finite()) {
-        return Err(IdentifyError::NonFinite {
-            what: "start".into(),
-        });
-    }
-    if problem.amplitude.len() != u {
-        return Err(IdentifyError::Dimension {
-            what: "amplitudes (one per input)",
-            expected: u,
-            found: problem.amplitude.len(),
-        });
-    }
+    check_finite_vector("start", &problem.start, n)?;
+    check_length("amplitudes (one per input)", u, problem.amplitude.len())?;
     if let Some(a) = problem
         .amplitude
         .iter()
@@ -311,13 +297,7 @@ fn check_problem(
         )));
     }
     if !problem.position_limits.is_empty() {
-        if problem.position_limits.len() != n {
-            return Err(IdentifyError::Dimension {
-                what: "position limits",
-                expected: n,
-                found: problem.position_limits.len(),
-            });
-        }
+        check_length("position limits", n, problem.position_limits.len())?;
         if let Some((lo, hi)) = problem
             .position_limits
             .iter()
@@ -335,13 +315,7 @@ fn check_problem(
         }
     }
     if !problem.velocity_limits.is_empty() {
-        if problem.velocity_limits.len() != n {
-            return Err(IdentifyError::Dimension {
-                what: "velocity limits",
-                expected: n,
-                found: problem.velocity_limits.len(),
-            });
-        }
+        check_length("velocity limits", n, problem.velocity_limits.len())?;
         if let Some(v) = problem
             .velocity_limits
             .iter()
@@ -387,13 +361,7 @@ where
     {
         let dt = regressor.dt();
         let declared = <M as vigp_core::Dynamics<N, C>>::INPUTS;
-        if U != declared {
-            return Err(IdentifyError::Dimension {
-                what: "inputs (the mechanism's actuated joints)",
-                expected: declared,
-                found: U,
-            });
-        }
+        check_length("inputs (the mechanism's actuated joints)", declared, U)?;
         let period = check_problem(problem, N, U, regressor.structure().len(), dt)?;
         let model = *regressor.model();
         let vi = if regressor.alpha() == 0.0 {

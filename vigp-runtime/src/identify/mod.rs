@@ -155,6 +155,38 @@ pub enum IdentifyError {
     },
 }
 
+/// `Ok` when the vector `what` has its `expected` length `found`, else
+/// [`IdentifyError::Dimension`].
+pub(crate) fn check_length(
+    what: &'static str,
+    expected: usize,
+    found: usize,
+) -> Result<(), IdentifyError> {
+    if found != expected {
+        return Err(IdentifyError::Dimension {
+            what,
+            expected,
+            found,
+        });
+    }
+    Ok(())
+}
+
+/// `Ok` when `values` (the vector `what`) has `expected` entries, all
+/// finite: else [`IdentifyError::Dimension`], or
+/// [`IdentifyError::NonFinite`] naming `what`.
+pub(crate) fn check_finite_vector(
+    what: &'static str,
+    values: &[f64],
+    expected: usize,
+) -> Result<(), IdentifyError> {
+    check_length(what, expected, values.len())?;
+    if values.iter().any(|v| !v.is_finite()) {
+        return Err(IdentifyError::NonFinite { what: what.into() });
+    }
+    Ok(())
+}
+
 /// One logged run: positions every Δt (the regressor's time step) and the
 /// inputs.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -178,6 +210,19 @@ impl Log {
             positions,
             inputs: Vec::new(),
         }
+    }
+
+    /// `Ok` for a log without inputs or with one input per sample, else
+    /// [`IdentifyError::Dimension`].
+    pub(crate) fn check_input_count(&self) -> Result<(), IdentifyError> {
+        if self.inputs.is_empty() {
+            return Ok(());
+        }
+        check_length(
+            "inputs (one per sample)",
+            self.positions.len(),
+            self.inputs.len(),
+        )
     }
 
     /// Transition k: samples k − 1, k, k + 1 and the inputs u_{k−1}, u_k
@@ -428,29 +473,11 @@ pub fn stack<R: Regressor>(
     let mut instrumented = 0;
     for (li, log) in logs.iter().enumerate() {
         for x in &log.positions {
-            if x.len() != n {
-                return Err(IdentifyError::Dimension {
-                    what: "positions",
-                    expected: n,
-                    found: x.len(),
-                });
-            }
+            check_length("positions", n, x.len())?;
         }
-        if !log.inputs.is_empty() {
-            if log.inputs.len() != log.positions.len() {
-                return Err(IdentifyError::Dimension {
-                    what: "inputs (one per sample)",
-                    expected: log.positions.len(),
-                    found: log.inputs.len(),
-                });
-            }
-            if let Some(x) = log.inputs.iter().find(|x| x.len() != u) {
-                return Err(IdentifyError::Dimension {
-                    what: "input vector",
-                    expected: u,
-                    found: x.len(),
-                });
-            }
+        log.check_input_count()?;
+        for x in &log.inputs {
+            check_length("input vector", u, x.len())?;
         }
         let k_count = log.positions.len();
         // a log too short for the instruments' window enters by least

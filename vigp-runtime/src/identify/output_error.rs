@@ -86,7 +86,7 @@
 //! scale towards zero, so use it on such logs.
 
 use super::regressor::{Regressor, Transition};
-use super::{Identification, IdentifyError, Log, consistency, covariance};
+use super::{Identification, IdentifyError, Log, check_length, consistency, covariance};
 use nalgebra::{DMatrix, DVector};
 
 /// Options of the output-error refinement.
@@ -188,21 +188,9 @@ pub fn simulate<R: Regressor>(
         ("initial positions", initial.len(), 2 * n),
         ("parameters", pi.len(), regressor.structure().len()),
     ] {
-        if v != expected {
-            return Err(IdentifyError::Dimension {
-                what,
-                expected,
-                found: v,
-            });
-        }
+        check_length(what, expected, v)?;
     }
-    if !log.inputs.is_empty() && log.inputs.len() != log.positions.len() {
-        return Err(IdentifyError::Dimension {
-            what: "inputs (one per sample)",
-            expected: log.positions.len(),
-            found: log.inputs.len(),
-        });
-    }
+    log.check_input_count()?;
     let seg = Segment { log: 0, start, len };
     simulate_segment(
         regressor,

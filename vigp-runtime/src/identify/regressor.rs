@@ -38,7 +38,7 @@
 //! GᵀG): Zᵀ·(−Gᵀλ) = 0, so the projected residual Zᵀr does not involve λ,
 //! and a transition gives N − C rows. The multipliers are not estimated.
 
-use super::IdentifyError;
+use super::{IdentifyError, check_finite_vector, check_length};
 use crate::del;
 use crate::mechanism::{Mechanism, Scalar};
 use nalgebra::{Const, DMatrix, DVector, SVector};
@@ -365,13 +365,7 @@ impl Structure {
         pi: &[f64],
         mut set: impl FnMut(usize, f64),
     ) -> Result<(), IdentifyError> {
-        if pi.len() != self.len() {
-            return Err(IdentifyError::Dimension {
-                what: "standard parameters",
-                expected: self.len(),
-                found: pi.len(),
-            });
-        }
+        check_length("standard parameters", self.len(), pi.len())?;
         if let Some(i) = pi.iter().position(|x| !x.is_finite()) {
             return Err(IdentifyError::NonFinite {
                 what: format!("standard parameter `{}`", self.names[i]),
@@ -681,18 +675,7 @@ where
 
     /// One configuration as a vector: N finite entries.
     fn vector(&self, x: &[f64]) -> Result<SVector<f64, N>, IdentifyError> {
-        if x.len() != N {
-            return Err(IdentifyError::Dimension {
-                what: "positions",
-                expected: N,
-                found: x.len(),
-            });
-        }
-        if x.iter().any(|v| !v.is_finite()) {
-            return Err(IdentifyError::NonFinite {
-                what: "positions".into(),
-            });
-        }
+        check_finite_vector("positions", x, N)?;
         Ok(SVector::from_column_slice(x))
     }
 
@@ -901,13 +884,7 @@ where
     }
 
     fn loop_curvature(&self, x: &[f64], lambda: &[f64]) -> Result<DMatrix<f64>, IdentifyError> {
-        if lambda.len() != C {
-            return Err(IdentifyError::Dimension {
-                what: "multipliers",
-                expected: C,
-                found: lambda.len(),
-            });
-        }
+        check_length("multipliers", C, lambda.len())?;
         let x = self.vector(x)?;
         let k =
             vigp_core::Dynamics::constants(&self.model).map_err(|e| IdentifyError::Simulation {

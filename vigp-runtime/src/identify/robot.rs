@@ -44,8 +44,8 @@
 //! [`Regressor::position_jacobians`] comes from the engine's closed-form
 //! term derivatives, exact to rounding.
 
-use super::IdentifyError;
 use super::regressor::{Regressor, Structure, Transition, position_differences};
+use super::{IdentifyError, check_finite_vector};
 use crate::robot::{Robot, RobotTree, TermJacobians};
 use nalgebra::{DMatrix, DVector};
 use vigp_core::tree::{BodyScratch, Engine};
@@ -293,35 +293,15 @@ impl RobotRegressor {
     ) -> Result<Vec<f64>, IdentifyError> {
         let n = engine.dof();
         for x in t.positions {
-            if x.len() != n {
-                return Err(IdentifyError::Dimension {
-                    what: "positions",
-                    expected: n,
-                    found: x.len(),
-                });
-            }
-            if x.iter().any(|v| !v.is_finite()) {
-                return Err(IdentifyError::NonFinite {
-                    what: "positions".into(),
-                });
-            }
+            check_finite_vector("positions", x, n)?;
         }
         // τ(u_{k−1}) (read by the midpoint rule only) and τ(u_k) on the
         // actuated joints
         let mut tau = [vec![0.0; n], vec![0.0; n]];
         let first = usize::from(self.alpha == 0.0);
         for (side, u) in tau.iter_mut().zip(t.inputs).skip(first) {
-            if !(u.is_empty() || u.len() == self.inputs.len()) {
-                return Err(IdentifyError::Dimension {
-                    what: "inputs",
-                    expected: self.inputs.len(),
-                    found: u.len(),
-                });
-            }
-            if u.iter().any(|v| !v.is_finite()) {
-                return Err(IdentifyError::NonFinite {
-                    what: "inputs".into(),
-                });
+            if !u.is_empty() {
+                check_finite_vector("inputs", u, self.inputs.len())?;
             }
             for (&j, &x) in self.inputs.iter().zip(u) {
                 side[j] += x;
