@@ -65,7 +65,7 @@ fn all_finite(xs: &[f64]) -> bool {
 /// the dense code's contiguous loops are faster; four 3-joint legs
 /// (Solo-12) have 56 against 576, the G1 humanoid's legs, waist and arms
 /// far less than a chain of 29.
-fn branched<T: Tree>(tree: &T) -> bool {
+pub(super) fn branched<T: Tree>(tree: &T) -> bool {
     let n = tree.len();
     let mut work = 0usize;
     for k in 0..n {
@@ -218,12 +218,9 @@ fn substitute<const B: usize>(lu: &[f64], n: usize, x: &mut [f64], w: usize, c: 
         let mut acc = [0.0; B];
         acc.copy_from_slice(&x[i * w + c..i * w + c + B]);
         for j in js {
-            let f = lu[i * n + j];
-            if f != 0.0 {
-                let xj = &x[j * w + c..j * w + c + B];
-                for b in 0..B {
-                    acc[b] -= f * xj[b];
-                }
+            let (f, xj) = (lu[i * n + j], &x[j * w + c..j * w + c + B]);
+            for b in 0..B {
+                acc[b] -= f * xj[b];
             }
         }
         acc
@@ -348,7 +345,7 @@ impl<T: Tree> Engine<T> {
             max_depth: 0,
             ..options
         })?;
-        let branches = branched(self.tree());
+        let branches = self.branched;
         let mut report = EngineReport::default();
         let (mut depth, mut done, mut total, mut first) = (0u32, 0usize, 1usize, true);
         while done < total {

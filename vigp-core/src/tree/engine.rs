@@ -434,6 +434,13 @@ pub struct Engine<T: Tree> {
     options: EngineOptions,
     /// A hash of what the poses depend on (never 0).
     fingerprint: u64,
+    /// Whether the derivatives solve J in the tree's pattern
+    /// (`derivatives::branched`).
+    pub(super) branched: bool,
+    /// Whether every body's parent is the one before it (then every pair
+    /// of bodies is on one path, and no entry of the term derivatives is
+    /// structurally zero).
+    chain: bool,
 }
 
 /// FNV-1a over 64-bit words: the fingerprint of a tree's geometry and
@@ -582,10 +589,14 @@ impl<T: Tree> Engine<T> {
         validate(&tree)?;
         check_options(&options)?;
         let fingerprint = fingerprint(&tree);
+        let branched = super::derivatives::branched(&tree);
+        let chain = (0..tree.len()).all(|i| tree.body(i).parent == i.checked_sub(1));
         Ok(Self {
             tree,
             options,
             fingerprint,
+            branched,
+            chain,
         })
     }
 
@@ -598,6 +609,8 @@ impl<T: Tree> Engine<T> {
             tree: &self.tree,
             options,
             fingerprint: self.fingerprint,
+            branched: self.branched,
+            chain: self.chain,
         })
     }
 
@@ -1244,12 +1257,15 @@ impl<T: Tree> Engine<T> {
         mut rest: Option<(&mut [f64], &mut [f64], &mut [f64])>,
     ) {
         let n = ws.len();
-        p_q.fill(0.0);
-        p_v.fill(0.0);
-        if let Some((t_q, t_v, v_q)) = rest.as_mut() {
-            t_q.fill(0.0);
-            t_v.fill(0.0);
-            v_q.fill(0.0);
+        // on a chain every entry is written below
+        if !self.chain {
+            p_q.fill(0.0);
+            p_v.fill(0.0);
+            if let Some((t_q, t_v, v_q)) = rest.as_mut() {
+                t_q.fill(0.0);
+                t_v.fill(0.0);
+                v_q.fill(0.0);
+            }
         }
         let g = self.tree.gravity();
         let ag = [0.0, 0.0, 0.0, g[0], g[1], g[2]];
