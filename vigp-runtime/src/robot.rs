@@ -183,9 +183,8 @@ impl TermJacobians {
 
 /// What a step's derivatives carry to the next step of a rollout: the
 /// momentum and the scratch of [`Engine::step_derivatives`], whose first
-/// 2N² entries then hold the momentum's Jacobians at the state, and the
-/// last velocities, whose extrapolation starts the next iteration (as in
-/// [`Robot::step_in`]).
+/// 2N² entries then hold the momentum's Jacobians at the state `at`.
+#[derive(Clone, Debug)]
 struct DerivativeCarry {
     p: Vec<f64>,
     /// The step's generalized forces, and its A and B row-major.
@@ -193,12 +192,10 @@ struct DerivativeCarry {
     a: Vec<f64>,
     b: Vec<f64>,
     scratch: Vec<f64>,
+    /// Whether `p` and the scratch hold the momentum terms at `at`, the
+    /// state (q, v) the last step produced.
     start_known: bool,
-    /// The last 3 velocities before the state's, newest first (N each),
-    /// `known` of them valid.
-    past: Vec<f64>,
-    known: usize,
-    guess: Vec<f64>,
+    at: Vec<f64>,
 }
 
 impl DerivativeCarry {
@@ -210,10 +207,48 @@ impl DerivativeCarry {
             b: vec![0.0; 2 * n * inputs],
             scratch: vec![0.0; derivative_scratch_len(n, inputs)],
             start_known: false,
+            at: Vec::with_capacity(2 * n),
+        }
+    }
+
+    /// Whether it is sized for `n` coordinates and `inputs` inputs.
+    fn fits(&self, n: usize, inputs: usize) -> bool {
+        self.p.len() == n && self.b.len() == 2 * n * inputs
+    }
+}
+
+/// The velocities the last steps of a run started from, whose
+/// extrapolation ([`extrapolate`]) starts the next step's iteration.
+#[derive(Clone, Debug)]
+struct History {
+    /// The last three, newest first (3N), `known` of them valid.
+    past: Vec<f64>,
+    known: usize,
+    /// The extrapolation for the next step.
+    guess: Vec<f64>,
+}
+
+impl History {
+    fn new(n: usize) -> Self {
+        Self {
             past: vec![0.0; 3 * n],
             known: 0,
             guess: vec![0.0; n],
         }
+    }
+
+    /// For a step from velocity `v`: the extrapolation into `guess`
+    /// (`true`) when there is history (else `false`), then `v` recorded.
+    fn next(&mut self, v: &[f64]) -> bool {
+        let n = v.len();
+        let guessed = self.known > 0;
+        if guessed {
+            extrapolate(v, &self.past, self.known, &mut self.guess);
+        }
+        self.past.copy_within(0..2 * n, n);
+        self.past[..n].copy_from_slice(v);
+        self.known = (self.known + 1).min(3);
+        guessed
     }
 }
 
@@ -299,21 +334,21 @@ impl RolloutReport {
     }
 }
 
-/// The kept scratch of a robot's steps ([`Robot::step_in`]): one
-/// [`BodyScratch`] per body, the generalized forces, and the velocities of
-/// the last steps (the start of the next step's iteration).
+/// The kept scratch of a robot's steps ([`Robot::step_in`],
+/// [`Robot::step_derivatives_in`]): one [`BodyScratch`] per body, the
+/// generalized forces, the velocities of the last steps (the start of the
+/// next step's iteration) and, for the derivatives, the momentum terms at
+/// the last state.
 #[derive(Clone, Debug)]
 pub struct RobotWorkspace {
     bodies: Vec<BodyScratch>,
     tau: Vec<f64>,
     /// The state (q, v) the last step produced (2N; empty: none).
     last: Vec<f64>,
-    /// The velocities the last three steps started from, newest first
-    /// (3N), of which `known` belong to the run that produced `last`.
-    past: Vec<f64>,
-    known: usize,
-    /// The extrapolation of the next step's velocity ([`extrapolate`]).
-    guess: Vec<f64>,
+    /// The velocities of the run that produced `last`.
+    history: History,
+    /// The carry of [`Robot::step_derivatives_in`], made on its first call.
+    carry: Option<DerivativeCarry>,
 }
 
 /// The velocity of the next step extrapolated from the current one `v`
@@ -512,9 +547,8 @@ impl Robot {
             bodies: vec![BodyScratch::default(); n],
             tau: vec![0.0; n],
             last: Vec::with_capacity(2 * n),
-            past: vec![0.0; 3 * n],
-            known: 0,
-            guess: vec![0.0; n],
+            history: History::new(n),
+            carry: None,
         }
     }
 
@@ -605,32 +639,31 @@ impl Robot {
         ws: &mut RobotWorkspace,
     ) -> Result<EngineReport, RobotError> {
         self.check_state(z)?;
-        let n = self.dof();
-        if ws.tau.len() != n || ws.bodies.len() < n || ws.past.len() != 3 * n || ws.guess.len() != n
-        {
-            *ws = self.workspace();
-        }
-        let continues =
-            ws.last.len() == 2 * n && ws.last[..n] == z.q[..] && ws.last[n..] == z.v[..];
-        if !continues {
-            ws.known = 0;
-        }
-        let guessed = ws.known > 0;
-        if guessed {
-            extrapolate(&z.v, &ws.past, ws.known, &mut ws.guess);
-        }
-        ws.past.copy_within(0..2 * n, n);
-        ws.past[..n].copy_from_slice(&z.v);
-        ws.known = (ws.known + 1).min(3);
-        let guess = std::mem::take(&mut ws.guess);
+        self.continue_run(z, ws);
+        let guessed = ws.history.next(&z.v);
+        let guess = std::mem::take(&mut ws.history.guess);
         let r = self.step_guessed(z, p, u, dt, guessed.then_some(&guess[..]), ws);
-        ws.guess = guess;
+        ws.history.guess = guess;
         ws.last.clear();
         if r.is_ok() {
             ws.last.extend_from_slice(&z.q);
             ws.last.extend_from_slice(&z.v);
         }
         r
+    }
+
+    /// Sizes `ws` for this robot, and forgets its run's velocities unless
+    /// `z` is the state its last step produced.
+    fn continue_run(&self, z: &RobotState, ws: &mut RobotWorkspace) {
+        let n = self.dof();
+        if ws.tau.len() != n || ws.bodies.len() < n || ws.history.past.len() != 3 * n {
+            *ws = self.workspace();
+        }
+        let continues =
+            ws.last.len() == 2 * n && ws.last[..n] == z.q[..] && ws.last[n..] == z.v[..];
+        if !continues {
+            ws.history.known = 0;
+        }
     }
 
     fn step_guessed(
@@ -673,19 +706,66 @@ impl Robot {
         self.check_inputs(u)?;
         let mut ws = vec![BodyScratch::default(); self.dof()];
         let mut carry = DerivativeCarry::new(self.dof(), self.inputs.len());
+        let mut history = History::new(self.dof());
         let mut out = StepDerivatives::empty();
-        self.derivatives_into(z, &mut carry, u, dt, &mut ws, &mut out)?;
+        self.derivatives_into(z, &mut carry, &mut history, u, dt, &mut ws, &mut out)?;
         Ok(out)
+    }
+
+    /// [`Robot::step_derivatives`] with a kept workspace, into `out`
+    /// (its matrices reused when they have the right shape): what a
+    /// control loop that linearises at every tick calls, allocating
+    /// nothing after its first call. When `z` is the state the last call
+    /// (or [`Robot::step_in`]) produced, the iteration starts from the
+    /// extrapolation of the run's last velocities, as in `step_in`, and,
+    /// after a call of this method, the momentum and its Jacobians at `z`
+    /// are taken from it instead of recomputed. The state and its
+    /// derivatives equal [`Robot::step_derivatives`]'s to the solver's
+    /// tolerance.
+    pub fn step_derivatives_in(
+        &self,
+        z: &RobotState,
+        u: &[f64],
+        dt: f64,
+        ws: &mut RobotWorkspace,
+        out: &mut StepDerivatives,
+    ) -> Result<(), RobotError> {
+        self.check_state(z)?;
+        self.check_inputs(u)?;
+        let (n, nu) = (self.dof(), self.inputs.len());
+        self.continue_run(z, ws);
+        let RobotWorkspace {
+            bodies,
+            last,
+            history,
+            carry,
+            ..
+        } = ws;
+        let carry = match carry {
+            Some(c) if c.fits(n, nu) => c,
+            slot => slot.insert(DerivativeCarry::new(n, nu)),
+        };
+        let at_z = carry.at.len() == 2 * n && carry.at[..n] == z.q[..] && carry.at[n..] == z.v[..];
+        carry.start_known &= at_z;
+        let r = self.derivatives_into(z, carry, history, u, dt, bodies, out);
+        last.clear();
+        if r.is_ok() {
+            last.extend_from_slice(&out.state.q);
+            last.extend_from_slice(&out.state.v);
+        }
+        r
     }
 
     /// [`Robot::step_derivatives`] from z with the momentum and its
     /// Jacobians in `carry` when known (a rollout carries them from the
     /// step before); `carry` then holds them at the new state. Into `out`,
     /// whose matrices are reused when they have the right shape.
+    #[allow(clippy::too_many_arguments)]
     fn derivatives_into(
         &self,
         z: &RobotState,
         carry: &mut DerivativeCarry,
+        history: &mut History,
         u: &[f64],
         dt: f64,
         ws: &mut [BodyScratch],
@@ -704,10 +784,7 @@ impl Robot {
             scratch: &mut carry.scratch,
             start_known: carry.start_known,
         };
-        let guessed = carry.known > 0;
-        if guessed {
-            extrapolate(&z.v, &carry.past, carry.known, &mut carry.guess);
-        }
+        let guessed = history.next(&z.v);
         let result = self.engine.step_derivatives_guessed(
             &mut out.state.q,
             &mut out.state.v,
@@ -715,19 +792,15 @@ impl Robot {
             &carry.tau,
             &self.inputs,
             dt,
-            guessed.then_some(&carry.guess[..]),
+            guessed.then_some(&history.guess[..]),
             buffers,
             ws,
         );
         carry.start_known = result.is_ok();
-        carry.past.copy_within(0..2 * n, n);
-        carry.past[..n].copy_from_slice(&z.v);
-        carry.known = if result.is_ok() {
-            (carry.known + 1).min(3)
-        } else {
-            0
-        };
+        carry.at.clear();
         out.report = result.map_err(|e| self.engine_error(e))?;
+        carry.at.extend_from_slice(&out.state.q);
+        carry.at.extend_from_slice(&out.state.v);
         // the engine's matrices are row-major: as column-major views they
         // are the transposes
         if out.a.shape() != (2 * n, 2 * n) {
@@ -790,6 +863,7 @@ impl Robot {
         self.check_state(z0).map_err(|e| fail(0, e))?;
         let mut ws = vec![BodyScratch::default(); n];
         let mut carry = DerivativeCarry::new(n, nu);
+        let mut history = History::new(n);
         for (k, u) in inputs.iter().enumerate() {
             if let Err(e) = self.check_inputs(u) {
                 out.truncate(k);
@@ -800,7 +874,9 @@ impl Robot {
             }
             let (done, rest) = out.split_at_mut(k);
             let z = done.last().map_or(z0, |d| &d.state);
-            if let Err(e) = self.derivatives_into(z, &mut carry, u, dt, &mut ws, &mut rest[0]) {
+            let slot = &mut rest[0];
+            if let Err(e) = self.derivatives_into(z, &mut carry, &mut history, u, dt, &mut ws, slot)
+            {
                 out.truncate(k);
                 return Err(fail(k, e));
             }

@@ -670,6 +670,32 @@ fn rollout_derivatives_chain_to_the_differences_of_the_whole_rollout() {
         .rollout_derivatives_into(&z0, &inputs[..2], dt, &mut reused)
         .unwrap();
     assert_eq!(reused[..], steps[..2]);
+    // one step at a time with a kept workspace: the rollout's entries, bit
+    // for bit, in the same matrices on every call
+    let mut ws = robot.workspace();
+    let mut one = steps[0].clone();
+    let kept_a = one.a.as_ptr();
+    let mut z = z0.clone();
+    for (u, want) in inputs.iter().zip(&steps) {
+        robot
+            .step_derivatives_in(&z, u, dt, &mut ws, &mut one)
+            .unwrap();
+        assert_eq!(&one, want);
+        assert_eq!(one.a.as_ptr(), kept_a);
+        z = one.state.clone();
+    }
+    // after a plain step the next one recomputes its start terms: the
+    // single call's derivatives to the solver's tolerance
+    let mut p = robot.momentum(&z).unwrap();
+    robot
+        .step_in(&mut z, &mut p, &inputs[0], dt, &mut ws)
+        .unwrap();
+    robot
+        .step_derivatives_in(&z, &inputs[1], dt, &mut ws, &mut one)
+        .unwrap();
+    let single = robot.step_derivatives(&z, &inputs[1], dt).unwrap();
+    let gap = (&one.a - &single.a).amax() + (&one.b - &single.b).amax();
+    assert!(gap < 1e-8 * single.a.amax(), "{gap:e}");
 }
 
 #[test]
