@@ -351,6 +351,12 @@ pub struct RobotWorkspace {
     carry: Option<DerivativeCarry>,
 }
 
+/// Whether `x` is the state `z`, stored as (q, v).
+fn holds_state(x: &[f64], z: &RobotState) -> bool {
+    let n = z.q.len();
+    x.len() == 2 * n && x[..n] == z.q[..] && x[n..] == z.v[..]
+}
+
 /// The velocity of the next step extrapolated from the current one `v`
 /// and the `known` (1 to 3) before it in `past` (newest first, N each):
 /// the polynomial through them, of degree `known` (2v − v₋₁;
@@ -659,10 +665,17 @@ impl Robot {
         if ws.tau.len() != n || ws.bodies.len() < n || ws.history.past.len() != 3 * n {
             *ws = self.workspace();
         }
-        let continues =
-            ws.last.len() == 2 * n && ws.last[..n] == z.q[..] && ws.last[n..] == z.v[..];
-        if !continues {
+        if !holds_state(&ws.last, z) {
             ws.history.known = 0;
+        }
+    }
+
+    /// The generalized forces of inputs `u` into `tau` (input i on the
+    /// coordinate of the i-th actuated joint, zero elsewhere).
+    fn generalized_forces(&self, u: &[f64], tau: &mut [f64]) {
+        tau.fill(0.0);
+        for (&i, &x) in self.inputs.iter().zip(u) {
+            tau[i] = x;
         }
     }
 
@@ -680,10 +693,7 @@ impl Robot {
         if ws.tau.len() != self.dof() || ws.bodies.len() < self.dof() {
             *ws = self.workspace();
         }
-        ws.tau.iter_mut().for_each(|t| *t = 0.0);
-        for (&i, &x) in self.inputs.iter().zip(u) {
-            ws.tau[i] = x;
-        }
+        self.generalized_forces(u, &mut ws.tau);
         self.engine
             .step_guessed(&mut z.q, &mut z.v, p, &ws.tau, dt, guess, &mut ws.bodies)
             .map_err(|e| self.engine_error(e))
@@ -745,8 +755,7 @@ impl Robot {
             Some(c) if c.fits(n, nu) => c,
             slot => slot.insert(DerivativeCarry::new(n, nu)),
         };
-        let at_z = carry.at.len() == 2 * n && carry.at[..n] == z.q[..] && carry.at[n..] == z.v[..];
-        carry.start_known &= at_z;
+        carry.start_known &= holds_state(&carry.at, z);
         let r = self.derivatives_into(z, carry, history, u, dt, bodies, out);
         last.clear();
         if r.is_ok() {
@@ -772,10 +781,7 @@ impl Robot {
         out: &mut StepDerivatives,
     ) -> Result<(), RobotError> {
         let (n, nu) = (self.dof(), self.inputs.len());
-        carry.tau.iter_mut().for_each(|t| *t = 0.0);
-        for (&i, &x) in self.inputs.iter().zip(u) {
-            carry.tau[i] = x;
-        }
+        self.generalized_forces(u, &mut carry.tau);
         out.state.q.clone_from(&z.q);
         out.state.v.clone_from(&z.v);
         let buffers = DerivativeBuffers {
@@ -842,8 +848,9 @@ impl Robot {
     /// per input: the entries it already holds are overwritten in place
     /// (their matrices and states reused), so a control loop that
     /// linearises a horizon of the same length on every cycle allocates
-    /// nothing after its first. On an error `out` holds the steps before
-    /// the failing one.
+    /// only the call's scratch (one [`RobotWorkspace`]) after its first.
+    /// A loop of [`Robot::step_derivatives_in`]. On an error `out` holds
+    /// the steps before the failing one.
     pub fn rollout_derivatives_into(
         &self,
         z0: &RobotState,
@@ -855,28 +862,21 @@ impl Robot {
             step,
             source: Box::new(e),
         };
-        let (n, nu) = (self.dof(), self.inputs.len());
         out.truncate(inputs.len());
         if inputs.is_empty() {
             return Ok(());
         }
         self.check_state(z0).map_err(|e| fail(0, e))?;
-        let mut ws = vec![BodyScratch::default(); n];
-        let mut carry = DerivativeCarry::new(n, nu);
-        let mut history = History::new(n);
+        // each step continues the run of the one before: the extrapolated
+        // start and the carried momentum terms of `step_derivatives_in`
+        let mut ws = self.workspace();
         for (k, u) in inputs.iter().enumerate() {
-            if let Err(e) = self.check_inputs(u) {
-                out.truncate(k);
-                return Err(fail(k, e));
-            }
             if out.len() == k {
                 out.push(StepDerivatives::empty());
             }
             let (done, rest) = out.split_at_mut(k);
             let z = done.last().map_or(z0, |d| &d.state);
-            let slot = &mut rest[0];
-            if let Err(e) = self.derivatives_into(z, &mut carry, &mut history, u, dt, &mut ws, slot)
-            {
+            if let Err(e) = self.step_derivatives_in(z, u, dt, &mut ws, &mut rest[0]) {
                 out.truncate(k);
                 return Err(fail(k, e));
             }

@@ -20,9 +20,10 @@ use crate::Real;
 /// about 1 KB); they are overwritten by every call, so one slice serves
 /// any number of steps and trees. A step leaves the poses at the state it
 /// committed, as [`Engine::momentum_of`] and
-/// [`Engine::momentum_derivatives`] leave them at theirs; the next step of the same tree from exactly that state (bit
-/// for bit: q, v and p) reuses them for its starting energy instead of
-/// recomputing them (every other call clears that mark).
+/// [`Engine::momentum_derivatives`] leave them at theirs; the next step of
+/// the same tree from exactly that state (bit for bit: q, v and p) reuses
+/// them for its starting energy instead of recomputing them (every other
+/// call clears that mark).
 ///
 /// The kinematic and momentum fields are of the scalar `R`: `f64` for the
 /// step, a jet ([`crate::Jet1`]) for [`Engine::terms`] with exact
