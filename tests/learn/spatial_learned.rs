@@ -10,14 +10,15 @@ use vigp::embedded::gp::ExportedGp;
 use vigp::embedded::learned::{Encoding as CoreEncoding, LearnedModel, Prior as CorePrior};
 use vigp::embedded::{LearnedStepper, StepOptions};
 use vigp::gp::TrainOptions;
+use vigp::learned::ForcedTransition;
 use vigp::learned::{Encoding, Learned, Prior, transitions as minimal_transitions};
 use vigp::prelude::*;
 use vigp::projection::consistent_state;
 use vigp::spatial::bound::{SpatialCalibration, SpatialConformal, SpatialWindow};
 use vigp::spatial::learned::{
-    Configuration, LearnSpatialError, LearnedSpatial, Rotation, SpatialForcedTransition,
-    forced_transitions, transitions,
+    Configuration, LearnSpatialError, LearnedSpatial, Rotation, forced_transitions, transitions,
 };
+use vigp::spatial::maximal::unpack;
 use vigp::spatial::{LieStepper, SpatialError, SpatialState};
 use vigp::systems::spatial::{Furuta, SphericalPendulum, SphericalPendulumMinimal};
 
@@ -427,7 +428,7 @@ fn driven_data(
     truth: &impl Integrator<State = SpatialState<2>, Mechanism: vigp::Inputs<2>>,
     rng: &mut Rng,
     dt: f64,
-) -> Vec<SpatialForcedTransition<2, 2>> {
+) -> Vec<ForcedTransition<12, 2, SpatialState<2>>> {
     let mut data = Vec::new();
     for _ in 0..6 {
         let z0 = arm_state(rng, dt);
@@ -519,30 +520,31 @@ fn forced_spatial_transitions_follow_the_data_convention() {
     let (_, logged, configs) = random_logged_run(&t_step, &mut rng, dt, 40);
     let data = forced_transitions(&configs, &logged, dt);
     assert_eq!(data.len(), 38);
-    let miss = |data: &[SpatialForcedTransition<2, 2>]| {
+    let miss = |data: &[ForcedTransition<12, 2, SpatialState<2>>]| {
         data.iter()
             .map(|t| {
                 let z1 = t_step.step_forced(&t.z, &t.u).unwrap();
+                let (v_next, w_next) = unpack::<2, 12>(&t.v_next);
                 (0..2)
                     .map(|i| {
-                        (z1.v[i] - t.v_next[i])
+                        (z1.v[i] - v_next[i])
                             .norm()
-                            .max((z1.w[i] - t.w_next[i]).norm())
+                            .max((z1.w[i] - w_next[i]).norm())
                     })
                     .fold(0.0, f64::max)
             })
             .fold(0.0, f64::max)
     };
     let exact = miss(&data);
-    let shifted: Vec<_> = forced_transitions(&configs, &logged[1..], dt)
+    let shifted: Vec<_> = forced_transitions::<2, 12, 2>(&configs, &logged[1..], dt)
         .into_iter()
         .zip(&data)
-        .map(|(s, t)| SpatialForcedTransition { u: s.u, ..*t })
+        .map(|(s, t)| ForcedTransition { u: s.u, ..*t })
         .collect();
     let early: Vec<_> = data
         .iter()
         .zip(&logged)
-        .map(|(t, u)| SpatialForcedTransition { u: *u, ..*t })
+        .map(|(t, u)| ForcedTransition { u: *u, ..*t })
         .collect();
     println!(
         "forced spatial transitions: next velocities from the logged input {exact:.1e}, from the input one sample earlier {:.1e}, one later {:.1e}",
@@ -838,7 +840,7 @@ fn a_spatial_conformal_bound_covers_exchangeable_windows() {
             .iter()
             .map(|c| {
                 // the start as the data give it (velocities from samples 0, 1)
-                let z0 = transitions(&c[..3], dt)[0].z;
+                let z0 = SpatialState::from_configurations(&c[0].0, &c[0].1, &c[1].0, &c[1].1, dt);
                 (
                     learned.predict_bounded(&z0, horizon, &bound).unwrap(),
                     c.clone(),
@@ -871,7 +873,7 @@ fn a_spatial_conformal_bound_covers_exchangeable_windows() {
             };
             let like: Vec<_> = tests
                 .iter()
-                .map(|c| transitions(&c[..3], dt)[0].z)
+                .map(|c| SpatialState::from_configurations(&c[0].0, &c[0].1, &c[1].0, &c[1].1, dt))
                 .collect();
             let m = Furuta::default().minimal();
             let mut unlike = |lo: f64, hi: f64, rate: f64| -> Vec<SpatialState<2>> {
@@ -979,7 +981,7 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
             .zip(&test_inputs)
             .map(|(c, u)| {
                 // the start as the data give it (velocities from samples 0, 1)
-                let z0 = transitions(&c[..3], dt)[0].z;
+                let z0 = SpatialState::from_configurations(&c[0].0, &c[0].1, &c[1].0, &c[1].1, dt);
                 let (up, us): (SVector<f64, 2>, Vec<SVector<f64, 2>>) = if zero {
                     (SVector::zeros(), vec![SVector::zeros(); horizon])
                 } else {
@@ -1016,7 +1018,7 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
             .iter()
             .zip(&test_inputs)
             .filter(|(c, u)| {
-                let z0 = transitions(&c[..3], dt)[0].z;
+                let z0 = SpatialState::from_configurations(&c[0].0, &c[0].1, &c[1].0, &c[1].1, dt);
                 let mut us = u[1..].to_vec();
                 if beyond {
                     us[0][0] = us[0][0].signum() * (3.0 + us[0][0].abs());

@@ -1046,7 +1046,7 @@ fn spatial_errors_are_typed() {
         Ok(z) => assert!(z.is_finite()),
         Err(e) => assert!(!format!("{e}").is_empty()),
     }
-    let empty: Vec<vigp::spatial::learned::SpatialTransition<1>> = Vec::new();
+    let empty: Vec<vigp::learned::Transition<6, SpatialState<1>>> = Vec::new();
     assert!(
         vigp::spatial::learned::LearnedSpatial::train(
             stepper,

@@ -37,7 +37,6 @@ use crate::newton::{StepError, StepOptions};
 use crate::projection::{consistent_state, project_velocity};
 use crate::variational::Variational;
 use nalgebra::SVector;
-use vigp_core::state::discrete_velocity;
 
 mod embedded;
 mod export;
@@ -47,11 +46,13 @@ mod identified;
 #[cfg(feature = "urdf")]
 pub mod robot;
 pub(crate) mod time_step;
+pub(crate) mod transition;
 pub use embedded::{EmbeddedExport, ExportSize};
 pub(crate) use family::{InputLayout, Row};
 pub use family::{LearnedIntegrator, NominalStep, Space};
 pub use file::{LoadError, SavedKind, SavedLearned, SavedNewton};
 pub use identified::{IdentifiedError, IdentifiedParameters, IdentifiedValue};
+pub use transition::{ForcedTransition, Transition, forced_transitions, transitions};
 
 pub use vigp_core::learned::Encoding;
 
@@ -93,67 +94,6 @@ pub use vigp_core::learned::Encoding;
 /// `Identified` carries the identified parameters here (an exported model
 /// writes the identified parameters into its prior's mechanism instead).
 pub type Prior = vigp_core::learned::Prior<IdentifiedParameters>;
-
-/// One training pair: a discrete state and the next discrete velocity.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Transition<const N: usize> {
-    /// z_k = (x_k, v_k), v_k = (x_{k+1} − x_k)/Δt.
-    pub z: State<N>,
-    /// v_{k+1} = (x_{k+2} − x_{k+1})/Δt.
-    pub v_next: SVector<f64, N>,
-}
-
-/// One training pair of an actuated mechanism: a discrete state, the
-/// input that produced its velocity, the input that drove the step from it
-/// (held over the interval of the new discrete velocity,
-/// `vigp_core::forced`) and the next discrete velocity (module docs,
-/// "Under inputs": the GP input is (enc(z), u_prev, u)).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ForcedTransition<const N: usize, const U: usize> {
-    /// z_k = (x_k, v_k), v_k = (x_{k+1} − x_k)/Δt.
-    pub z: State<N>,
-    /// The input over [t_k, t_{k+1}] (the one that produced v_k).
-    pub u_prev: SVector<f64, U>,
-    /// The input over [t_{k+1}, t_{k+2}] (one per actuated joint).
-    pub u: SVector<f64, U>,
-    /// v_{k+1} = (x_{k+2} − x_{k+1})/Δt.
-    pub v_next: SVector<f64, N>,
-}
-
-/// Transitions of a trajectory of positions sampled every Δt with the
-/// input logged at each sample (held until the next): transition k is
-/// driven by `inputs[k + 1]` (see `vigp::data::Run::step_input`) after
-/// `inputs[k]` (its `u_prev`, the input that produced v_k). K positions
-/// give K − 2 transitions; `inputs` must be as long as `positions`
-/// (shorter: fewer transitions).
-pub fn forced_transitions<const N: usize, const U: usize>(
-    positions: &[SVector<f64, N>],
-    inputs: &[SVector<f64, U>],
-    dt: f64,
-) -> Vec<ForcedTransition<N, U>> {
-    positions
-        .windows(3)
-        .zip(inputs.windows(2))
-        .map(|(w, u)| ForcedTransition {
-            z: State::from_positions(w[0], &w[1], dt),
-            u_prev: u[0],
-            u: u[1],
-            v_next: discrete_velocity(&w[1], &w[2], dt),
-        })
-        .collect()
-}
-
-/// Transitions of a trajectory of positions sampled every Δt (K positions
-/// give K − 2 transitions).
-pub fn transitions<const N: usize>(positions: &[SVector<f64, N>], dt: f64) -> Vec<Transition<N>> {
-    positions
-        .windows(3)
-        .map(|w| Transition {
-            z: State::from_positions(w[0], &w[1], dt),
-            v_next: discrete_velocity(&w[1], &w[2], dt),
-        })
-        .collect()
-}
 
 /// Why training or prediction of a learned integrator failed.
 #[derive(Debug, thiserror::Error)]
@@ -446,15 +386,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     where
         M: crate::Parameters,
     {
-        let forced: Vec<ForcedTransition<N, 0>> = data
-            .iter()
-            .map(|t| ForcedTransition {
-                z: t.z,
-                u_prev: SVector::zeros(),
-                u: SVector::zeros(),
-                v_next: t.v_next,
-            })
-            .collect();
+        let forced = transition::without_inputs(data);
         let nominal =
             |vi: &Variational<M, N, C>, z: &State<N>, _: &SVector<f64, 0>| vi.prior_velocity(z);
         Self::train_inputs(model, dt, &forced, encoding, prior, options, false, nominal)

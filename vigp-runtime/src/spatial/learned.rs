@@ -41,7 +41,11 @@
 
 use crate::StepError;
 use crate::gp::{TrainOptions, TrainReport, Workspace};
-use crate::learned::{InputLayout, LearnError, LearnedIntegrator, NominalStep, Prior, Row, Space};
+use crate::learned::transition::{held_inputs, without_inputs};
+use crate::learned::{
+    ForcedTransition, InputLayout, LearnError, LearnedIntegrator, NominalStep, Prior, Row, Space,
+    Transition,
+};
 use nalgebra::{SVector, UnitQuaternion, Vector3};
 use vigp_core::spatial::maximal::{pack, unpack};
 use vigp_core::spatial::{LieStepper, Spatial, SpatialState};
@@ -99,36 +103,28 @@ impl Rotation {
     }
 }
 
-/// One training pair: a discrete state and the next discrete velocities.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SpatialTransition<const B: usize> {
-    /// z_k: configuration k and the velocities of the step to k+1.
-    pub z: SpatialState<B>,
-    /// Linear velocities of the step from k+1 to k+2.
-    pub v_next: [Vector3<f64>; B],
-    /// Body angular velocities of the step from k+1 to k+2.
-    pub w_next: [Vector3<f64>; B],
-}
-
 /// A sampled configuration: centres of mass and orientations of every link.
 pub type Configuration<const B: usize> = ([Vector3<f64>; B], [UnitQuaternion<f64>; B]);
 
 /// Transitions of a trajectory of configurations sampled every Δt (K
 /// configurations give K − 2 transitions): the discrete velocities are
 /// (x_{k+1} − x_k)/Δt and log(q_k⁻¹ q_{k+1})/Δt, so that the configuration
-/// update is exact and the GP learns only the velocity map.
-pub fn transitions<const B: usize>(
+/// update is exact and the GP learns only the velocity map. The next
+/// velocities stack every link's (v, ω) as
+/// [`pack`](vigp_core::spatial::maximal::pack) does: N = 6B, checked at
+/// compile time.
+pub fn transitions<const B: usize, const N: usize>(
     configurations: &[Configuration<B>],
     dt: f64,
-) -> Vec<SpatialTransition<B>> {
+) -> Vec<Transition<N, SpatialState<B>>> {
+    const { assert!(N == 6 * B, "N must be 6 times the number of links") };
     configurations
         .windows(3)
         .map(|w| {
             let next = between(&w[1], &w[2], dt);
-            SpatialTransition {
+            Transition {
                 z: between(&w[0], &w[1], dt),
-                v_next: next.v,
-                w_next: next.w,
+                v_next: pack(&next.v, &next.w),
             }
         })
         .collect()
@@ -144,49 +140,20 @@ pub(crate) fn between<const B: usize>(
     SpatialState::from_configurations(&a.0, &a.1, &b.0, &b.1, dt)
 }
 
-/// One training pair of an actuated spatial mechanism: a discrete state,
-/// the input that produced its velocities, the input that drove the step
-/// from it, and the next discrete velocities.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SpatialForcedTransition<const B: usize, const U: usize> {
-    /// z_k: configuration k and the velocities of the step to k+1.
-    pub z: SpatialState<B>,
-    /// The input over [t_k, t_{k+1}], which produced z_k's velocities.
-    pub u_prev: SVector<f64, U>,
-    /// The input over [t_{k+1}, t_{k+2}] (one per actuated joint, in
-    /// declaration order), held over the step from z_k
-    /// ([`LieStepper::step_forced`]).
-    pub u: SVector<f64, U>,
-    /// Linear velocities of the step from k+1 to k+2.
-    pub v_next: [Vector3<f64>; B],
-    /// Body angular velocities of the step from k+1 to k+2.
-    pub w_next: [Vector3<f64>; B],
-}
-
 /// Transitions of a trajectory of configurations sampled every Δt with the
 /// input logged at each sample and held until the next (zero-order hold):
 /// transition k, from configurations k, k+1, k+2, is driven by
 /// `inputs[k + 1]`, the input held over [t_{k+1}, t_{k+2}], after
-/// `inputs[k]` (its `u_prev`) — the planar convention of
-/// `vigp::learned::forced_transitions`. K configurations give
+/// `inputs[k]` (its `u_prev`) — the convention of
+/// [`crate::learned::forced_transitions`]. K configurations give
 /// K − 2 transitions; `inputs` must be as long as `configurations`
 /// (shorter: fewer transitions).
-pub fn forced_transitions<const B: usize, const U: usize>(
+pub fn forced_transitions<const B: usize, const N: usize, const U: usize>(
     configurations: &[Configuration<B>],
     inputs: &[SVector<f64, U>],
     dt: f64,
-) -> Vec<SpatialForcedTransition<B, U>> {
-    transitions(configurations, dt)
-        .into_iter()
-        .zip(inputs.windows(2))
-        .map(|(t, u)| SpatialForcedTransition {
-            z: t.z,
-            u_prev: u[0],
-            u: u[1],
-            v_next: t.v_next,
-            w_next: t.w_next,
-        })
-        .collect()
+) -> Vec<ForcedTransition<N, U, SpatialState<B>>> {
+    held_inputs(transitions(configurations, dt), inputs)
 }
 
 /// Why training or prediction of a learned spatial integrator failed: the
@@ -335,24 +302,19 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// once ([`crate::learned::distinct_rows`]).
     pub fn train(
         stepper: LieStepper<S, B, J, N, C>,
-        data: &[SpatialTransition<B>],
+        data: &[Transition<N, SpatialState<B>>],
         rotation: Rotation,
         prior: Prior,
         options: &TrainOptions,
     ) -> Result<(Self, TrainReport), LearnSpatialError> {
-        let data: Vec<SpatialForcedTransition<B, 0>> = data
-            .iter()
-            .map(|t| SpatialForcedTransition {
-                z: t.z,
-                u_prev: SVector::zeros(),
-                u: SVector::zeros(),
-                v_next: t.v_next,
-                w_next: t.w_next,
-            })
-            .collect();
-        Self::train_inputs(stepper, &data, rotation, prior, options, |s, z, _| {
-            s.prior_velocity(z)
-        })
+        Self::train_inputs(
+            stepper,
+            &without_inputs(data),
+            rotation,
+            prior,
+            options,
+            |s, z, _| s.prior_velocity(z),
+        )
     }
 
     /// [`LearnedSpatial::train`] for an actuated mechanism on transitions
@@ -365,7 +327,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// [`Integrator::rollout_forced`](crate::Integrator::rollout_forced).
     pub fn train_forced<const U: usize>(
         stepper: LieStepper<S, B, J, N, C>,
-        data: &[SpatialForcedTransition<B, U>],
+        data: &[ForcedTransition<N, U, SpatialState<B>>],
         rotation: Rotation,
         prior: Prior,
         options: &TrainOptions,
@@ -383,7 +345,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
     /// `nominal(stepper, z, u)`.
     fn train_inputs<const U: usize>(
         stepper: LieStepper<S, B, J, N, C>,
-        data: &[SpatialForcedTransition<B, U>],
+        data: &[ForcedTransition<N, U, SpatialState<B>>],
         rotation: Rotation,
         prior: Prior,
         options: &TrainOptions,
@@ -409,7 +371,7 @@ impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: 
                 z: &t.z,
                 u_prev: t.u_prev.as_slice(),
                 u: t.u.as_slice(),
-                next: pack(&t.v_next, &t.w_next),
+                next: t.v_next,
             },
             InputLayout {
                 inputs: U,
