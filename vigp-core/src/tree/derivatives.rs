@@ -28,7 +28,7 @@ use super::engine::{
     BodyScratch, Engine, EngineError, EngineOptions, EngineReport, TermDerivatives, check_len,
     check_time_step,
 };
-use super::model::Tree;
+use super::model::{Tree, ancestors};
 
 /// Length (f64 entries) of the scratch of [`Engine::step_derivatives`]
 /// for `n` bodies and `inputs` inputs: 12n² + 2n·inputs + 2n.
@@ -57,27 +57,6 @@ pub struct DerivativeBuffers<'a> {
 /// compiler vectorizes).
 fn all_finite(xs: &[f64]) -> bool {
     xs.iter().fold(true, |ok, x| ok & x.is_finite())
-}
-
-/// Whether the tree branches enough for [`tree_factor`] to pay: its work,
-/// Σ depth², at most a quarter of a dense factorisation's N³/3. A chain
-/// (the Panda, the UR5) has Σ depth² ≈ N³/3 and is factored densely, where
-/// the dense code's contiguous loops are faster; four 3-joint legs
-/// (Solo-12) have 56 against 576, the G1 humanoid's legs, waist and arms
-/// far less than a chain of 29.
-pub(super) fn branched<T: Tree>(tree: &T) -> bool {
-    let n = tree.len();
-    let mut work = 0usize;
-    for k in 0..n {
-        let depth = ancestors(tree, k).count() + 1;
-        work += depth * depth;
-    }
-    12 * work <= n * n * n
-}
-
-/// The ancestors of body `k`, its parent first.
-fn ancestors<T: Tree>(tree: &T, k: usize) -> impl Iterator<Item = usize> + '_ {
-    core::iter::successors(tree.body(k).parent, move |&a| tree.body(a).parent)
 }
 
 /// Factors in place, without pivoting, the row-major n × n matrix `jac`

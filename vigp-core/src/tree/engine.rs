@@ -436,7 +436,7 @@ pub struct Engine<T: Tree> {
     /// A hash of what the poses depend on (never 0).
     fingerprint: u64,
     /// Whether the derivatives solve J in the tree's pattern
-    /// (`derivatives::branched`).
+    /// (`model::branched`).
     pub(super) branched: bool,
     /// Whether every body's parent is the one before it (then every pair
     /// of bodies is on one path, and no entry of the term derivatives is
@@ -590,7 +590,7 @@ impl<T: Tree> Engine<T> {
         validate(&tree)?;
         check_options(&options)?;
         let fingerprint = fingerprint(&tree);
-        let branched = super::derivatives::branched(&tree);
+        let branched = super::model::branched(&tree);
         let chain = (0..tree.len()).all(|i| tree.body(i).parent == i.checked_sub(1));
         Ok(Self {
             tree,
