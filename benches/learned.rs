@@ -18,34 +18,15 @@ use std::time::Duration;
 use criterion::{Criterion, criterion_group, criterion_main};
 use vigp::bound::{BoundKind, Calibration};
 use vigp::embedded::Stepper;
-use vigp::gp::{TrainOptions, VarianceMode};
-use vigp::learned::{Encoding, Learned, Prior, Transition};
+use vigp::gp::VarianceMode;
+use vigp::learned::{Encoding, Prior};
 use vigp::prelude::*;
 use vigp::systems::{DoublePendulum, DoublePendulumMinimal};
 
 #[path = "learned/data.rs"]
 mod data;
 
-use data::{DT, data};
-
-fn train(n: usize, prior: Prior) -> (Learned<DoublePendulumMinimal, 2, 0>, Vec<Transition<2>>) {
-    let d = data(n, 7 + n as u64);
-    let opts = TrainOptions {
-        restarts: 2,
-        seed: 1,
-        ..TrainOptions::default()
-    };
-    let (l, _) = Learned::train(
-        DoublePendulum::default().minimal(),
-        DT,
-        &d,
-        Encoding::SinCos,
-        prior,
-        &opts,
-    )
-    .expect("training");
-    (l, d)
-}
+use data::{DT, train};
 
 fn bench_learned(c: &mut Criterion) {
     let z = State::new([1.0, -0.5], [0.5, 1.0]);
@@ -53,7 +34,7 @@ fn bench_learned(c: &mut Criterion) {
     g.warm_up_time(Duration::from_secs(1));
     g.measurement_time(Duration::from_secs(4));
     for n in [64, 512] {
-        let (l, _) = train(n, Prior::Constant);
+        let l = train(n, Prior::Constant).expect("training");
         let bound = l
             .error_bound(&BoundKind::theorem1(0.05), &Calibration::empty(0.01))
             .expect("bound");
@@ -178,7 +159,7 @@ fn bench_learned(c: &mut Criterion) {
         });
     }
     // with the nominal VI step as prior (paper eq. 7 for pendulum/cartpole)
-    let (l, _) = train(512, Prior::Nominal);
+    let l = train(512, Prior::Nominal).expect("training");
     let mut ws = l.workspace();
     g.bench_function("double_pendulum/N512/mean_nominal_prior", |b| {
         b.iter(|| l.step_mean_in(black_box(&z), &mut ws).unwrap())

@@ -46,6 +46,18 @@ fn bench_views<Mn, Mx, const N: usize, const C: usize, const NM: usize, const CM
     bench_step(g, &format!("{name}/maximal/vi"), &vim, &zm);
 }
 
+/// The four-bar's benchmark state: q = [0.9, −1.3, −0.4, 1.3] and
+/// v = [0.5, 0, 0, 0] made consistent with its loop constraints.
+fn fourbar_state(fb: &Fourbar, dt: f64) -> State<4> {
+    consistent_state(
+        &fb.minimal(),
+        &SVector::from([0.9, -1.3, -0.4, 1.3]),
+        &SVector::from([0.5, 0.0, 0.0, 0.0]),
+        dt,
+    )
+    .unwrap()
+}
+
 fn bench_steps(c: &mut Criterion) {
     let dt = 0.01;
     let mut g = c.benchmark_group("step");
@@ -79,13 +91,7 @@ fn bench_steps(c: &mut Criterion) {
     );
 
     let fb = Fourbar::default();
-    let z = consistent_state(
-        &fb.minimal(),
-        &SVector::from([0.9, -1.3, -0.4, 1.3]),
-        &SVector::from([0.5, 0.0, 0.0, 0.0]),
-        dt,
-    )
-    .unwrap();
+    let z = fourbar_state(&fb, dt);
     let vi = Variational::new(fb.minimal(), dt).unwrap();
     bench_step(&mut g, "fourbar/minimal/vi", &vi, &z);
     let zm = fb.minimal().to_maximal(&z, dt);
@@ -157,13 +163,7 @@ fn bench_embedded_steps(c: &mut Criterion) {
         State::new([1.0, -0.5], [0.5, 1.0]),
     );
     let fb = Fourbar::default();
-    let z = consistent_state(
-        &fb.minimal(),
-        &SVector::from([0.9, -1.3, -0.4, 1.3]),
-        &SVector::from([0.5, 0.0, 0.0, 0.0]),
-        dt,
-    )
-    .unwrap();
+    let z = fourbar_state(&fb, dt);
     bench_embedded(&mut g, "fourbar", fb, z);
     g.finish();
 }

@@ -35,6 +35,10 @@ pub const DT: f64 = 0.01;
 mod rng;
 use rng::Rng;
 
+#[path = "common/noisy_draw.rs"]
+mod noisy_draw;
+use noisy_draw::noisy_draw;
+
 /// The demo's nominal double pendulum.
 pub fn nominal() -> DoublePendulum {
     let mut m = DoublePendulum::default();
@@ -83,17 +87,7 @@ pub fn generate(n: usize) -> Result<Exported, Box<dyn Error>> {
             test.extend(transitions(&q, DT).into_iter().step_by(20));
         }
     }
-    let train: Vec<Transition<2>> = (0..n)
-        .map(|_| {
-            let mut t = pool[(rng.next_u64() % pool.len() as u64) as usize];
-            for i in 0..2 {
-                t.z.q[i] += 1e-3 * rng.normal();
-                t.z.v[i] += 1e-3 * rng.normal();
-                t.v_next[i] += 1e-3 * rng.normal();
-            }
-            t
-        })
-        .collect();
+    let train = noisy_draw(&pool, n, &mut rng);
     let opts = TrainOptions {
         restarts: 4,
         seed: 1,

@@ -25,15 +25,14 @@
 use std::f64::consts::PI;
 
 use nalgebra::{DMatrix, SVector};
-use vigp::gp::TrainOptions;
-use vigp::learned::{Encoding, Learned, Prior};
+use vigp::learned::{Encoding, Prior};
 use vigp::prelude::*;
 use vigp::systems::{DoublePendulum, DoublePendulumMinimal};
 
 #[path = "../benches/learned/data.rs"]
 mod data;
 
-use data::{DT, Rng, data};
+use data::{DT, Rng, train};
 
 /// The median of `v` (sorted in place).
 fn median(v: &mut [f64]) -> f64 {
@@ -43,19 +42,7 @@ fn median(v: &mut [f64]) -> f64 {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let n = 512;
-    let opts = TrainOptions {
-        restarts: 2,
-        seed: 1,
-        ..TrainOptions::default()
-    };
-    let (model, _) = Learned::train(
-        DoublePendulum::default().minimal(),
-        DT,
-        &data(n, 7 + n as u64),
-        Encoding::SinCos,
-        Prior::Constant,
-        &opts,
-    )?;
+    let model = train(n, Prior::Constant)?;
     // the query states: 40 nominal trajectories of 1 s from rest, every
     // fifth state
     let nominal = Variational::new(DoublePendulum::default().minimal(), DT)?;

@@ -1,13 +1,14 @@
-//! The double-pendulum training data of the `learned` benchmark, shared
-//! with `examples/variance_precision.rs` (which measures the same model):
-//! a seeded SplitMix64 generator and the paper's data.
+//! The double-pendulum training data and model of the `learned` benchmark,
+//! shared with `examples/variance_precision.rs` (which measures the same
+//! model): a seeded SplitMix64 generator, the paper's data and the training.
 
 use std::f64::consts::PI;
 
 use nalgebra::SVector;
-use vigp::learned::{Transition, transitions};
+use vigp::gp::TrainOptions;
+use vigp::learned::{Encoding, LearnError, Learned, Prior, Transition, transitions};
 use vigp::prelude::*;
-use vigp::systems::DoublePendulum;
+use vigp::systems::{DoublePendulum, DoublePendulumMinimal};
 
 /// The time step of the data and of the learned model.
 pub const DT: f64 = 0.01;
@@ -15,6 +16,10 @@ pub const DT: f64 = 0.01;
 #[path = "../../tests/common/rng.rs"]
 mod rng;
 pub use rng::Rng;
+
+#[path = "../../examples/common/noisy_draw.rs"]
+mod noisy_draw;
+use noisy_draw::noisy_draw;
 
 /// The paper's double-pendulum data: a damped, mass-perturbed "truth",
 /// trajectories of 2 s from random configurations at rest, noise σ = 1e-3
@@ -42,15 +47,24 @@ pub fn data(n: usize, seed: u64) -> Vec<Transition<2>> {
         let q: Vec<_> = traj.iter().map(|z| z.q).collect();
         pool.extend(transitions(&q, DT));
     }
-    (0..n)
-        .map(|_| {
-            let mut t = pool[(rng.next_u64() % pool.len() as u64) as usize];
-            for i in 0..2 {
-                t.z.q[i] += 1e-3 * rng.normal();
-                t.z.v[i] += 1e-3 * rng.normal();
-                t.v_next[i] += 1e-3 * rng.normal();
-            }
-            t
-        })
-        .collect()
+    noisy_draw(&pool, n, &mut rng)
+}
+
+/// The model the benchmark measures: a GP on [`data`]`(n, 7 + n)` with the
+/// sin/cos encoding and `prior` (2 restarts, seed 1).
+pub fn train(n: usize, prior: Prior) -> Result<Learned<DoublePendulumMinimal, 2, 0>, LearnError> {
+    let opts = TrainOptions {
+        restarts: 2,
+        seed: 1,
+        ..TrainOptions::default()
+    };
+    let (l, _) = Learned::train(
+        DoublePendulum::default().minimal(),
+        DT,
+        &data(n, 7 + n as u64),
+        Encoding::SinCos,
+        prior,
+        &opts,
+    )?;
+    Ok(l)
 }

@@ -1,6 +1,8 @@
 //! Invalid `mechanism!` descriptions are compile errors with spans that point
-//! at the offending token. One case per file in `tests/ui`; the
-//! expected compiler output sits next to it in `NAME.stderr`. Regenerate with
+//! at the offending token. One case per file in `tests/ui`: one kind of
+//! mistake, or a description carrying several that are all reported at once
+//! (`planar_link_errors.rs`, …); the expected compiler output sits next to it
+//! in `NAME.stderr`. Regenerate with
 //! `TRYBUILD=overwrite cargo test -p vigp-compile-fail` and review the diff.
 
 use std::path::Path;

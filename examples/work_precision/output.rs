@@ -571,46 +571,48 @@ fn sweep_line(s: &SystemResult, m: Method, x: impl Fn(&SweepPoint) -> f64) -> Li
     }
 }
 
-fn work_precision_figure(systems: &[SystemResult]) -> Figure {
+/// A figure with one panel a system, each with the sweep's line a method
+/// of error at T against `x` (labelled `x_label`).
+fn sweep_figure(
+    systems: &[SystemResult],
+    title: &str,
+    subtitle: &str,
+    x_label: &str,
+    x: impl Fn(&SweepPoint) -> f64 + Copy,
+) -> Figure {
     Figure {
-        title: "Work-precision: position error at t = T against compute time".into(),
-        subtitle: "error = max_i |q_i(T) − q_ref,i(T)| in minimal coordinates; cost = median wall time of the steps per simulated second; hollow: under 10× the reference, solver or round-off floor".into(),
+        title: title.into(),
+        subtitle: subtitle.into(),
         panels: systems
             .iter()
             .map(|s| Panel {
                 title: format!("{}{}", s.label, sweep_missing(s)),
-                x_label: "cost (s per simulated s)".into(),
+                x_label: x_label.into(),
                 y_label: "error at T".into(),
-                lines: Method::ALL
-                    .iter()
-                    .map(|&m| {
-                        sweep_line(s, m, |p| {
-                            p.outcome.as_ref().map(|e| e.cost).unwrap_or(f64::NAN)
-                        })
-                    })
-                    .collect(),
+                lines: Method::ALL.iter().map(|&m| sweep_line(s, m, x)).collect(),
             })
             .collect(),
     }
 }
 
+fn work_precision_figure(systems: &[SystemResult]) -> Figure {
+    sweep_figure(
+        systems,
+        "Work-precision: position error at t = T against compute time",
+        "error = max_i |q_i(T) − q_ref,i(T)| in minimal coordinates; cost = median wall time of the steps per simulated second; hollow: under 10× the reference, solver or round-off floor",
+        "cost (s per simulated s)",
+        |p| p.outcome.as_ref().map(|e| e.cost).unwrap_or(f64::NAN),
+    )
+}
+
 fn convergence_figure(systems: &[SystemResult]) -> Figure {
-    Figure {
-        title: "Convergence: position error at t = T against the time step".into(),
-        subtitle: "slopes are the observed orders (summary.csv); hollow: under 10× the reference, solver or round-off floor (not fitted)".into(),
-        panels: systems
-            .iter()
-            .map(|s| Panel {
-                title: format!("{}{}", s.label, sweep_missing(s)),
-                x_label: "dt (s)".into(),
-                y_label: "error at T".into(),
-                lines: Method::ALL
-                    .iter()
-                    .map(|&m| sweep_line(s, m, |p| p.dt))
-                    .collect(),
-            })
-            .collect(),
-    }
+    sweep_figure(
+        systems,
+        "Convergence: position error at t = T against the time step",
+        "slopes are the observed orders (summary.csv); hollow: under 10× the reference, solver or round-off floor (not fitted)",
+        "dt (s)",
+        |p| p.dt,
+    )
 }
 
 fn energy_figure(systems: &[SystemResult], info: &RunInfo) -> Figure {

@@ -20,8 +20,13 @@ vigp::mechanism! {
             upside_down: revolute(a.end, world) { axis: [0.0, 0.0, 1.0] },
             selfish: spherical(a.end, a.start),
             ghost: spherical(e.end, d.start),
+            // An axis shapes the generated code: the macro must know it, so
+            // it cannot name a constant (run-time parameters can).
+            tilted: revolute(world, a.start) { axis: [0.0, TILT, 1.0] },
         }
     }
 }
+
+const TILT: f64 = 0.1;
 
 fn main() {}
