@@ -522,79 +522,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     where
         M: vigp_core::Inputs<U>,
     {
-        self.check_input_count::<U>()?;
-        self.step_derivatives_at(z, u_prev, u, ws)
-    }
-
-    /// The learned mean rollout under planned inputs (the states of
-    /// [`Learned::rollout_mean_forced_into`], bit for bit: step k from z_k
-    /// under `inputs[k]` after `inputs[k − 1]`, the first after `u_prev`)
-    /// with the exact derivatives of every state with respect to z_0 and to
-    /// every planned input: what a shooting MPC over the learned model
-    /// needs. The learned step reads the previous input too
-    /// ([`Learned::takes_previous_input`]), so u_j reaches z_{j+1} through
-    /// B_j and z_{j+2} through B_prev,(j+1):
-    ///
-    /// ∂z_{k+1}/∂u_j = A_k ∂z_k/∂u_j + [j = k] B_k + [j = k − 1] B_prev,k,
-    ///
-    /// with A_k, B_k and B_prev,k from [`Learned::step_derivatives_forced`]
-    /// at (z_k, u_{k−1}, u_k). `u_prev` is data, not a decision: its column
-    /// is not returned. Cost: K derivative steps plus O(K²) products of
-    /// N × N blocks. Errors are those of the steps, tagged with the step.
-    pub fn rollout_derivatives_forced<const U: usize>(
-        &self,
-        z0: &State<N>,
-        u_prev: &SVector<f64, U>,
-        inputs: &[SVector<f64, U>],
-        ws: &mut Workspace,
-    ) -> Result<crate::RolloutDerivatives<N, U>, StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        self.check_input_count::<U>()?;
-        crate::RolloutDerivatives::fill(
-            z0,
-            inputs.len(),
-            |buffers| {
-                vigp_core::learned::chain_rollout(
-                    z0,
-                    u_prev,
-                    inputs,
-                    buffers,
-                    |z, up, u| self.step_derivatives_at(z, up, u, ws),
-                    |_, _, _| StepError::InvalidOptions("rollout derivative buffers"),
-                )
-            },
-            |e, _| e,
-        )
-    }
-
-    /// The forced calls take `U` equal to the inputs the model was trained
-    /// with, or `U = 0` (no input: u = 0, as every [`Integrator`](crate::Integrator) takes
-    /// it). A `U` other than 0 and the mechanism's input count does not
-    /// compile (the `Inputs<U>` bound on every forced call), so the only
-    /// run-time refusal is the mechanism's input count on a model trained
-    /// without inputs.
-    fn check_input_count<const U: usize>(&self) -> Result<(), StepError> {
-        <Variational<M, N, C> as Space<N>>::check_inputs(self.inputs, U).map_err(step_error)
-    }
-
-    /// [`Learned::step_derivatives_forced`] for `U` equal to the model's
-    /// inputs, or `U = 0` for any model: the derivatives of the step under
-    /// u = 0 that [`Learned::step_mean_in`] takes (the GP input's input
-    /// tail zero-filled).
-    pub(crate) fn step_derivatives_at<const U: usize>(
-        &self,
-        z: &State<N>,
-        u_prev: &SVector<f64, U>,
-        u: &SVector<f64, U>,
-        ws: &mut Workspace,
-    ) -> Result<StepWithDerivatives<N, U>, StepError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
         use vigp_core::learned::VelocityDerivatives;
-        debug_assert!(U == self.inputs || U == 0);
+        self.check_input_count::<U>()?;
         <Variational<M, N, C> as Space<N>>::check(z)?;
         if !u.iter().chain(u_prev.iter()).all(|x| x.is_finite()) {
             return Err(StepError::NonFiniteInput { step: None });
@@ -642,6 +571,59 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
             v = vp;
         }
         Ok(dv.into_step(z, v, h))
+    }
+
+    /// The learned mean rollout under planned inputs (the states of
+    /// [`Learned::rollout_mean_forced_into`], bit for bit: step k from z_k
+    /// under `inputs[k]` after `inputs[k − 1]`, the first after `u_prev`)
+    /// with the exact derivatives of every state with respect to z_0 and to
+    /// every planned input: what a shooting MPC over the learned model
+    /// needs. The learned step reads the previous input too
+    /// ([`Learned::takes_previous_input`]), so u_j reaches z_{j+1} through
+    /// B_j and z_{j+2} through B_prev,(j+1):
+    ///
+    /// ∂z_{k+1}/∂u_j = A_k ∂z_k/∂u_j + [j = k] B_k + [j = k − 1] B_prev,k,
+    ///
+    /// with A_k, B_k and B_prev,k from [`Learned::step_derivatives_forced`]
+    /// at (z_k, u_{k−1}, u_k). `u_prev` is data, not a decision: its column
+    /// is not returned. Cost: K derivative steps plus O(K²) products of
+    /// N × N blocks. Errors are those of the steps, tagged with the step.
+    pub fn rollout_derivatives_forced<const U: usize>(
+        &self,
+        z0: &State<N>,
+        u_prev: &SVector<f64, U>,
+        inputs: &[SVector<f64, U>],
+        ws: &mut Workspace,
+    ) -> Result<crate::RolloutDerivatives<N, U>, StepError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
+        self.check_input_count::<U>()?;
+        crate::RolloutDerivatives::fill(
+            z0,
+            inputs.len(),
+            |buffers| {
+                vigp_core::learned::chain_rollout(
+                    z0,
+                    u_prev,
+                    inputs,
+                    buffers,
+                    |z, up, u| self.step_derivatives_forced(z, up, u, ws),
+                    |_, _, _| StepError::InvalidOptions("rollout derivative buffers"),
+                )
+            },
+            |e, _| e,
+        )
+    }
+
+    /// The forced calls take `U` equal to the inputs the model was trained
+    /// with, or `U = 0` (no input: u = 0, as every [`Integrator`](crate::Integrator) takes
+    /// it). A `U` other than 0 and the mechanism's input count does not
+    /// compile (the `Inputs<U>` bound on every forced call), so the only
+    /// run-time refusal is the mechanism's input count on a model trained
+    /// without inputs.
+    fn check_input_count<const U: usize>(&self) -> Result<(), StepError> {
+        <Variational<M, N, C> as Space<N>>::check_inputs(self.inputs, U).map_err(step_error)
     }
 
     /// [`Learned::rollout_with_info`] under planned inputs: step k goes from

@@ -158,7 +158,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         } else {
             *z
         };
-        let (_, d, _) = self.step_derivatives_at(&z, u_prev, u, ws)?;
+        let (_, d, _) = self.step_derivatives_forced(&z, u_prev, u, ws)?;
         let (mut dq, mut dv) = (d.a.v_q, d.a.v_v);
         if constrained {
             let (cq, cvq, cvv) = consistent_state_jacobian(self.model(), &z, dt)?;
