@@ -24,8 +24,8 @@
 //! Position noise enters W and b together (the rows hold discrete
 //! velocities and their differences, 1/Δt and 1/Δt² times the noise), so
 //! least squares is biased (errors in variables): E(WᵀW) ≠ W̄ᵀW̄. With
-//! [`Noise::InstrumentalVariables`] every transition k also gets
-//! instrument rows Z_k: the regressor at positions x̃_{k−1}, x̃_k, x̃_{k+1}
+//! [`Noise::InstrumentalVariables`](super::Noise::InstrumentalVariables)
+//! every transition k also gets instrument rows Z_k: the regressor at positions x̃_{k−1}, x̃_k, x̃_{k+1}
 //! from a local polynomial fitted to the samples around k *leaving out*
 //! k−1, k, k+1. The residual of row k depends on the noise of those three
 //! samples only, and Z_k on none of them, so E[Z_kᵀ ε_k] = 0 (to second
@@ -44,40 +44,6 @@
 use super::IdentifyError;
 use super::base::Base;
 use nalgebra::{DMatrix, DVector};
-
-/// How the position noise of the log is treated.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Noise {
-    /// Ordinary (weighted) least squares: right for noise-free logs,
-    /// biased under position noise.
-    LeastSquares,
-    /// Bias-compensated least squares for position noise of a known size
-    /// ([`super::errors_in_variables`]): each row weighted by its own
-    /// predicted noise, the noise's expected contribution to the normal
-    /// equations removed. Needs no neighbouring samples, so it serves logs
-    /// of isolated transitions, where instrumental variables cannot. The
-    /// robust losses do not combine with it.
-    ErrorsInVariables(super::errors_in_variables::SampleNoise),
-    /// Instrumental variables from leave-out local polynomial fits (module
-    /// docs): `half_window` samples on each side beyond the three left
-    /// out, polynomial `degree`. In a log long enough for the window it
-    /// uses the transitions with a full window only; a shorter log's
-    /// transitions are their own instruments (least squares).
-    InstrumentalVariables {
-        /// Samples used on each side of the left-out triple.
-        half_window: usize,
-        /// Degree of the local polynomial (below 2·half_window).
-        degree: usize,
-    },
-}
-
-impl Noise {
-    /// Instrumental variables with 8 samples each side and degree 4.
-    pub const IV: Noise = Noise::InstrumentalVariables {
-        half_window: 8,
-        degree: 4,
-    };
-}
 
 /// The loss on standardised row residuals.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -114,7 +80,8 @@ pub struct Stack {
     pub w: DMatrix<f64>,
     /// b.
     pub b: DVector<f64>,
-    /// Instrument rows (same shape as W), for [`Noise::InstrumentalVariables`].
+    /// Instrument rows (same shape as W), for
+    /// [`Noise::InstrumentalVariables`](super::Noise::InstrumentalVariables).
     pub z: Option<DMatrix<f64>>,
     /// Position of each row within its transition's block.
     pub slot: Vec<usize>,

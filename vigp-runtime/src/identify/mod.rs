@@ -63,6 +63,7 @@ pub mod covariance;
 pub mod errors_in_variables;
 pub mod estimate;
 pub mod excitation;
+pub mod noise;
 pub mod output_error;
 pub mod regressor;
 pub mod report;
@@ -70,9 +71,9 @@ pub mod report;
 pub mod robot;
 
 pub use base::Base;
-pub use errors_in_variables::SampleNoise;
-pub use estimate::{Loss, Noise};
+pub use estimate::Loss;
 pub use excitation::{Designed, Evaluation, Excitation, Fourier, Problem};
+pub use noise::{Noise, SampleNoise};
 pub use output_error::{OutputError, Refinement};
 pub use regressor::{
     BodySlots, DelRegressor, JointSlots, ParameterKind, Regressor, Structure, Transition,
