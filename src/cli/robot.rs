@@ -70,18 +70,6 @@ fn load(mechanism: &MechanismArgs, set: &[String]) -> Result<Robot, CliError> {
         .map_err(|e| CliError::Usage(format!("--urdf {}: {e}", path.display())))
 }
 
-/// The robot's state at sample `s` of `run` (time step `dt`): the
-/// positions there and the discrete velocity to sample s + 1.
-pub(super) fn state_at(run: &DynRun, s: usize, dt: f64) -> RobotState {
-    let q0 = run.positions[s].as_slice().to_vec();
-    let v0 = q0
-        .iter()
-        .zip(run.positions[s + 1].iter())
-        .map(|(a, b)| (b - a) / dt)
-        .collect();
-    RobotState::new(q0, v0)
-}
-
 /// A robot's log and its runs' common time step.
 fn read_log(robot: &Robot, path: &Path, read: &ReadArgs) -> Result<(DynDataset, f64), CliError> {
     let names: Vec<&str> = robot.joint_names().iter().map(String::as_str).collect();
@@ -327,7 +315,11 @@ fn score(a: &ScoreArgs, out: &mut dyn Write) -> Result<(), CliError> {
         .map(|&(r, s)| {
             let run = &data.runs[r];
             let truth = &run.positions[s + 2..=s + k + 1];
-            let z0 = state_at(run, s, dt);
+            let z0 = RobotState::from_positions(
+                run.positions[s].as_slice(),
+                run.positions[s + 1].as_slice(),
+                dt,
+            );
             // step j of the window runs under row s + j + 1's input after
             // row s + j's
             let input = |row: usize| {

@@ -142,6 +142,17 @@ impl RobotState {
     pub fn new(q: Vec<f64>, v: Vec<f64>) -> Self {
         Self { q, v }
     }
+
+    /// The state at positions `q0` whose positions Δt later are `q1`:
+    /// (q₀, (q₁ − q₀)/Δt), the velocity convention of
+    /// [`State::from_positions`](crate::State::from_positions). `q1` pairs
+    /// with `q0` entry by entry (the shorter decides the velocity's
+    /// length). Δt is not checked: with Δt = 0, NaN or ±∞ the velocities
+    /// are not finite, which every step refuses.
+    pub fn from_positions(q0: &[f64], q1: &[f64], dt: f64) -> Self {
+        let v = q1.iter().zip(q0).map(|(b, a)| (b - a) / dt).collect();
+        Self::new(q0.to_vec(), v)
+    }
 }
 
 /// The Jacobians of the engine's terms at one (q, v).

@@ -72,19 +72,17 @@ impl RobotTransition {
             let Some(dt) = run.dt else { continue };
             let x = &run.positions;
             for k in 0..x.len().saturating_sub(2) {
-                let diff = |a: usize| -> Vec<f64> {
-                    x[a + 1]
-                        .iter()
-                        .zip(x[a].iter())
-                        .map(|(b, a)| (b - a) / dt)
-                        .collect()
-                };
                 let input = |row: usize| run.inputs.get(row).cloned().unwrap_or_default();
                 out.push(RobotTransition {
-                    z: RobotState::new(x[k].as_slice().to_vec(), diff(k)),
+                    z: RobotState::from_positions(x[k].as_slice(), x[k + 1].as_slice(), dt),
                     u_prev: input(k),
                     u: input(k + 1),
-                    v_next: diff(k + 1),
+                    v_next: RobotState::from_positions(
+                        x[k + 1].as_slice(),
+                        x[k + 2].as_slice(),
+                        dt,
+                    )
+                    .v,
                 });
             }
         }

@@ -37,13 +37,8 @@ impl CalibrationWindow for RobotWindow {
     type Sample = Vec<f64>;
 
     fn cut(p: &[Vec<f64>], s: usize, horizon: usize, dt: f64) -> Self {
-        let v = p[s + 1]
-            .iter()
-            .zip(&p[s])
-            .map(|(b, a)| (b - a) / dt)
-            .collect();
         RobotWindow {
-            start: RobotState::new(p[s].clone(), v),
+            start: RobotState::from_positions(&p[s], &p[s + 1], dt),
             positions: p[s + 1..=s + horizon].to_vec(),
         }
     }
