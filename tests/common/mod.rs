@@ -297,6 +297,15 @@ pub fn furuta_start(dt: f64) -> vigp::spatial::SpatialState<2> {
     sys.minimal().to_maximal(&zmin, dt)
 }
 
+/// The numbers of a JSON array (of a test fixture).
+pub fn json_floats(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .expect("array")
+        .iter()
+        .map(|x| x.as_f64().expect("number"))
+        .collect()
+}
+
 /// Deterministic pseudo-random numbers in [lo, hi) (xorshift).
 pub struct XorShift(pub u64);
 
