@@ -11,7 +11,7 @@
 use crate::common;
 use crate::slider_crank;
 
-use common::{Rng, a_stencil_errors, ab_errors, nudged, state_bits, stencil};
+use common::{Rng, a_stencil_errors, ab_errors, jacobian_amax, nudged, state_bits, stencil};
 use nalgebra::{SMatrix, SVector};
 use num_dual::DualVec;
 use slider_crank::SliderCrank;
@@ -618,12 +618,7 @@ where
         let mut worst = 0.0f64;
         // ∂z_K/∂v_0 column j and ∂z_K/∂q_0 column j
         let jk = &d.initial[k_steps];
-        let scale = jk
-            .q_q
-            .amax()
-            .max(jk.q_v.amax())
-            .max(jk.v_q.amax())
-            .max(jk.v_v.amax());
+        let scale = jacobian_amax(jk);
         for j in 0..N {
             for pos in [true, false] {
                 let p = last(&nudged(z0, j, pos, eps), &inputs);

@@ -305,12 +305,7 @@ where
             )
         }
     };
-    let scale_a = a
-        .q_q
-        .amax()
-        .max(a.q_v.amax())
-        .max(a.v_q.amax())
-        .max(a.v_v.amax());
+    let scale_a = crate::common::jacobian_amax(&a);
     let mut worst_a = 0.0f64;
     for k in 0..2 * N {
         let mut e = SVector::<f64, N>::zeros();
