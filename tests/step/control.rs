@@ -60,17 +60,11 @@ vigp::mechanism! {
     }
 }
 
-vigp::mechanism! {
-    /// A cartpole pushed along its rail, with a spring on the hinge.
-    pub DriveCartpole {
-        links {
-            cart: { mass: 1.0, length: 0.5 },
-            pole: { mass: 0.3, length: 0.8 },
-        }
-        joints {
-            rail: prismatic(world, cart.center) { axis: [1.0, 0.0], damping: 0.1, actuated },
-            hinge: revolute(cart.center, pole.start) { damping: 0.05, stiffness: 0.7, rest: 0.2 },
-        }
+drive_cartpole! {
+    /// tests/common/drive_cartpole.rs with a spring on the hinge.
+    DriveCartpole {
+        rail: [damping: 0.1],
+        hinge: [damping: 0.05, stiffness: 0.7, rest: 0.2],
     }
 }
 
