@@ -196,6 +196,15 @@ pub fn a_stencil_errors<const N: usize>(
     (err, scale)
 }
 
+/// The largest entry in magnitude of the four blocks of a state Jacobian.
+pub fn jacobian_amax<const N: usize>(a: &vigp::embedded::StateJacobian<N>) -> f64 {
+    a.q_q
+        .amax()
+        .max(a.q_v.amax())
+        .max(a.v_q.amax())
+        .max(a.v_v.amax())
+}
+
 /// The relative errors (max |A − A_fd| / max |A_fd|, the same for B) of the
 /// exact one-step derivatives `d` of the forced step `step` at (`z`, `u`)
 /// against five-point central differences ([`stencil`]) with steps `fd`
@@ -295,6 +304,15 @@ pub fn furuta_start(dt: f64) -> vigp::spatial::SpatialState<2> {
     )
     .unwrap();
     sys.minimal().to_maximal(&zmin, dt)
+}
+
+/// The numbers of a JSON array (of a test fixture).
+pub fn json_floats(v: &serde_json::Value) -> Vec<f64> {
+    v.as_array()
+        .expect("array")
+        .iter()
+        .map(|x| x.as_f64().expect("number"))
+        .collect()
 }
 
 /// Deterministic pseudo-random numbers in [lo, hi) (xorshift).

@@ -64,6 +64,11 @@ pub fn expand_no_panic(src: &str) -> Result<(), String> {
     })
 }
 
+/// Expands `src`, failing the proptest case with the source on a panic.
+pub fn expand_case(src: &str) -> Result<(), TestCaseError> {
+    expand_no_panic(src).map_err(|p| TestCaseError::fail(format!("panic on {src:?}: {p}")))
+}
+
 /// Expands every case, failing with the case on a panic.
 pub fn assert_cases_do_not_panic(cases: &[&str]) {
     for c in cases {

@@ -18,6 +18,7 @@
 //!   total mass of the file's links) and against the fixed-base arm.
 
 use crate::common::XorShift as Rng;
+use crate::common::json_floats;
 use vigp::SVector;
 use vigp::robot::{Robot, RobotState};
 use vigp::spatial::minimal;
@@ -229,21 +230,14 @@ fn urdf_panda_equals_the_run_time_robot_and_pinocchio() {
         .map(|x| x.as_str().unwrap())
         .collect();
     assert_eq!(joints, robot.joint_names());
-    let floats = |v: &serde_json::Value| -> Vec<f64> {
-        v.as_array()
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().unwrap())
-            .collect()
-    };
     for case in pin["panda"]["cases"].as_array().unwrap() {
-        let q: [f64; 7] = floats(&case["q"]).try_into().unwrap();
+        let q: [f64; 7] = json_floats(&case["q"]).try_into().unwrap();
         let t = minimal::terms::<Panda, 7, 7, 7>(&sys, &SVector::from(q));
         let m_pin: Vec<Vec<f64>> = case["mass"]
             .as_array()
             .unwrap()
             .iter()
-            .map(floats)
+            .map(json_floats)
             .collect();
         let scale = largest(&t.mass);
         // Pinocchio's CRBA against our jets: two algorithms, 1e-10 relative

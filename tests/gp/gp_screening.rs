@@ -10,7 +10,7 @@ use crate::common;
 use common::Rng;
 use vigp::gp::{
     Curvature, Gp, GpError, Hyperparameters, Method, SCREEN_FROM, Screening, SparseOptions,
-    TrainOptions, log_marginal_likelihood,
+    TrainOptions, TrainReport, log_marginal_likelihood,
 };
 
 /// Deterministic pseudo-random numbers in [0, 1) (Weyl sequence).
@@ -212,18 +212,47 @@ fn two_outputs(n: usize) -> (Vec<f64>, Vec<f64>) {
     (x, t)
 }
 
+/// The setting of the nested-subset tests: 600 samples of
+/// [`two_outputs`], and the first half of them trained with every start.
+struct HalfData {
+    /// The inputs of all samples.
+    x: Vec<f64>,
+    /// The targets of all samples.
+    t: Vec<f64>,
+    /// The number of samples in the first half.
+    half: usize,
+    /// The model trained on the first half.
+    gp: Gp,
+    /// Its training report.
+    report: TrainReport,
+    /// Its distinct optima, per output, in original units.
+    optima: Vec<Vec<Hyperparameters>>,
+}
+
+/// [`HalfData`]: the samples and the first half's training.
+fn half_data_training() -> HalfData {
+    let n = 600;
+    let (x, t) = two_outputs(n);
+    let half = n / 2;
+    let (gp, report) =
+        Gp::train(&x[..2 * half], 2, &t[..2 * half], 2, &opts(Screening::Off)).unwrap();
+    let optima = report.outputs.iter().map(|o| o.optima.clone()).collect();
+    HalfData {
+        x,
+        t,
+        half,
+        gp,
+        report,
+        optima,
+    }
+}
+
 #[test]
 fn candidates_from_a_nested_subset_reach_the_unscreened_optimum() {
     // The first N/2 samples trained with every start; their distinct
     // optima (original units) refined on all N samples. Checked against
     // every start on all N samples (scikit-learn's procedure).
-    let n = 600;
-    let (x, t) = two_outputs(n);
-    let half = n / 2;
-    let (_, rep_h) =
-        Gp::train(&x[..2 * half], 2, &t[..2 * half], 2, &opts(Screening::Off)).unwrap();
-    let optima: Vec<Vec<Hyperparameters>> =
-        rep_h.outputs.iter().map(|o| o.optima.clone()).collect();
+    let HalfData { x, t, optima, .. } = half_data_training();
     assert!(optima.iter().all(|o| !o.is_empty()));
     let with = TrainOptions {
         candidates: Some(optima.clone()),
@@ -280,13 +309,14 @@ fn candidate_curvature_seeds_the_refinements() {
     // the unscreened LML) in fewer evaluations on all samples than with
     // empty memories. The pairs themselves are checked against the
     // likelihood's gradient recomputed at the half data's model.
-    let n = 600;
-    let (x, t) = two_outputs(n);
-    let half = n / 2;
-    let (gp_h, rep_h) =
-        Gp::train(&x[..2 * half], 2, &t[..2 * half], 2, &opts(Screening::Off)).unwrap();
-    let optima: Vec<Vec<Hyperparameters>> =
-        rep_h.outputs.iter().map(|o| o.optima.clone()).collect();
+    let HalfData {
+        x,
+        t,
+        half,
+        gp: gp_h,
+        report: rep_h,
+        optima,
+    } = half_data_training();
     let curvature: Vec<Vec<Curvature>> = rep_h
         .outputs
         .iter()

@@ -2,19 +2,12 @@
 //! (fixtures from scripts/gp_sklearn_fixtures.py, kernel
 //! ConstantKernel·RBF(ARD) + WhiteKernel).
 
+use crate::common::json_floats;
 use serde_json::Value;
 use vigp::gp::{Bounds, Gp, Hyperparameters, PriorMean, TrainOptions, log_marginal_likelihood};
 
 fn fixture() -> Value {
     serde_json::from_str(include_str!("../fixtures/gp_sklearn.json")).expect("valid fixture JSON")
-}
-
-fn vec_of(v: &Value) -> Vec<f64> {
-    v.as_array()
-        .expect("array")
-        .iter()
-        .map(|x| x.as_f64().expect("number"))
-        .collect()
 }
 
 fn usize_of(v: &Value) -> usize {
@@ -37,12 +30,12 @@ fn fixed_hyperparameters_match_sklearn() {
     for case in fx["fixed"].as_array().unwrap() {
         let name = case["name"].as_str().unwrap();
         let d = usize_of(&case["d"]);
-        let x = vec_of(&case["x"]);
-        let y = vec_of(&case["y"]);
-        let xt = vec_of(&case["x_test"]);
+        let x = json_floats(&case["x"]);
+        let y = json_floats(&case["y"]);
+        let xt = json_floats(&case["x_test"]);
         let normalize_y = case["normalize_y"].as_bool().unwrap();
         let hp = Hyperparameters {
-            length_scales: vec_of(&case["length_scales"]),
+            length_scales: json_floats(&case["length_scales"]),
             signal_variance: case["signal_variance"].as_f64().unwrap(),
             noise_variance: case["noise_variance"].as_f64().unwrap(),
         };
@@ -75,7 +68,7 @@ fn fixed_hyperparameters_match_sklearn() {
         let resid: Vec<f64> = out.residual_normalised().to_vec();
         let (v, g) = log_marginal_likelihood(&x, d, &resid, &hp.to_log(), false).unwrap();
         assert!(rel(v, lml_ref) < FIXED_TOL, "{name}: raw lml");
-        let g_ref = vec_of(&case["lml_gradient"]);
+        let g_ref = json_floats(&case["lml_gradient"]);
         // Components near zero would make a relative test meaningless: scale by
         // the gradient's norm.
         let gnorm = g_ref.iter().map(|v| v * v).sum::<f64>().sqrt();
@@ -86,8 +79,8 @@ fn fixed_hyperparameters_match_sklearn() {
         }
 
         let pred = gp.predict(&xt).unwrap();
-        let mean_ref = vec_of(&case["mean"]);
-        let var_ref = vec_of(&case["var_with_noise"]);
+        let mean_ref = json_floats(&case["mean"]);
+        let var_ref = json_floats(&case["var_with_noise"]);
         let noise = out.hyperparameters_original().noise_variance;
         for i in 0..mean_ref.len() {
             // The mean is O(1) (targets have offset 3); relative to max(|m|, 1).
@@ -131,8 +124,8 @@ fn trained_optimum_at_least_sklearn() {
     for case in fx["trained"].as_array().unwrap() {
         let name = case["name"].as_str().unwrap();
         let d = usize_of(&case["d"]);
-        let x = vec_of(&case["x"]);
-        let y = vec_of(&case["y"]);
+        let x = json_floats(&case["x"]);
+        let y = json_floats(&case["y"]);
         let (lo, hi) = (
             case["bound_lower"].as_f64().unwrap(),
             case["bound_upper"].as_f64().unwrap(),

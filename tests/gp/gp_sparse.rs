@@ -15,7 +15,7 @@
 //! * a sparse run gives the same bits on one and on two threads.
 
 use crate::common;
-use common::Rng;
+use common::{Rng, json_floats};
 use vigp::gp::{
     ExportOptions, Gp, GpError, InducingInit, Method, SavedGp, SparseOptions, TrainOptions,
     TrainReport, VarianceMode, log_marginal_likelihood, sparse_bound,
@@ -28,14 +28,6 @@ fn fixture() -> serde_json::Value {
     ))
     .expect("fixture (scripts/gp_sparse_fixtures.py)");
     serde_json::from_str(&text).unwrap()
-}
-
-fn vec_of(v: &serde_json::Value) -> Vec<f64> {
-    v.as_array()
-        .unwrap()
-        .iter()
-        .map(|x| x.as_f64().unwrap())
-        .collect()
 }
 
 fn raw_sparse(z: Vec<f64>) -> TrainOptions {
@@ -61,8 +53,12 @@ fn bound_gradient_and_predictions_match_numpy() {
         let name = case["name"].as_str().unwrap();
         let d = case["d"].as_u64().unwrap() as usize;
         let m = case["m"].as_u64().unwrap() as usize;
-        let (x, y, z) = (vec_of(&case["x"]), vec_of(&case["y"]), vec_of(&case["z"]));
-        let theta = vec_of(&case["log_params"]);
+        let (x, y, z) = (
+            json_floats(&case["x"]),
+            json_floats(&case["y"]),
+            json_floats(&case["z"]),
+        );
+        let theta = json_floats(&case["log_params"]);
         let (f, g) = sparse_bound(&x, d, &y, &z, &theta, false).unwrap();
         let f_ref = case["bound"].as_f64().unwrap();
         // numpy forms Q = K_fu K_uu⁻¹ K_uf and solves with the dense N × N
@@ -73,7 +69,7 @@ fn bound_gradient_and_predictions_match_numpy() {
         assert!(rel < 1e-8, "{name}: bound {f} vs {f_ref}");
         // numpy's gradient is a central difference with h = 1e-5: truncation
         // O(h²·F''') plus rounding ε·|F|/h ≈ 1e-10·|F|.
-        let g_ref = vec_of(&case["bound_gradient_fd"]);
+        let g_ref = json_floats(&case["bound_gradient_fd"]);
         for (k, (a, b)) in g.iter().zip(&g_ref).enumerate() {
             let tol = 1e-6 * (1.0 + b.abs()) + 1e-9 * f_ref.abs();
             assert!((a - b).abs() < tol, "{name}: gradient {k}: {a} vs {b}");
@@ -94,9 +90,9 @@ fn bound_gradient_and_predictions_match_numpy() {
         assert!(model.is_sparse());
         let lml = model.output(0).log_marginal_likelihood();
         assert!((lml - f).abs() <= 1e-12 * f.abs(), "{lml} vs {f}");
-        let xt = vec_of(&case["x_test"]);
+        let xt = json_floats(&case["x_test"]);
         let pred = model.predict(&xt).unwrap();
-        let (mref, vref) = (vec_of(&case["mean"]), vec_of(&case["variance"]));
+        let (mref, vref) = (json_floats(&case["mean"]), json_floats(&case["variance"]));
         let sf2 = theta[d].exp();
         let full = m == case["n"].as_u64().unwrap() as usize;
         // The variance σ_f² − kᵀK_uu⁻¹k + kᵀ(K_uu + K_ufK_fu/σ²)⁻¹k is a

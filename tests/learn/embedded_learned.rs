@@ -418,9 +418,7 @@ fn exported_furuta_source_matches_the_model_file() {
     let _: [_; 30] = rollout_without_allocating(&stepper, &z0, "the embedded rollout allocated");
 }
 
-#[path = "../common/drive_cartpole.rs"]
-mod drive_cartpole;
-use drive_cartpole::DriveCartpole;
+use crate::drive_cartpole::DriveCartpole;
 
 use crate::drive_fourbar::DriveFourbar;
 

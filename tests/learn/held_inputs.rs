@@ -57,18 +57,12 @@ vigp::mechanism! {
     }
 }
 
-vigp::mechanism! {
+drive_cartpole! {
     /// A cart-pole pushed along its rail.
-    pub HeldCartpole {
+    HeldCartpole {
         gravity: [0.0, -9.81],
-        links {
-            cart: { mass: 1.0, length: 0.5 },
-            pole: { mass: 0.3, length: 0.8 },
-        }
-        joints {
-            rail: prismatic(world, cart.center) { axis: [1.0, 0.0], damping: 0.3, actuated },
-            hinge: revolute(cart.center, pole.start) { damping: 0.05 },
-        }
+        rail: [damping: 0.3],
+        hinge: [damping: 0.05],
     }
 }
 

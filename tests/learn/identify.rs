@@ -123,6 +123,27 @@ fn not_identifiable(id: &Identification) -> Vec<String> {
 
 // ---------------------------------------------------------------- regressor
 
+/// Checks [`affine_defect`] of the regressor of `m` (rule `alpha`) on
+/// `log` at three random parameter vectors (perturbations of `m` drawn
+/// from `rng`): below 1e-11, printed with `name`.
+fn assert_affine_at_random_parameters<M, const N: usize, const C: usize>(
+    name: &str,
+    m: M,
+    alpha: f64,
+    log: &Log,
+    rng: &mut Rng,
+) where
+    M: Mechanism<N, C> + Parameters + Copy,
+{
+    let r = DelRegressor::new(m, DT, alpha).unwrap();
+    for _ in 0..3 {
+        let pi = standard(&perturbed(m, rng));
+        let defect = affine_defect(&r, log, &pi);
+        println!("affine defect {name}: {defect:.2e}");
+        assert!(defect < 1e-11, "{name}: {defect:e}");
+    }
+}
+
 /// Y·π − b equals the residual at random parameters far from the base
 /// point (masses ×U[0.5, 2], centres of mass moved, inertias scaled,
 /// damping, springs), for every kind of mechanism: planar, with inputs
@@ -133,47 +154,27 @@ fn not_identifiable(id: &Identification) -> Vec<String> {
 #[test]
 fn regressor_matches_residual_at_random_parameters() {
     let mut rng = Rng(11);
-    let check = |name: &str, defect: f64| {
-        println!("affine defect {name}: {defect:.2e}");
-        assert!(defect < 1e-11, "{name}: {defect:e}");
-    };
     for alpha in [0.0, 0.5] {
         let m = DoublePendulum::default().minimal();
         let log = vi_log::<_, 2, 0, 0>(m, alpha, SVector::from([1.2, -0.5]), 40, |_| {
             SVector::zeros()
         });
-        let r = DelRegressor::new(m, DT, alpha).unwrap();
-        for _ in 0..3 {
-            let pi = standard(&perturbed(m, &mut rng));
-            check("double pendulum", affine_defect(&r, &log, &pi));
-        }
+        assert_affine_at_random_parameters("double pendulum", m, alpha, &log, &mut rng);
         let m = DrivenSprung::default().minimal();
         let log = vi_log::<_, 2, 0, 2>(m, alpha, SVector::from([0.5, 0.2]), 40, |k| {
             SVector::from([(0.3 * k as f64).sin(), 0.5 * (0.17 * k as f64).cos()])
         });
-        let r = DelRegressor::new(m, DT, alpha).unwrap();
-        for _ in 0..3 {
-            let pi = standard(&perturbed(m, &mut rng));
-            check("driven, sprung", affine_defect(&r, &log, &pi));
-        }
+        assert_affine_at_random_parameters("driven, sprung", m, alpha, &log, &mut rng);
         let m = Fourbar::default().minimal();
         let log = vi_log::<_, 4, 2, 0>(m, alpha, SVector::from([0.6, -0.4, -0.3, 0.5]), 40, |_| {
             SVector::zeros()
         });
-        let r = DelRegressor::new(m, DT, alpha).unwrap();
-        for _ in 0..3 {
-            let pi = standard(&perturbed(m, &mut rng));
-            check("fourbar", affine_defect(&r, &log, &pi));
-        }
+        assert_affine_at_random_parameters("fourbar", m, alpha, &log, &mut rng);
         let m = Arm::default().minimal();
         let log = vi_log::<_, 3, 0, 2>(m, alpha, SVector::from([0.3, 0.7, -0.4]), 40, |k| {
             SVector::from([drive(k), drive(k + 50)])
         });
-        let r = DelRegressor::new(m, DT, alpha).unwrap();
-        for _ in 0..3 {
-            let pi = standard(&perturbed(m, &mut rng));
-            check("spatial arm", affine_defect(&r, &log, &pi));
-        }
+        assert_affine_at_random_parameters("spatial arm", m, alpha, &log, &mut rng);
     }
 }
 

@@ -17,6 +17,11 @@ mod rhombus;
 /// output-error files.
 #[path = "../common/drive_fourbar.rs"]
 mod drive_fourbar;
+/// The actuated cart-pole of the embedded-stepper file, and the macro
+/// that declares it, which held_inputs.rs also uses.
+#[macro_use]
+#[path = "../common/drive_cartpole.rs"]
+mod drive_cartpole;
 
 mod embedded_learned;
 mod errors_in_variables;

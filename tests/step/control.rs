@@ -11,7 +11,7 @@
 use crate::common;
 use crate::slider_crank;
 
-use common::{Rng, a_stencil_errors, ab_errors, nudged, state_bits, stencil};
+use common::{Rng, a_stencil_errors, ab_errors, jacobian_amax, nudged, state_bits, stencil};
 use nalgebra::{SMatrix, SVector};
 use num_dual::DualVec;
 use slider_crank::SliderCrank;
@@ -60,17 +60,11 @@ vigp::mechanism! {
     }
 }
 
-vigp::mechanism! {
-    /// A cartpole pushed along its rail, with a spring on the hinge.
-    pub DriveCartpole {
-        links {
-            cart: { mass: 1.0, length: 0.5 },
-            pole: { mass: 0.3, length: 0.8 },
-        }
-        joints {
-            rail: prismatic(world, cart.center) { axis: [1.0, 0.0], damping: 0.1, actuated },
-            hinge: revolute(cart.center, pole.start) { damping: 0.05, stiffness: 0.7, rest: 0.2 },
-        }
+drive_cartpole! {
+    /// tests/common/drive_cartpole.rs with a spring on the hinge.
+    DriveCartpole {
+        rail: [damping: 0.1],
+        hinge: [damping: 0.05, stiffness: 0.7, rest: 0.2],
     }
 }
 
@@ -618,12 +612,7 @@ where
         let mut worst = 0.0f64;
         // ∂z_K/∂v_0 column j and ∂z_K/∂q_0 column j
         let jk = &d.initial[k_steps];
-        let scale = jk
-            .q_q
-            .amax()
-            .max(jk.q_v.amax())
-            .max(jk.v_q.amax())
-            .max(jk.v_v.amax());
+        let scale = jacobian_amax(jk);
         for j in 0..N {
             for pos in [true, false] {
                 let p = last(&nudged(z0, j, pos, eps), &inputs);

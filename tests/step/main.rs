@@ -16,6 +16,11 @@ mod rhombus;
 #[macro_use]
 #[path = "../common/spatial_four_bar.rs"]
 mod spatial_four_bar;
+/// The macro of the actuated cart-pole, for control.rs's sprung one.
+#[macro_use]
+#[allow(dead_code)] // the cart-pole declared beside the macro is not used here
+#[path = "../common/drive_cartpole.rs"]
+mod drive_cartpole;
 
 mod control;
 mod embedded;

@@ -10,20 +10,42 @@ use vigp::embedded::{Tangent, TangentError};
 use vigp::projection::consistent_state;
 use vigp::{Mechanism, State, Variational};
 
-vigp::mechanism! {
+/// Declares the 3-D arm `$name` with the doc comment `$doc`: an upper
+/// link on a ball joint at the origin (`$shoulder`: the joint's keys, in
+/// braces, or nothing) and a lower link on an elbow about (0, 0.6, 0.8)
+/// taking the keys `$elbow` after its axis.
+macro_rules! ball_arm {
+    (
+        $(#[doc = $doc:tt])*
+        $name:ident {
+            shoulder: [$($shoulder:tt)*],
+            elbow: [$($elbow:tt)*],
+        }
+    ) => {
+        vigp::mechanism! {
+            $(#[doc = $doc])*
+            pub $name {
+                gravity: [0.0, 0.0, -9.81],
+                links {
+                    upper: { mass: 1.2, length: 0.8, inertia: [0.001, 0.065, 0.065] },
+                    lower: { mass: 0.7, length: 0.6, inertia: [0.0007, 0.021, 0.0215] },
+                }
+                joints {
+                    shoulder: spherical(world, upper.start) $($shoulder)*,
+                    elbow: revolute(upper.end, lower.start) { axis: [0.0, 0.6, 0.8], $($elbow)* },
+                }
+            }
+        }
+    };
+}
+
+ball_arm! {
     /// A 3-D arm: a ball-jointed shoulder and an actuated, sprung, damped
     /// elbow (5 coordinates: a quaternion and an angle, one unit-norm
     /// constraint; 4 DoF).
-    pub BallArm {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            upper: { mass: 1.2, length: 0.8, inertia: [0.001, 0.065, 0.065] },
-            lower: { mass: 0.7, length: 0.6, inertia: [0.0007, 0.021, 0.0215] },
-        }
-        joints {
-            shoulder: spherical(world, upper.start) { damping: 0.1 },
-            elbow: revolute(upper.end, lower.start) { axis: [0.0, 0.6, 0.8], damping: 0.2, stiffness: 1.5, rest: 0.2, actuated },
-        }
+    BallArm {
+        shoulder: [{ damping: 0.1 }],
+        elbow: [damping: 0.2, stiffness: 1.5, rest: 0.2, actuated],
     }
 }
 
@@ -262,20 +284,13 @@ spatial_four_bar! {
     }
 }
 
-vigp::mechanism! {
+ball_arm! {
     /// A ball-jointed upper arm with an actuated, undamped elbow whose
     /// axis is neither parallel nor perpendicular to anything (a chain:
     /// 8 constraint rows on 2 links).
-    pub DrivenBallArm {
-        gravity: [0.0, 0.0, -9.81],
-        links {
-            upper: { mass: 1.2, length: 0.8, inertia: [0.001, 0.065, 0.065] },
-            lower: { mass: 0.7, length: 0.6, inertia: [0.0007, 0.021, 0.0215] },
-        }
-        joints {
-            shoulder: spherical(world, upper.start),
-            elbow: revolute(upper.end, lower.start) { axis: [0.0, 0.6, 0.8], actuated },
-        }
+    DrivenBallArm {
+        shoulder: [],
+        elbow: [actuated],
     }
 }
 
@@ -305,12 +320,7 @@ where
             )
         }
     };
-    let scale_a = a
-        .q_q
-        .amax()
-        .max(a.q_v.amax())
-        .max(a.v_q.amax())
-        .max(a.v_v.amax());
+    let scale_a = crate::common::jacobian_amax(&a);
     let mut worst_a = 0.0f64;
     for k in 0..2 * N {
         let mut e = SVector::<f64, N>::zeros();

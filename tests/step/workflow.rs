@@ -24,27 +24,30 @@ fn summarize_uses_each_integrators_own_energy() {
             v: vigp::dynamics::discrete_velocity(&m, &q, &SVector::zeros(), dt).unwrap(),
         }
     };
-    let err = |vi: Variational<_, 2, 0>, dt: f64| {
-        let steps = (2.0 / dt).round() as usize;
-        summarize(&vi, &m, &z0(dt), steps).unwrap().max_energy_error
+    // max |ΔE| over 2 s at Δt = 0.004 and 0.002 (printed), and their ratio
+    let halving_ratio = |name: &str, midpoint: bool| {
+        let err = |dt: f64| {
+            let vi = if midpoint {
+                Variational::midpoint(m, dt)
+            } else {
+                Variational::new(m, dt)
+            }
+            .unwrap();
+            let steps = (2.0 / dt).round() as usize;
+            summarize(&vi, &m, &z0(dt), steps).unwrap().max_energy_error
+        };
+        let (a, b) = (err(0.004), err(0.002));
+        let ratio = a / b;
+        eprintln!("{name}: max |ΔE| {a:.3e} → {b:.3e}, ratio {ratio:.2}");
+        ratio
     };
-    let (a, b) = (
-        err(Variational::midpoint(m, 0.004).unwrap(), 0.004),
-        err(Variational::midpoint(m, 0.002).unwrap(), 0.002),
-    );
-    let ratio = a / b;
-    eprintln!("midpoint VI: max |ΔE| {a:.3e} → {b:.3e}, ratio {ratio:.2}");
+    let ratio = halving_ratio("midpoint VI", true);
     assert!((3.5..=4.5).contains(&ratio), "{ratio}");
     // the model's energy at the midpoint VI's discrete velocity is off by O(Δt)
     let vi = Variational::midpoint(m, 0.004).unwrap();
     let z = State::new([1.0, 0.5], [1.0, -1.0]);
     assert!((vi.energy(&z) - m.energy(&z)).abs() > 1e-3);
-    let (a, b) = (
-        err(Variational::new(m, 0.004).unwrap(), 0.004),
-        err(Variational::new(m, 0.002).unwrap(), 0.002),
-    );
-    let ratio = a / b;
-    eprintln!("paper VI: max |ΔE| {a:.3e} → {b:.3e}, ratio {ratio:.2}");
+    let ratio = halving_ratio("paper VI", false);
     assert!((1.6..=2.4).contains(&ratio), "{ratio}");
 }
 
