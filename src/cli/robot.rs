@@ -18,7 +18,7 @@ use super::fit::{choose, report_data, report_saved, resolve_prior, train_options
 use super::identify::identify_robot;
 use super::simulate::{INPUT_ROWS, check_start, one_plan};
 use super::{CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read, w};
-use crate::data::{DynDataset, DynRun};
+use crate::data::DynDataset;
 use crate::learned::Encoding;
 use crate::learned::robot::{LearnedRobot, RobotTransition, coordinate_kinds};
 use crate::robot::{Robot, RobotState};
