@@ -973,77 +973,69 @@ fn poly_tokens(m: &Model, mech: &Mechanics, p: &Poly) -> TokenStream {
 
 /// Checks of every run-time parameter, naming it in the error.
 fn validation(m: &Model) -> Vec<TokenStream> {
-    let sign = |s: &str| {
-        let s = format_ident!("{}", s);
-        quote!(::vigp::embedded::dynamics::ParameterSign::#s)
-    };
     let mut out = Vec::new();
-    let mut check = |value: TokenStream, s: &str, msg: String| {
-        let sg = sign(s);
-        out.push(quote!(::vigp::embedded::dynamics::check_parameter(#value, #sg, #msg)?;));
+    // `what` must be finite, and of the sign `s` ("Any", "NonNegative" or
+    // "Positive"), which the message states
+    let mut check = |value: TokenStream, s: &str, what: String| {
+        let bound = match s {
+            "NonNegative" => " and >= 0",
+            "Positive" => " and > 0",
+            _ => "",
+        };
+        let msg = format!("{what} must be finite{bound}");
+        let s = format_ident!("{}", s);
+        out.push(quote!(::vigp::embedded::dynamics::check_parameter(
+            #value,
+            ::vigp::embedded::dynamics::ParameterSign::#s,
+            #msg
+        )?;));
     };
-    check(
-        quote!(sys.gravity[0]),
-        "Any",
-        "gravity[0] must be finite".into(),
-    );
-    check(
-        quote!(sys.gravity[1]),
-        "Any",
-        "gravity[1] must be finite".into(),
-    );
+    for i in 0..2 {
+        let ii = index(i);
+        check(quote!(sys.gravity[#ii]), "Any", format!("gravity[{i}]"));
+    }
     for l in &m.links {
         let n = &l.name;
         let name = syn::ext::IdentExt::unraw(n).to_string();
-        check(
-            quote!(sys.links.#n.mass),
-            "NonNegative",
-            format!("link `{name}`: mass must be finite and >= 0"),
-        );
-        check(
-            quote!(sys.links.#n.length),
-            "Positive",
-            format!("link `{name}`: length must be finite and > 0"),
-        );
-        check(
-            quote!(sys.links.#n.inertia),
-            "NonNegative",
-            format!("link `{name}`: inertia must be finite and >= 0"),
-        );
+        for (field, s) in [
+            ("mass", "NonNegative"),
+            ("length", "Positive"),
+            ("inertia", "NonNegative"),
+        ] {
+            let f = format_ident!("{}", field);
+            check(
+                quote!(sys.links.#n.#f),
+                s,
+                format!("link `{name}`: {field}"),
+            );
+        }
         for i in 0..2 {
             let ii = index(i);
             check(
                 quote!(sys.links.#n.com[#ii]),
                 "Any",
-                format!("link `{name}`: com[{i}] must be finite"),
+                format!("link `{name}`: com[{i}]"),
             );
         }
     }
-    if m.dissipative() {
-        for j in &m.joints {
-            let n = &j.name;
-            let name = syn::ext::IdentExt::unraw(n).to_string();
-            check(
-                quote!(sys.joints.#n.damping),
-                "NonNegative",
-                format!("joint `{name}`: damping must be finite and >= 0"),
-            );
+    // all joints' dampings, then each joint's spring
+    let damping: &[(&str, &str)] = &[("damping", "NonNegative")];
+    let spring: &[(&str, &str)] = &[("stiffness", "NonNegative"), ("rest", "Any")];
+    for (fields, present) in [(damping, m.dissipative()), (spring, m.elastic())] {
+        if !present {
+            continue;
         }
-    }
-    if m.elastic() {
         for j in &m.joints {
             let n = &j.name;
             let name = syn::ext::IdentExt::unraw(n).to_string();
-            check(
-                quote!(sys.joints.#n.stiffness),
-                "NonNegative",
-                format!("joint `{name}`: stiffness must be finite and >= 0"),
-            );
-            check(
-                quote!(sys.joints.#n.rest),
-                "Any",
-                format!("joint `{name}`: rest must be finite"),
-            );
+            for &(field, s) in fields {
+                let f = format_ident!("{}", field);
+                check(
+                    quote!(sys.joints.#n.#f),
+                    s,
+                    format!("joint `{name}`: {field}"),
+                );
+            }
         }
     }
     out
