@@ -34,39 +34,29 @@ fn index(i: usize) -> Literal {
 
 /// Tokens reading a parameter from `sys` (the parameter struct).
 fn param_tokens(m: &Model, p: &Param) -> TokenStream {
+    let link = |l: usize, field: &str| {
+        let (n, f) = (&m.links[l].name, format_ident!("{}", field));
+        quote!(sys.links.#n.#f)
+    };
+    let joint = |j: usize, field: &str| {
+        let (n, f) = (&m.joints[j].name, format_ident!("{}", field));
+        quote!(sys.joints.#n.#f)
+    };
     match *p {
         Param::Gravity(i) => {
             let i = index(i);
             quote!(sys.gravity[#i])
         }
-        Param::Mass(l) => {
-            let n = &m.links[l].name;
-            quote!(sys.links.#n.mass)
-        }
-        Param::Length(l) => {
-            let n = &m.links[l].name;
-            quote!(sys.links.#n.length)
-        }
-        Param::Inertia(l) => {
-            let n = &m.links[l].name;
-            quote!(sys.links.#n.inertia)
-        }
+        Param::Mass(l) => link(l, "mass"),
+        Param::Length(l) => link(l, "length"),
+        Param::Inertia(l) => link(l, "inertia"),
         Param::Com(l, i) => {
             let (n, i) = (&m.links[l].name, index(i));
             quote!(sys.links.#n.com[#i])
         }
-        Param::Damping(j) => {
-            let n = &m.joints[j].name;
-            quote!(sys.joints.#n.damping)
-        }
-        Param::Stiffness(j) => {
-            let n = &m.joints[j].name;
-            quote!(sys.joints.#n.stiffness)
-        }
-        Param::Rest(j) => {
-            let n = &m.joints[j].name;
-            quote!(sys.joints.#n.rest)
-        }
+        Param::Damping(j) => joint(j, "damping"),
+        Param::Stiffness(j) => joint(j, "stiffness"),
+        Param::Rest(j) => joint(j, "rest"),
     }
 }
 
@@ -974,9 +964,11 @@ fn poly_tokens(m: &Model, mech: &Mechanics, p: &Poly) -> TokenStream {
 /// Checks of every run-time parameter, naming it in the error.
 fn validation(m: &Model) -> Vec<TokenStream> {
     let mut out = Vec::new();
-    // `what` must be finite, and of the sign `s` ("Any", "NonNegative" or
-    // "Positive"), which the message states
-    let mut check = |value: TokenStream, s: &str, what: String| {
+    // parameter `p`, called `what` in the message, must be finite and of
+    // the sign `s` ("Any", "NonNegative" or "Positive"), which the message
+    // states
+    let mut check = |p: Param, s: &str, what: String| {
+        let value = param_tokens(m, &p);
         let bound = match s {
             "NonNegative" => " and >= 0",
             "Positive" => " and > 0",
@@ -991,50 +983,35 @@ fn validation(m: &Model) -> Vec<TokenStream> {
         )?;));
     };
     for i in 0..2 {
-        let ii = index(i);
-        check(quote!(sys.gravity[#ii]), "Any", format!("gravity[{i}]"));
+        check(Param::Gravity(i), "Any", format!("gravity[{i}]"));
     }
-    for l in &m.links {
-        let n = &l.name;
-        let name = syn::ext::IdentExt::unraw(n).to_string();
-        for (field, s) in [
-            ("mass", "NonNegative"),
-            ("length", "Positive"),
-            ("inertia", "NonNegative"),
+    for (l, link) in m.links.iter().enumerate() {
+        let name = syn::ext::IdentExt::unraw(&link.name).to_string();
+        for (p, s, field) in [
+            (Param::Mass(l), "NonNegative", "mass"),
+            (Param::Length(l), "Positive", "length"),
+            (Param::Inertia(l), "NonNegative", "inertia"),
+            (Param::Com(l, 0), "Any", "com[0]"),
+            (Param::Com(l, 1), "Any", "com[1]"),
         ] {
-            let f = format_ident!("{}", field);
-            check(
-                quote!(sys.links.#n.#f),
-                s,
-                format!("link `{name}`: {field}"),
-            );
-        }
-        for i in 0..2 {
-            let ii = index(i);
-            check(
-                quote!(sys.links.#n.com[#ii]),
-                "Any",
-                format!("link `{name}`: com[{i}]"),
-            );
+            check(p, s, format!("link `{name}`: {field}"));
         }
     }
     // all joints' dampings, then each joint's spring
-    let damping: &[(&str, &str)] = &[("damping", "NonNegative")];
-    let spring: &[(&str, &str)] = &[("stiffness", "NonNegative"), ("rest", "Any")];
+    type Field = (fn(usize) -> Param, &'static str, &'static str);
+    let damping: &[Field] = &[(Param::Damping, "NonNegative", "damping")];
+    let spring: &[Field] = &[
+        (Param::Stiffness, "NonNegative", "stiffness"),
+        (Param::Rest, "Any", "rest"),
+    ];
     for (fields, present) in [(damping, m.dissipative()), (spring, m.elastic())] {
         if !present {
             continue;
         }
-        for j in &m.joints {
-            let n = &j.name;
-            let name = syn::ext::IdentExt::unraw(n).to_string();
-            for &(field, s) in fields {
-                let f = format_ident!("{}", field);
-                check(
-                    quote!(sys.joints.#n.#f),
-                    s,
-                    format!("joint `{name}`: {field}"),
-                );
+        for (j, joint) in m.joints.iter().enumerate() {
+            let name = syn::ext::IdentExt::unraw(&joint.name).to_string();
+            for &(p, s, field) in fields {
+                check(p(j), s, format!("joint `{name}`: {field}"));
             }
         }
     }
