@@ -34,39 +34,29 @@ fn index(i: usize) -> Literal {
 
 /// Tokens reading a parameter from `sys` (the parameter struct).
 fn param_tokens(m: &Model, p: &Param) -> TokenStream {
+    let link = |l: usize, field: &str| {
+        let (n, f) = (&m.links[l].name, format_ident!("{}", field));
+        quote!(sys.links.#n.#f)
+    };
+    let joint = |j: usize, field: &str| {
+        let (n, f) = (&m.joints[j].name, format_ident!("{}", field));
+        quote!(sys.joints.#n.#f)
+    };
     match *p {
         Param::Gravity(i) => {
             let i = index(i);
             quote!(sys.gravity[#i])
         }
-        Param::Mass(l) => {
-            let n = &m.links[l].name;
-            quote!(sys.links.#n.mass)
-        }
-        Param::Length(l) => {
-            let n = &m.links[l].name;
-            quote!(sys.links.#n.length)
-        }
-        Param::Inertia(l) => {
-            let n = &m.links[l].name;
-            quote!(sys.links.#n.inertia)
-        }
+        Param::Mass(l) => link(l, "mass"),
+        Param::Length(l) => link(l, "length"),
+        Param::Inertia(l) => link(l, "inertia"),
         Param::Com(l, i) => {
             let (n, i) = (&m.links[l].name, index(i));
             quote!(sys.links.#n.com[#i])
         }
-        Param::Damping(j) => {
-            let n = &m.joints[j].name;
-            quote!(sys.joints.#n.damping)
-        }
-        Param::Stiffness(j) => {
-            let n = &m.joints[j].name;
-            quote!(sys.joints.#n.stiffness)
-        }
-        Param::Rest(j) => {
-            let n = &m.joints[j].name;
-            quote!(sys.joints.#n.rest)
-        }
+        Param::Damping(j) => joint(j, "damping"),
+        Param::Stiffness(j) => joint(j, "stiffness"),
+        Param::Rest(j) => joint(j, "rest"),
     }
 }
 
@@ -973,77 +963,56 @@ fn poly_tokens(m: &Model, mech: &Mechanics, p: &Poly) -> TokenStream {
 
 /// Checks of every run-time parameter, naming it in the error.
 fn validation(m: &Model) -> Vec<TokenStream> {
-    let sign = |s: &str| {
-        let s = format_ident!("{}", s);
-        quote!(::vigp::embedded::dynamics::ParameterSign::#s)
-    };
     let mut out = Vec::new();
-    let mut check = |value: TokenStream, s: &str, msg: String| {
-        let sg = sign(s);
-        out.push(quote!(::vigp::embedded::dynamics::check_parameter(#value, #sg, #msg)?;));
+    // parameter `p`, called `what` in the message, must be finite and of
+    // the sign `s` ("Any", "NonNegative" or "Positive"), which the message
+    // states
+    let mut check = |p: Param, s: &str, what: String| {
+        let value = param_tokens(m, &p);
+        let bound = match s {
+            "NonNegative" => " and >= 0",
+            "Positive" => " and > 0",
+            _ => "",
+        };
+        let msg = format!("{what} must be finite{bound}");
+        let s = format_ident!("{}", s);
+        out.push(quote!(::vigp::embedded::dynamics::check_parameter(
+            #value,
+            ::vigp::embedded::dynamics::ParameterSign::#s,
+            #msg
+        )?;));
     };
-    check(
-        quote!(sys.gravity[0]),
-        "Any",
-        "gravity[0] must be finite".into(),
-    );
-    check(
-        quote!(sys.gravity[1]),
-        "Any",
-        "gravity[1] must be finite".into(),
-    );
-    for l in &m.links {
-        let n = &l.name;
-        let name = syn::ext::IdentExt::unraw(n).to_string();
-        check(
-            quote!(sys.links.#n.mass),
-            "NonNegative",
-            format!("link `{name}`: mass must be finite and >= 0"),
-        );
-        check(
-            quote!(sys.links.#n.length),
-            "Positive",
-            format!("link `{name}`: length must be finite and > 0"),
-        );
-        check(
-            quote!(sys.links.#n.inertia),
-            "NonNegative",
-            format!("link `{name}`: inertia must be finite and >= 0"),
-        );
-        for i in 0..2 {
-            let ii = index(i);
-            check(
-                quote!(sys.links.#n.com[#ii]),
-                "Any",
-                format!("link `{name}`: com[{i}] must be finite"),
-            );
+    for i in 0..2 {
+        check(Param::Gravity(i), "Any", format!("gravity[{i}]"));
+    }
+    for (l, link) in m.links.iter().enumerate() {
+        let name = syn::ext::IdentExt::unraw(&link.name).to_string();
+        for (p, s, field) in [
+            (Param::Mass(l), "NonNegative", "mass"),
+            (Param::Length(l), "Positive", "length"),
+            (Param::Inertia(l), "NonNegative", "inertia"),
+            (Param::Com(l, 0), "Any", "com[0]"),
+            (Param::Com(l, 1), "Any", "com[1]"),
+        ] {
+            check(p, s, format!("link `{name}`: {field}"));
         }
     }
-    if m.dissipative() {
-        for j in &m.joints {
-            let n = &j.name;
-            let name = syn::ext::IdentExt::unraw(n).to_string();
-            check(
-                quote!(sys.joints.#n.damping),
-                "NonNegative",
-                format!("joint `{name}`: damping must be finite and >= 0"),
-            );
+    // all joints' dampings, then each joint's spring
+    type Field = (fn(usize) -> Param, &'static str, &'static str);
+    let damping: &[Field] = &[(Param::Damping, "NonNegative", "damping")];
+    let spring: &[Field] = &[
+        (Param::Stiffness, "NonNegative", "stiffness"),
+        (Param::Rest, "Any", "rest"),
+    ];
+    for (fields, present) in [(damping, m.dissipative()), (spring, m.elastic())] {
+        if !present {
+            continue;
         }
-    }
-    if m.elastic() {
-        for j in &m.joints {
-            let n = &j.name;
-            let name = syn::ext::IdentExt::unraw(n).to_string();
-            check(
-                quote!(sys.joints.#n.stiffness),
-                "NonNegative",
-                format!("joint `{name}`: stiffness must be finite and >= 0"),
-            );
-            check(
-                quote!(sys.joints.#n.rest),
-                "Any",
-                format!("joint `{name}`: rest must be finite"),
-            );
+        for (j, joint) in m.joints.iter().enumerate() {
+            let name = syn::ext::IdentExt::unraw(&joint.name).to_string();
+            for &(p, s, field) in fields {
+                check(p(j), s, format!("joint `{name}`: {field}"));
+            }
         }
     }
     out

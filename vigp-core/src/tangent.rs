@@ -194,15 +194,23 @@ impl<const N: usize> Tangent<N> {
         }
     }
 
+    /// [`TangentError::Dimension`] unless `got` is the tangent dimension
+    /// 2·DoF.
+    fn check_dim(&self, got: usize) -> Result<(), TangentError> {
+        if got == self.dim() {
+            Ok(())
+        } else {
+            Err(TangentError::Dimension {
+                expected: self.dim(),
+                got,
+            })
+        }
+    }
+
     /// The state retract(z, δ) (module docs); `delta` has length 2·DoF.
     pub fn retract(&self, z: &State<N>, delta: &[f64]) -> Result<State<N>, TangentError> {
         self.check(z)?;
-        if delta.len() != self.dim() {
-            return Err(TangentError::Dimension {
-                expected: self.dim(),
-                got: delta.len(),
-            });
-        }
+        self.check_dim(delta.len())?;
         let (d, dt) = (self.dof, self.dt);
         let mut out = *z;
         let mut bad = false;
@@ -244,12 +252,7 @@ impl<const N: usize> Tangent<N> {
     ) -> Result<(), TangentError> {
         self.check(base)?;
         self.check(z)?;
-        if out.len() != self.dim() {
-            return Err(TangentError::Dimension {
-                expected: self.dim(),
-                got: out.len(),
-            });
-        }
+        self.check_dim(out.len())?;
         let (d, dt) = (self.dof, self.dt);
         let mut bad = false;
         self.blocks(|i, t, quat| {
@@ -280,12 +283,7 @@ impl<const N: usize> Tangent<N> {
     /// E = ∂retract(z, δ)/∂δ at δ = 0, `T` = 2·DoF.
     pub fn embedding<const T: usize>(&self, z: &State<N>) -> Result<Embedding<N, T>, TangentError> {
         self.check(z)?;
-        if T != self.dim() {
-            return Err(TangentError::Dimension {
-                expected: self.dim(),
-                got: T,
-            });
-        }
+        self.check_dim(T)?;
         let (d, dt) = (self.dof, self.dt);
         let mut e = Embedding {
             q: SMatrix::<f64, N, T>::zeros(),

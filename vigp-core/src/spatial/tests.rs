@@ -170,6 +170,15 @@ impl Rng {
     }
 }
 
+/// x ± h·e_k with h = 1e-6·(1 + |x_k|), and the width 2h between them.
+fn plus_minus(x: &SVector<f64, 24>, k: usize) -> (SVector<f64, 24>, SVector<f64, 24>, f64) {
+    let h = 1e-6 * (1.0 + x[k].abs());
+    let (mut p, mut m) = (*x, *x);
+    p[k] += h;
+    m[k] -= h;
+    (p, m, 2.0 * h)
+}
+
 /// The Newton Jacobian (∂r/∂ν, ∂r/∂λ, ∂c/∂ν) against central differences of
 /// the residual, relative to the largest entry of each block, on random
 /// states of a mechanism with every joint type, damping, a loop, a full
@@ -201,29 +210,18 @@ fn del_jacobian_matches_finite_differences() {
             );
         };
         for k in 0..24 {
-            let h = 1e-6 * (1.0 + nu[k].abs());
-            let (mut p, mut m) = (nu, nu);
-            p[k] += h;
-            m[k] -= h;
+            let (p, m, width) = plus_minus(&nu, k);
             let (rp, cp) = stepper.del_residual(&z, &p, &lambda);
             let (rm, cm) = stepper.del_residual(&z, &m, &lambda);
             for i in 0..24 {
-                check("dr/dnu", a[(i, k)], (rp[i] - rm[i]) / (2.0 * h), a.amax());
-                check("dc/dnu", g2[(i, k)], (cp[i] - cm[i]) / (2.0 * h), g2.amax());
+                check("dr/dnu", a[(i, k)], (rp[i] - rm[i]) / width, a.amax());
+                check("dc/dnu", g2[(i, k)], (cp[i] - cm[i]) / width, g2.amax());
             }
-            let h = 1e-6 * (1.0 + lambda[k].abs());
-            let (mut p, mut m) = (lambda, lambda);
-            p[k] += h;
-            m[k] -= h;
+            let (p, m, width) = plus_minus(&lambda, k);
             let (rp, _) = stepper.del_residual(&z, &nu, &p);
             let (rm, _) = stepper.del_residual(&z, &nu, &m);
             for i in 0..24 {
-                check(
-                    "dr/dlambda",
-                    b[(i, k)],
-                    (rp[i] - rm[i]) / (2.0 * h),
-                    b.amax(),
-                );
+                check("dr/dlambda", b[(i, k)], (rp[i] - rm[i]) / width, b.amax());
             }
         }
     }

@@ -173,6 +173,18 @@ pub(crate) fn check_length(
     Ok(())
 }
 
+/// [`IdentifyError::NonFinite`] unless the time step `dt` is finite and
+/// positive.
+pub(crate) fn check_time_step(dt: f64) -> Result<(), IdentifyError> {
+    if dt.is_finite() && dt > 0.0 {
+        Ok(())
+    } else {
+        Err(IdentifyError::NonFinite {
+            what: format!("time step {dt}"),
+        })
+    }
+}
+
 /// `Ok` when `values` (the vector `what`) has `expected` entries, all
 /// finite: else [`IdentifyError::Dimension`], or
 /// [`IdentifyError::NonFinite`] naming `what`.

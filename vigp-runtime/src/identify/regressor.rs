@@ -38,7 +38,7 @@
 //! GᵀG): Zᵀ·(−Gᵀλ) = 0, so the projected residual Zᵀr does not involve λ,
 //! and a transition gives N − C rows. The multipliers are not estimated.
 
-use super::{IdentifyError, check_finite_vector, check_length};
+use super::{IdentifyError, check_finite_vector, check_length, check_time_step};
 use crate::del;
 use crate::mechanism::{Mechanism, Scalar};
 use nalgebra::{Const, DMatrix, DVector, SVector};
@@ -540,7 +540,7 @@ pub trait Regressor {
 
 /// The rows (Y, b), or [`IdentifyError::NonFinite`] when an entry is NaN
 /// or ∞.
-fn finite_rows(
+pub(super) fn finite_rows(
     (y, b): (DMatrix<f64>, DVector<f64>),
 ) -> Result<(DMatrix<f64>, DVector<f64>), IdentifyError> {
     if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
@@ -605,11 +605,7 @@ where
     /// The regressor of the DEL residual with quadrature weight `alpha`
     /// ([`crate::del`]): 0 or ½.
     pub fn new(model: M, dt: f64, alpha: f64) -> Result<Self, IdentifyError> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(IdentifyError::NonFinite {
-                what: format!("time step {dt}"),
-            });
-        }
+        check_time_step(dt)?;
         if !(alpha == 0.0 || alpha == 0.5) {
             return Err(IdentifyError::Layout {
                 message: format!(

@@ -44,8 +44,8 @@
 //! [`Regressor::position_jacobians`] comes from the engine's closed-form
 //! term derivatives, exact to rounding.
 
-use super::regressor::{Regressor, Structure, Transition, position_differences};
-use super::{IdentifyError, check_finite_vector};
+use super::regressor::{Regressor, Structure, Transition, finite_rows, position_differences};
+use super::{IdentifyError, check_finite_vector, check_time_step};
 use crate::robot::{Robot, RobotTree, TermJacobians};
 use nalgebra::{DMatrix, DVector};
 use vigp_core::tree::{BodyScratch, Engine};
@@ -110,11 +110,7 @@ impl RobotRegressor {
     }
 
     fn with_alpha(robot: &Robot, dt: f64, alpha: f64) -> Result<Self, IdentifyError> {
-        if !(dt.is_finite() && dt > 0.0) {
-            return Err(IdentifyError::NonFinite {
-                what: format!("time step {dt}"),
-            });
-        }
+        check_time_step(dt)?;
         let tree = robot.tree().clone();
         let (joints, links) = (robot.joint_names(), robot.link_names());
         let inputs = robot
@@ -398,12 +394,7 @@ impl Regressor for RobotRegressor {
             }
         }
         let b = &y * DVector::from_column_slice(&self.base) - r0;
-        if y.iter().chain(b.iter()).any(|v| !v.is_finite()) {
-            return Err(IdentifyError::NonFinite {
-                what: "regressor rows".into(),
-            });
-        }
-        Ok((y, b))
+        finite_rows((y, b))
     }
 
     /// The residual and its exact Jacobians in x_{k−1}, x_k and x_{k+1}
