@@ -323,6 +323,22 @@ fn assign_body(
     (quote!(#lets #(#assigns)* #extra), uses_q, uses_k)
 }
 
+/// The Hessians ∇²f_i of `count` functions of the `n` coordinates from
+/// their gradients, `grad(i, a)` = ∂f_i/∂q_a.
+fn hessians<'e>(
+    count: usize,
+    n: usize,
+    grad: impl Fn(usize, usize) -> &'e Expr,
+) -> Vec<Vec<Vec<Expr>>> {
+    (0..count)
+        .map(|i| {
+            (0..n)
+                .map(|a| (0..n).map(|b| grad(i, a).deriv(b)).collect())
+                .collect()
+        })
+        .collect()
+}
+
 /// The statements `h[(a, b)] = Σ_r (hess_r)_ab · w[r]` (upper triangle,
 /// mirrored) of a weighted sum of symmetric n × n Hessians with weights
 /// named `weight` (Σ μ_r ∇²g_r, Σ u_i ∇²s_i), skipping structural zeros;
@@ -783,14 +799,7 @@ pub fn emit_dynamics(
             }
         };
         // Σ μ_r ∇²g_r
-        let hess: Vec<Vec<Vec<Expr>>> = jac
-            .iter()
-            .map(|row| {
-                (0..n)
-                    .map(|a| (0..n).map(|b| row[a].deriv(b)).collect())
-                    .collect()
-            })
-            .collect();
+        let hess = hessians(jac.len(), n, |r, a| &jac[r][a]);
         let (lets, assigns, uq, uk) = weighted_hessian(&mut constants, &hess, n, "mu");
         let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
         let mu_arg = arg(!assigns.is_empty(), "mu");
@@ -848,13 +857,7 @@ pub fn emit_dynamics(
             }
         };
         // Σ_i u_i ∇²s_i (symmetric)
-        let hess: Vec<Vec<Vec<Expr>>> = (0..u)
-            .map(|i| {
-                (0..n)
-                    .map(|a| (0..n).map(|c| bm[a][i].deriv(c)).collect())
-                    .collect()
-            })
-            .collect();
+        let hess = hessians(u, n, |i, a| &bm[a][i]);
         let (lets, assigns, uq, uk) = weighted_hessian(&mut constants, &hess, n, "u");
         let (q_arg, k_arg) = (arg(uq, "q"), arg(uk, "k"));
         let u_arg = arg(!assigns.is_empty(), "u");
