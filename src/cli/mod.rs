@@ -501,6 +501,13 @@ fn load<M: Mechanism<N, C> + Parameters + Clone, const N: usize, const C: usize>
     })
 }
 
+/// A robot's state at sample `s` of `run`, with the log's common time
+/// step `dt` ([`RobotState::from_positions`](crate::robot::RobotState::from_positions)).
+fn robot_state_at(run: &crate::data::DynRun, s: usize, dt: f64) -> crate::robot::RobotState {
+    let (q0, q1) = (&run.positions[s], &run.positions[s + 1]);
+    crate::robot::RobotState::from_positions(q0.as_slice(), q1.as_slice(), dt)
+}
+
 /// Where a window from sample `s` of `run` starts: the run, the sample and
 /// its file line (not for a resampled run, whose samples have none).
 fn window_place<const N: usize>(run: &crate::data::Run<N>, s: usize, resampled: bool) -> String {

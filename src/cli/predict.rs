@@ -7,7 +7,7 @@ use std::path::Path;
 use super::args::{BoundArg, PredictArgs};
 use super::{
     CliError, bar, check_model_inputs, check_out_dir, data_error, io_error, read_data, read_plan,
-    read_plan_rows, report_read, w, window_place,
+    read_plan_rows, report_read, robot_state_at, w, window_place,
 };
 use crate::bound::{
     BoundError, BoundKind, BoundParts, Calibration, ConformalSettings, ErrorBound, Tube,
@@ -15,7 +15,6 @@ use crate::bound::{
 use crate::data::{Dataset, DynDataset, RunOf};
 use crate::learned::Learned;
 use crate::learned::robot::{LearnedRobot, RobotCalibration, coordinate_kinds};
-use crate::robot::RobotState;
 use crate::{Integrator, Mechanism, SVector, State};
 
 /// `U`: the mechanism's inputs (0 for none; with inputs each run's logged
@@ -687,12 +686,7 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
             None if m > 0 => run_inputs[r][s + 1..=s + a.steps].to_vec(),
             None => vec![Vec::new(); a.steps],
         };
-        let run = &data.runs[r];
-        let z0 = RobotState::from_positions(
-            run.positions[s].as_slice(),
-            run.positions[s + 1].as_slice(),
-            dt,
-        );
+        let z0 = robot_state_at(&data.runs[r], s, dt);
         Some((r, s, z0, run_inputs[r][s].clone(), us))
     })?;
     if starts.is_empty() {

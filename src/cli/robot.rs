@@ -17,7 +17,10 @@ use super::excite::excite_robot;
 use super::fit::{choose, report_data, report_saved, resolve_prior, train_options, train_timed};
 use super::identify::identify_robot;
 use super::simulate::{INPUT_ROWS, check_start, one_plan};
-use super::{CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read, w};
+use super::{
+    CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read,
+    robot_state_at, w,
+};
 use crate::data::DynDataset;
 use crate::learned::Encoding;
 use crate::learned::robot::{LearnedRobot, RobotTransition, coordinate_kinds};
@@ -315,11 +318,7 @@ fn score(a: &ScoreArgs, out: &mut dyn Write) -> Result<(), CliError> {
         .map(|&(r, s)| {
             let run = &data.runs[r];
             let truth = &run.positions[s + 2..=s + k + 1];
-            let z0 = RobotState::from_positions(
-                run.positions[s].as_slice(),
-                run.positions[s + 1].as_slice(),
-                dt,
-            );
+            let z0 = robot_state_at(run, s, dt);
             // step j of the window runs under row s + j + 1's input after
             // row s + j's
             let input = |row: usize| {

@@ -251,11 +251,11 @@ pub fn validate<T: Tree + ?Sized>(tree: &T) -> Result<(), InvalidTree> {
 
 /// Whether the tree branches enough for the derivatives to factor their
 /// Newton matrix in the tree's pattern: that work, Σ depth², is at most a
-/// quarter of a dense factorisation's N³/3. A chain
-/// (the Panda, the UR5) has Σ depth² ≈ N³/3 and is factored densely, where
-/// the dense code's contiguous loops are faster; four 3-joint legs
-/// (Solo-12) have 56 against 576, the G1 humanoid's legs, waist and arms
-/// far less than a chain of 29.
+/// quarter of a dense factorisation's N³/3. A chain (the Panda, the UR5)
+/// has Σ depth² ≈ N³/3 and is factored densely, where the dense code's
+/// contiguous loops are faster; four 3-joint legs (Solo-12) have 56
+/// against 576, the G1 humanoid's legs, waist and arms far less than a
+/// chain of 29.
 pub(super) fn branched<T: Tree>(tree: &T) -> bool {
     let n = tree.len();
     let mut work = 0usize;

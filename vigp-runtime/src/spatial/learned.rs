@@ -110,9 +110,8 @@ pub type Configuration<const B: usize> = ([Vector3<f64>; B], [UnitQuaternion<f64
 /// configurations give K − 2 transitions): the discrete velocities are
 /// (x_{k+1} − x_k)/Δt and log(q_k⁻¹ q_{k+1})/Δt, so that the configuration
 /// update is exact and the GP learns only the velocity map. The next
-/// velocities stack every link's (v, ω) as
-/// [`pack`] does: N = 6B, checked at
-/// compile time.
+/// velocities stack every link's (v, ω) as [`pack`] does: N = 6B, checked
+/// at compile time.
 pub fn transitions<const B: usize, const N: usize>(
     configurations: &[Configuration<B>],
     dt: f64,
