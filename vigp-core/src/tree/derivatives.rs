@@ -140,8 +140,7 @@ fn tree_solve<T: Tree>(jac: &[f64], tree: &T, x: &mut [f64], w: usize) {
 /// Solves J·X = R in place (J row-major n × n, destroyed; X row-major
 /// n × w) by Gaussian elimination with partial pivoting: J = P·L·U in
 /// place (the row swaps applied to X as they happen), then X by forward
-/// and back substitution, [`SUBSTITUTION_BLOCK`] columns at a time held
-/// in registers. `false` when a pivot is zero or not finite.
+/// and back substitution, a row of X at a time. `false` when a pivot is zero or not finite.
 pub(super) fn dense_solve(jac: &mut [f64], n: usize, x: &mut [f64], w: usize) -> bool {
     for k in 0..n {
         let (mut piv, mut best) = (k, jac[k * n + k].abs());
@@ -173,48 +172,39 @@ pub(super) fn dense_solve(jac: &mut [f64], n: usize, x: &mut [f64], w: usize) ->
             }
         }
     }
-    let blocks = w / SUBSTITUTION_BLOCK * SUBSTITUTION_BLOCK;
-    for c in (0..blocks).step_by(SUBSTITUTION_BLOCK) {
-        substitute::<SUBSTITUTION_BLOCK>(jac, n, x, w, c);
-    }
-    for c in blocks..w {
-        substitute::<1>(jac, n, x, w, c);
-    }
+    substitute(jac, n, x, w);
     true
 }
 
-/// Columns of X that [`substitute`] carries at once.
-const SUBSTITUTION_BLOCK: usize = 4;
-
-/// Columns `c..c + B` of the row-major n × w matrix `x` replaced by
-/// U⁻¹L⁻¹ of them, L (unit lower) and U the factors [`dense_solve`] left
-/// in `lu`: each row accumulated in B registers, its terms subtracted in
-/// the order of a row-by-row elimination.
-#[inline(always)]
-fn substitute<const B: usize>(lu: &[f64], n: usize, x: &mut [f64], w: usize, c: usize) {
-    // row i of the block minus Σ_j lu_ij·(row j), j over `js` in order
-    let eliminated = |x: &[f64], i: usize, js: core::ops::Range<usize>| -> [f64; B] {
-        let mut acc = [0.0; B];
-        acc.copy_from_slice(&x[i * w + c..i * w + c + B]);
-        for j in js {
-            let (f, xj) = (lu[i * n + j], &x[j * w + c..j * w + c + B]);
-            for b in 0..B {
-                acc[b] -= f * xj[b];
+/// The row-major n × w matrix `x` replaced by U⁻¹L⁻¹x, L (unit lower)
+/// and U the factors [`dense_solve`] left in `lu`, a whole row at a time:
+/// row i minus l_ij times row j, j in order (each column sees the
+/// operations of a column-by-column substitution, in the same order),
+/// over rows contiguous in memory, which vectorizes.
+fn substitute(lu: &[f64], n: usize, x: &mut [f64], w: usize) {
+    for i in 1..n {
+        let (done, rest) = x.split_at_mut(i * w);
+        let xi = &mut rest[..w];
+        for (j, xj) in done.chunks_exact(w).enumerate() {
+            let f = lu[i * n + j];
+            for (d, s) in xi.iter_mut().zip(xj) {
+                *d -= f * s;
             }
         }
-        acc
-    };
-    for i in 0..n {
-        let acc = eliminated(x, i, 0..i);
-        x[i * w + c..i * w + c + B].copy_from_slice(&acc);
     }
     for i in (0..n).rev() {
-        let mut acc = eliminated(x, i, i + 1..n);
-        let r = 1.0 / lu[i * n + i];
-        for b in 0..B {
-            acc[b] *= r;
+        let (head, tail) = x.split_at_mut((i + 1) * w);
+        let xi = &mut head[i * w..];
+        for (j, xj) in tail.chunks_exact(w).enumerate() {
+            let f = lu[i * n + i + 1 + j];
+            for (d, s) in xi.iter_mut().zip(xj) {
+                *d -= f * s;
+            }
         }
-        x[i * w + c..i * w + c + B].copy_from_slice(&acc);
+        let r = 1.0 / lu[i * n + i];
+        for d in xi.iter_mut() {
+            *d *= r;
+        }
     }
 }
 
