@@ -187,10 +187,7 @@ where
                 (&pred.one_step_bounds, &pred.position_bounds),
             );
             if conformal {
-                // row k's `bound` is predicted from state k − 1, and every
-                // position bound falls back when the start is outside
-                let flagged = k > 0 && (pred.outside[k - 1] || pred.outside[0]);
-                row.push(match (&bound.fallback, flagged) {
+                row.push(match (&bound.fallback, flagged(&pred.outside, k)) {
                     (Some(f), true) => f.kind_name().to_string(),
                     (None, true) => "outside".to_string(),
                     (_, false) => String::new(),
@@ -399,6 +396,14 @@ impl Tally {
         }
         Ok(())
     }
+}
+
+/// Whether output row `k` of a prediction whose states lie `outside` the
+/// bound's region is flagged in column `fallback`: row k's `bound` is
+/// predicted from state k − 1, and every position bound falls back (or
+/// leaves the guarantee) when the start is outside.
+fn flagged(outside: &[bool], k: usize) -> bool {
+    k > 0 && (outside[k - 1] || outside[0])
 }
 
 /// The output's columns before `fallback`: run, [start,] t, the
@@ -709,13 +714,8 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
     for (r, s, z0, u_prev, us) in &starts {
         let run = &data.runs[*r];
         let pred = learned.predict(z0, u_prev, us, &bound);
-        let place = || {
-            format!(
-                "run `{}`, window from line {} (sample {s})",
-                run.name,
-                run.line + *s as u64
-            )
-        };
+        // a robot's window is named by its file line, resampled or not
+        let place = || window_place(run, *s, false);
         let Some(pred) = tally.take(pred, place, out)? else {
             continue;
         };
@@ -730,10 +730,7 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
                 m,
                 (&pred.one_step_bounds, &pred.position_bounds),
             );
-            // row k's `bound` is predicted from state k − 1, and every
-            // position bound leaves the guarantee when the start is outside
-            let flagged = k > 0 && (pred.outside[k - 1] || pred.outside[0]);
-            row.push(if flagged {
+            row.push(if flagged(&pred.outside, k) {
                 "outside".into()
             } else {
                 String::new()

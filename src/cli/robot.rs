@@ -16,10 +16,9 @@ use super::args::{
 use super::excite::excite_robot;
 use super::fit::{choose, report_data, report_saved, resolve_prior, train_options, train_timed};
 use super::identify::identify_robot;
-use super::simulate::{INPUT_ROWS, check_start, one_plan};
+use super::simulate::{INPUT_ROWS, check_start, one_plan, write_log};
 use super::{
-    CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read,
-    robot_state_at, w,
+    CliError, bar, check_out_dir, data_error, read_plan_rows, report_read, robot_state_at, w,
 };
 use crate::data::DynDataset;
 use crate::learned::Encoding;
@@ -174,9 +173,7 @@ fn simulate(a: &SimulateArgs, robot: &Robot, out: &mut dyn Write) -> Result<(), 
         (&vec![0.0; m], &us),
     )
     .map_err(|e| CliError::Usage(e.to_string()))?;
-    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
-    log.write_csv(std::io::BufWriter::new(file))
-        .map_err(io_error(&a.out))?;
+    write_log(&log, &a.out)?;
     let r = &rollout.report;
     w(
         out,
