@@ -5,7 +5,6 @@ use std::io::Write;
 
 use super::args::ExportArgs;
 use super::{CliError, check_out_dir, io_error, w};
-use crate::learned::robot::LearnedRobot;
 use crate::learned::{EmbeddedExport, ExportSize, Learned};
 use crate::{Mechanism, Parameters};
 
@@ -56,8 +55,7 @@ where
 /// prior's bodies and a `LearnedTree` static for
 /// `vigp::embedded::tree::LearnedTreeStepper`.
 pub(super) fn export_robot(a: &ExportArgs, out: &mut dyn Write) -> Result<(), CliError> {
-    let learned = LearnedRobot::load(&a.model)
-        .map_err(|e| CliError::Usage(format!("{}: {e}", a.model.display())))?;
+    let learned = super::robot::load_learned(&a.model)?;
     check_out_dir(&a.out)?;
     let (src, size) = learned.to_embedded_source(&options(a))?;
     std::fs::write(&a.out, &src).map_err(io_error(&a.out))?;

@@ -510,7 +510,7 @@ fn robot_state_at(run: &crate::data::DynRun, s: usize, dt: f64) -> crate::robot:
 
 /// Where a window from sample `s` of `run` starts: the run, the sample and
 /// its file line (not for a resampled run, whose samples have none).
-fn window_place<const N: usize>(run: &crate::data::Run<N>, s: usize, resampled: bool) -> String {
+fn window_place<P>(run: &crate::data::RunOf<P>, s: usize, resampled: bool) -> String {
     if resampled {
         format!("run `{}`, window from sample {s} (resampled)", run.name)
     } else {

@@ -5,16 +5,17 @@ use std::io::Write;
 use std::path::Path;
 
 use super::args::{BoundArg, PredictArgs};
+use super::robot::{load_learned, read_data_at};
 use super::{
     CliError, bar, check_model_inputs, check_out_dir, data_error, io_error, read_data, read_plan,
-    read_plan_rows, report_read, robot_state_at, w, window_place,
+    read_plan_rows, robot_state_at, w, window_place,
 };
 use crate::bound::{
     BoundError, BoundKind, BoundParts, Calibration, ConformalSettings, ErrorBound, Tube,
 };
 use crate::data::{Dataset, DynDataset, RunOf};
 use crate::learned::Learned;
-use crate::learned::robot::{LearnedRobot, RobotCalibration, coordinate_kinds};
+use crate::learned::robot::RobotCalibration;
 use crate::{Integrator, Mechanism, SVector, State};
 
 /// `U`: the mechanism's inputs (0 for none; with inputs each run's logged
@@ -186,10 +187,7 @@ where
                 (&pred.one_step_bounds, &pred.position_bounds),
             );
             if conformal {
-                // row k's `bound` is predicted from state k − 1, and every
-                // position bound falls back when the start is outside
-                let flagged = k > 0 && (pred.outside[k - 1] || pred.outside[0]);
-                row.push(match (&bound.fallback, flagged) {
+                row.push(match (&bound.fallback, flagged(&pred.outside, k)) {
                     (Some(f), true) => f.kind_name().to_string(),
                     (None, true) => "outside".to_string(),
                     (_, false) => String::new(),
@@ -400,6 +398,14 @@ impl Tally {
     }
 }
 
+/// Whether output row `k` of a prediction whose states lie `outside` the
+/// bound's region is flagged in column `fallback`: row k's `bound` is
+/// predicted from state k − 1, and every position bound falls back (or
+/// leaves the guarantee) when the start is outside.
+fn flagged(outside: &[bool], k: usize) -> bool {
+    k > 0 && (outside[k - 1] || outside[0])
+}
+
 /// The output's columns before `fallback`: run, [start,] t, the
 /// coordinates, their velocities, the inputs that drove the steps into
 /// the rows (the data's convention), the one-step and the position bound.
@@ -604,6 +610,8 @@ fn guarantee(bound: &ErrorBound, delta: f64) -> String {
 /// the conformal bound calibrated on `--calibration`'s held-out runs
 /// ([`LearnedRobot::error_bound`]); the rigorous kinds need a declared
 /// mechanism's integrator and are refused.
+///
+/// [`LearnedRobot::error_bound`]: crate::learned::robot::LearnedRobot::error_bound
 pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), CliError> {
     let usage = |why: String| Err(CliError::Usage(why));
     check_counts(a)?;
@@ -622,30 +630,15 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
                 .into(),
         );
     };
-    let learned = LearnedRobot::load(&a.model)
-        .map_err(|e| CliError::Usage(format!("{}: {e}", a.model.display())))?;
+    let learned = load_learned(&a.model)?;
     check_out_dir(&a.out)?;
     let robot = learned.robot();
     let dt = learned.dt();
     let names: Vec<&str> = robot.joint_names().iter().map(String::as_str).collect();
     let inputs = robot.input_names();
     let m = inputs.len();
-    let read = |path: &std::path::Path| -> Result<DynDataset, CliError> {
-        let data = DynDataset::read_path_with_inputs(
-            path,
-            &names,
-            &coordinate_kinds(robot),
-            &inputs,
-            &a.read.options(),
-        )
-        .map_err(data_error(path))?;
-        report_read(path, &data.warnings, &data.dropped);
-        data.check_dt(dt, a.read.time_tolerance)
-            .map_err(data_error(path))?;
-        Ok(data)
-    };
-    let data = read(&a.data)?;
-    let held_out = read(cal_path)?;
+    let data = read_data_at(robot, &a.data, &a.read, dt)?;
+    let held_out = read_data_at(robot, cal_path, &a.read, dt)?;
     // a window of h steps needs h + 1 samples of one run
     let horizon = a.steps.max(2);
     let positions = |d: &DynDataset| -> Vec<Vec<Vec<f64>>> {
@@ -721,13 +714,8 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
     for (r, s, z0, u_prev, us) in &starts {
         let run = &data.runs[*r];
         let pred = learned.predict(z0, u_prev, us, &bound);
-        let place = || {
-            format!(
-                "run `{}`, window from line {} (sample {s})",
-                run.name,
-                run.line + *s as u64
-            )
-        };
+        // a robot's window is named by its file line, resampled or not
+        let place = || window_place(run, *s, false);
         let Some(pred) = tally.take(pred, place, out)? else {
             continue;
         };
@@ -742,10 +730,7 @@ pub(super) fn predict_robot(a: &PredictArgs, out: &mut dyn Write) -> Result<(), 
                 m,
                 (&pred.one_step_bounds, &pred.position_bounds),
             );
-            // row k's `bound` is predicted from state k − 1, and every
-            // position bound leaves the guarantee when the start is outside
-            let flagged = k > 0 && (pred.outside[k - 1] || pred.outside[0]);
-            row.push(if flagged {
+            row.push(if flagged(&pred.outside, k) {
                 "outside".into()
             } else {
                 String::new()

@@ -16,10 +16,9 @@ use super::args::{
 use super::excite::excite_robot;
 use super::fit::{choose, report_data, report_saved, resolve_prior, train_options, train_timed};
 use super::identify::identify_robot;
-use super::simulate::{INPUT_ROWS, check_start, one_plan};
+use super::simulate::{INPUT_ROWS, check_start, one_plan, write_log};
 use super::{
-    CliError, bar, check_out_dir, data_error, io_error, read_plan_rows, report_read,
-    robot_state_at, w,
+    CliError, bar, check_out_dir, data_error, read_plan_rows, report_read, robot_state_at, w,
 };
 use crate::data::DynDataset;
 use crate::learned::Encoding;
@@ -75,19 +74,56 @@ fn load(mechanism: &MechanismArgs, set: &[String]) -> Result<Robot, CliError> {
 
 /// A robot's log and its runs' common time step.
 fn read_log(robot: &Robot, path: &Path, read: &ReadArgs) -> Result<(DynDataset, f64), CliError> {
+    let data = read_data(robot, path, read)?;
+    let dt = data.dt(read.time_tolerance).map_err(data_error(path))?;
+    Ok((data, dt))
+}
+
+/// A log of `robot`'s joints and inputs, with what the reader noticed
+/// reported on stderr.
+fn read_data(robot: &Robot, path: &Path, read: &ReadArgs) -> Result<DynDataset, CliError> {
     let names: Vec<&str> = robot.joint_names().iter().map(String::as_str).collect();
-    let kinds = coordinate_kinds(robot);
     let data = DynDataset::read_path_with_inputs(
         path,
         &names,
-        &kinds,
+        &coordinate_kinds(robot),
         &robot.input_names(),
         &read.options(),
     )
     .map_err(data_error(path))?;
     report_read(path, &data.warnings, &data.dropped);
-    let dt = data.dt(read.time_tolerance).map_err(data_error(path))?;
-    Ok((data, dt))
+    Ok(data)
+}
+
+/// A log of `robot` for a learned model of time step `dt` (`score`,
+/// `predict`): read as [`read_data`], its runs checked to step by `dt`.
+pub(super) fn read_data_at(
+    robot: &Robot,
+    path: &Path,
+    read: &ReadArgs,
+    dt: f64,
+) -> Result<DynDataset, CliError> {
+    let data = read_data(robot, path, read)?;
+    data.check_dt(dt, read.time_tolerance)
+        .map_err(data_error(path))?;
+    Ok(data)
+}
+
+/// A learned robot's model file (`fit --urdf`).
+pub(super) fn load_learned(path: &Path) -> Result<LearnedRobot, CliError> {
+    LearnedRobot::load(path).map_err(|e| CliError::Usage(format!("{}: {e}", path.display())))
+}
+
+/// `robot` with at most `max_depth` halvings of a failing step
+/// (`--max-subdivision`), its other engine options kept.
+fn with_max_subdivision(robot: &Robot, max_depth: u32) -> Result<Robot, CliError> {
+    robot
+        .clone()
+        .with_options(EngineOptions {
+            max_depth,
+            ..*robot.engine().options()
+        })
+        .map_err(|e| CliError::Usage(e.to_string()))
 }
 
 /// `simulate --urdf`: the robot's rollout from `--q`, `--v` under the
@@ -106,13 +142,7 @@ fn simulate(a: &SimulateArgs, robot: &Robot, out: &mut dyn Write) -> Result<(), 
         );
     }
     check_out_dir(&a.out)?;
-    let robot = robot
-        .clone()
-        .with_options(EngineOptions {
-            max_depth: a.stepping.max_subdivision,
-            ..*robot.engine().options()
-        })
-        .map_err(|e| CliError::Usage(e.to_string()))?;
+    let robot = with_max_subdivision(robot, a.stepping.max_subdivision)?;
     let inputs = robot.input_names();
     let m = inputs.len();
     let plan: Vec<Vec<f64>> = match &a.inputs {
@@ -143,9 +173,7 @@ fn simulate(a: &SimulateArgs, robot: &Robot, out: &mut dyn Write) -> Result<(), 
         (&vec![0.0; m], &us),
     )
     .map_err(|e| CliError::Usage(e.to_string()))?;
-    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
-    log.write_csv(std::io::BufWriter::new(file))
-        .map_err(io_error(&a.out))?;
+    write_log(&log, &a.out)?;
     let r = &rollout.report;
     w(
         out,
@@ -275,28 +303,10 @@ fn score(a: &ScoreArgs, out: &mut dyn Write) -> Result<(), CliError> {
             "--substeps: the tree engine halves a step by itself where it must".into(),
         ));
     }
-    let learned = LearnedRobot::load(&a.model)
-        .map_err(|e| CliError::Usage(format!("{}: {e}", a.model.display())))?;
-    let robot = learned.robot().clone();
+    let learned = load_learned(&a.model)?;
     let dt = learned.dt();
-    let names: Vec<&str> = robot.joint_names().iter().map(String::as_str).collect();
-    let data = DynDataset::read_path_with_inputs(
-        &a.data,
-        &names,
-        &coordinate_kinds(&robot),
-        &robot.input_names(),
-        &a.read.options(),
-    )
-    .map_err(data_error(&a.data))?;
-    report_read(&a.data, &data.warnings, &data.dropped);
-    data.check_dt(dt, a.read.time_tolerance)
-        .map_err(data_error(&a.data))?;
-    let nominal = robot
-        .with_options(EngineOptions {
-            max_depth: a.stepping.max_subdivision,
-            ..*learned.robot().engine().options()
-        })
-        .map_err(|e| CliError::Usage(e.to_string()))?;
+    let data = read_data_at(learned.robot(), &a.data, &a.read, dt)?;
+    let nominal = with_max_subdivision(learned.robot(), a.stepping.max_subdivision)?;
     let windows = super::score::windows(data.runs.iter().map(|r| r.positions.len()), k);
     w(
         out,

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use super::args::SimulateArgs;
 use super::{CliError, check_out_dir, io_error, read_plan, w};
-use crate::data::Dataset;
+use crate::data::{Dataset, DatasetOf, Positions};
 use crate::{Mechanism, Parameters, SVector, State};
 
 /// Rolls the nominal (minimal) model out from `--q`, `--v` under the
@@ -72,9 +72,7 @@ where
         (SVector::<f64, U>::zeros(), &us),
     )
     .map_err(|e| CliError::Usage(e.to_string()))?;
-    let file = std::fs::File::create(&a.out).map_err(io_error(&a.out))?;
-    log.write_csv(std::io::BufWriter::new(file))
-        .map_err(io_error(&a.out))?;
+    write_log(&log, &a.out)?;
     w(
         out,
         format_args!(
@@ -89,6 +87,13 @@ where
             if U > 0 { INPUT_ROWS } else { "" }
         ),
     )
+}
+
+/// Writes a simulated `log` to the file `path` (CSV).
+pub(super) fn write_log<P: Positions>(log: &DatasetOf<P>, path: &Path) -> Result<(), CliError> {
+    let file = std::fs::File::create(path).map_err(io_error(path))?;
+    log.write_csv(std::io::BufWriter::new(file))
+        .map_err(io_error(path))
 }
 
 /// The end of `simulate`'s report on a log with inputs: on which rows they

@@ -1082,11 +1082,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     where
         M: vigp_core::Inputs<U>,
     {
-        if U != self.inputs() {
-            return Err(BoundError::Mismatch(
-                "number of inputs (U must be the model's inputs)",
-            ));
-        }
+        self.check_forced_inputs::<U>()?;
         self.error_bound_at::<U>(kind, calibration)
     }
 
@@ -1278,11 +1274,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     where
         M: vigp_core::Inputs<U>,
     {
-        if U != self.inputs() {
-            return Err(BoundError::Mismatch(
-                "number of inputs (U must be the model's inputs)",
-            ));
-        }
+        self.check_forced_inputs::<U>()?;
         self.predict_bounds_at(z0, inputs.len(), u_prev, inputs, bounds)
     }
 
@@ -1369,6 +1361,17 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
                 },
             )
             .collect())
+    }
+
+    /// The check of the forced calls that `U` is the model's input count
+    /// ([`BoundError::Mismatch`] otherwise).
+    fn check_forced_inputs<const U: usize>(&self) -> Result<(), BoundError> {
+        if U != self.inputs() {
+            return Err(BoundError::Mismatch(
+                "number of inputs (U must be the model's inputs)",
+            ));
+        }
+        Ok(())
     }
 
     /// The checks of [`Learned::predict`] on one bound.
