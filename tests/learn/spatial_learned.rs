@@ -5,7 +5,7 @@
 
 use nalgebra::SVector;
 use vigp::Integrator;
-use vigp::bound::{BoundError, ConformalSettings, Score, Tube};
+use vigp::bound::{BoundError, BoundKind, ConformalSettings, Score, Tube};
 use vigp::embedded::gp::ExportedGp;
 use vigp::embedded::learned::{Encoding as CoreEncoding, LearnedModel, Prior as CorePrior};
 use vigp::embedded::{LearnedStepper, StepOptions};
@@ -834,17 +834,16 @@ fn a_spatial_conformal_bound_covers_exchangeable_windows() {
             score,
             ..ConformalSettings::default()
         };
-        let bound = learned.conformal_bound(&cal, &settings).unwrap();
+        let bound = learned
+            .error_bound(&BoundKind::Conformal(settings.clone()), &cal)
+            .unwrap();
         assert_eq!(bound.failed, 0);
         let cases: Vec<_> = tests
             .iter()
             .map(|c| {
                 // the start as the data give it (velocities from samples 0, 1)
                 let z0 = SpatialState::from_configurations(&c[0].0, &c[0].1, &c[1].0, &c[1].1, dt);
-                (
-                    learned.predict_bounded(&z0, horizon, &bound).unwrap(),
-                    c.clone(),
-                )
+                (learned.predict(&z0, horizon, &bound).unwrap(), c.clone())
             })
             .collect();
         let c = coverage(&cases);
@@ -867,7 +866,7 @@ fn a_spatial_conformal_bound_covers_exchangeable_windows() {
             let flagged = |starts: &[SpatialState<2>]| {
                 starts
                     .iter()
-                    .filter(|z0| learned.predict_bounded(z0, horizon, &bound).unwrap()[0].outside)
+                    .filter(|z0| learned.predict(z0, horizon, &bound).unwrap()[0].outside)
                     .count() as f64
                     / starts.len() as f64
             };
@@ -972,7 +971,7 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
     );
     assert!(exact <= 1e-10 && early >= 1e-4);
     let bound = learned
-        .conformal_bound_forced::<2>(&cal, &ConformalSettings::default())
+        .error_bound_forced::<2>(&BoundKind::Conformal(ConformalSettings::default()), &cal)
         .unwrap();
     let (test_runs, test_inputs) = runs(1000);
     let predict = |zero: bool| -> Vec<_> {
@@ -988,9 +987,7 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
                     (u[0], u[1..].to_vec())
                 };
                 (
-                    learned
-                        .predict_bounded_forced(&z0, &up, &us, &bound)
-                        .unwrap(),
+                    learned.predict_forced(&z0, &up, &us, &bound).unwrap(),
                     c.clone(),
                 )
             })
@@ -1023,10 +1020,7 @@ fn a_spatial_conformal_bound_under_inputs_covers_driven_windows() {
                 if beyond {
                     us[0][0] = us[0][0].signum() * (3.0 + us[0][0].abs());
                 }
-                learned
-                    .predict_bounded_forced(&z0, &u[0], &us, &bound)
-                    .unwrap()[0]
-                    .outside
+                learned.predict_forced(&z0, &u[0], &us, &bound).unwrap()[0].outside
             })
             .count() as f64
             / test_runs.len() as f64
@@ -1079,16 +1073,24 @@ fn spatial_bound_misuse_is_a_typed_error() {
         ..ConformalSettings::default()
     };
     let is_mismatch = |e: &BoundError| matches!(e, BoundError::Mismatch(_));
+    // the rigorous kinds are bounds of minimal coordinates only
+    for kind in [BoundKind::theorem1(0.2), BoundKind::rkhs(0.2)] {
+        let name = kind.name();
+        assert!(matches!(
+            plain.error_bound(&kind, &cal_p),
+            Err(BoundError::KindUnavailable { kind, .. }) if kind == name
+        ));
+    }
     // inputs: model, calibration and prediction must agree
     assert!(matches!(
-        plain.conformal_bound_forced::<2>(&cal_f, &loose),
+        plain.error_bound_forced::<2>(&BoundKind::Conformal(loose.clone()), &cal_f),
         Err(BoundError::Inputs {
             trained: 0,
             given: 2
         })
     ));
     assert!(matches!(
-        forced.conformal_bound(&cal_p, &loose),
+        forced.error_bound(&BoundKind::Conformal(loose.clone()), &cal_p),
         Err(BoundError::Inputs {
             trained: 2,
             given: 0
@@ -1096,23 +1098,27 @@ fn spatial_bound_misuse_is_a_typed_error() {
     ));
     assert!(is_mismatch(
         &forced
-            .conformal_bound_forced::<2>(&cal_p, &loose)
+            .error_bound_forced::<2>(&BoundKind::Conformal(loose.clone()), &cal_p)
             .unwrap_err()
     ));
-    let bound: SpatialConformal = forced.conformal_bound_forced::<2>(&cal_f, &loose).unwrap();
-    let pb = plain.conformal_bound(&cal_p, &loose).unwrap();
-    assert!(plain.predict_bounded(&z0, horizon, &pb).is_ok());
+    let bound: SpatialConformal = forced
+        .error_bound_forced::<2>(&BoundKind::Conformal(loose.clone()), &cal_f)
+        .unwrap();
+    let pb = plain
+        .error_bound(&BoundKind::Conformal(loose.clone()), &cal_p)
+        .unwrap();
+    assert!(plain.predict(&z0, horizon, &pb).is_ok());
     assert!(
         forced
-            .predict_bounded_forced(&z0, &logged[0], &logged[1..=horizon], &bound)
+            .predict_forced(&z0, &logged[0], &logged[1..=horizon], &bound)
             .is_ok()
     );
     assert!(matches!(
-        plain.predict_bounded(&z0, horizon, &bound),
+        plain.predict(&z0, horizon, &bound),
         Err(BoundError::Mismatch(_))
     ));
     assert!(matches!(
-        forced.predict_bounded_forced(&z0, &logged[0], &logged[1..=horizon + 1], &bound),
+        forced.predict_forced(&z0, &logged[0], &logged[1..=horizon + 1], &bound),
         Err(BoundError::HorizonTooLong {
             calibrated: 4,
             requested: 5
@@ -1120,21 +1126,21 @@ fn spatial_bound_misuse_is_a_typed_error() {
     ));
     // no steps: the start alone, bounds 0
     let alone = forced
-        .predict_bounded_forced::<2>(&z0, &logged[0], &[], &bound)
+        .predict_forced::<2>(&z0, &logged[0], &[], &bound)
         .unwrap();
     assert_eq!(alone.len(), 1);
     assert_eq!((alone[0].translation, alone[0].rotation), (0.0, 0.0));
-    assert_eq!(plain.predict_bounded(&z0, 0, &pb).unwrap().len(), 1);
+    assert_eq!(plain.predict(&z0, 0, &pb).unwrap().len(), 1);
     let mut nan = logged[1..=horizon].to_vec();
     nan[2][0] = f64::NAN;
     assert!(
         forced
-            .predict_bounded_forced(&z0, &logged[0], &nan, &bound)
+            .predict_forced(&z0, &logged[0], &nan, &bound)
             .is_err()
     );
     assert!(
         forced
-            .predict_bounded_forced(&z0, &nan[2], &logged[1..=horizon], &bound)
+            .predict_forced(&z0, &nan[2], &logged[1..=horizon], &bound)
             .is_err()
     );
     // a bound edited or loaded from a file (its fields are public and it
@@ -1143,7 +1149,7 @@ fn spatial_bound_misuse_is_a_typed_error() {
     let edited = |edit: &dyn Fn(&mut SpatialConformal)| {
         let mut b = pb.clone();
         edit(&mut b);
-        plain.predict_bounded(&z0, horizon, &b).map(|_| ())
+        plain.predict(&z0, horizon, &b).map(|_| ())
     };
     assert!(matches!(
         edited(&|b| b.translation.per_step.truncate(3)),
@@ -1180,10 +1186,12 @@ fn spatial_bound_misuse_is_a_typed_error() {
     // Δt, δ and the window count
     let other_dt = SpatialCalibration::from_trajectories(&runs, 0.02, horizon, 5).unwrap();
     assert!(is_mismatch(
-        &plain.conformal_bound(&other_dt, &loose).unwrap_err()
+        &plain
+            .error_bound(&BoundKind::Conformal(loose.clone()), &other_dt)
+            .unwrap_err()
     ));
     assert!(matches!(
-        plain.conformal_bound(&cal_p, &ConformalSettings::default()),
+        plain.error_bound(&BoundKind::Conformal(ConformalSettings::default()), &cal_p),
         Err(BoundError::TooFewCalibration {
             needed: 19,
             got: 18,
@@ -1191,12 +1199,12 @@ fn spatial_bound_misuse_is_a_typed_error() {
         })
     ));
     assert!(matches!(
-        plain.conformal_bound(
-            &cal_p,
-            &ConformalSettings {
+        plain.error_bound(
+            &BoundKind::Conformal(ConformalSettings {
                 delta: 1.5,
                 ..loose.clone()
-            }
+            }),
+            &cal_p
         ),
         Err(BoundError::InvalidSetting { .. })
     ));
@@ -1206,7 +1214,7 @@ fn spatial_bound_misuse_is_a_typed_error() {
     assert!(SpatialCalibration::<2>::from_trajectories(&runs, dt, 40, 5).is_err());
     let none = SpatialCalibration::<2>::new(dt, Vec::new()).unwrap();
     assert!(matches!(
-        plain.conformal_bound(&none, &loose),
+        plain.error_bound(&BoundKind::Conformal(loose.clone()), &none),
         Err(BoundError::TooFewCalibration { got: 0, .. })
     ));
     let mut w = cal_p.windows()[0].clone();
@@ -1253,12 +1261,12 @@ fn spatial_bound_misuse_is_a_typed_error() {
     );
     // the per-step tube and the simultaneous one: the latter is wider
     let simultaneous = plain
-        .conformal_bound(
-            &cal_p,
-            &ConformalSettings {
+        .error_bound(
+            &BoundKind::Conformal(ConformalSettings {
                 tube: Tube::Simultaneous,
                 ..loose.clone()
-            },
+            }),
+            &cal_p,
         )
         .unwrap();
     assert!(

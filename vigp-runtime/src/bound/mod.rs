@@ -50,12 +50,14 @@
 pub(crate) mod conformal;
 mod jacobian;
 mod rkhs;
+pub mod space;
 mod uniform;
 pub(crate) mod windows;
 
 pub use conformal::{Calibration, ConformalParts, Region, Window};
 pub use jacobian::projection_jacobian;
 pub use rkhs::RkhsOutput;
+pub use space::{BoundSpace, Planned};
 pub use uniform::Theorem1Output;
 pub use windows::{CalibrationOf, CalibrationWindow};
 
@@ -64,6 +66,7 @@ use crate::integrator::Integrator;
 use crate::learned::{LearnError, Learned};
 use crate::mechanism::{Mechanism, State};
 use crate::newton::StepError;
+use crate::variational::Variational;
 use conformal::{position_scales, predictive_scale, score_scale};
 use core::fmt;
 use nalgebra::SVector;
@@ -197,6 +200,15 @@ pub enum BoundError {
         trained: usize,
         /// Inputs given.
         given: usize,
+    },
+    /// A kind of bound this configuration space does not have (bodies in
+    /// ℝ³ × SO(3) take the conformal kind only).
+    #[error("no {kind} bound for {space}: use the conformal kind")]
+    KindUnavailable {
+        /// The kind asked for ([`BoundKind::name`]).
+        kind: &'static str,
+        /// The configuration space.
+        space: &'static str,
     },
     /// A step, projection or nominal prior failed.
     #[error(transparent)]
@@ -499,6 +511,15 @@ impl BoundKind {
             delta,
             ..ConformalSettings::default()
         })
+    }
+
+    /// `"theorem1"`, `"rkhs"` or `"conformal"` (as [`ErrorBound::kind_name`]).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Theorem1(_) => "theorem1",
+            Self::Rkhs(_) => "rkhs",
+            Self::Conformal(_) => "conformal",
+        }
     }
 
     /// The δ of the settings.
@@ -829,6 +850,87 @@ pub struct BoundedPrediction<const N: usize> {
     pub fell_back: bool,
 }
 
+/// Minimal coordinates in ℝⁿ: all three kinds ([`BoundKind`]; module
+/// docs), one entry point for them.
+///
+/// `error_bound`: `calibration` holds held-out windows, required by the
+/// conformal kind; the rigorous kinds also estimate L and pick τ at its
+/// start states (besides the training states) and accept
+/// [`Calibration::empty`]. Cost: the rigorous kinds predict σ and the
+/// projection's Jacobian at up to 2·256 sample states (plus an O(N³)
+/// eigenvalue problem per output for [`SigmaModulus::Lederer2019`]); the
+/// conformal kind predicts every calibration window with variances (n·K
+/// learned steps). Errors: invalid settings (NaN, ∞, negative, δ ∉ (0, 1),
+/// wrong lengths), too few or malformed calibration windows, calibration
+/// data with another Δt, a failed projection or prior step at a sample
+/// state, a constant that comes out non-finite, or a rigorous kind asked of
+/// a sparse GP ([`BoundError::SparseModel`]: a sparse model takes the
+/// conformal kind, without a fallback). A model trained with inputs is
+/// sampled under u = 0 by `error_bound`; the conformal kind on calibration
+/// windows that carry inputs is a [`BoundError::Mismatch`] there.
+///
+/// `error_bound_forced`: the conformal kind predicts each calibration
+/// window under its inputs (windows from
+/// [`Calibration::from_trajectories_forced`] or [`Calibration::new_forced`]);
+/// the GP inputs of its region test are the starts' with their first step's
+/// input. The rigorous kinds estimate the projection's Lipschitz constant
+/// and pick τ at the training inputs and the calibration starts, each state
+/// with its input; Theorem 1's box X spans the GP inputs, the inputs' range
+/// included. `U` other than the model's inputs (inputs for a model trained
+/// without them, or none for one trained with them) is a
+/// [`BoundError::Mismatch`].
+///
+/// `predict`: every state carries its bound, the one-step velocity bound of
+/// each step and the position bound of each state ([`BoundedPrediction`]).
+/// Cost: `steps` learned steps with variances, plus, for the rigorous kinds
+/// (and a conformal bound that falls back), one mean step with its exact
+/// gradient per step for the local Jacobian that propagates the bound
+/// ([`Learned::step_jacobian_norms`]). A model trained with inputs predicts
+/// under u = 0 there (as [`Learned::step_mean_in`]).
+///
+/// `predict_forced`: step k from the predicted z_k under `inputs[k]` (held
+/// over [t_{k+1}, t_{k+2}], the interval of the velocity the step predicts,
+/// as in [`crate::learned::ForcedTransition::u`]). The one-step bounds are
+/// those of the GP at (z_k, u_{k−1}, u_k), and the rigorous kinds propagate
+/// them to positions with the forced step's Jacobian norms there
+/// ([`Learned::step_jacobian_norms_forced`]). Several bounds on one
+/// prediction: [`Learned::predict_bounds`], [`Learned::predict_bounds_forced`].
+impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> BoundSpace<N>
+    for Variational<M, N, C>
+{
+    type Window = Window<N>;
+    type Bound = ErrorBound;
+    type Prediction = BoundedPrediction<N>;
+
+    fn check_forced(learned: &Learned<M, N, C>, inputs: usize) -> Result<(), BoundError> {
+        learned.check_forced_inputs(inputs)
+    }
+
+    fn error_bound<const U: usize>(
+        learned: &Learned<M, N, C>,
+        kind: &BoundKind,
+        calibration: &Calibration<N>,
+    ) -> Result<ErrorBound, BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
+        learned.error_bound_at::<U>(kind, calibration)
+    }
+
+    fn predict<const U: usize>(
+        learned: &Learned<M, N, C>,
+        z0: &State<N>,
+        run: Planned<'_, U>,
+        bound: &ErrorBound,
+    ) -> Result<BoundedPrediction<N>, BoundError>
+    where
+        M: vigp_core::Inputs<U>,
+    {
+        let mut all = learned.predict_bounds_at(z0, run.steps, run.u_prev, run.inputs, &[bound])?;
+        Ok(all.remove(0))
+    }
+}
+
 /// States, standard deviations and corrections of a learned prediction,
 /// the inputs it was made under (empty: unforced, U = 0) and the input
 /// before the first (that produced the start's velocity).
@@ -1027,65 +1129,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         out
     }
 
-    /// The error bound of this trained model: one entry point for the three
-    /// kinds. `calibration` holds held-out windows: required by the
-    /// conformal kind; the rigorous kinds also estimate L and pick τ at its
-    /// start states (besides the training states) and accept
-    /// [`Calibration::empty`].
-    ///
-    /// Cost: the rigorous kinds predict σ and the projection's Jacobian at
-    /// up to 2·256 sample states (plus an O(N³) eigenvalue problem per
-    /// output for [`SigmaModulus::Lederer2019`]); the conformal kind predicts
-    /// every calibration window with variances (n·K learned steps).
-    ///
-    /// Errors: invalid settings (NaN, ∞, negative, δ ∉ (0, 1), wrong
-    /// lengths), too few or malformed calibration windows, calibration data
-    /// with another Δt, a failed projection or prior step at a sample state,
-    /// a constant that comes out non-finite, or a rigorous kind asked of a
-    /// sparse GP ([`BoundError::SparseModel`]: a sparse model takes the
-    /// conformal kind, without a fallback).
-    ///
-    /// A model trained with inputs is sampled under u = 0 here, the step
-    /// [`Learned::predict`] takes; for predictions under inputs use
-    /// [`Learned::error_bound_forced`]. The conformal kind on calibration
-    /// windows that carry inputs is a [`BoundError::Mismatch`] here.
-    pub fn error_bound(
-        &self,
-        kind: &BoundKind,
-        calibration: &Calibration<N>,
-    ) -> Result<ErrorBound, BoundError> {
-        self.error_bound_at::<0>(kind, calibration)
-    }
-
-    /// [`Learned::error_bound`] for predictions under inputs
-    /// ([`Learned::predict_forced`]) of a model from
-    /// [`Learned::train_forced`]. The conformal kind predicts each
-    /// calibration window under its inputs (windows from
-    /// [`Calibration::from_trajectories_forced`] or
-    /// [`Calibration::new_forced`]); the GP inputs of its region test are
-    /// the starts' with their first step's input. The rigorous kinds
-    /// estimate the projection's Lipschitz constant and pick τ at the
-    /// training inputs and the calibration starts, each state with its
-    /// input. Theorem 1's box X spans the GP inputs, the inputs' range
-    /// included. `U = 0` on a model without inputs is `error_bound`.
-    ///
-    /// Errors: those of `error_bound`; `U` other than the model's inputs
-    /// (inputs for a model trained without them, or none for one trained
-    /// with them), or conformal calibration windows without inputs
-    /// ([`BoundError::Mismatch`]). A `U` other than the mechanism's number
-    /// of actuated joints does not compile (the forced step's assertion).
-    pub fn error_bound_forced<const U: usize>(
-        &self,
-        kind: &BoundKind,
-        calibration: &Calibration<N>,
-    ) -> Result<ErrorBound, BoundError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        self.check_forced_inputs::<U>()?;
-        self.error_bound_at::<U>(kind, calibration)
-    }
-
     /// `error_bound` (U = 0: unforced samples) or `error_bound_forced`.
     fn error_bound_at<const U: usize>(
         &self,
@@ -1202,65 +1245,6 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
         Ok(bound(parts, lip, samples.len()))
     }
 
-    /// A `steps`-step prediction from `z0` (e.g. 20 steps for MPC) in which
-    /// every state carries its bound: the one-step velocity bound of each
-    /// step and the position bound of each state (see
-    /// [`BoundedPrediction`]). Cost: `steps` learned steps with variances,
-    /// plus, for the rigorous kinds (and a conformal bound that falls
-    /// back), one mean step with its exact gradient per step for the local
-    /// Jacobian that propagates the bound
-    /// ([`Learned::step_jacobian_norms`]).
-    ///
-    /// Errors: a bound made for another model, more steps than a conformal
-    /// bound was calibrated for, a failed step, or a non-finite bound.
-    ///
-    /// A model trained with inputs predicts under u = 0 here (as
-    /// [`Learned::step_mean_in`]); [`Learned::predict_forced`] predicts
-    /// under planned inputs.
-    pub fn predict(
-        &self,
-        z0: &State<N>,
-        steps: usize,
-        bound: &ErrorBound,
-    ) -> Result<BoundedPrediction<N>, BoundError> {
-        let mut all = self.predict_bounds(z0, steps, &[bound])?;
-        Ok(all.remove(0))
-    }
-
-    /// [`Learned::predict`] under planned inputs, for a model from
-    /// [`Learned::train_forced`]: `inputs.len()` steps, step k from the
-    /// predicted z_k under `inputs[k]` (held over [t_{k+1}, t_{k+2}], the
-    /// interval of the velocity the step predicts, as in
-    /// [`crate::learned::ForcedTransition::u`]) after `inputs[k − 1]`, the
-    /// first step after `u_prev` (the input that produced z₀'s velocity;
-    /// `crate::learned`, "Under inputs"), each state with its bound. The
-    /// one-step bounds are those of the GP at (z_k, u_{k−1}, u_k), and the
-    /// rigorous kinds propagate them to positions with the forced step's
-    /// Jacobian norms there
-    /// ([`Learned::step_jacobian_norms_forced`]): the bounds are on the
-    /// distance to the true trajectory under the same inputs. Use a bound
-    /// from [`Learned::error_bound_forced`]. `U = 0` on a model without
-    /// inputs is `predict` with `inputs.len()` steps.
-    ///
-    /// Errors: those of `predict`; `U` other than the model's inputs
-    /// (inputs for a model trained without them, or none for one trained
-    /// with them: [`BoundError::Mismatch`]); a NaN or ∞ input (a step
-    /// error). A `U` other than the mechanism's number of actuated joints
-    /// does not compile.
-    pub fn predict_forced<const U: usize>(
-        &self,
-        z0: &State<N>,
-        u_prev: &SVector<f64, U>,
-        inputs: &[SVector<f64, U>],
-        bound: &ErrorBound,
-    ) -> Result<BoundedPrediction<N>, BoundError>
-    where
-        M: vigp_core::Inputs<U>,
-    {
-        let mut all = self.predict_bounds_forced(z0, u_prev, inputs, &[bound])?;
-        Ok(all.remove(0))
-    }
-
     /// [`Learned::predict_forced`] under several bounds at once, as
     /// [`Learned::predict_bounds`]: result `i` equals
     /// `predict_forced(z0, u_prev, inputs, bounds[i])` bit for bit.
@@ -1274,7 +1258,7 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
     where
         M: vigp_core::Inputs<U>,
     {
-        self.check_forced_inputs::<U>()?;
+        self.check_forced_inputs(U)?;
         self.predict_bounds_at(z0, inputs.len(), u_prev, inputs, bounds)
     }
 
@@ -1365,8 +1349,8 @@ impl<M: Mechanism<N, C> + Clone, const N: usize, const C: usize> Learned<M, N, C
 
     /// The check of the forced calls that `U` is the model's input count
     /// ([`BoundError::Mismatch`] otherwise).
-    fn check_forced_inputs<const U: usize>(&self) -> Result<(), BoundError> {
-        if U != self.inputs() {
+    fn check_forced_inputs(&self, inputs: usize) -> Result<(), BoundError> {
+        if inputs != self.inputs() {
             return Err(BoundError::Mismatch(
                 "number of inputs (U must be the model's inputs)",
             ));

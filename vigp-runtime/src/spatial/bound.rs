@@ -34,13 +34,14 @@
 //! is one such prediction.
 
 use super::learned::{Configuration, LearnedSpatial, Trace, between};
-use super::{Spatial, SpatialState};
+use super::{LieStepper, Spatial, SpatialState};
 use crate::bound::conformal::{
     RegionBuilder, Traced, calibrate_traced, position_scales, predictive_scale, quantile_index,
     score_scale,
 };
+use crate::bound::space::{BoundSpace, Planned};
 use crate::bound::windows::{CalibrationOf, CalibrationWindow};
-use crate::bound::{BoundError, ConformalSettings, Region, Score, Tube, check_delta};
+use crate::bound::{BoundError, BoundKind, ConformalSettings, Region, Score, Tube, check_delta};
 use crate::learned::LearnError;
 use nalgebra::SVector;
 use serde::{Deserialize, Serialize};
@@ -126,7 +127,7 @@ pub struct PoseQuantiles {
 }
 
 /// A calibrated conformal bound for a [`LearnedSpatial`] model
-/// ([`LearnedSpatial::conformal_bound`]).
+/// ([`LearnedIntegrator::error_bound`](crate::learned::LearnedIntegrator::error_bound)).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SpatialConformal {
     /// Miscoverage δ.
@@ -198,103 +199,94 @@ fn pose_errors<const B: usize>(z: &SpatialState<B>, c: &Configuration<B>) -> (f6
     })
 }
 
-impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
-    LearnedSpatial<S, B, J, N, C>
+/// The conformal bound of the [module docs](self): `error_bound` takes
+/// [`BoundKind::Conformal`] (its `fallback` does not apply here) and a
+/// model trained without inputs, `error_bound_forced` a model from
+/// [`LearnedSpatial::train_forced`] with windows that carry their inputs
+/// ([`SpatialCalibration::new_forced`],
+/// [`SpatialCalibration::from_trajectories_forced`]). Errors: δ ∉ (0, 1),
+/// too few windows for δ (at least ⌈1/δ − 1⌉), windows with other inputs or
+/// another Δt ([`BoundError::Mismatch`]), a model trained with other inputs
+/// ([`BoundError::Inputs`]); a quantile that is not finite (too many failed
+/// windows).
+impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize> BoundSpace<N>
+    for LieStepper<S, B, J, N, C>
 {
-    /// The conformal bound of a model trained without inputs, calibrated
-    /// on `calibration` (windows without inputs) with `settings` (δ, score
-    /// normalisation, tube; `settings.fallback` does not apply here). See
-    /// the [module docs](self) for the guarantee. Errors: δ ∉ (0, 1), too
-    /// few windows for δ (at least ⌈1/δ − 1⌉), windows with inputs or
-    /// another Δt ([`BoundError::Mismatch`]), a model trained with inputs;
-    /// a quantile that is not finite (too many failed windows).
-    pub fn conformal_bound(
-        &self,
-        calibration: &SpatialCalibration<B>,
-        settings: &ConformalSettings,
-    ) -> Result<SpatialConformal, BoundError> {
-        self.check_inputs(0)?;
-        let mut ws = self.workspace();
-        self.calibrate(calibration, settings, 0, |_, w| {
-            self.trace(&w.start, w.configurations.len(), &mut ws)
-        })
+    type Window = SpatialWindow<B>;
+    type Bound = SpatialConformal;
+    type Prediction = Vec<BoundedSpatialState<B>>;
+
+    /// The model's inputs are checked with the calibration or the
+    /// prediction, for both entry points.
+    fn check_forced(_: &LearnedSpatial<S, B, J, N, C>, _: usize) -> Result<(), BoundError> {
+        Ok(())
     }
 
-    /// [`LearnedSpatial::conformal_bound`] for a model from
-    /// [`LearnedSpatial::train_forced`]: each window is predicted under its
-    /// own inputs ([`SpatialCalibration::new_forced`],
-    /// [`SpatialCalibration::from_trajectories_forced`]), and the bound
-    /// covers predictions under inputs
-    /// ([`LearnedSpatial::predict_bounded_forced`]).
-    pub fn conformal_bound_forced<const U: usize>(
-        &self,
+    fn error_bound<const U: usize>(
+        learned: &LearnedSpatial<S, B, J, N, C>,
+        kind: &BoundKind,
         calibration: &SpatialCalibration<B>,
-        settings: &ConformalSettings,
     ) -> Result<SpatialConformal, BoundError>
     where
         S: vigp_core::Inputs<U>,
     {
-        self.check_inputs(U)?;
-        if calibration.input_count() != U {
+        let BoundKind::Conformal(settings) = kind else {
+            return Err(BoundError::KindUnavailable {
+                kind: kind.name(),
+                space: "bodies in ℝ³ × SO(3)",
+            });
+        };
+        learned.check_inputs(U)?;
+        if U > 0 && calibration.input_count() != U {
             return Err(BoundError::Mismatch(
                 "calibration windows carry other inputs",
             ));
         }
-        let mut ws = self.workspace();
-        self.calibrate(calibration, settings, U, |i, w| {
+        let mut ws = learned.workspace();
+        learned.calibrate(calibration, settings, U, |i, w| {
+            if U == 0 {
+                return learned.trace(&w.start, w.configurations.len(), &mut ws);
+            }
             let us: Vec<SVector<f64, U>> = calibration
                 .window_inputs(i)
                 .expect("input count checked above");
             let up: SVector<f64, U> = calibration
                 .window_previous_input(i)
                 .expect("input count checked above");
-            self.trace_forced(&w.start, &up, &us, &mut ws)
+            learned.trace_forced(&w.start, &up, &us, &mut ws)
         })
     }
 
-    /// The mean prediction of `steps` steps from `z0` with its conformal
-    /// bounds (a model trained without inputs): entry k is z_k with the
-    /// translation and rotation bounds at horizon k. Errors: more steps
-    /// than the bound's horizon ([`BoundError::HorizonTooLong`]), a bound
-    /// of another model or one calibrated under inputs
-    /// ([`BoundError::Mismatch`]), a failed step.
-    pub fn predict_bounded(
-        &self,
+    /// Entry k is z_k with the translation and rotation bounds at horizon
+    /// k; z_K is tested against the region with the last step's inputs
+    /// (u_prev and 0 without steps).
+    fn predict<const U: usize>(
+        learned: &LearnedSpatial<S, B, J, N, C>,
         z0: &SpatialState<B>,
-        steps: usize,
-        bound: &SpatialConformal,
-    ) -> Result<Vec<BoundedSpatialState<B>>, BoundError> {
-        self.check_bound(bound, 0, steps)?;
-        let trace = self.trace(z0, steps, &mut self.workspace())?;
-        self.bounded(trace, bound, |_| (&[], &[]))
-    }
-
-    /// [`LearnedSpatial::predict_bounded`] under `inputs` (one per step)
-    /// after `u_prev` (the input that produced z₀'s velocities; step k runs
-    /// after `inputs[k − 1]`) for a model from
-    /// [`LearnedSpatial::train_forced`] with a bound from
-    /// [`LearnedSpatial::conformal_bound_forced`].
-    pub fn predict_bounded_forced<const U: usize>(
-        &self,
-        z0: &SpatialState<B>,
-        u_prev: &SVector<f64, U>,
-        inputs: &[SVector<f64, U>],
+        run: Planned<'_, U>,
         bound: &SpatialConformal,
     ) -> Result<Vec<BoundedSpatialState<B>>, BoundError>
     where
         S: vigp_core::Inputs<U>,
     {
-        self.check_bound(bound, U, inputs.len())?;
-        let trace = self.trace_forced(z0, u_prev, inputs, &mut self.workspace())?;
-        // z_K is tested with the last step's inputs (u_prev and 0 without
-        // steps)
+        learned.check_bound(bound, U, run.steps)?;
+        let mut ws = learned.workspace();
+        if U == 0 {
+            let trace = learned.trace(z0, run.steps, &mut ws)?;
+            return learned.bounded(trace, bound, |_| (&[], &[]));
+        }
+        let trace = learned.trace_forced(z0, run.u_prev, run.inputs, &mut ws)?;
         let zero = SVector::<f64, U>::zeros();
-        self.bounded(trace, bound, |k| match inputs.len() {
+        learned.bounded(trace, bound, |k| match run.inputs.len() {
             0 => (zero.as_slice(), zero.as_slice()),
-            n => super::learned::step_inputs(u_prev, inputs, k.min(n - 1)),
+            n => super::learned::step_inputs(run.u_prev, run.inputs, k.min(n - 1)),
         })
     }
+}
 
+impl<S: Spatial<B, J>, const B: usize, const J: usize, const N: usize, const C: usize>
+    LearnedSpatial<S, B, J, N, C>
+{
     fn check_bound(
         &self,
         bound: &SpatialConformal,
