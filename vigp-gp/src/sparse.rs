@@ -872,6 +872,23 @@ mod tests {
         (fp - f(&p)) / (2.0 * h)
     }
 
+    /// Asserts that `analytic` is ∂f/∂a_k at a = `at` to 1e-6·(1 + |fd|),
+    /// fd the [`central_difference`]; `what` names the component in the
+    /// message.
+    fn assert_matches_central_difference(
+        f: impl FnMut(&[f64]) -> f64,
+        at: &[f64],
+        k: usize,
+        analytic: f64,
+        what: &str,
+    ) {
+        let fd = central_difference(f, at, k);
+        assert!(
+            (fd - analytic).abs() <= 1e-6 * (1.0 + fd.abs()),
+            "{what} {k}: analytic {analytic} vs fd {fd}"
+        );
+    }
+
     #[test]
     fn gradient_matches_central_differences() {
         let (n, d, m) = (N, D, M);
@@ -879,14 +896,10 @@ mod tests {
         let mut ws = SparseWorkspace::new(m, n);
         let e = elbo_ws(&mut ws, &x, &z, d, &y, &theta, true, Par::Seq).unwrap();
         for k in 0..theta.len() {
-            let fd = central_difference(|t| bound(&mut ws, &x, &z, &y, t), &theta, k);
             // central differences: O(h²) truncation ≈ 1e-10·|f'''|, rounding
             // ≈ ε·|F|/h ≈ 1e-9 here
-            assert!(
-                (fd - e.gradient[k]).abs() <= 1e-6 * (1.0 + fd.abs()),
-                "component {k}: analytic {} vs fd {fd}",
-                e.gradient[k]
-            );
+            let f = |t: &[f64]| bound(&mut ws, &x, &z, &y, t);
+            assert_matches_central_difference(f, &theta, k, e.gradient[k], "component");
         }
         // the parallel path gives the same bits (fixed partition, partial
         // sums added in task order)
@@ -911,13 +924,10 @@ mod tests {
         assert_eq!(t.gradient[..], e.gradient[..d + 2]);
         let mut largest = 0.0f64;
         for k in 0..m * d {
-            let fd = central_difference(|zk| bound(&mut ws, &x, zk, &y, &theta), &z, k);
             let an = e.gradient[d + 2 + k];
             largest = largest.max(an.abs());
-            assert!(
-                (fd - an).abs() <= 1e-6 * (1.0 + fd.abs()),
-                "inducing coordinate {k}: analytic {an} vs fd {fd}"
-            );
+            let f = |zk: &[f64]| bound(&mut ws, &x, zk, &y, &theta);
+            assert_matches_central_difference(f, &z, k, an, "inducing coordinate");
         }
         // the check is not vacuous: the bound does move with Z here
         assert!(largest > 1e-2, "largest |dF/dz| {largest}");
