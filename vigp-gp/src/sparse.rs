@@ -847,11 +847,13 @@ mod tests {
     const M: usize = 15;
 
     /// The tests' problem: inputs, targets, inducing inputs (k-means++ with
-    /// two Lloyd iterations) and a point θ = (ln ℓ, ln σ_f², ln σ_n²).
-    fn problem() -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+    /// two Lloyd iterations), a point θ = (ln ℓ, ln σ_f², ln σ_n²) and a
+    /// workspace of its size.
+    fn problem() -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, SparseWorkspace) {
         let (x, y) = data(N, D);
         let z = kmeans_pp(&x, D, M, 2, 1);
-        (x, y, z, vec![0.2, -0.3, 0.5, 0.4, -3.0])
+        let ws = SparseWorkspace::new(M, N);
+        (x, y, z, vec![0.2, -0.3, 0.5, 0.4, -3.0], ws)
     }
 
     /// The bound F alone (no gradient, sequential) on the tests' problem
@@ -891,9 +893,8 @@ mod tests {
 
     #[test]
     fn gradient_matches_central_differences() {
-        let (n, d, m) = (N, D, M);
-        let (x, y, z, theta) = problem();
-        let mut ws = SparseWorkspace::new(m, n);
+        let d = D;
+        let (x, y, z, theta, mut ws) = problem();
         let e = elbo_ws(&mut ws, &x, &z, d, &y, &theta, true, Par::Seq).unwrap();
         for k in 0..theta.len() {
             // central differences: O(h²) truncation ≈ 1e-10·|f'''|, rounding
@@ -914,9 +915,8 @@ mod tests {
         // every inducing point (h = 1e-5 in units where the inputs span
         // [−2, 2]: truncation ≈ h²·|F‴| ≈ 1e-9, rounding ≈ ε·|F|/h ≈
         // 1e-9), and the θ part equal to elbo_ws's bit for bit.
-        let (n, d, m) = (N, D, M);
-        let (x, y, z, theta) = problem();
-        let mut ws = SparseWorkspace::new(m, n);
+        let (d, m) = (D, M);
+        let (x, y, z, theta, mut ws) = problem();
         let e = elbo_z_ws(&mut ws, &x, &z, d, &y, &theta, Par::Seq).unwrap();
         assert_eq!(e.gradient.len(), d + 2 + m * d);
         let t = elbo_ws(&mut ws, &x, &z, d, &y, &theta, true, Par::Seq).unwrap();
@@ -941,9 +941,8 @@ mod tests {
         // against many small tasks with a partial last one and several
         // panels per task: the same bound and gradient up to the order of
         // the sums (relative 1e-12: ≈ N·ε over N = 120 terms, with margin).
-        let (n, d, m) = (N, D, M);
-        let (x, y, z, theta) = problem();
-        let mut ws = SparseWorkspace::new(m, n);
+        let (n, d) = (N, D);
+        let (x, y, z, theta, mut ws) = problem();
         let one = Blocks { task: n, sub: n };
         let e = elbo_blocks(&mut ws, &x, &z, d, &y, &theta, true, true, Par::Seq, one).unwrap();
         for blocks in [Blocks { task: 17, sub: 5 }, Blocks { task: 64, sub: 64 }] {
