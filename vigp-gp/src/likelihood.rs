@@ -758,16 +758,24 @@ mod tests {
             .collect()
     }
 
+    /// This CPU's AVX2 token; `None`, said on stderr, when it has no AVX2
+    /// (the comparisons with the portable paths then have nothing to do).
+    #[cfg(target_arch = "x86_64")]
+    fn avx2() -> Option<pulp::x86::V3> {
+        let simd = pulp::x86::V3::try_new();
+        if simd.is_none() {
+            eprintln!("no AVX2 on this CPU: nothing to compare");
+        }
+        simd
+    }
+
     /// The AVX2 kernel matrix (four columns at a time) has the bits of the
     /// portable column-by-column one, for sizes off the tile grid and
     /// dimensions on both the fixed and the any-dimension paths.
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx2_kernel_matrix_has_the_portable_bits() {
-        let Some(simd) = pulp::x86::V3::try_new() else {
-            eprintln!("no AVX2 on this CPU: nothing to compare");
-            return;
-        };
+        let Some(simd) = avx2() else { return };
         for n in [1, 2, 3, 4, 5, 7, 8, 9, 12, 13, 17, 40, 75] {
             for d in [1, 3, 4, 8, 9, 12, 14, 24] {
                 let xs = inputs(n, d);
@@ -793,10 +801,7 @@ mod tests {
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn avx2_gradient_sums_have_the_portable_bits() {
-        let Some(simd) = pulp::x86::V3::try_new() else {
-            eprintln!("no AVX2 on this CPU: nothing to compare");
-            return;
-        };
+        let Some(simd) = avx2() else { return };
         for m in 0..=41 {
             let w: Vec<f64> = (0..m).map(|i| (i as f64 * 0.37).sin() * 1e3).collect();
             let x = inputs(m, 1);

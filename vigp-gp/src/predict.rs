@@ -142,17 +142,17 @@ impl Gp {
     }
 
     /// One output's kernel row k(x*, X) for the normalised query `xn` into
-    /// `lane.kstar` (the query scaled by its length scales into `lane.xs`).
-    fn lane_kernel_row(o: &OutputGp, xn: &[f64], b: usize, lane: &mut Lane) -> Result<(), GpError> {
-        Self::scale_query(o, xn, &mut lane.xs);
-        kernel_row_dispatched(
-            &o.xs_cols,
-            b,
-            &lane.xs,
-            o.hp.signal_variance,
-            &mut lane.kstar,
-        )
-        .map_err(core_error)
+    /// `kstar` (the query scaled by its length scales into `xs`).
+    #[inline]
+    fn kernel_row_at(
+        o: &OutputGp,
+        xn: &[f64],
+        b: usize,
+        xs: &mut [f64],
+        kstar: &mut [f64],
+    ) -> Result<(), GpError> {
+        Self::scale_query(o, xn, xs);
+        kernel_row_dispatched(&o.xs_cols, b, xs, o.hp.signal_variance, kstar).map_err(core_error)
     }
 
     /// The scaled query x_n/ℓ of output `o` into `xs`.
@@ -196,9 +196,7 @@ impl Gp {
         for j in 0..self.p {
             let j = if flip { self.p - 1 - j } else { j };
             let o = &self.outputs[j];
-            Self::scale_query(o, &ws.xn, &mut ws.xs);
-            kernel_row_dispatched(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
-                .map_err(core_error)?;
+            Self::kernel_row_at(o, &ws.xn, b, &mut ws.xs, &mut ws.kstar)?;
             let mn = core_gp::dot(&ws.kstar, &o.alpha).map_err(core_error)?;
             let vv = match &o.post {
                 Posterior::Exact {
@@ -261,7 +259,7 @@ impl Gp {
             tasks.resize_with(p - h, Task::default);
             for (t, j) in tasks.iter_mut().zip(h..p) {
                 let (o, lane) = (&self.outputs[j], &mut ws.lanes[j]);
-                Self::lane_kernel_row(o, &ws.xn, b, lane)?;
+                Self::kernel_row_at(o, &ws.xn, b, &mut lane.xs, &mut lane.kstar)?;
                 t.linv = Some(linv_of(o)?);
                 t.k.clear();
                 t.k.extend_from_slice(&lane.kstar);
@@ -271,7 +269,7 @@ impl Gp {
         for (j, o) in self.outputs.iter().enumerate() {
             let lane = &mut ws.lanes[j];
             if j < h {
-                Self::lane_kernel_row(o, &ws.xn, b, lane)?;
+                Self::kernel_row_at(o, &ws.xn, b, &mut lane.xs, &mut lane.kstar)?;
             }
             lane.mean = core_gp::dot(&lane.kstar, &o.alpha).map_err(core_error)?;
             if j < h {
@@ -362,9 +360,7 @@ impl Gp {
         self.mean.eval(x, &mut ws.prior);
         let b = ws.n;
         for (j, o) in self.outputs.iter().enumerate() {
-            Self::scale_query(o, &ws.xn, &mut ws.xs);
-            kernel_row_dispatched(&o.xs_cols, b, &ws.xs, o.hp.signal_variance, &mut ws.kstar)
-                .map_err(core_error)?;
+            Self::kernel_row_at(o, &ws.xn, b, &mut ws.xs, &mut ws.kstar)?;
             // as predict_mean_into (kernel_dot = kernel_row + dot), bit for bit
             let mn = core_gp::dot(&ws.kstar, &o.alpha).map_err(core_error)?;
             mean[j] = ws.prior[j] + o.output_scale * mn;
@@ -531,9 +527,7 @@ impl Gp {
         };
         let ks = &mut lane.kstar[..m * b];
         for (h, k) in ks.chunks_exact_mut(b).enumerate() {
-            Self::scale_query(o, &xn[h * d..(h + 1) * d], &mut lane.xs);
-            kernel_row_dispatched(&o.xs_cols, b, &lane.xs, o.hp.signal_variance, k)
-                .map_err(core_error)?;
+            Self::kernel_row_at(o, &xn[h * d..(h + 1) * d], b, &mut lane.xs, k)?;
             lane.mn[h] = core_gp::dot(k, &o.alpha).map_err(core_error)?;
         }
         let tmp = &mut lane.tmp[..m * b];

@@ -847,11 +847,13 @@ mod tests {
     const M: usize = 15;
 
     /// The tests' problem: inputs, targets, inducing inputs (k-means++ with
-    /// two Lloyd iterations) and a point θ = (ln ℓ, ln σ_f², ln σ_n²).
-    fn problem() -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>) {
+    /// two Lloyd iterations), a point θ = (ln ℓ, ln σ_f², ln σ_n²) and a
+    /// workspace of its size.
+    fn problem() -> (Vec<f64>, Vec<f64>, Vec<f64>, Vec<f64>, SparseWorkspace) {
         let (x, y) = data(N, D);
         let z = kmeans_pp(&x, D, M, 2, 1);
-        (x, y, z, vec![0.2, -0.3, 0.5, 0.4, -3.0])
+        let ws = SparseWorkspace::new(M, N);
+        (x, y, z, vec![0.2, -0.3, 0.5, 0.4, -3.0], ws)
     }
 
     /// The bound F alone (no gradient, sequential) on the tests' problem
@@ -872,21 +874,33 @@ mod tests {
         (fp - f(&p)) / (2.0 * h)
     }
 
+    /// Asserts that `analytic` is ∂f/∂a_k at a = `at` to 1e-6·(1 + |fd|),
+    /// fd the [`central_difference`]; `what` names the component in the
+    /// message.
+    fn assert_matches_central_difference(
+        f: impl FnMut(&[f64]) -> f64,
+        at: &[f64],
+        k: usize,
+        analytic: f64,
+        what: &str,
+    ) {
+        let fd = central_difference(f, at, k);
+        assert!(
+            (fd - analytic).abs() <= 1e-6 * (1.0 + fd.abs()),
+            "{what} {k}: analytic {analytic} vs fd {fd}"
+        );
+    }
+
     #[test]
     fn gradient_matches_central_differences() {
-        let (n, d, m) = (N, D, M);
-        let (x, y, z, theta) = problem();
-        let mut ws = SparseWorkspace::new(m, n);
+        let d = D;
+        let (x, y, z, theta, mut ws) = problem();
         let e = elbo_ws(&mut ws, &x, &z, d, &y, &theta, true, Par::Seq).unwrap();
         for k in 0..theta.len() {
-            let fd = central_difference(|t| bound(&mut ws, &x, &z, &y, t), &theta, k);
             // central differences: O(h²) truncation ≈ 1e-10·|f'''|, rounding
             // ≈ ε·|F|/h ≈ 1e-9 here
-            assert!(
-                (fd - e.gradient[k]).abs() <= 1e-6 * (1.0 + fd.abs()),
-                "component {k}: analytic {} vs fd {fd}",
-                e.gradient[k]
-            );
+            let f = |t: &[f64]| bound(&mut ws, &x, &z, &y, t);
+            assert_matches_central_difference(f, &theta, k, e.gradient[k], "component");
         }
         // the parallel path gives the same bits (fixed partition, partial
         // sums added in task order)
@@ -901,9 +915,8 @@ mod tests {
         // every inducing point (h = 1e-5 in units where the inputs span
         // [−2, 2]: truncation ≈ h²·|F‴| ≈ 1e-9, rounding ≈ ε·|F|/h ≈
         // 1e-9), and the θ part equal to elbo_ws's bit for bit.
-        let (n, d, m) = (N, D, M);
-        let (x, y, z, theta) = problem();
-        let mut ws = SparseWorkspace::new(m, n);
+        let (d, m) = (D, M);
+        let (x, y, z, theta, mut ws) = problem();
         let e = elbo_z_ws(&mut ws, &x, &z, d, &y, &theta, Par::Seq).unwrap();
         assert_eq!(e.gradient.len(), d + 2 + m * d);
         let t = elbo_ws(&mut ws, &x, &z, d, &y, &theta, true, Par::Seq).unwrap();
@@ -911,13 +924,10 @@ mod tests {
         assert_eq!(t.gradient[..], e.gradient[..d + 2]);
         let mut largest = 0.0f64;
         for k in 0..m * d {
-            let fd = central_difference(|zk| bound(&mut ws, &x, zk, &y, &theta), &z, k);
             let an = e.gradient[d + 2 + k];
             largest = largest.max(an.abs());
-            assert!(
-                (fd - an).abs() <= 1e-6 * (1.0 + fd.abs()),
-                "inducing coordinate {k}: analytic {an} vs fd {fd}"
-            );
+            let f = |zk: &[f64]| bound(&mut ws, &x, zk, &y, &theta);
+            assert_matches_central_difference(f, &z, k, an, "inducing coordinate");
         }
         // the check is not vacuous: the bound does move with Z here
         assert!(largest > 1e-2, "largest |dF/dz| {largest}");
@@ -931,9 +941,8 @@ mod tests {
         // against many small tasks with a partial last one and several
         // panels per task: the same bound and gradient up to the order of
         // the sums (relative 1e-12: ≈ N·ε over N = 120 terms, with margin).
-        let (n, d, m) = (N, D, M);
-        let (x, y, z, theta) = problem();
-        let mut ws = SparseWorkspace::new(m, n);
+        let (n, d) = (N, D);
+        let (x, y, z, theta, mut ws) = problem();
         let one = Blocks { task: n, sub: n };
         let e = elbo_blocks(&mut ws, &x, &z, d, &y, &theta, true, true, Par::Seq, one).unwrap();
         for blocks in [Blocks { task: 17, sub: 5 }, Blocks { task: 64, sub: 64 }] {
