@@ -964,21 +964,45 @@ fn poly_tokens(m: &Model, mech: &Mechanics, p: &Poly) -> TokenStream {
     out
 }
 
+/// The sign a run-time parameter must have (besides being finite): the
+/// variant of `vigp::embedded::dynamics::ParameterSign` the generated check
+/// names, and what its message says.
+#[derive(Clone, Copy)]
+enum Sign {
+    Any,
+    NonNegative,
+    Positive,
+}
+
+impl Sign {
+    /// The generated `ParameterSign` variant.
+    fn variant(self) -> TokenStream {
+        match self {
+            Sign::Any => quote!(Any),
+            Sign::NonNegative => quote!(NonNegative),
+            Sign::Positive => quote!(Positive),
+        }
+    }
+
+    /// What the message adds to "must be finite".
+    fn bound(self) -> &'static str {
+        match self {
+            Sign::Any => "",
+            Sign::NonNegative => " and >= 0",
+            Sign::Positive => " and > 0",
+        }
+    }
+}
+
 /// Checks of every run-time parameter, naming it in the error.
 fn validation(m: &Model) -> Vec<TokenStream> {
     let mut out = Vec::new();
     // parameter `p`, called `what` in the message, must be finite and of
-    // the sign `s` ("Any", "NonNegative" or "Positive"), which the message
-    // states
-    let mut check = |p: Param, s: &str, what: String| {
+    // the sign `s`, which the message states
+    let mut check = |p: Param, s: Sign, what: String| {
         let value = param_tokens(m, &p);
-        let bound = match s {
-            "NonNegative" => " and >= 0",
-            "Positive" => " and > 0",
-            _ => "",
-        };
-        let msg = format!("{what} must be finite{bound}");
-        let s = format_ident!("{}", s);
+        let msg = format!("{what} must be finite{}", s.bound());
+        let s = s.variant();
         out.push(quote!(::vigp::embedded::dynamics::check_parameter(
             #value,
             ::vigp::embedded::dynamics::ParameterSign::#s,
@@ -986,26 +1010,26 @@ fn validation(m: &Model) -> Vec<TokenStream> {
         )?;));
     };
     for i in 0..2 {
-        check(Param::Gravity(i), "Any", format!("gravity[{i}]"));
+        check(Param::Gravity(i), Sign::Any, format!("gravity[{i}]"));
     }
     for (l, link) in m.links.iter().enumerate() {
         let name = syn::ext::IdentExt::unraw(&link.name).to_string();
         for (p, s, field) in [
-            (Param::Mass(l), "NonNegative", "mass"),
-            (Param::Length(l), "Positive", "length"),
-            (Param::Inertia(l), "NonNegative", "inertia"),
-            (Param::Com(l, 0), "Any", "com[0]"),
-            (Param::Com(l, 1), "Any", "com[1]"),
+            (Param::Mass(l), Sign::NonNegative, "mass"),
+            (Param::Length(l), Sign::Positive, "length"),
+            (Param::Inertia(l), Sign::NonNegative, "inertia"),
+            (Param::Com(l, 0), Sign::Any, "com[0]"),
+            (Param::Com(l, 1), Sign::Any, "com[1]"),
         ] {
             check(p, s, format!("link `{name}`: {field}"));
         }
     }
     // all joints' dampings, then each joint's spring
-    type Field = (fn(usize) -> Param, &'static str, &'static str);
-    let damping: &[Field] = &[(Param::Damping, "NonNegative", "damping")];
+    type Field = (fn(usize) -> Param, Sign, &'static str);
+    let damping: &[Field] = &[(Param::Damping, Sign::NonNegative, "damping")];
     let spring: &[Field] = &[
-        (Param::Stiffness, "NonNegative", "stiffness"),
-        (Param::Rest, "Any", "rest"),
+        (Param::Stiffness, Sign::NonNegative, "stiffness"),
+        (Param::Rest, Sign::Any, "rest"),
     ];
     for (fields, present) in [(damping, m.dissipative()), (spring, m.elastic())] {
         if !present {

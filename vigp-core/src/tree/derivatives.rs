@@ -140,7 +140,8 @@ fn tree_solve<T: Tree>(jac: &[f64], tree: &T, x: &mut [f64], w: usize) {
 /// Solves J·X = R in place (J row-major n × n, destroyed; X row-major
 /// n × w) by Gaussian elimination with partial pivoting: J = P·L·U in
 /// place (the row swaps applied to X as they happen), then X by forward
-/// and back substitution, a row of X at a time. `false` when a pivot is zero or not finite.
+/// and back substitution, a row of X at a time. `false` when a pivot is
+/// zero or not finite.
 pub(super) fn dense_solve(jac: &mut [f64], n: usize, x: &mut [f64], w: usize) -> bool {
     for k in 0..n {
         let (mut piv, mut best) = (k, jac[k * n + k].abs());
